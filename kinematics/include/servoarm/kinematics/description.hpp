@@ -1,0 +1,55 @@
+#pragma once
+// Robot description files (TOML) and the built-in models.
+//
+// Set-up code, not real-time: it allocates and uses toml11 (which throws; every
+// exception is caught here and turned into an error message).
+//
+//   name = "my_arm"
+//   convention = "standard"      # or "modified"
+//   length_unit = "mm"           # or "m"
+//   angle_unit = "deg"           # or "rad"
+//   [[joint]]                    # in chain order
+//   type = "revolute"            # "revolute" | "prismatic" | "fixed"
+//   theta = 0                    # fixed part of theta (offset for revolute)
+//   d = 0
+//   a = 0
+//   alpha = 0
+//   direction = 1                # optional, -1 reverses the joint
+//   limits = [-170, 170]         # optional, joint units
+//   max_velocity = 180           # optional, joint units per second (and /s^2, /s^3 below)
+//   max_acceleration = 720
+//   max_jerk = 7200
+//   [tool]                       # optional: xyz (length unit) + rpy (angle unit)
+//   xyz = [0, 0, 100]
+//   rpy = [0, 0, 0]
+//   [base]                       # optional, same keys
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "servoarm/kinematics/chain.hpp"
+
+namespace servoarm::kin {
+
+struct LoadResult {
+  bool ok = false;
+  std::string error;  ///< one line naming the file, the joint and the key when !ok
+  Chain chain;
+};
+
+/// Parse a description from text; `origin` names it in error messages.
+LoadResult load_description(std::string_view text, std::string_view origin);
+/// Read and parse a file.
+LoadResult load_description_file(const std::string& path);
+/// A built-in model name (see builtin_model_names()) or a path to a .toml file.
+LoadResult load_robot(const std::string& name_or_path);
+
+struct BuiltinModel {
+  const char* name;
+  const char* summary;
+  const char* toml;
+};
+/// The built-in models shipped in kinematics/models/*.toml.
+const std::vector<BuiltinModel>& builtin_models();
+
+}  // namespace servoarm::kin
