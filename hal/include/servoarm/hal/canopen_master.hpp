@@ -1,0 +1,123 @@
+#pragma once
+// CANopen master for CiA 402 drives in cyclic synchronous position mode,
+// implementing ServoBus over any CanBus.
+//
+// Process data (set up explicitly by start(), classic CAN, 8-byte limit):
+//   RPDO1 0x200+n  controlword 0x6040 (u16) + target position 0x607A (i32)  6 bytes, acted on at SYNC
+//   TPDO1 0x180+n  statusword 0x6041 (u16) + position actual 0x6064 (i32)   6 bytes, every SYNC
+//   TPDO2 0x280+n  velocity actual 0x606C (i32) + error code 0x603F (u16)    6 bytes, every SYNC
+// (statusword + position + velocity is 10 bytes, more than one classic frame holds.)
+// Each write() sends the RPDOs then one SYNC (0x080), so the master is the SYNC producer.
+// Heartbeat consumer: each node produces every `heartbeat_period`; a node is
+// reported lost when nothing arrived for its `heartbeat_timeout`, checked at
+// every read() - so within timeout + one cycle.
+#include <array>
+#include <cstdint>
+
+#include "servoarm/hal/can_bus.hpp"
+#include "servoarm/hal/canopen.hpp"
+#include "servoarm/hal/cia402.hpp"
+#include "servoarm/hal/clock.hpp"
+#include "servoarm/hal/scaling.hpp"
+#include "servoarm/hal/sdo_client.hpp"
+#include "servoarm/hal/servo_bus.hpp"
+
+namespace servoarm::hal {
+
+struct CanopenJointConfig {
+  std::uint8_t node_id = 0;
+  JointScaling scaling{};
+  Duration heartbeat_timeout = 0;  ///< 0 = use CanopenMasterConfig::heartbeat_timeout
+};
+
+struct CanopenMasterConfig {
+  std::array<CanopenJointConfig, kMaxServoJoints> joints{};
+  std::size_t joint_count = 0;
+  Duration heartbeat_period = 50 * kMillisecond;    ///< written to each node's 0x1017
+  Duration heartbeat_timeout = 150 * kMillisecond;  ///< consumer time (default per node)
+  Duration sdo_timeout = 100 * kMillisecond;
+  Duration state_timeout = 500 * kMillisecond;      ///< max time a drive may sit in one state while enabling
+  bool produce_sync = true;
+
+  /// Convenience: nodes first..first+count-1 with the same scaling.
+  static CanopenMasterConfig consecutive(std::uint8_t first, std::size_t count, const JointScaling& s = {});
+};
+
+// Process-data codecs for the mapping above. Real-time safe.
+namespace pdo {
+CanFrame encode_rpdo1(std::uint8_t node, std::uint16_t controlword, std::int32_t target);
+bool decode_rpdo1(const CanFrame& f, std::uint16_t& controlword, std::int32_t& target);
+CanFrame encode_tpdo1(std::uint8_t node, std::uint16_t statusword, std::int32_t position);
+bool decode_tpdo1(const CanFrame& f, std::uint16_t& statusword, std::int32_t& position);
+CanFrame encode_tpdo2(std::uint8_t node, std::int32_t velocity, std::uint16_t error_code);
+bool decode_tpdo2(const CanFrame& f, std::int32_t& velocity, std::uint16_t& error_code);
+}  // namespace pdo
+
+class CanopenServoBus final : public ServoBus {
+ public:
+  /// Set-up: validates the config (see config_status()); no I/O.
+  CanopenServoBus(CanBus& bus, Clock& clock, const CanopenMasterConfig& cfg);
+
+  /// invalid_argument (bad node id / scaling / duplicate node) or capacity; ok otherwise.
+  Status config_status() const { return config_status_; }
+
+  std::size_t joint_count() const override { return cfg_.joint_count; }
+  Status start(TimePoint deadline) override;
+  void enable() override;
+  void disable() override;
+  Status read(TimePoint now) override;
+  Status write(std::span<const double> setpoints, TimePoint now) override;
+  const JointFeedback& feedback(std::size_t j) const override { return fb_[j < cfg_.joint_count ? j : 0]; }
+  const char* last_error() const override { return error_; }
+
+  /// Set-up helper: run read/write cycles with the current measured positions
+  /// held, every `period`, until every joint is enabled (ok), a joint faults, or
+  /// the deadline passes (drive_refused / the fault). Sleeps on the clock.
+  Status enable_blocking(TimePoint deadline, Duration period);
+
+  /// Real-time: the last commanded position in counts for joint j (tests/diagnostics).
+  std::int32_t last_target_counts(std::size_t j) const { return joints_[j].target_counts; }
+  /// Frames received that no codec accepted (unknown ids, wrong lengths): robustness counter.
+  std::uint64_t ignored_frames() const { return ignored_; }
+  /// Set-up/diagnostics: device name read from 0x1008 during start() ("" if none).
+  const char* device_name(std::size_t j) const { return joints_[j].name; }
+  /// Set-up/diagnostics: describe joint j's fault in `buf` ("node 3: heartbeat_lost ...").
+  void describe_fault(std::size_t j, char* buf, std::size_t size) const;
+
+  /// Real-time: handle one received frame (read() calls this; exposed for SDO waits and tests).
+  void dispatch(const CanFrame& f, TimePoint now);
+
+ private:
+  struct Joint {
+    std::uint8_t node = 0;
+    cia402::State state = cia402::State::not_ready_to_switch_on;
+    cia402::State refused_in = cia402::State::not_ready_to_switch_on;
+    canopen::NmtState nmt = canopen::NmtState::boot_up;
+    bool have_status = false;
+    bool reset_phase = false;
+    bool need_nmt_start = false;
+    TimePoint state_since = 0;
+    std::int32_t actual_counts = 0;
+    std::int32_t target_counts = 0;
+    Duration hb_timeout = 0;
+    char name[32] = {};
+  };
+  void set_fault(std::size_t j, Status why, TimePoint now);
+  Status setup_node(std::size_t j, TimePoint deadline);
+  static void sink(void* ctx, const CanFrame& f);
+
+  CanBus& bus_;
+  Clock& clock_;
+  CanopenMasterConfig cfg_;
+  Status config_status_ = Status::ok;
+  SdoClient sdo_;
+  std::array<Joint, kMaxServoJoints> joints_{};
+  std::array<JointFeedback, kMaxServoJoints> fb_{};
+  std::array<std::int8_t, 128> joint_of_node_{};  // -1 = not ours
+  cia402::Target target_ = cia402::Target::disabled;
+  bool started_ = false;
+  std::uint64_t ignored_ = 0;
+  char error_[192] = {};
+};
+
+}  // namespace servoarm::hal

@@ -1,0 +1,82 @@
+#pragma once
+// Linux SocketCAN backend (CAN_RAW).
+//
+// Set-up: open(iface) creates a non-blocking raw socket, enables error frames
+// (CAN_RAW_ERR_FILTER: bus-off, controller, restarted, ...), kernel timestamps
+// (SO_TIMESTAMPNS), the drop counter (SO_RXQ_OVFL), sizes SO_RCVBUF for bursts
+// and, on request, CAN FD after checking the interface MTU.
+// Real-time: send()/receive() use only the fd and fixed members; receive waits
+// with ppoll() up to an absolute CLOCK_MONOTONIC deadline. No allocation after open.
+// When the interface goes down (ENETDOWN/ENODEV) or the controller goes bus-off,
+// the calls report it; a backend opened by name then reopens the socket (at
+// most every `reopen_interval`) and counts it in stats().reopens.
+#include <cstdint>
+
+#include "servoarm/hal/can_bus.hpp"
+#include "servoarm/hal/clock.hpp"
+
+namespace servoarm::hal {
+
+struct SocketCanOptions {
+  int rcvbuf_bytes = 256 * 1024;   ///< SO_RCVBUF request (kernel doubles it)
+  bool enable_fd = false;          ///< CAN FD (fails with invalid_argument if MTU says no)
+  bool recv_own = false;           ///< CAN_RAW_RECV_OWN_MSGS: see our own frames
+  bool auto_reopen = true;         ///< reopen after interface-down / bus-off (named iface only)
+  Duration reopen_interval = 100 * kMillisecond;
+};
+
+class SocketCanBus final : public CanBus {
+ public:
+  /// Unopened bus; call open().
+  SocketCanBus() = default;
+  /// Test/adoption constructor: take ownership of an already-open fd (a CAN_RAW
+  /// socket, or a SOCK_SEQPACKET socketpair end carrying struct can_frame /
+  /// canfd_frame bytes). Made non-blocking; no CAN socket options are set.
+  explicit SocketCanBus(int fd, const SocketCanOptions& opt = {});
+  ~SocketCanBus() override;
+  SocketCanBus(const SocketCanBus&) = delete;
+  SocketCanBus& operator=(const SocketCanBus&) = delete;
+
+  /// Set-up: open a raw socket bound to `iface` (e.g. "vcan0"; names longer
+  /// than IFNAMSIZ-1 are rejected, never truncated).
+  /// @retval ok, invalid_argument (bad name / FD unsupported), interface_down (no such iface),
+  ///         io_error (socket() failed, e.g. kernel without CAN; message() tells)
+  Status open(const char* iface, const SocketCanOptions& opt = {});
+  void close();
+  bool is_open() const { return fd_ >= 0; }
+
+  Status send(const CanFrame& frame) override;
+  Status receive(CanFrame& out, TimePoint deadline) override;
+  Status set_filters(std::span<const CanFilter> filters) override;
+  BusStats stats() const override { return stats_; }
+
+  /// Last OS error text ("socket(PF_CAN): Address family not supported ..."); static storage.
+  const char* message() const { return msg_; }
+  int fd() const { return fd_; }
+
+  /// Decode a controller error frame (id has CAN_ERR_* class bits, data per
+  /// linux/can/error.h) into a new error state and overrun count. Pure; exposed for tests.
+  static ErrorState decode_error_frame(const CanFrame& f, ErrorState previous, std::uint64_t* overruns);
+
+ private:
+  Status fail(Status s, const char* what, int err);
+  Status maybe_reopen();
+  void handle_down();
+  Status apply_filters();
+
+  int fd_ = -1;
+  bool named_ = false;
+  bool adopted_ = false;
+  char iface_[16] = {};
+  SocketCanOptions opt_{};
+  MonotonicClock clock_;
+  TimePoint next_reopen_ = 0;
+  bool need_reopen_ = false;
+  std::uint32_t last_drop_count_ = 0;
+  CanFilter filters_[kMaxFilters];
+  std::size_t n_filters_ = 0;
+  BusStats stats_;
+  char msg_[160] = {};
+};
+
+}  // namespace servoarm::hal

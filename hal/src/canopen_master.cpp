@@ -1,0 +1,436 @@
+#include "servoarm/hal/canopen_master.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+namespace servoarm::hal {
+
+using namespace canopen;
+
+const char* to_string(JointState s) {
+  switch (s) {
+    case JointState::offline: return "offline";
+    case JointState::disabled: return "disabled";
+    case JointState::enabling: return "enabling";
+    case JointState::enabled: return "enabled";
+    case JointState::fault: return "fault";
+  }
+  return "unknown";
+}
+
+CanopenMasterConfig CanopenMasterConfig::consecutive(std::uint8_t first, std::size_t count, const JointScaling& s) {
+  CanopenMasterConfig c;
+  c.joint_count = count;
+  for (std::size_t i = 0; i < count && i < kMaxServoJoints; ++i) {
+    c.joints[i].node_id = std::uint8_t(first + i);
+    c.joints[i].scaling = s;
+  }
+  return c;
+}
+
+namespace pdo {
+CanFrame encode_rpdo1(std::uint8_t node, std::uint16_t controlword, std::int32_t target) {
+  CanFrame f;
+  f.id = kRpdo1 + node;
+  f.len = 6;
+  put_u16(&f.data[0], controlword);
+  put_u32(&f.data[2], std::uint32_t(target));
+  return f;
+}
+bool decode_rpdo1(const CanFrame& f, std::uint16_t& controlword, std::int32_t& target) {
+  if (f.extended || f.rtr || f.error || function_of(f.id) != kRpdo1 || f.len != 6) return false;
+  controlword = get_u16(&f.data[0]);
+  target = std::int32_t(get_u32(&f.data[2]));
+  return true;
+}
+CanFrame encode_tpdo1(std::uint8_t node, std::uint16_t statusword, std::int32_t position) {
+  CanFrame f;
+  f.id = kTpdo1 + node;
+  f.len = 6;
+  put_u16(&f.data[0], statusword);
+  put_u32(&f.data[2], std::uint32_t(position));
+  return f;
+}
+bool decode_tpdo1(const CanFrame& f, std::uint16_t& statusword, std::int32_t& position) {
+  if (f.extended || f.rtr || f.error || function_of(f.id) != kTpdo1 || f.len != 6) return false;
+  statusword = get_u16(&f.data[0]);
+  position = std::int32_t(get_u32(&f.data[2]));
+  return true;
+}
+CanFrame encode_tpdo2(std::uint8_t node, std::int32_t velocity, std::uint16_t error_code) {
+  CanFrame f;
+  f.id = kTpdo2 + node;
+  f.len = 6;
+  put_u32(&f.data[0], std::uint32_t(velocity));
+  put_u16(&f.data[4], error_code);
+  return f;
+}
+bool decode_tpdo2(const CanFrame& f, std::int32_t& velocity, std::uint16_t& error_code) {
+  if (f.extended || f.rtr || f.error || function_of(f.id) != kTpdo2 || f.len != 6) return false;
+  velocity = std::int32_t(get_u32(&f.data[0]));
+  error_code = get_u16(&f.data[4]);
+  return true;
+}
+}  // namespace pdo
+
+CanopenServoBus::CanopenServoBus(CanBus& bus, Clock& clock, const CanopenMasterConfig& cfg)
+    : bus_(bus), clock_(clock), cfg_(cfg), sdo_(bus, clock, cfg.sdo_timeout, FrameSink{&CanopenServoBus::sink, this}) {
+  joint_of_node_.fill(-1);
+  if (cfg_.joint_count > kMaxServoJoints) {
+    config_status_ = Status::capacity;
+    cfg_.joint_count = 0;
+    std::snprintf(error_, sizeof error_, "%s", "more joints than kMaxServoJoints");
+    return;
+  }
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    const auto& jc = cfg_.joints[j];
+    if (!valid_node(jc.node_id) || joint_of_node_[jc.node_id] >= 0 || !jc.scaling.valid()) {
+      config_status_ = Status::invalid_argument;
+      std::snprintf(error_, sizeof error_, "joint %zu: invalid or duplicate node id %u, or invalid scaling", j,
+                    unsigned(jc.node_id));
+      cfg_.joint_count = 0;
+      joint_of_node_.fill(-1);
+      return;
+    }
+    joint_of_node_[jc.node_id] = std::int8_t(j);
+    joints_[j].node = jc.node_id;
+    joints_[j].hb_timeout = jc.heartbeat_timeout > 0 ? jc.heartbeat_timeout : cfg_.heartbeat_timeout;
+  }
+}
+
+void CanopenServoBus::sink(void* ctx, const CanFrame& f) {
+  auto* self = static_cast<CanopenServoBus*>(ctx);
+  self->dispatch(f, self->clock_.now());
+}
+
+void CanopenServoBus::set_fault(std::size_t j, Status why, TimePoint now) {
+  JointFeedback& fb = fb_[j];
+  if (fb.state == JointState::fault) return;  // keep the first reason
+  fb.state = JointState::fault;
+  fb.fault = why;
+  fb.fault_since = now;
+}
+
+void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
+  if (f.error || f.extended || f.rtr || f.fd) {
+    ++ignored_;
+    return;
+  }
+  const std::uint8_t node = node_of(f.id);
+  const std::int8_t jj = joint_of_node_[node];
+  if (jj < 0 || f.id == kSync || f.id == kNmt) {
+    ++ignored_;
+    return;
+  }
+  const std::size_t j = std::size_t(jj);
+  Joint& jt = joints_[j];
+  JointFeedback& fb = fb_[j];
+  switch (function_of(f.id)) {
+    case kTpdo1: {
+      std::uint16_t sw;
+      std::int32_t pos;
+      if (!pdo::decode_tpdo1(f, sw, pos)) break;
+      const cia402::State st = cia402::decode_statusword(sw);
+      if (!jt.have_status || st != jt.state) jt.state_since = now;
+      jt.state = st;
+      jt.have_status = true;
+      jt.actual_counts = pos;
+      fb.statusword = sw;
+      fb.drive_state = std::uint8_t(st);
+      fb.position = cfg_.joints[j].scaling.to_joint(pos);
+      fb.valid = true;
+      fb.last_feedback = now;
+      if (st == cia402::State::fault || st == cia402::State::fault_reaction_active) {
+        if (target_ == cia402::Target::enabled) set_fault(j, Status::drive_fault, now);
+      }
+      return;
+    }
+    case kTpdo2: {
+      std::int32_t vel;
+      std::uint16_t code;
+      if (!pdo::decode_tpdo2(f, vel, code)) break;
+      fb.velocity = cfg_.joints[j].scaling.velocity_to_joint(vel);
+      if (code != 0) fb.error_code = code;
+      return;
+    }
+    case kEmcy: {
+      std::uint8_t n;
+      Emcy e;
+      if (!decode_emcy(f, n, e)) break;
+      ++fb.emcy_count;
+      if (e.error_code != 0) fb.error_code = e.error_code;
+      return;
+    }
+    case kHeartbeat: {
+      std::uint8_t n;
+      NmtState s;
+      if (!decode_heartbeat(f, n, s)) break;
+      fb.last_heartbeat = now;
+      if (started_ && s != NmtState::operational && jt.nmt == NmtState::operational) {
+        // Node left operational on its own (reset, boot-up): no process data any more.
+        set_fault(j, Status::protocol_error, now);
+      }
+      jt.nmt = s;
+      return;
+    }
+    case kSdoTx:
+      break;  // late SDO answer after a timeout: ignore
+    default:
+      break;
+  }
+  ++ignored_;
+}
+
+Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
+  const std::uint8_t n = joints_[j].node;
+  struct W {
+    std::uint16_t index;
+    std::uint8_t sub;
+    std::uint8_t size;
+    std::uint32_t value;
+  };
+  const std::uint32_t hb_ms = std::uint32_t(cfg_.heartbeat_period / kMillisecond);
+  const W writes[] = {
+      {0x1017, 0, 2, hb_ms},
+      {cia402::kModesOfOperation, 0, 1, std::uint32_t(cia402::kModeCsp)},
+      // RPDO1: disable, map controlword + target position, synchronous, enable.
+      {0x1400, 1, 4, 0x80000000u | (kRpdo1 + n)},
+      {0x1600, 0, 1, 0},
+      {0x1600, 1, 4, 0x60400010},
+      {0x1600, 2, 4, 0x607A0020},
+      {0x1600, 0, 1, 2},
+      {0x1400, 2, 1, 1},
+      {0x1400, 1, 4, kRpdo1 + n},
+      // TPDO1: statusword + position actual, every SYNC.
+      {0x1800, 1, 4, 0x80000000u | (kTpdo1 + n)},
+      {0x1A00, 0, 1, 0},
+      {0x1A00, 1, 4, 0x60410010},
+      {0x1A00, 2, 4, 0x60640020},
+      {0x1A00, 0, 1, 2},
+      {0x1800, 2, 1, 1},
+      {0x1800, 1, 4, kTpdo1 + n},
+      // TPDO2: velocity actual + error code, every SYNC.
+      {0x1801, 1, 4, 0x80000000u | (kTpdo2 + n)},
+      {0x1A01, 0, 1, 0},
+      {0x1A01, 1, 4, 0x606C0020},
+      {0x1A01, 2, 4, 0x603F0010},
+      {0x1A01, 0, 1, 2},
+      {0x1801, 2, 1, 1},
+      {0x1801, 1, 4, kTpdo2 + n},
+  };
+  std::uint32_t devtype = 0;
+  SdoResult r = sdo_.read_u32(n, 0x1000, 0, devtype);
+  if (r.status != Status::ok) {
+    std::snprintf(error_, sizeof error_, "node %u: reading device type 0x1000 failed: %s%s%s", unsigned(n),
+                  to_string(r.status), r.abort_code ? ", " : "", r.abort_code ? sdo::abort_text(r.abort_code) : "");
+    return r.status;
+  }
+  if ((devtype & 0xFFFF) != cia402::kDeviceTypeProfile) {
+    std::snprintf(error_, sizeof error_, "node %u: not a CiA 402 drive (0x1000 = 0x%08X)", unsigned(n), unsigned(devtype));
+    return Status::protocol_error;
+  }
+  std::uint8_t name[sizeof joints_[j].name - 1] = {};
+  r = sdo_.upload(n, 0x1008, 0, name, sizeof name);
+  if (r.status == Status::ok) std::memcpy(joints_[j].name, name, r.size);
+  for (const W& w : writes) {
+    if (clock_.now() > deadline) {
+      std::snprintf(error_, sizeof error_, "node %u: bring-up deadline passed", unsigned(n));
+      return Status::timeout;
+    }
+    std::uint8_t b[4];
+    put_u32(b, w.value);
+    r = sdo_.download(n, w.index, w.sub, b, w.size);
+    if (r.status != Status::ok) {
+      std::snprintf(error_, sizeof error_, "node %u: SDO write 0x%04X:%u = 0x%X failed: %s (abort 0x%08X: %s)",
+                    unsigned(n), unsigned(w.index), unsigned(w.sub), unsigned(w.value), to_string(r.status),
+                    unsigned(r.abort_code), r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+      return r.status;
+    }
+  }
+  return Status::ok;
+}
+
+Status CanopenServoBus::start(TimePoint deadline) {
+  if (config_status_ != Status::ok) return config_status_;
+  if (cfg_.joint_count == 0) {
+    std::snprintf(error_, sizeof error_, "%s", "no joints configured");
+    return Status::not_configured;
+  }
+  started_ = false;
+  error_[0] = '\0';
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    if (const Status s = bus_.send(encode_nmt(NmtCommand::enter_pre_operational, joints_[j].node)); !is_ok(s)) {
+      std::snprintf(error_, sizeof error_, "NMT pre-operational: %s", describe(s));
+      return s;
+    }
+  }
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    if (const Status s = setup_node(j, deadline); s != Status::ok) return s;
+  }
+  const TimePoint now = clock_.now();
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    if (const Status s = bus_.send(encode_nmt(NmtCommand::start, joints_[j].node)); !is_ok(s)) {
+      std::snprintf(error_, sizeof error_, "NMT start: %s", describe(s));
+      return s;
+    }
+    joints_[j].nmt = NmtState::operational;
+    joints_[j].have_status = false;
+    fb_[j] = JointFeedback{};
+    fb_[j].state = JointState::disabled;
+    fb_[j].last_heartbeat = now;  // consumer starts counting now
+  }
+  target_ = cia402::Target::disabled;
+  started_ = true;
+  return Status::ok;
+}
+
+void CanopenServoBus::enable() {
+  target_ = cia402::Target::enabled;
+  const TimePoint now = clock_.now();
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    JointFeedback& fb = fb_[j];
+    if (fb.state == JointState::fault) {
+      if (fb.fault == Status::heartbeat_lost || fb.fault == Status::protocol_error) joints_[j].need_nmt_start = true;
+      fb.fault = Status::ok;
+      fb.state = JointState::enabling;
+      fb.last_heartbeat = now;
+    }
+    joints_[j].state_since = now;
+  }
+}
+
+void CanopenServoBus::disable() { target_ = cia402::Target::disabled; }
+
+Status CanopenServoBus::read(TimePoint now) {
+  if (!started_) return Status::not_configured;
+  CanFrame f;
+  // Bounded drain: at most this many frames per cycle, so a flood cannot stall the loop.
+  for (int i = 0; i < 256; ++i) {
+    if (bus_.receive(f, 0) != Status::ok) break;
+    dispatch(f, f.rx_time != 0 ? f.rx_time : now);
+  }
+  Status worst = Status::ok;
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    Joint& jt = joints_[j];
+    JointFeedback& fb = fb_[j];
+    fb.age = fb.last_feedback ? now - fb.last_feedback : -1;
+    if (now - fb.last_heartbeat > jt.hb_timeout) set_fault(j, Status::heartbeat_lost, now);
+    if (fb.state != JointState::fault) {
+      switch (target_) {
+        case cia402::Target::enabled:
+          if (jt.have_status && jt.state == cia402::State::operation_enabled) {
+            fb.state = JointState::enabled;
+          } else {
+            fb.state = JointState::enabling;
+            if (now - jt.state_since > cfg_.state_timeout) {
+              jt.refused_in = jt.state;
+              set_fault(j, Status::drive_refused, now);
+            }
+          }
+          break;
+        case cia402::Target::disabled:
+          fb.state = jt.have_status && jt.state == cia402::State::operation_enabled ? JointState::enabling
+                                                                                     : JointState::disabled;
+          break;
+      }
+    }
+    if (fb.state == JointState::fault && worst == Status::ok) worst = fb.fault;
+  }
+  return worst;
+}
+
+Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) {
+  (void)now;
+  if (!started_) return Status::not_configured;
+  Status result = setpoints.size() == cfg_.joint_count ? Status::ok : Status::invalid_argument;
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    Joint& jt = joints_[j];
+    JointFeedback& fb = fb_[j];
+    if (jt.need_nmt_start) {
+      jt.need_nmt_start = false;
+      bus_.send(encode_nmt(NmtCommand::start, jt.node));
+    }
+    const bool faulted = fb.state == JointState::fault;
+    cia402::Target t = faulted ? cia402::Target::disabled : target_;
+    const std::uint16_t cw = cia402::next_controlword(jt.state, t, jt.reset_phase);
+    jt.reset_phase = !jt.reset_phase;
+    std::int32_t target = jt.actual_counts;
+    const bool following = !faulted && target_ == cia402::Target::enabled && jt.have_status &&
+                           jt.state == cia402::State::operation_enabled;
+    if (following) {
+      if (j < setpoints.size() && cfg_.joints[j].scaling.to_counts(setpoints[j], target)) {
+      } else {
+        target = jt.target_counts;  // bad setpoint: hold the last good one
+        result = Status::invalid_argument;
+      }
+    }
+    jt.target_counts = target;
+    const Status s = bus_.send(pdo::encode_rpdo1(jt.node, cw, target));
+    if (!is_ok(s) && is_ok(result)) result = s;
+  }
+  if (cfg_.produce_sync) {
+    const Status s = bus_.send(encode_sync());
+    if (!is_ok(s) && is_ok(result)) result = s;
+  }
+  return result;
+}
+
+Status CanopenServoBus::enable_blocking(TimePoint deadline, Duration period) {
+  enable();
+  double hold[kMaxServoJoints] = {};
+  TimePoint next = clock_.now();
+  for (;;) {
+    const TimePoint now = clock_.now();
+    const Status rs = read(now);
+    if (rs != Status::ok) {
+      std::size_t j = 0;
+      while (j < cfg_.joint_count && fb_[j].state != JointState::fault) ++j;
+      if (j < cfg_.joint_count) describe_fault(j, error_, sizeof error_);
+      return rs;
+    }
+    bool all = true;
+    for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+      all = all && fb_[j].state == JointState::enabled;
+      hold[j] = fb_[j].position;
+    }
+    if (all) return Status::ok;
+    if (now > deadline) {
+      std::snprintf(error_, sizeof error_, "%s", "enable: deadline passed before every drive was enabled");
+      return Status::drive_refused;
+    }
+    write(std::span<const double>(hold, cfg_.joint_count), now);
+    next += period;
+    clock_.sleep_until(next);
+  }
+}
+
+void CanopenServoBus::describe_fault(std::size_t j, char* buf, std::size_t size) const {
+  if (size == 0) return;
+  if (j >= cfg_.joint_count) {
+    buf[0] = '\0';
+    return;
+  }
+  const JointFeedback& fb = fb_[j];
+  const Joint& jt = joints_[j];
+  switch (fb.fault) {
+    case Status::heartbeat_lost:
+      std::snprintf(buf, size, "node %u: heartbeat_lost (no heartbeat for more than %lld ms)", unsigned(jt.node),
+                    static_cast<long long>(jt.hb_timeout / kMillisecond));
+      return;
+    case Status::drive_refused:
+      std::snprintf(buf, size, "node %u: drive_refused (stayed in %s for more than %lld ms while enabling)",
+                    unsigned(jt.node), cia402::to_string(jt.refused_in),
+                    static_cast<long long>(cfg_.state_timeout / kMillisecond));
+      return;
+    case Status::drive_fault:
+      std::snprintf(buf, size, "node %u: drive_fault (error code 0x%04X: %s)", unsigned(jt.node),
+                    unsigned(fb.error_code), emcy_text(fb.error_code));
+      return;
+    default:
+      std::snprintf(buf, size, "node %u: %s (%s)", unsigned(jt.node), to_string(fb.fault), describe(fb.fault));
+      return;
+  }
+}
+
+}  // namespace servoarm::hal

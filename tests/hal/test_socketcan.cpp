@@ -1,0 +1,189 @@
+// SocketCAN backend without kernel CAN: the fd-taking constructor on one end of
+// a socketpair(AF_UNIX, SOCK_SEQPACKET) carrying struct can_frame bytes.
+#include <linux/can.h>
+#include <linux/can/error.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cstring>
+
+#include "servoarm/hal/socketcan_bus.hpp"
+
+// CppUTest last: its leak detector redefines `new`.
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm::hal;
+
+TEST_GROUP(SocketCan) {
+  int sv[2] = {-1, -1};
+  SocketCanBus* bus = nullptr;
+  MonotonicClock clock;
+  void setup() override {
+    CHECK(socketpair(AF_UNIX, SOCK_SEQPACKET, 0, sv) == 0);
+    bus = new SocketCanBus(sv[0]);
+  }
+  void teardown() override {
+    delete bus;
+    if (sv[1] >= 0) close(sv[1]);
+  }
+  void peer_send(canid_t id, std::initializer_list<std::uint8_t> bytes) {
+    can_frame k;
+    std::memset(&k, 0, sizeof k);
+    k.can_id = id;
+    k.can_dlc = std::uint8_t(bytes.size());
+    std::size_t i = 0;
+    for (auto b : bytes) k.data[i++] = b;
+    CHECK(write(sv[1], &k, sizeof k) == ssize_t(sizeof k));
+  }
+};
+
+TEST(SocketCan, SendWritesKernelLayout) {
+  LONGS_EQUAL(int(Status::ok), int(bus->send(CanFrame::make(0x601, {0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0}))));
+  CanFrame ext = CanFrame::make(0x1ABCDE0, {0xAA});
+  ext.extended = true;
+  LONGS_EQUAL(int(Status::ok), int(bus->send(ext)));
+  CanFrame rtr;
+  rtr.id = 0x701;
+  rtr.rtr = true;
+  LONGS_EQUAL(int(Status::ok), int(bus->send(rtr)));
+
+  can_frame k;
+  LONGS_EQUAL(sizeof(can_frame), read(sv[1], &k, sizeof k));  // one 16-byte record per frame
+  UNSIGNED_LONGS_EQUAL(0x601, k.can_id);
+  LONGS_EQUAL(8, k.can_dlc);
+  BYTES_EQUAL(0x40, k.data[0]);
+  BYTES_EQUAL(0x10, k.data[2]);
+  LONGS_EQUAL(sizeof(can_frame), read(sv[1], &k, sizeof k));
+  UNSIGNED_LONGS_EQUAL(0x1ABCDE0u | CAN_EFF_FLAG, k.can_id);
+  LONGS_EQUAL(1, k.can_dlc);
+  LONGS_EQUAL(sizeof(can_frame), read(sv[1], &k, sizeof k));
+  UNSIGNED_LONGS_EQUAL(0x701u | CAN_RTR_FLAG, k.can_id);
+  UNSIGNED_LONGS_EQUAL(3, bus->stats().tx_frames);
+}
+
+TEST(SocketCan, SendRejectsInvalidFrame) {
+  CanFrame bad = CanFrame::make(0x900, {1});
+  LONGS_EQUAL(int(Status::invalid_argument), int(bus->send(bad)));
+  UNSIGNED_LONGS_EQUAL(1, bus->stats().tx_errors);
+}
+
+TEST(SocketCan, ReceiveDecodesIdsAndFlags) {
+  peer_send(0x185, {0x27, 0x06, 1, 2, 3, 4});
+  peer_send(0x12345u | CAN_EFF_FLAG, {9});
+  CanFrame f;
+  const TimePoint dl = clock.now() + 100 * kMillisecond;
+  LONGS_EQUAL(int(Status::ok), int(bus->receive(f, dl)));
+  UNSIGNED_LONGS_EQUAL(0x185, f.id);
+  CHECK_FALSE(f.extended);
+  LONGS_EQUAL(6, f.len);
+  BYTES_EQUAL(4, f.data[5]);
+  CHECK(f.rx_time > 0);
+  LONGS_EQUAL(int(Status::ok), int(bus->receive(f, dl)));
+  UNSIGNED_LONGS_EQUAL(0x12345, f.id);
+  CHECK(f.extended);
+  UNSIGNED_LONGS_EQUAL(2, bus->stats().rx_frames);
+}
+
+TEST(SocketCan, ReceiveHonoursAbsoluteDeadline) {
+  CanFrame f;
+  const TimePoint t0 = clock.now();
+  LONGS_EQUAL(int(Status::timeout), int(bus->receive(f, t0 + 20 * kMillisecond)));
+  const Duration waited = clock.now() - t0;
+  CHECK(waited >= 20 * kMillisecond);
+  CHECK(waited < 200 * kMillisecond);  // generous upper bound for a shared VM
+  // A deadline in the past polls.
+  const TimePoint t1 = clock.now();
+  LONGS_EQUAL(int(Status::timeout), int(bus->receive(f, 0)));
+  CHECK(clock.now() - t1 < 10 * kMillisecond);
+}
+
+TEST(SocketCan, ErrorFramesUpdateState) {
+  CanFrame f;
+  // Controller problem: error passive (data[1] = CAN_ERR_CRTL_TX_PASSIVE).
+  peer_send(CAN_ERR_FLAG | CAN_ERR_CRTL, {0, CAN_ERR_CRTL_TX_PASSIVE, 0, 0, 0, 0, 0, 0});
+  LONGS_EQUAL(int(Status::ok), int(bus->receive(f, 0)));
+  CHECK(f.error);
+  LONGS_EQUAL(int(ErrorState::passive), int(bus->stats().state));
+  // Sending while passive still works but says so.
+  LONGS_EQUAL(int(Status::error_passive), int(bus->send(CanFrame::make(0x1, {}))));
+  // Bus-off.
+  peer_send(CAN_ERR_FLAG | CAN_ERR_BUSOFF, {0, 0, 0, 0, 0, 0, 0, 0});
+  LONGS_EQUAL(int(Status::ok), int(bus->receive(f, 0)));
+  LONGS_EQUAL(int(ErrorState::bus_off), int(bus->stats().state));
+  // Restarted -> active again.
+  peer_send(CAN_ERR_FLAG | CAN_ERR_RESTARTED, {0, 0, 0, 0, 0, 0, 0, 0});
+  LONGS_EQUAL(int(Status::ok), int(bus->receive(f, 0)));
+  LONGS_EQUAL(int(ErrorState::active), int(bus->stats().state));
+  UNSIGNED_LONGS_EQUAL(3, bus->stats().error_frames);
+  UNSIGNED_LONGS_EQUAL(0, bus->stats().rx_frames);  // error frames are not data frames
+}
+
+TEST(SocketCan, DecodeErrorFrameTable) {
+  struct Case {
+    std::uint32_t cls;
+    std::uint8_t d1;
+    ErrorState prev, expect;
+    int overruns;
+  } cases[] = {
+      {CAN_ERR_CRTL, CAN_ERR_CRTL_RX_WARNING, ErrorState::active, ErrorState::warning, 0},
+      {CAN_ERR_CRTL, CAN_ERR_CRTL_RX_PASSIVE, ErrorState::warning, ErrorState::passive, 0},
+      {CAN_ERR_CRTL, CAN_ERR_CRTL_RX_OVERFLOW, ErrorState::active, ErrorState::active, 1},
+      {CAN_ERR_CRTL, 0x40 /* CAN_ERR_CRTL_ACTIVE */, ErrorState::passive, ErrorState::active, 0},
+      {CAN_ERR_BUSOFF, 0, ErrorState::passive, ErrorState::bus_off, 0},
+      {CAN_ERR_RESTARTED, 0, ErrorState::bus_off, ErrorState::active, 0},
+      {CAN_ERR_PROT, 0, ErrorState::warning, ErrorState::warning, 0},
+  };
+  for (const auto& c : cases) {
+    CanFrame f;
+    f.error = true;
+    f.id = c.cls;
+    f.len = 8;
+    f.data[1] = c.d1;
+    std::uint64_t ov = 0;
+    LONGS_EQUAL(int(c.expect), int(SocketCanBus::decode_error_frame(f, c.prev, &ov)));
+    LONGS_EQUAL(c.overruns, int(ov));
+  }
+}
+
+TEST(SocketCan, UserSpaceFiltersOnAdoptedFd) {
+  const CanFilter only_hb[] = {{0x700, 0x780, false}};
+  LONGS_EQUAL(int(Status::ok), int(bus->set_filters(only_hb)));
+  peer_send(0x181, {1, 2});
+  peer_send(0x705, {0x05});
+  CanFrame f;
+  LONGS_EQUAL(int(Status::ok), int(bus->receive(f, clock.now() + 50 * kMillisecond)));
+  UNSIGNED_LONGS_EQUAL(0x705, f.id);
+}
+
+TEST(SocketCan, PeerGoneIsInterfaceDown) {
+  close(sv[1]);
+  sv[1] = -1;
+  CanFrame f;
+  LONGS_EQUAL(int(Status::interface_down), int(bus->receive(f, clock.now() + 50 * kMillisecond)));
+}
+
+TEST(SocketCan, OddSizedRecordIgnored) {
+  const char junk[5] = {1, 2, 3, 4, 5};
+  CHECK(write(sv[1], junk, sizeof junk) == 5);
+  peer_send(0x123, {7});
+  CanFrame f;
+  LONGS_EQUAL(int(Status::ok), int(bus->receive(f, clock.now() + 50 * kMillisecond)));
+  UNSIGNED_LONGS_EQUAL(0x123, f.id);
+}
+
+TEST_GROUP(SocketCanOpen){};
+
+TEST(SocketCanOpen, BadNamesAndMissingKernelSupport) {
+  SocketCanBus b;
+  LONGS_EQUAL(int(Status::invalid_argument), int(b.open("")));
+  LONGS_EQUAL(int(Status::invalid_argument), int(b.open("a_very_long_interface_name0")));  // > IFNAMSIZ-1
+  STRCMP_CONTAINS("too long", b.message());
+  // On a kernel without CAN, socket() fails: io_error with the errno text; on a
+  // kernel with CAN, an unknown interface is interface_down. Never ok, never a crash.
+  const Status s = b.open("nosuchcan7");
+  CHECK(s == Status::io_error || s == Status::interface_down);
+  CHECK(std::strlen(b.message()) > 0);
+  CHECK_FALSE(b.is_open());
+  CanFrame f;
+  LONGS_EQUAL(int(Status::not_open), int(b.send(CanFrame::make(1, {}))));
+}
