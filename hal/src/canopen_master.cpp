@@ -142,7 +142,10 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
       fb.valid = true;
       fb.last_feedback = now;
       if (st == cia402::State::fault || st == cia402::State::fault_reaction_active) {
-        if (target_ == cia402::Target::enabled) set_fault(j, Status::drive_fault, now);
+        // While enable() is resetting this drive, fault is the expected starting point.
+        if (target_ == cia402::Target::enabled && !jt.resetting) set_fault(j, Status::drive_fault, now);
+      } else {
+        jt.resetting = false;
       }
       return;
     }
@@ -294,8 +297,12 @@ void CanopenServoBus::enable() {
       if (fb.fault == Status::heartbeat_lost || fb.fault == Status::protocol_error) joints_[j].need_nmt_start = true;
       fb.fault = Status::ok;
       fb.state = JointState::enabling;
+      joints_[j].resetting = true;
       fb.last_heartbeat = now;
     }
+    if (joints_[j].have_status &&
+        (joints_[j].state == cia402::State::fault || joints_[j].state == cia402::State::fault_reaction_active))
+      joints_[j].resetting = true;  // a drive that faulted while disabled gets its reset too
     joints_[j].state_since = now;
   }
 }

@@ -96,6 +96,7 @@ class CanopenServoBus final : public ServoBus {
     bool have_status = false;
     bool reset_phase = false;
     bool need_nmt_start = false;
+    bool resetting = false;  ///< enable() is walking this drive out of fault
     TimePoint state_since = 0;
     std::int32_t actual_counts = 0;
     std::int32_t target_counts = 0;

@@ -1,0 +1,508 @@
+#include "servoarm/sim/virtual_drive.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+namespace servoarm::sim {
+
+using namespace hal::canopen;
+namespace c402 = hal::cia402;
+using hal::get_u16;
+using hal::get_u32;
+using hal::put_u32;
+
+namespace {
+constexpr std::uint16_t kRpdoComm[2] = {0x1400, 0x1401};
+constexpr std::uint16_t kRpdoMap[2] = {0x1600, 0x1601};
+constexpr std::uint16_t kTpdoComm[2] = {0x1800, 0x1801};
+constexpr std::uint16_t kTpdoMap[2] = {0x1A00, 0x1A01};
+constexpr std::uint32_t kRpdoBase[2] = {kRpdo1, kRpdo2};
+constexpr std::uint32_t kTpdoBase[2] = {kTpdo1, kTpdo2};
+constexpr std::uint32_t kCobInvalid = 0x80000000u;
+}  // namespace
+
+VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uint64_t seed)
+    : node_(node), motor_(motor), rng_(seed * 0x9E3779B97F4A7C15ull + node) {
+  if (rng_ == 0) rng_ = 1;
+  // Communication profile (CiA 301).
+  add(0x1000, 0, 4, false, false, 0x00020192);  // device type: servo drive, CiA 402
+  add(0x1001, 0, 1, false, true, 0);            // error register
+  add(0x1008, 0, 0, false, false, 0);           // manufacturer device name (segmented upload)
+  add(0x1017, 0, 2, true, false, 0);            // producer heartbeat time, ms
+  add(0x1018, 0, 1, false, false, 1);
+  add(0x1018, 1, 4, false, false, 0x00000DEA);  // vendor id
+  for (int p = 0; p < 2; ++p) {
+    add(kRpdoComm[p], 0, 1, false, false, 2);
+    add(kRpdoComm[p], 1, 4, true, false, kCobInvalid | (kRpdoBase[p] + node));
+    add(kRpdoComm[p], 2, 1, true, false, 0xFF);
+    add(kRpdoMap[p], 0, 1, true, false, 0);
+    for (std::uint8_t s = 1; s <= 8; ++s) add(kRpdoMap[p], s, 4, true, false, 0);
+    add(kTpdoComm[p], 0, 1, false, false, 2);
+    add(kTpdoComm[p], 1, 4, true, false, kCobInvalid | (kTpdoBase[p] + node));
+    add(kTpdoComm[p], 2, 1, true, false, 0xFF);
+    add(kTpdoMap[p], 0, 1, true, false, 0);
+    for (std::uint8_t s = 1; s <= 8; ++s) add(kTpdoMap[p], s, 4, true, false, 0);
+  }
+  add(0x2000, 0, 0, true, false, 0);  // user data (domain, segmented download/upload)
+  // Device profile (CiA 402).
+  add(c402::kErrorCode, 0, 2, false, true, 0);
+  add(c402::kControlword, 0, 2, true, true, 0);
+  add(c402::kStatusword, 0, 2, false, true, 0);
+  add(c402::kModesOfOperation, 0, 1, true, true, 0);
+  add(c402::kModesDisplay, 0, 1, false, true, 0);
+  add(c402::kPositionActual, 0, 4, false, true, 0);
+  add(c402::kFollowingErrorWindow, 0, 4, true, false, motor_.following_window);
+  add(c402::kVelocityActual, 0, 4, false, true, 0);
+  add(c402::kTargetPosition, 0, 4, true, true, 0);
+  add(c402::kFollowingErrorActual, 0, 4, false, true, 0);
+  Entry* name = find(0x1008, 0);
+  char buf[48];
+  const int n = std::snprintf(buf, sizeof buf, "servoarm virtual drive %u", unsigned(node));
+  name->domain.assign(buf, buf + n);
+  name->domain_cap = name->domain.size();
+  find(0x2000, 0)->domain_cap = 32;
+}
+
+void VirtualDrive::add(std::uint16_t index, std::uint8_t sub, std::uint8_t size, bool writable, bool mappable,
+                       std::uint32_t value) {
+  od_.push_back(Entry{index, sub, size, writable, mappable, value, value, {}, 0});
+}
+
+VirtualDrive::Entry* VirtualDrive::find(std::uint16_t index, std::uint8_t sub) {
+  for (Entry& e : od_)
+    if (e.index == index && e.sub == sub) return &e;
+  return nullptr;
+}
+const VirtualDrive::Entry* VirtualDrive::find(std::uint16_t index, std::uint8_t sub) const {
+  for (const Entry& e : od_)
+    if (e.index == index && e.sub == sub) return &e;
+  return nullptr;
+}
+
+bool VirtualDrive::od_read(std::uint16_t index, std::uint8_t sub, std::uint32_t& value) const {
+  const Entry* e = find(index, sub);
+  if (!e || e->size == 0) return false;
+  value = e->value;
+  return true;
+}
+
+void VirtualDrive::set(std::uint16_t index, std::uint32_t v) {
+  if (Entry* e = find(index, 0)) e->value = v;
+}
+std::uint32_t VirtualDrive::get(std::uint16_t index, std::uint8_t sub) const {
+  const Entry* e = find(index, sub);
+  return e ? e->value : 0;
+}
+
+void VirtualDrive::reset_dictionary(bool communication_only) {
+  for (Entry& e : od_) {
+    const bool comm = e.index < 0x2000;
+    if (communication_only && !comm) continue;
+    if (e.index == c402::kPositionActual) continue;  // the shaft does not move on reset
+    e.value = e.initial;
+    if (e.index == 0x2000) e.domain.clear();
+  }
+}
+
+double VirtualDrive::uniform() {
+  rng_ ^= rng_ >> 12;
+  rng_ ^= rng_ << 25;
+  rng_ ^= rng_ >> 27;
+  return double((rng_ * 0x2545F4914F6CDD1Dull) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+void VirtualDrive::tx(CanBus& bus, const CanFrame& f) {
+  if (faults_.silent) return;
+  if (faults_.tx_drop_rate > 0 && uniform() < faults_.tx_drop_rate) return;
+  bus.send(f);
+}
+
+void VirtualDrive::power_on(TimePoint now, CanBus& bus) {
+  t_ = now;
+  booted_ = true;
+  nmt_ = NmtState::pre_operational;
+  state_ = c402::State::switch_on_disabled;  // transitions 0 + 1 are automatic
+  update_statusword();
+  tx(bus, encode_heartbeat(node_, NmtState::boot_up));
+  next_hb_ = now;
+}
+
+void VirtualDrive::handle(const CanFrame& f, TimePoint now, CanBus& bus) {
+  if (faults_.silent || !booted_ || f.error || f.extended || f.rtr || f.fd) return;
+  if (f.id == kNmt) {
+    NmtCommand cmd;
+    std::uint8_t target;
+    if (decode_nmt(f, cmd, target) && (target == 0 || target == node_)) handle_nmt(cmd, now, bus);
+    return;
+  }
+  if (nmt_ == NmtState::stopped) return;
+  if (f.id == kSdoRx + node_) {
+    if (f.len == 8) handle_sdo(f, bus);
+    return;
+  }
+  if (nmt_ != NmtState::operational) return;
+  if (is_sync(f)) {
+    on_sync(now, bus);
+    return;
+  }
+  for (int p = 0; p < 2; ++p) {
+    const std::uint32_t cob = get(kRpdoComm[p], 1);
+    if ((cob & kCobInvalid) || f.id != (cob & 0x7FF)) continue;
+    const std::uint32_t type = get(kRpdoComm[p], 2);
+    if (type <= 240) {
+      rpdo_latch_[p] = f;  // synchronous: acted on at the next SYNC
+      rpdo_pending_[p] = true;
+    } else {
+      apply_rpdo(p, f);
+      apply_controlword(now, bus);
+    }
+  }
+}
+
+void VirtualDrive::handle_nmt(NmtCommand cmd, TimePoint now, CanBus& bus) {
+  switch (cmd) {
+    case NmtCommand::start:
+      nmt_ = NmtState::operational;
+      break;
+    case NmtCommand::stop:
+      nmt_ = NmtState::stopped;
+      break;
+    case NmtCommand::enter_pre_operational:
+      nmt_ = NmtState::pre_operational;
+      break;
+    case NmtCommand::reset_node:
+    case NmtCommand::reset_communication:
+      reset_dictionary(cmd == NmtCommand::reset_communication);
+      sdo_mode_ = SdoMode::idle;
+      rpdo_pending_ = {};
+      if (cmd == NmtCommand::reset_node) {
+        state_ = c402::State::switch_on_disabled;
+        prev_cw_ = 0;
+        target_ = std::int32_t(std::lround(pos_));
+      }
+      power_on(now, bus);
+      break;
+  }
+}
+
+std::uint32_t VirtualDrive::check_mapping(std::uint16_t map_index, std::uint32_t count) const {
+  if (count > 8) return sdo::kAbortPdoLength;
+  const bool rx = map_index < 0x1800;
+  std::uint32_t bits = 0;
+  for (std::uint8_t s = 1; s <= count; ++s) {
+    const std::uint32_t m = get(map_index, s);
+    const Entry* e = find(std::uint16_t(m >> 16), std::uint8_t(m >> 8));
+    if (!e || !e->mappable || (rx && !e->writable)) return sdo::kAbortNotMappable;
+    if ((m & 0xFF) != std::uint32_t(e->size) * 8) return sdo::kAbortParamIncompatible;
+    bits += m & 0xFF;
+  }
+  return bits > 64 ? sdo::kAbortPdoLength : 0;
+}
+
+std::uint32_t VirtualDrive::sdo_write(Entry& e, const std::uint8_t* data, std::size_t len) {
+  if (!e.writable) return sdo::kAbortReadOnly;
+  if (e.size == 0) {
+    if (len > e.domain_cap) return sdo::kAbortTooLong;
+    e.domain.assign(data, data + len);
+    return 0;
+  }
+  if (len > e.size) return sdo::kAbortTooLong;
+  if (len < e.size) return sdo::kAbortTooShort;
+  std::uint32_t v = 0;
+  for (std::size_t i = 0; i < len; ++i) v |= std::uint32_t(data[i]) << (8 * i);
+  const bool is_map = (e.index >= 0x1600 && e.index <= 0x1601) || (e.index >= 0x1A00 && e.index <= 0x1A01);
+  const bool is_comm = (e.index >= 0x1400 && e.index <= 0x1401) || (e.index >= 0x1800 && e.index <= 0x1801);
+  if (is_map) {
+    const std::uint16_t comm = std::uint16_t(e.index - 0x200);
+    if (!(get(comm, 1) & kCobInvalid)) return sdo::kAbortDeviceState;  // PDO must be disabled first
+    if (e.sub == 0) {
+      if (const std::uint32_t a = check_mapping(e.index, v)) return a;
+    } else if (get(e.index, 0) != 0) {
+      return sdo::kAbortDeviceState;  // CiA 301: set sub 0 to 0 before changing entries
+    }
+  }
+  if (is_comm && e.sub == 1) {
+    if ((v & 0x3FFFF800u) != 0) return sdo::kAbortValueRange;  // 11-bit ids only
+  }
+  if (is_comm && e.sub == 2 && v > 240 && v < 254) return sdo::kAbortValueRange;
+  if (e.index == c402::kModesOfOperation && std::int8_t(v) != c402::kModeCsp && v != 0) return sdo::kAbortValueRange;
+  e.value = v;
+  if (e.index == c402::kModesOfOperation) set(c402::kModesDisplay, v);
+  if (e.index == 0x1017) next_hb_ = t_;
+  return 0;
+}
+
+void VirtualDrive::handle_sdo(const CanFrame& f, CanBus& bus) {
+  const std::uint8_t c = f.data[0];
+  const std::uint8_t cs = sdo::cs_of(c);
+  if (cs == sdo::kAbort) {
+    sdo_mode_ = SdoMode::idle;
+    return;
+  }
+  auto abort = [&](std::uint16_t index, std::uint8_t sub, std::uint32_t code) {
+    sdo_mode_ = SdoMode::idle;
+    tx(bus, sdo::abort(node_, true, index, sub, code));
+  };
+  switch (cs) {
+    case sdo::kCcsInitiateDownload: {
+      const std::uint16_t index = sdo::index_of(f);
+      const std::uint8_t sub = sdo::sub_of(f);
+      Entry* e = find(index, sub);
+      if (!e) return abort(index, sub, find(index, 0) ? sdo::kAbortNoSub : sdo::kAbortNoObject);
+      if (!e->writable) return abort(index, sub, sdo::kAbortReadOnly);
+      if (c & 0x02) {  // expedited
+        const std::size_t n = (c & 0x01) ? std::size_t(4 - ((c >> 2) & 3)) : std::size_t(e->size ? e->size : 4);
+        if (const std::uint32_t a = sdo_write(*e, &f.data[4], n)) return abort(index, sub, a);
+        sdo_mode_ = SdoMode::idle;
+        tx(bus, sdo::download_response(node_, index, sub));
+        return;
+      }
+      const std::size_t size = (c & 0x01) ? get_u32(&f.data[4]) : 0;
+      if (size > sdo_buf_.size()) return abort(index, sub, sdo::kAbortTooLong);
+      sdo_mode_ = SdoMode::download;
+      sdo_index_ = index;
+      sdo_sub_ = sub;
+      sdo_toggle_ = false;
+      sdo_off_ = 0;
+      sdo_size_ = size;
+      tx(bus, sdo::download_response(node_, index, sub));
+      return;
+    }
+    case sdo::kCcsDownloadSegment: {
+      if (sdo_mode_ != SdoMode::download) return abort(0, 0, sdo::kAbortCommand);
+      if (((c & 0x10) != 0) != sdo_toggle_) return abort(sdo_index_, sdo_sub_, sdo::kAbortToggle);
+      const std::size_t n = 7 - ((c >> 1) & 7);
+      if (sdo_off_ + n > sdo_buf_.size()) return abort(sdo_index_, sdo_sub_, sdo::kAbortTooLong);
+      std::memcpy(&sdo_buf_[sdo_off_], &f.data[1], n);
+      sdo_off_ += n;
+      const bool toggle = sdo_toggle_;
+      sdo_toggle_ = !sdo_toggle_;
+      if (c & 0x01) {
+        if (sdo_size_ != 0 && sdo_off_ != sdo_size_) return abort(sdo_index_, sdo_sub_, sdo::kAbortLength);
+        Entry* e = find(sdo_index_, sdo_sub_);
+        if (const std::uint32_t a = sdo_write(*e, sdo_buf_.data(), sdo_off_)) return abort(sdo_index_, sdo_sub_, a);
+        sdo_mode_ = SdoMode::idle;
+      }
+      tx(bus, sdo::download_segment_response(node_, toggle));
+      return;
+    }
+    case sdo::kCcsInitiateUpload: {
+      const std::uint16_t index = sdo::index_of(f);
+      const std::uint8_t sub = sdo::sub_of(f);
+      const Entry* e = find(index, sub);
+      if (!e) return abort(index, sub, find(index, 0) ? sdo::kAbortNoSub : sdo::kAbortNoObject);
+      if (e->size != 0) {
+        std::uint8_t b[4];
+        put_u32(b, e->value);
+        sdo_mode_ = SdoMode::idle;
+        tx(bus, sdo::upload_response(node_, index, sub, b, e->size));
+        return;
+      }
+      const std::size_t n = std::min(e->domain.size(), sdo_buf_.size());
+      std::memcpy(sdo_buf_.data(), e->domain.data(), n);
+      if (n >= 1 && n <= 4) {
+        sdo_mode_ = SdoMode::idle;
+        tx(bus, sdo::upload_response(node_, index, sub, sdo_buf_.data(), std::uint32_t(n)));
+        return;
+      }
+      sdo_mode_ = SdoMode::upload;
+      sdo_index_ = index;
+      sdo_sub_ = sub;
+      sdo_toggle_ = false;
+      sdo_off_ = 0;
+      sdo_size_ = n;
+      tx(bus, sdo::upload_response(node_, index, sub, sdo_buf_.data(), std::uint32_t(n)));
+      return;
+    }
+    case sdo::kCcsUploadSegment: {
+      if (sdo_mode_ != SdoMode::upload) return abort(0, 0, sdo::kAbortCommand);
+      if (((c & 0x10) != 0) != sdo_toggle_) return abort(sdo_index_, sdo_sub_, sdo::kAbortToggle);
+      const std::size_t n = std::min<std::size_t>(7, sdo_size_ - sdo_off_);
+      const bool last = sdo_off_ + n == sdo_size_;
+      tx(bus, sdo::upload_segment(node_, sdo_toggle_, &sdo_buf_[sdo_off_], std::uint8_t(n), last));
+      sdo_off_ += n;
+      sdo_toggle_ = !sdo_toggle_;
+      if (last) sdo_mode_ = SdoMode::idle;
+      return;
+    }
+    default:
+      return abort(sdo::index_of(f), sdo::sub_of(f), sdo::kAbortCommand);
+  }
+}
+
+void VirtualDrive::apply_rpdo(int p, const CanFrame& f) {
+  const std::uint32_t count = get(kRpdoMap[p], 0);
+  std::size_t off = 0;
+  for (std::uint8_t s = 1; s <= count; ++s) {
+    const std::uint32_t m = get(kRpdoMap[p], s);
+    const std::size_t bytes = (m & 0xFF) / 8;
+    if (off + bytes > f.len) return;  // too short: CiA 301 says ignore (EMCY 0x8210 on real drives)
+    Entry* e = find(std::uint16_t(m >> 16), std::uint8_t(m >> 8));
+    if (!e) return;
+    std::uint32_t v = 0;
+    for (std::size_t i = 0; i < bytes; ++i) v |= std::uint32_t(f.data[off + i]) << (8 * i);
+    e->value = v;
+    off += bytes;
+  }
+}
+
+void VirtualDrive::send_tpdo(int p, CanBus& bus) {
+  const std::uint32_t cob = get(kTpdoComm[p], 1);
+  if (cob & kCobInvalid) return;
+  CanFrame f;
+  f.id = cob & 0x7FF;
+  const std::uint32_t count = get(kTpdoMap[p], 0);
+  std::size_t off = 0;
+  for (std::uint8_t s = 1; s <= count; ++s) {
+    const std::uint32_t m = get(kTpdoMap[p], s);
+    const std::size_t bytes = (m & 0xFF) / 8;
+    std::uint32_t v = get(std::uint16_t(m >> 16), std::uint8_t(m >> 8));
+    if ((m >> 16) == c402::kPositionActual && faults_.position_noise > 0) {
+      v = std::uint32_t(std::int32_t(v) +
+                        std::int32_t(std::lround((2 * uniform() - 1) * faults_.position_noise)));
+    }
+    for (std::size_t i = 0; i < bytes && off + i < 8; ++i) f.data[off + i] = std::uint8_t(v >> (8 * i));
+    off += bytes;
+  }
+  f.len = std::uint8_t(off);
+  tx(bus, f);
+}
+
+void VirtualDrive::on_sync(TimePoint now, CanBus& bus) {
+  ++syncs_;
+  advance(now, bus);
+  // Inputs are sampled at the SYNC...
+  for (int p = 0; p < 2; ++p) {
+    const std::uint32_t type = get(kTpdoComm[p], 2);
+    if (type >= 1 && type <= 240 && syncs_ % type == 0) send_tpdo(p, bus);
+  }
+  // ...and outputs received before it are actuated at it.
+  for (int p = 0; p < 2; ++p) {
+    if (rpdo_pending_[p]) {
+      apply_rpdo(p, rpdo_latch_[p]);
+      rpdo_pending_[p] = false;
+    }
+  }
+  apply_controlword(now, bus);
+}
+
+void VirtualDrive::apply_controlword(TimePoint now, CanBus& bus) {
+  (void)now;
+  const std::uint16_t cw = std::uint16_t(get(c402::kControlword));
+  int t = 0;
+  c402::State next = c402::apply_controlword(state_, cw, prev_cw_, &t);
+  prev_cw_ = cw;
+  if (t == 4 && (faults_.refuse_enable || std::int8_t(get(c402::kModesDisplay)) != c402::kModeCsp)) {
+    next = state_;  // refuses: stays switched on
+  }
+  if (t == 4 || t == 16) target_ = std::int32_t(std::lround(pos_));  // no jump on enable
+  if (t == 15) {  // fault reset: clear the error and say so
+    set(c402::kErrorCode, 0);
+    set(0x1001, 0);
+    tx(bus, encode_emcy(node_, Emcy{}));
+  }
+  state_ = next;
+  if (state_ == c402::State::operation_enabled) target_ = std::int32_t(get(c402::kTargetPosition));
+  update_statusword();
+}
+
+void VirtualDrive::inject_emcy(std::uint16_t code, TimePoint now, CanBus& bus) {
+  if (code == 0) return;
+  advance(now, bus);
+  set(c402::kErrorCode, code);
+  set(0x1001, 0x01 | ((code & 0xF000) == 0x2000 ? 0x02 : 0) | ((code & 0xF000) == 0x3000 ? 0x04 : 0) |
+                  ((code & 0xF000) == 0x4000 ? 0x08 : 0));
+  Emcy e;
+  e.error_code = code;
+  e.error_register = std::uint8_t(get(0x1001));
+  tx(bus, encode_emcy(node_, e));
+  state_ = c402::State::fault;  // fault reaction (stop) is immediate in the model
+  update_statusword();
+}
+
+void VirtualDrive::advance(TimePoint now, CanBus& bus) {
+  if (now <= t_) return;
+  const double dt = double(motor_.substep) * 1e-9;
+  while (t_ + motor_.substep <= now) {
+    t_ += motor_.substep;
+    double v_des = 0.0;
+    const bool powered = state_ == c402::State::operation_enabled;
+    if (powered) v_des = (double(target_) - pos_) / motor_.lag;
+    v_des = std::clamp(v_des, -motor_.max_velocity, motor_.max_velocity);
+    const double dv = std::clamp(v_des - vel_, -motor_.max_accel * dt, motor_.max_accel * dt);
+    vel_ += dv;
+    pos_ += vel_ * dt;
+    if (powered) {
+      const double fe = double(target_) - pos_;
+      set(c402::kFollowingErrorActual, std::uint32_t(std::int32_t(std::lround(fe))));
+      const std::uint32_t window = get(c402::kFollowingErrorWindow);
+      if (window != 0xFFFFFFFFu && std::fabs(fe) > double(window)) {
+        inject_emcy(0x8611, t_, bus);
+      }
+    }
+  }
+  // Encoder quantisation: the drive reports whole counts.
+  set(c402::kPositionActual, std::uint32_t(std::int32_t(std::floor(pos_))));
+  set(c402::kVelocityActual, std::uint32_t(std::int32_t(std::lround(vel_))));
+  update_statusword();
+}
+
+void VirtualDrive::update_statusword() {
+  std::uint16_t sw = c402::encode_state_bits(state_);
+  if (state_ == c402::State::switched_on || state_ == c402::State::operation_enabled ||
+      state_ == c402::State::quick_stop_active || state_ == c402::State::ready_to_switch_on)
+    sw |= c402::kSwVoltageEnabled;
+  sw |= c402::kSwRemote;
+  if (state_ == c402::State::operation_enabled && std::fabs(double(target_) - pos_) < 10.0) sw |= c402::kSwTargetReached;
+  set(c402::kStatusword, sw);
+}
+
+void VirtualDrive::tick(TimePoint now, CanBus& bus) {
+  if (!booted_) return;
+  advance(now, bus);
+  const std::uint32_t hb_ms = get(0x1017);
+  if (hb_ms == 0 || faults_.heartbeat_stopped) {
+    next_hb_ = now;
+    return;
+  }
+  if (now >= next_hb_) {
+    tx(bus, encode_heartbeat(node_, nmt_));
+    const Duration period = Duration(hb_ms) * hal::kMillisecond;
+    next_hb_ += period;
+    if (next_hb_ <= now) next_hb_ = now + period;
+  }
+}
+
+ArmSim::ArmSim(CanBus& bus, std::span<const std::uint8_t> nodes, const MotorParams& motor, std::uint64_t seed)
+    : bus_(bus) {
+  drives_.reserve(nodes.size());
+  for (std::uint8_t n : nodes) drives_.emplace_back(n, motor, seed);
+}
+
+void ArmSim::power_on(TimePoint now) {
+  for (auto& d : drives_) d.power_on(now, bus_);
+}
+
+void ArmSim::handle(const CanFrame& f, TimePoint now) {
+  for (auto& d : drives_) d.handle(f, now, bus_);
+}
+
+void ArmSim::tick(TimePoint now) {
+  for (auto& d : drives_) d.tick(now, bus_);
+}
+
+void ArmSim::step(TimePoint now) {
+  CanFrame f;
+  for (int i = 0; i < 4096 && bus_.receive(f, 0) == hal::Status::ok; ++i) handle(f, now);
+  tick(now);
+}
+
+VirtualDrive* ArmSim::node(std::uint8_t n) {
+  for (auto& d : drives_)
+    if (d.node() == n) return &d;
+  return nullptr;
+}
+
+}  // namespace servoarm::sim

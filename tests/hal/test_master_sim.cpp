@@ -1,0 +1,301 @@
+// CANopen master (CanopenServoBus) against six virtual CiA 402 drives on the in-process bus.
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <random>
+
+#include "alloc_counter.hpp"
+#include "servoarm/hal/canopen.hpp"
+#include "sim_fixture.hpp"
+
+// CppUTest last: its leak detector redefines `new`.
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm;
+using namespace servoarm::hal;
+
+namespace {
+constexpr Duration kPeriod = kMillisecond;  // 1 kHz cycle = SYNC period
+
+double sine(double t, std::size_t j) { return 0.4 * std::sin(2 * 3.141592653589793 * 0.5 * t + 0.3 * double(j)); }
+}  // namespace
+
+TEST_GROUP(MasterSim) {
+  test::SimRig* rig = nullptr;
+  CanopenServoBus* master = nullptr;
+  void setup() override {
+    rig = new test::SimRig({1, 2, 3, 4, 5, 6});
+    CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 6);
+    cfg.heartbeat_period = 20 * kMillisecond;
+    cfg.heartbeat_timeout = 60 * kMillisecond;
+    master = new CanopenServoBus(*rig->master_ep, rig->clock, cfg);
+  }
+  void teardown() override {
+    delete master;
+    delete rig;
+  }
+  void bring_up() {
+    LONGS_EQUAL(int(Status::ok), int(master->config_status()));
+    const Status s = master->start(rig->clock.now() + 2 * kSecond);
+    STRCMP_EQUAL("", master->last_error());
+    LONGS_EQUAL(int(Status::ok), int(s));
+    const Status e = master->enable_blocking(rig->clock.now() + kSecond, kPeriod);
+    STRCMP_EQUAL("", master->last_error());
+    LONGS_EQUAL(int(Status::ok), int(e));
+  }
+  // One control cycle: read feedback, write setpoints + SYNC, then time passes (drives run).
+  Status cycle(const double* sp) {
+    const TimePoint now = rig->clock.now();
+    const Status r = master->read(now);
+    master->write(std::span<const double>(sp, 6), now);
+    rig->clock.advance(kPeriod);
+    return r;
+  }
+  void hold_cycles(int n) {
+    double sp[6];
+    for (int k = 0; k < n; ++k) {
+      for (std::size_t j = 0; j < 6; ++j) sp[j] = master->feedback(j).position;
+      cycle(sp);
+    }
+  }
+};
+
+TEST(MasterSim, BringUpConfiguresEveryDriveExplicitly) {
+  bring_up();
+  for (std::uint8_t n = 1; n <= 6; ++n) {
+    sim::VirtualDrive* d = rig->sim->node(n);
+    std::uint32_t v = 0;
+    struct {
+      std::uint16_t index;
+      std::uint8_t sub;
+      std::uint32_t value;
+    } expect[] = {
+        {0x6060, 0, 8},          {0x1017, 0, 20},         {0x1600, 0, 2},          {0x1600, 1, 0x60400010},
+        {0x1600, 2, 0x607A0020}, {0x1400, 1, 0x200u + n}, {0x1400, 2, 1},          {0x1A00, 0, 2},
+        {0x1A00, 1, 0x60410010}, {0x1A00, 2, 0x60640020}, {0x1800, 1, 0x180u + n}, {0x1800, 2, 1},
+        {0x1A01, 1, 0x606C0020}, {0x1A01, 2, 0x603F0010}, {0x1801, 1, 0x280u + n},
+    };
+    for (auto& e : expect) {
+      CHECK(d->od_read(e.index, e.sub, v));
+      char msg[64];
+      std::snprintf(msg, sizeof msg, "node %u 0x%04X:%u", unsigned(n), unsigned(e.index), unsigned(e.sub));
+      UNSIGNED_LONGS_EQUAL_TEXT(e.value, v, msg);
+    }
+    LONGS_EQUAL(int(canopen::NmtState::operational), int(d->nmt()));
+    STRCMP_EQUAL("operation_enabled", cia402::to_string(d->state()));
+  }
+  STRCMP_CONTAINS("virtual drive 4", master->device_name(3));
+  for (std::size_t j = 0; j < 6; ++j) LONGS_EQUAL(int(JointState::enabled), int(master->feedback(j).state));
+}
+
+TEST(MasterSim, StreamedSetpointsAreFollowedLikeADrive) {
+  bring_up();
+  // Ramp in from the current position (0) over 0.5 s, then a sine for 2 s.
+  double sp[6];
+  double max_err = 0, max_err_late = 0;
+  for (int k = 0; k < 2500; ++k) {
+    const double t = k * 1e-3;
+    const double ramp = t < 0.5 ? t / 0.5 : 1.0;
+    for (std::size_t j = 0; j < 6; ++j) sp[j] = ramp * sine(t, j);
+    LONGS_EQUAL(int(Status::ok), int(cycle(sp)));
+    if (k > 10) {
+      for (std::size_t j = 0; j < 6; ++j) {
+        // Feedback read this cycle belongs to the SYNC two cycles back.
+        const double t_fb = (k - 2) * 1e-3;
+        const double ramp_fb = t_fb < 0.5 ? t_fb / 0.5 : 1.0;
+        const double err = std::fabs(master->feedback(j).position - ramp_fb * sine(t_fb, j));
+        max_err = std::max(max_err, err);
+        if (k > 600) max_err_late = std::max(max_err_late, err);
+        LONGS_EQUAL(int(JointState::enabled), int(master->feedback(j).state));
+        CHECK(master->feedback(j).age >= 0 && master->feedback(j).age <= 2 * kPeriod);
+      }
+    }
+  }
+  // Within tolerance (2 mrad = 0.11 deg for a 0.4 rad, 0.5 Hz sine)...
+  CHECK(max_err < 2e-3);
+  // ...but not an echo: the first-order lag shows up as a measurable error.
+  CHECK(max_err_late > 1e-5);
+  // The drives hold exactly the counts the master sent (no corruption).
+  for (std::size_t j = 0; j < 6; ++j) LONGS_EQUAL(master->last_target_counts(j), rig->sim->at(j).target());
+  // Velocity feedback matches the derivative of the sine (amplitude 0.4 * pi rad/s).
+  double vmax = 0;
+  for (std::size_t j = 0; j < 6; ++j) vmax = std::max(vmax, std::fabs(master->feedback(j).velocity));
+  CHECK(vmax < 0.4 * 3.141592653589793 * 1.05);
+}
+
+TEST(MasterSim, HeartbeatLossReportedWithinTimeoutPlusOnePeriod) {
+  bring_up();
+  hold_cycles(100);
+  rig->sim->node(3)->faults().silent = true;
+  const TimePoint silenced = rig->clock.now();
+  TimePoint detected = 0;
+  for (int k = 0; k < 500 && detected == 0; ++k) {
+    double sp[6];
+    for (std::size_t j = 0; j < 6; ++j) sp[j] = master->feedback(j).position;
+    const Status s = cycle(sp);
+    if (s == Status::heartbeat_lost) detected = master->feedback(2).fault_since;
+  }
+  CHECK(detected != 0);
+  const JointFeedback& fb = master->feedback(2);
+  LONGS_EQUAL(int(JointState::fault), int(fb.state));
+  LONGS_EQUAL(int(Status::heartbeat_lost), int(fb.fault));
+  CHECK(fb.last_heartbeat <= silenced);
+  const Duration latency = detected - fb.last_heartbeat;
+  CHECK(latency > 60 * kMillisecond);
+  CHECK(latency <= 60 * kMillisecond + kPeriod);
+  // No false faults on the others.
+  for (std::size_t j : {0u, 1u, 3u, 4u, 5u}) LONGS_EQUAL(int(JointState::enabled), int(master->feedback(j).state));
+  char text[128];
+  master->describe_fault(2, text, sizeof text);
+  STRCMP_CONTAINS("node 3: heartbeat_lost", text);
+}
+
+TEST(MasterSim, EmcyDecodedAndFaultResetOnEnable) {
+  bring_up();
+  hold_cycles(10);
+  rig->sim->node(2)->inject_emcy(0x2310, rig->clock.now(), *rig->sim_ep);
+  hold_cycles(5);
+  const JointFeedback& fb = master->feedback(1);
+  LONGS_EQUAL(int(JointState::fault), int(fb.state));
+  LONGS_EQUAL(int(Status::drive_fault), int(fb.fault));
+  UNSIGNED_LONGS_EQUAL(0x2310, fb.error_code);
+  UNSIGNED_LONGS_EQUAL(1, fb.emcy_count);
+  STRCMP_EQUAL("fault", cia402::to_string(cia402::State(fb.drive_state)));
+  char text[128];
+  master->describe_fault(1, text, sizeof text);
+  STRCMP_CONTAINS("0x2310", text);
+  STRCMP_CONTAINS("over-current", text);
+  // EMCY frame on the wire: 0x082, code LE, error register bit 1 (current) + bit 0 (generic).
+  bool seen = false;
+  for (auto& f : rig->capture())
+    if (f.id == 0x082 && f.len == 8 && f.data[0] == 0x10 && f.data[1] == 0x23 && f.data[2] == 0x03) seen = true;
+  CHECK(seen);
+  // Re-enable: fault reset edge, drive comes back, EMCY 0x0000 (error reset) follows.
+  LONGS_EQUAL(int(Status::ok), int(master->enable_blocking(rig->clock.now() + kSecond, kPeriod)));
+  LONGS_EQUAL(int(JointState::enabled), int(master->feedback(1).state));
+  UNSIGNED_LONGS_EQUAL(2, master->feedback(1).emcy_count);
+}
+
+TEST(MasterSim, RefusedEnableIsReportedWithTheState) {
+  rig->sim->node(4)->faults().refuse_enable = true;
+  LONGS_EQUAL(int(Status::ok), int(master->start(rig->clock.now() + 2 * kSecond)));
+  const Status s = master->enable_blocking(rig->clock.now() + 2 * kSecond, kPeriod);
+  LONGS_EQUAL(int(Status::drive_refused), int(s));
+  STRCMP_CONTAINS("node 4: drive_refused (stayed in switched_on", master->last_error());
+  LONGS_EQUAL(int(Status::drive_refused), int(master->feedback(3).fault));
+  // The other drives did enable; a refusing drive never got torque.
+  LONGS_EQUAL(int(JointState::enabled), int(master->feedback(0).state));
+  STRCMP_EQUAL("switched_on", cia402::to_string(rig->sim->node(4)->state()));
+}
+
+TEST(MasterSim, FollowingErrorFaultsTheDrive) {
+  bring_up();
+  double sp[6] = {0, 0, 0, 0, 0, 0};
+  sp[5] = 3.0;  // a 3 rad step: far beyond the 0.1 rev following window
+  for (int k = 0; k < 50; ++k) cycle(sp);
+  LONGS_EQUAL(int(Status::drive_fault), int(master->feedback(5).fault));
+  UNSIGNED_LONGS_EQUAL(0x8611, master->feedback(5).error_code);
+}
+
+TEST(MasterSim, NonFiniteSetpointIsRejectedAndHeld) {
+  bring_up();
+  hold_cycles(5);
+  double sp[6] = {0.01, 0.01, 0.01, 0.01, 0.01, 0.01};
+  for (int k = 0; k < 5; ++k) cycle(sp);
+  const std::int32_t before = master->last_target_counts(2);
+  sp[2] = std::nan("");
+  const TimePoint now = rig->clock.now();
+  master->read(now);
+  LONGS_EQUAL(int(Status::invalid_argument), int(master->write(std::span<const double>(sp, 6), now)));
+  LONGS_EQUAL(before, master->last_target_counts(2));
+  // Wrong size: nothing is trusted beyond the given values, error reported.
+  LONGS_EQUAL(int(Status::invalid_argument), int(master->write(std::span<const double>(sp, 3), now)));
+}
+
+TEST(MasterSim, PerCycleReadWriteDoesNotAllocate) {
+  bring_up();
+  hold_cycles(20);
+  double sp[6];
+  std::size_t allocs = 0;
+  for (int k = 0; k < 1000; ++k) {
+    for (std::size_t j = 0; j < 6; ++j) sp[j] = 0.1 * std::sin(k * 1e-3 + double(j));
+    const TimePoint now = rig->clock.now();
+    {
+      test::AllocScope scope;
+      master->read(now);
+      master->write(std::span<const double>(sp, 6), now);
+      allocs += scope.end();
+    }
+    rig->clock.advance(kPeriod);  // the simulated drives may allocate; they are not the RT path
+  }
+  LONGS_EQUAL(0, allocs);
+}
+
+TEST(MasterSim, RandomFloodCausesNoFalseFault) {
+  bring_up();
+  auto flood = rig->bus.open(16);
+  std::mt19937 rng(5);
+  double sp[6];
+  for (int k = 0; k < 1000; ++k) {
+    for (int i = 0; i < 20; ++i) {
+      CanFrame f;
+      f.extended = rng() % 2;
+      if (f.extended) {
+        f.id = rng() & 0x1FFFFFFF;
+      } else {
+        // Random standard ids except NMT/SYNC and the COB-ids of nodes 1..6 (a real
+        // foreign device would not use those either).
+        do f.id = rng() & 0x7FF; while (f.id <= 0x080 || (canopen::node_of(f.id) >= 1 && canopen::node_of(f.id) <= 6));
+      }
+      f.len = std::uint8_t(rng() % 9);
+      for (auto& b : f.data) b = std::uint8_t(rng());
+      flood->send(f);
+    }
+    for (std::size_t j = 0; j < 6; ++j) sp[j] = 0.2 * std::sin(k * 2e-3 + double(j));
+    LONGS_EQUAL(int(Status::ok), int(cycle(sp)));
+  }
+  CHECK(master->ignored_frames() > 10000);
+  for (std::size_t j = 0; j < 6; ++j) {
+    LONGS_EQUAL(int(JointState::enabled), int(master->feedback(j).state));
+    LONGS_EQUAL(master->last_target_counts(j), rig->sim->at(j).target());
+  }
+}
+
+TEST(MasterSim, SurvivesOnePercentFrameLoss) {
+  bring_up();
+  SimFaults faults;
+  faults.drop_rate = 0.01;
+  faults.seed = 77;
+  rig->bus.set_faults(faults);
+  double sp[6];
+  double max_err = 0;
+  for (int k = 0; k < 2000; ++k) {
+    const double t = k * 1e-3;
+    for (std::size_t j = 0; j < 6; ++j) sp[j] = 0.1 * std::sin(2 * 3.141592653589793 * 0.5 * t) * std::min(1.0, t);
+    LONGS_EQUAL(int(Status::ok), int(cycle(sp)));
+    if (k > 10)
+      for (std::size_t j = 0; j < 6; ++j) max_err = std::max(max_err, std::fabs(master->feedback(j).position - sp[j]));
+  }
+  CHECK(max_err < 5e-3);
+}
+
+TEST(MasterSim, StartFailsClearlyWhenANodeIsMissing) {
+  rig->sim->node(5)->faults().silent = true;
+  const Status s = master->start(rig->clock.now() + 2 * kSecond);
+  LONGS_EQUAL(int(Status::timeout), int(s));
+  STRCMP_CONTAINS("node 5", master->last_error());
+  STRCMP_CONTAINS("0x1000", master->last_error());
+}
+
+TEST(MasterSim, InvalidConfigRejected) {
+  CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 2);
+  cfg.joints[1].node_id = 1;  // duplicate
+  CanopenServoBus m(*rig->master_ep, rig->clock, cfg);
+  LONGS_EQUAL(int(Status::invalid_argument), int(m.config_status()));
+  LONGS_EQUAL(int(Status::invalid_argument), int(m.start(rig->clock.now() + kSecond)));
+  CanopenMasterConfig cfg2 = CanopenMasterConfig::consecutive(1, 9);
+  cfg2.joint_count = 9;
+  CanopenServoBus m2(*rig->master_ep, rig->clock, cfg2);
+  LONGS_EQUAL(int(Status::capacity), int(m2.config_status()));
+  LONGS_EQUAL(int(Status::not_configured), int(m.read(rig->clock.now())));
+}
