@@ -29,6 +29,10 @@ std::size_t alloc_count_end() {
   return t_count;
 }
 std::size_t alloc_count_now() { return t_count; }
+void probe_malloc_free() {
+  void* volatile p = std::malloc(16);
+  std::free(p);
+}
 }  // namespace servoarm::test
 
 extern "C" {

@@ -17,6 +17,10 @@ std::size_t alloc_count_end();
 /// Allocations counted so far on this thread (counting may still be on).
 std::size_t alloc_count_now();
 
+/// Calls malloc and free once (from a file that CppUTest's malloc macros do not
+/// reach), so a test can prove the counter sees plain mallocs.
+void probe_malloc_free();
+
 /// RAII scope: counts allocations on this thread while alive.
 class AllocScope {
  public:

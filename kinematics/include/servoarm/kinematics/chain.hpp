@@ -61,6 +61,7 @@ struct Chain {
   std::array<std::int8_t, kMaxJoints> joint_row{};  ///< DH row index of joint j
   Pose base = Pose::Identity();
   Pose tool = Pose::Identity();
+  bool tool_is_identity = true;  ///< set by set_tool(); skips a product in forward()
   /// Units the description was written in (display/console only; the chain is SI).
   double length_unit = 1.0;  ///< metres per user length unit (0.001 for mm)
   double angle_unit = 1.0;   ///< radians per user angle unit (pi/180 for deg)
@@ -76,6 +77,9 @@ struct Chain {
 /// Append a row. Returns capacity if the chain is full (rows or joints), bad_input
 /// if a value is not finite, the direction is not +-1, or lower > upper.
 Status add_row(Chain& chain, const DhRow& row);
+
+/// Set the tool transform (keeps tool_is_identity right). Set-up code.
+void set_tool(Chain& chain, const Pose& tool);
 
 /// Set the chain's name (truncated to fit).
 void set_name(Chain& chain, const char* name);

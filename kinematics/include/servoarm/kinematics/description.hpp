@@ -23,6 +23,7 @@
 //   xyz = [0, 0, 100]
 //   rpy = [0, 0, 0]
 //   [base]                       # optional, same keys
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -50,6 +51,6 @@ struct BuiltinModel {
   const char* toml;
 };
 /// The built-in models shipped in kinematics/models/*.toml.
-const std::vector<BuiltinModel>& builtin_models();
+std::span<const BuiltinModel> builtin_models();
 
 }  // namespace servoarm::kin

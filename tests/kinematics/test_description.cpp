@@ -1,0 +1,159 @@
+// Description files: the keys of the issue, units, and every error path as a
+// case table (text -> expected words in the one-line error).
+#include <fstream>
+
+#include "kin_test_util.hpp"
+
+using namespace servoarm;
+using namespace servoarm::test;
+
+namespace {
+const char* kHeader =
+    "name = \"t\"\nconvention = \"standard\"\nlength_unit = \"mm\"\nangle_unit = \"deg\"\n";
+const char* kJoint = "[[joint]]\ntype = \"revolute\"\n";
+
+struct ErrorCase {
+  const char* text;
+  const char* expect1;
+  const char* expect2;
+};
+
+std::string with_header(const std::string& body) { return std::string(kHeader) + body; }
+}  // namespace
+
+TEST_GROUP(Description){};
+
+TEST(Description, EveryKeyAndUnitIsApplied) {
+  const std::string text = with_header(
+      "[[joint]]\ntype = \"revolute\"\ntheta = 90\nd = 100\na = 200\nalpha = -90\ndirection = -1\n"
+      "limits = [-170, 170]\nmax_velocity = 90\nmax_acceleration = 180\nmax_jerk = 1800\n"
+      "[[joint]]\ntype = \"fixed\"\nd = 50\n"
+      "[[joint]]\ntype = \"prismatic\"\nlimits = [0, 500]\nmax_velocity = 250\n"
+      "[tool]\nxyz = [0, 0, 100]\nrpy = [0, 0, 90]\n[base]\nxyz = [10, 20, 30]\n");
+  const kin::LoadResult r = kin::load_description(text, "t.toml");
+  if (!r.ok) FAIL(r.error.c_str());
+  const kin::Chain& c = r.chain;
+  STRCMP_EQUAL("t", c.name.data());
+  LONGS_EQUAL(3, c.n_rows);
+  LONGS_EQUAL(2, c.n_joints);
+  const kin::DhRow& j1 = c.joint(0);
+  DOUBLES_EQUAL(M_PI / 2, j1.theta, 1e-15);
+  DOUBLES_EQUAL(0.1, j1.d, 1e-15);
+  DOUBLES_EQUAL(0.2, j1.a, 1e-15);
+  DOUBLES_EQUAL(-M_PI / 2, j1.alpha, 1e-15);
+  DOUBLES_EQUAL(-1.0, j1.direction, 0);
+  DOUBLES_EQUAL(deg(-170), j1.lower, 1e-15);
+  DOUBLES_EQUAL(deg(170), j1.upper, 1e-15);
+  DOUBLES_EQUAL(deg(90), j1.dynamics.max_velocity, 1e-15);
+  DOUBLES_EQUAL(deg(1800), j1.dynamics.max_jerk, 1e-12);
+  CHECK(c.rows[1].type == kin::JointType::fixed);
+  DOUBLES_EQUAL(0.05, c.rows[1].d, 1e-15);
+  const kin::DhRow& j2 = c.joint(1);
+  CHECK(j2.type == kin::JointType::prismatic);
+  DOUBLES_EQUAL(0.5, j2.upper, 1e-15);
+  DOUBLES_EQUAL(0.25, j2.dynamics.max_velocity, 1e-15);
+  DOUBLES_EQUAL(0.1, c.tool.translation().z(), 1e-15);
+  DOUBLES_EQUAL(1.0, c.tool.linear()(1, 0), 1e-15);  // yaw 90: x_tool -> y
+  CHECK_FALSE(c.tool_is_identity);
+  DOUBLES_EQUAL(0.02, c.base.translation().y(), 1e-15);
+  DOUBLES_EQUAL(1e-3, c.length_unit, 0);
+  // metres and radians are taken as written
+  const kin::LoadResult m = kin::load_description(
+      "name = \"m\"\nconvention = \"modified\"\nlength_unit = \"m\"\nangle_unit = \"rad\"\n"
+      "[[joint]]\ntype = \"revolute\"\na = 0.5\nalpha = 1.5\n", "m.toml");
+  CHECK(m.ok);
+  CHECK(m.chain.convention == kin::Convention::modified);
+  DOUBLES_EQUAL(0.5, m.chain.rows[0].a, 0);
+  DOUBLES_EQUAL(1.5, m.chain.rows[0].alpha, 0);
+}
+
+TEST(Description, EveryErrorNamesTheKeyAndTheJoint) {
+  const std::string j = kJoint;
+  const std::vector<std::pair<std::string, std::pair<const char*, const char*>>> cases = {
+      {"name = \"x\"\n" + j, {"'convention'", "missing"}},
+      {"convention = \"standard\"\nlength_unit = \"mm\"\nangle_unit = \"deg\"\n" + j, {"'name'", "missing"}},
+      {"name = \"\"\nconvention = \"standard\"\nlength_unit = \"mm\"\nangle_unit = \"deg\"\n" + j, {"'name'", "empty"}},
+      {"name = 3\nconvention = \"standard\"\nlength_unit = \"mm\"\nangle_unit = \"deg\"\n" + j, {"'name'", "expected a string"}},
+      {"name = \"x\"\nconvention = \"craig\"\nlength_unit = \"mm\"\nangle_unit = \"deg\"\n" + j, {"'convention'", "craig"}},
+      {"name = \"x\"\nconvention = \"standard\"\nlength_unit = \"inch\"\nangle_unit = \"deg\"\n" + j, {"'length_unit'", "inch"}},
+      {"name = \"x\"\nconvention = \"standard\"\nlength_unit = \"mm\"\nangle_unit = \"grad\"\n" + j, {"'angle_unit'", "grad"}},
+      {"name = \"x\"\nconvention = \"standard\"\nlength_unit = \"mm\"\n" + j, {"'angle_unit'", "missing"}},
+      {with_header("colour = \"red\"\n" + j), {"'colour'", "not known"}},
+      {with_header(""), {"'joint'", "missing"}},
+      {with_header("joint = 5\n"), {"'joint'", "array"}},
+      {with_header(j + "alpah = 90\n"), {"joint 1", "'alpah'"}},
+      {with_header(j + "[[joint]]\ntype = \"spherical\"\n"), {"joint 2", "spherical"}},
+      {with_header(j + "[[joint]]\nd = 5\n"), {"joint 2", "'type' is missing"}},
+      {with_header(j + "theta = \"ninety\"\n"), {"joint 1", "'theta': expected a number"}},
+      {with_header(j + "d = nan\n"), {"joint 1", "'d': value is not finite"}},
+      {with_header(j + "a = inf\n"), {"joint 1", "'a': value is not finite"}},
+      {with_header(j + "direction = 2\n"), {"joint 1", "'direction'"}},
+      {with_header(j + "limits = [10, -10]\n"), {"joint 1", "'limits'"}},
+      {with_header(j + "limits = [10]\n"), {"joint 1", "expected 2 numbers"}},
+      {with_header(j + "limits = 10\n"), {"joint 1", "'limits'"}},
+      {with_header(j + "max_velocity = -1\n"), {"joint 1", "'max_velocity': must be positive"}},
+      {with_header(j + "max_jerk = 0\n"), {"joint 1", "'max_jerk'"}},
+      {with_header("[[joint]]\ntype = \"fixed\"\nlimits = [0, 1]\n" + j), {"joint 1", "does not apply to a fixed row"}},
+      {with_header("[[joint]]\ntype = \"fixed\"\ndirection = -1\n" + j), {"joint 1", "'direction'"}},
+      {with_header("[[joint]]\ntype = \"fixed\"\nd = 1\n"), {"no joints", ""}},
+      {with_header(j + "[tool]\nxyz = [1, 2]\n"), {"[tool]", "'xyz'"}},
+      {with_header(j + "[tool]\nwhere = [1, 2, 3]\n"), {"[tool]", "'where'"}},
+      {with_header(j + "[base]\nrpy = [0, \"x\", 0]\n"), {"[base]", "'rpy'"}},
+      {with_header("tool = 3\n" + j), {"'tool'", "table"}},
+      {with_header(j + "tool = 3\n"), {"joint 1", "'tool' is not known"}},
+      {"name = \"x\"\nconvention = ", {"not valid TOML", ""}},
+      {"this is not toml\n", {"not valid TOML", ""}},
+  };
+  // capacity: 9 joints, 17 rows
+  std::string nine, seventeen;
+  for (int i = 0; i < 9; ++i) nine += j;
+  for (int i = 0; i < 17; ++i) seventeen += "[[joint]]\ntype = \"fixed\"\n";
+  std::vector<std::pair<std::string, std::pair<const char*, const char*>>> all = cases;
+  all.push_back({with_header(nine), {"joint 9", "more than 8 joints"}});
+  all.push_back({with_header(j + seventeen), {"joint 17", "more than 16 rows"}});
+  int n = 0;
+  for (const auto& [text, expect] : all) {
+    const kin::LoadResult r = kin::load_description(text, "case.toml");
+    const std::string label = "case " + std::to_string(n++) + ": " + r.error;
+    CHECK_TEXT(!r.ok, label.c_str());
+    CHECK_TEXT(r.error.rfind("case.toml: ", 0) == 0, label.c_str());
+    CHECK_TEXT(r.error.find(expect.first) != std::string::npos, label.c_str());
+    CHECK_TEXT(r.error.find(expect.second) != std::string::npos, label.c_str());
+    CHECK_TEXT(r.error.find('\n') == std::string::npos, label.c_str());
+  }
+}
+
+TEST(Description, RobotByNameOrPath) {
+  const kin::LoadResult unknown = kin::load_robot("puma561");
+  CHECK_FALSE(unknown.ok);
+  CHECK(unknown.error.find("unknown robot 'puma561'") != std::string::npos);
+  CHECK(unknown.error.find("puma560") != std::string::npos);  // lists the built-ins
+  const kin::LoadResult missing = kin::load_robot("/nonexistent/arm.toml");
+  CHECK_FALSE(missing.ok);
+  CHECK(missing.error.find("cannot open") != std::string::npos);
+  const std::string path = "/tmp/servoarm_test_arm.toml";
+  {
+    std::ofstream f(path);
+    f << with_header(kJoint);
+  }
+  const kin::LoadResult file = kin::load_robot(path);
+  CHECK_TEXT(file.ok, file.error.c_str());
+  LONGS_EQUAL(1, file.chain.n_joints);
+}
+
+TEST(Description, EveryBuiltinLoadsAndHasLimitsAndASummary) {
+  const char* expected[] = {"puma560", "puma560_craig", "stanford", "cylindrical_rpp_rrr", "ist6", "rr_planar",
+                            "rrr_planar", "rlr_planar", "trr", "trl_r", "vvl_r", "vvr_vr"};
+  for (const char* name : expected) {
+    bool found = false;
+    for (const auto& m : kin::builtin_models())
+      if (std::string(m.name) == name) {
+        found = true;
+        CHECK(std::string(m.summary).size() > 10);
+      }
+    CHECK_TEXT(found, name);
+    const kin::Chain c = model(name);
+    STRCMP_EQUAL(name, c.name.data());
+    for (int j = 0; j < c.n_joints; ++j) CHECK(std::isfinite(c.joint(j).lower) && std::isfinite(c.joint(j).upper));
+  }
+}

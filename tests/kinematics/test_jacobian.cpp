@@ -1,0 +1,131 @@
+// Jacobian against central finite differences of FK, manipulability and
+// condition number at known singular configurations, Cartesian precision
+// (seed 002 §3.14) against its closed form, and the two PUMA descriptions
+// against each other.
+#include "kin_test_util.hpp"
+
+using namespace servoarm;
+using namespace servoarm::test;
+
+namespace {
+
+// Angular velocity column from rotations at q +- h: vee(dR/dq R^T).
+kin::Jacobian numeric_jacobian(const kin::Chain& c, const kin::JointVector& q, double h) {
+  kin::Jacobian J(6, c.n_joints);
+  for (int j = 0; j < c.n_joints; ++j) {
+    kin::JointVector qp = q, qm = q;
+    qp[j] += h;
+    qm[j] -= h;
+    const kin::Pose Tp = fk(c, qp), Tm = fk(c, qm);
+    J.block<3, 1>(0, j) = (Tp.translation() - Tm.translation()) / (2 * h);
+    const Eigen::Matrix3d W = (Tp.linear() - Tm.linear()) / (2 * h) * fk(c, q).linear().transpose();
+    J.block<3, 1>(3, j) = Eigen::Vector3d(W(2, 1) - W(1, 2), W(0, 2) - W(2, 0), W(1, 0) - W(0, 1)) / 2;
+  }
+  return J;
+}
+
+}  // namespace
+
+TEST_GROUP(Jacobian){};
+
+TEST(Jacobian, MatchesCentralFiniteDifferencesForEveryModel) {
+  for (const auto& m : kin::builtin_models()) {
+    const kin::Chain c = model(m.name);
+    std::mt19937_64 rng(7);
+    for (int n = 0; n < 500; ++n) {
+      const kin::JointVector q = random_q(c, rng);
+      kin::Jacobian J;
+      CHECK(kin::jacobian(c, q, J) == kin::Status::ok);
+      const kin::Jacobian Jn = numeric_jacobian(c, q, 1e-6);
+      const double err = (J - Jn).cwiseAbs().maxCoeff();
+      if (err > 1e-7) {
+        std::ostringstream os;
+        os << m.name << " " << describe(q) << " |J - J_fd| = " << err << "\nJ\n" << J << "\nJ_fd\n" << Jn;
+        FAIL(os.str().c_str());
+      }
+    }
+  }
+}
+
+TEST(Jacobian, WrongSizeAndNonFiniteJointsAreRefused) {
+  const kin::Chain c = model("puma560");
+  kin::Jacobian J;
+  kin::Pose T = kin::Pose::Identity();
+  CHECK(kin::jacobian(c, kin::JointVector::Zero(5), J) == kin::Status::wrong_size);
+  CHECK(kin::forward(c, kin::JointVector::Zero(7), T) == kin::Status::wrong_size);
+  kin::JointVector q = kin::JointVector::Zero(6);
+  q[3] = std::numeric_limits<double>::infinity();
+  CHECK(kin::forward(c, q, T) == kin::Status::bad_input);
+  CHECK(T.matrix().isIdentity(0));  // untouched
+  q[3] = std::numeric_limits<double>::quiet_NaN();
+  CHECK(kin::jacobian(c, q, J) == kin::Status::bad_input);
+}
+
+// Singular configurations (seed 001 §4): wrist (theta5 = 0) and elbow
+// stretched make the Jacobian rank-deficient; a generic pose does not.
+TEST(Jacobian, ManipulabilityAndConditionAtSingularities) {
+  const kin::Chain c = model("puma560");
+  kin::Jacobian J;
+  kin::JointVector q(6);
+  q << 0.3, -0.7, 1.1, 0.4, 0.8, -0.2;
+  CHECK(kin::jacobian(c, q, J) == kin::Status::ok);
+  const double m_generic = kin::manipulability(J);
+  CHECK(m_generic > 1e-3);
+  CHECK(kin::condition_number(J) < 1e3);
+  // product of singular values equals sqrt(det(J J^T)) for a square J
+  DOUBLES_EQUAL(std::sqrt(std::abs((J * J.transpose()).determinant())), m_generic, 1e-12);
+
+  kin::JointVector qw = q;
+  qw[4] = 0.0;  // wrist singularity
+  CHECK(kin::jacobian(c, qw, J) == kin::Status::ok);
+  CHECK(kin::manipulability(J) < 1e-12);
+  CHECK(kin::condition_number(J) > 1e12);
+
+  // Elbow fully stretched: find theta3 where the in-plane distance from the
+  // shoulder (joint 2 axis) to the wrist centre is largest; it must equal
+  // a2 + sqrt(a3^2 + d4^2), and the Jacobian must be singular there.
+  const double a2 = 0.4318, a3 = -0.02032, d4 = 0.43307;
+  auto planar_reach = [&](double q3) {
+    kin::JointVector qe = q;
+    qe[2] = q3;
+    kin::FrameSet F;
+    kin::Pose T;
+    kin::forward_frames(c, qe, F, T);
+    const Eigen::Vector3d v = F.frame[4].translation() - F.frame[1].translation();
+    const Eigen::Vector3d z1 = F.frame[1].linear().col(2);
+    return (v - v.dot(z1) * z1).norm();
+  };
+  double best = -1, q3best = 0;
+  for (double q3 = -M_PI; q3 < M_PI; q3 += 1e-5) {
+    const double r = planar_reach(q3);
+    if (r > best) best = r, q3best = q3;
+  }
+  DOUBLES_EQUAL(a2 + std::hypot(a3, d4), best, 1e-9);
+  kin::JointVector qs = q;
+  qs[2] = q3best;
+  kin::jacobian(c, qs, J);
+  CHECK(kin::manipulability(J) < 1e-4 * m_generic);
+  CHECK(kin::condition_number(J) > 1e4);
+}
+
+// seed 002 §4.1: dx = |a1 s1 + a2 s12| dq1 + |a2 s12| dq2 (and dy likewise).
+TEST(Jacobian, CartesianPrecisionMatchesSeed002ClosedForm) {
+  const kin::Chain c = model("rr_planar");
+  const double a1 = 0.3, a2 = 0.25;
+  std::mt19937_64 rng(9);
+  for (int n = 0; n < 1000; ++n) {
+    const kin::JointVector q = random_q(c, rng);
+    kin::JointVector dq(2);
+    dq << 1e-4 * (1 + n % 3), 2e-4;
+    Eigen::Vector3d dw;
+    CHECK(kin::cartesian_precision(c, q, dq, dw) == kin::Status::ok);
+    const double t1 = q[0], t12 = q[0] + q[1];
+    DOUBLES_EQUAL(std::abs(a1 * std::sin(t1) + a2 * std::sin(t12)) * dq[0] + std::abs(a2 * std::sin(t12)) * dq[1], dw.x(), 1e-15);
+    DOUBLES_EQUAL(std::abs(a1 * std::cos(t1) + a2 * std::cos(t12)) * dq[0] + std::abs(a2 * std::cos(t12)) * dq[1], dw.y(), 1e-15);
+    DOUBLES_EQUAL(0.0, dw.z(), 1e-15);
+  }
+  kin::JointVector bad(2);
+  bad << -1e-4, 1e-4;
+  Eigen::Vector3d dw;
+  CHECK(kin::cartesian_precision(c, kin::JointVector::Zero(2), bad, dw) == kin::Status::bad_input);
+}
