@@ -190,8 +190,22 @@ MotionStatus plan_movel(const Chain& chain, const JointVector& q_start, const Po
     if (k > 0) {
       for (int i = 0; i < n; ++i) {
         if (std::fabs(q[i] - prev[i]) > options.max_joint_step) {
-          fill_report(report, MotionStatus::branch_change, s, x.translation(), i);
-          return MotionStatus::branch_change;
+          // A jump: either the line passes close to a singularity (joint rates
+          // explode between the knots) or the solution switched branch. Look at
+          // the conditioning at both knots and halfway.
+          double c = condition_number(J);
+          jacobian(chain, prev, J);
+          c = std::max(c, condition_number(J));
+          JointVector qm(n);
+          if (is_ok(ik.fn(chain, tr.pose_at(s - 0.5 * kStep), prev, qm, ik.ctx)) && qm.allFinite()) {
+            jacobian(chain, qm, J);
+            c = std::max(c, condition_number(J));
+          }
+          const bool singular = !(c <= std::sqrt(options.max_condition));
+          const MotionStatus why = singular ? MotionStatus::singularity : MotionStatus::branch_change;
+          fill_report(report, why, s, x.translation(), i);
+          if (report) report->max_condition = std::max(worst_cond, std::isfinite(c) ? c : 1e300);
+          return why;
         }
       }
     }
