@@ -1,1 +1,334 @@
-int main() { return 0; }
+// canmaster: CANopen CiA 402 master for shell scenarios (bring-up, streaming, fault checks).
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include "servoarm/hal/canopen_master.hpp"
+#include "servoarm/hal/clock.hpp"
+#include "servoarm/hal/sim_bus.hpp"
+#include "servoarm/hal/socketcan_bus.hpp"
+#include "servoarm/sim/cli.hpp"
+#include "servoarm/sim/virtual_drive.hpp"
+
+using namespace servoarm;
+using namespace servoarm::hal;
+
+namespace {
+
+const char* kUsage =
+    "usage: canmaster (--iface NAME | --sim) [--nodes LIST] --bringup [--stream-sine SEC] [--hold SEC] [options]\n"
+    "\n"
+    "CANopen master for CiA 402 drives (the servoarm hal::CanopenServoBus) for shell scenarios.\n"
+    "--bringup configures every node over SDO (heartbeat 0x1017, mode 0x6060 = 8 CSP, RPDO1\n"
+    "0x6040+0x607A, TPDO1 0x6041+0x6064, TPDO2 0x606C+0x603F, SYNC-triggered), starts them\n"
+    "(NMT) and enables them (CiA 402). Then it runs a fixed-period cycle: read feedback,\n"
+    "write RPDOs + SYNC.\n"
+    "\n"
+    "  --iface NAME            SocketCAN interface, e.g. vcan0\n"
+    "  --sim                   in-process virtual drives on the sim bus, simulated time (no kernel CAN)\n"
+    "  --nodes LIST            node ids: 1-6, 1,3,5, 2-4,7 (default 1-6; at most 8)\n"
+    "  --bringup               SDO configuration + NMT start + enable (required for the phases below)\n"
+    "  --stream-sine SEC       stream a sine around each joint's start position for SEC seconds\n"
+    "  --amplitude RAD         sine amplitude (default 0.3)\n"
+    "  --freq HZ               sine frequency (default 0.5)\n"
+    "  --tolerance RAD         max tracking error allowed while streaming (default 0.02)\n"
+    "  --hold SEC              hold position for SEC seconds (after the sine), watching for faults\n"
+    "  --period-ms X           cycle = SYNC period (default 2)\n"
+    "  --hb-ms N               heartbeat producer time written to each node (default 50)\n"
+    "  --hb-timeout-ms N       heartbeat consumer timeout per node (default 150)\n"
+    "  --sdo-timeout-ms N      SDO answer timeout (default 200)\n"
+    "  --enable-timeout-ms N   max time a drive may stay in one CiA 402 state while enabling (default 1000)\n"
+    "  --counts-per-rev N      encoder counts per revolution, gear 1 (default 131072)\n"
+    "  --expect-hb-loss NODE   success means: NODE's heartbeat loss is reported within\n"
+    "                          hb-timeout + one period of its last heartbeat, and no other joint faults\n"
+    "  --sim-silent NODE@SEC   (--sim) the virtual node goes silent SEC seconds into the phases\n"
+    "  --sim-emcy NODE:CODE@SEC (--sim) the virtual node raises EMCY CODE and faults\n"
+    "  --quiet                 only the final result line\n"
+    "\n"
+    "Output (stdout, one record per line, key=value):\n"
+    "  bringup status=ok|<status> elapsed_ms=.. [error=\"..\"]\n"
+    "  node id=N name=\"..\" state=enabled\n"
+    "  fault t=SEC node=N reason=heartbeat_lost|drive_fault|drive_refused|protocol_error\n"
+    "        since_last_hb_ms=.. limit_ms=.. error_code=0x.... detail=\"..\"\n"
+    "  joint node=N max_err_rad=.. state=.. age_ms=..\n"
+    "  result status=ok|fail cycles=.. late_cycles=.. max_err_rad=.. reason=\"..\"\n"
+    "Exit status: 0 success, 1 scenario failed, 2 usage error, 3 cannot open the interface,\n"
+    "4 bring-up failed.\n";
+
+int usage_error(const std::string& msg) {
+  std::fprintf(stderr, "canmaster: %s\n(see canmaster --help)\n", msg.c_str());
+  return 2;
+}
+
+struct Options {
+  std::string iface;
+  bool sim = false;
+  std::vector<std::uint8_t> nodes = {1, 2, 3, 4, 5, 6};
+  bool bringup = false;
+  double stream = 0, hold = 0, amplitude = 0.3, freq = 0.5, tolerance = 0.02, period_ms = 2;
+  std::uint32_t hb_ms = 50, hb_timeout_ms = 150, sdo_timeout_ms = 200, enable_timeout_ms = 1000, cpr = 131072;
+  std::uint32_t expect_hb_loss = 0;
+  std::vector<sim::cli::FaultArg> sim_silent, sim_emcy;
+  bool quiet = false;
+};
+
+struct SimParts {
+  std::unique_ptr<SimBus> bus;
+  std::unique_ptr<SimBusEndpoint> master_ep, sim_ep;
+  std::unique_ptr<sim::ArmSim> arm;
+};
+
+int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm) {
+  CanopenMasterConfig cfg;
+  cfg.joint_count = o.nodes.size();
+  JointScaling sc;
+  sc.counts_per_unit = double(o.cpr);
+  for (std::size_t j = 0; j < o.nodes.size(); ++j) {
+    cfg.joints[j].node_id = o.nodes[j];
+    cfg.joints[j].scaling = sc;
+  }
+  const Duration period = Duration(o.period_ms * 1e6);
+  cfg.heartbeat_period = Duration(o.hb_ms) * kMillisecond;
+  cfg.heartbeat_timeout = Duration(o.hb_timeout_ms) * kMillisecond;
+  cfg.sdo_timeout = Duration(o.sdo_timeout_ms) * kMillisecond;
+  cfg.state_timeout = Duration(o.enable_timeout_ms) * kMillisecond;
+  CanopenServoBus master(bus, clock, cfg);
+  if (master.config_status() != Status::ok) {
+    std::fprintf(stderr, "canmaster: %s\n", master.last_error());
+    return 2;
+  }
+  const std::size_t n = o.nodes.size();
+  const TimePoint tb = clock.now();
+  Status st = master.start(tb + 10 * kSecond);
+  if (st == Status::ok) st = master.enable_blocking(clock.now() + 5 * kSecond, period);
+  const double bring_ms = double(clock.now() - tb) * 1e-6;
+  if (st != Status::ok) {
+    std::printf("bringup status=%s elapsed_ms=%.1f error=\"%s\"\n", to_string(st), bring_ms, master.last_error());
+    std::printf("result status=fail cycles=0 late_cycles=0 max_err_rad=0 reason=\"bring-up failed\"\n");
+    return 4;
+  }
+  if (!o.quiet) {
+    std::printf("bringup status=ok elapsed_ms=%.1f\n", bring_ms);
+    for (std::size_t j = 0; j < n; ++j)
+      std::printf("node id=%u name=\"%s\" state=%s\n", unsigned(o.nodes[j]), master.device_name(j),
+                  to_string(master.feedback(j).state));
+    std::fflush(stdout);
+  }
+
+  // Cyclic phases.
+  std::vector<double> p0(n), sp(n), max_err(n, 0.0);
+  for (std::size_t j = 0; j < n; ++j) p0[j] = master.feedback(j).position;
+  constexpr int kHist = 16;
+  std::vector<std::array<double, kHist>> hist(n);
+  for (std::size_t j = 0; j < n; ++j) hist[j].fill(p0[j]);
+  std::vector<bool> reported(n, false);
+  bool hb_loss_ok = false, other_fault = false, expected_seen = false;
+  std::string reason;
+  const TimePoint t0 = clock.now();
+  const Duration total = Duration((o.stream + o.hold) * 1e9);
+  std::uint64_t cycles = 0, late = 0;
+  TimePoint next = t0;
+  std::vector<bool> silent_done(o.sim_silent.size(), false), emcy_done(o.sim_emcy.size(), false);
+  const double limit_ms = double(o.hb_timeout_ms) + o.period_ms;
+  for (;;) {
+    const TimePoint now = clock.now();
+    const double t = double(now - t0) * 1e-9;
+    if (now - t0 >= total) break;
+    if (arm) {
+      for (std::size_t i = 0; i < o.sim_silent.size(); ++i)
+        if (!silent_done[i] && t >= o.sim_silent[i].at) {
+          silent_done[i] = true;
+          for (std::size_t k = 0; k < arm->size(); ++k)
+            if (o.sim_silent[i].node == 0 || arm->at(k).node() == o.sim_silent[i].node) arm->at(k).faults().silent = true;
+        }
+      for (std::size_t i = 0; i < o.sim_emcy.size(); ++i)
+        if (!emcy_done[i] && t >= o.sim_emcy[i].at) {
+          emcy_done[i] = true;
+          std::uint32_t code = 0;
+          sim::cli::parse_uint(o.sim_emcy[i].value, 0xFFFF, code);
+          if (auto* d = arm->node(o.sim_emcy[i].node)) d->inject_emcy(std::uint16_t(code), now, arm->bus());
+        }
+    }
+    master.read(now);
+    for (std::size_t j = 0; j < n; ++j) {
+      const JointFeedback& fb = master.feedback(j);
+      if (fb.state == JointState::fault && !reported[j]) {
+        reported[j] = true;
+        const double since_hb = double(fb.fault_since - fb.last_heartbeat) * 1e-6;
+        char detail[160];
+        master.describe_fault(j, detail, sizeof detail);
+        std::printf("fault t=%.3f node=%u reason=%s since_last_hb_ms=%.1f limit_ms=%.1f error_code=0x%04X detail=\"%s\"\n",
+                    double(fb.fault_since - t0) * 1e-9, unsigned(o.nodes[j]), to_string(fb.fault), since_hb, limit_ms,
+                    unsigned(fb.error_code), detail);
+        std::fflush(stdout);
+        if (o.expect_hb_loss == o.nodes[j] && fb.fault == Status::heartbeat_lost) {
+          expected_seen = true;
+          hb_loss_ok = since_hb <= limit_ms;
+          if (!hb_loss_ok) reason = "heartbeat loss reported too late";
+        } else {
+          other_fault = true;
+          if (reason.empty()) reason = std::string("unexpected fault on node ") + std::to_string(o.nodes[j]);
+        }
+      }
+      // Tracking error against the best-matching recent setpoint (transport delay 1..kHist cycles).
+      if (fb.state == JointState::enabled && cycles > 20 && t < o.stream) {
+        double best = 1e9;
+        for (int l = 1; l < kHist; ++l) best = std::min(best, std::fabs(fb.position - hist[j][(cycles - l) % kHist]));
+        max_err[j] = std::max(max_err[j], best);
+      }
+    }
+    const double ramp = std::min(1.0, t / 0.5);
+    for (std::size_t j = 0; j < n; ++j) {
+      if (t < o.stream) {
+        sp[j] = p0[j] + ramp * o.amplitude * std::sin(2 * std::numbers::pi * o.freq * t + 0.5 * double(j));
+      }
+      hist[j][cycles % kHist] = sp[j];
+    }
+    master.write(sp, now);
+    ++cycles;
+    next += period;
+    const TimePoint after = clock.now();
+    if (after > next + period) {
+      ++late;
+      next = after;
+    }
+    clock.sleep_until(next);
+  }
+  // Power down.
+  master.disable();
+  for (int k = 0; k < 200; ++k) {
+    const TimePoint now = clock.now();
+    master.read(now);
+    master.write(sp, now);
+    bool all = true;
+    for (std::size_t j = 0; j < n; ++j) all = all && master.feedback(j).state != JointState::enabling;
+    if (all) break;
+    clock.sleep_until(now + period);
+  }
+  double worst = 0;
+  for (std::size_t j = 0; j < n; ++j) {
+    const JointFeedback& fb = master.feedback(j);
+    worst = std::max(worst, max_err[j]);
+    if (!o.quiet)
+      std::printf("joint node=%u max_err_rad=%.6f state=%s age_ms=%.1f\n", unsigned(o.nodes[j]), max_err[j],
+                  to_string(fb.state), fb.age >= 0 ? double(fb.age) * 1e-6 : -1.0);
+  }
+  bool ok = true;
+  if (o.expect_hb_loss) {
+    if (!expected_seen) {
+      ok = false;
+      reason = "heartbeat loss of node " + std::to_string(o.expect_hb_loss) + " not reported";
+    }
+    ok = ok && hb_loss_ok && !other_fault;
+  } else {
+    ok = !other_fault;
+  }
+  if (o.stream > 0 && worst > o.tolerance) {
+    ok = false;
+    if (reason.empty()) reason = "tracking error above tolerance";
+  }
+  const BusStats bs = bus.stats();
+  std::printf("result status=%s cycles=%llu late_cycles=%llu max_err_rad=%.6f ignored_frames=%llu tx_errors=%llu reason=\"%s\"\n",
+              ok ? "ok" : "fail", static_cast<unsigned long long>(cycles), static_cast<unsigned long long>(late), worst,
+              static_cast<unsigned long long>(master.ignored_frames()), static_cast<unsigned long long>(bs.tx_errors),
+              reason.c_str());
+  return ok ? 0 : 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    std::string v;
+    auto value = [&]() {
+      if (i + 1 >= argc) return false;
+      v = argv[++i];
+      return true;
+    };
+    auto num = [&](double& out, double lo) { return value() && sim::cli::parse_double(v, out) && out >= lo; };
+    auto uint = [&](std::uint32_t& out, std::uint32_t max) { return value() && sim::cli::parse_uint(v, max, out); };
+    if (a == "--help" || a == "-h") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else if (a == "--sim") {
+      o.sim = true;
+    } else if (a == "--bringup") {
+      o.bringup = true;
+    } else if (a == "--quiet") {
+      o.quiet = true;
+    } else if (a == "--iface") {
+      if (!value()) return usage_error("--iface needs a name");
+      o.iface = v;
+    } else if (a == "--nodes") {
+      if (!value() || !sim::cli::parse_nodes(v, o.nodes)) return usage_error("bad --nodes (e.g. 1-6 or 1,3,5)");
+      if (o.nodes.size() > kMaxServoJoints) return usage_error("at most 8 nodes");
+    } else if (a == "--stream-sine") {
+      if (!num(o.stream, 0)) return usage_error("bad --stream-sine SEC");
+    } else if (a == "--hold") {
+      if (!num(o.hold, 0)) return usage_error("bad --hold SEC");
+    } else if (a == "--amplitude") {
+      if (!num(o.amplitude, 0)) return usage_error("bad --amplitude");
+    } else if (a == "--freq") {
+      if (!num(o.freq, 0)) return usage_error("bad --freq");
+    } else if (a == "--tolerance") {
+      if (!num(o.tolerance, 0)) return usage_error("bad --tolerance");
+    } else if (a == "--period-ms") {
+      if (!num(o.period_ms, 0.1)) return usage_error("bad --period-ms (>= 0.1)");
+    } else if (a == "--hb-ms") {
+      if (!uint(o.hb_ms, 65535) || o.hb_ms == 0) return usage_error("bad --hb-ms (1..65535)");
+    } else if (a == "--hb-timeout-ms") {
+      if (!uint(o.hb_timeout_ms, 600000) || o.hb_timeout_ms == 0) return usage_error("bad --hb-timeout-ms");
+    } else if (a == "--sdo-timeout-ms") {
+      if (!uint(o.sdo_timeout_ms, 60000) || o.sdo_timeout_ms == 0) return usage_error("bad --sdo-timeout-ms");
+    } else if (a == "--enable-timeout-ms") {
+      if (!uint(o.enable_timeout_ms, 600000) || o.enable_timeout_ms == 0) return usage_error("bad --enable-timeout-ms");
+    } else if (a == "--counts-per-rev") {
+      if (!uint(o.cpr, 0x7FFFFFFF) || o.cpr == 0) return usage_error("bad --counts-per-rev");
+    } else if (a == "--expect-hb-loss") {
+      if (!uint(o.expect_hb_loss, 127) || o.expect_hb_loss == 0) return usage_error("bad --expect-hb-loss NODE");
+    } else if (a == "--sim-silent" || a == "--sim-emcy") {
+      sim::cli::FaultArg f;
+      const bool emcy = a == "--sim-emcy";
+      std::uint32_t code = 0;
+      if (!value() || !sim::cli::parse_fault(v, emcy, f) || f.node == 0 ||
+          (emcy && (!sim::cli::parse_uint(f.value, 0xFFFF, code) || code == 0)))
+        return usage_error("bad " + a + " (NODE@SEC or NODE:CODE@SEC)");
+      (emcy ? o.sim_emcy : o.sim_silent).push_back(f);
+    } else {
+      return usage_error("unknown option " + a);
+    }
+  }
+  if (o.sim == !o.iface.empty()) return usage_error("give exactly one of --iface NAME or --sim");
+  if (!o.bringup) return usage_error("nothing to do: add --bringup (and --stream-sine / --hold)");
+  if (!o.sim && (!o.sim_silent.empty() || !o.sim_emcy.empty())) return usage_error("--sim-* faults need --sim");
+  if (o.expect_hb_loss && std::find(o.nodes.begin(), o.nodes.end(), std::uint8_t(o.expect_hb_loss)) == o.nodes.end())
+    return usage_error("--expect-hb-loss node is not in --nodes");
+
+  if (o.sim) {
+    ManualClock clock;
+    SimParts s;
+    s.bus = std::make_unique<SimBus>(clock, 50 * kMicrosecond);
+    s.master_ep = s.bus->open(4096);
+    s.sim_ep = s.bus->open(4096);
+    s.arm = std::make_unique<sim::ArmSim>(*s.sim_ep, o.nodes);
+    s.arm->power_on(clock.now());
+    clock.set_idle_hook([&](TimePoint t) { s.arm->step(t); });
+    const int rc = run(*s.master_ep, clock, o, s.arm.get());
+    clock.set_idle_hook(nullptr);
+    return rc;
+  }
+  SocketCanBus bus;
+  if (const Status st = bus.open(o.iface.c_str()); st != Status::ok) {
+    std::fprintf(stderr, "canmaster: cannot open %s: %s (%s)\n", o.iface.c_str(), bus.message(), to_string(st));
+    return 3;
+  }
+  MonotonicClock clock;
+  return run(bus, clock, o, nullptr);
+}

@@ -88,6 +88,14 @@ bool VirtualDrive::od_read(std::uint16_t index, std::uint8_t sub, std::uint32_t&
   return true;
 }
 
+bool VirtualDrive::od_write(std::uint16_t index, std::uint8_t sub, std::uint32_t value) {
+  Entry* e = find(index, sub);
+  if (!e || e->size == 0) return false;
+  e->value = value;
+  if (index == 0x1017) next_hb_ = t_;
+  return true;
+}
+
 void VirtualDrive::set(std::uint16_t index, std::uint32_t v) {
   if (Entry* e = find(index, 0)) e->value = v;
 }

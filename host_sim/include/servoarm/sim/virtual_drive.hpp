@@ -70,6 +70,8 @@ class VirtualDrive {
 
   /// Object dictionary access for tests (expedited-size objects only).
   bool od_read(std::uint16_t index, std::uint8_t sub, std::uint32_t& value) const;
+  /// Set an object directly (configuration/tests; bypasses access rights and checks).
+  bool od_write(std::uint16_t index, std::uint8_t sub, std::uint32_t value);
 
  private:
   struct Entry {
