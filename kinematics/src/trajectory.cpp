@@ -133,12 +133,20 @@ struct Eval {
   double T;
 };
 
+// Stopping from cruise (vc >= 0, a = 0) is symmetric in time: the mean velocity is
+// vc / 2, so dp = vc T / 2 with T = vc/A + A/J (A reached) or 2 sqrt(vc/J).
+inline void stop_from_cruise(double vc, double A, double J, double& T, double& dp) {
+  T = vc * J >= A * A ? vc / A + A / J : 2.0 * std::sqrt(vc / J);
+  dp = 0.5 * vc * T;
+}
+
 Eval eval(const Joint1& P, double vc) {
   const VelChange a = velocity_change(P.v0, P.a0, vc, P.L.a, P.L.j);
-  const VelChange d = velocity_change(vc, 0.0, 0.0, P.L.a, P.L.j);
+  double Td, dpd;
+  stop_from_cruise(vc, P.L.a, P.L.j, Td, dpd);
   Eval e{};
-  e.F = a.dp + d.dp - P.D;
-  e.T = a.T + d.T;
+  e.F = a.dp + dpd - P.D;
+  e.T = a.T + Td;
   if (vc > 0 && e.F < 0) e.T += -e.F / vc;
   return e;
 }
