@@ -321,7 +321,8 @@ Status CanopenServoBus::read(TimePoint now) {
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
     Joint& jt = joints_[j];
     JointFeedback& fb = fb_[j];
-    fb.age = fb.last_feedback ? now - fb.last_feedback : -1;
+    // Frames stamped by the backend after `now` was sampled count as fresh (age 0).
+    fb.age = fb.last_feedback ? (now > fb.last_feedback ? now - fb.last_feedback : 0) : -1;
     if (now - fb.last_heartbeat > jt.hb_timeout) set_fault(j, Status::heartbeat_lost, now);
     if (fb.state != JointState::fault) {
       switch (target_) {

@@ -60,7 +60,8 @@ void SocketCanBus::close() {
 }
 
 Status SocketCanBus::fail(Status s, const char* what, int err) {
-  std::snprintf(msg_, sizeof msg_, "%s: %s", what, err ? std::strerror(err) : "failed");
+  if (err) std::snprintf(msg_, sizeof msg_, "%s: %s", what, std::strerror(err));
+  else std::snprintf(msg_, sizeof msg_, "%s", what);
   return s;
 }
 

@@ -3,6 +3,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -21,14 +22,16 @@ volatile std::sig_atomic_t g_stop = 0;
 void on_signal(int) { g_stop = 1; }
 
 const char* kUsage =
-    "usage: armsim --iface NAME [--nodes LIST] [options]\n"
+    "usage: armsim (--iface NAME | --fd N) [--nodes LIST] [options]\n"
     "\n"
     "Virtual CiA 402 servo drives (CANopen nodes) on a SocketCAN interface. Each node\n"
     "boots into pre-operational (boot-up heartbeat), answers SDO, follows NMT, produces\n"
     "heartbeats (0x1017) and EMCY, sends SYNC-triggered TPDOs as mapped by the master and\n"
     "runs a motor model in cyclic synchronous position mode.\n"
     "\n"
-    "  --iface NAME            SocketCAN interface, e.g. vcan0 (required)\n"
+    "  --iface NAME            SocketCAN interface, e.g. vcan0 (this or --fd is required)\n"
+    "  --fd N                  testing: use inherited fd N (a CAN_RAW socket or a SOCK_SEQPACKET\n"
+    "                          socketpair end carrying struct can_frame records) instead of --iface\n"
     "  --nodes LIST            node ids: 1-6, 1,3,5 or 2-4,7 (default 1-6)\n"
     "  --duration SEC          exit after SEC seconds (default: until SIGINT/SIGTERM)\n"
     "  --heartbeat-ms N        heartbeat producer time before the master sets 0x1017 (default 0 = off)\n"
@@ -49,7 +52,8 @@ const char* kUsage =
     "  --drop-rate NODE:P           each frame the node sends is lost with probability P\n"
     "\n"
     "Output: 'armsim ready iface=... nodes=...' once the socket is open, then event lines.\n"
-    "Exit status: 0 normal end (duration or signal), 2 usage error, 3 cannot open the interface.\n";
+    "Exit status: 0 normal end (duration, signal, or --fd peer closed), 2 usage error,\n"
+    "3 cannot open the interface.\n";
 
 struct Scheduled {
   enum Kind { silent, stop_hb, emcy } kind;
@@ -67,6 +71,8 @@ int usage_error(const std::string& msg) {
 
 int main(int argc, char** argv) {
   std::string iface;
+  std::uint32_t fd = 0;
+  bool have_fd = false;
   std::vector<std::uint8_t> nodes = {1, 2, 3, 4, 5, 6};
   double duration = 0, status_every = 0, lag_ms = 2, vmax = 10, amax = 400;
   std::uint32_t hb_ms = 0, window = 13107, seed = 1;
@@ -91,6 +97,9 @@ int main(int argc, char** argv) {
       return usage_error("unknown option or missing value: " + a);
     } else if (a == "--iface") {
       iface = v;
+    } else if (a == "--fd") {
+      if (!cli::parse_uint(v, 1 << 20, fd)) return usage_error("bad --fd");
+      have_fd = true;
     } else if (a == "--nodes") {
       if (!cli::parse_nodes(v, nodes)) return usage_error("bad --nodes '" + v + "' (use e.g. 1-6 or 1,3,5; ids 1..127)");
     } else if (a == "--duration") {
@@ -135,18 +144,25 @@ int main(int argc, char** argv) {
       return usage_error("unknown option " + a);
     }
   }
-  if (iface.empty()) return usage_error("--iface is required");
+  if (iface.empty() == !have_fd) return usage_error("give exactly one of --iface NAME or --fd N");
   auto known = [&](std::uint8_t n) {
     return n == 0 || std::find(nodes.begin(), nodes.end(), n) != nodes.end();
   };
   for (auto& s : schedule)
     if (!known(s.arg.node)) return usage_error("fault for node " + std::to_string(s.arg.node) + " not in --nodes");
 
-  SocketCanBus bus;
-  if (const Status st = bus.open(iface.c_str()); st != Status::ok) {
-    std::fprintf(stderr, "armsim: cannot open %s: %s (%s)\n", iface.c_str(), bus.message(), to_string(st));
-    return 3;
+  std::unique_ptr<SocketCanBus> bus_ptr;
+  if (have_fd) {
+    bus_ptr = std::make_unique<SocketCanBus>(int(fd));
+    iface = "fd:" + std::to_string(fd);
+  } else {
+    bus_ptr = std::make_unique<SocketCanBus>();
+    if (const Status st = bus_ptr->open(iface.c_str()); st != Status::ok) {
+      std::fprintf(stderr, "armsim: cannot open %s: %s (%s)\n", iface.c_str(), bus_ptr->message(), to_string(st));
+      return 3;
+    }
   }
+  SocketCanBus& bus = *bus_ptr;
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
 
@@ -227,9 +243,14 @@ int main(int argc, char** argv) {
     if (st == Status::ok) {
       arm.handle(f, clock.now());
       last_err = Status::ok;
-    } else if (st != Status::timeout && st != last_err) {
-      std::fprintf(stderr, "armsim: receive: %s (%s); retrying\n", to_string(st), bus.message());
+    } else if (st != Status::timeout) {
+      if (have_fd && st == Status::interface_down) {
+        std::printf("armsim peer closed fd\n");  // --fd: the other end is gone for good
+        break;
+      }
+      if (st != last_err) std::fprintf(stderr, "armsim: receive: %s (%s); retrying\n", to_string(st), bus.message());
       last_err = st;
+      clock.sleep_until(next_tick);  // no busy loop while the interface is down
     }
     if (verbose) {
       for (std::size_t i = 0; i < arm.size(); ++i) {

@@ -21,7 +21,7 @@ using namespace servoarm::hal;
 namespace {
 
 const char* kUsage =
-    "usage: canmaster (--iface NAME | --sim) [--nodes LIST] --bringup [--stream-sine SEC] [--hold SEC] [options]\n"
+    "usage: canmaster (--iface NAME | --sim | --fd N) [--nodes LIST] --bringup [--stream-sine SEC] [--hold SEC] [options]\n"
     "\n"
     "CANopen master for CiA 402 drives (the servoarm hal::CanopenServoBus) for shell scenarios.\n"
     "--bringup configures every node over SDO (heartbeat 0x1017, mode 0x6060 = 8 CSP, RPDO1\n"
@@ -30,6 +30,8 @@ const char* kUsage =
     "write RPDOs + SYNC.\n"
     "\n"
     "  --iface NAME            SocketCAN interface, e.g. vcan0\n"
+    "  --fd N                  testing: use inherited fd N (CAN_RAW socket or SOCK_SEQPACKET socketpair\n"
+    "                          end carrying struct can_frame records) instead of --iface\n"
     "  --sim                   in-process virtual drives on the sim bus, simulated time (no kernel CAN)\n"
     "  --nodes LIST            node ids: 1-6, 1,3,5, 2-4,7 (default 1-6; at most 8)\n"
     "  --bringup               SDO configuration + NMT start + enable (required for the phases below)\n"
@@ -67,6 +69,7 @@ int usage_error(const std::string& msg) {
 
 struct Options {
   std::string iface;
+  int fd = -1;
   bool sim = false;
   std::vector<std::uint8_t> nodes = {1, 2, 3, 4, 5, 6};
   bool bringup = false;
@@ -266,6 +269,10 @@ int main(int argc, char** argv) {
     } else if (a == "--iface") {
       if (!value()) return usage_error("--iface needs a name");
       o.iface = v;
+    } else if (a == "--fd") {
+      std::uint32_t fd = 0;
+      if (!uint(fd, 1 << 20)) return usage_error("bad --fd");
+      o.fd = int(fd);
     } else if (a == "--nodes") {
       if (!value() || !sim::cli::parse_nodes(v, o.nodes)) return usage_error("bad --nodes (e.g. 1-6 or 1,3,5)");
       if (o.nodes.size() > kMaxServoJoints) return usage_error("at most 8 nodes");
@@ -305,7 +312,8 @@ int main(int argc, char** argv) {
       return usage_error("unknown option " + a);
     }
   }
-  if (o.sim == !o.iface.empty()) return usage_error("give exactly one of --iface NAME or --sim");
+  if (int(o.sim) + int(!o.iface.empty()) + int(o.fd >= 0) != 1)
+    return usage_error("give exactly one of --iface NAME, --fd N or --sim");
   if (!o.bringup) return usage_error("nothing to do: add --bringup (and --stream-sine / --hold)");
   if (!o.sim && (!o.sim_silent.empty() || !o.sim_emcy.empty())) return usage_error("--sim-* faults need --sim");
   if (o.expect_hb_loss && std::find(o.nodes.begin(), o.nodes.end(), std::uint8_t(o.expect_hb_loss)) == o.nodes.end())
@@ -323,6 +331,11 @@ int main(int argc, char** argv) {
     const int rc = run(*s.master_ep, clock, o, s.arm.get());
     clock.set_idle_hook(nullptr);
     return rc;
+  }
+  if (o.fd >= 0) {
+    SocketCanBus bus(o.fd);
+    MonotonicClock clock;
+    return run(bus, clock, o, nullptr);
   }
   SocketCanBus bus;
   if (const Status st = bus.open(o.iface.c_str()); st != Status::ok) {

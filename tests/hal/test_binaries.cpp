@@ -1,0 +1,140 @@
+// The armsim and canmaster binaries as separate processes, talking SocketCAN
+// frames (struct can_frame records) over a socketpair(AF_UNIX, SOCK_SEQPACKET)
+// passed with --fd: the shell scenarios of the vcan VM, without kernel CAN.
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <string>
+#include <vector>
+
+// CppUTest last: its leak detector redefines `new`.
+#include <CppUTest/TestHarness.h>
+
+namespace {
+
+struct Proc {
+  pid_t pid = -1;
+  int out = -1;  // read end of stdout
+};
+
+Proc spawn(const std::vector<std::string>& args, int keep_fd, int close_fd) {
+  int pipefd[2];
+  if (pipe(pipefd) != 0) return {};
+  const pid_t pid = fork();
+  if (pid == 0) {
+    dup2(pipefd[1], 1);
+    close(pipefd[0]);
+    close(pipefd[1]);
+    if (close_fd >= 0) close(close_fd);
+    (void)keep_fd;
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  close(pipefd[1]);
+  return {pid, pipefd[0]};
+}
+
+std::string read_all(int fd) {
+  std::string s;
+  char buf[4096];
+  ssize_t n;
+  while ((n = read(fd, buf, sizeof buf)) > 0) s.append(buf, std::size_t(n));
+  close(fd);
+  return s;
+}
+
+int wait_rc(pid_t pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+struct Run {
+  int master_rc, sim_rc;
+  std::string master_out, sim_out;
+};
+
+Run run_pair(std::vector<std::string> master_args, std::vector<std::string> sim_args) {
+  int sv[2];
+  socketpair(AF_UNIX, SOCK_SEQPACKET, 0, sv);
+  sim_args.insert(sim_args.begin(), {ARMSIM_PATH, "--fd", std::to_string(sv[1])});
+  master_args.insert(master_args.begin(), {CANMASTER_PATH, "--fd", std::to_string(sv[0])});
+  Proc sim = spawn(sim_args, sv[1], sv[0]);
+  Proc master = spawn(master_args, sv[0], sv[1]);
+  close(sv[0]);
+  close(sv[1]);
+  Run r;
+  r.master_out = read_all(master.out);
+  r.master_rc = wait_rc(master.pid);
+  r.sim_out = read_all(sim.out);
+  r.sim_rc = wait_rc(sim.pid);
+  return r;
+}
+
+int run_alone(const std::vector<std::string>& args) {
+  Proc p = spawn(args, -1, -1);
+  read_all(p.out);
+  return wait_rc(p.pid);
+}
+
+}  // namespace
+
+TEST_GROUP(Binaries){};
+
+TEST(Binaries, BringUpAndStreamAcrossProcesses) {
+  Run r = run_pair({"--nodes", "1-6", "--bringup", "--stream-sine", "1.5", "--period-ms", "2"},
+                   {"--nodes", "1-6", "--duration", "6"});
+  STRCMP_CONTAINS("bringup status=ok", r.master_out.c_str());
+  STRCMP_CONTAINS("node id=6 name=\"servoarm virtual drive 6\" state=enabled", r.master_out.c_str());
+  STRCMP_CONTAINS("result status=ok", r.master_out.c_str());
+  LONGS_EQUAL(0, r.master_rc);
+  STRCMP_CONTAINS("armsim ready", r.sim_out.c_str());
+  LONGS_EQUAL(0, r.sim_rc);
+}
+
+TEST(Binaries, SilentNodeHeartbeatLossReportedInTime) {
+  Run r = run_pair({"--nodes", "1-3", "--bringup", "--hold", "2", "--hb-ms", "50", "--hb-timeout-ms", "150",
+                    "--expect-hb-loss", "2"},
+                   {"--nodes", "1-3", "--silent", "2@1.2", "--duration", "5"});
+  STRCMP_CONTAINS("fault t=", r.master_out.c_str());
+  STRCMP_CONTAINS("node=2 reason=heartbeat_lost", r.master_out.c_str());
+  STRCMP_CONTAINS("result status=ok", r.master_out.c_str());
+  LONGS_EQUAL(0, r.master_rc);
+  STRCMP_CONTAINS("node=2 kind=silent", r.sim_out.c_str());
+}
+
+TEST(Binaries, RefusingDriveFailsBringUpWithExitCode4) {
+  Run r = run_pair({"--nodes", "1-2", "--bringup", "--hold", "0.2", "--enable-timeout-ms", "300"},
+                   {"--nodes", "1-2", "--refuse-enable", "2", "--duration", "4"});
+  STRCMP_CONTAINS("bringup status=drive_refused", r.master_out.c_str());
+  STRCMP_CONTAINS("node 2: drive_refused (stayed in switched_on", r.master_out.c_str());
+  LONGS_EQUAL(4, r.master_rc);
+}
+
+TEST(Binaries, UsageErrorsExit2) {
+  LONGS_EQUAL(2, run_alone({CANMASTER_PATH}));
+  LONGS_EQUAL(2, run_alone({CANMASTER_PATH, "--sim"}));  // nothing to do
+  LONGS_EQUAL(2, run_alone({CANMASTER_PATH, "--sim", "--bringup", "--nodes", "0-3"}));
+  LONGS_EQUAL(2, run_alone({CANMASTER_PATH, "--sim", "--iface", "vcan0", "--bringup"}));
+  LONGS_EQUAL(2, run_alone({ARMSIM_PATH, "--iface", "vcan0", "--emcy", "3"}));  // code missing
+  LONGS_EQUAL(2, run_alone({ARMSIM_PATH, "--iface", "vcan0", "--nodes", "1-2", "--silent", "5"}));
+  LONGS_EQUAL(2, run_alone({ARMSIM_PATH, "--bogus"}));
+  LONGS_EQUAL(0, run_alone({ARMSIM_PATH, "--help"}));
+  LONGS_EQUAL(0, run_alone({CANMASTER_PATH, "--help"}));
+}
+
+TEST(Binaries, SimModeScenarios) {
+  LONGS_EQUAL(0, run_alone({CANMASTER_PATH, "--sim", "--bringup", "--stream-sine", "1", "--quiet"}));
+  LONGS_EQUAL(0, run_alone({CANMASTER_PATH, "--sim", "--bringup", "--hold", "1", "--expect-hb-loss", "4",
+                            "--sim-silent", "4@0.3", "--quiet"}));
+  // Expecting a loss that never happens is a failure.
+  LONGS_EQUAL(1, run_alone({CANMASTER_PATH, "--sim", "--bringup", "--hold", "0.5", "--expect-hb-loss", "4", "--quiet"}));
+  // A drive fault during the run fails the scenario.
+  LONGS_EQUAL(1, run_alone({CANMASTER_PATH, "--sim", "--bringup", "--hold", "0.5", "--sim-emcy", "2:0x4310@0.1",
+                            "--quiet"}));
+}
