@@ -1,0 +1,62 @@
+#pragma once
+// Run a command line, capture stdout and stderr separately and the exit status.
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace servoarm::test {
+
+struct CommandResult {
+  int status = -1;
+  std::string out, err;
+};
+
+inline std::string slurp(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+inline CommandResult run_command(const std::string& cmdline) {
+  static int counter = 0;
+  const std::string base = "/tmp/servoarm_cmd_" + std::to_string(getpid()) + "_" + std::to_string(counter++);
+  const std::string full = cmdline + " >" + base + ".out 2>" + base + ".err";
+  CommandResult r;
+  const int raw = std::system(full.c_str());
+  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  r.out = slurp(base + ".out");
+  r.err = slurp(base + ".err");
+  std::remove((base + ".out").c_str());
+  std::remove((base + ".err").c_str());
+  return r;
+}
+
+/// Numbers of a JSON array that follows `"key": ` (flat arrays only, or the
+/// flattened content of nested ones).
+inline std::vector<double> json_numbers(const std::string& json, const std::string& key) {
+  std::vector<double> v;
+  const std::size_t k = json.find("\"" + key + "\":");
+  if (k == std::string::npos) return v;
+  std::size_t i = json.find('[', k);
+  int depth = 0;
+  std::string tok;
+  for (; i < json.size(); ++i) {
+    const char c = json[i];
+    if (c == '[') {
+      ++depth;
+    } else if (c == ']' || c == ',') {
+      if (!tok.empty()) v.push_back(std::strtod(tok.c_str(), nullptr)), tok.clear();
+      if (c == ']' && --depth == 0) break;
+    } else if (c != ' ') {
+      tok += c;
+    }
+  }
+  return v;
+}
+
+}  // namespace servoarm::test
