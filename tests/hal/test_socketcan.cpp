@@ -184,6 +184,5 @@ TEST(SocketCanOpen, BadNamesAndMissingKernelSupport) {
   CHECK(s == Status::io_error || s == Status::interface_down);
   CHECK(std::strlen(b.message()) > 0);
   CHECK_FALSE(b.is_open());
-  CanFrame f;
   LONGS_EQUAL(int(Status::not_open), int(b.send(CanFrame::make(1, {}))));
 }
