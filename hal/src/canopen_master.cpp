@@ -171,7 +171,7 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
       if (!decode_heartbeat(f, n, s)) break;
       fb.last_heartbeat = now;
       if (started_ && s != NmtState::operational && jt.nmt == NmtState::operational) {
-        // Node left operational on its own (reset, boot-up): no process data any more.
+        // Node was seen operational and left on its own (reset, boot-up, stop): no process data any more.
         set_fault(j, Status::protocol_error, now);
       }
       jt.nmt = s;
@@ -277,7 +277,9 @@ Status CanopenServoBus::start(TimePoint deadline) {
       std::snprintf(error_, sizeof error_, "NMT start: %s", describe(s));
       return s;
     }
-    joints_[j].nmt = NmtState::operational;
+    // NMT state is learnt from heartbeats only: a heartbeat sent before the node
+    // processed this start command may still say pre-operational.
+    joints_[j].nmt = NmtState::boot_up;
     joints_[j].have_status = false;
     fb_[j] = JointFeedback{};
     fb_[j].state = JointState::disabled;
@@ -357,6 +359,7 @@ Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) 
     JointFeedback& fb = fb_[j];
     if (jt.need_nmt_start) {
       jt.need_nmt_start = false;
+      jt.nmt = NmtState::boot_up;  // learn the new state from the next heartbeats
       bus_.send(encode_nmt(NmtCommand::start, jt.node));
     }
     const bool faulted = fb.state == JointState::fault;

@@ -299,3 +299,31 @@ TEST(MasterSim, InvalidConfigRejected) {
   LONGS_EQUAL(int(Status::capacity), int(m2.config_status()));
   LONGS_EQUAL(int(Status::not_configured), int(m.read(rig->clock.now())));
 }
+
+TEST(MasterSim, NodeResetIsReported) {
+  bring_up();
+  hold_cycles(50);  // heartbeats have shown every node operational
+  auto other = rig->bus.open(16);
+  other->send(canopen::encode_nmt(canopen::NmtCommand::reset_node, 2));
+  hold_cycles(5);
+  LONGS_EQUAL(int(JointState::fault), int(master->feedback(1).state));
+  LONGS_EQUAL(int(Status::protocol_error), int(master->feedback(1).fault));
+  for (std::size_t j : {0u, 2u, 3u, 4u, 5u}) LONGS_EQUAL(int(JointState::enabled), int(master->feedback(j).state));
+  // After a reset the drive lost its PDO configuration: start() configures it again.
+  LONGS_EQUAL(int(Status::ok), int(master->start(rig->clock.now() + 2 * kSecond)));
+  LONGS_EQUAL(int(Status::ok), int(master->enable_blocking(rig->clock.now() + kSecond, kPeriod)));
+  LONGS_EQUAL(int(JointState::enabled), int(master->feedback(1).state));
+}
+
+TEST(MasterSim, StaleHeartbeatDuringStartIsNoFault) {
+  // A pre-operational heartbeat that crosses the NMT start on the wire (sent by the node
+  // before it processed the start) must not count as "node left operational".
+  LONGS_EQUAL(int(Status::ok), int(master->start(rig->clock.now() + 2 * kSecond)));
+  auto other = rig->bus.open(16);
+  other->send(canopen::encode_heartbeat(3, canopen::NmtState::pre_operational));
+  const Status s = master->enable_blocking(rig->clock.now() + kSecond, kPeriod);
+  STRCMP_EQUAL("", master->last_error());
+  LONGS_EQUAL(int(Status::ok), int(s));
+  hold_cycles(20);
+  for (std::size_t j = 0; j < 6; ++j) LONGS_EQUAL(int(JointState::enabled), int(master->feedback(j).state));
+}
