@@ -63,13 +63,18 @@ stop_candump() {
   wait "$_c_pid" 2>/dev/null || true
 }
 
-# frames FILE: candump -L lines -> "ID#DATA" (timestamp and interface dropped).
-# Linux >= 6.1 sets CANFD_FDF (0x04) in the flags of every CAN FD frame; older
-# kernels do not: it is masked out so expectations hold on both.
-frames() {
-  sed -n 's/^([0-9.]*) [^ ]* //p' "$1" |
+# tframes FILE: candump -L lines -> "SECONDS ID#DATA", in kernel timestamp
+# order. On an SMP kernel a frame is handed to each socket in turn, so a fast
+# answer (armsim replying on the other CPU) can reach candump's socket before
+# the request that caused it; the timestamps (taken when the frame entered the
+# stack) keep the causal order. Linux >= 6.1 sets CANFD_FDF (0x04) in the flags
+# of every CAN FD frame; older kernels do not: it is masked out.
+tframes() {
+  sed -n 's/^(\([0-9.]*\)) [^ ]* /\1 /p' "$1" | sort -s -k1,1 |
     sed 's/##4/##0/; s/##5/##1/; s/##6/##2/; s/##7/##3/'
 }
+# frames FILE: the same without timestamps: "ID#DATA" lines.
+frames() { tframes "$1" | cut -d' ' -f2; }
 
 # expected FILE: the file without blank lines and "# comment" lines.
 expected() { grep -v -e '^[[:space:]]*$' -e '^#' "$1"; }
@@ -89,3 +94,92 @@ same_frames() {
 # Little-endian hex of an unsigned/signed 32-bit or 16-bit integer: le32 100000 -> A0860100
 le32() { printf '%08X' $(( $1 & 0xFFFFFFFF )) | sed 's/\(..\)\(..\)\(..\)\(..\)/\4\3\2\1/'; }
 le16() { printf '%04X' $(( $1 & 0xFFFF )) | sed 's/\(..\)\(..\)/\2\1/'; }
+
+# awk functions for candump payloads: le_u(hex) little-endian unsigned value of
+# a hex byte string, s32(v) / s16(v) two's complement.
+AWK_LE='
+function hexval(s,   i, v) { v = 0; for (i = 1; i <= length(s); i++) v = v * 16 + index("0123456789ABCDEF", substr(s, i, 1)) - 1; return v }
+function le_u(s,   i, r) { r = ""; for (i = length(s) - 1; i >= 1; i -= 2) r = r substr(s, i, 2); return hexval(r) }
+function s32(v) { return v >= 2147483648 ? v - 4294967296 : v }
+function s16(v) { return v >= 32768 ? v - 65536 : v }
+'
+
+# play_exchange FILE NAME: send the "> FRAME" lines of FILE with cansend and
+# wait for each "< FRAME" line to be answered, with candump -L recording into
+# $OUT_DIR/NAME.log (started by the caller with start_candump NAME ...). Each
+# line waits until the log holds as many frames as lines played so far, so the
+# order of requests and answers is fixed. In "<" lines, x matches any hex digit.
+play_exchange() {
+  _p_n=0
+  while read -r _p_dir _p_frame _p_rest; do
+    case $_p_dir in
+      '>') _p_n=$((_p_n + 1)); cansend "$CAN_IF" "$_p_frame" || check_fail "cansend $_p_frame failed" ;;
+      '<') _p_n=$((_p_n + 1)) ;;
+      *) continue ;;
+    esac
+    _p_t=60   # x 50 ms
+    while [ "$(wc -l <"$OUT_DIR/$2.log")" -lt "$_p_n" ] && [ "$_p_t" -gt 0 ]; do sleep 0.05; _p_t=$((_p_t - 1)); done
+    [ "$_p_t" -gt 0 ] || { check_fail "no answer within 3 s after line $_p_n ($_p_dir $_p_frame)"; return 1; }
+  done <"$1"
+}
+
+# match_exchange FILE ACTUAL-FRAMES WHAT: ACTUAL-FRAMES must be exactly the
+# frames of FILE's "<" and ">" lines, in order ("x" = any hex digit).
+match_exchange() {
+  awk '$1 == "<" || $1 == ">" { print $2 }' "$1" >"$OUT_DIR/exchange.want"
+  if awk 'NR == FNR { want[++n] = $0; next }
+          { ++m; re = want[m]; gsub(/x/, "[0-9A-F]", re)
+            if (m > n || $0 !~ ("^" re "$")) { printf "  frame %d: got %s, want %s\n", m, $0, (m > n ? "(nothing)" : want[m]); bad = 1 } }
+          END { if (m < n) { printf "  only %d of %d frames; first missing: %s\n", m, n, want[m + 1]; bad = 1 }
+                exit bad }' "$OUT_DIR/exchange.want" "$2" >"$OUT_DIR/exchange.diff"; then
+    pass "$3 ($(wc -l <"$2") frames as expected)"
+  else
+    check_fail "$3: captured frames differ from $1:"
+    head -n 20 "$OUT_DIR/exchange.diff"
+  fi
+}
+
+# node_template FILE NODE: expected lines of FILE with the hex digit N -> NODE (1..9).
+node_template() { expected "$1" | sed "s/N/$2/g"; }
+
+# start_armsim NAME ARGS...: armsim --iface $CAN_IF ARGS > $OUT_DIR/NAME.log,
+# returns once it printed "armsim ready". ARMSIM_PID is its pid.
+start_armsim() {
+  _a_name=$1; shift
+  armsim --iface "$CAN_IF" "$@" >"$OUT_DIR/$_a_name.log" 2>&1 &
+  ARMSIM_PID=$!
+  wait_until 10 "armsim to print 'armsim ready'" grep -q '^armsim ready' "$OUT_DIR/$_a_name.log"
+}
+stop_armsim() { # stop_armsim: SIGTERM, wait; fails the check if it did not exit 0
+  kill -TERM "$ARMSIM_PID" 2>/dev/null || true
+  _a_rc=0; wait "$ARMSIM_PID" || _a_rc=$?
+  [ "$_a_rc" -eq 0 ] || check_fail "armsim exited with status $_a_rc (crash?)"
+}
+
+# check_sine_targets WHAT TFRAMES ID AMP_COUNTS FREQ PERIOD_S: the RPDO1 targets
+# (bytes 2..5, cw 0x000F only) on ID in TFRAMES ("seconds ID#DATA") must be a
+# streamed sine of amplitude AMP_COUNTS: its negative peak within 2 % of -AMP
+# around the start position, never beyond +AMP, and no step faster than the
+# sine (with its 0.5 s amplitude ramp) can move between two frames:
+# |d target| <= 1.2 A (2 + 2 pi f) (dt + 2 PERIOD) + 20 counts, dt from the
+# kernel timestamps (2 periods allow for the time between computing a
+# setpoint and sending it, which the timestamps do not see).
+check_sine_targets() {
+  if awk -v id="$3" -v A="$4" -v f="$5" -v T="$6" "$AWK_LE"'
+      { split($2, p, "#") }
+      p[1] == id && substr(p[2], 1, 4) == "0F00" {
+        v = s32(le_u(substr(p[2], 5, 8))); t = $1
+        if (c == 0) { p0 = v; lo = hi = 0 }
+        d = v - p0; if (d < lo) lo = d; if (d > hi) hi = d
+        if (c > 0) { step = v - pv; if (step < 0) step = -step
+                     lim = 1.2 * A * (2 + 6.2832 * f) * (t - pt + 2 * T) + 20
+                     if (step > lim) { jumps++; if (!bad) bad = sprintf("jump of %d counts in %.4f s at target %d", step, t - pt, c + 1) } }
+        pv = v; pt = t; c++ }
+      END { printf "%d targets from %d: min %+d, max %+d counts around the start (A = %d)%s\n", c, p0, lo, hi, A, bad ? ", " jumps " bad steps, first: " bad : ""
+            exit !(c >= 50 && lo <= -0.98 * A && lo >= -1.02 * A && hi <= 1.02 * A && !jumps) }' "$2" >"$OUT_DIR/sine.tmp"; then
+    pass "$1: $(cat "$OUT_DIR/sine.tmp")"
+  else
+    check_fail "$1: not the streamed sine: $(cat "$OUT_DIR/sine.tmp")"
+  fi
+  rm -f "$OUT_DIR/sine.tmp"
+}
