@@ -7,6 +7,7 @@
 
 #include <cstring>
 
+#include "alloc_counter.hpp"
 #include "servoarm/hal/socketcan_bus.hpp"
 
 // CppUTest last: its leak detector redefines `new`.
@@ -169,6 +170,22 @@ TEST(SocketCan, OddSizedRecordIgnored) {
   CanFrame f;
   LONGS_EQUAL(int(Status::ok), int(bus->receive(f, clock.now() + 50 * kMillisecond)));
   UNSIGNED_LONGS_EQUAL(0x123, f.id);
+}
+
+TEST(SocketCan, NoAllocationInSendReceive) {
+  CanFrame f;
+  std::size_t allocs = 0;
+  for (int i = 0; i < 100; ++i) {
+    servoarm::test::AllocScope scope;
+    bus->send(CanFrame::make(0x201, {0x0F, 0, 1, 2, 3, 4}));
+    peer_send(0x181, {0x27, 0x06, 1, 2, 3, 4});
+    bus->receive(f, 0);
+    bus->receive(f, 0);  // nothing left: timeout path
+    allocs += scope.end();
+    can_frame k;
+    CHECK(read(sv[1], &k, sizeof k) == ssize_t(sizeof k));
+  }
+  LONGS_EQUAL(0, allocs);
 }
 
 TEST_GROUP(SocketCanOpen){};
