@@ -65,6 +65,14 @@ Status add_row(Chain& chain, const DhRow& in) {
   }
   row.ca = std::cos(row.alpha);
   row.sa = std::sin(row.alpha);
+  row.alpha_kind = 0;
+  if (std::abs(row.sa) < 1e-15) {
+    if (row.ca > 0) row.alpha_kind = 1, row.ca = 1, row.sa = 0;
+  } else if (std::abs(row.ca) < 1e-15) {
+    row.alpha_kind = row.sa > 0 ? 2 : 3;
+    row.ca = 0;
+    row.sa = row.sa > 0 ? 1 : -1;
+  }
   row.ct = std::cos(row.theta);
   row.st = std::sin(row.theta);
   if (is_joint) chain.joint_row[static_cast<std::size_t>(chain.n_joints++)] = static_cast<std::int8_t>(chain.n_rows);
@@ -101,6 +109,32 @@ inline Status check_q(const Chain& chain, const JointVector& q) {
 // Advance the accumulator across one row whose joint value has been resolved
 // into (ct, st, d). `axis_z`/`axis_p` receive the joint axis (direction and a
 // point on it) in the base frame.
+// Frame update by Rx(alpha): y' = ca y + sa z, z' = ca z - sa y, with the
+// common alphas (0, +90, -90 deg) special-cased.
+inline void rot_x(const DhRow& r, const Eigen::Vector3d& y, Eigen::Vector3d& y_out, Eigen::Vector3d& z) {
+  switch (r.alpha_kind) {
+    case 1:
+      y_out = y;
+      return;
+    case 2: {
+      y_out = z;
+      z = -y;
+      return;
+    }
+    case 3: {
+      y_out = -z;
+      z = y;
+      return;
+    }
+    default: {
+      const Eigen::Vector3d z0 = z;
+      y_out = r.ca * y + r.sa * z0;
+      z = r.ca * z0 - r.sa * y;
+      return;
+    }
+  }
+}
+
 template <bool kModified>
 inline void step(const DhRow& r, double ct, double st, double d, Acc& t, Eigen::Vector3d* axis_z,
                  Eigen::Vector3d* axis_p) {
@@ -111,14 +145,14 @@ inline void step(const DhRow& r, double ct, double st, double d, Acc& t, Eigen::
     }
     const Eigen::Vector3d x1 = ct * t.x + st * t.y;
     const Eigen::Vector3d y1 = ct * t.y - st * t.x;
-    t.p += d * t.z + r.a * x1;
+    if (d != 0.0) t.p += d * t.z;
+    if (r.a != 0.0) t.p += r.a * x1;
     t.x = x1;
-    t.y = r.ca * y1 + r.sa * t.z;
-    t.z = r.ca * t.z - r.sa * y1;
+    rot_x(r, y1, t.y, t.z);
   } else {
-    t.p += r.a * t.x;
-    const Eigen::Vector3d y1 = r.ca * t.y + r.sa * t.z;
-    t.z = r.ca * t.z - r.sa * t.y;
+    if (r.a != 0.0) t.p += r.a * t.x;
+    Eigen::Vector3d y1;
+    rot_x(r, t.y, y1, t.z);
     if (axis_z) {
       *axis_z = t.z;
       *axis_p = t.p;
@@ -126,7 +160,7 @@ inline void step(const DhRow& r, double ct, double st, double d, Acc& t, Eigen::
     const Eigen::Vector3d x2 = ct * t.x + st * y1;
     t.y = ct * y1 - st * t.x;
     t.x = x2;
-    t.p += d * t.z;
+    if (d != 0.0) t.p += d * t.z;
   }
 }
 

@@ -49,3 +49,64 @@ TEST(KdlReference, ForwardKinematicsAndJacobianOfEveryBuiltinModel) {
   }
   CHECK(models >= 12);
 }
+
+// Random chains: both conventions, every row type, general and special alphas
+// (0, +-90, 180 and arbitrary), negative directions, base and tool transforms.
+TEST(KdlReference, RandomChainsOfEveryShape) {
+  std::mt19937_64 rng(777);
+  std::uniform_real_distribution<double> len(-0.5, 0.5), ang(-M_PI, M_PI);
+  std::uniform_int_distribution<int> pick(0, 9);
+  int checked = 0;
+  for (int c = 0; c < 300; ++c) {
+    kin::Chain chain;
+    chain.convention = (c % 2) ? kin::Convention::modified : kin::Convention::standard;
+    const int rows = 1 + static_cast<int>(rng() % kin::kMaxRows);
+    for (int i = 0; i < rows; ++i) {
+      kin::DhRow r;
+      const int t = pick(rng);
+      r.type = t < 6 ? kin::JointType::revolute : t < 8 ? kin::JointType::prismatic : kin::JointType::fixed;
+      if (r.type != kin::JointType::fixed && chain.n_joints == kin::kMaxJoints) r.type = kin::JointType::fixed;
+      const double alphas[] = {0, M_PI / 2, -M_PI / 2, M_PI, ang(rng)};
+      r.alpha = alphas[rng() % 5];
+      r.theta = pick(rng) < 3 ? 0 : ang(rng);
+      r.a = pick(rng) < 3 ? 0 : len(rng);
+      r.d = pick(rng) < 3 ? 0 : len(rng);
+      r.direction = pick(rng) < 3 ? -1 : 1;
+      CHECK(kin::add_row(chain, r) == kin::Status::ok);
+    }
+    if (chain.n_joints == 0) continue;
+    if (c % 3 == 0) {
+      kin::Pose B = kin::Pose::Identity();
+      B.linear() = Eigen::AngleAxisd(ang(rng), Eigen::Vector3d(len(rng), len(rng), 1).normalized()).toRotationMatrix();
+      B.translation() << len(rng), len(rng), len(rng);
+      chain.base = B;
+      kin::set_tool(chain, B.inverse());
+    }
+    const KDL::Chain kc = to_kdl(chain);
+    KDL::ChainFkSolverPos_recursive kfk(kc);
+    KDL::ChainJntToJacSolver kjac(kc);
+    KDL::Jacobian kJ(kc.getNrOfJoints());
+    for (int n = 0; n < 50; ++n) {
+      kin::JointVector q(chain.n_joints);
+      for (int j = 0; j < chain.n_joints; ++j) q[j] = ang(rng);
+      KDL::Frame F;
+      kfk.JntToCart(to_kdl(q), F);
+      kjac.JntToJac(to_kdl(q), kJ);
+      kin::Jacobian J;
+      kin::Pose T;
+      CHECK(kin::jacobian(chain, q, J, &T) == kin::Status::ok);
+      const kin::Pose ref = from_kdl(F);
+      const double e = std::max({(T.translation() - ref.translation()).cwiseAbs().maxCoeff(),
+                                 (T.linear() - ref.linear()).cwiseAbs().maxCoeff(), (J - kJ.data).cwiseAbs().maxCoeff(),
+                                 (fk(chain, q).matrix() - T.matrix()).cwiseAbs().maxCoeff()});
+      if (e > 1e-9) {
+        std::ostringstream os;
+        os << "chain " << c << " (" << kin::to_string(chain.convention) << ", " << chain.n_rows << " rows) "
+           << describe(q) << " error " << e;
+        FAIL(os.str().c_str());
+      }
+      ++checked;
+    }
+  }
+  CHECK(checked > 10000);
+}

@@ -47,8 +47,11 @@ struct DhRow {
   double lower = -std::numeric_limits<double>::infinity();  ///< joint limit (rad or m)
   double upper = std::numeric_limits<double>::infinity();
   JointDynamics dynamics{};
-  // Precomputed by add_row(): cos/sin of alpha, and of theta for rows whose theta is constant.
+  // Precomputed by add_row(): cos/sin of alpha, and of theta for rows whose theta is constant;
+  // alpha_kind: 0 general, 1 alpha = 0, 2 alpha = +90 deg, 3 alpha = -90 deg (exactly, to 1e-15),
+  // so forward() can skip the multiplications by 0 and 1 of the common cases.
   double ca = 1, sa = 0, ct = 1, st = 0;
+  std::uint8_t alpha_kind = 0;
 };
 
 /// A serial chain of up to kMaxRows DH rows (kMaxJoints of them joints).

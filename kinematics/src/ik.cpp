@@ -1,0 +1,777 @@
+// Closed-form inverse kinematics (see ik.hpp for the method).
+//
+// Real-time parts (ik_solve_all and what it calls) are heap-free: fixed-size
+// Eigen types only, the root finder works on an 8x8 companion matrix with
+// compile-time maximum size.
+#include "servoarm/kinematics/ik.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+
+#include "ik_detail.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+
+namespace servoarm::kin {
+
+const char* to_string(IkMethod m) {
+  switch (m) {
+    case IkMethod::none: return "numeric";
+    case IkMethod::spherical_wrist: return "spherical_wrist";
+    case IkMethod::planar_2r: return "planar_2r";
+    case IkMethod::planar_3: return "planar_3";
+    case IkMethod::spatial_3: return "spatial_3";
+    case IkMethod::pitch_4: return "pitch_4";
+  }
+  return "unknown";
+}
+
+const char* singular_kinds_to_string(std::uint8_t kinds, char* buf, int size) {
+  if (size <= 0) return buf;
+  buf[0] = '\0';
+  if (kinds == 0) {
+    std::snprintf(buf, static_cast<std::size_t>(size), "none");
+    return buf;
+  }
+  std::snprintf(buf, static_cast<std::size_t>(size), "%s%s%s%s%s",
+                (kinds & kSingularWrist) ? "wrist" : "",
+                ((kinds & kSingularWrist) && (kinds & (kSingularShoulder | kSingularElbow))) ? "|" : "",
+                (kinds & kSingularShoulder) ? "shoulder" : "",
+                ((kinds & kSingularShoulder) && (kinds & kSingularElbow)) ? "|" : "",
+                (kinds & kSingularElbow) ? "elbow" : "");
+  return buf;
+}
+
+namespace detail {
+
+bool pose_error(const Chain& chain, const JointVector& q, const Pose& target, double& ep, double& er) {
+  Pose T;
+  if (forward(chain, q, T) != Status::ok) return false;
+  ep = (T.translation() - target.translation()).norm();
+  er = rotation_error(T.linear(), target.linear()).norm();
+  return std::isfinite(ep) && std::isfinite(er);
+}
+
+void refine(const Chain& chain, const Pose& target, JointVector& q, int iterations, bool position_only) {
+  const int n = chain.n_joints;
+  using MatN = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kMaxJoints, kMaxJoints>;
+  for (int it = 0; it < iterations; ++it) {
+    Jacobian J;
+    Pose T;
+    if (jacobian(chain, q, J, &T) != Status::ok) return;
+    Eigen::Matrix<double, 6, 1> e;
+    e.head<3>() = target.translation() - T.translation();
+    e.tail<3>() = position_only ? Eigen::Vector3d::Zero() : rotation_error(T.linear(), target.linear());
+    if (position_only) J.bottomRows<3>().setZero();
+    if (e.norm() < 1e-15) return;
+    MatN A = J.transpose() * J;
+    A.diagonal().array() += 1e-12;
+    const JointVector g = J.transpose() * e;
+    const JointVector dq = A.ldlt().solve(g);
+    if (!dq.allFinite()) return;
+    JointVector q2 = q + dq;
+    double ep0, er0, ep1, er1;
+    if (!pose_error(chain, q, target, ep0, er0) || !pose_error(chain, q2, target, ep1, er1)) return;
+    if (ep1 + (position_only ? 0 : er1) >= ep0 + (position_only ? 0 : er0)) return;
+    q = q2;
+    (void)n;
+  }
+}
+
+}  // namespace detail
+
+namespace {
+
+using detail::joint_motion;
+using detail::rot_z;
+
+constexpr double kPi = M_PI;
+constexpr double kVerifyPos = 1e-9;
+constexpr double kVerifyRot = 1e-9;
+constexpr double kNearSingular = 1e-6;
+
+Pose rx_pose(double a) {
+  Pose T = Pose::Identity();
+  const double c = std::cos(a), s = std::sin(a);
+  T.linear() << 1, 0, 0, 0, c, -s, 0, s, c;
+  return T;
+}
+Pose rz_pose(double a) {
+  Pose T = Pose::Identity();
+  T.linear() = rot_z(a);
+  return T;
+}
+Pose tx_pose(double a) {
+  Pose T = Pose::Identity();
+  T.translation().x() = a;
+  return T;
+}
+Pose tz_pose(double d) {
+  Pose T = Pose::Identity();
+  T.translation().z() = d;
+  return T;
+}
+
+// Rewrite the chain as C0 J1 C1 ... Jn Cn.
+void decompose(const Chain& c, IkModel& m) {
+  Pose K = c.base;
+  int j = 0;
+  double scale = 0;
+  for (int i = 0; i < c.n_rows; ++i) {
+    const DhRow& r = c.rows[static_cast<std::size_t>(i)];
+    scale += std::abs(r.a) + std::abs(r.d);
+    if (r.type == JointType::prismatic) scale += std::max(std::abs(r.lower), std::abs(r.upper)) * (std::isfinite(r.upper) ? 1.0 : 0.0);
+    const bool joint = r.type != JointType::fixed;
+    if (c.convention == Convention::standard) {
+      K = K * rz_pose(r.theta) * tz_pose(r.d);
+      if (joint) {
+        m.C[static_cast<std::size_t>(j)] = K;
+        m.prismatic[static_cast<std::size_t>(j)] = r.type == JointType::prismatic;
+        m.dir[static_cast<std::size_t>(j)] = r.direction;
+        ++j;
+        K = Pose::Identity();
+      }
+      K = K * tx_pose(r.a) * rx_pose(r.alpha);
+    } else {
+      K = K * rx_pose(r.alpha) * tx_pose(r.a) * rz_pose(r.theta) * tz_pose(r.d);
+      if (joint) {
+        m.C[static_cast<std::size_t>(j)] = K;
+        m.prismatic[static_cast<std::size_t>(j)] = r.type == JointType::prismatic;
+        m.dir[static_cast<std::size_t>(j)] = r.direction;
+        ++j;
+        K = Pose::Identity();
+      }
+    }
+  }
+  m.C[static_cast<std::size_t>(j)] = K * c.tool;
+  m.n = j;
+  scale += c.tool.translation().norm() + c.base.translation().norm();
+  m.scale = std::max(scale, 1e-3);
+}
+
+const Pose& C(const IkModel& m, int i) { return m.C[static_cast<std::size_t>(i)]; }
+bool prism(const IkModel& m, int j) { return m.prismatic[static_cast<std::size_t>(j)]; }
+
+// Basis of a joint's motion: (1, cos m, sin m) or (1, m, m^2), and its derivative.
+Eigen::Vector3d basis(bool prismatic, double m) {
+  if (prismatic) return {1.0, m, m * m};
+  return {1.0, std::cos(m), std::sin(m)};
+}
+Eigen::Vector3d dbasis(bool prismatic, double m) {
+  if (prismatic) return {0.0, 1.0, 2.0 * m};
+  return {0.0, -std::sin(m), std::cos(m)};
+}
+
+// Point w (frame after J3 motion) in the frame after J1 motion.
+Eigen::Vector3d f_of(const IkModel& m, double m2, double m3, const Eigen::Vector3d& w) {
+  return C(m, 1) * (joint_motion(prism(m, 1), m2) * (C(m, 2) * (joint_motion(prism(m, 2), m3) * w)));
+}
+
+// Closest points of two lines; returns the distance, s/t the parameters.
+double line_closest(const Eigen::Vector3d& p, const Eigen::Vector3d& u, const Eigen::Vector3d& q,
+                    const Eigen::Vector3d& v, double& s, double& t) {
+  const Eigen::Vector3d w0 = p - q;
+  const double a = u.dot(u), b = u.dot(v), c = v.dot(v), d = u.dot(w0), e = v.dot(w0);
+  const double den = a * c - b * b;
+  if (den < 1e-14) {
+    s = 0;
+    t = e / c;
+  } else {
+    s = (b * e - c * d) / den;
+    t = (a * e - b * d) / den;
+  }
+  return ((p + s * u) - (q + t * v)).norm();
+}
+
+// Set up the position subproblem of joints 1..3 for the point w3 (frame after
+// J3 motion): lambda, M1, M2, shoulder direction.
+void setup_position(IkModel& m) {
+  const Eigen::Vector3d t1 = C(m, 1).translation();
+  const Eigen::Vector3d n2 = C(m, 1).linear().col(2);
+  const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
+  if (n2.cross(ez).norm() < 1e-9) {
+    m.lambda = t1.z();
+  } else {
+    double s = 0, t = 0;
+    line_closest(Eigen::Vector3d::Zero(), ez, t1, n2, s, t);
+    m.lambda = s;
+  }
+  // Sample E1, E2 on a 3x3 grid of (m2, m3) and solve for the coefficients.
+  auto samples = [](bool prismatic, double out[3]) {
+    if (prismatic) {
+      out[0] = 0; out[1] = 1; out[2] = -1;
+    } else {
+      out[0] = 0; out[1] = kPi / 2; out[2] = kPi;
+    }
+  };
+  double s2[3], s3[3];
+  samples(prism(m, 1), s2);
+  samples(prism(m, 2), s3);
+  Eigen::Matrix3d B2, B3, V1, V2;
+  for (int i = 0; i < 3; ++i) {
+    B2.row(i) = basis(prism(m, 1), s2[i]).transpose();
+    B3.row(i) = basis(prism(m, 2), s3[i]).transpose();
+  }
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d f = f_of(m, s2[i], s3[k], m.w3);
+      V1(i, k) = (f - m.lambda * ez).squaredNorm();
+      V2(i, k) = f.z();
+    }
+  const Eigen::Matrix3d B2i = B2.inverse(), B3it = B3.inverse().transpose();
+  m.M1 = B2i * V1 * B3it;
+  m.M2 = B2i * V2 * B3it;
+  // Clean exact zeros (sampling leaves ~1e-17 noise).
+  const double tol1 = 1e-13 * m.scale * m.scale, tol2 = 1e-13 * m.scale;
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) {
+      if (std::abs(m.M1(i, k)) < tol1) m.M1(i, k) = 0;
+      if (std::abs(m.M2(i, k)) < tol2) m.M2(i, k) = 0;
+    }
+  // Shoulder direction: perpendicular to axes 1 and 2, or (axes parallel)
+  // the horizontal part of axis 3.
+  const Eigen::Vector3d sd = ez.cross(n2);
+  if (sd.norm() > 1e-6) {
+    m.shoulder_dir = sd.normalized();
+  } else {
+    const Eigen::Vector3d n3 = (C(m, 1) * C(m, 2)).linear().col(2);
+    Eigen::Vector3d h(n3.x(), n3.y(), 0);
+    if (h.norm() < 1e-6) h = Eigen::Vector3d::UnitX();
+    m.shoulder_dir = h.normalized();
+  }
+}
+
+bool detect_spherical_wrist(IkModel& m) {
+  if (m.n != 6 || prism(m, 0) || prism(m, 3) || prism(m, 4) || prism(m, 5)) return false;
+  // Axes 4, 5, 6 in the frame after C3 (joint 4's frame), joints at 0.
+  const Pose T5 = C(m, 4);
+  const Pose T6 = C(m, 4) * C(m, 5);
+  const Eigen::Vector3d z4 = Eigen::Vector3d::UnitZ(), p4 = Eigen::Vector3d::Zero();
+  const Eigen::Vector3d z5 = T5.linear().col(2), p5 = T5.translation();
+  const Eigen::Vector3d z6 = T6.linear().col(2), p6 = T6.translation();
+  if (z4.cross(z5).norm() < 1e-6 || z5.cross(z6).norm() < 1e-6) return false;
+  double s = 0, t = 0;
+  if (line_closest(p4, z4, p5, z5, s, t) > 1e-9 * m.scale) return false;
+  const Eigen::Vector3d W = p4 + s * z4;
+  const Eigen::Vector3d d6 = W - p6;
+  if ((d6 - d6.dot(z6) * z6).norm() > 1e-9 * m.scale) return false;
+  m.w3 = C(m, 3) * W;
+  const Pose T36 = C(m, 3) * C(m, 4) * C(m, 5) * C(m, 6);
+  m.w_tool = T36.inverse() * m.w3;
+  m.A = C(m, 4).linear();
+  m.B = C(m, 5).linear();
+  const Eigen::Vector3d g = m.A.transpose().col(2), v = m.B.col(2);
+  m.wrist_P = g.x() * v.x() + g.y() * v.y();
+  m.wrist_Q = g.y() * v.x() - g.x() * v.y();
+  m.wrist_gz_vz = g.z() * v.z();
+  if (std::hypot(m.wrist_P, m.wrist_Q) < 1e-9) return false;
+  setup_position(m);
+  return true;
+}
+
+// ---------------------------------------------------------------------------
+// Univariate equations and polynomials
+// ---------------------------------------------------------------------------
+struct Roots {
+  double v[2] = {0, 0};
+  std::int8_t label[2] = {1, -1};
+  int n = 0;
+  bool free = false;  ///< the equation holds for every value
+};
+
+// a + b*x + c*y = 0 in the basis of a revolute (cos, sin) or prismatic (m, m^2) joint.
+Roots solve_basis(double a, double b, double c, bool prismatic, double tol) {
+  Roots r;
+  if (!prismatic) {
+    const double h = std::hypot(b, c);
+    if (h <= tol) {
+      r.free = std::abs(a) <= tol;
+      return r;
+    }
+    double k = -a / h;
+    if (k > 1.0) {
+      if (k > 1.0 + 1e-9) return r;
+      k = 1.0;
+    } else if (k < -1.0) {
+      if (k < -1.0 - 1e-9) return r;
+      k = -1.0;
+    }
+    const double phi = std::atan2(c, b);
+    const double t = std::acos(k);
+    r.v[0] = phi + t;
+    r.v[1] = phi - t;
+    r.n = t > 0 ? 2 : 1;
+    return r;
+  }
+  const double sc = std::max({std::abs(a), std::abs(b), std::abs(c)});
+  if (sc <= tol) {
+    r.free = true;
+    return r;
+  }
+  if (std::abs(c) <= 1e-12 * sc) {
+    if (std::abs(b) <= 1e-12 * sc) return r;
+    r.v[0] = -a / b;
+    r.n = 1;
+    return r;
+  }
+  double disc = b * b - 4 * a * c;
+  if (disc < 0) {
+    if (disc < -1e-9 * b * b - 1e-18 * sc * sc) return r;
+    disc = 0;
+  }
+  const double sq = std::sqrt(disc);
+  // +label: the root with the + square root (per the sign of c)
+  r.v[0] = (-b + sq) / (2 * c);
+  r.v[1] = (-b - sq) / (2 * c);
+  r.n = sq > 0 ? 2 : 1;
+  return r;
+}
+
+// Polynomial up to degree 8, coefficient k of x^k.
+struct Poly {
+  double c[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+  int deg = 0;
+};
+Poly pmul(const Poly& a, const Poly& b) {
+  Poly r;
+  r.deg = std::min(8, a.deg + b.deg);
+  for (int i = 0; i <= a.deg; ++i)
+    for (int j = 0; j <= b.deg && i + j <= 8; ++j) r.c[i + j] += a.c[i] * b.c[j];
+  return r;
+}
+Poly psub(const Poly& a, const Poly& b) {
+  Poly r;
+  r.deg = std::max(a.deg, b.deg);
+  for (int i = 0; i <= r.deg; ++i) r.c[i] = a.c[i] - b.c[i];
+  return r;
+}
+Poly padd(const Poly& a, const Poly& b) {
+  Poly r;
+  r.deg = std::max(a.deg, b.deg);
+  for (int i = 0; i <= r.deg; ++i) r.c[i] = a.c[i] + b.c[i];
+  return r;
+}
+
+// Real roots of p (degree <= 8) via the companion matrix.
+int real_roots(const Poly& p, double* out) {
+  double mx = 0;
+  for (int i = 0; i <= p.deg; ++i) mx = std::max(mx, std::abs(p.c[i]));
+  if (!(mx > 0)) return 0;
+  int deg = p.deg;
+  while (deg > 0 && std::abs(p.c[deg]) <= 1e-13 * mx) --deg;
+  if (deg == 0) return 0;
+  using Mat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, 8, 8>;
+  Mat comp = Mat::Zero(deg, deg);
+  for (int i = 1; i < deg; ++i) comp(i, i - 1) = 1.0;
+  for (int i = 0; i < deg; ++i) comp(i, deg - 1) = -p.c[i] / p.c[deg];
+  Eigen::EigenSolver<Mat> es(comp, false);
+  if (es.info() != Eigen::Success) return 0;
+  int n = 0;
+  for (int i = 0; i < deg; ++i) {
+    const std::complex<double> z = es.eigenvalues()[i];
+    if (std::abs(z.imag()) <= 1e-4 * (1.0 + std::abs(z.real()))) out[n++] = z.real();
+  }
+  return n;
+}
+
+// One coefficient row (v0, v1, v2) of the q3 basis as a quadratic in x:
+// revolute, m3 = sigma + 2 atan(x), times (1 + x^2); prismatic: v0 + v1 x + v2 x^2.
+Poly row_poly(const Eigen::Vector3d& v, bool prismatic, double sigma) {
+  Poly p;
+  p.deg = 2;
+  if (prismatic) {
+    p.c[0] = v[0]; p.c[1] = v[1]; p.c[2] = v[2];
+    return p;
+  }
+  const double cs = std::cos(sigma), sn = std::sin(sigma);
+  const double v1 = v[1] * cs + v[2] * sn, v2 = -v[1] * sn + v[2] * cs;
+  p.c[0] = v[0] + v1;
+  p.c[1] = 2 * v2;
+  p.c[2] = v[0] - v1;
+  return p;
+}
+
+// ---------------------------------------------------------------------------
+// Position subproblem: (m2, m3) candidates
+// ---------------------------------------------------------------------------
+struct PosCand {
+  double m2 = 0, m3 = 0;
+  std::int8_t elbow = 0;  ///< from the root (0: decide from the Jacobian)
+  bool free2 = false;
+};
+
+void newton_polish(const IkModel& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double& m2,
+                   double& m3) {
+  const bool p2 = prism(m, 1), p3 = prism(m, 2);
+  for (int it = 0; it < 8; ++it) {
+    const Eigen::Vector3d b2 = basis(p2, m2), b3 = basis(p3, m3);
+    const Eigen::Vector3d d2 = dbasis(p2, m2), d3 = dbasis(p3, m3);
+    const double e1 = b2.dot(M1 * b3), e2 = b2.dot(M2 * b3);
+    if (std::abs(e1) < 1e-15 * m.scale * m.scale && std::abs(e2) < 1e-15 * m.scale) return;
+    Eigen::Matrix2d J;
+    J << d2.dot(M1 * b3), b2.dot(M1 * d3), d2.dot(M2 * b3), b2.dot(M2 * d3);
+    const double det = J.determinant();
+    if (!(std::abs(det) > 1e-300)) return;
+    const Eigen::Vector2d dx = J.inverse() * Eigen::Vector2d(e1, e2);
+    if (!dx.allFinite() || dx.norm() > 0.5) return;
+    m2 -= dx[0];
+    m3 -= dx[1];
+  }
+}
+
+int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out) {
+  const bool p2 = prism(m, 1), p3 = prism(m, 2);
+  Eigen::Matrix3d M1 = m.M1, M2 = m.M2;
+  const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
+  M1(0, 0) -= (p0 - m.lambda * ez).squaredNorm();
+  M2(0, 0) -= p0.z();
+  const double tol1 = 1e-12 * m.scale * m.scale, tol2 = 1e-12 * m.scale;
+  auto dep2 = [](const Eigen::Matrix3d& M) { return M.bottomRows<2>().cwiseAbs().maxCoeff() > 0; };
+  auto dep3 = [](const Eigen::Matrix3d& M) { return M.rightCols<2>().cwiseAbs().maxCoeff() > 0; };
+  const bool d12 = dep2(m.M1), d13 = dep3(m.M1), d22 = dep2(m.M2), d23 = dep3(m.M2);
+  int n = 0;
+  // Case A: one equation involves only q3.
+  const Eigen::Matrix3d* Mq3 = nullptr;
+  const Eigen::Matrix3d* Mo = nullptr;
+  double tq3 = 0, to = 0;
+  if (!d12 && d13) { Mq3 = &M1; Mo = &M2; tq3 = tol1; to = tol2; }
+  else if (!d22 && d23) { Mq3 = &M2; Mo = &M1; tq3 = tol2; to = tol1; }
+  if (Mq3) {
+    const Roots r3 = solve_basis((*Mq3)(0, 0), (*Mq3)(0, 1), (*Mq3)(0, 2), p3, tq3);
+    for (int i = 0; i < r3.n; ++i) {
+      const Eigen::Vector3d u = (*Mo) * basis(p3, r3.v[i]);
+      const Roots r2 = solve_basis(u[0], u[1], u[2], p2, to);
+      if (r2.free) {
+        out[n++] = {ref_m2 ? *ref_m2 : 0.0, r3.v[i], r3.label[i], true};
+        continue;
+      }
+      for (int k = 0; k < r2.n; ++k) out[n++] = {r2.v[k], r3.v[i], r3.label[i], false};
+    }
+    return n;
+  }
+  // Case B: one equation involves only q2.
+  const Eigen::Matrix3d* Mq2 = nullptr;
+  if (!d13 && d12) { Mq2 = &M1; Mo = &M2; tq3 = tol1; to = tol2; }
+  else if (!d23 && d22) { Mq2 = &M2; Mo = &M1; tq3 = tol2; to = tol1; }
+  if (Mq2) {
+    const Roots r2 = solve_basis((*Mq2)(0, 0), (*Mq2)(1, 0), (*Mq2)(2, 0), p2, tq3);
+    for (int i = 0; i < r2.n; ++i) {
+      const Eigen::Vector3d u = Mo->transpose() * basis(p2, r2.v[i]);
+      const Roots r3 = solve_basis(u[0], u[1], u[2], p3, to);
+      for (int k = 0; k < r3.n; ++k) out[n++] = {r2.v[i], r3.v[k], r3.label[k], false};
+    }
+    return n;
+  }
+  // Case C: eliminate q2 (resultant), polynomial of degree <= 8 in x.
+  double sigma = 0;
+  if (!p3) {
+    double best = -1;
+    for (int k = 0; k < 8; ++k) {
+      const double s = 0.3 + k * kPi / 4;
+      const Eigen::Vector3d b3 = basis(false, s + kPi);
+      const Eigen::Vector3d a1 = M1 * b3, a2 = M2 * b3;
+      double F;
+      if (!p2) {
+        const double D = a1[1] * a2[2] - a2[1] * a1[2];
+        const double Nc = a2[0] * a1[2] - a1[0] * a2[2], Ns = a1[0] * a2[1] - a2[0] * a1[1];
+        F = Nc * Nc + Ns * Ns - D * D;
+      } else {
+        const double x = a1[2] * a2[0] - a1[0] * a2[2];
+        F = x * x - (a1[2] * a2[1] - a1[1] * a2[2]) * (a1[1] * a2[0] - a1[0] * a2[1]);
+      }
+      if (std::abs(F) > best) {
+        best = std::abs(F);
+        sigma = s;
+      }
+    }
+  }
+  const Poly al1 = row_poly(M1.row(0).transpose(), p3, sigma), be1 = row_poly(M1.row(1).transpose(), p3, sigma),
+             ga1 = row_poly(M1.row(2).transpose(), p3, sigma);
+  const Poly al2 = row_poly(M2.row(0).transpose(), p3, sigma), be2 = row_poly(M2.row(1).transpose(), p3, sigma),
+             ga2 = row_poly(M2.row(2).transpose(), p3, sigma);
+  Poly F;
+  if (!p2) {
+    const Poly D = psub(pmul(be1, ga2), pmul(be2, ga1));
+    const Poly Nc = psub(pmul(al2, ga1), pmul(al1, ga2));
+    const Poly Ns = psub(pmul(al1, be2), pmul(al2, be1));
+    F = psub(padd(pmul(Nc, Nc), pmul(Ns, Ns)), pmul(D, D));
+  } else {
+    const Poly X = psub(pmul(ga1, al2), pmul(al1, ga2));
+    F = psub(pmul(X, X), pmul(psub(pmul(ga1, be2), pmul(be1, ga2)), psub(pmul(be1, al2), pmul(al1, be2))));
+  }
+  double xs[8];
+  const int nr = real_roots(F, xs);
+  for (int i = 0; i < nr && n < 8; ++i) {
+    const double m3 = p3 ? xs[i] : sigma + 2.0 * std::atan(xs[i]);
+    const Eigen::Vector3d b3 = basis(p3, m3);
+    const Eigen::Vector3d a1 = M1 * b3, a2 = M2 * b3;
+    double c2[2];
+    int nc = 0;
+    if (!p2) {
+      const double D = a1[1] * a2[2] - a2[1] * a1[2];
+      const double Nc = a2[0] * a1[2] - a1[0] * a2[2], Ns = a1[0] * a2[1] - a2[0] * a1[1];
+      if (std::abs(D) > 1e-9 * (std::abs(Nc) + std::abs(Ns))) {
+        c2[nc++] = std::atan2(Ns, Nc);
+      } else {
+        const Roots r = solve_basis(a1[0], a1[1], a1[2], false, tol1);
+        for (int k = 0; k < r.n; ++k) c2[nc++] = r.v[k];
+      }
+    } else {
+      const double den = a2[2] * a1[1] - a1[2] * a2[1];
+      if (std::abs(den) > 1e-300) {
+        c2[nc++] = -(a2[2] * a1[0] - a1[2] * a2[0]) / den;
+      } else {
+        const Roots r = solve_basis(a1[0], a1[1], a1[2], true, tol1);
+        for (int k = 0; k < r.n; ++k) c2[nc++] = r.v[k];
+      }
+    }
+    for (int k = 0; k < nc && n < 8; ++k) {
+      double m2 = c2[k], mm3 = m3;
+      newton_polish(m, M1, M2, m2, mm3);
+      const double e1 = basis(p2, m2).dot(M1 * basis(p3, mm3)), e2 = basis(p2, m2).dot(M2 * basis(p3, mm3));
+      if (!(std::abs(e1) < 1e-8 * m.scale * m.scale && std::abs(e2) < 1e-8 * m.scale)) continue;
+      out[n++] = {m2, mm3, 0, false};
+    }
+  }
+  return n;
+}
+
+// Wrap a revolute joint into its limits where a 2*pi equivalent fits (nearest
+// to ref); prismatic joints are left alone.
+double wrap_joint(const DhRow& r, double q, double ref) {
+  if (r.type != JointType::revolute) return q;
+  double best = wrap_pi(q);
+  bool found = false;
+  double best_d = 0;
+  for (int k = -2; k <= 2; ++k) {
+    const double v = wrap_pi(q) + 2.0 * kPi * k;
+    if (v < r.lower - 1e-12 || v > r.upper + 1e-12) continue;
+    const double d = std::abs(v - ref);
+    if (!found || d < best_d) {
+      best = v;
+      best_d = d;
+      found = true;
+    }
+  }
+  return best;
+}
+
+double joint_distance(const Chain& c, int j, double a, double b) {
+  const double d = a - b;
+  return c.joint(j).type == JointType::revolute ? std::abs(wrap_pi(d)) : std::abs(d);
+}
+
+bool same_solution(const Chain& c, const JointVector& a, const JointVector& b) {
+  for (int j = 0; j < c.n_joints; ++j)
+    if (joint_distance(c, j, a[j], b[j]) > 1e-7) return false;
+  return true;
+}
+
+// Finish a candidate (motion values m, SI joints = dir*m): wrap, verify, add.
+void add_candidate(const IkModel& m, const Pose& target, const JointVector* q_ref, const double* mot,
+                   Branch br, std::uint8_t singular, bool position_only, IkResult& res) {
+  const Chain& c = m.chain;
+  JointVector q(c.n_joints);
+  for (int j = 0; j < c.n_joints; ++j) {
+    const double v = m.dir[static_cast<std::size_t>(j)] * mot[j];
+    q[j] = wrap_joint(c.joint(j), v, q_ref ? (*q_ref)[j] : 0.0);
+  }
+  if (!q.allFinite()) return;
+  double ep = 0, er = 0;
+  if (!detail::pose_error(c, q, target, ep, er)) return;
+  if (position_only) er = 0;
+  if (ep > kVerifyPos || er > kVerifyRot) {
+    if (ep < 1e-4 * m.scale && er < 1e-4) {
+      detail::refine(c, target, q, 4, position_only);
+      for (int j = 0; j < c.n_joints; ++j) q[j] = wrap_joint(c.joint(j), q[j], q_ref ? (*q_ref)[j] : 0.0);
+      if (!detail::pose_error(c, q, target, ep, er)) return;
+      if (position_only) er = 0;
+    }
+    if (ep > kVerifyPos || er > kVerifyRot) return;
+  }
+  for (int i = 0; i < res.count; ++i)
+    if (same_solution(c, res.solutions[static_cast<std::size_t>(i)].q, q)) return;
+  if (res.count >= kMaxIkSolutions) return;
+  IkSolution& s = res.solutions[static_cast<std::size_t>(res.count++)];
+  s.q = q;
+  s.branch = br;
+  s.within_limits = within_limits(c, q, 1e-9);
+  s.singular = singular;
+  s.position_error = ep;
+  s.rotation_error = er;
+}
+
+void finish_status(IkResult& res) {
+  res.singular_kinds = 0;
+  bool any_in = false;
+  for (int i = 0; i < res.count; ++i) {
+    const IkSolution& s = res.solutions[static_cast<std::size_t>(i)];
+    res.singular_kinds |= s.singular;
+    any_in = any_in || s.within_limits;
+  }
+  if (res.count == 0) res.status = Status::unreachable;
+  else if (!any_in) res.status = Status::out_of_limits;
+  else if (res.singular_kinds) res.status = Status::singular;
+  else res.status = Status::ok;
+}
+
+// ---------------------------------------------------------------------------
+// Spherical wrist
+// ---------------------------------------------------------------------------
+void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res) {
+  const Eigen::Vector3d W = target * m.w_tool;
+  const Eigen::Vector3d p0 = C(m, 0).inverse() * W;
+  double mref[6] = {0, 0, 0, 0, 0, 0};
+  if (q_ref)
+    for (int j = 0; j < 6; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
+  PosCand pc[8];
+  const int np = solve_position(m, p0, q_ref ? &mref[1] : nullptr, pc);
+  const Eigen::Matrix3d Rt = target.linear() * C(m, 6).linear().transpose();
+  const double p0xy = std::hypot(p0.x(), p0.y());
+  for (int i = 0; i < np; ++i) {
+    double mot[6];
+    mot[1] = pc[i].m2;
+    mot[2] = pc[i].m3;
+    const Pose T13 = C(m, 1) * joint_motion(prism(m, 1), mot[1]) * C(m, 2) * joint_motion(prism(m, 2), mot[2]);
+    const Eigen::Vector3d f = T13 * m.w3;
+    const double fxy = std::hypot(f.x(), f.y());
+    std::uint8_t sing = 0;
+    if (fxy < 1e-9 * m.scale && p0xy < 1e-9 * m.scale) {
+      mot[0] = mref[0];  // wrist centre on axis 1: keep q1
+      sing |= kSingularShoulder;
+    } else {
+      mot[0] = std::atan2(p0.y(), p0.x()) - std::atan2(f.y(), f.x());
+    }
+    Branch br;
+    const double sh = f.dot(m.shoulder_dir);
+    br.shoulder = sh >= 0 ? 1 : -1;
+    if (std::abs(sh) < kNearSingular * m.scale) sing |= kSingularShoulder;
+    // Position Jacobian of the wrist centre (frame after J1 motion).
+    {
+      const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
+      const Eigen::Vector3d c1 = ez.cross(f);
+      const Eigen::Vector3d n2 = C(m, 1).linear().col(2), t1 = C(m, 1).translation();
+      const Eigen::Vector3d c2 = prism(m, 1) ? n2 : Eigen::Vector3d(n2.cross(f - t1));
+      const Pose T3 = C(m, 1) * joint_motion(prism(m, 1), mot[1]) * C(m, 2);
+      const Eigen::Vector3d n3 = T3.linear().col(2), t3 = T3.translation();
+      const Eigen::Vector3d c3 = prism(m, 2) ? n3 : Eigen::Vector3d(n3.cross(f - t3));
+      const double den = c1.norm() * c2.norm() * c3.norm();
+      const double det = c1.dot(c2.cross(c3));
+      const double nd = den > 0 ? det / den : 0.0;
+      br.elbow = pc[i].elbow != 0 ? pc[i].elbow : static_cast<std::int8_t>((nd >= 0 ? 1 : -1) * br.shoulder);
+      if (std::abs(nd) < kNearSingular && !(sing & kSingularShoulder)) sing |= kSingularElbow;
+    }
+    if (pc[i].free2) sing |= kSingularShoulder;
+    const Eigen::Matrix3d R3 = C(m, 0).linear() * rot_z(mot[0]) * T13.linear() * C(m, 3).linear();
+    const Eigen::Matrix3d M = R3.transpose() * Rt;
+    const Roots r5 = solve_basis(m.wrist_gz_vz - M(2, 2), m.wrist_P, m.wrist_Q, false, 1e-12);
+    const Eigen::Vector3d v = m.B.col(2);
+    const Eigen::Vector3d mz = M.col(2);
+    for (int k = 0; k < r5.n; ++k) {
+      mot[4] = r5.v[k];
+      const Eigen::Matrix3d AR5 = m.A * rot_z(mot[4]);
+      const Eigen::Vector3d w = AR5 * v;
+      std::uint8_t s2 = sing;
+      const double wxy = std::hypot(w.x(), w.y());
+      if (wxy < 1e-9) {
+        mot[3] = mref[3];  // theta5 = 0 family: keep q4
+      } else {
+        mot[3] = std::atan2(mz.y(), mz.x()) - std::atan2(w.y(), w.x());
+      }
+      if (wxy < kNearSingular) s2 |= kSingularWrist;
+      const Eigen::Matrix3d N = (rot_z(mot[3]) * AR5 * m.B).transpose() * M;
+      mot[5] = std::atan2(N(1, 0), N(0, 0));
+      Branch b = br;
+      b.wrist = r5.label[k];
+      add_candidate(m, target, q_ref, mot, b, s2, false, res);
+    }
+  }
+}
+
+}  // namespace
+
+Status ik_prepare(const Chain& chain, IkModel& model) {
+  model = IkModel{};
+  if (chain.n_joints > kMaxJoints || chain.n_rows > kMaxRows) return Status::capacity;
+  model.chain = chain;
+  decompose(chain, model);
+  model.method = IkMethod::none;
+  if (detect_spherical_wrist(model)) {
+    model.method = IkMethod::spherical_wrist;
+    return Status::ok;
+  }
+  if (detail::detect_reduced(model)) return Status::ok;
+  return Status::ok;
+}
+
+void ik_solve_all(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& result) {
+  result.count = 0;
+  result.singular_kinds = 0;
+  if (model.method == IkMethod::none) {
+    result.status = Status::unsupported;
+    return;
+  }
+  if (q_ref && (q_ref->size() != model.chain.n_joints || !q_ref->allFinite())) {
+    result.status = q_ref->size() != model.chain.n_joints ? Status::wrong_size : Status::bad_input;
+    return;
+  }
+  if (!target.matrix().allFinite() || !is_rotation(target.linear(), 1e-6)) {
+    result.status = Status::bad_input;
+    return;
+  }
+  if (model.method == IkMethod::spherical_wrist) {
+    solve_spherical(model, target, q_ref, result);
+  } else {
+    detail::solve_reduced(model, target, q_ref, result);
+  }
+  finish_status(result);
+}
+
+Branch ik_branch_of(const IkModel& model, const JointVector& q) {
+  Pose T;
+  if (forward(model.chain, q, T) != Status::ok) return {};
+  IkResult r;
+  ik_solve_all(model, T, &q, r);
+  int best = -1;
+  double bd = 0;
+  for (int i = 0; i < r.count; ++i) {
+    double d = 0;
+    for (int j = 0; j < q.size(); ++j) d += joint_distance(model.chain, j, r.solutions[static_cast<std::size_t>(i)].q[j], q[j]);
+    if (best < 0 || d < bd) {
+      best = i;
+      bd = d;
+    }
+  }
+  return best >= 0 ? r.solutions[static_cast<std::size_t>(best)].branch : Branch{};
+}
+
+int ik_choose(const IkModel& model, const IkResult& result, const JointVector& q_current, const IkChoice& choice) {
+  const Chain& c = model.chain;
+  if (q_current.size() != c.n_joints) return -1;
+  Branch want{};
+  if (choice.keep_branch) want = ik_branch_of(model, q_current);
+  int best = -1;
+  double bd = 0;
+  for (int i = 0; i < result.count; ++i) {
+    const IkSolution& s = result.solutions[static_cast<std::size_t>(i)];
+    if (!s.within_limits && !choice.allow_out_of_limits) continue;
+    if (choice.keep_branch && !(s.branch == want)) continue;
+    double d = 0;
+    for (int j = 0; j < c.n_joints; ++j) {
+      const double w = choice.weights.size() == c.n_joints ? choice.weights[j] : 1.0;
+      const double dj = s.q[j] - q_current[j];  // wrapped solutions: the travel really needed
+      d += w * dj * dj;
+    }
+    if (best < 0 || d < bd) {
+      best = i;
+      bd = d;
+    }
+  }
+  return best;
+}
+
+}  // namespace servoarm::kin

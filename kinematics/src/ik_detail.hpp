@@ -1,0 +1,40 @@
+#pragma once
+// Internal helpers shared by the IK sources (not installed).
+#include <cmath>
+
+#include "servoarm/kinematics/ik.hpp"
+
+namespace servoarm::kin::detail {
+
+/// Motion of joint j by m: Rz(m) (revolute) or Tz(m) (prismatic).
+inline Pose joint_motion(bool prismatic, double m) {
+  Pose T = Pose::Identity();
+  if (prismatic) {
+    T.translation().z() = m;
+  } else {
+    const double c = std::cos(m), s = std::sin(m);
+    T.linear() << c, -s, 0, s, c, 0, 0, 0, 1;
+  }
+  return T;
+}
+
+inline Eigen::Matrix3d rot_z(double m) {
+  const double c = std::cos(m), s = std::sin(m);
+  Eigen::Matrix3d R;
+  R << c, -s, 0, s, c, 0, 0, 0, 1;
+  return R;
+}
+
+/// Position and rotation error of q against target; false on FK failure.
+bool pose_error(const Chain& chain, const JointVector& q, const Pose& target, double& ep, double& er);
+
+/// A few Gauss-Newton/DLS steps on the full pose (position-only if asked):
+/// polishes a closed-form solution that lost digits near a singularity.
+void refine(const Chain& chain, const Pose& target, JointVector& q, int iterations, bool position_only);
+
+/// Recognise the reduced (chapter 4) arms; sets model.method. ik_reduced.cpp.
+bool detect_reduced(IkModel& model);
+/// Solve a reduced arm (model.method planar_2r, planar_3, spatial_3, pitch_4).
+void solve_reduced(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res);
+
+}  // namespace servoarm::kin::detail

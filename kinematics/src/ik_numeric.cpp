@@ -1,0 +1,189 @@
+// Numerical IK: damped least squares with Levenberg-Marquardt damping.
+//
+// Each iteration: J (geometric Jacobian, weighted), e (weighted pose error),
+//   (J^T J + mu (diag(J^T J) + I)) dq = J^T e,   q' = clamp(q + dq)
+// accepted if the weighted error drops (mu /= 3), else rejected (mu *= 4).
+// Clamping to the limits after each step keeps every iterate inside them.
+// Random restarts (deterministic generator) run only if the start fails.
+// Worst case: (1 + max_restarts) * max_iterations iterations, each one
+// Jacobian, one FK and one n x n LDLT (n <= 8). Heap-free.
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+
+#include "ik_detail.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+
+namespace servoarm::kin {
+
+namespace {
+
+using MatN = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kMaxJoints, kMaxJoints>;
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+
+std::uint64_t splitmix(std::uint64_t& s) {
+  std::uint64_t z = (s += 0x9e3779b97f4a7c15ULL);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+double uniform(std::uint64_t& s) { return static_cast<double>(splitmix(s) >> 11) * (1.0 / 9007199254740992.0); }
+
+void clamp_limits(const Chain& c, JointVector& q) {
+  for (int j = 0; j < c.n_joints; ++j) {
+    const DhRow& r = c.joint(j);
+    if (r.type == JointType::revolute && !(std::isfinite(r.lower) && std::isfinite(r.upper))) q[j] = wrap_pi(q[j]);
+    q[j] = std::clamp(q[j], r.lower, r.upper);
+  }
+}
+
+struct Err {
+  Vec6 e;          // unweighted (position, rotation)
+  double cost = 0; // weighted squared norm
+  double ep = 0, er = 0;
+};
+
+bool evaluate(const Chain& c, const Pose& target, const JointVector& q, const IkNumericOptions& o, Err& out,
+              Jacobian* J) {
+  Pose T;
+  if (J) {
+    if (jacobian(c, q, *J, &T) != Status::ok) return false;
+  } else if (forward(c, q, T) != Status::ok) {
+    return false;
+  }
+  out.e.head<3>() = target.translation() - T.translation();
+  if (o.position_only) {
+    out.e.tail<3>().setZero();
+  } else {
+    out.e.tail<3>() = rotation_error(T.linear(), target.linear());
+  }
+  out.ep = out.e.head<3>().norm();
+  out.er = out.e.tail<3>().norm();
+  out.cost = (o.task_weights.cwiseProduct(out.e)).squaredNorm();
+  return std::isfinite(out.cost);
+}
+
+bool converged(const Err& e, const IkNumericOptions& o) {
+  return e.ep <= o.tolerance_position && (o.position_only || e.er <= o.tolerance_rotation);
+}
+
+// One LM run from q (in place). Returns iterations used.
+int run_lm(const Chain& c, const Pose& target, JointVector& q, const IkNumericOptions& o, Err& err) {
+  const int n = c.n_joints;
+  double mu = o.initial_damping;
+  Jacobian J;
+  if (!evaluate(c, target, q, o, err, &J)) return 0;
+  int it = 0;
+  while (it < o.max_iterations && !converged(err, o)) {
+    ++it;
+    Jacobian Jw = J;
+    for (int r = 0; r < 6; ++r) Jw.row(r) *= o.task_weights[r];
+    if (o.position_only) Jw.bottomRows<3>().setZero();
+    const Vec6 ew = o.task_weights.cwiseProduct(err.e);
+    MatN H = Jw.transpose() * Jw;
+    const JointVector g = Jw.transpose() * ew;
+    MatN A = H;
+    for (int j = 0; j < n; ++j) A(j, j) += mu * (H(j, j) + 1e-6);
+    const JointVector dq = A.ldlt().solve(g);
+    if (!dq.allFinite()) {
+      mu *= 10;
+      continue;
+    }
+    JointVector q2 = q + dq;
+    clamp_limits(c, q2);
+    Err e2;
+    Jacobian J2;
+    if (!evaluate(c, target, q2, o, e2, &J2)) {
+      mu *= 10;
+      continue;
+    }
+    if (e2.cost < err.cost) {
+      q = q2;
+      err = e2;
+      J = J2;
+      mu = std::max(mu / 3.0, 1e-12);
+    } else {
+      mu = std::min(mu * 4.0, 1e8);
+      if (mu >= 1e8) break;  // stuck (limit or local minimum): restart
+    }
+  }
+  return it;
+}
+
+}  // namespace
+
+void ik_numeric(const Chain& chain, const Pose& target, const JointVector& q_start, const IkNumericOptions& o,
+                IkNumericResult& res) {
+  res.iterations = 0;
+  res.restarts = 0;
+  if (q_start.size() != chain.n_joints) {
+    res.status = Status::wrong_size;
+    return;
+  }
+  if (!q_start.allFinite() || !target.matrix().allFinite() ||
+      (!o.position_only && !is_rotation(target.linear(), 1e-6)) || !o.task_weights.allFinite() ||
+      o.max_iterations < 0 || o.max_restarts < 0) {
+    res.status = Status::bad_input;
+    res.q = q_start;
+    clamp_limits(chain, res.q);
+    if (!res.q.allFinite()) res.q.setZero();
+    return;
+  }
+  JointVector q = q_start;
+  clamp_limits(chain, q);
+  Err err;
+  res.iterations += run_lm(chain, target, q, o, err);
+  JointVector best = q;
+  Err best_err = err;
+  std::uint64_t s = o.seed;
+  while (!converged(best_err, o) && res.restarts < o.max_restarts) {
+    ++res.restarts;
+    JointVector r(chain.n_joints);
+    for (int j = 0; j < chain.n_joints; ++j) {
+      const DhRow& row = chain.joint(j);
+      const double lo = std::isfinite(row.lower) ? row.lower : -M_PI;
+      const double hi = std::isfinite(row.upper) ? row.upper : M_PI;
+      r[j] = lo + (hi - lo) * uniform(s);
+    }
+    Err e;
+    res.iterations += run_lm(chain, target, r, o, e);
+    if (e.cost < best_err.cost) {
+      best = r;
+      best_err = e;
+    }
+  }
+  res.q = best;
+  res.position_error = best_err.ep;
+  res.rotation_error = o.position_only ? 0.0 : best_err.er;
+  res.status = converged(best_err, o) ? Status::ok : Status::not_converged;
+}
+
+Status ik_solve_nearest(const IkModel& model, const Pose& target, const JointVector& q_current, JointVector& q_out,
+                        const IkChoice& choice) {
+  if (q_current.size() != model.chain.n_joints) return Status::wrong_size;
+  if (model.method != IkMethod::none) {
+    IkResult r;
+    ik_solve_all(model, target, &q_current, r);
+    if (!is_ok(r.status) && r.count == 0) return r.status;
+    const int i = ik_choose(model, r, q_current, choice);
+    if (i < 0) return r.count ? Status::out_of_limits : Status::unreachable;
+    q_out = r.solutions[static_cast<std::size_t>(i)].q;
+    return r.solutions[static_cast<std::size_t>(i)].singular ? Status::singular : Status::ok;
+  }
+  IkNumericOptions o;
+  o.max_restarts = 0;  // continuity first: stay on the current branch
+  IkNumericResult nr;
+  ik_numeric(model.chain, target, q_current, o, nr);
+  if (nr.status != Status::ok) return nr.status == Status::not_converged ? Status::unreachable : nr.status;
+  q_out = nr.q;
+  return Status::ok;
+}
+
+Status ik_nearest_fn(const Chain& chain, const Pose& target, const JointVector& q_near, JointVector& q_out,
+                     void* ctx) {
+  const auto* model = static_cast<const IkModel*>(ctx);
+  if (!model || model->chain.n_joints != chain.n_joints) return Status::bad_input;
+  return ik_solve_nearest(*model, target, q_near, q_out);
+}
+
+}  // namespace servoarm::kin
