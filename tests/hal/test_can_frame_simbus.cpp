@@ -1,5 +1,6 @@
 // CanFrame validity and the in-process SimBus (vcan semantics, fault injection).
 #include <cstdio>
+#include <thread>
 #include <vector>
 
 #include "servoarm/hal/can_frame.hpp"
@@ -241,4 +242,28 @@ TEST(SimBus, BusOffRefusesSends) {
   LONGS_EQUAL(int(Status::error_passive), int(a->send(CanFrame::make(1, {}))));
   LONGS_EQUAL(1, b->pending());
   STRCMP_EQUAL("bus_off", to_string(ErrorState::bus_off));
+}
+
+TEST(SimBus, RealClockReceiveWakesOnSendFromAnotherThread) {
+  MonotonicClock real;
+  SimBus bus(real);
+  auto a = bus.open(4);
+  auto b = bus.open(4);
+  const TimePoint t0 = real.now();
+  std::thread sender([&] {
+    real.sleep_until(t0 + 20 * kMillisecond);
+    a->send(CanFrame::make(0x77, {1}));
+  });
+  CanFrame f;
+  const Status s = b->receive(f, t0 + 2 * kSecond);
+  const Duration waited = real.now() - t0;
+  sender.join();
+  LONGS_EQUAL(int(Status::ok), int(s));
+  UNSIGNED_LONGS_EQUAL(0x77, f.id);
+  CHECK(waited >= 20 * kMillisecond);
+  CHECK(waited < kSecond);  // woken by the send, not by the deadline
+  // And the deadline holds when nothing comes.
+  const TimePoint t1 = real.now();
+  LONGS_EQUAL(int(Status::timeout), int(b->receive(f, t1 + 30 * kMillisecond)));
+  CHECK(real.now() - t1 >= 30 * kMillisecond);
 }

@@ -327,3 +327,31 @@ TEST(MasterSim, StaleHeartbeatDuringStartIsNoFault) {
   hold_cycles(20);
   for (std::size_t j = 0; j < 6; ++j) LONGS_EQUAL(int(JointState::enabled), int(master->feedback(j).state));
 }
+
+TEST(MasterSim, PerNodeHeartbeatTimeout) {
+  // Node 5 gets a tighter consumer time than the rest.
+  CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 6);
+  cfg.heartbeat_period = 10 * kMillisecond;
+  cfg.heartbeat_timeout = 200 * kMillisecond;
+  cfg.joints[4].heartbeat_timeout = 25 * kMillisecond;
+  CanopenServoBus m(*rig->master_ep, rig->clock, cfg);
+  LONGS_EQUAL(int(Status::ok), int(m.start(rig->clock.now() + 2 * kSecond)));
+  LONGS_EQUAL(int(Status::ok), int(m.enable_blocking(rig->clock.now() + kSecond, kPeriod)));
+  rig->sim->node(5)->faults().heartbeat_stopped = true;
+  rig->sim->node(6)->faults().heartbeat_stopped = true;
+  double sp[6];
+  TimePoint detected5 = 0;
+  for (int k = 0; k < 100; ++k) {
+    for (std::size_t j = 0; j < 6; ++j) sp[j] = m.feedback(j).position;
+    const TimePoint now = rig->clock.now();
+    m.read(now);
+    if (!detected5 && m.feedback(4).state == JointState::fault) detected5 = now;
+    m.write(std::span<const double>(sp, 6), now);
+    rig->clock.advance(kPeriod);
+  }
+  CHECK(detected5 != 0);
+  LONGS_EQUAL(int(Status::heartbeat_lost), int(m.feedback(4).fault));
+  CHECK(detected5 - m.feedback(4).last_heartbeat <= 25 * kMillisecond + kPeriod);
+  // Node 6 (200 ms) has not timed out yet 100 ms later; PDOs still flow, so it is healthy.
+  LONGS_EQUAL(int(JointState::enabled), int(m.feedback(5).state));
+}

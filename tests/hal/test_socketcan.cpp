@@ -188,6 +188,33 @@ TEST(SocketCan, NoAllocationInSendReceive) {
   LONGS_EQUAL(0, allocs);
 }
 
+TEST(SocketCan, CanFdRecordsBothWays) {
+  CanFrame fd;
+  fd.id = 0x123;
+  fd.fd = true;
+  fd.brs = true;
+  fd.len = 64;
+  for (int i = 0; i < 64; ++i) fd.data[std::size_t(i)] = std::uint8_t(i);
+  LONGS_EQUAL(int(Status::ok), int(bus->send(fd)));
+  canfd_frame k;
+  LONGS_EQUAL(sizeof(canfd_frame), read(sv[1], &k, sizeof k));  // 72-byte record
+  UNSIGNED_LONGS_EQUAL(0x123, k.can_id);
+  LONGS_EQUAL(64, k.len);
+  CHECK(k.flags & CANFD_BRS);
+  BYTES_EQUAL(63, k.data[63]);
+  // Incoming FD record.
+  std::memset(&k, 0, sizeof k);
+  k.can_id = 0x456;
+  k.len = 12;
+  k.data[11] = 0xEE;
+  CHECK(write(sv[1], &k, sizeof k) == ssize_t(sizeof k));
+  CanFrame f;
+  LONGS_EQUAL(int(Status::ok), int(bus->receive(f, 0)));
+  CHECK(f.fd);
+  LONGS_EQUAL(12, f.len);
+  BYTES_EQUAL(0xEE, f.data[11]);
+}
+
 TEST_GROUP(SocketCanOpen){};
 
 TEST(SocketCanOpen, BadNamesAndMissingKernelSupport) {

@@ -63,7 +63,9 @@ class ServoBus {
   virtual Status read(TimePoint now) = 0;
 
   /// Real-time: send one setpoint per joint (rad or m) plus the cycle trigger.
-  /// Joints that are not enabled hold their measured position instead.
+  /// Joints that are not enabled hold their measured position instead. No rate limiting
+  /// here: the caller sends a continuous trajectory (a jump trips the drive's following-error
+  /// window, which reports a drive_fault).
   /// @retval ok; invalid_argument (size mismatch or non-finite/out-of-range setpoint:
   ///         nothing is sent for that joint, it holds); bus errors from CanBus::send
   virtual Status write(std::span<const double> setpoints, TimePoint now) = 0;
