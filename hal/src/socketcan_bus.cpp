@@ -276,8 +276,9 @@ Status SocketCanBus::receive(CanFrame& out, TimePoint deadline) {
       out.rx_time = clock_.now();
       if (out.error) {
         ++stats_.error_frames;
+        // Bus-off is reported, not "fixed" by reopening: the controller restart is the
+        // kernel's (ip link ... restart-ms N), which sends CAN_ERR_RESTARTED -> active.
         stats_.state = decode_error_frame(out, stats_.state, &stats_.rx_overruns);
-        if (stats_.state == ErrorState::bus_off) handle_down();
         return Status::ok;
       }
       if (adopted_ && n_filters_ > 0) {

@@ -7,9 +7,11 @@
 // and, on request, CAN FD after checking the interface MTU.
 // Real-time: send()/receive() use only the fd and fixed members; receive waits
 // with ppoll() up to an absolute CLOCK_MONOTONIC deadline. No allocation after open.
-// When the interface goes down (ENETDOWN/ENODEV) or the controller goes bus-off,
-// the calls report it; a backend opened by name then reopens the socket (at
-// most every `reopen_interval`) and counts it in stats().reopens.
+// When the interface goes down or vanishes (ENETDOWN/ENODEV/ENXIO, POLLERR) the
+// calls return interface_down; a backend opened by name then reopens the socket
+// (at most every `reopen_interval`) and counts it in stats().reopens. Bus-off is
+// seen through error frames (stats().state == bus_off, send() -> bus_off) until
+// the kernel restarts the controller (restart-ms) and reports CAN_ERR_RESTARTED.
 #include <cstdint>
 
 #include "servoarm/hal/can_bus.hpp"
@@ -21,7 +23,7 @@ struct SocketCanOptions {
   int rcvbuf_bytes = 256 * 1024;   ///< SO_RCVBUF request (kernel doubles it)
   bool enable_fd = false;          ///< CAN FD (fails with invalid_argument if MTU says no)
   bool recv_own = false;           ///< CAN_RAW_RECV_OWN_MSGS: see our own frames
-  bool auto_reopen = true;         ///< reopen after interface-down / bus-off (named iface only)
+  bool auto_reopen = true;         ///< reopen after interface-down (named iface only)
   Duration reopen_interval = 100 * kMillisecond;
 };
 
