@@ -11,6 +11,10 @@
 #include "servoarm/firmware/cli_ik.hpp"
 #define SERVOARM_HAVE_CLI_IK 1
 #endif
+#if __has_include("servoarm/firmware/cli_plan.hpp")
+#include "servoarm/firmware/cli_plan.hpp"
+#define SERVOARM_HAVE_CLI_PLAN 1
+#endif
 
 namespace {
 
@@ -31,7 +35,11 @@ const char* kUsage =
     "                                                      worst-case tool position error\n"
 #endif
 #ifdef SERVOARM_HAVE_CLI_PLAN
-    "  armctl plan movej|movel --robot NAME|FILE ...       plan a trajectory (see armctl plan --help)\n"
+    "Offline trajectory planning (prints duration and peaks; --csv and --svg write the samples):\n"
+    "  armctl plan movej --robot NAME|FILE --from q1..qn --to q1..qn [--vmax V] [--amax A] [--jmax J]\n"
+    "                    [--override PCT] [--rate HZ] [--csv FILE] [--svg FILE]\n"
+    "  armctl plan movel --robot NAME|FILE --from q1..qn (--to q1..qn | --xyz X Y Z [--rpy R P Y | --quat W X Y Z])\n"
+    "                    [--speed V] [--accel A] [--angular W] [--override PCT] [--no-slowdown] [--csv FILE] [--svg FILE]\n"
 #endif
     "\n"
     "Each command takes --help. Exit status: 0 ok, 1 valid request that failed\n"
