@@ -8,6 +8,7 @@
 #include "alloc_counter.hpp"
 #include "ik_stub.hpp"
 #include "servoarm/kinematics/description.hpp"
+#include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 
@@ -286,4 +287,25 @@ TEST(Movel, ZeroHeapInPlanAndSample) {
   }
   CHECK(stop_movel(tr, 0.1) == MotionStatus::ok);
   CHECK_EQUAL(0u, scope.end());
+}
+
+// The library's fallback solver (what armctl plan movel uses) on random lines.
+TEST(Movel, FallbackNewtonIkOnRandomLines) {
+  std::mt19937_64 g(5004);
+  const CartesianLimits cl{};
+  int planned = 0;
+  double worst = 0;
+  CartesianTrajectory tr;
+  for (int m = 0; m < 300; ++m) {
+    const JointVector q0 = random_q(g);
+    JointVector q1 = q0;
+    for (int i = 0; i < 6; ++i) q1[i] += std::uniform_real_distribution<double>(-0.25, 0.25)(g);
+    PathReport rep;
+    const MotionStatus st = plan_movel(c, q0, fk(c, q1), cl, {}, IkSolver{&ik_nearest_newton, nullptr}, tr, &rep);
+    if (!is_ok(st)) continue;
+    ++planned;
+    const std::string e = check_movel(c, tr, cl, true, 1e-6, worst);
+    if (!e.empty()) FAIL(("fallback ik line " + std::to_string(m) + ": " + e).c_str());
+  }
+  CHECK(planned > 250);
 }
