@@ -311,6 +311,8 @@ void CanopenServoBus::enable() {
 
 void CanopenServoBus::disable() { target_ = cia402::Target::disabled; }
 
+void CanopenServoBus::quick_stop() { target_ = cia402::Target::quick_stop; }
+
 Status CanopenServoBus::read(TimePoint now) {
   if (!started_) return Status::not_configured;
   CanFrame f;
@@ -340,8 +342,13 @@ Status CanopenServoBus::read(TimePoint now) {
           }
           break;
         case cia402::Target::disabled:
-          fb.state = jt.have_status && jt.state == cia402::State::operation_enabled ? JointState::enabling
-                                                                                     : JointState::disabled;
+        case cia402::Target::quick_stop:
+          // Still powered (or still ramping down in quick stop with speed): not yet disabled.
+          fb.state = jt.have_status && (jt.state == cia402::State::operation_enabled ||
+                                        (jt.state == cia402::State::quick_stop_active &&
+                                         std::fabs(fb.velocity) > 1e-9))
+                         ? JointState::enabling
+                         : JointState::disabled;
           break;
       }
     }

@@ -69,6 +69,18 @@ std::uint16_t next_controlword(State state, Target target, bool reset_phase) {
         case State::fault: return cw::kDisableVoltage;  // no automatic reset when disabling
       }
       break;
+    case Target::quick_stop:
+      switch (state) {
+        case State::not_ready_to_switch_on: return cw::kDisableVoltage;
+        case State::switch_on_disabled: return cw::kDisableVoltage;
+        case State::ready_to_switch_on: return cw::kQuickStop;   // T7
+        case State::switched_on: return cw::kQuickStop;          // T10
+        case State::operation_enabled: return cw::kQuickStop;    // T11
+        case State::quick_stop_active: return cw::kQuickStop;    // stay
+        case State::fault_reaction_active: return cw::kDisableVoltage;
+        case State::fault: return cw::kDisableVoltage;
+      }
+      break;
   }
   return cw::kDisableVoltage;
 }
@@ -78,6 +90,7 @@ bool reached(State state, Target target) {
     case Target::enabled: return state == State::operation_enabled;
     case Target::disabled:
       return state == State::switch_on_disabled || state == State::ready_to_switch_on || state == State::switched_on;
+    case Target::quick_stop: return state == State::quick_stop_active || state == State::switch_on_disabled;
   }
   return false;
 }

@@ -83,10 +83,11 @@ TEST(Cia402, DriveTransitionTable) {
 
 TEST(Cia402, MasterWalksEveryStateToEnabledAndBack) {
   // The controlwords the master chooses, applied by the drive-side table, reach the target
-  // from every stable state within a few steps.
+  // from every stable state within a few steps. Quick stop from operation enabled must go
+  // through quick_stop_active (T11), not drop the power (T9).
   const State starts[] = {State::switch_on_disabled, State::ready_to_switch_on, State::switched_on,
                           State::operation_enabled, State::quick_stop_active, State::fault};
-  for (Target target : {Target::enabled, Target::disabled}) {
+  for (Target target : {Target::enabled, Target::disabled, Target::quick_stop}) {
     for (State s0 : starts) {
       State s = s0;
       std::uint16_t prev = 0;
@@ -100,12 +101,14 @@ TEST(Cia402, MasterWalksEveryStateToEnabledAndBack) {
         ++steps;
       }
       char msg[96];
-      std::snprintf(msg, sizeof msg, "from %s to %s", to_string(s0), target == Target::enabled ? "enabled" : "disabled");
-      if (target == Target::disabled && s0 == State::fault) {
-        STRCMP_EQUAL_TEXT("fault", to_string(s), msg);  // disabling never resets a fault
+      std::snprintf(msg, sizeof msg, "from %s to target %d", to_string(s0), int(target));
+      if (target != Target::enabled && s0 == State::fault) {
+        STRCMP_EQUAL_TEXT("fault", to_string(s), msg);  // only enabling resets a fault
       } else {
         CHECK_TEXT(reached(s, target), msg);
         CHECK_TEXT(steps <= 5, msg);
+        if (target == Target::quick_stop && s0 == State::operation_enabled)
+          STRCMP_EQUAL_TEXT("quick_stop_active", to_string(s), msg);
       }
     }
   }

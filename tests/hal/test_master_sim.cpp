@@ -355,3 +355,28 @@ TEST(MasterSim, PerNodeHeartbeatTimeout) {
   // Node 6 (200 ms) has not timed out yet 100 ms later; PDOs still flow, so it is healthy.
   LONGS_EQUAL(int(JointState::enabled), int(m.feedback(5).state));
 }
+
+TEST(MasterSim, QuickStopRampsDownThenEnableResumes) {
+  bring_up();
+  // Move joint 0 at speed, then quick-stop.
+  double sp[6] = {};
+  for (int k = 0; k < 300; ++k) {
+    sp[0] = 1.0 * k * 1e-3;  // 1 rad/s ramp
+    cycle(sp);
+  }
+  // Sampled at SYNC, just before the next setpoint step: the low point of the staircase
+  // response (a drive interpolating between setpoints would be smoother).
+  CHECK(master->feedback(0).velocity > 0.6 && master->feedback(0).velocity < 1.4);
+  master->quick_stop();
+  for (int k = 0; k < 10; ++k) cycle(sp);
+  STRCMP_EQUAL("quick_stop_active", cia402::to_string(rig->sim->node(1)->state()));
+  // The drive stops (deceleration-limited) and keeps holding in quick stop active.
+  for (int k = 0; k < 100; ++k) cycle(sp);
+  DOUBLES_EQUAL(0.0, master->feedback(0).velocity, 1e-6);
+  LONGS_EQUAL(int(JointState::disabled), int(master->feedback(0).state));
+  for (std::size_t j = 0; j < 6; ++j) CHECK(master->feedback(j).state != JointState::fault);
+  // Resume: the drive holds where it stopped (no jump back to the last setpoint).
+  const double stopped_at = master->feedback(0).position;
+  LONGS_EQUAL(int(Status::ok), int(master->enable_blocking(rig->clock.now() + kSecond, kPeriod)));
+  DOUBLES_EQUAL(stopped_at, master->feedback(0).position, 1e-3);
+}

@@ -65,6 +65,7 @@ class CanopenServoBus final : public ServoBus {
   Status start(TimePoint deadline) override;
   void enable() override;
   void disable() override;
+  void quick_stop() override;
   Status read(TimePoint now) override;
   Status write(std::span<const double> setpoints, TimePoint now) override;
   const JointFeedback& feedback(std::size_t j) const override { return fb_[j < cfg_.joint_count ? j : 0]; }

@@ -62,7 +62,11 @@ inline constexpr std::uint16_t kFaultReset = 0x0080;
 }  // namespace cw
 
 /// What the master wants the drive to be.
-enum class Target : std::uint8_t { disabled, enabled };
+enum class Target : std::uint8_t {
+  disabled,    ///< powered down (shutdown / disable voltage)
+  enabled,     ///< operation enabled
+  quick_stop,  ///< controlled stop with the drive's quick-stop ramp, then hold in quick stop active
+};
 
 /// Master side, real-time: the controlword that moves a drive in `state` one
 /// step towards `target`. `reset_phase` alternates each cycle while in fault so
@@ -70,7 +74,8 @@ enum class Target : std::uint8_t { disabled, enabled };
 std::uint16_t next_controlword(State state, Target target, bool reset_phase);
 
 /// True when `state` is where `target` wants it (enabled: operation_enabled;
-/// disabled: switch_on_disabled or ready_to_switch_on or switched_on).
+/// disabled: switch_on_disabled or ready_to_switch_on or switched_on;
+/// quick_stop: quick_stop_active or switch_on_disabled).
 bool reached(State state, Target target);
 
 /// Drive side: the state after the drive sees controlword `cw` (previous

@@ -17,7 +17,8 @@ inline constexpr std::size_t kMaxServoJoints = 8;
 enum class JointState : std::uint8_t {
   offline,   ///< not started, or never heard from
   disabled,  ///< powered down (no torque)
-  enabling,  ///< walking the power state machine towards operation enabled
+  enabling,  ///< in transition: walking the power state machine towards the requested
+             ///< state (enable, disable or quick stop), or still ramping down
   enabled,   ///< operation enabled: following setpoints
   fault,     ///< latched fault: see JointFeedback::fault and error_code
 };
@@ -54,6 +55,9 @@ class ServoBus {
   virtual void enable() = 0;
   /// Real-time: ask every drive to power down (disable operation / shutdown).
   virtual void disable() = 0;
+  /// Real-time: controlled stop on the drives' own quick-stop ramp, then hold there
+  /// (CiA 402 quick stop). enable() resumes. Protocols without one just disable().
+  virtual void quick_stop() { disable(); }
 
   /// Real-time: consume received frames and update feedback; checks heartbeat
   /// and state-machine timeouts against `now`. Never blocks.
