@@ -262,6 +262,14 @@ Status CanopenServoBus::start(TimePoint deadline) {
   }
   started_ = false;
   error_[0] = '\0';
+  if (cfg_.set_bus_filters) {
+    CanFilter filters[kMaxServoJoints];
+    for (std::size_t j = 0; j < cfg_.joint_count; ++j) filters[j] = CanFilter{joints_[j].node, 0x7F, false};
+    if (const Status s = bus_.set_filters(std::span<const CanFilter>(filters, cfg_.joint_count)); s != Status::ok) {
+      std::snprintf(error_, sizeof error_, "installing receive filters: %s", describe(s));
+      return s;
+    }
+  }
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
     if (const Status s = bus_.send(encode_nmt(NmtCommand::enter_pre_operational, joints_[j].node)); !is_ok(s)) {
       std::snprintf(error_, sizeof error_, "NMT pre-operational: %s", describe(s));

@@ -50,6 +50,8 @@ const char* kUsage =
     "                          hb-timeout + one period of its last heartbeat, and no other joint faults\n"
     "  --sim-silent NODE@SEC   (--sim) the virtual node goes silent SEC seconds into the phases\n"
     "  --sim-emcy NODE:CODE@SEC (--sim) the virtual node raises EMCY CODE and faults\n"
+    "  --no-filters            receive every frame (default: kernel filters pass only frames whose\n"
+    "                          node part, id & 0x7F, is one of --nodes)\n"
     "  --quiet                 only the final result line\n"
     "\n"
     "Output (stdout, one record per line, key=value):\n"
@@ -78,6 +80,7 @@ struct Options {
   std::uint32_t expect_hb_loss = 0;
   std::vector<sim::cli::FaultArg> sim_silent, sim_emcy;
   bool quiet = false;
+  bool filters = true;
 };
 
 struct SimParts {
@@ -100,6 +103,7 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm) {
   cfg.heartbeat_timeout = Duration(o.hb_timeout_ms) * kMillisecond;
   cfg.sdo_timeout = Duration(o.sdo_timeout_ms) * kMillisecond;
   cfg.state_timeout = Duration(o.enable_timeout_ms) * kMillisecond;
+  cfg.set_bus_filters = o.filters;
   CanopenServoBus master(bus, clock, cfg);
   if (master.config_status() != Status::ok) {
     std::fprintf(stderr, "canmaster: %s\n", master.last_error());
@@ -266,6 +270,8 @@ int main(int argc, char** argv) {
       o.bringup = true;
     } else if (a == "--quiet") {
       o.quiet = true;
+    } else if (a == "--no-filters") {
+      o.filters = false;
     } else if (a == "--iface") {
       if (!value()) return usage_error("--iface needs a name");
       o.iface = v;

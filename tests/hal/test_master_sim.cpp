@@ -380,3 +380,23 @@ TEST(MasterSim, QuickStopRampsDownThenEnableResumes) {
   LONGS_EQUAL(int(Status::ok), int(master->enable_blocking(rig->clock.now() + kSecond, kPeriod)));
   DOUBLES_EQUAL(stopped_at, master->feedback(0).position, 1e-3);
 }
+
+TEST(MasterSim, BusFiltersKeepForeignFramesOut) {
+  CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 6);
+  cfg.set_bus_filters = true;
+  CanopenServoBus m(*rig->master_ep, rig->clock, cfg);
+  LONGS_EQUAL(int(Status::ok), int(m.start(rig->clock.now() + 2 * kSecond)));
+  LONGS_EQUAL(int(Status::ok), int(m.enable_blocking(rig->clock.now() + kSecond, kPeriod)));
+  auto flood = rig->bus.open(16);
+  double sp[6] = {};
+  for (int k = 0; k < 50; ++k) {
+    for (std::uint32_t id = 0x107; id < 0x180; ++id) flood->send(CanFrame::make(id, {1, 2, 3}));  // nodes 7..127
+    const TimePoint now = rig->clock.now();
+    LONGS_EQUAL(int(Status::ok), int(m.read(now)));
+    m.write(std::span<const double>(sp, 6), now);
+    rig->clock.advance(kPeriod);
+  }
+  UNSIGNED_LONGS_EQUAL(0, m.ignored_frames());  // never delivered to the master
+  CHECK(rig->master_ep->stats().rx_overruns == 0);
+  for (std::size_t j = 0; j < 6; ++j) LONGS_EQUAL(int(JointState::enabled), int(m.feedback(j).state));
+}

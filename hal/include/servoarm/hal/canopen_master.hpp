@@ -38,6 +38,11 @@ struct CanopenMasterConfig {
   Duration sdo_timeout = 100 * kMillisecond;
   Duration state_timeout = 500 * kMillisecond;      ///< max time a drive may sit in one state while enabling
   bool produce_sync = true;
+  /// start() installs receive filters on the bus that pass only frames whose node part
+  /// (id & 0x7F) is one of the configured nodes (EMCY, TPDOs, SDO answers, heartbeats):
+  /// a flood of foreign frames then never reaches the cycle. Off by default because the
+  /// bus may be shared (e.g. a console over ISO-TP on the same endpoint).
+  bool set_bus_filters = false;
 
   /// Convenience: nodes first..first+count-1 with the same scaling.
   static CanopenMasterConfig consecutive(std::uint8_t first, std::size_t count, const JointScaling& s = {});
