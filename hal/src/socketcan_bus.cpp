@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
 
 #ifndef CAN_ERR_CRTL_ACTIVE
 #define CAN_ERR_CRTL_ACTIVE 0x40
@@ -49,6 +50,8 @@ SocketCanBus::SocketCanBus(int fd, const SocketCanOptions& opt) : fd_(fd), adopt
   if (fd_ >= 0) {
     const int fl = fcntl(fd_, F_GETFL, 0);
     if (fl >= 0) fcntl(fd_, F_SETFL, fl | O_NONBLOCK);
+    const int on = 1;
+    setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on);  // works on AF_UNIX too
   }
 }
 
@@ -264,7 +267,13 @@ Status SocketCanBus::receive(CanFrame& out, TimePoint deadline) {
         fail(Status::protocol_error, "recvmsg: frame of unexpected size ignored", 0);
         continue;
       }
+      TimePoint kernel_rx = 0;  // CLOCK_REALTIME ns when the frame reached the socket
       for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
+        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS) {
+          timespec ts;
+          std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
+          kernel_rx = TimePoint(ts.tv_sec) * kSecond + ts.tv_nsec;
+        }
         if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_RXQ_OVFL) {
           std::uint32_t drops;
           std::memcpy(&drops, CMSG_DATA(c), sizeof drops);
@@ -273,7 +282,15 @@ Status SocketCanBus::receive(CanFrame& out, TimePoint deadline) {
         }
       }
       from_kernel(k, n == ssize_t(CANFD_MTU), out);
-      out.rx_time = clock_.now();
+      const TimePoint mono_now = clock_.now();
+      out.rx_time = mono_now;
+      if (kernel_rx != 0) {
+        // Kernel stamps are CLOCK_REALTIME: move them onto CLOCK_MONOTONIC (vDSO, no syscall).
+        timespec rt{};
+        clock_gettime(CLOCK_REALTIME, &rt);
+        const TimePoint mono = mono_now - ((TimePoint(rt.tv_sec) * kSecond + rt.tv_nsec) - kernel_rx);
+        if (mono <= mono_now && mono > mono_now - kSecond) out.rx_time = mono;  // ignore clock steps
+      }
       if (out.error) {
         ++stats_.error_frames;
         // Bus-off is reported, not "fixed" by reopening: the controller restart is the

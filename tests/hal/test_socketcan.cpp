@@ -85,6 +85,20 @@ TEST(SocketCan, ReceiveDecodesIdsAndFlags) {
   UNSIGNED_LONGS_EQUAL(2, bus->stats().rx_frames);
 }
 
+TEST(SocketCan, RxTimeIsWhenTheFrameArrivedNotWhenItWasRead) {
+  const TimePoint before = clock.now();
+  peer_send(0x701, {0x05});
+  const TimePoint after_send = clock.now();
+  clock.sleep_until(after_send + 30 * kMillisecond);
+  CanFrame f;
+  LONGS_EQUAL(int(Status::ok), int(bus->receive(f, 0)));
+  const TimePoint read_at = clock.now();
+  // Kernel timestamp (moved to CLOCK_MONOTONIC): within the send window, well before the read.
+  CHECK(f.rx_time >= before - kMillisecond);
+  CHECK(f.rx_time <= after_send + kMillisecond);
+  CHECK(read_at - f.rx_time >= 29 * kMillisecond);
+}
+
 TEST(SocketCan, ReceiveHonoursAbsoluteDeadline) {
   CanFrame f;
   const TimePoint t0 = clock.now();

@@ -27,7 +27,8 @@ struct CanFrame {
   bool fd = false;          ///< CAN FD frame (len up to 64)
   bool brs = false;         ///< CAN FD bit-rate switch
   std::uint8_t len = 0;     ///< payload length (DLC decoded): 0..8 classic, FD lengths up to 64
-  TimePoint rx_time = 0;    ///< CLOCK_MONOTONIC time the backend received the frame (0 for tx)
+  TimePoint rx_time = 0;    ///< CLOCK_MONOTONIC time the frame arrived (SocketCAN: the kernel's
+                            ///< socket timestamp, moved onto CLOCK_MONOTONIC); 0 for tx
   std::array<std::uint8_t, kMaxFdLen> data{};
 
   /// Classic data frame with a standard id. Real-time safe (no allocation).
