@@ -21,7 +21,7 @@ log "canmaster: 6 nodes, ${period_ms} ms SYNC, heartbeat ${hb_ms} ms, consumer t
 canmaster --iface "$CAN_IF" --nodes 1-6 --bringup --hold 6 --period-ms "$period_ms" --hb-ms "$hb_ms" \
   --hb-timeout-ms "$hb_timeout_ms" --expect-hb-loss 3 >"$OUT_DIR/canmaster.log" 2>&1 &
 master=$!
-wait_until 30 "canmaster to enable node 6" grep -q '^node id=6 .*state=enabled' "$OUT_DIR/canmaster.log"
+wait_until 30 "canmaster to enable node 6" grep -qs '^node id=6 .*state=enabled' "$OUT_DIR/canmaster.log"
 sleep 1
 log "node 3 goes silent (SIGSTOP to its armsim)"
 kill -STOP "$node3"
