@@ -317,6 +317,11 @@ void CanopenServoBus::enable() {
   }
 }
 
+Status CanopenServoBus::nmt(NmtCommand cmd, std::uint8_t node) {
+  if (node != 0 && (node > kMaxNodeId || joint_of_node_[node] < 0)) return Status::invalid_argument;
+  return bus_.send(encode_nmt(cmd, node));
+}
+
 void CanopenServoBus::disable() { target_ = cia402::Target::disabled; }
 
 void CanopenServoBus::quick_stop() { target_ = cia402::Target::quick_stop; }

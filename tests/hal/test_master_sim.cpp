@@ -400,3 +400,24 @@ TEST(MasterSim, BusFiltersKeepForeignFramesOut) {
   CHECK(rig->master_ep->stats().rx_overruns == 0);
   for (std::size_t j = 0; j < 6; ++j) LONGS_EQUAL(int(JointState::enabled), int(m.feedback(j).state));
 }
+
+TEST(MasterSim, NmtCommandsReachTheNodes) {
+  bring_up();
+  hold_cycles(30);
+  LONGS_EQUAL(int(Status::invalid_argument), int(master->nmt(canopen::NmtCommand::stop, 9)));
+  LONGS_EQUAL(int(Status::ok), int(master->nmt(canopen::NmtCommand::stop, 4)));
+  hold_cycles(60);  // > one heartbeat period (20 ms)
+  LONGS_EQUAL(int(canopen::NmtState::stopped), int(rig->sim->node(4)->nmt()));
+  LONGS_EQUAL(int(Status::protocol_error), int(master->feedback(3).fault));
+  LONGS_EQUAL(int(Status::ok), int(master->nmt(canopen::NmtCommand::enter_pre_operational, 0)));
+  hold_cycles(5);
+  for (std::uint8_t n = 1; n <= 6; ++n) LONGS_EQUAL(int(canopen::NmtState::pre_operational), int(rig->sim->node(n)->nmt()));
+  // Wire format of the broadcast: 0x000 [0x80, 0x00].
+  bool seen = false;
+  for (auto& f : rig->capture())
+    if (f.id == 0x000 && f.len == 2 && f.data[0] == 0x80 && f.data[1] == 0x00) seen = true;
+  CHECK(seen);
+  // Back to work: start() reconfigures and restarts every node.
+  LONGS_EQUAL(int(Status::ok), int(master->start(rig->clock.now() + 2 * kSecond)));
+  LONGS_EQUAL(int(Status::ok), int(master->enable_blocking(rig->clock.now() + kSecond, kPeriod)));
+}

@@ -81,6 +81,12 @@ class CanopenServoBus final : public ServoBus {
   /// the deadline passes (drive_refused / the fault). Sleeps on the clock.
   Status enable_blocking(TimePoint deadline, Duration period);
 
+  /// Set-up/diagnostics: send an NMT command to one configured node, or to all of them
+  /// (node 0: one broadcast frame). A stop/reset makes the joints fault (protocol_error,
+  /// seen in the next heartbeats); start() configures them again.
+  /// @retval ok, invalid_argument (node not configured), bus errors from CanBus::send
+  Status nmt(canopen::NmtCommand cmd, std::uint8_t node);
+
   /// Real-time: the last commanded position in counts for joint j (tests/diagnostics).
   std::int32_t last_target_counts(std::size_t j) const { return joints_[j].target_counts; }
   /// Frames received that no codec accepted (unknown ids, wrong lengths): robustness counter.
