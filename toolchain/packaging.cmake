@@ -1,0 +1,61 @@
+# Install rules and CPack (Debian package) for the robot controller.
+# Included at the end of the top-level CMakeLists.txt.
+#
+#   cmake --preset aarch64 && cmake --build --preset aarch64
+#   cd build-aarch64 && cpack -G DEB          -> servoarm_<version>_arm64.deb
+# (bash .ci/cross does both and runs the tests under qemu-aarch64.) A host build
+# packages for the host's architecture the same way.
+#
+# What goes where (CPACK_PACKAGING_INSTALL_PREFIX /usr):
+#   /usr/bin/armfw, /usr/bin/armctl          install() rules of firmware/CMakeLists.txt
+#   /usr/share/servoarm/models/*.toml        built-in robot descriptions
+#   /etc/servoarm/armfw.toml                 default firmware config (conffile)
+#   /etc/default/servoarm                    CAN bitrate, extra armfw arguments (conffile)
+#   /lib/systemd/system/servoarm.service     the firmware, real-time limits, service user
+#   /lib/systemd/system/servoarm-can.service CAN interface bring-up (root oneshot)
+#   /usr/lib/servoarm/servoarm-can-up        its script
+#   /usr/share/doc/servoarm/README.md
+set(_pkg ${CMAKE_CURRENT_LIST_DIR}/packaging)
+
+set(SERVOARM_SYSCONFDIR "/etc" CACHE PATH "Where the package's configuration files go (absolute)")
+set(SERVOARM_SYSTEMD_UNITDIR "/lib/systemd/system" CACHE PATH "Where the systemd units go (absolute)")
+
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/kinematics/models/ DESTINATION share/servoarm/models
+        COMPONENT servoarm FILES_MATCHING PATTERN "*.toml")
+install(FILES ${_pkg}/armfw.toml DESTINATION ${SERVOARM_SYSCONFDIR}/servoarm COMPONENT servoarm
+        PERMISSIONS OWNER_READ OWNER_WRITE GROUP_READ)
+install(FILES ${_pkg}/servoarm.default DESTINATION ${SERVOARM_SYSCONFDIR}/default RENAME servoarm COMPONENT servoarm)
+install(FILES ${_pkg}/servoarm.service ${_pkg}/servoarm-can.service DESTINATION ${SERVOARM_SYSTEMD_UNITDIR}
+        COMPONENT servoarm)
+install(PROGRAMS ${_pkg}/servoarm-can-up DESTINATION lib/servoarm COMPONENT servoarm)
+install(FILES ${PROJECT_SOURCE_DIR}/README.md DESTINATION share/doc/servoarm COMPONENT servoarm)
+
+# ---------------------------------------------------------------------------
+# CPack: one Debian package, "servoarm".
+# ---------------------------------------------------------------------------
+set(CPACK_GENERATOR DEB)
+set(CPACK_PACKAGE_NAME servoarm)
+set(CPACK_PACKAGE_VERSION ${PROJECT_VERSION})
+set(CPACK_PACKAGE_VENDOR "servoarm")
+set(CPACK_PACKAGE_CONTACT "servoarm developers <servoarm@localhost>")
+set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "servoarm robot arm firmware (armfw), armctl and robot descriptions")
+set(CPACK_PACKAGE_DESCRIPTION
+    "Firmware for a serial-chain servo arm: a fixed-rate real-time control loop sending joint\n"
+    "setpoints to CiA 402 servo drives over SocketCAN, started at boot by servoarm.service.")
+set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
+set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
+set(CPACK_DEBIAN_PACKAGE_SECTION misc)
+set(CPACK_DEBIAN_PACKAGE_PRIORITY optional)
+# The toolchain files name the target's Debian architecture (arm64, armhf);
+# a host build packages for the host's (dpkg --print-architecture).
+if(SERVOARM_DEB_ARCH)
+  set(CPACK_DEBIAN_PACKAGE_ARCHITECTURE ${SERVOARM_DEB_ARCH})
+endif()
+# Written by hand: dpkg-shlibdeps cannot see a cross build's target libraries.
+# The binaries need glibc >= 2.34 (bookworm's toolchain) and libstdc++ from g++ 12.
+set(CPACK_DEBIAN_PACKAGE_DEPENDS "libc6 (>= 2.34), libstdc++6 (>= 12), libgcc-s1 (>= 3.0), adduser, iproute2")
+set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "can-utils")
+set(CPACK_DEBIAN_PACKAGE_CONTROL_EXTRA ${_pkg}/postinst ${_pkg}/prerm ${_pkg}/postrm ${_pkg}/conffiles)
+set(CPACK_DEBIAN_PACKAGE_CONTROL_STRICT_PERMISSION ON)
+include(CPack)
+unset(_pkg)
