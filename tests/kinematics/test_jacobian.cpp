@@ -129,3 +129,33 @@ TEST(Jacobian, CartesianPrecisionMatchesSeed002ClosedForm) {
   Eigen::Vector3d dw;
   CHECK(kin::cartesian_precision(c, kin::JointVector::Zero(2), bad, dw) == kin::Status::bad_input);
 }
+
+// The two PUMA 560 descriptions (seed 000 standard DH, seed 004 Craig) place
+// their frames differently: with q_std = (q1, q2, q3 + 180, q4, q5, q6 + 180)
+// they describe the same arm. Where they should agree they do: the wrist centre
+// (Craig's tool point; the standard tool point minus d6 along z6), the tool
+// orientation, the Jacobian once moved to the same reference point
+// (v_wc = v_tool + w x (p_wc - p_tool)), and |det J| (a change of reference
+// point has determinant 1).
+TEST(Jacobian, TheTwoPumaDescriptionsAgree) {
+  const kin::Chain S = model("puma560"), C = model("puma560_craig");
+  const double d6 = 0.05625;
+  std::mt19937_64 rng(17);
+  for (int n = 0; n < 5000; ++n) {
+    const kin::JointVector q = random_q(C, rng);
+    kin::JointVector qs = q;
+    qs[2] += M_PI;
+    qs[5] += M_PI;
+    kin::Jacobian Js, Jc;
+    kin::Pose Ts, Tc;
+    CHECK(kin::jacobian(S, qs, Js, &Ts) == kin::Status::ok);
+    CHECK(kin::jacobian(C, q, Jc, &Tc) == kin::Status::ok);
+    const Eigen::Vector3d r = -d6 * Ts.linear().col(2);  // p_wc - p_tool
+    CHECK((Ts.translation() + r - Tc.translation()).norm() < 1e-12);
+    CHECK((Ts.linear() - Tc.linear()).cwiseAbs().maxCoeff() < 1e-12);
+    kin::Jacobian Jmoved = Js;
+    for (int j = 0; j < 6; ++j) Jmoved.block<3, 1>(0, j) += Js.block<3, 1>(3, j).cross(r);
+    CHECK((Jmoved - Jc).cwiseAbs().maxCoeff() < 1e-12);
+    DOUBLES_EQUAL(kin::manipulability(Js), kin::manipulability(Jc), 1e-12);
+  }
+}
