@@ -329,17 +329,25 @@ void CanopenServoBus::quick_stop() { target_ = cia402::Target::quick_stop; }
 Status CanopenServoBus::read(TimePoint now) {
   if (!started_) return Status::not_configured;
   CanFrame f;
+  Status bus_status = Status::ok;
   // Bounded drain: at most this many frames per cycle, so a flood cannot stall the loop.
   for (int i = 0; i < 256; ++i) {
-    if (bus_.receive(f, 0) != Status::ok) break;
+    const Status rs = bus_.receive(f, 0);
+    if (rs != Status::ok) {
+      if (rs != Status::timeout) bus_status = rs;  // interface_down, io_error, ...
+      break;
+    }
     dispatch(f, f.rx_time != 0 ? f.rx_time : now);
   }
+  // A bus-off controller reaches no drive: every joint faults with that reason.
+  const bool bus_off = bus_.stats().state == ErrorState::bus_off;
   Status worst = Status::ok;
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
     Joint& jt = joints_[j];
     JointFeedback& fb = fb_[j];
     // Frames stamped by the backend after `now` was sampled count as fresh (age 0).
     fb.age = fb.last_feedback ? (now > fb.last_feedback ? now - fb.last_feedback : 0) : -1;
+    if (bus_off) set_fault(j, Status::bus_off, now);
     if (now - fb.last_heartbeat > jt.hb_timeout) set_fault(j, Status::heartbeat_lost, now);
     if (fb.state != JointState::fault) {
       switch (target_) {
@@ -367,7 +375,7 @@ Status CanopenServoBus::read(TimePoint now) {
     }
     if (fb.state == JointState::fault && worst == Status::ok) worst = fb.fault;
   }
-  return worst;
+  return worst != Status::ok ? worst : bus_status;
 }
 
 Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) {

@@ -421,3 +421,18 @@ TEST(MasterSim, NmtCommandsReachTheNodes) {
   LONGS_EQUAL(int(Status::ok), int(master->start(rig->clock.now() + 2 * kSecond)));
   LONGS_EQUAL(int(Status::ok), int(master->enable_blocking(rig->clock.now() + kSecond, kPeriod)));
 }
+
+TEST(MasterSim, BusOffFaultsEveryJoint) {
+  bring_up();
+  hold_cycles(10);
+  rig->bus.set_error_state(ErrorState::bus_off);
+  double sp[6] = {};
+  const TimePoint now = rig->clock.now();
+  LONGS_EQUAL(int(Status::bus_off), int(master->read(now)));
+  LONGS_EQUAL(int(Status::bus_off), int(master->write(std::span<const double>(sp, 6), now)));
+  for (std::size_t j = 0; j < 6; ++j) LONGS_EQUAL(int(Status::bus_off), int(master->feedback(j).fault));
+  // Recovery is explicit: bus back, enable() resets the latched faults.
+  rig->bus.set_error_state(ErrorState::active);
+  rig->clock.advance(kPeriod);
+  LONGS_EQUAL(int(Status::ok), int(master->enable_blocking(rig->clock.now() + kSecond, kPeriod)));
+}

@@ -30,7 +30,8 @@ struct JointFeedback {
   std::uint16_t statusword = 0; ///< raw drive status (CiA 402 0x6041 for CANopen)
   std::uint8_t drive_state = 0; ///< protocol state (cia402::State for CANopen)
   JointState state = JointState::offline;
-  Status fault = Status::ok;    ///< why state == fault: drive_fault, heartbeat_lost, drive_refused, protocol_error
+  Status fault = Status::ok;    ///< why state == fault: drive_fault, heartbeat_lost, drive_refused,
+                                ///< protocol_error (node left operational), bus_off
   std::uint16_t error_code = 0; ///< last drive error code (EMCY / 0x603F), 0 = none
   std::uint32_t emcy_count = 0; ///< EMCY frames received from this drive
   bool valid = false;           ///< position/velocity come from at least one feedback frame
@@ -62,7 +63,9 @@ class ServoBus {
   /// Real-time: consume received frames and update feedback; checks heartbeat
   /// and state-machine timeouts against `now`. Never blocks.
   /// @retval ok               all joints healthy
-  /// @retval heartbeat_lost / drive_fault / drive_refused   at least one joint in fault (see feedback)
+  /// @retval heartbeat_lost / drive_fault / drive_refused / protocol_error / bus_off
+  ///                          at least one joint in fault (the first one's reason; see feedback)
+  /// @retval interface_down / io_error   the bus failed while reading (joints fault on heartbeat loss)
   /// @retval not_configured   start() not done
   virtual Status read(TimePoint now) = 0;
 
