@@ -365,3 +365,10 @@ TEST(CanUp, BadInterfaceNameRefused) {
   STRCMP_CONTAINS("bad interface name", c.out.c_str());
   STRCMP_EQUAL("", log().c_str());
 }
+
+TEST(CanUp, SetupNoLeavesInterfaceAlone) {
+  const Cmd c = run("[bus]\ncan = \"lo\"\n", "SERVOARM_CAN_SETUP=no");
+  CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
+  STRCMP_CONTAINS("configured elsewhere", c.out.c_str());
+  STRCMP_EQUAL("", log().c_str());
+}
