@@ -466,10 +466,22 @@ void CanopenServoBus::describe_fault(std::size_t j, char* buf, std::size_t size)
       std::snprintf(buf, size, "node %u: drive_fault (error code 0x%04X: %s)", unsigned(jt.node),
                     unsigned(fb.error_code), emcy_text(fb.error_code));
       return;
-    default:
-      std::snprintf(buf, size, "node %u: %s (%s)", unsigned(jt.node), to_string(fb.fault), describe(fb.fault));
-      return;
+    case Status::ok:
+    case Status::timeout:
+    case Status::would_block:
+    case Status::error_passive:
+    case Status::invalid_argument:
+    case Status::io_error:
+    case Status::bus_off:
+    case Status::interface_down:
+    case Status::not_open:
+    case Status::sdo_abort:
+    case Status::protocol_error:
+    case Status::not_configured:
+    case Status::capacity:
+      break;
   }
+  std::snprintf(buf, size, "node %u: %s (%s)", unsigned(jt.node), to_string(fb.fault), describe(fb.fault));
 }
 
 }  // namespace servoarm::hal
