@@ -57,5 +57,8 @@ set(CPACK_DEBIAN_PACKAGE_DEPENDS "libc6 (>= 2.34), libstdc++6 (>= 12), libgcc-s1
 set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "can-utils")
 set(CPACK_DEBIAN_PACKAGE_CONTROL_EXTRA ${_pkg}/postinst ${_pkg}/prerm ${_pkg}/postrm ${_pkg}/conffiles)
 set(CPACK_DEBIAN_PACKAGE_CONTROL_STRICT_PERMISSION ON)
+# Stripped binaries on the controller (CMAKE_STRIP: the cross strip in a cross build);
+# the build tree keeps the unstripped ones for gdb.
+set(CPACK_STRIP_FILES ON)
 include(CPack)
 unset(_pkg)

@@ -233,19 +233,29 @@ TEST(Package, SystemdAnalyzeVerify) {
     return;
   }
   extract();
-  // --root: ExecStart= paths and the Requires= unit are looked up in the scratch root.
+  // Both units side by side in one directory (verify finds Requires= units
+  // there), with the programs they start pointed into the scratch root, so
+  // verify checks the packaged binaries exist and are executable.
+  const std::string dir = tmp + "/units";
+  CHECK_EQUAL(0, ::mkdir(dir.c_str(), 0755));
   for (const char* u : {"servoarm.service", "servoarm-can.service"}) {
-    const Cmd v = sh("SYSTEMD_LOG_LEVEL=notice systemd-analyze verify --root='" + root + "' '" + root +
-                     "/lib/systemd/system/" + u + "'");
+    std::string text = slurp(root + "/lib/systemd/system/" + u);
+    for (const char* key : {"ExecStart=", "ExecStartPre=", "ExecStop="}) {
+      const std::string k = std::string(key) + "/usr/";
+      for (std::size_t at = text.find(k); at != std::string::npos; at = text.find(k, at + 1))
+        text.replace(at + std::strlen(key), 1, root + "/");
+    }
+    std::ofstream(dir + "/" + u) << text;
+  }
+  for (const char* u : {"servoarm.service", "servoarm-can.service"}) {
+    const Cmd v = sh("systemd-analyze verify '" + dir + "/" + u + "'");
     CHECK_EQUAL_TEXT(0, v.status, (std::string(u) + ":\n" + v.out).c_str());
-    // Warnings count too (unknown keys, bad values); only the "not booted with
-    // systemd" notice of a container is tolerated.
+    // Warnings fail too (an unknown key is only a warning to systemd); a
+    // container's "not booted with systemd" notice is tolerated.
     std::istringstream is(v.out);
     std::string line;
-    while (std::getline(is, line)) {
-      if (line.empty() || has(line, "not been booted with systemd") || has(line, "Failed to prepare filename")) continue;
-      if (has(line, u) || has(line, "servoarm")) FAIL((std::string(u) + ": " + line).c_str());
-    }
+    while (std::getline(is, line))
+      if (has(line, "servoarm")) FAIL((std::string(u) + ": " + line).c_str());
   }
 }
 
