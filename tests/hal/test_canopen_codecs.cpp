@@ -5,6 +5,7 @@
 
 #include "servoarm/hal/canopen.hpp"
 #include "servoarm/hal/canopen_master.hpp"
+#include "servoarm/hal/status.hpp"
 
 // CppUTest last: its leak detector redefines `new`.
 #include <CppUTest/TestHarness.h>
@@ -178,4 +179,38 @@ TEST(CanopenCodec, FunctionAndNode) {
   CHECK(valid_node(127));
   CHECK_FALSE(valid_node(0));
   CHECK_FALSE(valid_node(128));
+}
+
+TEST_GROUP(HalStatus){};
+
+TEST(HalStatus, EveryCodeHasANameAndADescriptionAndASign) {
+  struct {
+    Status s;
+    const char* name;
+    bool ok;
+  } table[] = {
+      {Status::ok, "ok", true},
+      {Status::timeout, "timeout", true},
+      {Status::would_block, "would_block", true},
+      {Status::error_passive, "error_passive", true},
+      {Status::invalid_argument, "invalid_argument", false},
+      {Status::io_error, "io_error", false},
+      {Status::bus_off, "bus_off", false},
+      {Status::interface_down, "interface_down", false},
+      {Status::not_open, "not_open", false},
+      {Status::sdo_abort, "sdo_abort", false},
+      {Status::protocol_error, "protocol_error", false},
+      {Status::drive_fault, "drive_fault", false},
+      {Status::drive_refused, "drive_refused", false},
+      {Status::heartbeat_lost, "heartbeat_lost", false},
+      {Status::not_configured, "not_configured", false},
+      {Status::capacity, "capacity", false},
+  };
+  for (auto& t : table) {
+    STRCMP_EQUAL(t.name, to_string(t.s));
+    CHECK_EQUAL_TEXT(t.ok, is_ok(t.s), t.name);
+    CHECK_TEXT(std::strlen(describe(t.s)) > 10, t.name);
+    CHECK_TEXT(std::strstr(describe(t.s), "unknown") == nullptr, t.name);
+  }
+  STRCMP_EQUAL("unknown_status", to_string(Status(99)));
 }

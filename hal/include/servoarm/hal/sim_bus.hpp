@@ -66,6 +66,8 @@ class SimBus {
   ErrorState state_ = ErrorState::active;
 };
 
+/// One open "socket" on a SimBus. send/receive/stats never allocate and are bounded,
+/// but take the bus mutex (fine for tests and host simulation; SocketCanBus takes none).
 class SimBusEndpoint final : public CanBus {
  public:
   ~SimBusEndpoint() override;
