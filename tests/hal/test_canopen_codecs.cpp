@@ -209,7 +209,7 @@ TEST(HalStatus, EveryCodeHasANameAndADescriptionAndASign) {
   for (auto& t : table) {
     STRCMP_EQUAL(t.name, to_string(t.s));
     CHECK_EQUAL_TEXT(t.ok, is_ok(t.s), t.name);
-    CHECK_TEXT(std::strlen(describe(t.s)) > 10, t.name);
+    CHECK_TEXT(std::strlen(describe(t.s)) >= 7, t.name);
     CHECK_TEXT(std::strstr(describe(t.s), "unknown") == nullptr, t.name);
   }
   STRCMP_EQUAL("unknown_status", to_string(Status(99)));
