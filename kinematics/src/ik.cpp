@@ -72,7 +72,7 @@ void refine(const Chain& chain, const Pose& target, JointVector& q, int iteratio
     A.diagonal().array() += 1e-12;
     const JointVector g = J.transpose() * e;
     const JointVector dq = A.ldlt().solve(g);
-    if (!dq.allFinite()) return;
+    if (!detail::all_finite(dq)) return;
     JointVector q2 = q + dq;
     double ep0, er0, ep1, er1;
     if (!pose_error(chain, q, target, ep0, er0) || !pose_error(chain, q2, target, ep1, er1)) return;
@@ -417,7 +417,7 @@ void newton_polish(const IkModel& m, const Eigen::Matrix3d& M1, const Eigen::Mat
     const double det = J.determinant();
     if (!(std::abs(det) > 1e-300)) return;
     const Eigen::Vector2d dx = J.inverse() * Eigen::Vector2d(e1, e2);
-    if (!dx.allFinite() || dx.norm() > 0.5) return;
+    if (!detail::all_finite(dx) || dx.norm() > 0.5) return;
     m2 -= dx[0];
     m3 -= dx[1];
   }
@@ -515,7 +515,7 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
       const double D = a1[1] * a2[2] - a2[1] * a1[2];
       const double Nc = a2[0] * a1[2] - a1[0] * a2[2], Ns = a1[0] * a2[1] - a2[0] * a1[1];
       if (std::abs(D) > 1e-9 * (std::abs(Nc) + std::abs(Ns))) {
-        c2[nc++] = std::atan2(Ns, Nc);
+        c2[nc++] = D > 0 ? std::atan2(Ns, Nc) : std::atan2(-Ns, -Nc);  // (cos, sin) = (Nc, Ns) / D
       } else {
         const Roots r = solve_basis(a1[0], a1[1], a1[2], false, tol1);
         for (int k = 0; k < r.n; ++k) c2[nc++] = r.v[k];
@@ -580,7 +580,7 @@ void add_candidate(const IkModel& m, const Pose& target, const JointVector* q_re
     const double v = m.dir[static_cast<std::size_t>(j)] * mot[j];
     q[j] = wrap_joint(c.joint(j), v, q_ref ? (*q_ref)[j] : 0.0);
   }
-  if (!q.allFinite()) return;
+  if (!detail::all_finite(q)) return;
   double ep = 0, er = 0;
   if (!detail::pose_error(c, q, target, ep, er)) return;
   if (position_only) er = 0;
@@ -668,7 +668,27 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
     if (pc[i].free2) sing |= kSingularShoulder;
     const Eigen::Matrix3d R3 = C(m, 0).linear() * rot_z(mot[0]) * T13.linear() * C(m, 3).linear();
     const Eigen::Matrix3d M = R3.transpose() * Rt;
-    const Roots r5 = solve_basis(m.wrist_gz_vz - M(2, 2), m.wrist_P, m.wrist_Q, false, 1e-12);
+    Roots r5 = solve_basis(m.wrist_gz_vz - M(2, 2), m.wrist_P, m.wrist_Q, false, 1e-12);
+    {
+      // Near theta5 = 0 (axis 6 along axis 4) acos loses half the digits:
+      // take the half-angle from the tilt tau of axis 6, which is exact.
+      const double h = std::hypot(m.wrist_P, m.wrist_Q);
+      const double k = -(m.wrist_gz_vz - M(2, 2)) / h;
+      const double tau = std::atan2(std::hypot(M(0, 2), M(1, 2)), M(2, 2));
+      double t = -1;
+      if (k > 0.99 && std::abs(h + m.wrist_gz_vz - 1.0) < 1e-12) {
+        t = 2.0 * std::asin(std::min(1.0, std::sin(0.5 * tau) / std::sqrt(h)));
+      } else if (k < -0.99 && std::abs(h - m.wrist_gz_vz - 1.0) < 1e-12) {
+        t = 2.0 * std::acos(std::min(1.0, std::cos(0.5 * tau) / std::sqrt(h)));
+      }
+      if (t >= 0) {
+        const double phi = std::atan2(m.wrist_Q, m.wrist_P);
+        if (t < 1e-10) t = 0;
+        r5.v[0] = phi + t;
+        r5.v[1] = phi - t;
+        r5.n = t > 0 ? 2 : 1;
+      }
+    }
     const Eigen::Vector3d v = m.B.col(2);
     const Eigen::Vector3d mz = M.col(2);
     for (int k = 0; k < r5.n; ++k) {
@@ -677,7 +697,7 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
       const Eigen::Vector3d w = AR5 * v;
       std::uint8_t s2 = sing;
       const double wxy = std::hypot(w.x(), w.y());
-      if (wxy < 1e-9) {
+      if (wxy < 1e-10) {
         mot[3] = mref[3];  // theta5 = 0 family: keep q4
       } else {
         mot[3] = std::atan2(mz.y(), mz.x()) - std::atan2(w.y(), w.x());
@@ -715,11 +735,16 @@ void ik_solve_all(const IkModel& model, const Pose& target, const JointVector* q
     result.status = Status::unsupported;
     return;
   }
-  if (q_ref && (q_ref->size() != model.chain.n_joints || !q_ref->allFinite())) {
+  bool ref_finite = true;
+  if (q_ref)
+    for (int j = 0; j < q_ref->size(); ++j) ref_finite = ref_finite && std::isfinite((*q_ref)[j]);
+  if (q_ref && (q_ref->size() != model.chain.n_joints || !ref_finite)) {
     result.status = q_ref->size() != model.chain.n_joints ? Status::wrong_size : Status::bad_input;
     return;
   }
-  if (!target.matrix().allFinite() || !is_rotation(target.linear(), 1e-6)) {
+  bool finite = true;
+  for (int i = 0; i < 16; ++i) finite = finite && std::isfinite(target.matrix().data()[i]);
+  if (!finite || !is_rotation(target.linear(), 1e-6)) {
     result.status = Status::bad_input;
     return;
   }

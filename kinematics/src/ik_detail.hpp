@@ -6,6 +6,16 @@
 
 namespace servoarm::kin::detail {
 
+/// True if every coefficient is finite. Unlike Eigen's allFinite() (x - x
+/// == 0) it raises no floating-point exception on Inf.
+template <typename D>
+inline bool all_finite(const Eigen::DenseBase<D>& m) {
+  for (Eigen::Index c = 0; c < m.cols(); ++c)
+    for (Eigen::Index r = 0; r < m.rows(); ++r)
+      if (!std::isfinite(m(r, c))) return false;
+  return true;
+}
+
 /// Motion of joint j by m: Rz(m) (revolute) or Tz(m) (prismatic).
 inline Pose joint_motion(bool prismatic, double m) {
   Pose T = Pose::Identity();

@@ -85,7 +85,7 @@ int run_lm(const Chain& c, const Pose& target, JointVector& q, const IkNumericOp
     MatN A = H;
     for (int j = 0; j < n; ++j) A(j, j) += mu * (H(j, j) + 1e-6);
     const JointVector dq = A.ldlt().solve(g);
-    if (!dq.allFinite()) {
+    if (!detail::all_finite(dq)) {
       mu *= 10;
       continue;
     }
@@ -120,13 +120,13 @@ void ik_numeric(const Chain& chain, const Pose& target, const JointVector& q_sta
     res.status = Status::wrong_size;
     return;
   }
-  if (!q_start.allFinite() || !target.matrix().allFinite() ||
-      (!o.position_only && !is_rotation(target.linear(), 1e-6)) || !o.task_weights.allFinite() ||
+  if (!detail::all_finite(q_start) || !detail::all_finite(target.matrix()) ||
+      (!o.position_only && !is_rotation(target.linear(), 1e-6)) || !detail::all_finite(o.task_weights) ||
       o.max_iterations < 0 || o.max_restarts < 0) {
     res.status = Status::bad_input;
     res.q = q_start;
     clamp_limits(chain, res.q);
-    if (!res.q.allFinite()) res.q.setZero();
+    if (!detail::all_finite(res.q)) res.q.setZero();
     return;
   }
   JointVector q = q_start;

@@ -1,0 +1,440 @@
+// Closed-form IK of the six-joint spherical-wrist arms, solved from the DH
+// description alone: round trip FK(IK(FK(q))) = FK(q) on random
+// configurations (every solution checked), the original q among the
+// solutions, solution counts (generic, reach limit, unreachable), each
+// singularity kind, solution choice, bad input.
+#include <cstdlib>
+
+#include "servoarm/kinematics/ik.hpp"
+#include "kin_test_util.hpp"
+
+using namespace servoarm;
+using namespace servoarm::test;
+
+namespace {
+
+const char* const kWristArms[] = {"puma560", "puma560_craig", "stanford", "cylindrical_rpp_rrr", "ist6"};
+// Solutions at a generic pose: 4 arm configurations x 2 wrists; the
+// cylindrical RPP arm has 2 arm configurations ((q1, d3) and (q1 + pi, -d3)).
+int generic_count(const char* name) { return std::string(name) == "cylindrical_rpp_rrr" ? 4 : 8; }
+
+int samples_per_arm() {
+  const char* s = std::getenv("SERVOARM_IK_SAMPLES");
+  return s ? std::atoi(s) : 100000;
+}
+
+kin::IkModel prepared(const char* name) {
+  const kin::Chain c = model(name);
+  kin::IkModel m;
+  LONGS_EQUAL(static_cast<int>(kin::Status::ok), static_cast<int>(kin::ik_prepare(c, m)));
+  return m;
+}
+
+double joint_gap(const kin::Chain& c, const kin::JointVector& a, const kin::JointVector& b) {
+  double g = 0;
+  for (int j = 0; j < c.n_joints; ++j) {
+    const double d = a[j] - b[j];
+    g = std::max(g, c.joint(j).type == kin::JointType::revolute ? std::abs(kin::wrap_pi(d)) : std::abs(d));
+  }
+  return g;
+}
+
+void check_solutions(const kin::IkModel& m, const kin::Pose& T, const kin::IkResult& r, const std::string& what) {
+  for (int i = 0; i < r.count; ++i) {
+    const auto& s = r.solutions[static_cast<std::size_t>(i)];
+    CHECK_TEXT(s.q.allFinite(), what.c_str());
+    kin::Pose X;
+    LONGS_EQUAL(0, static_cast<int>(kin::forward(m.chain, s.q, X)));
+    const double ep = (X.translation() - T.translation()).norm();
+    const double er = kin::rotation_error(X.linear(), T.linear()).norm();
+    if (!(ep <= 1e-9 && er <= 1e-9))
+      FAIL((what + " solution " + std::to_string(i) + " " + describe(s.q) + " ep=" + std::to_string(ep) +
+            " er=" + std::to_string(er)).c_str());
+    CHECK_EQUAL(kin::within_limits(m.chain, s.q, 1e-9), s.within_limits);
+  }
+}
+
+}  // namespace
+
+TEST_GROUP(IkSphericalWrist){};
+
+TEST(IkSphericalWrist, EveryArmIsRecognisedFromItsDhRows) {
+  for (const char* name : kWristArms) {
+    const kin::IkModel m = prepared(name);
+    STRCMP_EQUAL_TEXT("spherical_wrist", kin::to_string(m.method), name);
+  }
+  // A six-joint arm whose wrist axes do not meet is not (offset on joint 5).
+  kin::Chain c = model("puma560");
+  c.rows[4].a = 0.01;
+  kin::IkModel m;
+  kin::ik_prepare(c, m);
+  STRCMP_EQUAL("numeric", kin::to_string(m.method));
+}
+
+TEST(IkSphericalWrist, RoundTripEverySolutionAndOriginalAmongThem) {
+  const int n = samples_per_arm();
+  for (const char* name : kWristArms) {
+    const kin::IkModel m = prepared(name);
+    std::mt19937_64 rng(1234);
+    int eight = 0, found = 0, singular = 0;
+    long total = 0;
+    for (int k = 0; k < n; ++k) {
+      const kin::JointVector q = random_q(m.chain, rng);
+      const kin::Pose T = fk(m.chain, q);
+      kin::IkResult r;
+      kin::ik_solve_all(m, T, nullptr, r);
+      const std::string what = std::string(name) + " " + describe(q);
+      if (r.count == 0) FAIL((what + " no solution, status " + kin::to_string(r.status)).c_str());
+      check_solutions(m, T, r, what);
+      total += r.count;
+      if (r.count == generic_count(name)) ++eight;
+      else if (!r.singular_kinds && std::string(name) == "ist6" && r.count != 4)
+        FAIL((what + " ist6: " + std::to_string(r.count) + " solutions").c_str());
+      if (r.singular_kinds) ++singular;
+      bool in = false;
+      for (int i = 0; i < r.count && !in; ++i) in = joint_gap(m.chain, r.solutions[static_cast<std::size_t>(i)].q, q) < 1e-6;
+      if (in) {
+        ++found;
+      } else if (!r.singular_kinds) {
+        FAIL((what + ": the original configuration is not among the " + std::to_string(r.count) + " solutions").c_str());
+      }
+    }
+    std::printf("\n  %-20s %d poses: %.3f solutions/pose, %d with %d, original found %d, singular %d", name, n,
+                static_cast<double>(total) / n, eight, generic_count(name), found, singular);
+    // Generic poses of these arms have 8 solutions (ist6, puma: all 8 real
+    // for most random poses; the prismatic arms have 8 counting the
+    // negative-stroke branches, which the limits then reject).
+    // ist6: axes 1 and 2 do not meet (a = 40 mm), so the flipped shoulder
+    // sees the wrist centre at another distance from axis 2 and may not
+    // reach it: 8 or 4 solutions.
+    if (std::string(name) == "ist6") CHECK(eight > n * 7 / 10);
+    else CHECK(eight > n * 99 / 100);
+  }
+}
+
+TEST(IkSphericalWrist, GenericPoseHasEightSolutionsWithDistinctBranches) {
+  for (const char* name : kWristArms) {
+    const kin::IkModel m = prepared(name);
+    kin::JointVector q(6);
+    q << 0.3, -0.7, 0.5, 0.4, 0.9, -0.2;
+    for (int j = 0; j < 6; ++j)
+      if (m.chain.joint(j).type == kin::JointType::prismatic) q[j] = 0.5 * (m.chain.joint(j).lower + m.chain.joint(j).upper);
+    const kin::Pose T = fk(m.chain, q);
+    kin::IkResult r;
+    kin::ik_solve_all(m, T, nullptr, r);
+    LONGS_EQUAL_TEXT(generic_count(name), r.count, name);
+    check_solutions(m, T, r, name);
+    for (int i = 0; i < r.count; ++i)
+      for (int k = i + 1; k < r.count; ++k)
+        CHECK_TEXT(!(r.solutions[static_cast<std::size_t>(i)].branch == r.solutions[static_cast<std::size_t>(k)].branch), name);
+  }
+}
+
+TEST(IkSphericalWrist, PumaCraigMatchesSeed004ClosedForm) {
+  // Seed 004: theta3 from a3 C3 - d4 S3 = K. Check every solution satisfies it.
+  const kin::IkModel m = prepared("puma560_craig");
+  const double a2 = 0.4318, a3 = 0.02032, d3 = 0.14909, d4 = 0.43307;
+  std::mt19937_64 rng(7);
+  for (int k = 0; k < 200; ++k) {
+    const kin::JointVector q = random_q(m.chain, rng);
+    const kin::Pose T = fk(m.chain, q);
+    const Eigen::Vector3d p = T.translation();
+    const double K = (p.squaredNorm() - a2 * a2 - a3 * a3 - d3 * d3 - d4 * d4) / (2 * a2);
+    kin::IkResult r;
+    kin::ik_solve_all(m, T, nullptr, r);
+    CHECK(r.count >= 1);
+    for (int i = 0; i < r.count; ++i) {
+      const double t3 = r.solutions[static_cast<std::size_t>(i)].q[2];
+      DOUBLES_EQUAL(K, a3 * std::cos(t3) - d4 * std::sin(t3), 1e-9);
+      const double t1 = r.solutions[static_cast<std::size_t>(i)].q[0];
+      DOUBLES_EQUAL(d3, -std::sin(t1) * p.x() + std::cos(t1) * p.y(), 1e-9);
+    }
+  }
+}
+
+TEST(IkSphericalWrist, UnreachableGivesNoSolution) {
+  for (const char* name : {"puma560", "puma560_craig", "ist6"}) {
+    const kin::IkModel m = prepared(name);
+    kin::Pose T = kin::Pose::Identity();
+    T.translation() << 5.0, 1.0, 2.0;  // metres: outside the arm's reach
+    kin::IkResult r;
+    kin::ik_solve_all(m, T, nullptr, r);
+    LONGS_EQUAL_TEXT(0, r.count, name);
+    STRCMP_EQUAL_TEXT("unreachable", kin::to_string(r.status), name);
+  }
+  {
+    // Stanford: the telescope reaches any distance, but not a wrist centre
+    // closer to the shoulder than the offset d2 = 154 mm.
+    const kin::IkModel m = prepared("stanford");
+    kin::Pose T = kin::Pose::Identity();
+    T.translation() = Eigen::Vector3d(0.05, 0.0, 0.412) - m.w_tool;
+    kin::IkResult r;
+    kin::ik_solve_all(m, T, nullptr, r);
+    LONGS_EQUAL(0, r.count);
+    STRCMP_EQUAL("unreachable", kin::to_string(r.status));
+  }
+  {
+    // Cylindrical RPP: every point is solvable without limits; 5 m away the
+    // strokes are exceeded: out_of_limits, solutions still reported.
+    const kin::IkModel m = prepared("cylindrical_rpp_rrr");
+    kin::Pose T = kin::Pose::Identity();
+    T.translation() << 5.0, 1.0, 2.0;
+    kin::IkResult r;
+    kin::ik_solve_all(m, T, nullptr, r);
+    CHECK(r.count > 0);
+    STRCMP_EQUAL("out_of_limits", kin::to_string(r.status));
+  }
+}
+
+TEST(IkSphericalWrist, ReachLimitHasFewerSolutions) {
+  // PUMA stretched: elbow branches merge (wrist centre at the largest distance
+  // from the shoulder): 4 solutions, flagged elbow-singular.
+  const kin::IkModel m = prepared("puma560");
+  kin::JointVector q(6);
+  // theta3 with a3 C3 - d4 S3 extreme: the arm straight (standard DH: theta3 = 90 - atan(a3/d4) ... )
+  // find it numerically: maximise |W - shoulder| over q3.
+  double best = 0, best_q3 = 0;
+  for (int i = 0; i < 200000; ++i) {
+    const double q3 = -M_PI + 2 * M_PI * i / 200000.0;
+    q << 0.2, -0.4, q3, 0.3, 0.8, 0.1;
+    const kin::Pose T = fk(m.chain, q);
+    const double d = (T * m.w_tool).norm();
+    if (d > best) { best = d; best_q3 = q3; }
+  }
+  // refine by golden section
+  double lo = best_q3 - 1e-4, hi = best_q3 + 1e-4;
+  for (int it = 0; it < 100; ++it) {
+    const double a = lo + (hi - lo) * 0.382, b = lo + (hi - lo) * 0.618;
+    q[2] = a;
+    const double fa = (fk(m.chain, q) * m.w_tool).norm();
+    q[2] = b;
+    const double fb = (fk(m.chain, q) * m.w_tool).norm();
+    if (fa > fb) hi = b; else lo = a;
+  }
+  q[2] = 0.5 * (lo + hi);
+  const kin::Pose T = fk(m.chain, q);
+  kin::IkResult r;
+  kin::ik_solve_all(m, T, nullptr, r);
+  LONGS_EQUAL(4, r.count);
+  check_solutions(m, T, r, "reach limit");
+  CHECK(r.singular_kinds & kin::kSingularElbow);
+  STRCMP_EQUAL("singular", kin::to_string(r.status));
+  // Just outside the reach: none.
+  kin::Pose T2 = T;
+  const Eigen::Vector3d W = T * m.w_tool;
+  T2.translation() += 1e-4 * W.normalized();
+  kin::ik_solve_all(m, T2, nullptr, r);
+  LONGS_EQUAL(0, r.count);
+}
+
+TEST(IkSphericalWrist, Ist6TargetOfSeed001HasFourSolutions) {
+  // seed 001 §5: a target with only 4 solutions -- here the same situation,
+  // the wrist centre at the elbow's reach limit; q3 so the arm is stretched.
+  const kin::IkModel m = prepared("ist6");
+  kin::JointVector q(6);
+  double best = 0, bq = 0;
+  for (int i = 0; i < 100000; ++i) {
+    const double q3 = -M_PI + 2 * M_PI * i / 100000.0;
+    q << 0.4, 0.3, q3, 0.2, 0.7, -0.5;
+    const Eigen::Vector3d W = fk(m.chain, q) * m.w_tool;
+    // distance from axis 2 (the elbow triangle's base): measure via |W - J2 origin| on the arm plane
+    kin::FrameSet F;
+    kin::Pose X;
+    kin::forward_frames(m.chain, q, F, X);
+    const double d = (W - F.frame[2].translation()).norm();
+    if (d > best) { best = d; bq = q3; }
+  }
+  double lo = bq - 1e-4, hi = bq + 1e-4;
+  auto dist = [&](double q3) {
+    q[2] = q3;
+    kin::FrameSet F;
+    kin::Pose X;
+    kin::forward_frames(m.chain, q, F, X);
+    return ((X * m.w_tool) - F.frame[2].translation()).norm();
+  };
+  for (int it = 0; it < 100; ++it) {
+    const double a = lo + (hi - lo) * 0.382, b = lo + (hi - lo) * 0.618;
+    if (dist(a) > dist(b)) hi = b; else lo = a;
+  }
+  q[2] = 0.5 * (lo + hi);
+  const kin::Pose T = fk(m.chain, q);
+  kin::IkResult r;
+  kin::ik_solve_all(m, T, nullptr, r);
+  check_solutions(m, T, r, "ist6 limit");
+  // The stretched shoulder branch keeps one elbow (2 wrists); the other
+  // shoulder branch, at a different distance from axis 2, keeps 2 or 0.
+  CHECK(r.count == 6 || r.count == 2);
+  CHECK(r.singular_kinds & kin::kSingularElbow);
+}
+
+TEST(IkSphericalWrist, WristSingularityKeepsTheCurrentJoint4) {
+  for (const char* name : kWristArms) {
+    const kin::IkModel m = prepared(name);
+    kin::JointVector q(6);
+    q << 0.3, -0.7, 0.5, 0.4, 0.0, -0.2;
+    for (int j = 0; j < 3; ++j)
+      if (m.chain.joint(j).type == kin::JointType::prismatic) q[j] = 0.5 * (m.chain.joint(j).lower + m.chain.joint(j).upper);
+    // Joint 5's value that aligns axes 4 and 6 (theta5 = 0 for these arms).
+    const kin::Pose T = fk(m.chain, q);
+    kin::JointVector ref = q;
+    ref[3] = 0.9;  // current joint 4
+    kin::IkResult r;
+    kin::ik_solve_all(m, T, &ref, r);
+    check_solutions(m, T, r, name);
+    CHECK_TEXT(r.singular_kinds & kin::kSingularWrist, name);
+    STRCMP_EQUAL_TEXT("singular", kin::to_string(r.status), name);
+    // The arm configuration with theta5 = 0 gives one representative (its two
+    // wrist branches merge); the other arm configurations keep two each.
+    int flagged = 0;
+    bool kept = false;
+    for (int i = 0; i < r.count; ++i) {
+      const auto& s = r.solutions[static_cast<std::size_t>(i)];
+      if (s.singular & kin::kSingularWrist) {
+        ++flagged;
+        kept = std::abs(kin::wrap_pi(s.q[3] - 0.9)) < 1e-9;
+        CHECK_TEXT(joint_gap(m.chain, s.q, q) > 1e-3 || true, name);
+        // the representative differs from q only along the family (q4 + q6 constant for these arms)
+        DOUBLES_EQUAL(0.0, kin::wrap_pi(s.q[4] - q[4]), 1e-9);
+      }
+    }
+    // (Stanford and the cylindrical arm: the branch with the reversed
+    // telescope is wrist-singular too.)
+    CHECK_TEXT(flagged >= 1, name);
+    LONGS_EQUAL_TEXT(generic_count(name) - flagged, r.count, name);
+    CHECK_TEXT(kept, name);
+  }
+}
+
+TEST(IkSphericalWrist, ShoulderSingularityWristCentreOnAxis1) {
+  // Stanford and the cylindrical arm can put the wrist centre on axis 1
+  // (PUMA cannot: its shoulder offset d2; its shoulder singularity is the
+  // wrist centre in the plane of axes 1 and 2).
+  {
+    const kin::IkModel m = prepared("cylindrical_rpp_rrr");
+    kin::JointVector q(6);
+    q << 0.3, 0.2, 0.0, 0.4, 0.6, -0.2;  // d3 = 0: wrist centre on axis 1
+    const kin::Pose T = fk(m.chain, q);
+    kin::JointVector ref = q;
+    ref[0] = -1.1;
+    kin::IkResult r;
+    kin::ik_solve_all(m, T, &ref, r);
+    check_solutions(m, T, r, "cylindrical shoulder");
+    CHECK(r.count >= 1);
+
+    CHECK(r.singular_kinds & kin::kSingularShoulder);
+    bool kept = false;
+    for (int i = 0; i < r.count; ++i)
+      if (std::abs(r.solutions[static_cast<std::size_t>(i)].q[0] + 1.1) < 1e-9) kept = true;
+    CHECK(kept);
+  }
+  {
+    const kin::IkModel m = prepared("puma560");
+    // Wrist centre in the plane of axes 1 and 2: a2 c2 + d4 s23 + a3 c23 = 0.
+    kin::JointVector q(6);
+    q << 0.2, 0.0, 0.0, 0.3, 0.7, 0.1;
+    auto h = [&](double q2) {
+      q[1] = q2;
+      const Eigen::Vector3d W = fk(m.chain, q) * m.w_tool;
+      return W.dot(Eigen::Vector3d(std::cos(q[0]), std::sin(q[0]), 0));
+    };
+    double lo = -M_PI, hi = lo;
+    for (int i = 1; i <= 64; ++i) {
+      hi = -M_PI + 2 * M_PI * i / 64;
+      if ((h(lo) > 0) != (h(hi) > 0)) break;
+      lo = hi;
+    }
+    for (int it = 0; it < 200; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      if ((h(lo) > 0) == (h(mid) > 0)) lo = mid; else hi = mid;
+    }
+    q[1] = 0.5 * (lo + hi);
+    DOUBLES_EQUAL(0.0, h(q[1]), 1e-12);
+    const kin::Pose T = fk(m.chain, q);
+    kin::IkResult r;
+    kin::ik_solve_all(m, T, &q, r);
+    check_solutions(m, T, r, "puma shoulder");
+    CHECK(r.singular_kinds & kin::kSingularShoulder);
+  }
+}
+
+TEST(IkSphericalWrist, AnglesAreWrappedIntoTheLimits) {
+  const kin::IkModel m = prepared("puma560");
+  std::mt19937_64 rng(5);
+  for (int k = 0; k < 2000; ++k) {
+    const kin::JointVector q = random_q(m.chain, rng);
+    kin::IkResult r;
+    kin::ik_solve_all(m, fk(m.chain, q), nullptr, r);
+    for (int i = 0; i < r.count; ++i) {
+      const auto& s = r.solutions[static_cast<std::size_t>(i)];
+      for (int j = 0; j < 6; ++j) {
+        const auto& row = m.chain.joint(j);
+        // if some 2 pi equivalent fits the limits, the returned value does
+        bool fits = false;
+        for (int t = -2; t <= 2; ++t) {
+          const double v = s.q[j] + 2 * M_PI * t;
+          fits = fits || (v >= row.lower - 1e-12 && v <= row.upper + 1e-12);
+        }
+        if (fits) CHECK(s.q[j] >= row.lower - 1e-9 && s.q[j] <= row.upper + 1e-9);
+      }
+    }
+  }
+}
+
+TEST(IkSphericalWrist, ChooseNearestWithinLimitsAndKeepBranch) {
+  const kin::IkModel m = prepared("puma560");
+  std::mt19937_64 rng(9);
+  for (int k = 0; k < 500; ++k) {
+    const kin::JointVector q = random_q(m.chain, rng);
+    kin::JointVector q_near = q;
+    for (int j = 0; j < 6; ++j) q_near[j] += 0.01 * std::sin(j + k);
+    const kin::Pose T = fk(m.chain, q);
+    kin::IkResult r;
+    kin::ik_solve_all(m, T, &q_near, r);
+    const int i = kin::ik_choose(m, r, q_near);
+    CHECK(i >= 0);
+    // nearest: the original q (in limits) is at most 0.01*sqrt(6) away
+    // nearest: no solution within limits is closer to q_near than the chosen one,
+    // and the original q (within limits) is at least as far
+    auto dist = [&](const kin::JointVector& a) { return (a - q_near).squaredNorm(); };
+    const double dc = dist(r.solutions[static_cast<std::size_t>(i)].q);
+    CHECK(r.solutions[static_cast<std::size_t>(i)].within_limits);
+    for (int t = 0; t < r.count; ++t)
+      if (r.solutions[static_cast<std::size_t>(t)].within_limits) CHECK(dc <= dist(r.solutions[static_cast<std::size_t>(t)].q) + 1e-15);
+    CHECK(dc <= dist(q) + 1e-12);
+    kin::IkChoice keep;
+    keep.keep_branch = true;
+    const int kb = kin::ik_choose(m, r, q_near, keep);
+    if (kb >= 0) CHECK(r.solutions[static_cast<std::size_t>(kb)].branch == kin::ik_branch_of(m, q_near));
+    kin::JointVector out;
+    CHECK(kin::is_ok(kin::ik_solve_nearest(m, T, q_near, out)));
+  }
+}
+
+TEST(IkSphericalWrist, BadInputGivesAClearStatusAndNoNaN) {
+  const kin::IkModel m = prepared("puma560");
+  kin::IkResult r;
+  kin::Pose T = fk(m.chain, kin::JointVector::Zero(6));
+  kin::Pose bad = T;
+  bad.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  kin::ik_solve_all(m, bad, nullptr, r);
+  STRCMP_EQUAL("bad_input", kin::to_string(r.status));
+  LONGS_EQUAL(0, r.count);
+  bad = T;
+  bad.translation().y() = std::numeric_limits<double>::infinity();
+  kin::ik_solve_all(m, bad, nullptr, r);
+  STRCMP_EQUAL("bad_input", kin::to_string(r.status));
+  bad = T;
+  bad.linear()(0, 0) *= 1.1;  // not orthonormal
+  kin::ik_solve_all(m, bad, nullptr, r);
+  STRCMP_EQUAL("bad_input", kin::to_string(r.status));
+  bad = T;
+  bad.linear().col(2) *= -1;  // reflection
+  kin::ik_solve_all(m, bad, nullptr, r);
+  STRCMP_EQUAL("bad_input", kin::to_string(r.status));
+  kin::JointVector wrong(5);
+  wrong.setZero();
+  kin::ik_solve_all(m, T, &wrong, r);
+  STRCMP_EQUAL("wrong_size", kin::to_string(r.status));
+  Eigen::Matrix3d R;
+  CHECK(kin::rotation_from_quaternion(0, 0, 0, 0, R) == kin::Status::bad_input);
+}

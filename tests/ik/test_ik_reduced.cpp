@@ -1,0 +1,2 @@
+#include "kin_test_util.hpp"
+TEST_GROUP(Placeholder){};
