@@ -1,0 +1,96 @@
+#pragma once
+// The console command language: one line in, one Command out. Pure: no I/O, no
+// clock, no allocation; the only state is the G-code modal state passed in,
+// which changes only when the line parses.
+//
+// Units on the console (stated in `help`): joint values in degrees (revolute)
+// or millimetres (prismatic); positions in millimetres; orientations rx ry rz
+// in degrees as fixed-axis roll-pitch-yaw: R = Rz(rz) * Ry(ry) * Rx(rx).
+// G-code X Y Z follow G20/G21 (inches/mm), A B C are rx ry rz in degrees,
+// F is in length units per minute.
+#include <array>
+#include <cstdint>
+#include <string_view>
+
+#include "servoarm/kinematics/types.hpp"
+
+namespace servoarm::fw {
+
+/// Longest accepted line (characters, without the newline).
+inline constexpr std::size_t kMaxLine = 200;
+
+enum class CmdError : std::uint8_t {
+  ok,
+  overlong,          ///< line longer than kMaxLine
+  binary,            ///< control or non-ASCII bytes in the line
+  unknown_command,   ///< first word is no command / G-code
+  arg_count,         ///< wrong number of arguments
+  bad_number,        ///< an argument is not a decimal number
+  not_finite,        ///< NaN / Inf / overflow
+  bad_option,        ///< unknown key=value option or malformed option
+  out_of_range,      ///< a value outside its allowed range (e.g. speed <= 0)
+  unsupported,       ///< a G/M code or word this firmware does not implement
+  checksum,          ///< G-code line checksum (*nn) does not match
+  // Errors the console (not the parser) reports, listed here so every `error:` code has one home.
+  busy,              ///< motion queue full: the command was NOT queued
+  bad_state,         ///< not allowed in the current state
+  fault,             ///< arm in fault / e-stop: reset first
+  unreachable,       ///< target outside the workspace / no IK solution
+  limits,            ///< target or path outside the joint limits
+  singular,          ///< path too close to a singularity
+  branch,            ///< path changes IK branch
+  plan_failed,       ///< planner refused (message says why)
+  timeout,           ///< control thread did not answer in time
+  internal,          ///< should not happen (message says what)
+};
+const char* to_string(CmdError e);
+
+enum class Cmd : std::uint8_t {
+  none,      ///< empty line / comment / modal-only G-code: answer ok, do nothing
+  help, status, enable, disable, home, movej, movel, stop, estop, reset, fk, ik, limits, stats, config, wait,
+  hold,      ///< feed hold (also realtime '!')
+  resume,    ///< resume after feed hold (also realtime '~')
+  dwell,     ///< G4
+  position,  ///< M114
+  gmove,     ///< G0/G1 (axes in `axis_mask`, values in vals[0..5])
+  temperature,  ///< M105 (senders poll it): answers ok T:0 /0
+};
+const char* to_string(Cmd c);
+
+struct GcodeModal {
+  bool relative = false;   ///< G91
+  double unit_mm = 1.0;    ///< 1 (G21) or 25.4 (G20)
+  double feed_mm_s = 0.0;  ///< last F (0 = none given yet: use the default speed)
+};
+
+struct Command {
+  Cmd cmd = Cmd::none;
+  int count = 0;                        ///< numbers in vals
+  std::array<double, 8> vals{};         ///< as typed (deg / mm), G-code converted to mm / deg
+  bool has_speed = false;
+  double speed = 0;                     ///< movej: percent (0,100]; movel: mm/s; gmove: mm/s (from F)
+  std::uint8_t axis_mask = 0;           ///< gmove: bit 0..5 = X Y Z A B C given
+  bool relative = false;                ///< gmove: G91 in effect
+  bool rapid = false;                   ///< gmove: G0
+  bool gcode = false;                   ///< line was G-code
+  std::array<char, 16> topic{};         ///< `help <topic>`
+};
+
+struct ParseResult {
+  CmdError error = CmdError::ok;
+  std::array<char, 112> message{};
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// Parse one line (without the newline). `n_joints` sets how many values movej
+/// and fk take. `modal` is updated only on success.
+ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, Command& out);
+
+/// GRBL-style realtime characters, acted on as soon as they arrive (never part of a line).
+inline constexpr char kRtStatus = '?';
+inline constexpr char kRtHold = '!';
+inline constexpr char kRtResume = '~';
+inline constexpr char kRtReset = 0x18;  ///< Ctrl-X: e-stop / soft reset
+inline bool is_realtime(char c) { return c == kRtStatus || c == kRtHold || c == kRtResume || c == kRtReset; }
+
+}  // namespace servoarm::fw

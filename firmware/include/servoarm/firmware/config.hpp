@@ -1,0 +1,60 @@
+#pragma once
+// armfw configuration: defaults, TOML loading (toml11) and validation.
+// Set-up code only. Every key, its default and its range are listed in
+// kConfigKeys (and in the README); a bad file is refused naming the key.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace servoarm::fw {
+
+struct FwConfig {
+  std::string robot = "puma560";       ///< built-in model name or a description file path
+  // [loop]
+  double rate_hz = 1000.0;
+  int priority = 80;
+  int cpu = -1;
+  bool lock_memory = true;
+  // [bus]
+  std::string can = "sim";             ///< "sim" or a SocketCAN interface ("can0", "vcan0")
+  int first_node = 1;
+  double counts_per_rev = 131072.0;
+  double gear_ratio = 1.0;
+  double heartbeat_period_ms = 50.0;
+  double heartbeat_timeout_ms = 150.0;
+  double start_timeout_s = 5.0;
+  // [safety]
+  double following_error_deg = 5.0;
+  double enable_timeout_s = 2.0;
+  // [motion]
+  std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
+  double joint_speed_pct = 50.0;
+  double linear_speed_mm_s = 100.0;
+  double max_linear_speed_mm_s = 250.0;
+  // [console]
+  bool console_stdin = true;
+  bool console_pty = false;
+  std::string console_serial;          ///< "" = none
+  int console_baud = 115200;
+};
+
+struct ConfigKey {
+  const char* key;          ///< "section.name"
+  const char* default_text;
+  const char* doc;
+};
+/// Every key armfw reads, in file order.
+extern const ConfigKey kConfigKeys[];
+extern const int kConfigKeyCount;
+
+/// Load a TOML file over the defaults in `cfg`. Returns "" on success, else one
+/// line naming the file and the key (unknown key, wrong type, out of range, syntax).
+std::string load_config_file(const std::string& path, FwConfig& cfg);
+/// Same from text (tests).
+std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg);
+/// Range checks of every field. "" when valid, else "key: reason".
+std::string validate(const FwConfig& cfg);
+/// The effective configuration as TOML (what `config` prints).
+std::string to_toml(const FwConfig& cfg);
+
+}  // namespace servoarm::fw

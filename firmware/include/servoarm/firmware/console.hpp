@@ -1,0 +1,120 @@
+#pragma once
+// The console: turns text lines from any transport into actions and answers.
+// Runs on the console thread (non-real-time: may allocate and format text).
+// Talks to the control thread only through the Controller's SPSC queues and
+// telemetry seqlock.
+//
+// Protocol (every transport): one command per line; every line is answered by
+// exactly one final line, `ok [data]` or `error: <code> <message>` (multi-line
+// answers -- help, config, limits, M114 -- print their data lines first).
+// Asynchronous events print as `alarm: ...` lines. GRBL realtime characters
+// act at once and are never part of a line: '?' prints a status report,
+// '!' feed hold, '~' resume, Ctrl-X (0x18) e-stop and discards the partial line.
+//
+// Motion commands (movej, movel, home, G0/G1, G28, G4) answer `ok` when the
+// move is checked and queued (GRBL semantics); `wait` / M400 answer when the
+// queue has run empty. A full queue answers `error: busy` and queues nothing.
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <string>
+#include <string_view>
+
+#include "servoarm/firmware/commands.hpp"
+#include "servoarm/firmware/controller.hpp"
+#include "servoarm/kinematics/trajectory_cartesian.hpp"
+
+namespace servoarm::fw {
+
+struct ConsoleConfig {
+  double default_joint_speed_pct = 50.0;     ///< movej / home without speed=
+  double default_linear_speed = 0.1;         ///< m/s: movel / G1 without speed/F
+  double max_linear_speed = 0.25;            ///< m/s: upper bound of speed= / F, and G0
+  kin::JointVector home;                     ///< SI; empty = all zeros clamped into the limits
+  kin::CartesianLimits cartesian{};          ///< linear_velocity is replaced per move
+  double reply_timeout_s = 1.0;              ///< wait for the control thread to answer a request
+  std::string config_text;                   ///< what `config` prints (the effective configuration)
+};
+
+/// One connected client: its partial line, queued lines, G-code modal state.
+struct Session {
+  std::string name = "console";
+  std::string partial;                 ///< bytes of the line being received
+  bool discarding = false;
+  bool after_cr = false;               ///< last byte was CR (CR LF is one line end)             ///< current line overflowed: drop until newline
+  std::deque<std::string> lines;       ///< complete lines not executed yet (while waiting)
+  GcodeModal modal;
+  bool waiting = false;                ///< `wait` / M400 in progress
+  std::string out;                     ///< text to send to the client
+  std::uint64_t lines_done = 0;
+};
+
+class Console {
+ public:
+  Console(Controller& ctl, const ConsoleConfig& cfg);
+
+  /// Bytes from a transport: realtime characters act now, lines are executed
+  /// (or queued while the session waits). Answers go to session.out.
+  void feed(Session& s, std::string_view bytes);
+  /// Execute queued lines / finish a wait when the arm is idle. Call regularly.
+  void poll(Session& s);
+  /// Execute one complete line now (no realtime characters). Used by feed().
+  void execute(Session& s, std::string_view line);
+  /// Drain control-thread events into text lines ("alarm: ..."), for every session.
+  std::string drain_events();
+
+  /// True while the session has work pending (queued lines or a wait).
+  bool busy(const Session& s) const { return s.waiting || !s.lines.empty(); }
+
+  /// How to pass time while waiting for the control thread (default: sleep 200 us).
+  /// Single-threaded tests set it to run a control cycle.
+  void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
+
+  /// Status line as printed by `status` (without "ok ").
+  std::string status_text() const;
+  /// GRBL-style report for '?': <Idle|MPos:x,y,z|J:...|Q:n>
+  std::string grbl_report() const;
+  /// Human-readable statistics (the `stats` answer without "ok ").
+  std::string stats_text() const;
+
+  /// Joint values of the end of the motion queue (or the commanded position).
+  kin::JointVector tail() const;
+  const ConsoleConfig& config() const { return cfg_; }
+  /// Motions queued by this console so far (ids 1..n).
+  std::uint32_t last_motion_id() const { return next_id_ - 1; }
+
+ private:
+  bool request(RequestOp op, Reply& out);
+  void answer_error(Session& s, CmdError e, const std::string& msg);
+  void answer_ok(Session& s, const std::string& data = {});
+  bool motion_state_ok(Session& s);
+  void queue_joint(Session& s, const kin::JointVector& goal, double pct);
+  void queue_linear(Session& s, const kin::Pose& target, double speed_m_s);
+  void queue_dwell(Session& s, double secs);
+  void do_help(Session& s, std::string_view topic);
+  void do_fk(Session& s, const Command& c);
+  void do_ik(Session& s, const Command& c);
+  void do_limits(Session& s);
+  void do_gmove(Session& s, const Command& c);
+  kin::Pose pose_from_values(const Command& c, const kin::JointVector& q_ref) const;
+  std::string pose_text(const kin::JointVector& q) const;
+  std::string joints_text(const kin::JointVector& q) const;
+  double to_si(int j, double user) const;
+  double to_user(int j, double si) const;
+
+  Controller& ctl_;
+  ConsoleConfig cfg_;
+  const kin::Chain& chain_;
+  int n_;
+  std::uint32_t seq_ = 0;
+  std::uint32_t next_id_ = 1;
+  kin::JointVector tail_;
+  std::uint32_t tail_id_ = 0;  ///< id of the motion whose goal tail_ holds (0: none)
+  std::uint64_t tail_gen_ = 0; ///< controller generation when tail_ was set
+  std::function<void()> idle_;
+  struct Ik;
+  std::shared_ptr<Ik> ik_;
+};
+
+}  // namespace servoarm::fw

@@ -1,0 +1,198 @@
+#include "servoarm/firmware/config.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <toml.hpp>
+
+namespace servoarm::fw {
+
+const ConfigKey kConfigKeys[] = {
+    {"robot", "\"puma560\"", "built-in model name (armctl kin models) or path to a description .toml"},
+    {"loop.rate_hz", "1000", "control rate in Hz, 250..4000"},
+    {"loop.priority", "80", "SCHED_FIFO priority 1..99 for the control thread; 0 = normal scheduling"},
+    {"loop.cpu", "-1", "pin the control thread to this CPU; -1 = no affinity"},
+    {"loop.lock_memory", "true", "mlockall() all memory at start"},
+    {"bus.can", "\"sim\"", "\"sim\" = virtual drives on the in-process bus, or a SocketCAN interface (can0, vcan0)"},
+    {"bus.first_node", "1", "CANopen node id of joint 1; joint k is first_node + k - 1 (1..127)"},
+    {"bus.counts_per_rev", "131072", "encoder counts per motor revolution"},
+    {"bus.gear_ratio", "1.0", "motor revolutions per joint revolution"},
+    {"bus.heartbeat_period_ms", "50", "heartbeat period written to every drive"},
+    {"bus.heartbeat_timeout_ms", "150", "heartbeat consumer time: silence longer than this faults the arm"},
+    {"bus.start_timeout_s", "5", "time allowed for drive bring-up at start"},
+    {"safety.following_error_deg", "5", "largest |commanded - actual| per joint (deg, or mm for prismatic)"},
+    {"safety.enable_timeout_s", "2", "time for every drive to reach operation enabled"},
+    {"motion.home_deg", "[] (zeros, clamped into the limits)", "home pose for `home` / G28, one value per joint (deg / mm)"},
+    {"motion.joint_speed_pct", "50", "movej / home speed without speed=, percent of the joint limits (1..100)"},
+    {"motion.linear_speed_mm_s", "100", "movel / G1 speed without speed= / F"},
+    {"motion.max_linear_speed_mm_s", "250", "highest linear speed (speed=, F are clamped to it; G0 uses it)"},
+    {"console.stdin", "true", "console on stdin/stdout"},
+    {"console.pty", "false", "open a pseudo-terminal console and print its path"},
+    {"console.serial", "\"\"", "serial device for a console (e.g. /dev/ttyS0); \"\" = none"},
+    {"console.baud", "115200", "serial baud rate (9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)"},
+};
+const int kConfigKeyCount = static_cast<int>(sizeof kConfigKeys / sizeof kConfigKeys[0]);
+
+namespace {
+
+struct Reader {
+  std::string origin;
+  std::string err;
+  bool fail(const std::string& key, const std::string& why) {
+    if (err.empty()) err = origin + ": " + key + ": " + why;
+    return false;
+  }
+  bool num(const toml::value& v, const std::string& key, double& out) {
+    if (v.is_integer()) out = static_cast<double>(v.as_integer());
+    else if (v.is_floating()) out = v.as_floating();
+    else return fail(key, "expected a number");
+    if (!std::isfinite(out)) return fail(key, "not a finite number");
+    return true;
+  }
+  bool integer(const toml::value& v, const std::string& key, int& out) {
+    if (!v.is_integer()) return fail(key, "expected an integer");
+    const auto i = v.as_integer();
+    if (i < -1000000 || i > 1000000) return fail(key, "integer out of range");
+    out = static_cast<int>(i);
+    return true;
+  }
+  bool boolean(const toml::value& v, const std::string& key, bool& out) {
+    if (!v.is_boolean()) return fail(key, "expected true or false");
+    out = v.as_boolean();
+    return true;
+  }
+  bool str(const toml::value& v, const std::string& key, std::string& out) {
+    if (!v.is_string()) return fail(key, "expected a string");
+    out = v.as_string().str;
+    return true;
+  }
+};
+
+bool apply(Reader& r, const std::string& key, const toml::value& v, FwConfig& c) {
+  if (key == "robot") return r.str(v, key, c.robot);
+  if (key == "loop.rate_hz") return r.num(v, key, c.rate_hz);
+  if (key == "loop.priority") return r.integer(v, key, c.priority);
+  if (key == "loop.cpu") return r.integer(v, key, c.cpu);
+  if (key == "loop.lock_memory") return r.boolean(v, key, c.lock_memory);
+  if (key == "bus.can") return r.str(v, key, c.can);
+  if (key == "bus.first_node") return r.integer(v, key, c.first_node);
+  if (key == "bus.counts_per_rev") return r.num(v, key, c.counts_per_rev);
+  if (key == "bus.gear_ratio") return r.num(v, key, c.gear_ratio);
+  if (key == "bus.heartbeat_period_ms") return r.num(v, key, c.heartbeat_period_ms);
+  if (key == "bus.heartbeat_timeout_ms") return r.num(v, key, c.heartbeat_timeout_ms);
+  if (key == "bus.start_timeout_s") return r.num(v, key, c.start_timeout_s);
+  if (key == "safety.following_error_deg") return r.num(v, key, c.following_error_deg);
+  if (key == "safety.enable_timeout_s") return r.num(v, key, c.enable_timeout_s);
+  if (key == "motion.home_deg") {
+    if (!v.is_array()) return r.fail(key, "expected an array of numbers");
+    c.home_deg.clear();
+    int k = 0;
+    for (const auto& e : v.as_array()) {
+      double d = 0;
+      if (!r.num(e, key + "[" + std::to_string(k++) + "]", d)) return false;
+      c.home_deg.push_back(d);
+    }
+    return true;
+  }
+  if (key == "motion.joint_speed_pct") return r.num(v, key, c.joint_speed_pct);
+  if (key == "motion.linear_speed_mm_s") return r.num(v, key, c.linear_speed_mm_s);
+  if (key == "motion.max_linear_speed_mm_s") return r.num(v, key, c.max_linear_speed_mm_s);
+  if (key == "console.stdin") return r.boolean(v, key, c.console_stdin);
+  if (key == "console.pty") return r.boolean(v, key, c.console_pty);
+  if (key == "console.serial") return r.str(v, key, c.console_serial);
+  if (key == "console.baud") return r.integer(v, key, c.console_baud);
+  return r.fail(key, "unknown key (see armfw --config-keys)");
+}
+
+}  // namespace
+
+std::string validate(const FwConfig& c) {
+  auto bad = [](const char* k, const char* why) { return std::string(k) + ": " + why; };
+  if (c.robot.empty()) return bad("robot", "must not be empty");
+  if (!(c.rate_hz >= 250 && c.rate_hz <= 4000)) return bad("loop.rate_hz", "must be within 250..4000");
+  if (c.priority < 0 || c.priority > 99) return bad("loop.priority", "must be within 0..99");
+  if (c.cpu < -1 || c.cpu > 1023) return bad("loop.cpu", "must be -1 or a CPU index");
+  if (c.can.empty() || c.can.size() > 15) return bad("bus.can", "must be \"sim\" or an interface name (1..15 chars)");
+  if (c.first_node < 1 || c.first_node > 127) return bad("bus.first_node", "must be within 1..127");
+  if (!(c.counts_per_rev > 0)) return bad("bus.counts_per_rev", "must be > 0");
+  if (!(c.gear_ratio != 0)) return bad("bus.gear_ratio", "must not be 0");
+  if (!(c.heartbeat_period_ms >= 1 && c.heartbeat_period_ms <= 10000)) return bad("bus.heartbeat_period_ms", "must be within 1..10000");
+  if (!(c.heartbeat_timeout_ms > c.heartbeat_period_ms && c.heartbeat_timeout_ms <= 60000))
+    return bad("bus.heartbeat_timeout_ms", "must be above heartbeat_period_ms and <= 60000");
+  if (!(c.start_timeout_s > 0 && c.start_timeout_s <= 120)) return bad("bus.start_timeout_s", "must be within (0, 120]");
+  if (!(c.following_error_deg > 0 && c.following_error_deg <= 180)) return bad("safety.following_error_deg", "must be within (0, 180]");
+  if (!(c.enable_timeout_s > 0 && c.enable_timeout_s <= 60)) return bad("safety.enable_timeout_s", "must be within (0, 60]");
+  if (!(c.joint_speed_pct >= 1 && c.joint_speed_pct <= 100)) return bad("motion.joint_speed_pct", "must be within 1..100");
+  if (!(c.max_linear_speed_mm_s > 0 && c.max_linear_speed_mm_s <= 5000)) return bad("motion.max_linear_speed_mm_s", "must be within (0, 5000]");
+  if (!(c.linear_speed_mm_s > 0 && c.linear_speed_mm_s <= c.max_linear_speed_mm_s))
+    return bad("motion.linear_speed_mm_s", "must be within (0, max_linear_speed_mm_s]");
+  switch (c.console_baud) {
+    case 9600: case 19200: case 38400: case 57600: case 115200: case 230400: case 460800: case 921600: break;
+    default: return bad("console.baud", "unsupported baud rate");
+  }
+  return "";
+}
+
+std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
+  Reader r{origin, {}};
+  toml::value root;
+  try {
+    std::istringstream is(text);
+    root = toml::parse(is, origin);
+  } catch (const std::exception& e) {
+    std::string m = e.what();
+    const auto nl = m.find('\n');
+    if (nl != std::string::npos) m = m.substr(0, nl);
+    return origin + ": syntax: " + m;
+  }
+  if (!root.is_table()) return origin + ": not a TOML table";
+  FwConfig c = cfg;
+  for (const auto& [k, v] : root.as_table()) {
+    if (v.is_table()) {
+      if (k != "loop" && k != "bus" && k != "safety" && k != "motion" && k != "console") {
+        r.fail(k, "unknown section (loop, bus, safety, motion, console)");
+        break;
+      }
+      for (const auto& [k2, v2] : v.as_table())
+        if (!apply(r, k + "." + k2, v2, c)) break;
+      if (!r.err.empty()) break;
+    } else if (!apply(r, k, v, c)) {
+      break;
+    }
+  }
+  if (!r.err.empty()) return r.err;
+  const std::string bad = validate(c);
+  if (!bad.empty()) return origin + ": " + bad;
+  cfg = c;
+  return "";
+}
+
+std::string load_config_file(const std::string& path, FwConfig& cfg) {
+  std::ifstream f(path);
+  if (!f) return path + ": cannot open";
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return load_config_text(ss.str(), path, cfg);
+}
+
+std::string to_toml(const FwConfig& c) {
+  char b[2048];
+  std::string home = "[";
+  for (std::size_t i = 0; i < c.home_deg.size(); ++i) home += (i ? ", " : "") + std::to_string(c.home_deg[i]);
+  home += "]";
+  std::snprintf(b, sizeof b,
+                "robot = \"%s\"\n[loop]\nrate_hz = %g\npriority = %d\ncpu = %d\nlock_memory = %s\n"
+                "[bus]\ncan = \"%s\"\nfirst_node = %d\ncounts_per_rev = %g\ngear_ratio = %g\nheartbeat_period_ms = %g\n"
+                "heartbeat_timeout_ms = %g\nstart_timeout_s = %g\n[safety]\nfollowing_error_deg = %g\nenable_timeout_s = %g\n"
+                "[motion]\nhome_deg = %s\njoint_speed_pct = %g\nlinear_speed_mm_s = %g\nmax_linear_speed_mm_s = %g\n"
+                "[console]\nstdin = %s\npty = %s\nserial = \"%s\"\nbaud = %d\n",
+                c.robot.c_str(), c.rate_hz, c.priority, c.cpu, c.lock_memory ? "true" : "false", c.can.c_str(), c.first_node,
+                c.counts_per_rev, c.gear_ratio, c.heartbeat_period_ms, c.heartbeat_timeout_ms, c.start_timeout_s,
+                c.following_error_deg, c.enable_timeout_s, home.c_str(), c.joint_speed_pct, c.linear_speed_mm_s,
+                c.max_linear_speed_mm_s, c.console_stdin ? "true" : "false", c.console_pty ? "true" : "false",
+                c.console_serial.c_str(), c.console_baud);
+  return b;
+}
+
+}  // namespace servoarm::fw
