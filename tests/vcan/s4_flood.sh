@@ -14,7 +14,12 @@
 # commands (id 0) and setpoints that a correct stack must obey.
 . "$SCENARIO_DIR/lib.sh"
 need candump cangen cansend armsim canmaster
-period_ms=10
+# Time constants: 10 ms cycle, 50 ms heartbeat, 150 ms consumer timeout on a
+# real kernel; twice as long in the TCG-emulated VM, whose vCPUs a busy host
+# starves for tens of ms (a false fault from that would be the host's load,
+# not the flood's frames).
+if [ "${SERVOARM_VM:-0}" = 1 ]; then period_ms=20 hb_ms=100 hb_timeout_ms=300
+else period_ms=10 hb_ms=50 hb_timeout_ms=150; fi
 # Tracking accuracy is scenario 2's business. Here the flood loads an emulated
 # CPU: armsim is sometimes starved for a few hundred ms, then its positions lag
 # and, after the large step that follows, overshoot a little. So canmaster's
@@ -41,13 +46,17 @@ for g in "-e -I r -L r -D r" "-e -I 00000201 -L 6 -D r" "-e -I 00000183 -L 6 -D 
   # shellcheck disable=SC2086
   cangen "$CAN_IF" $g -g 10 -c 5 -p 10 >>"$OUT_DIR/cangen.log" 2>&1 &
   flood="$flood $!"
+  # The flood stands for other nodes on the bus, not for load on the master's
+  # CPU: in the VM the generators share the emulated CPUs, so they run niced.
+  renice -n 19 -p $! >/dev/null 2>&1 || true
 done
 (sleep 0.3; cangen "$CAN_IF" -g 50 -I 77F -L 1 -D 05 >>"$OUT_DIR/cangen.log" 2>&1) &
 flood="$flood $!"
-log "canmaster: 6 nodes, ${period_ms} ms cycle, sine for 9 s, hold 0.5 s"
+log "canmaster: 6 nodes, ${period_ms} ms cycle, heartbeat ${hb_ms} ms / timeout ${hb_timeout_ms} ms, sine for 9 s, hold 0.5 s"
 mrc=0
 canmaster --iface "$CAN_IF" --nodes 1-6 --bringup --stream-sine 9 --hold 0.5 --amplitude 0.3 --freq 0.5 \
-  --tolerance "$tol_rad" --period-ms "$period_ms" --counts-per-rev 131072 >"$OUT_DIR/canmaster.log" 2>&1 || mrc=$?
+  --tolerance "$tol_rad" --period-ms "$period_ms" --hb-ms "$hb_ms" --hb-timeout-ms "$hb_timeout_ms" \
+  --counts-per-rev 131072 >"$OUT_DIR/canmaster.log" 2>&1 || mrc=$?
 log "canmaster exited with status $mrc"
 dead=""
 for p in $flood; do kill -0 "$p" 2>/dev/null || dead="$dead $p"; done
@@ -79,7 +88,7 @@ for n in 1 2 3 4 5 6; do
   bad=$(grep "^20$n#" "$OUT_DIR/all.frames" | awk -F'#' 'length($2) != 12' | head -n 1)
   [ -z "$bad" ] || check_fail "node $n: RPDO1 of the wrong length on the bus: $bad"
   check_controlwords "no false fault" "$OUT_DIR/all.frames" "$n"
-  check_sine_targets "node $n setpoints intact" "$OUT_DIR/all.tframes" "20$n" 6258 0.5 0.010
+  check_sine_targets "node $n setpoints intact" "$OUT_DIR/all.tframes" "20$n" 6258 0.5 "0.0$period_ms"
   check_tracking "node $n followed its setpoints" "$OUT_DIR/all.tframes" "$n" "$tol_counts" 64
 done
 finish
