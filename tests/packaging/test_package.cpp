@@ -311,7 +311,7 @@ TEST_GROUP(CanUp) {
     ::chmod((tmp + "/ip").c_str(), 0755);
   }
   void teardown() override { sh("rm -rf '" + tmp + "'"); }
-  Cmd run(const std::string& conf_text, const std::string& env) {
+  Cmd can_up(const std::string& conf_text, const std::string& env) {
     std::ofstream(tmp + "/armfw.toml") << conf_text;
     return sh("env -i PATH=/usr/bin:/bin SERVOARM_IP='" + tmp + "/ip' SERVOARM_CAN_WAIT_S=0 " + env + " sh '" + script +
               "' '" + tmp + "/armfw.toml'");
@@ -320,21 +320,21 @@ TEST_GROUP(CanUp) {
 };
 
 TEST(CanUp, SimNeedsNoInterface) {
-  const Cmd c = run("robot = \"puma560\"\n[bus]\ncan = \"sim\"\n", "");
+  const Cmd c = can_up("robot = \"puma560\"\n[bus]\ncan = \"sim\"\n", "");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
   STRCMP_CONTAINS("no CAN interface to bring up", c.out.c_str());
   STRCMP_EQUAL("", log().c_str());
 }
 
 TEST(CanUp, MissingKeyMeansSim) {
-  const Cmd c = run("robot = \"puma560\"\n", "");
+  const Cmd c = can_up("robot = \"puma560\"\n", "");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
   STRCMP_EQUAL("", log().c_str());
 }
 
 // "lo" stands in for can0: an interface that exists on every machine.
 TEST(CanUp, BitrateAndRestartFromEnvironment) {
-  const Cmd c = run("[loop]\ncan = \"wrong-section\"\n[bus]\nfirst_node = 1\ncan = \"lo\"   # the drives\n",
+  const Cmd c = can_up("[loop]\ncan = \"wrong-section\"\n[bus]\nfirst_node = 1\ncan = \"lo\"   # the drives\n",
                     "SERVOARM_CAN_BITRATE=500000 SERVOARM_CAN_RESTART_MS=200");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
   STRCMP_EQUAL("ip link set dev lo down\n"
@@ -345,39 +345,39 @@ TEST(CanUp, BitrateAndRestartFromEnvironment) {
 }
 
 TEST(CanUp, DefaultsAndDottedKey) {
-  const Cmd c = run("bus.can = 'lo'\n", "");
+  const Cmd c = can_up("bus.can = 'lo'\n", "");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
   STRCMP_CONTAINS("type can bitrate 1000000 restart-ms 100\n", log().c_str());
 }
 
 TEST(CanUp, CanFd) {
-  const Cmd c = run("[bus]\ncan = \"lo\"\n", "SERVOARM_CAN_DBITRATE=5000000");
+  const Cmd c = can_up("[bus]\ncan = \"lo\"\n", "SERVOARM_CAN_DBITRATE=5000000");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
   STRCMP_CONTAINS("type can bitrate 1000000 dbitrate 5000000 fd on restart-ms 100\n", log().c_str());
 }
 
 TEST(CanUp, InterfaceOverride) {
-  const Cmd c = run("[bus]\ncan = \"sim\"\n", "SERVOARM_CAN_INTERFACE=lo");
+  const Cmd c = can_up("[bus]\ncan = \"sim\"\n", "SERVOARM_CAN_INTERFACE=lo");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
   STRCMP_CONTAINS("ip link set dev lo up\n", log().c_str());
 }
 
 TEST(CanUp, MissingInterfaceFailsClearly) {
-  const Cmd c = run("[bus]\ncan = \"can7\"\n", "");
+  const Cmd c = can_up("[bus]\ncan = \"can7\"\n", "");
   CHECK_EQUAL_TEXT(1, c.status, c.out.c_str());
   STRCMP_CONTAINS("no interface can7", c.out.c_str());
   STRCMP_EQUAL("", log().c_str());
 }
 
 TEST(CanUp, BadInterfaceNameRefused) {
-  const Cmd c = run("[bus]\ncan = \"can0;reboot\"\n", "");
+  const Cmd c = can_up("[bus]\ncan = \"can0;reboot\"\n", "");
   CHECK_EQUAL_TEXT(2, c.status, c.out.c_str());
   STRCMP_CONTAINS("bad interface name", c.out.c_str());
   STRCMP_EQUAL("", log().c_str());
 }
 
 TEST(CanUp, SetupNoLeavesInterfaceAlone) {
-  const Cmd c = run("[bus]\ncan = \"lo\"\n", "SERVOARM_CAN_SETUP=no");
+  const Cmd c = can_up("[bus]\ncan = \"lo\"\n", "SERVOARM_CAN_SETUP=no");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
   STRCMP_CONTAINS("configured elsewhere", c.out.c_str());
   STRCMP_EQUAL("", log().c_str());
