@@ -36,6 +36,7 @@ const char* kUsage =
     "  --duration SEC          exit after SEC seconds (default: until SIGINT/SIGTERM)\n"
     "  --heartbeat-ms N        heartbeat producer time before the master sets 0x1017 (default 0 = off)\n"
     "  --lag-ms X              position-loop time constant (default 2)\n"
+    "  --counts-per-rev N      encoder counts per motor revolution, for --vmax/--amax (default 131072)\n"
     "  --vmax REV_PER_S        velocity limit in motor revolutions/s (default 10)\n"
     "  --amax REV_PER_S2       acceleration limit (default 400)\n"
     "  --window COUNTS         following error window 0x6065 (default 13107)\n"
@@ -75,7 +76,7 @@ int main(int argc, char** argv) {
   bool have_fd = false;
   std::vector<std::uint8_t> nodes = {1, 2, 3, 4, 5, 6};
   double duration = 0, status_every = 0, lag_ms = 2, vmax = 10, amax = 400;
-  std::uint32_t hb_ms = 0, window = 13107, seed = 1;
+  std::uint32_t hb_ms = 0, window = 13107, seed = 1, cpr = 131072;
   bool verbose = false;
   std::vector<Scheduled> schedule;
   std::vector<cli::FaultArg> refuse, noise, drops;
@@ -110,6 +111,8 @@ int main(int argc, char** argv) {
       if (!cli::parse_uint(v, 65535, hb_ms)) return usage_error("bad --heartbeat-ms (0..65535)");
     } else if (a == "--lag-ms") {
       if (!cli::parse_double(v, lag_ms) || lag_ms <= 0) return usage_error("bad --lag-ms");
+    } else if (a == "--counts-per-rev") {
+      if (!cli::parse_uint(v, 0x7FFFFFFF, cpr) || cpr == 0) return usage_error("bad --counts-per-rev");
     } else if (a == "--vmax") {
       if (!cli::parse_double(v, vmax) || vmax <= 0) return usage_error("bad --vmax");
     } else if (a == "--amax") {
@@ -168,8 +171,8 @@ int main(int argc, char** argv) {
 
   sim::MotorParams motor;
   motor.lag = lag_ms * 1e-3;
-  motor.max_velocity = vmax * 131072;
-  motor.max_accel = amax * 131072;
+  motor.max_velocity = vmax * cpr;
+  motor.max_accel = amax * cpr;
   motor.following_window = window;
   sim::ArmSim arm(bus, nodes, motor, seed);
   auto each = [&](std::uint8_t node, auto fn) {

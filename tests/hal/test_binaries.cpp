@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdio>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -114,6 +115,37 @@ TEST(Binaries, RefusingDriveFailsBringUpWithExitCode4) {
   STRCMP_CONTAINS("bringup status=drive_refused", r.master_out.c_str());
   STRCMP_CONTAINS("node 2: drive_refused (stayed in switched_on", r.master_out.c_str());
   LONGS_EQUAL(4, r.master_rc);
+}
+
+TEST(Binaries, EmcyFromArmsimIsAFaultWithItsCode) {
+  Run r = run_pair({"--nodes", "1-3", "--bringup", "--hold", "1.5"},
+                   {"--nodes", "1-3", "--emcy", "2:0x2310@1.0", "--duration", "5"});
+  STRCMP_CONTAINS("node=2 reason=drive_fault", r.master_out.c_str());
+  STRCMP_CONTAINS("error_code=0x2310", r.master_out.c_str());
+  STRCMP_CONTAINS("continuous over-current", r.master_out.c_str());
+  STRCMP_CONTAINS("result status=fail", r.master_out.c_str());
+  LONGS_EQUAL(1, r.master_rc);
+  STRCMP_CONTAINS("node=2 kind=emcy code=0x2310", r.sim_out.c_str());
+}
+
+TEST(Binaries, StoppedHeartbeatAndNoisyEncoders) {
+  // Heartbeat producer of node 1 stops while its PDOs keep flowing: still a heartbeat loss.
+  Run r = run_pair({"--nodes", "1-2", "--bringup", "--hold", "1.5", "--expect-hb-loss", "1"},
+                   {"--nodes", "1-2", "--stop-heartbeat", "1@0.8", "--duration", "5"});
+  STRCMP_CONTAINS("node=1 reason=heartbeat_lost", r.master_out.c_str());
+  LONGS_EQUAL(0, r.master_rc);
+  // +-1000 counts of position noise (48 mrad) on the reported position.
+  Run n = run_pair({"--nodes", "1-2", "--bringup", "--stream-sine", "1", "--tolerance", "0.1"},
+                   {"--nodes", "1-2", "--noise", "all:1000", "--duration", "5"});
+  STRCMP_CONTAINS("result status=ok", n.master_out.c_str());
+  LONGS_EQUAL(0, n.master_rc);
+  // The noise shows in the tracking error (noise-free runs: a few mrad).
+  const std::size_t at = n.master_out.find("result status=ok");
+  double err = 0;
+  CHECK(at != std::string::npos &&
+        std::sscanf(n.master_out.c_str() + n.master_out.find("max_err_rad=", at), "max_err_rad=%lf", &err) == 1);
+  CHECK(err > 0.02);
+  CHECK(err < 0.1);
 }
 
 TEST(Binaries, UsageErrorsExit2) {
