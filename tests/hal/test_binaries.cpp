@@ -15,6 +15,10 @@
 
 namespace {
 
+// Heartbeat consumer time for runs that are not about heartbeats: a shared CI machine can
+// stall both processes for a few hundred ms, which would (correctly) be a heartbeat loss.
+const char* const kSlowHb = "1500";
+
 struct Proc {
   pid_t pid = -1;
   int out = -1;  // read end of stdout
@@ -88,7 +92,7 @@ int run_alone(const std::vector<std::string>& args) {
 TEST_GROUP(Binaries){};
 
 TEST(Binaries, BringUpAndStreamAcrossProcesses) {
-  Run r = run_pair({"--nodes", "1-6", "--bringup", "--stream-sine", "1.5", "--period-ms", "2"},
+  Run r = run_pair({"--nodes", "1-6", "--bringup", "--stream-sine", "1.5", "--period-ms", "2", "--hb-timeout-ms", kSlowHb},
                    {"--nodes", "1-6", "--duration", "6"});
   STRCMP_CONTAINS("bringup status=ok", r.master_out.c_str());
   STRCMP_CONTAINS("node id=6 name=\"servoarm virtual drive 6\" state=enabled", r.master_out.c_str());
@@ -110,7 +114,7 @@ TEST(Binaries, SilentNodeHeartbeatLossReportedInTime) {
 }
 
 TEST(Binaries, RefusingDriveFailsBringUpWithExitCode4) {
-  Run r = run_pair({"--nodes", "1-2", "--bringup", "--hold", "0.2", "--enable-timeout-ms", "300"},
+  Run r = run_pair({"--nodes", "1-2", "--bringup", "--hold", "0.2", "--enable-timeout-ms", "300", "--hb-timeout-ms", kSlowHb},
                    {"--nodes", "1-2", "--refuse-enable", "2", "--duration", "4"});
   STRCMP_CONTAINS("bringup status=drive_refused", r.master_out.c_str());
   STRCMP_CONTAINS("node 2: drive_refused (stayed in switched_on", r.master_out.c_str());
@@ -118,7 +122,7 @@ TEST(Binaries, RefusingDriveFailsBringUpWithExitCode4) {
 }
 
 TEST(Binaries, EmcyFromArmsimIsAFaultWithItsCode) {
-  Run r = run_pair({"--nodes", "1-3", "--bringup", "--hold", "1.5"},
+  Run r = run_pair({"--nodes", "1-3", "--bringup", "--hold", "1.5", "--hb-timeout-ms", kSlowHb},
                    {"--nodes", "1-3", "--emcy", "2:0x2310@1.0", "--duration", "5"});
   STRCMP_CONTAINS("node=2 reason=drive_fault", r.master_out.c_str());
   STRCMP_CONTAINS("error_code=0x2310", r.master_out.c_str());
@@ -135,7 +139,7 @@ TEST(Binaries, StoppedHeartbeatAndNoisyEncoders) {
   STRCMP_CONTAINS("node=1 reason=heartbeat_lost", r.master_out.c_str());
   LONGS_EQUAL(0, r.master_rc);
   // +-1000 counts of position noise (48 mrad) on the reported position.
-  Run n = run_pair({"--nodes", "1-2", "--bringup", "--stream-sine", "1", "--tolerance", "0.1"},
+  Run n = run_pair({"--nodes", "1-2", "--bringup", "--stream-sine", "1", "--tolerance", "0.1", "--hb-timeout-ms", kSlowHb},
                    {"--nodes", "1-2", "--noise", "all:1000", "--duration", "5"});
   STRCMP_CONTAINS("result status=ok", n.master_out.c_str());
   LONGS_EQUAL(0, n.master_rc);
