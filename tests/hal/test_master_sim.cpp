@@ -474,13 +474,16 @@ TEST(MasterRealTime, DrivesOnTheirOwnThreadWithTheRealClock) {
   if (s2 == Status::ok) {
     double sp[6], hist[6][8] = {};
     TimePoint next = clock.now();
+    int settle = 20;  // cycles to skip: start-up, and after any cycle the OS started late
     for (int k = 0; k < 250; ++k) {
       const TimePoint now = clock.now();
+      if (now - next > 5 * kMillisecond) settle = 10;  // a stalled machine is not a master fault
       const Status r = m.read(now);
       if (r != Status::ok && worst == Status::ok) worst = r;
+      if (settle > 0) --settle;
       for (std::size_t j = 0; j < 6; ++j) {
-        sp[j] = 0.05 * std::sin(2 * 3.141592653589793 * k * 2e-3);
-        if (k > 20) {
+        sp[j] = 0.2 * std::sin(2 * 3.141592653589793 * k * 2e-3);
+        if (settle == 0) {
           double best = 1e9;  // best-matching recent setpoint: thread wake-ups vary
           for (int l = 1; l < 8; ++l) best = std::min(best, std::fabs(m.feedback(j).position - hist[j][(k - l) % 8]));
           max_err = std::max(max_err, best);
@@ -497,5 +500,5 @@ TEST(MasterRealTime, DrivesOnTheirOwnThreadWithTheRealClock) {
   STRCMP_EQUAL("", m.last_error());
   LONGS_EQUAL(int(Status::ok), int(s2));
   LONGS_EQUAL(int(Status::ok), int(worst));
-  CHECK(max_err < 0.01);
+  CHECK(max_err < 0.02);  // followed (not following at all would be up to 0.2)
 }
