@@ -27,6 +27,8 @@ SimPlant::~SimPlant() {
 void SimPlant::apply_injections(hal::TimePoint now) {
   const int s = silent_.exchange(-1);
   if (s >= 0 && static_cast<std::size_t>(s) < arm_->size()) arm_->at(static_cast<std::size_t>(s)).faults().silent = true;
+  const int h = hb_stop_.exchange(-1);
+  if (h >= 0 && static_cast<std::size_t>(h) < arm_->size()) arm_->at(static_cast<std::size_t>(h)).faults().heartbeat_stopped = true;
   const int e = emcy_joint_.exchange(-1);
   if (e >= 0 && static_cast<std::size_t>(e) < arm_->size())
     arm_->at(static_cast<std::size_t>(e)).inject_emcy(emcy_code_.load(), now, *sim_ep_);
@@ -38,6 +40,7 @@ void SimPlant::step(hal::TimePoint now) {
 }
 
 void SimPlant::inject_silent(int joint) { silent_ = joint; }
+void SimPlant::inject_heartbeat_stop(int joint) { hb_stop_ = joint; }
 void SimPlant::inject_emcy(int joint, std::uint16_t code) {
   emcy_code_ = code;
   emcy_joint_ = joint;

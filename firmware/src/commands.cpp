@@ -1,5 +1,6 @@
 #include "servoarm/firmware/commands.hpp"
 
+#include <cfenv>
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
@@ -117,7 +118,10 @@ Num parse_number(std::string_view s, double& out) {
   char buf[48];
   std::memcpy(buf, s.data(), s.size());
   buf[s.size()] = '\0';
+  // strtod raises FE_OVERFLOW/FE_UNDERFLOW for 1e400 / 1e-400; the result is
+  // checked here, so the flags are cleared (the tests' IEEE754 plugin watches them).
   const double v = std::strtod(buf, nullptr);
+  std::feclearexcept(FE_OVERFLOW | FE_UNDERFLOW);
   if (!std::isfinite(v)) return Num::not_finite;
   out = v;
   return Num::ok;
@@ -309,7 +313,7 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
       c.axis_mask = static_cast<std::uint8_t>(c.axis_mask | (1u << k));
       c.vals[static_cast<std::size_t>(k)] = k < 3 ? axis[static_cast<std::size_t>(k)] * m.unit_mm : axis[static_cast<std::size_t>(k)];
     }
-    c.count = 6;
+    c.count = any_axis ? 6 : 0;
     if (m.feed_mm_s > 0 && motion == 1) {
       c.has_speed = true;
       c.speed = m.feed_mm_s;

@@ -204,13 +204,19 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
 void Controller::supervise(TimePoint now) {
   (void)now;
   const bool powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping;
-  const bool latched = state_ == ArmState::fault || state_ == ArmState::estop;
+  // Disabled / boot: a drive fault or lost heartbeat is shown in `status` and
+  // cleared by the next enable (which faults again if the cause persists); the
+  // arm state only latches faults while the drives are (being) powered.
+  const bool latched = state_ == ArmState::fault || state_ == ArmState::estop || state_ == ArmState::disabled ||
+                       state_ == ArmState::boot;
   for (int j = 0; j < n_; ++j) {
     const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
     char d[64];
     if (fb.emcy_count != emcy_seen_[static_cast<std::size_t>(j)]) {
       emcy_seen_[static_cast<std::size_t>(j)] = fb.emcy_count;
-      if (!latched) {
+      // While enabling, the fault reset itself produces EMCY "error reset" frames;
+      // a real error there also puts the drive in fault, which is caught below.
+      if (!latched && state_ != ArmState::enabling && fb.error_code != 0) {
         std::snprintf(d, sizeof d, "EMCY 0x%04X", unsigned(fb.error_code));
         raise_fault(FaultCause::emcy, j, d);
         return;
@@ -248,6 +254,11 @@ void Controller::supervise(TimePoint now) {
     }
     if (powered && !fb.valid) {
       raise_fault(FaultCause::feedback_invalid, j, "no position feedback");
+      return;
+    }
+    if (powered && static_cast<double>(fb.age) * 1e-9 > cfg_.feedback_timeout) {
+      std::snprintf(d, sizeof d, "no position feedback for %.1f ms", static_cast<double>(fb.age) * 1e-6);
+      raise_fault(FaultCause::feedback_invalid, j, d);
       return;
     }
     if (powered && cfg_.check_following_error && have_prev_) {

@@ -36,6 +36,7 @@ class SimPlant {
   hal::SimBus& bus() { return *bus_; }
   /// Fault injection from another thread: applied by the drive thread at its next step.
   void inject_silent(int joint);
+  void inject_heartbeat_stop(int joint);
   void inject_emcy(int joint, std::uint16_t code);
 
  private:
@@ -47,6 +48,7 @@ class SimPlant {
   std::thread th_;
   std::atomic<bool> stop_{false};
   std::atomic<int> silent_{-1};
+  std::atomic<int> hb_stop_{-1};
   std::atomic<int> emcy_joint_{-1};
   std::atomic<std::uint16_t> emcy_code_{0};
 };

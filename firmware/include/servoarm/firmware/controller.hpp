@@ -60,7 +60,7 @@ enum class FaultCause : std::uint8_t {
   setpoint_nan,       ///< motion produced a non-finite setpoint
   setpoint_position,  ///< setpoint outside the joint position limits
   setpoint_velocity,  ///< setpoint step faster than the joint velocity limit
-  feedback_invalid,   ///< no feedback from an enabled joint
+  feedback_invalid,   ///< no (or stale) position feedback from an enabled joint
 };
 const char* to_string(FaultCause c);
 
@@ -170,6 +170,7 @@ struct ControllerConfig {
   double rate_hz = 1000.0;
   double following_error = 0.1;        ///< rad (or m): supervisor limit per joint
   double enable_timeout = 2.0;         ///< s to reach operation enabled
+  double feedback_timeout = 0.02;      ///< s without position feedback from an enabled drive -> fault
   double position_tolerance = 1e-6;    ///< rad: setpoint check slack on the position limits
   double velocity_margin = 1.10;       ///< setpoint step may reach this x max_velocity
   bool check_following_error = true;

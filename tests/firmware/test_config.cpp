@@ -1,0 +1,80 @@
+// armfw configuration: defaults valid, every key accepted, bad files refused naming the key.
+#include <string>
+
+#include "servoarm/firmware/config.hpp"
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm::fw;
+
+TEST_GROUP(Config){};
+
+TEST(Config, DefaultsAreValidAndRoundTrip) {
+  FwConfig c;
+  STRCMP_EQUAL("", validate(c).c_str());
+  FwConfig d;
+  d.rate_hz = 500;
+  STRCMP_EQUAL("", load_config_text(to_toml(c), "rt", d).c_str());
+  DOUBLES_EQUAL(1000.0, d.rate_hz, 0);
+}
+
+TEST(Config, FullFileAccepted) {
+  FwConfig c;
+  const std::string text =
+      "robot = \"stanford\"\n[loop]\nrate_hz = 2000\npriority = 0\ncpu = 1\nlock_memory = false\n"
+      "[bus]\ncan = \"vcan0\"\nfirst_node = 10\ncounts_per_rev = 4096\ngear_ratio = 50\nheartbeat_period_ms = 20\n"
+      "heartbeat_timeout_ms = 60\nstart_timeout_s = 3\n[safety]\nfollowing_error_deg = 2.5\nenable_timeout_s = 1\n"
+      "[motion]\nhome_deg = [0, 10, 0, 0, 0, 0]\njoint_speed_pct = 30\nlinear_speed_mm_s = 50\nmax_linear_speed_mm_s = 200\n"
+      "[console]\nstdin = false\npty = true\nserial = \"/dev/ttyS0\"\nbaud = 57600\n";
+  STRCMP_EQUAL("", load_config_text(text, "f.toml", c).c_str());
+  STRCMP_EQUAL("stanford", c.robot.c_str());
+  DOUBLES_EQUAL(2000, c.rate_hz, 0);
+  LONGS_EQUAL(10, c.first_node);
+  LONGS_EQUAL(6, c.home_deg.size());
+  CHECK(c.console_pty);
+  LONGS_EQUAL(57600, c.console_baud);
+}
+
+TEST(Config, BadFilesNameTheKeyAndLeaveConfigUntouched) {
+  struct Case {
+    const char* text;
+    const char* must_contain;
+  };
+  const Case cases[] = {
+      {"[loop]\nrate_hz = 100\n", "loop.rate_hz"},
+      {"[loop]\nrate_hz = \"fast\"\n", "loop.rate_hz"},
+      {"[loop]\nspeed = 1\n", "loop.speed"},
+      {"[nosuch]\nx = 1\n", "nosuch"},
+      {"[bus]\nfirst_node = 0\n", "bus.first_node"},
+      {"[bus]\nheartbeat_timeout_ms = 10\n", "bus.heartbeat_timeout_ms"},
+      {"[safety]\nfollowing_error_deg = -1\n", "safety.following_error_deg"},
+      {"[motion]\nhome_deg = [0, \"x\"]\n", "motion.home_deg[1]"},
+      {"[motion]\nlinear_speed_mm_s = 900\n", "motion.linear_speed_mm_s"},
+      {"[console]\nbaud = 12345\n", "console.baud"},
+      {"[console]\npty = 1\n", "console.pty"},
+      {"robot = 5\n", "robot"},
+      {"[loop\nrate_hz = 1000\n", "syntax"},
+      {"[loop]\nrate_hz = nan\n", "loop.rate_hz"},
+  };
+  for (const Case& k : cases) {
+    FwConfig c;
+    const std::string e = load_config_text(k.text, "bad.toml", c);
+    if (e.find(k.must_contain) == std::string::npos || e.find("bad.toml") == std::string::npos)
+      FAIL((std::string("case '") + k.text + "' gave '" + e + "'").c_str());
+    DOUBLES_EQUAL(1000.0, c.rate_hz, 0);  // untouched
+  }
+}
+
+TEST(Config, EveryDocumentedKeyIsAccepted) {
+  // Each documented key written with its documented default loads.
+  CHECK(kConfigKeyCount >= 20);
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(to_toml(c), "defaults", c).c_str());
+  const std::string toml = to_toml(c);
+  for (int i = 0; i < kConfigKeyCount; ++i) {
+    std::string k = kConfigKeys[i].key;
+    const auto dot = k.find('.');
+    const std::string leaf = dot == std::string::npos ? k : k.substr(dot + 1);
+    if (toml.find(leaf + " = ") == std::string::npos) FAIL(("key not in to_toml: " + k).c_str());
+  }
+}

@@ -1,0 +1,577 @@
+// Controller + console in-process: puma560 on the sim bus with virtual CiA 402
+// drives, single-threaded on a ManualClock (deterministic: the clock's idle
+// hook steps the drives). Every control cycle runs inside an allocation
+// counter. Last group: the real RT thread (RtLoop) on CLOCK_MONOTONIC.
+#include <chrono>
+#include <cmath>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "alloc_counter.hpp"
+#include "servoarm/firmware/app.hpp"
+#include "servoarm/firmware/rt_loop.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm;
+using namespace servoarm::fw;
+
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+struct Rig {
+  hal::ManualClock clock;
+  App app;
+  Session s;
+  hal::Duration period = hal::kMillisecond;
+  std::size_t rt_allocs = 0;
+  std::uint64_t cycles = 0;
+
+  explicit Rig(const sim::MotorParams& motor = {}, FwConfig cfg = {}) {
+    cfg.can = "sim";
+    app.sim_motor = motor;
+    const std::string e = app.build(cfg, &clock);
+    if (!e.empty()) FAIL(e.c_str());
+    period = static_cast<hal::Duration>(1e9 / cfg.rate_hz);
+    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
+    const std::string b = app.boot();
+    if (!b.empty()) FAIL(b.c_str());
+    app.console->set_idle([this] { cycle(); });
+  }
+  ~Rig() { clock.set_idle_hook(nullptr); }
+
+  void cycle() {
+    test::alloc_count_begin();
+    app.ctl->cycle(clock.now());
+    rt_allocs += test::alloc_count_end();
+    ++cycles;
+    clock.advance(period);
+  }
+  void run(double secs) {
+    const auto n = static_cast<int>(secs * 1e9 / static_cast<double>(period));
+    for (int i = 0; i < n; ++i) {
+      cycle();
+      app.console->poll(s);
+    }
+  }
+  /// Execute a line and run cycles until the answer is complete (bounded).
+  std::string cmd(const std::string& line) {
+    s.out.clear();
+    app.console->execute(s, line);
+    for (int i = 0; i < 60000 && app.console->busy(s); ++i) {
+      cycle();
+      app.console->poll(s);
+    }
+    return s.out;
+  }
+  std::string feed(const std::string& bytes) {
+    s.out.clear();
+    app.console->feed(s, bytes);
+    return s.out;
+  }
+  Telemetry tel() const { return app.ctl->telemetry(); }
+  kin::JointVector q_act() const {
+    const Telemetry t = tel();
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+    return q;
+  }
+  kin::JointVector q_cmd() const {
+    const Telemetry t = tel();
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+    return q;
+  }
+  void enable() {
+    const std::string a = cmd("enable");
+    if (a.rfind("ok", 0) != 0) FAIL(("enable: " + a).c_str());
+    for (int i = 0; i < 2000 && tel().state == ArmState::enabling; ++i) cycle();
+    if (tel().state != ArmState::idle)
+      FAIL((std::string("not idle after enable: ") + to_string(tel().state) + " " + tel().fault_text).c_str());
+  }
+};
+
+bool is_ok(const std::string& a) {
+  // The final line of the answer starts with "ok".
+  if (a.empty() || a.back() != '\n') return false;
+  const auto p = a.rfind('\n', a.size() - 2);
+  const std::string last = a.substr(p == std::string::npos ? 0 : p + 1);
+  return last.rfind("ok", 0) == 0;
+}
+bool is_error(const std::string& a) { return a.rfind("error: ", 0) == 0 && a.find('\n') == a.size() - 1; }
+
+double max_abs_diff(const kin::JointVector& a, const kin::JointVector& b) { return (a - b).cwiseAbs().maxCoeff(); }
+
+}  // namespace
+
+TEST_GROUP(Controller){};
+
+TEST(Controller, BootsDisabledAndEnables) {
+  Rig r;
+  CHECK(r.tel().state == ArmState::disabled);
+  CHECK(is_error(r.cmd("movej 0 0 0 0 0 0")));  // not enabled: refused
+  r.enable();
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, MovejReachesTarget) {
+  Rig r;
+  r.enable();
+  const std::string a = r.cmd("movej 10 -20 30 5 20 -15 speed=100");
+  CHECK_TEXT(is_ok(a), a.c_str());
+  CHECK(is_ok(r.cmd("wait")));
+  r.run(0.05);
+  kin::JointVector goal(6);
+  goal << 10, -20, 30, 5, 20, -15;
+  goal *= kDeg;
+  CHECK(r.tel().state == ArmState::idle);
+  CHECK(max_abs_diff(r.q_act(), goal) < 0.02 * kDeg);
+  CHECK(max_abs_diff(r.q_cmd(), goal) < 1e-12);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, MovelAndGcodeReachTargetsOnTheLine) {
+  Rig r;
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 20 -40 160 10 -50 30")));
+  CHECK(is_ok(r.cmd("wait")));
+  kin::Pose p0;
+  kin::forward(r.app.chain, r.q_cmd(), p0);
+  const Eigen::Vector3d c = p0.translation() * 1e3;
+  char line[128];
+  std::snprintf(line, sizeof line, "movel %.3f %.3f %.3f speed=200", c.x() + 60, c.y() - 30, c.z() + 20);
+  const std::string a = r.cmd(line);
+  CHECK_TEXT(is_ok(a), a.c_str());
+  // Sample the path while moving: every commanded tool point on the segment.
+  const Eigen::Vector3d target = (c + Eigen::Vector3d(60, -30, 20)) * 1e-3;
+  const Eigen::Vector3d dir = (target - p0.translation()).normalized();
+  double worst = 0;
+  for (int i = 0; i < 4000 && !r.app.ctl->motions().empty(); ++i) {
+    r.cycle();
+    kin::Pose x;
+    kin::forward(r.app.chain, r.q_cmd(), x);
+    const Eigen::Vector3d d = x.translation() - p0.translation();
+    worst = std::fmax(worst, (d - d.dot(dir) * dir).norm());
+  }
+  CHECK(r.tel().state == ArmState::idle);
+  CHECK_TEXT(worst < 1e-6, std::to_string(worst).c_str());
+  r.run(0.05);
+  kin::Pose x;
+  kin::forward(r.app.chain, r.q_act(), x);
+  CHECK_TEXT((x.translation() - target).norm() < 0.3e-3, std::to_string((x.translation() - target).norm()).c_str());
+  // Orientation kept.
+  CHECK(kin::rotation_error(x.linear(), p0.linear()).norm() < 1e-3);
+  // G-code relative move from there.
+  CHECK(is_ok(r.cmd("G91")));
+  CHECK(is_ok(r.cmd("G1 Z-25 F3000")));
+  CHECK(is_ok(r.cmd("G90")));
+  CHECK(is_ok(r.cmd("M400")));
+  r.run(0.05);
+  kin::forward(r.app.chain, r.q_act(), x);
+  CHECK((x.translation() - (target + Eigen::Vector3d(0, 0, -0.025))).norm() < 0.3e-3);
+  const std::string m114 = r.cmd("M114");
+  CHECK_TEXT(m114.rfind("X:", 0) == 0 && is_ok(m114), m114.c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, GoodCommandsAnswerOk) {
+  Rig r;
+  r.enable();
+  const char* lines[] = {"help", "help movej", "status", "fk", "fk 0 10 20 0 30 0", "ik 500 150 300", "limits", "stats",
+                         "config", "wait", "stop", "hold", "resume", "reset", "G21", "G90", "M105", "M110 N0", "M114",
+                         "M400", "", "# comment", "G1 F600"};
+  for (const char* l : lines) {
+    const std::string a = r.cmd(l);
+    if (!is_ok(a)) FAIL((std::string("'") + l + "' answered: " + a).c_str());
+  }
+  CHECK(r.tel().state == ArmState::idle);
+}
+
+TEST(Controller, MalformedAndRefusedCommandsAnswerErrorAndNothingMoves) {
+  Rig r;
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 10 -30 150 0 -40 0")));
+  CHECK(is_ok(r.cmd("wait")));
+  const kin::JointVector q0 = r.q_cmd();
+  const std::string overlong = "movej " + std::string(400, '9');
+  const std::string binary = std::string("movej 0 0\x01 0 0 0 0");
+  const std::string garbage = "\xde\xad\xbe\xef";
+  const char* bad[] = {
+      "movej 0 0 0 0 0",                 // too few
+      "movej 0 0 0 0 0 0 0",             // too many
+      "movej 0 0 0 0 0 nan",             // NaN
+      "movej 0 0 0 0 0 inf",
+      "movej 500 0 0 0 0 0",             // outside joint 1 limits
+      "movej 0 0 0 0 0 0 speed=0",
+      "movel 5000 0 0",                  // unreachable
+      "movel 1 2",                       // wrong count
+      "movel 500 100 300 speed=99999",   // faster than max_linear_speed
+      "movel nan 0 0",
+      "ik 5000 0 0",                     // unreachable
+      "frobnicate",
+      "G1 X5000",                        // unreachable
+      "G2 X1 Y1",                        // unsupported
+      "G1 Xnan",
+      "G4",
+      "M999",
+      "N3 G1 X1*0",                      // checksum
+      "status 1",
+      overlong.c_str(),
+      binary.c_str(),
+      garbage.c_str(),
+  };
+  for (const char* l : bad) {
+    const std::string a = r.cmd(l);
+    if (!is_error(a)) FAIL((std::string("'") + l + "' answered: " + a).c_str());
+    r.run(0.01);
+    CHECK(r.app.ctl->motions().empty());
+    CHECK(r.tel().state == ArmState::idle);
+    if (max_abs_diff(r.q_cmd(), q0) != 0) FAIL((std::string("'") + l + "' moved the arm").c_str());
+  }
+  // Overlong lines arriving byte by byte through feed(): one error, the next line works.
+  std::string bytes(1000, 'a');
+  bytes += "\nstatus\n";
+  const std::string a = r.feed(bytes);
+  CHECK_TEXT(a.rfind("error: overlong", 0) == 0, a.c_str());
+  CHECK_TEXT(a.find("\nok state=idle") != std::string::npos, a.c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, FeedHoldAndResumeJointAndLinear) {
+  Rig r;
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 40 -40 120 30 -40 60 speed=40")));
+  r.run(0.6);
+  CHECK(r.tel().state == ArmState::moving);
+  r.feed("!");
+  r.run(0.5);
+  const Telemetry held = r.tel();
+  CHECK(held.holding);
+  const kin::JointVector qh = r.q_cmd();
+  r.run(0.2);
+  CHECK(max_abs_diff(r.q_cmd(), qh) == 0);  // at rest while held
+  const std::string rep = r.feed("?");
+  CHECK_TEXT(rep.rfind("<Hold|", 0) == 0, rep.c_str());
+  r.feed("~");
+  CHECK(is_ok(r.cmd("wait")));
+  kin::JointVector goal(6);
+  goal << 40, -40, 120, 30, -40, 60;
+  CHECK(max_abs_diff(r.q_cmd(), goal * kDeg) < 1e-12);
+  // Linear: hold stops on the line, resume finishes it.
+  kin::Pose p0;
+  kin::forward(r.app.chain, r.q_cmd(), p0);
+  const Eigen::Vector3d c = p0.translation() * 1e3;
+  char line[128];
+  std::snprintf(line, sizeof line, "movel %.3f %.3f %.3f speed=50", c.x() - 80, c.y(), c.z());
+  CHECK(is_ok(r.cmd(line)));
+  r.run(0.5);
+  r.feed("!");
+  r.run(0.6);
+  kin::Pose x;
+  kin::forward(r.app.chain, r.q_cmd(), x);
+  CHECK(std::fabs(x.translation().y() - p0.translation().y()) < 1e-6);
+  CHECK(x.translation().x() < p0.translation().x() - 0.005);
+  CHECK(x.translation().x() > p0.translation().x() - 0.075);
+  r.feed("~");
+  CHECK(is_ok(r.cmd("wait")));
+  kin::forward(r.app.chain, r.q_cmd(), x);
+  CHECK((x.translation() - (c + Eigen::Vector3d(-80, 0, 0)) * 1e-3).norm() < 1e-6);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, EstopFromEveryState) {
+  for (int which = 0; which < 5; ++which) {
+    Rig r;
+    const char* name = "";
+    switch (which) {
+      case 0: name = "disabled"; break;
+      case 1: name = "idle"; r.enable(); break;
+      case 2:
+        name = "moving";
+        r.enable();
+        CHECK(is_ok(r.cmd("movej 60 -60 100 0 30 0 speed=100")));
+        r.run(0.4);
+        break;
+      case 3:
+        name = "stopping";
+        r.enable();
+        CHECK(is_ok(r.cmd("movej 60 -60 100 0 30 0 speed=100")));
+        r.run(0.4);
+        r.app.ctl->requests().push(Request{RequestOp::stop, 999});
+        r.cycle();
+        CHECK(r.tel().state == ArmState::stopping);
+        break;
+      case 4:
+        name = "fault";
+        r.enable();
+        r.app.plant->inject_silent(1);
+        r.run(0.4);
+        CHECK(r.tel().state == ArmState::fault);
+        break;
+    }
+    // Ctrl-X through the byte stream: acts in the next cycle.
+    r.app.ctl->requests().push(Request{RequestOp::estop, 1000});
+    r.cycle();
+    if (r.tel().state != ArmState::estop) FAIL((std::string("estop from ") + name + " gave " + to_string(r.tel().state)).c_str());
+    const kin::JointVector q_after_first = r.q_cmd();
+    r.run(1.0);
+    // At rest, drives powered down, queue empty.
+    const kin::JointVector qr = r.q_cmd();
+    r.run(0.1);
+    CHECK(max_abs_diff(r.q_cmd(), qr) < 1e-3 * kDeg);
+    CHECK(r.app.ctl->motions().empty());
+    for (int j = 0; j < 6; ++j) CHECK(r.app.servo->feedback(static_cast<std::size_t>(j)).state != hal::JointState::enabled);
+    (void)q_after_first;
+    // Nothing moves until reset + enable.
+    CHECK(is_error(r.cmd("movej 0 0 0 0 0 0")));
+    CHECK(is_error(r.cmd("enable")));
+    CHECK(is_error(r.cmd("home")));
+    if (which == 4) continue;  // the silent drive stays silent: enable would fault again
+    CHECK(is_ok(r.cmd("reset")));
+    CHECK(r.tel().state == ArmState::disabled);
+    r.enable();
+    CHECK(is_ok(r.cmd("home")));
+    CHECK(is_ok(r.cmd("wait")));
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}
+
+TEST(Controller, CtrlXIsEstopAndDropsThePartialLine) {
+  Rig r;
+  r.enable();
+  const std::string a = r.feed(std::string("movej 1 2") + '\x18' + "\n");
+  r.cycle();
+  CHECK(r.tel().state == ArmState::estop);
+  // The partial line was dropped: the newline gives an empty line (ok), not a movej error.
+  CHECK_TEXT(a.find("arg_count") == std::string::npos, a.c_str());
+  const std::string ev = r.app.console->drain_events();
+  CHECK_TEXT(ev.find("alarm: estop") != std::string::npos, ev.c_str());
+}
+
+TEST(Controller, SilentNodeStopsTheArmWithinHeartbeatTimeoutNamingTheJoint) {
+  Rig r;
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 30 -30 60 0 30 0 speed=50")));
+  r.run(0.3);
+  r.app.plant->inject_silent(2);
+  const hal::TimePoint t0 = r.clock.now();
+  int n = 0;
+  while (r.tel().state != ArmState::fault && n < 1000) {
+    r.cycle();
+    ++n;
+  }
+  CHECK_TEXT(r.tel().state == ArmState::fault, r.tel().fault_text);
+  // Within heartbeat_timeout (150 ms) + 2 cycles (stale feedback is usually seen first).
+  const double dt = static_cast<double>(r.clock.now() - t0) * 1e-9;
+  CHECK_TEXT(dt <= 0.150 + 0.002 + 1e-9, std::to_string(dt).c_str());
+  const Telemetry t = r.tel();
+  LONGS_EQUAL(2, t.fault_joint);
+  CHECK_TEXT(std::string(t.fault_text).find("joint 3 ") == 0, t.fault_text);
+  const std::string ev = r.app.console->drain_events();
+  CHECK_TEXT(ev.find("alarm: fault joint 3 ") != std::string::npos, ev.c_str());
+  // Quick stop: the commanded joints come to rest.
+  r.run(1.0);
+  const kin::JointVector q1 = r.q_cmd();
+  r.run(0.1);
+  CHECK(max_abs_diff(r.q_cmd(), q1) < 1e-9);
+  const std::string a = r.cmd("movej 0 0 0 0 0 0");
+  CHECK_TEXT(a.rfind("error: fault", 0) == 0, a.c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, HeartbeatLossFaultsAsHeartbeatLost) {
+  Rig r;
+  r.enable();
+  r.run(0.1);
+  r.app.plant->inject_heartbeat_stop(4);  // PDOs keep coming, only the heartbeat stops
+  const hal::TimePoint t0 = r.clock.now();
+  int n = 0;
+  while (r.tel().state != ArmState::fault && n < 1000) {
+    r.cycle();
+    ++n;
+  }
+  const Telemetry t = r.tel();
+  CHECK_TEXT(t.cause == FaultCause::heartbeat_lost, t.fault_text);
+  LONGS_EQUAL(4, t.fault_joint);
+  CHECK_TEXT(std::string(t.fault_text).find("joint 5 heartbeat_lost") == 0, t.fault_text);
+  const double dt = static_cast<double>(r.clock.now() - t0) * 1e-9;
+  CHECK_TEXT(dt <= 0.150 + 0.050 + 0.002, std::to_string(dt).c_str());  // timeout after the last heartbeat
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, EmcyFaultsNamingTheJoint) {
+  Rig r;
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 30 -30 60 0 30 0 speed=50")));
+  r.run(0.3);
+  r.app.plant->inject_emcy(1, 0x2310);
+  r.run(0.01);
+  const Telemetry t = r.tel();
+  CHECK(t.state == ArmState::fault);
+  LONGS_EQUAL(1, t.fault_joint);
+  CHECK_TEXT(std::string(t.fault_text).find("joint 2") != std::string::npos, t.fault_text);
+  CHECK_TEXT(std::string(t.fault_text).find("2310") != std::string::npos, t.fault_text);
+  // reset + enable recovers (the drive's fault is reset by enable).
+  r.run(1.0);
+  CHECK(is_ok(r.cmd("reset")));
+  r.enable();
+  CHECK(is_ok(r.cmd("home")));
+  CHECK(is_ok(r.cmd("wait")));
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, FollowingErrorFaults) {
+  sim::MotorParams slow;
+  slow.max_velocity = 0.02 * 131072;  // the motor cannot follow: 7 deg/s
+  FwConfig cfg;
+  cfg.following_error_deg = 2.0;
+  Rig r(slow, cfg);
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 0 -40 0 0 0 0 speed=100")));
+  r.run(1.0);
+  const Telemetry t = r.tel();
+  CHECK(t.state == ArmState::fault);
+  CHECK(t.cause == FaultCause::following_error);
+  CHECK_TEXT(std::string(t.fault_text).find("joint 2 following_error") != std::string::npos, t.fault_text);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, FullQueueAnswersBusyAndDropsNothing) {
+  Rig r;
+  r.enable();
+  int ok = 0;
+  for (std::size_t i = 0; i < kMotionQueue; ++i) {
+    const std::string a = r.feed(i % 2 ? "movej 10 0 0 0 0 0 speed=5\n" : "movej -10 0 0 0 0 0 speed=5\n");
+    ok += is_ok(a);
+  }
+  LONGS_EQUAL(static_cast<long>(kMotionQueue), ok);
+  const std::string busy = r.feed("movej 20 0 0 0 0 0\n");
+  CHECK_TEXT(busy.rfind("error: busy", 0) == 0, busy.c_str());
+  CHECK_TEXT(r.feed("G4 P10\n").rfind("error: busy", 0) == 0, "dwell");
+  LONGS_EQUAL(static_cast<long>(kMotionQueue), r.app.ctl->motions().size());
+  // Every accepted move runs: ids 1..16 finish in order.
+  std::uint32_t last_done = 0;
+  bool in_order = true;
+  for (int i = 0; i < 200000 && !r.app.ctl->motions().empty(); ++i) {
+    r.cycle();
+    const std::uint32_t d = r.tel().done_id;
+    if (d != last_done) {
+      in_order = in_order && d == last_done + 1;
+      last_done = d;
+    }
+  }
+  CHECK(in_order);
+  LONGS_EQUAL(static_cast<long>(kMotionQueue), last_done);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, StopDropsQueueAndDisableWhileMovingStopsFirst) {
+  Rig r;
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 60 0 0 0 0 0 speed=50")));
+  CHECK(is_ok(r.cmd("movej 0 0 0 0 0 0 speed=50")));
+  r.run(0.3);
+  CHECK(is_ok(r.cmd("stop")));
+  r.run(1.0);
+  CHECK(r.tel().state == ArmState::idle);
+  CHECK(r.app.ctl->motions().empty());
+  CHECK(is_ok(r.cmd("movej 0 0 0 0 0 0 speed=100")));
+  r.run(0.2);
+  CHECK(is_ok(r.cmd("disable")));
+  r.run(1.0);
+  CHECK(r.tel().state == ArmState::disabled);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST(Controller, AllocationFreeOverAFullRunWithEveryKindOfMove) {
+  Rig r;
+  r.enable();
+  const char* script[] = {"home", "movej 20 -40 160 10 -50 30 speed=80", "wait", "movel 650 380 150 speed=150",
+                          "G91", "G1 X-20 Z10 F3000", "G90", "G4 P50", "G0 X640", "M400", "stats", "status", "fk",
+                          "ik 600 380 150"};
+  for (const char* l : script) {
+    const std::string a = r.cmd(l);
+    if (!is_ok(a)) FAIL((std::string("'") + l + "': " + a).c_str());
+  }
+  CHECK(is_ok(r.cmd("movej 0 -20 100 0 -30 0 speed=30")));
+  r.run(0.3);
+  r.feed("!");
+  r.run(0.3);
+  r.feed("~");
+  r.run(0.2);
+  CHECK(is_ok(r.cmd("stop")));
+  r.run(0.5);
+  CHECK(is_ok(r.cmd("movej 10 -20 100 0 -30 0 speed=30")));
+  r.run(0.2);
+  r.feed("\x18");
+  r.run(0.5);
+  CHECK(is_ok(r.cmd("reset")));
+  r.enable();
+  CHECK(is_ok(r.cmd("home")));
+  r.run(0.1);
+  r.app.plant->inject_silent(4);
+  r.run(0.5);
+  CHECK(r.tel().state == ArmState::fault);
+  CHECK(r.cycles > 5000);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+TEST_GROUP(RtThread){};
+
+TEST(RtThread, RealLoopRunsMovesWithoutAllocatingOnTheControlThread) {
+  App app;
+  FwConfig cfg;
+  cfg.can = "sim";
+  cfg.priority = 0;  // tests run without RT privileges everywhere
+  cfg.lock_memory = false;
+  const std::string e = app.build(cfg);
+  CHECK_TEXT(e.empty(), e.c_str());
+  const std::string b = app.boot();
+  CHECK_TEXT(b.empty(), b.c_str());
+  LoopConfig lc;
+  lc.priority = 0;
+  lc.lock_memory = false;
+  RtLoop loop(*app.ctl, lc);
+  std::size_t allocs = 999;
+  loop.on_thread_start = [] { test::alloc_count_begin(); };
+  loop.on_thread_exit = [&] { allocs = test::alloc_count_end(); };
+  CHECK(loop.start());
+  Session s;
+  auto run = [&](const std::string& line) {
+    s.out.clear();
+    app.console->execute(s, line);
+    for (int i = 0; i < 20000 && app.console->busy(s); ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      app.console->poll(s);
+    }
+    return s.out;
+  };
+  CHECK(is_ok(run("enable")));
+  for (int i = 0; i < 2000 && app.ctl->telemetry().state != ArmState::idle; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  CHECK(is_ok(run("movej 20 -40 160 10 -50 30 speed=100")));
+  CHECK(is_ok(run("wait")));
+  CHECK(is_ok(run("movel 700 380 120 speed=250")));
+  CHECK(is_ok(run("G4 P20")));
+  CHECK(is_ok(run("home")));
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  app.console->feed(s, "!");
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  app.console->feed(s, "~");
+  CHECK(is_ok(run("wait")));
+  CHECK(is_ok(run("movej 10 0 0 0 0 0")));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  CHECK(is_ok(run("stop")));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  CHECK(is_ok(run("estop")));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  loop.stop();
+  app.plant->stop_thread();
+  CHECK(loop.cycles() > 500);
+  LONGS_EQUAL(0, allocs);
+  const Telemetry t = app.ctl->telemetry();
+  CHECK(t.state == ArmState::estop);
+}
