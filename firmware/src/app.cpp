@@ -74,6 +74,7 @@ ControllerConfig App::controller_config() const {
   c.rate_hz = cfg.rate_hz;
   c.following_error = cfg.following_error_deg * M_PI / 180.0;
   c.enable_timeout = cfg.enable_timeout_s;
+  c.feedback_timeout = cfg.feedback_timeout_ms * 1e-3;
   return c;
 }
 

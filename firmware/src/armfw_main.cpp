@@ -228,7 +228,7 @@ int run_bench(App& app, double seconds) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
-  // Force a summary refresh: the RT thread publishes summaries every 256 cycles.
+  // Force a summary refresh: the RT thread publishes summaries every 64 cycles.
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   print_stats_json(app.ctl->telemetry(), app.cfg.rate_hz);
   return 0;

@@ -493,7 +493,18 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::none: answer_ok(s); return;
     case Cmd::help: do_help(s, std::string_view(c.topic.data())); return;
     case Cmd::status: answer_ok(s, status_text()); return;
-    case Cmd::enable: simple(RequestOp::enable); return;
+    case Cmd::enable:
+      if (!request(RequestOp::enable, r)) {
+        answer_error(s, CmdError::timeout, "control thread did not answer enable");
+        return;
+      }
+      if (r.result != RtResult::ok) {
+        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, r.message);
+        return;
+      }
+      s.enabling = true;
+      poll(s);
+      return;
     case Cmd::disable: simple(RequestOp::disable); return;
     case Cmd::stop: simple(RequestOp::stop); return;
     case Cmd::estop: simple(RequestOp::estop); return;
@@ -543,6 +554,28 @@ void Console::execute(Session& s, std::string_view line) {
 
 void Console::poll(Session& s) {
   for (;;) {
+    if (s.enabling) {
+      const Telemetry t = ctl_.telemetry();
+      switch (t.state) {
+        case ArmState::enabling: return;
+        case ArmState::idle:
+        case ArmState::moving:
+          s.enabling = false;
+          answer_ok(s, "enabled");
+          break;
+        case ArmState::fault:
+          s.enabling = false;
+          answer_error(s, CmdError::fault, fmt("enable failed: %s", t.fault_text));
+          break;
+        case ArmState::boot:
+        case ArmState::disabled:
+        case ArmState::stopping:
+        case ArmState::estop:
+          s.enabling = false;
+          answer_error(s, CmdError::bad_state, fmt("enable interrupted: arm is %s", to_string(t.state)));
+          break;
+      }
+    }
     if (s.waiting) {
       const Telemetry t = ctl_.telemetry();
       switch (t.state) {

@@ -648,7 +648,7 @@ void Controller::validate_and_write(TimePoint now) {
 }
 
 void Controller::publish() {
-  if (cycles_ % 256 == 0) {
+  if (cycles_ % 64 == 0) {
     latency_sum_ = latency_.summary();
     compute_sum_ = compute_.summary();
   }

@@ -527,6 +527,11 @@ TEST(RtThread, RealLoopRunsMovesWithoutAllocatingOnTheControlThread) {
   cfg.can = "sim";
   cfg.priority = 0;  // tests run without RT privileges everywhere
   cfg.lock_memory = false;
+  // A shared 2-core machine can stall the drive thread: generous timeouts (the
+  // deterministic tests above check the real ones).
+  cfg.feedback_timeout_ms = 1000;
+  cfg.heartbeat_timeout_ms = 1000;
+  cfg.following_error_deg = 30;
   const std::string e = app.build(cfg);
   CHECK_TEXT(e.empty(), e.c_str());
   const std::string b = app.boot();

@@ -26,6 +26,7 @@ struct FwConfig {
   // [safety]
   double following_error_deg = 5.0;
   double enable_timeout_s = 2.0;
+  double feedback_timeout_ms = 50.0;
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;

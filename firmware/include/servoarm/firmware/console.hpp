@@ -11,6 +11,7 @@
 // act at once and are never part of a line: '?' prints a status report,
 // '!' feed hold, '~' resume, Ctrl-X (0x18) e-stop and discards the partial line.
 //
+// `enable` answers once every drive is in operation enabled (or with the fault).
 // Motion commands (movej, movel, home, G0/G1, G28, G4) answer `ok` when the
 // move is checked and queued (GRBL semantics); `wait` / M400 answer when the
 // queue has run empty. A full queue answers `error: busy` and queues nothing.
@@ -46,6 +47,7 @@ struct Session {
   std::deque<std::string> lines;       ///< complete lines not executed yet (while waiting)
   GcodeModal modal;
   bool waiting = false;                ///< `wait` / M400 in progress
+  bool enabling = false;               ///< `enable` / M17 waits for operation enabled
   std::string out;                     ///< text to send to the client
   std::uint64_t lines_done = 0;
 };
@@ -65,7 +67,7 @@ class Console {
   std::string drain_events();
 
   /// True while the session has work pending (queued lines or a wait).
-  bool busy(const Session& s) const { return s.waiting || !s.lines.empty(); }
+  bool busy(const Session& s) const { return s.waiting || s.enabling || !s.lines.empty(); }
 
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
   /// Single-threaded tests set it to run a control cycle.

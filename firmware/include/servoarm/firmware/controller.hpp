@@ -170,7 +170,7 @@ struct ControllerConfig {
   double rate_hz = 1000.0;
   double following_error = 0.1;        ///< rad (or m): supervisor limit per joint
   double enable_timeout = 2.0;         ///< s to reach operation enabled
-  double feedback_timeout = 0.02;      ///< s without position feedback from an enabled drive -> fault
+  double feedback_timeout = 0.05;      ///< s without position feedback from an enabled drive -> fault
   double position_tolerance = 1e-6;    ///< rad: setpoint check slack on the position limits
   double velocity_margin = 1.10;       ///< setpoint step may reach this x max_velocity
   bool check_following_error = true;
