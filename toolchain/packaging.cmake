@@ -39,9 +39,9 @@ set(CPACK_PACKAGE_VERSION ${PROJECT_VERSION})
 set(CPACK_PACKAGE_VENDOR "servoarm")
 set(CPACK_PACKAGE_CONTACT "servoarm developers <servoarm@localhost>")
 set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "servoarm robot arm firmware (armfw), armctl and robot descriptions")
-set(CPACK_PACKAGE_DESCRIPTION
-    "Firmware for a serial-chain servo arm: a fixed-rate real-time control loop sending joint\n"
-    "setpoints to CiA 402 servo drives over SocketCAN, started at boot by servoarm.service.")
+string(CONCAT CPACK_PACKAGE_DESCRIPTION
+       "Firmware for a serial-chain servo arm: a fixed-rate real-time control loop sending joint\n"
+       "setpoints to CiA 402 servo drives over SocketCAN, started at boot by servoarm.service.")
 set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 set(CPACK_DEBIAN_PACKAGE_SECTION misc)
