@@ -13,6 +13,7 @@
 
 #include "servoarm/firmware/cli_common.hpp"
 #include "servoarm/kinematics/description.hpp"
+#include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
@@ -342,9 +343,13 @@ int cli_plan(int argc, char** argv) {
   opt.override = ov;
   opt.allow_slowdown = !a.no_slowdown;
   auto tr = std::make_unique<kin::CartesianTrajectory>();  // ~40 kB: not on the stack
+  // IK: kinematics/ik (closed form where the chain has one, else numerical);
+  // the damped-Newton fallback only if the chain cannot be analysed.
+  auto model = std::make_unique<kin::IkModel>();
+  kin::IkSolver ik{&kin::ik_nearest_for_motion, model.get()};
+  if (kin::ik_prepare(chain, *model) != kin::Status::ok) ik = kin::IkSolver{&kin::ik_nearest_newton, nullptr};
   kin::PathReport rep;
-  const kin::MotionStatus st =
-      kin::plan_movel(chain, q0, target, cl, opt, kin::IkSolver{&kin::ik_nearest_newton, nullptr}, *tr, &rep);
+  const kin::MotionStatus st = kin::plan_movel(chain, q0, target, cl, opt, ik, *tr, &rep);
   const double L = chain.length_unit;
   if (!kin::is_ok(st)) {
     std::fprintf(stderr, "armctl: movel refused: %s at %s %% of the line, tool at (%s, %s, %s) %s", kin::to_string(st),

@@ -10,9 +10,19 @@
 #include <algorithm>
 #include <cmath>
 
+#include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 namespace servoarm::kin {
+
+Status ik_nearest_for_motion(const Chain& /*chain*/, const Pose& target, const JointVector& q_near, JointVector& q_out,
+                             void* ctx) {
+  if (!ctx) return Status::bad_input;
+  const IkModel& model = *static_cast<const IkModel*>(ctx);
+  IkChoice choice;
+  choice.allow_out_of_limits = true;
+  return ik_solve_nearest(model, target, q_near, q_out, choice);
+}
 
 Status ik_nearest_newton(const Chain& chain, const Pose& target, const JointVector& q_near, JointVector& q_out,
                          void* /*ctx*/) {

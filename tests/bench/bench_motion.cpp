@@ -6,7 +6,7 @@
 //                                 joint + SetProfileDuration sync (trapezoidal
 //                                 velocity, NOT jerk-limited: a lower bound on cost)
 //   plan/movel/servoarm           PUMA 560 straight line incl. its path check
-//                                 (257 IK solutions + Jacobian condition numbers)
+//                                 (257 IK solutions by kinematics/ik + Jacobian condition numbers)
 //   sample/movel_ik/servoarm      one movel sample with IK at the exact pose
 //   sample/movel_pre/servoarm     one movel sample from the precomputed joint path
 // Ruckig/Reflexxes are not Debian packages, so they are not run here.
@@ -15,8 +15,9 @@
 #include <random>
 #include <vector>
 
-#include "../motion/ik_stub.hpp"
 #include "servoarm/kinematics/description.hpp"
+#include "servoarm/kinematics/ik.hpp"
+#include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 
@@ -124,17 +125,20 @@ BENCHMARK(plan_movej6_kdl)->Name("plan/movej6/kdl_trap");
 
 struct MovelFixture {
   kin::Chain chain;
+  kin::IkModel model;  // kinematics/ik: closed form for the PUMA
+  kin::IkSolver ik() const { return {&kin::ik_nearest_for_motion, const_cast<kin::IkModel*>(&model)}; }
   std::vector<kin::JointVector> q0;
   std::vector<kin::Pose> target;
 };
 
 const MovelFixture& movel_fixture() {
   static MovelFixture f = [] {
-    MovelFixture x;
+    MovelFixture x;  // (static below: IkModel is large)
     const auto r = kin::load_robot("puma560");
     if (!r.ok) std::abort();
     x.chain = r.chain;
     for (int i = 0; i < 6; ++i) x.chain.joint(i).dynamics = kin::JointDynamics{2.0, 10.0, 100.0};
+    kin::ik_prepare(x.chain, x.model);
     std::mt19937_64 g(43);
     auto u = [&g](double a, double b) { return std::uniform_real_distribution<double>(a, b)(g); };
     while (x.q0.size() < 64) {
@@ -144,7 +148,7 @@ const MovelFixture& movel_fixture() {
       kin::Pose t;
       kin::forward(x.chain, q1, t);
       kin::CartesianTrajectory tr;
-      if (kin::plan_movel(x.chain, q, t, {}, {}, {&test::newton_ik, nullptr}, tr) != kin::MotionStatus::ok) continue;
+      if (kin::plan_movel(x.chain, q, t, {}, {}, x.ik(), tr) != kin::MotionStatus::ok) continue;
       x.q0.push_back(q);
       x.target.push_back(t);
     }
@@ -159,7 +163,7 @@ void plan_movel(benchmark::State& st) {
   std::size_t i = 0;
   for (auto _ : st) {
     const std::size_t k = i++ & 63;
-    const auto r = kin::plan_movel(f.chain, f.q0[k], f.target[k], {}, {}, {&test::newton_ik, nullptr}, tr);
+    const auto r = kin::plan_movel(f.chain, f.q0[k], f.target[k], {}, {}, f.ik(), tr);
     benchmark::DoNotOptimize(r);
   }
 }
@@ -168,7 +172,7 @@ BENCHMARK(plan_movel)->Name("plan/movel/servoarm")->Unit(benchmark::kMicrosecond
 void sample_movel(benchmark::State& st, bool ik) {
   const MovelFixture& f = movel_fixture();
   static kin::CartesianTrajectory tr;
-  kin::plan_movel(f.chain, f.q0[0], f.target[0], {}, {}, {&test::newton_ik, nullptr}, tr);
+  kin::plan_movel(f.chain, f.q0[0], f.target[0], {}, {}, f.ik(), tr);
   std::vector<double> ts(kInputs);
   std::mt19937_64 g(8);
   for (double& t : ts) t = std::uniform_real_distribution<double>(0, tr.duration)(g);

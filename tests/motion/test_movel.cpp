@@ -6,8 +6,8 @@
 #include <string>
 
 #include "alloc_counter.hpp"
-#include "ik_stub.hpp"
 #include "servoarm/kinematics/description.hpp"
+#include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
@@ -29,7 +29,12 @@ Chain puma() {
   return c;
 }
 
-IkSolver stub() { return IkSolver{&servoarm::test::newton_ik, nullptr}; }
+// kinematics/ik (closed form for the PUMA), as the firmware and armctl use it.
+IkSolver real_ik(const Chain& c) {
+  static IkModel model;
+  if (ik_prepare(c, model) != Status::ok) FAIL("ik_prepare failed");
+  return IkSolver{&ik_nearest_for_motion, &model};
+}
 
 Pose fk(const Chain& c, const JointVector& q) {
   Pose x;
@@ -112,22 +117,29 @@ std::string check_movel(const Chain& c, const CartesianTrajectory& tr, const Car
 
 TEST_GROUP(Movel) {
   Chain c;
-  void setup() override { c = puma(); }
+  IkSolver ik;
+  void setup() override {
+    c = puma();
+    ik = real_ik(c);
+  }
 };
 
-TEST(Movel, RandomLinesStayOnTheLine) {
-  std::mt19937_64 g(5001);
+// Random lines on a PUMA 560: every planned one is sampled at 1 kHz with IK per
+// sample (tool on the line, orientation on the slerp, joint and tool speeds within
+// limits, end on target); every 10th also from the precomputed joint path.
+void random_lines(const Chain& c, IkSolver ik, int count, unsigned seed) {
+  std::mt19937_64 g(seed);
   const CartesianLimits cl{};
   int planned = 0, slowed = 0, refused = 0;
   double worst_ik = 0, worst_pre = 0;
   CartesianTrajectory tr;
-  for (int m = 0; m < 10000; ++m) {
+  for (int m = 0; m < count; ++m) {
     const JointVector q0 = random_q(g);
     JointVector q1 = q0;
     for (int i = 0; i < 6; ++i) q1[i] += std::uniform_real_distribution<double>(-0.25, 0.25)(g);
     const Pose target = fk(c, q1);
     PathReport rep;
-    const MotionStatus st = plan_movel(c, q0, target, cl, MovelOptions{}, stub(), tr, &rep);
+    const MotionStatus st = plan_movel(c, q0, target, cl, MovelOptions{}, ik, tr, &rep);
     const std::string ctx = "line " + std::to_string(m) + " (" + to_string(st) + ")";
     if (!is_ok(st)) {
       ++refused;
@@ -147,8 +159,13 @@ TEST(Movel, RandomLinesStayOnTheLine) {
   }
   std::printf("\n  movel sweep: %d planned (%d slowed), %d refused; worst deviation ik %.2e m, precomputed %.2e m\n",
               planned, slowed, refused, worst_ik, worst_pre);
-  CHECK(planned > 8000);
+  CHECK(planned > count * 8 / 10);
 }
+
+// 10 000 lines with the library's damped-Newton fallback (fast), 400 with
+// kinematics/ik (closed form, what armctl and the firmware use).
+TEST(Movel, RandomLinesStayOnTheLineFallbackIk) { random_lines(c, IkSolver{&ik_nearest_newton, nullptr}, 10000, 5001); }
+TEST(Movel, RandomLinesStayOnTheLineClosedFormIk) { random_lines(c, ik, 400, 5005); }
 
 TEST(Movel, RefusedMovesNameReasonAndPlace) {
   const JointVector q0 = (JointVector(6) << 0.2, -1.4, 1.5, 0.3, 0.8, 0.1).finished();
@@ -160,7 +177,7 @@ TEST(Movel, RefusedMovesNameReasonAndPlace) {
     Pose t = x0;
     t.translation() += Eigen::Vector3d(3, 0, 0);
     CHECK_EQUAL(static_cast<int>(MotionStatus::no_ik_solution),
-                static_cast<int>(plan_movel(c, q0, t, {}, {}, stub(), tr, &rep)));
+                static_cast<int>(plan_movel(c, q0, t, {}, {}, ik, tr, &rep)));
     CHECK(rep.s > 0 && rep.s < 1);  // the line leaves the workspace part way
     DOUBLES_EQUAL((x0.translation() + rep.s * Eigen::Vector3d(3, 0, 0) - rep.position).norm(), 0, 1e-9);
   }
@@ -170,19 +187,19 @@ TEST(Movel, RefusedMovesNameReasonAndPlace) {
     tight.joint(0).upper = 0.3;
     const Pose t = fk(c, (JointVector(6) << 0.6, -1.4, 1.5, 0.3, 0.8, 0.1).finished());
     CHECK_EQUAL(static_cast<int>(MotionStatus::path_out_of_limits),
-                static_cast<int>(plan_movel(tight, q0, t, {}, {}, stub(), tr, &rep)));
+                static_cast<int>(plan_movel(tight, q0, t, {}, {}, ik, tr, &rep)));
     CHECK_EQUAL(0, rep.joint);
     CHECK(rep.s > 0 && rep.s < 1);
   }
   {  // Bad input.
     Pose t = x0;
     t.linear() *= 2.0;
-    CHECK(plan_movel(c, q0, t, {}, {}, stub(), tr) == MotionStatus::bad_input);
+    CHECK(plan_movel(c, q0, t, {}, {}, ik, tr) == MotionStatus::bad_input);
     CHECK(plan_movel(c, q0, x0, {}, {}, IkSolver{}, tr) == MotionStatus::bad_input);
-    CHECK(plan_movel(c, JointVector::Zero(5), x0, {}, {}, stub(), tr) == MotionStatus::wrong_size);
+    CHECK(plan_movel(c, JointVector::Zero(5), x0, {}, {}, ik, tr) == MotionStatus::wrong_size);
     CartesianLimits bad;
     bad.linear_velocity = 0;
-    CHECK(plan_movel(c, q0, x0, bad, {}, stub(), tr) == MotionStatus::bad_limits);
+    CHECK(plan_movel(c, q0, x0, bad, {}, ik, tr) == MotionStatus::bad_limits);
   }
   DOUBLES_EQUAL(42, tr.duration, 0);
   STRCMP_EQUAL("no_ik_solution", to_string(MotionStatus::no_ik_solution));
@@ -199,7 +216,7 @@ TEST(Movel, SingularityRefusedOrSlowedNeverTooFast) {
   int slowed = 0, singular = 0, other = 0, fine = 0;
   double worst = 0;
   CartesianTrajectory tr;
-  for (int m = 0; m < 2000; ++m) {
+  for (int m = 0; m < 600; ++m) {
     JointVector q0(6), q1(6);
     q0 << u(-1, 1), u(-2, -1), u(-0.5, 1.0), u(-0.5, 0.5), u(0.02, 0.4), u(-1, 1);
     q1 = q0;
@@ -207,7 +224,7 @@ TEST(Movel, SingularityRefusedOrSlowedNeverTooFast) {
     q1[4] = -u(0.02, 0.4);  // the wrist crosses q5 = 0 (in joint space)
     q1[5] += u(-0.3, 0.3);
     PathReport rep;
-    const MotionStatus st = plan_movel(c, q0, fk(c, q1), cl, MovelOptions{}, stub(), tr, &rep);
+    const MotionStatus st = plan_movel(c, q0, fk(c, q1), cl, MovelOptions{}, ik, tr, &rep);
     const std::string ctx = "singular line " + std::to_string(m) + " (" + to_string(st) + ")";
     switch (st) {
       case MotionStatus::singularity: ++singular; break;
@@ -228,7 +245,7 @@ TEST(Movel, SingularityRefusedOrSlowedNeverTooFast) {
   }
   std::printf("\n  singular lines: %d refused as singularity, %d slowed, %d ok, %d other refusals\n", singular, slowed,
               fine, other);
-  CHECK(singular + slowed > 500);
+  CHECK(singular + slowed > 150);
   // Slowing disabled: the same kind of line is refused as joint_velocity or singularity.
   MovelOptions strict;
   strict.allow_slowdown = false;
@@ -240,7 +257,7 @@ TEST(Movel, SingularityRefusedOrSlowedNeverTooFast) {
     q1[4] = -0.05;
     q1[5] += 0.01 * m;
     PathReport rep;
-    const MotionStatus st = plan_movel(c, q0, fk(c, q1), cl, strict, stub(), tr, &rep);
+    const MotionStatus st = plan_movel(c, q0, fk(c, q1), cl, strict, ik, tr, &rep);
     if (st == MotionStatus::joint_velocity || st == MotionStatus::singularity) ++refused;
     CHECK(st != MotionStatus::slowed_near_singularity);
   }
@@ -251,11 +268,11 @@ TEST(Movel, StopStaysOnTheLineAndResumeFinishes) {
   std::mt19937_64 g(5003);
   const CartesianLimits cl{};
   CartesianTrajectory tr;
-  for (int m = 0; m < 200; ++m) {
+  for (int m = 0; m < 100; ++m) {
     const JointVector q0 = random_q(g);
     JointVector q1 = q0;
     for (int i = 0; i < 6; ++i) q1[i] += std::uniform_real_distribution<double>(-0.25, 0.25)(g);
-    if (!is_ok(plan_movel(c, q0, fk(c, q1), cl, {}, stub(), tr))) continue;
+    if (!is_ok(plan_movel(c, q0, fk(c, q1), cl, {}, ik, tr))) continue;
     const double ts = std::uniform_real_distribution<double>(0, tr.duration)(g);
     JointVector before, qd, qdd;
     tr.sample_ik(ts, before, qd, qdd);
@@ -280,7 +297,7 @@ TEST(Movel, ZeroHeapInPlanAndSample) {
   static CartesianTrajectory tr;
   JointVector q, qd, qdd;
   servoarm::test::AllocScope scope;
-  CHECK(is_ok(plan_movel(c, q0, t, {}, {}, stub(), tr)));
+  CHECK(is_ok(plan_movel(c, q0, t, {}, {}, ik, tr)));
   for (int k = 0; k < 100; ++k) {
     tr.sample_ik(k * tr.duration / 100, q, qd, qdd);
     tr.sample_precomputed(k * tr.duration / 100, q, qd, qdd);
@@ -289,23 +306,3 @@ TEST(Movel, ZeroHeapInPlanAndSample) {
   CHECK_EQUAL(0u, scope.end());
 }
 
-// The library's fallback solver (what armctl plan movel uses) on random lines.
-TEST(Movel, FallbackNewtonIkOnRandomLines) {
-  std::mt19937_64 g(5004);
-  const CartesianLimits cl{};
-  int planned = 0;
-  double worst = 0;
-  CartesianTrajectory tr;
-  for (int m = 0; m < 300; ++m) {
-    const JointVector q0 = random_q(g);
-    JointVector q1 = q0;
-    for (int i = 0; i < 6; ++i) q1[i] += std::uniform_real_distribution<double>(-0.25, 0.25)(g);
-    PathReport rep;
-    const MotionStatus st = plan_movel(c, q0, fk(c, q1), cl, {}, IkSolver{&ik_nearest_newton, nullptr}, tr, &rep);
-    if (!is_ok(st)) continue;
-    ++planned;
-    const std::string e = check_movel(c, tr, cl, true, 1e-6, worst);
-    if (!e.empty()) FAIL(("fallback ik line " + std::to_string(m) + ": " + e).c_str());
-  }
-  CHECK(planned > 250);
-}
