@@ -42,9 +42,5 @@ bool pose_error(const Chain& chain, const JointVector& q, const Pose& target, do
 /// polishes a closed-form solution that lost digits near a singularity.
 void refine(const Chain& chain, const Pose& target, JointVector& q, int iterations, bool position_only);
 
-/// Recognise the reduced (chapter 4) arms; sets model.method. ik_reduced.cpp.
-bool detect_reduced(IkModel& model);
-/// Solve a reduced arm (model.method planar_2r, planar_3, spatial_3, pitch_4).
-void solve_reduced(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res);
 
 }  // namespace servoarm::kin::detail

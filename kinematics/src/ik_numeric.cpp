@@ -32,7 +32,14 @@ double uniform(std::uint64_t& s) { return static_cast<double>(splitmix(s) >> 11)
 void clamp_limits(const Chain& c, JointVector& q) {
   for (int j = 0; j < c.n_joints; ++j) {
     const DhRow& r = c.joint(j);
-    if (r.type == JointType::revolute && !(std::isfinite(r.lower) && std::isfinite(r.upper))) q[j] = wrap_pi(q[j]);
+    if (r.type == JointType::revolute) {
+      if (!(std::isfinite(r.lower) && std::isfinite(r.upper))) {
+        q[j] = wrap_pi(q[j]);
+      } else if (r.upper - r.lower >= 2 * M_PI - 1e-12) {
+        // a full turn fits: wrap into [lower, lower + 2 pi) instead of stopping at the limit
+        q[j] = r.lower + std::fmod(std::fmod(q[j] - r.lower, 2 * M_PI) + 2 * M_PI, 2 * M_PI);
+      }
+    }
     q[j] = std::clamp(q[j], r.lower, r.upper);
   }
 }

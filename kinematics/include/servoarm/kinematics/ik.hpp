@@ -159,7 +159,7 @@ struct IkNumericOptions {
   /// Task weights: position x, y, z (per metre), rotation x, y, z (per radian).
   Eigen::Matrix<double, 6, 1> task_weights = Eigen::Matrix<double, 6, 1>::Ones();
   int max_iterations = 100;       ///< per start
-  int max_restarts = 4;           ///< extra random starts if the first fails
+  int max_restarts = 8;           ///< extra random starts if the first fails
   double tolerance_position = 1e-9;  ///< m
   double tolerance_rotation = 1e-9;  ///< rad
   double initial_damping = 1e-3;
