@@ -540,15 +540,27 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
   return n;
 }
 
+// wrap_pi without a libm call for the small multiples of 2 pi that atan2
+// sums produce (std::remainder costs ~20 ns; it ran 100+ times per solve).
+double fast_wrap(double a) {
+  for (int i = 0; i < 4; ++i) {
+    if (a > kPi) a -= 2.0 * kPi;
+    else if (a <= -kPi) a += 2.0 * kPi;
+    else return a;
+  }
+  return wrap_pi(a);
+}
+
 // Wrap a revolute joint into its limits where a 2*pi equivalent fits (nearest
 // to ref); prismatic joints are left alone.
 double wrap_joint(const DhRow& r, double q, double ref) {
   if (r.type != JointType::revolute) return q;
-  double best = wrap_pi(q);
+  const double w = fast_wrap(q);
+  double best = w;
   bool found = false;
   double best_d = 0;
   for (int k = -2; k <= 2; ++k) {
-    const double v = wrap_pi(q) + 2.0 * kPi * k;
+    const double v = w + 2.0 * kPi * k;
     if (v < r.lower - 1e-12 || v > r.upper + 1e-12) continue;
     const double d = std::abs(v - ref);
     if (!found || d < best_d) {
@@ -562,7 +574,7 @@ double wrap_joint(const DhRow& r, double q, double ref) {
 
 double joint_distance(const Chain& c, int j, double a, double b) {
   const double d = a - b;
-  return c.joint(j).type == JointType::revolute ? std::abs(wrap_pi(d)) : std::abs(d);
+  return c.joint(j).type == JointType::revolute ? std::abs(fast_wrap(d)) : std::abs(d);
 }
 
 bool same_solution(const Chain& c, const JointVector& a, const JointVector& b) {
