@@ -82,6 +82,9 @@ struct PathReport {
   double max_condition = 0;                           ///< largest Jacobian condition number seen
 };
 
+/// A planned movel. Holds a pointer to the chain and the IK context it was
+/// planned with: both must outlive it. About 37 kB (the knot tables): keep it in
+/// a preallocated slot, not on a small RT stack.
 struct CartesianTrajectory {
   const Chain* chain = nullptr;
   IkSolver ik{};
