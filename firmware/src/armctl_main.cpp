@@ -11,6 +11,10 @@
 #include "servoarm/firmware/cli_ik.hpp"
 #define SERVOARM_HAVE_CLI_IK 1
 #endif
+#if __has_include("servoarm/firmware/cli_console.hpp")
+#include "servoarm/firmware/cli_console.hpp"
+#define SERVOARM_HAVE_CLI_CONSOLE 1
+#endif
 #if __has_include("servoarm/firmware/cli_plan.hpp")
 #include "servoarm/firmware/cli_plan.hpp"
 #define SERVOARM_HAVE_CLI_PLAN 1
@@ -73,6 +77,9 @@ int main(int argc, char** argv) {
   }
 #ifdef SERVOARM_HAVE_CLI_PLAN
   if (cmd == "plan") return cli_plan(argc - 1, argv + 1);
+#endif
+#ifdef SERVOARM_HAVE_CLI_CONSOLE
+  if (cmd == "console") return console_main(argc, argv);  // armfw console client (serial / pty)
 #endif
   return usage_error("unknown command '" + cmd + "' (see armctl --help)");
 }

@@ -1,0 +1,118 @@
+// armfw and armctl as processes: a script on stdin (exits at EOF when done), the
+// pty console driven by `armctl console -c ...`, and a bad config refused naming the key.
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <thread>
+
+#include <CppUTest/TestHarness.h>
+
+namespace {
+
+std::string run_capture(const std::string& cmd, int& status) {
+  std::string out;
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return out;
+  char buf[4096];
+  std::size_t n;
+  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+  status = pclose(p);
+  return out;
+}
+
+int count(const std::string& s, const std::string& what) {
+  int n = 0;
+  for (std::size_t p = s.find(what); p != std::string::npos; p = s.find(what, p + 1)) ++n;
+  return n;
+}
+
+}  // namespace
+
+TEST_GROUP(Process){};
+
+TEST(Process, StdinScriptAnswersEveryLineAndExitsAtEof) {
+  int st = 0;
+  const std::string out = run_capture(
+      "printf 'enable\\nmovej 10 -20 30 0 20 0 speed=100\\nwait\\nmovej 999 0 0 0 0 0\\nfrobnicate\\nstatus\\n' | " ARMFW_PATH
+      " --sim --priority 0 2>/dev/null",
+      st);
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
+  LONGS_EQUAL(4, count(out, "\nok") + (out.rfind("ok", 0) == 0 ? 1 : 0));
+  LONGS_EQUAL(2, count(out, "error: "));
+  CHECK_TEXT(out.find("error: limits") != std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("error: unknown_command") != std::string::npos, out.c_str());
+  const auto jp = out.find("joints=[");
+  CHECK_TEXT(jp != std::string::npos, out.c_str());
+  double j1 = 0;
+  CHECK(std::sscanf(out.c_str() + jp + 8, "%lf", &j1) == 1);
+  CHECK_TEXT(std::fabs(j1 - 10.0) < 0.01, out.c_str());  // measured: within an encoder count or two
+}
+
+TEST(Process, BadConfigRefusedNamingTheKey) {
+  char path[] = "/tmp/armfw_cfg_XXXXXX";
+  const int fd = mkstemp(path);
+  CHECK(fd >= 0);
+  const std::string text = "[loop]\nrate_hz = 50\n";
+  CHECK(write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size()));
+  close(fd);
+  int st = 0;
+  const std::string out = run_capture(std::string(ARMFW_PATH) + " --config " + path + " 2>&1 </dev/null", st);
+  unlink(path);
+  CHECK(WIFEXITED(st) && WEXITSTATUS(st) == 2);
+  CHECK_TEXT(out.find("loop.rate_hz") != std::string::npos, out.c_str());
+}
+
+TEST(Process, PtyConsoleDrivenByArmctl) {
+  int errpipe[2];
+  CHECK(pipe(errpipe) == 0);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    dup2(errpipe[1], 2);
+    close(errpipe[0]);
+    const int devnull = open("/dev/null", O_RDWR);
+    dup2(devnull, 0);
+    dup2(devnull, 1);
+    execl(ARMFW_PATH, ARMFW_PATH, "--sim", "--pty", "--no-stdin", "--priority", "0", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(errpipe[1]);
+  // Read stderr until the pty path is printed.
+  std::string err;
+  std::string pty;
+  const auto t0 = std::chrono::steady_clock::now();
+  fcntl(errpipe[0], F_SETFL, O_NONBLOCK);
+  while (pty.empty() && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(20)) {
+    char b[256];
+    const ssize_t r = read(errpipe[0], b, sizeof b);
+    if (r > 0) err.append(b, static_cast<std::size_t>(r));
+    const auto p = err.find("console pty: ");
+    if (p != std::string::npos) {
+      const auto e = err.find('\n', p);
+      if (e != std::string::npos) pty = err.substr(p + 13, e - p - 13);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  CHECK_TEXT(!pty.empty(), err.c_str());
+  int st = 0;
+  const std::string out = run_capture(std::string(ARMCTL_PATH) + " console --serial " + pty +
+                                          " --timeout 30 -c enable -c 'G1 Z10' -c 'movej 0 -10 20 0 10 0' -c wait"
+                                          " -c M114 -c 'movel 99999 0 0' 2>&1",
+                                      st);
+  kill(pid, SIGTERM);
+  int fst = 0;
+  waitpid(pid, &fst, 0);
+  close(errpipe[0]);
+  // G1 Z10 at the zero pose of the puma is refused (wrist singular); the rest ok; movel 99999 refused.
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 1, out.c_str());
+  CHECK_TEXT(out.find("ok enabled") != std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("ok queued") != std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("X:") != std::string::npos, out.c_str());
+  CHECK_TEXT(count(out, "error: ") == 2, out.c_str());
+  CHECK(WIFEXITED(fst) && WEXITSTATUS(fst) == 0);
+}
