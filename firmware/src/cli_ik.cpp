@@ -148,6 +148,7 @@ int cli_kin_ik(int argc, char** argv) {
   };
   std::vector<Out> outs;
   kin::Status status;
+  std::string status_text;  // overrides to_string(status) where the code says too little
   const char* method = kin::to_string(model.method);
   double residual_p = 0, residual_r = 0;
   int iterations = -1;
@@ -179,15 +180,17 @@ int cli_kin_ik(int argc, char** argv) {
         outs.push_back({s.q, s.branch, s.within_limits, s.singular});
         status = s.singular ? kin::Status::singular : kin::Status::ok;
       } else {
-        status = r.status == kin::Status::out_of_limits || !keep ? kin::Status::out_of_limits : kin::Status::unreachable;
+        status = kin::Status::out_of_limits;
+        if (keep && r.status != kin::Status::out_of_limits) status_text = "no_solution_on_branch";
         err = keep ? "no solution on the current branch within the limits" : "no solution within the joint limits";
       }
     }
   }
   const bool failed = !(status == kin::Status::ok || status == kin::Status::singular);
+  if (status_text.empty()) status_text = kin::to_string(status);
   if (json) {
     std::string s = "{\"robot\": \"" + std::string(chain.name.data()) + "\", \"method\": \"" + method +
-                    "\", \"status\": \"" + kin::to_string(status) + "\", \"length_unit\": \"" +
+                    "\", \"status\": \"" + status_text + "\", \"length_unit\": \"" +
                     length_unit_name(chain) + "\", \"angle_unit\": \"" + angle_unit_name(chain) + "\"";
     if (iterations >= 0)
       s += ", \"iterations\": " + std::to_string(iterations) + ", \"position_residual\": " +
@@ -203,7 +206,7 @@ int cli_kin_ik(int argc, char** argv) {
     s += "]}";
     std::printf("%s\n", s.c_str());
   } else {
-    std::printf("robot %s: method %s, status %s\n", chain.name.data(), method, kin::to_string(status));
+    std::printf("robot %s: method %s, status %s\n", chain.name.data(), method, status_text.c_str());
     if (iterations >= 0)
       std::printf("numerical: %d iterations, residual %s %s, %s %s\n", iterations,
                   num(residual_p / chain.length_unit).c_str(), length_unit_name(chain), num(residual_r / A).c_str(),
