@@ -438,3 +438,40 @@ TEST(IkSphericalWrist, BadInputGivesAClearStatusAndNoNaN) {
   Eigen::Matrix3d R;
   CHECK(kin::rotation_from_quaternion(0, 0, 0, 0, R) == kin::Status::bad_input);
 }
+
+TEST(IkSphericalWrist, NearestFnAdapterForMovelAndNumericFallback) {
+  // kin::IkSolver{ik_nearest_fn, &model}: what plan_movel calls at every knot.
+  const kin::IkModel m = prepared("ist6");
+  std::mt19937_64 rng(12);
+  for (int k = 0; k < 200; ++k) {
+    const kin::JointVector q = random_q(m.chain, rng);
+    kin::JointVector q_near = q;
+    for (int j = 0; j < 6; ++j) q_near[j] += 1e-3;
+    kin::JointVector out;
+    const kin::Status s = kin::ik_nearest_fn(m.chain, fk(m.chain, q), q_near, out, const_cast<kin::IkModel*>(&m));
+    CHECK(kin::is_ok(s));
+    if (s == kin::Status::ok) CHECK(joint_gap(m.chain, out, q) < 1e-6);
+  }
+  // A chain with no closed form (vvr_vr, five joints): the numerical solver from the current joints.
+  kin::IkModel v;
+  kin::ik_prepare(model("vvr_vr"), v);
+  std::mt19937_64 rng2(13);
+  int ok = 0;
+  for (int k = 0; k < 200; ++k) {
+    const kin::JointVector q = random_q(v.chain, rng2);
+    kin::JointVector q_near = q;
+    for (int j = 0; j < 5; ++j) q_near[j] += 0.02;
+    kin::JointVector out;
+    if (kin::ik_solve_nearest(v, fk(v.chain, q), q_near, out) == kin::Status::ok) {
+      ++ok;
+      const kin::Pose X = fk(v.chain, out), T = fk(v.chain, q);
+      CHECK((X.translation() - T.translation()).norm() < 1e-9);
+      CHECK(kin::within_limits(v.chain, out, 1e-12));
+    }
+  }
+  CHECK(ok >= 195);
+  kin::JointVector out;
+  kin::Pose far = kin::Pose::Identity();
+  far.translation() << 5, 0, 0;
+  STRCMP_EQUAL("unreachable", kin::to_string(kin::ik_solve_nearest(m, far, kin::JointVector::Zero(6), out)));
+}

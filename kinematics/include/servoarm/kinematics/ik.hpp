@@ -129,9 +129,13 @@ Status ik_prepare(const Chain& chain, IkModel& model);
 /// Every closed-form solution of `target` (tool pose in the base frame, SI).
 /// `q_ref` (optional, SI, n joints): the current joints -- used for the free
 /// joint of a singular family (keep it) and to pick the 2*pi equivalent inside
-/// the limits. For planar/pitch arms only what the arm controls is read from
-/// the pose: see IkMethod (phi = rotation about the base z axis for planar_3,
-/// elevation of the tool x axis above the base xy plane for pitch_4).
+/// the limits. Arms with fewer than six joints read from the pose what they
+/// control: planar_2r and spatial_3 the tool position only; planar_3 the
+/// position and the heading phi about the base z axis (the rotation's z-angle);
+/// pitch_4 the position, joint 1 from the direction of axis 2 (= axis 4) that
+/// the target rotation implies, and the pitch phi about that axis. Their
+/// solutions are verified against that reachable part (position_error,
+/// rotation_error say how far it is from the full target).
 /// Never returns NaN: failures leave count = 0.
 void ik_solve_all(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& result);
 
