@@ -116,3 +116,69 @@ TEST(Process, PtyConsoleDrivenByArmctl) {
   CHECK_TEXT(count(out, "error: ") == 2, out.c_str());
   CHECK(WIFEXITED(fst) && WEXITSTATUS(fst) == 0);
 }
+
+// Printrun's printcore (the library under pronsole) as the G-code sender over the pty.
+// Skipped when Debian's printrun-common is not installed.
+TEST(Process, PrintrunPrintcoreDrivesThePty) {
+  if (access("/usr/lib/python3/dist-packages/printrun/printcore.py", R_OK) != 0) {
+    std::printf("\n  (skipped: printrun-common not installed)\n");
+    return;
+  }
+  char path[] = "/tmp/armfw_pc_XXXXXX";
+  const int fd = mkstemp(path);
+  CHECK(fd >= 0);
+  const std::string py =
+      "import sys, time\n"
+      "from printrun.printcore import printcore\n"
+      "got = []\n"
+      "p = printcore()\n"
+      "p.recvcb = lambda l: got.append(l.strip())\n"
+      "p.connect(sys.argv[1], 115200)\n"
+      "t0 = time.time()\n"
+      "while not p.online and time.time() - t0 < 10: time.sleep(0.05)\n"
+      "print('online', p.online)\n"
+      "for l in ['M17', 'movej 20 -40 160 10 -50 30 speed=100', 'M400', 'G91', 'G1 Z20 F3000', 'G90', 'M400', 'M114']:\n"
+      "    n = len(got)\n"
+      "    p.send_now(l)\n"
+      "    t1 = time.time()\n"
+      "    while not any(x.startswith('ok') or x.startswith('error') for x in got[n:]) and time.time() - t1 < 20: time.sleep(0.01)\n"
+      "p.disconnect()\n"
+      "print('\\n'.join(got))\n";
+  CHECK(write(fd, py.data(), py.size()) == static_cast<ssize_t>(py.size()));
+  close(fd);
+  int errpipe[2];
+  CHECK(pipe(errpipe) == 0);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    dup2(errpipe[1], 2);
+    close(errpipe[0]);
+    const int devnull = open("/dev/null", O_RDWR);
+    dup2(devnull, 0);
+    dup2(devnull, 1);
+    execl(ARMFW_PATH, ARMFW_PATH, "--sim", "--pty", "--no-stdin", "--priority", "0", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(errpipe[1]);
+  std::string err, pty;
+  const auto t0 = std::chrono::steady_clock::now();
+  fcntl(errpipe[0], F_SETFL, O_NONBLOCK);
+  while (pty.empty() && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(20)) {
+    char b[256];
+    const ssize_t r = read(errpipe[0], b, sizeof b);
+    if (r > 0) err.append(b, static_cast<std::size_t>(r));
+    const auto p = err.find("console pty: ");
+    if (p != std::string::npos && err.find('\n', p) != std::string::npos)
+      pty = err.substr(p + 13, err.find('\n', p) - p - 13);
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  int st = 0;
+  const std::string out = run_capture("/usr/bin/python3 " + std::string(path) + " " + pty + " 2>&1", st);
+  kill(pid, SIGTERM);
+  waitpid(pid, nullptr, 0);
+  close(errpipe[0]);
+  unlink(path);
+  CHECK_TEXT(out.find("online True") != std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("error") == std::string::npos, out.c_str());
+  CHECK_TEXT(count(out, "\nok") >= 8, out.c_str());
+  CHECK_TEXT(out.find("\nX:") != std::string::npos, out.c_str());
+}
