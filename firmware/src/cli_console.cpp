@@ -1,8 +1,11 @@
 #include "servoarm/firmware/cli_console.hpp"
 
+#include <fcntl.h>
 #include <poll.h>
+#include <termios.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -11,11 +14,58 @@
 #include <vector>
 
 #include "servoarm/firmware/cli_common.hpp"
-#include "servoarm/firmware/transport.hpp"
 
 namespace servoarm::fw {
 
 namespace {
+
+// armctl links only the CLI library, so the few lines of termios set-up live here
+// (armfw's side is firmware/src/transport.cpp).
+bool write_all(int fd, const std::string& s) {
+  std::size_t off = 0;
+  while (off < s.size()) {
+    const ssize_t w = ::write(fd, s.data() + off, s.size() - off);
+    if (w > 0) off += static_cast<std::size_t>(w);
+    else if (w < 0 && errno == EINTR) continue;
+    else if (w < 0 && errno == EAGAIN) {
+      pollfd p{fd, POLLOUT, 0};
+      ::poll(&p, 1, 100);
+    } else return false;
+  }
+  return true;
+}
+
+int open_tty(const std::string& path, int baud, std::string& err) {
+  speed_t sp = B115200;
+  switch (baud) {
+    case 9600: sp = B9600; break;
+    case 19200: sp = B19200; break;
+    case 38400: sp = B38400; break;
+    case 57600: sp = B57600; break;
+    case 115200: sp = B115200; break;
+    case 230400: sp = B230400; break;
+    case 460800: sp = B460800; break;
+    case 921600: sp = B921600; break;
+    default: err = "unsupported baud rate " + std::to_string(baud); return -1;
+  }
+  const int fd = ::open(path.c_str(), O_RDWR | O_NOCTTY);
+  if (fd < 0) {
+    err = path + ": " + std::strerror(errno);
+    return -1;
+  }
+  termios tio{};
+  if (tcgetattr(fd, &tio) != 0) {
+    err = path + ": not a terminal";
+    ::close(fd);
+    return -1;
+  }
+  cfmakeraw(&tio);
+  tio.c_cflag |= CLOCAL | CREAD;
+  cfsetispeed(&tio, sp);
+  cfsetospeed(&tio, sp);
+  tcsetattr(fd, TCSANOW, &tio);
+  return fd;
+}
 
 const char* kConsoleUsage =
     "usage: armctl console --serial PATH [--baud N] [--timeout SEC] [-c LINE]...\n"
@@ -97,9 +147,16 @@ int console_main(int argc, char** argv) {
     }
   }
   if (path.empty()) return usage_error("console: give --serial PATH (the pty armfw printed, or a serial device)");
-  FdTransport t;
-  const std::string e = open_serial(t, path, baud);
-  if (!e.empty()) return usage_error("console: " + e);
+  std::string e;
+  const int fd = open_tty(path, baud, e);
+  if (fd < 0) return usage_error("console: " + e);
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  struct {
+    int rd, wr;
+  } t{fd, fd};
   std::string buf;
   int rc = kExitOk;
   if (!lines.empty()) {
