@@ -44,6 +44,7 @@ const char* to_string(Cmd c) {
     case Cmd::enable: return "enable";
     case Cmd::disable: return "disable";
     case Cmd::home: return "home";
+    case Cmd::home_zero: return "home zero";
     case Cmd::movej: return "movej";
     case Cmd::movel: return "movel";
     case Cmd::stop: return "stop";
@@ -391,7 +392,14 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       }
       break;
     case Cmd::stats:
-    case Cmd::status: case Cmd::enable: case Cmd::disable: case Cmd::home: case Cmd::stop: case Cmd::estop:
+    case Cmd::home:
+      if (nargs == 1 && ieq(ws.w[1], "zero")) {
+        c.cmd = Cmd::home_zero;
+        break;
+      }
+      if (nargs != 0) return fail(CmdError::arg_count, "home takes no argument or 'zero'");
+      break;
+    case Cmd::status: case Cmd::enable: case Cmd::disable: case Cmd::stop: case Cmd::estop:
     case Cmd::reset: case Cmd::limits: case Cmd::config: case Cmd::wait: case Cmd::hold: case Cmd::resume:
       if (nargs != 0) return fail(CmdError::arg_count, "%s takes no arguments", to_string(cmd));
       break;
@@ -420,7 +428,7 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       if (c.count != 0 && c.count != n_joints) return fail(CmdError::arg_count, "fk takes no values or %d joint values, got %d", n_joints, c.count);
       break;
     }
-    case Cmd::none: case Cmd::dwell: case Cmd::position: case Cmd::gmove: case Cmd::temperature:
+    case Cmd::none: case Cmd::dwell: case Cmd::position: case Cmd::gmove: case Cmd::temperature: case Cmd::home_zero:
       return fail(CmdError::internal, "unreachable command kind");
   }
   out = c;

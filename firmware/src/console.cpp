@@ -423,6 +423,8 @@ void Console::do_help(Session& s, std::string_view topic) {
       "  status                 state, queue, joints (deg / mm), tool pose\n"
       "  enable | disable       power the drives up / down (disable while moving stops first)\n"
       "  home                   joint move to the home pose\n"
+      "  home zero              (disabled arm) the current joint positions become joint zero until\n"
+      "                         restart; answers the drives' zero_offset = [...] for the config file\n"
       "  movej j1..jn [speed=%] joint move; joints in deg (prismatic mm); speed 1-100 % (default 50)\n"
       "  movel x y z [rx ry rz] [speed=mm/s]   straight line of the tool point; x y z in mm;\n"
       "                         rx ry rz in deg, fixed-axis roll-pitch-yaw: R = Rz(rz) Ry(ry) Rx(rx);\n"
@@ -511,6 +513,7 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::reset: simple(RequestOp::reset); return;
     case Cmd::hold: simple(RequestOp::hold); return;
     case Cmd::resume: simple(RequestOp::resume); return;
+    case Cmd::home_zero: simple(RequestOp::set_zero); return;
     case Cmd::home: queue_joint(s, cfg_.home, cfg_.default_joint_speed_pct); return;
     case Cmd::movej: {
       kin::JointVector q(n_);

@@ -59,6 +59,7 @@ const char* to_string(RequestOp op) {
     case RequestOp::reset: return "reset";
     case RequestOp::hold: return "hold";
     case RequestOp::resume: return "resume";
+    case RequestOp::set_zero: return "set_zero";
   }
   return "?";
 }
@@ -241,7 +242,9 @@ void Controller::supervise(TimePoint now) {
         case hal::Status::sdo_abort:
         case hal::Status::protocol_error:
         case hal::Status::not_configured:
-        case hal::Status::capacity: c = FaultCause::bus_error; break;
+        case hal::Status::capacity:
+        case hal::Status::not_supported:
+        case hal::Status::bad_state: c = FaultCause::bus_error; break;
       }
       std::snprintf(d, sizeof d, "%s, error code 0x%04X", hal::to_string(fb.fault), unsigned(fb.error_code));
       raise_fault(c, j, d);
@@ -293,8 +296,46 @@ void Controller::supervise(TimePoint now) {
 // ---------------------------------------------------------------------------
 
 void Controller::handle_request(const Request& r, TimePoint now) {
-  char m[96];
+  char m[sizeof(Reply::message)];
   switch (r.op) {
+    case RequestOp::set_zero: {
+      if (state_ != ArmState::disabled) {
+        std::snprintf(m, sizeof m, "home zero needs the arm disabled (it is %s)", to_string(state_));
+        reply(r.seq, RtResult::bad_state, m);
+        return;
+      }
+      // Check every joint before touching any, so the request applies to all or none.
+      for (int j = 0; j < n_; ++j) {
+        const auto ju = static_cast<std::size_t>(j);
+        const hal::JointFeedback& fb = bus_.feedback(ju);
+        if (fb.state != hal::JointState::disabled || !fb.valid) {
+          std::snprintf(m, sizeof m, "joint %d: drive is %s%s, not disabled", j + 1, hal::to_string(fb.state),
+                        fb.valid ? "" : " (no position feedback)");
+          reply(r.seq, RtResult::bad_state, m);
+          return;
+        }
+        if (!(limits_.lower[ju] <= 0.0 && 0.0 <= limits_.upper[ju])) {
+          std::snprintf(m, sizeof m, "joint %d: zero lies outside its limits", j + 1);
+          reply(r.seq, RtResult::bad_state, m);
+          return;
+        }
+      }
+      int len = std::snprintf(m, sizeof m, "zero_offset = [");
+      for (int j = 0; j < n_; ++j) {
+        const hal::Status st = bus_.set_position_zero(static_cast<std::size_t>(j));
+        if (st != hal::Status::ok) {  // not_supported: nothing was changed (first joint), else a bug
+          std::snprintf(m, sizeof m, "joint %d: %s", j + 1, hal::describe(st));
+          reply(r.seq, RtResult::bad_state, m);
+          return;
+        }
+        if (len > 0 && static_cast<std::size_t>(len) < sizeof m)
+          len += std::snprintf(m + len, sizeof m - static_cast<std::size_t>(len), "%s%lld%s", j ? ", " : "",
+                               static_cast<long long>(bus_.zero_offset(static_cast<std::size_t>(j))), j + 1 == n_ ? "]" : "");
+      }
+      hold_measured();
+      reply(r.seq, RtResult::ok, m);
+      return;
+    }
     case RequestOp::estop:
       // Acts in this cycle: quick stop ramp (category 1), then power off.
       if (state_ != ArmState::estop) {

@@ -324,6 +324,18 @@ Status CanopenServoBus::nmt(NmtCommand cmd, std::uint8_t node) {
 
 void CanopenServoBus::disable() { target_ = cia402::Target::disabled; }
 
+Status CanopenServoBus::set_position_zero(std::size_t j) {
+  if (j >= cfg_.joint_count) return Status::invalid_argument;
+  JointFeedback& fb = fb_[j];
+  if (!joints_[j].have_status || !fb.valid) return Status::not_configured;
+  if (fb.state == JointState::enabled || fb.state == JointState::enabling) return Status::bad_state;
+  JointScaling& s = cfg_.joints[j].scaling;
+  s.zero_offset = joints_[j].actual_counts;
+  fb.position = s.to_joint(joints_[j].actual_counts);  // 0 from now on
+  joints_[j].target_counts = joints_[j].actual_counts;
+  return Status::ok;
+}
+
 void CanopenServoBus::quick_stop() { target_ = cia402::Target::quick_stop; }
 
 Status CanopenServoBus::read(TimePoint now) {
@@ -479,6 +491,8 @@ void CanopenServoBus::describe_fault(std::size_t j, char* buf, std::size_t size)
     case Status::protocol_error:
     case Status::not_configured:
     case Status::capacity:
+    case Status::not_supported:
+    case Status::bad_state:
       break;
   }
   std::snprintf(buf, size, "node %u: %s (%s)", unsigned(jt.node), to_string(fb.fault), describe(fb.fault));

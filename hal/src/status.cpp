@@ -20,6 +20,8 @@ const char* to_string(Status s) {
     case Status::heartbeat_lost: return "heartbeat_lost";
     case Status::not_configured: return "not_configured";
     case Status::capacity: return "capacity";
+    case Status::not_supported: return "not_supported";
+    case Status::bad_state: return "bad_state";
   }
   return "unknown_status";
 }
@@ -42,6 +44,8 @@ const char* describe(Status s) {
     case Status::heartbeat_lost: return "node heartbeat not received within the consumer time";
     case Status::not_configured: return "not configured or not brought up yet";
     case Status::capacity: return "more items than the fixed capacity";
+    case Status::not_supported: return "operation not supported by this backend";
+    case Status::bad_state: return "not allowed in the current state";
   }
   return "unknown status";
 }

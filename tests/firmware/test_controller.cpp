@@ -468,6 +468,52 @@ TEST(Controller, FullQueueAnswersBusyAndDropsNothing) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+TEST(Controller, HomeZeroMakesTheCurrentPositionJointZeroOnlyWhenDisabled) {
+  Rig r;
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 10 -20 30 5 20 -15 speed=100")));
+  CHECK(is_ok(r.cmd("wait")));
+  const kin::JointVector before = r.q_act();
+  // Powered arm: refused, nothing changes.
+  const std::string powered = r.cmd("home zero");
+  CHECK_TEXT(powered.rfind("error: bad_state", 0) == 0, powered.c_str());
+  CHECK(max_abs_diff(r.q_act(), before) < 1e-9);
+  CHECK(is_error(r.cmd("home zero now")));
+  CHECK(is_error(r.cmd("home 1")));
+
+  CHECK(is_ok(r.cmd("disable")));
+  r.run(0.2);
+  const std::string a = r.cmd("home zero");
+  CHECK_TEXT(is_ok(a), a.c_str());
+  r.run(0.01);
+  // Every joint now reads zero where it stands ...
+  CHECK_TEXT(r.q_act().cwiseAbs().maxCoeff() < 1e-12, a.c_str());
+  // ... and the reported offsets are the drive counts of the old positions
+  // (default scaling: 131072 counts per joint revolution, direction +1).
+  const std::size_t lb = a.find('['), rb = a.find(']');
+  CHECK_TEXT(lb != std::string::npos && rb != std::string::npos, a.c_str());
+  std::vector<double> offs;
+  for (std::size_t p = lb + 1; p < rb;) {
+    std::size_t used = 0;
+    offs.push_back(std::stod(a.substr(p, rb - p), &used));
+    p += used;
+    while (p < rb && (a[p] == ',' || a[p] == ' ')) ++p;
+  }
+  LONGS_EQUAL(6, static_cast<long>(offs.size()));
+  for (int j = 0; j < 6; ++j)
+    DOUBLES_EQUAL(before[j] * 131072.0 / (2 * M_PI), offs[static_cast<std::size_t>(j)], 1.0);
+  // Moves are relative to the new zero; the drives keep their physical positions.
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 5 0 0 0 0 0 speed=100")));
+  CHECK(is_ok(r.cmd("wait")));
+  r.run(0.05);
+  kin::JointVector goal = kin::JointVector::Zero(6);
+  goal[0] = 5 * kDeg;
+  CHECK(max_abs_diff(r.q_act(), goal) < 0.02 * kDeg);
+  DOUBLES_EQUAL(offs[0] + 5 * kDeg * 131072.0 / (2 * M_PI), static_cast<double>(r.app.servo->last_target_counts(0)), 1.0);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 TEST(Controller, StopDropsQueueAndDisableWhileMovingStopsFirst) {
   Rig r;
   r.enable();

@@ -53,6 +53,7 @@ enum class Cmd : std::uint8_t {
   dwell,     ///< G4
   position,  ///< M114
   gmove,     ///< G0/G1 (axes in `axis_mask`, values in vals[0..5])
+  home_zero, ///< `home zero`: the current joint positions become joint zero (arm disabled)
   temperature,  ///< M105 (senders poll it): answers ok T:0 /0
 };
 const char* to_string(Cmd c);

@@ -75,7 +75,9 @@ enum class RtResult : std::uint8_t {
 };
 const char* to_string(RtResult r);
 
-enum class RequestOp : std::uint8_t { enable, disable, stop, estop, reset, hold, resume };
+/// set_zero: `home zero`, the current joint positions become joint zero (ServoBus::set_position_zero);
+/// only in the disabled state, and only when 0 lies within every joint's limits.
+enum class RequestOp : std::uint8_t { enable, disable, stop, estop, reset, hold, resume, set_zero };
 const char* to_string(RequestOp op);
 
 struct Request {
@@ -86,7 +88,7 @@ struct Request {
 struct Reply {
   std::uint32_t seq = 0;
   RtResult result = RtResult::ok;
-  char message[96] = {};
+  char message[160] = {};
 };
 
 enum class MotionKind : std::uint8_t { joint, cartesian, dwell };

@@ -73,6 +73,10 @@ class CanopenServoBus final : public ServoBus {
   void quick_stop() override;
   Status read(TimePoint now) override;
   Status write(std::span<const double> setpoints, TimePoint now) override;
+  Status set_position_zero(std::size_t j) override;
+  std::int64_t zero_offset(std::size_t j) const override {
+    return j < cfg_.joint_count ? cfg_.joints[j].scaling.zero_offset : 0;
+  }
   const JointFeedback& feedback(std::size_t j) const override { return fb_[j < cfg_.joint_count ? j : 0]; }
   const char* last_error() const override { return error_; }
 

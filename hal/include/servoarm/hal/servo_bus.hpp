@@ -77,6 +77,24 @@ class ServoBus {
   ///         nothing is sent for that joint, it holds); bus errors from CanBus::send
   virtual Status write(std::span<const double> setpoints, TimePoint now) = 0;
 
+  /// Real-time: make joint `j`'s measured position its zero from now on (homing on the
+  /// current position, for drives with incremental encoders). The CANopen master moves its
+  /// own zero offset (JointScaling::zero_offset): nothing is written to the drive and the
+  /// drive's position is untouched, so it lasts until restart; zero_offset() gives the value
+  /// to put into the configuration. Only while the joint is not powered (a powered joint
+  /// would see its setpoint jump).
+  /// @retval ok; invalid_argument (no such joint); not_configured (no position feedback yet);
+  ///         bad_state (joint enabled or enabling); not_supported (protocol without it)
+  virtual Status set_position_zero(std::size_t j) {
+    (void)j;
+    return Status::not_supported;
+  }
+  /// Real-time: drive position (drive units, e.g. counts) at joint zero; 0 when not applicable.
+  virtual std::int64_t zero_offset(std::size_t j) const {
+    (void)j;
+    return 0;
+  }
+
   /// Real-time: latest feedback of joint `j` (j < joint_count()).
   virtual const JointFeedback& feedback(std::size_t j) const = 0;
 

@@ -25,6 +25,8 @@ enum class Status : std::int8_t {
   heartbeat_lost = -10,  ///< no heartbeat within the configured consumer time
   not_configured = -11,  ///< call order: configure()/bring-up not done yet
   capacity = -12,        ///< more nodes/filters/joints than the fixed capacity
+  not_supported = -13,   ///< the backend/protocol does not offer this operation
+  bad_state = -14,       ///< not allowed in the joint's current state (e.g. enabled)
 };
 
 /// Short name of a status, e.g. "bus_off". Never returns null.
