@@ -7,12 +7,10 @@
 
 namespace servoarm::fw {
 
-SimPlant::SimPlant(hal::Clock& clock, int joints, int first_node, const sim::MotorParams& motor) : clock_(clock) {
+SimPlant::SimPlant(hal::Clock& clock, const std::vector<std::uint8_t>& nodes, const sim::MotorParams& motor) : clock_(clock) {
   bus_ = std::make_unique<hal::SimBus>(clock, 50 * hal::kMicrosecond);
   master_ep_ = bus_->open(4096);
   sim_ep_ = bus_->open(4096);
-  std::vector<std::uint8_t> nodes;
-  for (int j = 0; j < joints; ++j) nodes.push_back(static_cast<std::uint8_t>(first_node + j));
   arm_ = std::make_unique<sim::ArmSim>(*sim_ep_, nodes, motor, 7);
   arm_->power_on(clock.now());
 }
@@ -107,10 +105,47 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override) {
   if (n < 1 || n > static_cast<int>(hal::kMaxServoJoints)) return "robot: joint count not supported by the servo bus";
   if (!cfg.home_deg.empty() && static_cast<int>(cfg.home_deg.size()) != n)
     return "config: motion.home_deg: needs " + std::to_string(n) + " values for " + cfg.robot;
-  if (cfg.first_node + n - 1 > 127) return "config: bus.first_node: node ids would exceed 127";
+  if (!cfg.drives.empty() && static_cast<int>(cfg.drives.size()) != n)
+    return "config: drive: " + std::to_string(cfg.drives.size()) + " [[drive]] tables for the " + std::to_string(n) +
+           " joints of " + cfg.robot + " (give one per joint, or none)";
+  // Per-drive limits narrow the description's (so IK, planning and the supervisor all see them).
+  for (int j = 0; j < static_cast<int>(cfg.drives.size()); ++j) {
+    const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
+    kin::DhRow& row = chain.joint(j);
+    const double unit = row.type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;
+    const std::string w = "config: drive[" + std::to_string(j + 1) + "].";
+    if (!d.limits.empty()) {
+      const double lo = d.limits[0] * unit, hi = d.limits[1] * unit;
+      if (lo < row.lower - 1e-12 || hi > row.upper + 1e-12)
+        return w + "limits: [" + std::to_string(d.limits[0]) + ", " + std::to_string(d.limits[1]) +
+               "] reaches outside the robot description's [" + std::to_string(row.lower / unit) + ", " +
+               std::to_string(row.upper / unit) + "]";
+      row.lower = lo;
+      row.upper = hi;
+    }
+    if (d.max_velocity > 0) {
+      const double v = d.max_velocity * unit;
+      if (row.dynamics.max_velocity > 0 && v > row.dynamics.max_velocity * (1 + 1e-12))
+        return w + "max_velocity: " + std::to_string(d.max_velocity) + " is above the robot description's " +
+               std::to_string(row.dynamics.max_velocity / unit);
+      row.dynamics.max_velocity = v;
+    }
+  }
+  std::vector<std::uint8_t> nodes;
+  for (int j = 0; j < n; ++j) {
+    const int id = cfg.drives.empty() || cfg.drives[static_cast<std::size_t>(j)].node == 0
+                       ? cfg.first_node + j
+                       : cfg.drives[static_cast<std::size_t>(j)].node;
+    if (id > 127) return "config: bus.first_node: node id of joint " + std::to_string(j + 1) + " would exceed 127";
+    for (int k = 0; k < j; ++k)
+      if (nodes[static_cast<std::size_t>(k)] == id)
+        return "config: drive[" + std::to_string(j + 1) + "].node: node " + std::to_string(id) + " is joint " +
+               std::to_string(k + 1) + "'s too";
+    nodes.push_back(static_cast<std::uint8_t>(id));
+  }
   hal::CanBus* canbus = nullptr;
   if (cfg.can == "sim") {
-    plant = std::make_unique<SimPlant>(*clock, n, cfg.first_node, sim_motor);
+    plant = std::make_unique<SimPlant>(*clock, nodes, sim_motor);
     canbus = &plant->master_bus();
   } else {
     socketcan = std::make_unique<hal::SocketCanBus>();
@@ -124,9 +159,17 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override) {
   mc.heartbeat_timeout = static_cast<hal::Duration>(cfg.heartbeat_timeout_ms * 1e6);
   for (int j = 0; j < n; ++j) {
     auto& jc = mc.joints[static_cast<std::size_t>(j)];
-    jc.node_id = static_cast<std::uint8_t>(cfg.first_node + j);
+    jc.node_id = nodes[static_cast<std::size_t>(j)];
     jc.scaling.counts_per_unit = cfg.counts_per_rev;
     jc.scaling.gear_ratio = cfg.gear_ratio;
+    if (!cfg.drives.empty()) {
+      const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
+      if (d.counts_per_rev > 0) jc.scaling.counts_per_unit = d.counts_per_rev;
+      if (d.gear_ratio != 0) jc.scaling.gear_ratio = d.gear_ratio;
+      jc.scaling.direction = d.direction;
+      jc.scaling.zero_offset = static_cast<std::int32_t>(d.zero_offset);
+      if (d.heartbeat_timeout_ms > 0) jc.heartbeat_timeout = static_cast<hal::Duration>(d.heartbeat_timeout_ms * 1e6);
+    }
     jc.scaling.kind = chain.joint(j).type == kin::JointType::prismatic ? hal::JointScaling::Kind::prismatic
                                                                        : hal::JointScaling::Kind::revolute;
   }

@@ -21,6 +21,15 @@ const ConfigKey kConfigKeys[] = {
     {"bus.heartbeat_period_ms", "50", "heartbeat period written to every drive"},
     {"bus.heartbeat_timeout_ms", "150", "heartbeat consumer time: silence longer than this faults the arm"},
     {"bus.start_timeout_s", "5", "time allowed for drive bring-up at start"},
+    {"drive", "[] (one per joint from the [bus] values)", "[[drive]] tables, one per joint in chain order (keys below); give all or none"},
+    {"drive.node", "bus.first_node + k", "CANopen node id of this joint's drive (1..127, unique)"},
+    {"drive.counts_per_rev", "bus.counts_per_rev", "encoder counts per motor revolution (per motor mm for prismatic joints)"},
+    {"drive.gear_ratio", "bus.gear_ratio", "motor revolutions (mm) per joint revolution (mm); not 0"},
+    {"drive.direction", "1", "1 or -1: sign between the joint and the drive"},
+    {"drive.zero_offset", "0", "drive position in counts at joint zero (what `home zero` answers)"},
+    {"drive.limits", "the robot description's", "[lower, upper] in deg / mm; must lie within the description's limits"},
+    {"drive.max_velocity", "the robot description's", "deg/s or mm/s; at most the description's"},
+    {"drive.heartbeat_timeout_ms", "bus.heartbeat_timeout_ms", "heartbeat consumer time for this drive"},
     {"safety.following_error_deg", "5", "largest |commanded - actual| per joint (deg, or mm for prismatic)"},
     {"safety.enable_timeout_s", "2", "time for every drive to reach operation enabled"},
     {"safety.feedback_timeout_ms", "50", "an enabled drive silent (no position feedback) this long faults the arm"},
@@ -70,7 +79,41 @@ struct Reader {
   }
 };
 
+bool apply_drive(Reader& r, const std::string& where, const std::string& key, const toml::value& v, DriveConfig& d) {
+  const std::string k = where + "." + key;
+  if (key == "node") return r.integer(v, k, d.node);
+  if (key == "counts_per_rev") return r.num(v, k, d.counts_per_rev);
+  if (key == "gear_ratio") return r.num(v, k, d.gear_ratio);
+  if (key == "direction") return r.integer(v, k, d.direction);
+  if (key == "zero_offset") {
+    if (!v.is_integer()) return r.fail(k, "expected an integer (drive counts)");
+    d.zero_offset = v.as_integer();
+    return true;
+  }
+  if (key == "limits") {
+    if (!v.is_array() || v.as_array().size() != 2) return r.fail(k, "expected [lower, upper]");
+    d.limits.assign(2, 0.0);
+    return r.num(v.as_array()[0], k, d.limits[0]) && r.num(v.as_array()[1], k, d.limits[1]);
+  }
+  if (key == "max_velocity") return r.num(v, k, d.max_velocity);
+  if (key == "heartbeat_timeout_ms") return r.num(v, k, d.heartbeat_timeout_ms);
+  return r.fail(k, "unknown key (node, counts_per_rev, gear_ratio, direction, zero_offset, limits, max_velocity, heartbeat_timeout_ms)");
+}
+
 bool apply(Reader& r, const std::string& key, const toml::value& v, FwConfig& c) {
+  if (key == "drive") {
+    if (!v.is_array()) return r.fail(key, "expected [[drive]] tables");
+    c.drives.clear();
+    for (const auto& t : v.as_array()) {
+      const std::string where = "drive[" + std::to_string(c.drives.size() + 1) + "]";
+      if (!t.is_table()) return r.fail(where, "expected a table");
+      DriveConfig d;
+      for (const auto& [k2, v2] : t.as_table())
+        if (!apply_drive(r, where, k2, v2, d)) return false;
+      c.drives.push_back(d);
+    }
+    return true;
+  }
   if (key == "robot") return r.str(v, key, c.robot);
   if (key == "loop.rate_hz") return r.num(v, key, c.rate_hz);
   if (key == "loop.priority") return r.integer(v, key, c.priority);
@@ -130,6 +173,18 @@ std::string validate(const FwConfig& c) {
   if (!(c.max_linear_speed_mm_s > 0 && c.max_linear_speed_mm_s <= 5000)) return bad("motion.max_linear_speed_mm_s", "must be within (0, 5000]");
   if (!(c.linear_speed_mm_s > 0 && c.linear_speed_mm_s <= c.max_linear_speed_mm_s))
     return bad("motion.linear_speed_mm_s", "must be within (0, max_linear_speed_mm_s]");
+  for (std::size_t i = 0; i < c.drives.size(); ++i) {
+    const DriveConfig& d = c.drives[i];
+    const std::string w = "drive[" + std::to_string(i + 1) + "].";
+    if (d.node != 0 && (d.node < 1 || d.node > 127)) return w + "node: must be within 1..127";
+    if (!(d.counts_per_rev >= 0)) return w + "counts_per_rev: must be > 0";
+    if (d.direction != 1 && d.direction != -1) return w + "direction: must be 1 or -1";
+    if (d.zero_offset < INT32_MIN || d.zero_offset > INT32_MAX) return w + "zero_offset: outside the drive's 32-bit position range";
+    if (!d.limits.empty() && !(d.limits[0] < d.limits[1])) return w + "limits: lower must be below upper";
+    if (!(d.max_velocity >= 0)) return w + "max_velocity: must be > 0";
+    if (!(d.heartbeat_timeout_ms == 0 || (d.heartbeat_timeout_ms > c.heartbeat_period_ms && d.heartbeat_timeout_ms <= 60000)))
+      return w + "heartbeat_timeout_ms: must be above bus.heartbeat_period_ms and <= 60000";
+  }
   switch (c.console_baud) {
     case 9600: case 19200: case 38400: case 57600: case 115200: case 230400: case 460800: case 921600: break;
     default: return bad("console.baud", "unsupported baud rate");
@@ -195,7 +250,27 @@ std::string to_toml(const FwConfig& c) {
                 c.following_error_deg, c.enable_timeout_s, c.feedback_timeout_ms, home.c_str(), c.joint_speed_pct, c.linear_speed_mm_s,
                 c.max_linear_speed_mm_s, c.console_stdin ? "true" : "false", c.console_pty ? "true" : "false",
                 c.console_serial.c_str(), c.console_baud);
-  return b;
+  std::string out = b;
+  for (const DriveConfig& d : c.drives) {
+    char l[512];
+    std::snprintf(l, sizeof l,
+                  "[[drive]]\nnode = %d\ncounts_per_rev = %g\ngear_ratio = %g\ndirection = %d\nzero_offset = %lld\n",
+                  d.node, d.counts_per_rev, d.gear_ratio, d.direction, static_cast<long long>(d.zero_offset));
+    out += l;
+    if (!d.limits.empty()) {
+      std::snprintf(l, sizeof l, "limits = [%g, %g]\n", d.limits[0], d.limits[1]);
+      out += l;
+    }
+    if (d.max_velocity > 0) {
+      std::snprintf(l, sizeof l, "max_velocity = %g\n", d.max_velocity);
+      out += l;
+    }
+    if (d.heartbeat_timeout_ms > 0) {
+      std::snprintf(l, sizeof l, "heartbeat_timeout_ms = %g\n", d.heartbeat_timeout_ms);
+      out += l;
+    }
+  }
+  return out;
 }
 
 }  // namespace servoarm::fw

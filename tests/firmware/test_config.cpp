@@ -55,6 +55,15 @@ TEST(Config, BadFilesNameTheKeyAndLeaveConfigUntouched) {
       {"robot = 5\n", "robot"},
       {"[loop\nrate_hz = 1000\n", "syntax"},
       {"[loop]\nrate_hz = nan\n", "loop.rate_hz"},
+      {"drive = 5\n", "drive"},
+      {"[[drive]]\nnode = 1\n[[drive]]\ndirection = 0\n", "drive[2].direction"},
+      {"[[drive]]\nnosuch = 1\n", "drive[1].nosuch"},
+      {"[[drive]]\nlimits = [1]\n", "drive[1].limits"},
+      {"[[drive]]\nlimits = [10, -10]\n", "drive[1].limits"},
+      {"[[drive]]\nzero_offset = 1.5\n", "drive[1].zero_offset"},
+      {"[[drive]]\nzero_offset = 9000000000\n", "drive[1].zero_offset"},
+      {"[[drive]]\nnode = 200\n", "drive[1].node"},
+      {"[[drive]]\nheartbeat_timeout_ms = 5\n", "drive[1].heartbeat_timeout_ms"},
   };
   for (const Case& k : cases) {
     FwConfig c;
@@ -70,9 +79,32 @@ TEST(Config, EveryDocumentedKeyIsAccepted) {
   CHECK(kConfigKeyCount >= 20);
   FwConfig c;
   STRCMP_EQUAL("", load_config_text(to_toml(c), "defaults", c).c_str());
+  DriveConfig d;  // every optional [[drive]] field set, so to_toml writes them all
+  d.node = 7;
+  d.counts_per_rev = 4096;
+  d.gear_ratio = 100;
+  d.direction = -1;
+  d.zero_offset = -12345;
+  d.limits = {-90, 45};
+  d.max_velocity = 30;
+  d.heartbeat_timeout_ms = 200;
+  c.drives = {d, d};
+  c.drives[1].node = 8;
   const std::string toml = to_toml(c);
+  FwConfig back;
+  STRCMP_EQUAL("", load_config_text(toml, "round-trip", back).c_str());
+  LONGS_EQUAL(2, back.drives.size());
+  LONGS_EQUAL(8, back.drives[1].node);
+  LONGS_EQUAL(-1, back.drives[0].direction);
+  LONGS_EQUAL(-12345, back.drives[0].zero_offset);
+  DOUBLES_EQUAL(45, back.drives[0].limits[1], 0);
+  DOUBLES_EQUAL(200, back.drives[1].heartbeat_timeout_ms, 0);
   for (int i = 0; i < kConfigKeyCount; ++i) {
     std::string k = kConfigKeys[i].key;
+    if (k == "drive") {
+      CHECK(toml.find("[[drive]]") != std::string::npos);
+      continue;
+    }
     const auto dot = k.find('.');
     const std::string leaf = dot == std::string::npos ? k : k.substr(dot + 1);
     if (toml.find(leaf + " = ") == std::string::npos) FAIL(("key not in to_toml: " + k).c_str());

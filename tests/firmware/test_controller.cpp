@@ -514,6 +514,65 @@ TEST(Controller, HomeZeroMakesTheCurrentPositionJointZeroOnlyWhenDisabled) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+TEST(Controller, DriveTablesSetNodesScalingAndNarrowLimits) {
+  // Bad [[drive]] sets are refused at build time naming the drive and key.
+  struct Bad {
+    int count;
+    int joint;  // 0-based joint given the bad value
+    const char* what;
+    const char* must_contain;
+  };
+  const Bad bad[] = {
+      {5, -1, "", "drive: 5 [[drive]] tables"},
+      {6, 1, "limits", "drive[2].limits"},
+      {6, 2, "node", "drive[3].node"},
+      {6, 3, "max_velocity", "drive[4].max_velocity"},
+  };
+  for (const Bad& b : bad) {
+    FwConfig c;
+    c.can = "sim";
+    c.drives.resize(static_cast<std::size_t>(b.count));
+    if (b.joint >= 0) {
+      DriveConfig& d = c.drives[static_cast<std::size_t>(b.joint)];
+      if (std::string(b.what) == "limits") d.limits = {-400, 10};
+      if (std::string(b.what) == "node") {
+        c.drives[0].node = 40;
+        d.node = 40;
+      }
+      if (std::string(b.what) == "max_velocity") d.max_velocity = 1e6;
+    }
+    hal::ManualClock clock;
+    App app;
+    const std::string e = app.build(c, &clock);
+    CHECK_TEXT(e.find(b.must_contain) != std::string::npos, (std::string(b.must_contain) + " <- " + e).c_str());
+  }
+
+  // Node ids 20..25 in reverse joint order, joint 2 reversed with a gear, joint 1 offset and narrowed.
+  FwConfig c;
+  c.drives.resize(6);
+  for (int j = 0; j < 6; ++j) c.drives[static_cast<std::size_t>(j)].node = 25 - j;
+  c.drives[0].zero_offset = 5000;
+  c.drives[0].limits = {-30, 30};
+  c.drives[1].direction = -1;
+  c.drives[1].gear_ratio = 2;
+  Rig r({}, c);
+  r.enable();
+  CHECK(is_error(r.cmd("movej 40 0 0 0 0 0")));  // outside the narrowed limit of joint 1
+  const std::string lim = r.cmd("limits");
+  CHECK_TEXT(lim.find("[-30.000, 30.000]") != std::string::npos, lim.c_str());
+  CHECK(is_ok(r.cmd("movej 20 10 0 0 0 0 speed=100")));
+  CHECK(is_ok(r.cmd("wait")));
+  r.run(0.05);
+  kin::JointVector goal = kin::JointVector::Zero(6);
+  goal[0] = 20 * kDeg;
+  goal[1] = 10 * kDeg;
+  CHECK(max_abs_diff(r.q_act(), goal) < 0.02 * kDeg);
+  const double cpr = 131072.0 / (2 * M_PI);
+  DOUBLES_EQUAL(5000 + 20 * kDeg * cpr, static_cast<double>(r.app.servo->last_target_counts(0)), 1.0);
+  DOUBLES_EQUAL(-2 * 10 * kDeg * cpr, static_cast<double>(r.app.servo->last_target_counts(1)), 1.0);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 TEST(Controller, StopDropsQueueAndDisableWhileMovingStopsFirst) {
   Rig r;
   r.enable();

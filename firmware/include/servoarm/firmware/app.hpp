@@ -24,7 +24,8 @@ namespace servoarm::fw {
 /// (what `--sim` runs: the drives behave like separate devices, with lag).
 class SimPlant {
  public:
-  SimPlant(hal::Clock& clock, int joints, int first_node, const sim::MotorParams& motor = {});
+  /// Virtual drives with these node ids (one per joint) on a fresh in-process bus.
+  SimPlant(hal::Clock& clock, const std::vector<std::uint8_t>& nodes, const sim::MotorParams& motor = {});
   ~SimPlant();
   hal::CanBus& master_bus() { return *master_ep_; }
   /// Start the drive thread (real time). Tests with a ManualClock call step() instead.

@@ -8,6 +8,19 @@
 
 namespace servoarm::fw {
 
+/// One `[[drive]]` table: the drive of one joint (chain order). Unset fields
+/// (NaN / 0 / empty) take the [bus] defaults and the robot description's limits.
+struct DriveConfig {
+  int node = 0;                          ///< CANopen node id; 0 = bus.first_node + joint index
+  double counts_per_rev = 0;             ///< 0 = bus.counts_per_rev (counts per mm for prismatic joints)
+  double gear_ratio = 0;                 ///< 0 = bus.gear_ratio
+  int direction = 1;                     ///< +1 / -1 between joint and drive
+  std::int64_t zero_offset = 0;          ///< drive counts at joint zero
+  std::vector<double> limits;            ///< {lower, upper} deg / mm; empty = the description's
+  double max_velocity = 0;               ///< deg/s or mm/s; 0 = the description's
+  double heartbeat_timeout_ms = 0;       ///< 0 = bus.heartbeat_timeout_ms
+};
+
 struct FwConfig {
   std::string robot = "puma560";       ///< built-in model name or a description file path
   // [loop]
@@ -23,6 +36,7 @@ struct FwConfig {
   double heartbeat_period_ms = 50.0;
   double heartbeat_timeout_ms = 150.0;
   double start_timeout_s = 5.0;
+  std::vector<DriveConfig> drives;     ///< [[drive]] tables; empty = defaults for every joint
   // [safety]
   double following_error_deg = 5.0;
   double enable_timeout_s = 2.0;
