@@ -1,0 +1,107 @@
+// Cost of one control cycle (Controller::cycle: read feedback, supervisor,
+// motion sample, limit/NaN checks, 6 RPDOs + SYNC, telemetry) for the PUMA 560
+// on six virtual CiA 402 drives on the in-process bus, single thread, simulated
+// clock (no sleeping, no second thread: the CPU cost only, not the wake-up latency
+// that tests/bench/run_loop_bench.sh measures).
+//
+// Every iteration also steps the virtual drives (they answer the SYNC with their
+// TPDOs, which the next cycle reads) and, when the queue runs dry, queues the next
+// move through the console; only Controller::cycle is timed (manual time, one
+// steady_clock pair per iteration, ~40 ns of it). Figures: tests/bench/RESULTS.md.
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <string>
+
+#include "servoarm/firmware/app.hpp"
+
+namespace {
+
+using namespace servoarm;
+
+struct FwRig {
+  hal::ManualClock clock;
+  fw::App app;
+  fw::Session s;
+  bool ok = false;
+
+  FwRig() {
+    fw::FwConfig cfg;
+    cfg.can = "sim";
+    if (!app.build(cfg, &clock).empty()) return;
+    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
+    if (!app.boot().empty()) return;
+    app.console->set_idle([this] { tick(); });
+    ok = command("enable") && wait_state(fw::ArmState::idle);
+  }
+  ~FwRig() { clock.set_idle_hook(nullptr); }
+  void tick() {
+    clock.advance(hal::kMillisecond);
+    app.plant->step(clock.now());
+    app.ctl->cycle(clock.now());
+  }
+  /// One period; returns the seconds spent in Controller::cycle alone.
+  double timed_tick() {
+    clock.advance(hal::kMillisecond);
+    app.plant->step(clock.now());
+    const auto t0 = std::chrono::steady_clock::now();
+    app.ctl->cycle(clock.now());
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  bool command(const std::string& line) {
+    s.out.clear();
+    app.console->execute(s, line);
+    for (int i = 0; i < 20000 && app.console->busy(s); ++i) {
+      tick();
+      app.console->poll(s);
+    }
+    return s.out.rfind("ok", 0) == 0 || s.out.find("\nok") != std::string::npos;
+  }
+  bool wait_state(fw::ArmState st) {
+    for (int i = 0; i < 5000 && app.ctl->telemetry().state != st; ++i) tick();
+    return app.ctl->telemetry().state == st;
+  }
+};
+
+// Keeps a move in progress: whenever the queue runs dry, queue the next one
+// (outside the timed region).
+template <typename Next>
+void run_cycles(benchmark::State& state, FwRig& r, Next next) {
+  if (!r.ok) {
+    state.SkipWithError("firmware rig did not come up");
+    return;
+  }
+  int k = 0;
+  for (auto _ : state) {
+    if (r.app.ctl->motions().empty() && k >= 0 && !next(k++)) k = -1;
+    state.SetIterationTime(r.timed_tick());
+  }
+  if (k < 0) state.SkipWithError("a move was refused");
+  const fw::Telemetry t = r.app.ctl->telemetry();
+  if (t.state == fw::ArmState::fault) state.SkipWithError(t.fault_text);
+}
+
+void BM_FwCycle_Idle(benchmark::State& state) {
+  FwRig r;
+  run_cycles(state, r, [](int) { return true; });
+}
+BENCHMARK(BM_FwCycle_Idle)->UseManualTime();
+
+void BM_FwCycle_Movej(benchmark::State& state) {
+  FwRig r;
+  run_cycles(state, r, [&r](int k) {
+    return r.command(k % 2 ? "movej 20 -40 160 10 -50 30 speed=60" : "movej -20 -60 140 -10 -30 -30 speed=60");
+  });
+}
+BENCHMARK(BM_FwCycle_Movej)->UseManualTime();
+
+void BM_FwCycle_Movel(benchmark::State& state) {
+  FwRig r;
+  // From the demo's working pose, straight lines of 60 mm back and forth along x (G91).
+  if (r.ok) r.ok = r.command("movej 20 -40 160 10 -50 30 speed=100") && r.command("wait") && r.command("G91");
+  run_cycles(state, r, [&r](int k) { return r.command(k % 2 ? "G1 X-60 F6000" : "G1 X60 F6000"); });
+}
+BENCHMARK(BM_FwCycle_Movel)->UseManualTime();
+
+
+}  // namespace
