@@ -1,5 +1,6 @@
 // armfw: the firmware binary. Control loop on its own thread, consoles on the
-// main thread (stdin/stdout, pty, serial), drives through the CANopen master.
+// main thread (stdin/stdout, pty, serial, CAN ISO-TP through its bridge thread),
+// drives through the CANopen master.
 //
 //   armfw --sim [--robot puma560]          virtual servos on the in-process bus
 //   armfw --config FILE                    everything from a TOML file
@@ -46,6 +47,8 @@ int usage(FILE* f, int code) {
                "  --cpu N               pin the control thread to CPU N\n"
                "  --pty                 also open a pty console and print its path\n"
                "  --serial PATH [--baud N]   also run a console on a serial TTY\n"
+               "  --can-console IFACE   also run a console over CAN (ISO-TP) on IFACE (vcan0, can0, or sim);\n"
+               "                        ids from console.can_rx_id / can_tx_id (default 0x7E0 in, 0x7E8 out)\n"
                "  --no-stdin            no console on stdin/stdout\n"
                "  -h, --help            this text\n");
   return code;
@@ -234,51 +237,12 @@ int run_bench(App& app, double seconds) {
   return 0;
 }
 
-int console_loop(App& app, std::vector<FdTransport*>& ts, bool exit_on_eof) {
-  std::vector<Session> sessions(ts.size());
-  for (std::size_t i = 0; i < ts.size(); ++i) sessions[i].name = ts[i]->name;
-  for (;;) {
-    if (g_quit) break;
-    std::vector<pollfd> pfds;
-    for (auto* t : ts) pfds.push_back(pollfd{t->eof ? -1 : t->rd, POLLIN, 0});
-    ::poll(pfds.data(), pfds.size(), 10);
-    const std::string ev = app.console->drain_events();
-    bool all_eof_done = true;
-    for (std::size_t i = 0; i < ts.size(); ++i) {
-      FdTransport& t = *ts[i];
-      Session& s = sessions[i];
-      if (!t.eof && (pfds[i].revents & (POLLIN | POLLHUP | POLLERR))) {
-        char buf[512];
-        const ssize_t r = ::read(t.rd, buf, sizeof buf);
-        if (r > 0) {
-          app.console->feed(s, std::string_view(buf, static_cast<std::size_t>(r)));
-        } else if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR && errno != EIO)) {
-          if (t.name == "stdin") {
-            t.eof = true;
-            if (!s.partial.empty()) app.console->feed(s, "\n");
-          }
-        }
-      }
-      app.console->poll(s);
-      if (!ev.empty()) s.out += ev;
-      if (!s.out.empty()) {
-        write_all(t.wr, s.out);
-        s.out.clear();
-      }
-      if (t.name == "stdin" && !(t.eof && !app.console->busy(s))) all_eof_done = false;
-      if (t.name != "stdin") all_eof_done = all_eof_done && exit_on_eof;
-    }
-    if (exit_on_eof && all_eof_done) break;
-  }
-  return 0;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
   FwConfig cfg;
   bool sim = false, demo = false, interactive = false, pty = false, no_stdin = false;
-  std::string config_file, robot, serial;
+  std::string config_file, robot, serial, can_console;
   double bench = -1, rate = -1;
   int priority = -1, cpu = -2, baud = -1;
   for (int i = 1; i < argc; ++i) {
@@ -311,6 +275,7 @@ int main(int argc, char** argv) {
     else if (a == "--cpu") cpu = static_cast<int>(number("--cpu", 0, 1023));
     else if (a == "--pty") pty = true;
     else if (a == "--serial") serial = value("--serial");
+    else if (a == "--can-console") can_console = value("--can-console");
     else if (a == "--baud") baud = static_cast<int>(number("--baud", 1, 4000000));
     else if (a == "--no-stdin") no_stdin = true;
     else if (a == "--config-keys") {
@@ -342,6 +307,7 @@ int main(int argc, char** argv) {
   if (pty) cfg.console_pty = true;
   if (!serial.empty()) cfg.console_serial = serial;
   if (baud > 0) cfg.console_baud = baud;
+  if (!can_console.empty()) cfg.console_can = can_console;
   if (no_stdin) cfg.console_stdin = false;
 
   App app;
@@ -377,7 +343,8 @@ int main(int argc, char** argv) {
     if (demo) rc = run_demo(app);
     if (!demo || interactive) {
       std::vector<FdTransport*> ts;
-      FdTransport in, pt, se;
+      FdTransport in, pt, se, ct;
+      CanConsole can;
       if (app.cfg.console_stdin) {
         in.name = "stdin";
         in.rd = 0;
@@ -404,11 +371,26 @@ int main(int argc, char** argv) {
           ts.push_back(&se);
         }
       }
+      if (!app.cfg.console_can.empty()) {
+        CanConsoleConfig cc;
+        cc.iface = app.cfg.console_can;
+        cc.rx_id = static_cast<std::uint32_t>(app.cfg.console_can_rx_id);
+        cc.tx_id = static_cast<std::uint32_t>(app.cfg.console_can_tx_id);
+        const std::string e = can.open(cc, app.plant ? &app.plant->bus() : nullptr, ct);
+        if (!e.empty()) {
+          std::fprintf(stderr, "armfw: can console: %s\n", e.c_str());
+          rc = 1;
+        } else {
+          std::fprintf(stderr, "armfw: can console: ISO-TP on %s\n", ct.path.c_str());
+          ts.push_back(&ct);
+        }
+      }
       if (rc == 0 && !ts.empty()) {
         std::fprintf(stderr, "armfw: %s ready (%d joints, %.0f Hz); type help\n", app.cfg.robot.c_str(), app.chain.n_joints,
                      app.cfg.rate_hz);
-        console_loop(app, ts, app.cfg.console_stdin);
+        serve_consoles(*app.console, ts, app.cfg.console_stdin, &g_quit);
       }
+      can.stop();
     }
   }
   // Shut down: stop motion, power down, stop the loop, statistics at exit.

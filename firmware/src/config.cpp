@@ -41,6 +41,9 @@ const ConfigKey kConfigKeys[] = {
     {"console.pty", "false", "open a pseudo-terminal console and print its path"},
     {"console.serial", "\"\"", "serial device for a console (e.g. /dev/ttyS0); \"\" = none"},
     {"console.baud", "115200", "serial baud rate (9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)"},
+    {"console.can", "\"\"", "console over CAN (ISO-TP): a SocketCAN interface (can0, vcan0), \"sim\" (the in-process bus), \"\" = none"},
+    {"console.can_rx_id", "0x7E0", "11-bit id armfw receives console requests on (ISO-TP); outside the CANopen ids of nodes 1..127"},
+    {"console.can_tx_id", "0x7E8", "11-bit id armfw answers on (ISO-TP); outside the CANopen ids of nodes 1..127"},
 };
 const int kConfigKeyCount = static_cast<int>(sizeof kConfigKeys / sizeof kConfigKeys[0]);
 
@@ -147,10 +150,26 @@ bool apply(Reader& r, const std::string& key, const toml::value& v, FwConfig& c)
   if (key == "console.pty") return r.boolean(v, key, c.console_pty);
   if (key == "console.serial") return r.str(v, key, c.console_serial);
   if (key == "console.baud") return r.integer(v, key, c.console_baud);
+  if (key == "console.can") return r.str(v, key, c.console_can);
+  if (key == "console.can_rx_id") return r.integer(v, key, c.console_can_rx_id);
+  if (key == "console.can_tx_id") return r.integer(v, key, c.console_can_tx_id);
   return r.fail(key, "unknown key (see armfw --config-keys)");
 }
 
 }  // namespace
+
+const char* can_console_id_problem(int id) {
+  // CANopen predefined connection set (CiA 301) of nodes 1..127: NMT 0x000, SYNC 0x080,
+  // EMCY 0x081-0x0FF, TIME 0x100, PDOs 0x181-0x57F, SDO 0x581-0x67F, heartbeat 0x701-0x77F;
+  // LSS (CiA 305) 0x7E4 / 0x7E5.
+  if (id < 0 || id > 0x7FF) return "must be an 11-bit id (0x000..0x7FF)";
+  if (id <= 0x100) return "collides with CANopen NMT / SYNC / EMCY / TIME (0x000-0x100)";
+  if (id >= 0x181 && id <= 0x57F) return "collides with the CANopen PDOs of nodes 1..127 (0x181-0x57F)";
+  if (id >= 0x581 && id <= 0x67F) return "collides with the CANopen SDOs of nodes 1..127 (0x581-0x67F)";
+  if (id >= 0x701 && id <= 0x77F) return "collides with the CANopen heartbeats of nodes 1..127 (0x701-0x77F)";
+  if (id == 0x7E4 || id == 0x7E5) return "collides with CANopen LSS (0x7E4 / 0x7E5)";
+  return nullptr;
+}
 
 std::string validate(const FwConfig& c) {
   auto bad = [](const char* k, const char* why) { return std::string(k) + ": " + why; };
@@ -189,6 +208,10 @@ std::string validate(const FwConfig& c) {
     case 9600: case 19200: case 38400: case 57600: case 115200: case 230400: case 460800: case 921600: break;
     default: return bad("console.baud", "unsupported baud rate");
   }
+  if (c.console_can.size() > 15) return bad("console.can", "must be \"\", \"sim\" or an interface name (1..15 chars)");
+  if (const char* why = can_console_id_problem(c.console_can_rx_id)) return std::string("console.can_rx_id: ") + why;
+  if (const char* why = can_console_id_problem(c.console_can_tx_id)) return std::string("console.can_tx_id: ") + why;
+  if (c.console_can_rx_id == c.console_can_tx_id) return bad("console.can_tx_id", "must differ from console.can_rx_id");
   return "";
 }
 
@@ -244,12 +267,13 @@ std::string to_toml(const FwConfig& c) {
                 "[bus]\ncan = \"%s\"\nfirst_node = %d\ncounts_per_rev = %g\ngear_ratio = %g\nheartbeat_period_ms = %g\n"
                 "heartbeat_timeout_ms = %g\nstart_timeout_s = %g\n[safety]\nfollowing_error_deg = %g\nenable_timeout_s = %g\nfeedback_timeout_ms = %g\n"
                 "[motion]\nhome_deg = %s\njoint_speed_pct = %g\nlinear_speed_mm_s = %g\nmax_linear_speed_mm_s = %g\n"
-                "[console]\nstdin = %s\npty = %s\nserial = \"%s\"\nbaud = %d\n",
+                "[console]\nstdin = %s\npty = %s\nserial = \"%s\"\nbaud = %d\ncan = \"%s\"\ncan_rx_id = 0x%03X\ncan_tx_id = 0x%03X\n",
                 c.robot.c_str(), c.rate_hz, c.priority, c.cpu, c.lock_memory ? "true" : "false", c.can.c_str(), c.first_node,
                 c.counts_per_rev, c.gear_ratio, c.heartbeat_period_ms, c.heartbeat_timeout_ms, c.start_timeout_s,
                 c.following_error_deg, c.enable_timeout_s, c.feedback_timeout_ms, home.c_str(), c.joint_speed_pct, c.linear_speed_mm_s,
                 c.max_linear_speed_mm_s, c.console_stdin ? "true" : "false", c.console_pty ? "true" : "false",
-                c.console_serial.c_str(), c.console_baud);
+                c.console_serial.c_str(), c.console_baud, c.console_can.c_str(), static_cast<unsigned>(c.console_can_rx_id),
+                static_cast<unsigned>(c.console_can_tx_id));
   std::string out = b;
   for (const DriveConfig& d : c.drives) {
     char l[512];

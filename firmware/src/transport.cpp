@@ -2,12 +2,17 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <sys/socket.h>
 #include <termios.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
+
+#include "servoarm/firmware/commands.hpp"
+#include "servoarm/firmware/console.hpp"
 
 namespace servoarm::fw {
 
@@ -108,6 +113,153 @@ bool write_all(int fd, const std::string& s) {
     return false;
   }
   return true;
+}
+
+void serve_consoles(Console& console, const std::vector<FdTransport*>& ts, bool exit_on_eof,
+                    const volatile std::sig_atomic_t* quit, const std::atomic<bool>* stop) {
+  std::vector<Session> sessions(ts.size());
+  for (std::size_t i = 0; i < ts.size(); ++i) sessions[i].name = ts[i]->name;
+  std::vector<pollfd> pfds(ts.size());
+  for (;;) {
+    if ((quit != nullptr && *quit) || (stop != nullptr && stop->load())) break;
+    for (std::size_t i = 0; i < ts.size(); ++i) pfds[i] = pollfd{ts[i]->eof ? -1 : ts[i]->rd, POLLIN, 0};
+    ::poll(pfds.data(), pfds.size(), 10);
+    const std::string ev = console.drain_events();
+    bool all_eof_done = true;
+    for (std::size_t i = 0; i < ts.size(); ++i) {
+      FdTransport& t = *ts[i];
+      Session& s = sessions[i];
+      if (!t.eof && (pfds[i].revents & (POLLIN | POLLHUP | POLLERR))) {
+        char buf[512];
+        const ssize_t r = ::read(t.rd, buf, sizeof buf);
+        if (r > 0) {
+          console.feed(s, std::string_view(buf, static_cast<std::size_t>(r)));
+        } else if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR && errno != EIO)) {
+          if (t.name == "stdin") {
+            t.eof = true;
+            if (!s.partial.empty()) console.feed(s, "\n");
+          } else if (t.name == "can") {
+            t.eof = true;  // the bridge thread is gone
+          }
+        }
+      }
+      console.poll(s);
+      if (!ev.empty()) s.out += ev;
+      if (!s.out.empty()) {
+        write_all(t.wr, s.out);
+        s.out.clear();
+      }
+      if (t.name == "stdin" && !(t.eof && !console.busy(s))) all_eof_done = false;
+      if (t.name != "stdin") all_eof_done = all_eof_done && exit_on_eof;
+    }
+    if (exit_on_eof && all_eof_done) break;
+  }
+}
+
+std::string isotp_message_to_console(const std::uint8_t* data, std::size_t n) {
+  std::string s(reinterpret_cast<const char*>(data), n);
+  bool only_rt = n > 0;
+  for (char c : s) only_rt = only_rt && is_realtime(c);
+  if (!only_rt && (s.empty() || (s.back() != '\n' && s.back() != '\r'))) s += '\n';
+  return s;
+}
+
+CanConsole::~CanConsole() { stop(); }
+
+std::string CanConsole::open(const CanConsoleConfig& cfg, hal::SimBus* sim, FdTransport& t) {
+  stop();
+  cfg_ = cfg;
+  if (cfg.iface == "sim") {
+    if (sim == nullptr) return "console.can = \"sim\" needs the in-process bus (bus.can = \"sim\" or --sim)";
+    bus_ = sim->open(1024);
+  } else {
+    auto sc = std::make_unique<hal::SocketCanBus>();
+    if (sc->open(cfg.iface.c_str()) != hal::Status::ok) {
+      const std::string m = sc->message();  // names the interface itself in newer hal versions
+      return "cannot open " + (m.rfind(cfg.iface + ":", 0) == 0 ? m : cfg.iface + ": " + m);
+    }
+    bus_ = std::move(sc);
+  }
+  hal::IsoTpConfig ic;
+  ic.rx_id = cfg.rx_id;
+  ic.tx_id = cfg.tx_id;
+  iso_ = std::make_unique<hal::IsoTpEndpoint>(*bus_, clock_, ic);
+  const hal::CanFilter f = iso_->rx_filter();
+  if (bus_->set_filters({&f, 1}) != hal::Status::ok) return "cannot set the receive filter on " + cfg.iface;
+  int sv[2];
+  if (::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv) != 0) return std::string("socketpair: ") + std::strerror(errno);
+  fcntl(sv[0], F_SETFL, fcntl(sv[0], F_GETFL) | O_NONBLOCK);
+  fcntl(sv[1], F_SETFL, fcntl(sv[1], F_GETFL) | O_NONBLOCK);
+  fd_ = sv[1];
+  t.name = "can";
+  t.rd = t.wr = sv[0];
+  char b[64];
+  std::snprintf(b, sizeof b, "%s rx 0x%X tx 0x%X", cfg.iface.c_str(), unsigned(cfg.rx_id), unsigned(cfg.tx_id));
+  t.path = b;
+  t.owns = true;
+  stop_ = false;
+  th_ = std::thread([this] { run(); });
+  return "";
+}
+
+void CanConsole::stop() {
+  stop_ = true;
+  if (th_.joinable()) th_.join();
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
+// The bridge thread: ISO-TP messages -> socketpair (console input), socketpair
+// (console output) -> ISO-TP messages of whole lines. Waits in CanBus::receive
+// at most 2 ms, so console output leaves within ~2 ms of being written.
+void CanConsole::run() {
+  std::string out;       // console output not sent yet
+  std::string in;        // console input not written to the socketpair yet
+  bool warned = false;
+  while (!stop_.load(std::memory_order_relaxed)) {
+    const hal::IsoTpEvent ev = iso_->service(clock_.now() + 2 * hal::kMillisecond);
+    if (ev.rx == hal::IsoTpResult::ok) {
+      const auto m = iso_->rx_message();
+      in += isotp_message_to_console(m.data(), m.size());
+    } else if (static_cast<int>(ev.rx) < 0 && ev.rx != hal::IsoTpResult::malformed) {
+      std::fprintf(stderr, "armfw: can console: receive: %s\n", hal::to_string(ev.rx));
+    }
+    if (static_cast<int>(ev.tx) < 0 && ev.tx != hal::IsoTpResult::malformed)
+      std::fprintf(stderr, "armfw: can console: send: %s (answer lost)\n", hal::to_string(ev.tx));
+    if (ev.rx == hal::IsoTpResult::bus_error && !warned) {
+      std::fprintf(stderr, "armfw: can console: bus: %s\n", hal::describe(iso_->last_bus_status()));
+      warned = true;
+    }
+    while (!in.empty()) {
+      const ssize_t w = ::write(fd_, in.data(), in.size());
+      if (w <= 0) break;  // the console loop is behind: keep the rest for the next round
+      in.erase(0, static_cast<std::size_t>(w));
+    }
+    char buf[4096];
+    for (;;) {
+      const ssize_t r = ::read(fd_, buf, sizeof buf);
+      if (r > 0) {
+        out.append(buf, static_cast<std::size_t>(r));
+        continue;
+      }
+      if (r == 0) stop_ = true;  // console side closed
+      break;
+    }
+    if (!out.empty() && !iso_->sending()) {
+      std::size_t n = std::min<std::size_t>(out.size(), hal::IsoTpEndpoint::kMaxMessage);
+      if (n < out.size()) {
+        const std::size_t nl = out.rfind('\n', n - 1);
+        if (nl != std::string::npos) n = nl + 1;
+      }
+      const hal::IsoTpResult r =
+          iso_->send({reinterpret_cast<const std::uint8_t*>(out.data()), n});
+      if (r == hal::IsoTpResult::ok) out.erase(0, n);
+      else if (r != hal::IsoTpResult::busy) {
+        std::fprintf(stderr, "armfw: can console: send: %s (answer lost)\n", hal::to_string(r));
+        out.erase(0, n);
+      }
+    }
+  }
 }
 
 }  // namespace servoarm::fw

@@ -51,6 +51,9 @@ struct FwConfig {
   bool console_pty = false;
   std::string console_serial;          ///< "" = none
   int console_baud = 115200;
+  std::string console_can;             ///< "" = none, "sim", or a SocketCAN interface
+  int console_can_rx_id = 0x7E0;       ///< ISO-TP: requests to armfw
+  int console_can_tx_id = 0x7E8;       ///< ISO-TP: armfw's answers
 };
 
 struct ConfigKey {
@@ -69,6 +72,8 @@ std::string load_config_file(const std::string& path, FwConfig& cfg);
 std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg);
 /// Range checks of every field. "" when valid, else "key: reason".
 std::string validate(const FwConfig& cfg);
+/// Why `id` cannot be a console ISO-TP id (not 11-bit, or a CANopen id of nodes 1..127), or null.
+const char* can_console_id_problem(int id);
 /// The effective configuration as TOML (what `config` prints).
 std::string to_toml(const FwConfig& cfg);
 
