@@ -46,13 +46,35 @@ void from_kernel(const canfd_frame& k, bool fd, CanFrame& f) {
 
 }  // namespace
 
+const char* to_string(RxTimestamps t) {
+  switch (t) {
+    case RxTimestamps::kernel_ns:
+      return "kernel_ns";
+    case RxTimestamps::kernel_us:
+      return "kernel_us";
+    case RxTimestamps::receive:
+      return "receive";
+  }
+  return "?";
+}
+
 SocketCanBus::SocketCanBus(int fd, const SocketCanOptions& opt) : fd_(fd), adopted_(true), opt_(opt) {
   if (fd_ >= 0) {
     const int fl = fcntl(fd_, F_GETFL, 0);
     if (fl >= 0) fcntl(fd_, F_SETFL, fl | O_NONBLOCK);
-    const int on = 1;
-    setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on);  // works on AF_UNIX too
+    enable_timestamps(fd_);  // works on AF_UNIX too
   }
+}
+
+// Nanosecond kernel stamps if the kernel takes SO_TIMESTAMPNS; microsecond ones
+// (SO_TIMESTAMP) otherwise - qemu-user 7.2 answers SO_TIMESTAMPNS with ENOPROTOOPT
+// but translates SO_TIMESTAMP; else rx_time is the time receive() read the frame.
+void SocketCanBus::enable_timestamps(int fd) {
+  ts_ = RxTimestamps::receive;
+  if (!opt_.kernel_timestamps) return;
+  const int on = 1;
+  if (setsockopt(fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on) == 0) ts_ = RxTimestamps::kernel_ns;
+  else if (setsockopt(fd, SOL_SOCKET, SO_TIMESTAMP, &on, sizeof on) == 0) ts_ = RxTimestamps::kernel_us;
 }
 
 SocketCanBus::~SocketCanBus() { close(); }
@@ -62,23 +84,36 @@ void SocketCanBus::close() {
   fd_ = -1;
 }
 
+// Not real-time only in the sense of formatting: snprintf into a fixed buffer, no heap.
 Status SocketCanBus::fail(Status s, const char* what, int err) {
-  if (err) std::snprintf(msg_, sizeof msg_, "%s: %s", what, std::strerror(err));
-  else std::snprintf(msg_, sizeof msg_, "%s", what);
+  const char* sep = iface_[0] ? ": " : "";
+  if (err) std::snprintf(msg_, sizeof msg_, "%s%s%s: %s", iface_, sep, what, std::strerror(err));
+  else std::snprintf(msg_, sizeof msg_, "%s%s%s", iface_, sep, what);
   return s;
 }
 
 Status SocketCanBus::open(const char* iface, const SocketCanOptions& opt) {
   close();
   opt_ = opt;
+  std::memset(iface_, 0, sizeof iface_);
+  named_ = false;
   if (iface == nullptr || iface[0] == '\0') return fail(Status::invalid_argument, "empty interface name", 0);
   const std::size_t n = strnlen(iface, sizeof iface_);
   if (n >= sizeof iface_ || n >= IFNAMSIZ) return fail(Status::invalid_argument, "interface name too long", 0);
-  std::memset(iface_, 0, sizeof iface_);
   std::memcpy(iface_, iface, n);
   named_ = true;
   adopted_ = false;
+  need_reopen_ = false;
+  down_ = false;
+  stats_.state = ErrorState::active;
+  return open_socket(false);
+}
 
+// Set-up (also the reopen path, which passes require_up: a socket bound to a down
+// interface binds fine but only reports ENETDOWN, so wait for IFF_UP instead).
+Status SocketCanBus::open_socket(bool require_up) {
+  close();
+  const std::size_t n = strnlen(iface_, sizeof iface_);
   const int fd = ::socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW);
   if (fd < 0) return fail(Status::io_error, "socket(PF_CAN, SOCK_RAW, CAN_RAW)", errno);
 
@@ -91,6 +126,17 @@ Status SocketCanBus::open(const char* iface, const SocketCanOptions& opt) {
     return fail(Status::interface_down, "SIOCGIFINDEX (no such CAN interface?)", e);
   }
   const int ifindex = ifr.ifr_ifindex;
+  if (require_up) {
+    if (ioctl(fd, SIOCGIFFLAGS, &ifr) < 0) {
+      const int e = errno;
+      ::close(fd);
+      return fail(Status::interface_down, "SIOCGIFFLAGS", e);
+    }
+    if (!(ifr.ifr_flags & IFF_UP)) {
+      ::close(fd);
+      return fail(Status::interface_down, "interface is down (waiting for it to come up)", 0);
+    }
+  }
 
   if (opt_.enable_fd) {
     if (ioctl(fd, SIOCGIFMTU, &ifr) < 0 || ifr.ifr_mtu != CANFD_MTU) {
@@ -116,7 +162,7 @@ Status SocketCanBus::open(const char* iface, const SocketCanOptions& opt) {
   const int rcvbuf = opt_.rcvbuf_bytes;
   if (rcvbuf > 0) setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
   const int on = 1;
-  setsockopt(fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on);
+  enable_timestamps(fd);
   setsockopt(fd, SOL_SOCKET, SO_RXQ_OVFL, &on, sizeof on);
 
   sockaddr_can addr;
@@ -130,7 +176,6 @@ Status SocketCanBus::open(const char* iface, const SocketCanOptions& opt) {
   }
   fd_ = fd;
   last_drop_count_ = 0;
-  need_reopen_ = false;
   if (n_filters_ > 0) return apply_filters();
   return Status::ok;
 }
@@ -163,10 +208,13 @@ Status SocketCanBus::set_filters(std::span<const CanFilter> filters) {
 }
 
 void SocketCanBus::handle_down() {
+  if (down_) return;  // same episode
+  down_ = true;
+  ++downs_;
   if (named_ && opt_.auto_reopen) {
     need_reopen_ = true;
     const TimePoint now = clock_.now();
-    if (next_reopen_ < now) next_reopen_ = now + opt_.reopen_interval;
+    if (next_reopen_ < now) next_reopen_ = now;  // first attempt at once, then rate-limited
   }
 }
 
@@ -175,15 +223,15 @@ Status SocketCanBus::maybe_reopen() {
   const TimePoint now = clock_.now();
   if (now < next_reopen_) return Status::interface_down;
   next_reopen_ = now + opt_.reopen_interval;
-  char name[sizeof iface_];
-  std::memcpy(name, iface_, sizeof name);
-  const Status st = open(name, opt_);  // no heap: socket()/ioctl()/bind() only
+  // No heap: socket()/ioctl()/setsockopt()/bind() only. Filters are re-applied.
+  const Status st = open_socket(true);
   if (st == Status::ok) {
+    need_reopen_ = false;
+    down_ = false;
     ++stats_.reopens;
     stats_.state = ErrorState::active;
     return Status::ok;
   }
-  need_reopen_ = true;
   return Status::interface_down;
 }
 
@@ -199,6 +247,11 @@ Status SocketCanBus::send(const CanFrame& frame) {
   if (fd_ < 0) {
     ++stats_.tx_errors;
     return Status::not_open;
+  }
+  if (stats_.state == ErrorState::bus_off) {
+    // Not queued: the controller would send it after its restart, by then stale.
+    ++stats_.tx_errors;
+    return Status::bus_off;
   }
   canfd_frame k;
   to_kernel(frame, k);
@@ -253,7 +306,8 @@ Status SocketCanBus::receive(CanFrame& out, TimePoint deadline) {
 
     canfd_frame k;
     iovec iov{&k, sizeof k};
-    alignas(cmsghdr) char ctrl[CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(sizeof(std::uint32_t))];
+    alignas(cmsghdr) char ctrl[CMSG_SPACE(sizeof(timespec) > sizeof(timeval) ? sizeof(timespec) : sizeof(timeval)) +
+                               CMSG_SPACE(sizeof(std::uint32_t))];
     msghdr msg;
     std::memset(&msg, 0, sizeof msg);
     msg.msg_iov = &iov;
@@ -269,12 +323,18 @@ Status SocketCanBus::receive(CanFrame& out, TimePoint deadline) {
       }
       TimePoint kernel_rx = 0;  // CLOCK_REALTIME ns when the frame reached the socket
       for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
-        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS) {
+        if (c->cmsg_level != SOL_SOCKET) continue;
+        if (c->cmsg_type == SCM_TIMESTAMPNS && c->cmsg_len >= CMSG_LEN(sizeof(timespec))) {
           timespec ts;
           std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
           kernel_rx = TimePoint(ts.tv_sec) * kSecond + ts.tv_nsec;
         }
-        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_RXQ_OVFL) {
+        if (c->cmsg_type == SCM_TIMESTAMP && c->cmsg_len >= CMSG_LEN(sizeof(timeval))) {
+          timeval tv;
+          std::memcpy(&tv, CMSG_DATA(c), sizeof tv);
+          kernel_rx = TimePoint(tv.tv_sec) * kSecond + TimePoint(tv.tv_usec) * kMicrosecond;
+        }
+        if (c->cmsg_type == SO_RXQ_OVFL && c->cmsg_len >= CMSG_LEN(sizeof(std::uint32_t))) {
           std::uint32_t drops;
           std::memcpy(&drops, CMSG_DATA(c), sizeof drops);
           if (drops > last_drop_count_) stats_.rx_overruns += drops - last_drop_count_;
@@ -306,7 +366,10 @@ Status SocketCanBus::receive(CanFrame& out, TimePoint deadline) {
       ++stats_.rx_frames;
       return Status::ok;
     }
-    if (n == 0) return fail(Status::interface_down, "recvmsg: peer closed", 0);
+    if (n == 0) {  // socketpair peer gone (a CAN_RAW socket never reads 0 bytes)
+      handle_down();
+      return fail(Status::interface_down, "recvmsg: peer closed", 0);
+    }
     const int e = errno;
     if (e == EINTR) continue;
     if (e == ENETDOWN || e == ENODEV || e == ENXIO) {

@@ -85,7 +85,13 @@ TEST(SocketCan, ReceiveDecodesIdsAndFlags) {
   UNSIGNED_LONGS_EQUAL(2, bus->stats().rx_frames);
 }
 
+// rx_time must say when the frame arrived. Which kernel stamp is available decides the
+// resolution: SO_TIMESTAMPNS on a Linux kernel; under qemu-user (7.2 answers
+// SO_TIMESTAMPNS with ENOPROTOOPT) the microsecond SO_TIMESTAMP, which it translates.
+// Either way the stamp is taken when the frame was queued, 30 ms before it is read.
 TEST(SocketCan, RxTimeIsWhenTheFrameArrivedNotWhenItWasRead) {
+  CHECK_TEXT(bus->rx_timestamps() != RxTimestamps::receive,
+             "neither SO_TIMESTAMPNS nor SO_TIMESTAMP accepted on an AF_UNIX socket");
   const TimePoint before = clock.now();
   peer_send(0x701, {0x05});
   const TimePoint after_send = clock.now();
@@ -94,9 +100,40 @@ TEST(SocketCan, RxTimeIsWhenTheFrameArrivedNotWhenItWasRead) {
   LONGS_EQUAL(int(Status::ok), int(bus->receive(f, 0)));
   const TimePoint read_at = clock.now();
   // Kernel timestamp (moved to CLOCK_MONOTONIC): within the send window, well before the read.
-  CHECK(f.rx_time >= before - kMillisecond);
+  const Duration res = bus->rx_timestamps() == RxTimestamps::kernel_us ? kMicrosecond : 1;
+  CHECK(f.rx_time >= before - kMillisecond - res);
   CHECK(f.rx_time <= after_send + kMillisecond);
   CHECK(read_at - f.rx_time >= 29 * kMillisecond);
+}
+
+// Without kernel stamps (options.kernel_timestamps = false, or a kernel/emulator that takes
+// neither option) rx_time is the CLOCK_MONOTONIC time receive() read the frame: never 0,
+// never before the frame was sent, and the queueing time is not hidden.
+TEST(SocketCan, RxTimeFallsBackToReceiveTime) {
+  int p[2];
+  CHECK(socketpair(AF_UNIX, SOCK_SEQPACKET, 0, p) == 0);
+  SocketCanOptions opt;
+  opt.kernel_timestamps = false;
+  SocketCanBus b(p[0], opt);
+  LONGS_EQUAL(int(RxTimestamps::receive), int(b.rx_timestamps()));
+  STRCMP_EQUAL("receive", to_string(b.rx_timestamps()));
+  can_frame k;
+  std::memset(&k, 0, sizeof k);
+  k.can_id = 0x701;
+  k.can_dlc = 1;
+  for (int round = 0; round < 3; ++round) {
+    CHECK(write(p[1], &k, sizeof k) == ssize_t(sizeof k));
+    const TimePoint sent = clock.now();
+    clock.sleep_until(sent + 20 * kMillisecond);
+    const TimePoint read_from = clock.now();
+    CanFrame f;
+    LONGS_EQUAL(int(Status::ok), int(b.receive(f, 0)));
+    const TimePoint read_to = clock.now();
+    CHECK(f.rx_time >= read_from);  // the read time, not the (earlier) arrival
+    CHECK(f.rx_time <= read_to);
+    CHECK(f.rx_time - sent >= 19 * kMillisecond);
+  }
+  close(p[1]);
 }
 
 TEST(SocketCan, ReceiveHonoursAbsoluteDeadline) {
@@ -121,14 +158,25 @@ TEST(SocketCan, ErrorFramesUpdateState) {
   LONGS_EQUAL(int(ErrorState::passive), int(bus->stats().state));
   // Sending while passive still works but says so.
   LONGS_EQUAL(int(Status::error_passive), int(bus->send(CanFrame::make(0x1, {}))));
-  // Bus-off.
+  can_frame k;
+  CHECK(read(sv[1], &k, sizeof k) == ssize_t(sizeof k));  // that frame went out
+  // Bus-off (the kernel's error frame: class CAN_ERR_BUSOFF, as can_bus_off() sends it).
   peer_send(CAN_ERR_FLAG | CAN_ERR_BUSOFF, {0, 0, 0, 0, 0, 0, 0, 0});
   LONGS_EQUAL(int(Status::ok), int(bus->receive(f, 0)));
   LONGS_EQUAL(int(ErrorState::bus_off), int(bus->stats().state));
-  // Restarted -> active again.
+  // While bus-off nothing is queued: a setpoint would otherwise go out stale after the restart.
+  const std::uint64_t tx_before = bus->stats().tx_frames;
+  LONGS_EQUAL(int(Status::bus_off), int(bus->send(CanFrame::make(0x201, {0x0F, 0, 1, 2, 3, 4}))));
+  UNSIGNED_LONGS_EQUAL(tx_before, bus->stats().tx_frames);
+  CHECK(bus->stats().tx_errors >= 1);
+  CHECK(recv(sv[1], &k, sizeof k, MSG_DONTWAIT) < 0);  // nothing reached the peer (EAGAIN)
+  // Restarted (restart-ms, or ip link set can0 type can restart) -> active again, sends go out.
   peer_send(CAN_ERR_FLAG | CAN_ERR_RESTARTED, {0, 0, 0, 0, 0, 0, 0, 0});
   LONGS_EQUAL(int(Status::ok), int(bus->receive(f, 0)));
   LONGS_EQUAL(int(ErrorState::active), int(bus->stats().state));
+  LONGS_EQUAL(int(Status::ok), int(bus->send(CanFrame::make(0x201, {0x0F, 0, 1, 2, 3, 4}))));
+  CHECK(read(sv[1], &k, sizeof k) == ssize_t(sizeof k));
+  UNSIGNED_LONGS_EQUAL(0x201, k.can_id);
   UNSIGNED_LONGS_EQUAL(3, bus->stats().error_frames);
   UNSIGNED_LONGS_EQUAL(0, bus->stats().rx_frames);  // error frames are not data frames
 }
@@ -175,6 +223,13 @@ TEST(SocketCan, PeerGoneIsInterfaceDown) {
   sv[1] = -1;
   CanFrame f;
   LONGS_EQUAL(int(Status::interface_down), int(bus->receive(f, clock.now() + 50 * kMillisecond)));
+  CHECK(std::strlen(bus->message()) > 0);
+  CHECK(bus->is_down());
+  LONGS_EQUAL(int(Status::interface_down), int(bus->receive(f, 0)));
+  UNSIGNED_LONGS_EQUAL(1, bus->interface_downs());  // one episode, counted once
+  // An adopted fd has no interface name to reopen: reported, never "reopened".
+  CHECK_FALSE(bus->reopen_pending());
+  UNSIGNED_LONGS_EQUAL(0, bus->stats().reopens);
 }
 
 TEST(SocketCan, OddSizedRecordIgnored) {
