@@ -1,5 +1,7 @@
 #pragma once
 // Run a command line, capture stdout and stderr separately and the exit status.
+// In a cross build a line that starts with a target binary (kArmctl) runs it
+// under the emulator (target_exec.hpp): no binfmt_misc needed.
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -7,6 +9,8 @@
 #include <string>
 #include <sys/wait.h>
 #include <unistd.h>
+
+#include "target_exec.hpp"
 
 namespace servoarm::test {
 
@@ -25,7 +29,7 @@ inline std::string slurp(const std::string& path) {
 inline CommandResult run_command(const std::string& cmdline) {
   static int counter = 0;
   const std::string base = "/tmp/servoarm_cmd_" + std::to_string(getpid()) + "_" + std::to_string(counter++);
-  const std::string full = cmdline + " >" + base + ".out 2>" + base + ".err";
+  const std::string full = with_emulator(cmdline) + " >" + base + ".out 2>" + base + ".err";
   CommandResult r;
   const int raw = std::system(full.c_str());
   r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;

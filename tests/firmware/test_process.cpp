@@ -1,5 +1,6 @@
 // armfw and armctl as processes: a script on stdin (exits at EOF when done), the
 // pty console driven by `armctl console -c ...`, and a bad config refused naming the key.
+// In a cross build armfw and armctl run under the emulator (target_exec.hpp).
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -10,6 +11,9 @@
 #include <cstdio>
 #include <string>
 #include <thread>
+#include <vector>
+
+#include "target_exec.hpp"
 
 #include <CppUTest/TestHarness.h>
 
@@ -26,6 +30,29 @@ std::string run_capture(const std::string& cmd, int& status) {
   return out;
 }
 
+using servoarm::test::emulator_prefix;
+
+// armfw --sim --pty --no-stdin --priority 0, stdout and stdin on /dev/null, stderr
+// into err_fd (the pty path is printed there). Returns the child's pid.
+pid_t start_armfw_pty(int err_fd, int close_fd) {
+  const std::vector<std::string> args =
+      servoarm::test::target_argv({ARMFW_PATH, "--sim", "--pty", "--no-stdin", "--priority", "0"});
+  std::vector<char*> argv;
+  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    dup2(err_fd, 2);
+    close(close_fd);
+    const int devnull = open("/dev/null", O_RDWR);
+    dup2(devnull, 0);
+    dup2(devnull, 1);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  return pid;
+}
+
 int count(const std::string& s, const std::string& what) {
   int n = 0;
   for (std::size_t p = s.find(what); p != std::string::npos; p = s.find(what, p + 1)) ++n;
@@ -39,8 +66,8 @@ TEST_GROUP(Process){};
 TEST(Process, StdinScriptAnswersEveryLineAndExitsAtEof) {
   int st = 0;
   const std::string out = run_capture(
-      "printf 'enable\\nmovej 10 -20 30 0 20 0 speed=100\\nwait\\nmovej 999 0 0 0 0 0\\nfrobnicate\\nstatus\\n' | " ARMFW_PATH
-      " --sim --priority 0 2>/dev/null",
+      "printf 'enable\\nmovej 10 -20 30 0 20 0 speed=100\\nwait\\nmovej 999 0 0 0 0 0\\nfrobnicate\\nstatus\\n' | " +
+          emulator_prefix() + ARMFW_PATH " --sim --priority 0 2>/dev/null",
       st);
   CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
   LONGS_EQUAL(4, count(out, "\nok") + (out.rfind("ok", 0) == 0 ? 1 : 0));
@@ -62,7 +89,7 @@ TEST(Process, BadConfigRefusedNamingTheKey) {
   CHECK(write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size()));
   close(fd);
   int st = 0;
-  const std::string out = run_capture(std::string(ARMFW_PATH) + " --config " + path + " 2>&1 </dev/null", st);
+  const std::string out = run_capture(emulator_prefix() + ARMFW_PATH + " --config " + path + " 2>&1 </dev/null", st);
   unlink(path);
   CHECK(WIFEXITED(st) && WEXITSTATUS(st) == 2);
   CHECK_TEXT(out.find("loop.rate_hz") != std::string::npos, out.c_str());
@@ -71,16 +98,7 @@ TEST(Process, BadConfigRefusedNamingTheKey) {
 TEST(Process, PtyConsoleDrivenByArmctl) {
   int errpipe[2];
   CHECK(pipe(errpipe) == 0);
-  const pid_t pid = fork();
-  if (pid == 0) {
-    dup2(errpipe[1], 2);
-    close(errpipe[0]);
-    const int devnull = open("/dev/null", O_RDWR);
-    dup2(devnull, 0);
-    dup2(devnull, 1);
-    execl(ARMFW_PATH, ARMFW_PATH, "--sim", "--pty", "--no-stdin", "--priority", "0", static_cast<char*>(nullptr));
-    _exit(127);
-  }
+  const pid_t pid = start_armfw_pty(errpipe[1], errpipe[0]);
   close(errpipe[1]);
   // Read stderr until the pty path is printed.
   std::string err;
@@ -100,7 +118,7 @@ TEST(Process, PtyConsoleDrivenByArmctl) {
   }
   CHECK_TEXT(!pty.empty(), err.c_str());
   int st = 0;
-  const std::string out = run_capture(std::string(ARMCTL_PATH) + " console --serial " + pty +
+  const std::string out = run_capture(emulator_prefix() + ARMCTL_PATH + " console --serial " + pty +
                                           " --timeout 30 -c enable -c 'G1 Z10' -c 'movej 0 -10 20 0 10 0' -c wait"
                                           " -c M114 -c 'movel 99999 0 0' 2>&1",
                                       st);
@@ -148,16 +166,7 @@ TEST(Process, PrintrunPrintcoreDrivesThePty) {
   close(fd);
   int errpipe[2];
   CHECK(pipe(errpipe) == 0);
-  const pid_t pid = fork();
-  if (pid == 0) {
-    dup2(errpipe[1], 2);
-    close(errpipe[0]);
-    const int devnull = open("/dev/null", O_RDWR);
-    dup2(devnull, 0);
-    dup2(devnull, 1);
-    execl(ARMFW_PATH, ARMFW_PATH, "--sim", "--pty", "--no-stdin", "--priority", "0", static_cast<char*>(nullptr));
-    _exit(127);
-  }
+  const pid_t pid = start_armfw_pty(errpipe[1], errpipe[0]);
   close(errpipe[1]);
   std::string err, pty;
   const auto t0 = std::chrono::steady_clock::now();

@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "target_exec.hpp"
+
 // CppUTest last: its leak detector redefines `new`.
 #include <CppUTest/TestHarness.h>
 
@@ -24,7 +26,12 @@ struct Proc {
   int out = -1;  // read end of stdout
 };
 
+// In a cross build args[0] runs under the emulator (target_exec.hpp), not through binfmt_misc.
 Proc spawn(const std::vector<std::string>& args, int keep_fd, int close_fd) {
+  const std::vector<std::string> full = servoarm::test::target_argv(args);
+  std::vector<char*> argv;
+  for (auto& a : full) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
   int pipefd[2];
   if (pipe(pipefd) != 0) return {};
   const pid_t pid = fork();
@@ -34,9 +41,6 @@ Proc spawn(const std::vector<std::string>& args, int keep_fd, int close_fd) {
     close(pipefd[1]);
     if (close_fd >= 0) close(close_fd);
     (void)keep_fd;
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
     execv(argv[0], argv.data());
     _exit(127);
   }

@@ -2,7 +2,8 @@
 // control fields, file list, maintainer scripts, the systemd units, and the
 // package unpacked into a scratch root with dpkg-deb -x: files where the
 // README says, binaries for the package's architecture, the default config
-// accepted by armfw, the CAN bring-up script driving a stub `ip`.
+// accepted by armfw, the CAN bring-up script driving a stub `ip`. In a cross
+// build the packaged armfw/armctl run under the emulator (target_exec.hpp).
 #include <dirent.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -15,6 +16,8 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include "target_exec.hpp"
 
 // CppUTest last: its leak detector redefines `new`.
 #include <CppUTest/TestHarness.h>
@@ -292,7 +295,7 @@ TEST(Package, ScratchRootInstall) {
 TEST(Package, InstalledArmctlReadsInstalledModels) {
   if (!HAVE_ARMCTL) return;
   extract();
-  const Cmd c = sh("'" + root + "/usr/bin/armctl' kin fk --robot '" + root +
+  const Cmd c = sh(servoarm::test::emulator_prefix() + "'" + root + "/usr/bin/armctl' kin fk --robot '" + root +
                    "/usr/share/servoarm/models/puma560.toml' 0 0 0 0 0 0");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
 }
@@ -302,7 +305,7 @@ TEST(Package, DefaultConfigAcceptedByArmfw) {
   extract();
   // The shipped config as it is (bus.can = "sim": virtual drives), for a short
   // loop run at normal priority: armfw refuses a config it cannot load (exit 2).
-  const Cmd c = sh("'" + root + "/usr/bin/armfw' --config '" + root +
+  const Cmd c = sh(servoarm::test::emulator_prefix() + "'" + root + "/usr/bin/armfw' --config '" + root +
                    "/etc/servoarm/armfw.toml' --priority 0 --bench-loop 0.3 </dev/null");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
   STRCMP_CONTAINS("\"cycles\"", c.out.c_str());
