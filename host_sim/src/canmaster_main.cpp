@@ -21,7 +21,8 @@ using namespace servoarm::hal;
 namespace {
 
 const char* kUsage =
-    "usage: canmaster (--iface NAME | --sim | --fd N) [--nodes LIST] --bringup [--stream-sine SEC] [--hold SEC] [options]\n"
+    "usage: canmaster (--iface NAME | --sim | --fd N) [--nodes LIST] --bringup [--roundtrip N] [--stream-sine SEC]\n"
+    "                 [--hold SEC] [options]\n"
     "\n"
     "CANopen master for CiA 402 drives (the servoarm hal::CanopenServoBus) for shell scenarios.\n"
     "--bringup configures every node over SDO (heartbeat 0x1017, mode 0x6060 = 8 CSP, RPDO1\n"
@@ -35,6 +36,10 @@ const char* kUsage =
     "  --sim                   in-process virtual drives on the sim bus, simulated time (no kernel CAN)\n"
     "  --nodes LIST            node ids: 1-6, 1,3,5, 2-4,7 (default 1-6; at most 8)\n"
     "  --bringup               SDO configuration + NMT start + enable (required for the phases below)\n"
+    "  --roundtrip N           first phase: N round trips, each RPDOs + SYNC sent -> every node's TPDO1 and\n"
+    "                          TPDO2 back (positions held); one round per --period-ms; prints the latency\n"
+    "                          (send to the last TPDO1 back) and fails when a round is lost or a frame is bad\n"
+    "  --roundtrip-timeout-ms N  a round not complete after N ms is lost (default 500)\n"
     "  --stream-sine SEC       stream a sine around each joint's start position for SEC seconds\n"
     "  --amplitude RAD         sine amplitude (default 0.3)\n"
     "  --freq HZ               sine frequency (default 0.5)\n"
@@ -50,6 +55,12 @@ const char* kUsage =
     "                          hb-timeout + one period of its last heartbeat, and no other joint faults\n"
     "  --sim-silent NODE@SEC   (--sim) the virtual node goes silent SEC seconds into the phases\n"
     "  --sim-emcy NODE:CODE@SEC (--sim) the virtual node raises EMCY CODE and faults\n"
+    "  --recover               after an interface outage (down, then reopened), once every node's heartbeat\n"
+    "                          is back: enable() again (clears the heartbeat_lost / bus_off faults of the\n"
+    "                          outage) and blend the sine in again from where each joint stands (0.5 s)\n"
+    "  --expect-outage         success means: the interface went down at least once, was reopened, every\n"
+    "                          fault came during an outage (heartbeat_lost / bus_off) and, with --recover,\n"
+    "                          every joint was enabled again and followed the sine within --tolerance\n"
     "  --no-filters            receive every frame (default: kernel filters pass only frames whose\n"
     "                          node part, id & 0x7F, is one of --nodes)\n"
     "  --quiet                 only the final result line\n"
@@ -61,8 +72,13 @@ const char* kUsage =
     "        since_last_hb_ms=.. limit_ms=.. cycle_late_ms=.. error_code=0x.... detail=\"..\"\n"
     "        (--expect-hb-loss passes when since_last_hb_ms <= limit_ms + cycle_late_ms: the\n"
     "        bound hb-timeout + one period assumes the detecting cycle started on time)\n"
+    "  bus t=SEC event=interface_down|reopened downs=.. reopens=.. [outage_ms=..] detail=\"..\"   (--iface)\n"
+    "  recover t=SEC joints=N                  (--recover: enable() called again after an outage)\n"
+    "  roundtrip rounds=N complete=.. lost=.. bad_frames=.. min_us=.. median_us=.. p99_us=.. max_us=..\n"
+    "            all_tpdo_median_us=.. all_tpdo_p99_us=.. timestamps=kernel_ns|kernel_us|receive detail=\"..\"\n"
     "  joint node=N max_err_rad=.. state=.. age_ms=..\n"
-    "  result status=ok|fail cycles=.. late_cycles=.. max_err_rad=.. reason=\"..\"\n"
+    "  result status=ok|fail cycles=.. late_cycles=.. max_err_rad=.. ignored_frames=.. tx_errors=.. reopens=..\n"
+    "         reason=\"..\"\n"
     "Exit status: 0 success, 1 scenario failed, 2 usage error, 3 cannot open the interface,\n"
     "4 bring-up failed.\n";
 
@@ -83,6 +99,8 @@ struct Options {
   std::vector<sim::cli::FaultArg> sim_silent, sim_emcy;
   bool quiet = false;
   bool filters = true;
+  std::uint32_t roundtrip = 0, roundtrip_timeout_ms = 500;
+  bool recover = false, expect_outage = false;
 };
 
 struct SimParts {
@@ -91,7 +109,116 @@ struct SimParts {
   std::unique_ptr<sim::ArmSim> arm;
 };
 
-int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm) {
+double percentile(const std::vector<double>& sorted, double q) {
+  if (sorted.empty()) return 0;
+  std::size_t k = std::size_t(std::ceil(q * double(sorted.size())));
+  if (k > 0) --k;
+  return sorted[std::min(k, sorted.size() - 1)];
+}
+
+// --roundtrip N: the measure of BM_HalRoundTrip6_SimBus_TwoThreads on a real bus. Each
+// round: write() (RPDOs + SYNC), then receive until every node's TPDO1 and TPDO2 of that
+// SYNC are back. Latency = from just before write() to the return of the receive that
+// delivered the last TPDO1 (and, second figure, the last of all 2n TPDOs). A TPDO that
+// does not decode, comes twice in a round, says "not operation enabled" or reports a
+// position off the held target by more than --tolerance is a bad frame.
+// Returns true when every round completed with no bad frame.
+bool roundtrip_phase(CanopenServoBus& master, CanBus& bus, Clock& clock, const Options& o, const char* ts_source) {
+  const std::size_t n = o.nodes.size();
+  std::vector<double> hold(n);
+  for (std::size_t j = 0; j < n; ++j) hold[j] = master.feedback(j).position;
+  std::vector<double> rt1, rt_all;
+  rt1.reserve(o.roundtrip);
+  rt_all.reserve(o.roundtrip);
+  std::array<int, 128> slot{};
+  slot.fill(-1);
+  for (std::size_t j = 0; j < n; ++j) slot[o.nodes[j]] = int(j);
+  const Duration period = Duration(o.period_ms * 1e6);
+  const Duration timeout = Duration(o.roundtrip_timeout_ms) * kMillisecond;
+  const double tol_counts = o.tolerance * double(o.cpr) / (2 * std::numbers::pi) + 1;
+  std::uint64_t lost = 0, bad = 0;
+  std::string first_bad;
+  auto note_bad = [&](const char* what, const CanFrame& f, std::uint32_t round) {
+    ++bad;
+    if (first_bad.empty()) {
+      char b[160];
+      std::snprintf(b, sizeof b, "round %u: %s (id 0x%03X len %u)", unsigned(round), what, unsigned(f.id), unsigned(f.len));
+      first_bad = b;
+    }
+  };
+  TimePoint next = clock.now();
+  for (std::uint32_t r = 0; r < o.roundtrip; ++r) {
+    std::array<std::uint8_t, kMaxServoJoints> got1{}, got2{};
+    std::size_t c1 = 0, c2 = 0;
+    const TimePoint t_send = clock.now();
+    master.write(hold, t_send);
+    const TimePoint deadline = t_send + timeout;
+    TimePoint t1 = 0;
+    CanFrame f;
+    while (c1 < n || c2 < n) {
+      const Status st = bus.receive(f, deadline);
+      if (st != Status::ok) break;
+      const TimePoint at = clock.now();
+      master.dispatch(f, f.rx_time != 0 ? f.rx_time : at);
+      if (f.error || f.extended) continue;
+      const std::uint32_t fn = canopen::function_of(f.id);
+      const int j = slot[canopen::node_of(f.id)];
+      if (j < 0 || (fn != canopen::kTpdo1 && fn != canopen::kTpdo2)) continue;
+      if (fn == canopen::kTpdo1) {
+        std::uint16_t sw = 0;
+        std::int32_t pos = 0;
+        if (!pdo::decode_tpdo1(f, sw, pos)) note_bad("TPDO1 does not decode", f, r);
+        else if (got1[std::size_t(j)]) note_bad("second TPDO1 in one round", f, r);
+        else if (cia402::decode_statusword(sw) != cia402::State::operation_enabled)
+          note_bad("TPDO1 statusword is not operation enabled", f, r);
+        else if (std::fabs(double(pos - master.last_target_counts(std::size_t(j)))) > tol_counts)
+          note_bad("TPDO1 position off the held target", f, r);
+        if (!got1[std::size_t(j)]) {
+          got1[std::size_t(j)] = 1;
+          if (++c1 == n) t1 = at;
+        }
+      } else {
+        std::int32_t vel = 0;
+        std::uint16_t ec = 0;
+        if (!pdo::decode_tpdo2(f, vel, ec)) note_bad("TPDO2 does not decode", f, r);
+        else if (got2[std::size_t(j)]) note_bad("second TPDO2 in one round", f, r);
+        else if (ec != 0) note_bad("TPDO2 carries an error code", f, r);
+        if (!got2[std::size_t(j)]) {
+          got2[std::size_t(j)] = 1;
+          ++c2;
+        }
+      }
+      if (c1 == n && c2 == n) rt_all.push_back(double(at - t_send) * 1e-3);
+    }
+    if (c1 == n) rt1.push_back(double(t1 - t_send) * 1e-3);
+    if (c1 < n || c2 < n) {
+      ++lost;
+      if (first_bad.empty() && lost == 1) {
+        char b[160];
+        std::snprintf(b, sizeof b, "round %u lost: %zu of %zu TPDO1, %zu of %zu TPDO2 within %u ms", unsigned(r), c1, n,
+                      c2, n, unsigned(o.roundtrip_timeout_ms));
+        first_bad = b;
+      }
+    }
+    master.read(clock.now());  // heartbeats, faults
+    next += period;
+    const TimePoint now = clock.now();
+    if (next < now) next = now;
+    clock.sleep_until(next);
+  }
+  std::sort(rt1.begin(), rt1.end());
+  std::sort(rt_all.begin(), rt_all.end());
+  std::printf("roundtrip rounds=%u complete=%zu lost=%llu bad_frames=%llu min_us=%.1f median_us=%.1f p99_us=%.1f "
+              "max_us=%.1f all_tpdo_median_us=%.1f all_tpdo_p99_us=%.1f timestamps=%s detail=\"%s\"\n",
+              unsigned(o.roundtrip), rt_all.size(), static_cast<unsigned long long>(lost),
+              static_cast<unsigned long long>(bad), rt1.empty() ? 0.0 : rt1.front(), percentile(rt1, 0.5),
+              percentile(rt1, 0.99), rt1.empty() ? 0.0 : rt1.back(), percentile(rt_all, 0.5), percentile(rt_all, 0.99),
+              ts_source, first_bad.c_str());
+  std::fflush(stdout);
+  return lost == 0 && bad == 0 && rt_all.size() == o.roundtrip;
+}
+
+int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCanBus* scb = nullptr) {
   CanopenMasterConfig cfg;
   cfg.joint_count = o.nodes.size();
   JointScaling sc;
@@ -128,6 +255,9 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm) {
                   to_string(master.feedback(j).state));
     std::fflush(stdout);
   }
+  bool roundtrip_ok = true;
+  if (o.roundtrip > 0)
+    roundtrip_ok = roundtrip_phase(master, bus, clock, o, scb ? to_string(scb->rx_timestamps()) : arm ? "simulated" : "receive");
 
   // Cyclic phases.
   std::vector<double> p0(n), sp(n), max_err(n, 0.0);
@@ -144,10 +274,40 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm) {
   TimePoint next = t0;
   std::vector<bool> silent_done(o.sim_silent.size(), false), emcy_done(o.sim_emcy.size(), false);
   const double limit_ms = double(o.hb_timeout_ms) + o.period_ms;
+  // Interface outages (--iface): reported as they happen; with --recover the joints are
+  // enabled again once every heartbeat is back, and the sine blended in from where each
+  // joint stands. The tracking error is not measured from the interface-down until the
+  // joint follows again (kHist + 1 cycles after its re-enable, or 0.5 s after a reopen
+  // that needed none).
+  bool was_down = false, outage_seen = false, reopened = false, in_outage = false, recovering = false;
+  TimePoint down_at = 0, up_at = 0;
+  std::uint64_t recoveries = 0, outage_faults = 0;
+  std::vector<double> blend_from(n, 0.0);
+  std::vector<double> blend_t0(n, -1.0);                  // s; < 0: no blend
+  std::vector<std::uint64_t> measure_from(n, 21);         // first cycle whose error counts
+  std::vector<bool> await_enable(n, false);
   for (;;) {
     const TimePoint now = clock.now();
     const double t = double(now - t0) * 1e-9;
     if (now - t0 >= total) break;
+    if (scb && scb->is_down() != was_down) {
+      was_down = scb->is_down();
+      const BusStats bs = scb->stats();
+      if (was_down) {
+        outage_seen = in_outage = true;
+        down_at = now;
+        std::printf("bus t=%.3f event=interface_down downs=%llu reopens=%llu detail=\"%s\"\n", t,
+                    static_cast<unsigned long long>(scb->interface_downs()),
+                    static_cast<unsigned long long>(bs.reopens), scb->message());
+      } else {
+        reopened = true;
+        up_at = now;
+        std::printf("bus t=%.3f event=reopened downs=%llu reopens=%llu outage_ms=%.1f detail=\"\"\n", t,
+                    static_cast<unsigned long long>(scb->interface_downs()),
+                    static_cast<unsigned long long>(bs.reopens), double(now - down_at) * 1e-6);
+      }
+      std::fflush(stdout);
+    }
     if (arm) {
       for (std::size_t i = 0; i < o.sim_silent.size(); ++i)
         if (!silent_done[i] && t >= o.sim_silent[i].at) {
@@ -179,7 +339,9 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm) {
                     double(fb.fault_since - t0) * 1e-9, unsigned(o.nodes[j]), to_string(fb.fault), since_hb, limit_ms,
                     cycle_late_ms, unsigned(fb.error_code), detail);
         std::fflush(stdout);
-        if (o.expect_hb_loss == o.nodes[j] && fb.fault == Status::heartbeat_lost) {
+        if (in_outage && (fb.fault == Status::heartbeat_lost || fb.fault == Status::bus_off)) {
+          ++outage_faults;  // the outage's doing: judged by --expect-outage / --recover below
+        } else if (o.expect_hb_loss == o.nodes[j] && fb.fault == Status::heartbeat_lost) {
           expected_seen = true;
           hb_loss_ok = since_hb <= limit_ms + cycle_late_ms + 1e-6;
           if (!hb_loss_ok) reason = "heartbeat loss reported too late";
@@ -188,17 +350,52 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm) {
           if (reason.empty()) reason = std::string("unexpected fault on node ") + std::to_string(o.nodes[j]);
         }
       }
+      if (await_enable[j] && fb.state == JointState::enabled) {
+        await_enable[j] = false;
+        blend_from[j] = fb.position;
+        blend_t0[j] = t;
+        measure_from[j] = cycles + kHist + 1;
+      }
       // Tracking error against the best-matching recent setpoint (transport delay 1..kHist cycles).
-      if (fb.state == JointState::enabled && cycles > 20 && t < o.stream) {
+      if (fb.state == JointState::enabled && cycles >= measure_from[j] && !in_outage && t < o.stream) {
         double best = 1e9;
         for (int l = 1; l < kHist; ++l) best = std::min(best, std::fabs(fb.position - hist[j][(cycles - l) % kHist]));
         max_err[j] = std::max(max_err[j], best);
+      }
+    }
+    // End of an outage: the bus is back and every node's heartbeat came after the reopen.
+    if (in_outage && reopened && scb && !scb->is_down()) {
+      bool all_hb = true, any_fault = false;
+      for (std::size_t j = 0; j < n; ++j) {
+        all_hb = all_hb && master.feedback(j).last_heartbeat > up_at;
+        any_fault = any_fault || master.feedback(j).state == JointState::fault;
+      }
+      if (all_hb && any_fault && o.recover && !recovering) {
+        master.enable();  // clears the latched faults (fault reset where needed), enables again
+        recovering = true;
+        ++recoveries;
+        for (std::size_t j = 0; j < n; ++j) {
+          reported[j] = false;
+          await_enable[j] = true;
+        }
+        std::printf("recover t=%.3f joints=%zu\n", t, n);
+        std::fflush(stdout);
+      }
+      if (all_hb && !any_fault) {  // recovered (or never faulted): measure again after 0.5 s
+        in_outage = recovering = false;
+        for (std::size_t j = 0; j < n; ++j)
+          if (!await_enable[j]) measure_from[j] = std::max(measure_from[j], cycles + std::uint64_t(0.5e3 / o.period_ms));
       }
     }
     const double ramp = std::min(1.0, t / 0.5);
     for (std::size_t j = 0; j < n; ++j) {
       if (t < o.stream) {
         sp[j] = p0[j] + ramp * o.amplitude * std::sin(2 * std::numbers::pi * o.freq * t + 0.5 * double(j));
+        if (blend_t0[j] >= 0) {  // after a re-enable: from where the joint stood to the sine in 0.5 s
+          const double r = std::min(1.0, (t - blend_t0[j]) / 0.5);
+          sp[j] = (1 - r) * blend_from[j] + r * sp[j];
+          if (r >= 1) blend_t0[j] = -1;
+        }
       }
       hist[j][cycles % kHist] = sp[j];
     }
@@ -231,7 +428,24 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm) {
       std::printf("joint node=%u max_err_rad=%.6f state=%s age_ms=%.1f\n", unsigned(o.nodes[j]), max_err[j],
                   to_string(fb.state), fb.age >= 0 ? double(fb.age) * 1e-6 : -1.0);
   }
-  bool ok = true;
+  bool ok = roundtrip_ok;
+  if (!roundtrip_ok) reason = "round trip lost or bad frame (see the roundtrip line)";
+  if (o.expect_outage) {
+    if (!outage_seen) {
+      ok = false;
+      if (reason.empty()) reason = "no interface outage seen";
+    } else if (!reopened) {
+      ok = false;
+      if (reason.empty()) reason = "interface not reopened";
+    } else if (in_outage) {
+      ok = false;
+      if (reason.empty()) reason = outage_faults && !o.recover ? "joints faulted in the outage (no --recover)"
+                                                              : "not every joint followed again after the outage";
+    }
+  } else if (outage_seen && reason.empty()) {
+    reason = "unexpected interface outage";
+  }
+  if (outage_seen && !o.expect_outage) ok = false;
   if (o.expect_hb_loss) {
     if (!expected_seen) {
       ok = false;
@@ -239,17 +453,18 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm) {
     }
     ok = ok && hb_loss_ok && !other_fault;
   } else {
-    ok = !other_fault;
+    ok = ok && !other_fault;
   }
   if (o.stream > 0 && worst > o.tolerance) {
     ok = false;
     if (reason.empty()) reason = "tracking error above tolerance";
   }
   const BusStats bs = bus.stats();
-  std::printf("result status=%s cycles=%llu late_cycles=%llu max_err_rad=%.6f ignored_frames=%llu tx_errors=%llu reason=\"%s\"\n",
+  std::printf("result status=%s cycles=%llu late_cycles=%llu max_err_rad=%.6f ignored_frames=%llu tx_errors=%llu "
+              "reopens=%llu reason=\"%s\"\n",
               ok ? "ok" : "fail", static_cast<unsigned long long>(cycles), static_cast<unsigned long long>(late), worst,
               static_cast<unsigned long long>(master.ignored_frames()), static_cast<unsigned long long>(bs.tx_errors),
-              reason.c_str());
+              static_cast<unsigned long long>(bs.reopens), reason.c_str());
   return ok ? 0 : 1;
 }
 
@@ -278,6 +493,15 @@ int main(int argc, char** argv) {
       o.quiet = true;
     } else if (a == "--no-filters") {
       o.filters = false;
+    } else if (a == "--recover") {
+      o.recover = true;
+    } else if (a == "--expect-outage") {
+      o.expect_outage = true;
+    } else if (a == "--roundtrip") {
+      if (!uint(o.roundtrip, 1000000) || o.roundtrip == 0) return usage_error("bad --roundtrip N (1..1000000)");
+    } else if (a == "--roundtrip-timeout-ms") {
+      if (!uint(o.roundtrip_timeout_ms, 60000) || o.roundtrip_timeout_ms == 0)
+        return usage_error("bad --roundtrip-timeout-ms (1..60000)");
     } else if (a == "--iface") {
       if (!value()) return usage_error("--iface needs a name");
       o.iface = v;
@@ -326,7 +550,9 @@ int main(int argc, char** argv) {
   }
   if (int(o.sim) + int(!o.iface.empty()) + int(o.fd >= 0) != 1)
     return usage_error("give exactly one of --iface NAME, --fd N or --sim");
-  if (!o.bringup) return usage_error("nothing to do: add --bringup (and --stream-sine / --hold)");
+  if (!o.bringup) return usage_error("nothing to do: add --bringup (and --roundtrip / --stream-sine / --hold)");
+  if ((o.recover || o.expect_outage) && o.iface.empty())
+    return usage_error("--recover / --expect-outage need --iface (an interface that can go down)");
   if (!o.sim && (!o.sim_silent.empty() || !o.sim_emcy.empty())) return usage_error("--sim-* faults need --sim");
   if (o.expect_hb_loss && std::find(o.nodes.begin(), o.nodes.end(), std::uint8_t(o.expect_hb_loss)) == o.nodes.end())
     return usage_error("--expect-hb-loss node is not in --nodes");
@@ -347,7 +573,7 @@ int main(int argc, char** argv) {
   if (o.fd >= 0) {
     SocketCanBus bus(o.fd);
     MonotonicClock clock;
-    return run(bus, clock, o, nullptr);
+    return run(bus, clock, o, nullptr, &bus);
   }
   SocketCanBus bus;
   if (const Status st = bus.open(o.iface.c_str()); st != Status::ok) {
@@ -355,5 +581,5 @@ int main(int argc, char** argv) {
     return 3;
   }
   MonotonicClock clock;
-  return run(bus, clock, o, nullptr);
+  return run(bus, clock, o, nullptr, &bus);
 }
