@@ -55,12 +55,14 @@ const char* kUsage =
     "                          hb-timeout + one period of its last heartbeat, and no other joint faults\n"
     "  --sim-silent NODE@SEC   (--sim) the virtual node goes silent SEC seconds into the phases\n"
     "  --sim-emcy NODE:CODE@SEC (--sim) the virtual node raises EMCY CODE and faults\n"
-    "  --recover               after an interface outage (down, then reopened), once every node's heartbeat\n"
-    "                          is back: enable() again (clears the heartbeat_lost / bus_off faults of the\n"
-    "                          outage) and blend the sine in again from where each joint stands (0.5 s)\n"
-    "  --expect-outage         success means: the interface went down at least once, was reopened, every\n"
+    "  --recover               after a bus outage (interface down then reopened, or bus-off then restarted),\n"
+    "                          once every node's heartbeat is back: enable() again (clears the outage's\n"
+    "                          heartbeat_lost / bus_off faults) and blend the sine in again from where each\n"
+    "                          joint stands (0.5 s)\n"
+    "  --expect-outage         success means: the interface went down at least once and was reopened, every\n"
     "                          fault came during an outage (heartbeat_lost / bus_off) and, with --recover,\n"
     "                          every joint was enabled again and followed the sine within --tolerance\n"
+    "                          (without it, an outage fails the run)\n"
     "  --no-filters            receive every frame (default: kernel filters pass only frames whose\n"
     "                          node part, id & 0x7F, is one of --nodes)\n"
     "  --quiet                 only the final result line\n"
@@ -73,6 +75,7 @@ const char* kUsage =
     "        (--expect-hb-loss passes when since_last_hb_ms <= limit_ms + cycle_late_ms: the\n"
     "        bound hb-timeout + one period assumes the detecting cycle started on time)\n"
     "  bus t=SEC event=interface_down|reopened downs=.. reopens=.. [outage_ms=..] detail=\"..\"   (--iface)\n"
+    "  bus t=SEC event=bus_off|restarted error_frames=..   (controller error frames CAN_ERR_BUSOFF / _RESTARTED)\n"
     "  recover t=SEC joints=N                  (--recover: enable() called again after an outage)\n"
     "  roundtrip rounds=N complete=.. lost=.. bad_frames=.. min_us=.. median_us=.. p99_us=.. max_us=..\n"
     "            all_tpdo_median_us=.. all_tpdo_p99_us=.. timestamps=kernel_ns|kernel_us|receive detail=\"..\"\n"
@@ -279,7 +282,8 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
   // joint stands. The tracking error is not measured from the interface-down until the
   // joint follows again (kHist + 1 cycles after its re-enable, or 0.5 s after a reopen
   // that needed none).
-  bool was_down = false, outage_seen = false, reopened = false, in_outage = false, recovering = false;
+  bool was_down = false, was_bus_off = false, bus_was_bad = false;
+  bool outage_seen = false, reopened = false, in_outage = false, recovering = false;
   TimePoint down_at = 0, up_at = 0;
   std::uint64_t recoveries = 0, outage_faults = 0;
   std::vector<double> blend_from(n, 0.0);
@@ -290,24 +294,6 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
     const TimePoint now = clock.now();
     const double t = double(now - t0) * 1e-9;
     if (now - t0 >= total) break;
-    if (scb && scb->is_down() != was_down) {
-      was_down = scb->is_down();
-      const BusStats bs = scb->stats();
-      if (was_down) {
-        outage_seen = in_outage = true;
-        down_at = now;
-        std::printf("bus t=%.3f event=interface_down downs=%llu reopens=%llu detail=\"%s\"\n", t,
-                    static_cast<unsigned long long>(scb->interface_downs()),
-                    static_cast<unsigned long long>(bs.reopens), scb->message());
-      } else {
-        reopened = true;
-        up_at = now;
-        std::printf("bus t=%.3f event=reopened downs=%llu reopens=%llu outage_ms=%.1f detail=\"\"\n", t,
-                    static_cast<unsigned long long>(scb->interface_downs()),
-                    static_cast<unsigned long long>(bs.reopens), double(now - down_at) * 1e-6);
-      }
-      std::fflush(stdout);
-    }
     if (arm) {
       for (std::size_t i = 0; i < o.sim_silent.size(); ++i)
         if (!silent_done[i] && t >= o.sim_silent[i].at) {
@@ -324,6 +310,30 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
         }
     }
     master.read(now);
+    // Bus events (after read(): it is the receive that sees them), before the faults they cause.
+    if (scb && scb->is_down() != was_down) {
+      was_down = scb->is_down();
+      const BusStats bs = scb->stats();
+      std::printf("bus t=%.3f event=%s downs=%llu reopens=%llu", t, was_down ? "interface_down" : "reopened",
+                  static_cast<unsigned long long>(scb->interface_downs()), static_cast<unsigned long long>(bs.reopens));
+      if (!was_down) std::printf(" outage_ms=%.1f", double(now - down_at) * 1e-6);
+      std::printf(" detail=\"%s\"\n", was_down ? scb->message() : "");
+      if (was_down) down_at = now;
+      else reopened = true;
+      std::fflush(stdout);
+    }
+    const bool bus_off = bus.stats().state == ErrorState::bus_off;
+    if (bus_off != was_bus_off) {
+      was_bus_off = bus_off;
+      std::printf("bus t=%.3f event=%s error_frames=%llu\n", t, bus_off ? "bus_off" : "restarted",
+                  static_cast<unsigned long long>(bus.stats().error_frames));
+      if (bus_off) down_at = now;
+      std::fflush(stdout);
+    }
+    const bool bus_bad = was_down || bus_off;
+    if (bus_bad && !bus_was_bad) outage_seen = in_outage = true;
+    if (!bus_bad && bus_was_bad) up_at = now;
+    bus_was_bad = bus_bad;
     for (std::size_t j = 0; j < n; ++j) {
       const JointFeedback& fb = master.feedback(j);
       if (fb.state == JointState::fault && !reported[j]) {
@@ -364,7 +374,7 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
       }
     }
     // End of an outage: the bus is back and every node's heartbeat came after the reopen.
-    if (in_outage && reopened && scb && !scb->is_down()) {
+    if (in_outage && !bus_was_bad) {
       bool all_hb = true, any_fault = false;
       for (std::size_t j = 0; j < n; ++j) {
         all_hb = all_hb && master.feedback(j).last_heartbeat > up_at;
