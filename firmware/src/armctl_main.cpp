@@ -45,6 +45,13 @@ const char* kUsage =
     "  armctl plan movel --robot NAME|FILE --from q1..qn (--to q1..qn | --xyz X Y Z [--rpy R P Y | --quat W X Y Z])\n"
     "                    [--speed V] [--accel A] [--angular W] [--override PCT] [--no-slowdown] [--csv FILE] [--svg FILE]\n"
 #endif
+#ifdef SERVOARM_HAVE_CLI_CONSOLE
+    "Console client of the firmware (armfw), interactive (line editing, history) or one-shot -c:\n"
+    "  armctl console --serial PATH [--baud N] [--timeout SEC] [-c LINE]...\n"
+    "                                                      over armfw's pty (--pty) or a serial port\n"
+    "  armctl console --can IFACE [--tx-id 0x7E0] [--rx-id 0x7E8] [--timeout SEC] [-c LINE]...\n"
+    "                                                      over CAN, ISO-TP (armfw console.can)\n"
+#endif
     "\n"
     "Each command takes --help. Exit status: 0 ok, 1 valid request that failed\n"
     "(e.g. unreachable), 2 bad usage or bad input.\n";
@@ -79,7 +86,7 @@ int main(int argc, char** argv) {
   if (cmd == "plan") return cli_plan(argc - 1, argv + 1);
 #endif
 #ifdef SERVOARM_HAVE_CLI_CONSOLE
-  if (cmd == "console") return console_main(argc, argv);  // armfw console client (serial / pty)
+  if (cmd == "console") return console_main(argc, argv);  // armfw console client (serial / pty / CAN)
 #endif
   return usage_error("unknown command '" + cmd + "' (see armctl --help)");
 }
