@@ -207,15 +207,18 @@ Status SocketCanBus::set_filters(std::span<const CanFilter> filters) {
   return apply_filters();
 }
 
-void SocketCanBus::handle_down() {
-  if (down_) return;  // same episode
+Status SocketCanBus::down(const char* what, int err) {
+  fail(Status::interface_down, what, err);
+  if (down_) return Status::interface_down;  // same episode
   down_ = true;
   ++downs_;
+  std::memcpy(down_msg_, msg_, sizeof down_msg_);
   if (named_ && opt_.auto_reopen) {
     need_reopen_ = true;
     const TimePoint now = clock_.now();
     if (next_reopen_ < now) next_reopen_ = now;  // first attempt at once, then rate-limited
   }
+  return Status::interface_down;
 }
 
 Status SocketCanBus::maybe_reopen() {
@@ -272,8 +275,7 @@ Status SocketCanBus::send(const CanFrame& frame) {
     case ENETDOWN:
     case ENODEV:
     case ENXIO:
-      handle_down();
-      return fail(Status::interface_down, "write(CAN)", e);
+      return down("write(CAN)", e);
     default:
       return fail(Status::io_error, "write(CAN)", e);
   }
@@ -367,14 +369,12 @@ Status SocketCanBus::receive(CanFrame& out, TimePoint deadline) {
       return Status::ok;
     }
     if (n == 0) {  // socketpair peer gone (a CAN_RAW socket never reads 0 bytes)
-      handle_down();
-      return fail(Status::interface_down, "recvmsg: peer closed", 0);
+      return down("recvmsg: peer closed", 0);
     }
     const int e = errno;
     if (e == EINTR) continue;
     if (e == ENETDOWN || e == ENODEV || e == ENXIO) {
-      handle_down();
-      return fail(Status::interface_down, "recvmsg(CAN)", e);
+      return down("recvmsg(CAN)", e);
     }
     if (e != EAGAIN) return fail(Status::io_error, "recvmsg(CAN)", e);
 
@@ -386,8 +386,7 @@ Status SocketCanBus::receive(CanFrame& out, TimePoint deadline) {
     const int r = ::ppoll(&p, 1, &ts, nullptr);
     if (r < 0 && errno != EINTR) return fail(Status::io_error, "ppoll(CAN)", errno);
     if (r > 0 && (p.revents & (POLLERR | POLLHUP | POLLNVAL)) && !(p.revents & POLLIN)) {
-      handle_down();
-      return fail(Status::interface_down, "ppoll: socket error/hangup", 0);
+      return down("ppoll: socket error/hangup", 0);
     }
   }
 }

@@ -58,7 +58,7 @@ const char* kUsage =
     "  --recover               after a bus outage (interface down then reopened, or bus-off then restarted),\n"
     "                          once every node's heartbeat is back: enable() again (clears the outage's\n"
     "                          heartbeat_lost / bus_off faults) and blend the sine in again from where each\n"
-    "                          joint stands (0.5 s)\n"
+    "                          joint stands (smoothstep over 1.5 s)\n"
     "  --expect-outage         success means: the interface went down at least once and was reopened, every\n"
     "                          fault came during an outage (heartbeat_lost / bus_off) and, with --recover,\n"
     "                          every joint was enabled again and followed the sine within --tolerance\n"
@@ -317,7 +317,7 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
       std::printf("bus t=%.3f event=%s downs=%llu reopens=%llu", t, was_down ? "interface_down" : "reopened",
                   static_cast<unsigned long long>(scb->interface_downs()), static_cast<unsigned long long>(bs.reopens));
       if (!was_down) std::printf(" outage_ms=%.1f", double(now - down_at) * 1e-6);
-      std::printf(" detail=\"%s\"\n", was_down ? scb->message() : "");
+      std::printf(" detail=\"%s\"\n", was_down ? scb->down_reason() : "");
       if (was_down) down_at = now;
       else reopened = true;
       std::fflush(stdout);
@@ -401,9 +401,10 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
     for (std::size_t j = 0; j < n; ++j) {
       if (t < o.stream) {
         sp[j] = p0[j] + ramp * o.amplitude * std::sin(2 * std::numbers::pi * o.freq * t + 0.5 * double(j));
-        if (blend_t0[j] >= 0) {  // after a re-enable: from where the joint stood to the sine in 0.5 s
-          const double r = std::min(1.0, (t - blend_t0[j]) / 0.5);
-          sp[j] = (1 - r) * blend_from[j] + r * sp[j];
+        if (blend_t0[j] >= 0) {  // after a re-enable: from where the joint stood to the sine in 1.5 s
+          const double r = std::min(1.0, (t - blend_t0[j]) / 1.5);
+          const double w = r * r * (3 - 2 * r);  // smoothstep: no velocity step at either end
+          sp[j] = (1 - w) * blend_from[j] + w * sp[j];
           if (r >= 1) blend_t0[j] = -1;
         }
       }

@@ -227,6 +227,7 @@ TEST(SocketCan, PeerGoneIsInterfaceDown) {
   CHECK(bus->is_down());
   LONGS_EQUAL(int(Status::interface_down), int(bus->receive(f, 0)));
   UNSIGNED_LONGS_EQUAL(1, bus->interface_downs());  // one episode, counted once
+  STRCMP_CONTAINS("peer closed", bus->down_reason());
   // An adopted fd has no interface name to reopen: reported, never "reopened".
   CHECK_FALSE(bus->reopen_pending());
   UNSIGNED_LONGS_EQUAL(0, bus->stats().reopens);

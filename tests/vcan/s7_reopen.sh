@@ -18,16 +18,24 @@
 # follow the RPDO targets.
 . "$SCENARIO_DIR/lib.sh"
 need candump cansend armsim canmaster ip
-if [ "${SERVOARM_VM:-0}" = 1 ]; then period_ms=10 hb_ms=100 hb_timeout_ms=300
+# Time constants: 10 ms cycle, 50 ms heartbeat, 150 ms consumer timeout on a
+# real kernel; in the TCG VM, whose vCPUs a busy host starves for tens (at
+# times hundreds) of ms, 100 / 500 ms - still well under the 1 s link outage,
+# which must fault every joint with heartbeat_lost. Tracking accuracy is
+# scenario 2's business: as in scenario 4, a starved armsim lags, so here the
+# tolerance is 0.1 rad (canmaster) and, on the bus, 0.1 rad from one of the
+# targets of the last 64 cycles; a drive that was not re-enabled, or follows
+# nothing, is far outside that.
+if [ "${SERVOARM_VM:-0}" = 1 ]; then period_ms=10 hb_ms=100 hb_timeout_ms=500
 else period_ms=10 hb_ms=50 hb_timeout_ms=150; fi
-tol_rad=0.02
-tol_counts=417          # 0.02 rad * 131072 counts/rev / 2pi
+tol_rad=0.1
+tol_counts=2086          # 0.1 rad * 131072 counts/rev / 2pi
 
 # -D: candump keeps its socket when vcan0 goes down; error frames too (#FFFFFFFF).
 start_candump all -D -r 4194304 "$CAN_IF,000:C00007FF,080:C00007FF,180:C00007F8,200:C00007F8,700:C00007F8,#FFFFFFFF"
 start_armsim armsim --nodes 1-6
-log "canmaster: 6 nodes, ${period_ms} ms cycle, 14 s sine, --recover --expect-outage"
-canmaster --iface "$CAN_IF" --nodes 1-6 --bringup --stream-sine 14 --hold 0.5 --amplitude 0.3 --freq 0.5 \
+log "canmaster: 6 nodes, ${period_ms} ms cycle, 12 s sine, --recover --expect-outage"
+canmaster --iface "$CAN_IF" --nodes 1-6 --bringup --stream-sine 12 --hold 0.5 --amplitude 0.3 --freq 0.5 \
   --tolerance "$tol_rad" --period-ms "$period_ms" --hb-ms "$hb_ms" --hb-timeout-ms "$hb_timeout_ms" \
   --recover --expect-outage >"$OUT_DIR/canmaster.log" 2>&1 &
 master=$!
@@ -95,6 +103,6 @@ for n in 1 2 3 4 5 6; do
       END { printf "%d statuswords operation enabled between the outages, %d after the restart", mid, post; exit !(mid >= 50 && post >= 100) }' \
     "$OUT_DIR/all.tframes" >"$OUT_DIR/en.txt" && pass "node $n: $(cat "$OUT_DIR/en.txt")" || check_fail "node $n: $(cat "$OUT_DIR/en.txt")"
   awk -v b="${restart_at:-0}" '$1 > b' "$OUT_DIR/all.tframes" | grep -E " (080|18$n|20$n)#" >"$OUT_DIR/node$n.post.tframes"
-  check_tracking "bus, after the restart: node $n follows its RPDO targets" "$OUT_DIR/node$n.post.tframes" "$n" "$tol_counts"
+  check_tracking "bus, after the restart: node $n follows its RPDO targets" "$OUT_DIR/node$n.post.tframes" "$n" "$tol_counts" 64
 done
 finish

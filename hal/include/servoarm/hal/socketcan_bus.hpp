@@ -75,6 +75,9 @@ class SocketCanBus final : public CanBus {
   std::uint64_t interface_downs() const { return downs_; }
   /// Real-time: true from an interface-down until a reopen succeeded (for ever on an adopted fd).
   bool is_down() const { return down_; }
+  /// What reported the current (or last) interface-down episode, e.g.
+  /// "vcan0: recvmsg(CAN): Network is down"; message() moves on (reopen attempts).
+  const char* down_reason() const { return down_msg_; }
   /// Real-time: true while the interface is down and a reopen is pending.
   bool reopen_pending() const { return need_reopen_; }
 
@@ -87,7 +90,7 @@ class SocketCanBus final : public CanBus {
   Status open_socket(bool require_up);
   void enable_timestamps(int fd);
   Status maybe_reopen();
-  void handle_down();
+  Status down(const char* what, int err);  ///< record an interface-down episode
   Status apply_filters();
 
   int fd_ = -1;
@@ -106,6 +109,7 @@ class SocketCanBus final : public CanBus {
   std::size_t n_filters_ = 0;
   BusStats stats_;
   char msg_[160] = {};
+  char down_msg_[160] = {};
 };
 
 }  // namespace servoarm::hal
