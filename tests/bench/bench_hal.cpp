@@ -194,4 +194,58 @@ void BM_HalSocketCanPair7Frames(benchmark::State& state) {
 }
 BENCHMARK(BM_HalSocketCanPair7Frames);
 
+// The round trip of BM_HalRoundTrip6_SimBus_TwoThreads through the kernel: master and
+// drives each on a SocketCanBus, the two ends of a socketpair(AF_UNIX, SOCK_SEQPACKET)
+// carrying struct can_frame records (what vcan does between two sockets, minus the CAN
+// layer), the drives on their own thread waiting in ppoll. Time from sending RPDOs + SYNC
+// until all 6 TPDO1 are back - the host reference for the vcan figure of vcan_s6_latency
+// (canmaster --roundtrip), which runs emulated.
+void BM_HalRoundTrip6_SocketPair_TwoThreads(benchmark::State& state) {
+  int sv[2];
+  if (socketpair(AF_UNIX, SOCK_SEQPACKET, 0, sv) != 0) {
+    state.SkipWithError("socketpair failed");
+    return;
+  }
+  MonotonicClock clock;
+  SocketCanBus master_bus(sv[0]), drive_bus(sv[1]);
+  std::vector<std::uint8_t> nodes{1, 2, 3, 4, 5, 6};
+  sim::ArmSim arm(drive_bus, nodes);
+  arm.power_on(clock.now());
+  std::atomic<bool> stop{false};
+  std::thread drives([&] {
+    TimePoint next = clock.now();
+    while (!stop.load(std::memory_order_relaxed)) {
+      CanFrame f;
+      if (drive_bus.receive(f, next) == Status::ok) arm.handle(f, clock.now());
+      if (clock.now() >= next) {
+        arm.tick(clock.now());
+        next = clock.now() + kMillisecond;
+      }
+    }
+  });
+  CanopenServoBus master(master_bus, clock, CanopenMasterConfig::consecutive(1, 6));
+  bool ok = master.start(clock.now() + 2 * kSecond) == Status::ok &&
+            master.enable_blocking(clock.now() + 2 * kSecond, kMillisecond) == Status::ok;
+  if (!ok) state.SkipWithError("bring-up failed");
+  double sp[6] = {};
+  for (int j = 0; j < 6; ++j) sp[j] = master.feedback(std::size_t(j)).position;
+  std::int64_t lost = 0;
+  for (auto _ : state) {
+    if (!ok) break;
+    master.write(std::span<const double>(sp, 6), clock.now());
+    int got = 0;
+    CanFrame f;
+    const TimePoint deadline = clock.now() + 100 * kMillisecond;
+    while (got < 6 && master_bus.receive(f, deadline) == Status::ok) {
+      if (canopen::function_of(f.id) == canopen::kTpdo1) ++got;
+      master.dispatch(f, f.rx_time);
+    }
+    if (got < 6) ++lost;
+  }
+  stop = true;
+  drives.join();
+  state.counters["lost"] = double(lost);
+}
+BENCHMARK(BM_HalRoundTrip6_SocketPair_TwoThreads)->UseRealTime();
+
 }  // namespace
