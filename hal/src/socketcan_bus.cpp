@@ -84,7 +84,7 @@ void SocketCanBus::close() {
   fd_ = -1;
 }
 
-// Not real-time only in the sense of formatting: snprintf into a fixed buffer, no heap.
+// Real-time safe: formats into the fixed msg_ buffer (snprintf), no heap.
 Status SocketCanBus::fail(Status s, const char* what, int err) {
   const char* sep = iface_[0] ? ": " : "";
   if (err) std::snprintf(msg_, sizeof msg_, "%s%s%s: %s", iface_, sep, what, std::strerror(err));
