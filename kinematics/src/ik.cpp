@@ -13,6 +13,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 
+#include "fast_trig.hpp"
 #include "ik_detail.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
@@ -116,6 +117,22 @@ Pose tz_pose(double d) {
   return T;
 }
 
+// R as a signed permutation, if it is one (to 1e-15).
+IkSignedPerm signed_perm(const Eigen::Matrix3d& R) {
+  IkSignedPerm p;
+  for (int j = 0; j < 3; ++j) {
+    int k = 0;
+    R.col(j).cwiseAbs().maxCoeff(&k);
+    if (std::abs(std::abs(R(k, j)) - 1.0) > 1e-15) return IkSignedPerm{};
+    for (int r = 0; r < 3; ++r)
+      if (r != k && std::abs(R(r, j)) > 1e-15) return IkSignedPerm{};
+    p.idx[static_cast<std::size_t>(j)] = static_cast<std::int8_t>(k);
+    p.sign[static_cast<std::size_t>(j)] = R(k, j) > 0 ? 1.0 : -1.0;
+  }
+  p.is = true;
+  return p;
+}
+
 // Rewrite the chain as C0 J1 C1 ... Jn Cn.
 void decompose(const Chain& c, IkModel& m) {
   Pose K = c.base;
@@ -149,6 +166,15 @@ void decompose(const Chain& c, IkModel& m) {
   }
   m.C[static_cast<std::size_t>(j)] = K * c.tool;
   m.n = j;
+  // Rotations that are signed permutations up to rounding (the usual 0 and
+  // +-90 degree DH angles) are made exact, as forward() does with alpha.
+  for (int i = 0; i <= j; ++i) {
+    const IkSignedPerm p = signed_perm(m.C[static_cast<std::size_t>(i)].linear());
+    if (!p.is) continue;
+    Eigen::Matrix3d R = Eigen::Matrix3d::Zero();
+    for (int k = 0; k < 3; ++k) R(p.idx[static_cast<std::size_t>(k)], k) = p.sign[static_cast<std::size_t>(k)];
+    m.C[static_cast<std::size_t>(i)].linear() = R;
+  }
   scale += c.tool.translation().norm() + c.base.translation().norm();
   m.scale = std::max(scale, 1e-3);
 }
@@ -270,6 +296,15 @@ bool detect_spherical_wrist(IkModel& m) {
   m.wrist_gz_vz = g.z() * v.z();
   if (std::hypot(m.wrist_P, m.wrist_Q) < 1e-9) return false;
   setup_position(m);
+  for (int i = 0; i <= 6; ++i) m.perm[static_cast<std::size_t>(i)] = signed_perm(C(m, i).linear());
+  m.wrist_phi = std::atan2(m.wrist_Q, m.wrist_P);
+  m.wrist_flip = true;
+  const double samples[3][3] = {{0.3, 0.7, -1.1}, {-2.0, 2.5, 0.4}, {1.3, -0.2, 2.9}};
+  for (const auto& a : samples) {
+    const Eigen::Matrix3d W1 = rot_z(a[0]) * m.A * rot_z(a[1]) * m.B * rot_z(a[2]);
+    const Eigen::Matrix3d W2 = rot_z(a[0] + kPi) * m.A * rot_z(2 * m.wrist_phi - a[1]) * m.B * rot_z(a[2] + kPi);
+    if ((W1 - W2).cwiseAbs().maxCoeff() > 1e-12) m.wrist_flip = false;
+  }
   return true;
 }
 
@@ -277,17 +312,23 @@ bool detect_spherical_wrist(IkModel& m) {
 // Univariate equations and polynomials
 // ---------------------------------------------------------------------------
 struct Roots {
-  double v[2] = {0, 0};
+  double v[2] = {0, 0};  ///< the roots (revolute: angles, only if asked for)
+  double c[2] = {0, 0};  ///< revolute: cos of the roots; prismatic: the roots
+  double s[2] = {0, 0};  ///< revolute: sin of the roots
   std::int8_t label[2] = {1, -1};
   int n = 0;
   bool free = false;  ///< the equation holds for every value
 };
 
 // a + b*x + c*y = 0 in the basis of a revolute (cos, sin) or prismatic (m, m^2) joint.
-Roots solve_basis(double a, double b, double c, bool prismatic, double tol) {
+// Revolute: h cos(m - phi) = -a with (b, c) = h (cos phi, sin phi), so the
+// roots are phi +- t, cos t = k = -a/h; their cosines and sines follow
+// without trigonometry (sin t = sqrt((1 - k)(1 + k))), and the angles (one
+// atan2 each) only when `angles` is set.
+Roots solve_basis(double a, double b, double c, bool prismatic, double tol, bool angles = true) {
   Roots r;
   if (!prismatic) {
-    const double h = std::hypot(b, c);
+    const double h = std::sqrt(b * b + c * c);
     if (h <= tol) {
       r.free = std::abs(a) <= tol;
       return r;
@@ -300,11 +341,15 @@ Roots solve_basis(double a, double b, double c, bool prismatic, double tol) {
       if (k < -1.0 - 1e-9) return r;
       k = -1.0;
     }
-    const double phi = std::atan2(c, b);
-    const double t = std::acos(k);
-    r.v[0] = phi + t;
-    r.v[1] = phi - t;
-    r.n = t > 0 ? 2 : 1;
+    const double cp = b / h, sp = c / h;
+    const double st = std::sqrt((1.0 - k) * (1.0 + k));
+    r.c[0] = cp * k - sp * st;  // phi + t
+    r.s[0] = sp * k + cp * st;
+    r.c[1] = cp * k + sp * st;  // phi - t
+    r.s[1] = sp * k - cp * st;
+    r.n = st > 0 ? 2 : 1;
+    if (angles)
+      for (int i = 0; i < r.n; ++i) r.v[i] = detail::atan2_poly(r.s[i], r.c[i]);
     return r;
   }
   const double sc = std::max({std::abs(a), std::abs(b), std::abs(c)});
@@ -314,7 +359,7 @@ Roots solve_basis(double a, double b, double c, bool prismatic, double tol) {
   }
   if (std::abs(c) <= 1e-12 * sc) {
     if (std::abs(b) <= 1e-12 * sc) return r;
-    r.v[0] = -a / b;
+    r.v[0] = r.c[0] = -a / b;
     r.n = 1;
     return r;
   }
@@ -325,8 +370,8 @@ Roots solve_basis(double a, double b, double c, bool prismatic, double tol) {
   }
   const double sq = std::sqrt(disc);
   // +label: the root with the + square root (per the sign of c)
-  r.v[0] = (-b + sq) / (2 * c);
-  r.v[1] = (-b - sq) / (2 * c);
+  r.v[0] = r.c[0] = (-b + sq) / (2 * c);
+  r.v[1] = r.c[1] = (-b - sq) / (2 * c);
   r.n = sq > 0 ? 2 : 1;
   return r;
 }
@@ -399,10 +444,25 @@ Poly row_poly(const Eigen::Vector3d& v, bool prismatic, double sigma) {
 // Position subproblem: (m2, m3) candidates
 // ---------------------------------------------------------------------------
 struct PosCand {
-  double m2 = 0, m3 = 0;
+  double m2 = 0, m3 = 0;  ///< motion values (revolute: angles, set only if asked for)
   std::int8_t elbow = 0;  ///< from the root (0: decide from the Jacobian)
   bool free2 = false;
+  double c2 = 1, s2 = 0, c3 = 1, s3 = 0;  ///< revolute: cos, sin of m2, m3; prismatic: c = m
 };
+
+// Motion value and its (cos, sin) pair (prismatic: the value in c).
+inline void set_pair(bool prismatic, double v, double& c, double& s) {
+  if (prismatic) {
+    c = v;
+    s = 0;
+  } else {
+    detail::sincos_poly(v, s, c);
+  }
+}
+inline Eigen::Vector3d basis_cs(bool prismatic, double c, double s) {
+  if (prismatic) return {1.0, c, c * c};
+  return {1.0, c, s};
+}
 
 void newton_polish(const IkModel& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double& m2,
                    double& m3) {
@@ -423,7 +483,11 @@ void newton_polish(const IkModel& m, const Eigen::Matrix3d& M1, const Eigen::Mat
   }
 }
 
-int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out) {
+// (m2, m3) candidates with their (cos, sin) pairs; the angles m2, m3 only
+// if `angles` (the spherical-wrist solver computes every angle in one batch
+// at the end).
+int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out,
+                   bool angles = true) {
   const bool p2 = prism(m, 1), p3 = prism(m, 2);
   Eigen::Matrix3d M1 = m.M1, M2 = m.M2;
   const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
@@ -441,15 +505,26 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
   if (!d12 && d13) { Mq3 = &M1; Mo = &M2; tq3 = tol1; to = tol2; }
   else if (!d22 && d23) { Mq3 = &M2; Mo = &M1; tq3 = tol2; to = tol1; }
   if (Mq3) {
-    const Roots r3 = solve_basis((*Mq3)(0, 0), (*Mq3)(0, 1), (*Mq3)(0, 2), p3, tq3);
+    const Roots r3 = solve_basis((*Mq3)(0, 0), (*Mq3)(0, 1), (*Mq3)(0, 2), p3, tq3, angles);
     for (int i = 0; i < r3.n; ++i) {
-      const Eigen::Vector3d u = (*Mo) * basis(p3, r3.v[i]);
-      const Roots r2 = solve_basis(u[0], u[1], u[2], p2, to);
+      const Eigen::Vector3d u = (*Mo) * basis_cs(p3, r3.c[i], r3.s[i]);
+      const Roots r2 = solve_basis(u[0], u[1], u[2], p2, to, angles);
       if (r2.free) {
-        out[n++] = {ref_m2 ? *ref_m2 : 0.0, r3.v[i], r3.label[i], true};
+        PosCand& o = out[n++];
+        o = {ref_m2 ? *ref_m2 : 0.0, r3.v[i], r3.label[i], true};
+        set_pair(p2, o.m2, o.c2, o.s2);
+        o.c3 = r3.c[i];
+        o.s3 = r3.s[i];
         continue;
       }
-      for (int k = 0; k < r2.n; ++k) out[n++] = {r2.v[k], r3.v[i], r3.label[i], false};
+      for (int k = 0; k < r2.n; ++k) {
+        PosCand& o = out[n++];
+        o = {r2.v[k], r3.v[i], r3.label[i], false};
+        o.c2 = r2.c[k];
+        o.s2 = r2.s[k];
+        o.c3 = r3.c[i];
+        o.s3 = r3.s[i];
+      }
     }
     return n;
   }
@@ -458,11 +533,18 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
   if (!d13 && d12) { Mq2 = &M1; Mo = &M2; tq3 = tol1; to = tol2; }
   else if (!d23 && d22) { Mq2 = &M2; Mo = &M1; tq3 = tol2; to = tol1; }
   if (Mq2) {
-    const Roots r2 = solve_basis((*Mq2)(0, 0), (*Mq2)(1, 0), (*Mq2)(2, 0), p2, tq3);
+    const Roots r2 = solve_basis((*Mq2)(0, 0), (*Mq2)(1, 0), (*Mq2)(2, 0), p2, tq3, angles);
     for (int i = 0; i < r2.n; ++i) {
-      const Eigen::Vector3d u = Mo->transpose() * basis(p2, r2.v[i]);
-      const Roots r3 = solve_basis(u[0], u[1], u[2], p3, to);
-      for (int k = 0; k < r3.n; ++k) out[n++] = {r2.v[i], r3.v[k], r3.label[k], false};
+      const Eigen::Vector3d u = Mo->transpose() * basis_cs(p2, r2.c[i], r2.s[i]);
+      const Roots r3 = solve_basis(u[0], u[1], u[2], p3, to, angles);
+      for (int k = 0; k < r3.n; ++k) {
+        PosCand& o = out[n++];
+        o = {r2.v[i], r3.v[k], r3.label[k], false};
+        o.c2 = r2.c[i];
+        o.s2 = r2.s[i];
+        o.c3 = r3.c[k];
+        o.s3 = r3.s[k];
+      }
     }
     return n;
   }
@@ -534,7 +616,10 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
       newton_polish(m, M1, M2, m2, mm3);
       const double e1 = basis(p2, m2).dot(M1 * basis(p3, mm3)), e2 = basis(p2, m2).dot(M2 * basis(p3, mm3));
       if (!(std::abs(e1) < 1e-8 * m.scale * m.scale && std::abs(e2) < 1e-8 * m.scale)) continue;
-      out[n++] = {m2, mm3, 0, false};
+      PosCand& o = out[n++];
+      o = {m2, mm3, 0, false};
+      set_pair(p2, m2, o.c2, o.s2);
+      set_pair(p3, mm3, o.c3, o.s3);
     }
   }
   return n;
@@ -542,7 +627,7 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
 
 // wrap_pi without a libm call for the small multiples of 2 pi that atan2
 // sums produce (std::remainder costs ~20 ns; it ran 100+ times per solve).
-double fast_wrap(double a) {
+inline double fast_wrap(double a) {
   for (int i = 0; i < 4; ++i) {
     if (a > kPi) a -= 2.0 * kPi;
     else if (a <= -kPi) a += 2.0 * kPi;
@@ -552,24 +637,21 @@ double fast_wrap(double a) {
 }
 
 // Wrap a revolute joint into its limits where a 2*pi equivalent fits (nearest
-// to ref); prismatic joints are left alone.
-double wrap_joint(const DhRow& r, double q, double ref) {
+// to ref); prismatic joints are left alone. O(1) but for far-off references:
+// the equivalent nearest to ref, then moved into the limits by whole turns.
+inline double wrap_joint(const DhRow& r, double q, double ref) {
   if (r.type != JointType::revolute) return q;
   const double w = fast_wrap(q);
-  double best = w;
-  bool found = false;
-  double best_d = 0;
-  for (int k = -2; k <= 2; ++k) {
-    const double v = w + 2.0 * kPi * k;
-    if (v < r.lower - 1e-12 || v > r.upper + 1e-12) continue;
-    const double d = std::abs(v - ref);
-    if (!found || d < best_d) {
-      best = v;
-      best_d = d;
-      found = true;
-    }
-  }
-  return best;
+  const double lo = r.lower - 1e-12, hi = r.upper + 1e-12;
+  if (w >= lo && w <= hi && w + 2.0 * kPi > hi && w - 2.0 * kPi < lo) return w;  // the only equivalent inside
+  // round((ref - w) / 2 pi) without a libm call (see sincos_poly)
+  constexpr double magic = 6755399441055744.0;
+  const double x = (ref - w) * (0.5 / kPi);
+  const double k = std::abs(x) < 1e15 ? (x + magic) - magic : 0.0;
+  double v = w + 2.0 * kPi * k;
+  for (int i = 0; i < 4 && v > hi; ++i) v -= 2.0 * kPi;
+  for (int i = 0; i < 4 && v < lo; ++i) v += 2.0 * kPi;
+  return v >= lo && v <= hi ? v : w;
 }
 
 double joint_distance(const Chain& c, int j, double a, double b) {
@@ -583,7 +665,25 @@ bool same_solution(const Chain& c, const JointVector& a, const JointVector& b) {
   return true;
 }
 
-// Finish a candidate (motion values m, SI joints = dir*m): wrap, verify, add.
+// Add a verified solution (SI joints, wrapped) unless it is a duplicate.
+void store_solution(const IkModel& m, const JointVector& q, Branch br, std::uint8_t singular, double ep, double er,
+                    IkResult& res) {
+  const Chain& c = m.chain;
+  for (int i = 0; i < res.count; ++i)
+    if (same_solution(c, res.solutions[static_cast<std::size_t>(i)].q, q)) return;
+  if (res.count >= kMaxIkSolutions) return;
+  IkSolution& s = res.solutions[static_cast<std::size_t>(res.count++)];
+  s.q = q;
+  s.branch = br;
+  s.within_limits = within_limits(c, q, 1e-9);
+  s.singular = singular;
+  s.position_error = ep;
+  s.rotation_error = er;
+}
+
+// Finish a candidate (motion values m, SI joints = dir*m): wrap, verify by
+// the chain's FK (a few Gauss-Newton steps if it is close but not within
+// the tolerance, e.g. a root clamped at the reach limit), add.
 void add_candidate(const IkModel& m, const Pose& target, const JointVector* q_ref, const double* mot,
                    Branch br, std::uint8_t singular, bool position_only, IkResult& res) {
   const Chain& c = m.chain;
@@ -605,16 +705,7 @@ void add_candidate(const IkModel& m, const Pose& target, const JointVector* q_re
     }
     if (ep > kVerifyPos || er > kVerifyRot) return;
   }
-  for (int i = 0; i < res.count; ++i)
-    if (same_solution(c, res.solutions[static_cast<std::size_t>(i)].q, q)) return;
-  if (res.count >= kMaxIkSolutions) return;
-  IkSolution& s = res.solutions[static_cast<std::size_t>(res.count++)];
-  s.q = q;
-  s.branch = br;
-  s.within_limits = within_limits(c, q, 1e-9);
-  s.singular = singular;
-  s.position_error = ep;
-  s.rotation_error = er;
+  store_solution(m, q, br, singular, ep, er, res);
 }
 
 void finish_status(IkResult& res) {
@@ -633,97 +724,319 @@ void finish_status(IkResult& res) {
 
 // ---------------------------------------------------------------------------
 // Spherical wrist
+//
+// Everything runs on (cos, sin) pairs; the angles are computed at the end in
+// one batch of atan2_poly calls and never fed back. Constant rotations that
+// are signed permutations (the usual 0 / +-90 degree DH angles) multiply as
+// copies. Each candidate is verified by forward kinematics of its joint
+// values through the model's decomposition C0 J1 C1 ... J6 C6, with the part
+// shared by the two wrist solutions of one arm configuration computed once:
+//   wrist centre   W_fk = C0 Rz(m1) f(m2, m3)          (per arm configuration)
+//   rotation       R_fk = R3 X C6,  X = Rz(m4) C4 Rz(m5) C5 Rz(m6)
+// against the target's M = R3^T R_target C6^T:  |X - M|_F = 2 sqrt(2) sin(err/2)
+// (R3 orthonormal), and the tool position error
+//   p_fk - p = (W_fk - W) - R3 (X - M) C6 w_tool,
+// both exact to rounding. A candidate that misses 1e-9 m / 1e-9 rad (a root
+// clamped at the reach limit, precision lost at a singularity) goes through
+// add_candidate: the chain's own FK and a few Gauss-Newton steps.
 // ---------------------------------------------------------------------------
+// R <- R Rz(c, s) (columns) and R <- Rz(c, s) R (rows).
+EIGEN_ALWAYS_INLINE void mul_rz_right(Eigen::Matrix3d& R, double c, double s) {
+  const Eigen::Vector3d x = R.col(0), y = R.col(1);
+  R.col(0) = c * x + s * y;
+  R.col(1) = c * y - s * x;
+}
+EIGEN_ALWAYS_INLINE void mul_rz_left(Eigen::Matrix3d& R, double c, double s) {
+  const Eigen::RowVector3d x = R.row(0), y = R.row(1);
+  R.row(0) = c * x - s * y;
+  R.row(1) = s * x + c * y;
+}
+// X R, R x and R^T x with R given also as a signed permutation.
+inline Eigen::Matrix3d mul_right(const Eigen::Matrix3d& X, const Eigen::Matrix3d& R, const IkSignedPerm& p) {
+  if (!p.is) return X * R;
+  Eigen::Matrix3d Y;
+  for (int j = 0; j < 3; ++j) Y.col(j) = p.sign[static_cast<std::size_t>(j)] * X.col(p.idx[static_cast<std::size_t>(j)]);
+  return Y;
+}
+inline Eigen::Vector3d apply(const Eigen::Matrix3d& R, const IkSignedPerm& p, const Eigen::Vector3d& x) {
+  if (!p.is) return R * x;
+  Eigen::Vector3d y;
+  for (int j = 0; j < 3; ++j) y[p.idx[static_cast<std::size_t>(j)]] = p.sign[static_cast<std::size_t>(j)] * x[j];
+  return y;
+}
+inline Eigen::Vector3d apply_t(const Eigen::Matrix3d& R, const IkSignedPerm& p, const Eigen::Vector3d& x) {
+  if (!p.is) return R.transpose() * x;
+  Eigen::Vector3d y;
+  for (int j = 0; j < 3; ++j) y[j] = p.sign[static_cast<std::size_t>(j)] * x[p.idx[static_cast<std::size_t>(j)]];
+  return y;
+}
+// Unit (cos, sin) of the angle from a to b in the xy plane; false if either is ~0.
+inline bool angle_between(double ax, double ay, double bx, double by, double& c, double& s) {
+  const double cr = ax * by - ay * bx, dt = ax * bx + ay * by;
+  const double r2 = cr * cr + dt * dt;
+  if (!(r2 > 0)) return false;
+  const double ir = 1.0 / std::sqrt(r2);
+  c = dt * ir;
+  s = cr * ir;
+  return true;
+}
+
 void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res) {
   const Eigen::Vector3d W = target * m.w_tool;
-  const Eigen::Vector3d p0 = C(m, 0).inverse() * W;
+  const Eigen::Matrix3d& C0R = C(m, 0).linear();
+  const Eigen::Vector3d p0 = C0R.transpose() * (W - C(m, 0).translation());
   double mref[6] = {0, 0, 0, 0, 0, 0};
   if (q_ref)
     for (int j = 0; j < 6; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
   PosCand pc[8];
-  const int np = solve_position(m, p0, q_ref ? &mref[1] : nullptr, pc);
-  const Eigen::Matrix3d Rt = target.linear() * C(m, 6).linear().transpose();
-  const double p0xy = std::hypot(p0.x(), p0.y());
+  const int np = solve_position(m, p0, q_ref ? &mref[1] : nullptr, pc, false);
+  if (np == 0) return;
+  const bool p2 = prism(m, 1), p3 = prism(m, 2);
+  const Eigen::Matrix3d& R1 = C(m, 1).linear();
+  const Eigen::Matrix3d& R2 = C(m, 2).linear();
+  const Eigen::Matrix3d& R3c = C(m, 3).linear();
+  const Eigen::Vector3d& t1 = C(m, 1).translation();
+  const Eigen::Vector3d& t2 = C(m, 2).translation();
+  const Eigen::Matrix3d& A = m.A;
+  const Eigen::Matrix3d& B = m.B;
+  const IkSignedPerm &pA = m.perm[4], &pB = m.perm[5], &pR2 = m.perm[2], &pR3 = m.perm[3];
+  const Eigen::Vector3d v = B.col(2);
+  const Eigen::Matrix3d Rt0 = C0R.transpose() * target.linear() * C(m, 6).linear().transpose();
+  const Eigen::Vector3d u = apply(C(m, 6).linear(), m.perm[6], m.w_tool);
+  const double p0xy2 = p0.x() * p0.x() + p0.y() * p0.y();
+  const double tiny_xy2 = 1e-18 * m.scale * m.scale;  // (1e-9 scale)^2
+  const double h5 = std::sqrt(m.wrist_P * m.wrist_P + m.wrist_Q * m.wrist_Q);
+  const double cphi5 = m.wrist_P / h5, sphi5 = m.wrist_Q / h5;
+  const bool tilt_pos = std::abs(h5 + m.wrist_gz_vz - 1.0) < 1e-12;
+  const bool tilt_neg = std::abs(h5 - m.wrist_gz_vz - 1.0) < 1e-12;
+
+  // atan2 arguments, evaluated in one batch at the end.
+  double sy[8 * 6], sx[8 * 6];
+  int ns = 0;
+  auto slot = [&](double y, double x) {
+    sy[ns] = y;
+    sx[ns] = x;
+    return ns++;
+  };
+  struct Arm {
+    int s1, s2, s3, st;  ///< slots of m1, m2, m3 (-1: prismatic, value in v2/v3), t of m5
+    double v2, v3;
+    bool used;  ///< has wrist candidates
+  };
+  struct Cand {
+    int arm, s4, s6, base;  ///< base >= 0: wrist flip of candidate `base` (m4, m6 + pi)
+    double sgn;             ///< m5 = phi5 + sgn t
+    Branch br;
+    std::uint8_t sing;
+    double ep, er;
+  };
+  Arm arms[8];
+  Cand cand[16];
+  int nc = 0;
   for (int i = 0; i < np; ++i) {
-    double mot[6];
-    mot[1] = pc[i].m2;
-    mot[2] = pc[i].m3;
-    const Pose T13 = C(m, 1) * joint_motion(prism(m, 1), mot[1]) * C(m, 2) * joint_motion(prism(m, 2), mot[2]);
-    const Eigen::Vector3d f = T13 * m.w3;
-    const double fxy = std::hypot(f.x(), f.y());
+    const PosCand& P = pc[i];
+    arms[i].used = false;
+    // Frames after the J2 and J3 motions (in the frame after J1's motion).
+    Eigen::Matrix3d R12 = R1;
+    Eigen::Vector3d t12 = t1;
+    if (p2) t12 += P.c2 * R1.col(2);
+    else mul_rz_right(R12, P.c2, P.s2);
+    const Eigen::Matrix3d K = mul_right(R12, R2, pR2);
+    const Eigen::Vector3d tK = R12 * t2 + t12;  // a point of axis 3
+    Eigen::Matrix3d R13 = K;
+    Eigen::Vector3d t13 = tK;
+    if (p3) t13 += P.c3 * K.col(2);
+    else mul_rz_right(R13, P.c3, P.s3);
+    const Eigen::Vector3d f = R13 * m.w3 + t13;  // wrist centre
+    // Joint 1: turn f onto p0 about z.
     std::uint8_t sing = 0;
-    if (fxy < 1e-9 * m.scale && p0xy < 1e-9 * m.scale) {
-      mot[0] = mref[0];  // wrist centre on axis 1: keep q1
+    double c1 = 1, s1 = 0;
+    const double fxy2 = f.x() * f.x() + f.y() * f.y();
+    if (fxy2 < tiny_xy2 && p0xy2 < tiny_xy2) {
+      detail::sincos_poly(mref[0], s1, c1);  // wrist centre on axis 1: keep q1
       sing |= kSingularShoulder;
     } else {
-      mot[0] = std::atan2(p0.y(), p0.x()) - std::atan2(f.y(), f.x());
+      angle_between(f.x(), f.y(), p0.x(), p0.y(), c1, s1);
     }
     Branch br;
     const double sh = f.dot(m.shoulder_dir);
     br.shoulder = sh >= 0 ? 1 : -1;
     if (std::abs(sh) < kNearSingular * m.scale) sing |= kSingularShoulder;
-    // Position Jacobian of the wrist centre (frame after J1 motion).
     {
-      const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
-      const Eigen::Vector3d c1 = ez.cross(f);
-      const Eigen::Vector3d n2 = C(m, 1).linear().col(2), t1 = C(m, 1).translation();
-      const Eigen::Vector3d c2 = prism(m, 1) ? n2 : Eigen::Vector3d(n2.cross(f - t1));
-      const Pose T3 = C(m, 1) * joint_motion(prism(m, 1), mot[1]) * C(m, 2);
-      const Eigen::Vector3d n3 = T3.linear().col(2), t3 = T3.translation();
-      const Eigen::Vector3d c3 = prism(m, 2) ? n3 : Eigen::Vector3d(n3.cross(f - t3));
-      const double den = c1.norm() * c2.norm() * c3.norm();
-      const double det = c1.dot(c2.cross(c3));
-      const double nd = den > 0 ? det / den : 0.0;
-      br.elbow = pc[i].elbow != 0 ? pc[i].elbow : static_cast<std::int8_t>((nd >= 0 ? 1 : -1) * br.shoulder);
-      if (std::abs(nd) < kNearSingular && !(sing & kSingularShoulder)) sing |= kSingularElbow;
+      // Position Jacobian of the wrist centre (frame after J1 motion): its
+      // normalised determinant gives the elbow side and the elbow singularity.
+      const Eigen::Vector3d j1(-f.y(), f.x(), 0.0);
+      const Eigen::Vector3d n2 = R1.col(2);
+      const Eigen::Vector3d j2 = p2 ? n2 : Eigen::Vector3d(n2.cross(f - t1));
+      const Eigen::Vector3d n3 = K.col(2);
+      const Eigen::Vector3d j3 = p3 ? n3 : Eigen::Vector3d(n3.cross(f - tK));
+      // (normalised: det / (|j1| |j2| |j3|), compared squared)
+      const double den2 = j1.squaredNorm() * j2.squaredNorm() * j3.squaredNorm();
+      const double det = j1.dot(j2.cross(j3));
+      br.elbow = P.elbow != 0 ? P.elbow : static_cast<std::int8_t>((det >= 0 ? 1 : -1) * br.shoulder);
+      if (det * det <= kNearSingular * kNearSingular * den2 && !(sing & kSingularShoulder)) sing |= kSingularElbow;
     }
-    if (pc[i].free2) sing |= kSingularShoulder;
-    const Eigen::Matrix3d R3 = C(m, 0).linear() * rot_z(mot[0]) * T13.linear() * C(m, 3).linear();
-    const Eigen::Matrix3d M = R3.transpose() * Rt;
-    Roots r5 = solve_basis(m.wrist_gz_vz - M(2, 2), m.wrist_P, m.wrist_Q, false, 1e-12);
-    {
-      // Near theta5 = 0 (axis 6 along axis 4) acos loses half the digits:
-      // take the half-angle from the tilt tau of axis 6, which is exact.
-      const double h = std::hypot(m.wrist_P, m.wrist_Q);
-      const double k = -(m.wrist_gz_vz - M(2, 2)) / h;
-      const double tau = std::atan2(std::hypot(M(0, 2), M(1, 2)), M(2, 2));
-      double t = -1;
-      if (k > 0.99 && std::abs(h + m.wrist_gz_vz - 1.0) < 1e-12) {
-        t = 2.0 * std::asin(std::min(1.0, std::sin(0.5 * tau) / std::sqrt(h)));
-      } else if (k < -0.99 && std::abs(h - m.wrist_gz_vz - 1.0) < 1e-12) {
-        t = 2.0 * std::acos(std::min(1.0, std::cos(0.5 * tau) / std::sqrt(h)));
-      }
-      if (t >= 0) {
-        const double phi = std::atan2(m.wrist_Q, m.wrist_P);
-        if (t < 1e-10) t = 0;
-        r5.v[0] = phi + t;
-        r5.v[1] = phi - t;
-        r5.n = t > 0 ? 2 : 1;
-      }
+    if (P.free2) sing |= kSingularShoulder;
+    // Everything in the frame of joint 4 (after C3): wrist-centre error and
+    // the wrist's target rotation M = R3^T R_target C6^T.
+    const Eigen::Vector3d p1(c1 * p0.x() + s1 * p0.y(), c1 * p0.y() - s1 * p0.x(), p0.z());  // Rz(-m1) p0
+    const Eigen::Matrix3d K3 = mul_right(R13, R3c, pR3);
+    const Eigen::Vector3d e3 = K3.transpose() * (f - p1);
+    Eigen::Matrix3d Y = Rt0;
+    mul_rz_left(Y, c1, -s1);  // Rz(-m1) Rt0
+    const Eigen::Matrix3d M = K3.transpose() * Y;
+    // Joint 5: a + P cos m5 + Q sin m5 = 0, roots phi5 +- t.
+    const double k5 = (M(2, 2) - m.wrist_gz_vz) / h5;  // cos t
+    // 1 - k and 1 + k, exact near the ends (theta5 -> 0: the tilt of axis 6,
+    // sin(tau) = |M(0:1, 2)|, is exact where M(2, 2) = cos(tau) is not).
+    const double stau2 = M(0, 2) * M(0, 2) + M(1, 2) * M(1, 2);
+    double um = 1.0 - k5, up = 1.0 + k5;
+    if (tilt_pos && k5 > 0.99 && M(2, 2) > 0) um = stau2 / (1.0 + M(2, 2)) / h5;
+    if (tilt_neg && k5 < -0.99 && M(2, 2) < 0) up = stau2 / (1.0 - M(2, 2)) / h5;
+    if (um < -1e-9 || up < -1e-9) continue;  // |k| > 1 + 1e-9: no wrist solution for this arm configuration
+    um = std::max(um, 0.0);
+    up = std::max(up, 0.0);
+    double st = std::sqrt(um * up), ct = std::clamp(0.5 * (up - um), -1.0, 1.0);
+    if (std::sqrt(0.5 * um) < 0.5e-10) {  // t < 1e-10: the two roots merge
+      st = 0;
+      ct = 1;
     }
-    const Eigen::Vector3d v = m.B.col(2);
+    const int n5 = st > 0 ? 2 : 1;
+    Arm& arm = arms[i];
+    arm.used = true;
+    arm.s1 = slot(s1, c1);
+    arm.s2 = p2 ? -1 : slot(P.s2, P.c2);
+    arm.s3 = p3 ? -1 : slot(P.s3, P.c3);
+    arm.v2 = P.c2;
+    arm.v3 = P.c3;
+    arm.st = slot(st, ct);
     const Eigen::Vector3d mz = M.col(2);
-    for (int k = 0; k < r5.n; ++k) {
-      mot[4] = r5.v[k];
-      const Eigen::Matrix3d AR5 = m.A * rot_z(mot[4]);
-      const Eigen::Vector3d w = AR5 * v;
+    double c4 = 1, s4 = 0, c6 = 1, s6 = 0;
+    for (int k = 0; k < n5; ++k) {
+      const double sgn = k == 0 ? 1.0 : -1.0;
+      const double c5 = cphi5 * ct - sgn * sphi5 * st, s5 = sphi5 * ct + sgn * cphi5 * st;
+      // Joint 4: turn w = A Rz(m5) v (axis 6 before joint 4) onto M's z column.
+      const Eigen::Vector3d w = apply(A, pA, Eigen::Vector3d(c5 * v.x() - s5 * v.y(), s5 * v.x() + c5 * v.y(), v.z()));
       std::uint8_t s2 = sing;
-      const double wxy = std::hypot(w.x(), w.y());
-      if (wxy < 1e-10) {
-        mot[3] = mref[3];  // theta5 = 0 family: keep q4
+      const double wxy2 = w.x() * w.x() + w.y() * w.y();
+      if (wxy2 < kNearSingular * kNearSingular) s2 |= kSingularWrist;
+      Cand& cd = cand[nc];
+      cd.arm = i;
+      cd.sgn = sgn;
+      cd.base = -1;
+      if (k == 1 && m.wrist_flip && !(cand[nc - 1].sing & kSingularWrist)) {
+        // (m4 + pi, 2 phi5 - m5, m6 + pi): the same wrist rotation.
+        c4 = -c4, s4 = -s4, c6 = -c6, s6 = -s6;
+        cd.base = nc - 1;
+        cd.s4 = cd.s6 = -1;
       } else {
-        mot[3] = std::atan2(mz.y(), mz.x()) - std::atan2(w.y(), w.x());
+        if (wxy2 < 1e-20) {
+          detail::sincos_poly(mref[3], s4, c4);  // theta5 = 0 family: keep q4
+        } else {
+          angle_between(w.x(), w.y(), mz.x(), mz.y(), c4, s4);
+        }
+        // Joint 6 from N = (Rz(m4) A Rz(m5) B)^T M, first column.
+        const Eigen::Vector3d x(c4 * M(0, 0) + s4 * M(1, 0), c4 * M(1, 0) - s4 * M(0, 0), M(2, 0));
+        const Eigen::Vector3d y = apply_t(A, pA, x);
+        const Eigen::Vector3d z = apply_t(B, pB, Eigen::Vector3d(c5 * y.x() + s5 * y.y(), c5 * y.y() - s5 * y.x(), y.z()));
+        if (!angle_between(1.0, 0.0, z.x(), z.y(), c6, s6)) c6 = 1, s6 = 0;
+        cd.s4 = slot(s4, c4);
+        cd.s6 = slot(s6, c6);
       }
-      if (wxy < kNearSingular) s2 |= kSingularWrist;
-      const Eigen::Matrix3d N = (rot_z(mot[3]) * AR5 * m.B).transpose() * M;
-      mot[5] = std::atan2(N(1, 0), N(0, 0));
+      // Verify: X = Rz(m4) A Rz(m5) B Rz(m6) against M; the position error.
+      Eigen::Matrix3d G = A;
+      mul_rz_left(G, c4, s4);
+      mul_rz_right(G, c5, s5);
+      Eigen::Matrix3d X = mul_right(G, B, pB);
+      mul_rz_right(X, c6, s6);
+      const Eigen::Matrix3d D = X - M;
+      const double f2 = D.squaredNorm();
+      cd.ep = (e3 - D * u).norm();
+      cd.er = f2 < 1e-8 ? std::sqrt(0.5 * f2) : 2.0 * std::asin(std::min(1.0, std::sqrt(f2 / 8.0)));
       Branch b = br;
-      b.wrist = r5.label[k];
-      add_candidate(m, target, q_ref, mot, b, s2, false, res);
+      b.wrist = static_cast<std::int8_t>(sgn);
+      cd.br = b;
+      cd.sing = s2;
+      ++nc;
+    }
+  }
+  // Every angle in one batch, then wrapped into the limits (joints 1-3 once
+  // per arm configuration).
+  double ang[8 * 6];
+  for (int i = 0; i < ns; ++i) ang[i] = detail::atan2_poly(sy[i], sx[i]);
+  // Joint constants for wrapping, limits and de-duplication (inlined here:
+  // they ran 36 and 8 times per pose through the generic helpers).
+  double lo[6], hi[6], lo9[6], hi9[6], ref[6], dir[6];
+  bool rev[6];
+  for (int j = 0; j < 6; ++j) {
+    const DhRow& r = m.chain.joint(j);
+    rev[j] = r.type == JointType::revolute;
+    lo[j] = r.lower - 1e-12;
+    hi[j] = r.upper + 1e-12;
+    lo9[j] = r.lower - 1e-9;
+    hi9[j] = r.upper + 1e-9;
+    ref[j] = q_ref ? (*q_ref)[j] : 0.0;
+    dir[j] = m.dir[static_cast<std::size_t>(j)];
+  }
+  // v = dir * motion, |v| < 2 pi (atan2 output, or that + pi)
+  auto wrap = [&](int j, double v) {
+    if (!rev[j]) return v;
+    const double w = v > kPi ? v - 2.0 * kPi : (v <= -kPi ? v + 2.0 * kPi : v);
+    if (w >= lo[j] && w <= hi[j] && w + 2.0 * kPi > hi[j] && w - 2.0 * kPi < lo[j]) return w;
+    return wrap_joint(m.chain.joint(j), w, ref[j]);
+  };
+  double qarm[8 * 3], mot_arm[8 * 3];
+  for (int i = 0; i < np; ++i) {
+    const Arm& a = arms[i];
+    if (!a.used) continue;
+    mot_arm[i * 3] = ang[a.s1];
+    mot_arm[i * 3 + 1] = a.s2 >= 0 ? ang[a.s2] : a.v2;
+    mot_arm[i * 3 + 2] = a.s3 >= 0 ? ang[a.s3] : a.v3;
+    for (int j = 0; j < 3; ++j) qarm[i * 3 + j] = wrap(j, dir[j] * mot_arm[i * 3 + j]);
+  }
+  double wm[16][3];
+  for (int k = 0; k < nc; ++k) {
+    const Cand& cd = cand[k];
+    const int i = cd.arm;
+    wm[k][1] = m.wrist_phi + cd.sgn * ang[arms[i].st];
+    if (cd.base >= 0) {
+      wm[k][0] = wm[cd.base][0] + kPi;
+      wm[k][2] = wm[cd.base][2] + kPi;
+    } else {
+      wm[k][0] = ang[cd.s4];
+      wm[k][2] = ang[cd.s6];
+    }
+    if (cd.ep <= kVerifyPos && cd.er <= kVerifyRot) {
+      if (res.count >= kMaxIkSolutions) break;
+      IkSolution& sol = res.solutions[static_cast<std::size_t>(res.count)];
+      sol.q.resize(6);
+      for (int j = 0; j < 3; ++j) sol.q[j] = qarm[i * 3 + j];
+      for (int j = 3; j < 6; ++j) sol.q[j] = wrap(j, dir[j] * fast_wrap(wm[k][j - 3]));
+      bool dup = false;
+      for (int t = 0; t < res.count && !dup; ++t) {
+        const JointVector& o = res.solutions[static_cast<std::size_t>(t)].q;
+        bool same = true;
+        for (int j = 0; j < 6 && same; ++j) {
+          const double d = sol.q[j] - o[j];
+          same = std::abs(rev[j] ? fast_wrap(d) : d) <= 1e-7;
+        }
+        dup = same;
+      }
+      if (dup) continue;
+      bool in = true;
+      for (int j = 0; j < 6; ++j) in = in && sol.q[j] >= lo9[j] && sol.q[j] <= hi9[j];
+      sol.branch = cd.br;
+      sol.within_limits = in;
+      sol.singular = cd.sing;
+      sol.position_error = cd.ep;
+      sol.rotation_error = cd.er;
+      ++res.count;
+    } else if (cd.ep < 1e-4 * m.scale && cd.er < 1e-4) {
+      const double all[6] = {mot_arm[i * 3], mot_arm[i * 3 + 1], mot_arm[i * 3 + 2], wm[k][0], wm[k][1], wm[k][2]};
+      add_candidate(m, target, q_ref, all, cd.br, cd.sing, false, res);
     }
   }
 }
-
 
 // ---------------------------------------------------------------------------
 // Reduced arms of seed 002 chapter 4

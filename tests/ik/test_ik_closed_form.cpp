@@ -475,3 +475,59 @@ TEST(IkSphericalWrist, NearestFnAdapterForMovelAndNumericFallback) {
   far.translation() << 5, 0, 0;
   STRCMP_EQUAL("unreachable", kin::to_string(kin::ik_solve_nearest(m, far, kin::JointVector::Zero(6), out)));
 }
+
+// ---------------------------------------------------------------------------
+// The fast path's pieces: atan2_poly (fast_trig.hpp) against std::atan2, and
+// the errors the solver reports (computed from its own decomposition) against
+// the chain's FK.
+// ---------------------------------------------------------------------------
+#include "../../kinematics/src/fast_trig.hpp"
+
+TEST_GROUP(IkFastPath){};
+
+TEST(IkFastPath, Atan2PolyMatchesStdAtan2) {
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> u(-3, 3);
+  double worst = 0;
+  for (int i = 0; i < 2000000; ++i) {
+    double y = u(rng), x = u(rng);
+    if (i % 5 == 1) y *= 1e-9;    // near the axes
+    if (i % 7 == 2) x *= 1e-12;
+    if (i % 11 == 3) x = y * (1 + 1e-15 * u(rng));  // near the diagonal (reduction switch)
+    if (i % 13 == 4) x = y * 0.66;                   // at the rational's switch point
+    worst = std::max(worst, std::abs(servoarm::kin::detail::atan2_poly(y, x) - std::atan2(y, x)));
+  }
+  CHECK(worst < 1e-15);
+  // Signs and zeros as std::atan2.
+  const double z[] = {0.0, -0.0, 1.0, -1.0, 1e-30, -1e-30, 1e30, -1e30};  // (no underflow: the FP plugin traps it)
+  for (double y : z)
+    for (double x : z) {
+      const double a = servoarm::kin::detail::atan2_poly(y, x), b = std::atan2(y, x);
+      if (!(std::abs(a - b) <= 1e-15)) FAIL(("atan2_poly(" + std::to_string(y) + ", " + std::to_string(x) + ")").c_str());
+      CHECK(std::signbit(a) == std::signbit(b));
+    }
+}
+
+TEST(IkFastPath, ReportedErrorsAgreeWithTheChainFk) {
+  for (const char* name : kWristArms) {
+    const kin::IkModel m = prepared(name);
+    std::mt19937_64 rng(21);
+    for (int k = 0; k < 2000; ++k) {
+      const kin::JointVector q = random_q(m.chain, rng);
+      const kin::Pose T = fk(m.chain, q);
+      kin::IkResult r;
+      kin::ik_solve_all(m, T, nullptr, r);
+      for (int i = 0; i < r.count; ++i) {
+        const auto& s = r.solutions[static_cast<std::size_t>(i)];
+        const kin::Pose X = fk(m.chain, s.q);
+        const double ep = (X.translation() - T.translation()).norm();
+        const double er = kin::rotation_error(X.linear(), T.linear()).norm();
+        // both are rounding-level: they agree to rounding
+        if (!(std::abs(ep - s.position_error) < 1e-12 && std::abs(er - s.rotation_error) < 1e-12))
+          FAIL((std::string(name) + " " + describe(s.q) + ": reported " + std::to_string(s.position_error) + " / " +
+                std::to_string(s.rotation_error) + ", FK " + std::to_string(ep) + " / " + std::to_string(er))
+                   .c_str());
+      }
+    }
+  }
+}

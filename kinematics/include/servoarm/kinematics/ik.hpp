@@ -37,7 +37,13 @@
 //    parallel axes perpendicular to it: the point before the last link is
 //    found from the target and phi, then the spatial_3 machinery.
 // Every closed-form solution is checked by FK (1e-9 m, 1e-9 rad on what the
-// method controls) and duplicates are removed.
+// method controls) and duplicates are removed. The spherical-wrist solver
+// evaluates that FK through its own decomposition C0 J1 C1 ... J6 C6 with the
+// part shared by the two wrist solutions of an arm configuration computed once
+// (wrist centre, then the wrist rotation against the target's), exact to
+// rounding; a candidate that misses goes through the chain's forward() and a
+// few Gauss-Newton steps. It works on (cos, sin) pairs and computes every
+// angle in one batch at the end (fast_trig.hpp atan2_poly, 4.4e-16 rad).
 #include <array>
 #include <cstdint>
 
@@ -100,6 +106,15 @@ struct IkResult {
   std::array<IkSolution, kMaxIkSolutions> solutions{};
 };
 
+/// A rotation that is a signed permutation (column j = sign[j] * unit vector
+/// idx[j]), as the constant transforms of DH rows with angles in multiples of
+/// 90 degrees are: products with it are copies (set by ik_prepare()).
+struct IkSignedPerm {
+  bool is = false;
+  std::array<std::int8_t, 3> idx{0, 1, 2};
+  std::array<double, 3> sign{1, 1, 1};
+};
+
 /// A chain analysed for IK. Plain data; build with ik_prepare().
 struct IkModel {
   IkMethod method = IkMethod::none;
@@ -119,6 +134,14 @@ struct IkModel {
   // Wrist (spherical_wrist): M = Rz(m4) A Rz(m5) B Rz(m6).
   Eigen::Matrix3d A = Eigen::Matrix3d::Identity(), B = Eigen::Matrix3d::Identity();
   double wrist_P = 0, wrist_Q = 0, wrist_gz_vz = 0;
+  /// The rotations of C0..C6 as signed permutations where they are one.
+  std::array<IkSignedPerm, 7> perm{};
+  /// Wrist flip: (m4 + pi, 2 phi5 - m5, m6 + pi) gives the same rotation as
+  /// (m4, m5, m6), phi5 = atan2(wrist_Q, wrist_P) -- true when axes 4, 5 and
+  /// 5, 6 are perpendicular (checked numerically at set-up). The solver then
+  /// derives the second wrist solution from the first (no atan2).
+  bool wrist_flip = false;
+  double wrist_phi = 0;
   // planar / pitch arms
   Eigen::Vector3d last_link = Eigen::Vector3d::Zero();  ///< tool point in the frame after the last joint motion
 };
