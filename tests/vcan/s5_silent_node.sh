@@ -1,0 +1,85 @@
+# Scenario 5b: a drive falls silent while the arm moves. armfw (bus.can = vcan0,
+# console over ISO-TP on vcan0) drives armsim nodes 1,2,4,5,6 (one process) and
+# node 3 (its own process, started with armsim's fault injection --silent 3@T:
+# from T s after its start the node sends nothing and ignores the bus, an
+# unplugged drive). armfw must stop the arm with a fault naming joint 3:
+#   - on the console: an `alarm: fault joint 3 ...` line, and `status` in
+#     state fault with fault="joint 3 heartbeat_lost ...";
+#   - on the bus (candump kernel timestamps): from node 3's last heartbeat to the
+#     first RPDO 0x203 that no longer says "enable operation" (the fault
+#     reaction) within heartbeat timeout + 2 control cycles. Under emulation the
+#     cycles themselves run late, so this is judged like scenario 3, in cycles
+#     actually run: at most 2 SYNCs between (last heartbeat + timeout) and the
+#     reaction, and not before the timeout expired; the time is printed.
+#   - every other joint is powered down afterwards (the quick-stop ramp ends).
+. "$SCENARIO_DIR/lib.sh"
+. "$SCENARIO_DIR/s5_lib.sh"
+need candump isotpsend isotprecv isotpsniffer armsim armfw od mkfifo
+silent_after=${1:-25}   # s after node 3's armsim starts; enable + the start of a move must fit before
+write_armfw_config "$OUT_DIR/armfw.toml"
+
+start_candump all -r 4194304 "$CAN_IF,200:C00007F8,080:C00007FF,700:C00007F8,7E0:C00007F7"
+t_node3=$(cut -d' ' -f1 /proc/uptime)
+start_armsim armsim_node3 --nodes 3 --silent "3@$silent_after"
+node3=$ARMSIM_PID
+start_armsim armsim_others --nodes 1,2,4,5,6
+others=$ARMSIM_PID
+start_isotprecv
+log "armfw: ${rate_hz} Hz, heartbeat ${hb_ms} ms, consumer timeout ${hb_timeout_ms} ms; node 3 falls silent ${silent_after} s after its start"
+start_armfw "$OUT_DIR/armfw.toml"
+first_contact
+expect_ok "enable" "$(isotp_ask enable 60)"
+wait_state idle 60
+# start the 10 s move about 4 s before node 3 falls silent
+_before_move() { awk -v t3="$t_node3" -v s="$silent_after" '{ exit !($1 < t3 + s - 4) }' /proc/uptime; }
+_before_move || check_fail "start-up took too long: node 3 falls silent within 4 s (raise the scenario's argument)"
+while _before_move; do sleep 0.1; done   # (sleep loops run slow under emulation: the clock decides)
+expect_ok "movej (slow, 10 s)" "$(isotp_ask 'movej 60 -60 120 40 -40 60 speed=10')"
+grep -q 'kind=silent' "$OUT_DIR/armsim_node3.log" &&
+  check_fail "node 3 fell silent before the move started (the VM is slow: raise the scenario's argument)" ||
+  log "moving; waiting for node 3 to fall silent"
+wait_until $((silent_after + 30)) "armsim to silence node 3" grep -qs 'kind=silent' "$OUT_DIR/armsim_node3.log"
+wait_state fault 30
+st=$(isotp_ask status)
+echo "$st"
+# stopped on the way: not at the goal of the move
+echo "$st" | awk '{ if (match($0, /joints=\[[^]]*\]/)) { split(substr($0, RSTART + 8, RLENGTH - 9), q, " ") }
+                    d = q[1] - 60; if (d < 0) d = -d; printf "joint 1 at %s deg when stopped (goal 60)\n", q[1]; exit !(q[1] != "" && d > 1) }' \
+  >"$OUT_DIR/stopped.txt" && pass "the arm stopped during the move: $(cat "$OUT_DIR/stopped.txt")" ||
+  check_fail "the arm was not stopped during the move: $(cat "$OUT_DIR/stopped.txt")"
+case $st in
+  *'fault="joint 3 heartbeat_lost'*) pass "status names the joint and the cause: ${st#*fault=}" ;;
+  *) check_fail "status does not say fault=\"joint 3 heartbeat_lost...\": $st" ;;
+esac
+isotp_text | grep '^alarm: fault' >"$OUT_DIR/alarms.txt" || true
+grep -q '^alarm: fault joint 3 ' "$OUT_DIR/alarms.txt" && pass "console alarm: $(head -n 1 "$OUT_DIR/alarms.txt")" ||
+  check_fail "no 'alarm: fault joint 3 ...' on the console (got: $(cat "$OUT_DIR/alarms.txt"))"
+expect_error "movej refused while faulted" "$(isotp_ask 'movej 0 0 0 0 0 0')"
+sleep 1
+stop_armfw
+stop_isotprecv
+kill -KILL "$node3" 2>/dev/null; wait "$node3" 2>/dev/null
+ARMSIM_PID=$others; stop_armsim
+stop_candump all
+cat "$OUT_DIR/armsim_node3.log" | grep -E 'fault|ready'
+
+tframes "$OUT_DIR/all.log" >"$OUT_DIR/all.tframes"
+awk -v timeout="$hb_timeout_ms" -v rate="$rate_hz" '
+    { split($2, p, "#") }
+    p[1] == "703" { last_hb = $1 }
+    p[1] == "080" && p[2] == "" { sync[++ns] = $1 }
+    p[1] == "203" && substr(p[2], 1, 4) == "0F00" { moving = 1; if (react != "") back = 1 }
+    p[1] == "203" && moving && react == "" && substr(p[2], 1, 4) != "0F00" { react = $1; cw = substr(p[2], 3, 2) substr(p[2], 1, 2) }
+    END { if (react == "") { print "no fault reaction (RPDO 0x203 without enable operation) after node 3 fell silent"; exit 1 }
+          period = 1000 / rate; dt = (react - last_hb) * 1000
+          for (i = 1; i <= ns; i++) if (sync[i] > last_hb + timeout / 1000 && sync[i] < react) between++
+          printf "bus: node 3 last heartbeat at %.6f, RPDO 0x203 controlword 0x%s at %.6f: %.1f ms later (timeout %d ms + 2 cycles = %.1f ms), %d SYNC(s) between timeout expiry and reaction (want 0-2)%s\n", last_hb, cw, react, dt, timeout, timeout + 2 * period, between + 0, back ? "; node 3 re-enabled afterwards!" : ""
+          exit !(dt > timeout && between <= 2 && !back) }' "$OUT_DIR/all.tframes" >"$OUT_DIR/silent_latency.txt" &&
+  pass "$(cat "$OUT_DIR/silent_latency.txt")" || check_fail "$(cat "$OUT_DIR/silent_latency.txt")"
+# the other joints end powered down (ramp to rest, then no "enable operation")
+for n in 1 2 4 5 6; do
+  last=$(grep " 20$n#" "$OUT_DIR/all.tframes" | tail -n 1 | cut -d' ' -f2)
+  case $last in 20$n#0F00*) check_fail "node $n still enabled at the end: $last" ;; "") check_fail "no RPDO for node $n" ;;
+    *) pass "node $n powered down after the fault ($last)" ;; esac
+done
+finish
