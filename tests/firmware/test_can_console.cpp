@@ -6,11 +6,15 @@
 // target, realtime characters, and the e-stop latency from the client's Ctrl-X
 // to the first quick-stop controlword on the bus. The kernel's ISO-TP against
 // this console is tests/vcan/s5_can_console.sh.
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 #include <thread>
 #include <vector>
@@ -190,6 +194,37 @@ TEST(CanConsoleFraming, ConfigKeysAndIdChecks) {
   k.iface = "nosuchcan9";
   CHECK(starts(cc.open(k, nullptr, t), "cannot open nosuchcan9: "));
 }
+
+#ifdef ARMCTL_PATH
+// armctl console --can: bad usage and a missing interface are one-line errors, exit 2.
+TEST(CanConsoleFraming, ArmctlCanUsageErrors) {
+  struct {
+    const char* args;
+    const char* want;  // part of stderr
+  } cases[] = {
+      {"console --can nosuchcan9 -c status", "cannot open nosuchcan9"},
+      {"console --can vcan0 --tx-id 0x800 -c status", "--tx-id needs an 11-bit CAN id"},
+      {"console --can vcan0 --rx-id zz -c status", "--rx-id needs an 11-bit CAN id"},
+      {"console --can vcan0 --tx-id 0x7E8 -c status", "--tx-id and --rx-id must differ"},
+      {"console --can vcan0 --serial /dev/null -c status", "give either --serial"},
+      {"console -c status", "give either --serial"},
+      {"console --can", "--can needs an interface"},
+  };
+  const std::string err = "/tmp/servoarm_can_console_" + std::to_string(getpid()) + ".err";
+  for (const auto& c : cases) {
+    const std::string cmd = std::string(ARMCTL_PATH) + " " + c.args + " >/dev/null 2>" + err;
+    const int raw = std::system(cmd.c_str());
+    std::FILE* f = std::fopen(err.c_str(), "r");
+    std::string text;
+    char b[512];
+    while (f && std::fgets(b, sizeof b, f)) text += b;
+    if (f) std::fclose(f);
+    LONGS_EQUAL_TEXT(2, WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, c.args);
+    CHECK_TEXT(text.find(c.want) != std::string::npos, (std::string(c.args) + " -> " + text).c_str());
+  }
+  std::remove(err.c_str());
+}
+#endif
 
 TEST_GROUP(CanConsole){};
 
