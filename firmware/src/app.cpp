@@ -150,7 +150,10 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override) {
   } else {
     socketcan = std::make_unique<hal::SocketCanBus>();
     const hal::Status st = socketcan->open(cfg.can.c_str());
-    if (st != hal::Status::ok) return "bus.can: cannot open " + cfg.can + ": " + socketcan->message();
+    if (st != hal::Status::ok) {
+      const std::string m = socketcan->message();  // starts with the interface name
+      return "bus.can: cannot open " + (m.rfind(cfg.can + ":", 0) == 0 ? m : cfg.can + ": " + m);
+    }
     canbus = socketcan.get();
   }
   hal::CanopenMasterConfig mc;
