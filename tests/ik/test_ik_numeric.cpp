@@ -175,14 +175,25 @@ TEST(IkNumeric, ClosedFormsMissNoSolution) {
         kin::ik_numeric(c, T, random_q(c, rng), o, r);
         if (r.status != kin::Status::ok) continue;
         ++checked;
-        bool in = false;
-        for (int i = 0; i < cf.count && !in; ++i) {
+        auto gap = [&](const kin::JointVector& a, const kin::JointVector& b) {
           double g = 0;
           for (int j = 0; j < c.n_joints; ++j) {
-            const double d = cf.solutions[static_cast<std::size_t>(i)].q[j] - r.q[j];
+            const double d = a[j] - b[j];
             g = std::max(g, c.joint(j).type == kin::JointType::revolute ? std::abs(kin::wrap_pi(d)) : std::abs(d));
           }
-          in = g < 1e-6;
+          return g;
+        };
+        // Two closed-form solutions close together (roots about to merge):
+        // there the joints are ill-conditioned -- a 1e-9 pose tolerance
+        // leaves ~sqrt(1e-9) in the joints -- so 1e-4 is accepted.
+        bool merging = false;
+        for (int i = 0; i < cf.count; ++i)
+          for (int k = i + 1; k < cf.count; ++k)
+            merging = merging || gap(cf.solutions[static_cast<std::size_t>(i)].q, cf.solutions[static_cast<std::size_t>(k)].q) < 0.1;
+        bool in = false;
+        for (int i = 0; i < cf.count && !in; ++i) {
+          const double g = gap(cf.solutions[static_cast<std::size_t>(i)].q, r.q);
+          in = g < 1e-6 || (merging && g < 1e-4);
         }
         if (!in) FAIL((std::string(name) + ": numerical solution not found in closed form " + describe(r.q)).c_str());
       }
