@@ -191,3 +191,61 @@ TEST(Process, PrintrunPrintcoreDrivesThePty) {
   CHECK_TEXT(count(out, "\nok") >= 8, out.c_str());
   CHECK_TEXT(out.find("\nX:") != std::string::npos, out.c_str());
 }
+
+// Printrun's pronsole itself (Debian package pronsole), its console fed on stdin:
+// connect to the armfw pty, enable, a joint move, a relative G-code line, M400, M114.
+// pronsole sends console commands without waiting for "ok"; armfw answers them in
+// order (M400 holds the M114 behind it), so only the connect needs a pause.
+TEST(Process, PronsoleDrivesThePty) {
+  if (access("/usr/bin/pronsole", X_OK) != 0) {
+    std::printf("\n  (skipped: pronsole not installed)\n");
+    return;
+  }
+  int errpipe[2];
+  CHECK(pipe(errpipe) == 0);
+  const pid_t pid = start_armfw_pty(errpipe[1], errpipe[0]);
+  close(errpipe[1]);
+  std::string err, pty;
+  const auto t0 = std::chrono::steady_clock::now();
+  fcntl(errpipe[0], F_SETFL, O_NONBLOCK);
+  while (pty.empty() && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(20)) {
+    char b[256];
+    const ssize_t r = read(errpipe[0], b, sizeof b);
+    if (r > 0) err.append(b, static_cast<std::size_t>(r));
+    const auto p = err.find("console pty: ");
+    if (p != std::string::npos && err.find('\n', p) != std::string::npos)
+      pty = err.substr(p + 13, err.find('\n', p) - p - 13);
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  CHECK_TEXT(!pty.empty(), err.c_str());
+  int st = 0;
+  const std::string out = run_capture(
+      "(echo 'connect " + pty + " 115200'; sleep 5; echo M17; echo 'movej 20 -40 160 10 -50 30 speed=100'; "
+      "echo G91; echo 'G1 Z20 F3000'; echo G90; echo M400; echo M114; echo 'G1 X99999'; sleep 10; "
+      "echo disconnect; echo exit) | HOME=/tmp timeout 60 /usr/bin/pronsole 2>&1",
+      st);
+  kill(pid, SIGTERM);
+  waitpid(pid, nullptr, 0);
+  close(errpipe[0]);
+  CHECK_TEXT(out.find("Printer is now online") != std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("ok enabled") != std::string::npos, out.c_str());
+  CHECK_TEXT(count(out, "ok queued") == 2, out.c_str());
+  CHECK_TEXT(out.find("X:") != std::string::npos, out.c_str());
+  // Only the unreachable G1 X99999 is refused, with its reason.
+  CHECK_TEXT(count(out, "error: ") == 1, out.c_str());
+  CHECK_TEXT(out.find("error: unreachable") != std::string::npos || out.find("error: limits") != std::string::npos, out.c_str());
+  // M114 after the relative Z+20: compare with the pose of the joint move plus 20 mm.
+  const auto xp = out.find("X:");
+  double x = 0, y = 0, z = 0;
+  CHECK(std::sscanf(out.c_str() + xp, "X:%lf Y:%lf Z:%lf", &x, &y, &z) == 3);
+  const std::string fk = run_capture(emulator_prefix() + ARMCTL_PATH +
+                                         " kin fk --robot puma560 20 -40 160 10 -50 30 2>&1",
+                                     st);
+  const auto pp = fk.find("position [mm]:");
+  double fx = 0, fy = 0, fz = 0;
+  CHECK_TEXT(pp != std::string::npos && std::sscanf(fk.c_str() + pp, "position [mm]: x %lf y %lf z %lf", &fx, &fy, &fz) == 3,
+             fk.c_str());
+  DOUBLES_EQUAL(fx, x, 0.05);
+  DOUBLES_EQUAL(fy, y, 0.05);
+  DOUBLES_EQUAL(fz + 20.0, z, 0.05);
+}
