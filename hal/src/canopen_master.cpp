@@ -264,8 +264,11 @@ Status CanopenServoBus::start(TimePoint deadline) {
   error_[0] = '\0';
   if (cfg_.set_bus_filters) {
     CanFilter filters[kMaxServoJoints];
-    for (std::size_t j = 0; j < cfg_.joint_count; ++j) filters[j] = CanFilter{joints_[j].node, 0x7F, false};
-    if (const Status s = bus_.set_filters(std::span<const CanFilter>(filters, cfg_.joint_count)); s != Status::ok) {
+    // joint_count <= kMaxServoJoints (checked in the constructor); the min() tells GCC's
+    // -O3 -Wstringop-overflow so.
+    const std::size_t nf = cfg_.joint_count < kMaxServoJoints ? cfg_.joint_count : kMaxServoJoints;
+    for (std::size_t j = 0; j < nf; ++j) filters[j] = CanFilter{joints_[j].node, 0x7F, false};
+    if (const Status s = bus_.set_filters(std::span<const CanFilter>(filters, nf)); s != Status::ok) {
       std::snprintf(error_, sizeof error_, "installing receive filters: %s", describe(s));
       return s;
     }
