@@ -448,6 +448,9 @@ struct PosCand {
   std::int8_t elbow = 0;  ///< from the root (0: decide from the Jacobian)
   bool free2 = false;
   double c2 = 1, s2 = 0, c3 = 1, s3 = 0;  ///< revolute: cos, sin of m2, m3; prismatic: c = m
+  /// Candidates with the same g2 (g3) >= 0 share the root m2 (m3) bit for
+  /// bit (one atan2 for them).
+  std::int8_t g2 = -1, g3 = -1;
 };
 
 // Motion value and its (cos, sin) pair (prismatic: the value in c).
@@ -515,6 +518,7 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
         set_pair(p2, o.m2, o.c2, o.s2);
         o.c3 = r3.c[i];
         o.s3 = r3.s[i];
+        o.g3 = static_cast<std::int8_t>(i);
         continue;
       }
       for (int k = 0; k < r2.n; ++k) {
@@ -524,6 +528,7 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
         o.s2 = r2.s[k];
         o.c3 = r3.c[i];
         o.s3 = r3.s[i];
+        o.g3 = static_cast<std::int8_t>(i);
       }
     }
     return n;
@@ -544,6 +549,7 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
         o.s2 = r2.s[i];
         o.c3 = r3.c[k];
         o.s3 = r3.s[k];
+        o.g2 = static_cast<std::int8_t>(i);
       }
     }
     return n;
@@ -637,21 +643,10 @@ inline double fast_wrap(double a) {
 }
 
 // Wrap a revolute joint into its limits where a 2*pi equivalent fits (nearest
-// to ref); prismatic joints are left alone. O(1) but for far-off references:
-// the equivalent nearest to ref, then moved into the limits by whole turns.
+// to ref); prismatic joints are left alone (rule: detail::wrap_into_limits).
 inline double wrap_joint(const DhRow& r, double q, double ref) {
   if (r.type != JointType::revolute) return q;
-  const double w = fast_wrap(q);
-  const double lo = r.lower - 1e-12, hi = r.upper + 1e-12;
-  if (w >= lo && w <= hi && w + 2.0 * kPi > hi && w - 2.0 * kPi < lo) return w;  // the only equivalent inside
-  // round((ref - w) / 2 pi) without a libm call (see sincos_poly)
-  constexpr double magic = 6755399441055744.0;
-  const double x = (ref - w) * (0.5 / kPi);
-  const double k = std::abs(x) < 1e15 ? (x + magic) - magic : 0.0;
-  double v = w + 2.0 * kPi * k;
-  for (int i = 0; i < 4 && v > hi; ++i) v -= 2.0 * kPi;
-  for (int i = 0; i < 4 && v < lo; ++i) v += 2.0 * kPi;
-  return v >= lo && v <= hi ? v : w;
+  return detail::wrap_into_limits(fast_wrap(q), r.lower - 1e-12, r.upper + 1e-12, ref);
 }
 
 double joint_distance(const Chain& c, int j, double a, double b) {
@@ -726,7 +721,7 @@ void finish_status(IkResult& res) {
 // Spherical wrist
 //
 // Everything runs on (cos, sin) pairs; the angles are computed at the end in
-// one batch of atan2_poly calls and never fed back. Constant rotations that
+// one batch (atan2_poly_x2, two at a time) and never fed back. Constant rotations that
 // are signed permutations (the usual 0 / +-90 degree DH angles) multiply as
 // copies. Each candidate is verified by forward kinematics of its joint
 // values through the model's decomposition C0 J1 C1 ... J6 C6, with the part
@@ -736,7 +731,10 @@ void finish_status(IkResult& res) {
 // against the target's M = R3^T R_target C6^T:  |X - M|_F = 2 sqrt(2) sin(err/2)
 // (R3 orthonormal), and the tool position error
 //   p_fk - p = (W_fk - W) - R3 (X - M) C6 w_tool,
-// both exact to rounding. A candidate that misses 1e-9 m / 1e-9 rad (a root
+// both exact to rounding. The second wrist solution of an arm configuration,
+// when derived by the wrist flip (m4 + pi, 2 phi5 - m5, m6 + pi: the same X,
+// an identity checked at set-up), shares the first one's errors and flags.
+// A candidate that misses 1e-9 m / 1e-9 rad (a root
 // clamped at the reach limit, precision lost at a singularity) goes through
 // add_candidate: the chain's own FK and a few Gauss-Newton steps.
 // ---------------------------------------------------------------------------
@@ -752,19 +750,19 @@ EIGEN_ALWAYS_INLINE void mul_rz_left(Eigen::Matrix3d& R, double c, double s) {
   R.row(1) = s * x + c * y;
 }
 // X R, R x and R^T x with R given also as a signed permutation.
-inline Eigen::Matrix3d mul_right(const Eigen::Matrix3d& X, const Eigen::Matrix3d& R, const IkSignedPerm& p) {
+EIGEN_ALWAYS_INLINE Eigen::Matrix3d mul_right(const Eigen::Matrix3d& X, const Eigen::Matrix3d& R, const IkSignedPerm& p) {
   if (!p.is) return X * R;
   Eigen::Matrix3d Y;
   for (int j = 0; j < 3; ++j) Y.col(j) = p.sign[static_cast<std::size_t>(j)] * X.col(p.idx[static_cast<std::size_t>(j)]);
   return Y;
 }
-inline Eigen::Vector3d apply(const Eigen::Matrix3d& R, const IkSignedPerm& p, const Eigen::Vector3d& x) {
+EIGEN_ALWAYS_INLINE Eigen::Vector3d apply(const Eigen::Matrix3d& R, const IkSignedPerm& p, const Eigen::Vector3d& x) {
   if (!p.is) return R * x;
   Eigen::Vector3d y;
   for (int j = 0; j < 3; ++j) y[p.idx[static_cast<std::size_t>(j)]] = p.sign[static_cast<std::size_t>(j)] * x[j];
   return y;
 }
-inline Eigen::Vector3d apply_t(const Eigen::Matrix3d& R, const IkSignedPerm& p, const Eigen::Vector3d& x) {
+EIGEN_ALWAYS_INLINE Eigen::Vector3d apply_t(const Eigen::Matrix3d& R, const IkSignedPerm& p, const Eigen::Vector3d& x) {
   if (!p.is) return R.transpose() * x;
   Eigen::Vector3d y;
   for (int j = 0; j < 3; ++j) y[j] = p.sign[static_cast<std::size_t>(j)] * x[p.idx[static_cast<std::size_t>(j)]];
@@ -811,7 +809,7 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
   const bool tilt_neg = std::abs(h5 - m.wrist_gz_vz - 1.0) < 1e-12;
 
   // atan2 arguments, evaluated in one batch at the end.
-  double sy[8 * 6], sx[8 * 6];
+  double sy[8 * 6 + 1], sx[8 * 6 + 1];
   int ns = 0;
   auto slot = [&](double y, double x) {
     sy[ns] = y;
@@ -831,6 +829,7 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
     double ep, er;
   };
   Arm arms[8];
+  int gslot2[2] = {-1, -1}, gslot3[2] = {-1, -1};  // shared root slots (PosCand g2, g3)
   Cand cand[16];
   int nc = 0;
   for (int i = 0; i < np; ++i) {
@@ -905,8 +904,14 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
     Arm& arm = arms[i];
     arm.used = true;
     arm.s1 = slot(s1, c1);
-    arm.s2 = p2 ? -1 : slot(P.s2, P.c2);
-    arm.s3 = p3 ? -1 : slot(P.s3, P.c3);
+    if (p2) arm.s2 = -1;
+    else if (P.g2 >= 0 && gslot2[P.g2] >= 0) arm.s2 = gslot2[P.g2];
+    else if (P.g2 >= 0) arm.s2 = gslot2[P.g2] = slot(P.s2, P.c2);
+    else arm.s2 = slot(P.s2, P.c2);
+    if (p3) arm.s3 = -1;
+    else if (P.g3 >= 0 && gslot3[P.g3] >= 0) arm.s3 = gslot3[P.g3];
+    else if (P.g3 >= 0) arm.s3 = gslot3[P.g3] = slot(P.s3, P.c3);
+    else arm.s3 = slot(P.s3, P.c3);
     arm.v2 = P.c2;
     arm.v3 = P.c3;
     arm.st = slot(st, ct);
@@ -914,6 +919,19 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
     double c4 = 1, s4 = 0, c6 = 1, s6 = 0;
     for (int k = 0; k < n5; ++k) {
       const double sgn = k == 0 ? 1.0 : -1.0;
+      if (k == 1 && m.wrist_flip && !(cand[nc - 1].sing & kSingularWrist)) {
+        // (m4 + pi, 2 phi5 - m5, m6 + pi): the same wrist rotation X as the
+        // first root's (identity checked at set-up), so the same errors and
+        // the same |w_xy| (the wrist-singularity test): nothing to compute.
+        Cand& cd = cand[nc];
+        cd = cand[nc - 1];
+        cd.sgn = sgn;
+        cd.base = nc - 1;
+        cd.s4 = cd.s6 = -1;
+        cd.br.wrist = static_cast<std::int8_t>(sgn);
+        ++nc;
+        continue;
+      }
       const double c5 = cphi5 * ct - sgn * sphi5 * st, s5 = sphi5 * ct + sgn * cphi5 * st;
       // Joint 4: turn w = A Rz(m5) v (axis 6 before joint 4) onto M's z column.
       const Eigen::Vector3d w = apply(A, pA, Eigen::Vector3d(c5 * v.x() - s5 * v.y(), s5 * v.x() + c5 * v.y(), v.z()));
@@ -924,12 +942,7 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
       cd.arm = i;
       cd.sgn = sgn;
       cd.base = -1;
-      if (k == 1 && m.wrist_flip && !(cand[nc - 1].sing & kSingularWrist)) {
-        // (m4 + pi, 2 phi5 - m5, m6 + pi): the same wrist rotation.
-        c4 = -c4, s4 = -s4, c6 = -c6, s6 = -s6;
-        cd.base = nc - 1;
-        cd.s4 = cd.s6 = -1;
-      } else {
+      {
         if (wxy2 < 1e-20) {
           detail::sincos_poly(mref[3], s4, c4);  // theta5 = 0 family: keep q4
         } else {
@@ -962,29 +975,32 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
   }
   // Every angle in one batch, then wrapped into the limits (joints 1-3 once
   // per arm configuration).
-  double ang[8 * 6];
-  for (int i = 0; i < ns; ++i) ang[i] = detail::atan2_poly(sy[i], sx[i]);
-  // Joint constants for wrapping, limits and de-duplication (inlined here:
-  // they ran 36 and 8 times per pose through the generic helpers).
-  double lo[6], hi[6], lo9[6], hi9[6], ref[6], dir[6];
-  bool rev[6];
+  double ang[8 * 6 + 1];
+  if (ns & 1) {  // pad to pairs
+    sy[ns] = 0.0;
+    sx[ns] = 1.0;
+  }
+  for (int i = 0; i < ns; i += 2) detail::atan2_poly_x2(sy + i, sx + i, ang + i);
+  // Wrapping into the limits with the per-joint table of ik_prepare(): a
+  // joint whose limits span less than a turn has at most one equivalent
+  // inside (no reference needed: branch-free), others follow the rule.
+  double ref[6], dir[6];
+  bool narrow[6];
   for (int j = 0; j < 6; ++j) {
-    const DhRow& r = m.chain.joint(j);
-    rev[j] = r.type == JointType::revolute;
-    lo[j] = r.lower - 1e-12;
-    hi[j] = r.upper + 1e-12;
-    lo9[j] = r.lower - 1e-9;
-    hi9[j] = r.upper + 1e-9;
     ref[j] = q_ref ? (*q_ref)[j] : 0.0;
     dir[j] = m.dir[static_cast<std::size_t>(j)];
+    narrow[j] = detail::narrow_applies(m.wrap[static_cast<std::size_t>(j)], ref[j]);
   }
-  // v = dir * motion, |v| < 2 pi (atan2 output, or that + pi)
+  // v = dir * motion, |v| < 3 pi (atan2 output, or that + pi)
   auto wrap = [&](int j, double v) {
-    if (!rev[j]) return v;
+    const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
+    if (jw.kind == 0) return v;
     const double w = v > kPi ? v - 2.0 * kPi : (v <= -kPi ? v + 2.0 * kPi : v);
-    if (w >= lo[j] && w <= hi[j] && w + 2.0 * kPi > hi[j] && w - 2.0 * kPi < lo[j]) return w;
-    return wrap_joint(m.chain.joint(j), w, ref[j]);
+    if (narrow[j]) return detail::wrap_narrow(jw, w);
+    return detail::wrap_into_limits(w, jw.lo, jw.hi, ref[j]);
   };
+  // one step of fast_wrap (|a| < 3 pi)
+  auto wrap1 = [](double a) { return a > kPi ? a - 2.0 * kPi : (a <= -kPi ? a + 2.0 * kPi : a); };
   double qarm[8 * 3], mot_arm[8 * 3];
   for (int i = 0; i < np; ++i) {
     const Arm& a = arms[i];
@@ -995,6 +1011,7 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
     for (int j = 0; j < 3; ++j) qarm[i * 3 + j] = wrap(j, dir[j] * mot_arm[i * 3 + j]);
   }
   double wm[16][3];
+  int owner[kMaxIkSolutions];  // candidate index of each stored solution
   for (int k = 0; k < nc; ++k) {
     const Cand& cd = cand[k];
     const int i = cd.arm;
@@ -1010,21 +1027,33 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
       if (res.count >= kMaxIkSolutions) break;
       IkSolution& sol = res.solutions[static_cast<std::size_t>(res.count)];
       sol.q.resize(6);
-      for (int j = 0; j < 3; ++j) sol.q[j] = qarm[i * 3 + j];
-      for (int j = 3; j < 6; ++j) sol.q[j] = wrap(j, dir[j] * fast_wrap(wm[k][j - 3]));
+      double q[6];
+      for (int j = 0; j < 3; ++j) q[j] = qarm[i * 3 + j];
+      for (int j = 3; j < 6; ++j) q[j] = wrap(j, dir[j] * wrap1(wm[k][j - 3]));
+      // De-duplication: every joint within 1e-7 (revolute: modulo 2 pi). A
+      // wrist flip (m4 + pi) never repeats its base; otherwise most pairs
+      // differ at the first joints, by more than 1e-7 and less than 2 pi -
+      // 2e-7 (no wrap needed to tell).
       bool dup = false;
       for (int t = 0; t < res.count && !dup; ++t) {
+        if (cd.base >= 0 && owner[t] == cd.base) continue;
         const JointVector& o = res.solutions[static_cast<std::size_t>(t)].q;
         bool same = true;
         for (int j = 0; j < 6 && same; ++j) {
-          const double d = sol.q[j] - o[j];
-          same = std::abs(rev[j] ? fast_wrap(d) : d) <= 1e-7;
+          const double d = std::abs(q[j] - o[j]);
+          if (d <= 1e-7) continue;
+          same = m.wrap[static_cast<std::size_t>(j)].kind != 0 && d >= 2.0 * kPi - 2e-7 && std::abs(fast_wrap(q[j] - o[j])) <= 1e-7;
         }
         dup = same;
       }
       if (dup) continue;
       bool in = true;
-      for (int j = 0; j < 6; ++j) in = in && sol.q[j] >= lo9[j] && sol.q[j] <= hi9[j];
+      for (int j = 0; j < 6; ++j) {
+        const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
+        in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
+        sol.q[j] = q[j];
+      }
+      owner[res.count] = k;
       sol.branch = cd.br;
       sol.within_limits = in;
       sol.singular = cd.sing;
@@ -1033,7 +1062,9 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
       ++res.count;
     } else if (cd.ep < 1e-4 * m.scale && cd.er < 1e-4) {
       const double all[6] = {mot_arm[i * 3], mot_arm[i * 3 + 1], mot_arm[i * 3 + 2], wm[k][0], wm[k][1], wm[k][2]};
+      const int before = res.count;
       add_candidate(m, target, q_ref, all, cd.br, cd.sing, false, res);
+      for (int t = before; t < res.count; ++t) owner[t] = -1;
     }
   }
 }
@@ -1233,6 +1264,7 @@ Status ik_prepare(const Chain& chain, IkModel& model) {
   model = IkModel{};
   if (chain.n_joints > kMaxJoints || chain.n_rows > kMaxRows) return Status::capacity;
   model.chain = chain;
+  for (int j = 0; j < chain.n_joints; ++j) model.wrap[static_cast<std::size_t>(j)] = detail::make_joint_wrap(chain.joint(j));
   decompose(chain, model);
   model.method = IkMethod::none;
   if (detect_spherical_wrist(model)) {

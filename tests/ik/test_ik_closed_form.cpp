@@ -4,6 +4,9 @@
 // solutions, solution counts (generic, reach limit, unreachable), each
 // singularity kind, solution choice, bad input.
 #include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <vector>
 
 #include "servoarm/kinematics/ik.hpp"
 #include "kin_test_util.hpp"
@@ -530,4 +533,103 @@ TEST(IkFastPath, ReportedErrorsAgreeWithTheChainFk) {
       }
     }
   }
+}
+
+TEST(IkFastPath, Atan2PolyX2IsTheScalarVersionBitForBit) {
+  std::mt19937_64 rng(78);
+  std::uniform_real_distribution<double> u(-3, 3);
+  const double z[] = {0.0, -0.0, 1.0, -1.0, 0.66, -0.66, 1e-30, -1e-30, 1e30, -1e30};
+  std::vector<double> ys, xs;
+  for (double y : z)
+    for (double x : z) {
+      ys.push_back(y);
+      xs.push_back(x);
+    }
+  for (int i = 0; i < 200000; ++i) {
+    double y = u(rng), x = u(rng);
+    if (i % 5 == 1) y *= 1e-9;
+    if (i % 7 == 2) x *= 1e-12;
+    if (i % 11 == 3) x = y;
+    if (i % 13 == 4) x = y * 0.66;
+    ys.push_back(y);
+    xs.push_back(x);
+  }
+  if (ys.size() % 2) {
+    ys.push_back(0.0);
+    xs.push_back(1.0);
+  }
+  for (std::size_t i = 0; i < ys.size(); i += 2) {
+    double out[2];
+    servoarm::kin::detail::atan2_poly_x2(&ys[i], &xs[i], out);
+    for (std::size_t k = 0; k < 2; ++k) {
+      const double s = servoarm::kin::detail::atan2_poly(ys[i + k], xs[i + k]);
+      if (std::memcmp(&s, &out[k], sizeof s) != 0)
+        FAIL(("atan2_poly_x2(" + std::to_string(ys[i + k]) + ", " + std::to_string(xs[i + k]) + ")").c_str());
+    }
+  }
+}
+
+// The per-joint wrap table of ik_prepare (IkJointWrap, ik_detail.hpp): the
+// branch-free form for joints whose limits span less than a turn gives what
+// the rule (wrap_into_limits) gives, on a case table and random angles,
+// references and limits.
+#include "../../kinematics/src/ik_detail.hpp"
+
+TEST(IkFastPath, NarrowWrapMatchesTheRule) {
+  using servoarm::kin::detail::kTwoPi;
+  auto row = [](double lo, double hi) {
+    kin::DhRow r;
+    r.type = kin::JointType::revolute;
+    r.lower = lo;
+    r.upper = hi;
+    return r;
+  };
+  auto check = [&](const kin::DhRow& r, double w, double ref) {
+    const kin::IkJointWrap j = servoarm::kin::detail::make_joint_wrap(r);
+    const double rule = servoarm::kin::detail::wrap_into_limits(w, j.lo, j.hi, ref);
+    if (!servoarm::kin::detail::narrow_applies(j, ref)) return false;
+    const double fast = servoarm::kin::detail::wrap_narrow(j, w);
+    // the same equivalent (ulp-level differences: w + 2 pi k vs. turns added one by one)
+    if (!(std::abs(fast - rule) <= 1e-14))
+      FAIL(("limits [" + std::to_string(r.lower) + ", " + std::to_string(r.upper) + "] w=" + std::to_string(w) +
+            " ref=" + std::to_string(ref) + ": " + std::to_string(fast) + " vs rule " + std::to_string(rule)).c_str());
+    return true;
+  };
+  const double d = M_PI / 180;
+  // Case table: PUMA-like limits, limits off zero, beyond +-pi, a span just
+  // under a turn; angles inside, outside, at the limits, at +-pi.
+  const double lims[][2] = {{-160 * d, 160 * d}, {-225 * d, 45 * d}, {-45 * d, 225 * d}, {-110 * d, 170 * d},
+                            {-100 * d, 100 * d}, {100 * d, 350 * d}, {-350 * d, -100 * d}, {0, kTwoPi - 1e-6},
+                            {-M_PI, M_PI - 1e-9}, {400 * d, 500 * d}, {-500 * d, -400 * d}};
+  const double ws[] = {0.0, 0.5, -0.5, 1.0, -1.0, 2.5, -2.5, M_PI, -M_PI + 1e-15, 45 * d, -45 * d, 160 * d, -160 * d,
+                       170 * d, 100 * d, -100 * d, 135 * d, -135 * d};
+  const double refs[] = {0.0, 1.0, -1.0, 3.0, -3.0, 6.0, -6.0, 7.5};
+  int used = 0;
+  for (const auto& l : lims)
+    for (double w : ws)
+      for (double ref : refs) used += check(row(l[0], l[1]), w, ref) ? 1 : 0;
+  CHECK(used > 1000);
+  // Explicit expectations.
+  const kin::IkJointWrap j2 = servoarm::kin::detail::make_joint_wrap(row(-225 * d, 45 * d));
+  LONGS_EQUAL(1, j2.kind);
+  DOUBLES_EQUAL(135 * d - kTwoPi, servoarm::kin::detail::wrap_narrow(j2, 135 * d), 1e-15);  // -225 deg
+  DOUBLES_EQUAL(90 * d, servoarm::kin::detail::wrap_narrow(j2, 90 * d), 0);                // nothing fits: unchanged
+  LONGS_EQUAL(2, servoarm::kin::detail::make_joint_wrap(row(-266 * d, 266 * d)).kind);     // wide: the rule
+  kin::DhRow p = row(-1, 1);
+  p.type = kin::JointType::prismatic;
+  LONGS_EQUAL(0, servoarm::kin::detail::make_joint_wrap(p).kind);
+  kin::DhRow inf = row(-std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
+  LONGS_EQUAL(2, servoarm::kin::detail::make_joint_wrap(inf).kind);
+  // Random limits (span < a turn), angles, references within a turn of the limits.
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<double> u(0, 1);
+  int n = 0;
+  for (int i = 0; i < 200000; ++i) {
+    const double lo = -2.9 * M_PI + 5.0 * M_PI * u(rng);
+    const double hi = std::min(lo + kTwoPi * u(rng), 2.95 * M_PI);
+    const double w = -M_PI + kTwoPi * u(rng);
+    const double ref = lo - kTwoPi + (hi - lo + 2 * kTwoPi) * u(rng);
+    n += check(row(lo, hi), w, ref) ? 1 : 0;
+  }
+  CHECK(n > 150000);
 }

@@ -115,6 +115,17 @@ struct IkSignedPerm {
   std::array<double, 3> sign{1, 1, 1};
 };
 
+/// How ik_solve_all wraps one joint into its limits (set by ik_prepare()).
+/// kind 0: not revolute (never wrapped); 1: revolute whose limits span less
+/// than a turn and lie within (-3 pi, 3 pi) -- at most one 2*pi equivalent of
+/// an angle fits, found without the reference (for references within a
+/// turn of the limits); 2: any other revolute joint (nearest to the reference).
+struct IkJointWrap {
+  std::uint8_t kind = 0;
+  double lo = 0, hi = 0;    ///< limits widened by 1e-12 (wrapping)
+  double lo9 = 0, hi9 = 0;  ///< limits widened by 1e-9 (within_limits)
+};
+
 /// A chain analysed for IK. Plain data; build with ik_prepare().
 struct IkModel {
   IkMethod method = IkMethod::none;
@@ -142,6 +153,8 @@ struct IkModel {
   /// derives the second wrist solution from the first (no atan2).
   bool wrist_flip = false;
   double wrist_phi = 0;
+  /// Per joint: wrapping into the limits (see IkJointWrap).
+  std::array<IkJointWrap, kMaxJoints> wrap{};
   // planar / pitch arms
   Eigen::Vector3d last_link = Eigen::Vector3d::Zero();  ///< tool point in the frame after the last joint motion
 };
