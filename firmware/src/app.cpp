@@ -73,6 +73,8 @@ ControllerConfig App::controller_config() const {
   c.following_error = cfg.following_error_deg * M_PI / 180.0;
   c.enable_timeout = cfg.enable_timeout_s;
   c.feedback_timeout = cfg.feedback_timeout_ms * 1e-3;
+  c.drive_quick_stop = cfg.stop == "drive";
+  c.drive_stop_timeout = cfg.drive_stop_timeout_s;
   return c;
 }
 

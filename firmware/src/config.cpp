@@ -33,6 +33,8 @@ const ConfigKey kConfigKeys[] = {
     {"safety.following_error_deg", "5", "largest |commanded - actual| per joint (deg, or mm for prismatic)"},
     {"safety.enable_timeout_s", "2", "time for every drive to reach operation enabled"},
     {"safety.feedback_timeout_ms", "50", "an enabled drive silent (no position feedback) this long faults the arm"},
+    {"safety.stop", "\"ramp\"", "e-stop and fault reaction: \"ramp\" = the controller ramps every joint to rest with the full limits, then powers down; \"drive\" = CiA 402 Quick Stop (controlword 0x0002) to every drive in the next cycle, each stops on its own quick-stop ramp (605Ah/6085h), power-down once all are at rest"},
+    {"safety.drive_stop_timeout_s", "2", "stop = \"drive\": power the drives down after this long even if one still reports motion"},
     {"motion.home_deg", "[] (zeros, clamped into the limits)", "home pose for `home` / G28, one value per joint (deg / mm)"},
     {"motion.joint_speed_pct", "50", "movej / home speed without speed=, percent of the joint limits (1..100)"},
     {"motion.linear_speed_mm_s", "100", "movel / G1 speed without speed= / F"},
@@ -132,6 +134,8 @@ bool apply(Reader& r, const std::string& key, const toml::value& v, FwConfig& c)
   if (key == "safety.following_error_deg") return r.num(v, key, c.following_error_deg);
   if (key == "safety.enable_timeout_s") return r.num(v, key, c.enable_timeout_s);
   if (key == "safety.feedback_timeout_ms") return r.num(v, key, c.feedback_timeout_ms);
+  if (key == "safety.stop") return r.str(v, key, c.stop);
+  if (key == "safety.drive_stop_timeout_s") return r.num(v, key, c.drive_stop_timeout_s);
   if (key == "motion.home_deg") {
     if (!v.is_array()) return r.fail(key, "expected an array of numbers");
     c.home_deg.clear();
@@ -188,6 +192,8 @@ std::string validate(const FwConfig& c) {
   if (!(c.following_error_deg > 0 && c.following_error_deg <= 180)) return bad("safety.following_error_deg", "must be within (0, 180]");
   if (!(c.enable_timeout_s > 0 && c.enable_timeout_s <= 60)) return bad("safety.enable_timeout_s", "must be within (0, 60]");
   if (!(c.feedback_timeout_ms >= 1 && c.feedback_timeout_ms <= 10000)) return bad("safety.feedback_timeout_ms", "must be within 1..10000");
+  if (c.stop != "ramp" && c.stop != "drive") return bad("safety.stop", "must be \"ramp\" or \"drive\"");
+  if (!(c.drive_stop_timeout_s >= 0.05 && c.drive_stop_timeout_s <= 60)) return bad("safety.drive_stop_timeout_s", "must be within 0.05..60");
   if (!(c.joint_speed_pct >= 1 && c.joint_speed_pct <= 100)) return bad("motion.joint_speed_pct", "must be within 1..100");
   if (!(c.max_linear_speed_mm_s > 0 && c.max_linear_speed_mm_s <= 5000)) return bad("motion.max_linear_speed_mm_s", "must be within (0, 5000]");
   if (!(c.linear_speed_mm_s > 0 && c.linear_speed_mm_s <= c.max_linear_speed_mm_s))
@@ -265,12 +271,12 @@ std::string to_toml(const FwConfig& c) {
   std::snprintf(b, sizeof b,
                 "robot = \"%s\"\n[loop]\nrate_hz = %g\npriority = %d\ncpu = %d\nlock_memory = %s\n"
                 "[bus]\ncan = \"%s\"\nfirst_node = %d\ncounts_per_rev = %g\ngear_ratio = %g\nheartbeat_period_ms = %g\n"
-                "heartbeat_timeout_ms = %g\nstart_timeout_s = %g\n[safety]\nfollowing_error_deg = %g\nenable_timeout_s = %g\nfeedback_timeout_ms = %g\n"
+                "heartbeat_timeout_ms = %g\nstart_timeout_s = %g\n[safety]\nfollowing_error_deg = %g\nenable_timeout_s = %g\nfeedback_timeout_ms = %g\nstop = \"%s\"\ndrive_stop_timeout_s = %g\n"
                 "[motion]\nhome_deg = %s\njoint_speed_pct = %g\nlinear_speed_mm_s = %g\nmax_linear_speed_mm_s = %g\n"
                 "[console]\nstdin = %s\npty = %s\nserial = \"%s\"\nbaud = %d\ncan = \"%s\"\ncan_rx_id = 0x%03X\ncan_tx_id = 0x%03X\n",
                 c.robot.c_str(), c.rate_hz, c.priority, c.cpu, c.lock_memory ? "true" : "false", c.can.c_str(), c.first_node,
                 c.counts_per_rev, c.gear_ratio, c.heartbeat_period_ms, c.heartbeat_timeout_ms, c.start_timeout_s,
-                c.following_error_deg, c.enable_timeout_s, c.feedback_timeout_ms, home.c_str(), c.joint_speed_pct, c.linear_speed_mm_s,
+                c.following_error_deg, c.enable_timeout_s, c.feedback_timeout_ms, c.stop.c_str(), c.drive_stop_timeout_s, home.c_str(), c.joint_speed_pct, c.linear_speed_mm_s,
                 c.max_linear_speed_mm_s, c.console_stdin ? "true" : "false", c.console_pty ? "true" : "false",
                 c.console_serial.c_str(), c.console_baud, c.console_can.c_str(), static_cast<unsigned>(c.console_can_rx_id),
                 static_cast<unsigned>(c.console_can_tx_id));

@@ -180,6 +180,39 @@ void Controller::begin_quick_stop() {
   }
 }
 
+void Controller::begin_emergency_stop() {
+  if (!cfg_.drive_quick_stop) {
+    begin_quick_stop();
+    return;
+  }
+  // CiA 402 Quick Stop to every drive in this cycle's RPDOs; they ramp down themselves.
+  bus_.quick_stop();
+  stop_active_ = true;
+  drive_stop_ = true;
+  stop_t_ = 0;
+}
+
+// The drives stop on their own ramps: follow their measured positions (so the
+// setpoints never pull against the ramp and enabling later never jumps); power
+// down once none reports motion any more (the HAL says `enabling` while a drive
+// is operation enabled or quick-stop active with speed), or at the timeout.
+void Controller::step_drive_stop() {
+  stop_t_ += period_s_;
+  bool moving = false;
+  for (int j = 0; j < n_; ++j) {
+    const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+    if (fb.valid) cmd_.pos[j] = fb.position;
+    if (fb.state == hal::JointState::enabling || fb.state == hal::JointState::enabled) moving = true;
+  }
+  cmd_.vel.setZero();
+  cmd_.acc.setZero();
+  if (!moving || stop_t_ >= cfg_.drive_stop_timeout) {
+    stop_active_ = false;
+    drive_stop_ = false;
+    bus_.disable();
+  }
+}
+
 void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
   if (state_ == ArmState::fault) return;  // first cause wins (latched)
   const bool was_powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping ||
@@ -196,8 +229,12 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
   running_ = nullptr;
   holding_ = false;
   set_state(ArmState::fault);
-  if (was_powered) begin_quick_stop();
-  else stop_active_ = false;
+  if (was_powered) {
+    if (!drive_stop_) begin_emergency_stop();  // (ramp mode: replanned from here, as before)
+  } else {
+    stop_active_ = false;
+    drive_stop_ = false;
+  }
   if (!stop_active_) bus_.disable();
   emit(EventKind::fault, c, joint, 0, fault_text_);
 }
@@ -348,9 +385,11 @@ void Controller::handle_request(const Request& r, TimePoint now) {
         set_state(ArmState::estop);
         estop_seen_ = now;
         if (powered) {
-          if (!stop_active_) begin_quick_stop();
+          // a ramp already running goes on; in drive mode the drives take over
+          if (!stop_active_ || (cfg_.drive_quick_stop && !drive_stop_)) begin_emergency_stop();
         } else {
           stop_active_ = false;
+          drive_stop_ = false;
           bus_.disable();
         }
         emit(EventKind::estop, FaultCause::none, -1, 0, "emergency stop");
@@ -550,6 +589,10 @@ bool Controller::start_next_motion() {
 
 void Controller::step_motion() {
   // Quick stop / stop ramp has priority over everything.
+  if (stop_active_ && drive_stop_) {
+    step_drive_stop();
+    return;
+  }
   if (stop_active_) {
     stop_t_ += period_s_;
     stop_traj_.sample(stop_t_, cmd_);
@@ -642,7 +685,7 @@ void Controller::step_motion() {
 
 void Controller::validate_and_write(TimePoint now) {
   const bool powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping ||
-                       ((state_ == ArmState::fault || state_ == ArmState::estop) && stop_active_);
+                       ((state_ == ArmState::fault || state_ == ArmState::estop) && stop_active_ && !drive_stop_);
   if (powered) {
     for (int j = 0; j < n_; ++j) {
       const double q = cmd_.pos[j];

@@ -24,6 +24,7 @@ TEST(Config, FullFileAccepted) {
       "robot = \"stanford\"\n[loop]\nrate_hz = 2000\npriority = 0\ncpu = 1\nlock_memory = false\n"
       "[bus]\ncan = \"vcan0\"\nfirst_node = 10\ncounts_per_rev = 4096\ngear_ratio = 50\nheartbeat_period_ms = 20\n"
       "heartbeat_timeout_ms = 60\nstart_timeout_s = 3\n[safety]\nfollowing_error_deg = 2.5\nenable_timeout_s = 1\n"
+      "stop = \"drive\"\ndrive_stop_timeout_s = 1.5\n"
       "[motion]\nhome_deg = [0, 10, 0, 0, 0, 0]\njoint_speed_pct = 30\nlinear_speed_mm_s = 50\nmax_linear_speed_mm_s = 200\n"
       "[console]\nstdin = false\npty = true\nserial = \"/dev/ttyS0\"\nbaud = 57600\n";
   STRCMP_EQUAL("", load_config_text(text, "f.toml", c).c_str());
@@ -33,6 +34,8 @@ TEST(Config, FullFileAccepted) {
   LONGS_EQUAL(6, c.home_deg.size());
   CHECK(c.console_pty);
   LONGS_EQUAL(57600, c.console_baud);
+  STRCMP_EQUAL("drive", c.stop.c_str());
+  DOUBLES_EQUAL(1.5, c.drive_stop_timeout_s, 0);
 }
 
 TEST(Config, BadFilesNameTheKeyAndLeaveConfigUntouched) {
@@ -48,6 +51,9 @@ TEST(Config, BadFilesNameTheKeyAndLeaveConfigUntouched) {
       {"[bus]\nfirst_node = 0\n", "bus.first_node"},
       {"[bus]\nheartbeat_timeout_ms = 10\n", "bus.heartbeat_timeout_ms"},
       {"[safety]\nfollowing_error_deg = -1\n", "safety.following_error_deg"},
+      {"[safety]\nstop = \"coast\"\n", "safety.stop"},
+      {"[safety]\nstop = 1\n", "safety.stop"},
+      {"[safety]\ndrive_stop_timeout_s = 0\n", "safety.drive_stop_timeout_s"},
       {"[motion]\nhome_deg = [0, \"x\"]\n", "motion.home_deg[1]"},
       {"[motion]\nlinear_speed_mm_s = 900\n", "motion.linear_speed_mm_s"},
       {"[console]\nbaud = 12345\n", "console.baud"},

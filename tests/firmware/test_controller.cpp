@@ -4,6 +4,7 @@
 // counter. Last group: the real RT thread (RtLoop) on CLOCK_MONOTONIC.
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <string>
 #include <thread>
 #include <vector>
@@ -11,6 +12,7 @@
 #include "alloc_counter.hpp"
 #include "servoarm/firmware/app.hpp"
 #include "servoarm/firmware/rt_loop.hpp"
+#include "servoarm/hal/can_frame.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -283,8 +285,12 @@ TEST(Controller, FeedHoldAndResumeJointAndLinear) {
 }
 
 TEST(Controller, EstopFromEveryState) {
-  for (int which = 0; which < 5; ++which) {
-    Rig r;
+  // both e-stop reactions: the controller's ramp (default) and the drives' CiA 402 quick stop
+  for (int k = 0; k < 10; ++k) {
+    const int which = k % 5;
+    FwConfig cfg;
+    cfg.stop = k < 5 ? "ramp" : "drive";
+    Rig r({}, cfg);
     const char* name = "";
     switch (which) {
       case 0: name = "disabled"; break;
@@ -315,7 +321,8 @@ TEST(Controller, EstopFromEveryState) {
     // Ctrl-X through the byte stream: acts in the next cycle.
     r.app.ctl->requests().push(Request{RequestOp::estop, 1000});
     r.cycle();
-    if (r.tel().state != ArmState::estop) FAIL((std::string("estop from ") + name + " gave " + to_string(r.tel().state)).c_str());
+    if (r.tel().state != ArmState::estop)
+      FAIL((std::string("estop (") + cfg.stop + ") from " + name + " gave " + to_string(r.tel().state)).c_str());
     const kin::JointVector q_after_first = r.q_cmd();
     r.run(1.0);
     // At rest, drives powered down, queue empty.
@@ -337,6 +344,136 @@ TEST(Controller, EstopFromEveryState) {
     CHECK(is_ok(r.cmd("wait")));
     LONGS_EQUAL(0, r.rt_allocs);
   }
+}
+
+namespace {
+// Controlwords of the RPDOs (0x201..0x206) the spy saw, per node, consecutive repeats collapsed.
+void collect_controlwords(hal::SimBusEndpoint& spy, std::vector<std::uint16_t> (&cws)[6]) {
+  hal::CanFrame f;
+  while (spy.receive(f, 0) == hal::Status::ok) {
+    if (f.id < 0x201 || f.id > 0x206 || f.len < 2) continue;
+    auto& v = cws[f.id - 0x201];
+    const std::uint16_t cw = hal::get_u16(f.data.data());
+    if (v.empty() || v.back() != cw) v.push_back(cw);
+  }
+}
+std::string cw_text(const std::vector<std::uint16_t>& v) {
+  std::string t;
+  char b[8];
+  for (std::uint16_t c : v) {
+    std::snprintf(b, sizeof b, "%04X ", c);
+    t += b;
+  }
+  return t;
+}
+}  // namespace
+
+// safety.stop = "drive": an e-stop during a fast joint move sends the CiA 402
+// Quick Stop command (controlword 0x0002) to every drive in the next cycle; the
+// (virtual) drives ramp down on their own -- the arm keeps moving for a while,
+// it does not freeze -- and once every drive reports rest the controller powers
+// them down (controlword 0x0000, disable voltage). Nothing moves again until
+// reset + enable, and the control cycle allocates nothing on the way.
+TEST(Controller, DriveQuickStopSendsCia402QuickStopThenPowersDownAtRest) {
+  FwConfig cfg;
+  cfg.stop = "drive";
+  // drives that decelerate at 4 rev/s^2 (twice the joints' 4 pi rad/s^2 limit; the
+  // default virtual motor's 400 rev/s^2 would stop within 2-3 cycles)
+  sim::MotorParams motor;
+  motor.max_accel = 4.0 * 131072;
+  Rig r(motor, cfg);
+  auto spy = r.app.plant->bus().open(16384);
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 60 -60 100 0 30 0 speed=100")));
+  r.run(0.4);
+  CHECK(r.tel().state == ArmState::moving);
+  std::vector<std::uint16_t> before[6];
+  collect_controlwords(*spy, before);
+  for (int j = 0; j < 6; ++j) CHECK_EQUAL(0x000F, before[j].back());  // enable operation while moving
+  const kin::JointVector q_estop = r.q_act();
+  r.app.ctl->requests().push(Request{RequestOp::estop, 77});
+  r.cycle();
+  CHECK(r.tel().state == ArmState::estop);
+  std::vector<std::uint16_t> cws[6];
+  collect_controlwords(*spy, cws);
+  for (int j = 0; j < 6; ++j) {
+    const std::string t = cw_text(cws[j]);
+    CHECK_TEXT(cws[j].size() == 1 && cws[j][0] == 0x0002, ("node " + std::to_string(j + 1) + ": " + t).c_str());
+  }
+  // the drives ramp down on their own; the power-down follows when all are at rest
+  int n = 0;
+  auto any_powered = [&] {
+    const Telemetry t = r.tel();
+    for (int j = 0; j < 6; ++j)
+      if (t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabling) ||
+          t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabled))
+        return true;
+    return false;
+  };
+  while (any_powered() && n < 3000) {
+    r.cycle();
+    collect_controlwords(*spy, cws);
+    ++n;
+  }
+  const double t_stop = n * 1e-3;
+  CHECK_TEXT(!any_powered(), "drives still powered 3 s after the quick stop");
+  // it took the drives' deceleration (the fastest joint was at speed: v / 8 pi rad/s^2),
+  // not one cycle, and not the 2 s timeout either
+  CHECK_TEXT(t_stop > 0.02 && t_stop < 1.0, std::to_string(t_stop).c_str());
+  const kin::JointVector q_rest = r.q_act();
+  CHECK_TEXT(max_abs_diff(q_rest, q_estop) > 0.01 * kDeg, "the arm froze instead of ramping down");
+  r.run(0.2);
+  collect_controlwords(*spy, cws);
+  CHECK(max_abs_diff(r.q_act(), q_rest) < 0.001 * kDeg);
+  for (int j = 0; j < 6; ++j) {
+    const std::string t = cw_text(cws[j]);
+    CHECK_TEXT(t == "0002 0000 ", ("node " + std::to_string(j + 1) + ": " + t).c_str());
+  }
+  std::printf("\n[drive quick stop] moving at speed -> all drives at rest and powered down in %.3f s\n", t_stop);
+  CHECK(is_error(r.cmd("movej 0 0 0 0 0 0")));
+  CHECK(is_ok(r.cmd("reset")));
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 10 -10 20 0 10 0 speed=100")));
+  CHECK(is_ok(r.cmd("wait")));
+  kin::JointVector goal(6);
+  goal << 10, -10, 20, 0, 10, 0;
+  CHECK(max_abs_diff(r.q_act(), goal * kDeg) < 0.1 * kDeg);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+// safety.stop = "drive" and a fault: a silent drive (joint 3) during a move; the
+// fault reaction is the Quick Stop command to the drives still on the bus.
+TEST(Controller, DriveQuickStopIsTheFaultReaction) {
+  FwConfig cfg;
+  cfg.stop = "drive";
+  Rig r({}, cfg);
+  auto spy = r.app.plant->bus().open(16384);
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 30 -30 60 0 30 0 speed=50")));
+  r.run(0.3);
+  std::vector<std::uint16_t> cws[6];
+  collect_controlwords(*spy, cws);
+  for (auto& v : cws) v.clear();
+  r.app.plant->inject_silent(2);
+  int n = 0;
+  while (r.tel().state != ArmState::fault && n < 1000) {
+    r.cycle();
+    ++n;
+  }
+  CHECK_TEXT(std::string(r.tel().fault_text).find("joint 3 ") == 0, r.tel().fault_text);
+  r.run(1.0);
+  collect_controlwords(*spy, cws);
+  for (int j = 0; j < 6; ++j) {
+    const std::string t = cw_text(cws[j]);
+    // joint 3's RPDOs are still sent (its drive just does not listen); its last known
+    // state is operation enabled, so the power-down there starts with "disable operation"
+    const bool ok = j == 2 ? t.rfind("000F 0002 ", 0) == 0 : t == "000F 0002 0000 ";
+    CHECK_TEXT(ok, ("node " + std::to_string(j + 1) + ": " + t).c_str());
+  }
+  const kin::JointVector q1 = r.q_cmd();
+  r.run(0.1);
+  CHECK(max_abs_diff(r.q_cmd(), q1) < 1e-9);
+  LONGS_EQUAL(0, r.rt_allocs);
 }
 
 TEST(Controller, CtrlXIsEstopAndDropsThePartialLine) {

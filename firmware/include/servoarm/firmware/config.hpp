@@ -41,6 +41,8 @@ struct FwConfig {
   double following_error_deg = 5.0;
   double enable_timeout_s = 2.0;
   double feedback_timeout_ms = 50.0;
+  std::string stop = "ramp";           ///< e-stop / fault reaction: "ramp" (controller) or "drive" (CiA 402 quick stop)
+  double drive_stop_timeout_s = 2.0;   ///< stop = "drive": power down after this long even if a drive still moves
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;

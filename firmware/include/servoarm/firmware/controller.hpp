@@ -176,6 +176,17 @@ struct ControllerConfig {
   double position_tolerance = 1e-6;    ///< rad: setpoint check slack on the position limits
   double velocity_margin = 1.10;       ///< setpoint step may reach this x max_velocity
   bool check_following_error = true;
+  /// How e-stop and fault reactions stop a powered arm (normal `stop`, feed hold
+  /// and `disable` always ramp in the controller):
+  ///  - false (ramp): the controller ramps every joint to rest with the full
+  ///    limits, then powers the drives down (category 1);
+  ///  - true (drive): every drive gets the CiA 402 Quick Stop command
+  ///    (controlword 0x0002) in the same cycle and stops on its own quick-stop
+  ///    ramp (its 605Ah/6085h settings); the controller follows the measured
+  ///    positions and powers the drives down once every drive reports rest
+  ///    (or after drive_stop_timeout).
+  bool drive_quick_stop = false;
+  double drive_stop_timeout = 2.0;     ///< s: longest drive-side quick stop before power-down anyway
 };
 
 inline constexpr std::size_t kMotionQueue = 16;
@@ -220,6 +231,8 @@ class Controller {
   void supervise(TimePoint now);
   void raise_fault(FaultCause c, int joint, const char* detail);
   void begin_quick_stop();
+  void begin_emergency_stop();      ///< e-stop / fault reaction: ramp or drive quick stop (cfg_)
+  void step_drive_stop();
   bool start_next_motion();
   void step_motion();
   void finish_motion(bool refused, RtResult why);
@@ -250,6 +263,7 @@ class Controller {
   bool have_prev_ = false;
   kin::JointTrajectory stop_traj_;  ///< quick stop / stop / joint feed hold
   bool stop_active_ = false;
+  bool drive_stop_ = false;         ///< the stop in progress is the drives' CiA 402 quick stop
   double stop_t_ = 0;
   MotionItem* running_ = nullptr;   ///< front of motions_ while executing
   double motion_t_ = 0;
