@@ -54,6 +54,11 @@ endif()
 # Written by hand: dpkg-shlibdeps cannot see a cross build's target libraries.
 # The binaries need glibc >= 2.34 (bookworm's toolchain) and libstdc++ from g++ 12.
 set(CPACK_DEBIAN_PACKAGE_DEPENDS "libc6 (>= 2.34), libstdc++6 (>= 12), libgcc-s1 (>= 3.0), adduser, iproute2")
+# armctl's line editing (firmware/CMakeLists.txt: only when libedit was found for the target)
+get_property(_servoarm_libedit GLOBAL PROPERTY SERVOARM_NEEDS_LIBEDIT)
+if(_servoarm_libedit)
+  string(APPEND CPACK_DEBIAN_PACKAGE_DEPENDS ", libedit2 (>= 3.1)")
+endif()
 set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "can-utils")
 set(CPACK_DEBIAN_PACKAGE_CONTROL_EXTRA ${_pkg}/postinst ${_pkg}/prerm ${_pkg}/postrm ${_pkg}/conffiles)
 set(CPACK_DEBIAN_PACKAGE_CONTROL_STRICT_PERMISSION ON)

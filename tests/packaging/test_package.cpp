@@ -146,6 +146,45 @@ TEST(Package, ControlFields) {
   STRCMP_CONTAINS("_" DEB_VERSION "_" DEB_ARCH ".deb", deb.c_str());
 }
 
+// Every shared library the packaged binaries load (ELF NEEDED, read with readelf,
+// which reads any architecture) is provided by a package in Depends.
+TEST(Package, DependsCoversEveryNeededLibrary) {
+  extract();
+  const Cmd f = sh("dpkg-deb -f '" + deb + "' Depends");
+  CHECK_EQUAL_TEXT(0, f.status, f.out.c_str());
+  struct Lib {
+    const char* soname_prefix;
+    const char* package;
+  };
+  const Lib known[] = {{"libc.so.", "libc6"},          {"libm.so.", "libc6"},       {"libpthread.so.", "libc6"},
+                       {"libdl.so.", "libc6"},         {"librt.so.", "libc6"},      {"ld-linux", "libc6"},
+                       {"libstdc++.so.", "libstdc++6"}, {"libgcc_s.so.", "libgcc-s1"}, {"libedit.so.", "libedit2"}};
+  int binaries = 0;
+  for (const char* bin : {"/usr/bin/armfw", "/usr/bin/armctl"}) {
+    const std::string path = root + bin;
+    if (::access(path.c_str(), F_OK) != 0) continue;
+    ++binaries;
+    const Cmd d = sh("readelf -d '" + path + "'");
+    CHECK_EQUAL_TEXT(0, d.status, d.out.c_str());
+    std::istringstream is(d.out);
+    std::string line;
+    int needed = 0;
+    while (std::getline(is, line)) {
+      const auto p = line.find("Shared library: [");
+      if (p == std::string::npos) continue;
+      ++needed;
+      const std::string so = line.substr(p + 17, line.find(']', p) - p - 17);
+      const char* pkg = nullptr;
+      for (const Lib& l : known)
+        if (so.rfind(l.soname_prefix, 0) == 0) pkg = l.package;
+      CHECK_TEXT(pkg != nullptr, (std::string(bin) + " needs " + so + ": which package? (add it to Depends and here)").c_str());
+      if (pkg != nullptr) CHECK_TEXT(has(f.out, pkg), (std::string(bin) + " needs " + so + " but Depends lacks " + pkg + ": " + f.out).c_str());
+    }
+    CHECK_TEXT(needed > 0, d.out.c_str());
+  }
+  CHECK(binaries > 0 || (!HAVE_ARMFW && !HAVE_ARMCTL));
+}
+
 TEST(Package, FileList) {
   const Cmd c = sh("dpkg-deb -c '" + deb + "'");
   CHECK_EQUAL_TEXT(0, c.status, c.out.c_str());
