@@ -956,15 +956,19 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
         cd.s4 = slot(s4, c4);
         cd.s6 = slot(s6, c6);
       }
-      // Verify: X = Rz(m4) A Rz(m5) B Rz(m6) against M; the position error.
-      Eigen::Matrix3d G = A;
-      mul_rz_left(G, c4, s4);
-      mul_rz_right(G, c5, s5);
-      Eigen::Matrix3d X = mul_right(G, B, pB);
-      mul_rz_right(X, c6, s6);
-      const Eigen::Matrix3d D = X - M;
-      const double f2 = D.squaredNorm();
-      cd.ep = (e3 - D * u).norm();
+      // Verify: X = Rz(m4) A Rz(m5) B Rz(m6) against M, column by column
+      // (x_k = Rz(m4) A Rz(m5) b_k for B's columns b_k; x_2 = Rz(m4) w), and
+      // the position error.
+      auto rz = [](double c, double s, const Eigen::Vector3d& a) {
+        return Eigen::Vector3d(c * a.x() - s * a.y(), s * a.x() + c * a.y(), a.z());
+      };
+      const Eigen::Vector3d x0 = rz(c4, s4, apply(A, pA, rz(c5, s5, B.col(0))));
+      const Eigen::Vector3d x1 = rz(c4, s4, apply(A, pA, rz(c5, s5, B.col(1))));
+      const Eigen::Vector3d d0 = c6 * x0 + s6 * x1 - M.col(0);
+      const Eigen::Vector3d d1 = c6 * x1 - s6 * x0 - M.col(1);
+      const Eigen::Vector3d d2 = rz(c4, s4, w) - M.col(2);
+      const double f2 = d0.squaredNorm() + d1.squaredNorm() + d2.squaredNorm();
+      cd.ep = (e3 - (u.x() * d0 + u.y() * d1 + u.z() * d2)).norm();
       cd.er = f2 < 1e-8 ? std::sqrt(0.5 * f2) : 2.0 * std::asin(std::min(1.0, std::sqrt(f2 / 8.0)));
       Branch b = br;
       b.wrist = static_cast<std::int8_t>(sgn);
@@ -1001,17 +1005,50 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
   };
   // one step of fast_wrap (|a| < 3 pi)
   auto wrap1 = [](double a) { return a > kPi ? a - 2.0 * kPi : (a <= -kPi ? a + 2.0 * kPi : a); };
+  // Same joint value: within 1e-7 (revolute: modulo 2 pi). Most pairs
+  // differ by more than 1e-7 and less than 2 pi - 2e-7 (no wrap needed).
+  auto same_joint = [&](int j, double a, double b) {
+    const double d = std::abs(a - b);
+    if (d <= 1e-7) return true;
+    return m.wrap[static_cast<std::size_t>(j)].kind != 0 && d >= 2.0 * kPi - 2e-7 && std::abs(fast_wrap(a - b)) <= 1e-7;
+  };
+  auto in_limits = [&](int j, double q) {
+    const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
+    return (q >= jw.lo9) & (q <= jw.hi9);
+  };
+  // Arm joints: wrapped and checked against the limits once per arm
+  // configuration; which configurations have the same arm joints (only
+  // their solutions can be duplicates of each other: near a double root).
   double qarm[8 * 3], mot_arm[8 * 3];
+  bool in_arm[8];
+  unsigned arm_same[8];
   for (int i = 0; i < np; ++i) {
     const Arm& a = arms[i];
     if (!a.used) continue;
     mot_arm[i * 3] = ang[a.s1];
     mot_arm[i * 3 + 1] = a.s2 >= 0 ? ang[a.s2] : a.v2;
     mot_arm[i * 3 + 2] = a.s3 >= 0 ? ang[a.s3] : a.v3;
-    for (int j = 0; j < 3; ++j) qarm[i * 3 + j] = wrap(j, dir[j] * mot_arm[i * 3 + j]);
+    bool in = true;
+    for (int j = 0; j < 3; ++j) {
+      qarm[i * 3 + j] = wrap(j, dir[j] * mot_arm[i * 3 + j]);
+      in &= in_limits(j, qarm[i * 3 + j]);
+    }
+    in_arm[i] = in;
+    arm_same[i] = 1u << i;
+    for (int t = 0; t < i; ++t) {
+      if (!arms[t].used) continue;
+      bool same = true;
+      for (int j = 0; j < 3 && same; ++j) same = same_joint(j, qarm[i * 3 + j], qarm[t * 3 + j]);
+      if (same) {
+        arm_same[i] |= 1u << t;
+        arm_same[t] |= 1u << i;
+      }
+    }
   }
   double wm[16][3];
-  int owner[kMaxIkSolutions];  // candidate index of each stored solution
+  int owner[kMaxIkSolutions];  // candidate index of each stored solution (-1: add_candidate's)
+  int stored[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // solutions stored per arm configuration
+  bool foreign = false;                       // add_candidate stored one
   for (int k = 0; k < nc; ++k) {
     const Cand& cd = cand[k];
     const int i = cd.arm;
@@ -1030,30 +1067,32 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
       double q[6];
       for (int j = 0; j < 3; ++j) q[j] = qarm[i * 3 + j];
       for (int j = 3; j < 6; ++j) q[j] = wrap(j, dir[j] * wrap1(wm[k][j - 3]));
-      // De-duplication: every joint within 1e-7 (revolute: modulo 2 pi). A
-      // wrist flip (m4 + pi) never repeats its base; otherwise most pairs
-      // differ at the first joints, by more than 1e-7 and less than 2 pi -
-      // 2e-7 (no wrap needed to tell).
+      // De-duplication (every joint the same): against solutions of arm
+      // configurations with the same arm joints, wrist joints only; a wrist
+      // flip (m4 + pi) never repeats its base. add_candidate's: all joints.
+      // Generic pose: no other arm configuration has the same arm joints and
+      // this is the first solution of its own or the flip of it: none to test.
+      const bool alone = arm_same[i] == (1u << i) && !foreign &&
+                         (cd.base >= 0 ? stored[i] == 1 && owner[res.count - 1] == cd.base : stored[i] == 0);
       bool dup = false;
-      for (int t = 0; t < res.count && !dup; ++t) {
-        if (cd.base >= 0 && owner[t] == cd.base) continue;
+      for (int t = 0; t < res.count && !dup && !alone; ++t) {
+        const int ot = owner[t];
         const JointVector& o = res.solutions[static_cast<std::size_t>(t)].q;
-        bool same = true;
-        for (int j = 0; j < 6 && same; ++j) {
-          const double d = std::abs(q[j] - o[j]);
-          if (d <= 1e-7) continue;
-          same = m.wrap[static_cast<std::size_t>(j)].kind != 0 && d >= 2.0 * kPi - 2e-7 && std::abs(fast_wrap(q[j] - o[j])) <= 1e-7;
+        int j0 = 0;
+        if (ot >= 0) {
+          if (!((arm_same[i] >> cand[ot].arm) & 1u) || cd.base == ot) continue;
+          j0 = 3;
         }
+        bool same = true;
+        for (int j = j0; j < 6 && same; ++j) same = same_joint(j, q[j], o[j]);
         dup = same;
       }
       if (dup) continue;
-      bool in = true;
-      for (int j = 0; j < 6; ++j) {
-        const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
-        in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
-        sol.q[j] = q[j];
-      }
+      bool in = in_arm[i];
+      for (int j = 0; j < 6; ++j) sol.q[j] = q[j];
+      for (int j = 3; j < 6; ++j) in &= in_limits(j, q[j]);
       owner[res.count] = k;
+      ++stored[i];
       sol.branch = cd.br;
       sol.within_limits = in;
       sol.singular = cd.sing;
@@ -1065,6 +1104,7 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
       const int before = res.count;
       add_candidate(m, target, q_ref, all, cd.br, cd.sing, false, res);
       for (int t = before; t < res.count; ++t) owner[t] = -1;
+      foreign = foreign || res.count > before;
     }
   }
 }

@@ -78,14 +78,11 @@ inline bool narrow_applies(const IkJointWrap& j, double ref) {
 
 /// wrap_into_limits() for a kind-1 joint (span < 2 pi, limits within
 /// (-3 pi, 3 pi)) and w in (-pi, pi]: at most one of w, w + 2 pi, w - 2 pi
-/// fits, whatever the reference; w if none does. Branch-free.
+/// fits, whatever the reference (below the limits only w + 2 pi can, above
+/// them only w - 2 pi); w if none does. Branch-free.
 inline double wrap_narrow(const IkJointWrap& j, double w) {
-  const double up = w + kTwoPi, dn = w - kTwoPi;
-  double r = w;
-  r = ((dn >= j.lo) & (dn <= j.hi)) ? dn : r;
-  r = ((up >= j.lo) & (up <= j.hi)) ? up : r;
-  r = ((w >= j.lo) & (w <= j.hi)) ? w : r;
-  return r;
+  const double r = w < j.lo ? w + kTwoPi : (w > j.hi ? w - kTwoPi : w);
+  return ((r >= j.lo) & (r <= j.hi)) ? r : w;
 }
 
 /// Position and rotation error of q against target; false on FK failure.
