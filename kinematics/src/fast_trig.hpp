@@ -109,26 +109,33 @@ inline void sincos_poly(double x, double& s, double& c) {
                    Q4 = 1.945506571482613964425e2;
   constexpr double pio4 = 7.85398163397448309616e-1, pio2 = 1.57079632679489661923, pi_hi = 3.14159265358979311600;
   constexpr double morebits = 6.123233995736765886130e-17;
+  auto splat = [](double c) { return v2d{c, c}; };
   const v2d vy = {y[0], y[1]}, vx = {x[0], x[1]};
-  const v2d zero = {0.0, 0.0}, one = {1.0, 1.0};
-  const v2m sign = (v2m)(v2d{-0.0, -0.0});
+  const v2d zero = splat(0.0), one = splat(1.0);
+  const v2m sign = (v2m)splat(-0.0);
   auto sel = [](v2m m, v2d a, v2d b) { return (v2d)((m & (v2m)a) | (~m & (v2m)b)); };
+  auto when = [](v2m m, v2d a) { return (v2d)(m & (v2m)a); };  // m ? a : 0
   const v2d ax = (v2d)((v2m)vx & ~sign), ay = (v2d)((v2m)vy & ~sign);
   const v2m swap = ay > ax;
   const v2d num = sel(swap, ax, ay);
   const v2d den = sel(swap, ay, ax);
-  const v2m big = num > 0.66 * den;
-  const v2d tn = num - sel(big, den, zero);
-  const v2d td = sel(big, num, zero) + sel(den > zero, den, one);
+  const v2m big = num > splat(0.66) * den;
+  const v2d tn = num - when(big, den);
+  const v2d td = when(big, num) + sel(den > zero, den, one);
   const v2d t = tn / td;
   const v2d z = t * t;
-  const v2d p = (((P0 * z + P1) * z + P2) * z + P3) * z + P4;
-  const v2d q = ((((z + Q0) * z + Q1) * z + Q2) * z + Q3) * z + Q4;
+  const v2d p = (((splat(P0) * z + splat(P1)) * z + splat(P2)) * z + splat(P3)) * z + splat(P4);
+  const v2d q = ((((z + splat(Q0)) * z + splat(Q1)) * z + splat(Q2)) * z + splat(Q3)) * z + splat(Q4);
   v2d r = t + t * (z * p / q);
-  r = (r + sel(big, zero + 0.5 * morebits, zero)) + sel(big, zero + pio4, zero);
-  r = (sel(swap, zero + pio2, zero) + sel(swap, -r, r)) + sel(swap, zero + morebits, zero);
-  const v2m neg = (v2m)vx < (v2m)zero;  // sign bit set
-  r = (sel(neg, zero + pi_hi, zero) + sel(neg, -r, r)) + sel(neg, zero + 2.0 * morebits, zero);
+  r = (r + when(big, splat(0.5 * morebits))) + when(big, splat(pio4));
+  // swap ? pio2 - r + morebits : r  (the sign flip of r as an XOR)
+  r = (when(swap, splat(pio2)) + (v2d)((v2m)r ^ (swap & sign))) + when(swap, splat(morebits));
+  // x negative (sign bit, so -0 too): pi - r + 2 morebits. The full-lane
+  // mask from a double compare of copysign(1, x) (SSE2 has no 64-bit
+  // integer compare).
+  const v2m xs = (v2m)vx & sign;
+  const v2m neg = (v2d)((v2m)one | xs) < zero;
+  r = (when(neg, splat(pi_hi)) + (v2d)((v2m)r ^ xs)) + when(neg, splat(2.0 * morebits));
   r = (v2d)(((v2m)r & ~sign) | ((v2m)vy & sign));  // copysign(r, y)
   out[0] = r[0];
   out[1] = r[1];
