@@ -38,6 +38,16 @@ TEST(Config, FullFileAccepted) {
   DOUBLES_EQUAL(1.5, c.drive_stop_timeout_s, 0);
 }
 
+// The file the package installs as /etc/servoarm/armfw.toml loads and validates
+// (a typo there would keep the service from starting on the controller).
+TEST(Config, ShippedConfigLoads) {
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_file(SERVOARM_SHIPPED_CONFIG, c).c_str());
+  STRCMP_EQUAL("", validate(c).c_str());
+  STRCMP_EQUAL("sim", c.can.c_str());  // as shipped: virtual drives until bus.can is set
+  STRCMP_EQUAL("ramp", c.stop.c_str());
+}
+
 TEST(Config, BadFilesNameTheKeyAndLeaveConfigUntouched) {
   struct Case {
     const char* text;
