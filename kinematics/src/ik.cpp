@@ -95,6 +95,8 @@ constexpr double kPi = M_PI;
 constexpr double kVerifyPos = 1e-9;
 constexpr double kVerifyRot = 1e-9;
 constexpr double kNearSingular = 1e-6;
+/// |axis 6 x axis 4|^2 below which q4 is kept at the reference (theta5 = 0).
+constexpr double kKeepQ4 = 1e-20;
 
 Pose rx_pose(double a) {
   Pose T = Pose::Identity();
@@ -984,7 +986,7 @@ EIGEN_ALWAYS_INLINE void wrist_lanes(const SphCtx& x, const ArmL<T>& a, T sgn, W
   o.wxy2 = w[0] * w[0] + w[1] * w[1];
   T c4, s4;
   angle_between_l(w[0], w[1], a.M[0][2], a.M[1][2], c4, s4);
-  const auto keep4 = o.wxy2 < 1e-20;  // theta5 = 0 family: keep q4
+  const auto keep4 = o.wxy2 < kKeepQ4;  // theta5 = 0 family: keep q4
   c4 = o.c4 = select(keep4, bc<T>(x.c4ref), c4);
   s4 = o.s4 = select(keep4, bc<T>(x.s4ref), s4);
   const T xv[3] = {c4 * a.M[0][0] + s4 * a.M[1][0], c4 * a.M[1][0] - s4 * a.M[0][0], a.M[2][0]};
@@ -1109,10 +1111,13 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
     for (int k = 0; k < n5; ++k) {
       const double sgn = k == 0 ? 1.0 : -1.0;
       Cand& cd = cand[nc];
-      if (k == 1 && m.wrist_flip && !(cand[nc - 1].sing & kSingularWrist)) {
+      if (k == 1 && m.wrist_flip && !(lane(w1.wxy2, l) < kKeepQ4)) {
         // (m4 + pi, 2 phi5 - m5, m6 + pi): the same wrist rotation X as the
         // first root's (identity checked at set-up), so the same errors and
         // the same |w_xy| (the wrist-singularity test): nothing to compute.
+        // Also near the singularity (theta5 -> 0, q4 ill-conditioned but
+        // q4 + q6 not): the identity holds for any q4. Only where q4 was
+        // kept at the reference is the second root computed.
         cd = cand[nc - 1];
         cd.sgn = sgn;
         cd.base = nc - 1;
@@ -1140,7 +1145,7 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
   // Whether lane l needs its second wrist root computed (no wrist flip).
   auto second = [&](const auto& a, const auto& w1, int l) {
     return lane(a.st, l) > 0 && !(lane(a.um, l) < -1e-9 || lane(a.up, l) < -1e-9) &&
-           !(m.wrist_flip && !(lane(w1.wxy2, l) < kNearSingular * kNearSingular));
+           !(m.wrist_flip && !(lane(w1.wxy2, l) < kKeepQ4));
   };
   int i = 0;
   for (; i + 1 < np; i += 2) {  // two arm configurations at a time

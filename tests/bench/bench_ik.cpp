@@ -2,6 +2,8 @@
 // against Orocos KDL's ChainIkSolverPos_NR_JL and ChainIkSolverPos_LMA on the
 // same targets and starts, same run.
 //   ik/<model>/servoarm            every closed-form solution of one pose
+//   ik_class/puma560/<class>/servoarm  the same on PUMA pose classes near the
+//                                  wrist singularity and out of reach (worst case)
 //   ik_numeric/<model>/servoarm    DLS/LM from a random start (counter: success)
 //   ik_numeric/<model>/kdl_nr_jl   KDL Newton-Raphson with joint limits
 //   ik_numeric/<model>/kdl_lma     KDL Levenberg-Marquardt (no limits; success
@@ -91,6 +93,42 @@ void ik_closed(benchmark::State& st, const char* name) {
   st.counters["solutions"] = static_cast<double>(sols) / static_cast<double>(n);
 }
 
+// Pose classes of the PUMA for the worst case of the closed form: 256 poses
+// each, from random in-limit joints with theta5 forced (0 with a random
+// reference: the singular family; 1e-9: the two wrist roots do not merge
+// and the second is computed, not flipped; 1e-5: near-singular), or the
+// position scaled out of reach.
+enum class PoseClass { theta5_zero, theta5_1e9, theta5_1e5, unreachable };
+
+void ik_class(benchmark::State& st, PoseClass cls) {
+  const IkFixture& f = ik_fixture("puma560");
+  std::mt19937_64 rng(7 + static_cast<int>(cls));
+  std::vector<kin::Pose> targets;
+  std::vector<kin::JointVector> refs;
+  for (int k = 0; k < kTargets; ++k) {
+    kin::JointVector q = random_joints(f.chain, rng);
+    if (cls == PoseClass::theta5_zero) q[4] = 0;
+    if (cls == PoseClass::theta5_1e9) q[4] = 1e-9;
+    if (cls == PoseClass::theta5_1e5) q[4] = 1e-5;
+    kin::Pose T;
+    kin::forward(f.chain, q, T);
+    if (cls == PoseClass::unreachable) T.translation() *= 3.0;
+    targets.push_back(T);
+    refs.push_back(random_joints(f.chain, rng));
+  }
+  kin::IkResult r;
+  std::size_t i = 0;
+  long sols = 0, n = 0;
+  for (auto _ : st) {
+    const std::size_t k = i++ % kTargets;
+    kin::ik_solve_all(f.model, targets[k], cls == PoseClass::theta5_zero ? &refs[k] : nullptr, r);
+    benchmark::DoNotOptimize(r);
+    sols += r.count;
+    ++n;
+  }
+  st.counters["solutions"] = static_cast<double>(sols) / static_cast<double>(n);
+}
+
 void ik_numeric_servoarm(benchmark::State& st, const char* name) {
   const IkFixture& f = ik_fixture(name);
   kin::IkNumericOptions o;
@@ -161,6 +199,10 @@ const char* const kNumeric[] = {"puma560", "stanford", "ist6", "vvr_vr"};
 [[maybe_unused]] const bool registered = [] {
   for (const char* m : kClosed)
     benchmark::RegisterBenchmark((std::string("ik/") + m + "/servoarm").c_str(), ik_closed, m);
+  benchmark::RegisterBenchmark("ik_class/puma560/theta5_zero/servoarm", ik_class, PoseClass::theta5_zero);
+  benchmark::RegisterBenchmark("ik_class/puma560/theta5_1e-9/servoarm", ik_class, PoseClass::theta5_1e9);
+  benchmark::RegisterBenchmark("ik_class/puma560/theta5_1e-5/servoarm", ik_class, PoseClass::theta5_1e5);
+  benchmark::RegisterBenchmark("ik_class/puma560/unreachable/servoarm", ik_class, PoseClass::unreachable);
   for (const char* m : kNumeric) {
     benchmark::RegisterBenchmark((std::string("ik_numeric/") + m + "/servoarm").c_str(), ik_numeric_servoarm, m);
 #ifdef SERVOARM_WITH_KDL

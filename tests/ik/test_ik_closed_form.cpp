@@ -308,6 +308,45 @@ TEST(IkSphericalWrist, WristSingularityKeepsTheCurrentJoint4) {
   }
 }
 
+TEST(IkSphericalWrist, NearWristSingularityKeepsBothWristRootsExact) {
+  // theta5 a hair off 0: the two wrist roots do not merge, q4 alone is
+  // ill-conditioned (q4 + q6 is not). The second root of each arm
+  // configuration is the wrist flip of the first; both must still verify by
+  // the chain's FK and carry the wrist flag, and the original must be among
+  // them up to the family (q4 and q6 individually).
+  const double theta5[] = {1e-9, -3e-8, 1e-7, -5e-7};
+  for (const char* name : kWristArms) {
+    const kin::IkModel m = prepared(name);
+    std::mt19937_64 rng(77);
+    for (int k = 0; k < 200; ++k) {
+      kin::JointVector q = random_q(m.chain, rng);
+      q[4] = theta5[k % 4];
+      const kin::Pose T = fk(m.chain, q);
+      kin::IkResult r;
+      kin::ik_solve_all(m, T, nullptr, r);
+      const std::string what = std::string(name) + " " + describe(q);
+      check_solutions(m, T, r, what);
+      CHECK_TEXT(r.singular_kinds & kin::kSingularWrist, what.c_str());
+      int near = 0;
+      bool in = false;
+      for (int i = 0; i < r.count; ++i) {
+        const auto& s = r.solutions[static_cast<std::size_t>(i)];
+        if (std::abs(std::sin(s.q[4])) < 1e-6) {
+          ++near;
+          CHECK_TEXT(s.singular & kin::kSingularWrist, what.c_str());
+        }
+        // the original, up to the singular family (q4 and q6 individually)
+        kin::JointVector a = s.q, b = q;
+        a[3] = b[3] = a[5] = b[5] = 0;
+        in = in || joint_gap(m.chain, a, b) < 1e-6;
+      }
+      CHECK_TEXT(near >= 2, what.c_str());  // +t and -t, not merged
+      CHECK_TEXT(in, (what + ": original (q1, q2, q3, q5) not among the solutions").c_str());
+      if (std::string(name) != "ist6") LONGS_EQUAL_TEXT(generic_count(name), r.count, what.c_str());
+    }
+  }
+}
+
 TEST(IkSphericalWrist, ShoulderSingularityWristCentreOnAxis1) {
   // Stanford and the cylindrical arm can put the wrist centre on axis 1
   // (PUMA cannot: its shoulder offset d2; its shoulder singularity is the
