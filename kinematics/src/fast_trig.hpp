@@ -15,6 +15,8 @@
 // (see tests/kinematics/test_fast_trig.cpp).
 #include <cmath>
 
+#include "lanes.hpp"
+
 namespace servoarm::kin::detail {
 
 inline void sincos_poly(double x, double& s, double& c) {
@@ -99,8 +101,6 @@ inline void sincos_poly(double x, double& s, double& c) {
 /// bit for bit, at about half the instructions. The scalar version does not
 /// vectorise by itself (-ftrapping-math keeps its comparisons as branches).
 [[gnu::always_inline]] inline void atan2_poly_x2(const double* y, const double* x, double* out) {
-  typedef double v2d __attribute__((vector_size(16)));
-  using v2m = decltype(v2d{} > v2d{});  // lane masks (all ones / zero)
   constexpr double P0 = -8.750608600031904122785e-1, P1 = -1.615753718733365076637e1,
                    P2 = -7.500855792314704667340e1, P3 = -1.228866684490136173410e2,
                    P4 = -6.485021904942025371773e1;
@@ -109,11 +109,11 @@ inline void sincos_poly(double x, double& s, double& c) {
                    Q4 = 1.945506571482613964425e2;
   constexpr double pio4 = 7.85398163397448309616e-1, pio2 = 1.57079632679489661923, pi_hi = 3.14159265358979311600;
   constexpr double morebits = 6.123233995736765886130e-17;
-  auto splat = [](double c) { return v2d{c, c}; };
+  auto splat = [](double c) { return bc<v2d>(c); };
   const v2d vy = {y[0], y[1]}, vx = {x[0], x[1]};
   const v2d zero = splat(0.0), one = splat(1.0);
   const v2m sign = (v2m)splat(-0.0);
-  auto sel = [](v2m m, v2d a, v2d b) { return (v2d)((m & (v2m)a) | (~m & (v2m)b)); };
+  auto sel = [](v2m m, v2d a, v2d b) { return select(m, a, b); };
   auto when = [](v2m m, v2d a) { return (v2d)(m & (v2m)a); };  // m ? a : 0
   const v2d ax = (v2d)((v2m)vx & ~sign), ay = (v2d)((v2m)vy & ~sign);
   const v2m swap = ay > ax;
