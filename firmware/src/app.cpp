@@ -177,6 +177,11 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override) {
     }
     jc.scaling.kind = chain.joint(j).type == kin::JointType::prismatic ? hal::JointScaling::Kind::prismatic
                                                                        : hal::JointScaling::Kind::revolute;
+    if (!cfg.drives.empty() && cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel > 0) {
+      // joint deg/s^2 (mm/s^2) -> motor counts/s^2
+      const double unit = chain.joint(j).type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;
+      jc.quick_stop_decel = cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel * unit * jc.scaling.counts_per_si();
+    }
   }
   servo = std::make_unique<hal::CanopenServoBus>(*canbus, *clock, mc);
   if (servo->config_status() != hal::Status::ok) return std::string("bus: ") + hal::to_string(servo->config_status());

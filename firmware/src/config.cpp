@@ -30,6 +30,7 @@ const ConfigKey kConfigKeys[] = {
     {"drive.limits", "the robot description's", "[lower, upper] in deg / mm; must lie within the description's limits"},
     {"drive.max_velocity", "the robot description's", "deg/s or mm/s; at most the description's"},
     {"drive.heartbeat_timeout_ms", "bus.heartbeat_timeout_ms", "heartbeat consumer time for this drive"},
+    {"drive.quick_stop_decel", "the drive's own", "deg/s^2 or mm/s^2 (joint side): written to the drive's 6085h quick stop deceleration at bring-up (safety.stop = \"drive\")"},
     {"safety.following_error_deg", "5", "largest |commanded - actual| per joint (deg, or mm for prismatic)"},
     {"safety.enable_timeout_s", "2", "time for every drive to reach operation enabled"},
     {"safety.feedback_timeout_ms", "50", "an enabled drive silent (no position feedback) this long faults the arm"},
@@ -102,7 +103,8 @@ bool apply_drive(Reader& r, const std::string& where, const std::string& key, co
   }
   if (key == "max_velocity") return r.num(v, k, d.max_velocity);
   if (key == "heartbeat_timeout_ms") return r.num(v, k, d.heartbeat_timeout_ms);
-  return r.fail(k, "unknown key (node, counts_per_rev, gear_ratio, direction, zero_offset, limits, max_velocity, heartbeat_timeout_ms)");
+  if (key == "quick_stop_decel") return r.num(v, k, d.quick_stop_decel);
+  return r.fail(k, "unknown key (node, counts_per_rev, gear_ratio, direction, zero_offset, limits, max_velocity, heartbeat_timeout_ms, quick_stop_decel)");
 }
 
 bool apply(Reader& r, const std::string& key, const toml::value& v, FwConfig& c) {
@@ -209,6 +211,7 @@ std::string validate(const FwConfig& c) {
     if (!(d.max_velocity >= 0)) return w + "max_velocity: must be > 0";
     if (!(d.heartbeat_timeout_ms == 0 || (d.heartbeat_timeout_ms > c.heartbeat_period_ms && d.heartbeat_timeout_ms <= 60000)))
       return w + "heartbeat_timeout_ms: must be above bus.heartbeat_period_ms and <= 60000";
+    if (!(d.quick_stop_decel >= 0 && d.quick_stop_decel <= 1e7)) return w + "quick_stop_decel: must be within 0..1e7 deg/s^2 (mm/s^2; 0 = the drive's own)";
   }
   switch (c.console_baud) {
     case 9600: case 19200: case 38400: case 57600: case 115200: case 230400: case 460800: case 921600: break;
@@ -297,6 +300,10 @@ std::string to_toml(const FwConfig& c) {
     }
     if (d.heartbeat_timeout_ms > 0) {
       std::snprintf(l, sizeof l, "heartbeat_timeout_ms = %g\n", d.heartbeat_timeout_ms);
+      out += l;
+    }
+    if (d.quick_stop_decel > 0) {
+      std::snprintf(l, sizeof l, "quick_stop_decel = %.17g\n", d.quick_stop_decel);
       out += l;
     }
   }

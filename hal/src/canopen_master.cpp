@@ -1,5 +1,6 @@
 #include "servoarm/hal/canopen_master.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -248,6 +249,19 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
       std::snprintf(error_, sizeof error_, "node %u: SDO write 0x%04X:%u = 0x%X failed: %s (abort 0x%08X: %s)",
                     unsigned(n), unsigned(w.index), unsigned(w.sub), unsigned(w.value), to_string(r.status),
                     unsigned(r.abort_code), r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+      return r.status;
+    }
+  }
+  const double qsd = cfg_.joints[j].quick_stop_decel;
+  if (qsd > 0) {
+    const std::uint32_t v = qsd >= 4294967295.0 ? 0xFFFFFFFFu : std::uint32_t(std::max(1.0, std::round(qsd)));
+    std::uint8_t b[4];
+    put_u32(b, v);
+    r = sdo_.download(n, cia402::kQuickStopDecel, 0, b, 4);
+    if (r.status != Status::ok) {
+      std::snprintf(error_, sizeof error_, "node %u: SDO write quick stop deceleration 0x6085 = %u failed: %s (abort 0x%08X: %s)",
+                    unsigned(n), unsigned(v), to_string(r.status), unsigned(r.abort_code),
+                    r.abort_code ? sdo::abort_text(r.abort_code) : "-");
       return r.status;
     }
   }

@@ -57,6 +57,14 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kVelocityActual, 0, 4, false, true, 0);
   add(c402::kTargetPosition, 0, 4, true, true, 0);
   add(c402::kFollowingErrorActual, 0, 4, false, true, 0);
+  // Quick stop: option code (6: ramp down with 6085h, stay in quick stop
+  // active; 2: the same, then switch on disabled; 1/5: as 2/6 -- this model
+  // has no separate slow-down ramp; 0: power off at once, the unpowered motor
+  // stops with its acceleration limit) and deceleration (counts/s^2; default
+  // and ceiling: the motor's acceleration limit).
+  add(c402::kQuickStopOption, 0, 2, true, false, 6);
+  add(c402::kQuickStopDecel, 0, 4, true, false,
+      std::uint32_t(std::clamp(std::round(motor_.max_accel), 1.0, 4294967295.0)));
   Entry* name = find(0x1008, 0);
   char buf[48];
   const int n = std::snprintf(buf, sizeof buf, "servoarm virtual drive %u", unsigned(node));
@@ -236,6 +244,11 @@ std::uint32_t VirtualDrive::sdo_write(Entry& e, const std::uint8_t* data, std::s
   }
   if (is_comm && e.sub == 2 && v > 240 && v < 254) return sdo::kAbortValueRange;
   if (e.index == c402::kModesOfOperation && std::int8_t(v) != c402::kModeCsp && v != 0) return sdo::kAbortValueRange;
+  if (e.index == c402::kQuickStopOption) {
+    const std::int16_t o = std::int16_t(v);
+    if (!(o == 0 || o == 1 || o == 2 || o == 5 || o == 6)) return sdo::kAbortValueRange;
+  }
+  if (e.index == c402::kQuickStopDecel && v == 0) return sdo::kAbortValueRange;
   e.value = v;
   if (e.index == c402::kModesOfOperation) set(c402::kModesDisplay, v);
   if (e.index == 0x1017) next_hb_ = t_;
@@ -406,6 +419,7 @@ void VirtualDrive::apply_controlword(TimePoint now, CanBus& bus) {
     next = state_;  // refuses: stays switched on
   }
   if (t == 4 || t == 16) target_ = std::int32_t(std::lround(pos_));  // no jump on enable
+  if (t == 11 && std::int16_t(get(c402::kQuickStopOption)) == 0) next = c402::State::switch_on_disabled;
   if (t == 15) {  // fault reset: clear the error and say so
     set(c402::kErrorCode, 0);
     set(0x1001, 0);
@@ -439,9 +453,15 @@ void VirtualDrive::advance(TimePoint now, CanBus& bus) {
     const bool powered = state_ == c402::State::operation_enabled;
     if (powered) v_des = (double(target_) - pos_) / motor_.lag;
     v_des = std::clamp(v_des, -motor_.max_velocity, motor_.max_velocity);
-    const double dv = std::clamp(v_des - vel_, -motor_.max_accel * dt, motor_.max_accel * dt);
+    double amax = motor_.max_accel;
+    if (state_ == c402::State::quick_stop_active) amax = std::min(amax, double(get(c402::kQuickStopDecel)));
+    const double dv = std::clamp(v_des - vel_, -amax * dt, amax * dt);
     vel_ += dv;
     pos_ += vel_ * dt;
+    if (state_ == c402::State::quick_stop_active && vel_ == 0.0) {
+      const std::int16_t o = std::int16_t(get(c402::kQuickStopOption));
+      if (o == 1 || o == 2) state_ = c402::State::switch_on_disabled;  // at rest: transition 12
+    }
     if (powered) {
       const double fe = double(target_) - pos_;
       set(c402::kFollowingErrorActual, std::uint32_t(std::int32_t(std::lround(fe))));

@@ -80,6 +80,8 @@ TEST(Config, BadFilesNameTheKeyAndLeaveConfigUntouched) {
       {"[[drive]]\nzero_offset = 9000000000\n", "drive[1].zero_offset"},
       {"[[drive]]\nnode = 200\n", "drive[1].node"},
       {"[[drive]]\nheartbeat_timeout_ms = 5\n", "drive[1].heartbeat_timeout_ms"},
+      {"[[drive]]\nquick_stop_decel = -1\n", "drive[1].quick_stop_decel"},
+      {"[[drive]]\nquick_stop_decel = \"fast\"\n", "drive[1].quick_stop_decel"},
   };
   for (const Case& k : cases) {
     FwConfig c;
@@ -104,6 +106,7 @@ TEST(Config, EveryDocumentedKeyIsAccepted) {
   d.limits = {-90, 45};
   d.max_velocity = 30;
   d.heartbeat_timeout_ms = 200;
+  d.quick_stop_decel = 720.5;
   c.drives = {d, d};
   c.drives[1].node = 8;
   const std::string toml = to_toml(c);
@@ -115,6 +118,7 @@ TEST(Config, EveryDocumentedKeyIsAccepted) {
   LONGS_EQUAL(-12345, back.drives[0].zero_offset);
   DOUBLES_EQUAL(45, back.drives[0].limits[1], 0);
   DOUBLES_EQUAL(200, back.drives[1].heartbeat_timeout_ms, 0);
+  DOUBLES_EQUAL(720.5, back.drives[1].quick_stop_decel, 0);
   for (int i = 0; i < kConfigKeyCount; ++i) {
     std::string k = kConfigKeys[i].key;
     if (k == "drive") {

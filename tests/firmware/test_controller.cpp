@@ -441,6 +441,61 @@ TEST(Controller, DriveQuickStopSendsCia402QuickStopThenPowersDownAtRest) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+// drive.quick_stop_decel: armfw writes the drives' 6085h at bring-up (joint
+// deg/s^2 -> motor counts/s^2), and the virtual drives stop on it: the time
+// from the Quick Stop command to rest is the fastest joint's speed over that
+// deceleration (here 180 deg/s^2 = 0.5 motor rev/s^2, far below the motor's
+// own 400 rev/s^2).
+TEST(Controller, DriveQuickStopUsesTheConfiguredDeceleration) {
+  FwConfig cfg;
+  cfg.stop = "drive";
+  DriveConfig d;
+  d.quick_stop_decel = 180;
+  cfg.drives.assign(6, d);
+  cfg.drives[2].quick_stop_decel = 360;  // a drive of its own: twice as fast
+  Rig r({}, cfg);
+  for (int j = 0; j < 6; ++j) {
+    std::uint32_t v = 0;
+    CHECK(r.app.plant->arm().at(std::size_t(j)).od_read(0x6085, 0, v));
+    LONGS_EQUAL(j == 2 ? 131072 : 65536, v);
+  }
+  r.enable();
+  CHECK(is_ok(r.cmd("movej 150 -150 150 0 30 0 speed=60")));
+  r.run(0.7);
+  CHECK(r.tel().state == ArmState::moving);
+  r.app.ctl->requests().push(Request{RequestOp::estop, 78});
+  r.cycle();
+  // Each drive's speed when it took the Quick Stop (its 606Ch; the virtual
+  // drive's position loop makes it vary within a cycle): the slowest to stop
+  // sets the time, |v| / 6085h.
+  double t_expect = 0;
+  for (int j = 0; j < 6; ++j) {
+    std::uint32_t vel = 0;
+    CHECK(r.app.plant->arm().at(std::size_t(j)).od_read(0x606C, 0, vel));
+    t_expect = std::max(t_expect, std::abs(double(std::int32_t(vel))) / (j == 2 ? 131072.0 : 65536.0));
+  }
+  CHECK(t_expect > 0.2);
+  int n = 0;
+  auto any_powered = [&] {
+    const Telemetry t = r.tel();
+    for (int j = 0; j < 6; ++j)
+      if (t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabling) ||
+          t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabled))
+        return true;
+    return false;
+  };
+  while (any_powered() && n < 5000) {
+    r.cycle();
+    ++n;
+  }
+  const double t_stop = n * 1e-3;
+  std::printf("\n[drive quick stop, 6085h from the config] at rest and powered down in %.3f s, expected %.3f s\n", t_stop,
+              t_expect);
+  CHECK_TEXT(t_stop > 0.97 * t_expect && t_stop < 1.03 * t_expect + 0.005,
+             (std::to_string(t_stop) + " s, expected " + std::to_string(t_expect)).c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 // safety.stop = "drive" and a fault: a silent drive (joint 3) during a move; the
 // fault reaction is the Quick Stop command to the drives still on the bus.
 TEST(Controller, DriveQuickStopIsTheFaultReaction) {

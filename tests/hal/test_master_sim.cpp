@@ -384,6 +384,54 @@ TEST(MasterSim, QuickStopRampsDownThenEnableResumes) {
   DOUBLES_EQUAL(stopped_at, master->feedback(0).position, 1e-3);
 }
 
+// CanopenJointConfig::quick_stop_decel is written to 6085h at bring-up (only
+// where set); the drive then stops on it, and its 605Ah option code decides
+// what follows: 6 holds quick stop active, 2 goes to switch on disabled at
+// rest, 0 powers off at once.
+TEST(MasterSim, QuickStopDecelerationWrittenAndOptionCodesFollowed) {
+  delete master;
+  CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 6);
+  cfg.heartbeat_period = 20 * kMillisecond;
+  cfg.heartbeat_timeout = 60 * kMillisecond;
+  cfg.joints[0].quick_stop_decel = 2.0 * 131072;  // 2 rev/s^2
+  cfg.joints[1].quick_stop_decel = 2.0 * 131072;
+  cfg.joints[2].quick_stop_decel = 2.0 * 131072;
+  master = new CanopenServoBus(*rig->master_ep, rig->clock, cfg);
+  bring_up();
+  std::uint32_t v = 0;
+  CHECK(rig->sim->node(1)->od_read(0x6085, 0, v));
+  UNSIGNED_LONGS_EQUAL(262144u, v);
+  CHECK(rig->sim->node(4)->od_read(0x6085, 0, v));
+  UNSIGNED_LONGS_EQUAL(400u * 131072u, v);  // not configured: the drive's own
+  CHECK(rig->sim->node(2)->od_write(0x605A, 0, 2));
+  CHECK(rig->sim->node(3)->od_write(0x605A, 0, 0));
+  // joints 0-2 at 1 rev/s (2 pi rad/s motor side, gear 1), then quick stop
+  double sp[6] = {};
+  for (int k = 0; k < 600; ++k) {
+    const double w = std::min(k * 1e-3 / 0.5, 1.0) * 2 * M_PI;  // ramp to 2 pi rad/s in 0.5 s
+    for (int j = 0; j < 3; ++j) sp[j] += w * 1e-3;
+    cycle(sp);
+  }
+  master->quick_stop();
+  cycle(sp);
+  // About 1 rev/s at 2 rev/s^2: about 0.5 s to rest, exactly |606Ch| / 6085h
+  // from the speed the drive had when it took the command (joint 3, option 0:
+  // off at once).
+  CHECK(rig->sim->node(1)->od_read(0x606C, 0, v));
+  const double t_expect = std::abs(double(std::int32_t(v))) / 262144.0;
+  CHECK_TEXT(t_expect > 0.4 && t_expect < 0.55, std::to_string(t_expect).c_str());
+  int stopped0 = -1;
+  for (int k = 0; k < 800; ++k) {
+    cycle(sp);
+    if (k == 5) STRCMP_EQUAL("switch_on_disabled", cia402::to_string(rig->sim->node(3)->state()));
+    if (stopped0 < 0 && std::abs(master->feedback(0).velocity) < 1e-9) stopped0 = k;
+  }
+  CHECK_TEXT(stopped0 * 1e-3 > 0.97 * t_expect - 0.003 && stopped0 * 1e-3 < 1.03 * t_expect + 0.003,
+             (std::to_string(stopped0) + " cycles, expected " + std::to_string(t_expect) + " s").c_str());
+  STRCMP_EQUAL("quick_stop_active", cia402::to_string(rig->sim->node(1)->state()));   // option 6
+  STRCMP_EQUAL("switch_on_disabled", cia402::to_string(rig->sim->node(2)->state()));  // option 2
+}
+
 TEST(MasterSim, BusFiltersKeepForeignFramesOut) {
   CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 6);
   cfg.set_bus_filters = true;

@@ -182,3 +182,26 @@ TEST(SdoBadServer, ToggleErrorAborts) {
   UNSIGNED_LONGS_EQUAL(sdo::kAbortToggle, r.abort_code);
   clock.set_idle_hook(nullptr);
 }
+
+// Quick stop objects of the virtual drive (CiA 402): 605Ah option code (the
+// codes the model implements) and 6085h deceleration (non-zero), readable back.
+TEST(Sdo, QuickStopObjectsValidatedLikeADrive) {
+  std::uint32_t v = 0;
+  LONGS_EQUAL(int(Status::ok), int(sdo->read_u32(3, 0x6085, 0, v).status));
+  UNSIGNED_LONGS_EQUAL(400u * 131072u, v);  // default: the motor's acceleration limit
+  LONGS_EQUAL(int(Status::ok), int(sdo->write_u32(3, 0x6085, 0, 65536).status));
+  LONGS_EQUAL(int(Status::ok), int(sdo->read_u32(3, 0x6085, 0, v).status));
+  UNSIGNED_LONGS_EQUAL(65536u, v);
+  SdoResult r = sdo->write_u32(3, 0x6085, 0, 0);
+  UNSIGNED_LONGS_EQUAL(sdo::kAbortValueRange, r.abort_code);
+  for (int code : {0, 1, 2, 5, 6}) {
+    r = sdo->write_u16(3, 0x605A, 0, std::uint16_t(code));
+    LONGS_EQUAL_TEXT(int(Status::ok), int(r.status), std::to_string(code).c_str());
+  }
+  for (int code : {3, 4, 7, -1}) {
+    r = sdo->write_u16(3, 0x605A, 0, std::uint16_t(std::int16_t(code)));
+    UNSIGNED_LONGS_EQUAL_TEXT(sdo::kAbortValueRange, r.abort_code, std::to_string(code).c_str());
+  }
+  LONGS_EQUAL(int(Status::ok), int(sdo->read_u32(3, 0x605A, 0, v).status));
+  UNSIGNED_LONGS_EQUAL(6u, v);  // the last accepted value
+}

@@ -19,6 +19,7 @@ struct DriveConfig {
   std::vector<double> limits;            ///< {lower, upper} deg / mm; empty = the description's
   double max_velocity = 0;               ///< deg/s or mm/s; 0 = the description's
   double heartbeat_timeout_ms = 0;       ///< 0 = bus.heartbeat_timeout_ms
+  double quick_stop_decel = 0;           ///< deg/s^2 or mm/s^2 written to 6085h; 0 = leave the drive's
 };
 
 struct FwConfig {

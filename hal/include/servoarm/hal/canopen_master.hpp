@@ -28,6 +28,11 @@ struct CanopenJointConfig {
   std::uint8_t node_id = 0;
   JointScaling scaling{};
   Duration heartbeat_timeout = 0;  ///< 0 = use CanopenMasterConfig::heartbeat_timeout
+  /// Quick-stop deceleration written to the drive's 6085h at bring-up, in drive
+  /// acceleration units (counts/s^2, rounded, at most 2^32 - 1); 0 = leave the
+  /// drive's own setting. The drive ramps down with it on the Quick Stop command
+  /// (and on its 605Ah option code's terms).
+  double quick_stop_decel = 0;
 };
 
 struct CanopenMasterConfig {
