@@ -50,6 +50,19 @@ inline void sincos_poly(double x, double& s, double& c) {
   c = ((q + 1) & 2) ? -cos_base : cos_base;
 }
 
+/// Constants of atan2_poly and atan2_poly_x2 (Cephes atan).
+namespace atan2_coef {
+inline constexpr double P0 = -8.750608600031904122785e-1, P1 = -1.615753718733365076637e1,
+                        P2 = -7.500855792314704667340e1, P3 = -1.228866684490136173410e2,
+                        P4 = -6.485021904942025371773e1;
+inline constexpr double Q0 = 2.485846490142306297962e1, Q1 = 1.650270098316988542046e2,
+                        Q2 = 4.328810604912902668951e2, Q3 = 4.853903996359136964868e2,
+                        Q4 = 1.945506571482613964425e2;
+inline constexpr double pio4 = 7.85398163397448309616e-1, pio2 = 1.57079632679489661923,
+                        pi_hi = 3.14159265358979311600;
+inline constexpr double morebits = 6.123233995736765886130e-17;  // pi/2 - pio2 (pi/4, pi: 1/2x, 2x)
+}  // namespace atan2_coef
+
 /// atan2(y, x) for finite arguments, inlined and branch-light (the closed-form
 /// IK calls it ~30 times per pose; glibc's atan2 is an out-of-line call of
 /// ~15-20 ns each here). Cephes atan: the ratio min/max in [0, 1] is reduced
@@ -61,14 +74,7 @@ inline void sincos_poly(double x, double& s, double& c) {
 /// signs of zeros follow std::atan2 (atan2(-0, -1) = -pi). No FP exceptions
 /// for finite arguments.
 [[gnu::always_inline]] inline double atan2_poly(double y, double x) {
-  constexpr double P0 = -8.750608600031904122785e-1, P1 = -1.615753718733365076637e1,
-                   P2 = -7.500855792314704667340e1, P3 = -1.228866684490136173410e2,
-                   P4 = -6.485021904942025371773e1;
-  constexpr double Q0 = 2.485846490142306297962e1, Q1 = 1.650270098316988542046e2,
-                   Q2 = 4.328810604912902668951e2, Q3 = 4.853903996359136964868e2,
-                   Q4 = 1.945506571482613964425e2;
-  constexpr double pio4 = 7.85398163397448309616e-1, pio2 = 1.57079632679489661923, pi_hi = 3.14159265358979311600;
-  constexpr double morebits = 6.123233995736765886130e-17;  // pi/2 - pio2 (pi/4, pi: 1/2x, 2x)
+  using namespace atan2_coef;
   // Written as selects between values computed unconditionally (no branches,
   // no floating-point operation under a condition), so that GCC if-converts
   // and vectorises a loop over it.
@@ -101,14 +107,7 @@ inline void sincos_poly(double x, double& s, double& c) {
 /// bit for bit, at about half the instructions. The scalar version does not
 /// vectorise by itself (-ftrapping-math keeps its comparisons as branches).
 [[gnu::always_inline]] inline void atan2_poly_x2(const double* y, const double* x, double* out) {
-  constexpr double P0 = -8.750608600031904122785e-1, P1 = -1.615753718733365076637e1,
-                   P2 = -7.500855792314704667340e1, P3 = -1.228866684490136173410e2,
-                   P4 = -6.485021904942025371773e1;
-  constexpr double Q0 = 2.485846490142306297962e1, Q1 = 1.650270098316988542046e2,
-                   Q2 = 4.328810604912902668951e2, Q3 = 4.853903996359136964868e2,
-                   Q4 = 1.945506571482613964425e2;
-  constexpr double pio4 = 7.85398163397448309616e-1, pio2 = 1.57079632679489661923, pi_hi = 3.14159265358979311600;
-  constexpr double morebits = 6.123233995736765886130e-17;
+  using namespace atan2_coef;
   auto splat = [](double c) { return bc<v2d>(c); };
   const v2d vy = {y[0], y[1]}, vx = {x[0], x[1]};
   const v2d zero = splat(0.0), one = splat(1.0);

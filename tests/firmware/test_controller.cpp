@@ -87,6 +87,15 @@ struct Rig {
     for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
     return q;
   }
+  /// Some drive still powered (enabling/enabled; quick stop active with speed counts as enabling).
+  bool any_powered() const {
+    const Telemetry t = tel();
+    for (int j = 0; j < 6; ++j)
+      if (t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabling) ||
+          t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabled))
+        return true;
+    return false;
+  }
   void enable() {
     const std::string a = cmd("enable");
     if (a.rfind("ok", 0) != 0) FAIL(("enable: " + a).c_str());
@@ -402,21 +411,13 @@ TEST(Controller, DriveQuickStopSendsCia402QuickStopThenPowersDownAtRest) {
   }
   // the drives ramp down on their own; the power-down follows when all are at rest
   int n = 0;
-  auto any_powered = [&] {
-    const Telemetry t = r.tel();
-    for (int j = 0; j < 6; ++j)
-      if (t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabling) ||
-          t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabled))
-        return true;
-    return false;
-  };
-  while (any_powered() && n < 3000) {
+  while (r.any_powered() && n < 3000) {
     r.cycle();
     collect_controlwords(*spy, cws);
     ++n;
   }
   const double t_stop = n * 1e-3;
-  CHECK_TEXT(!any_powered(), "drives still powered 3 s after the quick stop");
+  CHECK_TEXT(!r.any_powered(), "drives still powered 3 s after the quick stop");
   // it took the drives' deceleration (the fastest joint was at speed: v / 8 pi rad/s^2),
   // not one cycle, and not the 2 s timeout either
   CHECK_TEXT(t_stop > 0.02 && t_stop < 1.0, std::to_string(t_stop).c_str());
@@ -476,15 +477,7 @@ TEST(Controller, DriveQuickStopUsesTheConfiguredDeceleration) {
   }
   CHECK(t_expect > 0.2);
   int n = 0;
-  auto any_powered = [&] {
-    const Telemetry t = r.tel();
-    for (int j = 0; j < 6; ++j)
-      if (t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabling) ||
-          t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabled))
-        return true;
-    return false;
-  };
-  while (any_powered() && n < 5000) {
+  while (r.any_powered() && n < 5000) {
     r.cycle();
     ++n;
   }
