@@ -727,9 +727,8 @@ void finish_status(IkResult& res) {
 // one batch (atan2_poly_x2, two at a time) and never fed back. The arm
 // configurations (up to 4 for a 6R arm) go through the arm and wrist stages
 // two at a time, one per lane of a two-lane vector (arm_lanes, wrist_lanes).
-// Constant rotations that
-// are signed permutations (the usual 0 / +-90 degree DH angles) multiply as
-// copies. Each candidate is verified by forward kinematics of its joint
+// Constant rotations that are signed permutations (the usual 0 / +-90 degree
+// DH angles) multiply as copies. Each candidate is verified by forward kinematics of its joint
 // values through the model's decomposition C0 J1 C1 ... J6 C6, with the part
 // shared by the two wrist solutions of one arm configuration computed once:
 //   wrist centre   W_fk = C0 Rz(m1) f(m2, m3)          (per arm configuration)
