@@ -612,7 +612,7 @@ TEST(IkFastPath, Atan2PolyX2IsTheScalarVersionBitForBit) {
 // branch-free form for joints whose limits span less than a turn gives what
 // the rule (wrap_into_limits) gives, on a case table and random angles,
 // references and limits.
-#include "../../kinematics/src/ik_detail.hpp"
+#include "../../kinematics/src/ik/ik_detail.hpp"
 
 TEST(IkFastPath, NarrowWrapMatchesTheRule) {
   using servoarm::kin::detail::kTwoPi;
