@@ -38,7 +38,8 @@ int usage(FILE* f, int code) {
                "  --sim                 virtual CiA 402 servos on the in-process bus (no config needed)\n"
                "  --robot NAME|FILE     robot model (default puma560; see armctl kin models)\n"
                "  --config FILE         TOML configuration (armfw --config-keys lists every key)\n"
-               "  --config-keys         print every configuration key with its default and exit\n"
+               "  --config-keys         print every configuration key (default, range, unit, doc) and exit\n"
+               "  --config-reference    print the generated reference section of docs/configuration.md and exit\n"
                "  --demo                play the demo program through the console, print a summary, exit\n"
                "  --interactive         after --demo, leave the console open on stdin\n"
                "  --bench-loop SEC      run the loop SEC seconds with moves in progress; print one JSON line\n"
@@ -279,8 +280,10 @@ int main(int argc, char** argv) {
     else if (a == "--baud") baud = static_cast<int>(number("--baud", 1, 4000000));
     else if (a == "--no-stdin") no_stdin = true;
     else if (a == "--config-keys") {
-      for (int k = 0; k < kConfigKeyCount; ++k)
-        std::printf("%-30s default %-12s %s\n", kConfigKeys[k].key, kConfigKeys[k].default_text, kConfigKeys[k].doc);
+      std::fputs(config_keys_text().c_str(), stdout);
+      return 0;
+    } else if (a == "--config-reference") {
+      std::fputs(config_reference_markdown().c_str(), stdout);
       return 0;
     } else if (a == "-h" || a == "--help") return usage(stdout, 0);
     else {

@@ -1,56 +1,391 @@
 #include "servoarm/firmware/config.hpp"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
+#include <cstring>
 #include <sstream>
 #include <toml.hpp>
 
+#include "servoarm/kinematics/chain.hpp"
+
 namespace servoarm::fw {
 
-const ConfigKey kConfigKeys[] = {
-    {"robot", "\"puma560\"", "built-in model name (armctl kin models) or path to a description .toml"},
-    {"loop.rate_hz", "1000", "control rate in Hz, 250..4000"},
-    {"loop.priority", "80", "SCHED_FIFO priority 1..99 for the control thread; 0 = normal scheduling"},
-    {"loop.cpu", "-1", "pin the control thread to this CPU; -1 = no affinity"},
-    {"loop.lock_memory", "true", "mlockall() all memory at start"},
-    {"bus.can", "\"sim\"", "\"sim\" = virtual drives on the in-process bus, or a SocketCAN interface (can0, vcan0)"},
-    {"bus.first_node", "1", "CANopen node id of joint 1; joint k is first_node + k - 1 (1..127)"},
-    {"bus.counts_per_rev", "131072", "encoder counts per motor revolution"},
-    {"bus.gear_ratio", "1.0", "motor revolutions per joint revolution"},
-    {"bus.heartbeat_period_ms", "50", "heartbeat period written to every drive"},
-    {"bus.heartbeat_timeout_ms", "150", "heartbeat consumer time: silence longer than this faults the arm"},
-    {"bus.start_timeout_s", "5", "time allowed for drive bring-up at start"},
-    {"drive", "[] (one per joint from the [bus] values)", "[[drive]] tables, one per joint in chain order (keys below); give all or none"},
-    {"drive.node", "bus.first_node + k", "CANopen node id of this joint's drive (1..127, unique)"},
-    {"drive.counts_per_rev", "bus.counts_per_rev", "encoder counts per motor revolution (per motor mm for prismatic joints)"},
-    {"drive.gear_ratio", "bus.gear_ratio", "motor revolutions (mm) per joint revolution (mm); not 0"},
-    {"drive.direction", "1", "1 or -1: sign between the joint and the drive"},
-    {"drive.zero_offset", "0", "drive position in counts at joint zero (what `home zero` answers)"},
-    {"drive.limits", "the robot description's", "[lower, upper] in deg / mm; must lie within the description's limits"},
-    {"drive.max_velocity", "the robot description's", "deg/s or mm/s; at most the description's"},
-    {"drive.heartbeat_timeout_ms", "bus.heartbeat_timeout_ms", "heartbeat consumer time for this drive"},
-    {"drive.quick_stop_decel", "the drive's own", "deg/s^2 or mm/s^2 (joint side): written to the drive's 6085h quick stop deceleration at bring-up (safety.stop = \"drive\")"},
-    {"safety.following_error_deg", "5", "largest |commanded - actual| per joint (deg, or mm for prismatic)"},
-    {"safety.enable_timeout_s", "2", "time for every drive to reach operation enabled"},
-    {"safety.feedback_timeout_ms", "50", "an enabled drive silent (no position feedback) this long faults the arm"},
-    {"safety.stop", "\"ramp\"", "e-stop and fault reaction: \"ramp\" = the controller ramps every joint to rest with the full limits, then powers down; \"drive\" = CiA 402 Quick Stop (controlword 0x0002) to every drive in the next cycle, each stops on its own quick-stop ramp (605Ah/6085h), power-down once all are at rest"},
-    {"safety.drive_stop_timeout_s", "2", "stop = \"drive\": power the drives down after this long even if one still reports motion"},
-    {"motion.home_deg", "[] (zeros, clamped into the limits)", "home pose for `home` / G28, one value per joint (deg / mm)"},
-    {"motion.joint_speed_pct", "50", "movej / home speed without speed=, percent of the joint limits (1..100)"},
-    {"motion.linear_speed_mm_s", "100", "movel / G1 speed without speed= / F"},
-    {"motion.max_linear_speed_mm_s", "250", "highest linear speed (speed=, F are clamped to it; G0 uses it)"},
-    {"console.stdin", "true", "console on stdin/stdout"},
-    {"console.pty", "false", "open a pseudo-terminal console and print its path"},
-    {"console.serial", "\"\"", "serial device for a console (e.g. /dev/ttyS0); \"\" = none"},
-    {"console.baud", "115200", "serial baud rate (9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)"},
-    {"console.can", "\"\"", "console over CAN (ISO-TP): a SocketCAN interface (can0, vcan0), \"sim\" (the in-process bus), \"\" = none"},
-    {"console.can_rx_id", "0x7E0", "11-bit id armfw receives console requests on (ISO-TP); outside the CANopen ids of nodes 1..127"},
-    {"console.can_tx_id", "0x7E8", "11-bit id armfw answers on (ISO-TP); outside the CANopen ids of nodes 1..127"},
-};
-const int kConfigKeyCount = static_cast<int>(sizeof kConfigKeys / sizeof kConfigKeys[0]);
-
+// ---------------------------------------------------------------------------
+// The key tables. One entry per key; the default is the member's initialiser in
+// config.hpp. Ranges are closed unless `above` (open low end) or `below` (open
+// high end) says otherwise.
+// ---------------------------------------------------------------------------
 namespace {
+
+constexpr double kBauds[] = {9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600};
+constexpr double kDirections[] = {1, -1};
+constexpr const char* kStops[] = {"ramp", "drive"};
+constexpr double kTwo31 = 2147483648.0;  // counts_per_rev below 2^31: a revolution fits the drive's int32 position
+constexpr double kMaxLength = 1e5;       // deg or mm: |limits| and |home| (277 turns, 100 m)
+
+std::string num_text(double v);
+
+// Relations between keys. validate() runs them only once every key is within its own
+// range, so the values here are finite (no ordered compare with NaN) and a bad value
+// is named by its own key, not by the key it is compared with.
+std::string bus_heartbeat_above_period(const FwConfig& c, const FwConfig&) {
+  if (c.heartbeat_timeout_ms > c.heartbeat_period_ms) return "";
+  return "must be above bus.heartbeat_period_ms (" + num_text(c.heartbeat_period_ms) + ")";
+}
+std::string linear_speed_at_most_max(const FwConfig& c, const FwConfig&) {
+  if (c.linear_speed_mm_s <= c.max_linear_speed_mm_s) return "";
+  return "must be at most motion.max_linear_speed_mm_s (" + num_text(c.max_linear_speed_mm_s) + ")";
+}
+std::string can_rx_id_free(const FwConfig& c, const FwConfig&) {
+  const char* why = can_console_id_problem(c.console_can_rx_id);
+  return why ? why : "";
+}
+std::string can_tx_id_free(const FwConfig& c, const FwConfig&) {
+  if (const char* why = can_console_id_problem(c.console_can_tx_id)) return why;
+  return c.console_can_tx_id == c.console_can_rx_id ? "must differ from console.can_rx_id" : "";
+}
+std::string drive_heartbeat_above_period(const DriveConfig& d, const FwConfig& c) {
+  if (d.heartbeat_timeout_ms > c.heartbeat_period_ms) return "";
+  return "must be above bus.heartbeat_period_ms (" + num_text(c.heartbeat_period_ms) + ")";
+}
+std::string drive_limits_ordered(const DriveConfig& d, const FwConfig&) {
+  return d.limits.size() == 2 && !(d.limits[0] < d.limits[1]) ? "lower must be below upper" : "";
+}
+
+using K = ConfigKey;
+using F = FwConfig;
+const ConfigKey kConfigTable[] = {
+    K{"robot", &F::robot, "", "built-in model name (`armctl kin models`) or the path of a robot description `.toml`"}
+        .length(1, 4095).rule_text("a model name or a path, not empty"),
+    K{"loop.rate_hz", &F::rate_hz, "Hz", "control rate"}.within(250, 4000),
+    K{"loop.priority", &F::priority, "", "SCHED_FIFO priority of the control thread; 0 = normal scheduling"}.within(0, 99),
+    K{"loop.cpu", &F::cpu, "", "pin the control thread to this CPU (e.g. an isolcpus= one); -1 = no affinity"}.within(-1, 1023),
+    K{"loop.lock_memory", &F::lock_memory, "", "`mlockall()` all memory at start"},
+    K{"bus.can", &F::can, "",
+      "`\"sim\"` = virtual CiA 402 drives on the in-process bus, or the SocketCAN interface of the drives (`can0`, `vcan0`)"}
+        .length(1, 15).rule_text("\"sim\" or an interface name (1..15 chars)"),
+    K{"bus.first_node", &F::first_node, "", "CANopen node id of joint 1; joint k is first_node + k - 1"}.within(1, 127),
+    K{"bus.counts_per_rev", &F::counts_per_rev, "counts/rev",
+      "encoder counts per motor revolution (per motor mm for prismatic joints)"}.below(1, kTwo31),
+    K{"bus.gear_ratio", &F::gear_ratio, "",
+      "motor revolutions per joint revolution (motor mm per joint mm); positive: the sign between joint and drive is "
+      "drive.direction"}.within(1e-3, 1e5),
+    K{"bus.heartbeat_period_ms", &F::heartbeat_period_ms, "ms", "heartbeat period written to every drive (1017h)"}
+        .within(1, 10000),
+    K{"bus.heartbeat_timeout_ms", &F::heartbeat_timeout_ms, "ms",
+      "heartbeat consumer time: a drive silent longer than this faults the arm"}
+        .above(0, 60000).related(bus_heartbeat_above_period, "above bus.heartbeat_period_ms"),
+    K{"bus.start_timeout_s", &F::start_timeout_s, "s", "time allowed for drive bring-up at start"}.above(0, 120),
+    K{"safety.following_error_deg", &F::following_error_deg, "deg (mm)",
+      "largest |commanded - actual| per joint (mm for prismatic joints)"}.above(0, 180),
+    K{"safety.enable_timeout_s", &F::enable_timeout_s, "s", "time for every drive to reach operation enabled"}.above(0, 60),
+    K{"safety.feedback_timeout_ms", &F::feedback_timeout_ms, "ms",
+      "an enabled drive without position feedback this long faults the arm"}.within(1, 10000),
+    K{"safety.stop", &F::stop, "",
+      "e-stop and fault reaction: `\"ramp\"` = the controller ramps every joint to rest with the full limits, then "
+      "powers down; `\"drive\"` = CiA 402 Quick Stop (controlword 0x0002) to every drive in the next cycle, each stops "
+      "on its own quick-stop ramp (605Ah/6085h), power-down once all are at rest"}
+        .among(std::span<const char* const>(kStops)),
+    K{"safety.drive_stop_timeout_s", &F::drive_stop_timeout_s, "s",
+      "with stop = \"drive\": power the drives down after this long even if one still reports motion"}.within(0.05, 60),
+    K{"motion.home_deg", &F::home_deg, "deg (mm)",
+      "home pose for `home` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
+      "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
+    K{"motion.joint_speed_pct", &F::joint_speed_pct, "%",
+      "movej / home speed without speed=, percent of each joint's velocity limit"}.within(1, 100),
+    K{"motion.linear_speed_mm_s", &F::linear_speed_mm_s, "mm/s", "movel / G1 speed without speed= / F"}
+        .within(0.01, 5000).related(linear_speed_at_most_max, "at most motion.max_linear_speed_mm_s"),
+    K{"motion.max_linear_speed_mm_s", &F::max_linear_speed_mm_s, "mm/s",
+      "highest linear speed: speed= and F are clamped to it; G0 moves at it"}.within(0.01, 5000),
+    K{"motion.max_move_duration_s", &F::max_move_duration_s, "s",
+      "longest move the console accepts; longer moves are refused with out_of_range"}.within(1, 86400),
+    K{"console.stdin", &F::console_stdin, "", "console on stdin/stdout"},
+    K{"console.pty", &F::console_pty, "", "open a pseudo-terminal console and print its path"},
+    K{"console.serial", &F::console_serial, "", "serial device for a console (e.g. `/dev/ttyS0`); `\"\"` = none"}
+        .length(0, 4095).rule_text("a device path or \"\""),
+    K{"console.baud", &F::console_baud, "baud", "serial baud rate"}.among(std::span<const double>(kBauds)),
+    K{"console.can", &F::console_can, "",
+      "console over CAN (ISO-TP): a SocketCAN interface (`can0`, `vcan0`), `\"sim\"` (the in-process bus), `\"\"` = none"}
+        .length(0, 15).rule_text("\"\", \"sim\" or an interface name (at most 15 chars)"),
+    K{"console.can_rx_id", &F::console_can_rx_id, "", "11-bit CAN id armfw receives console requests on (ISO-TP)"}
+        .in_hex().rule_text("an 11-bit id (0x000..0x7FF)")
+        .related(can_rx_id_free, "outside the CANopen ids of nodes 1..127 and LSS"),
+    K{"console.can_tx_id", &F::console_can_tx_id, "", "11-bit CAN id armfw answers on (ISO-TP)"}
+        .in_hex().rule_text("an 11-bit id (0x000..0x7FF)")
+        .related(can_tx_id_free, "outside the CANopen ids of nodes 1..127 and LSS, not console.can_rx_id"),
+};
+
+using D = DriveConfig;
+using DK = DriveKey;
+const DriveKey kDriveTable[] = {
+    DK{"node", &D::node, "", "CANopen node id of this joint's drive (unique on the bus)"}
+        .within(1, 127).unset_means(0, "bus.first_node + k - 1", false),
+    DK{"counts_per_rev", &D::counts_per_rev, "counts/rev",
+       "encoder counts per motor revolution (per motor mm for prismatic joints)"}
+        .below(1, kTwo31).unset_means(0, "bus.counts_per_rev", false),
+    DK{"gear_ratio", &D::gear_ratio, "", "motor revolutions (mm) per joint revolution (mm); positive"}
+        .within(1e-3, 1e5).unset_means(0, "bus.gear_ratio", false),
+    DK{"direction", &D::direction, "", "sign between the joint and the drive"}.among(std::span<const double>(kDirections)),
+    DK{"zero_offset", &D::zero_offset, "counts", "drive position at joint zero (what `home zero` answers)"}
+        .within(-kTwo31, kTwo31 - 1),
+    DK{"limits", &D::limits, "deg (mm)",
+       "`[lower, upper]`; must lie within the robot description's limits, narrows them for planning, IK and the "
+       "supervisor"}
+        .within(-kMaxLength, kMaxLength).length(2, 2).related(drive_limits_ordered, "lower below upper")
+        .unset_means(0, "the robot description's", false),
+    DK{"max_velocity", &D::max_velocity, "deg/s (mm/s)", "at most the robot description's; 0 = the description's"}
+        .above(0, 1e6).unset_means(0, "the robot description's", true),
+    DK{"heartbeat_timeout_ms", &D::heartbeat_timeout_ms, "ms", "heartbeat consumer time for this drive; 0 = the bus's"}
+        .above(0, 60000).related(drive_heartbeat_above_period, "above bus.heartbeat_period_ms")
+        .unset_means(0, "bus.heartbeat_timeout_ms", true),
+    DK{"quick_stop_decel", &D::quick_stop_decel, "deg/s^2 (mm/s^2)",
+       "joint-side deceleration written to the drive's 6085h quick stop deceleration at bring-up (how fast it stops "
+       "on its own with safety.stop = \"drive\"); 0 = leave the drive's own"}
+        .above(0, 1e7).unset_means(0, "the drive's own", true),
+};
+
+// ---------------------------------------------------------------------------
+// Text helpers
+// ---------------------------------------------------------------------------
+
+/// Shortest text that reads back to the same double (std::to_chars): "1000", "100000",
+/// "0.01"; scientific ("1e-300", "1e+300") only outside [1e-4, 1e15).
+std::string num_text(double v) {
+  char b[64];
+  const double a = std::fabs(v);
+  const bool sci = std::isfinite(v) && a != 0 && (a < 1e-4 || a >= 1e15);
+  const auto r = std::to_chars(b, b + sizeof b, v, sci ? std::chars_format::scientific : std::chars_format::fixed);
+  return std::string(b, r.ptr);
+}
+
+/// A value converted from SI for a message ("-225", not "-225.00000000000003").
+std::string shown_text(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.10g", v);
+  return b;
+}
+
+std::string int_text(long long v, bool hex) {
+  char b[32];
+  if (hex && v >= 0) std::snprintf(b, sizeof b, "0x%03llX", v);
+  else std::snprintf(b, sizeof b, "%lld", v);
+  return b;
+}
+
+/// Length of the valid UTF-8 sequence at s[i], or 0 when it is not one.
+std::size_t utf8_len(const std::string& s, std::size_t i) {
+  const auto c = static_cast<unsigned char>(s[i]);
+  std::size_t n = 0;
+  std::uint32_t cp = 0;
+  if (c < 0x80) return 1;
+  if (c >= 0xC2 && c <= 0xDF) n = 2, cp = c & 0x1Fu;
+  else if (c >= 0xE0 && c <= 0xEF) n = 3, cp = c & 0x0Fu;
+  else if (c >= 0xF0 && c <= 0xF4) n = 4, cp = c & 0x07u;
+  else return 0;
+  if (i + n > s.size()) return 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    const auto d = static_cast<unsigned char>(s[i + k]);
+    if ((d & 0xC0u) != 0x80u) return 0;
+    cp = (cp << 6) | (d & 0x3Fu);
+  }
+  if ((n == 3 && cp < 0x800) || (n == 4 && (cp < 0x10000 || cp > 0x10FFFF)) || (cp >= 0xD800 && cp <= 0xDFFF)) return 0;
+  return n;
+}
+
+/// A TOML basic string: quotes, backslashes and control characters escaped; bytes
+/// that are not UTF-8 (TOML cannot hold them) become U+FFFD.
+std::string toml_string(const std::string& s) {
+  std::string o = "\"";
+  for (std::size_t i = 0; i < s.size();) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    const std::size_t n = utf8_len(s, i);
+    if (n == 0) {
+      o += "\\uFFFD";
+      ++i;
+      continue;
+    }
+    if (n > 1) {
+      o.append(s, i, n);
+      i += n;
+      continue;
+    }
+    switch (c) {
+      case '"': o += "\\\""; break;
+      case '\\': o += "\\\\"; break;
+      case '\b': o += "\\b"; break;
+      case '\t': o += "\\t"; break;
+      case '\n': o += "\\n"; break;
+      case '\r': o += "\\r"; break;
+      case '\f': o += "\\f"; break;
+      default:
+        if (c < 0x20 || c == 0x7F) {
+          char b[8];
+          std::snprintf(b, sizeof b, "\\u%04X", c);
+          o += b;
+        } else {
+          o += static_cast<char>(c);
+        }
+    }
+    ++i;
+  }
+  return o + "\"";
+}
+
+template <class S>
+std::string value_of(const Key<S>& k, const S& s) {
+  return std::visit(
+      [&](auto m) -> std::string {
+        using T = std::decay_t<decltype(s.*m)>;
+        const T& v = s.*m;
+        if constexpr (std::is_same_v<T, bool>) return v ? "true" : "false";
+        else if constexpr (std::is_same_v<T, int> || std::is_same_v<T, std::int64_t>) return int_text(v, k.hex);
+        else if constexpr (std::is_same_v<T, double>) return num_text(v);
+        else if constexpr (std::is_same_v<T, std::string>) return toml_string(v);
+        else {
+          std::string o = "[";
+          for (std::size_t i = 0; i < v.size(); ++i) o += (i ? ", " : "") + num_text(v[i]);
+          return o + "]";
+        }
+      },
+      k.member);
+}
+
+template <class S>
+bool is_integer_key(const Key<S>& k) {
+  return k.member.index() == 1 || k.member.index() == 2;  // int, std::int64_t
+}
+
+/// "[0.01, 5000]", "(0, 120]", "1..127", "9600, 19200, ...", "\"ramp\" or \"drive\"".
+template <class S>
+std::string numeric_range(const Key<S>& k) {
+  if (!k.one_of.empty()) {
+    std::string o;
+    for (std::size_t i = 0; i < k.one_of.size(); ++i) o += (i ? ", " : "") + num_text(k.one_of[i]);
+    return o;
+  }
+  if (std::isinf(k.lo) && std::isinf(k.hi)) return "";
+  if (is_integer_key(k) && !k.lo_open && !k.hi_open)
+    return int_text(static_cast<long long>(k.lo), k.hex) + ".." + int_text(static_cast<long long>(k.hi), k.hex);
+  return std::string(k.lo_open ? "(" : "[") + num_text(k.lo) + ", " + num_text(k.hi) + (k.hi_open ? ")" : "]");
+}
+
+template <class S>
+std::string range_of(const Key<S>& k) {
+  std::string r;
+  switch (k.member.index()) {
+    case 0: r = "true or false"; break;
+    case 4:
+      if (k.rule) r = k.rule;
+      else if (!k.one_of_text.empty())
+        for (std::size_t i = 0; i < k.one_of_text.size(); ++i)
+          r += std::string(i == 0 ? "" : i + 1 == k.one_of_text.size() ? " or " : ", ") + "\"" + k.one_of_text[i] + "\"";
+      break;
+    case 5:
+      r = (k.min_len == k.max_len ? std::to_string(k.min_len) : std::to_string(k.min_len) + ".." + std::to_string(k.max_len)) +
+          " values, each " + numeric_range(k);
+      break;
+    default: r = k.rule ? k.rule : numeric_range(k);
+  }
+  if (k.relation_text) r += (r.empty() ? "" : ", ") + std::string(k.relation_text);
+  if (k.has_unset && k.unset_writable && k.member.index() != 5) r += " or " + num_text(k.unset) + " (unset)";
+  return r;
+}
+
+template <class S>
+std::string default_of(const Key<S>& k) {
+  if (k.has_unset) return k.unset_text;
+  return value_of(k, S{});
+}
+
+bool in_range(double v, double lo, double hi, bool lo_open, bool hi_open) {
+  return (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
+}
+
+std::string with_unit(const char* unit) { return *unit ? std::string(" ") + unit : std::string(); }
+
+/// Why the number `v` of key `k` is refused, or "".
+template <class S>
+std::string number_problem(const Key<S>& k, double v) {
+  if (!std::isfinite(v)) return "must be a finite number (got " + num_text(v) + ")";
+  if (!k.one_of.empty()) {
+    if (std::find(k.one_of.begin(), k.one_of.end(), v) != k.one_of.end()) return "";
+    return "must be one of " + numeric_range(k) + with_unit(k.unit) + " (got " + num_text(v) + ")";
+  }
+  if (in_range(v, k.lo, k.hi, k.lo_open, k.hi_open)) return "";
+  return "must be within " + numeric_range(k) + with_unit(k.unit) + " (got " + num_text(v) + ")";
+}
+
+/// True when key `k` of `s` holds its "unset: inherit" value.
+template <class S>
+bool is_unset(const Key<S>& k, const S& s) {
+  if (!k.has_unset) return false;
+  return std::visit(
+      [&](auto m) -> bool {
+        using T = std::decay_t<decltype(s.*m)>;
+        if constexpr (std::is_same_v<T, std::vector<double>>) return (s.*m).empty();
+        else if constexpr (std::is_same_v<T, std::string> || std::is_same_v<T, bool>) return false;
+        else return static_cast<double>(s.*m) == k.unset;
+      },
+      k.member);
+}
+
+/// Why key `k` of `s` is refused ("" when fine). `label` is its name in messages.
+/// `relations`: false = the key's own range, true = only its relation to other keys
+/// (checked after every key's own range, so a bad value is named by its own key).
+template <class S>
+std::string key_problem(const Key<S>& k, const S& s, const FwConfig& whole, const std::string& label, bool relations) {
+  if (is_unset(k, s)) return "";
+  if (relations) {
+    const std::string why = k.relation ? k.relation(s, whole) : "";
+    return why.empty() ? "" : label + ": " + why;
+  }
+  std::string why;
+  std::visit(
+      [&](auto m) {
+        using T = std::decay_t<decltype(s.*m)>;
+        const T& v = s.*m;
+        if constexpr (std::is_same_v<T, bool>) {
+          return;
+        } else if constexpr (std::is_same_v<T, std::string>) {
+          const bool listed = k.one_of_text.empty() ||
+                              std::find(k.one_of_text.begin(), k.one_of_text.end(), v) != k.one_of_text.end();
+          if (!listed || v.size() < k.min_len || v.size() > k.max_len)
+            why = "must be " + range_of(k) + " (got " + toml_string(v) + ")";
+        } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+          if (v.size() < k.min_len || v.size() > k.max_len) {
+            why = "must hold " + (k.min_len == k.max_len ? std::to_string(k.min_len) : std::to_string(k.min_len) + ".." + std::to_string(k.max_len)) +
+                  " values (got " + std::to_string(v.size()) + ")";
+            return;
+          }
+          for (std::size_t i = 0; i < v.size() && why.empty(); ++i) {
+            const std::string p = number_problem(k, v[i]);
+            if (!p.empty()) why = "\x01" + std::to_string(i) + "\x02" + p;  // element index, rewritten below
+          }
+        } else {
+          why = number_problem(k, static_cast<double>(v));
+        }
+      },
+      k.member);
+  if (why.empty()) return "";
+  if (why[0] == '\x01') {  // "label[i]: reason"
+    const auto e = why.find('\x02');
+    return label + "[" + why.substr(1, e - 1) + "]: " + why.substr(e + 1);
+  }
+  return label + ": " + why;
+}
+
+std::string drive_label(std::size_t i) { return "drive[" + std::to_string(i + 1) + "]"; }
+
+// ---------------------------------------------------------------------------
+// Loading
+// ---------------------------------------------------------------------------
 
 struct Reader {
   std::string origin;
@@ -59,110 +394,140 @@ struct Reader {
     if (err.empty()) err = origin + ": " + key + ": " + why;
     return false;
   }
-  bool num(const toml::value& v, const std::string& key, double& out) {
+  static std::string shown(const toml::value& v) {
+    std::ostringstream os;
+    os << v;
+    std::string s = os.str();
+    std::replace(s.begin(), s.end(), '\n', ' ');
+    if (s.size() > 40) s = s.substr(0, 37) + "...";
+    return s;
+  }
+  bool number(const toml::value& v, const std::string& key, double& out) {
     if (v.is_integer()) out = static_cast<double>(v.as_integer());
     else if (v.is_floating()) out = v.as_floating();
-    else return fail(key, "expected a number");
-    if (!std::isfinite(out)) return fail(key, "not a finite number");
+    else return fail(key, "expected a number (got " + shown(v) + ")");
+    if (!std::isfinite(out)) return fail(key, "must be a finite number (got " + shown(v) + ")");
     return true;
   }
-  bool integer(const toml::value& v, const std::string& key, int& out) {
-    if (!v.is_integer()) return fail(key, "expected an integer");
-    const auto i = v.as_integer();
-    if (i < -1000000 || i > 1000000) return fail(key, "integer out of range");
-    out = static_cast<int>(i);
-    return true;
-  }
-  bool boolean(const toml::value& v, const std::string& key, bool& out) {
-    if (!v.is_boolean()) return fail(key, "expected true or false");
-    out = v.as_boolean();
-    return true;
-  }
-  bool str(const toml::value& v, const std::string& key, std::string& out) {
-    if (!v.is_string()) return fail(key, "expected a string");
-    out = v.as_string().str;
+
+  /// Read `v` into key `k` of `s`. False (and err set) when the type is wrong or the
+  /// file writes the "unset" value of a key that does not allow it.
+  template <class S>
+  bool read(const Key<S>& k, const toml::value& v, const std::string& label, S& s) {
+    bool ok = std::visit(
+        [&](auto m) -> bool {
+          using T = std::decay_t<decltype(s.*m)>;
+          T& out = s.*m;
+          if constexpr (std::is_same_v<T, bool>) {
+            if (!v.is_boolean()) return fail(label, "expected true or false (got " + shown(v) + ")");
+            out = v.as_boolean();
+          } else if constexpr (std::is_same_v<T, int> || std::is_same_v<T, std::int64_t>) {
+            if (!v.is_integer()) return fail(label, "expected an integer (got " + shown(v) + ")");
+            const std::int64_t i = v.as_integer();
+            if constexpr (std::is_same_v<T, int>) {
+              // Refused here, before it is narrowed: validate() could not see it.
+              if (i < std::numeric_limits<int>::min() || i > std::numeric_limits<int>::max())
+                return fail(label, "integer out of range (got " + std::to_string(i) + ")");
+            }
+            out = static_cast<T>(i);
+          } else if constexpr (std::is_same_v<T, double>) {
+            if (!number(v, label, out)) return false;
+          } else if constexpr (std::is_same_v<T, std::string>) {
+            if (!v.is_string()) return fail(label, "expected a string (got " + shown(v) + ")");
+            out = v.as_string().str;
+          } else {
+            if (!v.is_array()) return fail(label, "expected an array of numbers (got " + shown(v) + ")");
+            const auto& a = v.as_array();
+            if (a.size() > k.max_len || a.size() < k.min_len)
+              return fail(label, "expected " + range_of(k) + " (got " + std::to_string(a.size()) + " values)");
+            std::vector<double> tmp(a.size());
+            for (std::size_t i = 0; i < a.size(); ++i)
+              if (!number(a[i], label + "[" + std::to_string(i) + "]", tmp[i])) return false;
+            out = std::move(tmp);
+          }
+          return true;
+        },
+        k.member);
+    if (!ok) return false;
+    if (!k.unset_writable && is_unset(k, s))
+      return fail(label, value_of(k, s) + " is not allowed: " + range_of(k) + " (leave the key out for " + k.unset_text + ")");
     return true;
   }
 };
 
-bool apply_drive(Reader& r, const std::string& where, const std::string& key, const toml::value& v, DriveConfig& d) {
-  const std::string k = where + "." + key;
-  if (key == "node") return r.integer(v, k, d.node);
-  if (key == "counts_per_rev") return r.num(v, k, d.counts_per_rev);
-  if (key == "gear_ratio") return r.num(v, k, d.gear_ratio);
-  if (key == "direction") return r.integer(v, k, d.direction);
-  if (key == "zero_offset") {
-    if (!v.is_integer()) return r.fail(k, "expected an integer (drive counts)");
-    d.zero_offset = v.as_integer();
-    return true;
-  }
-  if (key == "limits") {
-    if (!v.is_array() || v.as_array().size() != 2) return r.fail(k, "expected [lower, upper]");
-    d.limits.assign(2, 0.0);
-    return r.num(v.as_array()[0], k, d.limits[0]) && r.num(v.as_array()[1], k, d.limits[1]);
-  }
-  if (key == "max_velocity") return r.num(v, k, d.max_velocity);
-  if (key == "heartbeat_timeout_ms") return r.num(v, k, d.heartbeat_timeout_ms);
-  if (key == "quick_stop_decel") return r.num(v, k, d.quick_stop_decel);
-  return r.fail(k, "unknown key (node, counts_per_rev, gear_ratio, direction, zero_offset, limits, max_velocity, heartbeat_timeout_ms, quick_stop_decel)");
+/// The section of a dotted name ("loop" of "loop.rate_hz"), "" for a top-level key.
+std::string section_of(const char* name) {
+  const char* dot = std::strchr(name, '.');
+  return dot ? std::string(name, dot) : std::string();
 }
 
-bool apply(Reader& r, const std::string& key, const toml::value& v, FwConfig& c) {
-  if (key == "drive") {
-    if (!v.is_array()) return r.fail(key, "expected [[drive]] tables");
-    c.drives.clear();
-    for (const auto& t : v.as_array()) {
-      const std::string where = "drive[" + std::to_string(c.drives.size() + 1) + "]";
-      if (!t.is_table()) return r.fail(where, "expected a table");
-      DriveConfig d;
-      for (const auto& [k2, v2] : t.as_table())
-        if (!apply_drive(r, where, k2, v2, d)) return false;
-      c.drives.push_back(d);
-    }
-    return true;
+std::vector<std::string> sections() {
+  std::vector<std::string> out;
+  for (const ConfigKey& k : kConfigTable) {
+    const std::string s = section_of(k.name);
+    if (!s.empty() && std::find(out.begin(), out.end(), s) == out.end()) out.push_back(s);
   }
-  if (key == "robot") return r.str(v, key, c.robot);
-  if (key == "loop.rate_hz") return r.num(v, key, c.rate_hz);
-  if (key == "loop.priority") return r.integer(v, key, c.priority);
-  if (key == "loop.cpu") return r.integer(v, key, c.cpu);
-  if (key == "loop.lock_memory") return r.boolean(v, key, c.lock_memory);
-  if (key == "bus.can") return r.str(v, key, c.can);
-  if (key == "bus.first_node") return r.integer(v, key, c.first_node);
-  if (key == "bus.counts_per_rev") return r.num(v, key, c.counts_per_rev);
-  if (key == "bus.gear_ratio") return r.num(v, key, c.gear_ratio);
-  if (key == "bus.heartbeat_period_ms") return r.num(v, key, c.heartbeat_period_ms);
-  if (key == "bus.heartbeat_timeout_ms") return r.num(v, key, c.heartbeat_timeout_ms);
-  if (key == "bus.start_timeout_s") return r.num(v, key, c.start_timeout_s);
-  if (key == "safety.following_error_deg") return r.num(v, key, c.following_error_deg);
-  if (key == "safety.enable_timeout_s") return r.num(v, key, c.enable_timeout_s);
-  if (key == "safety.feedback_timeout_ms") return r.num(v, key, c.feedback_timeout_ms);
-  if (key == "safety.stop") return r.str(v, key, c.stop);
-  if (key == "safety.drive_stop_timeout_s") return r.num(v, key, c.drive_stop_timeout_s);
-  if (key == "motion.home_deg") {
-    if (!v.is_array()) return r.fail(key, "expected an array of numbers");
-    c.home_deg.clear();
-    int k = 0;
-    for (const auto& e : v.as_array()) {
-      double d = 0;
-      if (!r.num(e, key + "[" + std::to_string(k++) + "]", d)) return false;
-      c.home_deg.push_back(d);
-    }
-    return true;
-  }
-  if (key == "motion.joint_speed_pct") return r.num(v, key, c.joint_speed_pct);
-  if (key == "motion.linear_speed_mm_s") return r.num(v, key, c.linear_speed_mm_s);
-  if (key == "motion.max_linear_speed_mm_s") return r.num(v, key, c.max_linear_speed_mm_s);
-  if (key == "console.stdin") return r.boolean(v, key, c.console_stdin);
-  if (key == "console.pty") return r.boolean(v, key, c.console_pty);
-  if (key == "console.serial") return r.str(v, key, c.console_serial);
-  if (key == "console.baud") return r.integer(v, key, c.console_baud);
-  if (key == "console.can") return r.str(v, key, c.console_can);
-  if (key == "console.can_rx_id") return r.integer(v, key, c.console_can_rx_id);
-  if (key == "console.can_tx_id") return r.integer(v, key, c.console_can_tx_id);
-  return r.fail(key, "unknown key (see armfw --config-keys)");
+  return out;
 }
+
+std::string joined(const std::vector<std::string>& v) {
+  std::string o;
+  for (std::size_t i = 0; i < v.size(); ++i) o += (i ? ", " : "") + v[i];
+  return o;
+}
+
+template <class Map>
+std::vector<std::string> sorted_keys(const Map& m) {
+  std::vector<std::string> out;
+  for (const auto& e : m) out.push_back(e.first);
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+bool read_drive(Reader& r, const toml::value& t, std::size_t index, DriveConfig& d) {
+  const std::string where = drive_label(index);
+  if (!t.is_table()) return r.fail(where, "expected a table");
+  const auto& tab = t.as_table();
+  for (const std::string& name : sorted_keys(tab)) {
+    const DriveKey* k = nullptr;
+    for (const DriveKey& e : kDriveTable)
+      if (name == e.name) k = &e;
+    if (!k) {
+      std::vector<std::string> names;
+      for (const DriveKey& e : kDriveTable) names.push_back(e.name);
+      return r.fail(where + "." + name, "unknown key (" + joined(names) + ")");
+    }
+    if (!r.read(*k, tab.at(name), where + "." + name, d)) return false;
+  }
+  return true;
+}
+
+/// Where the text is not UTF-8 (TOML requires it; Debian's toml11 3.7.1 reads past
+/// the end of a literal string holding invalid UTF-8): "line L, column C", or "".
+std::string utf8_problem(const std::string& t) {
+  std::size_t line = 1, col = 1;
+  for (std::size_t i = 0; i < t.size();) {
+    const std::size_t n = utf8_len(t, i);
+    if (n == 0 || t[i] == '\0') return "line " + std::to_string(line) + ", column " + std::to_string(col);
+    if (t[i] == '\n') ++line, col = 0;
+    i += n;
+    ++col;
+  }
+  return "";
+}
+
+constexpr std::size_t kMaxFileBytes = 1 << 20;
 
 }  // namespace
+
+std::span<const ConfigKey> config_keys() { return kConfigTable; }
+std::span<const DriveKey> drive_keys() { return kDriveTable; }
+std::string value_text(const ConfigKey& k, const FwConfig& s) { return value_of(k, s); }
+std::string value_text(const DriveKey& k, const DriveConfig& s) { return value_of(k, s); }
+std::string range_text(const ConfigKey& k) { return range_of(k); }
+std::string range_text(const DriveKey& k) { return range_of(k); }
+std::string default_text(const ConfigKey& k) { return default_of(k); }
+std::string default_text(const DriveKey& k) { return default_of(k); }
 
 const char* can_console_id_problem(int id) {
   // CANopen predefined connection set (CiA 301) of nodes 1..127: NMT 0x000, SYNC 0x080,
@@ -178,53 +543,85 @@ const char* can_console_id_problem(int id) {
 }
 
 std::string validate(const FwConfig& c) {
-  auto bad = [](const char* k, const char* why) { return std::string(k) + ": " + why; };
-  if (c.robot.empty()) return bad("robot", "must not be empty");
-  if (!(c.rate_hz >= 250 && c.rate_hz <= 4000)) return bad("loop.rate_hz", "must be within 250..4000");
-  if (c.priority < 0 || c.priority > 99) return bad("loop.priority", "must be within 0..99");
-  if (c.cpu < -1 || c.cpu > 1023) return bad("loop.cpu", "must be -1 or a CPU index");
-  if (c.can.empty() || c.can.size() > 15) return bad("bus.can", "must be \"sim\" or an interface name (1..15 chars)");
-  if (c.first_node < 1 || c.first_node > 127) return bad("bus.first_node", "must be within 1..127");
-  if (!(c.counts_per_rev > 0)) return bad("bus.counts_per_rev", "must be > 0");
-  if (!(c.gear_ratio != 0)) return bad("bus.gear_ratio", "must not be 0");
-  if (!(c.heartbeat_period_ms >= 1 && c.heartbeat_period_ms <= 10000)) return bad("bus.heartbeat_period_ms", "must be within 1..10000");
-  if (!(c.heartbeat_timeout_ms > c.heartbeat_period_ms && c.heartbeat_timeout_ms <= 60000))
-    return bad("bus.heartbeat_timeout_ms", "must be above heartbeat_period_ms and <= 60000");
-  if (!(c.start_timeout_s > 0 && c.start_timeout_s <= 120)) return bad("bus.start_timeout_s", "must be within (0, 120]");
-  if (!(c.following_error_deg > 0 && c.following_error_deg <= 180)) return bad("safety.following_error_deg", "must be within (0, 180]");
-  if (!(c.enable_timeout_s > 0 && c.enable_timeout_s <= 60)) return bad("safety.enable_timeout_s", "must be within (0, 60]");
-  if (!(c.feedback_timeout_ms >= 1 && c.feedback_timeout_ms <= 10000)) return bad("safety.feedback_timeout_ms", "must be within 1..10000");
-  if (c.stop != "ramp" && c.stop != "drive") return bad("safety.stop", "must be \"ramp\" or \"drive\"");
-  if (!(c.drive_stop_timeout_s >= 0.05 && c.drive_stop_timeout_s <= 60)) return bad("safety.drive_stop_timeout_s", "must be within 0.05..60");
-  if (!(c.joint_speed_pct >= 1 && c.joint_speed_pct <= 100)) return bad("motion.joint_speed_pct", "must be within 1..100");
-  if (!(c.max_linear_speed_mm_s > 0 && c.max_linear_speed_mm_s <= 5000)) return bad("motion.max_linear_speed_mm_s", "must be within (0, 5000]");
-  if (!(c.linear_speed_mm_s > 0 && c.linear_speed_mm_s <= c.max_linear_speed_mm_s))
-    return bad("motion.linear_speed_mm_s", "must be within (0, max_linear_speed_mm_s]");
-  for (std::size_t i = 0; i < c.drives.size(); ++i) {
-    const DriveConfig& d = c.drives[i];
-    const std::string w = "drive[" + std::to_string(i + 1) + "].";
-    if (d.node != 0 && (d.node < 1 || d.node > 127)) return w + "node: must be within 1..127";
-    if (!(d.counts_per_rev >= 0)) return w + "counts_per_rev: must be > 0";
-    if (d.direction != 1 && d.direction != -1) return w + "direction: must be 1 or -1";
-    if (d.zero_offset < INT32_MIN || d.zero_offset > INT32_MAX) return w + "zero_offset: outside the drive's 32-bit position range";
-    if (!d.limits.empty() && !(d.limits[0] < d.limits[1])) return w + "limits: lower must be below upper";
-    if (!(d.max_velocity >= 0)) return w + "max_velocity: must be > 0";
-    if (!(d.heartbeat_timeout_ms == 0 || (d.heartbeat_timeout_ms > c.heartbeat_period_ms && d.heartbeat_timeout_ms <= 60000)))
-      return w + "heartbeat_timeout_ms: must be above bus.heartbeat_period_ms and <= 60000";
-    if (!(d.quick_stop_decel >= 0 && d.quick_stop_decel <= 1e7)) return w + "quick_stop_decel: must be within 0..1e7 deg/s^2 (mm/s^2; 0 = the drive's own)";
+  for (const bool relations : {false, true}) {
+    for (const ConfigKey& k : kConfigTable) {
+      const std::string why = key_problem(k, c, c, k.name, relations);
+      if (!why.empty()) return why;
+    }
+    for (std::size_t i = 0; i < c.drives.size(); ++i)
+      for (const DriveKey& k : kDriveTable) {
+        const std::string why = key_problem(k, c.drives[i], c, drive_label(i) + "." + k.name, relations);
+        if (!why.empty()) return why;
+      }
   }
-  switch (c.console_baud) {
-    case 9600: case 19200: case 38400: case 57600: case 115200: case 230400: case 460800: case 921600: break;
-    default: return bad("console.baud", "unsupported baud rate");
+  return "";
+}
+
+std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
+  if (std::string bad = validate(c); !bad.empty()) return bad;  // the arithmetic below needs the ranges
+  const int n = chain.n_joints;
+  const std::string robot = c.robot;
+  if (!c.home_deg.empty() && static_cast<int>(c.home_deg.size()) != n)
+    return "motion.home_deg: needs " + std::to_string(n) + " values for " + robot + " (got " +
+           std::to_string(c.home_deg.size()) + ")";
+  if (!c.drives.empty() && static_cast<int>(c.drives.size()) != n)
+    return "drive: " + std::to_string(c.drives.size()) + " [[drive]] tables for the " + std::to_string(n) +
+           " joints of " + robot + " (give one per joint, or none)";
+  for (int j = 0; j < n; ++j) {
+    const kin::DhRow& row = chain.joint(j);
+    const bool prismatic = row.type == kin::JointType::prismatic;
+    const double unit = prismatic ? 1e-3 : M_PI / 180.0;  // SI per deg / mm
+    const char* u = prismatic ? " mm" : " deg";
+    const std::string w = drive_label(static_cast<std::size_t>(j)) + ".";
+    const DriveConfig* d = c.drives.empty() ? nullptr : &c.drives[static_cast<std::size_t>(j)];
+    double lo = row.lower / unit, hi = row.upper / unit;  // deg / mm; may be infinite
+    if (d && !d->limits.empty()) {
+      if (d->limits[0] * unit < row.lower - 1e-12 || d->limits[1] * unit > row.upper + 1e-12)
+        return w + "limits: [" + shown_text(d->limits[0]) + ", " + shown_text(d->limits[1]) +
+               "] reaches outside the robot description's [" + shown_text(lo) + ", " + shown_text(hi) + "]" + u;
+      lo = d->limits[0];
+      hi = d->limits[1];
+    }
+    if (!c.home_deg.empty()) {
+      const double h = c.home_deg[static_cast<std::size_t>(j)];
+      if (!(h >= lo - 1e-9 && h <= hi + 1e-9))
+        return "motion.home_deg[" + std::to_string(j) + "]: " + shown_text(h) + u + " is outside joint " +
+               std::to_string(j + 1) + "'s limits [" + shown_text(lo) + ", " + shown_text(hi) + "]" + u;
+    }
+    // Drive scaling, as hal::JointScaling computes it: counts per joint unit.
+    const bool own_counts = d && d->counts_per_rev > 0, own_gear = d && d->gear_ratio != 0;
+    const double cpr = own_counts ? d->counts_per_rev : c.counts_per_rev;
+    const double gear = own_gear ? d->gear_ratio : c.gear_ratio;
+    const double per_unit = prismatic ? cpr * gear : cpr * gear / 360.0;  // counts per deg / mm
+    const std::string scale_key = std::string(own_counts ? w : "bus.") + "counts_per_rev";
+    const std::string scaling = " (" + shown_text(cpr) + " counts/rev x gear " + shown_text(gear) + ")";
+    const double zero = d ? static_cast<double>(d->zero_offset) : 0.0;
+    const double dir = d ? static_cast<double>(d->direction) : 1.0;
+    for (const double q : {lo, hi}) {
+      if (!std::isfinite(q)) continue;
+      const double counts = zero + dir * q * per_unit;
+      if (!(counts >= -kTwo31 && counts <= kTwo31 - 1))
+        return scale_key + ": joint " + std::to_string(j + 1) + "'s range [" + shown_text(lo) + ", " + shown_text(hi) + "]" +
+               u + " does not fit the drive's 32-bit position: " + shown_text(q) + u + " is " + shown_text(counts) +
+               " counts" + scaling;
+    }
+    const double per_count = 1.0 / per_unit;  // deg / mm per count
+    if (!(per_count < c.following_error_deg))
+      return scale_key + ": one count is " + shown_text(per_count) + u + " on joint " + std::to_string(j + 1) +
+             ", not finer than safety.following_error_deg (" + shown_text(c.following_error_deg) + ")" + scaling;
+    double vmax = row.dynamics.max_velocity / unit;  // deg/s or mm/s; 0 = none given
+    if (d && d->max_velocity > 0) vmax = d->max_velocity;
+    if (vmax > 0 && vmax * per_unit > kTwo31 - 1)
+      return scale_key + ": joint " + std::to_string(j + 1) + "'s maximum velocity " + shown_text(vmax) + u +
+             "/s is " + shown_text(vmax * per_unit) + " counts/s, beyond the drive's 32-bit velocity" + scaling;
   }
-  if (c.console_can.size() > 15) return bad("console.can", "must be \"\", \"sim\" or an interface name (1..15 chars)");
-  if (const char* why = can_console_id_problem(c.console_can_rx_id)) return std::string("console.can_rx_id: ") + why;
-  if (const char* why = can_console_id_problem(c.console_can_tx_id)) return std::string("console.can_tx_id: ") + why;
-  if (c.console_can_rx_id == c.console_can_tx_id) return bad("console.can_tx_id", "must differ from console.can_rx_id");
   return "";
 }
 
 std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
+  if (text.size() > kMaxFileBytes)
+    return origin + ": larger than " + std::to_string(kMaxFileBytes) + " bytes (" + std::to_string(text.size()) + ")";
+  if (const std::string at = utf8_problem(text); !at.empty()) return origin + ": " + at + ": not UTF-8 text";
   Reader r{origin, {}};
   toml::value root;
   try {
@@ -237,21 +634,52 @@ std::string load_config_text(const std::string& text, const std::string& origin,
     return origin + ": syntax: " + m;
   }
   if (!root.is_table()) return origin + ": not a TOML table";
+  const auto& top = root.as_table();
+  const std::vector<std::string> secs = sections();
   FwConfig c = cfg;
-  for (const auto& [k, v] : root.as_table()) {
-    if (v.is_table()) {
-      if (k != "loop" && k != "bus" && k != "safety" && k != "motion" && k != "console") {
-        r.fail(k, "unknown section (loop, bus, safety, motion, console)");
-        break;
+  // Unknown names first (sorted, so the message does not depend on hash order).
+  for (const std::string& name : sorted_keys(top)) {
+    const toml::value& v = top.at(name);
+    if (name == "drive") continue;
+    if (std::find(secs.begin(), secs.end(), name) != secs.end()) {
+      if (!v.is_table()) return origin + ": " + name + ": expected a [" + name + "] table";
+      for (const std::string& leaf : sorted_keys(v.as_table())) {
+        const std::string full = name + "." + leaf;
+        bool known = false;
+        for (const ConfigKey& k : kConfigTable) known = known || full == k.name;
+        if (!known) return origin + ": " + full + ": unknown key (see armfw --config-keys)";
       }
-      for (const auto& [k2, v2] : v.as_table())
-        if (!apply(r, k + "." + k2, v2, c)) break;
-      if (!r.err.empty()) break;
-    } else if (!apply(r, k, v, c)) {
-      break;
+      continue;
+    }
+    bool known = false;
+    for (const ConfigKey& k : kConfigTable) known = known || (name == k.name && section_of(k.name).empty());
+    if (!known)
+      return origin + ": " + name + ": " +
+             (v.is_table() ? "unknown section (" + joined(secs) + ", [[drive]])" : "unknown key (see armfw --config-keys)");
+  }
+  // Then every key in table order.
+  for (const ConfigKey& k : kConfigTable) {
+    const std::string sec = section_of(k.name);
+    const toml::value* v = nullptr;
+    if (sec.empty()) {
+      if (top.count(k.name)) v = &top.at(k.name);
+    } else if (top.count(sec)) {
+      const auto& t = top.at(sec).as_table();
+      const std::string leaf = k.name + sec.size() + 1;
+      if (t.count(leaf)) v = &t.at(leaf);
+    }
+    if (v && !r.read(k, *v, k.name, c)) return r.err;
+  }
+  if (top.count("drive")) {
+    const toml::value& v = top.at("drive");
+    if (!v.is_array()) return origin + ": drive: expected [[drive]] tables";
+    c.drives.clear();
+    for (const auto& t : v.as_array()) {
+      DriveConfig d;
+      if (!read_drive(r, t, c.drives.size(), d)) return r.err;
+      c.drives.push_back(d);
     }
   }
-  if (!r.err.empty()) return r.err;
   const std::string bad = validate(c);
   if (!bad.empty()) return origin + ": " + bad;
   cfg = c;
@@ -259,55 +687,169 @@ std::string load_config_text(const std::string& text, const std::string& origin,
 }
 
 std::string load_config_file(const std::string& path, FwConfig& cfg) {
-  std::ifstream f(path);
-  if (!f) return path + ": cannot open";
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return load_config_text(ss.str(), path, cfg);
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);  // O_NONBLOCK: a FIFO must not hang us
+  if (fd < 0) return path + ": cannot open: " + std::strerror(errno);
+  struct stat st{};
+  std::string why;
+  if (::fstat(fd, &st) != 0) why = std::string("cannot stat: ") + std::strerror(errno);
+  else if (S_ISDIR(st.st_mode)) why = "is a directory, not a file";
+  else if (!S_ISREG(st.st_mode)) why = "not a regular file";
+  else if (static_cast<std::size_t>(st.st_size) > kMaxFileBytes)
+    why = "larger than " + std::to_string(kMaxFileBytes) + " bytes (" + std::to_string(st.st_size) + ")";
+  std::string text;
+  if (why.empty()) {
+    char buf[8192];
+    for (;;) {
+      const ssize_t n = ::read(fd, buf, sizeof buf);
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0) {
+        why = std::string("read error: ") + std::strerror(errno);
+        break;
+      }
+      if (n == 0) break;
+      text.append(buf, static_cast<std::size_t>(n));
+      if (text.size() > kMaxFileBytes) {
+        why = "larger than " + std::to_string(kMaxFileBytes) + " bytes";
+        break;
+      }
+    }
+  }
+  ::close(fd);
+  if (!why.empty()) return path + ": " + why;
+  return load_config_text(text, path, cfg);
 }
 
 std::string to_toml(const FwConfig& c) {
-  char b[2048];
-  std::string home = "[";
-  for (std::size_t i = 0; i < c.home_deg.size(); ++i) home += (i ? ", " : "") + std::to_string(c.home_deg[i]);
-  home += "]";
-  std::snprintf(b, sizeof b,
-                "robot = \"%s\"\n[loop]\nrate_hz = %g\npriority = %d\ncpu = %d\nlock_memory = %s\n"
-                "[bus]\ncan = \"%s\"\nfirst_node = %d\ncounts_per_rev = %g\ngear_ratio = %g\nheartbeat_period_ms = %g\n"
-                "heartbeat_timeout_ms = %g\nstart_timeout_s = %g\n[safety]\nfollowing_error_deg = %g\nenable_timeout_s = %g\nfeedback_timeout_ms = %g\nstop = \"%s\"\ndrive_stop_timeout_s = %g\n"
-                "[motion]\nhome_deg = %s\njoint_speed_pct = %g\nlinear_speed_mm_s = %g\nmax_linear_speed_mm_s = %g\n"
-                "[console]\nstdin = %s\npty = %s\nserial = \"%s\"\nbaud = %d\ncan = \"%s\"\ncan_rx_id = 0x%03X\ncan_tx_id = 0x%03X\n",
-                c.robot.c_str(), c.rate_hz, c.priority, c.cpu, c.lock_memory ? "true" : "false", c.can.c_str(), c.first_node,
-                c.counts_per_rev, c.gear_ratio, c.heartbeat_period_ms, c.heartbeat_timeout_ms, c.start_timeout_s,
-                c.following_error_deg, c.enable_timeout_s, c.feedback_timeout_ms, c.stop.c_str(), c.drive_stop_timeout_s, home.c_str(), c.joint_speed_pct, c.linear_speed_mm_s,
-                c.max_linear_speed_mm_s, c.console_stdin ? "true" : "false", c.console_pty ? "true" : "false",
-                c.console_serial.c_str(), c.console_baud, c.console_can.c_str(), static_cast<unsigned>(c.console_can_rx_id),
-                static_cast<unsigned>(c.console_can_tx_id));
-  std::string out = b;
+  std::string out;
+  for (const ConfigKey& k : kConfigTable)
+    if (section_of(k.name).empty()) out += std::string(k.name) + " = " + value_of(k, c) + "\n";
+  for (const std::string& sec : sections()) {
+    out += "[" + sec + "]\n";
+    for (const ConfigKey& k : kConfigTable)
+      if (section_of(k.name) == sec) out += std::string(k.name + sec.size() + 1) + " = " + value_of(k, c) + "\n";
+  }
   for (const DriveConfig& d : c.drives) {
-    char l[512];
-    std::snprintf(l, sizeof l,
-                  "[[drive]]\nnode = %d\ncounts_per_rev = %g\ngear_ratio = %g\ndirection = %d\nzero_offset = %lld\n",
-                  d.node, d.counts_per_rev, d.gear_ratio, d.direction, static_cast<long long>(d.zero_offset));
-    out += l;
-    if (!d.limits.empty()) {
-      std::snprintf(l, sizeof l, "limits = [%g, %g]\n", d.limits[0], d.limits[1]);
-      out += l;
-    }
-    if (d.max_velocity > 0) {
-      std::snprintf(l, sizeof l, "max_velocity = %g\n", d.max_velocity);
-      out += l;
-    }
-    if (d.heartbeat_timeout_ms > 0) {
-      std::snprintf(l, sizeof l, "heartbeat_timeout_ms = %g\n", d.heartbeat_timeout_ms);
-      out += l;
-    }
-    if (d.quick_stop_decel > 0) {
-      std::snprintf(l, sizeof l, "quick_stop_decel = %.17g\n", d.quick_stop_decel);
-      out += l;
+    out += "[[drive]]\n";
+    for (const DriveKey& k : kDriveTable) {
+      if (!is_unset(k, d)) out += std::string(k.name) + " = " + value_of(k, d) + "\n";
     }
   }
   return out;
+}
+
+// ---------------------------------------------------------------------------
+// --config-keys and the reference page
+// ---------------------------------------------------------------------------
+
+std::string config_keys_text() {
+  std::string o;
+  auto line = [&](const std::string& name, const std::string& def, const std::string& range, const char* unit,
+                  const char* doc) {
+    auto pad = [](std::string s, std::size_t w) { return s.size() < w ? s.append(w - s.size(), ' ') : s + " "; };
+    o += pad(name, 30) + "default " + pad(def, 22) + "range " + range + (*unit ? std::string("  unit ") + unit : "") +
+         "\n    " + doc + "\n";
+  };
+  for (const ConfigKey& k : kConfigTable) line(k.name, default_of(k), range_of(k), k.unit, k.doc);
+  line("drive", "[]", "[[drive]] tables", "", "one table per joint in chain order, give all or none; their keys:");
+  for (const DriveKey& k : kDriveTable) line(std::string("drive.") + k.name, default_of(k), range_of(k), k.unit, k.doc);
+  return o;
+}
+
+namespace {
+
+constexpr const char* kBegin =
+    "<!-- BEGIN config-reference: generated by `armfw --config-reference` from the key tables in "
+    "firmware/src/config.cpp. Do not edit by hand: change the table, then regenerate (see above). -->";
+constexpr const char* kEnd = "<!-- END config-reference -->";
+
+std::string cell(const std::string& s) {
+  std::string o;
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '|' && (i == 0 || s[i - 1] != '\\')) o += '\\';
+    o += s[i];
+  }
+  return o;
+}
+
+template <class S>
+std::string table_row(const Key<S>& k, const std::string& name) {
+  const std::string def = k.has_unset ? std::string(k.unset_text) : "`" + value_of(k, S{}) + "`";
+  return "| `" + name + "` | " + cell(def) + " | " + cell(range_of(k)) + " | " + cell(k.unit) + " | " + cell(k.doc) + " |\n";
+}
+
+constexpr const char* kHeader = "| key | default | allowed | unit | meaning |\n| --- | --- | --- | --- | --- |\n";
+
+std::vector<std::string> lines_of(const std::string& s) {
+  std::vector<std::string> out;
+  std::size_t a = 0;
+  while (a < s.size()) {
+    std::size_t b = s.find('\n', a);
+    if (b == std::string::npos) b = s.size();
+    out.push_back(s.substr(a, b - a));
+    a = b + 1;
+  }
+  return out;
+}
+
+}  // namespace
+
+std::string config_reference_markdown() {
+  std::string o = std::string(kBegin) + "\n\n### Top-level keys\n\n" + kHeader;
+  for (const ConfigKey& k : kConfigTable)
+    if (section_of(k.name).empty()) o += table_row(k, k.name);
+  for (const std::string& sec : sections()) {
+    o += "\n### `[" + sec + "]`\n\n" + kHeader;
+    for (const ConfigKey& k : kConfigTable)
+      if (section_of(k.name) == sec) o += table_row(k, k.name);
+  }
+  o += "\n### `[[drive]]`\n\n"
+       "One table per joint, in chain order: give one for every joint or none (then every joint takes the [bus] "
+       "values). Every key is optional; a key left out inherits what the default column says.\n\n";
+  o += kHeader;
+  for (const DriveKey& k : kDriveTable) o += table_row(k, std::string("drive.") + k.name);
+  o += std::string("\n") + kEnd + "\n";
+  return o;
+}
+
+std::string config_reference_mismatch(const std::string& page) {
+  const std::vector<std::string> pl = lines_of(page);
+  std::size_t b = pl.size(), e = pl.size();
+  for (std::size_t i = 0; i < pl.size(); ++i) {
+    if (b == pl.size() && pl[i].rfind("<!-- BEGIN config-reference", 0) == 0) b = i;
+    else if (b != pl.size() && pl[i] == kEnd) {
+      e = i;
+      break;
+    }
+  }
+  const char* how =
+      "regenerate the section: see \"Regenerating the reference\" in docs/configuration.md "
+      "(armfw --config-reference)";
+  if (b == pl.size() || e == pl.size()) return std::string("no BEGIN/END config-reference markers; ") + how;
+  const std::vector<std::string> have(pl.begin() + static_cast<long>(b), pl.begin() + static_cast<long>(e) + 1);
+  const std::vector<std::string> want = lines_of(config_reference_markdown());
+  if (have == want) return "";
+  // Line diff (longest common subsequence; the section is ~60 lines).
+  const std::size_t n = have.size(), m = want.size();
+  std::vector<std::vector<int>> L(n + 1, std::vector<int>(m + 1, 0));
+  for (std::size_t i = n; i-- > 0;)
+    for (std::size_t j = m; j-- > 0;)
+      L[i][j] = have[i] == want[j] ? L[i + 1][j + 1] + 1 : std::max(L[i + 1][j], L[i][j + 1]);
+  std::string o = "docs/configuration.md differs from armfw --config-reference (- page, + generated):\n";
+  int shown = 0;
+  std::size_t i = 0, j = 0;
+  while ((i < n || j < m) && shown < 40) {
+    if (i < n && j < m && have[i] == want[j]) {
+      ++i, ++j;
+    } else if (j < m && (i == n || L[i][j + 1] >= L[i + 1][j])) {
+      o += "+ " + want[j++] + "\n";
+      ++shown;
+    } else {
+      o += "- line " + std::to_string(b + i + 1) + ": " + have[i] + "\n";
+      ++i;
+      ++shown;
+    }
+  }
+  return o + how;
 }
 
 }  // namespace servoarm::fw

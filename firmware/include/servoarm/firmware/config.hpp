@@ -1,15 +1,33 @@
 #pragma once
-// armfw configuration: defaults, TOML loading (toml11) and validation.
-// Set-up code only. Every key, its default and its range are listed in
-// kConfigKeys (and in the README); a bad file is refused naming the key.
+// armfw configuration: defaults, TOML loading (toml11), validation, writing and
+// documentation, all produced from ONE key table per TOML shape:
+// config_keys() (the top-level keys and the [loop] [bus] [safety] [motion]
+// [console] sections) and drive_keys() (the keys of each [[drive]] table).
+//
+// A key is declared once, in config.cpp: its name, the member it fills, its unit,
+// its range and its doc. Its default is the member's initialiser below (read
+// through the member pointer, so it is written nowhere else). From the tables
+// come: load_config_text() (unknown keys, wrong types and values outside the
+// range refuse the file naming the file, the key, the value and the range),
+// validate(), to_toml() (what the console's `config` prints), `armfw
+// --config-keys`, and the reference section of docs/configuration.md
+// (`armfw --config-reference`; a test fails when the committed page differs).
+// Set-up code only: nothing here runs on the control thread.
 #include <cstdint>
+#include <limits>
+#include <span>
 #include <string>
+#include <variant>
 #include <vector>
+
+namespace servoarm::kin {
+struct Chain;
+}
 
 namespace servoarm::fw {
 
 /// One `[[drive]]` table: the drive of one joint (chain order). Unset fields
-/// (NaN / 0 / empty) take the [bus] defaults and the robot description's limits.
+/// (0 / empty) take the [bus] defaults and the robot description's limits.
 struct DriveConfig {
   int node = 0;                          ///< CANopen node id; 0 = bus.first_node + joint index
   double counts_per_rev = 0;             ///< 0 = bus.counts_per_rev (counts per mm for prismatic joints)
@@ -20,6 +38,8 @@ struct DriveConfig {
   double max_velocity = 0;               ///< deg/s or mm/s; 0 = the description's
   double heartbeat_timeout_ms = 0;       ///< 0 = bus.heartbeat_timeout_ms
   double quick_stop_decel = 0;           ///< deg/s^2 or mm/s^2 written to 6085h; 0 = leave the drive's
+
+  bool operator==(const DriveConfig&) const = default;
 };
 
 struct FwConfig {
@@ -49,6 +69,7 @@ struct FwConfig {
   double joint_speed_pct = 50.0;
   double linear_speed_mm_s = 100.0;
   double max_linear_speed_mm_s = 250.0;
+  double max_move_duration_s = 600.0;  ///< longest move the console accepts (longer: out_of_range)
   // [console]
   bool console_stdin = true;
   bool console_pty = false;
@@ -57,27 +78,104 @@ struct FwConfig {
   std::string console_can;             ///< "" = none, "sim", or a SocketCAN interface
   int console_can_rx_id = 0x7E0;       ///< ISO-TP: requests to armfw
   int console_can_tx_id = 0x7E8;       ///< ISO-TP: armfw's answers
+
+  bool operator==(const FwConfig&) const = default;
 };
 
-struct ConfigKey {
-  const char* key;          ///< "section.name"
-  const char* default_text;
+/// One key of a table over struct S (FwConfig or DriveConfig). Built with the
+/// chained setters below, e.g.
+///   Key<FwConfig>{"loop.rate_hz", &FwConfig::rate_hz, "Hz", "control rate"}.within(250, 4000)
+/// Numbers are refused when not finite, outside [lo, hi] (either end may be open),
+/// or not one of `one_of` when that is given; strings by length or `one_of_text`;
+/// lists by element count and each element's range. `relation` checks what
+/// depends on other keys; `rule` replaces the generated range text (docs and errors).
+template <class S>
+struct Key {
+  using Member =
+      std::variant<bool S::*, int S::*, std::int64_t S::*, double S::*, std::string S::*, std::vector<double> S::*>;
+  /// Returns "" or why the value is refused ("must be above bus.heartbeat_period_ms (50)").
+  using Relation = std::string (*)(const S& s, const FwConfig& whole);
+
+  const char* name;   ///< "motion.linear_speed_mm_s" (FwConfig) or "gear_ratio" (DriveConfig)
+  Member member;
+  const char* unit;   ///< "mm/s", "" when the value has no unit
   const char* doc;
+  double lo = -std::numeric_limits<double>::infinity();
+  double hi = std::numeric_limits<double>::infinity();
+  bool lo_open = false, hi_open = false;
+  std::span<const double> one_of{};            ///< numbers: the only values allowed
+  std::span<const char* const> one_of_text{};  ///< strings: the only values allowed
+  std::size_t min_len = 0, max_len = 4096;     ///< strings: bytes; lists: elements
+  const char* rule = nullptr;                  ///< hand-written allowed-values text
+  Relation relation = nullptr;
+  const char* relation_text = nullptr;         ///< shown after the range ("above bus.heartbeat_period_ms")
+  bool hex = false;                            ///< integers written as 0x...
+  bool has_unset = false;                      ///< a value meaning "not set: inherit" (lists: empty)
+  double unset = 0;
+  bool unset_writable = false;                 ///< may the file write the unset value itself?
+  const char* unset_text = nullptr;            ///< what an unset key means ("bus.gear_ratio")
+
+  constexpr Key(const char* n, Member m, const char* u, const char* d) : name(n), member(m), unit(u), doc(d) {}
+  constexpr Key within(double l, double h) const { Key k = *this; k.lo = l; k.hi = h; return k; }
+  constexpr Key above(double l, double h) const { Key k = within(l, h); k.lo_open = true; return k; }   ///< (l, h]
+  constexpr Key below(double l, double h) const { Key k = within(l, h); k.hi_open = true; return k; }   ///< [l, h)
+  constexpr Key among(std::span<const double> v) const { Key k = *this; k.one_of = v; return k; }
+  constexpr Key among(std::span<const char* const> v) const { Key k = *this; k.one_of_text = v; return k; }
+  constexpr Key length(std::size_t a, std::size_t b) const { Key k = *this; k.min_len = a; k.max_len = b; return k; }
+  constexpr Key rule_text(const char* r) const { Key k = *this; k.rule = r; return k; }
+  constexpr Key related(Relation f, const char* text) const { Key k = *this; k.relation = f; k.relation_text = text; return k; }
+  constexpr Key in_hex() const { Key k = *this; k.hex = true; return k; }
+  /// `value` (lists: empty) means "inherit `text`"; `writable`: a file may write it.
+  constexpr Key unset_means(double value, const char* text, bool writable) const {
+    Key k = *this; k.has_unset = true; k.unset = value; k.unset_text = text; k.unset_writable = writable; return k;
+  }
 };
-/// Every key armfw reads, in file order.
-extern const ConfigKey kConfigKeys[];
-extern const int kConfigKeyCount;
+using ConfigKey = Key<FwConfig>;
+using DriveKey = Key<DriveConfig>;
+
+/// Every top-level and [section] key, in file order.
+std::span<const ConfigKey> config_keys();
+/// Every key of a [[drive]] table, in file order.
+std::span<const DriveKey> drive_keys();
+
+/// A key's value in `s` as TOML ("1000", "0x7E0", "\"sim\"", "[-90, 45]").
+std::string value_text(const ConfigKey& k, const FwConfig& s);
+std::string value_text(const DriveKey& k, const DriveConfig& s);
+/// The allowed values as text ("[0.01, 5000]", "1..127", "\"ramp\" or \"drive\"").
+std::string range_text(const ConfigKey& k);
+std::string range_text(const DriveKey& k);
+/// The default as text: the value in FwConfig{} / DriveConfig{}, or what "unset" inherits.
+std::string default_text(const ConfigKey& k);
+std::string default_text(const DriveKey& k);
 
 /// Load a TOML file over the defaults in `cfg`. Returns "" on success, else one
 /// line naming the file and the key (unknown key, wrong type, out of range, syntax).
+/// A read error, a directory or a file over 1 MiB is refused naming the path.
 std::string load_config_file(const std::string& path, FwConfig& cfg);
-/// Same from text (tests).
+/// Same from text (tests). `cfg` is untouched when the text is refused.
 std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg);
-/// Range checks of every field. "" when valid, else "key: reason".
+/// Range checks of every key (table order, first problem). "" when valid, else
+/// "key: reason (got value)".
 std::string validate(const FwConfig& cfg);
+/// Checks that need the robot: motion.home_deg has one value per joint within the
+/// joint's limits (the description's, narrowed by drive.limits), drive.limits lie
+/// within the description's, [[drive]] count, every joint's range fits the drive's
+/// 32-bit position at its scaling, one count is finer than the following-error limit,
+/// and the joint's maximum velocity fits 32-bit counts/s. "" when fine, else "key: reason".
+std::string validate_for_chain(const FwConfig& cfg, const kin::Chain& chain);
 /// Why `id` cannot be a console ISO-TP id (not 11-bit, or a CANopen id of nodes 1..127), or null.
 const char* can_console_id_problem(int id);
-/// The effective configuration as TOML (what `config` prints).
+/// The effective configuration as TOML (what `config` prints); loads back to `cfg`.
+/// Unset [[drive]] keys are left out.
 std::string to_toml(const FwConfig& cfg);
+
+/// What `armfw --config-keys` prints: one line per key (name, default, range, unit, doc).
+std::string config_keys_text();
+/// What `armfw --config-reference` prints: the generated section of
+/// docs/configuration.md, from its BEGIN marker line to its END marker line.
+std::string config_reference_markdown();
+/// "" when `page` holds exactly config_reference_markdown() between its markers,
+/// else what differs (first differing line of each, with line numbers) and how to regenerate.
+std::string config_reference_mismatch(const std::string& page);
 
 }  // namespace servoarm::fw
