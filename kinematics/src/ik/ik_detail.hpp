@@ -1,8 +1,12 @@
 #pragma once
 // Internal helpers shared by the IK sources (not installed).
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 
+#include "../fast_trig.hpp"
 #include "servoarm/kinematics/ik.hpp"
+#include "servoarm/kinematics/orientation.hpp"
 
 namespace servoarm::kin::detail {
 
@@ -92,5 +96,169 @@ bool pose_error(const Chain& chain, const JointVector& q, const Pose& target, do
 /// polishes a closed-form solution that lost digits near a singularity.
 void refine(const Chain& chain, const Pose& target, JointVector& q, int iterations, bool position_only);
 
+// ---------------------------------------------------------------------------
+// Shared by the parts of the closed-form solver (src/ik/*.cpp). The model's
+// decomposition C0 J1 C1 ... Jn Cn and its joint kinds, the bases of a joint's
+// motion, the univariate equations every part solves.
+// ---------------------------------------------------------------------------
+inline constexpr double kPi = M_PI;
+inline constexpr double kVerifyPos = 1e-9;
+inline constexpr double kVerifyRot = 1e-9;
+inline constexpr double kNearSingular = 1e-6;
+
+inline const Pose& C(const IkModel& m, int i) { return m.C[static_cast<std::size_t>(i)]; }
+inline bool prism(const IkModel& m, int j) { return m.prismatic[static_cast<std::size_t>(j)]; }
+
+// Basis of a joint's motion: (1, cos m, sin m) or (1, m, m^2), and its derivative.
+inline Eigen::Vector3d basis(bool prismatic, double m) {
+  if (prismatic) return {1.0, m, m * m};
+  return {1.0, std::cos(m), std::sin(m)};
+}
+inline Eigen::Vector3d dbasis(bool prismatic, double m) {
+  if (prismatic) return {0.0, 1.0, 2.0 * m};
+  return {0.0, -std::sin(m), std::cos(m)};
+}
+
+// Point w (frame after J3 motion) in the frame after J1 motion.
+inline Eigen::Vector3d f_of(const IkModel& m, double m2, double m3, const Eigen::Vector3d& w) {
+  return C(m, 1) * (joint_motion(prism(m, 1), m2) * (C(m, 2) * (joint_motion(prism(m, 2), m3) * w)));
+}
+
+// ---------------------------------------------------------------------------
+// Univariate equations and polynomials
+// ---------------------------------------------------------------------------
+struct Roots {
+  double v[2] = {0, 0};  ///< the roots (revolute: angles, only if asked for)
+  double c[2] = {0, 0};  ///< revolute: cos of the roots; prismatic: the roots
+  double s[2] = {0, 0};  ///< revolute: sin of the roots
+  std::int8_t label[2] = {1, -1};
+  int n = 0;
+  bool free = false;  ///< the equation holds for every value
+};
+
+// a + b*x + c*y = 0 in the basis of a revolute (cos, sin) or prismatic (m, m^2) joint.
+// Revolute: h cos(m - phi) = -a with (b, c) = h (cos phi, sin phi), so the
+// roots are phi +- t, cos t = k = -a/h; their cosines and sines follow
+// without trigonometry (sin t = sqrt((1 - k)(1 + k))), and the angles (one
+// atan2 each) only when `angles` is set.
+inline Roots solve_basis(double a, double b, double c, bool prismatic, double tol, bool angles = true) {
+  Roots r;
+  if (!prismatic) {
+    const double h = std::sqrt(b * b + c * c);
+    if (h <= tol) {
+      r.free = std::abs(a) <= tol;
+      return r;
+    }
+    double k = -a / h;
+    if (k > 1.0) {
+      if (k > 1.0 + 1e-9) return r;
+      k = 1.0;
+    } else if (k < -1.0) {
+      if (k < -1.0 - 1e-9) return r;
+      k = -1.0;
+    }
+    const double cp = b / h, sp = c / h;
+    const double st = std::sqrt((1.0 - k) * (1.0 + k));
+    r.c[0] = cp * k - sp * st;  // phi + t
+    r.s[0] = sp * k + cp * st;
+    r.c[1] = cp * k + sp * st;  // phi - t
+    r.s[1] = sp * k - cp * st;
+    r.n = st > 0 ? 2 : 1;
+    if (angles)
+      for (int i = 0; i < r.n; ++i) r.v[i] = detail::atan2_poly(r.s[i], r.c[i]);
+    return r;
+  }
+  const double sc = std::max({std::abs(a), std::abs(b), std::abs(c)});
+  if (sc <= tol) {
+    r.free = true;
+    return r;
+  }
+  if (std::abs(c) <= 1e-12 * sc) {
+    if (std::abs(b) <= 1e-12 * sc) return r;
+    r.v[0] = r.c[0] = -a / b;
+    r.n = 1;
+    return r;
+  }
+  double disc = b * b - 4 * a * c;
+  if (disc < 0) {
+    if (disc < -1e-9 * b * b - 1e-18 * sc * sc) return r;
+    disc = 0;
+  }
+  const double sq = std::sqrt(disc);
+  // +label: the root with the + square root (per the sign of c)
+  r.v[0] = r.c[0] = (-b + sq) / (2 * c);
+  r.v[1] = r.c[1] = (-b - sq) / (2 * c);
+  r.n = sq > 0 ? 2 : 1;
+  return r;
+}
+
+// ---------------------------------------------------------------------------
+// Position subproblem: (m2, m3) candidates
+// ---------------------------------------------------------------------------
+struct PosCand {
+  double m2 = 0, m3 = 0;  ///< motion values (revolute: angles, set only if asked for)
+  std::int8_t elbow = 0;  ///< from the root (0: decide from the Jacobian)
+  bool free2 = false;
+  double c2 = 1, s2 = 0, c3 = 1, s3 = 0;  ///< revolute: cos, sin of m2, m3; prismatic: c = m
+  /// Candidates with the same g2 (g3) >= 0 share the root m2 (m3) bit for
+  /// bit (one atan2 for them).
+  std::int8_t g2 = -1, g3 = -1;
+};
+
+// Motion value and its (cos, sin) pair (prismatic: the value in c).
+inline void set_pair(bool prismatic, double v, double& c, double& s) {
+  if (prismatic) {
+    c = v;
+    s = 0;
+  } else {
+    detail::sincos_poly(v, s, c);
+  }
+}
+inline Eigen::Vector3d basis_cs(bool prismatic, double c, double s) {
+  if (prismatic) return {1.0, c, c * c};
+  return {1.0, c, s};
+}
+
+/// (m2, m3) candidates of the position subproblem for the point p0 (frame
+/// after C0) with their (cos, sin) pairs; the angles m2, m3 only if `angles`
+/// (the spherical-wrist solver computes every angle in one batch at the end).
+/// Cases: one equation free of q2 or of q3 (closed form, position.cpp), else
+/// the degree-8 resultant (solve_position_resultant, polynomial.cpp). <= 8.
+int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out,
+                   bool angles = true);
+
+/// The general case of solve_position: q2 eliminated by the resultant, a
+/// polynomial of degree <= 8 in tan(q3/2) (or d3), roots from its companion
+/// matrix polished by Newton. M1, M2: the equations with the target's
+/// right-hand sides subtracted. Returns the number of candidates (<= 8).
+int solve_position_resultant(const IkModel& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double tol1,
+                             PosCand* out);
+
+// wrap_pi without a libm call for the small multiples of 2 pi that atan2
+// sums produce (std::remainder costs ~20 ns; it ran 100+ times per solve).
+inline double fast_wrap(double a) {
+  for (int i = 0; i < 4; ++i) {
+    if (a > kPi) a -= 2.0 * kPi;
+    else if (a <= -kPi) a += 2.0 * kPi;
+    else return a;
+  }
+  return wrap_pi(a);
+}
+
+inline double joint_distance(const Chain& c, int j, double a, double b) {
+  const double d = a - b;
+  return c.joint(j).type == JointType::revolute ? std::abs(fast_wrap(d)) : std::abs(d);
+}
+
+/// Finish a candidate (motion values mot, SI joints = dir * mot): wrap into
+/// the limits, verify by the chain's FK (a few Gauss-Newton steps if it is
+/// close but not within the tolerance), add unless a duplicate (position.cpp).
+void add_candidate(const IkModel& m, const Pose& target, const JointVector* q_ref, const double* mot, Branch br,
+                   std::uint8_t singular, bool position_only, IkResult& res);
+
+/// Every solution of a spherical-wrist arm (spherical_wrist.cpp).
+void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
+/// Every solution of a reduced arm: planar_2r, planar_3, spatial_3, pitch_4 (reduced.cpp).
+void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
 
 }  // namespace servoarm::kin::detail

@@ -246,34 +246,4 @@ void ik_numeric(const Chain& chain, const Pose& target, const JointVector& q_sta
   res.status = converged(best_err, o) ? Status::ok : Status::not_converged;
 }
 
-Status ik_solve_nearest(const IkModel& model, const Pose& target, const JointVector& q_current, JointVector& q_out,
-                        const IkChoice& choice) {
-  if (q_current.size() != model.chain.n_joints) return Status::wrong_size;
-  if (model.method != IkMethod::none) {
-    IkResult r;
-    ik_solve_all(model, target, &q_current, r);
-    if (!is_ok(r.status) && r.count == 0) return r.status;
-    const int i = ik_choose(model, r, q_current, choice);
-    if (i < 0) return r.count ? Status::out_of_limits : Status::unreachable;
-    q_out = r.solutions[static_cast<std::size_t>(i)].q;
-    return r.solutions[static_cast<std::size_t>(i)].singular ? Status::singular : Status::ok;
-  }
-  IkNumericOptions o;
-  o.max_restarts = 0;  // continuity first: stay on the current branch
-  o.stall_iterations = 0;  // and give the start from the current joints every iteration
-  o.max_iterations = 100;
-  IkNumericResult nr;
-  ik_numeric(model.chain, target, q_current, o, nr);
-  if (nr.status != Status::ok) return nr.status == Status::not_converged ? Status::unreachable : nr.status;
-  q_out = nr.q;
-  return Status::ok;
-}
-
-Status ik_nearest_fn(const Chain& chain, const Pose& target, const JointVector& q_near, JointVector& q_out,
-                     void* ctx) {
-  const auto* model = static_cast<const IkModel*>(ctx);
-  if (!model || model->chain.n_joints != chain.n_joints) return Status::bad_input;
-  return ik_solve_nearest(*model, target, q_near, q_out);
-}
-
 }  // namespace servoarm::kin

@@ -1,0 +1,352 @@
+// Inverse kinematics, the model: ik_prepare() rewrites a chain as
+// C0 J1 C1 ... Jn Cn and recognises which closed form fits it (IkMethod; see
+// ik.hpp), ik_solve_all() checks its input and dispatches on that class
+// (spherical_wrist.cpp, reduced.cpp). Set-up code: heap-free, not real-time.
+#include "servoarm/kinematics/ik.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include <Eigen/LU>
+
+#include "ik_detail.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+
+namespace servoarm::kin {
+
+const char* to_string(IkMethod m) {
+  switch (m) {
+    case IkMethod::none: return "numeric";
+    case IkMethod::spherical_wrist: return "spherical_wrist";
+    case IkMethod::planar_2r: return "planar_2r";
+    case IkMethod::planar_3: return "planar_3";
+    case IkMethod::spatial_3: return "spatial_3";
+    case IkMethod::pitch_4: return "pitch_4";
+  }
+  return "unknown";
+}
+
+const char* singular_kinds_to_string(std::uint8_t kinds, char* buf, int size) {
+  if (size <= 0) return buf;
+  buf[0] = '\0';
+  if (kinds == 0) {
+    std::snprintf(buf, static_cast<std::size_t>(size), "none");
+    return buf;
+  }
+  std::snprintf(buf, static_cast<std::size_t>(size), "%s%s%s%s%s",
+                (kinds & kSingularWrist) ? "wrist" : "",
+                ((kinds & kSingularWrist) && (kinds & (kSingularShoulder | kSingularElbow))) ? "|" : "",
+                (kinds & kSingularShoulder) ? "shoulder" : "",
+                ((kinds & kSingularShoulder) && (kinds & kSingularElbow)) ? "|" : "",
+                (kinds & kSingularElbow) ? "elbow" : "");
+  return buf;
+}
+
+namespace detail {
+namespace {
+
+Pose rx_pose(double a) {
+  Pose T = Pose::Identity();
+  const double c = std::cos(a), s = std::sin(a);
+  T.linear() << 1, 0, 0, 0, c, -s, 0, s, c;
+  return T;
+}
+Pose rz_pose(double a) {
+  Pose T = Pose::Identity();
+  T.linear() = rot_z(a);
+  return T;
+}
+Pose tx_pose(double a) {
+  Pose T = Pose::Identity();
+  T.translation().x() = a;
+  return T;
+}
+Pose tz_pose(double d) {
+  Pose T = Pose::Identity();
+  T.translation().z() = d;
+  return T;
+}
+
+// R as a signed permutation, if it is one (to 1e-15).
+IkSignedPerm signed_perm(const Eigen::Matrix3d& R) {
+  IkSignedPerm p;
+  for (int j = 0; j < 3; ++j) {
+    int k = 0;
+    R.col(j).cwiseAbs().maxCoeff(&k);
+    if (std::abs(std::abs(R(k, j)) - 1.0) > 1e-15) return IkSignedPerm{};
+    for (int r = 0; r < 3; ++r)
+      if (r != k && std::abs(R(r, j)) > 1e-15) return IkSignedPerm{};
+    p.idx[static_cast<std::size_t>(j)] = static_cast<std::int8_t>(k);
+    p.sign[static_cast<std::size_t>(j)] = R(k, j) > 0 ? 1.0 : -1.0;
+  }
+  p.is = true;
+  return p;
+}
+
+// Rewrite the chain as C0 J1 C1 ... Jn Cn.
+void decompose(const Chain& c, IkModel& m) {
+  Pose K = c.base;
+  int j = 0;
+  double scale = 0;
+  for (int i = 0; i < c.n_rows; ++i) {
+    const DhRow& r = c.rows[static_cast<std::size_t>(i)];
+    scale += std::abs(r.a) + std::abs(r.d);
+    if (r.type == JointType::prismatic) scale += std::max(std::abs(r.lower), std::abs(r.upper)) * (std::isfinite(r.upper) ? 1.0 : 0.0);
+    const bool joint = r.type != JointType::fixed;
+    if (c.convention == Convention::standard) {
+      K = K * rz_pose(r.theta) * tz_pose(r.d);
+      if (joint) {
+        m.C[static_cast<std::size_t>(j)] = K;
+        m.prismatic[static_cast<std::size_t>(j)] = r.type == JointType::prismatic;
+        m.dir[static_cast<std::size_t>(j)] = r.direction;
+        ++j;
+        K = Pose::Identity();
+      }
+      K = K * tx_pose(r.a) * rx_pose(r.alpha);
+    } else {
+      K = K * rx_pose(r.alpha) * tx_pose(r.a) * rz_pose(r.theta) * tz_pose(r.d);
+      if (joint) {
+        m.C[static_cast<std::size_t>(j)] = K;
+        m.prismatic[static_cast<std::size_t>(j)] = r.type == JointType::prismatic;
+        m.dir[static_cast<std::size_t>(j)] = r.direction;
+        ++j;
+        K = Pose::Identity();
+      }
+    }
+  }
+  m.C[static_cast<std::size_t>(j)] = K * c.tool;
+  m.n = j;
+  // Rotations that are signed permutations up to rounding (the usual 0 and
+  // +-90 degree DH angles) are made exact, as forward() does with alpha.
+  for (int i = 0; i <= j; ++i) {
+    const IkSignedPerm p = signed_perm(m.C[static_cast<std::size_t>(i)].linear());
+    if (!p.is) continue;
+    Eigen::Matrix3d R = Eigen::Matrix3d::Zero();
+    for (int k = 0; k < 3; ++k) R(p.idx[static_cast<std::size_t>(k)], k) = p.sign[static_cast<std::size_t>(k)];
+    m.C[static_cast<std::size_t>(i)].linear() = R;
+  }
+  scale += c.tool.translation().norm() + c.base.translation().norm();
+  m.scale = std::max(scale, 1e-3);
+}
+
+// Closest points of two lines; returns the distance, s/t the parameters.
+double line_closest(const Eigen::Vector3d& p, const Eigen::Vector3d& u, const Eigen::Vector3d& q,
+                    const Eigen::Vector3d& v, double& s, double& t) {
+  const Eigen::Vector3d w0 = p - q;
+  const double a = u.dot(u), b = u.dot(v), c = v.dot(v), d = u.dot(w0), e = v.dot(w0);
+  const double den = a * c - b * b;
+  if (den < 1e-14) {
+    s = 0;
+    t = e / c;
+  } else {
+    s = (b * e - c * d) / den;
+    t = (a * e - b * d) / den;
+  }
+  return ((p + s * u) - (q + t * v)).norm();
+}
+
+// Set up the position subproblem of joints 1..3 for the point w3 (frame after
+// J3 motion): lambda, M1, M2, shoulder direction.
+void setup_position(IkModel& m) {
+  const Eigen::Vector3d t1 = C(m, 1).translation();
+  const Eigen::Vector3d n2 = C(m, 1).linear().col(2);
+  const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
+  if (n2.cross(ez).norm() < 1e-9) {
+    m.lambda = t1.z();
+  } else {
+    double s = 0, t = 0;
+    line_closest(Eigen::Vector3d::Zero(), ez, t1, n2, s, t);
+    m.lambda = s;
+  }
+  // Sample E1, E2 on a 3x3 grid of (m2, m3) and solve for the coefficients.
+  auto samples = [](bool prismatic, double out[3]) {
+    if (prismatic) {
+      out[0] = 0; out[1] = 1; out[2] = -1;
+    } else {
+      out[0] = 0; out[1] = kPi / 2; out[2] = kPi;
+    }
+  };
+  double s2[3], s3[3];
+  samples(prism(m, 1), s2);
+  samples(prism(m, 2), s3);
+  Eigen::Matrix3d B2, B3, V1, V2;
+  for (int i = 0; i < 3; ++i) {
+    B2.row(i) = basis(prism(m, 1), s2[i]).transpose();
+    B3.row(i) = basis(prism(m, 2), s3[i]).transpose();
+  }
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d f = f_of(m, s2[i], s3[k], m.w3);
+      V1(i, k) = (f - m.lambda * ez).squaredNorm();
+      V2(i, k) = f.z();
+    }
+  const Eigen::Matrix3d B2i = B2.inverse(), B3it = B3.inverse().transpose();
+  m.M1 = B2i * V1 * B3it;
+  m.M2 = B2i * V2 * B3it;
+  // Clean exact zeros (sampling leaves ~1e-17 noise).
+  const double tol1 = 1e-13 * m.scale * m.scale, tol2 = 1e-13 * m.scale;
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) {
+      if (std::abs(m.M1(i, k)) < tol1) m.M1(i, k) = 0;
+      if (std::abs(m.M2(i, k)) < tol2) m.M2(i, k) = 0;
+    }
+  // Shoulder direction: perpendicular to axes 1 and 2, or (axes parallel)
+  // the horizontal part of axis 3.
+  const Eigen::Vector3d sd = ez.cross(n2);
+  if (sd.norm() > 1e-6) {
+    m.shoulder_dir = sd.normalized();
+  } else {
+    const Eigen::Vector3d n3 = (C(m, 1) * C(m, 2)).linear().col(2);
+    Eigen::Vector3d h(n3.x(), n3.y(), 0);
+    if (h.norm() < 1e-6) h = Eigen::Vector3d::UnitX();
+    m.shoulder_dir = h.normalized();
+  }
+}
+
+bool detect_spherical_wrist(IkModel& m) {
+  if (m.n != 6 || prism(m, 0) || prism(m, 3) || prism(m, 4) || prism(m, 5)) return false;
+  // Axes 4, 5, 6 in the frame after C3 (joint 4's frame), joints at 0.
+  const Pose T5 = C(m, 4);
+  const Pose T6 = C(m, 4) * C(m, 5);
+  const Eigen::Vector3d z4 = Eigen::Vector3d::UnitZ(), p4 = Eigen::Vector3d::Zero();
+  const Eigen::Vector3d z5 = T5.linear().col(2), p5 = T5.translation();
+  const Eigen::Vector3d z6 = T6.linear().col(2), p6 = T6.translation();
+  if (z4.cross(z5).norm() < 1e-6 || z5.cross(z6).norm() < 1e-6) return false;
+  double s = 0, t = 0;
+  if (line_closest(p4, z4, p5, z5, s, t) > 1e-9 * m.scale) return false;
+  const Eigen::Vector3d W = p4 + s * z4;
+  const Eigen::Vector3d d6 = W - p6;
+  if ((d6 - d6.dot(z6) * z6).norm() > 1e-9 * m.scale) return false;
+  m.w3 = C(m, 3) * W;
+  const Pose T36 = C(m, 3) * C(m, 4) * C(m, 5) * C(m, 6);
+  m.w_tool = T36.inverse() * m.w3;
+  m.A = C(m, 4).linear();
+  m.B = C(m, 5).linear();
+  const Eigen::Vector3d g = m.A.transpose().col(2), v = m.B.col(2);
+  m.wrist_P = g.x() * v.x() + g.y() * v.y();
+  m.wrist_Q = g.y() * v.x() - g.x() * v.y();
+  m.wrist_gz_vz = g.z() * v.z();
+  if (std::hypot(m.wrist_P, m.wrist_Q) < 1e-9) return false;
+  setup_position(m);
+  for (int i = 0; i <= 6; ++i) m.perm[static_cast<std::size_t>(i)] = signed_perm(C(m, i).linear());
+  m.wrist_phi = std::atan2(m.wrist_Q, m.wrist_P);
+  m.wrist_flip = true;
+  const double samples[3][3] = {{0.3, 0.7, -1.1}, {-2.0, 2.5, 0.4}, {1.3, -0.2, 2.9}};
+  for (const auto& a : samples) {
+    const Eigen::Matrix3d W1 = rot_z(a[0]) * m.A * rot_z(a[1]) * m.B * rot_z(a[2]);
+    const Eigen::Matrix3d W2 = rot_z(a[0] + kPi) * m.A * rot_z(2 * m.wrist_phi - a[1]) * m.B * rot_z(a[2] + kPi);
+    if ((W1 - W2).cwiseAbs().maxCoeff() > 1e-12) m.wrist_flip = false;
+  }
+  return true;
+}
+
+void finish_status(IkResult& res) {
+  res.singular_kinds = 0;
+  bool any_in = false;
+  for (int i = 0; i < res.count; ++i) {
+    const IkSolution& s = res.solutions[static_cast<std::size_t>(i)];
+    res.singular_kinds |= s.singular;
+    any_in = any_in || s.within_limits;
+  }
+  if (res.count == 0) res.status = Status::unreachable;
+  else if (!any_in) res.status = Status::out_of_limits;
+  else if (res.singular_kinds) res.status = Status::singular;
+  else res.status = Status::ok;
+}
+
+// Reduced arms (seed 002 chapter 4, reduced.cpp): which one the chain is.
+bool parallel(const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return a.cross(b).norm() < 1e-9; }
+
+// Joint axes (directions, in the frame after C0) at q = 0.
+void axes_at_zero(const IkModel& m, Eigen::Vector3d* z) {
+  Pose T = Pose::Identity();
+  for (int j = 0; j < m.n; ++j) {
+    if (j > 0) T = T * C(m, j);
+    z[j] = T.linear().col(2);
+  }
+}
+
+bool detect_reduced(IkModel& m) {
+  if (m.n < 2 || m.n > 4 || prism(m, 0)) return false;
+  Eigen::Vector3d z[kMaxJoints];
+  axes_at_zero(m, z);
+  const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
+  bool planar = true;
+  for (int j = 1; j < m.n; ++j) {
+    if (prism(m, j)) planar = planar && std::abs(z[j].dot(ez)) < 1e-9;
+    else planar = planar && parallel(z[j], ez);
+  }
+  if (planar && m.n == 2 && !prism(m, 1)) {
+    m.method = IkMethod::planar_2r;
+    m.w3 = C(m, 2).translation();  // tool point after the J2 motion
+    return true;
+  }
+  if (planar && m.n == 3 && !prism(m, 2)) {
+    m.method = IkMethod::planar_3;
+    m.w3 = C(m, 2).translation();  // a point of axis 3, frame after J2 motion
+    return true;
+  }
+  if (m.n == 3) {
+    m.method = IkMethod::spatial_3;
+    m.w3 = C(m, 3).translation();  // tool point after the J3 motion
+    setup_position(m);
+    // Position only: needs one equation free of q2 or of q3, or the resultant.
+    return true;
+  }
+  if (m.n == 4 && !prism(m, 1) && !prism(m, 3) && parallel(z[1], z[3]) && std::abs(z[1].dot(ez)) < 1e-9 &&
+      (prism(m, 2) || parallel(z[2], z[1]))) {
+    m.method = IkMethod::pitch_4;
+    m.w3 = C(m, 3).translation();  // a point of axis 4, frame after J3 motion
+    return true;
+  }
+  return false;
+}
+
+}  // namespace
+}  // namespace detail
+
+Status ik_prepare(const Chain& chain, IkModel& model) {
+  model = IkModel{};
+  if (chain.n_joints > kMaxJoints || chain.n_rows > kMaxRows) return Status::capacity;
+  model.chain = chain;
+  for (int j = 0; j < chain.n_joints; ++j) model.wrap[static_cast<std::size_t>(j)] = detail::make_joint_wrap(chain.joint(j));
+  detail::decompose(chain, model);
+  model.method = IkMethod::none;
+  if (detail::detect_spherical_wrist(model)) {
+    model.method = IkMethod::spherical_wrist;
+    return Status::ok;
+  }
+  if (detail::detect_reduced(model)) return Status::ok;
+  return Status::ok;
+}
+
+void ik_solve_all(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& result) {
+  result.count = 0;
+  result.singular_kinds = 0;
+  if (model.method == IkMethod::none) {
+    result.status = Status::unsupported;
+    return;
+  }
+  bool ref_finite = true;
+  if (q_ref)
+    for (int j = 0; j < q_ref->size(); ++j) ref_finite = ref_finite && std::isfinite((*q_ref)[j]);
+  if (q_ref && (q_ref->size() != model.chain.n_joints || !ref_finite)) {
+    result.status = q_ref->size() != model.chain.n_joints ? Status::wrong_size : Status::bad_input;
+    return;
+  }
+  bool finite = true;
+  for (int i = 0; i < 16; ++i) finite = finite && std::isfinite(target.matrix().data()[i]);
+  if (!finite || !is_rotation(target.linear(), 1e-6)) {
+    result.status = Status::bad_input;
+    return;
+  }
+  if (model.method == IkMethod::spherical_wrist) {
+    detail::solve_spherical(model, target, q_ref, result);
+  } else {
+    detail::solve_reduced(model, target, q_ref, result);
+  }
+  detail::finish_status(result);
+}
+
+}  // namespace servoarm::kin

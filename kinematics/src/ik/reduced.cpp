@@ -1,0 +1,155 @@
+// Inverse kinematics, the reduced arms of seed 002 chapter 4 (ik.hpp):
+// planar_2r (4.1), planar_3 (RRR, RLR: 4.2, 4.3), spatial_3 (TRR: 4.4, the
+// position machinery of position.cpp with W = the tool point) and pitch_4
+// (TRL:R, VVL:R: 4.5, 4.6). Real-time, heap-free.
+#include <cmath>
+
+#include <Eigen/LU>
+
+#include "ik_detail.hpp"
+
+namespace servoarm::kin::detail {
+namespace {
+
+// Coefficients (a, b, c) of g(m) = a + b x + c y in the basis of joint j,
+// from three samples of g.
+template <typename G>
+Eigen::Vector3d fit_basis(bool prismatic, G g) {
+  const double s[3] = {0.0, prismatic ? 1.0 : kPi / 2, prismatic ? -1.0 : kPi};
+  Eigen::Matrix3d B;
+  Eigen::Vector3d v;
+  for (int i = 0; i < 3; ++i) {
+    B.row(i) = basis(prismatic, s[i]).transpose();
+    v[i] = g(s[i]);
+  }
+  return B.inverse() * v;
+}
+
+}  // namespace
+
+void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res) {
+  double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
+  if (q_ref)
+    for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
+  const Pose C0i = C(m, 0).inverse();
+  const double tol = 1e-12 * m.scale * m.scale;
+  if (m.method == IkMethod::spatial_3) {
+    const Eigen::Vector3d p0 = C0i * target.translation();
+    PosCand pc[8];
+    const int np = solve_position(m, p0, &mref[1], pc);
+    for (int i = 0; i < np; ++i) {
+      double mot[3] = {0, pc[i].m2, pc[i].m3};
+      const Eigen::Vector3d f = f_of(m, mot[1], mot[2], m.w3);
+      std::uint8_t sing = 0;
+      if (std::hypot(f.x(), f.y()) < 1e-9 * m.scale) {
+        mot[0] = mref[0];
+        sing |= kSingularShoulder;
+      } else {
+        mot[0] = std::atan2(p0.y(), p0.x()) - std::atan2(f.y(), f.x());
+      }
+      Branch br;
+      const double sh = f.dot(m.shoulder_dir);
+      br.shoulder = sh >= 0 ? 1 : -1;
+      if (std::abs(sh) < kNearSingular * m.scale) sing |= kSingularShoulder;
+      br.elbow = pc[i].elbow;
+      add_candidate(m, target, q_ref, mot, br, sing, true, res);
+    }
+    return;
+  }
+  // Planar and pitch arms: build the reachable target (position + the
+  // rotation part the arm controls), then the point on the last axis.
+  Pose eff = target;
+  double m1_fixed = 0;
+  bool have_m1 = false;
+  const int last = m.n - 1;
+  if (m.method == IkMethod::planar_3) {
+    // R = R_C0 Rz(sum) R_C(last): heading psi of the tool about the base z.
+    const Eigen::Matrix3d X = C(m, 0).linear().transpose() * target.linear() * C(m, m.n).linear().transpose();
+    const double psi = std::atan2(X(1, 0), X(0, 0));
+    eff.linear() = C(m, 0).linear() * rot_z(psi) * C(m, m.n).linear();
+  } else if (m.method == IkMethod::pitch_4) {
+    // Axis 2 (= axis 4) in the tool frame is constant: it fixes q1 from the
+    // target rotation; then the pitch about that axis.
+    const Eigen::Matrix3d Rrest = C(m, 2).linear() * C(m, 3).linear() * C(m, 4).linear();  // J3 prismatic or parallel
+    const Eigen::Vector3d n2_tool = Rrest.transpose().col(2);
+    const Eigen::Vector3d n2 = C(m, 0).linear().transpose() * (target.linear() * n2_tool);
+    const Eigen::Vector3d n2_1 = C(m, 1).linear().col(2);  // axis 2 in the frame after J1 motion
+    m1_fixed = std::atan2(n2.y(), n2.x()) - std::atan2(n2_1.y(), n2_1.x());
+    have_m1 = true;
+    const Eigen::Matrix3d R1 = C(m, 0).linear() * rot_z(m1_fixed) * C(m, 1).linear();
+    const Eigen::Matrix3d X = R1.transpose() * target.linear() * Rrest.transpose();
+    const double s = std::atan2(X(1, 0), X(0, 0));
+    eff.linear() = R1 * rot_z(s) * Rrest;
+  }
+  Pose after_last = eff * C(m, m.n).inverse();  // frame after the last joint motion
+  const Eigen::Vector3d P = (m.method == IkMethod::planar_2r) ? eff.translation() : after_last.translation();
+  const Eigen::Vector3d p0 = C0i * P;
+  // Position of the point (m.w3, frame after the motion of joint `k`) with k = 1 (planar) or 2 (pitch).
+  double sols[4][kMaxJoints];
+  std::int8_t elbows[4];
+  int ns = 0;
+  if (m.method == IkMethod::pitch_4) {
+    // g = Rz(-m1) p0 = C1 Rz(m2) C2 J3(m3) w3: |g - t1| = |h(m3)|, then m2.
+    const Eigen::Vector3d g = rot_z(-m1_fixed) * p0;
+    const Eigen::Vector3d gl = C(m, 1).inverse() * g;  // in axis 2's frame
+    const Eigen::Vector3d co = fit_basis(prism(m, 2), [&](double m3) {
+      return (C(m, 2) * (joint_motion(prism(m, 2), m3) * m.w3)).squaredNorm();
+    });
+    const Roots r3 = solve_basis(co[0] - gl.squaredNorm(), co[1], co[2], prism(m, 2), tol);
+    for (int i = 0; i < r3.n; ++i) {
+      const Eigen::Vector3d h = C(m, 2) * (joint_motion(prism(m, 2), r3.v[i]) * m.w3);
+      sols[ns][0] = m1_fixed;
+      sols[ns][1] = std::atan2(gl.y(), gl.x()) - std::atan2(h.y(), h.x());
+      sols[ns][2] = r3.v[i];
+      elbows[ns++] = r3.label[i];
+    }
+  } else {
+    // Distance from axis 1 of f(m2) = C1 J2(m2) w: |f_xy| = |p0_xy|.
+    const Eigen::Vector3d co = fit_basis(prism(m, 1), [&](double m2) {
+      const Eigen::Vector3d f = C(m, 1) * (joint_motion(prism(m, 1), m2) * m.w3);
+      return f.x() * f.x() + f.y() * f.y();
+    });
+    const Roots r2 = solve_basis(co[0] - (p0.x() * p0.x() + p0.y() * p0.y()), co[1], co[2], prism(m, 1), tol);
+    for (int i = 0; i < r2.n; ++i) {
+      const Eigen::Vector3d f = C(m, 1) * (joint_motion(prism(m, 1), r2.v[i]) * m.w3);
+      sols[ns][0] = std::hypot(f.x(), f.y()) < 1e-9 * m.scale ? mref[0]
+                                                               : std::atan2(p0.y(), p0.x()) - std::atan2(f.y(), f.x());
+      sols[ns][1] = r2.v[i];
+      elbows[ns++] = r2.label[i];
+    }
+  }
+  (void)have_m1;
+  for (int i = 0; i < ns; ++i) {
+    double* mot = sols[i];
+    // Last joint from the rotation: Rz(m_last) = R_before^T R_eff R_C(n)^T.
+    if (m.method != IkMethod::planar_2r) {
+      Pose T = C(m, 0);
+      for (int j = 0; j < last; ++j) T = T * joint_motion(prism(m, j), mot[j]) * C(m, j + 1);
+      const Eigen::Matrix3d N = T.linear().transpose() * eff.linear() * C(m, m.n).linear().transpose();
+      mot[last] = std::atan2(N(1, 0), N(0, 0));
+    }
+    Branch br;
+    br.elbow = elbows[i];
+    std::uint8_t sing = 0;
+    // Elbow singular: the two roots merged (stretched / folded).
+    if (ns >= 1) {
+      Jacobian J;
+      JointVector q(m.n);
+      for (int j = 0; j < m.n; ++j) q[j] = m.dir[static_cast<std::size_t>(j)] * mot[j];
+      if (jacobian(m.chain, q, J) == Status::ok) {
+        // position rows of the joints that place the point: small singular value
+        const int k = m.method == IkMethod::pitch_4 ? 3 : 2;
+        Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, kMaxJoints> Jp = J.topRows<3>().leftCols(k);
+        const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kMaxJoints, kMaxJoints> G =
+            Jp.transpose() * Jp;
+        const double det = G.determinant();
+        double prod = 1;
+        for (int j = 0; j < k; ++j) prod *= G(j, j);
+        if (prod > 0 && det / prod < kNearSingular * kNearSingular) sing |= kSingularElbow;
+      }
+    }
+    add_candidate(m, eff, q_ref, mot, br, sing, m.method == IkMethod::planar_2r, res);
+  }
+}
+
+}  // namespace servoarm::kin::detail
