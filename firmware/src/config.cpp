@@ -516,7 +516,73 @@ std::string utf8_problem(const std::string& t) {
   return "";
 }
 
-constexpr std::size_t kMaxFileBytes = 1 << 20;
+/// Where brackets nest deeper than kMaxDepth outside strings and comments ("line L,
+/// column C"), or "". toml11 parses nesting recursively: `x = ` and 20 000 `[` overflow
+/// its stack (SIGSEGV), so such text never reaches it.
+constexpr int kMaxDepth = 32;
+std::string nesting_problem(const std::string& t) {
+  int depth = 0;
+  std::size_t line = 1, col = 0;
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    const char c = t[i];
+    ++col;
+    if (c == '\n') {
+      ++line, col = 0;
+    } else if (c == '#') {  // comment to the end of the line
+      while (i + 1 < t.size() && t[i + 1] != '\n') ++i;
+    } else if (c == '"' || c == '\'') {
+      const bool multi = t.compare(i, 3, std::string(3, c)) == 0;
+      const std::string close = multi ? std::string(3, c) : std::string(1, c);
+      i += close.size();
+      while (i < t.size() && t.compare(i, close.size(), close) != 0) {
+        if (t[i] == '\n') {
+          if (!multi) break;  // an unterminated one-line string: toml11 reports it
+          ++line, col = 0;
+        }
+        if (c == '"' && t[i] == '\\') ++i;  // escape in a basic string
+        ++i;
+      }
+      i += close.size() - 1;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxDepth)
+        return "line " + std::to_string(line) + ", column " + std::to_string(col) + ": nested deeper than " +
+               std::to_string(kMaxDepth) + " levels";
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+  return "";
+}
+
+/// toml11's multi-line message as one line: "origin:L:C: syntax: what" (the line and
+/// column from its " L | text" and "   | ^--- ..." rows).
+std::string syntax_message(const std::string& origin, const std::string& what) {
+  std::vector<std::string> rows;
+  for (std::size_t a = 0; a <= what.size();) {
+    const std::size_t b = std::min(what.find('\n', a), what.size());
+    rows.push_back(what.substr(a, b - a));
+    a = b + 1;
+  }
+  std::string msg = rows.empty() ? what : rows[0];
+  if (msg.rfind("[error] ", 0) == 0) msg.erase(0, 8);
+  std::string where;
+  for (std::size_t r = 1; r + 1 < rows.size() && where.empty(); ++r) {
+    const std::string& row = rows[r];
+    const std::size_t bar = row.find(" | ");
+    if (bar == std::string::npos || bar == 0) continue;
+    const std::size_t digits = row.find_first_not_of(' ');
+    if (digits >= bar || row.find_first_not_of("0123456789", digits) != bar) continue;
+    const std::string& mark = rows[r + 1];
+    const std::size_t caret = mark.find('^');
+    if (caret == std::string::npos || mark.size() <= bar + 1 || mark[bar + 1] != '|' || caret < bar + 3) continue;
+    where = row.substr(digits, bar - digits) + ":" + std::to_string(caret - (bar + 3) + 1);
+  }
+  return origin + (where.empty() ? "" : ":" + where) + ": syntax: " + msg;
+}
+
+/// Configuration files are small (the shipped one is 3 KiB, six [[drive]] tables add
+/// 1 KiB); the cap also bounds toml11's time on long arrays (quadratic in 3.7.1).
+constexpr std::size_t kMaxFileBytes = 64 * 1024;
 
 }  // namespace
 
@@ -622,16 +688,14 @@ std::string load_config_text(const std::string& text, const std::string& origin,
   if (text.size() > kMaxFileBytes)
     return origin + ": larger than " + std::to_string(kMaxFileBytes) + " bytes (" + std::to_string(text.size()) + ")";
   if (const std::string at = utf8_problem(text); !at.empty()) return origin + ": " + at + ": not UTF-8 text";
+  if (const std::string at = nesting_problem(text); !at.empty()) return origin + ": " + at;
   Reader r{origin, {}};
   toml::value root;
   try {
     std::istringstream is(text);
     root = toml::parse(is, origin);
   } catch (const std::exception& e) {
-    std::string m = e.what();
-    const auto nl = m.find('\n');
-    if (nl != std::string::npos) m = m.substr(0, nl);
-    return origin + ": syntax: " + m;
+    return syntax_message(origin, e.what());
   }
   if (!root.is_table()) return origin + ": not a TOML table";
   const auto& top = root.as_table();

@@ -150,7 +150,8 @@ std::string default_text(const DriveKey& k);
 
 /// Load a TOML file over the defaults in `cfg`. Returns "" on success, else one
 /// line naming the file and the key (unknown key, wrong type, out of range, syntax).
-/// A read error, a directory or a file over 1 MiB is refused naming the path.
+/// A read error, a directory, a FIFO, a device or a file over 64 KiB is refused naming the path;
+/// text that is not UTF-8 or nests brackets deeper than 32 levels is refused before toml11 parses it.
 std::string load_config_file(const std::string& path, FwConfig& cfg);
 /// Same from text (tests). `cfg` is untouched when the text is refused.
 std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg);
