@@ -1,12 +1,85 @@
 #pragma once
 // Internal helpers shared by the IK sources (not installed).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <new>
 
 #include "../fast_trig.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
+
+namespace servoarm::kin {
+
+/// A rotation that is a signed permutation (column j = sign[j] * unit vector
+/// idx[j]), as the constant transforms of DH rows with angles in multiples of
+/// 90 degrees are: products with it are copies (set by ik_prepare()).
+struct IkSignedPerm {
+  bool is = false;
+  std::array<std::int8_t, 3> idx{0, 1, 2};
+  std::array<double, 3> sign{1, 1, 1};
+};
+
+/// How ik_solve_all wraps one joint into its limits (set by ik_prepare()).
+/// kind 0: not revolute (never wrapped); 1: revolute whose limits span less
+/// than a turn and lie within (-3 pi, 3 pi) -- at most one 2*pi equivalent of
+/// an angle fits, found without the reference (for references within a
+/// turn of the limits); 2: any other revolute joint (nearest to the reference).
+struct IkJointWrap {
+  std::uint8_t kind = 0;
+  double lo = 0, hi = 0;    ///< limits widened by 1e-12 (wrapping)
+  double lo9 = 0, hi9 = 0;  ///< limits widened by 1e-9 (within_limits)
+};
+
+namespace detail {
+
+/// What ik_prepare() precomputes for the closed-form solvers, held in place
+/// in IkModel::solver (ik.hpp: IkSolverStorage). Plain data.
+struct IkSolverData {
+  int n = 0;  ///< joints
+  // C0 J1 C1 ... Jn Cn
+  std::array<Pose, kMaxJoints + 1> C{};
+  std::array<bool, kMaxJoints> prismatic{};
+  std::array<double, kMaxJoints> dir{};
+  // Position subproblem (joints 1..3): E_k = b2^T M_k b3 (- right-hand side).
+  Eigen::Matrix3d M1 = Eigen::Matrix3d::Zero(), M2 = Eigen::Matrix3d::Zero();
+  double lambda = 0;                                  ///< l in E1
+  Eigen::Vector3d w3 = Eigen::Vector3d::Zero();       ///< point after J3 motion (wrist centre; IkModel::w_tool in the tool frame)
+  Eigen::Vector3d shoulder_dir = Eigen::Vector3d::UnitX();  ///< shoulder-branch direction (frame after J1)
+  double scale = 1;                                   ///< typical length of the arm (m)
+  // Wrist (spherical_wrist): M = Rz(m4) A Rz(m5) B Rz(m6).
+  Eigen::Matrix3d A = Eigen::Matrix3d::Identity(), B = Eigen::Matrix3d::Identity();
+  double wrist_P = 0, wrist_Q = 0, wrist_gz_vz = 0;
+  /// The rotations of C0..C6 as signed permutations where they are one.
+  std::array<IkSignedPerm, 7> perm{};
+  /// Wrist flip: (m4 + pi, 2 phi5 - m5, m6 + pi) gives the same rotation as
+  /// (m4, m5, m6), phi5 = atan2(wrist_Q, wrist_P) -- true when axes 4, 5 and
+  /// 5, 6 are perpendicular (checked numerically at set-up). The solver then
+  /// derives the second wrist solution from the first (no atan2).
+  bool wrist_flip = false;
+  double wrist_phi = 0;
+  /// Per joint: wrapping into the limits (see IkJointWrap).
+  std::array<IkJointWrap, kMaxJoints> wrap{};
+};
+static_assert(sizeof(IkSolverData) <= IkSolverStorage::kBytes, "raise IkSolverStorage::kBytes (ik.hpp)");
+static_assert(IkSolverStorage::kBytes - sizeof(IkSolverData) < 256, "lower IkSolverStorage::kBytes (ik.hpp)");
+static_assert(alignof(IkSolverData) <= IkSolverStorage::kAlign, "raise IkSolverStorage::kAlign (ik.hpp)");
+
+/// The one way to the data in an IkModel's storage (constructed there by
+/// IkSolverStorage's constructors, model.cpp).
+struct IkSolverAccess {
+  static IkSolverData& get(IkSolverStorage& s) { return *std::launder(reinterpret_cast<IkSolverData*>(s.bytes_)); }
+  static const IkSolverData& get(const IkSolverStorage& s) {
+    return *std::launder(reinterpret_cast<const IkSolverData*>(s.bytes_));
+  }
+};
+inline IkSolverData& solver_data(IkModel& m) { return IkSolverAccess::get(m.solver); }
+inline const IkSolverData& solver_data(const IkModel& m) { return IkSolverAccess::get(m.solver); }
+
+}  // namespace detail
+
+}  // namespace servoarm::kin
 
 namespace servoarm::kin::detail {
 
@@ -106,8 +179,8 @@ inline constexpr double kVerifyPos = 1e-9;
 inline constexpr double kVerifyRot = 1e-9;
 inline constexpr double kNearSingular = 1e-6;
 
-inline const Pose& C(const IkModel& m, int i) { return m.C[static_cast<std::size_t>(i)]; }
-inline bool prism(const IkModel& m, int j) { return m.prismatic[static_cast<std::size_t>(j)]; }
+inline const Pose& C(const IkSolverData& m, int i) { return m.C[static_cast<std::size_t>(i)]; }
+inline bool prism(const IkSolverData& m, int j) { return m.prismatic[static_cast<std::size_t>(j)]; }
 
 // Basis of a joint's motion: (1, cos m, sin m) or (1, m, m^2), and its derivative.
 inline Eigen::Vector3d basis(bool prismatic, double m) {
@@ -120,7 +193,7 @@ inline Eigen::Vector3d dbasis(bool prismatic, double m) {
 }
 
 // Point w (frame after J3 motion) in the frame after J1 motion.
-inline Eigen::Vector3d f_of(const IkModel& m, double m2, double m3, const Eigen::Vector3d& w) {
+inline Eigen::Vector3d f_of(const IkSolverData& m, double m2, double m3, const Eigen::Vector3d& w) {
   return C(m, 1) * (joint_motion(prism(m, 1), m2) * (C(m, 2) * (joint_motion(prism(m, 2), m3) * w)));
 }
 
@@ -224,14 +297,14 @@ inline Eigen::Vector3d basis_cs(bool prismatic, double c, double s) {
 /// (the spherical-wrist solver computes every angle in one batch at the end).
 /// Cases: one equation free of q2 or of q3 (closed form, position.cpp), else
 /// the degree-8 resultant (solve_position_resultant, polynomial.cpp). <= 8.
-int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out,
+int solve_position(const IkSolverData& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out,
                    bool angles = true);
 
 /// The general case of solve_position: q2 eliminated by the resultant, a
 /// polynomial of degree <= 8 in tan(q3/2) (or d3), roots from its companion
 /// matrix polished by Newton. M1, M2: the equations with the target's
 /// right-hand sides subtracted. Returns the number of candidates (<= 8).
-int solve_position_resultant(const IkModel& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double tol1,
+int solve_position_resultant(const IkSolverData& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double tol1,
                              PosCand* out);
 
 // wrap_pi without a libm call for the small multiples of 2 pi that atan2

@@ -44,6 +44,18 @@ const char* singular_kinds_to_string(std::uint8_t kinds, char* buf, int size) {
 }
 
 namespace detail {
+
+// IkModel::solver holds an IkSolverData in place (ik.hpp, ik_detail.hpp).
+IkSolverStorage::IkSolverStorage() { ::new (static_cast<void*>(bytes_)) IkSolverData(); }
+IkSolverStorage::IkSolverStorage(const IkSolverStorage& other) {
+  ::new (static_cast<void*>(bytes_)) IkSolverData(IkSolverAccess::get(other));
+}
+IkSolverStorage& IkSolverStorage::operator=(const IkSolverStorage& other) {
+  IkSolverAccess::get(*this) = IkSolverAccess::get(other);
+  return *this;
+}
+IkSolverStorage::~IkSolverStorage() { IkSolverAccess::get(*this).~IkSolverData(); }
+
 namespace {
 
 Pose rx_pose(double a) {
@@ -85,7 +97,7 @@ IkSignedPerm signed_perm(const Eigen::Matrix3d& R) {
 }
 
 // Rewrite the chain as C0 J1 C1 ... Jn Cn.
-void decompose(const Chain& c, IkModel& m) {
+void decompose(const Chain& c, IkSolverData& m) {
   Pose K = c.base;
   int j = 0;
   double scale = 0;
@@ -148,7 +160,7 @@ double line_closest(const Eigen::Vector3d& p, const Eigen::Vector3d& u, const Ei
 
 // Set up the position subproblem of joints 1..3 for the point w3 (frame after
 // J3 motion): lambda, M1, M2, shoulder direction.
-void setup_position(IkModel& m) {
+void setup_position(IkSolverData& m) {
   const Eigen::Vector3d t1 = C(m, 1).translation();
   const Eigen::Vector3d n2 = C(m, 1).linear().col(2);
   const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
@@ -204,7 +216,8 @@ void setup_position(IkModel& m) {
   }
 }
 
-bool detect_spherical_wrist(IkModel& m) {
+bool detect_spherical_wrist(IkModel& model) {
+  IkSolverData& m = solver_data(model);
   if (m.n != 6 || prism(m, 0) || prism(m, 3) || prism(m, 4) || prism(m, 5)) return false;
   // Axes 4, 5, 6 in the frame after C3 (joint 4's frame), joints at 0.
   const Pose T5 = C(m, 4);
@@ -220,7 +233,7 @@ bool detect_spherical_wrist(IkModel& m) {
   if ((d6 - d6.dot(z6) * z6).norm() > 1e-9 * m.scale) return false;
   m.w3 = C(m, 3) * W;
   const Pose T36 = C(m, 3) * C(m, 4) * C(m, 5) * C(m, 6);
-  m.w_tool = T36.inverse() * m.w3;
+  model.w_tool = T36.inverse() * m.w3;
   m.A = C(m, 4).linear();
   m.B = C(m, 5).linear();
   const Eigen::Vector3d g = m.A.transpose().col(2), v = m.B.col(2);
@@ -259,7 +272,7 @@ void finish_status(IkResult& res) {
 bool parallel(const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return a.cross(b).norm() < 1e-9; }
 
 // Joint axes (directions, in the frame after C0) at q = 0.
-void axes_at_zero(const IkModel& m, Eigen::Vector3d* z) {
+void axes_at_zero(const IkSolverData& m, Eigen::Vector3d* z) {
   Pose T = Pose::Identity();
   for (int j = 0; j < m.n; ++j) {
     if (j > 0) T = T * C(m, j);
@@ -267,7 +280,8 @@ void axes_at_zero(const IkModel& m, Eigen::Vector3d* z) {
   }
 }
 
-bool detect_reduced(IkModel& m) {
+bool detect_reduced(IkModel& model) {
+  IkSolverData& m = solver_data(model);
   if (m.n < 2 || m.n > 4 || prism(m, 0)) return false;
   Eigen::Vector3d z[kMaxJoints];
   axes_at_zero(m, z);
@@ -278,17 +292,17 @@ bool detect_reduced(IkModel& m) {
     else planar = planar && parallel(z[j], ez);
   }
   if (planar && m.n == 2 && !prism(m, 1)) {
-    m.method = IkMethod::planar_2r;
+    model.method = IkMethod::planar_2r;
     m.w3 = C(m, 2).translation();  // tool point after the J2 motion
     return true;
   }
   if (planar && m.n == 3 && !prism(m, 2)) {
-    m.method = IkMethod::planar_3;
+    model.method = IkMethod::planar_3;
     m.w3 = C(m, 2).translation();  // a point of axis 3, frame after J2 motion
     return true;
   }
   if (m.n == 3) {
-    m.method = IkMethod::spatial_3;
+    model.method = IkMethod::spatial_3;
     m.w3 = C(m, 3).translation();  // tool point after the J3 motion
     setup_position(m);
     // Position only: needs one equation free of q2 or of q3, or the resultant.
@@ -296,7 +310,7 @@ bool detect_reduced(IkModel& m) {
   }
   if (m.n == 4 && !prism(m, 1) && !prism(m, 3) && parallel(z[1], z[3]) && std::abs(z[1].dot(ez)) < 1e-9 &&
       (prism(m, 2) || parallel(z[2], z[1]))) {
-    m.method = IkMethod::pitch_4;
+    model.method = IkMethod::pitch_4;
     m.w3 = C(m, 3).translation();  // a point of axis 4, frame after J3 motion
     return true;
   }
@@ -310,8 +324,8 @@ Status ik_prepare(const Chain& chain, IkModel& model) {
   model = IkModel{};
   if (chain.n_joints > kMaxJoints || chain.n_rows > kMaxRows) return Status::capacity;
   model.chain = chain;
-  for (int j = 0; j < chain.n_joints; ++j) model.wrap[static_cast<std::size_t>(j)] = detail::make_joint_wrap(chain.joint(j));
-  detail::decompose(chain, model);
+  for (int j = 0; j < chain.n_joints; ++j) detail::solver_data(model).wrap[static_cast<std::size_t>(j)] = detail::make_joint_wrap(chain.joint(j));
+  detail::decompose(chain, detail::solver_data(model));
   model.method = IkMethod::none;
   if (detail::detect_spherical_wrist(model)) {
     model.method = IkMethod::spherical_wrist;

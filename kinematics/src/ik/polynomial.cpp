@@ -79,7 +79,7 @@ Poly row_poly(const Eigen::Vector3d& v, bool prismatic, double sigma) {
   return p;
 }
 
-void newton_polish(const IkModel& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double& m2,
+void newton_polish(const IkSolverData& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double& m2,
                    double& m3) {
   const bool p2 = prism(m, 1), p3 = prism(m, 2);
   for (int it = 0; it < 8; ++it) {
@@ -100,7 +100,7 @@ void newton_polish(const IkModel& m, const Eigen::Matrix3d& M1, const Eigen::Mat
 
 }  // namespace
 
-int solve_position_resultant(const IkModel& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double tol1,
+int solve_position_resultant(const IkSolverData& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double tol1,
                              PosCand* out) {
   const bool p2 = prism(m, 1), p3 = prism(m, 2);
   int n = 0;

@@ -82,7 +82,7 @@ void store_solution(const IkModel& m, const JointVector& q, Branch br, std::uint
 }  // namespace
 
 // (m2, m3) candidates (see ik_detail.hpp).
-int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out, bool angles) {
+int solve_position(const IkSolverData& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out, bool angles) {
   const bool p2 = prism(m, 1), p3 = prism(m, 2);
   Eigen::Matrix3d M1 = m.M1, M2 = m.M2;
   const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
@@ -152,9 +152,10 @@ int solve_position(const IkModel& m, const Eigen::Vector3d& p0, const double* re
 // Finish a candidate (motion values m, SI joints = dir*m): wrap, verify by
 // the chain's FK (a few Gauss-Newton steps if it is close but not within
 // the tolerance, e.g. a root clamped at the reach limit), add.
-void add_candidate(const IkModel& m, const Pose& target, const JointVector* q_ref, const double* mot,
+void add_candidate(const IkModel& model, const Pose& target, const JointVector* q_ref, const double* mot,
                    Branch br, std::uint8_t singular, bool position_only, IkResult& res) {
-  const Chain& c = m.chain;
+  const IkSolverData& m = solver_data(model);
+  const Chain& c = model.chain;
   JointVector q(c.n_joints);
   for (int j = 0; j < c.n_joints; ++j) {
     const double v = m.dir[static_cast<std::size_t>(j)] * mot[j];
@@ -173,7 +174,7 @@ void add_candidate(const IkModel& m, const Pose& target, const JointVector* q_re
     }
     if (ep > kVerifyPos || er > kVerifyRot) return;
   }
-  store_solution(m, q, br, singular, ep, er, res);
+  store_solution(model, q, br, singular, ep, er, res);
 }
 
 }  // namespace servoarm::kin::detail

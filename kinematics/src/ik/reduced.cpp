@@ -27,13 +27,14 @@ Eigen::Vector3d fit_basis(bool prismatic, G g) {
 
 }  // namespace
 
-void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res) {
+void solve_reduced(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
+  const IkSolverData& m = solver_data(model);
   double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
   if (q_ref)
     for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
   const Pose C0i = C(m, 0).inverse();
   const double tol = 1e-12 * m.scale * m.scale;
-  if (m.method == IkMethod::spatial_3) {
+  if (model.method == IkMethod::spatial_3) {
     const Eigen::Vector3d p0 = C0i * target.translation();
     PosCand pc[8];
     const int np = solve_position(m, p0, &mref[1], pc);
@@ -52,7 +53,7 @@ void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_re
       br.shoulder = sh >= 0 ? 1 : -1;
       if (std::abs(sh) < kNearSingular * m.scale) sing |= kSingularShoulder;
       br.elbow = pc[i].elbow;
-      add_candidate(m, target, q_ref, mot, br, sing, true, res);
+      add_candidate(model, target, q_ref, mot, br, sing, true, res);
     }
     return;
   }
@@ -62,12 +63,12 @@ void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_re
   double m1_fixed = 0;
   bool have_m1 = false;
   const int last = m.n - 1;
-  if (m.method == IkMethod::planar_3) {
+  if (model.method == IkMethod::planar_3) {
     // R = R_C0 Rz(sum) R_C(last): heading psi of the tool about the base z.
     const Eigen::Matrix3d X = C(m, 0).linear().transpose() * target.linear() * C(m, m.n).linear().transpose();
     const double psi = std::atan2(X(1, 0), X(0, 0));
     eff.linear() = C(m, 0).linear() * rot_z(psi) * C(m, m.n).linear();
-  } else if (m.method == IkMethod::pitch_4) {
+  } else if (model.method == IkMethod::pitch_4) {
     // Axis 2 (= axis 4) in the tool frame is constant: it fixes q1 from the
     // target rotation; then the pitch about that axis.
     const Eigen::Matrix3d Rrest = C(m, 2).linear() * C(m, 3).linear() * C(m, 4).linear();  // J3 prismatic or parallel
@@ -82,13 +83,13 @@ void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_re
     eff.linear() = R1 * rot_z(s) * Rrest;
   }
   Pose after_last = eff * C(m, m.n).inverse();  // frame after the last joint motion
-  const Eigen::Vector3d P = (m.method == IkMethod::planar_2r) ? eff.translation() : after_last.translation();
+  const Eigen::Vector3d P = (model.method == IkMethod::planar_2r) ? eff.translation() : after_last.translation();
   const Eigen::Vector3d p0 = C0i * P;
   // Position of the point (m.w3, frame after the motion of joint `k`) with k = 1 (planar) or 2 (pitch).
   double sols[4][kMaxJoints];
   std::int8_t elbows[4];
   int ns = 0;
-  if (m.method == IkMethod::pitch_4) {
+  if (model.method == IkMethod::pitch_4) {
     // g = Rz(-m1) p0 = C1 Rz(m2) C2 J3(m3) w3: |g - t1| = |h(m3)|, then m2.
     const Eigen::Vector3d g = rot_z(-m1_fixed) * p0;
     const Eigen::Vector3d gl = C(m, 1).inverse() * g;  // in axis 2's frame
@@ -122,7 +123,7 @@ void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_re
   for (int i = 0; i < ns; ++i) {
     double* mot = sols[i];
     // Last joint from the rotation: Rz(m_last) = R_before^T R_eff R_C(n)^T.
-    if (m.method != IkMethod::planar_2r) {
+    if (model.method != IkMethod::planar_2r) {
       Pose T = C(m, 0);
       for (int j = 0; j < last; ++j) T = T * joint_motion(prism(m, j), mot[j]) * C(m, j + 1);
       const Eigen::Matrix3d N = T.linear().transpose() * eff.linear() * C(m, m.n).linear().transpose();
@@ -136,9 +137,9 @@ void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_re
       Jacobian J;
       JointVector q(m.n);
       for (int j = 0; j < m.n; ++j) q[j] = m.dir[static_cast<std::size_t>(j)] * mot[j];
-      if (jacobian(m.chain, q, J) == Status::ok) {
+      if (jacobian(model.chain, q, J) == Status::ok) {
         // position rows of the joints that place the point: small singular value
-        const int k = m.method == IkMethod::pitch_4 ? 3 : 2;
+        const int k = model.method == IkMethod::pitch_4 ? 3 : 2;
         Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, kMaxJoints> Jp = J.topRows<3>().leftCols(k);
         const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kMaxJoints, kMaxJoints> G =
             Jp.transpose() * Jp;
@@ -148,7 +149,7 @@ void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_re
         if (prod > 0 && det / prod < kNearSingular * kNearSingular) sing |= kSingularElbow;
       }
     }
-    add_candidate(m, eff, q_ref, mot, br, sing, m.method == IkMethod::planar_2r, res);
+    add_candidate(model, eff, q_ref, mot, br, sing, model.method == IkMethod::planar_2r, res);
   }
 }
 

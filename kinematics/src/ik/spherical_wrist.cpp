@@ -66,7 +66,7 @@ struct L3 {
 
 /// Constants of one solve, shared by every arm configuration.
 struct SphCtx {
-  const IkModel* m;
+  const IkSolverData* m;
   bool p2, p3;
   Eigen::Vector3d p0, u;
   Eigen::Matrix3d Rt0;    ///< C0^T R_target C6^T
@@ -145,7 +145,7 @@ EIGEN_ALWAYS_INLINE void mul_right_l(const T (&X)[3][3], const Eigen::Matrix3d& 
 // M = R3^T R_target C6^T, joint 5's roots.
 template <class T>
 EIGEN_ALWAYS_INLINE void arm_lanes(const SphCtx& x, T c2, T s2, T c3, T s3, ArmL<T>& o) {
-  const IkModel& m = *x.m;
+  const IkSolverData& m = *x.m;
   const Eigen::Matrix3d& R1 = C(m, 1).linear();
   const Eigen::Vector3d& t1 = C(m, 1).translation();
   const Eigen::Vector3d& t2 = C(m, 2).translation();
@@ -264,7 +264,7 @@ EIGEN_ALWAYS_INLINE void arm_lanes(const SphCtx& x, T c2, T s2, T c3, T s3, ArmL
 // column and the tool position error.
 template <class T>
 EIGEN_ALWAYS_INLINE void wrist_lanes(const SphCtx& x, const ArmL<T>& a, T sgn, WristL<T>& o) {
-  const IkModel& m = *x.m;
+  const IkSolverData& m = *x.m;
   const Eigen::Matrix3d& A = m.A;
   const Eigen::Matrix3d& B = m.B;
   const IkSignedPerm &pA = m.perm[4], &pB = m.perm[5];
@@ -320,8 +320,9 @@ EIGEN_ALWAYS_INLINE void wrist_lanes(const SphCtx& x, const ArmL<T>& a, T sgn, W
 
 }  // namespace
 
-void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res) {
-  const Eigen::Vector3d W = target * m.w_tool;
+void solve_spherical(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  const Eigen::Vector3d W = target * model.w_tool;
   const Eigen::Matrix3d& C0R = C(m, 0).linear();
   const Eigen::Vector3d p0 = C0R.transpose() * (W - C(m, 0).translation());
   double mref[6] = {0, 0, 0, 0, 0, 0};
@@ -336,7 +337,7 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
   x.p3 = prism(m, 2);
   x.p0 = p0;
   x.Rt0 = C0R.transpose() * target.linear() * C(m, 6).linear().transpose();
-  x.u = apply(C(m, 6).linear(), m.perm[6], m.w_tool);
+  x.u = apply(C(m, 6).linear(), m.perm[6], model.w_tool);
   detail::sincos_poly(mref[0], x.s1ref, x.c1ref);
   detail::sincos_poly(mref[3], x.s4ref, x.c4ref);
   x.p0xy2 = p0.x() * p0.x() + p0.y() * p0.y();
@@ -589,7 +590,7 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
     } else if (cd.ep < 1e-4 * m.scale && cd.er < 1e-4) {
       const double all[6] = {mot_arm[i * 3], mot_arm[i * 3 + 1], mot_arm[i * 3 + 2], wm[k][0], wm[k][1], wm[k][2]};
       const int before = res.count;
-      add_candidate(m, target, q_ref, all, cd.br, cd.sing, false, res);
+      add_candidate(model, target, q_ref, all, cd.br, cd.sing, false, res);
       for (int t = before; t < res.count; ++t) owner[t] = -1;
       foreign = foreign || res.count > before;
     }

@@ -45,6 +45,7 @@
 // few Gauss-Newton steps. It works on (cos, sin) pairs and computes every
 // angle in one batch at the end (fast_trig.hpp atan2_poly, 4.4e-16 rad).
 #include <array>
+#include <cstddef>
 #include <cstdint>
 
 #include "servoarm/kinematics/chain.hpp"
@@ -106,57 +107,42 @@ struct IkResult {
   std::array<IkSolution, kMaxIkSolutions> solutions{};
 };
 
-/// A rotation that is a signed permutation (column j = sign[j] * unit vector
-/// idx[j]), as the constant transforms of DH rows with angles in multiples of
-/// 90 degrees are: products with it are copies (set by ik_prepare()).
-struct IkSignedPerm {
-  bool is = false;
-  std::array<std::int8_t, 3> idx{0, 1, 2};
-  std::array<double, 3> sign{1, 1, 1};
-};
+namespace detail {
+struct IkSolverData;    // kinematics/src/ik/ik_detail.hpp
+struct IkSolverAccess;  // idem
+/// In-place storage of what ik_prepare() precomputes for the closed-form
+/// solvers (detail::IkSolverData, private to kinematics/src/ik/: the chain
+/// rewritten as C0 J1 C1 ... Jn Cn, the coefficient matrices of the position
+/// subproblem, the wrist's constant rotations, the per-joint wrap table...).
+/// Fixed size, no heap; copying copies the data. kBytes is checked against
+/// sizeof(IkSolverData) where that is defined (static_assert).
+class IkSolverStorage {
+ public:
+  static constexpr std::size_t kBytes = 2304;
+  static constexpr std::size_t kAlign = EIGEN_MAX_STATIC_ALIGN_BYTES > 16 ? EIGEN_MAX_STATIC_ALIGN_BYTES : 16;
+  IkSolverStorage();
+  IkSolverStorage(const IkSolverStorage& other);
+  IkSolverStorage& operator=(const IkSolverStorage& other);
+  ~IkSolverStorage();
 
-/// How ik_solve_all wraps one joint into its limits (set by ik_prepare()).
-/// kind 0: not revolute (never wrapped); 1: revolute whose limits span less
-/// than a turn and lie within (-3 pi, 3 pi) -- at most one 2*pi equivalent of
-/// an angle fits, found without the reference (for references within a
-/// turn of the limits); 2: any other revolute joint (nearest to the reference).
-struct IkJointWrap {
-  std::uint8_t kind = 0;
-  double lo = 0, hi = 0;    ///< limits widened by 1e-12 (wrapping)
-  double lo9 = 0, hi9 = 0;  ///< limits widened by 1e-9 (within_limits)
+ private:
+  friend struct IkSolverAccess;
+  alignas(kAlign) unsigned char bytes_[kBytes];
 };
+}  // namespace detail
 
-/// A chain analysed for IK. Plain data; build with ik_prepare().
+/// A chain analysed for IK: build with ik_prepare(). A plain value of fixed
+/// size (no heap; copies are independent), what the solvers precompute is
+/// opaque (`solver`).
 struct IkModel {
-  IkMethod method = IkMethod::none;
+  IkMethod method = IkMethod::none;  ///< the closed form that fits (none: use ik_numeric)
+  /// The chain analysed; its joint limits are the ones solutions are checked
+  /// against (within_limits) and wrapped into.
   Chain chain{};
-  int n = 0;
-  // C0 J1 C1 ... Jn Cn
-  std::array<Pose, kMaxJoints + 1> C{};
-  std::array<bool, kMaxJoints> prismatic{};
-  std::array<double, kMaxJoints> dir{};
-  // Position subproblem (joints 1..3): E_k = b2^T M_k b3 (- right-hand side).
-  Eigen::Matrix3d M1 = Eigen::Matrix3d::Zero(), M2 = Eigen::Matrix3d::Zero();
-  double lambda = 0;                                  ///< l in E1
-  Eigen::Vector3d w3 = Eigen::Vector3d::Zero();       ///< point after J3 motion (wrist centre)
-  Eigen::Vector3d w_tool = Eigen::Vector3d::Zero();   ///< same point in the tool frame
-  Eigen::Vector3d shoulder_dir = Eigen::Vector3d::UnitX();  ///< shoulder-branch direction (frame after J1)
-  double scale = 1;                                   ///< typical length of the arm (m)
-  // Wrist (spherical_wrist): M = Rz(m4) A Rz(m5) B Rz(m6).
-  Eigen::Matrix3d A = Eigen::Matrix3d::Identity(), B = Eigen::Matrix3d::Identity();
-  double wrist_P = 0, wrist_Q = 0, wrist_gz_vz = 0;
-  /// The rotations of C0..C6 as signed permutations where they are one.
-  std::array<IkSignedPerm, 7> perm{};
-  /// Wrist flip: (m4 + pi, 2 phi5 - m5, m6 + pi) gives the same rotation as
-  /// (m4, m5, m6), phi5 = atan2(wrist_Q, wrist_P) -- true when axes 4, 5 and
-  /// 5, 6 are perpendicular (checked numerically at set-up). The solver then
-  /// derives the second wrist solution from the first (no atan2).
-  bool wrist_flip = false;
-  double wrist_phi = 0;
-  /// Per joint: wrapping into the limits (see IkJointWrap).
-  std::array<IkJointWrap, kMaxJoints> wrap{};
-  // planar / pitch arms
-  Eigen::Vector3d last_link = Eigen::Vector3d::Zero();  ///< tool point in the frame after the last joint motion
+  /// spherical_wrist: the wrist centre (where axes 4, 5, 6 meet) in the tool
+  /// frame, so that W = target * w_tool; zero for the other methods.
+  Eigen::Vector3d w_tool = Eigen::Vector3d::Zero();
+  detail::IkSolverStorage solver{};  ///< set-up data of the solvers (private to kinematics/src/ik/)
 };
 
 /// Analyse `chain`. ok (method set, possibly none), capacity, or bad_input.
