@@ -758,7 +758,7 @@ std::string load_config_file(const std::string& path, FwConfig& cfg) {
   if (::fstat(fd, &st) != 0) why = std::string("cannot stat: ") + std::strerror(errno);
   else if (S_ISDIR(st.st_mode)) why = "is a directory, not a file";
   else if (!S_ISREG(st.st_mode)) why = "not a regular file";
-  else if (static_cast<std::size_t>(st.st_size) > kMaxFileBytes)
+  else if (st.st_size > static_cast<off_t>(kMaxFileBytes))  // off_t: no wrap on 32-bit size_t (armhf)
     why = "larger than " + std::to_string(kMaxFileBytes) + " bytes (" + std::to_string(st.st_size) + ")";
   std::string text;
   if (why.empty()) {
