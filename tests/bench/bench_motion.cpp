@@ -126,7 +126,12 @@ BENCHMARK(plan_movej6_kdl)->Name("plan/movej6/kdl_trap");
 struct MovelFixture {
   kin::Chain chain;
   kin::IkModel model;  // kinematics/ik: closed form for the PUMA
-  kin::IkSolver ik() const { return {&kin::ik_nearest_for_motion, const_cast<kin::IkModel*>(&model)}; }
+  // The motion IK adapter as armctl plan movel uses it (solutions outside the limits returned).
+  kin::IkSolver ik() const {
+    kin::IkSolverOptions o;
+    o.allow_out_of_limits = true;
+    return kin::make_ik_solver(model, o);
+  }
   std::vector<kin::JointVector> q0;
   std::vector<kin::Pose> target;
 };

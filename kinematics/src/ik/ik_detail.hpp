@@ -331,6 +331,11 @@ void add_candidate(const IkModel& m, const Pose& target, const JointVector* q_re
 
 /// Every solution of a spherical-wrist arm (spherical_wrist.cpp).
 void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
+/// ik_solve_nearest's numerical path (and IkFallback::numeric's): ik_numeric
+/// from q_current with no restarts, 100 iterations (selection.cpp).
+/// ok: q_out set; unreachable: no convergence; bad_input / wrong_size.
+Status ik_nearest_numeric(const Chain& chain, const Pose& target, const JointVector& q_current, JointVector& q_out);
+
 /// Every solution of a reduced arm: planar_2r, planar_3, spatial_3, pitch_4 (reduced.cpp).
 void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
 

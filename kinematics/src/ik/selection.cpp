@@ -2,7 +2,7 @@
 // the solution nearest to the current joints (weighted, within the limits
 // unless allowed, on the same branch if asked), and ik_solve_nearest (closed
 // form where the model has one, else the numerical solver). Real-time,
-// heap-free.
+// heap-free. (ik_nearest_fn, the IkSolver adapter: motion_ik.cpp.)
 #include "servoarm/kinematics/ik.hpp"
 
 #include <cmath>
@@ -10,6 +10,22 @@
 #include "ik_detail.hpp"
 
 namespace servoarm::kin {
+
+namespace detail {
+
+Status ik_nearest_numeric(const Chain& chain, const Pose& target, const JointVector& q_current, JointVector& q_out) {
+  IkNumericOptions o;
+  o.max_restarts = 0;  // continuity first: stay on the current branch
+  o.stall_iterations = 0;  // and give the start from the current joints every iteration
+  o.max_iterations = 100;
+  IkNumericResult nr;
+  ik_numeric(chain, target, q_current, o, nr);
+  if (nr.status != Status::ok) return nr.status == Status::not_converged ? Status::unreachable : nr.status;
+  q_out = nr.q;
+  return Status::ok;
+}
+
+}  // namespace detail
 
 Branch ik_branch_of(const IkModel& model, const JointVector& q) {
   Pose T;
@@ -66,22 +82,7 @@ Status ik_solve_nearest(const IkModel& model, const Pose& target, const JointVec
     q_out = r.solutions[static_cast<std::size_t>(i)].q;
     return r.solutions[static_cast<std::size_t>(i)].singular ? Status::singular : Status::ok;
   }
-  IkNumericOptions o;
-  o.max_restarts = 0;  // continuity first: stay on the current branch
-  o.stall_iterations = 0;  // and give the start from the current joints every iteration
-  o.max_iterations = 100;
-  IkNumericResult nr;
-  ik_numeric(model.chain, target, q_current, o, nr);
-  if (nr.status != Status::ok) return nr.status == Status::not_converged ? Status::unreachable : nr.status;
-  q_out = nr.q;
-  return Status::ok;
-}
-
-Status ik_nearest_fn(const Chain& chain, const Pose& target, const JointVector& q_near, JointVector& q_out,
-                     void* ctx) {
-  const auto* model = static_cast<const IkModel*>(ctx);
-  if (!model || model->chain.n_joints != chain.n_joints) return Status::bad_input;
-  return ik_solve_nearest(*model, target, q_near, q_out);
+  return detail::ik_nearest_numeric(model.chain, target, q_current, q_out);
 }
 
 }  // namespace servoarm::kin

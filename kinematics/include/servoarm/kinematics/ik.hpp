@@ -216,7 +216,8 @@ Status ik_solve_nearest(const IkModel& model, const Pose& target, const JointVec
                         JointVector& q_out, const IkChoice& choice = {});
 
 /// Adapter for kin::IkSolver (trajectory_cartesian.hpp): ctx = const IkModel*.
-/// The chain argument must be the model's chain.
+/// The chain argument must be the model's chain. Kept for the firmware until
+/// it switches to make_ik_solver(model, {}) (motion_ik.hpp), which it wraps.
 Status ik_nearest_fn(const Chain& chain, const Pose& target, const JointVector& q_near,
                      JointVector& q_out, void* ctx);
 

@@ -49,6 +49,8 @@ namespace servoarm::kin {
 using IkNearestFn = Status (*)(const Chain& chain, const Pose& target, const JointVector& q_near,
                                JointVector& q_out, void* ctx);
 
+/// Built by make_ik_solver(model, options) (motion_ik.hpp), the one adapter
+/// armfw and armctl plan share; any IkNearestFn works.
 struct IkSolver {
   IkNearestFn fn = nullptr;
   void* ctx = nullptr;
