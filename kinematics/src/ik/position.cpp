@@ -151,8 +151,11 @@ int solve_position(const IkSolverData& m, const Eigen::Vector3d& p0, const doubl
 
 // Finish a candidate (motion values m, SI joints = dir*m): wrap, verify by
 // the chain's FK (a few Gauss-Newton steps if it is close but not within
-// the tolerance, e.g. a root clamped at the reach limit), add.
-void add_candidate(const IkModel& model, const Pose& target, const JointVector* q_ref, const double* mot,
+// the tolerance, e.g. a root clamped at the reach limit), add. Flattened
+// (everything of this file and the headers inlined into it): with
+// solve_reduced flattened, the reduced arms take ~11 % fewer instructions
+// than when all of the IK was one file.
+[[gnu::flatten]] void add_candidate(const IkModel& model, const Pose& target, const JointVector* q_ref, const double* mot,
                    Branch br, std::uint8_t singular, bool position_only, IkResult& res) {
   const IkSolverData& m = solver_data(model);
   const Chain& c = model.chain;
