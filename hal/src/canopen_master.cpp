@@ -308,7 +308,7 @@ Status CanopenServoBus::start(TimePoint deadline) {
     joints_[j].have_status = false;
     fb_[j] = JointFeedback{};
     fb_[j].state = JointState::disabled;
-    fb_[j].last_heartbeat = now;  // consumer starts counting now
+    joints_[j].hb_watch_since = now;  // consumer starts counting now (last_heartbeat stays a real one)
   }
   target_ = cia402::Target::disabled;
   started_ = true;
@@ -325,7 +325,7 @@ void CanopenServoBus::enable() {
       fb.fault = Status::ok;
       fb.state = JointState::enabling;
       joints_[j].resetting = true;
-      fb.last_heartbeat = now;
+      joints_[j].hb_watch_since = now;  // the consumer restarts; enabled needs a real heartbeat (read())
     }
     if (joints_[j].have_status &&
         (joints_[j].state == cia402::State::fault || joints_[j].state == cia402::State::fault_reaction_active))
@@ -377,11 +377,15 @@ Status CanopenServoBus::read(TimePoint now) {
     // Frames stamped by the backend after `now` was sampled count as fresh (age 0).
     fb.age = fb.last_feedback ? (now > fb.last_feedback ? now - fb.last_feedback : 0) : -1;
     if (bus_off) set_fault(j, Status::bus_off, now);
-    if (now - fb.last_heartbeat > jt.hb_timeout) set_fault(j, Status::heartbeat_lost, now);
+    const TimePoint hb_ref = fb.last_heartbeat > jt.hb_watch_since ? fb.last_heartbeat : jt.hb_watch_since;
+    if (now - hb_ref > jt.hb_timeout) set_fault(j, Status::heartbeat_lost, now);
+    // Operation enabled counts only with a heartbeat within the consumer time: a drive that
+    // went silent is not "enabled" on its last statusword (it faults at hb_watch_since + timeout).
+    const bool hb_fresh = fb.last_heartbeat != 0 && now - fb.last_heartbeat <= jt.hb_timeout;
     if (fb.state != JointState::fault) {
       switch (target_) {
         case cia402::Target::enabled:
-          if (jt.have_status && jt.state == cia402::State::operation_enabled) {
+          if (jt.have_status && jt.state == cia402::State::operation_enabled && hb_fresh) {
             fb.state = JointState::enabled;
           } else {
             fb.state = JointState::enabling;

@@ -122,6 +122,7 @@ class CanopenServoBus final : public ServoBus {
     std::int32_t actual_counts = 0;
     std::int32_t target_counts = 0;
     Duration hb_timeout = 0;
+    TimePoint hb_watch_since = 0;  ///< heartbeat consumer start (start(), enable() out of a fault)
     char name[32] = {};
   };
   void set_fault(std::size_t j, Status why, TimePoint now);
