@@ -84,6 +84,7 @@ ConsoleConfig App::console_config() const {
   c.default_linear_speed = cfg.linear_speed_mm_s * 1e-3;
   c.max_linear_speed = cfg.max_linear_speed_mm_s * 1e-3;
   c.cartesian.linear_velocity = c.max_linear_speed;
+  c.max_move_duration_s = cfg.max_move_duration_s;
   if (!cfg.home_deg.empty()) {
     c.home = kin::JointVector::Zero(chain.n_joints);
     for (int j = 0; j < chain.n_joints; ++j) {

@@ -330,6 +330,12 @@ int main(int argc, char** argv) {
   lc.cpu = app.cfg.cpu;
   lc.lock_memory = app.cfg.lock_memory;
   RtLoop loop(*app.ctl, lc);
+  if (app.plant) {
+    // --sim: the drive thread served the bring-up (SDO); from now on the control thread
+    // steps the virtual drives right before each cycle (docs: firmware, "--sim").
+    app.plant->stop_thread();
+    loop.set_pre_cycle(&SimPlant::step_hook, app.plant.get());
+  }
   if (!loop.start()) {
     std::fprintf(stderr, "armfw: cannot start the control thread\n");
     return 1;

@@ -31,6 +31,7 @@ const char* to_string(CmdError e) {
     case CmdError::branch: return "branch";
     case CmdError::plan_failed: return "plan_failed";
     case CmdError::timeout: return "timeout";
+    case CmdError::estop: return "estop";
     case CmdError::internal: return "internal";
   }
   return "?";
@@ -303,6 +304,8 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
     }
   }
   const bool any_axis = given[0] || given[1] || given[2] || given[3] || given[4] || given[5];
+  if (f > 0 && f * m.unit_mm / 60.0 < kMinLinearSpeedMmS)
+    return fail(CmdError::out_of_range, "G-code: F%g is below the minimum feed %g mm/min", f, kMinLinearSpeedMmS * 60.0 / m.unit_mm);
   if (f > 0) m.feed_mm_s = f * m.unit_mm / 60.0;
   if (motion >= 0) {
     if (p >= 0 || sval >= 0) return fail(CmdError::bad_option, "G-code: P/S not allowed with G%d", motion);
@@ -391,7 +394,6 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
         std::memcpy(c.topic.data(), t.data(), k);
       }
       break;
-    case Cmd::stats:
     case Cmd::home:
       if (nargs == 1 && ieq(ws.w[1], "zero")) {
         c.cmd = Cmd::home_zero;
@@ -399,7 +401,7 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       }
       if (nargs != 0) return fail(CmdError::arg_count, "home takes no argument or 'zero'");
       break;
-    case Cmd::status: case Cmd::enable: case Cmd::disable: case Cmd::stop: case Cmd::estop:
+    case Cmd::status: case Cmd::enable: case Cmd::disable: case Cmd::stop: case Cmd::estop: case Cmd::stats:
     case Cmd::reset: case Cmd::limits: case Cmd::config: case Cmd::wait: case Cmd::hold: case Cmd::resume:
       if (nargs != 0) return fail(CmdError::arg_count, "%s takes no arguments", to_string(cmd));
       break;
@@ -407,13 +409,16 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       ParseResult r = parse_numbers(ws, 1, c, true, "movej");
       if (!r.ok()) return r;
       if (c.count != n_joints) return fail(CmdError::arg_count, "movej needs %d joint values, got %d", n_joints, c.count);
-      if (c.has_speed && c.speed > 100) return fail(CmdError::out_of_range, "movej: speed is a percentage in (0, 100]");
+      if (c.has_speed && (c.speed > 100 || c.speed < kMinJointSpeedPct))
+        return fail(CmdError::out_of_range, "movej: speed=%g is outside [%g, 100] (percent)", c.speed, kMinJointSpeedPct);
       break;
     }
     case Cmd::movel: {
       ParseResult r = parse_numbers(ws, 1, c, true, "movel");
       if (!r.ok()) return r;
       if (c.count != 3 && c.count != 6) return fail(CmdError::arg_count, "movel needs x y z [rx ry rz], got %d values", c.count);
+      if (c.has_speed && c.speed < kMinLinearSpeedMmS)
+        return fail(CmdError::out_of_range, "movel: speed=%g mm/s is below the minimum %g mm/s", c.speed, kMinLinearSpeedMmS);
       break;
     }
     case Cmd::ik: {

@@ -190,6 +190,9 @@ std::string Console::stats_text() const {
   if (t.estop_latency_ns >= 0) s += fmt(" estop_latency_us=%.1f", static_cast<double>(t.estop_latency_ns) / 1e3);
   const auto dropped = ctl_.events_dropped();
   if (dropped) s += fmt(" events_dropped=%llu", static_cast<unsigned long long>(dropped));
+  if (output_dropped_lines_ || output_dropped_bytes_)
+    s += fmt(" output_dropped_lines=%llu output_dropped_bytes=%llu", static_cast<unsigned long long>(output_dropped_lines_),
+             static_cast<unsigned long long>(output_dropped_bytes_));
   return s;
 }
 
@@ -257,6 +260,7 @@ void Console::queue_joint(Session& s, const kin::JointVector& goal, double pct) 
     answer_error(s, motion_error(ms), fmt("movej refused: %s", kin::to_string(ms)));
     return;
   }
+  if (!duration_ok(s, "movej", m->jt.duration)) return;
   m->kind = MotionKind::joint;
   m->id = next_id_++;
   m->goal = goal;
@@ -271,8 +275,9 @@ void Console::queue_joint(Session& s, const kin::JointVector& goal, double pct) 
 
 void Console::queue_linear(Session& s, const kin::Pose& target, double speed) {
   if (!motion_state_ok(s)) return;
-  if (!(speed > 0) || speed > cfg_.max_linear_speed + 1e-12) {
-    answer_error(s, CmdError::out_of_range, fmt("linear speed %.1f mm/s outside (0, %.1f]", speed * 1e3, cfg_.max_linear_speed * 1e3));
+  if (!(speed >= kMinLinearSpeedMmS * 1e-3) || speed > cfg_.max_linear_speed + 1e-12) {
+    answer_error(s, CmdError::out_of_range, fmt("linear speed %g mm/s outside [%g, %g]", speed * 1e3, kMinLinearSpeedMmS,
+                                                cfg_.max_linear_speed * 1e3));
     return;
   }
   MotionItem* m = ctl_.motions().back();
@@ -293,6 +298,7 @@ void Console::queue_linear(Session& s, const kin::Pose& target, double speed) {
     answer_error(s, motion_error(ms), fmt("movel refused: %s %s", kin::to_string(ms), where.c_str()));
     return;
   }
+  if (!duration_ok(s, "movel", m->ct.duration)) return;
   m->kind = MotionKind::cartesian;
   m->id = next_id_++;
   m->goal = m->ct.goal;
@@ -306,6 +312,13 @@ void Console::queue_linear(Session& s, const kin::Pose& target, double speed) {
   ctl_.motions().commit();
   answer_ok(s, fmt("queued id=%u duration=%.3fs%s", unsigned(tail_id_), dur,
                    ms == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", slow).c_str() : ""));
+}
+
+bool Console::duration_ok(Session& s, const char* what, double duration_s) {
+  if (std::isfinite(duration_s) && duration_s <= cfg_.max_move_duration_s) return true;
+  answer_error(s, CmdError::out_of_range, fmt("%s refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
+                                              "(raise the speed); nothing queued", what, duration_s, cfg_.max_move_duration_s));
+  return false;
 }
 
 void Console::queue_dwell(Session& s, double secs) {
@@ -505,7 +518,7 @@ void Console::execute(Session& s, std::string_view line) {
         return;
       }
       s.enabling = true;
-      poll(s);
+      settle(s);
       return;
     case Cmd::disable: simple(RequestOp::disable); return;
     case Cmd::stop: simple(RequestOp::stop); return;
@@ -537,7 +550,7 @@ void Console::execute(Session& s, std::string_view line) {
       if (!cfg_.config_text.empty() && cfg_.config_text.back() != '\n') s.out += '\n';
       answer_ok(s);
       return;
-    case Cmd::wait: s.waiting = true; poll(s); return;
+    case Cmd::wait: s.waiting = true; settle(s); return;
     case Cmd::position: {
       const Telemetry t = ctl_.telemetry();
       kin::JointVector q(n_);
@@ -555,61 +568,78 @@ void Console::execute(Session& s, std::string_view line) {
   }
 }
 
+bool Console::settle(Session& s) {
+  if (s.enabling) {
+    const Telemetry t = ctl_.telemetry();
+    switch (t.state) {
+      case ArmState::enabling: return true;
+      case ArmState::idle:
+      case ArmState::moving:
+        s.enabling = false;
+        answer_ok(s, "enabled");
+        break;
+      case ArmState::fault:
+        s.enabling = false;
+        answer_error(s, CmdError::fault, fmt("enable failed: %s", t.fault_text));
+        break;
+      case ArmState::boot:
+      case ArmState::disabled:
+      case ArmState::stopping:
+      case ArmState::estop:
+        s.enabling = false;
+        answer_error(s, CmdError::bad_state, fmt("enable interrupted: arm is %s", to_string(t.state)));
+        break;
+    }
+  }
+  if (s.waiting) {
+    const Telemetry t = ctl_.telemetry();
+    switch (t.state) {
+      case ArmState::fault:
+        s.waiting = false;
+        answer_error(s, CmdError::fault, fmt("arm in fault while waiting: %s", t.fault_text));
+        break;
+      case ArmState::estop:
+        s.waiting = false;
+        answer_error(s, CmdError::fault, "e-stop while waiting");
+        break;
+      case ArmState::moving:
+      case ArmState::stopping:
+      case ArmState::enabling: return true;  // still busy
+      case ArmState::boot:
+      case ArmState::disabled:
+      case ArmState::idle:
+        if (!ctl_.motions().empty()) return true;  // producer-side view: exact, never stale
+        s.waiting = false;
+        answer_ok(s, fmt("idle %s", pose_text(tail()).c_str()));
+        break;
+    }
+  }
+  return false;
+}
+
+bool Console::run_one(Session& s) {
+  if (settle(s) || s.lines.empty()) return false;
+  const std::string line = std::move(s.lines.front());
+  s.lines.pop_front();
+  execute(s, line);
+  return true;
+}
+
 void Console::poll(Session& s) {
-  for (;;) {
-    if (s.enabling) {
-      const Telemetry t = ctl_.telemetry();
-      switch (t.state) {
-        case ArmState::enabling: return;
-        case ArmState::idle:
-        case ArmState::moving:
-          s.enabling = false;
-          answer_ok(s, "enabled");
-          break;
-        case ArmState::fault:
-          s.enabling = false;
-          answer_error(s, CmdError::fault, fmt("enable failed: %s", t.fault_text));
-          break;
-        case ArmState::boot:
-        case ArmState::disabled:
-        case ArmState::stopping:
-        case ArmState::estop:
-          s.enabling = false;
-          answer_error(s, CmdError::bad_state, fmt("enable interrupted: arm is %s", to_string(t.state)));
-          break;
-      }
-    }
-    if (s.waiting) {
-      const Telemetry t = ctl_.telemetry();
-      switch (t.state) {
-        case ArmState::fault:
-          s.waiting = false;
-          answer_error(s, CmdError::fault, fmt("arm in fault while waiting: %s", t.fault_text));
-          break;
-        case ArmState::estop:
-          s.waiting = false;
-          answer_error(s, CmdError::fault, "e-stop while waiting");
-          break;
-        case ArmState::moving:
-        case ArmState::stopping:
-        case ArmState::enabling: return;  // still busy
-        case ArmState::boot:
-        case ArmState::disabled:
-        case ArmState::idle:
-          if (!ctl_.motions().empty()) return;  // producer-side view: exact, never stale
-          s.waiting = false;
-          answer_ok(s, fmt("idle %s", pose_text(tail()).c_str()));
-          break;
-      }
-    }
-    if (s.lines.empty()) return;
-    const std::string line = std::move(s.lines.front());
-    s.lines.pop_front();
-    execute(s, line);
+  while (run_one(s)) {
   }
 }
 
 void Console::feed(Session& s, std::string_view bytes) {
+  accept(s, bytes);
+  poll(s);
+}
+
+void Console::end_of_input(Session& s) {
+  if (!s.partial.empty() || s.discarding) accept(s, "\n");
+}
+
+void Console::accept(Session& s, std::string_view bytes) {
   for (char ch : bytes) {
     if (is_realtime(ch)) {
       Reply r;
@@ -617,12 +647,20 @@ void Console::feed(Session& s, std::string_view bytes) {
         case kRtStatus: s.out += grbl_report() + "\n"; break;
         case kRtHold: if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n"; break;
         case kRtResume: if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n"; break;
-        case kRtReset:
+        case kRtReset: {
           if (!request(RequestOp::estop, r)) s.out += "error: timeout e-stop not acknowledged\n";
           s.partial.clear();
           s.discarding = false;
+          // A pending wait / enable is answered first (in order), then every complete line
+          // not executed yet gets its answer: not executing them is right, leaving them
+          // unanswered would hang a sender that counts answers.
+          settle(s);
+          for (const std::string& l : s.lines)
+            answer_error(s, CmdError::estop,
+                         fmt("'%.40s%s' not executed: e-stop (Ctrl-X) before it ran", l.c_str(), l.size() > 40 ? "..." : ""));
           s.lines.clear();
           break;
+        }
         default: break;
       }
       continue;
@@ -648,7 +686,6 @@ void Console::feed(Session& s, std::string_view bytes) {
       s.partial.clear();
     }
   }
-  poll(s);
 }
 
 }  // namespace servoarm::fw

@@ -85,6 +85,12 @@ const char* to_string(EventKind k) {
 }
 
 namespace {
+/// "<what>" or "<what>; N queued move(s) dropped".
+void dropped_text(char* dst, std::size_t cap, const char* what, std::size_t dropped) {
+  if (dropped == 0) std::snprintf(dst, cap, "%s", what);
+  else std::snprintf(dst, cap, "%s; %zu queued move%s dropped", what, dropped, dropped == 1 ? "" : "s");
+}
+
 void copy_text(char* dst, std::size_t cap, const char* src) {
   std::size_t i = 0;
   for (; src != nullptr && src[i] != '\0' && i + 1 < cap; ++i) dst[i] = src[i];
@@ -121,6 +127,14 @@ void Controller::hold_measured() {
   cmd_ = kin::JointState::rest(q_act_);
   have_prev_ = false;
   ++generation_;
+}
+
+std::size_t Controller::flush_motions() {
+  const std::size_t n = motions_.clear();
+  ++generation_;
+  running_ = nullptr;
+  holding_ = false;
+  return n;
 }
 
 void Controller::reply(std::uint32_t seq, RtResult res, const char* msg) {
@@ -224,10 +238,7 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
                   detail);
   else
     std::snprintf(fault_text_, sizeof fault_text_, "%s%s%s", to_string(c), detail[0] ? ": " : "", detail);
-  motions_.clear();
-  ++generation_;
-  running_ = nullptr;
-  holding_ = false;
+  const std::size_t dropped = flush_motions();
   set_state(ArmState::fault);
   if (was_powered) {
     if (!drive_stop_) begin_emergency_stop();  // (ramp mode: replanned from here, as before)
@@ -237,6 +248,11 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
   }
   if (!stop_active_) bus_.disable();
   emit(EventKind::fault, c, joint, 0, fault_text_);
+  if (dropped > 0) {
+    char d[sizeof(Event::message)];
+    std::snprintf(d, sizeof d, "%zu queued move%s dropped: arm is fault", dropped, dropped == 1 ? "" : "s");
+    emit(EventKind::motion_refused, FaultCause::none, -1, 0, d);
+  }
 }
 
 void Controller::supervise(TimePoint now) {
@@ -292,11 +308,14 @@ void Controller::supervise(TimePoint now) {
       raise_fault(FaultCause::left_enabled, j, d);
       return;
     }
+    // Enabling needs live drives too: a drive that has been talking and went quiet faults
+    // the enable (one that has not sent feedback yet since start is waited for, above).
+    const bool watched = powered || (state_ == ArmState::enabling && fb.valid);
     if (powered && !fb.valid) {
       raise_fault(FaultCause::feedback_invalid, j, "no position feedback");
       return;
     }
-    if (powered && static_cast<double>(fb.age) * 1e-9 > cfg_.feedback_timeout) {
+    if (watched && static_cast<double>(fb.age) * 1e-9 > cfg_.feedback_timeout) {
       std::snprintf(d, sizeof d, "no position feedback for %.1f ms", static_cast<double>(fb.age) * 1e-6);
       raise_fault(FaultCause::feedback_invalid, j, d);
       return;
@@ -312,9 +331,13 @@ void Controller::supervise(TimePoint now) {
     }
   }
   if (state_ == ArmState::enabling) {
+    // Enabled = every drive operation enabled (the bus reports that only with a heartbeat
+    // within its consumer time) and every drive's position feedback valid and fresh.
     bool all = true;
     for (int j = 0; j < n_; ++j) all = all && bus_.feedback(static_cast<std::size_t>(j)).state == hal::JointState::enabled;
-    if (all) {
+    bool fresh = true;
+    for (int j = 0; j < n_; ++j) fresh = fresh && bus_.feedback(static_cast<std::size_t>(j)).valid;
+    if (all && fresh) {
       hold_measured();
       set_state(ArmState::idle);
       emit(EventKind::state, FaultCause::none, -1, 0, "enabled");
@@ -322,6 +345,11 @@ void Controller::supervise(TimePoint now) {
       for (int j = 0; j < n_; ++j)
         if (bus_.feedback(static_cast<std::size_t>(j)).state != hal::JointState::enabled) {
           raise_fault(FaultCause::drive_refused, j, "not operation enabled within enable_timeout");
+          return;
+        }
+      for (int j = 0; j < n_; ++j)
+        if (!bus_.feedback(static_cast<std::size_t>(j)).valid) {
+          raise_fault(FaultCause::feedback_invalid, j, "no position feedback within enable_timeout");
           return;
         }
     }
@@ -373,15 +401,13 @@ void Controller::handle_request(const Request& r, TimePoint now) {
       reply(r.seq, RtResult::ok, m);
       return;
     }
-    case RequestOp::estop:
+    case RequestOp::estop: {
       // Acts in this cycle: quick stop ramp (category 1), then power off.
+      std::size_t dropped = 0;
       if (state_ != ArmState::estop) {
         const bool powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping ||
                              (state_ == ArmState::fault && stop_active_);
-        motions_.clear();
-  ++generation_;
-        running_ = nullptr;
-        holding_ = false;
+        dropped = flush_motions();
         set_state(ArmState::estop);
         estop_seen_ = now;
         if (powered) {
@@ -394,8 +420,10 @@ void Controller::handle_request(const Request& r, TimePoint now) {
         }
         emit(EventKind::estop, FaultCause::none, -1, 0, "emergency stop");
       }
-      reply(r.seq, RtResult::ok, "estop");
+      dropped_text(m, sizeof m, "estop", dropped);
+      reply(r.seq, RtResult::ok, m);
       return;
+    }
     case RequestOp::reset:
       if (state_ == ArmState::fault || state_ == ArmState::estop) {
         if (stop_active_) {
@@ -417,6 +445,21 @@ void Controller::handle_request(const Request& r, TimePoint now) {
     case RequestOp::enable:
       switch (state_) {
         case ArmState::disabled:
+          // Never power up on a drive's last known state: every drive must be talking now
+          // (position feedback younger than feedback_timeout; heartbeats are checked by the
+          // bus, which reports a joint enabled only with a heartbeat within its consumer time).
+          for (int j = 0; j < n_; ++j) {
+            const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+            // (no feedback at all yet, just after start: the enabling state waits for it)
+            if (!fb.valid || static_cast<double>(fb.age) * 1e-9 <= cfg_.feedback_timeout) continue;
+            char d[64];
+            std::snprintf(d, sizeof d, "no position feedback for %.1f ms", static_cast<double>(fb.age) * 1e-6);
+            raise_fault(FaultCause::feedback_invalid, j, d);
+            std::snprintf(m, sizeof m, "enable failed: %s", fault_text_);
+            reply(r.seq, RtResult::fault, m);
+            return;
+          }
+          flush_motions();  // a move queued before the arm was disabled never starts
           for (int j = 0; j < n_; ++j) emcy_seen_[static_cast<std::size_t>(j)] = bus_.feedback(static_cast<std::size_t>(j)).emcy_count;
           bus_.enable();
           hold_measured();
@@ -445,10 +488,7 @@ void Controller::handle_request(const Request& r, TimePoint now) {
       switch (state_) {
         case ArmState::moving:
         case ArmState::stopping:
-          motions_.clear();
-  ++generation_;
-          running_ = nullptr;
-          holding_ = false;
+          flush_motions();
           if (!stop_active_) begin_quick_stop();
           disable_after_stop_ = true;
           set_state(ArmState::stopping);
@@ -456,15 +496,20 @@ void Controller::handle_request(const Request& r, TimePoint now) {
           return;
         case ArmState::idle:
         case ArmState::enabling:
-        case ArmState::disabled:
+        case ArmState::disabled: {
+          // Moves queued but not started yet (same cycle as this request) are dropped too.
+          const std::size_t dropped = flush_motions();
           bus_.disable();
           set_state(ArmState::disabled);
           hold_measured();
-          reply(r.seq, RtResult::ok, "disabled");
+          dropped_text(m, sizeof m, "disabled", dropped);
+          reply(r.seq, RtResult::ok, m);
           return;
+        }
         case ArmState::boot:
         case ArmState::fault:
         case ArmState::estop:
+          flush_motions();
           bus_.disable();
           reply(r.seq, RtResult::ok, "drives disabled");
           return;
@@ -473,10 +518,7 @@ void Controller::handle_request(const Request& r, TimePoint now) {
     case RequestOp::stop:
       switch (state_) {
         case ArmState::moving:
-          motions_.clear();
-  ++generation_;
-          running_ = nullptr;
-          holding_ = false;
+          flush_motions();
           if (!stop_active_) begin_quick_stop();
           set_state(ArmState::stopping);
           reply(r.seq, RtResult::ok, "stopping");
@@ -487,9 +529,14 @@ void Controller::handle_request(const Request& r, TimePoint now) {
         case ArmState::idle:
         case ArmState::stopping:
         case ArmState::fault:
-        case ArmState::estop:
-          reply(r.seq, RtResult::ok, "not moving");
+        case ArmState::estop: {
+          // Not moving yet, but a move queued in this same cycle would start at the
+          // next one: drop every queued move whatever the state.
+          const std::size_t dropped = flush_motions();
+          dropped_text(m, sizeof m, state_ == ArmState::stopping ? "stopping" : "not moving", dropped);
+          reply(r.seq, RtResult::ok, m);
           return;
+        }
       }
       return;
     case RequestOp::hold:
@@ -502,6 +549,14 @@ void Controller::handle_request(const Request& r, TimePoint now) {
           begin_quick_stop();
         }
         reply(r.seq, RtResult::ok, "feed hold");
+        return;
+      }
+      if (state_ == ArmState::idle && !motions_.empty()) {
+        // Moves queued but not started (GRBL Hold with a planned queue): hold the queue;
+        // `resume` / '~' starts it, `stop` drops it.
+        holding_ = true;
+        set_state(ArmState::moving);
+        reply(r.seq, RtResult::ok, "feed hold (queue held)");
         return;
       }
       reply(r.seq, RtResult::ok, state_ == ArmState::moving ? "already holding" : "not moving");
@@ -630,6 +685,14 @@ void Controller::step_motion() {
     case ArmState::fault:
     case ArmState::estop:
       // Not powered (or ramp finished): follow the measured position so enabling never jumps.
+      if (!motions_.empty()) {
+        // A move the console committed on a state it read before a fault / e-stop / disable:
+        // it never starts, and the console hears about it.
+        char d[sizeof(Event::message)];
+        const std::size_t n = flush_motions();
+        std::snprintf(d, sizeof d, "%zu queued move%s dropped: arm is %s", n, n == 1 ? "" : "s", to_string(state_));
+        emit(EventKind::motion_refused, FaultCause::none, -1, 0, d);
+      }
       for (int j = 0; j < n_; ++j) {
         const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
         if (fb.valid) cmd_.pos[j] = fb.position;
@@ -648,9 +711,18 @@ void Controller::step_motion() {
     case ArmState::moving:
       break;
   }
-  if (running_ == nullptr && !start_next_motion()) {
-    set_state(ArmState::idle);
-    return;
+  if (running_ == nullptr) {
+    if (holding_) {  // feed hold on a queue that has not started: nothing moves until resume
+      if (motions_.empty()) {
+        holding_ = false;
+        set_state(ArmState::idle);
+      }
+      return;
+    }
+    if (!start_next_motion()) {
+      set_state(ArmState::idle);
+      return;
+    }
   }
   if (holding_ && running_->kind != MotionKind::cartesian) return;  // joint/dwell: held at rest
   motion_t_ += period_s_;

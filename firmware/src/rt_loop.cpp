@@ -92,6 +92,7 @@ void RtLoop::thread_main() {
   while (!stop_.load(std::memory_order_relaxed)) {
     sleep_until_ns(next);
     const std::int64_t woke = now_ns();
+    if (pre_cycle_ != nullptr) pre_cycle_(pre_cycle_ctx_, woke);
     ctl_.cycle(woke);
     const std::int64_t end = now_ns();
     next += period;

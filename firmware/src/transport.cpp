@@ -115,44 +115,149 @@ bool write_all(int fd, const std::string& s) {
   return true;
 }
 
+ConsoleServer::ConsoleServer(Console& console, const std::vector<FdTransport*>& ts)
+    : console_(console), ts_(ts), sessions_(ts.size()), pfds_(2 * ts.size()) {
+  for (std::size_t i = 0; i < ts.size(); ++i) {
+    sessions_[i].name = ts[i]->name;
+    const int fl = ts[i]->wr >= 0 ? fcntl(ts[i]->wr, F_GETFL) : -1;
+    ts[i]->wr_nonblocking = fl >= 0 && (fl & O_NONBLOCK) != 0;
+  }
+}
+
+// Read what every transport has (bounded), so realtime characters act before
+// any line of any client runs and before any output is written.
+void ConsoleServer::sweep(int timeout_ms) {
+  for (std::size_t i = 0; i < ts_.size(); ++i) {
+    FdTransport& t = *ts_[i];
+    pfds_[2 * i] = pollfd{t.eof ? -1 : t.rd, POLLIN, 0};
+    const bool want_out = !t.pending.empty() && t.wr >= 0;
+    pfds_[2 * i + 1] = pollfd{want_out ? t.wr : -1, POLLOUT, 0};
+  }
+  ::poll(pfds_.data(), pfds_.size(), timeout_ms);
+  for (std::size_t i = 0; i < ts_.size(); ++i) {
+    FdTransport& t = *ts_[i];
+    Session& s = sessions_[i];
+    if (t.eof || !(pfds_[2 * i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
+    char buf[4096];
+    const ssize_t r = ::read(t.rd, buf, sizeof buf);
+    if (r > 0) {
+      console_.accept(s, std::string_view(buf, static_cast<std::size_t>(r)));
+    } else if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR && errno != EIO)) {
+      if (t.name == "stdin") {
+        t.eof = true;
+        console_.end_of_input(s);  // a last line without newline (even an overlong one) is answered
+      } else if (t.name == "can") {
+        t.eof = true;  // the bridge thread is gone
+      }
+    }
+  }
+}
+
+void ConsoleServer::queue_output(std::size_t i) {
+  FdTransport& t = *ts_[i];
+  Session& s = sessions_[i];
+  if (s.out.empty()) return;
+  if (t.pending.size() + s.out.size() > kMaxPendingOutput) {
+    // The client is not reading: it loses its own output, counted and told (below), and
+    // nobody else waits for it.
+    std::uint64_t lines = 0;
+    for (char c : s.out) lines += c == '\n';
+    t.dropped_lines += lines;
+    t.dropped_bytes += s.out.size();
+    t.dropped_unreported += lines;
+    console_.add_output_dropped(lines, s.out.size());
+  } else {
+    t.pending += s.out;
+  }
+  s.out.clear();
+}
+
+void ConsoleServer::write_some(std::size_t i) {
+  FdTransport& t = *ts_[i];
+  if (t.wr < 0) {
+    t.pending.clear();
+    return;
+  }
+  if (t.pending.empty() && t.dropped_unreported > 0) {
+    char b[160];
+    std::snprintf(b, sizeof b, "alarm: console output overflow: %llu lines dropped (this client did not read its answers)\n",
+                  static_cast<unsigned long long>(t.dropped_unreported));
+    t.pending = b;
+    t.dropped_unreported = 0;
+  }
+  // Never block on one client: a non-blocking fd takes what fits; a blocking one (stdout
+  // of the calling shell) gets at most PIPE_BUF bytes per write, and only when poll()
+  // says it is writable (a pipe then takes them without blocking).
+  for (int k = 0; k < 64 && !t.pending.empty(); ++k) {
+    std::size_t n = t.pending.size();
+    if (!t.wr_nonblocking) {
+      pollfd p{t.wr, POLLOUT, 0};
+      if (::poll(&p, 1, 0) <= 0 || !(p.revents & POLLOUT)) return;
+      if (n > 512) n = 512;
+    }
+    const ssize_t w = ::write(t.wr, t.pending.data(), n);
+    if (w > 0) {
+      t.pending.erase(0, static_cast<std::size_t>(w));
+      continue;
+    }
+    if (w < 0 && errno == EINTR) continue;
+    if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) return;
+    // The other end is gone (EIO on a pty without a client, EPIPE): nobody to tell.
+    t.pending.clear();
+    return;
+  }
+}
+
+bool ConsoleServer::round(int timeout_ms, bool exit_on_eof) {
+  sweep(timeout_ms);
+  // Lines one at a time, round-robin over the clients; between two lines every
+  // transport is read again, so a realtime character waits at most for the line
+  // being executed (a movel path check: a few ms), never for another client.
+  for (int budget = 0; budget < 256; ++budget) {
+    bool any = false;
+    for (std::size_t i = 0; i < ts_.size(); ++i) {
+      if (!console_.run_one(sessions_[i])) continue;
+      any = true;
+      queue_output(i);
+      sweep(0);
+    }
+    if (!any) break;
+  }
+  const std::string ev = console_.drain_events();
+  bool all_eof_done = true;
+  for (std::size_t i = 0; i < ts_.size(); ++i) {
+    FdTransport& t = *ts_[i];
+    Session& s = sessions_[i];
+    console_.poll(s);  // finish a wait that is done (lines were run above)
+    if (!ev.empty()) s.out += ev;
+    queue_output(i);
+    write_some(i);
+    if (t.name == "stdin" && !(t.eof && !console_.busy(s))) all_eof_done = false;
+    if (t.name != "stdin") all_eof_done = all_eof_done && exit_on_eof;
+  }
+  if (exit_on_eof && all_eof_done) {
+    // Last answers out before returning (bounded: a client that does not read loses them).
+    for (int k = 0; k < 200; ++k) {
+      bool left = false;
+      for (std::size_t i = 0; i < ts_.size(); ++i) {
+        write_some(i);
+        left = left || !ts_[i]->pending.empty();
+      }
+      if (!left) break;
+      pollfd p{-1, 0, 0};
+      ::poll(&p, 0, 5);
+    }
+    return false;
+  }
+  return true;
+}
+
 void serve_consoles(Console& console, const std::vector<FdTransport*>& ts, bool exit_on_eof,
                     const volatile std::sig_atomic_t* quit, const std::atomic<bool>* stop) {
-  std::vector<Session> sessions(ts.size());
-  for (std::size_t i = 0; i < ts.size(); ++i) sessions[i].name = ts[i]->name;
-  std::vector<pollfd> pfds(ts.size());
+  ConsoleServer srv(console, ts);
   for (;;) {
     if ((quit != nullptr && *quit) || (stop != nullptr && stop->load())) break;
-    for (std::size_t i = 0; i < ts.size(); ++i) pfds[i] = pollfd{ts[i]->eof ? -1 : ts[i]->rd, POLLIN, 0};
-    ::poll(pfds.data(), pfds.size(), 10);
-    const std::string ev = console.drain_events();
-    bool all_eof_done = true;
-    for (std::size_t i = 0; i < ts.size(); ++i) {
-      FdTransport& t = *ts[i];
-      Session& s = sessions[i];
-      if (!t.eof && (pfds[i].revents & (POLLIN | POLLHUP | POLLERR))) {
-        char buf[512];
-        const ssize_t r = ::read(t.rd, buf, sizeof buf);
-        if (r > 0) {
-          console.feed(s, std::string_view(buf, static_cast<std::size_t>(r)));
-        } else if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR && errno != EIO)) {
-          if (t.name == "stdin") {
-            t.eof = true;
-            if (!s.partial.empty()) console.feed(s, "\n");
-          } else if (t.name == "can") {
-            t.eof = true;  // the bridge thread is gone
-          }
-        }
-      }
-      console.poll(s);
-      if (!ev.empty()) s.out += ev;
-      if (!s.out.empty()) {
-        write_all(t.wr, s.out);
-        s.out.clear();
-      }
-      if (t.name == "stdin" && !(t.eof && !console.busy(s))) all_eof_done = false;
-      if (t.name != "stdin") all_eof_done = all_eof_done && exit_on_eof;
-    }
-    if (exit_on_eof && all_eof_done) break;
+    if (!srv.round(10, exit_on_eof)) break;
   }
 }
 

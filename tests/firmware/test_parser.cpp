@@ -152,6 +152,20 @@ TEST(Parser, MalformedCommands) {
       {"ik 1 2 inf", CmdError::not_finite},
       {"fk 1 2 3", CmdError::arg_count},
       {"fk 0 0 0 0 0 nan", CmdError::not_finite},
+      // A query never changes state: `stats zero` used to fall through into `home zero`.
+      {"stats zero", CmdError::arg_count},
+      {"stats 1", CmdError::arg_count},
+      {"status zero", CmdError::arg_count},
+      {"limits zero", CmdError::arg_count},
+      {"config zero", CmdError::arg_count},
+      {"home zero 1", CmdError::arg_count},
+      {"home one", CmdError::arg_count},
+      // Speeds have lower bounds (a move at 1e-9 mm/s never ends).
+      {"movel 1 2 3 speed=0.000000001", CmdError::out_of_range},
+      {"movel 1 2 3 speed=0.009", CmdError::out_of_range},
+      {"movej 0 0 0 0 0 0 speed=0.000001", CmdError::out_of_range},
+      {"movej 0 0 0 0 0 0 speed=0.09", CmdError::out_of_range},
+      {"movej 0 0 0 0 0 0 speed=0.99", CmdError::out_of_range},
   };
   for (const Bad& b : cases) {
     GcodeModal m;
@@ -165,6 +179,37 @@ TEST(Parser, MalformedCommands) {
     CHECK(r.message[0] != '\0');
     CHECK(c.cmd == Cmd::status);  // output untouched
     CHECK(m.relative);
+  }
+}
+
+// Every command word with arguments it does not take: refused with arg_count, and
+// the message names the command typed (not another one), so no case of the parser
+// can fall through into a different command.
+TEST(Parser, EveryCommandRefusesWrongArgumentsNamingItself) {
+  struct Case {
+    const char* word;
+    const char* args;
+  };
+  const Case cases[] = {
+      {"status", "zero"}, {"status", "1"},       {"enable", "zero"},  {"disable", "zero"}, {"stop", "zero"},
+      {"estop", "zero"},  {"reset", "zero"},     {"limits", "zero"},  {"stats", "zero"},   {"stats", "1"},
+      {"stats", "x y"},   {"config", "zero"},    {"wait", "zero"},    {"hold", "zero"},    {"resume", "zero"},
+      {"home", "1"},      {"home", "zero zero"}, {"help", "a b"},     {"movej", "1 2 3"},  {"movel", "1 2"},
+      {"ik", "1 2"},      {"fk", "1 2 3"},       {"movej", "zero"},   {"fk", "zero"},      {"ik", "zero 1 2"},
+  };
+  for (const Case& k : cases) {
+    const std::string line = std::string(k.word) + " " + k.args;
+    GcodeModal m;
+    Command c;
+    c.cmd = Cmd::status;
+    const ParseResult r = parse_line(line, kN, m, c);
+    if (r.ok()) FAIL(("'" + line + "' was accepted as " + to_string(c.cmd)).c_str());
+    if (r.error != CmdError::arg_count && r.error != CmdError::bad_number)
+      FAIL(("'" + line + "': expected arg_count or bad_number, got " + to_string(r.error)).c_str());
+    const std::string msg = r.message.data();
+    if (msg.rfind(k.word, 0) != 0)
+      FAIL(("'" + line + "': the message does not name '" + k.word + "': " + msg).c_str());
+    CHECK(c.cmd == Cmd::status);
   }
 }
 
@@ -252,6 +297,10 @@ TEST(Parser, MalformedGcode) {
       {"G4 X1", CmdError::arg_count},
       {"G4 P9999999", CmdError::out_of_range},
       {"G1 X1 F0", CmdError::out_of_range},
+      {"G1 X1 F0.00001", CmdError::out_of_range},
+      {"G1 X1 F0.02", CmdError::out_of_range},  // modal G20 here: 0.02 in/min = 0.51 mm/min
+      {"G21 G1 F0.5", CmdError::out_of_range},  // 0.5 mm/min: below 0.6 mm/min
+      {"G20 G1 X1 F0.02", CmdError::out_of_range},
       {"G1 X1 F-10", CmdError::out_of_range},
       {"G1 X1 P5", CmdError::bad_option},
       {"M17 X1", CmdError::arg_count},

@@ -81,6 +81,31 @@ TEST(Process, StdinScriptAnswersEveryLineAndExitsAtEof) {
   CHECK_TEXT(std::fabs(j1 - 10.0) < 0.01, out.c_str());  // measured: within an encoder count or two
 }
 
+TEST(Process, StopInTheSameWriteAsTheMoveCancelsIt) {
+  // Issue 13 item 1, as reported: both lines in one write; `wait` answers at once
+  // and the arm stands where it was (it used to run on to 60 deg).
+  int st = 0;
+  const std::string out = run_capture(
+      "printf 'enable\\nmovej 60 -60 120 60 -60 60 speed=20\\nstop\\nwait\\nstatus\\n' | timeout 60 " +
+          emulator_prefix() + ARMFW_PATH " --sim --priority 0 2>/dev/null",
+      st);
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
+  const auto jp = out.find("joints=[");
+  CHECK_TEXT(jp != std::string::npos, out.c_str());
+  double q[6] = {};
+  CHECK(std::sscanf(out.c_str() + jp + 8, "%lf %lf %lf %lf %lf %lf", &q[0], &q[1], &q[2], &q[3], &q[4], &q[5]) == 6);
+  for (double v : q) CHECK_TEXT(std::fabs(v) < 1.0, out.c_str());
+  CHECK_TEXT(out.find("state=idle") != std::string::npos, out.c_str());
+}
+
+TEST(Process, OverlongLastLineWithoutNewlineIsAnswered) {
+  int st = 0;
+  const std::string out = run_capture(
+      "head -c 300 /dev/zero | tr '\\0' a | timeout 60 " + emulator_prefix() + ARMFW_PATH " --sim --priority 0 2>/dev/null", st);
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
+  LONGS_EQUAL_TEXT(1, count(out, "error: overlong"), out.c_str());
+}
+
 TEST(Process, BadConfigRefusedNamingTheKey) {
   char path[] = "/tmp/armfw_cfg_XXXXXX";
   const int fd = mkstemp(path);

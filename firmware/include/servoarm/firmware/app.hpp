@@ -33,6 +33,9 @@ class SimPlant {
   void stop_thread();
   /// Single-threaded use: drain frames and tick the drives at `now`.
   void step(hal::TimePoint now);
+  /// RtLoop::PreCycle that steps the plant `ctx` (a SimPlant*): what `armfw --sim` runs
+  /// on the control thread once the drives are up (the drive thread is stopped then).
+  static void step_hook(void* ctx, std::int64_t now_ns) { static_cast<SimPlant*>(ctx)->step(now_ns); }
   sim::ArmSim& arm() { return *arm_; }
   hal::SimBus& bus() { return *bus_; }
   /// Fault injection from another thread: applied by the drive thread at its next step.

@@ -18,6 +18,10 @@ namespace servoarm::fw {
 
 /// Longest accepted line (characters, without the newline).
 inline constexpr std::size_t kMaxLine = 200;
+/// Slowest accepted speeds (every front end: movel speed=, G-code F, the configuration):
+/// slower moves would practically never end (the console also caps a move's duration).
+inline constexpr double kMinLinearSpeedMmS = 0.01;  ///< mm/s (G-code F: 0.6 mm/min)
+inline constexpr double kMinJointSpeedPct = 1.0;    ///< movej speed=, percent (the planner's override floor, 0.01)
 
 enum class CmdError : std::uint8_t {
   ok,
@@ -41,6 +45,7 @@ enum class CmdError : std::uint8_t {
   branch,            ///< path changes IK branch
   plan_failed,       ///< planner refused (message says why)
   timeout,           ///< control thread did not answer in time
+  estop,             ///< line dropped, not executed: an e-stop (Ctrl-X) arrived before it ran
   internal,          ///< should not happen (message says what)
 };
 const char* to_string(CmdError e);

@@ -35,6 +35,7 @@ struct ConsoleConfig {
   kin::JointVector home;                     ///< SI; empty = all zeros clamped into the limits
   kin::CartesianLimits cartesian{};          ///< linear_velocity is replaced per move
   double reply_timeout_s = 1.0;              ///< wait for the control thread to answer a request
+  double max_move_duration_s = 600.0;        ///< longest move accepted (movej, movel, G0/G1, home): out_of_range beyond
   std::string config_text;                   ///< what `config` prints (the effective configuration)
 };
 
@@ -57,10 +58,26 @@ class Console {
   Console(Controller& ctl, const ConsoleConfig& cfg);
 
   /// Bytes from a transport: realtime characters act now, lines are executed
-  /// (or queued while the session waits). Answers go to session.out.
+  /// (or queued while the session waits). Answers go to session.out. = accept() + poll().
   void feed(Session& s, std::string_view bytes);
+  /// Bytes from a transport, without executing lines: realtime characters act now
+  /// (Ctrl-X answers every complete line not executed yet with `error: estop`),
+  /// complete lines are queued in the session.
+  void accept(Session& s, std::string_view bytes);
+  /// The transport reached end of input: a last line without its newline (even an
+  /// overlong one) is queued, so every line gets exactly one answer.
+  void end_of_input(Session& s);
+  /// Finish a wait/enable that is done, then execute at most one queued line.
+  /// True when a line was executed (call again for the next one).
+  bool run_one(Session& s);
   /// Execute queued lines / finish a wait when the arm is idle. Call regularly.
   void poll(Session& s);
+  /// Console output a transport had to drop because its client did not read
+  /// (counted by the transport layer, shown in `stats`).
+  void add_output_dropped(std::uint64_t lines, std::uint64_t bytes) {
+    output_dropped_lines_ += lines;
+    output_dropped_bytes_ += bytes;
+  }
   /// Execute one complete line now (no realtime characters). Used by feed().
   void execute(Session& s, std::string_view line);
   /// Drain control-thread events into text lines ("alarm: ..."), for every session.
@@ -91,6 +108,10 @@ class Console {
   void answer_error(Session& s, CmdError e, const std::string& msg);
   void answer_ok(Session& s, const std::string& data = {});
   bool motion_state_ok(Session& s);
+  /// Resolve a pending `enable` / `wait` whose outcome is known. True while still blocked.
+  bool settle(Session& s);
+  /// out_of_range answer when a planned move would take longer than max_move_duration_s.
+  bool duration_ok(Session& s, const char* what, double duration_s);
   void queue_joint(Session& s, const kin::JointVector& goal, double pct);
   void queue_linear(Session& s, const kin::Pose& target, double speed_m_s);
   void queue_dwell(Session& s, double secs);
@@ -115,6 +136,7 @@ class Console {
   std::uint32_t tail_id_ = 0;  ///< id of the motion whose goal tail_ holds (0: none)
   std::uint64_t tail_gen_ = 0; ///< controller generation when tail_ was set
   std::function<void()> idle_;
+  std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
   struct Ik;
   std::shared_ptr<Ik> ik_;
 };

@@ -239,6 +239,9 @@ class Controller {
   void validate_and_write(TimePoint now);
   void publish();
   void hold_measured();
+  /// Drop every queued motion (the running one included), forget a feed hold, bump the
+  /// generation. Returns how many were queued.
+  std::size_t flush_motions();
 
   hal::ServoBus& bus_;
   const kin::Chain& chain_;

@@ -38,6 +38,17 @@ class RtLoop {
   /// (e.g. tests start/stop an allocation counter there). Set before start().
   std::function<void()> on_thread_start, on_thread_exit;
 
+  /// Work run on the RT thread right before every Controller::cycle(now), with the
+  /// same `now` (set before start()). `armfw --sim` steps its virtual drives here,
+  /// so drives and controller advance together: a busy machine that delays the
+  /// control thread delays the drives with it and cannot starve them into a
+  /// feedback or heartbeat fault.
+  using PreCycle = void (*)(void* ctx, std::int64_t now_ns);
+  void set_pre_cycle(PreCycle fn, void* ctx) {
+    pre_cycle_ = fn;
+    pre_cycle_ctx_ = ctx;
+  }
+
   /// Start the thread. Warnings (no RT priority, mlockall failed, affinity
   /// failed) are collected in warnings() -- one line each. False if the thread
   /// could not be created.
@@ -60,6 +71,8 @@ class RtLoop {
   std::atomic<std::uint64_t> cycles_{0};
   std::string warnings_;
   bool realtime_ = false;
+  PreCycle pre_cycle_ = nullptr;
+  void* pre_cycle_ctx_ = nullptr;
 };
 
 }  // namespace servoarm::fw

@@ -4,6 +4,8 @@
 // (screen / minicom / pronsole connect to it), a serial TTY in raw mode, and
 // CAN: ISO-TP (ISO 15765-2) messages on a CAN interface, bridged to a byte
 // stream by a thread of its own (CanConsole).
+#include <poll.h>
+
 #include <atomic>
 #include <csignal>
 #include <cstdint>
@@ -15,6 +17,7 @@
 #include "servoarm/hal/isotp.hpp"
 #include "servoarm/hal/sim_bus.hpp"
 #include "servoarm/hal/socketcan_bus.hpp"
+#include "servoarm/firmware/console.hpp"
 
 namespace servoarm::fw {
 
@@ -25,6 +28,12 @@ struct FdTransport {
   std::string path;       ///< pty slave / serial device path
   bool eof = false;
   bool owns = false;
+  // Output side (ConsoleServer): answers not written yet, and what a client that did
+  // not read lost.
+  std::string pending;
+  bool wr_nonblocking = false;
+  std::uint64_t dropped_lines = 0, dropped_bytes = 0;
+  std::uint64_t dropped_unreported = 0;  ///< lines dropped since the client was last told
   ~FdTransport();
 };
 
@@ -35,10 +44,39 @@ std::string open_serial(FdTransport& t, const std::string& path, int baud);
 /// Write all of `s` (blocking, retries on EINTR/EAGAIN with a short poll). False on error.
 bool write_all(int fd, const std::string& s);
 
-class Console;
-/// The console loop (console thread): poll every transport, feed bytes to the
-/// console, write answers and `alarm:` events back. Returns when `quit` is set,
-/// or (exit_on_eof) once stdin reached end of file and its last line finished.
+
+/// Most console output held for one client that is not reading (bytes). Beyond it
+/// the client's new answers are dropped, counted in its transport and in `stats`
+/// (output_dropped_lines), and it gets one `alarm: console output overflow` line
+/// once it reads again. Nobody else waits for it.
+inline constexpr std::size_t kMaxPendingOutput = 64 * 1024;
+
+/// The console thread's work over several transports. Each round: read every
+/// transport (realtime characters act at once, before any line runs or any
+/// output is written), run complete lines one at a time round-robin with a
+/// fresh read of every transport between two lines, then write to each client
+/// only what it takes without blocking. One stalled client never delays the
+/// others (nor an e-stop from them).
+class ConsoleServer {
+ public:
+  ConsoleServer(Console& console, const std::vector<FdTransport*>& ts);
+  /// One round, waiting up to timeout_ms for input. False when exit_on_eof and
+  /// stdin has ended and its last line has been answered.
+  bool round(int timeout_ms, bool exit_on_eof);
+  Session& session(std::size_t i) { return sessions_[i]; }
+
+ private:
+  void sweep(int timeout_ms);
+  void queue_output(std::size_t i);
+  void write_some(std::size_t i);
+  Console& console_;
+  std::vector<FdTransport*> ts_;
+  std::vector<Session> sessions_;
+  std::vector<pollfd> pfds_;
+};
+
+/// The console loop (console thread): ConsoleServer rounds until `quit` / `stop`
+/// is set, or (exit_on_eof) once stdin reached end of file and its last line finished.
 void serve_consoles(Console& console, const std::vector<FdTransport*>& ts, bool exit_on_eof,
                     const volatile std::sig_atomic_t* quit, const std::atomic<bool>* stop = nullptr);
 
