@@ -7,7 +7,7 @@
 # packages for the host's architecture the same way.
 #
 # What goes where (CPACK_PACKAGING_INSTALL_PREFIX /usr):
-#   /usr/bin/armfw, /usr/bin/armctl          install() rules of firmware/CMakeLists.txt
+#   /usr/bin/armfw, /usr/bin/armctl          install() rules of firmware/app/ and firmware/armctl/CMakeLists.txt
 #   /usr/share/servoarm/models/*.toml        built-in robot descriptions
 #   /etc/servoarm/armfw.toml                 default firmware config (conffile)
 #   /etc/default/servoarm                    CAN bitrate, extra armfw arguments (conffile)
@@ -54,7 +54,7 @@ endif()
 # Written by hand: dpkg-shlibdeps cannot see a cross build's target libraries.
 # The binaries need glibc >= 2.34 (bookworm's toolchain) and libstdc++ from g++ 12.
 set(CPACK_DEBIAN_PACKAGE_DEPENDS "libc6 (>= 2.34), libstdc++6 (>= 12), libgcc-s1 (>= 3.0), adduser, iproute2")
-# armctl's line editing (firmware/CMakeLists.txt: only when libedit was found for the target)
+# armctl's line editing (firmware/armctl/CMakeLists.txt: only when libedit was found for the target)
 get_property(_servoarm_libedit GLOBAL PROPERTY SERVOARM_NEEDS_LIBEDIT)
 if(_servoarm_libedit)
   string(APPEND CPACK_DEBIAN_PACKAGE_DEPENDS ", libedit2 (>= 3.1)")

@@ -13,7 +13,7 @@
 #include <chrono>
 #include <string>
 
-#include "servoarm/firmware/app.hpp"
+#include "servoarm/app/app.hpp"
 
 namespace {
 

@@ -9,7 +9,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 sec=${1:-10}; hz=${2:-1000}; prio=${3:-80}
-armfw=${ARMFW:-$root/build/firmware/armfw}
+armfw=${ARMFW:-$root/build/bin/armfw}
 [ -x "$armfw" ] || { echo "no $armfw (build first: bash .ci/build)" >&2; exit 2; }
 command -v cyclictest >/dev/null || { echo "cyclictest missing (apt-get install rt-tests)" >&2; exit 2; }
 period_us=$(( 1000000 / hz ))

@@ -1,0 +1,202 @@
+#include "servoarm/app/app.hpp"
+
+#include <cmath>
+#include <vector>
+
+#include "servoarm/kinematics/description.hpp"
+
+namespace servoarm::fw {
+
+SimPlant::SimPlant(hal::Clock& clock, const std::vector<std::uint8_t>& nodes, const sim::MotorParams& motor) : clock_(clock) {
+  bus_ = std::make_unique<hal::SimBus>(clock, 50 * hal::kMicrosecond);
+  master_ep_ = bus_->open(4096);
+  sim_ep_ = bus_->open(4096);
+  arm_ = std::make_unique<sim::ArmSim>(*sim_ep_, nodes, motor, 7);
+  arm_->power_on(clock.now());
+}
+
+SimPlant::~SimPlant() {
+  stop_thread();
+  arm_.reset();
+  sim_ep_.reset();
+  master_ep_.reset();
+}
+
+void SimPlant::apply_injections(hal::TimePoint now) {
+  const int s = silent_.exchange(-1);
+  if (s >= 0 && static_cast<std::size_t>(s) < arm_->size()) arm_->at(static_cast<std::size_t>(s)).faults().silent = true;
+  const int h = hb_stop_.exchange(-1);
+  if (h >= 0 && static_cast<std::size_t>(h) < arm_->size()) arm_->at(static_cast<std::size_t>(h)).faults().heartbeat_stopped = true;
+  const int e = emcy_joint_.exchange(-1);
+  if (e >= 0 && static_cast<std::size_t>(e) < arm_->size())
+    arm_->at(static_cast<std::size_t>(e)).inject_emcy(emcy_code_.load(), now, *sim_ep_);
+}
+
+void SimPlant::step(hal::TimePoint now) {
+  apply_injections(now);
+  arm_->step(now);
+}
+
+void SimPlant::inject_silent(int joint) { silent_ = joint; }
+void SimPlant::inject_heartbeat_stop(int joint) { hb_stop_ = joint; }
+void SimPlant::inject_emcy(int joint, std::uint16_t code) {
+  emcy_code_ = code;
+  emcy_joint_ = joint;
+}
+
+void SimPlant::start_thread() {
+  if (th_.joinable()) return;
+  stop_ = false;
+  th_ = std::thread([this] {
+    while (!stop_.load(std::memory_order_relaxed)) {
+      hal::CanFrame f;
+      const hal::TimePoint now = clock_.now();
+      apply_injections(now);
+      // Wait up to 100 us for a frame, then hand everything pending to the drives.
+      if (sim_ep_->receive(f, now + 100 * hal::kMicrosecond) == hal::Status::ok) {
+        arm_->handle(f, clock_.now());
+        for (int i = 0; i < 4096 && sim_ep_->receive(f, 0) == hal::Status::ok; ++i) arm_->handle(f, clock_.now());
+      }
+      arm_->tick(clock_.now());
+    }
+  });
+}
+
+void SimPlant::stop_thread() {
+  stop_ = true;
+  if (th_.joinable()) th_.join();
+}
+
+ControllerConfig App::controller_config() const {
+  ControllerConfig c;
+  c.rate_hz = cfg.rate_hz;
+  c.following_error = cfg.following_error_deg * M_PI / 180.0;
+  c.enable_timeout = cfg.enable_timeout_s;
+  c.feedback_timeout = cfg.feedback_timeout_ms * 1e-3;
+  c.drive_quick_stop = cfg.stop == "drive";
+  c.drive_stop_timeout = cfg.drive_stop_timeout_s;
+  return c;
+}
+
+ConsoleConfig App::console_config() const {
+  ConsoleConfig c;
+  c.default_joint_speed_pct = cfg.joint_speed_pct;
+  c.default_linear_speed = cfg.linear_speed_mm_s * 1e-3;
+  c.max_linear_speed = cfg.max_linear_speed_mm_s * 1e-3;
+  c.cartesian.linear_velocity = c.max_linear_speed;
+  c.max_move_duration_s = cfg.max_move_duration_s;
+  if (!cfg.home_deg.empty()) {
+    c.home = kin::JointVector::Zero(chain.n_joints);
+    for (int j = 0; j < chain.n_joints; ++j) {
+      const double v = cfg.home_deg[static_cast<std::size_t>(j)];
+      c.home[j] = chain.joint(j).type == kin::JointType::prismatic ? v * 1e-3 : v * M_PI / 180.0;
+    }
+  }
+  c.config_text = to_toml(cfg);
+  return c;
+}
+
+std::string App::build(const FwConfig& c, hal::Clock* clock_override) {
+  cfg = c;
+  const std::string bad = validate(cfg);
+  if (!bad.empty()) return "config: " + bad;
+  if (clock_override != nullptr) clock = clock_override;
+  kin::LoadResult lr = kin::load_robot(cfg.robot);
+  if (!lr.ok) return "robot: " + lr.error;
+  chain = lr.chain;
+  const int n = chain.n_joints;
+  if (n < 1 || n > static_cast<int>(hal::kMaxServoJoints)) return "robot: joint count not supported by the servo bus";
+  if (!cfg.home_deg.empty() && static_cast<int>(cfg.home_deg.size()) != n)
+    return "config: motion.home_deg: needs " + std::to_string(n) + " values for " + cfg.robot;
+  if (!cfg.drives.empty() && static_cast<int>(cfg.drives.size()) != n)
+    return "config: drive: " + std::to_string(cfg.drives.size()) + " [[drive]] tables for the " + std::to_string(n) +
+           " joints of " + cfg.robot + " (give one per joint, or none)";
+  // Per-drive limits narrow the description's (so IK, planning and the supervisor all see them).
+  for (int j = 0; j < static_cast<int>(cfg.drives.size()); ++j) {
+    const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
+    kin::DhRow& row = chain.joint(j);
+    const double unit = row.type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;
+    const std::string w = "config: drive[" + std::to_string(j + 1) + "].";
+    if (!d.limits.empty()) {
+      const double lo = d.limits[0] * unit, hi = d.limits[1] * unit;
+      if (lo < row.lower - 1e-12 || hi > row.upper + 1e-12)
+        return w + "limits: [" + std::to_string(d.limits[0]) + ", " + std::to_string(d.limits[1]) +
+               "] reaches outside the robot description's [" + std::to_string(row.lower / unit) + ", " +
+               std::to_string(row.upper / unit) + "]";
+      row.lower = lo;
+      row.upper = hi;
+    }
+    if (d.max_velocity > 0) {
+      const double v = d.max_velocity * unit;
+      if (row.dynamics.max_velocity > 0 && v > row.dynamics.max_velocity * (1 + 1e-12))
+        return w + "max_velocity: " + std::to_string(d.max_velocity) + " is above the robot description's " +
+               std::to_string(row.dynamics.max_velocity / unit);
+      row.dynamics.max_velocity = v;
+    }
+  }
+  std::vector<std::uint8_t> nodes;
+  for (int j = 0; j < n; ++j) {
+    const int id = cfg.drives.empty() || cfg.drives[static_cast<std::size_t>(j)].node == 0
+                       ? cfg.first_node + j
+                       : cfg.drives[static_cast<std::size_t>(j)].node;
+    if (id > 127) return "config: bus.first_node: node id of joint " + std::to_string(j + 1) + " would exceed 127";
+    for (int k = 0; k < j; ++k)
+      if (nodes[static_cast<std::size_t>(k)] == id)
+        return "config: drive[" + std::to_string(j + 1) + "].node: node " + std::to_string(id) + " is joint " +
+               std::to_string(k + 1) + "'s too";
+    nodes.push_back(static_cast<std::uint8_t>(id));
+  }
+  hal::CanBus* canbus = nullptr;
+  if (cfg.can == "sim") {
+    plant = std::make_unique<SimPlant>(*clock, nodes, sim_motor);
+    canbus = &plant->master_bus();
+  } else {
+    socketcan = std::make_unique<hal::SocketCanBus>();
+    const hal::Status st = socketcan->open(cfg.can.c_str());
+    if (st != hal::Status::ok) {
+      const std::string m = socketcan->message();  // starts with the interface name
+      return "bus.can: cannot open " + (m.rfind(cfg.can + ":", 0) == 0 ? m : cfg.can + ": " + m);
+    }
+    canbus = socketcan.get();
+  }
+  hal::CanopenMasterConfig mc;
+  mc.joint_count = static_cast<std::size_t>(n);
+  mc.heartbeat_period = static_cast<hal::Duration>(cfg.heartbeat_period_ms * 1e6);
+  mc.heartbeat_timeout = static_cast<hal::Duration>(cfg.heartbeat_timeout_ms * 1e6);
+  for (int j = 0; j < n; ++j) {
+    auto& jc = mc.joints[static_cast<std::size_t>(j)];
+    jc.node_id = nodes[static_cast<std::size_t>(j)];
+    jc.scaling.counts_per_unit = cfg.counts_per_rev;
+    jc.scaling.gear_ratio = cfg.gear_ratio;
+    if (!cfg.drives.empty()) {
+      const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
+      if (d.counts_per_rev > 0) jc.scaling.counts_per_unit = d.counts_per_rev;
+      if (d.gear_ratio != 0) jc.scaling.gear_ratio = d.gear_ratio;
+      jc.scaling.direction = d.direction;
+      jc.scaling.zero_offset = static_cast<std::int32_t>(d.zero_offset);
+      if (d.heartbeat_timeout_ms > 0) jc.heartbeat_timeout = static_cast<hal::Duration>(d.heartbeat_timeout_ms * 1e6);
+    }
+    jc.scaling.kind = chain.joint(j).type == kin::JointType::prismatic ? hal::JointScaling::Kind::prismatic
+                                                                       : hal::JointScaling::Kind::revolute;
+    if (!cfg.drives.empty() && cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel > 0) {
+      // joint deg/s^2 (mm/s^2) -> motor counts/s^2
+      const double unit = chain.joint(j).type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;
+      jc.quick_stop_decel = cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel * unit * jc.scaling.counts_per_si();
+    }
+  }
+  servo = std::make_unique<hal::CanopenServoBus>(*canbus, *clock, mc);
+  if (servo->config_status() != hal::Status::ok) return std::string("bus: ") + hal::to_string(servo->config_status());
+  ctl = std::make_unique<Controller>(*servo, chain, controller_config());
+  console = std::make_unique<Console>(*ctl, console_config());
+  return "";
+}
+
+std::string App::boot() {
+  if (plant && !clock->simulated()) plant->start_thread();
+  const hal::TimePoint now = clock->now();
+  const hal::Status st = ctl->boot(now, now + static_cast<hal::Duration>(cfg.start_timeout_s * 1e9));
+  if (st != hal::Status::ok) return std::string("drive bring-up failed: ") + hal::to_string(st) + ": " + servo->last_error();
+  return "";
+}
+
+}  // namespace servoarm::fw

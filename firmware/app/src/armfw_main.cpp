@@ -1,0 +1,418 @@
+// armfw: the firmware binary. Control loop on its own thread, consoles on the
+// main thread (stdin/stdout, pty, serial, CAN ISO-TP through its bridge thread),
+// drives through the CANopen master.
+//
+//   armfw --sim [--robot puma560]          virtual servos on the in-process bus
+//   armfw --config FILE                    everything from a TOML file
+//   armfw --sim --demo [--interactive]     play the demo program, print a summary
+//   armfw --sim --bench-loop SEC [--rate HZ]   loop statistics as one JSON line
+#include <poll.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "servoarm/app/app.hpp"
+#include "servoarm/rt/rt_loop.hpp"
+#include "servoarm/console/transport.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+
+using namespace servoarm;
+using namespace servoarm::fw;
+
+namespace {
+
+volatile sig_atomic_t g_quit = 0;
+void on_signal(int) { g_quit = 1; }
+
+int usage(FILE* f, int code) {
+  std::fprintf(f,
+               "usage: armfw (--sim [--robot NAME|FILE] | --config FILE) [options]\n"
+               "  --sim                 virtual CiA 402 servos on the in-process bus (no config needed)\n"
+               "  --robot NAME|FILE     robot model (default puma560; see armctl kin models)\n"
+               "  --config FILE         TOML configuration (armfw --config-keys lists every key)\n"
+               "  --config-keys         print every configuration key (default, range, unit, doc) and exit\n"
+               "  --config-reference    print the generated reference section of docs/configuration.md and exit\n"
+               "  --demo                play the demo program through the console, print a summary, exit\n"
+               "  --interactive         after --demo, leave the console open on stdin\n"
+               "  --bench-loop SEC      run the loop SEC seconds with moves in progress; print one JSON line\n"
+               "  --rate HZ             control rate 250..4000 (default 1000)\n"
+               "  --priority N          SCHED_FIFO priority 1..99, 0 = normal scheduling (default 80)\n"
+               "  --cpu N               pin the control thread to CPU N\n"
+               "  --pty                 also open a pty console and print its path\n"
+               "  --serial PATH [--baud N]   also run a console on a serial TTY\n"
+               "  --can-console IFACE   also run a console over CAN (ISO-TP) on IFACE (vcan0, can0, or sim);\n"
+               "                        ids from console.can_rx_id / can_tx_id (default 0x7E0 in, 0x7E8 out)\n"
+               "  --no-stdin            no console on stdin/stdout\n"
+               "  -h, --help            this text\n");
+  return code;
+}
+
+double now_s() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+void print_stats_json(const Telemetry& t, double rate) {
+  auto obj = [](const StatSummary& s) {
+    char b[160];
+    std::snprintf(b, sizeof b, "{\"min\": %.2f, \"mean\": %.2f, \"p99\": %.2f, \"max\": %.2f}", s.min_us, s.mean_us, s.p99_us,
+                  s.max_us);
+    return std::string(b);
+  };
+  std::printf("{\"rate_hz\": %.0f, \"cycles\": %llu, \"overruns\": %llu, \"latency_us\": %s, \"compute_us\": %s}\n", rate,
+              static_cast<unsigned long long>(t.cycles), static_cast<unsigned long long>(t.overruns), obj(t.latency).c_str(),
+              obj(t.compute).c_str());
+  std::fflush(stdout);
+}
+
+// Run one console line in a session, wait for it to finish (showing progress), print the answer.
+struct DemoRunner {
+  App& app;
+  Session s;
+  int errors = 0;
+  bool verbose = true;
+
+  std::string run(const std::string& line, bool show_progress = true) {
+    if (verbose) std::printf("> %s\n", line.c_str());
+    s.out.clear();
+    app.console->execute(s, line);
+    double last = now_s();
+    while (app.console->busy(s)) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      app.console->poll(s);
+      const std::string ev = app.console->drain_events();
+      if (!ev.empty()) std::printf("%s", ev.c_str());
+      if (show_progress && now_s() - last > 0.25) {
+        last = now_s();
+        std::printf("    %s\n", app.console->grbl_report().c_str());
+      }
+    }
+    const std::string ev = app.console->drain_events();
+    if (!ev.empty()) std::printf("%s", ev.c_str());
+    if (verbose) std::printf("%s", s.out.c_str());
+    if (s.out.find("error:") != std::string::npos) ++errors;
+    std::fflush(stdout);
+    return s.out;
+  }
+};
+
+struct Reached {
+  std::string what;
+  double err;
+  const char* unit;
+};
+
+int run_demo(App& app) {
+  DemoRunner d{app, {}, 0, true};
+  std::vector<Reached> reached;
+  const kin::Chain& ch = app.chain;
+  const int n = ch.n_joints;
+  auto q_act = [&] {
+    const Telemetry t = app.ctl->telemetry();
+    kin::JointVector q(n);
+    for (int j = 0; j < n; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+    return q;
+  };
+  auto joint_err_deg = [&](const kin::JointVector& goal) {
+    const kin::JointVector q = q_act();
+    return (q - goal).cwiseAbs().maxCoeff() * 180.0 / M_PI;
+  };
+  auto pos_err_mm = [&](const Eigen::Vector3d& p) {
+    kin::Pose x;
+    kin::forward(ch, q_act(), x);
+    return (x.translation() - p).norm() * 1e3;
+  };
+  std::printf("== armfw demo: %s, %d joints, virtual CiA 402 servos on the in-process CAN bus, %.0f Hz loop\n",
+              app.cfg.robot.c_str(), n, app.cfg.rate_hz);
+  d.run("help movel", false);
+  d.run("enable", false);
+  // Wait for operation enabled.
+  for (int i = 0; i < 400 && app.ctl->telemetry().state == ArmState::enabling; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  d.run("status", false);
+  d.run("home");
+  d.run("wait");
+  reached.push_back({"home", joint_err_deg(app.console->config().home), "deg"});
+
+  // A joint move to a working pose (degrees), then linear moves around it.
+  const bool puma = n == 6;
+  std::vector<double> work_deg = puma ? std::vector<double>{20, -40, 160, 10, -50, 30} : std::vector<double>(static_cast<std::size_t>(n), 10.0);
+  std::string mj = "movej";
+  kin::JointVector work(n);
+  for (int j = 0; j < n; ++j) {
+    char b[32];
+    std::snprintf(b, sizeof b, " %g", work_deg[static_cast<std::size_t>(j)]);
+    mj += b;
+    work[j] = work_deg[static_cast<std::size_t>(j)] * M_PI / 180.0;
+  }
+  d.run(mj + " speed=60");
+  d.run("wait");
+  reached.push_back({"movej work pose", joint_err_deg(work), "deg"});
+  d.run("fk", false);
+
+  kin::Pose p0;
+  kin::forward(ch, work, p0);
+  const Eigen::Vector3d c = p0.translation() * 1e3;
+  const double pts[][3] = {{80, 0, 0}, {80, 80, 0}, {0, 80, -60}, {0, 0, 0}};
+  int k = 0;
+  for (const auto& o : pts) {
+    char b[128];
+    std::snprintf(b, sizeof b, "movel %.1f %.1f %.1f speed=150", c.x() + o[0], c.y() + o[1], c.z() + o[2]);
+    const std::string ans = d.run(b);
+    d.run("wait");
+    char what[64];
+    std::snprintf(what, sizeof what, "movel corner %d", ++k);
+    reached.push_back({what, pos_err_mm(Eigen::Vector3d(c.x() + o[0], c.y() + o[1], c.z() + o[2]) * 1e-3), "mm"});
+  }
+  // The same as G-code (as a sender would stream it), relative moves.
+  d.run("G21 G91");
+  d.run("G1 Z30 F6000");
+  d.run("G1 X-40 Y-40");
+  d.run("G90");
+  d.run("M400");
+  reached.push_back({"G-code relative Z+30, X-40 Y-40", pos_err_mm(Eigen::Vector3d(c.x() - 40, c.y() - 40, c.z() + 30) * 1e-3), "mm"});
+  d.run("M114", false);
+  // A refused target: outside the workspace, nothing moves.
+  d.run("movel 5000 0 0");
+  --d.errors;  // expected
+  // Feed hold during a move, then resume.
+  d.run("home");
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  std::printf("> ! (feed hold)\n");
+  app.console->feed(d.s, "!");
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  std::printf("    %s\n", app.console->grbl_report().c_str());
+  std::printf("> ~ (resume)\n");
+  app.console->feed(d.s, "~");
+  d.run("wait");
+  reached.push_back({"home after feed hold", joint_err_deg(app.console->config().home), "deg"});
+  d.run("stats", false);
+  d.run("disable", false);
+
+  const Telemetry t = app.ctl->telemetry();
+  std::printf("\n== summary\n");
+  std::printf("  %-34s %s\n", "move", "final error");
+  for (const auto& r : reached) std::printf("  %-34s %.4f %s\n", r.what.c_str(), r.err, r.unit);
+  std::printf("  unexpected errors: %d\n", d.errors);
+  std::printf("  loop: %llu cycles at %.0f Hz, %llu overruns, wake-up latency us min/mean/p99/max %.1f/%.1f/%.1f/%.1f, "
+              "compute us %.1f/%.1f/%.1f/%.1f, max following error %.3f deg\n",
+              static_cast<unsigned long long>(t.cycles), app.cfg.rate_hz, static_cast<unsigned long long>(t.overruns),
+              t.latency.min_us, t.latency.mean_us, t.latency.p99_us, t.latency.max_us, t.compute.min_us, t.compute.mean_us,
+              t.compute.p99_us, t.compute.max_us, t.max_following_error * 180.0 / M_PI);
+  bool ok = d.errors == 0;
+  for (const auto& r : reached) ok = ok && r.err < (std::strcmp(r.unit, "mm") == 0 ? 1.0 : 0.1);
+  std::printf("  result: %s\n", ok ? "PASS" : "FAIL");
+  std::fflush(stdout);
+  return ok ? 0 : 1;
+}
+
+int run_bench(App& app, double seconds) {
+  // Keep moves of every kind in progress: alternate joint moves and a dwell.
+  DemoRunner d{app, {}, 0, false};
+  d.run("enable", false);
+  for (int i = 0; i < 400 && app.ctl->telemetry().state == ArmState::enabling; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const double t_end = now_s() + seconds;
+  const int n = app.chain.n_joints;
+  int flip = 0;
+  while (now_s() < t_end && !g_quit) {
+    if (app.ctl->telemetry().queued < 2) {
+      std::string mj = "movej";
+      for (int j = 0; j < n; ++j) mj += flip ? " 20" : " -20";
+      flip ^= 1;
+      Session s;
+      app.console->execute(s, mj + " speed=80");
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  // Force a summary refresh: the RT thread publishes summaries every 64 cycles.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  print_stats_json(app.ctl->telemetry(), app.cfg.rate_hz);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  FwConfig cfg;
+  bool sim = false, demo = false, interactive = false, pty = false, no_stdin = false;
+  std::string config_file, robot, serial, can_console;
+  double bench = -1, rate = -1;
+  int priority = -1, cpu = -2, baud = -1;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&](const char* what) -> const char* {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "armfw: %s needs a value\n", what);
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    auto number = [&](const char* what, double lo, double hi) {
+      const char* v = value(what);
+      char* end = nullptr;
+      const double d = std::strtod(v, &end);
+      if (end == v || *end != '\0' || !std::isfinite(d) || d < lo || d > hi) {
+        std::fprintf(stderr, "armfw: %s: '%s' is not a number within %g..%g\n", what, v, lo, hi);
+        std::exit(2);
+      }
+      return d;
+    };
+    if (a == "--sim") sim = true;
+    else if (a == "--robot") robot = value("--robot");
+    else if (a == "--config") config_file = value("--config");
+    else if (a == "--demo") demo = true;
+    else if (a == "--interactive") interactive = true;
+    else if (a == "--bench-loop") bench = number("--bench-loop", 0.1, 86400);
+    else if (a == "--rate") rate = number("--rate", 250, 4000);
+    else if (a == "--priority") priority = static_cast<int>(number("--priority", 0, 99));
+    else if (a == "--cpu") cpu = static_cast<int>(number("--cpu", 0, 1023));
+    else if (a == "--pty") pty = true;
+    else if (a == "--serial") serial = value("--serial");
+    else if (a == "--can-console") can_console = value("--can-console");
+    else if (a == "--baud") baud = static_cast<int>(number("--baud", 1, 4000000));
+    else if (a == "--no-stdin") no_stdin = true;
+    else if (a == "--config-keys") {
+      std::fputs(config_keys_text().c_str(), stdout);
+      return 0;
+    } else if (a == "--config-reference") {
+      std::fputs(config_reference_markdown().c_str(), stdout);
+      return 0;
+    } else if (a == "-h" || a == "--help") return usage(stdout, 0);
+    else {
+      std::fprintf(stderr, "armfw: unknown argument '%s'\n", a.c_str());
+      return usage(stderr, 2);
+    }
+  }
+  if (!sim && config_file.empty()) {
+    std::fprintf(stderr, "armfw: give --sim or --config FILE\n");
+    return usage(stderr, 2);
+  }
+  if (!config_file.empty()) {
+    const std::string e = load_config_file(config_file, cfg);
+    if (!e.empty()) {
+      std::fprintf(stderr, "armfw: config refused: %s\n", e.c_str());
+      return 2;
+    }
+  }
+  if (sim) cfg.can = "sim";
+  if (!robot.empty()) cfg.robot = robot;
+  if (rate > 0) cfg.rate_hz = rate;
+  if (priority >= 0) cfg.priority = priority;
+  if (cpu >= -1) cfg.cpu = cpu;
+  if (pty) cfg.console_pty = true;
+  if (!serial.empty()) cfg.console_serial = serial;
+  if (baud > 0) cfg.console_baud = baud;
+  if (!can_console.empty()) cfg.console_can = can_console;
+  if (no_stdin) cfg.console_stdin = false;
+
+  App app;
+  std::string err = app.build(cfg);
+  if (!err.empty()) {
+    std::fprintf(stderr, "armfw: %s\n", err.c_str());
+    return 2;
+  }
+  err = app.boot();
+  if (!err.empty()) {
+    std::fprintf(stderr, "armfw: %s\n", err.c_str());
+    return 1;
+  }
+  LoopConfig lc;
+  lc.rate_hz = app.cfg.rate_hz;
+  lc.priority = app.cfg.priority;
+  lc.cpu = app.cfg.cpu;
+  lc.lock_memory = app.cfg.lock_memory;
+  RtLoop loop(*app.ctl, lc);
+  if (app.plant) {
+    // --sim: the drive thread served the bring-up (SDO); from now on the control thread
+    // steps the virtual drives right before each cycle (docs: firmware, "--sim").
+    app.plant->stop_thread();
+    loop.set_pre_cycle(&SimPlant::step_hook, app.plant.get());
+  }
+  if (!loop.start()) {
+    std::fprintf(stderr, "armfw: cannot start the control thread\n");
+    return 1;
+  }
+  if (!loop.warnings().empty()) std::fprintf(stderr, "armfw: %s", loop.warnings().c_str());
+  signal(SIGINT, on_signal);
+  signal(SIGTERM, on_signal);
+  signal(SIGPIPE, SIG_IGN);
+
+  int rc = 0;
+  if (bench > 0) {
+    rc = run_bench(app, bench);
+  } else {
+    if (demo) rc = run_demo(app);
+    if (!demo || interactive) {
+      std::vector<FdTransport*> ts;
+      FdTransport in, pt, se, ct;
+      CanConsole can;
+      if (app.cfg.console_stdin) {
+        in.name = "stdin";
+        in.rd = 0;
+        in.wr = 1;
+        ts.push_back(&in);
+      }
+      if (app.cfg.console_pty) {
+        const std::string e = open_pty(pt);
+        if (!e.empty()) {
+          std::fprintf(stderr, "armfw: pty: %s\n", e.c_str());
+          rc = 1;
+        } else {
+          std::fprintf(stderr, "armfw: console pty: %s\n", pt.path.c_str());
+          ts.push_back(&pt);
+        }
+      }
+      if (!app.cfg.console_serial.empty()) {
+        const std::string e = open_serial(se, app.cfg.console_serial, app.cfg.console_baud);
+        if (!e.empty()) {
+          std::fprintf(stderr, "armfw: serial console: %s\n", e.c_str());
+          rc = 1;
+        } else {
+          std::fprintf(stderr, "armfw: serial console on %s at %d baud\n", se.path.c_str(), app.cfg.console_baud);
+          ts.push_back(&se);
+        }
+      }
+      if (!app.cfg.console_can.empty()) {
+        CanConsoleConfig cc;
+        cc.iface = app.cfg.console_can;
+        cc.rx_id = static_cast<std::uint32_t>(app.cfg.console_can_rx_id);
+        cc.tx_id = static_cast<std::uint32_t>(app.cfg.console_can_tx_id);
+        const std::string e = can.open(cc, app.plant ? &app.plant->bus() : nullptr, ct);
+        if (!e.empty()) {
+          std::fprintf(stderr, "armfw: can console: %s\n", e.c_str());
+          rc = 1;
+        } else {
+          std::fprintf(stderr, "armfw: can console: ISO-TP on %s\n", ct.path.c_str());
+          ts.push_back(&ct);
+        }
+      }
+      if (rc == 0 && !ts.empty()) {
+        std::fprintf(stderr, "armfw: %s ready (%d joints, %.0f Hz); type help\n", app.cfg.robot.c_str(), app.chain.n_joints,
+                     app.cfg.rate_hz);
+        serve_consoles(*app.console, ts, app.cfg.console_stdin, &g_quit);
+      }
+      can.stop();
+    }
+  }
+  // Shut down: stop motion, power down, stop the loop, statistics at exit.
+  {
+    Session s;
+    app.console->execute(s, "stop");
+    for (int i = 0; i < 400 && app.ctl->telemetry().state == ArmState::stopping; ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    app.console->execute(s, "disable");
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  loop.stop();
+  if (app.plant) app.plant->stop_thread();
+  if (bench <= 0) std::fprintf(stderr, "armfw: exit: %s\n", app.console->stats_text().c_str());
+  return rc;
+}

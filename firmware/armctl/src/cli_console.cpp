@@ -1,0 +1,490 @@
+#include "servoarm/armctl/cli_console.hpp"
+
+#include <fcntl.h>
+#include <poll.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "servoarm/armctl/cli_common.hpp"
+
+#ifdef SERVOARM_CLI_CAN
+#include "servoarm/hal/isotp.hpp"
+#include "servoarm/hal/socketcan_bus.hpp"
+#endif
+#ifdef SERVOARM_CLI_LIBEDIT
+// Line editing and history: Debian's libedit (BSD licence, readline-compatible API,
+// `libedit-dev`, pkg-config `libedit`) rather than GNU readline (GPL) or hand-written
+// terminal code.
+#include <editline/readline.h>
+#endif
+
+namespace servoarm::fw {
+
+namespace {
+
+// armctl links only the CLI library (plus hal for CAN), so the few lines of termios
+// set-up live here (armfw's side is firmware/console/src/transport.cpp).
+bool write_all(int fd, const std::string& s) {
+  std::size_t off = 0;
+  while (off < s.size()) {
+    const ssize_t w = ::write(fd, s.data() + off, s.size() - off);
+    if (w > 0) off += static_cast<std::size_t>(w);
+    else if (w < 0 && errno == EINTR) continue;
+    else if (w < 0 && errno == EAGAIN) {
+      pollfd p{fd, POLLOUT, 0};
+      ::poll(&p, 1, 100);
+    } else return false;
+  }
+  return true;
+}
+
+int open_tty(const std::string& path, int baud, std::string& err) {
+  speed_t sp = B115200;
+  switch (baud) {
+    case 9600: sp = B9600; break;
+    case 19200: sp = B19200; break;
+    case 38400: sp = B38400; break;
+    case 57600: sp = B57600; break;
+    case 115200: sp = B115200; break;
+    case 230400: sp = B230400; break;
+    case 460800: sp = B460800; break;
+    case 921600: sp = B921600; break;
+    default: err = "unsupported baud rate " + std::to_string(baud); return -1;
+  }
+  const int fd = ::open(path.c_str(), O_RDWR | O_NOCTTY);
+  if (fd < 0) {
+    err = path + ": " + std::strerror(errno);
+    return -1;
+  }
+  termios tio{};
+  if (tcgetattr(fd, &tio) != 0) {
+    err = path + ": not a terminal";
+    ::close(fd);
+    return -1;
+  }
+  cfmakeraw(&tio);
+  tio.c_cflag |= CLOCAL | CREAD;
+  cfsetispeed(&tio, sp);
+  cfsetospeed(&tio, sp);
+  tcsetattr(fd, TCSANOW, &tio);
+  return fd;
+}
+
+const char* kConsoleUsage =
+    "usage: armctl console (--serial PATH [--baud N] | --can IFACE [--tx-id ID] [--rx-id ID])\n"
+    "                      [--timeout SEC] [-c LINE]...\n"
+    "  --serial PATH   serial device or pty printed by armfw (--pty)\n"
+    "  --baud N        baud rate (default 115200)\n"
+    "  --can IFACE     SocketCAN interface (can0, vcan0): armfw's console over ISO-TP (ISO 15765-2)\n"
+    "  --tx-id ID      11-bit id armctl sends on = armfw's console.can_rx_id (default 0x7E0)\n"
+    "  --rx-id ID      11-bit id armctl receives on = armfw's console.can_tx_id (default 0x7E8)\n"
+    "                  (ids: 0x7E0 hex or 2016 decimal)\n"
+    "  --timeout SEC   how long to wait for each answer (default 60; `wait` can take long)\n"
+    "  -c LINE         send LINE, print the answer; repeatable; without -c: interactive\n"
+    "                  (line editing and history in ~/.armctl_history when built with libedit;\n"
+    "                  a line holding only ?, ! or ~ sends that realtime character;\n"
+    "                  ^X sends Ctrl-X, the e-stop; Ctrl-D quits)\n"
+    "Exit status: 0 every answer ok, 1 an answer was error: (or timed out), 2 usage / device error.\n";
+
+// The device: a byte stream (serial / pty) or ISO-TP messages on a CAN interface.
+class Link {
+ public:
+  virtual ~Link() = default;
+  /// Send bytes: a command line with its newline, or one realtime character.
+  virtual bool send(const std::string& bytes) = 0;
+  /// fd to wait on for input (poll).
+  virtual int fd() const = 0;
+  /// Longest wait in ms before pump() must run again (timers), -1 = none.
+  virtual int wait_ms() const { return -1; }
+  /// Move whatever arrived into `in`; run timers. False when the device is gone.
+  virtual bool pump(std::string& in) = 0;
+  std::string error;
+};
+
+class TtyLink final : public Link {
+ public:
+  explicit TtyLink(int fd) : fd_(fd) { fcntl(fd_, F_SETFL, fcntl(fd_, F_GETFL) | O_NONBLOCK); }  // pump() never blocks
+  ~TtyLink() override { ::close(fd_); }
+  bool send(const std::string& bytes) override {
+    if (write_all(fd_, bytes)) return true;
+    error = std::string("write: ") + std::strerror(errno);
+    return false;
+  }
+  int fd() const override { return fd_; }
+  bool pump(std::string& in) override {
+    char tmp[512];
+    const ssize_t r = ::read(fd_, tmp, sizeof tmp);
+    if (r > 0) in.append(tmp, static_cast<std::size_t>(r));
+    if (r == 0) {
+      error = "device closed";
+      return false;
+    }
+    return true;
+  }
+
+ private:
+  int fd_;
+};
+
+#ifdef SERVOARM_CLI_CAN
+// One ISO-TP message per send(): armfw takes each message as one line (or as
+// realtime characters). Messages wait in a queue while a long one is in flight.
+class CanLink final : public Link {
+ public:
+  std::string open(const std::string& iface, std::uint32_t tx_id, std::uint32_t rx_id) {
+    if (bus_.open(iface.c_str()) != hal::Status::ok) {
+      const std::string m = bus_.message();
+      return "cannot open " + (m.rfind(iface + ":", 0) == 0 ? m : iface + ": " + m);
+    }
+    hal::IsoTpConfig c;
+    c.tx_id = tx_id;
+    c.rx_id = rx_id;
+    iso_ = std::make_unique<hal::IsoTpEndpoint>(bus_, clock_, c);
+    const hal::CanFilter f = iso_->rx_filter();
+    if (bus_.set_filters({&f, 1}) != hal::Status::ok) return iface + ": cannot set the receive filter";
+    return "";
+  }
+  bool send(const std::string& bytes) override {
+    for (std::size_t off = 0; off < bytes.size(); off += hal::IsoTpEndpoint::kMaxMessage)
+      queue_.push_back(bytes.substr(off, hal::IsoTpEndpoint::kMaxMessage));
+    std::string none;
+    return pump(none);
+  }
+  int fd() const override { return bus_.fd(); }
+  int wait_ms() const override {
+    const hal::TimePoint t = iso_->next_deadline();
+    if (t == hal::IsoTpEndpoint::kNever) return queue_.empty() ? -1 : 1;
+    const hal::Duration d = t - clock_.now();
+    return d <= 0 ? 0 : static_cast<int>(d / hal::kMillisecond) + 1;
+  }
+  bool pump(std::string& in) override {
+    hal::CanFrame f;
+    for (int i = 0; i < 4096; ++i) {
+      const hal::Status s = bus_.receive(f, 0);
+      if (s == hal::Status::timeout) break;
+      if (s != hal::Status::ok) {
+        error = std::string("can: ") + hal::describe(s) + " (" + bus_.message() + ")";
+        return false;
+      }
+      if (!check(iso_->on_frame(f), in)) return false;
+    }
+    if (!check(iso_->poll(), in)) return false;
+    while (!queue_.empty() && !iso_->sending()) {
+      const std::string& m = queue_.front();
+      const hal::IsoTpResult r = iso_->send({reinterpret_cast<const std::uint8_t*>(m.data()), m.size()});
+      if (r != hal::IsoTpResult::ok) {
+        error = std::string("can: send: ") + hal::to_string(r) + " (" + hal::describe(iso_->last_bus_status()) + ")";
+        return false;
+      }
+      queue_.pop_front();
+    }
+    return true;
+  }
+
+ private:
+  bool check(const hal::IsoTpEvent& ev, std::string& in) {
+    if (ev.rx == hal::IsoTpResult::ok) {
+      const auto m = iso_->rx_message();
+      in.append(m.begin(), m.end());
+    }
+    if (static_cast<int>(ev.tx) < 0 && ev.tx != hal::IsoTpResult::malformed) {
+      error = std::string("can: send: ISO-TP ") + hal::to_string(ev.tx) +
+              (ev.tx == hal::IsoTpResult::timeout_bs ? " (no flow control: is armfw's console.can on this interface, with these ids?)" : "");
+      return false;
+    }
+    if (static_cast<int>(ev.rx) < 0 && ev.rx != hal::IsoTpResult::malformed)
+      std::fprintf(stderr, "armctl: can: an answer was lost: ISO-TP %s\n", hal::to_string(ev.rx));
+    return true;
+  }
+  hal::SocketCanBus bus_;
+  hal::MonotonicClock clock_;
+  std::unique_ptr<hal::IsoTpEndpoint> iso_;
+  std::deque<std::string> queue_;
+};
+#endif
+
+// Wait for the device (or `extra_fd`) up to `ms`, then pump. False when the link failed.
+bool wait_and_pump(Link& link, std::string& buf, int ms, int extra_fd = -1, bool* extra_ready = nullptr) {
+  const int lw = link.wait_ms();
+  if (lw >= 0 && (ms < 0 || lw < ms)) ms = lw;
+  pollfd p[2] = {{link.fd(), POLLIN, 0}, {extra_fd, POLLIN, 0}};
+  const int n = ::poll(p, extra_fd >= 0 ? 2 : 1, ms);
+  if (extra_ready) *extra_ready = n > 0 && extra_fd >= 0 && (p[1].revents & (POLLIN | POLLHUP | POLLERR));
+  return link.pump(buf);
+}
+
+// Read until a final answer line ("ok..." or "error:...") arrives. Data lines and
+// alarms are printed as they come. Returns 0 ok, 1 error/timeout, 2 device failure.
+int await_answer(Link& link, std::string& buf, double timeout_s) {
+  const auto t0 = std::chrono::steady_clock::now();
+  for (;;) {
+    std::size_t nl;
+    while ((nl = buf.find('\n')) != std::string::npos) {
+      std::string line = buf.substr(0, nl);
+      buf.erase(0, nl + 1);
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      if (line.rfind("alarm:", 0) == 0) {
+        std::fprintf(stderr, "%s\n", line.c_str());
+        continue;
+      }
+      std::printf("%s\n", line.c_str());
+      std::fflush(stdout);
+      if (line.rfind("ok", 0) == 0) return 0;
+      if (line.rfind("error:", 0) == 0) return 1;
+    }
+    const double left = timeout_s - std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (left <= 0) {
+      std::fprintf(stderr, "armctl: no answer within %.0f s\n", timeout_s);
+      return 1;
+    }
+    if (!wait_and_pump(link, buf, static_cast<int>(left * 1000) + 1)) {
+      std::fprintf(stderr, "armctl: %s\n", link.error.c_str());
+      return 2;
+    }
+  }
+}
+
+// A typed line -> what goes to the device.
+std::string device_bytes(const std::string& line) {
+  if (line == "?" || line == "!" || line == "~") return line;
+  if (line == "^X") return std::string(1, '\x18');
+  return line + "\n";
+}
+
+// Interactive without line editing (stdin not a terminal, or no libedit): stdin
+// lines to the device, everything from the device to stdout.
+int interactive_plain(Link& link) {
+  std::string in, buf;
+  for (;;) {
+    bool key = false;
+    if (!wait_and_pump(link, buf, -1, 0, &key)) {
+      std::fprintf(stderr, "armctl: %s\n", link.error.c_str());
+      return kExitUsage;
+    }
+    if (!buf.empty()) {
+      std::fwrite(buf.data(), 1, buf.size(), stdout);
+      std::fflush(stdout);
+      buf.clear();
+    }
+    if (!key) continue;
+    char tmp[512];
+    const ssize_t r = ::read(0, tmp, sizeof tmp);
+    if (r <= 0) break;
+    in.append(tmp, static_cast<std::size_t>(r));
+    std::size_t nl;
+    while ((nl = in.find('\n')) != std::string::npos) {
+      const std::string line = in.substr(0, nl);
+      in.erase(0, nl + 1);
+      if (!link.send(device_bytes(line))) {
+        std::fprintf(stderr, "armctl: %s\n", link.error.c_str());
+        return kExitUsage;
+      }
+    }
+  }
+  // Let answers to the last lines arrive (a script piped in).
+  const auto t0 = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::milliseconds(300)) {
+    if (!wait_and_pump(link, buf, 50)) break;
+    std::fwrite(buf.data(), 1, buf.size(), stdout);
+    buf.clear();
+  }
+  std::fflush(stdout);
+  return kExitOk;
+}
+
+#ifdef SERVOARM_CLI_LIBEDIT
+std::string history_path() {
+  const char* home = std::getenv("HOME");
+  return home && *home ? std::string(home) + "/.armctl_history" : std::string();
+}
+
+// Interactive with line editing: the main thread edits lines with libedit's
+// readline(); an I/O thread owns the device (and, for CAN, the ISO-TP endpoint),
+// sends the lines handed over to it and prints answers and alarms as they come.
+// (libedit's callback interface would allow one thread, but it mis-reads arrow-key
+// escape sequences in that mode, see the README.)
+int interactive_edit(Link& link, const std::string& prompt) {
+  int wake[2];
+  if (::pipe2(wake, O_CLOEXEC | O_NONBLOCK) != 0) return interactive_plain(link);
+  std::mutex mu;
+  std::deque<std::string> to_send;
+  std::atomic<bool> done{false}, failed{false};
+  std::thread io([&] {
+    std::string buf;
+    while (!done.load()) {
+      bool woken = false;
+      if (!wait_and_pump(link, buf, 100, wake[0], &woken)) {
+        std::fprintf(stderr, "\narmctl: %s (press Enter)\n", link.error.c_str());
+        failed = true;
+        break;
+      }
+      if (woken) {
+        char tmp[64];
+        while (::read(wake[0], tmp, sizeof tmp) > 0) {}
+        std::deque<std::string> q;
+        {
+          std::lock_guard<std::mutex> lk(mu);
+          q.swap(to_send);
+        }
+        for (const std::string& b : q) {
+          if (!link.send(b)) {
+            std::fprintf(stderr, "\narmctl: %s (press Enter)\n", link.error.c_str());
+            failed = true;
+            break;
+          }
+        }
+        if (failed) break;
+      }
+      if (!buf.empty()) {
+        // Answers arrive while the prompt is shown: print them on a fresh line.
+        std::fputs("\r\033[K", stdout);
+        std::fwrite(buf.data(), 1, buf.size(), stdout);
+        if (buf.back() == '\n') std::fputs(prompt.c_str(), stdout);  // (text typed meanwhile is kept, not redrawn)
+        std::fflush(stdout);
+        buf.clear();
+      }
+    }
+  });
+  const std::string hist = history_path();
+  using_history();
+  stifle_history(1000);
+  if (!hist.empty()) read_history(hist.c_str());
+  while (!failed.load()) {
+    char* line = readline(prompt.c_str());
+    if (line == nullptr) break;  // Ctrl-D
+    const std::string l(line);
+    if (!l.empty()) add_history(line);
+    std::free(line);
+    {
+      std::lock_guard<std::mutex> lk(mu);
+      to_send.push_back(device_bytes(l));
+    }
+    if (::write(wake[1], "x", 1) < 0) {}
+  }
+  std::fputc('\n', stdout);
+  // Let the answer to the last line arrive before leaving.
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  done = true;
+  io.join();
+  ::close(wake[0]);
+  ::close(wake[1]);
+  if (!hist.empty()) write_history(hist.c_str());
+  return failed.load() ? kExitUsage : kExitOk;
+}
+#endif
+
+bool parse_can_id(const char* v, std::uint32_t& out) {
+  if (v == nullptr || *v == '\0') return false;
+  char* end = nullptr;
+  errno = 0;
+  const long id = std::strtol(v, &end, 0);
+  if (errno != 0 || *end != '\0' || id < 0 || id > 0x7FF) return false;
+  out = static_cast<std::uint32_t>(id);
+  return true;
+}
+
+}  // namespace
+
+int console_main(int argc, char** argv) {
+  std::string path, iface;
+  int baud = 115200;
+  double timeout_s = 60;
+  std::uint32_t tx_id = 0x7E0, rx_id = 0x7E8;
+  std::vector<std::string> lines;
+  for (int i = 2; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> const char* { return i + 1 < argc ? argv[++i] : nullptr; };
+    if (a == "--help" || a == "-h") {
+      std::fputs(kConsoleUsage, stdout);
+      return kExitOk;
+    } else if (a == "--serial") {
+      const char* v = value();
+      if (!v) return usage_error("--serial needs a path");
+      path = v;
+    } else if (a == "--can") {
+      const char* v = value();
+      if (!v || !*v) return usage_error("--can needs an interface (can0, vcan0)");
+      iface = v;
+    } else if (a == "--tx-id" || a == "--rx-id") {
+      const char* v = value();
+      if (!parse_can_id(v, a == "--tx-id" ? tx_id : rx_id))
+        return usage_error(a + " needs an 11-bit CAN id (0x000..0x7FF, e.g. 0x7E0), got '" + (v ? v : "") + "'");
+    } else if (a == "--baud") {
+      const char* v = value();
+      double d = 0;
+      if (!v || !parse_number(v, d) || d < 1) return usage_error("--baud needs a rate");
+      baud = static_cast<int>(d);
+    } else if (a == "--timeout") {
+      const char* v = value();
+      if (!v || !parse_number(v, timeout_s) || timeout_s <= 0) return usage_error("--timeout needs seconds > 0");
+    } else if (a == "-c") {
+      const char* v = value();
+      if (!v) return usage_error("-c needs a command line");
+      lines.push_back(v);
+    } else {
+      return usage_error("console: unknown option '" + a + "' (see armctl console --help)");
+    }
+  }
+  if (path.empty() == iface.empty())
+    return usage_error("console: give either --serial PATH (the pty armfw printed, or a serial device) or --can IFACE");
+  if (tx_id == rx_id) return usage_error("console: --tx-id and --rx-id must differ");
+  std::unique_ptr<Link> link;
+  std::string where;
+  if (!path.empty()) {
+    std::string e;
+    const int fd = open_tty(path, baud, e);
+    if (fd < 0) return usage_error("console: " + e);
+    link = std::make_unique<TtyLink>(fd);
+    where = path;
+  } else {
+#ifdef SERVOARM_CLI_CAN
+    auto c = std::make_unique<CanLink>();
+    const std::string e = c->open(iface, tx_id, rx_id);
+    if (!e.empty()) return usage_error("console: --can: " + e);
+    link = std::move(c);
+    char b[96];
+    std::snprintf(b, sizeof b, "%s (ISO-TP, sending on 0x%03X, receiving on 0x%03X)", iface.c_str(), unsigned(tx_id),
+                  unsigned(rx_id));
+    where = b;
+#else
+    return usage_error("console: --can: this armctl was built without the hal library (no CAN support)");
+#endif
+  }
+  std::string buf;
+  int rc = kExitOk;
+  if (!lines.empty()) {
+    for (const std::string& l : lines) {
+      if (l.find('\n') != std::string::npos) return usage_error("console: -c takes one line");
+      if (!link->send(device_bytes(l))) {
+        std::fprintf(stderr, "armctl: %s\n", link->error.c_str());
+        return kExitUsage;
+      }
+      const int r = await_answer(*link, buf, timeout_s);
+      if (r == 2) return kExitUsage;
+      if (r != 0) rc = kExitFailed;
+    }
+    return rc;
+  }
+  std::fprintf(stderr, "armctl: connected to %s (Ctrl-D quits; ?, !, ~ alone on a line are realtime; ^X e-stop)\n",
+               where.c_str());
+#ifdef SERVOARM_CLI_LIBEDIT
+  if (isatty(0) && isatty(1)) return interactive_edit(*link, "arm> ");
+#endif
+  return interactive_plain(*link);
+}
+
+}  // namespace servoarm::fw

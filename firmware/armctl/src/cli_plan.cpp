@@ -1,0 +1,376 @@
+// armctl plan movej | movel: plan offline, print duration and peaks, write the
+// sampled trajectory as CSV and as an SVG plot (position / velocity /
+// acceleration per joint, drawn by hand as SVG text).
+#include "servoarm/armctl/cli_plan.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "servoarm/armctl/cli_common.hpp"
+#include "servoarm/kinematics/description.hpp"
+#include "servoarm/kinematics/ik.hpp"
+#include "servoarm/kinematics/motion_ik.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+#include "servoarm/kinematics/trajectory.hpp"
+#include "servoarm/kinematics/trajectory_cartesian.hpp"
+
+namespace servoarm::fw {
+
+namespace {
+
+const char* kPlanUsage =
+    "usage: armctl plan movej --robot NAME|FILE --from q1..qn --to q1..qn [options]\n"
+    "       armctl plan movel --robot NAME|FILE --from q1..qn\n"
+    "                         (--to q1..qn | --xyz X Y Z [--rpy R P Y | --quat W X Y Z]) [options]\n"
+    "\n"
+    "Plans a jerk-limited move offline and prints its duration and peak values.\n"
+    "movej: every joint starts and arrives together (time-synchronised), from rest to rest.\n"
+    "movel: the tool follows the straight line (orientation by slerp); the path is checked\n"
+    "       first (IK at every point, joint limits, branch, singularity) and the move is\n"
+    "       refused with the reason and place, or slowed near a singularity.\n"
+    "Units are the description's (built-in models: mm and degrees).\n"
+    "\n"
+    "options:\n"
+    "  --vmax V / --amax A / --jmax J   cap every joint's velocity / acceleration / jerk\n"
+    "                                   (joint units per s, s^2, s^3). Joints without limits in the\n"
+    "                                   description get 90 deg/s, 360 deg/s^2, 3600 deg/s^3\n"
+    "                                   (prismatic: 250 mm/s, 1000 mm/s^2, 10000 mm/s^3).\n"
+    "  --override PCT                   speed override 1..100 (default 100)\n"
+    "  --speed V --accel A              movel: tool speed / acceleration (length units/s, /s^2;\n"
+    "                                   default 250 mm/s, 1000 mm/s^2; jerk = 10 x accel)\n"
+    "  --angular W                      movel: tool angular speed (angle units/s, default 57.3 deg/s)\n"
+    "  --no-slowdown                    movel: refuse instead of slowing near a singularity\n"
+    "  --rate HZ                        sample rate of the CSV/SVG (default 1000)\n"
+    "  --csv FILE                       t, q1..qn, v1..vn, a1..an per sample (description units)\n"
+    "  --svg FILE                       plot of position, velocity, acceleration per joint\n";
+
+struct Args {
+  std::string kind, robot, csv, svg;
+  std::vector<double> from, to, xyz, rpy, quat;
+  double vmax = 0, amax = 0, jmax = 0, override_pct = 100, rate = 1000;
+  double speed = 0, accel = 0, angular = 0;
+  bool no_slowdown = false;
+};
+
+bool is_option(const char* s) { return s[0] == '-' && s[1] == '-'; }
+
+// Parses argv (argv[0] = "plan", argv[1] = kind). Returns "" or an error.
+std::string parse(int argc, char** argv, Args& a) {
+  if (argc < 2) return "plan needs a move kind: movej or movel";
+  a.kind = argv[1];
+  if (a.kind != "movej" && a.kind != "movel") return "unknown plan kind '" + a.kind + "' (movej or movel)";
+  for (int i = 2; i < argc; ++i) {
+    const std::string o = argv[i];
+    auto list = [&](std::vector<double>& out) -> std::string {
+      out.clear();
+      while (i + 1 < argc && !is_option(argv[i + 1])) {
+        double v;
+        if (!parse_number(argv[i + 1], v)) return o + ": '" + argv[i + 1] + "' is not a number";
+        out.push_back(v);
+        ++i;
+      }
+      if (out.empty()) return o + " needs values";
+      return "";
+    };
+    auto one = [&](double& out) -> std::string {
+      if (i + 1 >= argc) return o + " needs a value";
+      if (!parse_number(argv[i + 1], out)) return o + ": '" + argv[i + 1] + "' is not a number";
+      ++i;
+      return "";
+    };
+    auto text = [&](std::string& out) -> std::string {
+      if (i + 1 >= argc) return o + " needs a value";
+      out = argv[++i];
+      return "";
+    };
+    std::string e;
+    if (o == "--robot") e = text(a.robot);
+    else if (o == "--csv") e = text(a.csv);
+    else if (o == "--svg") e = text(a.svg);
+    else if (o == "--from") e = list(a.from);
+    else if (o == "--to") e = list(a.to);
+    else if (o == "--xyz") e = list(a.xyz);
+    else if (o == "--rpy") e = list(a.rpy);
+    else if (o == "--quat") e = list(a.quat);
+    else if (o == "--vmax") e = one(a.vmax);
+    else if (o == "--amax") e = one(a.amax);
+    else if (o == "--jmax") e = one(a.jmax);
+    else if (o == "--override") e = one(a.override_pct);
+    else if (o == "--rate") e = one(a.rate);
+    else if (o == "--speed") e = one(a.speed);
+    else if (o == "--accel") e = one(a.accel);
+    else if (o == "--angular") e = one(a.angular);
+    else if (o == "--no-slowdown") a.no_slowdown = true;
+    else return "unknown option '" + o + "' (see armctl plan --help)";
+    if (!e.empty()) return e;
+  }
+  if (a.robot.empty()) return "--robot is required";
+  if (a.from.empty()) return "--from is required";
+  if (a.kind == "movej" && a.to.empty()) return "movej needs --to";
+  if (a.kind == "movel" && a.to.empty() && a.xyz.empty()) return "movel needs --to q1..qn or --xyz X Y Z";
+  if (!a.xyz.empty() && a.xyz.size() != 3) return "--xyz needs 3 values";
+  if (!a.rpy.empty() && a.rpy.size() != 3) return "--rpy needs 3 values";
+  if (!a.quat.empty() && a.quat.size() != 4) return "--quat needs 4 values";
+  if (!a.to.empty() && !a.xyz.empty()) return "give either --to or --xyz, not both";
+  if (!(a.override_pct >= 1 && a.override_pct <= 100)) return "--override must be within 1..100";
+  if (!(a.rate >= 1 && a.rate <= 100000)) return "--rate must be within 1..100000 Hz";
+  for (double v : {a.vmax, a.amax, a.jmax, a.speed, a.accel, a.angular})
+    if (v < 0) return "limits must be positive";
+  return "";
+}
+
+// Joint limits in SI: the description's, defaults where missing, capped by --vmax/--amax/--jmax.
+bool apply_limits(kin::Chain& c, const Args& a, bool& defaulted) {
+  defaulted = false;
+  for (int j = 0; j < c.n_joints; ++j) {
+    kin::JointDynamics& d = c.joint(j).dynamics;
+    const bool prismatic = c.joint(j).type == kin::JointType::prismatic;
+    const double unit = 1.0 / c.joint_user_scale(j);  // SI per user unit
+    const double dv = prismatic ? 0.25 : M_PI / 2, da = prismatic ? 1.0 : 2 * M_PI, dj = prismatic ? 10.0 : 20 * M_PI;
+    if (!(d.max_velocity > 0)) d.max_velocity = dv, defaulted = true;
+    if (!(d.max_acceleration > 0)) d.max_acceleration = da, defaulted = true;
+    if (!(d.max_jerk > 0)) d.max_jerk = dj, defaulted = true;
+    if (a.vmax > 0) d.max_velocity = std::min(d.max_velocity, a.vmax * unit);
+    if (a.amax > 0) d.max_acceleration = std::min(d.max_acceleration, a.amax * unit);
+    if (a.jmax > 0) d.max_jerk = std::min(d.max_jerk, a.jmax * unit);
+  }
+  return true;
+}
+
+struct Samples {
+  std::vector<double> t;
+  std::vector<std::vector<double>> q, v, a;  // [joint][sample], description units
+};
+
+bool write_csv(const std::string& path, const kin::Chain& c, const Samples& s) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) return false;
+  const int n = c.n_joints;
+  std::fprintf(f, "t");
+  for (const char* k : {"q", "v", "a"})
+    for (int j = 0; j < n; ++j) std::fprintf(f, ",%s%d", k, j + 1);
+  std::fprintf(f, "\n");
+  for (std::size_t k = 0; k < s.t.size(); ++k) {
+    std::fprintf(f, "%.6f", s.t[k]);
+    for (const auto* m : {&s.q, &s.v, &s.a})
+      for (int j = 0; j < n; ++j) std::fprintf(f, ",%.9g", (*m)[static_cast<std::size_t>(j)][k]);
+    std::fprintf(f, "\n");
+  }
+  return std::fclose(f) == 0;
+}
+
+// Three stacked panels (position, velocity, acceleration), one polyline per joint.
+bool write_svg(const std::string& path, const kin::Chain& c, const Samples& s, const std::string& title) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) return false;
+  const int n = c.n_joints;
+  const double W = 900, H = 260, left = 80, right = 130, top = 40, gap = 30;
+  const double pw = W - left - right;
+  const double total_h = top + 3 * (H + gap);
+  static const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"};
+  std::fprintf(f, "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%g\" height=\"%g\" font-family=\"sans-serif\" font-size=\"12\">\n",
+               W, total_h);
+  std::fprintf(f, "<rect width=\"100%%\" height=\"100%%\" fill=\"white\"/>\n");
+  std::fprintf(f, "<text x=\"%g\" y=\"22\" font-size=\"15\">%s</text>\n", left, title.c_str());
+  const double T = s.t.empty() ? 1.0 : std::max(s.t.back(), 1e-9);
+  const std::string unit = angle_unit_name(c);
+  const char* names[] = {"position", "velocity", "acceleration"};
+  const std::string units[] = {unit, unit + "/s", unit + "/s^2"};
+  const std::vector<std::vector<double>>* data[] = {&s.q, &s.v, &s.a};
+  for (int p = 0; p < 3; ++p) {
+    const double y0 = top + p * (H + gap);
+    double lo = 1e300, hi = -1e300;
+    for (int j = 0; j < n; ++j)
+      for (double x : (*data[p])[static_cast<std::size_t>(j)]) lo = std::min(lo, x), hi = std::max(hi, x);
+    if (!(hi > lo)) lo -= 1, hi += 1;
+    const double pad = 0.05 * (hi - lo);
+    lo -= pad;
+    hi += pad;
+    auto X = [&](double t) { return left + pw * t / T; };
+    auto Y = [&](double v) { return y0 + H - H * (v - lo) / (hi - lo); };
+    std::fprintf(f, "<rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\" fill=\"none\" stroke=\"#888\"/>\n", left, y0, pw, H);
+    std::fprintf(f, "<text x=\"%g\" y=\"%g\" transform=\"rotate(-90 %g %g)\" text-anchor=\"middle\">%s [%s]</text>\n", 20.0,
+                 y0 + H / 2, 20.0, y0 + H / 2, names[p], units[p].c_str());
+    for (int k = 0; k <= 4; ++k) {  // value ticks
+      const double v = lo + (hi - lo) * k / 4;
+      std::fprintf(f, "<line x1=\"%g\" y1=\"%g\" x2=\"%g\" y2=\"%g\" stroke=\"#eee\"/>\n", left, Y(v), left + pw, Y(v));
+      std::fprintf(f, "<text x=\"%g\" y=\"%g\" text-anchor=\"end\">%s</text>\n", left - 4, Y(v) + 4, num(v).c_str());
+    }
+    if (lo < 0 && hi > 0)
+      std::fprintf(f, "<line x1=\"%g\" y1=\"%g\" x2=\"%g\" y2=\"%g\" stroke=\"#aaa\"/>\n", left, Y(0), left + pw, Y(0));
+    for (int k = 0; k <= 5; ++k) {  // time ticks
+      const double t = T * k / 5;
+      std::fprintf(f, "<text x=\"%g\" y=\"%g\" text-anchor=\"middle\">%s s</text>\n", X(t), y0 + H + 14, num(t).c_str());
+    }
+    const std::size_t stride = std::max<std::size_t>(1, s.t.size() / 1500);  // keep files small
+    for (int j = 0; j < n; ++j) {
+      const auto& v = (*data[p])[static_cast<std::size_t>(j)];
+      std::fprintf(f, "<polyline fill=\"none\" stroke=\"%s\" stroke-width=\"1.5\" points=\"", colors[j % 8]);
+      for (std::size_t k = 0; k < s.t.size(); k += stride) std::fprintf(f, "%.2f,%.2f ", X(s.t[k]), Y(v[k]));
+      if (!s.t.empty()) std::fprintf(f, "%.2f,%.2f", X(s.t.back()), Y(v.back()));
+      std::fprintf(f, "\"/>\n");
+      if (p == 0)
+        std::fprintf(f, "<text x=\"%g\" y=\"%g\" fill=\"%s\">joint %d</text>\n", left + pw + 12, y0 + 16 + 16.0 * j,
+                     colors[j % 8], j + 1);
+    }
+  }
+  std::fprintf(f, "</svg>\n");
+  return std::fclose(f) == 0;
+}
+
+void print_peaks(const kin::Chain& c, const Samples& s) {
+  std::printf("joint  peak |v|        limit v      peak |a|        limit a      unit\n");
+  for (int j = 0; j < c.n_joints; ++j) {
+    const auto k = static_cast<std::size_t>(j);
+    double pv = 0, pa = 0;
+    for (double x : s.v[k]) pv = std::max(pv, std::fabs(x));
+    for (double x : s.a[k]) pa = std::max(pa, std::fabs(x));
+    const double sc = c.joint_user_scale(j);
+    std::printf("%-6d %-15s %-12s %-15s %-12s %s\n", j + 1, num(pv).c_str(), num(c.joint(j).dynamics.max_velocity * sc).c_str(),
+                num(pa).c_str(), num(c.joint(j).dynamics.max_acceleration * sc).c_str(), joint_unit_name(c, j));
+  }
+}
+
+int outputs(const Args& a, const kin::Chain& c, const Samples& s, const std::string& title) {
+  if (!a.csv.empty()) {
+    if (!write_csv(a.csv, c, s)) return usage_error("cannot write " + a.csv);
+    std::printf("csv: %s (%zu samples)\n", a.csv.c_str(), s.t.size());
+  }
+  if (!a.svg.empty()) {
+    if (!write_svg(a.svg, c, s, title)) return usage_error("cannot write " + a.svg);
+    std::printf("svg: %s\n", a.svg.c_str());
+  }
+  return kExitOk;
+}
+
+template <class SampleFn>
+Samples sample_all(const kin::Chain& c, double duration, double rate, SampleFn fn) {
+  Samples s;
+  const int n = c.n_joints;
+  s.q.assign(static_cast<std::size_t>(n), {});
+  s.v = s.a = s.q;
+  const long steps = static_cast<long>(std::ceil(duration * rate));
+  kin::JointVector q(n), v(n), acc(n);
+  for (long k = 0; k <= steps; ++k) {
+    const double t = std::min(duration, static_cast<double>(k) / rate);
+    fn(t, q, v, acc);
+    s.t.push_back(t);
+    for (int j = 0; j < n; ++j) {
+      const double sc = c.joint_user_scale(j);
+      s.q[static_cast<std::size_t>(j)].push_back(q[j] * sc);
+      s.v[static_cast<std::size_t>(j)].push_back(v[j] * sc);
+      s.a[static_cast<std::size_t>(j)].push_back(acc[j] * sc);
+    }
+  }
+  return s;
+}
+
+}  // namespace
+
+int cli_plan(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--help") || !std::strcmp(argv[i], "-h")) {
+      std::fputs(kPlanUsage, stdout);
+      return kExitOk;
+    }
+  }
+  Args a;
+  const std::string err = parse(argc, argv, a);
+  if (!err.empty()) return usage_error(err);
+  const kin::LoadResult r = kin::load_robot(a.robot);
+  if (!r.ok) return usage_error(r.error);
+  kin::Chain chain = r.chain;
+  bool defaulted = false;
+  apply_limits(chain, a, defaulted);
+  if (defaulted) std::printf("note: joints without limits in the description use the armctl defaults (see --help)\n");
+  std::string e;
+  kin::JointVector q0;
+  if (!joints_from_user(chain, a.from, q0, e)) return usage_error("--from: " + e);
+  std::string report;
+  if (limit_violations(chain, q0, report) > 0) return usage_error("--from is outside the joint limits:\n" + report);
+  const double ov = a.override_pct / 100.0;
+
+  if (a.kind == "movej") {
+    kin::JointVector q1;
+    if (!joints_from_user(chain, a.to, q1, e)) return usage_error("--to: " + e);
+    kin::JointTrajectory tr;
+    const kin::MotionStatus st =
+        kin::plan_movej(kin::limits_from(chain), kin::JointState::rest(q0), q1, kin::MovejOptions{ov}, tr);
+    if (!kin::is_ok(st)) {
+      std::string rep;
+      limit_violations(chain, q1, rep);
+      std::fprintf(stderr, "armctl: movej refused: %s\n%s", kin::to_string(st), rep.c_str());
+      return kExitFailed;
+    }
+    std::printf("movej on %s: duration %s s (override %s %%)\n", chain.name.data(), num(tr.duration).c_str(),
+                num(a.override_pct).c_str());
+    const Samples s = sample_all(chain, tr.duration, a.rate, [&tr](double t, kin::JointVector& q, kin::JointVector& v,
+                                                                  kin::JointVector& acc) { tr.sample(t, q, v, acc); });
+    print_peaks(chain, s);
+    return outputs(a, chain, s, std::string("movej ") + chain.name.data() + ", " + num(tr.duration) + " s");
+  }
+
+  // movel
+  kin::Pose x0;
+  kin::forward(chain, q0, x0);
+  kin::Pose target = x0;
+  if (!a.to.empty()) {
+    kin::JointVector q1;
+    if (!joints_from_user(chain, a.to, q1, e)) return usage_error("--to: " + e);
+    kin::forward(chain, q1, target);
+  } else {
+    target.translation() = Eigen::Vector3d(a.xyz[0], a.xyz[1], a.xyz[2]) * chain.length_unit;
+    if (!a.rpy.empty()) {
+      target.linear() = kin::rotation_from_rpy(a.rpy[0] * chain.angle_unit, a.rpy[1] * chain.angle_unit,
+                                               a.rpy[2] * chain.angle_unit);
+    } else if (!a.quat.empty()) {
+      Eigen::Matrix3d R;
+      if (kin::rotation_from_quaternion(a.quat[0], a.quat[1], a.quat[2], a.quat[3], R) != kin::Status::ok)
+        return usage_error("--quat: not a valid quaternion");
+      target.linear() = R;
+    }
+  }
+  kin::CartesianLimits cl;
+  if (a.speed > 0) cl.linear_velocity = a.speed * chain.length_unit;
+  if (a.accel > 0) cl.linear_acceleration = a.accel * chain.length_unit, cl.linear_jerk = 10 * cl.linear_acceleration;
+  if (a.angular > 0) cl.angular_velocity = a.angular * chain.angle_unit;
+  kin::MovelOptions opt;
+  opt.override = ov;
+  opt.allow_slowdown = !a.no_slowdown;
+  auto tr = std::make_unique<kin::CartesianTrajectory>();  // ~40 kB: not on the stack
+  // IK: kinematics/ik (closed form where the chain has one, else numerical);
+  // the damped-Newton fallback only if the chain cannot be analysed.
+  auto model = std::make_unique<kin::IkModel>();
+  kin::IkSolver ik{&kin::ik_nearest_for_motion, model.get()};
+  if (kin::ik_prepare(chain, *model) != kin::Status::ok) ik = kin::IkSolver{&kin::ik_nearest_newton, nullptr};
+  kin::PathReport rep;
+  const kin::MotionStatus st = kin::plan_movel(chain, q0, target, cl, opt, ik, *tr, &rep);
+  const double L = chain.length_unit;
+  if (!kin::is_ok(st)) {
+    std::fprintf(stderr, "armctl: movel refused: %s at %s %% of the line, tool at (%s, %s, %s) %s", kin::to_string(st),
+                 num(100 * rep.s).c_str(), num(rep.position.x() / L).c_str(), num(rep.position.y() / L).c_str(),
+                 num(rep.position.z() / L).c_str(), length_unit_name(chain));
+    if (rep.joint >= 0) std::fprintf(stderr, ", joint %d", rep.joint + 1);
+    if (rep.slowdown > 1) std::fprintf(stderr, ", would need %sx slower", num(rep.slowdown).c_str());
+    std::fprintf(stderr, "\n");
+    return kExitFailed;
+  }
+  std::printf("movel on %s: duration %s s, line %s %s, rotation %s %s (override %s %%)\n", chain.name.data(),
+              num(tr->duration).c_str(), num(tr->length / L).c_str(), length_unit_name(chain),
+              num(tr->angle / chain.angle_unit).c_str(), angle_unit_name(chain), num(a.override_pct).c_str());
+  if (st == kin::MotionStatus::slowed_near_singularity)
+    std::printf("slowed %sx near a singularity at %s %% of the line (joint %d sets the pace)\n", num(rep.slowdown).c_str(),
+                num(100 * rep.s).c_str(), rep.joint + 1);
+  std::printf("largest Jacobian condition number on the line: %s\n", num(rep.max_condition).c_str());
+  const Samples s = sample_all(chain, tr->duration, a.rate, [&tr](double t, kin::JointVector& q, kin::JointVector& v,
+                                                                 kin::JointVector& acc) { tr->sample_ik(t, q, v, acc); });
+  print_peaks(chain, s);
+  return outputs(a, chain, s, std::string("movel ") + chain.name.data() + ", " + num(tr->duration) + " s");
+}
+
+}  // namespace servoarm::fw

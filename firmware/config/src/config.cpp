@@ -1,0 +1,919 @@
+#include "servoarm/config/config.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <sstream>
+#include <toml.hpp>
+
+#include "servoarm/kinematics/chain.hpp"
+
+namespace servoarm::fw {
+
+// ---------------------------------------------------------------------------
+// The key tables. One entry per key; the default is the member's initialiser in
+// config.hpp. Ranges are closed unless `above` (open low end) or `below` (open
+// high end) says otherwise.
+// ---------------------------------------------------------------------------
+namespace {
+
+constexpr double kBauds[] = {9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600};
+constexpr double kDirections[] = {1, -1};
+constexpr const char* kStops[] = {"ramp", "drive"};
+constexpr double kTwo31 = 2147483648.0;  // counts_per_rev below 2^31: a revolution fits the drive's int32 position
+constexpr double kMaxLength = 1e5;       // deg or mm: |limits| and |home| (277 turns, 100 m)
+
+std::string num_text(double v);
+
+// Relations between keys. validate() runs them only once every key is within its own
+// range, so the values here are finite (no ordered compare with NaN) and a bad value
+// is named by its own key, not by the key it is compared with.
+std::string bus_heartbeat_above_period(const FwConfig& c, const FwConfig&) {
+  if (c.heartbeat_timeout_ms > c.heartbeat_period_ms) return "";
+  return "must be above bus.heartbeat_period_ms (" + num_text(c.heartbeat_period_ms) + ")";
+}
+std::string linear_speed_at_most_max(const FwConfig& c, const FwConfig&) {
+  if (c.linear_speed_mm_s <= c.max_linear_speed_mm_s) return "";
+  return "must be at most motion.max_linear_speed_mm_s (" + num_text(c.max_linear_speed_mm_s) + ")";
+}
+std::string can_rx_id_free(const FwConfig& c, const FwConfig&) {
+  const char* why = can_console_id_problem(c.console_can_rx_id);
+  return why ? why : "";
+}
+std::string can_tx_id_free(const FwConfig& c, const FwConfig&) {
+  if (const char* why = can_console_id_problem(c.console_can_tx_id)) return why;
+  return c.console_can_tx_id == c.console_can_rx_id ? "must differ from console.can_rx_id" : "";
+}
+std::string drive_heartbeat_above_period(const DriveConfig& d, const FwConfig& c) {
+  if (d.heartbeat_timeout_ms > c.heartbeat_period_ms) return "";
+  return "must be above bus.heartbeat_period_ms (" + num_text(c.heartbeat_period_ms) + ")";
+}
+std::string drive_limits_ordered(const DriveConfig& d, const FwConfig&) {
+  return d.limits.size() == 2 && !(d.limits[0] < d.limits[1]) ? "lower must be below upper" : "";
+}
+
+using K = ConfigKey;
+using F = FwConfig;
+const ConfigKey kConfigTable[] = {
+    K{"robot", &F::robot, "", "built-in model name (`armctl kin models`) or the path of a robot description `.toml`"}
+        .length(1, 4095).rule_text("a model name or a path, not empty"),
+    K{"loop.rate_hz", &F::rate_hz, "Hz", "control rate"}.within(250, 4000),
+    K{"loop.priority", &F::priority, "", "SCHED_FIFO priority of the control thread; 0 = normal scheduling"}.within(0, 99),
+    K{"loop.cpu", &F::cpu, "", "pin the control thread to this CPU (e.g. an isolcpus= one); -1 = no affinity"}.within(-1, 1023),
+    K{"loop.lock_memory", &F::lock_memory, "", "`mlockall()` all memory at start"},
+    K{"bus.can", &F::can, "",
+      "`\"sim\"` = virtual CiA 402 drives on the in-process bus, or the SocketCAN interface of the drives (`can0`, `vcan0`)"}
+        .length(1, 15).rule_text("\"sim\" or an interface name (1..15 chars)"),
+    K{"bus.first_node", &F::first_node, "", "CANopen node id of joint 1; joint k is first_node + k - 1"}.within(1, 127),
+    K{"bus.counts_per_rev", &F::counts_per_rev, "counts/rev",
+      "encoder counts per motor revolution (per motor mm for prismatic joints)"}.below(1, kTwo31),
+    K{"bus.gear_ratio", &F::gear_ratio, "",
+      "motor revolutions per joint revolution (motor mm per joint mm); positive: the sign between joint and drive is "
+      "drive.direction"}.within(1e-3, 1e5),
+    K{"bus.heartbeat_period_ms", &F::heartbeat_period_ms, "ms", "heartbeat period written to every drive (1017h)"}
+        .within(1, 10000),
+    K{"bus.heartbeat_timeout_ms", &F::heartbeat_timeout_ms, "ms",
+      "heartbeat consumer time: a drive silent longer than this faults the arm"}
+        .above(0, 60000).related(bus_heartbeat_above_period, "above bus.heartbeat_period_ms"),
+    K{"bus.start_timeout_s", &F::start_timeout_s, "s", "time allowed for drive bring-up at start"}.above(0, 120),
+    K{"safety.following_error_deg", &F::following_error_deg, "deg (mm)",
+      "largest |commanded - actual| per joint (mm for prismatic joints)"}.above(0, 180),
+    K{"safety.enable_timeout_s", &F::enable_timeout_s, "s", "time for every drive to reach operation enabled"}.above(0, 60),
+    K{"safety.feedback_timeout_ms", &F::feedback_timeout_ms, "ms",
+      "an enabled drive without position feedback this long faults the arm"}.within(1, 10000),
+    K{"safety.stop", &F::stop, "",
+      "e-stop and fault reaction: `\"ramp\"` = the controller ramps every joint to rest with the full limits, then "
+      "powers down; `\"drive\"` = CiA 402 Quick Stop (controlword 0x0002) to every drive in the next cycle, each stops "
+      "on its own quick-stop ramp (605Ah/6085h), power-down once all are at rest"}
+        .among(std::span<const char* const>(kStops)),
+    K{"safety.drive_stop_timeout_s", &F::drive_stop_timeout_s, "s",
+      "with stop = \"drive\": power the drives down after this long even if one still reports motion"}.within(0.05, 60),
+    K{"motion.home_deg", &F::home_deg, "deg (mm)",
+      "home pose for `home` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
+      "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
+    K{"motion.joint_speed_pct", &F::joint_speed_pct, "%",
+      "movej / home speed without speed=, percent of each joint's velocity limit"}.within(1, 100),
+    K{"motion.linear_speed_mm_s", &F::linear_speed_mm_s, "mm/s", "movel / G1 speed without speed= / F"}
+        .within(0.01, 5000).related(linear_speed_at_most_max, "at most motion.max_linear_speed_mm_s"),
+    K{"motion.max_linear_speed_mm_s", &F::max_linear_speed_mm_s, "mm/s",
+      "highest linear speed: speed= and F are clamped to it; G0 moves at it"}.within(0.01, 5000),
+    K{"motion.max_move_duration_s", &F::max_move_duration_s, "s",
+      "longest move the console accepts; longer moves are refused with out_of_range"}.within(1, 86400),
+    K{"console.stdin", &F::console_stdin, "", "console on stdin/stdout"},
+    K{"console.pty", &F::console_pty, "", "open a pseudo-terminal console and print its path"},
+    K{"console.serial", &F::console_serial, "", "serial device for a console (e.g. `/dev/ttyS0`); `\"\"` = none"}
+        .length(0, 4095).rule_text("a device path or \"\""),
+    K{"console.baud", &F::console_baud, "baud", "serial baud rate"}.among(std::span<const double>(kBauds)),
+    K{"console.can", &F::console_can, "",
+      "console over CAN (ISO-TP): a SocketCAN interface (`can0`, `vcan0`), `\"sim\"` (the in-process bus), `\"\"` = none"}
+        .length(0, 15).rule_text("\"\", \"sim\" or an interface name (at most 15 chars)"),
+    K{"console.can_rx_id", &F::console_can_rx_id, "", "11-bit CAN id armfw receives console requests on (ISO-TP)"}
+        .in_hex().rule_text("an 11-bit id (0x000..0x7FF)")
+        .related(can_rx_id_free, "outside the CANopen ids of nodes 1..127 and LSS"),
+    K{"console.can_tx_id", &F::console_can_tx_id, "", "11-bit CAN id armfw answers on (ISO-TP)"}
+        .in_hex().rule_text("an 11-bit id (0x000..0x7FF)")
+        .related(can_tx_id_free, "outside the CANopen ids of nodes 1..127 and LSS, not console.can_rx_id"),
+};
+
+using D = DriveConfig;
+using DK = DriveKey;
+const DriveKey kDriveTable[] = {
+    DK{"node", &D::node, "", "CANopen node id of this joint's drive (unique on the bus)"}
+        .within(1, 127).unset_means(0, "bus.first_node + k - 1", false),
+    DK{"counts_per_rev", &D::counts_per_rev, "counts/rev",
+       "encoder counts per motor revolution (per motor mm for prismatic joints)"}
+        .below(1, kTwo31).unset_means(0, "bus.counts_per_rev", false),
+    DK{"gear_ratio", &D::gear_ratio, "", "motor revolutions (mm) per joint revolution (mm); positive"}
+        .within(1e-3, 1e5).unset_means(0, "bus.gear_ratio", false),
+    DK{"direction", &D::direction, "", "sign between the joint and the drive"}.among(std::span<const double>(kDirections)),
+    DK{"zero_offset", &D::zero_offset, "counts", "drive position at joint zero (what `home zero` answers)"}
+        .within(-kTwo31, kTwo31 - 1),
+    DK{"limits", &D::limits, "deg (mm)",
+       "`[lower, upper]`; must lie within the robot description's limits, narrows them for planning, IK and the "
+       "supervisor"}
+        .within(-kMaxLength, kMaxLength).length(2, 2).related(drive_limits_ordered, "lower below upper")
+        .unset_means(0, "the robot description's", false),
+    DK{"max_velocity", &D::max_velocity, "deg/s (mm/s)", "at most the robot description's; 0 = the description's"}
+        .above(0, 1e6).unset_means(0, "the robot description's", true),
+    DK{"heartbeat_timeout_ms", &D::heartbeat_timeout_ms, "ms", "heartbeat consumer time for this drive; 0 = the bus's"}
+        .above(0, 60000).related(drive_heartbeat_above_period, "above bus.heartbeat_period_ms")
+        .unset_means(0, "bus.heartbeat_timeout_ms", true),
+    DK{"quick_stop_decel", &D::quick_stop_decel, "deg/s^2 (mm/s^2)",
+       "joint-side deceleration written to the drive's 6085h quick stop deceleration at bring-up (how fast it stops "
+       "on its own with safety.stop = \"drive\"); 0 = leave the drive's own"}
+        .above(0, 1e7).unset_means(0, "the drive's own", true),
+};
+
+// ---------------------------------------------------------------------------
+// Text helpers
+// ---------------------------------------------------------------------------
+
+/// Shortest text that reads back to the same double (std::to_chars): "1000", "100000",
+/// "0.01"; scientific ("1e-300", "1e+300") only outside [1e-4, 1e15).
+std::string num_text(double v) {
+  char b[64];
+  const double a = std::fabs(v);
+  const bool sci = std::isfinite(v) && a != 0 && (a < 1e-4 || a >= 1e15);
+  const auto r = std::to_chars(b, b + sizeof b, v, sci ? std::chars_format::scientific : std::chars_format::fixed);
+  return std::string(b, r.ptr);
+}
+
+/// A value converted from SI for a message ("-225", not "-225.00000000000003").
+std::string shown_text(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.10g", v);
+  return b;
+}
+
+std::string int_text(long long v, bool hex) {
+  char b[32];
+  if (hex && v >= 0) std::snprintf(b, sizeof b, "0x%03llX", v);
+  else std::snprintf(b, sizeof b, "%lld", v);
+  return b;
+}
+
+/// Length of the valid UTF-8 sequence at s[i], or 0 when it is not one.
+std::size_t utf8_len(const std::string& s, std::size_t i) {
+  const auto c = static_cast<unsigned char>(s[i]);
+  std::size_t n = 0;
+  std::uint32_t cp = 0;
+  if (c < 0x80) return 1;
+  if (c >= 0xC2 && c <= 0xDF) n = 2, cp = c & 0x1Fu;
+  else if (c >= 0xE0 && c <= 0xEF) n = 3, cp = c & 0x0Fu;
+  else if (c >= 0xF0 && c <= 0xF4) n = 4, cp = c & 0x07u;
+  else return 0;
+  if (i + n > s.size()) return 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    const auto d = static_cast<unsigned char>(s[i + k]);
+    if ((d & 0xC0u) != 0x80u) return 0;
+    cp = (cp << 6) | (d & 0x3Fu);
+  }
+  if ((n == 3 && cp < 0x800) || (n == 4 && (cp < 0x10000 || cp > 0x10FFFF)) || (cp >= 0xD800 && cp <= 0xDFFF)) return 0;
+  return n;
+}
+
+/// A TOML basic string: quotes, backslashes and control characters escaped; bytes
+/// that are not UTF-8 (TOML cannot hold them) become U+FFFD.
+std::string toml_string(const std::string& s) {
+  std::string o = "\"";
+  for (std::size_t i = 0; i < s.size();) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    const std::size_t n = utf8_len(s, i);
+    if (n == 0) {
+      o += "\\uFFFD";
+      ++i;
+      continue;
+    }
+    if (n > 1) {
+      o.append(s, i, n);
+      i += n;
+      continue;
+    }
+    switch (c) {
+      case '"': o += "\\\""; break;
+      case '\\': o += "\\\\"; break;
+      case '\b': o += "\\b"; break;
+      case '\t': o += "\\t"; break;
+      case '\n': o += "\\n"; break;
+      case '\r': o += "\\r"; break;
+      case '\f': o += "\\f"; break;
+      default:
+        if (c < 0x20 || c == 0x7F) {
+          char b[8];
+          std::snprintf(b, sizeof b, "\\u%04X", c);
+          o += b;
+        } else {
+          o += static_cast<char>(c);
+        }
+    }
+    ++i;
+  }
+  return o + "\"";
+}
+
+template <class S>
+std::string value_of(const Key<S>& k, const S& s) {
+  return std::visit(
+      [&](auto m) -> std::string {
+        using T = std::decay_t<decltype(s.*m)>;
+        const T& v = s.*m;
+        if constexpr (std::is_same_v<T, bool>) return v ? "true" : "false";
+        else if constexpr (std::is_same_v<T, int> || std::is_same_v<T, std::int64_t>) return int_text(v, k.hex);
+        else if constexpr (std::is_same_v<T, double>) return num_text(v);
+        else if constexpr (std::is_same_v<T, std::string>) return toml_string(v);
+        else {
+          std::string o = "[";
+          for (std::size_t i = 0; i < v.size(); ++i) o += (i ? ", " : "") + num_text(v[i]);
+          return o + "]";
+        }
+      },
+      k.member);
+}
+
+template <class S>
+bool is_integer_key(const Key<S>& k) {
+  return k.member.index() == 1 || k.member.index() == 2;  // int, std::int64_t
+}
+
+/// "[0.01, 5000]", "(0, 120]", "1..127", "9600, 19200, ...", "\"ramp\" or \"drive\"".
+template <class S>
+std::string numeric_range(const Key<S>& k) {
+  if (!k.one_of.empty()) {
+    std::string o;
+    for (std::size_t i = 0; i < k.one_of.size(); ++i) o += (i ? ", " : "") + num_text(k.one_of[i]);
+    return o;
+  }
+  if (std::isinf(k.lo) && std::isinf(k.hi)) return "";
+  if (is_integer_key(k) && !k.lo_open && !k.hi_open)
+    return int_text(static_cast<long long>(k.lo), k.hex) + ".." + int_text(static_cast<long long>(k.hi), k.hex);
+  return std::string(k.lo_open ? "(" : "[") + num_text(k.lo) + ", " + num_text(k.hi) + (k.hi_open ? ")" : "]");
+}
+
+template <class S>
+std::string range_of(const Key<S>& k) {
+  std::string r;
+  switch (k.member.index()) {
+    case 0: r = "true or false"; break;
+    case 4:
+      if (k.rule) r = k.rule;
+      else if (!k.one_of_text.empty())
+        for (std::size_t i = 0; i < k.one_of_text.size(); ++i)
+          r += std::string(i == 0 ? "" : i + 1 == k.one_of_text.size() ? " or " : ", ") + "\"" + k.one_of_text[i] + "\"";
+      break;
+    case 5:
+      r = (k.min_len == k.max_len ? std::to_string(k.min_len) : std::to_string(k.min_len) + ".." + std::to_string(k.max_len)) +
+          " values, each " + numeric_range(k);
+      break;
+    default: r = k.rule ? k.rule : numeric_range(k);
+  }
+  if (k.relation_text) r += (r.empty() ? "" : ", ") + std::string(k.relation_text);
+  if (k.has_unset && k.unset_writable && k.member.index() != 5) r += " or " + num_text(k.unset) + " (unset)";
+  return r;
+}
+
+template <class S>
+std::string default_of(const Key<S>& k) {
+  if (k.has_unset) return k.unset_text;
+  return value_of(k, S{});
+}
+
+bool in_range(double v, double lo, double hi, bool lo_open, bool hi_open) {
+  return (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
+}
+
+std::string with_unit(const char* unit) { return *unit ? std::string(" ") + unit : std::string(); }
+
+/// Why the number `v` of key `k` is refused, or "".
+template <class S>
+std::string number_problem(const Key<S>& k, double v) {
+  if (!std::isfinite(v)) return "must be a finite number (got " + num_text(v) + ")";
+  if (!k.one_of.empty()) {
+    if (std::find(k.one_of.begin(), k.one_of.end(), v) != k.one_of.end()) return "";
+    return "must be one of " + numeric_range(k) + with_unit(k.unit) + " (got " + num_text(v) + ")";
+  }
+  if (in_range(v, k.lo, k.hi, k.lo_open, k.hi_open)) return "";
+  return "must be within " + numeric_range(k) + with_unit(k.unit) + " (got " + num_text(v) + ")";
+}
+
+/// True when key `k` of `s` holds its "unset: inherit" value.
+template <class S>
+bool is_unset(const Key<S>& k, const S& s) {
+  if (!k.has_unset) return false;
+  return std::visit(
+      [&](auto m) -> bool {
+        using T = std::decay_t<decltype(s.*m)>;
+        if constexpr (std::is_same_v<T, std::vector<double>>) return (s.*m).empty();
+        else if constexpr (std::is_same_v<T, std::string> || std::is_same_v<T, bool>) return false;
+        else return static_cast<double>(s.*m) == k.unset;
+      },
+      k.member);
+}
+
+/// Why key `k` of `s` is refused ("" when fine). `label` is its name in messages.
+/// `relations`: false = the key's own range, true = only its relation to other keys
+/// (checked after every key's own range, so a bad value is named by its own key).
+template <class S>
+std::string key_problem(const Key<S>& k, const S& s, const FwConfig& whole, const std::string& label, bool relations) {
+  if (is_unset(k, s)) return "";
+  if (relations) {
+    const std::string why = k.relation ? k.relation(s, whole) : "";
+    return why.empty() ? "" : label + ": " + why;
+  }
+  std::string why;
+  std::visit(
+      [&](auto m) {
+        using T = std::decay_t<decltype(s.*m)>;
+        const T& v = s.*m;
+        if constexpr (std::is_same_v<T, bool>) {
+          return;
+        } else if constexpr (std::is_same_v<T, std::string>) {
+          const bool listed = k.one_of_text.empty() ||
+                              std::find(k.one_of_text.begin(), k.one_of_text.end(), v) != k.one_of_text.end();
+          if (!listed || v.size() < k.min_len || v.size() > k.max_len)
+            why = "must be " + range_of(k) + " (got " + toml_string(v) + ")";
+        } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+          if (v.size() < k.min_len || v.size() > k.max_len) {
+            why = "must hold " + (k.min_len == k.max_len ? std::to_string(k.min_len) : std::to_string(k.min_len) + ".." + std::to_string(k.max_len)) +
+                  " values (got " + std::to_string(v.size()) + ")";
+            return;
+          }
+          for (std::size_t i = 0; i < v.size() && why.empty(); ++i) {
+            const std::string p = number_problem(k, v[i]);
+            if (!p.empty()) why = "\x01" + std::to_string(i) + "\x02" + p;  // element index, rewritten below
+          }
+        } else {
+          why = number_problem(k, static_cast<double>(v));
+        }
+      },
+      k.member);
+  if (why.empty()) return "";
+  if (why[0] == '\x01') {  // "label[i]: reason"
+    const auto e = why.find('\x02');
+    return label + "[" + why.substr(1, e - 1) + "]: " + why.substr(e + 1);
+  }
+  return label + ": " + why;
+}
+
+std::string drive_label(std::size_t i) { return "drive[" + std::to_string(i + 1) + "]"; }
+
+// ---------------------------------------------------------------------------
+// Loading
+// ---------------------------------------------------------------------------
+
+struct Reader {
+  std::string origin;
+  std::string err;
+  bool fail(const std::string& key, const std::string& why) {
+    if (err.empty()) err = origin + ": " + key + ": " + why;
+    return false;
+  }
+  static std::string shown(const toml::value& v) {
+    std::ostringstream os;
+    os << v;
+    std::string s = os.str();
+    std::replace(s.begin(), s.end(), '\n', ' ');
+    if (s.size() > 40) s = s.substr(0, 37) + "...";
+    return s;
+  }
+  bool number(const toml::value& v, const std::string& key, double& out) {
+    if (v.is_integer()) out = static_cast<double>(v.as_integer());
+    else if (v.is_floating()) out = v.as_floating();
+    else return fail(key, "expected a number (got " + shown(v) + ")");
+    if (!std::isfinite(out)) return fail(key, "must be a finite number (got " + shown(v) + ")");
+    return true;
+  }
+
+  /// Read `v` into key `k` of `s`. False (and err set) when the type is wrong or the
+  /// file writes the "unset" value of a key that does not allow it.
+  template <class S>
+  bool read(const Key<S>& k, const toml::value& v, const std::string& label, S& s) {
+    bool ok = std::visit(
+        [&](auto m) -> bool {
+          using T = std::decay_t<decltype(s.*m)>;
+          T& out = s.*m;
+          if constexpr (std::is_same_v<T, bool>) {
+            if (!v.is_boolean()) return fail(label, "expected true or false (got " + shown(v) + ")");
+            out = v.as_boolean();
+          } else if constexpr (std::is_same_v<T, int> || std::is_same_v<T, std::int64_t>) {
+            if (!v.is_integer()) return fail(label, "expected an integer (got " + shown(v) + ")");
+            const std::int64_t i = v.as_integer();
+            if constexpr (std::is_same_v<T, int>) {
+              // Refused here, before it is narrowed: validate() could not see it.
+              if (i < std::numeric_limits<int>::min() || i > std::numeric_limits<int>::max())
+                return fail(label, "integer out of range (got " + std::to_string(i) + ")");
+            }
+            out = static_cast<T>(i);
+          } else if constexpr (std::is_same_v<T, double>) {
+            if (!number(v, label, out)) return false;
+          } else if constexpr (std::is_same_v<T, std::string>) {
+            if (!v.is_string()) return fail(label, "expected a string (got " + shown(v) + ")");
+            out = v.as_string().str;
+          } else {
+            if (!v.is_array()) return fail(label, "expected an array of numbers (got " + shown(v) + ")");
+            const auto& a = v.as_array();
+            if (a.size() > k.max_len || a.size() < k.min_len)
+              return fail(label, "expected " + range_of(k) + " (got " + std::to_string(a.size()) + " values)");
+            std::vector<double> tmp(a.size());
+            for (std::size_t i = 0; i < a.size(); ++i)
+              if (!number(a[i], label + "[" + std::to_string(i) + "]", tmp[i])) return false;
+            out = std::move(tmp);
+          }
+          return true;
+        },
+        k.member);
+    if (!ok) return false;
+    if (!k.unset_writable && is_unset(k, s))
+      return fail(label, value_of(k, s) + " is not allowed: " + range_of(k) + " (leave the key out for " + k.unset_text + ")");
+    return true;
+  }
+};
+
+/// The section of a dotted name ("loop" of "loop.rate_hz"), "" for a top-level key.
+std::string section_of(const char* name) {
+  const char* dot = std::strchr(name, '.');
+  return dot ? std::string(name, dot) : std::string();
+}
+
+std::vector<std::string> sections() {
+  std::vector<std::string> out;
+  for (const ConfigKey& k : kConfigTable) {
+    const std::string s = section_of(k.name);
+    if (!s.empty() && std::find(out.begin(), out.end(), s) == out.end()) out.push_back(s);
+  }
+  return out;
+}
+
+std::string joined(const std::vector<std::string>& v) {
+  std::string o;
+  for (std::size_t i = 0; i < v.size(); ++i) o += (i ? ", " : "") + v[i];
+  return o;
+}
+
+template <class Map>
+std::vector<std::string> sorted_keys(const Map& m) {
+  std::vector<std::string> out;
+  for (const auto& e : m) out.push_back(e.first);
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+bool read_drive(Reader& r, const toml::value& t, std::size_t index, DriveConfig& d) {
+  const std::string where = drive_label(index);
+  if (!t.is_table()) return r.fail(where, "expected a table");
+  const auto& tab = t.as_table();
+  for (const std::string& name : sorted_keys(tab)) {
+    const DriveKey* k = nullptr;
+    for (const DriveKey& e : kDriveTable)
+      if (name == e.name) k = &e;
+    if (!k) {
+      std::vector<std::string> names;
+      for (const DriveKey& e : kDriveTable) names.push_back(e.name);
+      return r.fail(where + "." + name, "unknown key (" + joined(names) + ")");
+    }
+    if (!r.read(*k, tab.at(name), where + "." + name, d)) return false;
+  }
+  return true;
+}
+
+/// Where the text is not UTF-8 (TOML requires it; Debian's toml11 3.7.1 reads past
+/// the end of a literal string holding invalid UTF-8): "line L, column C", or "".
+std::string utf8_problem(const std::string& t) {
+  std::size_t line = 1, col = 1;
+  for (std::size_t i = 0; i < t.size();) {
+    const std::size_t n = utf8_len(t, i);
+    if (n == 0 || t[i] == '\0') return "line " + std::to_string(line) + ", column " + std::to_string(col);
+    if (t[i] == '\n') ++line, col = 0;
+    i += n;
+    ++col;
+  }
+  return "";
+}
+
+/// Where brackets nest deeper than kMaxDepth outside strings and comments ("line L,
+/// column C"), or "". toml11 parses nesting recursively: `x = ` and 20 000 `[` overflow
+/// its stack (SIGSEGV), so such text never reaches it.
+constexpr int kMaxDepth = 32;
+std::string nesting_problem(const std::string& t) {
+  int depth = 0;
+  std::size_t line = 1, col = 0;
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    const char c = t[i];
+    ++col;
+    if (c == '\n') {
+      ++line, col = 0;
+    } else if (c == '#') {  // comment to the end of the line
+      while (i + 1 < t.size() && t[i + 1] != '\n') ++i;
+    } else if (c == '"' || c == '\'') {
+      const bool multi = t.compare(i, 3, std::string(3, c)) == 0;
+      const std::string close = multi ? std::string(3, c) : std::string(1, c);
+      i += close.size();
+      while (i < t.size() && t.compare(i, close.size(), close) != 0) {
+        if (t[i] == '\n') {
+          if (!multi) break;  // an unterminated one-line string: toml11 reports it
+          ++line, col = 0;
+        }
+        if (c == '"' && t[i] == '\\') ++i;  // escape in a basic string
+        ++i;
+      }
+      i += close.size() - 1;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxDepth)
+        return "line " + std::to_string(line) + ", column " + std::to_string(col) + ": nested deeper than " +
+               std::to_string(kMaxDepth) + " levels";
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+  return "";
+}
+
+/// toml11's multi-line message as one line: "origin:L:C: syntax: what" (the line and
+/// column from its " L | text" and "   | ^--- ..." rows).
+std::string syntax_message(const std::string& origin, const std::string& what) {
+  std::vector<std::string> rows;
+  for (std::size_t a = 0; a <= what.size();) {
+    const std::size_t b = std::min(what.find('\n', a), what.size());
+    rows.push_back(what.substr(a, b - a));
+    a = b + 1;
+  }
+  std::string msg = rows.empty() ? what : rows[0];
+  if (msg.rfind("[error] ", 0) == 0) msg.erase(0, 8);
+  std::string where;
+  for (std::size_t r = 1; r + 1 < rows.size() && where.empty(); ++r) {
+    const std::string& row = rows[r];
+    const std::size_t bar = row.find(" | ");
+    if (bar == std::string::npos || bar == 0) continue;
+    const std::size_t digits = row.find_first_not_of(' ');
+    if (digits >= bar || row.find_first_not_of("0123456789", digits) != bar) continue;
+    const std::string& mark = rows[r + 1];
+    const std::size_t caret = mark.find('^');
+    if (caret == std::string::npos || mark.size() <= bar + 1 || mark[bar + 1] != '|' || caret < bar + 3) continue;
+    where = row.substr(digits, bar - digits) + ":" + std::to_string(caret - (bar + 3) + 1);
+  }
+  return origin + (where.empty() ? "" : ":" + where) + ": syntax: " + msg;
+}
+
+/// Configuration files are small (the shipped one is 3 KiB, six [[drive]] tables add
+/// 1 KiB); the cap also bounds toml11's time on long arrays (quadratic in 3.7.1).
+constexpr std::size_t kMaxFileBytes = 64 * 1024;
+
+}  // namespace
+
+std::span<const ConfigKey> config_keys() { return kConfigTable; }
+std::span<const DriveKey> drive_keys() { return kDriveTable; }
+std::string value_text(const ConfigKey& k, const FwConfig& s) { return value_of(k, s); }
+std::string value_text(const DriveKey& k, const DriveConfig& s) { return value_of(k, s); }
+std::string range_text(const ConfigKey& k) { return range_of(k); }
+std::string range_text(const DriveKey& k) { return range_of(k); }
+std::string default_text(const ConfigKey& k) { return default_of(k); }
+std::string default_text(const DriveKey& k) { return default_of(k); }
+
+const char* can_console_id_problem(int id) {
+  // CANopen predefined connection set (CiA 301) of nodes 1..127: NMT 0x000, SYNC 0x080,
+  // EMCY 0x081-0x0FF, TIME 0x100, PDOs 0x181-0x57F, SDO 0x581-0x67F, heartbeat 0x701-0x77F;
+  // LSS (CiA 305) 0x7E4 / 0x7E5.
+  if (id < 0 || id > 0x7FF) return "must be an 11-bit id (0x000..0x7FF)";
+  if (id <= 0x100) return "collides with CANopen NMT / SYNC / EMCY / TIME (0x000-0x100)";
+  if (id >= 0x181 && id <= 0x57F) return "collides with the CANopen PDOs of nodes 1..127 (0x181-0x57F)";
+  if (id >= 0x581 && id <= 0x67F) return "collides with the CANopen SDOs of nodes 1..127 (0x581-0x67F)";
+  if (id >= 0x701 && id <= 0x77F) return "collides with the CANopen heartbeats of nodes 1..127 (0x701-0x77F)";
+  if (id == 0x7E4 || id == 0x7E5) return "collides with CANopen LSS (0x7E4 / 0x7E5)";
+  return nullptr;
+}
+
+std::string validate(const FwConfig& c) {
+  for (const bool relations : {false, true}) {
+    for (const ConfigKey& k : kConfigTable) {
+      const std::string why = key_problem(k, c, c, k.name, relations);
+      if (!why.empty()) return why;
+    }
+    for (std::size_t i = 0; i < c.drives.size(); ++i)
+      for (const DriveKey& k : kDriveTable) {
+        const std::string why = key_problem(k, c.drives[i], c, drive_label(i) + "." + k.name, relations);
+        if (!why.empty()) return why;
+      }
+  }
+  return "";
+}
+
+std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
+  if (std::string bad = validate(c); !bad.empty()) return bad;  // the arithmetic below needs the ranges
+  const int n = chain.n_joints;
+  const std::string robot = c.robot;
+  if (!c.home_deg.empty() && static_cast<int>(c.home_deg.size()) != n)
+    return "motion.home_deg: needs " + std::to_string(n) + " values for " + robot + " (got " +
+           std::to_string(c.home_deg.size()) + ")";
+  if (!c.drives.empty() && static_cast<int>(c.drives.size()) != n)
+    return "drive: " + std::to_string(c.drives.size()) + " [[drive]] tables for the " + std::to_string(n) +
+           " joints of " + robot + " (give one per joint, or none)";
+  for (int j = 0; j < n; ++j) {
+    const kin::DhRow& row = chain.joint(j);
+    const bool prismatic = row.type == kin::JointType::prismatic;
+    const double unit = prismatic ? 1e-3 : M_PI / 180.0;  // SI per deg / mm
+    const char* u = prismatic ? " mm" : " deg";
+    const std::string w = drive_label(static_cast<std::size_t>(j)) + ".";
+    const DriveConfig* d = c.drives.empty() ? nullptr : &c.drives[static_cast<std::size_t>(j)];
+    double lo = row.lower / unit, hi = row.upper / unit;  // deg / mm; may be infinite
+    if (d && !d->limits.empty()) {
+      if (d->limits[0] * unit < row.lower - 1e-12 || d->limits[1] * unit > row.upper + 1e-12)
+        return w + "limits: [" + shown_text(d->limits[0]) + ", " + shown_text(d->limits[1]) +
+               "] reaches outside the robot description's [" + shown_text(lo) + ", " + shown_text(hi) + "]" + u;
+      lo = d->limits[0];
+      hi = d->limits[1];
+    }
+    if (!c.home_deg.empty()) {
+      const double h = c.home_deg[static_cast<std::size_t>(j)];
+      if (!(h >= lo - 1e-9 && h <= hi + 1e-9))
+        return "motion.home_deg[" + std::to_string(j) + "]: " + shown_text(h) + u + " is outside joint " +
+               std::to_string(j + 1) + "'s limits [" + shown_text(lo) + ", " + shown_text(hi) + "]" + u;
+    }
+    // Drive scaling, as hal::JointScaling computes it: counts per joint unit.
+    const bool own_counts = d && d->counts_per_rev > 0, own_gear = d && d->gear_ratio != 0;
+    const double cpr = own_counts ? d->counts_per_rev : c.counts_per_rev;
+    const double gear = own_gear ? d->gear_ratio : c.gear_ratio;
+    const double per_unit = prismatic ? cpr * gear : cpr * gear / 360.0;  // counts per deg / mm
+    const std::string scale_key = std::string(own_counts ? w : "bus.") + "counts_per_rev";
+    const std::string scaling = " (" + shown_text(cpr) + " counts/rev x gear " + shown_text(gear) + ")";
+    const double zero = d ? static_cast<double>(d->zero_offset) : 0.0;
+    const double dir = d ? static_cast<double>(d->direction) : 1.0;
+    for (const double q : {lo, hi}) {
+      if (!std::isfinite(q)) continue;
+      const double counts = zero + dir * q * per_unit;
+      if (!(counts >= -kTwo31 && counts <= kTwo31 - 1))
+        return scale_key + ": joint " + std::to_string(j + 1) + "'s range [" + shown_text(lo) + ", " + shown_text(hi) + "]" +
+               u + " does not fit the drive's 32-bit position: " + shown_text(q) + u + " is " + shown_text(counts) +
+               " counts" + scaling;
+    }
+    const double per_count = 1.0 / per_unit;  // deg / mm per count
+    if (!(per_count < c.following_error_deg))
+      return scale_key + ": one count is " + shown_text(per_count) + u + " on joint " + std::to_string(j + 1) +
+             ", not finer than safety.following_error_deg (" + shown_text(c.following_error_deg) + ")" + scaling;
+    double vmax = row.dynamics.max_velocity / unit;  // deg/s or mm/s; 0 = none given
+    if (d && d->max_velocity > 0) vmax = d->max_velocity;
+    if (vmax > 0 && vmax * per_unit > kTwo31 - 1)
+      return scale_key + ": joint " + std::to_string(j + 1) + "'s maximum velocity " + shown_text(vmax) + u +
+             "/s is " + shown_text(vmax * per_unit) + " counts/s, beyond the drive's 32-bit velocity" + scaling;
+  }
+  return "";
+}
+
+std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
+  if (text.size() > kMaxFileBytes)
+    return origin + ": larger than " + std::to_string(kMaxFileBytes) + " bytes (" + std::to_string(text.size()) + ")";
+  if (const std::string at = utf8_problem(text); !at.empty()) return origin + ": " + at + ": not UTF-8 text";
+  if (const std::string at = nesting_problem(text); !at.empty()) return origin + ": " + at;
+  Reader r{origin, {}};
+  toml::value root;
+  try {
+    std::istringstream is(text);
+    root = toml::parse(is, origin);
+  } catch (const std::exception& e) {
+    return syntax_message(origin, e.what());
+  }
+  if (!root.is_table()) return origin + ": not a TOML table";
+  const auto& top = root.as_table();
+  const std::vector<std::string> secs = sections();
+  FwConfig c = cfg;
+  // Unknown names first (sorted, so the message does not depend on hash order).
+  for (const std::string& name : sorted_keys(top)) {
+    const toml::value& v = top.at(name);
+    if (name == "drive") continue;
+    if (std::find(secs.begin(), secs.end(), name) != secs.end()) {
+      if (!v.is_table()) return origin + ": " + name + ": expected a [" + name + "] table";
+      for (const std::string& leaf : sorted_keys(v.as_table())) {
+        const std::string full = name + "." + leaf;
+        bool known = false;
+        for (const ConfigKey& k : kConfigTable) known = known || full == k.name;
+        if (!known) return origin + ": " + full + ": unknown key (see armfw --config-keys)";
+      }
+      continue;
+    }
+    bool known = false;
+    for (const ConfigKey& k : kConfigTable) known = known || (name == k.name && section_of(k.name).empty());
+    if (!known)
+      return origin + ": " + name + ": " +
+             (v.is_table() ? "unknown section (" + joined(secs) + ", [[drive]])" : "unknown key (see armfw --config-keys)");
+  }
+  // Then every key in table order.
+  for (const ConfigKey& k : kConfigTable) {
+    const std::string sec = section_of(k.name);
+    const toml::value* v = nullptr;
+    if (sec.empty()) {
+      if (top.count(k.name)) v = &top.at(k.name);
+    } else if (top.count(sec)) {
+      const auto& t = top.at(sec).as_table();
+      const std::string leaf = k.name + sec.size() + 1;
+      if (t.count(leaf)) v = &t.at(leaf);
+    }
+    if (v && !r.read(k, *v, k.name, c)) return r.err;
+  }
+  if (top.count("drive")) {
+    const toml::value& v = top.at("drive");
+    if (!v.is_array()) return origin + ": drive: expected [[drive]] tables";
+    c.drives.clear();
+    for (const auto& t : v.as_array()) {
+      DriveConfig d;
+      if (!read_drive(r, t, c.drives.size(), d)) return r.err;
+      c.drives.push_back(d);
+    }
+  }
+  const std::string bad = validate(c);
+  if (!bad.empty()) return origin + ": " + bad;
+  cfg = c;
+  return "";
+}
+
+std::string load_config_file(const std::string& path, FwConfig& cfg) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);  // O_NONBLOCK: a FIFO must not hang us
+  if (fd < 0) return path + ": cannot open: " + std::strerror(errno);
+  struct stat st{};
+  std::string why;
+  if (::fstat(fd, &st) != 0) why = std::string("cannot stat: ") + std::strerror(errno);
+  else if (S_ISDIR(st.st_mode)) why = "is a directory, not a file";
+  else if (!S_ISREG(st.st_mode)) why = "not a regular file";
+  else if (st.st_size > static_cast<off_t>(kMaxFileBytes))  // off_t: no wrap on 32-bit size_t (armhf)
+    why = "larger than " + std::to_string(kMaxFileBytes) + " bytes (" + std::to_string(st.st_size) + ")";
+  std::string text;
+  if (why.empty()) {
+    char buf[8192];
+    for (;;) {
+      const ssize_t n = ::read(fd, buf, sizeof buf);
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0) {
+        why = std::string("read error: ") + std::strerror(errno);
+        break;
+      }
+      if (n == 0) break;
+      text.append(buf, static_cast<std::size_t>(n));
+      if (text.size() > kMaxFileBytes) {
+        why = "larger than " + std::to_string(kMaxFileBytes) + " bytes";
+        break;
+      }
+    }
+  }
+  ::close(fd);
+  if (!why.empty()) return path + ": " + why;
+  return load_config_text(text, path, cfg);
+}
+
+std::string to_toml(const FwConfig& c) {
+  std::string out;
+  for (const ConfigKey& k : kConfigTable)
+    if (section_of(k.name).empty()) out += std::string(k.name) + " = " + value_of(k, c) + "\n";
+  for (const std::string& sec : sections()) {
+    out += "[" + sec + "]\n";
+    for (const ConfigKey& k : kConfigTable)
+      if (section_of(k.name) == sec) out += std::string(k.name + sec.size() + 1) + " = " + value_of(k, c) + "\n";
+  }
+  for (const DriveConfig& d : c.drives) {
+    out += "[[drive]]\n";
+    for (const DriveKey& k : kDriveTable) {
+      if (!is_unset(k, d)) out += std::string(k.name) + " = " + value_of(k, d) + "\n";
+    }
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------
+// --config-keys and the reference page
+// ---------------------------------------------------------------------------
+
+std::string config_keys_text() {
+  std::string o;
+  auto line = [&](const std::string& name, const std::string& def, const std::string& range, const char* unit,
+                  const char* doc) {
+    auto pad = [](std::string s, std::size_t w) { return s.size() < w ? s.append(w - s.size(), ' ') : s + " "; };
+    o += pad(name, 30) + "default " + pad(def, 22) + "range " + range + (*unit ? std::string("  unit ") + unit : "") +
+         "\n    " + doc + "\n";
+  };
+  for (const ConfigKey& k : kConfigTable) line(k.name, default_of(k), range_of(k), k.unit, k.doc);
+  line("drive", "[]", "[[drive]] tables", "", "one table per joint in chain order, give all or none; their keys:");
+  for (const DriveKey& k : kDriveTable) line(std::string("drive.") + k.name, default_of(k), range_of(k), k.unit, k.doc);
+  return o;
+}
+
+namespace {
+
+constexpr const char* kBegin =
+    "<!-- BEGIN config-reference: generated by `armfw --config-reference` from the key tables in "
+    "firmware/config/src/config.cpp. Do not edit by hand: change the table, then regenerate (see above). -->";
+constexpr const char* kEnd = "<!-- END config-reference -->";
+
+std::string cell(const std::string& s) {
+  std::string o;
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '|' && (i == 0 || s[i - 1] != '\\')) o += '\\';
+    o += s[i];
+  }
+  return o;
+}
+
+template <class S>
+std::string table_row(const Key<S>& k, const std::string& name) {
+  const std::string def = k.has_unset ? std::string(k.unset_text) : "`" + value_of(k, S{}) + "`";
+  return "| `" + name + "` | " + cell(def) + " | " + cell(range_of(k)) + " | " + cell(k.unit) + " | " + cell(k.doc) + " |\n";
+}
+
+constexpr const char* kHeader = "| key | default | allowed | unit | meaning |\n| --- | --- | --- | --- | --- |\n";
+
+std::vector<std::string> lines_of(const std::string& s) {
+  std::vector<std::string> out;
+  std::size_t a = 0;
+  while (a < s.size()) {
+    std::size_t b = s.find('\n', a);
+    if (b == std::string::npos) b = s.size();
+    out.push_back(s.substr(a, b - a));
+    a = b + 1;
+  }
+  return out;
+}
+
+}  // namespace
+
+std::string config_reference_markdown() {
+  std::string o = std::string(kBegin) + "\n\n### Top-level keys\n\n" + kHeader;
+  for (const ConfigKey& k : kConfigTable)
+    if (section_of(k.name).empty()) o += table_row(k, k.name);
+  for (const std::string& sec : sections()) {
+    o += "\n### `[" + sec + "]`\n\n" + kHeader;
+    for (const ConfigKey& k : kConfigTable)
+      if (section_of(k.name) == sec) o += table_row(k, k.name);
+  }
+  o += "\n### `[[drive]]`\n\n"
+       "One table per joint, in chain order: give one for every joint or none (then every joint takes the [bus] "
+       "values). Every key is optional; a key left out inherits what the default column says.\n\n";
+  o += kHeader;
+  for (const DriveKey& k : kDriveTable) o += table_row(k, std::string("drive.") + k.name);
+  o += std::string("\n") + kEnd + "\n";
+  return o;
+}
+
+std::string config_reference_mismatch(const std::string& page) {
+  const std::vector<std::string> pl = lines_of(page);
+  std::size_t b = pl.size(), e = pl.size();
+  for (std::size_t i = 0; i < pl.size(); ++i) {
+    if (b == pl.size() && pl[i].rfind("<!-- BEGIN config-reference", 0) == 0) b = i;
+    else if (b != pl.size() && pl[i] == kEnd) {
+      e = i;
+      break;
+    }
+  }
+  const char* how =
+      "regenerate the section: see \"Regenerating the reference\" in docs/configuration.md "
+      "(armfw --config-reference)";
+  if (b == pl.size() || e == pl.size()) return std::string("no BEGIN/END config-reference markers; ") + how;
+  const std::vector<std::string> have(pl.begin() + static_cast<long>(b), pl.begin() + static_cast<long>(e) + 1);
+  const std::vector<std::string> want = lines_of(config_reference_markdown());
+  if (have == want) return "";
+  // Line diff (longest common subsequence; the section is ~60 lines).
+  const std::size_t n = have.size(), m = want.size();
+  std::vector<std::vector<int>> L(n + 1, std::vector<int>(m + 1, 0));
+  for (std::size_t i = n; i-- > 0;)
+    for (std::size_t j = m; j-- > 0;)
+      L[i][j] = have[i] == want[j] ? L[i + 1][j + 1] + 1 : std::max(L[i + 1][j], L[i][j + 1]);
+  std::string o = "docs/configuration.md differs from armfw --config-reference (- page, + generated):\n";
+  int shown = 0;
+  std::size_t i = 0, j = 0;
+  while ((i < n || j < m) && shown < 40) {
+    if (i < n && j < m && have[i] == want[j]) {
+      ++i, ++j;
+    } else if (j < m && (i == n || L[i][j + 1] >= L[i + 1][j])) {
+      o += "+ " + want[j++] + "\n";
+      ++shown;
+    } else {
+      o += "- line " + std::to_string(b + i + 1) + ": " + have[i] + "\n";
+      ++i;
+      ++shown;
+    }
+  }
+  return o + how;
+}
+
+}  // namespace servoarm::fw

@@ -1,0 +1,144 @@
+#pragma once
+// The console: turns text lines from any transport into actions and answers.
+// Runs on the console thread (non-real-time: may allocate and format text).
+// Talks to the control thread only through the Controller's SPSC queues and
+// telemetry seqlock.
+//
+// Protocol (every transport): one command per line; every line is answered by
+// exactly one final line, `ok [data]` or `error: <code> <message>` (multi-line
+// answers -- help, config, limits, M114 -- print their data lines first).
+// Asynchronous events print as `alarm: ...` lines. GRBL realtime characters
+// act at once and are never part of a line: '?' prints a status report,
+// '!' feed hold, '~' resume, Ctrl-X (0x18) e-stop and discards the partial line.
+//
+// `enable` answers once every drive is in operation enabled (or with the fault).
+// Motion commands (movej, movel, home, G0/G1, G28, G4) answer `ok` when the
+// move is checked and queued (GRBL semantics); `wait` / M400 answer when the
+// queue has run empty. A full queue answers `error: busy` and queues nothing.
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <string>
+#include <string_view>
+
+#include "servoarm/console/commands.hpp"
+#include "servoarm/rt/controller.hpp"
+#include "servoarm/kinematics/trajectory_cartesian.hpp"
+
+namespace servoarm::fw {
+
+struct ConsoleConfig {
+  double default_joint_speed_pct = 50.0;     ///< movej / home without speed=
+  double default_linear_speed = 0.1;         ///< m/s: movel / G1 without speed/F
+  double max_linear_speed = 0.25;            ///< m/s: upper bound of speed= / F, and G0
+  kin::JointVector home;                     ///< SI; empty = all zeros clamped into the limits
+  kin::CartesianLimits cartesian{};          ///< linear_velocity is replaced per move
+  double reply_timeout_s = 1.0;              ///< wait for the control thread to answer a request
+  double max_move_duration_s = 600.0;        ///< longest move accepted (movej, movel, G0/G1, home): out_of_range beyond
+  std::string config_text;                   ///< what `config` prints (the effective configuration)
+};
+
+/// One connected client: its partial line, queued lines, G-code modal state.
+struct Session {
+  std::string name = "console";
+  std::string partial;                 ///< bytes of the line being received
+  bool discarding = false;
+  bool after_cr = false;               ///< last byte was CR (CR LF is one line end)             ///< current line overflowed: drop until newline
+  std::deque<std::string> lines;       ///< complete lines not executed yet (while waiting)
+  GcodeModal modal;
+  bool waiting = false;                ///< `wait` / M400 in progress
+  bool enabling = false;               ///< `enable` / M17 waits for operation enabled
+  std::string out;                     ///< text to send to the client
+  std::uint64_t lines_done = 0;
+};
+
+class Console {
+ public:
+  Console(Controller& ctl, const ConsoleConfig& cfg);
+
+  /// Bytes from a transport: realtime characters act now, lines are executed
+  /// (or queued while the session waits). Answers go to session.out. = accept() + poll().
+  void feed(Session& s, std::string_view bytes);
+  /// Bytes from a transport, without executing lines: realtime characters act now
+  /// (Ctrl-X answers every complete line not executed yet with `error: estop`),
+  /// complete lines are queued in the session.
+  void accept(Session& s, std::string_view bytes);
+  /// The transport reached end of input: a last line without its newline (even an
+  /// overlong one) is queued, so every line gets exactly one answer.
+  void end_of_input(Session& s);
+  /// Finish a wait/enable that is done, then execute at most one queued line.
+  /// True when a line was executed (call again for the next one).
+  bool run_one(Session& s);
+  /// Execute queued lines / finish a wait when the arm is idle. Call regularly.
+  void poll(Session& s);
+  /// Console output a transport had to drop because its client did not read
+  /// (counted by the transport layer, shown in `stats`).
+  void add_output_dropped(std::uint64_t lines, std::uint64_t bytes) {
+    output_dropped_lines_ += lines;
+    output_dropped_bytes_ += bytes;
+  }
+  /// Execute one complete line now (no realtime characters). Used by feed().
+  void execute(Session& s, std::string_view line);
+  /// Drain control-thread events into text lines ("alarm: ..."), for every session.
+  std::string drain_events();
+
+  /// True while the session has work pending (queued lines or a wait).
+  bool busy(const Session& s) const { return s.waiting || s.enabling || !s.lines.empty(); }
+
+  /// How to pass time while waiting for the control thread (default: sleep 200 us).
+  /// Single-threaded tests set it to run a control cycle.
+  void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
+
+  /// Status line as printed by `status` (without "ok ").
+  std::string status_text() const;
+  /// GRBL-style report for '?': <Idle|MPos:x,y,z|J:...|Q:n>
+  std::string grbl_report() const;
+  /// Human-readable statistics (the `stats` answer without "ok ").
+  std::string stats_text() const;
+
+  /// Joint values of the end of the motion queue (or the commanded position).
+  kin::JointVector tail() const;
+  const ConsoleConfig& config() const { return cfg_; }
+  /// Motions queued by this console so far (ids 1..n).
+  std::uint32_t last_motion_id() const { return next_id_ - 1; }
+
+ private:
+  bool request(RequestOp op, Reply& out);
+  void answer_error(Session& s, CmdError e, const std::string& msg);
+  void answer_ok(Session& s, const std::string& data = {});
+  bool motion_state_ok(Session& s);
+  /// Resolve a pending `enable` / `wait` whose outcome is known. True while still blocked.
+  bool settle(Session& s);
+  /// out_of_range answer when a planned move would take longer than max_move_duration_s.
+  bool duration_ok(Session& s, const char* what, double duration_s);
+  void queue_joint(Session& s, const kin::JointVector& goal, double pct);
+  void queue_linear(Session& s, const kin::Pose& target, double speed_m_s);
+  void queue_dwell(Session& s, double secs);
+  void do_help(Session& s, std::string_view topic);
+  void do_fk(Session& s, const Command& c);
+  void do_ik(Session& s, const Command& c);
+  void do_limits(Session& s);
+  void do_gmove(Session& s, const Command& c);
+  kin::Pose pose_from_values(const Command& c, const kin::JointVector& q_ref) const;
+  std::string pose_text(const kin::JointVector& q) const;
+  std::string joints_text(const kin::JointVector& q) const;
+  double to_si(int j, double user) const;
+  double to_user(int j, double si) const;
+
+  Controller& ctl_;
+  ConsoleConfig cfg_;
+  const kin::Chain& chain_;
+  int n_;
+  std::uint32_t seq_ = 0;
+  std::uint32_t next_id_ = 1;
+  kin::JointVector tail_;
+  std::uint32_t tail_id_ = 0;  ///< id of the motion whose goal tail_ holds (0: none)
+  std::uint64_t tail_gen_ = 0; ///< controller generation when tail_ was set
+  std::function<void()> idle_;
+  std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
+  struct Ik;
+  std::shared_ptr<Ik> ik_;
+};
+
+}  // namespace servoarm::fw

@@ -1,0 +1,128 @@
+#pragma once
+// Console transports (console thread, non-real-time): byte streams on file
+// descriptors. stdin/stdout, a pseudo-terminal whose slave path is printed
+// (screen / minicom / pronsole connect to it), a serial TTY in raw mode, and
+// CAN: ISO-TP (ISO 15765-2) messages on a CAN interface, bridged to a byte
+// stream by a thread of its own (CanConsole).
+#include <poll.h>
+
+#include <atomic>
+#include <csignal>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "servoarm/hal/isotp.hpp"
+#include "servoarm/hal/sim_bus.hpp"
+#include "servoarm/hal/socketcan_bus.hpp"
+#include "servoarm/console/console.hpp"
+
+namespace servoarm::fw {
+
+struct FdTransport {
+  std::string name;
+  int rd = -1, wr = -1;
+  int keep = -1;          ///< pty: our own slave fd (keeps the master readable with no client)
+  std::string path;       ///< pty slave / serial device path
+  bool eof = false;
+  bool owns = false;
+  // Output side (ConsoleServer): answers not written yet, and what a client that did
+  // not read lost.
+  std::string pending;
+  bool wr_nonblocking = false;
+  std::uint64_t dropped_lines = 0, dropped_bytes = 0;
+  std::uint64_t dropped_unreported = 0;  ///< lines dropped since the client was last told
+  ~FdTransport();
+};
+
+/// Open a pty (raw, no echo). "" or the error; t.path = slave path.
+std::string open_pty(FdTransport& t);
+/// Open a serial TTY in raw 8N1 at `baud`. "" or the error.
+std::string open_serial(FdTransport& t, const std::string& path, int baud);
+/// Write all of `s` (blocking, retries on EINTR/EAGAIN with a short poll). False on error.
+bool write_all(int fd, const std::string& s);
+
+
+/// Most console output held for one client that is not reading (bytes). Beyond it
+/// the client's new answers are dropped, counted in its transport and in `stats`
+/// (output_dropped_lines), and it gets one `alarm: console output overflow` line
+/// once it reads again. Nobody else waits for it.
+inline constexpr std::size_t kMaxPendingOutput = 64 * 1024;
+
+/// The console thread's work over several transports. Each round: read every
+/// transport (realtime characters act at once, before any line runs or any
+/// output is written), run complete lines one at a time round-robin with a
+/// fresh read of every transport between two lines, then write to each client
+/// only what it takes without blocking. One stalled client never delays the
+/// others (nor an e-stop from them).
+class ConsoleServer {
+ public:
+  ConsoleServer(Console& console, const std::vector<FdTransport*>& ts);
+  /// One round, waiting up to timeout_ms for input. False when exit_on_eof and
+  /// stdin has ended and its last line has been answered.
+  bool round(int timeout_ms, bool exit_on_eof);
+  Session& session(std::size_t i) { return sessions_[i]; }
+
+ private:
+  void sweep(int timeout_ms);
+  void queue_output(std::size_t i);
+  void write_some(std::size_t i);
+  Console& console_;
+  std::vector<FdTransport*> ts_;
+  std::vector<Session> sessions_;
+  std::vector<pollfd> pfds_;
+};
+
+/// The console loop (console thread): ConsoleServer rounds until `quit` / `stop`
+/// is set, or (exit_on_eof) once stdin reached end of file and its last line finished.
+void serve_consoles(Console& console, const std::vector<FdTransport*>& ts, bool exit_on_eof,
+                    const volatile std::sig_atomic_t* quit, const std::atomic<bool>* stop = nullptr);
+
+/// Console over CAN (ISO-TP). Its own thread owns its own CAN endpoint (a
+/// SocketCAN socket, or an endpoint of the in-process SimBus) and an ISO-TP
+/// endpoint (hal/isotp.hpp) and bridges it to a local socketpair, whose other
+/// end is an ordinary FdTransport for serve_consoles(): the console sees the
+/// same byte stream as on a serial line, and only the console thread talks to
+/// the control thread (through the Controller's SPSC queues).
+///
+/// Framing: each ISO-TP message received is one command line (a trailing
+/// newline is added when missing) or realtime characters (a message of only
+/// ?, !, ~, Ctrl-X is passed as is, so `echo 18 | isotpsend ...` is an e-stop);
+/// answers go out as ISO-TP messages of whole lines, up to 4095 bytes each.
+struct CanConsoleConfig {
+  std::string iface;                ///< "sim" (needs the in-process bus) or a SocketCAN interface
+  std::uint32_t rx_id = 0x7E0;      ///< armfw receives requests on this id
+  std::uint32_t tx_id = 0x7E8;      ///< and answers on this one
+};
+
+class CanConsole {
+ public:
+  CanConsole() = default;
+  ~CanConsole();
+  CanConsole(const CanConsole&) = delete;
+  CanConsole& operator=(const CanConsole&) = delete;
+  /// Open the CAN endpoint (sim: a new endpoint on `sim`, which must be non-null),
+  /// start the bridge thread, fill `t` (name "can"). "" or the error.
+  std::string open(const CanConsoleConfig& cfg, hal::SimBus* sim, FdTransport& t);
+  void stop();
+  /// ISO-TP counters (read after stop(), or racy while running: diagnostics only).
+  hal::IsoTpStats stats() const { return iso_ ? iso_->stats() : hal::IsoTpStats{}; }
+
+ private:
+  void run();
+  CanConsoleConfig cfg_;
+  hal::MonotonicClock clock_;
+  std::unique_ptr<hal::CanBus> bus_;
+  std::unique_ptr<hal::IsoTpEndpoint> iso_;
+  std::thread th_;
+  std::atomic<bool> stop_{false};
+  int fd_ = -1;  ///< the bridge thread's end of the socketpair
+};
+
+/// Message bytes -> console bytes: a trailing newline is added to a command line
+/// that lacks one; realtime-only messages pass unchanged. Exposed for tests.
+std::string isotp_message_to_console(const std::uint8_t* data, std::size_t n);
+
+}  // namespace servoarm::fw

@@ -1,0 +1,443 @@
+#include "servoarm/console/commands.hpp"
+
+#include <cfenv>
+#include <cmath>
+#include <cstdarg>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+
+namespace servoarm::fw {
+
+const char* to_string(CmdError e) {
+  switch (e) {
+    case CmdError::ok: return "ok";
+    case CmdError::overlong: return "overlong";
+    case CmdError::binary: return "binary";
+    case CmdError::unknown_command: return "unknown_command";
+    case CmdError::arg_count: return "arg_count";
+    case CmdError::bad_number: return "bad_number";
+    case CmdError::not_finite: return "not_finite";
+    case CmdError::bad_option: return "bad_option";
+    case CmdError::out_of_range: return "out_of_range";
+    case CmdError::unsupported: return "unsupported";
+    case CmdError::checksum: return "checksum";
+    case CmdError::busy: return "busy";
+    case CmdError::bad_state: return "bad_state";
+    case CmdError::fault: return "fault";
+    case CmdError::unreachable: return "unreachable";
+    case CmdError::limits: return "limits";
+    case CmdError::singular: return "singular";
+    case CmdError::branch: return "branch";
+    case CmdError::plan_failed: return "plan_failed";
+    case CmdError::timeout: return "timeout";
+    case CmdError::estop: return "estop";
+    case CmdError::internal: return "internal";
+  }
+  return "?";
+}
+
+const char* to_string(Cmd c) {
+  switch (c) {
+    case Cmd::none: return "none";
+    case Cmd::help: return "help";
+    case Cmd::status: return "status";
+    case Cmd::enable: return "enable";
+    case Cmd::disable: return "disable";
+    case Cmd::home: return "home";
+    case Cmd::home_zero: return "home zero";
+    case Cmd::movej: return "movej";
+    case Cmd::movel: return "movel";
+    case Cmd::stop: return "stop";
+    case Cmd::estop: return "estop";
+    case Cmd::reset: return "reset";
+    case Cmd::fk: return "fk";
+    case Cmd::ik: return "ik";
+    case Cmd::limits: return "limits";
+    case Cmd::stats: return "stats";
+    case Cmd::config: return "config";
+    case Cmd::wait: return "wait";
+    case Cmd::hold: return "hold";
+    case Cmd::resume: return "resume";
+    case Cmd::dwell: return "dwell";
+    case Cmd::position: return "position";
+    case Cmd::gmove: return "gmove";
+    case Cmd::temperature: return "temperature";
+  }
+  return "?";
+}
+
+namespace {
+
+ParseResult fail(CmdError e, const char* fmt, ...) __attribute__((format(printf, 2, 3)));
+ParseResult fail(CmdError e, const char* fmt, ...) {
+  ParseResult r;
+  r.error = e;
+  va_list ap;
+  va_start(ap, fmt);
+  std::vsnprintf(r.message.data(), r.message.size(), fmt, ap);
+  va_end(ap);
+  return r;
+}
+
+bool ieq(std::string_view a, std::string_view b) {
+  if (a.size() != b.size()) return false;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    char x = a[i], y = b[i];
+    if (x >= 'A' && x <= 'Z') x = static_cast<char>(x - 'A' + 'a');
+    if (y >= 'A' && y <= 'Z') y = static_cast<char>(y - 'A' + 'a');
+    if (x != y) return false;
+  }
+  return true;
+}
+
+/// Strict decimal: [+-]digits[.digits][(e|E)[+-]digits]; at least one digit in the mantissa.
+enum class Num { ok, bad, not_finite };
+Num parse_number(std::string_view s, double& out) {
+  if (s.empty() || s.size() > 40) return Num::bad;
+  std::size_t i = 0;
+  if (s[i] == '+' || s[i] == '-') ++i;
+  std::size_t digits = 0;
+  while (i < s.size() && s[i] >= '0' && s[i] <= '9') ++i, ++digits;
+  if (i < s.size() && s[i] == '.') {
+    ++i;
+    while (i < s.size() && s[i] >= '0' && s[i] <= '9') ++i, ++digits;
+  }
+  if (digits == 0) {
+    // Name the usual suspects explicitly.
+    std::string_view rest = s.substr(s[0] == '+' || s[0] == '-' ? 1 : 0);
+    if (ieq(rest, "nan") || ieq(rest, "inf") || ieq(rest, "infinity")) return Num::not_finite;
+    return Num::bad;
+  }
+  if (i < s.size() && (s[i] == 'e' || s[i] == 'E')) {
+    ++i;
+    if (i < s.size() && (s[i] == '+' || s[i] == '-')) ++i;
+    std::size_t ed = 0;
+    while (i < s.size() && s[i] >= '0' && s[i] <= '9') ++i, ++ed;
+    if (ed == 0) return Num::bad;
+  }
+  if (i != s.size()) return Num::bad;
+  char buf[48];
+  std::memcpy(buf, s.data(), s.size());
+  buf[s.size()] = '\0';
+  // strtod raises FE_OVERFLOW/FE_UNDERFLOW for 1e400 / 1e-400; the result is
+  // checked here, so the flags are cleared (the tests' IEEE754 plugin watches them).
+  const double v = std::strtod(buf, nullptr);
+  std::feclearexcept(FE_OVERFLOW | FE_UNDERFLOW);
+  if (!std::isfinite(v)) return Num::not_finite;
+  out = v;
+  return Num::ok;
+}
+
+struct Words {
+  std::array<std::string_view, 24> w{};
+  int n = 0;
+  bool too_many = false;
+};
+
+Words split(std::string_view line) {
+  Words ws;
+  std::size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+    if (i >= line.size()) break;
+    std::size_t j = i;
+    while (j < line.size() && line[j] != ' ' && line[j] != '\t') ++j;
+    if (ws.n == static_cast<int>(ws.w.size())) {
+      ws.too_many = true;
+      break;
+    }
+    ws.w[static_cast<std::size_t>(ws.n++)] = line.substr(i, j - i);
+    i = j;
+  }
+  return ws;
+}
+
+struct Named {
+  const char* name;
+  Cmd cmd;
+};
+constexpr Named kNames[] = {
+    {"help", Cmd::help},     {"status", Cmd::status}, {"enable", Cmd::enable}, {"disable", Cmd::disable},
+    {"home", Cmd::home},     {"movej", Cmd::movej},   {"movel", Cmd::movel},   {"stop", Cmd::stop},
+    {"estop", Cmd::estop},   {"reset", Cmd::reset},   {"fk", Cmd::fk},         {"ik", Cmd::ik},
+    {"limits", Cmd::limits}, {"stats", Cmd::stats},   {"config", Cmd::config}, {"wait", Cmd::wait},
+    {"hold", Cmd::hold},     {"resume", Cmd::resume},
+};
+
+ParseResult parse_numbers(const Words& ws, int first, Command& out, bool allow_speed, const char* name) {
+  out.count = 0;
+  for (int k = first; k < ws.n; ++k) {
+    const std::string_view w = ws.w[static_cast<std::size_t>(k)];
+    const std::size_t eq = w.find('=');
+    if (eq != std::string_view::npos) {
+      if (!allow_speed || !ieq(w.substr(0, eq), "speed"))
+        return fail(CmdError::bad_option, "%s: unknown option '%.*s' (only speed=)", name, int(eq), w.data());
+      if (out.has_speed) return fail(CmdError::bad_option, "%s: speed given twice", name);
+      double v = 0;
+      switch (parse_number(w.substr(eq + 1), v)) {
+        case Num::ok: break;
+        case Num::bad: return fail(CmdError::bad_number, "%s: speed '%.*s' is not a number", name, int(w.size() - eq - 1), w.data() + eq + 1);
+        case Num::not_finite: return fail(CmdError::not_finite, "%s: speed is not finite", name);
+      }
+      if (!(v > 0)) return fail(CmdError::out_of_range, "%s: speed must be > 0", name);
+      out.has_speed = true;
+      out.speed = v;
+      continue;
+    }
+    if (out.has_speed) return fail(CmdError::bad_option, "%s: options go after the values", name);
+    if (out.count >= static_cast<int>(out.vals.size())) return fail(CmdError::arg_count, "%s: too many values", name);
+    double v = 0;
+    switch (parse_number(w, v)) {
+      case Num::ok: break;
+      case Num::bad: return fail(CmdError::bad_number, "%s: '%.*s' is not a number", name, int(w.size()), w.data());
+      case Num::not_finite: return fail(CmdError::not_finite, "%s: value %d is not finite", name, out.count + 1);
+    }
+    out.vals[static_cast<std::size_t>(out.count++)] = v;
+  }
+  return {};
+}
+
+// ---------------------------------------------------------------------------
+// G-code
+// ---------------------------------------------------------------------------
+
+ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) {
+  // Strip comments: ';' to end of line, '(...)' inline.
+  char buf[kMaxLine + 1];
+  std::size_t n = 0;
+  int paren = 0;
+  for (char c : line) {
+    if (c == ';') break;
+    if (c == '(') { ++paren; continue; }
+    if (c == ')') { if (paren == 0) return fail(CmdError::bad_number, "G-code: ')' without '('"); --paren; continue; }
+    if (paren == 0) buf[n++] = c;
+  }
+  if (paren != 0) return fail(CmdError::bad_number, "G-code: unclosed '('");
+  std::string_view s(buf, n);
+  // Checksum "*nn": XOR of every byte before '*' (RepRap).
+  const std::size_t star = s.find('*');
+  if (star != std::string_view::npos) {
+    double cs = 0;
+    std::string_view tail = s.substr(star + 1);
+    while (!tail.empty() && (tail.back() == ' ' || tail.back() == '\t')) tail.remove_suffix(1);
+    if (parse_number(tail, cs) != Num::ok || cs < 0 || cs > 255 || cs != std::floor(cs))
+      return fail(CmdError::checksum, "G-code: bad checksum field");
+    unsigned x = 0;
+    for (std::size_t i = 0; i < star; ++i) x ^= static_cast<unsigned char>(line[i]);
+    if (x != static_cast<unsigned>(cs)) return fail(CmdError::checksum, "G-code: checksum %u, line says %u", x, unsigned(cs));
+    s = s.substr(0, star);
+  }
+  // Tokenise letter + number, spaces optional ("G1X10Y5" is valid).
+  GcodeModal m = modal;
+  Command c;
+  c.gcode = true;
+  int motion = -1;           // 0 / 1 for G0 / G1
+  int other = -1;            // the one non-modal G/M code
+  char other_letter = 0;
+  std::array<bool, 6> given{};
+  std::array<double, 6> axis{};
+  double p = -1, sval = -1, f = -1;
+  std::size_t i = 0;
+  while (i < s.size()) {
+    char L = s[i];
+    if (L == ' ' || L == '\t') { ++i; continue; }
+    if (L >= 'a' && L <= 'z') L = static_cast<char>(L - 'a' + 'A');
+    if (L < 'A' || L > 'Z') return fail(CmdError::bad_number, "G-code: expected a letter at '%c'", s[i]);
+    ++i;
+    // G-code numbers: optional sign, digits and one decimal point (no exponent).
+    std::size_t j = i;
+    if (j < s.size() && (s[j] == '-' || s[j] == '+')) ++j;
+    while (j < s.size() && ((s[j] >= '0' && s[j] <= '9') || s[j] == '.')) ++j;
+    double v = 0;
+    if (j == i) return fail(CmdError::bad_number, "G-code: '%c' has no number", L);
+    switch (parse_number(s.substr(i, j - i), v)) {
+      case Num::ok: break;
+      case Num::bad: return fail(CmdError::bad_number, "G-code: '%c%.*s' is not a number", L, int(j - i), s.data() + i);
+      case Num::not_finite: return fail(CmdError::not_finite, "G-code: '%c' value is not finite", L);
+    }
+    i = j;
+    switch (L) {
+      case 'N': break;  // line number: accepted and ignored
+      case 'G': {
+        const int g = static_cast<int>(std::lround(v * 10));
+        if (g == 900) m.relative = false;
+        else if (g == 910) m.relative = true;
+        else if (g == 200) m.unit_mm = 25.4;
+        else if (g == 210) m.unit_mm = 1.0;
+        else if (g == 0 || g == 10) {
+          if (motion >= 0 || other >= 0) return fail(CmdError::arg_count, "G-code: two motion/action codes on one line");
+          motion = g / 10;
+        } else if (g == 40 || g == 280) {
+          if (motion >= 0 || other >= 0) return fail(CmdError::arg_count, "G-code: two motion/action codes on one line");
+          other = g / 10;
+          other_letter = 'G';
+        } else {
+          return fail(CmdError::unsupported, "G-code: G%g not supported (G0 G1 G4 G20 G21 G28 G90 G91)", v);
+        }
+        break;
+      }
+      case 'M': {
+        const int mc = static_cast<int>(std::lround(v));
+        if (v != mc || !(mc == 17 || mc == 18 || mc == 84 || mc == 112 || mc == 114 || mc == 400 || mc == 105 || mc == 110))
+          return fail(CmdError::unsupported, "G-code: M%g not supported (M17 M18 M84 M105 M110 M112 M114 M400)", v);
+        if (motion >= 0 || other >= 0) return fail(CmdError::arg_count, "G-code: two motion/action codes on one line");
+        other = mc;
+        other_letter = 'M';
+        break;
+      }
+      case 'X': case 'Y': case 'Z': case 'A': case 'B': case 'C': {
+        const int k = L <= 'C' ? 3 + (L - 'A') : L - 'X';
+        if (given[static_cast<std::size_t>(k)]) return fail(CmdError::arg_count, "G-code: %c given twice", L);
+        given[static_cast<std::size_t>(k)] = true;
+        axis[static_cast<std::size_t>(k)] = v;
+        break;
+      }
+      case 'F':
+        if (!(v > 0)) return fail(CmdError::out_of_range, "G-code: F must be > 0");
+        f = v;
+        break;
+      case 'P': p = v; break;
+      case 'S': sval = v; break;
+      default:
+        return fail(CmdError::unsupported, "G-code: word '%c' not supported", L);
+    }
+  }
+  const bool any_axis = given[0] || given[1] || given[2] || given[3] || given[4] || given[5];
+  if (f > 0 && f * m.unit_mm / 60.0 < kMinLinearSpeedMmS)
+    return fail(CmdError::out_of_range, "G-code: F%g is below the minimum feed %g mm/min", f, kMinLinearSpeedMmS * 60.0 / m.unit_mm);
+  if (f > 0) m.feed_mm_s = f * m.unit_mm / 60.0;
+  if (motion >= 0) {
+    if (p >= 0 || sval >= 0) return fail(CmdError::bad_option, "G-code: P/S not allowed with G%d", motion);
+    c.cmd = any_axis ? Cmd::gmove : Cmd::none;
+    c.rapid = motion == 0;
+    c.relative = m.relative;
+    for (int k = 0; k < 6; ++k) {
+      if (!given[static_cast<std::size_t>(k)]) continue;
+      c.axis_mask = static_cast<std::uint8_t>(c.axis_mask | (1u << k));
+      c.vals[static_cast<std::size_t>(k)] = k < 3 ? axis[static_cast<std::size_t>(k)] * m.unit_mm : axis[static_cast<std::size_t>(k)];
+    }
+    c.count = any_axis ? 6 : 0;
+    if (m.feed_mm_s > 0 && motion == 1) {
+      c.has_speed = true;
+      c.speed = m.feed_mm_s;
+    }
+  } else if (other >= 0) {
+    if (any_axis && !(other_letter == 'G' && other == 28))
+      return fail(CmdError::arg_count, "G-code: %c%d takes no axis words", other_letter, other);
+    if (other_letter == 'G' && other == 4) {
+      if (p >= 0 && sval >= 0) return fail(CmdError::arg_count, "G-code: G4 takes P (ms) or S (s), not both");
+      if (p < 0 && sval < 0) return fail(CmdError::arg_count, "G-code: G4 needs P (milliseconds) or S (seconds)");
+      const double secs = p >= 0 ? p / 1000.0 : sval;
+      if (secs > 3600) return fail(CmdError::out_of_range, "G-code: G4 dwell longer than an hour");
+      c.cmd = Cmd::dwell;
+      c.count = 1;
+      c.vals[0] = secs;
+    } else {
+      if (p >= 0 || sval >= 0) return fail(CmdError::bad_option, "G-code: %c%d takes no P/S", other_letter, other);
+      if (other_letter == 'G') c.cmd = Cmd::home;
+      else if (other == 17) c.cmd = Cmd::enable;
+      else if (other == 18 || other == 84) c.cmd = Cmd::disable;
+      else if (other == 112) c.cmd = Cmd::estop;
+      else if (other == 114) c.cmd = Cmd::position;
+      else if (other == 400) c.cmd = Cmd::wait;
+      else if (other == 105) c.cmd = Cmd::temperature;
+      else c.cmd = Cmd::none;  // M110: line numbers are not tracked
+    }
+  } else {
+    if (any_axis) return fail(CmdError::arg_count, "G-code: axis words without G0/G1");
+    if (p >= 0 || sval >= 0) return fail(CmdError::arg_count, "G-code: P/S without G4");
+    c.cmd = Cmd::none;  // modal-only line (G90, G21 F600, N5, ...)
+  }
+  modal = m;
+  out = c;
+  return {};
+}
+
+bool looks_like_gcode(std::string_view w) {
+  if (w.empty()) return false;
+  const char L = w[0];
+  if (!(L == 'G' || L == 'g' || L == 'M' || L == 'm' || L == 'N' || L == 'n')) return false;
+  return w.size() >= 2 && ((w[1] >= '0' && w[1] <= '9') || w[1] == '-' || w[1] == '+' || w[1] == '.');
+}
+
+}  // namespace
+
+ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, Command& out) {
+  if (line.size() > kMaxLine) return fail(CmdError::overlong, "line longer than %zu characters", kMaxLine);
+  while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) line.remove_suffix(1);
+  for (char ch : line) {
+    const auto u = static_cast<unsigned char>(ch);
+    if ((u < 0x20 && ch != '\t') || u >= 0x7f) return fail(CmdError::binary, "control or non-ASCII byte 0x%02X in line", unsigned(u));
+  }
+  const Words ws = split(line);
+  if (ws.too_many) return fail(CmdError::arg_count, "too many words");
+  Command c;
+  if (ws.n == 0 || ws.w[0][0] == '#' || ws.w[0][0] == ';') {
+    out = c;
+    return {};
+  }
+  const std::string_view head = ws.w[0];
+  if (looks_like_gcode(head)) return parse_gcode(line, modal, out);
+  Cmd cmd = Cmd::none;
+  for (const Named& nm : kNames)
+    if (ieq(head, nm.name)) cmd = nm.cmd;
+  if (cmd == Cmd::none) return fail(CmdError::unknown_command, "unknown command '%.*s' (try help)", int(head.size() > 24 ? 24 : head.size()), head.data());
+  c.cmd = cmd;
+  const int nargs = ws.n - 1;
+  switch (cmd) {
+    case Cmd::help:
+      if (nargs > 1) return fail(CmdError::arg_count, "help takes at most one topic");
+      if (nargs == 1) {
+        const std::string_view t = ws.w[1];
+        const std::size_t k = t.size() < c.topic.size() - 1 ? t.size() : c.topic.size() - 1;
+        std::memcpy(c.topic.data(), t.data(), k);
+      }
+      break;
+    case Cmd::home:
+      if (nargs == 1 && ieq(ws.w[1], "zero")) {
+        c.cmd = Cmd::home_zero;
+        break;
+      }
+      if (nargs != 0) return fail(CmdError::arg_count, "home takes no argument or 'zero'");
+      break;
+    case Cmd::status: case Cmd::enable: case Cmd::disable: case Cmd::stop: case Cmd::estop: case Cmd::stats:
+    case Cmd::reset: case Cmd::limits: case Cmd::config: case Cmd::wait: case Cmd::hold: case Cmd::resume:
+      if (nargs != 0) return fail(CmdError::arg_count, "%s takes no arguments", to_string(cmd));
+      break;
+    case Cmd::movej: {
+      ParseResult r = parse_numbers(ws, 1, c, true, "movej");
+      if (!r.ok()) return r;
+      if (c.count != n_joints) return fail(CmdError::arg_count, "movej needs %d joint values, got %d", n_joints, c.count);
+      if (c.has_speed && (c.speed > 100 || c.speed < kMinJointSpeedPct))
+        return fail(CmdError::out_of_range, "movej: speed=%g is outside [%g, 100] (percent)", c.speed, kMinJointSpeedPct);
+      break;
+    }
+    case Cmd::movel: {
+      ParseResult r = parse_numbers(ws, 1, c, true, "movel");
+      if (!r.ok()) return r;
+      if (c.count != 3 && c.count != 6) return fail(CmdError::arg_count, "movel needs x y z [rx ry rz], got %d values", c.count);
+      if (c.has_speed && c.speed < kMinLinearSpeedMmS)
+        return fail(CmdError::out_of_range, "movel: speed=%g mm/s is below the minimum %g mm/s", c.speed, kMinLinearSpeedMmS);
+      break;
+    }
+    case Cmd::ik: {
+      ParseResult r = parse_numbers(ws, 1, c, false, "ik");
+      if (!r.ok()) return r;
+      if (c.count != 3 && c.count != 6) return fail(CmdError::arg_count, "ik needs x y z [rx ry rz], got %d values", c.count);
+      break;
+    }
+    case Cmd::fk: {
+      ParseResult r = parse_numbers(ws, 1, c, false, "fk");
+      if (!r.ok()) return r;
+      if (c.count != 0 && c.count != n_joints) return fail(CmdError::arg_count, "fk takes no values or %d joint values, got %d", n_joints, c.count);
+      break;
+    }
+    case Cmd::none: case Cmd::dwell: case Cmd::position: case Cmd::gmove: case Cmd::temperature: case Cmd::home_zero:
+      return fail(CmdError::internal, "unreachable command kind");
+  }
+  out = c;
+  return {};
+}
+
+}  // namespace servoarm::fw

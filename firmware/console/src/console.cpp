@@ -1,0 +1,691 @@
+#include "servoarm/console/console.hpp"
+
+#include <chrono>
+#include <cstdarg>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <thread>
+
+#include "servoarm/kinematics/motion_ik.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+#if __has_include("servoarm/kinematics/ik.hpp")
+#include "servoarm/kinematics/ik.hpp"
+#define SERVOARM_FW_HAVE_IK 1
+#endif
+
+namespace servoarm::fw {
+
+namespace {
+constexpr double kDeg = M_PI / 180.0;
+
+std::string fmt(const char* f, ...) __attribute__((format(printf, 1, 2)));
+std::string fmt(const char* f, ...) {
+  char buf[512];
+  va_list ap;
+  va_start(ap, f);
+  std::vsnprintf(buf, sizeof buf, f, ap);
+  va_end(ap);
+  return buf;
+}
+
+CmdError motion_error(kin::MotionStatus m) {
+  switch (m) {
+    case kin::MotionStatus::ok:
+    case kin::MotionStatus::slowed_near_singularity: return CmdError::ok;
+    case kin::MotionStatus::no_ik_solution: return CmdError::unreachable;
+    case kin::MotionStatus::goal_out_of_limits:
+    case kin::MotionStatus::path_out_of_limits: return CmdError::limits;
+    case kin::MotionStatus::branch_change: return CmdError::branch;
+    case kin::MotionStatus::singularity:
+    case kin::MotionStatus::joint_velocity: return CmdError::singular;
+    case kin::MotionStatus::bad_input:
+    case kin::MotionStatus::wrong_size:
+    case kin::MotionStatus::bad_limits:
+    case kin::MotionStatus::no_solution: return CmdError::plan_failed;
+  }
+  return CmdError::plan_failed;
+}
+}  // namespace
+
+// IK used by movel's path check and the `ik` command: the closed-form/numeric
+// solver of kinematics/ik when it is built, else the damped-Newton fallback.
+struct Console::Ik {
+#ifdef SERVOARM_FW_HAVE_IK
+  kin::IkModel model;
+  bool ready = false;
+#endif
+  kin::IkSolver solver() {
+#ifdef SERVOARM_FW_HAVE_IK
+    if (ready) return kin::IkSolver{&kin::ik_nearest_fn, &model};
+#endif
+    return kin::IkSolver{&kin::ik_nearest_newton, nullptr};
+  }
+};
+
+Console::Console(Controller& ctl, const ConsoleConfig& cfg)
+    : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints) {
+  if (cfg_.home.size() != n_) {
+    cfg_.home = kin::JointVector::Zero(n_);
+    const auto& lim = ctl_.limits();
+    for (int j = 0; j < n_; ++j)
+      cfg_.home[j] = std::fmin(std::fmax(0.0, lim.lower[static_cast<std::size_t>(j)]), lim.upper[static_cast<std::size_t>(j)]);
+  }
+  tail_ = kin::JointVector::Zero(n_);
+  idle_ = [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); };
+  ik_ = std::make_shared<Ik>();
+#ifdef SERVOARM_FW_HAVE_IK
+  ik_->ready = kin::ik_prepare(chain_, ik_->model) == kin::Status::ok && ik_->model.method != kin::IkMethod::none;
+#endif
+}
+
+double Console::to_si(int j, double user) const {
+  return chain_.joint(j).type == kin::JointType::prismatic ? user * 1e-3 : user * kDeg;
+}
+double Console::to_user(int j, double si) const {
+  return chain_.joint(j).type == kin::JointType::prismatic ? si * 1e3 : si / kDeg;
+}
+
+kin::JointVector Console::tail() const {
+  // Queue not empty: its end. Empty and nothing re-took the setpoint since the
+  // last move was queued (no flush, no enable): that move's goal, exactly.
+  // Otherwise the commanded position (the arm is at rest: moves are refused
+  // while it is stopping or enabling).
+  if (!ctl_.motions().empty()) return tail_;
+  const Telemetry t = ctl_.telemetry();
+  if (tail_id_ != 0 && t.generation == tail_gen_) return tail_;
+  kin::JointVector q(n_);
+  for (int j = 0; j < n_; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+  return q;
+}
+
+std::string Console::joints_text(const kin::JointVector& q) const {
+  std::string s;
+  for (int j = 0; j < q.size(); ++j) s += fmt("%s%.3f", j ? " " : "", to_user(j, q[j]));
+  return s;
+}
+
+std::string Console::pose_text(const kin::JointVector& q) const {
+  kin::Pose p;
+  if (kin::forward(chain_, q, p) != kin::Status::ok) return "x=nan";
+  const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear());
+  return fmt("x=%.3f y=%.3f z=%.3f rx=%.3f ry=%.3f rz=%.3f", p.translation().x() * 1e3, p.translation().y() * 1e3,
+             p.translation().z() * 1e3, rpy[0] / kDeg, rpy[1] / kDeg, rpy[2] / kDeg);
+}
+
+void Console::answer_error(Session& s, CmdError e, const std::string& msg) {
+  s.out += "error: ";
+  s.out += to_string(e);
+  s.out += ' ';
+  s.out += msg;
+  s.out += '\n';
+}
+
+void Console::answer_ok(Session& s, const std::string& data) {
+  s.out += data.empty() ? "ok\n" : "ok " + data + "\n";
+}
+
+bool Console::request(RequestOp op, Reply& out) {
+  const std::uint32_t seq = ++seq_;
+  if (!ctl_.requests().push(Request{op, seq})) {
+    out.result = RtResult::busy;
+    std::snprintf(out.message, sizeof out.message, "request queue full");
+    return true;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  for (;;) {
+    Reply r;
+    while (ctl_.replies().pop(r))
+      if (r.seq == seq) {
+        out = r;
+        return true;
+      }
+    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(cfg_.reply_timeout_s)) return false;
+    idle_();
+  }
+}
+
+std::string Console::status_text() const {
+  const Telemetry t = ctl_.telemetry();
+  kin::JointVector q(n_);
+  for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+  std::string s = fmt("state=%s%s queue=%u joints=[%s] deg pose=[%s] mm,deg", to_string(t.state),
+                      t.holding ? " hold=1" : "", unsigned(t.queued), joints_text(q).c_str(), pose_text(q).c_str());
+  if (t.fault_text[0]) s += fmt(" fault=\"%s\"", t.fault_text);
+  return s;
+}
+
+std::string Console::grbl_report() const {
+  const Telemetry t = ctl_.telemetry();
+  const char* st = "Idle";
+  switch (t.state) {
+    case ArmState::boot: st = "Boot"; break;
+    case ArmState::disabled: st = "Disabled"; break;
+    case ArmState::enabling: st = "Enabling"; break;
+    case ArmState::idle: st = "Idle"; break;
+    case ArmState::moving: st = t.holding ? "Hold" : "Run"; break;
+    case ArmState::stopping: st = "Stop"; break;
+    case ArmState::fault: st = "Alarm"; break;
+    case ArmState::estop: st = "Estop"; break;
+  }
+  kin::JointVector q(n_);
+  for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+  kin::Pose p;
+  kin::forward(chain_, q, p);
+  std::string s = fmt("<%s|MPos:%.3f,%.3f,%.3f|J:", st, p.translation().x() * 1e3, p.translation().y() * 1e3,
+                      p.translation().z() * 1e3);
+  for (int j = 0; j < n_; ++j) s += fmt("%s%.2f", j ? "," : "", to_user(j, q[j]));
+  s += fmt("|Q:%u>", unsigned(t.queued));
+  return s;
+}
+
+std::string Console::stats_text() const {
+  const Telemetry t = ctl_.telemetry();
+  auto one = [](const StatSummary& s) {
+    return fmt("{min=%.1f mean=%.1f p99=%.1f max=%.1f}", s.min_us, s.mean_us, s.p99_us, s.max_us);
+  };
+  std::string s = fmt("cycles=%llu overruns=%llu rate_hz=%.0f latency_us=%s compute_us=%s max_following_error_deg=%.4f",
+                      static_cast<unsigned long long>(t.cycles), static_cast<unsigned long long>(t.overruns),
+                      ctl_.config().rate_hz, one(t.latency).c_str(), one(t.compute).c_str(), t.max_following_error / kDeg);
+  if (t.estop_latency_ns >= 0) s += fmt(" estop_latency_us=%.1f", static_cast<double>(t.estop_latency_ns) / 1e3);
+  const auto dropped = ctl_.events_dropped();
+  if (dropped) s += fmt(" events_dropped=%llu", static_cast<unsigned long long>(dropped));
+  if (output_dropped_lines_ || output_dropped_bytes_)
+    s += fmt(" output_dropped_lines=%llu output_dropped_bytes=%llu", static_cast<unsigned long long>(output_dropped_lines_),
+             static_cast<unsigned long long>(output_dropped_bytes_));
+  return s;
+}
+
+std::string Console::drain_events() {
+  std::string out;
+  Event e;
+  while (ctl_.events().pop(e)) {
+    switch (e.kind) {
+      case EventKind::fault: out += fmt("alarm: fault %s\n", e.message); break;
+      case EventKind::estop: out += "alarm: estop (send reset, then enable)\n"; break;
+      case EventKind::motion_refused: out += fmt("alarm: %s\n", e.message); break;
+      case EventKind::motion_done:
+      case EventKind::state: break;
+    }
+  }
+  return out;
+}
+
+bool Console::motion_state_ok(Session& s) {
+  const Telemetry t = ctl_.telemetry();
+  switch (t.state) {
+    case ArmState::idle:
+    case ArmState::moving: return true;
+    case ArmState::enabling:
+      answer_error(s, CmdError::bad_state, "drives still enabling; retry (or wait)");
+      return false;
+    case ArmState::boot:
+    case ArmState::disabled:
+      answer_error(s, CmdError::bad_state, fmt("arm is %s: send enable first", to_string(t.state)));
+      return false;
+    case ArmState::stopping:
+      answer_error(s, CmdError::bad_state, "arm is stopping; retry when idle");
+      return false;
+    case ArmState::fault:
+      answer_error(s, CmdError::fault, fmt("arm in fault (%s): send reset, then enable", t.fault_text));
+      return false;
+    case ArmState::estop:
+      answer_error(s, CmdError::fault, "arm in e-stop: send reset, then enable");
+      return false;
+  }
+  return false;
+}
+
+void Console::queue_joint(Session& s, const kin::JointVector& goal, double pct) {
+  if (!motion_state_ok(s)) return;
+  const auto& lim = ctl_.limits();
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    if (goal[j] < lim.lower[ju] || goal[j] > lim.upper[ju]) {
+      answer_error(s, CmdError::limits, fmt("joint %d = %.3f outside [%.3f, %.3f]", j + 1, to_user(j, goal[j]),
+                                            to_user(j, lim.lower[ju]), to_user(j, lim.upper[ju])));
+      return;
+    }
+  }
+  MotionItem* m = ctl_.motions().back();
+  if (m == nullptr) {
+    answer_error(s, CmdError::busy, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
+    return;
+  }
+  // Check the plan from the queue's end (the RT thread plans again from the actual state at start).
+  kin::MovejOptions o;
+  o.override = pct / 100.0;
+  const kin::MotionStatus ms = kin::plan_movej(lim, kin::JointState::rest(tail()), goal, o, m->jt);
+  if (!kin::is_ok(ms)) {
+    answer_error(s, motion_error(ms), fmt("movej refused: %s", kin::to_string(ms)));
+    return;
+  }
+  if (!duration_ok(s, "movej", m->jt.duration)) return;
+  m->kind = MotionKind::joint;
+  m->id = next_id_++;
+  m->goal = goal;
+  m->override = o.override;
+  const double dur = m->jt.duration;
+  ctl_.motions().commit();
+  tail_ = goal;
+  tail_id_ = m->id;
+  tail_gen_ = ctl_.telemetry().generation;
+  answer_ok(s, fmt("queued id=%u duration=%.3fs", unsigned(tail_id_), dur));
+}
+
+void Console::queue_linear(Session& s, const kin::Pose& target, double speed) {
+  if (!motion_state_ok(s)) return;
+  if (!(speed >= kMinLinearSpeedMmS * 1e-3) || speed > cfg_.max_linear_speed + 1e-12) {
+    answer_error(s, CmdError::out_of_range, fmt("linear speed %g mm/s outside [%g, %g]", speed * 1e3, kMinLinearSpeedMmS,
+                                                cfg_.max_linear_speed * 1e3));
+    return;
+  }
+  MotionItem* m = ctl_.motions().back();
+  if (m == nullptr) {
+    answer_error(s, CmdError::busy, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
+    return;
+  }
+  kin::CartesianLimits cl = cfg_.cartesian;
+  cl.linear_velocity = speed;
+  kin::MovelOptions mo;
+  kin::PathReport rep;
+  const kin::JointVector q0 = tail();
+  const kin::MotionStatus ms = kin::plan_movel(chain_, q0, target, cl, mo, ik_->solver(), m->ct, &rep);
+  if (!kin::is_ok(ms)) {
+    std::string where = fmt("at s=%.2f (x=%.1f y=%.1f z=%.1f mm)", rep.s, rep.position.x() * 1e3, rep.position.y() * 1e3,
+                            rep.position.z() * 1e3);
+    if (rep.joint >= 0) where += fmt(" joint %d", rep.joint + 1);
+    answer_error(s, motion_error(ms), fmt("movel refused: %s %s", kin::to_string(ms), where.c_str()));
+    return;
+  }
+  if (!duration_ok(s, "movel", m->ct.duration)) return;
+  m->kind = MotionKind::cartesian;
+  m->id = next_id_++;
+  m->goal = m->ct.goal;
+  m->override = 1.0;
+  m->ct.ik = ik_->solver();
+  const double dur = m->ct.duration;
+  const double slow = m->ct.slowdown;
+  tail_ = m->goal;
+  tail_id_ = m->id;
+  tail_gen_ = ctl_.telemetry().generation;
+  ctl_.motions().commit();
+  answer_ok(s, fmt("queued id=%u duration=%.3fs%s", unsigned(tail_id_), dur,
+                   ms == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", slow).c_str() : ""));
+}
+
+bool Console::duration_ok(Session& s, const char* what, double duration_s) {
+  if (std::isfinite(duration_s) && duration_s <= cfg_.max_move_duration_s) return true;
+  answer_error(s, CmdError::out_of_range, fmt("%s refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
+                                              "(raise the speed); nothing queued", what, duration_s, cfg_.max_move_duration_s));
+  return false;
+}
+
+void Console::queue_dwell(Session& s, double secs) {
+  if (!motion_state_ok(s)) return;
+  MotionItem* m = ctl_.motions().back();
+  if (m == nullptr) {
+    answer_error(s, CmdError::busy, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
+    return;
+  }
+  const kin::JointVector q = tail();
+  m->kind = MotionKind::dwell;
+  m->id = next_id_++;
+  m->goal = q;
+  m->dwell_s = secs;
+  tail_ = q;
+  tail_id_ = m->id;
+  tail_gen_ = ctl_.telemetry().generation;
+  ctl_.motions().commit();
+  answer_ok(s, fmt("queued id=%u dwell=%.3fs", unsigned(tail_id_), secs));
+}
+
+kin::Pose Console::pose_from_values(const Command& c, const kin::JointVector& q_ref) const {
+  kin::Pose cur;
+  kin::forward(chain_, q_ref, cur);
+  kin::Pose p = cur;
+  p.translation() = Eigen::Vector3d(c.vals[0], c.vals[1], c.vals[2]) * 1e-3;
+  if (c.count == 6) p.linear() = kin::rotation_from_rpy(c.vals[3] * kDeg, c.vals[4] * kDeg, c.vals[5] * kDeg);
+  return p;
+}
+
+void Console::do_gmove(Session& s, const Command& c) {
+  const kin::JointVector q0 = tail();
+  kin::Pose cur;
+  kin::forward(chain_, q0, cur);
+  Eigen::Vector3d pos = cur.translation() * 1e3;
+  Eigen::Vector3d rpy = kin::rpy_from_rotation(cur.linear()) / kDeg;
+  for (int k = 0; k < 6; ++k) {
+    if (!(c.axis_mask & (1u << k))) continue;
+    double& v = k < 3 ? pos[k] : rpy[k - 3];
+    v = c.relative ? v + c.vals[static_cast<std::size_t>(k)] : c.vals[static_cast<std::size_t>(k)];
+  }
+  kin::Pose target = cur;
+  target.translation() = pos * 1e-3;
+  if (c.axis_mask & 0x38) target.linear() = kin::rotation_from_rpy(rpy[0] * kDeg, rpy[1] * kDeg, rpy[2] * kDeg);
+  double speed = c.rapid ? cfg_.max_linear_speed : (c.has_speed ? c.speed * 1e-3 : cfg_.default_linear_speed);
+  if (speed > cfg_.max_linear_speed) speed = cfg_.max_linear_speed;  // senders' F is clamped, as GRBL does
+  queue_linear(s, target, speed);
+}
+
+void Console::do_fk(Session& s, const Command& c) {
+  kin::JointVector q(n_);
+  if (c.count == 0) {
+    const Telemetry t = ctl_.telemetry();
+    for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+  } else {
+    for (int j = 0; j < n_; ++j) q[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
+  }
+  const bool inside = kin::within_limits(chain_, q);
+  answer_ok(s, pose_text(q) + (inside ? "" : " warning=outside_joint_limits"));
+}
+
+void Console::do_ik(Session& s, const Command& c) {
+  const Telemetry t = ctl_.telemetry();
+  kin::JointVector qc(n_);
+  for (int j = 0; j < n_; ++j) qc[j] = t.q_cmd[static_cast<std::size_t>(j)];
+  const kin::Pose target = pose_from_values(c, qc);
+  kin::JointVector q(n_);
+  kin::Status st = kin::Status::unreachable;
+  int solutions = -1;
+#ifdef SERVOARM_FW_HAVE_IK
+  if (ik_->ready) {
+    auto res = std::make_unique<kin::IkResult>();
+    kin::ik_solve_all(ik_->model, target, &qc, *res);
+    solutions = res->count;
+    st = kin::ik_solve_nearest(ik_->model, target, qc, q);
+  } else {
+    st = kin::ik_nearest_newton(chain_, target, qc, q, nullptr);
+  }
+#else
+  st = kin::ik_nearest_newton(chain_, target, qc, q, nullptr);
+#endif
+  if (!kin::is_ok(st)) {
+    answer_error(s, st == kin::Status::out_of_limits ? CmdError::limits : CmdError::unreachable,
+                 fmt("no IK solution within the joint limits: %s", kin::to_string(st)));
+    return;
+  }
+  if (!kin::within_limits(chain_, q, 1e-9)) {
+    answer_error(s, CmdError::limits, fmt("nearest solution [%s] is outside the joint limits", joints_text(q).c_str()));
+    return;
+  }
+  std::string d = fmt("joints=[%s] deg", joints_text(q).c_str());
+  if (solutions >= 0) d += fmt(" solutions=%d", solutions);
+  if (st == kin::Status::singular) d += " warning=singular";
+  answer_ok(s, d);
+}
+
+void Console::do_limits(Session& s) {
+  const auto& lim = ctl_.limits();
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    const bool pr = chain_.joint(j).type == kin::JointType::prismatic;
+    s.out += fmt("joint %d: %s [%.3f, %.3f] %s  vmax=%.3f amax=%.3f jmax=%.3f %s/s^k\n", j + 1, pr ? "prismatic" : "revolute",
+                 to_user(j, lim.lower[ju]), to_user(j, lim.upper[ju]), pr ? "mm" : "deg", to_user(j, lim.dyn[ju].max_velocity),
+                 to_user(j, lim.dyn[ju].max_acceleration), to_user(j, lim.dyn[ju].max_jerk), pr ? "mm" : "deg");
+  }
+  s.out += fmt("linear speed: default %.1f mm/s, max %.1f mm/s; following error limit %.3f deg\n", cfg_.default_linear_speed * 1e3,
+               cfg_.max_linear_speed * 1e3, ctl_.config().following_error / kDeg);
+  answer_ok(s);
+}
+
+void Console::do_help(Session& s, std::string_view topic) {
+  static const char* kHelp =
+      "commands (one per line; answers: ok [data] | error: <code> <message>):\n"
+      "  help [topic]           this text\n"
+      "  status                 state, queue, joints (deg / mm), tool pose\n"
+      "  enable | disable       power the drives up / down (disable while moving stops first)\n"
+      "  home                   joint move to the home pose\n"
+      "  home zero              (disabled arm) the current joint positions become joint zero until\n"
+      "                         restart; answers the drives' zero_offset = [...] for the config file\n"
+      "  movej j1..jn [speed=%] joint move; joints in deg (prismatic mm); speed 1-100 % (default 50)\n"
+      "  movel x y z [rx ry rz] [speed=mm/s]   straight line of the tool point; x y z in mm;\n"
+      "                         rx ry rz in deg, fixed-axis roll-pitch-yaw: R = Rz(rz) Ry(ry) Rx(rx);\n"
+      "                         without rx ry rz the tool keeps its orientation\n"
+      "  stop                   ramp down and drop the queued moves\n"
+      "  estop                  emergency stop (quick stop, drives off); then reset + enable\n"
+      "  reset                  clear a fault / e-stop (drives stay disabled)\n"
+      "  fk [j1..jn]            tool pose of the given (or current) joints\n"
+      "  ik x y z [rx ry rz]    joints for a tool pose, nearest to the current joints\n"
+      "  limits                 joint limits and speeds\n"
+      "  stats                  control-loop statistics (cycles, overruns, latency, compute)\n"
+      "  config                 effective configuration\n"
+      "  wait                   answer when every queued move has finished\n"
+      "  hold | resume          feed hold / resume (same as ! and ~)\n"
+      "realtime characters: ? status report, ! feed hold, ~ resume, Ctrl-X e-stop\n"
+      "G-code: G0/G1 X Y Z [A B C] [F] (A B C = rx ry rz deg, F units/min), G4 P<ms>|S<s>, G20/G21,\n"
+      "        G28 (home), G90/G91, M17 (enable), M18/M84 (disable), M112 (e-stop), M114 (position),\n"
+      "        M400 (wait), M105/M110 (accepted for senders)\n";
+  if (!topic.empty()) {
+    // Print the lines mentioning the topic.
+    std::string_view h(kHelp);
+    bool any = false;
+    std::size_t pos = 0;
+    while (pos < h.size()) {
+      const std::size_t e = h.find('\n', pos);
+      const std::string_view line = h.substr(pos, e - pos);
+      if (line.find(topic) != std::string_view::npos) {
+        s.out += line;
+        s.out += '\n';
+        any = true;
+      }
+      pos = e + 1;
+    }
+    if (!any) {
+      answer_error(s, CmdError::unknown_command, fmt("no help on '%.*s'", int(topic.size()), topic.data()));
+      return;
+    }
+  } else {
+    s.out += kHelp;
+  }
+  answer_ok(s);
+}
+
+void Console::execute(Session& s, std::string_view line) {
+  ++s.lines_done;
+  Command c;
+  const ParseResult pr = parse_line(line, n_, s.modal, c);
+  if (!pr.ok()) {
+    answer_error(s, pr.error, pr.message.data());
+    return;
+  }
+  Reply r;
+  auto simple = [&](RequestOp op) {
+    if (!request(op, r)) {
+      answer_error(s, CmdError::timeout, fmt("control thread did not answer %s", to_string(op)));
+      return;
+    }
+    switch (r.result) {
+      case RtResult::ok: answer_ok(s, r.message); return;
+      case RtResult::bad_state: answer_error(s, CmdError::bad_state, r.message); return;
+      case RtResult::fault: answer_error(s, CmdError::fault, r.message); return;
+      case RtResult::busy: answer_error(s, CmdError::busy, r.message); return;
+      case RtResult::start_moved:
+      case RtResult::plan_failed: answer_error(s, CmdError::plan_failed, r.message); return;
+    }
+  };
+  switch (c.cmd) {
+    case Cmd::none: answer_ok(s); return;
+    case Cmd::help: do_help(s, std::string_view(c.topic.data())); return;
+    case Cmd::status: answer_ok(s, status_text()); return;
+    case Cmd::enable:
+      if (!request(RequestOp::enable, r)) {
+        answer_error(s, CmdError::timeout, "control thread did not answer enable");
+        return;
+      }
+      if (r.result != RtResult::ok) {
+        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, r.message);
+        return;
+      }
+      s.enabling = true;
+      settle(s);
+      return;
+    case Cmd::disable: simple(RequestOp::disable); return;
+    case Cmd::stop: simple(RequestOp::stop); return;
+    case Cmd::estop: simple(RequestOp::estop); return;
+    case Cmd::reset: simple(RequestOp::reset); return;
+    case Cmd::hold: simple(RequestOp::hold); return;
+    case Cmd::resume: simple(RequestOp::resume); return;
+    case Cmd::home_zero: simple(RequestOp::set_zero); return;
+    case Cmd::home: queue_joint(s, cfg_.home, cfg_.default_joint_speed_pct); return;
+    case Cmd::movej: {
+      kin::JointVector q(n_);
+      for (int j = 0; j < n_; ++j) q[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
+      queue_joint(s, q, c.has_speed ? c.speed : cfg_.default_joint_speed_pct);
+      return;
+    }
+    case Cmd::movel: {
+      const kin::Pose target = pose_from_values(c, tail());
+      queue_linear(s, target, c.has_speed ? c.speed * 1e-3 : cfg_.default_linear_speed);
+      return;
+    }
+    case Cmd::gmove: do_gmove(s, c); return;
+    case Cmd::dwell: queue_dwell(s, c.vals[0]); return;
+    case Cmd::fk: do_fk(s, c); return;
+    case Cmd::ik: do_ik(s, c); return;
+    case Cmd::limits: do_limits(s); return;
+    case Cmd::stats: answer_ok(s, stats_text()); return;
+    case Cmd::config:
+      s.out += cfg_.config_text;
+      if (!cfg_.config_text.empty() && cfg_.config_text.back() != '\n') s.out += '\n';
+      answer_ok(s);
+      return;
+    case Cmd::wait: s.waiting = true; settle(s); return;
+    case Cmd::position: {
+      const Telemetry t = ctl_.telemetry();
+      kin::JointVector q(n_);
+      for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+      kin::Pose p;
+      kin::forward(chain_, q, p);
+      const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear()) / kDeg;
+      const double u = s.modal.unit_mm;
+      s.out += fmt("X:%.3f Y:%.3f Z:%.3f A:%.3f B:%.3f C:%.3f\n", p.translation().x() * 1e3 / u, p.translation().y() * 1e3 / u,
+                   p.translation().z() * 1e3 / u, rpy[0], rpy[1], rpy[2]);
+      answer_ok(s);
+      return;
+    }
+    case Cmd::temperature: answer_ok(s, "T:0 /0 B:0 /0"); return;
+  }
+}
+
+bool Console::settle(Session& s) {
+  if (s.enabling) {
+    const Telemetry t = ctl_.telemetry();
+    switch (t.state) {
+      case ArmState::enabling: return true;
+      case ArmState::idle:
+      case ArmState::moving:
+        s.enabling = false;
+        answer_ok(s, "enabled");
+        break;
+      case ArmState::fault:
+        s.enabling = false;
+        answer_error(s, CmdError::fault, fmt("enable failed: %s", t.fault_text));
+        break;
+      case ArmState::boot:
+      case ArmState::disabled:
+      case ArmState::stopping:
+      case ArmState::estop:
+        s.enabling = false;
+        answer_error(s, CmdError::bad_state, fmt("enable interrupted: arm is %s", to_string(t.state)));
+        break;
+    }
+  }
+  if (s.waiting) {
+    const Telemetry t = ctl_.telemetry();
+    switch (t.state) {
+      case ArmState::fault:
+        s.waiting = false;
+        answer_error(s, CmdError::fault, fmt("arm in fault while waiting: %s", t.fault_text));
+        break;
+      case ArmState::estop:
+        s.waiting = false;
+        answer_error(s, CmdError::fault, "e-stop while waiting");
+        break;
+      case ArmState::moving:
+      case ArmState::stopping:
+      case ArmState::enabling: return true;  // still busy
+      case ArmState::boot:
+      case ArmState::disabled:
+      case ArmState::idle:
+        if (!ctl_.motions().empty()) return true;  // producer-side view: exact, never stale
+        s.waiting = false;
+        answer_ok(s, fmt("idle %s", pose_text(tail()).c_str()));
+        break;
+    }
+  }
+  return false;
+}
+
+bool Console::run_one(Session& s) {
+  if (settle(s) || s.lines.empty()) return false;
+  const std::string line = std::move(s.lines.front());
+  s.lines.pop_front();
+  execute(s, line);
+  return true;
+}
+
+void Console::poll(Session& s) {
+  while (run_one(s)) {
+  }
+}
+
+void Console::feed(Session& s, std::string_view bytes) {
+  accept(s, bytes);
+  poll(s);
+}
+
+void Console::end_of_input(Session& s) {
+  if (!s.partial.empty() || s.discarding) accept(s, "\n");
+}
+
+void Console::accept(Session& s, std::string_view bytes) {
+  for (char ch : bytes) {
+    if (is_realtime(ch)) {
+      Reply r;
+      switch (ch) {
+        case kRtStatus: s.out += grbl_report() + "\n"; break;
+        case kRtHold: if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n"; break;
+        case kRtResume: if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n"; break;
+        case kRtReset: {
+          if (!request(RequestOp::estop, r)) s.out += "error: timeout e-stop not acknowledged\n";
+          s.partial.clear();
+          s.discarding = false;
+          // A pending wait / enable is answered first (in order), then every complete line
+          // not executed yet gets its answer: not executing them is right, leaving them
+          // unanswered would hang a sender that counts answers.
+          settle(s);
+          for (const std::string& l : s.lines)
+            answer_error(s, CmdError::estop,
+                         fmt("'%.40s%s' not executed: e-stop (Ctrl-X) before it ran", l.c_str(), l.size() > 40 ? "..." : ""));
+          s.lines.clear();
+          break;
+        }
+        default: break;
+      }
+      continue;
+    }
+    const bool crlf = ch == '\n' && s.after_cr;
+    s.after_cr = ch == '\r';
+    if (crlf) continue;  // CR LF ends one line, not two
+    if (ch == '\n' || ch == '\r') {
+      if (s.discarding) {
+        s.discarding = false;
+        s.partial.clear();
+        s.lines.emplace_back(std::string(kMaxLine + 1, 'x'));  // answered as overlong, in order
+        continue;
+      }
+      s.lines.push_back(std::move(s.partial));
+      s.partial.clear();
+      continue;
+    }
+    if (s.discarding) continue;
+    s.partial += ch;
+    if (s.partial.size() > kMaxLine) {
+      s.discarding = true;
+      s.partial.clear();
+    }
+  }
+}
+
+}  // namespace servoarm::fw

@@ -1,0 +1,370 @@
+#include "servoarm/console/transport.hpp"
+
+#include <fcntl.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+
+#include "servoarm/console/commands.hpp"
+#include "servoarm/console/console.hpp"
+
+namespace servoarm::fw {
+
+FdTransport::~FdTransport() {
+  if (owns) {
+    if (rd >= 0) ::close(rd);
+    if (wr >= 0 && wr != rd) ::close(wr);
+  }
+  if (keep >= 0) ::close(keep);
+}
+
+static void make_raw(int fd) {
+  termios tio{};
+  if (tcgetattr(fd, &tio) != 0) return;
+  cfmakeraw(&tio);
+  tio.c_cc[VMIN] = 1;
+  tio.c_cc[VTIME] = 0;
+  tcsetattr(fd, TCSANOW, &tio);
+}
+
+std::string open_pty(FdTransport& t) {
+  const int m = posix_openpt(O_RDWR | O_NOCTTY);
+  if (m < 0) return std::string("posix_openpt: ") + std::strerror(errno);
+  if (grantpt(m) != 0 || unlockpt(m) != 0) {
+    ::close(m);
+    return std::string("grantpt/unlockpt: ") + std::strerror(errno);
+  }
+  char name[128];
+  if (ptsname_r(m, name, sizeof name) != 0) {
+    ::close(m);
+    return "ptsname failed";
+  }
+  const int s = ::open(name, O_RDWR | O_NOCTTY);
+  if (s >= 0) make_raw(s);
+  make_raw(m);
+  fcntl(m, F_SETFL, fcntl(m, F_GETFL) | O_NONBLOCK);
+  t.name = "pty";
+  t.rd = t.wr = m;
+  t.keep = s;
+  t.path = name;
+  t.owns = true;
+  return "";
+}
+
+std::string open_serial(FdTransport& t, const std::string& path, int baud) {
+  speed_t sp = B115200;
+  switch (baud) {
+    case 9600: sp = B9600; break;
+    case 19200: sp = B19200; break;
+    case 38400: sp = B38400; break;
+    case 57600: sp = B57600; break;
+    case 115200: sp = B115200; break;
+    case 230400: sp = B230400; break;
+    case 460800: sp = B460800; break;
+    case 921600: sp = B921600; break;
+    default: return "unsupported baud rate " + std::to_string(baud);
+  }
+  const int fd = ::open(path.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK);
+  if (fd < 0) return path + ": " + std::strerror(errno);
+  termios tio{};
+  if (tcgetattr(fd, &tio) != 0) {
+    const std::string e = path + ": not a terminal (" + std::strerror(errno) + ")";
+    ::close(fd);
+    return e;
+  }
+  cfmakeraw(&tio);
+  tio.c_cflag |= CLOCAL | CREAD;
+  tio.c_cflag &= ~static_cast<tcflag_t>(CRTSCTS | CSTOPB);
+  cfsetispeed(&tio, sp);
+  cfsetospeed(&tio, sp);
+  if (tcsetattr(fd, TCSANOW, &tio) != 0) {
+    const std::string e = path + ": tcsetattr: " + std::strerror(errno);
+    ::close(fd);
+    return e;
+  }
+  t.name = "serial";
+  t.rd = t.wr = fd;
+  t.path = path;
+  t.owns = true;
+  return "";
+}
+
+bool write_all(int fd, const std::string& s) {
+  std::size_t off = 0;
+  int spins = 0;
+  while (off < s.size()) {
+    const ssize_t w = ::write(fd, s.data() + off, s.size() - off);
+    if (w > 0) {
+      off += static_cast<std::size_t>(w);
+      continue;
+    }
+    if (w < 0 && (errno == EINTR)) continue;
+    if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK) && ++spins < 200) {
+      pollfd p{fd, POLLOUT, 0};
+      ::poll(&p, 1, 10);
+      continue;
+    }
+    return false;
+  }
+  return true;
+}
+
+ConsoleServer::ConsoleServer(Console& console, const std::vector<FdTransport*>& ts)
+    : console_(console), ts_(ts), sessions_(ts.size()), pfds_(2 * ts.size()) {
+  for (std::size_t i = 0; i < ts.size(); ++i) {
+    sessions_[i].name = ts[i]->name;
+    const int fl = ts[i]->wr >= 0 ? fcntl(ts[i]->wr, F_GETFL) : -1;
+    ts[i]->wr_nonblocking = fl >= 0 && (fl & O_NONBLOCK) != 0;
+  }
+}
+
+// Read what every transport has (bounded), so realtime characters act before
+// any line of any client runs and before any output is written.
+void ConsoleServer::sweep(int timeout_ms) {
+  for (std::size_t i = 0; i < ts_.size(); ++i) {
+    FdTransport& t = *ts_[i];
+    pfds_[2 * i] = pollfd{t.eof ? -1 : t.rd, POLLIN, 0};
+    const bool want_out = !t.pending.empty() && t.wr >= 0;
+    pfds_[2 * i + 1] = pollfd{want_out ? t.wr : -1, POLLOUT, 0};
+  }
+  ::poll(pfds_.data(), pfds_.size(), timeout_ms);
+  for (std::size_t i = 0; i < ts_.size(); ++i) {
+    FdTransport& t = *ts_[i];
+    Session& s = sessions_[i];
+    if (t.eof || !(pfds_[2 * i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
+    char buf[4096];
+    const ssize_t r = ::read(t.rd, buf, sizeof buf);
+    if (r > 0) {
+      console_.accept(s, std::string_view(buf, static_cast<std::size_t>(r)));
+    } else if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR && errno != EIO)) {
+      if (t.name == "stdin") {
+        t.eof = true;
+        console_.end_of_input(s);  // a last line without newline (even an overlong one) is answered
+      } else if (t.name == "can") {
+        t.eof = true;  // the bridge thread is gone
+      }
+    }
+  }
+}
+
+void ConsoleServer::queue_output(std::size_t i) {
+  FdTransport& t = *ts_[i];
+  Session& s = sessions_[i];
+  if (s.out.empty()) return;
+  if (t.pending.size() + s.out.size() > kMaxPendingOutput) {
+    // The client is not reading: it loses its own output, counted and told (below), and
+    // nobody else waits for it.
+    std::uint64_t lines = 0;
+    for (char c : s.out) lines += c == '\n';
+    t.dropped_lines += lines;
+    t.dropped_bytes += s.out.size();
+    t.dropped_unreported += lines;
+    console_.add_output_dropped(lines, s.out.size());
+  } else {
+    t.pending += s.out;
+  }
+  s.out.clear();
+}
+
+void ConsoleServer::write_some(std::size_t i) {
+  FdTransport& t = *ts_[i];
+  if (t.wr < 0) {
+    t.pending.clear();
+    return;
+  }
+  if (t.pending.empty() && t.dropped_unreported > 0) {
+    char b[160];
+    std::snprintf(b, sizeof b, "alarm: console output overflow: %llu lines dropped (this client did not read its answers)\n",
+                  static_cast<unsigned long long>(t.dropped_unreported));
+    t.pending = b;
+    t.dropped_unreported = 0;
+  }
+  // Never block on one client: a non-blocking fd takes what fits; a blocking one (stdout
+  // of the calling shell) gets at most PIPE_BUF bytes per write, and only when poll()
+  // says it is writable (a pipe then takes them without blocking).
+  for (int k = 0; k < 64 && !t.pending.empty(); ++k) {
+    std::size_t n = t.pending.size();
+    if (!t.wr_nonblocking) {
+      pollfd p{t.wr, POLLOUT, 0};
+      if (::poll(&p, 1, 0) <= 0 || !(p.revents & POLLOUT)) return;
+      if (n > 512) n = 512;
+    }
+    const ssize_t w = ::write(t.wr, t.pending.data(), n);
+    if (w > 0) {
+      t.pending.erase(0, static_cast<std::size_t>(w));
+      continue;
+    }
+    if (w < 0 && errno == EINTR) continue;
+    if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) return;
+    // The other end is gone (EIO on a pty without a client, EPIPE): nobody to tell.
+    t.pending.clear();
+    return;
+  }
+}
+
+bool ConsoleServer::round(int timeout_ms, bool exit_on_eof) {
+  sweep(timeout_ms);
+  // Lines one at a time, round-robin over the clients; between two lines every
+  // transport is read again, so a realtime character waits at most for the line
+  // being executed (a movel path check: a few ms), never for another client.
+  for (int budget = 0; budget < 256; ++budget) {
+    bool any = false;
+    for (std::size_t i = 0; i < ts_.size(); ++i) {
+      if (!console_.run_one(sessions_[i])) continue;
+      any = true;
+      queue_output(i);
+      sweep(0);
+    }
+    if (!any) break;
+  }
+  const std::string ev = console_.drain_events();
+  bool all_eof_done = true;
+  for (std::size_t i = 0; i < ts_.size(); ++i) {
+    FdTransport& t = *ts_[i];
+    Session& s = sessions_[i];
+    console_.poll(s);  // finish a wait that is done (lines were run above)
+    if (!ev.empty()) s.out += ev;
+    queue_output(i);
+    write_some(i);
+    if (t.name == "stdin" && !(t.eof && !console_.busy(s))) all_eof_done = false;
+    if (t.name != "stdin") all_eof_done = all_eof_done && exit_on_eof;
+  }
+  if (exit_on_eof && all_eof_done) {
+    // Last answers out before returning (bounded: a client that does not read loses them).
+    for (int k = 0; k < 200; ++k) {
+      bool left = false;
+      for (std::size_t i = 0; i < ts_.size(); ++i) {
+        write_some(i);
+        left = left || !ts_[i]->pending.empty();
+      }
+      if (!left) break;
+      pollfd p{-1, 0, 0};
+      ::poll(&p, 0, 5);
+    }
+    return false;
+  }
+  return true;
+}
+
+void serve_consoles(Console& console, const std::vector<FdTransport*>& ts, bool exit_on_eof,
+                    const volatile std::sig_atomic_t* quit, const std::atomic<bool>* stop) {
+  ConsoleServer srv(console, ts);
+  for (;;) {
+    if ((quit != nullptr && *quit) || (stop != nullptr && stop->load())) break;
+    if (!srv.round(10, exit_on_eof)) break;
+  }
+}
+
+std::string isotp_message_to_console(const std::uint8_t* data, std::size_t n) {
+  std::string s(reinterpret_cast<const char*>(data), n);
+  bool only_rt = n > 0;
+  for (char c : s) only_rt = only_rt && is_realtime(c);
+  if (!only_rt && (s.empty() || (s.back() != '\n' && s.back() != '\r'))) s += '\n';
+  return s;
+}
+
+CanConsole::~CanConsole() { stop(); }
+
+std::string CanConsole::open(const CanConsoleConfig& cfg, hal::SimBus* sim, FdTransport& t) {
+  stop();
+  cfg_ = cfg;
+  if (cfg.iface == "sim") {
+    if (sim == nullptr) return "console.can = \"sim\" needs the in-process bus (bus.can = \"sim\" or --sim)";
+    bus_ = sim->open(1024);
+  } else {
+    auto sc = std::make_unique<hal::SocketCanBus>();
+    if (sc->open(cfg.iface.c_str()) != hal::Status::ok) {
+      const std::string m = sc->message();  // names the interface itself in newer hal versions
+      return "cannot open " + (m.rfind(cfg.iface + ":", 0) == 0 ? m : cfg.iface + ": " + m);
+    }
+    bus_ = std::move(sc);
+  }
+  hal::IsoTpConfig ic;
+  ic.rx_id = cfg.rx_id;
+  ic.tx_id = cfg.tx_id;
+  iso_ = std::make_unique<hal::IsoTpEndpoint>(*bus_, clock_, ic);
+  const hal::CanFilter f = iso_->rx_filter();
+  if (bus_->set_filters({&f, 1}) != hal::Status::ok) return "cannot set the receive filter on " + cfg.iface;
+  int sv[2];
+  if (::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv) != 0) return std::string("socketpair: ") + std::strerror(errno);
+  fcntl(sv[0], F_SETFL, fcntl(sv[0], F_GETFL) | O_NONBLOCK);
+  fcntl(sv[1], F_SETFL, fcntl(sv[1], F_GETFL) | O_NONBLOCK);
+  fd_ = sv[1];
+  t.name = "can";
+  t.rd = t.wr = sv[0];
+  char b[64];
+  std::snprintf(b, sizeof b, "%s rx 0x%X tx 0x%X", cfg.iface.c_str(), unsigned(cfg.rx_id), unsigned(cfg.tx_id));
+  t.path = b;
+  t.owns = true;
+  stop_ = false;
+  th_ = std::thread([this] { run(); });
+  return "";
+}
+
+void CanConsole::stop() {
+  stop_ = true;
+  if (th_.joinable()) th_.join();
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
+// The bridge thread: ISO-TP messages -> socketpair (console input), socketpair
+// (console output) -> ISO-TP messages of whole lines. Waits in CanBus::receive
+// at most 2 ms, so console output leaves within ~2 ms of being written.
+void CanConsole::run() {
+  std::string out;       // console output not sent yet
+  std::string in;        // console input not written to the socketpair yet
+  bool warned = false;
+  while (!stop_.load(std::memory_order_relaxed)) {
+    const hal::IsoTpEvent ev = iso_->service(clock_.now() + 2 * hal::kMillisecond);
+    if (ev.rx == hal::IsoTpResult::ok) {
+      const auto m = iso_->rx_message();
+      in += isotp_message_to_console(m.data(), m.size());
+    } else if (static_cast<int>(ev.rx) < 0 && ev.rx != hal::IsoTpResult::malformed) {
+      std::fprintf(stderr, "armfw: can console: receive: %s\n", hal::to_string(ev.rx));
+    }
+    if (static_cast<int>(ev.tx) < 0 && ev.tx != hal::IsoTpResult::malformed)
+      std::fprintf(stderr, "armfw: can console: send: %s (answer lost)\n", hal::to_string(ev.tx));
+    if (ev.rx == hal::IsoTpResult::bus_error && !warned) {
+      std::fprintf(stderr, "armfw: can console: bus: %s\n", hal::describe(iso_->last_bus_status()));
+      warned = true;
+    }
+    while (!in.empty()) {
+      const ssize_t w = ::write(fd_, in.data(), in.size());
+      if (w <= 0) break;  // the console loop is behind: keep the rest for the next round
+      in.erase(0, static_cast<std::size_t>(w));
+    }
+    char buf[4096];
+    for (;;) {
+      const ssize_t r = ::read(fd_, buf, sizeof buf);
+      if (r > 0) {
+        out.append(buf, static_cast<std::size_t>(r));
+        continue;
+      }
+      if (r == 0) stop_ = true;  // console side closed
+      break;
+    }
+    if (!out.empty() && !iso_->sending()) {
+      std::size_t n = std::min<std::size_t>(out.size(), hal::IsoTpEndpoint::kMaxMessage);
+      if (n < out.size()) {
+        const std::size_t nl = out.rfind('\n', n - 1);
+        if (nl != std::string::npos) n = nl + 1;
+      }
+      const hal::IsoTpResult r =
+          iso_->send({reinterpret_cast<const std::uint8_t*>(out.data()), n});
+      if (r == hal::IsoTpResult::ok) out.erase(0, n);
+      else if (r != hal::IsoTpResult::busy) {
+        std::fprintf(stderr, "armfw: can console: send: %s (answer lost)\n", hal::to_string(r));
+        out.erase(0, n);
+      }
+    }
+  }
+}
+
+}  // namespace servoarm::fw

@@ -1,0 +1,858 @@
+#include "servoarm/rt/controller.hpp"
+
+#include <cmath>
+#include <cstdio>
+
+namespace servoarm::fw {
+
+const char* to_string(ArmState s) {
+  switch (s) {
+    case ArmState::boot: return "boot";
+    case ArmState::disabled: return "disabled";
+    case ArmState::enabling: return "enabling";
+    case ArmState::idle: return "idle";
+    case ArmState::moving: return "moving";
+    case ArmState::stopping: return "stopping";
+    case ArmState::fault: return "fault";
+    case ArmState::estop: return "estop";
+  }
+  return "?";
+}
+
+const char* to_string(FaultCause c) {
+  switch (c) {
+    case FaultCause::none: return "none";
+    case FaultCause::heartbeat_lost: return "heartbeat_lost";
+    case FaultCause::drive_fault: return "drive_fault";
+    case FaultCause::drive_refused: return "drive_refused";
+    case FaultCause::left_enabled: return "left_enabled";
+    case FaultCause::emcy: return "emcy";
+    case FaultCause::bus_off: return "bus_off";
+    case FaultCause::bus_error: return "bus_error";
+    case FaultCause::following_error: return "following_error";
+    case FaultCause::setpoint_nan: return "setpoint_nan";
+    case FaultCause::setpoint_position: return "setpoint_position";
+    case FaultCause::setpoint_velocity: return "setpoint_velocity";
+    case FaultCause::feedback_invalid: return "feedback_invalid";
+  }
+  return "?";
+}
+
+const char* to_string(RtResult r) {
+  switch (r) {
+    case RtResult::ok: return "ok";
+    case RtResult::bad_state: return "bad_state";
+    case RtResult::fault: return "fault";
+    case RtResult::busy: return "busy";
+    case RtResult::start_moved: return "start_moved";
+    case RtResult::plan_failed: return "plan_failed";
+  }
+  return "?";
+}
+
+const char* to_string(RequestOp op) {
+  switch (op) {
+    case RequestOp::enable: return "enable";
+    case RequestOp::disable: return "disable";
+    case RequestOp::stop: return "stop";
+    case RequestOp::estop: return "estop";
+    case RequestOp::reset: return "reset";
+    case RequestOp::hold: return "hold";
+    case RequestOp::resume: return "resume";
+    case RequestOp::set_zero: return "set_zero";
+  }
+  return "?";
+}
+
+const char* to_string(MotionKind k) {
+  switch (k) {
+    case MotionKind::joint: return "joint";
+    case MotionKind::cartesian: return "cartesian";
+    case MotionKind::dwell: return "dwell";
+  }
+  return "?";
+}
+
+const char* to_string(EventKind k) {
+  switch (k) {
+    case EventKind::fault: return "fault";
+    case EventKind::estop: return "estop";
+    case EventKind::motion_done: return "motion_done";
+    case EventKind::motion_refused: return "motion_refused";
+    case EventKind::state: return "state";
+  }
+  return "?";
+}
+
+namespace {
+/// "<what>" or "<what>; N queued move(s) dropped".
+void dropped_text(char* dst, std::size_t cap, const char* what, std::size_t dropped) {
+  if (dropped == 0) std::snprintf(dst, cap, "%s", what);
+  else std::snprintf(dst, cap, "%s; %zu queued move%s dropped", what, dropped, dropped == 1 ? "" : "s");
+}
+
+void copy_text(char* dst, std::size_t cap, const char* src) {
+  std::size_t i = 0;
+  for (; src != nullptr && src[i] != '\0' && i + 1 < cap; ++i) dst[i] = src[i];
+  dst[i] = '\0';
+}
+}  // namespace
+
+Controller::Controller(hal::ServoBus& bus, const kin::Chain& chain, const ControllerConfig& cfg)
+    : bus_(bus), chain_(chain), cfg_(cfg), limits_(kin::limits_from(chain)), n_(chain.n_joints) {
+  period_s_ = 1.0 / cfg_.rate_hz;
+  cmd_ = kin::JointState::rest(kin::JointVector::Zero(n_));
+  q_act_ = kin::JointVector::Zero(n_);
+  q_prev_ = kin::JointVector::Zero(n_);
+}
+
+hal::Status Controller::boot(TimePoint now, TimePoint deadline) {
+  const hal::Status st = bus_.start(deadline);
+  if (st != hal::Status::ok) return st;
+  now_ = now;
+  bus_.read(now);
+  hold_measured();
+  for (int j = 0; j < n_; ++j) emcy_seen_[static_cast<std::size_t>(j)] = bus_.feedback(static_cast<std::size_t>(j)).emcy_count;
+  set_state(ArmState::disabled);
+  publish();
+  flush_replies();
+  return st;
+}
+
+void Controller::hold_measured() {
+  for (int j = 0; j < n_; ++j) {
+    const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+    q_act_[j] = fb.valid ? fb.position : q_act_[j];
+  }
+  cmd_ = kin::JointState::rest(q_act_);
+  have_prev_ = false;
+  ++generation_;
+}
+
+std::size_t Controller::flush_motions() {
+  const std::size_t n = motions_.clear();
+  ++generation_;
+  running_ = nullptr;
+  holding_ = false;
+  return n;
+}
+
+void Controller::reply(std::uint32_t seq, RtResult res, const char* msg) {
+  if (n_pending_ >= static_cast<int>(pending_replies_.size())) return;  // cannot happen: <= 4 requests per cycle
+  Reply& r = pending_replies_[static_cast<std::size_t>(n_pending_++)];
+  r.seq = seq;
+  r.result = res;
+  copy_text(r.message, sizeof r.message, msg);
+}
+
+void Controller::flush_replies() {
+  for (int i = 0; i < n_pending_; ++i)
+    if (!replies_.push(pending_replies_[static_cast<std::size_t>(i)])) break;  // console stopped reading: it times out
+  n_pending_ = 0;
+}
+
+void Controller::emit(EventKind k, FaultCause c, int joint, std::uint32_t id, const char* msg) {
+  Event* e = events_.back();
+  if (e == nullptr) {
+    events_dropped_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  e->kind = k;
+  e->state = state_;
+  e->cause = c;
+  e->joint = static_cast<std::int8_t>(joint);
+  e->motion_id = id;
+  copy_text(e->message, sizeof e->message, msg);
+  events_.commit();
+}
+
+void Controller::set_state(ArmState s) {
+  if (s == state_) return;
+  state_ = s;
+  state_since_ = now_;
+}
+
+void Controller::record_timing(std::int64_t latency_ns, std::int64_t compute_ns, std::uint32_t missed_deadlines) {
+  latency_.add(latency_ns);
+  compute_.add(compute_ns);
+  overruns_ += missed_deadlines;
+}
+
+// ---------------------------------------------------------------------------
+// Faults and stops
+// ---------------------------------------------------------------------------
+
+void Controller::begin_quick_stop() {
+  // Ramp every joint to rest from the commanded state with the full limits.
+  kin::MovejOptions o;
+  if (kin::plan_stop(limits_, cmd_, o, stop_traj_) == kin::MotionStatus::ok) {
+    stop_active_ = true;
+    stop_t_ = 0;
+  } else {
+    stop_active_ = false;  // cannot plan (never seen): hold the commanded position
+    cmd_ = kin::JointState::rest(cmd_.pos);
+  }
+}
+
+void Controller::begin_emergency_stop() {
+  if (!cfg_.drive_quick_stop) {
+    begin_quick_stop();
+    return;
+  }
+  // CiA 402 Quick Stop to every drive in this cycle's RPDOs; they ramp down themselves.
+  bus_.quick_stop();
+  stop_active_ = true;
+  drive_stop_ = true;
+  stop_t_ = 0;
+}
+
+// The drives stop on their own ramps: follow their measured positions (so the
+// setpoints never pull against the ramp and enabling later never jumps); power
+// down once none reports motion any more (the HAL says `enabling` while a drive
+// is operation enabled or quick-stop active with speed), or at the timeout.
+void Controller::step_drive_stop() {
+  stop_t_ += period_s_;
+  bool moving = false;
+  for (int j = 0; j < n_; ++j) {
+    const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+    if (fb.valid) cmd_.pos[j] = fb.position;
+    if (fb.state == hal::JointState::enabling || fb.state == hal::JointState::enabled) moving = true;
+  }
+  cmd_.vel.setZero();
+  cmd_.acc.setZero();
+  if (!moving || stop_t_ >= cfg_.drive_stop_timeout) {
+    stop_active_ = false;
+    drive_stop_ = false;
+    bus_.disable();
+  }
+}
+
+void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
+  if (state_ == ArmState::fault) return;  // first cause wins (latched)
+  const bool was_powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping ||
+                           state_ == ArmState::enabling;
+  cause_ = c;
+  fault_joint_ = joint;
+  if (joint >= 0)
+    std::snprintf(fault_text_, sizeof fault_text_, "joint %d %s%s%s", joint + 1, to_string(c), detail[0] ? ": " : "",
+                  detail);
+  else
+    std::snprintf(fault_text_, sizeof fault_text_, "%s%s%s", to_string(c), detail[0] ? ": " : "", detail);
+  const std::size_t dropped = flush_motions();
+  set_state(ArmState::fault);
+  if (was_powered) {
+    if (!drive_stop_) begin_emergency_stop();  // (ramp mode: replanned from here, as before)
+  } else {
+    stop_active_ = false;
+    drive_stop_ = false;
+  }
+  if (!stop_active_) bus_.disable();
+  emit(EventKind::fault, c, joint, 0, fault_text_);
+  if (dropped > 0) {
+    char d[sizeof(Event::message)];
+    std::snprintf(d, sizeof d, "%zu queued move%s dropped: arm is fault", dropped, dropped == 1 ? "" : "s");
+    emit(EventKind::motion_refused, FaultCause::none, -1, 0, d);
+  }
+}
+
+void Controller::supervise(TimePoint now) {
+  (void)now;
+  const bool powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping;
+  // Disabled / boot: a drive fault or lost heartbeat is shown in `status` and
+  // cleared by the next enable (which faults again if the cause persists); the
+  // arm state only latches faults while the drives are (being) powered.
+  const bool latched = state_ == ArmState::fault || state_ == ArmState::estop || state_ == ArmState::disabled ||
+                       state_ == ArmState::boot;
+  for (int j = 0; j < n_; ++j) {
+    const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+    char d[64];
+    if (fb.emcy_count != emcy_seen_[static_cast<std::size_t>(j)]) {
+      emcy_seen_[static_cast<std::size_t>(j)] = fb.emcy_count;
+      // While enabling, the fault reset itself produces EMCY "error reset" frames;
+      // a real error there also puts the drive in fault, which is caught below.
+      if (!latched && state_ != ArmState::enabling && fb.error_code != 0) {
+        std::snprintf(d, sizeof d, "EMCY 0x%04X", unsigned(fb.error_code));
+        raise_fault(FaultCause::emcy, j, d);
+        return;
+      }
+    }
+    if (latched) continue;
+    if (fb.state == hal::JointState::fault) {
+      FaultCause c = FaultCause::drive_fault;
+      switch (fb.fault) {
+        case hal::Status::heartbeat_lost: c = FaultCause::heartbeat_lost; break;
+        case hal::Status::drive_refused: c = FaultCause::drive_refused; break;
+        case hal::Status::drive_fault: c = FaultCause::drive_fault; break;
+        case hal::Status::bus_off: c = FaultCause::bus_off; break;
+        case hal::Status::ok:
+        case hal::Status::timeout:
+        case hal::Status::would_block:
+        case hal::Status::error_passive:
+        case hal::Status::invalid_argument:
+        case hal::Status::io_error:
+        case hal::Status::interface_down:
+        case hal::Status::not_open:
+        case hal::Status::sdo_abort:
+        case hal::Status::protocol_error:
+        case hal::Status::not_configured:
+        case hal::Status::capacity:
+        case hal::Status::not_supported:
+        case hal::Status::bad_state: c = FaultCause::bus_error; break;
+      }
+      std::snprintf(d, sizeof d, "%s, error code 0x%04X", hal::to_string(fb.fault), unsigned(fb.error_code));
+      raise_fault(c, j, d);
+      return;
+    }
+    if (powered && fb.state != hal::JointState::enabled) {
+      std::snprintf(d, sizeof d, "drive now %s", hal::to_string(fb.state));
+      raise_fault(FaultCause::left_enabled, j, d);
+      return;
+    }
+    // Enabling needs live drives too: a drive that has been talking and went quiet faults
+    // the enable (one that has not sent feedback yet since start is waited for, above).
+    const bool watched = powered || (state_ == ArmState::enabling && fb.valid);
+    if (powered && !fb.valid) {
+      raise_fault(FaultCause::feedback_invalid, j, "no position feedback");
+      return;
+    }
+    if (watched && static_cast<double>(fb.age) * 1e-9 > cfg_.feedback_timeout) {
+      std::snprintf(d, sizeof d, "no position feedback for %.1f ms", static_cast<double>(fb.age) * 1e-6);
+      raise_fault(FaultCause::feedback_invalid, j, d);
+      return;
+    }
+    if (powered && cfg_.check_following_error && have_prev_) {
+      const double e = std::fabs(q_prev_[j] - fb.position);
+      if (e > max_follow_) max_follow_ = e;
+      if (e > cfg_.following_error) {
+        std::snprintf(d, sizeof d, "%.4f > limit %.4f", e, cfg_.following_error);
+        raise_fault(FaultCause::following_error, j, d);
+        return;
+      }
+    }
+  }
+  if (state_ == ArmState::enabling) {
+    // Enabled = every drive operation enabled (the bus reports that only with a heartbeat
+    // within its consumer time) and every drive's position feedback valid and fresh.
+    bool all = true;
+    for (int j = 0; j < n_; ++j) all = all && bus_.feedback(static_cast<std::size_t>(j)).state == hal::JointState::enabled;
+    bool fresh = true;
+    for (int j = 0; j < n_; ++j) fresh = fresh && bus_.feedback(static_cast<std::size_t>(j)).valid;
+    if (all && fresh) {
+      hold_measured();
+      set_state(ArmState::idle);
+      emit(EventKind::state, FaultCause::none, -1, 0, "enabled");
+    } else if (static_cast<double>(now_ - state_since_) * 1e-9 > cfg_.enable_timeout) {
+      for (int j = 0; j < n_; ++j)
+        if (bus_.feedback(static_cast<std::size_t>(j)).state != hal::JointState::enabled) {
+          raise_fault(FaultCause::drive_refused, j, "not operation enabled within enable_timeout");
+          return;
+        }
+      for (int j = 0; j < n_; ++j)
+        if (!bus_.feedback(static_cast<std::size_t>(j)).valid) {
+          raise_fault(FaultCause::feedback_invalid, j, "no position feedback within enable_timeout");
+          return;
+        }
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------
+// Requests
+// ---------------------------------------------------------------------------
+
+void Controller::handle_request(const Request& r, TimePoint now) {
+  char m[sizeof(Reply::message)];
+  switch (r.op) {
+    case RequestOp::set_zero: {
+      if (state_ != ArmState::disabled) {
+        std::snprintf(m, sizeof m, "home zero needs the arm disabled (it is %s)", to_string(state_));
+        reply(r.seq, RtResult::bad_state, m);
+        return;
+      }
+      // Check every joint before touching any, so the request applies to all or none.
+      for (int j = 0; j < n_; ++j) {
+        const auto ju = static_cast<std::size_t>(j);
+        const hal::JointFeedback& fb = bus_.feedback(ju);
+        if (fb.state != hal::JointState::disabled || !fb.valid) {
+          std::snprintf(m, sizeof m, "joint %d: drive is %s%s, not disabled", j + 1, hal::to_string(fb.state),
+                        fb.valid ? "" : " (no position feedback)");
+          reply(r.seq, RtResult::bad_state, m);
+          return;
+        }
+        if (!(limits_.lower[ju] <= 0.0 && 0.0 <= limits_.upper[ju])) {
+          std::snprintf(m, sizeof m, "joint %d: zero lies outside its limits", j + 1);
+          reply(r.seq, RtResult::bad_state, m);
+          return;
+        }
+      }
+      int len = std::snprintf(m, sizeof m, "zero_offset = [");
+      for (int j = 0; j < n_; ++j) {
+        const hal::Status st = bus_.set_position_zero(static_cast<std::size_t>(j));
+        if (st != hal::Status::ok) {  // not_supported: nothing was changed (first joint), else a bug
+          std::snprintf(m, sizeof m, "joint %d: %s", j + 1, hal::describe(st));
+          reply(r.seq, RtResult::bad_state, m);
+          return;
+        }
+        if (len > 0 && static_cast<std::size_t>(len) < sizeof m)
+          len += std::snprintf(m + len, sizeof m - static_cast<std::size_t>(len), "%s%lld%s", j ? ", " : "",
+                               static_cast<long long>(bus_.zero_offset(static_cast<std::size_t>(j))), j + 1 == n_ ? "]" : "");
+      }
+      hold_measured();
+      reply(r.seq, RtResult::ok, m);
+      return;
+    }
+    case RequestOp::estop: {
+      // Acts in this cycle: quick stop ramp (category 1), then power off.
+      std::size_t dropped = 0;
+      if (state_ != ArmState::estop) {
+        const bool powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping ||
+                             (state_ == ArmState::fault && stop_active_);
+        dropped = flush_motions();
+        set_state(ArmState::estop);
+        estop_seen_ = now;
+        if (powered) {
+          // a ramp already running goes on; in drive mode the drives take over
+          if (!stop_active_ || (cfg_.drive_quick_stop && !drive_stop_)) begin_emergency_stop();
+        } else {
+          stop_active_ = false;
+          drive_stop_ = false;
+          bus_.disable();
+        }
+        emit(EventKind::estop, FaultCause::none, -1, 0, "emergency stop");
+      }
+      dropped_text(m, sizeof m, "estop", dropped);
+      reply(r.seq, RtResult::ok, m);
+      return;
+    }
+    case RequestOp::reset:
+      if (state_ == ArmState::fault || state_ == ArmState::estop) {
+        if (stop_active_) {
+          reply(r.seq, RtResult::bad_state, "still stopping; retry when the arm is at rest");
+          return;
+        }
+        bus_.disable();
+        cause_ = FaultCause::none;
+        fault_joint_ = -1;
+        fault_text_[0] = '\0';
+        max_follow_ = 0;
+        hold_measured();
+        set_state(ArmState::disabled);
+        reply(r.seq, RtResult::ok, "reset; drives disabled, send enable");
+        return;
+      }
+      reply(r.seq, RtResult::ok, "nothing to reset");
+      return;
+    case RequestOp::enable:
+      switch (state_) {
+        case ArmState::disabled:
+          // Never power up on a drive's last known state: every drive must be talking now
+          // (position feedback younger than feedback_timeout; heartbeats are checked by the
+          // bus, which reports a joint enabled only with a heartbeat within its consumer time).
+          for (int j = 0; j < n_; ++j) {
+            const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+            // (no feedback at all yet, just after start: the enabling state waits for it)
+            if (!fb.valid || static_cast<double>(fb.age) * 1e-9 <= cfg_.feedback_timeout) continue;
+            char d[64];
+            std::snprintf(d, sizeof d, "no position feedback for %.1f ms", static_cast<double>(fb.age) * 1e-6);
+            raise_fault(FaultCause::feedback_invalid, j, d);
+            std::snprintf(m, sizeof m, "enable failed: %s", fault_text_);
+            reply(r.seq, RtResult::fault, m);
+            return;
+          }
+          flush_motions();  // a move queued before the arm was disabled never starts
+          for (int j = 0; j < n_; ++j) emcy_seen_[static_cast<std::size_t>(j)] = bus_.feedback(static_cast<std::size_t>(j)).emcy_count;
+          bus_.enable();
+          hold_measured();
+          set_state(ArmState::enabling);
+          reply(r.seq, RtResult::ok, "enabling");
+          return;
+        case ArmState::enabling:
+        case ArmState::idle:
+        case ArmState::moving:
+          reply(r.seq, RtResult::ok, "already enabled");
+          return;
+        case ArmState::stopping:
+          reply(r.seq, RtResult::bad_state, "stopping; retry");
+          return;
+        case ArmState::boot:
+          reply(r.seq, RtResult::bad_state, "drives not started");
+          return;
+        case ArmState::fault:
+        case ArmState::estop:
+          std::snprintf(m, sizeof m, "in %s: send reset first", to_string(state_));
+          reply(r.seq, RtResult::fault, m);
+          return;
+      }
+      return;
+    case RequestOp::disable:
+      switch (state_) {
+        case ArmState::moving:
+        case ArmState::stopping:
+          flush_motions();
+          if (!stop_active_) begin_quick_stop();
+          disable_after_stop_ = true;
+          set_state(ArmState::stopping);
+          reply(r.seq, RtResult::ok, "stopping, then disabling");
+          return;
+        case ArmState::idle:
+        case ArmState::enabling:
+        case ArmState::disabled: {
+          // Moves queued but not started yet (same cycle as this request) are dropped too.
+          const std::size_t dropped = flush_motions();
+          bus_.disable();
+          set_state(ArmState::disabled);
+          hold_measured();
+          dropped_text(m, sizeof m, "disabled", dropped);
+          reply(r.seq, RtResult::ok, m);
+          return;
+        }
+        case ArmState::boot:
+        case ArmState::fault:
+        case ArmState::estop:
+          flush_motions();
+          bus_.disable();
+          reply(r.seq, RtResult::ok, "drives disabled");
+          return;
+      }
+      return;
+    case RequestOp::stop:
+      switch (state_) {
+        case ArmState::moving:
+          flush_motions();
+          if (!stop_active_) begin_quick_stop();
+          set_state(ArmState::stopping);
+          reply(r.seq, RtResult::ok, "stopping");
+          return;
+        case ArmState::boot:
+        case ArmState::disabled:
+        case ArmState::enabling:
+        case ArmState::idle:
+        case ArmState::stopping:
+        case ArmState::fault:
+        case ArmState::estop: {
+          // Not moving yet, but a move queued in this same cycle would start at the
+          // next one: drop every queued move whatever the state.
+          const std::size_t dropped = flush_motions();
+          dropped_text(m, sizeof m, state_ == ArmState::stopping ? "stopping" : "not moving", dropped);
+          reply(r.seq, RtResult::ok, m);
+          return;
+        }
+      }
+      return;
+    case RequestOp::hold:
+      if (state_ == ArmState::moving && !holding_) {
+        holding_ = true;
+        if (running_ != nullptr && running_->kind == MotionKind::cartesian) {
+          kin::stop_movel(running_->ct, motion_t_);  // stops on the line
+          motion_t_ = 0;
+        } else if (running_ != nullptr && running_->kind == MotionKind::joint) {
+          begin_quick_stop();
+        }
+        reply(r.seq, RtResult::ok, "feed hold");
+        return;
+      }
+      if (state_ == ArmState::idle && !motions_.empty()) {
+        // Moves queued but not started (GRBL Hold with a planned queue): hold the queue;
+        // `resume` / '~' starts it, `stop` drops it.
+        holding_ = true;
+        set_state(ArmState::moving);
+        reply(r.seq, RtResult::ok, "feed hold (queue held)");
+        return;
+      }
+      reply(r.seq, RtResult::ok, state_ == ArmState::moving ? "already holding" : "not moving");
+      return;
+    case RequestOp::resume:
+      if (state_ == ArmState::moving && holding_) {
+        if (stop_active_) {
+          reply(r.seq, RtResult::bad_state, "still ramping down; retry");
+          return;
+        }
+        holding_ = false;
+        if (running_ != nullptr && running_->kind == MotionKind::cartesian) {
+          kin::resume_movel(running_->ct, motion_t_, 1.0);
+          motion_t_ = 0;
+        } else if (running_ != nullptr && running_->kind == MotionKind::joint) {
+          kin::MovejOptions o;
+          o.override = running_->override;
+          if (kin::plan_movej(limits_, cmd_, running_->goal, o, running_->jt) != kin::MotionStatus::ok) {
+            finish_motion(true, RtResult::plan_failed);
+            reply(r.seq, RtResult::plan_failed, "cannot re-plan the interrupted move");
+            return;
+          }
+          motion_t_ = 0;
+        }
+        reply(r.seq, RtResult::ok, "resumed");
+        return;
+      }
+      reply(r.seq, RtResult::ok, "not holding");
+      return;
+  }
+}
+
+// ---------------------------------------------------------------------------
+// Motion
+// ---------------------------------------------------------------------------
+
+void Controller::finish_motion(bool refused, RtResult why) {
+  if (running_ == nullptr) return;
+  const std::uint32_t id = running_->id;
+  running_ = nullptr;
+  motions_.pop();
+  if (refused) {
+    char m[96];
+    std::snprintf(m, sizeof m, "motion %u refused: %s", unsigned(id), to_string(why));
+    emit(EventKind::motion_refused, FaultCause::none, -1, id, m);
+  } else {
+    done_id_ = id;
+    emit(EventKind::motion_done, FaultCause::none, -1, id, "done");
+  }
+}
+
+bool Controller::start_next_motion() {
+  while (MotionItem* m = motions_.front()) {
+    motion_t_ = 0;
+    holding_ = false;
+    switch (m->kind) {
+      case MotionKind::joint: {
+        kin::MovejOptions o;
+        o.override = m->override;
+        if (kin::plan_movej(limits_, kin::JointState::rest(cmd_.pos), m->goal, o, m->jt) != kin::MotionStatus::ok) {
+          running_ = m;
+          finish_motion(true, RtResult::plan_failed);
+          continue;
+        }
+        break;
+      }
+      case MotionKind::cartesian: {
+        double dev = 0;
+        for (int j = 0; j < n_; ++j)
+          dev = std::fmax(dev, std::fabs(m->ct.q_knot[0][static_cast<std::size_t>(j)] - cmd_.pos[j]));
+        if (dev > 1e-6) {
+          running_ = m;
+          finish_motion(true, RtResult::start_moved);
+          continue;
+        }
+        break;
+      }
+      case MotionKind::dwell: break;
+    }
+    running_ = m;
+    return true;
+  }
+  return false;
+}
+
+void Controller::step_motion() {
+  // Quick stop / stop ramp has priority over everything.
+  if (stop_active_ && drive_stop_) {
+    step_drive_stop();
+    return;
+  }
+  if (stop_active_) {
+    stop_t_ += period_s_;
+    stop_traj_.sample(stop_t_, cmd_);
+    if (stop_t_ >= stop_traj_.duration) {
+      stop_active_ = false;
+      cmd_ = kin::JointState::rest(cmd_.pos);
+      switch (state_) {
+        case ArmState::fault:
+        case ArmState::estop:
+          bus_.disable();
+          break;
+        case ArmState::stopping:
+          if (disable_after_stop_) {
+            bus_.disable();
+            disable_after_stop_ = false;
+            set_state(ArmState::disabled);
+          } else {
+            set_state(ArmState::idle);
+          }
+          break;
+        case ArmState::moving:  // joint feed hold: at rest, keep the motion
+        case ArmState::boot:
+        case ArmState::disabled:
+        case ArmState::enabling:
+        case ArmState::idle:
+          break;
+      }
+    }
+    return;
+  }
+  switch (state_) {
+    case ArmState::boot:
+    case ArmState::disabled:
+    case ArmState::enabling:
+    case ArmState::fault:
+    case ArmState::estop:
+      // Not powered (or ramp finished): follow the measured position so enabling never jumps.
+      if (!motions_.empty()) {
+        // A move the console committed on a state it read before a fault / e-stop / disable:
+        // it never starts, and the console hears about it.
+        char d[sizeof(Event::message)];
+        const std::size_t n = flush_motions();
+        std::snprintf(d, sizeof d, "%zu queued move%s dropped: arm is %s", n, n == 1 ? "" : "s", to_string(state_));
+        emit(EventKind::motion_refused, FaultCause::none, -1, 0, d);
+      }
+      for (int j = 0; j < n_; ++j) {
+        const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+        if (fb.valid) cmd_.pos[j] = fb.position;
+      }
+      cmd_.vel.setZero();
+      cmd_.acc.setZero();
+      have_prev_ = false;
+      return;
+    case ArmState::stopping:
+      set_state(ArmState::idle);
+      [[fallthrough]];
+    case ArmState::idle:
+      if (!start_next_motion()) return;
+      set_state(ArmState::moving);
+      [[fallthrough]];
+    case ArmState::moving:
+      break;
+  }
+  if (running_ == nullptr) {
+    if (holding_) {  // feed hold on a queue that has not started: nothing moves until resume
+      if (motions_.empty()) {
+        holding_ = false;
+        set_state(ArmState::idle);
+      }
+      return;
+    }
+    if (!start_next_motion()) {
+      set_state(ArmState::idle);
+      return;
+    }
+  }
+  if (holding_ && running_->kind != MotionKind::cartesian) return;  // joint/dwell: held at rest
+  motion_t_ += period_s_;
+  bool done = false;
+  switch (running_->kind) {
+    case MotionKind::joint:
+      running_->jt.sample(motion_t_, cmd_);
+      done = motion_t_ >= running_->jt.duration;
+      break;
+    case MotionKind::cartesian:
+      if (running_->ct.sample_ik(motion_t_, cmd_.pos, cmd_.vel, cmd_.acc) < kin::Status::ok) {
+        // sample_ik left the precomputed value in pos: still on the checked path.
+      }
+      done = !holding_ && motion_t_ >= running_->ct.duration;
+      if (holding_ && motion_t_ >= running_->ct.duration) motion_t_ = running_->ct.duration;
+      break;
+    case MotionKind::dwell:
+      done = motion_t_ >= running_->dwell_s;
+      break;
+  }
+  if (done) {
+    if (running_->kind != MotionKind::dwell) {
+      cmd_.pos = running_->goal;
+      cmd_.vel.setZero();
+      cmd_.acc.setZero();
+    }
+    finish_motion(false, RtResult::ok);
+    if (start_next_motion()) return;
+    set_state(ArmState::idle);
+  }
+}
+
+void Controller::validate_and_write(TimePoint now) {
+  const bool powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping ||
+                       ((state_ == ArmState::fault || state_ == ArmState::estop) && stop_active_ && !drive_stop_);
+  if (powered) {
+    for (int j = 0; j < n_; ++j) {
+      const double q = cmd_.pos[j];
+      char d[64];
+      if (!std::isfinite(q)) {
+        cmd_ = kin::JointState::rest(q_prev_);
+        raise_fault(FaultCause::setpoint_nan, j, "non-finite setpoint; holding");
+        break;
+      }
+      const auto ju = static_cast<std::size_t>(j);
+      const bool stopping_ramp = stop_active_;  // a stop may cross a limit it was already about to
+      if (!stopping_ramp && (q < limits_.lower[ju] - cfg_.position_tolerance || q > limits_.upper[ju] + cfg_.position_tolerance)) {
+        std::snprintf(d, sizeof d, "%.5f outside [%.5f, %.5f]", q, limits_.lower[ju], limits_.upper[ju]);
+        cmd_.pos[j] = std::fmin(std::fmax(q, limits_.lower[ju]), limits_.upper[ju]);
+        raise_fault(FaultCause::setpoint_position, j, d);
+        break;
+      }
+      if (have_prev_) {
+        const double v = std::fabs(q - q_prev_[j]) / period_s_;
+        const double vmax = limits_.dyn[ju].max_velocity * cfg_.velocity_margin + 1e-9;
+        if (v > vmax) {
+          std::snprintf(d, sizeof d, "%.4f/s > %.4f/s", v, vmax);
+          cmd_ = kin::JointState::rest(q_prev_);
+          raise_fault(FaultCause::setpoint_velocity, j, d);
+          break;
+        }
+      }
+    }
+  }
+  const auto sp = std::span<const double>(cmd_.pos.data(), static_cast<std::size_t>(n_));
+  const hal::Status ws = bus_.write(sp, now);
+  if (estop_seen_ >= 0) {
+    estop_latency_ = now - estop_seen_;
+    estop_seen_ = -1;
+  }
+  q_prev_ = cmd_.pos;
+  have_prev_ = powered;
+  if (ws == hal::Status::bus_off && state_ != ArmState::fault) raise_fault(FaultCause::bus_off, -1, "CAN controller bus-off");
+  else if (static_cast<int>(ws) < 0 && ws != hal::Status::invalid_argument && state_ != ArmState::fault && powered) {
+    char d[64];
+    std::snprintf(d, sizeof d, "write: %s", hal::to_string(ws));
+    raise_fault(FaultCause::bus_error, -1, d);
+  }
+}
+
+void Controller::publish() {
+  if (cycles_ % 64 == 0) {
+    latency_sum_ = latency_.summary();
+    compute_sum_ = compute_.summary();
+  }
+  Telemetry t;
+  t.state = state_;
+  t.holding = holding_;
+  t.n = n_;
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    t.q_cmd[ju] = cmd_.pos[j];
+    const auto& fb = bus_.feedback(ju);
+    t.q_act[ju] = fb.position;
+    t.joint_state[ju] = static_cast<std::uint8_t>(fb.state);
+  }
+  t.queued = static_cast<std::uint32_t>(motions_.size());
+  t.running_id = running_ != nullptr ? running_->id : 0;
+  t.done_id = done_id_;
+  t.cause = cause_;
+  t.fault_joint = static_cast<std::int8_t>(fault_joint_);
+  std::memcpy(t.fault_text, fault_text_, sizeof t.fault_text);
+  t.cycles = cycles_;
+  t.overruns = overruns_;
+  t.generation = generation_;
+  t.latency = latency_sum_;
+  t.compute = compute_sum_;
+  t.max_following_error = max_follow_;
+  t.estop_latency_ns = estop_latency_;
+  telemetry_.write(t);
+}
+
+void Controller::cycle(TimePoint now) {
+  now_ = now;
+  ++cycles_;
+  // 1 feedback
+  bus_.read(now);
+  for (int j = 0; j < n_; ++j) q_act_[j] = bus_.feedback(static_cast<std::size_t>(j)).position;
+  // console requests (bounded per cycle)
+  Request r;
+  for (int i = 0; i < 4 && requests_.pop(r); ++i) handle_request(r, now);
+  // 2 supervisor
+  supervise(now);
+  // 3 motion
+  step_motion();
+  // 4 + 5 validate, write setpoints + SYNC
+  validate_and_write(now);
+  // 6 telemetry (statistics are added by the loop through record_timing), then the replies
+  publish();
+  flush_replies();
+}
+
+}  // namespace servoarm::fw

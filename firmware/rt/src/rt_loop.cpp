@@ -1,0 +1,111 @@
+#include "servoarm/rt/rt_loop.hpp"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+#include <time.h>
+
+#include <cerrno>
+#include <cstring>
+
+namespace servoarm::fw {
+
+namespace {
+std::int64_t now_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+void sleep_until_ns(std::int64_t t) {
+  timespec ts{};
+  ts.tv_sec = t / 1000000000LL;
+  ts.tv_nsec = t % 1000000000LL;
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+// Touch the stack the loop will use so no page fault happens in a cycle.
+__attribute__((noinline)) void prefault_stack() {
+  constexpr std::size_t kBytes = 256 * 1024;
+  unsigned char buf[kBytes];
+  for (std::size_t i = 0; i < kBytes; i += 4096) static_cast<volatile unsigned char*>(buf)[i] = 0;
+  asm volatile("" : : "r"(buf) : "memory");  // keep the writes
+}
+}  // namespace
+
+std::string validate(const LoopConfig& c) {
+  if (!(c.rate_hz >= 250.0 && c.rate_hz <= 4000.0)) return "rate_hz must be within 250..4000";
+  if (c.priority < 0 || c.priority > 99) return "priority must be within 0..99 (0 = normal scheduling)";
+  if (c.cpu < -1 || c.cpu > 1023) return "cpu must be -1 (none) or a CPU index";
+  return "";
+}
+
+bool RtLoop::start() {
+  if (running_) return true;
+  warnings_.clear();
+  if (cfg_.lock_memory && mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
+    warnings_ += std::string("warning: mlockall failed (") + std::strerror(errno) + "): memory may be paged\n";
+  stop_ = false;
+  ready_ = false;
+  try {
+    th_ = std::thread([this] { thread_main(); });
+  } catch (...) {
+    return false;
+  }
+  while (!ready_.load()) std::this_thread::yield();
+  return true;
+}
+
+void RtLoop::stop() {
+  stop_ = true;
+  if (th_.joinable()) th_.join();
+}
+
+void RtLoop::thread_main() {
+  pthread_setname_np(pthread_self(), "armfw-rt");
+  if (cfg_.cpu >= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(static_cast<unsigned>(cfg_.cpu), &set);
+    const int e = pthread_setaffinity_np(pthread_self(), sizeof set, &set);
+    if (e != 0) warnings_ += "warning: CPU affinity " + std::to_string(cfg_.cpu) + " not set (" + std::strerror(e) + ")\n";
+  }
+  if (cfg_.priority > 0) {
+    sched_param sp{};
+    sp.sched_priority = cfg_.priority;
+    const int e = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+    if (e == 0) {
+      realtime_ = true;
+    } else {
+      warnings_ += "warning: SCHED_FIFO priority " + std::to_string(cfg_.priority) + " not permitted (" + std::strerror(e) +
+                   "); running with normal scheduling (grant CAP_SYS_NICE or an rtprio limit for real-time)\n";
+    }
+  }
+  prefault_stack();
+  if (on_thread_start) on_thread_start();
+  running_ = true;
+  ready_ = true;
+
+  const std::int64_t period = static_cast<std::int64_t>(1e9 / cfg_.rate_hz + 0.5);
+  std::int64_t next = now_ns() + period;
+  while (!stop_.load(std::memory_order_relaxed)) {
+    sleep_until_ns(next);
+    const std::int64_t woke = now_ns();
+    if (pre_cycle_ != nullptr) pre_cycle_(pre_cycle_ctx_, woke);
+    ctl_.cycle(woke);
+    const std::int64_t end = now_ns();
+    next += period;
+    std::uint32_t missed = 0;  // deadlines that passed during this cycle: skipped, each counted
+    while (end > next) {
+      next += period;
+      ++missed;
+    }
+    ctl_.record_timing(woke - (next - static_cast<std::int64_t>(missed + 1) * period), end - woke, missed);
+    cycles_.fetch_add(1, std::memory_order_relaxed);
+  }
+  running_ = false;
+  if (on_thread_exit) on_thread_exit();
+}
+
+}  // namespace servoarm::fw

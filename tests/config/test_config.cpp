@@ -1,0 +1,630 @@
+// armfw configuration: defaults valid, every key accepted, bad files refused naming the key,
+// the value and the range; to_toml round trips (awkward strings too); the shipped
+// armfw.toml and docs/configuration.md agree with the key tables.
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <fstream>
+#include <random>
+#include <regex>
+#include <set>
+#include <sstream>
+#include <string>
+#include <toml.hpp>
+
+#include "servoarm/config/config.hpp"
+#include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/description.hpp"
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm::fw;
+
+namespace {
+
+bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+std::string read_file(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+/// The repository's root, from the shipped config's path (".../toolchain/packaging/armfw.toml").
+std::string source_root() {
+  const std::string p = SERVOARM_SHIPPED_CONFIG;
+  const std::string tail = "toolchain/packaging/armfw.toml";
+  CHECK(p.size() > tail.size() && p.compare(p.size() - tail.size(), tail.size(), tail) == 0);
+  return p.substr(0, p.size() - tail.size());
+}
+
+std::string write_temp(const std::string& text) {
+  char path[] = "/tmp/fw_config_XXXXXX";
+  const int fd = mkstemp(path);
+  CHECK(fd >= 0);
+  CHECK(write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size()));
+  close(fd);
+  return path;
+}
+
+/// A refused text: the error names the origin and every `parts`, and leaves the config as it was.
+void expect_refused(const std::string& text, std::initializer_list<const char*> parts) {
+  FwConfig c;
+  c.rate_hz = 777;
+  const std::string e = load_config_text(text, "bad.toml", c);
+  bool ok = e.rfind("bad.toml:", 0) == 0;
+  for (const char* p : parts) ok = ok && has(e, p);
+  if (!ok) FAIL(("'" + text + "' gave '" + e + "'").c_str());
+  DOUBLES_EQUAL(777, c.rate_hz, 0);  // untouched
+}
+
+void expect_accepted(const std::string& text) {
+  FwConfig c;
+  const std::string e = load_config_text(text, "good.toml", c);
+  if (!e.empty()) FAIL(("'" + text + "' refused: '" + e + "'").c_str());
+}
+
+}  // namespace
+
+TEST_GROUP(Config){};
+
+TEST(Config, DefaultsAreValidAndRoundTrip) {
+  FwConfig c;
+  STRCMP_EQUAL("", validate(c).c_str());
+  FwConfig d;
+  d.rate_hz = 500;
+  STRCMP_EQUAL("", load_config_text(to_toml(c), "rt", d).c_str());
+  DOUBLES_EQUAL(1000.0, d.rate_hz, 0);
+  CHECK(c == d);
+  DOUBLES_EQUAL(600.0, c.max_move_duration_s, 0);  // the new key's default
+}
+
+TEST(Config, FullFileAccepted) {
+  FwConfig c;
+  const std::string text =
+      "robot = \"stanford\"\n[loop]\nrate_hz = 2000\npriority = 0\ncpu = 1\nlock_memory = false\n"
+      "[bus]\ncan = \"vcan0\"\nfirst_node = 10\ncounts_per_rev = 4096\ngear_ratio = 50\nheartbeat_period_ms = 20\n"
+      "heartbeat_timeout_ms = 60\nstart_timeout_s = 3\n[safety]\nfollowing_error_deg = 2.5\nenable_timeout_s = 1\n"
+      "stop = \"drive\"\ndrive_stop_timeout_s = 1.5\n"
+      "[motion]\nhome_deg = [0, 10, 0, 0, 0, 0]\njoint_speed_pct = 30\nlinear_speed_mm_s = 50\nmax_linear_speed_mm_s = 200\n"
+      "max_move_duration_s = 120\n"
+      "[console]\nstdin = false\npty = true\nserial = \"/dev/ttyS0\"\nbaud = 57600\n";
+  STRCMP_EQUAL("", load_config_text(text, "f.toml", c).c_str());
+  STRCMP_EQUAL("stanford", c.robot.c_str());
+  DOUBLES_EQUAL(2000, c.rate_hz, 0);
+  LONGS_EQUAL(10, c.first_node);
+  LONGS_EQUAL(6, c.home_deg.size());
+  CHECK(c.console_pty);
+  LONGS_EQUAL(57600, c.console_baud);
+  STRCMP_EQUAL("drive", c.stop.c_str());
+  DOUBLES_EQUAL(1.5, c.drive_stop_timeout_s, 0);
+  DOUBLES_EQUAL(120, c.max_move_duration_s, 0);
+}
+
+// The file the package installs as /etc/servoarm/armfw.toml loads and validates
+// (a typo there would keep the service from starting on the controller).
+TEST(Config, ShippedConfigLoads) {
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_file(SERVOARM_SHIPPED_CONFIG, c).c_str());
+  STRCMP_EQUAL("", validate(c).c_str());
+  STRCMP_EQUAL("sim", c.can.c_str());  // as shipped: virtual drives until bus.can is set
+  STRCMP_EQUAL("ramp", c.stop.c_str());
+}
+
+// The shipped file against the key table: every key it sets or shows commented out is a
+// key of the table (of its section, or of [[drive]]); every value it sets is the table's
+// default except the choices made for a service (console on a pty, not stdin); every
+// "lo..hi" range its comments give is the table's range.
+TEST(Config, ShippedConfigAgreesWithTheKeyTable) {
+  const std::string text = read_file(SERVOARM_SHIPPED_CONFIG);
+  CHECK(text.size() > 500);
+  const std::set<std::string> service_choices = {"console.stdin", "console.pty"};
+  auto find_key = [](const std::string& full) -> const ConfigKey* {
+    for (const ConfigKey& k : config_keys())
+      if (full == k.name) return &k;
+    return nullptr;
+  };
+  auto is_drive_key = [](const std::string& leaf) {
+    for (const DriveKey& k : drive_keys())
+      if (leaf == k.name) return true;
+    return false;
+  };
+  const std::regex section(R"(^\[([a-z_]+)\]\s*(#.*)?$)");
+  const std::regex assign(R"(^([a-z_]+)\s*=\s*([^#]*?)\s*(#(.*))?$)");
+  const std::regex commented(R"(^#\s*([a-z_]+)\s*=)");
+  const std::regex range(R"((-?[0-9.]+)\.\.(-?[0-9.]+))");
+  std::istringstream is(text);
+  std::string line, sec;
+  int assignments = 0, ranges = 0, commented_keys = 0;
+  FwConfig loaded;
+  STRCMP_EQUAL("", load_config_file(SERVOARM_SHIPPED_CONFIG, loaded).c_str());
+  const FwConfig defaults;
+  while (std::getline(is, line)) {
+    std::smatch m;
+    if (std::regex_match(line, m, section)) {
+      sec = m[1];
+      continue;
+    }
+    if (std::regex_search(line, m, commented)) {
+      const std::string leaf = m[1];
+      const std::string full = sec.empty() ? leaf : sec + "." + leaf;
+      if (!find_key(full) && !is_drive_key(leaf)) FAIL(("shipped file shows an unknown key: " + line).c_str());
+      ++commented_keys;
+      continue;
+    }
+    if (!std::regex_match(line, m, assign)) continue;
+    const std::string full = sec.empty() ? std::string(m[1]) : sec + "." + std::string(m[1]);
+    const ConfigKey* k = find_key(full);
+    if (!k) FAIL(("shipped file sets a key not in the table: " + full).c_str());
+    ++assignments;
+    const bool is_default = value_text(*k, loaded) == value_text(*k, defaults);
+    if (!is_default && !service_choices.count(full))
+      FAIL((full + " = " + value_text(*k, loaded) + " in the shipped file, but the table's default is " +
+            default_text(*k) + " (change one of them, or list it as a service choice here)")
+               .c_str());
+    const std::string comment = m[4];
+    std::smatch r;
+    if (std::regex_search(comment, r, range)) {
+      ++ranges;
+      const double lo = std::stod(r[1]), hi = std::stod(r[2]);
+      if (lo != k->lo || hi != k->hi)
+        FAIL((full + ": the shipped comment says " + std::string(r[0]) + ", the table " + range_text(*k)).c_str());
+    }
+  }
+  CHECK(assignments >= 15);
+  CHECK(ranges >= 2);
+  CHECK(commented_keys >= 1);
+  CHECK(!loaded.console_stdin && loaded.console_pty);  // the service choices themselves
+}
+
+TEST(Config, BadFilesNameTheKeyAndLeaveConfigUntouched) {
+  struct Case {
+    const char* text;
+    const char* must_contain;
+  };
+  const Case cases[] = {
+      {"[loop]\nrate_hz = 100\n", "loop.rate_hz"},
+      {"[loop]\nrate_hz = \"fast\"\n", "loop.rate_hz"},
+      {"[loop]\nspeed = 1\n", "loop.speed"},
+      {"[nosuch]\nx = 1\n", "nosuch"},
+      {"[bus]\nfirst_node = 0\n", "bus.first_node"},
+      {"[bus]\nheartbeat_timeout_ms = 10\n", "bus.heartbeat_timeout_ms"},
+      {"[safety]\nfollowing_error_deg = -1\n", "safety.following_error_deg"},
+      {"[safety]\nstop = \"coast\"\n", "safety.stop"},
+      {"[safety]\nstop = 1\n", "safety.stop"},
+      {"[safety]\ndrive_stop_timeout_s = 0\n", "safety.drive_stop_timeout_s"},
+      {"[motion]\nhome_deg = [0, \"x\"]\n", "motion.home_deg[1]"},
+      {"[motion]\nlinear_speed_mm_s = 900\n", "motion.linear_speed_mm_s"},
+      {"[console]\nbaud = 12345\n", "console.baud"},
+      {"[console]\npty = 1\n", "console.pty"},
+      {"robot = 5\n", "robot"},
+      {"[loop\nrate_hz = 1000\n", "syntax"},
+      {"[loop]\nrate_hz = nan\n", "loop.rate_hz"},
+      {"drive = 5\n", "drive"},
+      {"[[drive]]\nnode = 1\n[[drive]]\ndirection = 0\n", "drive[2].direction"},
+      {"[[drive]]\nnosuch = 1\n", "drive[1].nosuch"},
+      {"[[drive]]\nlimits = [1]\n", "drive[1].limits"},
+      {"[[drive]]\nlimits = [10, -10]\n", "drive[1].limits"},
+      {"[[drive]]\nzero_offset = 1.5\n", "drive[1].zero_offset"},
+      {"[[drive]]\nzero_offset = 9000000000\n", "drive[1].zero_offset"},
+      {"[[drive]]\nnode = 200\n", "drive[1].node"},
+      {"[[drive]]\nheartbeat_timeout_ms = 5\n", "drive[1].heartbeat_timeout_ms"},
+      {"[[drive]]\nquick_stop_decel = -1\n", "drive[1].quick_stop_decel"},
+      {"[[drive]]\nquick_stop_decel = \"fast\"\n", "drive[1].quick_stop_decel"},
+      // a key-shaped typo is refused, not ignored
+      {"[motion]\nlinear_speed_mm = 5\n", "motion.linear_speed_mm: unknown key"},
+      {"linear_speed_mm_s = 5\n", "linear_speed_mm_s: unknown key"},
+      {"\"motion.linear_speed_mm_s\" = 5\n", "motion.linear_speed_mm_s: unknown key"},
+      {"[[drive]]\ngear = 5\n", "drive[1].gear: unknown key"},
+      {"motion = 5\n", "motion: expected a [motion] table"},
+      {"[motion.extra]\nx = 1\n", "motion.extra: unknown key"},
+  };
+  for (const Case& k : cases) expect_refused(k.text, {k.must_contain});
+}
+
+// Each range edge: the value just inside loads, the value just outside is refused naming the
+// key, the value and the allowed range (issue 13 item 6, issue 15 configuration checks).
+TEST(Config, RangeEdgesNameKeyValueAndRange) {
+  // speeds: a move at 1e-300 mm/s never ends
+  expect_accepted("[motion]\nlinear_speed_mm_s = 0.01\n");
+  expect_refused("[motion]\nlinear_speed_mm_s = 1e-300\n", {"motion.linear_speed_mm_s", "1e-300", "[0.01, 5000]", "mm/s"});
+  expect_refused("[motion]\nlinear_speed_mm_s = 0.0099\n", {"motion.linear_speed_mm_s", "0.0099"});
+  expect_refused("[motion]\nlinear_speed_mm_s = 0\n", {"motion.linear_speed_mm_s"});
+  expect_accepted("[motion]\nmax_linear_speed_mm_s = 0.01\nlinear_speed_mm_s = 0.01\n");
+  expect_refused("[motion]\nmax_linear_speed_mm_s = 1e-300\n", {"motion.max_linear_speed_mm_s", "1e-300", "[0.01, 5000]"});
+  expect_refused("[motion]\nmax_linear_speed_mm_s = 5000.5\n", {"motion.max_linear_speed_mm_s", "5000.5"});
+  expect_refused("[motion]\nmax_linear_speed_mm_s = 50\n", {"motion.linear_speed_mm_s", "at most motion.max_linear_speed_mm_s (50)"});
+  expect_accepted("[motion]\njoint_speed_pct = 1\n");
+  expect_accepted("[motion]\njoint_speed_pct = 100\n");
+  expect_refused("[motion]\njoint_speed_pct = 0.5\n", {"motion.joint_speed_pct", "0.5", "[1, 100]"});
+  expect_refused("[motion]\njoint_speed_pct = 100.01\n", {"motion.joint_speed_pct", "100.01"});
+  expect_accepted("[motion]\nmax_move_duration_s = 1\n");
+  expect_accepted("[motion]\nmax_move_duration_s = 86400\n");
+  expect_refused("[motion]\nmax_move_duration_s = 0.5\n", {"motion.max_move_duration_s", "0.5", "[1, 86400]", " s "});
+  expect_refused("[motion]\nmax_move_duration_s = 86401\n", {"motion.max_move_duration_s", "86401"});
+  // scaling: plausible and positive (direction carries the sign)
+  expect_accepted("[bus]\ncounts_per_rev = 1\n");
+  expect_accepted("[bus]\ncounts_per_rev = 2147483647\n");
+  expect_refused("[bus]\ncounts_per_rev = 2147483648\n", {"bus.counts_per_rev", "2147483648", "[1, 2147483648)"});
+  expect_refused("[bus]\ncounts_per_rev = 1e300\n", {"bus.counts_per_rev", "1e+300"});
+  expect_refused("[bus]\ncounts_per_rev = 0.5\n", {"bus.counts_per_rev", "0.5"});
+  expect_refused("[bus]\ncounts_per_rev = 0\n", {"bus.counts_per_rev"});
+  expect_accepted("[bus]\ngear_ratio = 0.001\n");
+  expect_accepted("[bus]\ngear_ratio = 100000\n");
+  expect_refused("[bus]\ngear_ratio = 0\n", {"bus.gear_ratio", "(got 0)", "[0.001, 100000]"});
+  expect_refused("[bus]\ngear_ratio = 1e-300\n", {"bus.gear_ratio", "1e-300"});
+  expect_refused("[bus]\ngear_ratio = -50\n", {"bus.gear_ratio", "-50"});
+  expect_refused("[bus]\ngear_ratio = 100001\n", {"bus.gear_ratio", "100001"});
+  // per drive: the same ranges; 0 (= inherit the [bus] value) may not be written
+  expect_accepted("[[drive]]\ngear_ratio = 0.001\ncounts_per_rev = 1\n");
+  expect_refused("[[drive]]\ngear_ratio = 0\n", {"drive[1].gear_ratio", "not allowed", "bus.gear_ratio"});
+  expect_refused("[[drive]]\ngear_ratio = -2\n", {"drive[1].gear_ratio", "-2"});
+  expect_refused("[[drive]]\ngear_ratio = 1e-300\n", {"drive[1].gear_ratio", "1e-300"});
+  expect_refused("[[drive]]\ncounts_per_rev = 0\n", {"drive[1].counts_per_rev", "not allowed"});
+  expect_refused("[[drive]]\ncounts_per_rev = 1e300\n", {"drive[1].counts_per_rev", "1e+300"});
+  expect_refused("[[drive]]\nnode = 0\n", {"drive[1].node", "not allowed"});
+  expect_refused("[[drive]]\nnode = 128\n", {"drive[1].node", "1..127", "128"});
+  // 0 = "the drive's own / the description's / the bus's" may be written where documented
+  expect_accepted("[[drive]]\nmax_velocity = 0\nheartbeat_timeout_ms = 0\nquick_stop_decel = 0\n");
+  expect_refused("[[drive]]\nmax_velocity = -1\n", {"drive[1].max_velocity", "-1"});
+  expect_refused("[[drive]]\nzero_offset = 2147483648\n", {"drive[1].zero_offset", "2147483648"});
+  expect_accepted("[[drive]]\nzero_offset = -2147483648\n");
+  // integers: out of the key's range, and out of int before narrowing
+  expect_refused("[loop]\npriority = 100\n", {"loop.priority", "0..99", "100"});
+  expect_refused("[loop]\npriority = 4294967377\n", {"loop.priority", "4294967377"});  // 2^32 + 81: 81 after narrowing
+  expect_refused("[bus]\nfirst_node = -4294967295\n", {"bus.first_node"});
+  expect_refused("[[drive]]\nnode = 4294967297\n", {"drive[1].node"});  // 2^32 + 1
+  expect_refused("[loop]\ncpu = -2\n", {"loop.cpu", "-1..1023"});
+  expect_refused("[loop]\npriority = 80.0\n", {"loop.priority", "expected an integer"});
+  expect_refused("robot = \"\"\n", {"robot", "not empty"});
+}
+
+// Every numeric key, top level and per drive, refuses NaN and both infinities.
+TEST(Config, EveryNumericKeyRefusesNonFinite) {
+  int checked = 0;
+  for (const char* bad : {"nan", "inf", "-inf", "+nan"}) {
+    for (const ConfigKey& k : config_keys()) {
+      const std::string name = k.name;
+      const auto dot = name.find('.');
+      const std::string sec = name.substr(0, dot), leaf = name.substr(dot + 1);
+      std::string value = bad;
+      if (std::holds_alternative<std::vector<double> FwConfig::*>(k.member)) value = std::string("[") + bad + "]";
+      else if (!std::holds_alternative<double FwConfig::*>(k.member)) continue;
+      expect_refused("[" + sec + "]\n" + leaf + " = " + value + "\n", {k.name});
+      ++checked;
+    }
+    for (const DriveKey& k : drive_keys()) {
+      std::string value = bad;
+      if (std::holds_alternative<std::vector<double> DriveConfig::*>(k.member)) value = std::string("[0, ") + bad + "]";
+      else if (!std::holds_alternative<double DriveConfig::*>(k.member)) continue;
+      expect_refused(std::string("[[drive]]\n") + k.name + " = " + value + "\n", {(std::string("drive[1].") + k.name).c_str()});
+      ++checked;
+    }
+  }
+  CHECK(checked >= 4 * 20);
+}
+
+// validate() on a config built in code (App::build's path), not only through a file.
+TEST(Config, ValidateNamesTheKeyOfAStructValue) {
+  struct Case {
+    void (*set)(FwConfig&);
+    const char* want;
+  };
+  const Case cases[] = {
+      {[](FwConfig& c) { c.linear_speed_mm_s = 1e-300; }, "motion.linear_speed_mm_s: must be within [0.01, 5000] mm/s (got 1e-300)"},
+      {[](FwConfig& c) { c.max_move_duration_s = 1e9; }, "motion.max_move_duration_s"},
+      {[](FwConfig& c) { c.gear_ratio = 0; }, "bus.gear_ratio"},
+      {[](FwConfig& c) { c.gear_ratio = std::nan(""); }, "bus.gear_ratio: must be a finite number"},
+      {[](FwConfig& c) { c.counts_per_rev = INFINITY; }, "bus.counts_per_rev: must be a finite number"},
+      {[](FwConfig& c) { c.home_deg = {0, 1, NAN}; }, "motion.home_deg[2]: must be a finite number"},
+      {[](FwConfig& c) { c.drives.resize(2); c.drives[1].gear_ratio = -3; }, "drive[2].gear_ratio: must be within"},
+      {[](FwConfig& c) { c.drives.resize(1); c.drives[0].limits = {1, 2, 3}; }, "drive[1].limits: must hold 2 values"},
+      {[](FwConfig& c) { c.console_can_rx_id = 0x581; }, "console.can_rx_id: collides with the CANopen SDOs"},
+      {[](FwConfig& c) { c.stop = "coast"; }, "safety.stop: must be \"ramp\" or \"drive\" (got \"coast\")"},
+  };
+  for (const Case& k : cases) {
+    FwConfig c;
+    k.set(c);
+    const std::string e = validate(c);
+    CHECK_TEXT(has(e, k.want), (std::string(k.want) + " <- " + e).c_str());
+  }
+  FwConfig c;
+  c.drives.resize(6);  // every drive field unset: inherits, valid
+  STRCMP_EQUAL("", validate(c).c_str());
+}
+
+TEST(Config, EveryDocumentedKeyIsAccepted) {
+  // Each documented key written with its documented default loads.
+  CHECK(config_keys().size() >= 29);
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(to_toml(c), "defaults", c).c_str());
+  DriveConfig d;  // every optional [[drive]] field set, so to_toml writes them all
+  d.node = 7;
+  d.counts_per_rev = 4096;
+  d.gear_ratio = 100;
+  d.direction = -1;
+  d.zero_offset = -12345;
+  d.limits = {-90, 45};
+  d.max_velocity = 30;
+  d.heartbeat_timeout_ms = 200;
+  d.quick_stop_decel = 720.5;
+  c.drives = {d, d};
+  c.drives[1].node = 8;
+  const std::string toml = to_toml(c);
+  FwConfig back;
+  STRCMP_EQUAL("", load_config_text(toml, "round-trip", back).c_str());
+  LONGS_EQUAL(2, back.drives.size());
+  LONGS_EQUAL(8, back.drives[1].node);
+  LONGS_EQUAL(-1, back.drives[0].direction);
+  LONGS_EQUAL(-12345, back.drives[0].zero_offset);
+  DOUBLES_EQUAL(45, back.drives[0].limits[1], 0);
+  DOUBLES_EQUAL(200, back.drives[1].heartbeat_timeout_ms, 0);
+  DOUBLES_EQUAL(720.5, back.drives[1].quick_stop_decel, 0);
+  CHECK(back == c);
+  for (const ConfigKey& k : config_keys()) {
+    const std::string name = k.name;
+    const auto dot = name.find('.');
+    const std::string leaf = dot == std::string::npos ? name : name.substr(dot + 1);
+    if (!has(toml, "\n" + leaf + " = ") && toml.rfind(leaf + " = ", 0) != 0) FAIL(("key not in to_toml: " + name).c_str());
+  }
+  for (const DriveKey& k : drive_keys())
+    if (!has(toml, std::string("\n") + k.name + " = ")) FAIL((std::string("drive key not in to_toml: ") + k.name).c_str());
+  // an unset drive field is left out (writing `gear_ratio = 0` would not load back)
+  FwConfig u;
+  u.drives.resize(1);
+  const std::string ut = to_toml(u);
+  CHECK_TEXT(!has(ut, "\ngear_ratio = 0") && !has(ut, "\nnode = 0"), ut.c_str());
+  FwConfig ub;
+  STRCMP_EQUAL("", load_config_text(ut, "unset", ub).c_str());
+  CHECK(ub == u);
+}
+
+// What `config` prints is valid TOML that reads back to the same configuration, whatever
+// the strings hold: quotes, backslashes, newlines, tabs, control characters, UTF-8.
+TEST(Config, ToTomlEscapesAwkwardStrings) {
+  FwConfig c;
+  c.robot = "/opt/arms/\"left\" arm\\v2\n\ttab\x01\x7f \xC3\xA9t\xC3\xA9 \xE2\x82\xAC.toml";
+  c.can = "a\"b\\c";
+  c.console_serial = "/dev/tty\"S0\"\r\n";
+  c.console_can = "c'a\\n";
+  const std::string t = to_toml(c);
+  // an independent reader of the text (toml11 directly, not our loader)
+  std::istringstream is(t);
+  const toml::value v = toml::parse(is, "to_toml");
+  STRCMP_EQUAL(c.robot.c_str(), toml::find<std::string>(v, "robot").c_str());
+  STRCMP_EQUAL(c.can.c_str(), toml::find<std::string>(v, "bus", "can").c_str());
+  STRCMP_EQUAL(c.console_serial.c_str(), toml::find<std::string>(v, "console", "serial").c_str());
+  STRCMP_EQUAL(c.console_can.c_str(), toml::find<std::string>(v, "console", "can").c_str());
+  FwConfig back;
+  STRCMP_EQUAL("", load_config_text(t, "awkward", back).c_str());
+  CHECK(back == c);
+  // bytes that are not UTF-8 cannot be TOML: written as U+FFFD, still valid TOML
+  FwConfig b;
+  b.robot = std::string("x\x80y\xC3", 4);
+  FwConfig bb;
+  STRCMP_EQUAL("", load_config_text(to_toml(b), "invalid-utf8", bb).c_str());
+  STRCMP_EQUAL("x\xEF\xBF\xBDy\xEF\xBF\xBD", bb.robot.c_str());
+}
+
+// Seeded random configurations inside the ranges (chosen here, not read from the table)
+// round trip exactly through to_toml and the loader.
+TEST(Config, RandomConfigsRoundTrip) {
+  std::mt19937_64 rng(20261201);
+  auto u = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  auto i = [&](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
+  for (int n = 0; n < 300; ++n) {
+    FwConfig c;
+    c.robot = "model_" + std::to_string(i(0, 1 << 30));
+    c.rate_hz = u(250, 4000);
+    c.priority = i(0, 99);
+    c.cpu = i(-1, 1023);
+    c.lock_memory = i(0, 1) == 1;
+    c.can = i(0, 1) ? "sim" : "vcan" + std::to_string(i(0, 9));
+    c.first_node = i(1, 127);
+    c.counts_per_rev = u(1, 2147483647);
+    c.gear_ratio = std::exp(u(std::log(1e-3), std::log(1e5)));
+    c.heartbeat_period_ms = u(1, 1000);
+    c.heartbeat_timeout_ms = c.heartbeat_period_ms * u(1.01, 10);
+    c.start_timeout_s = u(0.001, 120);
+    c.following_error_deg = u(0.001, 180);
+    c.enable_timeout_s = u(0.001, 60);
+    c.feedback_timeout_ms = u(1, 10000);
+    c.stop = i(0, 1) ? "ramp" : "drive";
+    c.drive_stop_timeout_s = u(0.05, 60);
+    c.home_deg.clear();
+    for (int j = i(0, 8); j > 0; --j) c.home_deg.push_back(u(-360, 360));
+    c.max_linear_speed_mm_s = u(0.01, 5000);
+    c.linear_speed_mm_s = u(0.01, c.max_linear_speed_mm_s);
+    c.joint_speed_pct = u(1, 100);
+    c.max_move_duration_s = u(1, 86400);
+    c.console_stdin = i(0, 1) == 1;
+    c.console_pty = i(0, 1) == 1;
+    c.console_baud = 115200;
+    for (int j = i(0, 6); j > 0; --j) {
+      DriveConfig d;
+      if (i(0, 1)) d.node = i(1, 127);
+      if (i(0, 1)) d.counts_per_rev = u(1, 1e9);
+      if (i(0, 1)) d.gear_ratio = u(1e-3, 1e5);
+      d.direction = i(0, 1) ? 1 : -1;
+      d.zero_offset = i(-2000000000, 2000000000);
+      if (i(0, 1)) d.limits = {u(-300, -1), u(1, 300)};
+      if (i(0, 1)) d.max_velocity = u(0.1, 1000);
+      if (i(0, 1)) d.heartbeat_timeout_ms = c.heartbeat_period_ms * u(1.01, 5);
+      if (i(0, 1)) d.quick_stop_decel = u(1, 1e6);
+      c.drives.push_back(d);
+    }
+    STRCMP_EQUAL("", validate(c).c_str());
+    FwConfig back;
+    const std::string e = load_config_text(to_toml(c), "random", back);
+    if (!e.empty() || !(back == c)) FAIL(("case " + std::to_string(n) + ": " + e + "\n" + to_toml(c)).c_str());
+  }
+}
+
+// --config-keys lists every key with its default, range, unit and doc.
+TEST(Config, ConfigKeysTextListsDefaultRangeUnitDoc) {
+  const std::string t = config_keys_text();
+  for (const ConfigKey& k : config_keys()) CHECK_TEXT(has(t, std::string(k.name) + " "), k.name);
+  for (const DriveKey& k : drive_keys()) CHECK_TEXT(has(t, std::string("drive.") + k.name + " "), k.name);
+  // written out here, independently of the table
+  const std::regex dur(R"(motion\.max_move_duration_s +default 600 +range \[1, 86400\]  unit s\n +longest move the console accepts)");
+  CHECK_TEXT(std::regex_search(t, dur), t.c_str());
+  const std::regex gear(R"(drive\.gear_ratio +default bus\.gear_ratio +range \[0\.001, 100000\])");
+  CHECK_TEXT(std::regex_search(t, gear), t.c_str());
+  const std::regex rx(R"(console\.can_rx_id +default 0x7E0 )");
+  CHECK_TEXT(std::regex_search(t, rx), t.c_str());
+  const std::regex speed(R"(motion\.linear_speed_mm_s +default 100 +range \[0\.01, 5000\], at most motion\.max_linear_speed_mm_s  unit mm/s)");
+  CHECK_TEXT(std::regex_search(t, speed), t.c_str());
+}
+
+// docs/configuration.md holds exactly what the key tables produce between its markers: a key
+// added (or a range changed) without regenerating the page fails here, with the diff.
+TEST(Config, ReferencePageIsGeneratedFromTheTable) {
+  const std::string page = read_file(source_root() + "docs/configuration.md");
+  CHECK(page.size() > 1000);
+  const std::string why = config_reference_mismatch(page);
+  if (!why.empty()) FAIL(why.c_str());
+  // every key is on the page
+  for (const ConfigKey& k : config_keys()) CHECK_TEXT(has(page, std::string("| `") + k.name + "` |"), k.name);
+  for (const DriveKey& k : drive_keys()) CHECK_TEXT(has(page, std::string("| `drive.") + k.name + "` |"), k.name);
+  // the check itself: a row the table does not have, a row missing, a changed range, no markers
+  const std::string row = "| `motion.max_move_duration_s` |";
+  const auto at = page.find(row);
+  CHECK(at != std::string::npos);
+  const auto eol = page.find('\n', at);
+  std::string extra = page;
+  extra.insert(eol + 1, "| `motion.new_key_s` | `1` | [0, 1] | s | a key added by hand |\n");
+  const std::string e1 = config_reference_mismatch(extra);
+  CHECK_TEXT(has(e1, "- line ") && has(e1, "motion.new_key_s") && has(e1, "regenerate"), e1.c_str());
+  std::string missing = page;
+  missing.erase(at, eol + 1 - at);  // as if the key had been added to the table only
+  const std::string e2 = config_reference_mismatch(missing);
+  CHECK_TEXT(has(e2, "+ " + row), e2.c_str());
+  std::string changed = page;
+  const auto r = changed.find("[1, 86400]", at);
+  CHECK(r != std::string::npos && r < eol);
+  changed.replace(r, 10, "[1, 86401]");
+  CHECK(!config_reference_mismatch(changed).empty());
+  CHECK(has(config_reference_mismatch("# no markers\n"), "markers"));
+}
+
+// Checks that need the robot (App::build has the chain): home pose within the joint limits,
+// drive limits within the description's, scaling that fits the drives' 32-bit counts.
+TEST(Config, ChecksAgainstTheRobot) {
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  const servoarm::kin::Chain& ch = lr.chain;  // joint 2: [-225, 45] deg, joint 5: [-100, 100]
+  FwConfig c;
+  STRCMP_EQUAL("", validate_for_chain(c, ch).c_str());
+  c.home_deg = {0, -45, 180, 0, 45, 0};
+  STRCMP_EQUAL("", validate_for_chain(c, ch).c_str());
+  c.home_deg = {0, -45, 180, 0, 100, 0};  // at the limit: fine
+  STRCMP_EQUAL("", validate_for_chain(c, ch).c_str());
+  struct Case {
+    void (*set)(FwConfig&);
+    const char* want;
+  };
+  const Case cases[] = {
+      {[](FwConfig& c) { c.home_deg = {0, 60, 0, 0, 0, 0}; }, "motion.home_deg[1]: 60 deg is outside joint 2's limits [-225, 45]"},
+      {[](FwConfig& c) { c.home_deg = {0, 0, 0, 0, -100.5, 0}; }, "motion.home_deg[4]"},
+      {[](FwConfig& c) { c.home_deg = {0, 0, 0}; }, "motion.home_deg: needs 6 values"},
+      {[](FwConfig& c) { c.drives.resize(5); }, "drive: 5 [[drive]] tables"},
+      {[](FwConfig& c) {  // narrowed by the drive's limits
+         c.drives.resize(6);
+         c.drives[1].limits = {-90, 0};
+         c.home_deg = {0, 10, 0, 0, 0, 0};
+       },
+       "motion.home_deg[1]: 10 deg is outside joint 2's limits [-90, 0]"},
+      {[](FwConfig& c) {
+         c.drives.resize(6);
+         c.drives[0].limits = {-170, 0};
+       },
+       "drive[1].limits: [-170, 0] reaches outside"},
+      {[](FwConfig& c) {  // 2^31-1 counts/rev x 100 000: 266 deg is far beyond int32
+         c.counts_per_rev = 2147483647;
+         c.gear_ratio = 1e5;
+       },
+       "bus.counts_per_rev: joint 1's range [-160, 160] deg does not fit the drive's 32-bit position"},
+      {[](FwConfig& c) {  // per drive, with its own zero offset
+         c.drives.resize(6);
+         c.drives[5].counts_per_rev = 1 << 24;  // 932 068 counts/deg: +-266 deg is +-2.48e8 counts, fits...
+         c.drives[5].gear_ratio = 20;
+         c.drives[5].zero_offset = 2000000000;   // ...but not from 2e9
+       },
+       "drive[6].counts_per_rev: joint 6's range"},
+      {[](FwConfig& c) {  // 1 count per 1000 motor revolutions of gearing: 360 deg per count
+         c.counts_per_rev = 1;
+         c.gear_ratio = 1e-3;
+       },
+       "bus.counts_per_rev: one count is 360000 deg on joint 1, not finer than safety.following_error_deg (5)"},
+      {[](FwConfig& c) { c.gear_ratio = std::nan(""); }, "bus.gear_ratio: must be a finite number"},
+  };
+  for (const Case& k : cases) {
+    FwConfig d;
+    k.set(d);
+    const std::string e = validate_for_chain(d, ch);
+    CHECK_TEXT(has(e, k.want), (std::string(k.want) + " <- " + e).c_str());
+  }
+}
+
+// --config FILE reads only a regular file of bounded size, naming the path and the reason;
+// text that is not UTF-8 is refused before the TOML parser sees it.
+TEST(Config, FileInputIsCheckedAndCapped) {
+  FwConfig c;
+  c.rate_hz = 777;
+  std::string e = load_config_file("/tmp", c);
+  CHECK_TEXT(has(e, "/tmp: is a directory"), e.c_str());
+  e = load_config_file("/dev/zero", c);
+  CHECK_TEXT(has(e, "/dev/zero: not a regular file"), e.c_str());
+  e = load_config_file("/nonexistent/armfw.toml", c);
+  CHECK_TEXT(has(e, "/nonexistent/armfw.toml: cannot open"), e.c_str());
+  char fifo[] = "/tmp/fw_config_fifo_XXXXXX";
+  CHECK(mkdtemp(fifo) != nullptr);
+  const std::string fpath = std::string(fifo) + "/f";
+  CHECK(mkfifo(fpath.c_str(), 0600) == 0);
+  e = load_config_file(fpath, c);  // must not block waiting for a writer
+  CHECK_TEXT(has(e, fpath + ": not a regular file"), e.c_str());
+  unlink(fpath.c_str());
+  rmdir(fifo);
+  const std::string big = write_temp("# " + std::string(70000, 'x') + "\n");
+  e = load_config_file(big, c);
+  unlink(big.c_str());
+  CHECK_TEXT(has(e, big + ": larger than 65536 bytes"), e.c_str());
+  e = load_config_text("# " + std::string(70000, 'x') + "\n", "big.toml", c);
+  CHECK_TEXT(has(e, "big.toml: larger than 65536 bytes"), e.c_str());
+  const std::string ok = write_temp("[motion]\nmax_move_duration_s = 30\n");
+  e = load_config_file(ok, c);
+  unlink(ok.c_str());
+  STRCMP_EQUAL("", e.c_str());
+  DOUBLES_EQUAL(30, c.max_move_duration_s, 0);
+  c.rate_hz = 777;
+  // invalid UTF-8 inside a literal string (toml11 3.7.1 reads past its buffer on it)
+  e = load_config_text(std::string("robot = '\x80'\x00", 12), "u.toml", c);
+  CHECK_TEXT(has(e, "u.toml: line 1, column 10: not UTF-8"), e.c_str());
+  e = load_config_text("a = 1\nrobot = \"\xC3\x28\"\n", "u.toml", c);
+  CHECK_TEXT(has(e, "u.toml: line 2, column 10: not UTF-8"), e.c_str());
+  // nesting that overflows toml11's recursive parser (SIGSEGV at 20 000 levels) is refused
+  e = load_config_text("x = " + std::string(20000, '[') + "\n", "deep.toml", c);
+  CHECK_TEXT(has(e, "deep.toml: line 1, column 37: nested deeper than 32 levels"), e.c_str());
+  e = load_config_text("a = 1\n[motion]\nhome_deg = [[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]\n", "deep.toml", c);
+  CHECK_TEXT(has(e, "deep.toml: line 3, column 44: nested deeper"), e.c_str());
+  DOUBLES_EQUAL(777, c.rate_hz, 0);
+  // brackets inside strings and comments are not nesting
+  const std::string brackets(40, '[');
+  FwConfig s;
+  STRCMP_EQUAL("", load_config_text("robot = \"" + brackets + "\" # " + brackets + "\n[console]\nserial = '" + brackets +
+                                        "'\ncan = \"\"\"\\\"[\"\"\"\n",
+                                    "strings.toml", s)
+                       .c_str());
+  STRCMP_EQUAL(brackets.c_str(), s.robot.c_str());
+  STRCMP_EQUAL("\"[", s.console_can.c_str());
+  // a syntax error names the line and the column
+  e = load_config_text("[loop]\nrate_hz = 1000\n[loop\nx = 1\n", "syn.toml", c);
+  CHECK_TEXT(has(e, "syn.toml:3:1: syntax: "), e.c_str());
+  e = load_config_text("[motion]\nhome_deg = [1, 2\n", "syn.toml", c);
+  CHECK_TEXT(has(e, "syn.toml:2:") && has(e, ": syntax: "), e.c_str());
+}
