@@ -8,9 +8,11 @@
 // kept for the firmware (now wrappers of the adapter) and their bodies as
 // they were before the adapter (written out below on the public API). And
 // the adapter allocates nothing. This file and the library are built with
-// EIGEN_NO_MALLOC.
+// EIGEN_NO_MALLOC. Last, IkModel (its solver data private since the split)
+// is still a plain value.
 #include <cstring>
 #include <string>
+#include <type_traits>
 
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"
@@ -190,5 +192,40 @@ TEST(IkAdapter, AllocatesNothing) {
     const std::size_t allocations = scope.end();
     CHECK(std::isfinite(sink));
     if (allocations != 0) FAIL((std::string(name) + ": heap allocations in the IK adapter: " + std::to_string(allocations)).c_str());
+  }
+}
+
+// IkModel is a value: copies (construction, assignment) hold their own
+// set-up data, made without the heap, and solve as the original did after
+// the original is re-prepared for another arm.
+TEST(IkAdapter, ModelIsAPlainValue) {
+  static_assert(std::is_copy_constructible_v<kin::IkModel> && std::is_copy_assignable_v<kin::IkModel>);
+  const kin::Chain p = model("puma560"), s = model("stanford");
+  static kin::IkModel a, b, fresh;
+  CHECK(kin::ik_prepare(p, a) == kin::Status::ok);
+  CHECK(kin::ik_prepare(p, fresh) == kin::Status::ok);
+  kin::IkModel* c = nullptr;
+  {
+    AllocScope scope;
+    b = a;
+    static kin::IkModel copy(a);
+    c = &copy;
+    LONGS_EQUAL(0, scope.end());
+  }
+  CHECK(kin::ik_prepare(s, a) == kin::Status::ok);  // the original now analyses another arm
+  std::mt19937_64 rng(14008);
+  for (int k = 0; k < 50; ++k) {
+    const kin::JointVector q = random_q(p, rng);
+    const kin::Pose T = fk(p, q);
+    static kin::IkResult rf, rb, rc;
+    kin::ik_solve_all(fresh, T, &q, rf);
+    kin::ik_solve_all(b, T, &q, rb);
+    kin::ik_solve_all(*c, T, &q, rc);
+    LONGS_EQUAL(rf.count, rb.count);
+    LONGS_EQUAL(rf.count, rc.count);
+    for (int i = 0; i < rf.count; ++i) {
+      CHECK(rf.solutions[static_cast<std::size_t>(i)].q == rb.solutions[static_cast<std::size_t>(i)].q);
+      CHECK(rf.solutions[static_cast<std::size_t>(i)].q == rc.solutions[static_cast<std::size_t>(i)].q);
+    }
   }
 }

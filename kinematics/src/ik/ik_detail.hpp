@@ -1,5 +1,11 @@
 #pragma once
-// Internal helpers shared by the IK sources (not installed).
+// What the IK sources (kinematics/src/ik/*.cpp) share; not installed.
+//  * IkSolverData: what ik_prepare() precomputes, held in IkModel::solver,
+//    and the one way to it (solver_data);
+//  * the rules for wrapping a joint into its limits and their per-joint form;
+//  * the model's decomposition C0 J1 C1 ... Jn Cn, the bases of a joint's
+//    motion, the univariate equations every closed form solves;
+//  * the solver parts' entry points (which file defines each is said there).
 #include <algorithm>
 #include <array>
 #include <cmath>

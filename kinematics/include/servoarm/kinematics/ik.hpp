@@ -44,6 +44,14 @@
 // rounding; a candidate that misses goes through the chain's forward() and a
 // few Gauss-Newton steps. It works on (cos, sin) pairs and computes every
 // angle in one batch at the end (fast_trig.hpp atan2_poly, 4.4e-16 rad).
+//
+// Sources, kinematics/src/ik/: model.cpp (ik_prepare: decomposition and
+// classification; ik_solve_all's dispatch), position.cpp (joints 1-3 in
+// closed form, candidate verification), polynomial.cpp (the degree-8
+// resultant path), spherical_wrist.cpp, reduced.cpp (the chapter-4 arms),
+// selection.cpp (ik_branch_of, ik_choose, ik_solve_nearest), numeric.cpp
+// (ik_numeric); ik_detail.hpp: what they share. The IkSolver adapter for
+// motion: motion_ik.hpp.
 #include <array>
 #include <cstddef>
 #include <cstdint>
