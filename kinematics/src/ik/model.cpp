@@ -324,8 +324,9 @@ Status ik_prepare(const Chain& chain, IkModel& model) {
   model = IkModel{};
   if (chain.n_joints > kMaxJoints || chain.n_rows > kMaxRows) return Status::capacity;
   model.chain = chain;
-  for (int j = 0; j < chain.n_joints; ++j) detail::solver_data(model).wrap[static_cast<std::size_t>(j)] = detail::make_joint_wrap(chain.joint(j));
-  detail::decompose(chain, detail::solver_data(model));
+  detail::IkSolverData& d = detail::solver_data(model);
+  for (int j = 0; j < chain.n_joints; ++j) d.wrap[static_cast<std::size_t>(j)] = detail::make_joint_wrap(chain.joint(j));
+  detail::decompose(chain, d);
   model.method = IkMethod::none;
   if (detail::detect_spherical_wrist(model)) {
     model.method = IkMethod::spherical_wrist;
