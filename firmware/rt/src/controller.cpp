@@ -5,20 +5,6 @@
 
 namespace servoarm::fw {
 
-const char* to_string(ArmState s) {
-  switch (s) {
-    case ArmState::boot: return "boot";
-    case ArmState::disabled: return "disabled";
-    case ArmState::enabling: return "enabling";
-    case ArmState::idle: return "idle";
-    case ArmState::moving: return "moving";
-    case ArmState::stopping: return "stopping";
-    case ArmState::fault: return "fault";
-    case ArmState::estop: return "estop";
-  }
-  return "?";
-}
-
 const char* to_string(FaultCause c) {
   switch (c) {
     case FaultCause::none: return "none";
@@ -46,20 +32,6 @@ const char* to_string(RtResult r) {
     case RtResult::busy: return "busy";
     case RtResult::start_moved: return "start_moved";
     case RtResult::plan_failed: return "plan_failed";
-  }
-  return "?";
-}
-
-const char* to_string(RequestOp op) {
-  switch (op) {
-    case RequestOp::enable: return "enable";
-    case RequestOp::disable: return "disable";
-    case RequestOp::stop: return "stop";
-    case RequestOp::estop: return "estop";
-    case RequestOp::reset: return "reset";
-    case RequestOp::hold: return "hold";
-    case RequestOp::resume: return "resume";
-    case RequestOp::set_zero: return "set_zero";
   }
   return "?";
 }
@@ -113,7 +85,7 @@ hal::Status Controller::boot(TimePoint now, TimePoint deadline) {
   bus_.read(now);
   hold_measured();
   for (int j = 0; j < n_; ++j) emcy_seen_[static_cast<std::size_t>(j)] = bus_.feedback(static_cast<std::size_t>(j)).emcy_count;
-  set_state(ArmState::disabled);
+  set_mode(Mode::disabled);
   publish();
   flush_replies();
   return st;
@@ -133,7 +105,6 @@ std::size_t Controller::flush_motions() {
   const std::size_t n = motions_.clear();
   ++generation_;
   running_ = nullptr;
-  holding_ = false;
   return n;
 }
 
@@ -158,7 +129,7 @@ void Controller::emit(EventKind k, FaultCause c, int joint, std::uint32_t id, co
     return;
   }
   e->kind = k;
-  e->state = state_;
+  e->state = arm_state(mode_);
   e->cause = c;
   e->joint = static_cast<std::int8_t>(joint);
   e->motion_id = id;
@@ -166,10 +137,10 @@ void Controller::emit(EventKind k, FaultCause c, int joint, std::uint32_t id, co
   events_.commit();
 }
 
-void Controller::set_state(ArmState s) {
-  if (s == state_) return;
-  state_ = s;
-  state_since_ = now_;
+void Controller::set_mode(Mode m) {
+  if (m == mode_) return;
+  mode_ = m;
+  mode_since_ = now_;
 }
 
 void Controller::record_timing(std::int64_t latency_ns, std::int64_t compute_ns, std::uint32_t missed_deadlines) {
@@ -179,31 +150,63 @@ void Controller::record_timing(std::int64_t latency_ns, std::int64_t compute_ns,
 }
 
 // ---------------------------------------------------------------------------
-// Faults and stops
+// Stops: the controller's ramp, the drives' quick stop, powering down
 // ---------------------------------------------------------------------------
 
-void Controller::begin_quick_stop() {
-  // Ramp every joint to rest from the commanded state with the full limits.
-  kin::MovejOptions o;
-  if (kin::plan_stop(limits_, cmd_, o, stop_traj_) == kin::MotionStatus::ok) {
-    stop_active_ = true;
-    stop_t_ = 0;
-  } else {
-    stop_active_ = false;  // cannot plan (never seen): hold the commanded position
-    cmd_ = kin::JointState::rest(cmd_.pos);
+void Controller::power_down(Mode m) {
+  bus_.disable();
+  set_mode(m);
+}
+
+// A ramp has brought the arm to rest (or none could be planned): where each ramping mode goes.
+void Controller::end_of_ramp(Mode ramp) {
+  cmd_ = kin::JointState::rest(cmd_.pos);
+  switch (ramp) {
+    case Mode::hold_ramp: set_mode(Mode::held); return;  // at rest, the motion kept
+    case Mode::stopping_to_idle: set_mode(Mode::idle); return;
+    case Mode::stopping_to_disabled: power_down(Mode::disabled); return;
+    case Mode::fault_ramp: power_down(Mode::fault); return;
+    case Mode::estop_ramp: power_down(Mode::estop); return;
+    case Mode::boot:
+    case Mode::disabled:
+    case Mode::enabling:
+    case Mode::idle:
+    case Mode::moving:
+    case Mode::hold_line:
+    case Mode::held:
+    case Mode::fault_quick_stop:
+    case Mode::fault:
+    case Mode::estop_quick_stop:
+    case Mode::estop: return;  // not a ramp
   }
 }
 
-void Controller::begin_emergency_stop() {
+void Controller::begin_ramp(Mode ramp) {
+  // Ramp every joint to rest from the commanded state with the full limits.
+  kin::MovejOptions o;
+  if (kin::plan_stop(limits_, cmd_, o, stop_traj_) == kin::MotionStatus::ok) {
+    stop_t_ = 0;
+    set_mode(ramp);
+  } else {
+    end_of_ramp(ramp);  // cannot plan (never seen): at rest where the command is
+  }
+}
+
+void Controller::begin_emergency_stop(Mode ramp, Mode quick_stop) {
   if (!cfg_.drive_quick_stop) {
-    begin_quick_stop();
+    begin_ramp(ramp);
     return;
   }
   // CiA 402 Quick Stop to every drive in this cycle's RPDOs; they ramp down themselves.
   bus_.quick_stop();
-  stop_active_ = true;
-  drive_stop_ = true;
   stop_t_ = 0;
+  set_mode(quick_stop);
+}
+
+void Controller::step_ramp() {
+  stop_t_ += period_s_;
+  stop_traj_.sample(stop_t_, cmd_);
+  if (stop_t_ >= stop_traj_.duration) end_of_ramp(mode_);
 }
 
 // The drives stop on their own ramps: follow their measured positions (so the
@@ -220,17 +223,32 @@ void Controller::step_drive_stop() {
   }
   cmd_.vel.setZero();
   cmd_.acc.setZero();
-  if (!moving || stop_t_ >= cfg_.drive_stop_timeout) {
-    stop_active_ = false;
-    drive_stop_ = false;
-    bus_.disable();
-  }
+  if (moving && stop_t_ < cfg_.drive_stop_timeout) return;
+  power_down(mode_ == Mode::estop_quick_stop ? Mode::estop : Mode::fault);
 }
 
 void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
-  if (state_ == ArmState::fault) return;  // first cause wins (latched)
-  const bool was_powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping ||
-                           state_ == ArmState::enabling;
+  enum class Reaction { latched, emergency_stop, at_rest };
+  Reaction how = Reaction::at_rest;
+  switch (mode_) {
+    case Mode::fault_ramp:
+    case Mode::fault_quick_stop:
+    case Mode::fault: how = Reaction::latched; break;  // first cause wins
+    case Mode::enabling:
+    case Mode::idle:
+    case Mode::moving:
+    case Mode::hold_ramp:
+    case Mode::hold_line:
+    case Mode::held:
+    case Mode::stopping_to_idle:
+    case Mode::stopping_to_disabled: how = Reaction::emergency_stop; break;
+    case Mode::boot:
+    case Mode::disabled:
+    case Mode::estop_ramp:        // a fault during an e-stop powers down at once
+    case Mode::estop_quick_stop:
+    case Mode::estop: how = Reaction::at_rest; break;
+  }
+  if (how == Reaction::latched) return;
   cause_ = c;
   fault_joint_ = joint;
   if (joint >= 0)
@@ -239,14 +257,8 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
   else
     std::snprintf(fault_text_, sizeof fault_text_, "%s%s%s", to_string(c), detail[0] ? ": " : "", detail);
   const std::size_t dropped = flush_motions();
-  set_state(ArmState::fault);
-  if (was_powered) {
-    if (!drive_stop_) begin_emergency_stop();  // (ramp mode: replanned from here, as before)
-  } else {
-    stop_active_ = false;
-    drive_stop_ = false;
-  }
-  if (!stop_active_) bus_.disable();
+  if (how == Reaction::emergency_stop) begin_emergency_stop(Mode::fault_ramp, Mode::fault_quick_stop);
+  else power_down(Mode::fault);
   emit(EventKind::fault, c, joint, 0, fault_text_);
   if (dropped > 0) {
     char d[sizeof(Event::message)];
@@ -255,14 +267,37 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
   }
 }
 
+// ---------------------------------------------------------------------------
+// Supervisor
+// ---------------------------------------------------------------------------
+
 void Controller::supervise(TimePoint now) {
   (void)now;
-  const bool powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping;
-  // Disabled / boot: a drive fault or lost heartbeat is shown in `status` and
-  // cleared by the next enable (which faults again if the cause persists); the
-  // arm state only latches faults while the drives are (being) powered.
-  const bool latched = state_ == ArmState::fault || state_ == ArmState::estop || state_ == ArmState::disabled ||
-                       state_ == ArmState::boot;
+  // What is watched: everything while the drives are powered for normal work; live
+  // feedback while enabling; nothing that latches in boot / disabled (a drive fault or
+  // lost heartbeat is shown in `status` and cleared by the next enable, which faults
+  // again if the cause persists) nor during / after a fault or e-stop reaction.
+  enum class Watch { nothing, enabling, all };
+  Watch w = Watch::nothing;
+  switch (mode_) {
+    case Mode::boot:
+    case Mode::disabled:
+    case Mode::fault_ramp:
+    case Mode::fault_quick_stop:
+    case Mode::fault:
+    case Mode::estop_ramp:
+    case Mode::estop_quick_stop:
+    case Mode::estop: w = Watch::nothing; break;
+    case Mode::enabling: w = Watch::enabling; break;
+    case Mode::idle:
+    case Mode::moving:
+    case Mode::hold_ramp:
+    case Mode::hold_line:
+    case Mode::held:
+    case Mode::stopping_to_idle:
+    case Mode::stopping_to_disabled: w = Watch::all; break;
+  }
+  const bool all_checks = w == Watch::all;
   for (int j = 0; j < n_; ++j) {
     const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
     char d[64];
@@ -270,13 +305,13 @@ void Controller::supervise(TimePoint now) {
       emcy_seen_[static_cast<std::size_t>(j)] = fb.emcy_count;
       // While enabling, the fault reset itself produces EMCY "error reset" frames;
       // a real error there also puts the drive in fault, which is caught below.
-      if (!latched && state_ != ArmState::enabling && fb.error_code != 0) {
+      if (all_checks && fb.error_code != 0) {
         std::snprintf(d, sizeof d, "EMCY 0x%04X", unsigned(fb.error_code));
         raise_fault(FaultCause::emcy, j, d);
         return;
       }
     }
-    if (latched) continue;
+    if (w == Watch::nothing) continue;
     if (fb.state == hal::JointState::fault) {
       FaultCause c = FaultCause::drive_fault;
       switch (fb.fault) {
@@ -303,15 +338,15 @@ void Controller::supervise(TimePoint now) {
       raise_fault(c, j, d);
       return;
     }
-    if (powered && fb.state != hal::JointState::enabled) {
+    if (all_checks && fb.state != hal::JointState::enabled) {
       std::snprintf(d, sizeof d, "drive now %s", hal::to_string(fb.state));
       raise_fault(FaultCause::left_enabled, j, d);
       return;
     }
     // Enabling needs live drives too: a drive that has been talking and went quiet faults
     // the enable (one that has not sent feedback yet since start is waited for, above).
-    const bool watched = powered || (state_ == ArmState::enabling && fb.valid);
-    if (powered && !fb.valid) {
+    const bool watched = all_checks || (w == Watch::enabling && fb.valid);
+    if (all_checks && !fb.valid) {
       raise_fault(FaultCause::feedback_invalid, j, "no position feedback");
       return;
     }
@@ -320,7 +355,7 @@ void Controller::supervise(TimePoint now) {
       raise_fault(FaultCause::feedback_invalid, j, d);
       return;
     }
-    if (powered && cfg_.check_following_error && have_prev_) {
+    if (all_checks && cfg_.check_following_error && have_prev_) {
       const double e = std::fabs(q_prev_[j] - fb.position);
       if (e > max_follow_) max_follow_ = e;
       if (e > cfg_.following_error) {
@@ -330,7 +365,7 @@ void Controller::supervise(TimePoint now) {
       }
     }
   }
-  if (state_ == ArmState::enabling) {
+  if (w == Watch::enabling) {
     // Enabled = every drive operation enabled (the bus reports that only with a heartbeat
     // within its consumer time) and every drive's position feedback valid and fresh.
     bool all = true;
@@ -339,9 +374,9 @@ void Controller::supervise(TimePoint now) {
     for (int j = 0; j < n_; ++j) fresh = fresh && bus_.feedback(static_cast<std::size_t>(j)).valid;
     if (all && fresh) {
       hold_measured();
-      set_state(ArmState::idle);
+      set_mode(Mode::idle);
       emit(EventKind::state, FaultCause::none, -1, 0, "enabled");
-    } else if (static_cast<double>(now_ - state_since_) * 1e-9 > cfg_.enable_timeout) {
+    } else if (static_cast<double>(now_ - mode_since_) * 1e-9 > cfg_.enable_timeout) {
       for (int j = 0; j < n_; ++j)
         if (bus_.feedback(static_cast<std::size_t>(j)).state != hal::JointState::enabled) {
           raise_fault(FaultCause::drive_refused, j, "not operation enabled within enable_timeout");
@@ -357,236 +392,240 @@ void Controller::supervise(TimePoint now) {
 }
 
 // ---------------------------------------------------------------------------
-// Requests
+// Requests: one (mode x request) table (mode_table.hpp), one small action each
 // ---------------------------------------------------------------------------
 
-void Controller::handle_request(const Request& r, TimePoint now) {
+void Controller::handle_request(const Request& r, TimePoint now) { run(action_for(mode_, r.op), r, now); }
+
+void Controller::run(Action a, const Request& r, TimePoint now) {
   char m[sizeof(Reply::message)];
-  switch (r.op) {
-    case RequestOp::set_zero: {
-      if (state_ != ArmState::disabled) {
-        std::snprintf(m, sizeof m, "home zero needs the arm disabled (it is %s)", to_string(state_));
-        reply(r.seq, RtResult::bad_state, m);
-        return;
-      }
-      // Check every joint before touching any, so the request applies to all or none.
-      for (int j = 0; j < n_; ++j) {
-        const auto ju = static_cast<std::size_t>(j);
-        const hal::JointFeedback& fb = bus_.feedback(ju);
-        if (fb.state != hal::JointState::disabled || !fb.valid) {
-          std::snprintf(m, sizeof m, "joint %d: drive is %s%s, not disabled", j + 1, hal::to_string(fb.state),
-                        fb.valid ? "" : " (no position feedback)");
-          reply(r.seq, RtResult::bad_state, m);
-          return;
-        }
-        if (!(limits_.lower[ju] <= 0.0 && 0.0 <= limits_.upper[ju])) {
-          std::snprintf(m, sizeof m, "joint %d: zero lies outside its limits", j + 1);
-          reply(r.seq, RtResult::bad_state, m);
-          return;
-        }
-      }
-      int len = std::snprintf(m, sizeof m, "zero_offset = [");
-      for (int j = 0; j < n_; ++j) {
-        const hal::Status st = bus_.set_position_zero(static_cast<std::size_t>(j));
-        if (st != hal::Status::ok) {  // not_supported: nothing was changed (first joint), else a bug
-          std::snprintf(m, sizeof m, "joint %d: %s", j + 1, hal::describe(st));
-          reply(r.seq, RtResult::bad_state, m);
-          return;
-        }
-        if (len > 0 && static_cast<std::size_t>(len) < sizeof m)
-          len += std::snprintf(m + len, sizeof m - static_cast<std::size_t>(len), "%s%lld%s", j ? ", " : "",
-                               static_cast<long long>(bus_.zero_offset(static_cast<std::size_t>(j))), j + 1 == n_ ? "]" : "");
-      }
-      hold_measured();
+  switch (a) {
+    // enable
+    case Action::power_up: power_up(r); return;
+    case Action::already_enabled: reply(r.seq, RtResult::ok, "already enabled"); return;
+    case Action::refuse_stopping: reply(r.seq, RtResult::bad_state, "stopping; retry"); return;
+    case Action::refuse_not_started: reply(r.seq, RtResult::bad_state, "drives not started"); return;
+    case Action::refuse_send_reset:
+      std::snprintf(m, sizeof m, "in %s: send reset first", to_string(arm_state(mode_)));
+      reply(r.seq, RtResult::fault, m);
+      return;
+    // disable
+    case Action::disable_now: disable_now(r); return;
+    case Action::disable_drives:  // boot / fault / estop: the mode (and a running reaction) stays
+      flush_motions();
+      bus_.disable();
+      reply(r.seq, RtResult::ok, "drives disabled");
+      return;
+    case Action::ramp_then_disable:
+      flush_motions();
+      begin_ramp(Mode::stopping_to_disabled);
+      reply(r.seq, RtResult::ok, "stopping, then disabling");
+      return;
+    case Action::keep_ramp_then_disable:
+      flush_motions();
+      set_mode(Mode::stopping_to_disabled);
+      reply(r.seq, RtResult::ok, "stopping, then disabling");
+      return;
+    // stop
+    case Action::ramp_to_idle:
+      flush_motions();
+      begin_ramp(Mode::stopping_to_idle);
+      reply(r.seq, RtResult::ok, "stopping");
+      return;
+    case Action::keep_ramp_to_idle:
+      flush_motions();
+      set_mode(Mode::stopping_to_idle);
+      reply(r.seq, RtResult::ok, "stopping");
+      return;
+    case Action::drop_queue:
+      // Not moving yet, but a move queued in this same cycle would start at the next one.
+      dropped_text(m, sizeof m, arm_state(mode_) == ArmState::stopping ? "stopping" : "not moving", flush_motions());
       reply(r.seq, RtResult::ok, m);
       return;
-    }
-    case RequestOp::estop: {
-      // Acts in this cycle: quick stop ramp (category 1), then power off.
-      std::size_t dropped = 0;
-      if (state_ != ArmState::estop) {
-        const bool powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping ||
-                             (state_ == ArmState::fault && stop_active_);
-        dropped = flush_motions();
-        set_state(ArmState::estop);
-        estop_seen_ = now;
-        if (powered) {
-          // a ramp already running goes on; in drive mode the drives take over
-          if (!stop_active_ || (cfg_.drive_quick_stop && !drive_stop_)) begin_emergency_stop();
-        } else {
-          stop_active_ = false;
-          drive_stop_ = false;
-          bus_.disable();
-        }
-        emit(EventKind::estop, FaultCause::none, -1, 0, "emergency stop");
-      }
-      dropped_text(m, sizeof m, "estop", dropped);
-      reply(r.seq, RtResult::ok, m);
+    // estop: acts in this cycle
+    case Action::estop_stop: {
+      const std::size_t dropped = begin_estop(now);
+      begin_emergency_stop(Mode::estop_ramp, Mode::estop_quick_stop);
+      estop_done(r, dropped);
       return;
     }
-    case RequestOp::reset:
-      if (state_ == ArmState::fault || state_ == ArmState::estop) {
-        if (stop_active_) {
-          reply(r.seq, RtResult::bad_state, "still stopping; retry when the arm is at rest");
-          return;
-        }
-        bus_.disable();
-        cause_ = FaultCause::none;
-        fault_joint_ = -1;
-        fault_text_[0] = '\0';
-        max_follow_ = 0;
-        hold_measured();
-        set_state(ArmState::disabled);
-        reply(r.seq, RtResult::ok, "reset; drives disabled, send enable");
+    case Action::estop_keep_ramp: {  // the running ramp goes on; in drive mode the drives take over
+      const std::size_t dropped = begin_estop(now);
+      if (cfg_.drive_quick_stop) begin_emergency_stop(Mode::estop_ramp, Mode::estop_quick_stop);
+      else set_mode(Mode::estop_ramp);
+      estop_done(r, dropped);
+      return;
+    }
+    case Action::estop_keep_quick_stop: {
+      const std::size_t dropped = begin_estop(now);
+      set_mode(Mode::estop_quick_stop);
+      estop_done(r, dropped);
+      return;
+    }
+    case Action::estop_at_rest: {
+      const std::size_t dropped = begin_estop(now);
+      power_down(Mode::estop);
+      estop_done(r, dropped);
+      return;
+    }
+    case Action::estop_again: reply(r.seq, RtResult::ok, "estop"); return;
+    // reset
+    case Action::reset_latched: reset_latched(r); return;
+    case Action::refuse_still_stopping:
+      reply(r.seq, RtResult::bad_state, "still stopping; retry when the arm is at rest");
+      return;
+    case Action::nothing_to_reset: reply(r.seq, RtResult::ok, "nothing to reset"); return;
+    // hold
+    case Action::hold_motion: hold_motion(r); return;
+    case Action::hold_queue:
+      // Moves queued but not started (GRBL Hold with a planned queue): hold the queue;
+      // `resume` / '~' starts it, `stop` drops it.
+      if (motions_.empty()) {
+        reply(r.seq, RtResult::ok, "not moving");
         return;
       }
-      reply(r.seq, RtResult::ok, "nothing to reset");
+      set_mode(Mode::held);
+      reply(r.seq, RtResult::ok, "feed hold (queue held)");
       return;
-    case RequestOp::enable:
-      switch (state_) {
-        case ArmState::disabled:
-          // Never power up on a drive's last known state: every drive must be talking now
-          // (position feedback younger than feedback_timeout; heartbeats are checked by the
-          // bus, which reports a joint enabled only with a heartbeat within its consumer time).
-          for (int j = 0; j < n_; ++j) {
-            const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
-            // (no feedback at all yet, just after start: the enabling state waits for it)
-            if (!fb.valid || static_cast<double>(fb.age) * 1e-9 <= cfg_.feedback_timeout) continue;
-            char d[64];
-            std::snprintf(d, sizeof d, "no position feedback for %.1f ms", static_cast<double>(fb.age) * 1e-6);
-            raise_fault(FaultCause::feedback_invalid, j, d);
-            std::snprintf(m, sizeof m, "enable failed: %s", fault_text_);
-            reply(r.seq, RtResult::fault, m);
-            return;
-          }
-          flush_motions();  // a move queued before the arm was disabled never starts
-          for (int j = 0; j < n_; ++j) emcy_seen_[static_cast<std::size_t>(j)] = bus_.feedback(static_cast<std::size_t>(j)).emcy_count;
-          bus_.enable();
-          hold_measured();
-          set_state(ArmState::enabling);
-          reply(r.seq, RtResult::ok, "enabling");
-          return;
-        case ArmState::enabling:
-        case ArmState::idle:
-        case ArmState::moving:
-          reply(r.seq, RtResult::ok, "already enabled");
-          return;
-        case ArmState::stopping:
-          reply(r.seq, RtResult::bad_state, "stopping; retry");
-          return;
-        case ArmState::boot:
-          reply(r.seq, RtResult::bad_state, "drives not started");
-          return;
-        case ArmState::fault:
-        case ArmState::estop:
-          std::snprintf(m, sizeof m, "in %s: send reset first", to_string(state_));
-          reply(r.seq, RtResult::fault, m);
-          return;
-      }
-      return;
-    case RequestOp::disable:
-      switch (state_) {
-        case ArmState::moving:
-        case ArmState::stopping:
-          flush_motions();
-          if (!stop_active_) begin_quick_stop();
-          disable_after_stop_ = true;
-          set_state(ArmState::stopping);
-          reply(r.seq, RtResult::ok, "stopping, then disabling");
-          return;
-        case ArmState::idle:
-        case ArmState::enabling:
-        case ArmState::disabled: {
-          // Moves queued but not started yet (same cycle as this request) are dropped too.
-          const std::size_t dropped = flush_motions();
-          bus_.disable();
-          set_state(ArmState::disabled);
-          hold_measured();
-          dropped_text(m, sizeof m, "disabled", dropped);
-          reply(r.seq, RtResult::ok, m);
-          return;
-        }
-        case ArmState::boot:
-        case ArmState::fault:
-        case ArmState::estop:
-          flush_motions();
-          bus_.disable();
-          reply(r.seq, RtResult::ok, "drives disabled");
-          return;
-      }
-      return;
-    case RequestOp::stop:
-      switch (state_) {
-        case ArmState::moving:
-          flush_motions();
-          if (!stop_active_) begin_quick_stop();
-          set_state(ArmState::stopping);
-          reply(r.seq, RtResult::ok, "stopping");
-          return;
-        case ArmState::boot:
-        case ArmState::disabled:
-        case ArmState::enabling:
-        case ArmState::idle:
-        case ArmState::stopping:
-        case ArmState::fault:
-        case ArmState::estop: {
-          // Not moving yet, but a move queued in this same cycle would start at the
-          // next one: drop every queued move whatever the state.
-          const std::size_t dropped = flush_motions();
-          dropped_text(m, sizeof m, state_ == ArmState::stopping ? "stopping" : "not moving", dropped);
-          reply(r.seq, RtResult::ok, m);
-          return;
-        }
-      }
-      return;
-    case RequestOp::hold:
-      if (state_ == ArmState::moving && !holding_) {
-        holding_ = true;
-        if (running_ != nullptr && running_->kind == MotionKind::cartesian) {
-          kin::stop_movel(running_->ct, motion_t_);  // stops on the line
-          motion_t_ = 0;
-        } else if (running_ != nullptr && running_->kind == MotionKind::joint) {
-          begin_quick_stop();
-        }
-        reply(r.seq, RtResult::ok, "feed hold");
-        return;
-      }
-      if (state_ == ArmState::idle && !motions_.empty()) {
-        // Moves queued but not started (GRBL Hold with a planned queue): hold the queue;
-        // `resume` / '~' starts it, `stop` drops it.
-        holding_ = true;
-        set_state(ArmState::moving);
-        reply(r.seq, RtResult::ok, "feed hold (queue held)");
-        return;
-      }
-      reply(r.seq, RtResult::ok, state_ == ArmState::moving ? "already holding" : "not moving");
-      return;
-    case RequestOp::resume:
-      if (state_ == ArmState::moving && holding_) {
-        if (stop_active_) {
-          reply(r.seq, RtResult::bad_state, "still ramping down; retry");
-          return;
-        }
-        holding_ = false;
-        if (running_ != nullptr && running_->kind == MotionKind::cartesian) {
-          kin::resume_movel(running_->ct, motion_t_, 1.0);
-          motion_t_ = 0;
-        } else if (running_ != nullptr && running_->kind == MotionKind::joint) {
-          kin::MovejOptions o;
-          o.override = running_->override;
-          if (kin::plan_movej(limits_, cmd_, running_->goal, o, running_->jt) != kin::MotionStatus::ok) {
-            finish_motion(true, RtResult::plan_failed);
-            reply(r.seq, RtResult::plan_failed, "cannot re-plan the interrupted move");
-            return;
-          }
-          motion_t_ = 0;
-        }
-        reply(r.seq, RtResult::ok, "resumed");
-        return;
-      }
-      reply(r.seq, RtResult::ok, "not holding");
+    case Action::already_holding: reply(r.seq, RtResult::ok, "already holding"); return;
+    case Action::not_moving: reply(r.seq, RtResult::ok, "not moving"); return;
+    // resume
+    case Action::resume_motion: resume_motion(r); return;
+    case Action::refuse_still_ramping: reply(r.seq, RtResult::bad_state, "still ramping down; retry"); return;
+    case Action::not_holding: reply(r.seq, RtResult::ok, "not holding"); return;
+    // set_zero
+    case Action::set_zero: set_zero(r); return;
+    case Action::refuse_set_zero:
+      std::snprintf(m, sizeof m, "home zero needs the arm disabled (it is %s)", to_string(arm_state(mode_)));
+      reply(r.seq, RtResult::bad_state, m);
       return;
   }
+}
+
+void Controller::power_up(const Request& r) {
+  // Never power up on a drive's last known state: every drive must be talking now
+  // (position feedback younger than feedback_timeout; heartbeats are checked by the
+  // bus, which reports a joint enabled only with a heartbeat within its consumer time).
+  char m[sizeof(Reply::message)];
+  for (int j = 0; j < n_; ++j) {
+    const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+    // (no feedback at all yet, just after start: the enabling mode waits for it)
+    if (!fb.valid || static_cast<double>(fb.age) * 1e-9 <= cfg_.feedback_timeout) continue;
+    char d[64];
+    std::snprintf(d, sizeof d, "no position feedback for %.1f ms", static_cast<double>(fb.age) * 1e-6);
+    raise_fault(FaultCause::feedback_invalid, j, d);
+    std::snprintf(m, sizeof m, "enable failed: %s", fault_text_);
+    reply(r.seq, RtResult::fault, m);
+    return;
+  }
+  flush_motions();  // a move queued before the arm was disabled never starts
+  for (int j = 0; j < n_; ++j) emcy_seen_[static_cast<std::size_t>(j)] = bus_.feedback(static_cast<std::size_t>(j)).emcy_count;
+  bus_.enable();
+  hold_measured();
+  set_mode(Mode::enabling);
+  reply(r.seq, RtResult::ok, "enabling");
+}
+
+void Controller::disable_now(const Request& r) {
+  // Moves queued but not started yet (same cycle as this request) are dropped too.
+  char m[sizeof(Reply::message)];
+  const std::size_t dropped = flush_motions();
+  power_down(Mode::disabled);
+  hold_measured();
+  dropped_text(m, sizeof m, "disabled", dropped);
+  reply(r.seq, RtResult::ok, m);
+}
+
+std::size_t Controller::begin_estop(TimePoint now) {
+  estop_seen_ = now;
+  return flush_motions();
+}
+
+void Controller::estop_done(const Request& r, std::size_t dropped) {
+  char m[sizeof(Reply::message)];
+  emit(EventKind::estop, FaultCause::none, -1, 0, "emergency stop");
+  dropped_text(m, sizeof m, "estop", dropped);
+  reply(r.seq, RtResult::ok, m);
+}
+
+void Controller::reset_latched(const Request& r) {
+  bus_.disable();
+  cause_ = FaultCause::none;
+  fault_joint_ = -1;
+  fault_text_[0] = '\0';
+  max_follow_ = 0;
+  hold_measured();
+  set_mode(Mode::disabled);
+  reply(r.seq, RtResult::ok, "reset; drives disabled, send enable");
+}
+
+void Controller::hold_motion(const Request& r) {
+  if (running_ == nullptr) {
+    set_mode(Mode::held);  // between two moves: the rest of the queue is held
+  } else {
+    switch (running_->kind) {
+      case MotionKind::cartesian:
+        kin::stop_movel(running_->ct, motion_t_);  // stops on the line
+        motion_t_ = 0;
+        set_mode(Mode::hold_line);
+        break;
+      case MotionKind::joint: begin_ramp(Mode::hold_ramp); break;
+      case MotionKind::dwell: set_mode(Mode::held); break;  // the dwell's clock stops
+    }
+  }
+  reply(r.seq, RtResult::ok, "feed hold");
+}
+
+void Controller::resume_motion(const Request& r) {
+  set_mode(Mode::moving);
+  if (running_ != nullptr && running_->kind == MotionKind::cartesian) {
+    kin::resume_movel(running_->ct, motion_t_, 1.0);
+    motion_t_ = 0;
+  } else if (running_ != nullptr && running_->kind == MotionKind::joint) {
+    kin::MovejOptions o;
+    o.override = running_->override;
+    if (kin::plan_movej(limits_, cmd_, running_->goal, o, running_->jt) != kin::MotionStatus::ok) {
+      finish_motion(true, RtResult::plan_failed);
+      reply(r.seq, RtResult::plan_failed, "cannot re-plan the interrupted move");
+      return;
+    }
+    motion_t_ = 0;
+  }
+  reply(r.seq, RtResult::ok, "resumed");
+}
+
+void Controller::set_zero(const Request& r) {
+  char m[sizeof(Reply::message)];
+  // Check every joint before touching any, so the request applies to all or none.
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    const hal::JointFeedback& fb = bus_.feedback(ju);
+    if (fb.state != hal::JointState::disabled || !fb.valid) {
+      std::snprintf(m, sizeof m, "joint %d: drive is %s%s, not disabled", j + 1, hal::to_string(fb.state),
+                    fb.valid ? "" : " (no position feedback)");
+      reply(r.seq, RtResult::bad_state, m);
+      return;
+    }
+    if (!(limits_.lower[ju] <= 0.0 && 0.0 <= limits_.upper[ju])) {
+      std::snprintf(m, sizeof m, "joint %d: zero lies outside its limits", j + 1);
+      reply(r.seq, RtResult::bad_state, m);
+      return;
+    }
+  }
+  int len = std::snprintf(m, sizeof m, "zero_offset = [");
+  for (int j = 0; j < n_; ++j) {
+    const hal::Status st = bus_.set_position_zero(static_cast<std::size_t>(j));
+    if (st != hal::Status::ok) {  // not_supported: nothing was changed (first joint), else a bug
+      std::snprintf(m, sizeof m, "joint %d: %s", j + 1, hal::describe(st));
+      reply(r.seq, RtResult::bad_state, m);
+      return;
+    }
+    if (len > 0 && static_cast<std::size_t>(len) < sizeof m)
+      len += std::snprintf(m + len, sizeof m - static_cast<std::size_t>(len), "%s%lld%s", j ? ", " : "",
+                           static_cast<long long>(bus_.zero_offset(static_cast<std::size_t>(j))), j + 1 == n_ ? "]" : "");
+  }
+  hold_measured();
+  reply(r.seq, RtResult::ok, m);
 }
 
 // ---------------------------------------------------------------------------
@@ -611,7 +650,6 @@ void Controller::finish_motion(bool refused, RtResult why) {
 bool Controller::start_next_motion() {
   while (MotionItem* m = motions_.front()) {
     motion_t_ = 0;
-    holding_ = false;
     switch (m->kind) {
       case MotionKind::joint: {
         kin::MovejOptions o;
@@ -642,89 +680,63 @@ bool Controller::start_next_motion() {
   return false;
 }
 
+// Not powered (or the reaction is over): follow the measured position so enabling never jumps.
+void Controller::follow_measured() {
+  if (!motions_.empty()) {
+    // A move the console committed on a state it read before a fault / e-stop / disable:
+    // it never starts, and the console hears about it.
+    char d[sizeof(Event::message)];
+    const std::size_t n = flush_motions();
+    std::snprintf(d, sizeof d, "%zu queued move%s dropped: arm is %s", n, n == 1 ? "" : "s",
+                  to_string(arm_state(mode_)));
+    emit(EventKind::motion_refused, FaultCause::none, -1, 0, d);
+  }
+  for (int j = 0; j < n_; ++j) {
+    const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+    if (fb.valid) cmd_.pos[j] = fb.position;
+  }
+  cmd_.vel.setZero();
+  cmd_.acc.setZero();
+  have_prev_ = false;
+}
+
 void Controller::step_motion() {
-  // Quick stop / stop ramp has priority over everything.
-  if (stop_active_ && drive_stop_) {
-    step_drive_stop();
-    return;
-  }
-  if (stop_active_) {
-    stop_t_ += period_s_;
-    stop_traj_.sample(stop_t_, cmd_);
-    if (stop_t_ >= stop_traj_.duration) {
-      stop_active_ = false;
-      cmd_ = kin::JointState::rest(cmd_.pos);
-      switch (state_) {
-        case ArmState::fault:
-        case ArmState::estop:
-          bus_.disable();
-          break;
-        case ArmState::stopping:
-          if (disable_after_stop_) {
-            bus_.disable();
-            disable_after_stop_ = false;
-            set_state(ArmState::disabled);
-          } else {
-            set_state(ArmState::idle);
-          }
-          break;
-        case ArmState::moving:  // joint feed hold: at rest, keep the motion
-        case ArmState::boot:
-        case ArmState::disabled:
-        case ArmState::enabling:
-        case ArmState::idle:
-          break;
-      }
-    }
-    return;
-  }
-  switch (state_) {
-    case ArmState::boot:
-    case ArmState::disabled:
-    case ArmState::enabling:
-    case ArmState::fault:
-    case ArmState::estop:
-      // Not powered (or ramp finished): follow the measured position so enabling never jumps.
-      if (!motions_.empty()) {
-        // A move the console committed on a state it read before a fault / e-stop / disable:
-        // it never starts, and the console hears about it.
-        char d[sizeof(Event::message)];
-        const std::size_t n = flush_motions();
-        std::snprintf(d, sizeof d, "%zu queued move%s dropped: arm is %s", n, n == 1 ? "" : "s", to_string(state_));
-        emit(EventKind::motion_refused, FaultCause::none, -1, 0, d);
-      }
-      for (int j = 0; j < n_; ++j) {
-        const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
-        if (fb.valid) cmd_.pos[j] = fb.position;
-      }
-      cmd_.vel.setZero();
-      cmd_.acc.setZero();
-      have_prev_ = false;
+  switch (mode_) {
+    case Mode::fault_quick_stop:
+    case Mode::estop_quick_stop: step_drive_stop(); return;
+    case Mode::hold_ramp:
+    case Mode::stopping_to_idle:
+    case Mode::stopping_to_disabled:
+    case Mode::fault_ramp:
+    case Mode::estop_ramp: step_ramp(); return;  // a stop has priority over everything
+    case Mode::boot:
+    case Mode::disabled:
+    case Mode::enabling:
+    case Mode::fault:
+    case Mode::estop: follow_measured(); return;
+    case Mode::held:
+      // At rest, the motion kept (joint / dwell / Cartesian stopped on its line). A held
+      // queue that has not started goes idle once nothing is left of it.
+      if (running_ == nullptr && motions_.empty()) set_mode(Mode::idle);
       return;
-    case ArmState::stopping:
-      set_state(ArmState::idle);
-      [[fallthrough]];
-    case ArmState::idle:
+    case Mode::idle:
       if (!start_next_motion()) return;
-      set_state(ArmState::moving);
-      [[fallthrough]];
-    case ArmState::moving:
+      set_mode(Mode::moving);
+      break;
+    case Mode::moving:
+      if (running_ == nullptr && !start_next_motion()) {
+        set_mode(Mode::idle);
+        return;
+      }
+      break;
+    case Mode::hold_line:
+      if (running_ == nullptr) {  // (cannot happen: entered with a Cartesian move running)
+        set_mode(Mode::held);
+        return;
+      }
       break;
   }
-  if (running_ == nullptr) {
-    if (holding_) {  // feed hold on a queue that has not started: nothing moves until resume
-      if (motions_.empty()) {
-        holding_ = false;
-        set_state(ArmState::idle);
-      }
-      return;
-    }
-    if (!start_next_motion()) {
-      set_state(ArmState::idle);
-      return;
-    }
-  }
-  if (holding_ && running_->kind != MotionKind::cartesian) return;  // joint/dwell: held at rest
+  // moving or hold_line, running_ set
   motion_t_ += period_s_;
   bool done = false;
   switch (running_->kind) {
@@ -733,11 +745,18 @@ void Controller::step_motion() {
       done = motion_t_ >= running_->jt.duration;
       break;
     case MotionKind::cartesian:
-      if (running_->ct.sample_ik(motion_t_, cmd_.pos, cmd_.vel, cmd_.acc) < kin::Status::ok) {
-        // sample_ik left the precomputed value in pos: still on the checked path.
+      // IK at the exact pose; when it fails the precomputed joint value of the path is
+      // kept (the console checked the whole path with IK, and validate_and_write checks
+      // the setpoint as every other one), and the sample is counted (Telemetry::ik_fallbacks).
+      if (running_->ct.sample_ik(motion_t_, cmd_.pos, cmd_.vel, cmd_.acc) < kin::Status::ok) ++ik_fallbacks_;
+      if (mode_ == Mode::hold_line) {
+        if (motion_t_ >= running_->ct.duration) {  // at rest on the line
+          motion_t_ = running_->ct.duration;
+          set_mode(Mode::held);
+        }
+        return;
       }
-      done = !holding_ && motion_t_ >= running_->ct.duration;
-      if (holding_ && motion_t_ >= running_->ct.duration) motion_t_ = running_->ct.duration;
+      done = motion_t_ >= running_->ct.duration;
       break;
     case MotionKind::dwell:
       done = motion_t_ >= running_->dwell_s;
@@ -751,14 +770,13 @@ void Controller::step_motion() {
     }
     finish_motion(false, RtResult::ok);
     if (start_next_motion()) return;
-    set_state(ArmState::idle);
+    set_mode(Mode::idle);
   }
 }
 
 void Controller::validate_and_write(TimePoint now) {
-  const bool powered = state_ == ArmState::idle || state_ == ArmState::moving || state_ == ArmState::stopping ||
-                       ((state_ == ArmState::fault || state_ == ArmState::estop) && stop_active_ && !drive_stop_);
-  if (powered) {
+  const bool is_powered = powered(mode_);
+  if (is_powered) {
     for (int j = 0; j < n_; ++j) {
       const double q = cmd_.pos[j];
       char d[64];
@@ -768,7 +786,7 @@ void Controller::validate_and_write(TimePoint now) {
         break;
       }
       const auto ju = static_cast<std::size_t>(j);
-      const bool stopping_ramp = stop_active_;  // a stop may cross a limit it was already about to
+      const bool stopping_ramp = ramping(mode_);  // a stop may cross a limit it was already about to
       if (!stopping_ramp && (q < limits_.lower[ju] - cfg_.position_tolerance || q > limits_.upper[ju] + cfg_.position_tolerance)) {
         std::snprintf(d, sizeof d, "%.5f outside [%.5f, %.5f]", q, limits_.lower[ju], limits_.upper[ju]);
         cmd_.pos[j] = std::fmin(std::fmax(q, limits_.lower[ju]), limits_.upper[ju]);
@@ -794,9 +812,10 @@ void Controller::validate_and_write(TimePoint now) {
     estop_seen_ = -1;
   }
   q_prev_ = cmd_.pos;
-  have_prev_ = powered;
-  if (ws == hal::Status::bus_off && state_ != ArmState::fault) raise_fault(FaultCause::bus_off, -1, "CAN controller bus-off");
-  else if (static_cast<int>(ws) < 0 && ws != hal::Status::invalid_argument && state_ != ArmState::fault && powered) {
+  have_prev_ = is_powered;
+  const bool faulted = arm_state(mode_) == ArmState::fault;
+  if (ws == hal::Status::bus_off && !faulted) raise_fault(FaultCause::bus_off, -1, "CAN controller bus-off");
+  else if (static_cast<int>(ws) < 0 && ws != hal::Status::invalid_argument && !faulted && is_powered) {
     char d[64];
     std::snprintf(d, sizeof d, "write: %s", hal::to_string(ws));
     raise_fault(FaultCause::bus_error, -1, d);
@@ -809,8 +828,9 @@ void Controller::publish() {
     compute_sum_ = compute_.summary();
   }
   Telemetry t;
-  t.state = state_;
-  t.holding = holding_;
+  t.state = arm_state(mode_);
+  t.holding = holding(mode_);
+  t.mode = mode_;
   t.n = n_;
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
@@ -832,6 +852,7 @@ void Controller::publish() {
   t.compute = compute_sum_;
   t.max_following_error = max_follow_;
   t.estop_latency_ns = estop_latency_;
+  t.ik_fallbacks = ik_fallbacks_;
   telemetry_.write(t);
 }
 

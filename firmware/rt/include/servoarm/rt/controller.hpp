@@ -1,6 +1,9 @@
 #pragma once
 // The control cycle: state machine, safety supervisor and motion execution.
 //
+// State: one Mode (mode_table.hpp); requests are decided by its (mode x request)
+// table; the console sees arm_state(mode) and holding(mode).
+//
 // Controller::cycle(now) is the whole per-period work of the real-time thread
 // (DESIGN.md data flow): read drive feedback -> supervisor -> motion sample ->
 // limit + NaN check -> write setpoints + SYNC -> publish telemetry. It never
@@ -19,154 +22,19 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
-#include <cstring>
 
+#include "servoarm/rt/messages.hpp"
+#include "servoarm/rt/mode_table.hpp"
+#include "servoarm/rt/seqlock.hpp"
 #include "servoarm/rt/spsc_queue.hpp"
 #include "servoarm/rt/stats.hpp"
 #include "servoarm/hal/servo_bus.hpp"
 #include "servoarm/kinematics/chain.hpp"
-#include "servoarm/kinematics/trajectory.hpp"
-#include "servoarm/kinematics/trajectory_cartesian.hpp"
 
 namespace servoarm::fw {
 
 using hal::Duration;
 using hal::TimePoint;
-
-/// Arm state (the firmware's state machine).
-enum class ArmState : std::uint8_t {
-  boot,      ///< drives not started yet
-  disabled,  ///< drives up, powered down; `enable` powers them
-  enabling,  ///< drives walking to operation enabled
-  idle,      ///< enabled, holding position, motion queue empty
-  moving,    ///< executing the motion queue (also while a feed hold ramps down / is held)
-  stopping,  ///< `stop` or `disable`: ramping down; then idle (or disabled)
-  fault,     ///< supervisor fault: quick stop, then drives disabled; needs `reset` + `enable`
-  estop,     ///< emergency stop: quick stop, then drives disabled; needs `reset` + `enable`
-};
-const char* to_string(ArmState s);
-
-/// Why the supervisor faulted (one per cause; the joint is reported alongside).
-enum class FaultCause : std::uint8_t {
-  none,
-  heartbeat_lost,     ///< no heartbeat within the consumer time
-  drive_fault,        ///< drive reports fault (EMCY or statusword)
-  drive_refused,      ///< drive did not reach operation enabled in time
-  left_enabled,       ///< drive left operation enabled on its own
-  emcy,               ///< EMCY frame received
-  bus_off,            ///< CAN controller bus-off / bus write failed
-  bus_error,          ///< other bus/servo error
-  following_error,    ///< |commanded - actual| above the limit
-  setpoint_nan,       ///< motion produced a non-finite setpoint
-  setpoint_position,  ///< setpoint outside the joint position limits
-  setpoint_velocity,  ///< setpoint step faster than the joint velocity limit
-  feedback_invalid,   ///< no (or stale) position feedback from an enabled joint
-};
-const char* to_string(FaultCause c);
-
-/// Result codes of requests and motions as seen by the console.
-enum class RtResult : std::uint8_t {
-  ok,
-  bad_state,   ///< not allowed in the current state (message says which)
-  fault,       ///< refused: arm in fault / e-stop (needs reset)
-  busy,        ///< queue full
-  start_moved, ///< a planned Cartesian move no longer starts where the arm is
-  plan_failed, ///< the RT-side plan of a joint move failed
-};
-const char* to_string(RtResult r);
-
-/// set_zero: `home zero`, the current joint positions become joint zero (ServoBus::set_position_zero);
-/// only in the disabled state, and only when 0 lies within every joint's limits.
-enum class RequestOp : std::uint8_t { enable, disable, stop, estop, reset, hold, resume, set_zero };
-const char* to_string(RequestOp op);
-
-struct Request {
-  RequestOp op = RequestOp::stop;
-  std::uint32_t seq = 0;
-};
-
-struct Reply {
-  std::uint32_t seq = 0;
-  RtResult result = RtResult::ok;
-  char message[160] = {};
-};
-
-enum class MotionKind : std::uint8_t { joint, cartesian, dwell };
-const char* to_string(MotionKind k);
-
-/// One queued motion. Joint moves are planned on the RT thread when they start
-/// (plan_movej from the actual state: ~us, bounded, heap-free); Cartesian moves
-/// come planned (path checked) by the console thread from the queue's end pose.
-struct MotionItem {
-  MotionKind kind = MotionKind::joint;
-  std::uint32_t id = 0;
-  kin::JointVector goal;          ///< joint: target; cartesian: joint values at the end
-  double override = 1.0;          ///< joint: speed override 0.01..1
-  double dwell_s = 0.0;           ///< dwell: seconds
-  kin::JointTrajectory jt;        ///< joint: filled by the RT thread at start
-  kin::CartesianTrajectory ct;    ///< cartesian: planned by the console thread
-};
-
-enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state };
-const char* to_string(EventKind k);
-
-struct Event {
-  EventKind kind = EventKind::state;
-  ArmState state = ArmState::boot;
-  FaultCause cause = FaultCause::none;
-  std::int8_t joint = -1;  ///< joint index (0-based) concerned, -1 = none/all
-  std::uint32_t motion_id = 0;
-  char message[120] = {};
-};
-
-struct Telemetry {
-  ArmState state = ArmState::boot;
-  bool holding = false;           ///< feed hold active (moving state, ramped down or ramping)
-  int n = 0;
-  std::array<double, kin::kMaxJoints> q_cmd{};  ///< last commanded (SI)
-  std::array<double, kin::kMaxJoints> q_act{};  ///< last measured (SI)
-  std::array<std::uint8_t, kin::kMaxJoints> joint_state{};  ///< hal::JointState
-  std::uint32_t queued = 0;        ///< motions in the queue (including the running one)
-  std::uint32_t running_id = 0;    ///< id of the running motion (0 = none)
-  std::uint32_t done_id = 0;       ///< id of the last motion finished
-  FaultCause cause = FaultCause::none;
-  std::int8_t fault_joint = -1;
-  char fault_text[120] = {};
-  std::uint64_t cycles = 0;
-  std::uint64_t overruns = 0;
-  std::uint64_t generation = 0;    ///< bumps whenever the queue is flushed or the setpoint is re-taken from the drives
-  StatSummary latency, compute;
-  double max_following_error = 0;  ///< rad/m, since the last reset
-  std::int64_t estop_latency_ns = -1;  ///< request seen -> quick stop first setpoint written
-};
-
-/// Seqlock: one writer (RT thread), any number of readers that retry.
-template <typename T>
-class Seqlock {
- public:
-  void write(const T& v) {
-    const std::uint32_t s = seq_.load(std::memory_order_relaxed);
-    seq_.store(s + 1, std::memory_order_relaxed);
-    std::atomic_thread_fence(std::memory_order_release);
-    std::memcpy(static_cast<void*>(&data_), &v, sizeof(T));
-    std::atomic_thread_fence(std::memory_order_release);
-    seq_.store(s + 2, std::memory_order_release);
-  }
-  T read() const {
-    T out;
-    for (;;) {
-      const std::uint32_t s0 = seq_.load(std::memory_order_acquire);
-      if (s0 & 1u) continue;
-      std::memcpy(static_cast<void*>(&out), &data_, sizeof(T));
-      std::atomic_thread_fence(std::memory_order_acquire);
-      if (seq_.load(std::memory_order_relaxed) == s0) return out;
-    }
-  }
-
- private:
-  std::atomic<std::uint32_t> seq_{0};
-  T data_{};
-};
 
 struct ControllerConfig {
   double rate_hz = 1000.0;
@@ -223,25 +91,49 @@ class Controller {
   /// Events dropped because the event queue was full (counted, never silent).
   std::uint64_t events_dropped() const { return events_dropped_.load(std::memory_order_relaxed); }
 
+ /// Real-time / tests: the mode right now (the RT thread's view; others read Telemetry::mode).
+  Mode mode() const { return mode_; }
+
  private:
   void handle_request(const Request& r, TimePoint now);
+  void run(Action a, const Request& r, TimePoint now);
   void reply(std::uint32_t seq, RtResult res, const char* msg);
   void emit(EventKind k, FaultCause c, int joint, std::uint32_t id, const char* msg);
-  void set_state(ArmState s);
+  void set_mode(Mode m);
   void supervise(TimePoint now);
   void raise_fault(FaultCause c, int joint, const char* detail);
-  void begin_quick_stop();
-  void begin_emergency_stop();      ///< e-stop / fault reaction: ramp or drive quick stop (cfg_)
+  /// Start the controller's ramp to rest from the commanded state and enter `ramp` (a
+  /// ramping mode); when no ramp can be planned (never seen) the arm is at rest at once.
+  void begin_ramp(Mode ramp);
+  /// The ramp of mode `ramp` is over: cmd at rest, enter where that ramp leads.
+  void end_of_ramp(Mode ramp);
+  /// Fault / e-stop reaction of a powered arm: the drives' quick stop (cfg_.drive_quick_stop)
+  /// or the controller's ramp.
+  void begin_emergency_stop(Mode ramp, Mode quick_stop);
+  /// Power the drives down and enter `m` (disabled, fault, estop).
+  void power_down(Mode m);
+  void step_ramp();
   void step_drive_stop();
+  void follow_measured();
   bool start_next_motion();
   void step_motion();
   void finish_motion(bool refused, RtResult why);
   void validate_and_write(TimePoint now);
   void publish();
   void hold_measured();
-  /// Drop every queued motion (the running one included), forget a feed hold, bump the
-  /// generation. Returns how many were queued.
+  /// Drop every queued motion (the running one included), bump the generation.
+  /// Returns how many were queued. The only flush.
   std::size_t flush_motions();
+
+  // Actions of the request table (mode_table.hpp), one per Action value.
+  void power_up(const Request& r);
+  void disable_now(const Request& r);
+  void set_zero(const Request& r);
+  std::size_t begin_estop(TimePoint now);  ///< flush, note the time; returns how many were dropped
+  void estop_done(const Request& r, std::size_t dropped);
+  void reset_latched(const Request& r);
+  void hold_motion(const Request& r);
+  void resume_motion(const Request& r);
 
   hal::ServoBus& bus_;
   const kin::Chain& chain_;
@@ -257,21 +149,18 @@ class Controller {
   Seqlock<Telemetry> telemetry_;
   std::atomic<std::uint64_t> events_dropped_{0};
 
-  ArmState state_ = ArmState::boot;
+  Mode mode_ = Mode::boot;          ///< the arm's state: nothing beside it
   TimePoint now_ = 0;
-  TimePoint state_since_ = 0;
+  TimePoint mode_since_ = 0;
   kin::JointState cmd_;             ///< commanded state (pos/vel/acc), SI
   kin::JointVector q_act_;
   kin::JointVector q_prev_;         ///< last setpoint written
   bool have_prev_ = false;
-  kin::JointTrajectory stop_traj_;  ///< quick stop / stop / joint feed hold
-  bool stop_active_ = false;
-  bool drive_stop_ = false;         ///< the stop in progress is the drives' CiA 402 quick stop
-  double stop_t_ = 0;
-  MotionItem* running_ = nullptr;   ///< front of motions_ while executing
+  kin::JointTrajectory stop_traj_;  ///< data of the ramping modes (ramping(mode_))
+  double stop_t_ = 0;               ///< time into stop_traj_, or into the drives' quick stop
+  MotionItem* running_ = nullptr;   ///< front of motions_ while executing (moving, hold_*, held)
   double motion_t_ = 0;
-  bool holding_ = false;            ///< feed hold requested (moving state)
-  bool disable_after_stop_ = false;
+  std::uint64_t ik_fallbacks_ = 0;
   std::uint32_t done_id_ = 0;
   std::uint64_t generation_ = 0;
   FaultCause cause_ = FaultCause::none;

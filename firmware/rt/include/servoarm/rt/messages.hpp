@@ -1,0 +1,108 @@
+#pragma once
+// What the controller and the console threads exchange: requests and replies,
+// queued motions, events and the telemetry snapshot (controller.hpp has the queues).
+#include <array>
+#include <cstdint>
+
+#include "servoarm/rt/mode_table.hpp"
+#include "servoarm/rt/stats.hpp"
+#include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/trajectory.hpp"
+#include "servoarm/kinematics/trajectory_cartesian.hpp"
+
+namespace servoarm::fw {
+
+/// Why the supervisor faulted (one per cause; the joint is reported alongside).
+enum class FaultCause : std::uint8_t {
+  none,
+  heartbeat_lost,     ///< no heartbeat within the consumer time
+  drive_fault,        ///< drive reports fault (EMCY or statusword)
+  drive_refused,      ///< drive did not reach operation enabled in time
+  left_enabled,       ///< drive left operation enabled on its own
+  emcy,               ///< EMCY frame received
+  bus_off,            ///< CAN controller bus-off / bus write failed
+  bus_error,          ///< other bus/servo error
+  following_error,    ///< |commanded - actual| above the limit
+  setpoint_nan,       ///< motion produced a non-finite setpoint
+  setpoint_position,  ///< setpoint outside the joint position limits
+  setpoint_velocity,  ///< setpoint step faster than the joint velocity limit
+  feedback_invalid,   ///< no (or stale) position feedback from an enabled joint
+};
+const char* to_string(FaultCause c);
+
+/// Result codes of requests and motions as seen by the console.
+enum class RtResult : std::uint8_t {
+  ok,
+  bad_state,   ///< not allowed in the current state (message says which)
+  fault,       ///< refused: arm in fault / e-stop (needs reset)
+  busy,        ///< queue full
+  start_moved, ///< a planned Cartesian move no longer starts where the arm is
+  plan_failed, ///< the RT-side plan of a joint move failed
+};
+const char* to_string(RtResult r);
+
+struct Request {
+  RequestOp op = RequestOp::stop;
+  std::uint32_t seq = 0;
+};
+
+struct Reply {
+  std::uint32_t seq = 0;
+  RtResult result = RtResult::ok;
+  char message[160] = {};
+};
+
+enum class MotionKind : std::uint8_t { joint, cartesian, dwell };
+const char* to_string(MotionKind k);
+
+/// One queued motion. Joint moves are planned on the RT thread when they start
+/// (plan_movej from the actual state: ~us, bounded, heap-free); Cartesian moves
+/// come planned (path checked) by the console thread from the queue's end pose.
+struct MotionItem {
+  MotionKind kind = MotionKind::joint;
+  std::uint32_t id = 0;
+  kin::JointVector goal;          ///< joint: target; cartesian: joint values at the end
+  double override = 1.0;          ///< joint: speed override 0.01..1
+  double dwell_s = 0.0;           ///< dwell: seconds
+  kin::JointTrajectory jt;        ///< joint: filled by the RT thread at start
+  kin::CartesianTrajectory ct;    ///< cartesian: planned by the console thread
+};
+
+enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state };
+const char* to_string(EventKind k);
+
+struct Event {
+  EventKind kind = EventKind::state;
+  ArmState state = ArmState::boot;
+  FaultCause cause = FaultCause::none;
+  std::int8_t joint = -1;  ///< joint index (0-based) concerned, -1 = none/all
+  std::uint32_t motion_id = 0;
+  char message[120] = {};
+};
+
+struct Telemetry {
+  ArmState state = ArmState::boot;
+  bool holding = false;           ///< feed hold active (moving state, ramped down or ramping)
+  Mode mode = Mode::boot;         ///< the controller's mode (detail of `state`: state == arm_state(mode))
+  int n = 0;
+  std::array<double, kin::kMaxJoints> q_cmd{};  ///< last commanded (SI)
+  std::array<double, kin::kMaxJoints> q_act{};  ///< last measured (SI)
+  std::array<std::uint8_t, kin::kMaxJoints> joint_state{};  ///< hal::JointState
+  std::uint32_t queued = 0;        ///< motions in the queue (including the running one)
+  std::uint32_t running_id = 0;    ///< id of the running motion (0 = none)
+  std::uint32_t done_id = 0;       ///< id of the last motion finished
+  FaultCause cause = FaultCause::none;
+  std::int8_t fault_joint = -1;
+  char fault_text[120] = {};
+  std::uint64_t cycles = 0;
+  std::uint64_t overruns = 0;
+  std::uint64_t generation = 0;    ///< bumps whenever the queue is flushed or the setpoint is re-taken from the drives
+  StatSummary latency, compute;
+  double max_following_error = 0;  ///< rad/m, since the last reset
+  std::int64_t estop_latency_ns = -1;  ///< request seen -> quick stop first setpoint written
+  /// Cartesian samples whose IK at the exact pose failed: the cycle kept the precomputed
+  /// (path-checked) joint value there instead; counted since boot, never reset.
+  std::uint64_t ik_fallbacks = 0;
+};
+
+}  // namespace servoarm::fw

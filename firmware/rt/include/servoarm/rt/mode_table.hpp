@@ -1,0 +1,222 @@
+#pragma once
+// The controller's mode (the one state value of the arm) and its request table.
+//
+// Mode says everything the controller needs to know about where the arm is: no flag
+// sits beside it. The running motion and the stop trajectory are data the mode
+// refers to, not state. Console-facing code sees the coarse ArmState (arm_state())
+// plus Telemetry::holding (holding()); tests and diagnostics read the mode itself
+// (Telemetry::mode).
+//
+// Every request (RequestOp) in every mode is decided by one entry of kRequestTable:
+// (mode x request) -> Action. The controller looks the action up and runs it; an
+// action may still refuse on data (a queue that is empty, feedback that is stale).
+#include <array>
+#include <cstddef>
+#include <cstdint>
+
+namespace servoarm::fw {
+
+/// Arm state as the console sees it (coarse; derived from Mode by arm_state()).
+enum class ArmState : std::uint8_t {
+  boot,      ///< drives not started yet
+  disabled,  ///< drives up, powered down; `enable` powers them
+  enabling,  ///< drives walking to operation enabled
+  idle,      ///< enabled, holding position, motion queue empty
+  moving,    ///< executing the motion queue (also while a feed hold ramps down / is held)
+  stopping,  ///< `stop` or `disable`: ramping down; then idle (or disabled)
+  fault,     ///< supervisor fault: quick stop, then drives disabled; needs `reset` + `enable`
+  estop,     ///< emergency stop: quick stop, then drives disabled; needs `reset` + `enable`
+};
+const char* to_string(ArmState s);
+
+/// set_zero: `home zero`, the current joint positions become joint zero (ServoBus::set_position_zero);
+/// only in the disabled state, and only when 0 lies within every joint's limits.
+enum class RequestOp : std::uint8_t { enable, disable, stop, estop, reset, hold, resume, set_zero };
+const char* to_string(RequestOp op);
+inline constexpr std::size_t kRequestOps = 8;
+
+/// The controller's mode. "ramp" = the controller ramps every joint to rest along its
+/// stop trajectory (drives powered, following the setpoints); "quick stop" = the drives
+/// stop on their own CiA 402 quick-stop ramp while the controller follows their
+/// measured positions (ControllerConfig::drive_quick_stop).
+enum class Mode : std::uint8_t {
+  boot,              ///< drives not started
+  disabled,          ///< drives up, powered down
+  enabling,          ///< drives walking to operation enabled
+  idle,              ///< powered, at rest, no motion running
+  moving,            ///< running the motion queue
+  hold_ramp,         ///< feed hold of a joint move: ramping to rest (motion kept)
+  hold_line,         ///< feed hold of a Cartesian move: slowing to rest on the line (motion kept)
+  held,              ///< feed hold at rest, motion kept (or a held queue not started yet)
+  stopping_to_idle,  ///< `stop`: ramping to rest, then idle
+  stopping_to_disabled,  ///< `disable` while moving: ramping to rest, then drives disabled
+  fault_ramp,        ///< fault reaction: ramping to rest, then drives disabled
+  fault_quick_stop,  ///< fault reaction: drives' quick stop, then drives disabled
+  fault,             ///< fault latched, drives disabled; needs reset
+  estop_ramp,        ///< emergency stop: ramping to rest, then drives disabled
+  estop_quick_stop,  ///< emergency stop: drives' quick stop, then drives disabled
+  estop,             ///< emergency stop latched, drives disabled; needs reset
+};
+inline constexpr std::size_t kModes = 16;
+const char* to_string(Mode m);
+
+/// The one function from mode to what the console sees.
+constexpr ArmState arm_state(Mode m) {
+  switch (m) {
+    case Mode::boot: return ArmState::boot;
+    case Mode::disabled: return ArmState::disabled;
+    case Mode::enabling: return ArmState::enabling;
+    case Mode::idle: return ArmState::idle;
+    case Mode::moving:
+    case Mode::hold_ramp:
+    case Mode::hold_line:
+    case Mode::held: return ArmState::moving;
+    case Mode::stopping_to_idle:
+    case Mode::stopping_to_disabled: return ArmState::stopping;
+    case Mode::fault_ramp:
+    case Mode::fault_quick_stop:
+    case Mode::fault: return ArmState::fault;
+    case Mode::estop_ramp:
+    case Mode::estop_quick_stop:
+    case Mode::estop: return ArmState::estop;
+  }
+  return ArmState::fault;
+}
+
+/// Feed hold active (Telemetry::holding).
+constexpr bool holding(Mode m) { return m == Mode::hold_ramp || m == Mode::hold_line || m == Mode::held; }
+
+/// The drives are powered and follow the controller's setpoints (which are then
+/// validated: finite, within the limits, not too fast). Not while enabling, nor during a
+/// drive-side quick stop (the controller only follows the drives then).
+constexpr bool powered(Mode m) {
+  switch (m) {
+    case Mode::idle:
+    case Mode::moving:
+    case Mode::hold_ramp:
+    case Mode::hold_line:
+    case Mode::held:
+    case Mode::stopping_to_idle:
+    case Mode::stopping_to_disabled:
+    case Mode::fault_ramp:
+    case Mode::estop_ramp: return true;
+    case Mode::boot:
+    case Mode::disabled:
+    case Mode::enabling:
+    case Mode::fault_quick_stop:
+    case Mode::fault:
+    case Mode::estop_quick_stop:
+    case Mode::estop: return false;
+  }
+  return false;
+}
+
+/// The controller samples its stop trajectory (a ramp to rest is running).
+constexpr bool ramping(Mode m) {
+  return m == Mode::hold_ramp || m == Mode::stopping_to_idle || m == Mode::stopping_to_disabled ||
+         m == Mode::fault_ramp || m == Mode::estop_ramp;
+}
+
+/// What a request does in a mode. Named after what happens; the controller runs one per request.
+enum class Action : std::uint8_t {
+  // enable
+  power_up,               ///< disabled -> enabling (refused as a fault on stale feedback)
+  already_enabled,        ///< ok "already enabled"
+  refuse_stopping,        ///< bad_state "stopping; retry"
+  refuse_not_started,     ///< bad_state "drives not started"
+  refuse_send_reset,      ///< fault "in <state>: send reset first"
+  // disable
+  disable_now,            ///< drop the queue, power down -> disabled
+  disable_drives,         ///< drop the queue, power down, mode unchanged (boot / fault / estop)
+  ramp_then_disable,      ///< drop the queue, start a ramp -> stopping_to_disabled
+  keep_ramp_then_disable, ///< drop the queue, the running ramp goes on -> stopping_to_disabled
+  // stop
+  ramp_to_idle,           ///< drop the queue, start a ramp -> stopping_to_idle
+  keep_ramp_to_idle,      ///< drop the queue, the running (hold) ramp goes on -> stopping_to_idle
+  drop_queue,             ///< drop what is queued, nothing else moves ("not moving" / "stopping")
+  // estop
+  estop_stop,             ///< powered, no stop running: ramp or drive quick stop -> estop_ramp / estop_quick_stop
+  estop_keep_ramp,        ///< a ramp is running: it goes on (drive quick stop instead when configured)
+  estop_keep_quick_stop,  ///< the drives' quick stop goes on -> estop_quick_stop
+  estop_at_rest,          ///< not powered: power down -> estop
+  estop_again,            ///< already in e-stop: ok "estop"
+  // reset
+  reset_latched,          ///< fault / estop at rest -> disabled
+  refuse_still_stopping,  ///< bad_state "still stopping; retry when the arm is at rest"
+  nothing_to_reset,       ///< ok "nothing to reset"
+  // hold
+  hold_motion,            ///< moving -> hold_ramp / hold_line / held
+  hold_queue,             ///< idle with a queue -> held (else "not moving")
+  already_holding,        ///< ok "already holding"
+  not_moving,             ///< ok "not moving"
+  // resume
+  resume_motion,          ///< held / hold_line -> moving
+  refuse_still_ramping,   ///< bad_state "still ramping down; retry"
+  not_holding,            ///< ok "not holding"
+  // set_zero
+  set_zero,               ///< disabled: joint zero = current position (all joints or none)
+  refuse_set_zero,        ///< bad_state "home zero needs the arm disabled (it is <state>)"
+};
+inline constexpr std::size_t kActions = 29;
+const char* to_string(Action a);
+
+using RequestRow = std::array<Action, kRequestOps>;  ///< indexed by RequestOp
+
+/// (mode x request) -> action. Rows in Mode order, columns in RequestOp order:
+///   enable, disable, stop, estop, reset, hold, resume, set_zero.
+inline constexpr std::array<RequestRow, kModes> kRequestTable = {{
+    // boot
+    {Action::refuse_not_started, Action::disable_drives, Action::drop_queue, Action::estop_at_rest,
+     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+    // disabled
+    {Action::power_up, Action::disable_now, Action::drop_queue, Action::estop_at_rest, Action::nothing_to_reset,
+     Action::not_moving, Action::not_holding, Action::set_zero},
+    // enabling
+    {Action::already_enabled, Action::disable_now, Action::drop_queue, Action::estop_at_rest, Action::nothing_to_reset,
+     Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+    // idle
+    {Action::already_enabled, Action::disable_now, Action::drop_queue, Action::estop_stop, Action::nothing_to_reset,
+     Action::hold_queue, Action::not_holding, Action::refuse_set_zero},
+    // moving
+    {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
+     Action::nothing_to_reset, Action::hold_motion, Action::not_holding, Action::refuse_set_zero},
+    // hold_ramp
+    {Action::already_enabled, Action::keep_ramp_then_disable, Action::keep_ramp_to_idle, Action::estop_keep_ramp,
+     Action::nothing_to_reset, Action::already_holding, Action::refuse_still_ramping, Action::refuse_set_zero},
+    // hold_line
+    {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
+     Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero},
+    // held
+    {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
+     Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero},
+    // stopping_to_idle
+    {Action::refuse_stopping, Action::keep_ramp_then_disable, Action::drop_queue, Action::estop_keep_ramp,
+     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+    // stopping_to_disabled
+    {Action::refuse_stopping, Action::keep_ramp_then_disable, Action::drop_queue, Action::estop_keep_ramp,
+     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+    // fault_ramp
+    {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_keep_ramp,
+     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+    // fault_quick_stop
+    {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_keep_quick_stop,
+     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+    // fault
+    {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_at_rest,
+     Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+    // estop_ramp
+    {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
+     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+    // estop_quick_stop
+    {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
+     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+    // estop
+    {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
+     Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+}};
+
+constexpr Action action_for(Mode m, RequestOp op) {
+  return kRequestTable[static_cast<std::size_t>(m)][static_cast<std::size_t>(op)];
+}
+
+}  // namespace servoarm::fw
