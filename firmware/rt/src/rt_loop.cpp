@@ -11,20 +11,6 @@
 namespace servoarm::fw {
 
 namespace {
-std::int64_t now_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
-}
-
-void sleep_until_ns(std::int64_t t) {
-  timespec ts{};
-  ts.tv_sec = t / 1000000000LL;
-  ts.tv_nsec = t % 1000000000LL;
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
-}
-
 // Touch the stack the loop will use so no page fault happens in a cycle.
 __attribute__((noinline)) void prefault_stack() {
   constexpr std::size_t kBytes = 256 * 1024;
@@ -48,18 +34,27 @@ bool RtLoop::start() {
     warnings_ += std::string("warning: mlockall failed (") + std::strerror(errno) + "): memory may be paged\n";
   stop_ = false;
   ready_ = false;
-  try {
-    th_ = std::thread([this] { thread_main(); });
-  } catch (...) {
+  const int e = pthread_create(&th_, nullptr, &RtLoop::entry, this);
+  if (e != 0) {
+    warnings_ += std::string("error: cannot create the real-time thread (") + std::strerror(e) + ")\n";
     return false;
   }
-  while (!ready_.load()) std::this_thread::yield();
+  joinable_ = true;
+  while (!ready_.load()) sched_yield();
   return true;
 }
 
 void RtLoop::stop() {
   stop_ = true;
-  if (th_.joinable()) th_.join();
+  if (joinable_) {
+    pthread_join(th_, nullptr);
+    joinable_ = false;
+  }
+}
+
+void* RtLoop::entry(void* self) {
+  static_cast<RtLoop*>(self)->thread_main();
+  return nullptr;
 }
 
 void RtLoop::thread_main() {
@@ -88,13 +83,13 @@ void RtLoop::thread_main() {
   ready_ = true;
 
   const std::int64_t period = static_cast<std::int64_t>(1e9 / cfg_.rate_hz + 0.5);
-  std::int64_t next = now_ns() + period;
+  std::int64_t next = clock_.now() + period;
   while (!stop_.load(std::memory_order_relaxed)) {
-    sleep_until_ns(next);
-    const std::int64_t woke = now_ns();
+    clock_.sleep_until(next);
+    const std::int64_t woke = clock_.now();
     if (pre_cycle_ != nullptr) pre_cycle_(pre_cycle_ctx_, woke);
     ctl_.cycle(woke);
-    const std::int64_t end = now_ns();
+    const std::int64_t end = clock_.now();
     next += period;
     std::uint32_t missed = 0;  // deadlines that passed during this cycle: skipped, each counted
     while (end > next) {

@@ -5,17 +5,22 @@
 // before the first cycle): mlockall(MCL_CURRENT | MCL_FUTURE), SCHED_FIFO at
 // the configured priority when permitted (else one warning line and normal
 // scheduling), optional CPU affinity, a prefaulted stack.
-// Per cycle: clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME) to the absolute
-// deadline, wake-up latency = wake time - deadline, Controller::cycle(), compute
+// Per cycle: hal::Clock::sleep_until() to the absolute deadline (the default
+// hal::MonotonicClock: clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)), wake-up
+// latency = wake time - deadline, Controller::cycle(), compute
 // time, overrun when the cycle ends after the next deadline (missed periods are
 // skipped, counted once each, never silently absorbed).
+// The thread is created with pthread_create (firmware/rt is built without exceptions:
+// std::thread reports failure by throwing).
+#include <pthread.h>
+
 #include <atomic>
 #include <cstdint>
 #include <functional>
 #include <string>
-#include <thread>
 
 #include "servoarm/rt/controller.hpp"
+#include "servoarm/hal/clock.hpp"
 
 namespace servoarm::fw {
 
@@ -31,7 +36,13 @@ std::string validate(const LoopConfig& c);
 
 class RtLoop {
  public:
-  RtLoop(Controller& ctl, const LoopConfig& cfg) : ctl_(ctl), cfg_(cfg) {}
+  /// Time from CLOCK_MONOTONIC (hal::MonotonicClock).
+  RtLoop(Controller& ctl, const LoopConfig& cfg) : ctl_(ctl), cfg_(cfg), clock_(mono_) {}
+  /// Time from `clock` (must outlive the loop, and be usable from the RT thread alone:
+  /// nothing else may advance a ManualClock while the loop runs on it).
+  RtLoop(Controller& ctl, const LoopConfig& cfg, hal::Clock& clock) : ctl_(ctl), cfg_(cfg), clock_(clock) {}
+  RtLoop(const RtLoop&) = delete;
+  RtLoop& operator=(const RtLoop&) = delete;
   ~RtLoop() { stop(); }
 
   /// Hooks run on the RT thread: before the first cycle and after the last
@@ -51,7 +62,7 @@ class RtLoop {
 
   /// Start the thread. Warnings (no RT priority, mlockall failed, affinity
   /// failed) are collected in warnings() -- one line each. False if the thread
-  /// could not be created.
+  /// could not be created (warnings() says why).
   bool start();
   /// Ask the loop to stop and join it (idempotent).
   void stop();
@@ -62,11 +73,15 @@ class RtLoop {
   std::uint64_t cycles() const { return cycles_.load(std::memory_order_relaxed); }
 
  private:
+  static void* entry(void* self);
   void thread_main();
 
   Controller& ctl_;
   LoopConfig cfg_;
-  std::thread th_;
+  hal::MonotonicClock mono_;
+  hal::Clock& clock_;
+  pthread_t th_{};
+  bool joinable_ = false;
   std::atomic<bool> stop_{false}, running_{false}, ready_{false};
   std::atomic<std::uint64_t> cycles_{0};
   std::string warnings_;
