@@ -5,14 +5,9 @@
 #include <cstring>
 #include <initializer_list>
 
-namespace servoarm::hal {
+#include "servoarm/hal/time.hpp"  // TimePoint (rx_time)
 
-/// Nanoseconds on CLOCK_MONOTONIC (the same scale as Clock::now()).
-using TimePoint = std::int64_t;
-using Duration = std::int64_t;  ///< nanoseconds
-inline constexpr Duration kMicrosecond = 1000;
-inline constexpr Duration kMillisecond = 1000 * kMicrosecond;
-inline constexpr Duration kSecond = 1000 * kMillisecond;
+namespace servoarm::hal {
 
 struct CanFrame {
   static constexpr std::uint8_t kMaxClassicLen = 8;

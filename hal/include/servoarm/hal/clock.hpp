@@ -3,7 +3,7 @@
 // All times are absolute CLOCK_MONOTONIC nanoseconds (TimePoint).
 #include <functional>
 
-#include "servoarm/hal/can_frame.hpp"
+#include "servoarm/hal/time.hpp"
 
 namespace servoarm::hal {
 
