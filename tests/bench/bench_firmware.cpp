@@ -13,7 +13,7 @@
 #include <chrono>
 #include <string>
 
-#include "servoarm/app/app.hpp"
+#include "sim_app.hpp"
 
 namespace {
 
@@ -21,7 +21,7 @@ using namespace servoarm;
 
 struct FwRig {
   hal::ManualClock clock;
-  fw::App app;
+  test::SimApp app;
   fw::Session s;
   bool ok = false;
 

@@ -19,7 +19,7 @@
 #include <thread>
 #include <vector>
 
-#include "servoarm/app/app.hpp"
+#include "sim_app.hpp"
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/console/transport.hpp"
 
@@ -32,7 +32,7 @@ using namespace servoarm::fw;
 namespace {
 
 struct CanRig {
-  App app;
+  test::SimApp app;
   std::unique_ptr<RtLoop> loop;
   CanConsole can;
   FdTransport ct;

@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "alloc_counter.hpp"
-#include "servoarm/app/app.hpp"
+#include "sim_app.hpp"
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/console/transport.hpp"
 #include "servoarm/hal/can_frame.hpp"
@@ -32,7 +32,7 @@ constexpr double kDeg = M_PI / 180.0;
 
 struct Rig {
   hal::ManualClock clock;
-  App app;
+  test::SimApp app;
   Session s;
   hal::Duration period = hal::kMillisecond;
   std::size_t rt_allocs = 0;
@@ -733,7 +733,7 @@ TEST(Controller, DriveTablesSetNodesScalingAndNarrowLimits) {
       if (std::string(b.what) == "max_velocity") d.max_velocity = 1e6;
     }
     hal::ManualClock clock;
-    App app;
+    test::SimApp app;
     const std::string e = app.build(c, &clock);
     CHECK_TEXT(e.find(b.must_contain) != std::string::npos, (std::string(b.must_contain) + " <- " + e).c_str());
   }
@@ -1072,6 +1072,8 @@ TEST(Controller, MovesThatWouldNeverEndAreRefused) {
   cfg.max_move_duration_s = 5;
   Rig r({}, cfg);
   r.enable();
+  CHECK(is_ok(r.cmd("movej 20 -40 160 10 -50 30 speed=100")));  // a working pose (the zero pose is singular)
+  CHECK(is_ok(r.cmd("wait")));
   const char* bad[] = {"movel 600 380 150 speed=0.000000001", "G1 X600 F0.00001", "movej 150 0 0 0 0 0 speed=10",
                        "movej 150 0 0 0 0 0 speed=1", "movej 150 0 0 0 0 0 speed=0.5"};
   for (const char* l : bad) {
@@ -1079,8 +1081,6 @@ TEST(Controller, MovesThatWouldNeverEndAreRefused) {
     CHECK_TEXT(a.rfind("error: out_of_range", 0) == 0, (std::string(l) + ": " + a).c_str());
   }
   // A straight line at the slowest accepted speed that would take hours.
-  CHECK(is_ok(r.cmd("movej 20 -40 160 10 -50 30 speed=100")));
-  CHECK(is_ok(r.cmd("wait")));
   kin::Pose p0;
   kin::forward(r.app.chain, r.q_cmd(), p0);
   char line[128];
@@ -1112,7 +1112,7 @@ TEST(Controller, OverlongLastLineAtEndOfInputIsAnswered) {
 TEST_GROUP(RtThread){};
 
 TEST(RtThread, RealLoopRunsMovesWithoutAllocatingOnTheControlThread) {
-  App app;
+  test::SimApp app;
   FwConfig cfg;
   cfg.can = "sim";
   cfg.priority = 0;  // tests run without RT privileges everywhere
@@ -1194,7 +1194,7 @@ TEST(RtThread, StalledPtyClientDelaysNeitherAnEstopNorOtherClients) {
   // Client A on a pty floods `limits` and never reads its answers; client B (a pipe
   // pair, like stdin/stdout) moves joint 1 and sends Ctrl-X. The e-stop must act at
   // once; A loses only its own output, counted and told.
-  App app;
+  test::SimApp app;
   FwConfig cfg;
   cfg.can = "sim";
   cfg.priority = 0;
@@ -1274,13 +1274,13 @@ TEST(RtThread, StalledPtyClientDelaysNeitherAnEstopNorOtherClients) {
 
 namespace {
 struct StallingPlant {
-  SimPlant* plant = nullptr;
+  sim::SimPlant* plant = nullptr;
   std::atomic<int> stall_ms{0};
   static void hook(void* ctx, std::int64_t now) {
     auto* self = static_cast<StallingPlant*>(ctx);
     const int ms = self->stall_ms.exchange(0);
     if (ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(ms));
-    SimPlant::step_hook(self->plant, ms > 0 ? now + ms * 1000000LL : now);
+    sim::SimPlant::step_hook(self->plant, ms > 0 ? now + ms * 1000000LL : now);
   }
 };
 }  // namespace
@@ -1290,7 +1290,7 @@ TEST(RtThread, SimDrivesSteppedOnTheControlThreadRideThroughAStall) {
   // control thread held off the CPU (a busy desktop) stalls the drives with it:
   // with the default 50 ms feedback and 150 ms heartbeat timeouts, a 300 ms stall
   // in the middle of a move faults nothing.
-  App app;
+  test::SimApp app;
   FwConfig cfg;
   cfg.can = "sim";
   cfg.priority = 0;

@@ -7,66 +7,6 @@
 
 namespace servoarm::fw {
 
-SimPlant::SimPlant(hal::Clock& clock, const std::vector<std::uint8_t>& nodes, const sim::MotorParams& motor) : clock_(clock) {
-  bus_ = std::make_unique<hal::SimBus>(clock, 50 * hal::kMicrosecond);
-  master_ep_ = bus_->open(4096);
-  sim_ep_ = bus_->open(4096);
-  arm_ = std::make_unique<sim::ArmSim>(*sim_ep_, nodes, motor, 7);
-  arm_->power_on(clock.now());
-}
-
-SimPlant::~SimPlant() {
-  stop_thread();
-  arm_.reset();
-  sim_ep_.reset();
-  master_ep_.reset();
-}
-
-void SimPlant::apply_injections(hal::TimePoint now) {
-  const int s = silent_.exchange(-1);
-  if (s >= 0 && static_cast<std::size_t>(s) < arm_->size()) arm_->at(static_cast<std::size_t>(s)).faults().silent = true;
-  const int h = hb_stop_.exchange(-1);
-  if (h >= 0 && static_cast<std::size_t>(h) < arm_->size()) arm_->at(static_cast<std::size_t>(h)).faults().heartbeat_stopped = true;
-  const int e = emcy_joint_.exchange(-1);
-  if (e >= 0 && static_cast<std::size_t>(e) < arm_->size())
-    arm_->at(static_cast<std::size_t>(e)).inject_emcy(emcy_code_.load(), now, *sim_ep_);
-}
-
-void SimPlant::step(hal::TimePoint now) {
-  apply_injections(now);
-  arm_->step(now);
-}
-
-void SimPlant::inject_silent(int joint) { silent_ = joint; }
-void SimPlant::inject_heartbeat_stop(int joint) { hb_stop_ = joint; }
-void SimPlant::inject_emcy(int joint, std::uint16_t code) {
-  emcy_code_ = code;
-  emcy_joint_ = joint;
-}
-
-void SimPlant::start_thread() {
-  if (th_.joinable()) return;
-  stop_ = false;
-  th_ = std::thread([this] {
-    while (!stop_.load(std::memory_order_relaxed)) {
-      hal::CanFrame f;
-      const hal::TimePoint now = clock_.now();
-      apply_injections(now);
-      // Wait up to 100 us for a frame, then hand everything pending to the drives.
-      if (sim_ep_->receive(f, now + 100 * hal::kMicrosecond) == hal::Status::ok) {
-        arm_->handle(f, clock_.now());
-        for (int i = 0; i < 4096 && sim_ep_->receive(f, 0) == hal::Status::ok; ++i) arm_->handle(f, clock_.now());
-      }
-      arm_->tick(clock_.now());
-    }
-  });
-}
-
-void SimPlant::stop_thread() {
-  stop_ = true;
-  if (th_.joinable()) th_.join();
-}
-
 ControllerConfig App::controller_config() const {
   ControllerConfig c;
   c.rate_hz = cfg.rate_hz;
@@ -96,7 +36,7 @@ ConsoleConfig App::console_config() const {
   return c;
 }
 
-std::string App::build(const FwConfig& c, hal::Clock* clock_override) {
+std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimFactory& sim) {
   cfg = c;
   const std::string bad = validate(cfg);
   if (!bad.empty()) return "config: " + bad;
@@ -146,10 +86,11 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override) {
                std::to_string(k + 1) + "'s too";
     nodes.push_back(static_cast<std::uint8_t>(id));
   }
-  hal::CanBus* canbus = nullptr;
+  canbus = nullptr;
   if (cfg.can == "sim") {
-    plant = std::make_unique<SimPlant>(*clock, nodes, sim_motor);
-    canbus = &plant->master_bus();
+    if (sim) canbus = sim(*clock, nodes);
+    if (canbus == nullptr)
+      return "bus.can: \"sim\" needs virtual drives (armfw --sim; this armfw was built without host_sim, or none were given)";
   } else {
     socketcan = std::make_unique<hal::SocketCanBus>();
     const hal::Status st = socketcan->open(cfg.can.c_str());
@@ -186,13 +127,14 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override) {
   }
   servo = std::make_unique<hal::CanopenServoBus>(*canbus, *clock, mc);
   if (servo->config_status() != hal::Status::ok) return std::string("bus: ") + hal::to_string(servo->config_status());
+  ik = std::make_unique<kin::IkModel>();
+  ik_ready = kin::ik_prepare(chain, *ik) == kin::Status::ok && ik->method != kin::IkMethod::none;
   ctl = std::make_unique<Controller>(*servo, chain, controller_config());
-  console = std::make_unique<Console>(*ctl, console_config());
+  console = std::make_unique<Console>(*ctl, console_config(), ik_ready ? ik.get() : nullptr);
   return "";
 }
 
 std::string App::boot() {
-  if (plant && !clock->simulated()) plant->start_thread();
   const hal::TimePoint now = clock->now();
   const hal::Status st = ctl->boot(now, now + static_cast<hal::Duration>(cfg.start_timeout_s * 1e9));
   if (st != hal::Status::ok) return std::string("drive bring-up failed: ") + hal::to_string(st) + ": " + servo->last_error();

@@ -20,6 +20,18 @@
 #include <vector>
 
 #include "servoarm/app/app.hpp"
+#ifdef SERVOARM_WITH_SIM
+#include "servoarm/sim/sim_plant.hpp"  // --sim: the only firmware file that uses host_sim
+#else
+#include "servoarm/hal/sim_bus.hpp"
+namespace servoarm::sim {  // built without host_sim (robot-controller build): --sim is refused
+struct SimPlant {
+  void start_thread() {}
+  void stop_thread() {}
+  hal::SimBus& bus() { std::abort(); }
+};
+}  // namespace servoarm::sim
+#endif
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/console/transport.hpp"
 #include "servoarm/kinematics/orientation.hpp"
@@ -314,11 +326,26 @@ int main(int argc, char** argv) {
   if (no_stdin) cfg.console_stdin = false;
 
   App app;
-  std::string err = app.build(cfg);
+  App::SimFactory make_sim;
+#ifdef SERVOARM_WITH_SIM
+  std::unique_ptr<sim::SimPlant> plant;
+  make_sim = [&plant](hal::Clock& clock, const std::vector<std::uint8_t>& nodes) -> hal::CanBus* {
+    plant = std::make_unique<sim::SimPlant>(clock, nodes);
+    return &plant->master_bus();
+  };
+#else
+  sim::SimPlant* const plant = nullptr;
+  if (cfg.can == "sim") {
+    std::fprintf(stderr, "armfw: bus.can = \"sim\" (--sim): this armfw was built without the virtual drives (host_sim)\n");
+    return 2;
+  }
+#endif
+  std::string err = app.build(cfg, nullptr, make_sim);
   if (!err.empty()) {
     std::fprintf(stderr, "armfw: %s\n", err.c_str());
     return 2;
   }
+  if (plant) plant->start_thread();  // the drives answer the bring-up's SDOs from their own thread
   err = app.boot();
   if (!err.empty()) {
     std::fprintf(stderr, "armfw: %s\n", err.c_str());
@@ -330,12 +357,14 @@ int main(int argc, char** argv) {
   lc.cpu = app.cfg.cpu;
   lc.lock_memory = app.cfg.lock_memory;
   RtLoop loop(*app.ctl, lc);
-  if (app.plant) {
+#ifdef SERVOARM_WITH_SIM
+  if (plant) {
     // --sim: the drive thread served the bring-up (SDO); from now on the control thread
     // steps the virtual drives right before each cycle (docs: firmware, "--sim").
-    app.plant->stop_thread();
-    loop.set_pre_cycle(&SimPlant::step_hook, app.plant.get());
+    plant->stop_thread();
+    loop.set_pre_cycle(&sim::SimPlant::step_hook, plant.get());
   }
+#endif
   if (!loop.start()) {
     std::fprintf(stderr, "armfw: cannot start the control thread\n");
     return 1;
@@ -385,7 +414,7 @@ int main(int argc, char** argv) {
         cc.iface = app.cfg.console_can;
         cc.rx_id = static_cast<std::uint32_t>(app.cfg.console_can_rx_id);
         cc.tx_id = static_cast<std::uint32_t>(app.cfg.console_can_tx_id);
-        const std::string e = can.open(cc, app.plant ? &app.plant->bus() : nullptr, ct);
+        const std::string e = can.open(cc, plant ? &plant->bus() : nullptr, ct);
         if (!e.empty()) {
           std::fprintf(stderr, "armfw: can console: %s\n", e.c_str());
           rc = 1;
@@ -412,7 +441,7 @@ int main(int argc, char** argv) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   loop.stop();
-  if (app.plant) app.plant->stop_thread();
+  if (plant) plant->stop_thread();
   if (bench <= 0) std::fprintf(stderr, "armfw: exit: %s\n", app.console->stats_text().c_str());
   return rc;
 }

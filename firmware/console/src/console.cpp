@@ -9,10 +9,7 @@
 
 #include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
-#if __has_include("servoarm/kinematics/ik.hpp")
 #include "servoarm/kinematics/ik.hpp"
-#define SERVOARM_FW_HAVE_IK 1
-#endif
 
 namespace servoarm::fw {
 
@@ -48,23 +45,8 @@ CmdError motion_error(kin::MotionStatus m) {
 }
 }  // namespace
 
-// IK used by movel's path check and the `ik` command: the closed-form/numeric
-// solver of kinematics/ik when it is built, else the damped-Newton fallback.
-struct Console::Ik {
-#ifdef SERVOARM_FW_HAVE_IK
-  kin::IkModel model;
-  bool ready = false;
-#endif
-  kin::IkSolver solver() {
-#ifdef SERVOARM_FW_HAVE_IK
-    if (ready) return kin::IkSolver{&kin::ik_nearest_fn, &model};
-#endif
-    return kin::IkSolver{&kin::ik_nearest_newton, nullptr};
-  }
-};
-
-Console::Console(Controller& ctl, const ConsoleConfig& cfg)
-    : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints) {
+Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* ik)
+    : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints), ik_(ik) {
   if (cfg_.home.size() != n_) {
     cfg_.home = kin::JointVector::Zero(n_);
     const auto& lim = ctl_.limits();
@@ -73,10 +55,13 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg)
   }
   tail_ = kin::JointVector::Zero(n_);
   idle_ = [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); };
-  ik_ = std::make_shared<Ik>();
-#ifdef SERVOARM_FW_HAVE_IK
-  ik_->ready = kin::ik_prepare(chain_, ik_->model) == kin::Status::ok && ik_->model.method != kin::IkMethod::none;
-#endif
+}
+
+// IK of movel's path check and of the control thread's Cartesian sampling: the App's
+// model (closed form or numeric) when the chain has one, else the damped-Newton fallback.
+kin::IkSolver Console::ik_solver() const {
+  if (ik_ != nullptr) return kin::IkSolver{&kin::ik_nearest_fn, const_cast<kin::IkModel*>(ik_)};
+  return kin::IkSolver{&kin::ik_nearest_newton, nullptr};
 }
 
 double Console::to_si(int j, double user) const {
@@ -290,7 +275,7 @@ void Console::queue_linear(Session& s, const kin::Pose& target, double speed) {
   kin::MovelOptions mo;
   kin::PathReport rep;
   const kin::JointVector q0 = tail();
-  const kin::MotionStatus ms = kin::plan_movel(chain_, q0, target, cl, mo, ik_->solver(), m->ct, &rep);
+  const kin::MotionStatus ms = kin::plan_movel(chain_, q0, target, cl, mo, ik_solver(), m->ct, &rep);
   if (!kin::is_ok(ms)) {
     std::string where = fmt("at s=%.2f (x=%.1f y=%.1f z=%.1f mm)", rep.s, rep.position.x() * 1e3, rep.position.y() * 1e3,
                             rep.position.z() * 1e3);
@@ -303,7 +288,7 @@ void Console::queue_linear(Session& s, const kin::Pose& target, double speed) {
   m->id = next_id_++;
   m->goal = m->ct.goal;
   m->override = 1.0;
-  m->ct.ik = ik_->solver();
+  m->ct.ik = ik_solver();
   const double dur = m->ct.duration;
   const double slow = m->ct.slowdown;
   tail_ = m->goal;
@@ -388,18 +373,14 @@ void Console::do_ik(Session& s, const Command& c) {
   kin::JointVector q(n_);
   kin::Status st = kin::Status::unreachable;
   int solutions = -1;
-#ifdef SERVOARM_FW_HAVE_IK
-  if (ik_->ready) {
+  if (ik_ != nullptr) {
     auto res = std::make_unique<kin::IkResult>();
-    kin::ik_solve_all(ik_->model, target, &qc, *res);
+    kin::ik_solve_all(*ik_, target, &qc, *res);
     solutions = res->count;
-    st = kin::ik_solve_nearest(ik_->model, target, qc, q);
+    st = kin::ik_solve_nearest(*ik_, target, qc, q);
   } else {
     st = kin::ik_nearest_newton(chain_, target, qc, q, nullptr);
   }
-#else
-  st = kin::ik_nearest_newton(chain_, target, qc, q, nullptr);
-#endif
   if (!kin::is_ok(st)) {
     answer_error(s, st == kin::Status::out_of_limits ? CmdError::limits : CmdError::unreachable,
                  fmt("no IK solution within the joint limits: %s", kin::to_string(st)));

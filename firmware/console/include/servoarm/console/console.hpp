@@ -24,6 +24,7 @@
 
 #include "servoarm/console/commands.hpp"
 #include "servoarm/rt/controller.hpp"
+#include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 
 namespace servoarm::fw {
@@ -55,7 +56,9 @@ struct Session {
 
 class Console {
  public:
-  Console(Controller& ctl, const ConsoleConfig& cfg);
+  /// `ik`: the IK model of ctl.chain() (owned by the caller, e.g. App, and outliving the
+  /// console); nullptr when the chain has none (the damped-Newton fallback is used).
+  Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* ik = nullptr);
 
   /// Bytes from a transport: realtime characters act now, lines are executed
   /// (or queued while the session waits). Answers go to session.out. = accept() + poll().
@@ -137,8 +140,8 @@ class Console {
   std::uint64_t tail_gen_ = 0; ///< controller generation when tail_ was set
   std::function<void()> idle_;
   std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
-  struct Ik;
-  std::shared_ptr<Ik> ik_;
+  kin::IkSolver ik_solver() const;
+  const kin::IkModel* ik_ = nullptr;  ///< the App's (outlives the console); nullptr: numeric fallback
 };
 
 }  // namespace servoarm::fw

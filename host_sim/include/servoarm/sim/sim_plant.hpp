@@ -1,0 +1,55 @@
+#pragma once
+// SimPlant: a set of virtual CiA 402 drives (ArmSim) on a fresh in-process bus,
+// for `armfw --sim` and the in-process tests. The firmware's App only sees the
+// CanBus it returns (master_bus()); armfw_main.cpp is the one firmware file that
+// uses this header.
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <thread>
+#include <vector>
+
+#include "servoarm/hal/clock.hpp"
+#include "servoarm/hal/sim_bus.hpp"
+#include "servoarm/sim/virtual_drive.hpp"
+
+namespace servoarm::sim {
+
+/// Virtual drives on an in-process bus, stepped by a thread on CLOCK_MONOTONIC
+/// (what `--sim` runs: the drives behave like separate devices, with lag).
+class SimPlant {
+ public:
+  /// Virtual drives with these node ids (one per joint) on a fresh in-process bus.
+  SimPlant(hal::Clock& clock, const std::vector<std::uint8_t>& nodes, const MotorParams& motor = {});
+  ~SimPlant();
+  hal::CanBus& master_bus() { return *master_ep_; }
+  /// Start the drive thread (real time). Tests with a ManualClock call step() instead.
+  void start_thread();
+  void stop_thread();
+  /// Single-threaded use: drain frames and tick the drives at `now`.
+  void step(hal::TimePoint now);
+  /// RtLoop::PreCycle that steps the plant `ctx` (a SimPlant*): what `armfw --sim` runs
+  /// on the control thread once the drives are up (the drive thread is stopped then).
+  static void step_hook(void* ctx, std::int64_t now_ns) { static_cast<SimPlant*>(ctx)->step(now_ns); }
+  ArmSim& arm() { return *arm_; }
+  hal::SimBus& bus() { return *bus_; }
+  /// Fault injection from another thread: applied by the drive thread at its next step.
+  void inject_silent(int joint);
+  void inject_heartbeat_stop(int joint);
+  void inject_emcy(int joint, std::uint16_t code);
+
+ private:
+  void apply_injections(hal::TimePoint now);
+  hal::Clock& clock_;
+  std::unique_ptr<hal::SimBus> bus_;
+  std::unique_ptr<hal::SimBusEndpoint> master_ep_, sim_ep_;
+  std::unique_ptr<ArmSim> arm_;
+  std::thread th_;
+  std::atomic<bool> stop_{false};
+  std::atomic<int> silent_{-1};
+  std::atomic<int> hb_stop_{-1};
+  std::atomic<int> emcy_joint_{-1};
+  std::atomic<std::uint16_t> emcy_code_{0};
+};
+
+}  // namespace servoarm::sim
