@@ -1,0 +1,617 @@
+// The controller's (mode x request) table, walked exhaustively: for every Mode and every
+// RequestOp a fresh puma560 on the in-process bus (virtual CiA 402 drives, ManualClock)
+// is driven into that mode through real cycles, the request is sent, and one cycle later
+// the test checks the reply (result, text), the mode, the coarse ArmState / holding the
+// console sees, and what went to the drives (ServoSpy: power commands, setpoints).
+// The expectations below are written out by hand, from the behaviour before the table
+// existed: they are not read from kRequestTable.
+// Then the Cartesian IK-failure path: a sample whose IK fails keeps the precomputed
+// (path-checked) joint value and is counted in Telemetry::ik_fallbacks.
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "servo_spy.hpp"
+#include "sim_app.hpp"
+#include "servoarm/rt/controller.hpp"
+#include "servoarm/rt/mode_table.hpp"
+#include "servoarm/kinematics/ik.hpp"
+#include "servoarm/kinematics/chain.hpp"
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm;
+using namespace servoarm::fw;
+using Call = test::ServoSpy::Call;
+
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+struct TableRig {
+  hal::ManualClock clock;
+  test::SimApp app;
+  std::unique_ptr<test::ServoSpy> spy;
+  std::unique_ptr<Controller> ctl;
+  hal::Duration period = hal::kMillisecond;
+  std::uint32_t seq = 100;
+
+  explicit TableRig(bool drive_quick_stop, const sim::MotorParams& motor = {}) {
+    app.sim_motor = motor;
+    FwConfig cfg;
+    cfg.can = "sim";
+    cfg.stop = drive_quick_stop ? "drive" : "ramp";
+    const std::string e = app.build(cfg, &clock);
+    if (!e.empty()) FAIL(e.c_str());
+    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
+    spy = std::make_unique<test::ServoSpy>(*app.servo);
+    ctl = std::make_unique<Controller>(*spy, app.chain, app.controller_config());
+  }
+  ~TableRig() {
+    clock.set_idle_hook(nullptr);
+    ctl.reset();
+  }
+  void boot() {
+    const hal::TimePoint now = clock.now();
+    if (ctl->boot(now, now + 5 * hal::kSecond) != hal::Status::ok) FAIL(spy->last_error());
+  }
+  void cycle() {
+    ctl->cycle(clock.now());
+    clock.advance(period);
+  }
+  void cycles(int n) {
+    for (int i = 0; i < n; ++i) cycle();
+  }
+  Mode mode() const { return ctl->mode(); }
+  /// Send a request, run one cycle, return its reply (the cycle it ran in: spy->cycle).
+  Reply request(RequestOp op) {
+    Request r;
+    r.op = op;
+    r.seq = ++seq;
+    if (!ctl->requests().push(r)) FAIL("request queue full");
+    cycle();
+    Reply rep;
+    if (!ctl->replies().pop(rep)) FAIL("no reply");
+    LONGS_EQUAL(r.seq, rep.seq);
+    return rep;
+  }
+  void run_until(Mode m, int max_cycles, const char* what) {
+    for (int i = 0; i < max_cycles && mode() != m; ++i) cycle();
+    if (mode() != m) FAIL((std::string(what) + ": mode " + to_string(mode()) + ", wanted " + to_string(m)).c_str());
+  }
+  void expect(Mode m, const char* what) {
+    if (mode() != m) FAIL((std::string(what) + ": mode " + to_string(mode()) + ", wanted " + to_string(m)).c_str());
+  }
+  kin::JointVector q_cmd() const {
+    const Telemetry t = ctl->telemetry();
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+    return q;
+  }
+  void enable() {
+    boot();
+    request(RequestOp::enable);
+    run_until(Mode::idle, 3000, "enable");
+  }
+  /// A joint move that runs long enough to be at speed when the request comes.
+  void start_joint_move() {
+    MotionItem* m = ctl->motions().back();
+    m->kind = MotionKind::joint;
+    m->id = 1;
+    m->override = 1.0;
+    m->goal = q_cmd();
+    for (int j = 0; j < 6; ++j) m->goal[j] += (j % 2 ? -40.0 : 40.0) * kDeg;
+    ctl->motions().commit();
+    cycles(150);
+    expect(Mode::moving, "joint move");
+  }
+  /// Plan a straight line of `dx` (m) along x from the commanded pose; not committed.
+  MotionItem* plan_line(double dx) {
+    MotionItem* m = ctl->motions().back();
+    kin::Pose p;
+    kin::forward(app.chain, q_cmd(), p);
+    p.translation().x() += dx;
+    const kin::IkSolver ik{&kin::ik_nearest_fn, app.ik.get()};
+    const kin::MotionStatus st = kin::plan_movel(app.chain, q_cmd(), p, kin::CartesianLimits{}, kin::MovelOptions{}, ik, m->ct);
+    CHECK_TEXT(kin::is_ok(st), kin::to_string(st));
+    m->kind = MotionKind::cartesian;
+    m->id = 2;
+    m->goal = m->ct.goal;
+    return m;
+  }
+  /// Move to the demo's working pose, then start a 60 mm line and run into it.
+  void start_line() {
+    MotionItem* m = ctl->motions().back();
+    m->kind = MotionKind::joint;
+    m->id = 1;
+    m->override = 1.0;
+    m->goal = kin::JointVector(6);
+    m->goal << 20, -40, 160, 10, -50, 30;
+    m->goal *= kDeg;
+    ctl->motions().commit();
+    cycle();  // starts it
+    run_until(Mode::idle, 10000, "move to the working pose");
+    plan_line(0.06);
+    ctl->motions().commit();
+    cycles(100);
+    expect(Mode::moving, "line");
+  }
+  void inject_bus_error() {
+    spy->fail_next_write(hal::Status::io_error);
+    cycle();
+  }
+};
+
+/// Drive a fresh rig into `m` through real cycles.
+void enter(TableRig& r, Mode m) {
+  switch (m) {
+    case Mode::boot: return;
+    case Mode::disabled:
+      r.boot();
+      r.cycles(20);  // position feedback from every drive
+      return;
+    case Mode::enabling:
+      r.boot();
+      r.request(RequestOp::enable);
+      r.expect(Mode::enabling, "enable");
+      return;
+    case Mode::idle: r.enable(); return;
+    case Mode::moving:
+      r.enable();
+      r.start_joint_move();
+      return;
+    case Mode::hold_ramp:
+      enter(r, Mode::moving);
+      r.request(RequestOp::hold);
+      r.expect(Mode::hold_ramp, "hold");
+      return;
+    case Mode::hold_line:
+      r.enable();
+      r.start_line();
+      r.request(RequestOp::hold);
+      r.expect(Mode::hold_line, "hold on the line");
+      return;
+    case Mode::held:
+      enter(r, Mode::hold_ramp);
+      r.run_until(Mode::held, 3000, "hold ramp");
+      return;
+    case Mode::stopping_to_idle:
+      enter(r, Mode::moving);
+      r.request(RequestOp::stop);
+      r.expect(Mode::stopping_to_idle, "stop");
+      return;
+    case Mode::stopping_to_disabled:
+      enter(r, Mode::moving);
+      r.request(RequestOp::disable);
+      r.expect(Mode::stopping_to_disabled, "disable");
+      return;
+    case Mode::fault_ramp:
+    case Mode::fault_quick_stop:  // (the rig's config decides which)
+      enter(r, Mode::moving);
+      r.inject_bus_error();
+      r.expect(m, "bus error while moving");
+      return;
+    case Mode::fault:
+      enter(r, Mode::fault_ramp);
+      r.run_until(Mode::fault, 3000, "fault ramp");
+      return;
+    case Mode::estop_ramp:
+    case Mode::estop_quick_stop:
+      enter(r, Mode::moving);
+      r.request(RequestOp::estop);
+      r.expect(m, "estop while moving");
+      return;
+    case Mode::estop:
+      enter(r, Mode::estop_ramp);
+      r.run_until(Mode::estop, 3000, "estop ramp");
+      return;
+  }
+}
+
+bool needs_drive_quick_stop(Mode m) { return m == Mode::fault_quick_stop || m == Mode::estop_quick_stop; }
+
+struct Expect {
+  RtResult result;
+  const char* reply;  ///< the reply text starts with this
+  Mode after;         ///< mode after the request's cycle
+  std::vector<Call> calls;  ///< power commands in that cycle
+};
+
+const std::vector<Call> kNone{};
+const std::vector<Call> kDisable{Call::disable};
+const std::vector<Call> kEnable{Call::enable};
+const std::vector<Call> kQuick{Call::quick_stop};
+const std::vector<Call> kZero6(6, Call::set_zero);
+
+constexpr RtResult ok = RtResult::ok, bad = RtResult::bad_state, flt = RtResult::fault;
+
+// What every request does in every mode (ramp configuration; the quick-stop rows with
+// the drives' quick stop). Columns: enable, disable, stop, estop, reset, hold, resume, set_zero.
+Expect expected(Mode m, RequestOp op) {
+  // Requests that do nothing but answer, the same in many modes.
+  const auto stays = [m](RtResult res, const char* text) { return Expect{res, text, m, kNone}; };
+  const Expect nothing_to_reset = stays(ok, "nothing to reset");
+  const Expect not_moving = stays(ok, "not moving");
+  const Expect not_holding = stays(ok, "not holding");
+  const Expect no_zero = stays(bad, "home zero needs the arm disabled (it is ");
+  switch (m) {
+    case Mode::boot:
+      switch (op) {
+        case RequestOp::enable: return stays(bad, "drives not started");
+        case RequestOp::disable: return {ok, "drives disabled", Mode::boot, kDisable};
+        case RequestOp::stop: return not_moving;
+        case RequestOp::estop: return {ok, "estop", Mode::estop, kDisable};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return not_moving;
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::disabled:
+      switch (op) {
+        case RequestOp::enable: return {ok, "enabling", Mode::enabling, kEnable};
+        case RequestOp::disable: return {ok, "disabled", Mode::disabled, kDisable};
+        case RequestOp::stop: return not_moving;
+        case RequestOp::estop: return {ok, "estop", Mode::estop, kDisable};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return not_moving;
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return {ok, "zero_offset = [", Mode::disabled, kZero6};
+      }
+      break;
+    case Mode::enabling:
+      switch (op) {
+        case RequestOp::enable: return stays(ok, "already enabled");
+        case RequestOp::disable: return {ok, "disabled", Mode::disabled, kDisable};
+        case RequestOp::stop: return not_moving;
+        case RequestOp::estop: return {ok, "estop", Mode::estop, kDisable};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return not_moving;
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::idle:
+      switch (op) {
+        case RequestOp::enable: return stays(ok, "already enabled");
+        case RequestOp::disable: return {ok, "disabled", Mode::disabled, kDisable};
+        case RequestOp::stop: return not_moving;
+        // the ramp from rest ends in the same cycle: drives off at once
+        case RequestOp::estop: return {ok, "estop", Mode::estop, kDisable};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return not_moving;  // nothing queued
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::moving:
+      switch (op) {
+        case RequestOp::enable: return stays(ok, "already enabled");
+        case RequestOp::disable: return {ok, "stopping, then disabling", Mode::stopping_to_disabled, kNone};
+        case RequestOp::stop: return {ok, "stopping", Mode::stopping_to_idle, kNone};
+        case RequestOp::estop: return {ok, "estop", Mode::estop_ramp, kNone};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return {ok, "feed hold", Mode::hold_ramp, kNone};
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::hold_ramp:
+      switch (op) {
+        case RequestOp::enable: return stays(ok, "already enabled");
+        case RequestOp::disable: return {ok, "stopping, then disabling", Mode::stopping_to_disabled, kNone};
+        case RequestOp::stop: return {ok, "stopping", Mode::stopping_to_idle, kNone};
+        case RequestOp::estop: return {ok, "estop", Mode::estop_ramp, kNone};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return stays(ok, "already holding");
+        case RequestOp::resume: return stays(bad, "still ramping down; retry");
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::hold_line:
+      switch (op) {
+        case RequestOp::enable: return stays(ok, "already enabled");
+        case RequestOp::disable: return {ok, "stopping, then disabling", Mode::stopping_to_disabled, kNone};
+        case RequestOp::stop: return {ok, "stopping", Mode::stopping_to_idle, kNone};
+        case RequestOp::estop: return {ok, "estop", Mode::estop_ramp, kNone};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return stays(ok, "already holding");
+        case RequestOp::resume: return {ok, "resumed", Mode::moving, kNone};
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::held:  // a joint move held at rest: a stop's ramp from rest ends in the same cycle
+      switch (op) {
+        case RequestOp::enable: return stays(ok, "already enabled");
+        case RequestOp::disable: return {ok, "stopping, then disabling", Mode::disabled, kDisable};
+        case RequestOp::stop: return {ok, "stopping", Mode::idle, kNone};
+        case RequestOp::estop: return {ok, "estop", Mode::estop, kDisable};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return stays(ok, "already holding");
+        case RequestOp::resume: return {ok, "resumed", Mode::moving, kNone};
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::stopping_to_idle:
+    case Mode::stopping_to_disabled:
+      switch (op) {
+        case RequestOp::enable: return stays(bad, "stopping; retry");
+        case RequestOp::disable: return {ok, "stopping, then disabling", Mode::stopping_to_disabled, kNone};
+        case RequestOp::stop: return stays(ok, "stopping");
+        case RequestOp::estop: return {ok, "estop", Mode::estop_ramp, kNone};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return not_moving;
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::fault_ramp:
+    case Mode::fault_quick_stop:
+      switch (op) {
+        case RequestOp::enable: return stays(flt, "in fault: send reset first");
+        case RequestOp::disable: return {ok, "drives disabled", m, kDisable};  // the reaction goes on
+        case RequestOp::stop: return not_moving;
+        case RequestOp::estop:
+          return {ok, "estop", m == Mode::fault_ramp ? Mode::estop_ramp : Mode::estop_quick_stop, kNone};
+        case RequestOp::reset: return stays(bad, "still stopping; retry when the arm is at rest");
+        case RequestOp::hold: return not_moving;
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::fault:
+      switch (op) {
+        case RequestOp::enable: return stays(flt, "in fault: send reset first");
+        case RequestOp::disable: return {ok, "drives disabled", Mode::fault, kDisable};
+        case RequestOp::stop: return not_moving;
+        case RequestOp::estop: return {ok, "estop", Mode::estop, kDisable};
+        case RequestOp::reset: return {ok, "reset; drives disabled, send enable", Mode::disabled, kDisable};
+        case RequestOp::hold: return not_moving;
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::estop_ramp:
+    case Mode::estop_quick_stop:
+      switch (op) {
+        case RequestOp::enable: return stays(flt, "in estop: send reset first");
+        case RequestOp::disable: return {ok, "drives disabled", m, kDisable};
+        case RequestOp::stop: return not_moving;
+        case RequestOp::estop: return stays(ok, "estop");
+        case RequestOp::reset: return stays(bad, "still stopping; retry when the arm is at rest");
+        case RequestOp::hold: return not_moving;
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+    case Mode::estop:
+      switch (op) {
+        case RequestOp::enable: return stays(flt, "in estop: send reset first");
+        case RequestOp::disable: return {ok, "drives disabled", Mode::estop, kDisable};
+        case RequestOp::stop: return not_moving;
+        case RequestOp::estop: return stays(ok, "estop");
+        case RequestOp::reset: return {ok, "reset; drives disabled, send enable", Mode::disabled, kDisable};
+        case RequestOp::hold: return not_moving;
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+      }
+      break;
+  }
+  FAIL("unreachable");
+  return stays(ok, "");
+}
+
+std::string calls_text(const std::vector<Call>& c) {
+  std::string s = "[";
+  for (std::size_t i = 0; i < c.size(); ++i) s += std::string(i ? " " : "") + test::ServoSpy::to_string(c[i]);
+  return s + "]";
+}
+
+/// One (mode, request) case: enter the mode, send the request, check reply, mode and bus.
+void check_pair(Mode m, RequestOp op, bool drive_quick_stop, const Expect& e) {
+  TableRig r(drive_quick_stop || needs_drive_quick_stop(m));
+  enter(r, m);
+  r.expect(m, "entering");
+  // The setpoint written in the cycle before the request (to check continuity).
+  const std::size_t writes_before = r.spy->writes.size();
+  const test::ServoSpy::WriteRecord prev =
+      writes_before > 0 ? r.spy->writes.back() : test::ServoSpy::WriteRecord{};
+  const Reply rep = r.request(op);
+  const std::uint64_t c = r.spy->cycle;
+  char ctx[256];
+  std::snprintf(ctx, sizeof ctx, "(%s x %s -> %s%s) reply %s \"%s\"", to_string(m), to_string(op),
+                to_string(action_for(m, op)), drive_quick_stop ? ", drive quick stop" : "", to_string(rep.result),
+                rep.message);
+  // the reply
+  CHECK_TEXT(rep.result == e.result, ctx);
+  CHECK_TEXT(std::string(rep.message).rfind(e.reply, 0) == 0, (std::string(ctx) + " wanted \"" + e.reply + "\"").c_str());
+  // the mode, and what the console sees of it
+  CHECK_TEXT(r.mode() == e.after, (std::string(ctx) + " mode " + to_string(r.mode()) + ", wanted " + to_string(e.after)).c_str());
+  const Telemetry t = r.ctl->telemetry();
+  CHECK_TEXT(t.mode == e.after, ctx);
+  CHECK_TEXT(t.state == arm_state(e.after), ctx);
+  CHECK_TEXT(t.holding == holding(e.after), ctx);
+  // the power commands of that cycle
+  const std::vector<Call> calls = r.spy->calls_in(c);
+  CHECK_TEXT(calls == e.calls, (std::string(ctx) + " calls " + calls_text(calls) + ", wanted " + calls_text(e.calls)).c_str());
+  // one setpoint vector per cycle, finite; powered: continuous with the last one; not
+  // powered: the drives' measured positions (enabling / re-enabling never jumps)
+  const std::vector<test::ServoSpy::WriteRecord> w = r.spy->writes_in(c);
+  LONGS_EQUAL_TEXT(1, w.size(), ctx);
+  LONGS_EQUAL_TEXT(6, w[0].n, ctx);
+  for (std::size_t j = 0; j < 6; ++j) {
+    CHECK_TEXT(std::isfinite(w[0].setpoint[j]), ctx);
+    if (powered(e.after) && writes_before > 0) {
+      const double vmax = kin::limits_from(r.app.chain).dyn[j].max_velocity * 1.10;
+      CHECK_TEXT(std::fabs(w[0].setpoint[j] - prev.setpoint[j]) <= vmax * 1e-3 + 1e-9, ctx);
+    }
+    const hal::JointFeedback& fb = r.spy->feedback(j);
+    if (!powered(m) && !powered(e.after) && fb.valid) DOUBLES_EQUAL_TEXT(fb.position, w[0].setpoint[j], 0.0, ctx);
+  }
+}
+
+constexpr RequestOp kOps[] = {RequestOp::enable, RequestOp::disable, RequestOp::stop,  RequestOp::estop,
+                              RequestOp::reset,  RequestOp::hold,    RequestOp::resume, RequestOp::set_zero};
+
+void walk_mode(Mode m) {
+  for (RequestOp op : kOps) check_pair(m, op, false, expected(m, op));
+}
+
+}  // namespace
+
+TEST_GROUP(ModeTable){};
+
+// The table itself: one row per mode, one column per request, and the console-facing
+// derivations agree with the coarse states.
+TEST(ModeTable, EveryModeHasARowAndNamesItsState) {
+  LONGS_EQUAL(kModes, kRequestTable.size());
+  for (std::size_t i = 0; i < kModes; ++i) {
+    const Mode m = static_cast<Mode>(i);
+    STRCMP_EQUAL_TEXT(to_string(m), to_string(m), "name");
+    CHECK_TEXT(std::string(to_string(m)) != "?", "every mode is named");
+    for (RequestOp op : kOps) CHECK_TEXT(std::string(to_string(action_for(m, op))) != "?", to_string(m));
+    // the coarse name is the mode's own for the modes that are not split
+    if (m == Mode::boot || m == Mode::disabled || m == Mode::enabling || m == Mode::idle || m == Mode::moving ||
+        m == Mode::fault || m == Mode::estop)
+      STRCMP_EQUAL(to_string(m), to_string(arm_state(m)));
+    // powered modes are what validate_and_write checks; a ramp is always powered
+    if (ramping(m)) CHECK_TEXT(powered(m), to_string(m));
+  }
+}
+
+// Every (mode x request) pair, one test per mode (a fresh arm per pair).
+TEST(ModeTable, Boot) { walk_mode(Mode::boot); }
+TEST(ModeTable, Disabled) { walk_mode(Mode::disabled); }
+TEST(ModeTable, Enabling) { walk_mode(Mode::enabling); }
+TEST(ModeTable, Idle) { walk_mode(Mode::idle); }
+TEST(ModeTable, Moving) { walk_mode(Mode::moving); }
+TEST(ModeTable, HoldRamp) { walk_mode(Mode::hold_ramp); }
+TEST(ModeTable, HoldLine) { walk_mode(Mode::hold_line); }
+TEST(ModeTable, Held) { walk_mode(Mode::held); }
+TEST(ModeTable, StoppingToIdle) { walk_mode(Mode::stopping_to_idle); }
+TEST(ModeTable, StoppingToDisabled) { walk_mode(Mode::stopping_to_disabled); }
+TEST(ModeTable, FaultRamp) { walk_mode(Mode::fault_ramp); }
+TEST(ModeTable, FaultQuickStop) { walk_mode(Mode::fault_quick_stop); }
+TEST(ModeTable, Fault) { walk_mode(Mode::fault); }
+TEST(ModeTable, EstopRamp) { walk_mode(Mode::estop_ramp); }
+TEST(ModeTable, EstopQuickStop) { walk_mode(Mode::estop_quick_stop); }
+TEST(ModeTable, Estop) { walk_mode(Mode::estop); }
+
+// With safety.stop = "drive", an e-stop of a powered arm is the drives' quick stop
+// (controlword 0x0002 in the same cycle), also over a ramp already running.
+TEST(ModeTable, DriveQuickStopTakesOverEveryPoweredMode) {
+  const Expect to_quick{ok, "estop", Mode::estop_quick_stop, kQuick};
+  for (Mode m : {Mode::moving, Mode::hold_ramp, Mode::hold_line, Mode::stopping_to_idle, Mode::stopping_to_disabled})
+    check_pair(m, RequestOp::estop, true, to_quick);
+  // a fault while moving is a quick stop too, and the e-stop after it keeps it
+  check_pair(Mode::fault_quick_stop, RequestOp::estop, true, {ok, "estop", Mode::estop_quick_stop, kNone});
+}
+
+// ---------------------------------------------------------------------------
+// Cartesian IK failure: keep the precomputed value, count it
+// ---------------------------------------------------------------------------
+
+namespace {
+struct FailingIk {
+  int calls = 0;
+  int fail_every = 1;  ///< fail every k-th call (1 = always)
+  int failed = 0;
+};
+kin::Status failing_ik(const kin::Chain& chain, const kin::Pose& target, const kin::JointVector& q_near,
+                       kin::JointVector& q_out, void* ctx) {
+  (void)chain;
+  (void)target;
+  auto* f = static_cast<FailingIk*>(ctx);
+  ++f->calls;
+  if (f->calls % f->fail_every == 0) {
+    ++f->failed;
+    q_out = q_near;
+    return kin::Status::unreachable;
+  }
+  // "succeed" with a value 10 urad off the path: distinguishable from the fallback
+  q_out = q_near;
+  q_out[0] += 1e-5;
+  return kin::Status::ok;
+}
+
+void go_to_working_pose(TableRig& r) {
+  r.enable();
+  MotionItem* m = r.ctl->motions().back();
+  m->kind = MotionKind::joint;
+  m->id = 1;
+  m->override = 1.0;
+  m->goal = kin::JointVector(6);
+  m->goal << 20, -40, 160, 10, -50, 30;
+  m->goal *= kDeg;
+  r.ctl->motions().commit();
+  r.cycle();  // starts it
+  r.run_until(Mode::idle, 10000, "move to the working pose");
+}
+}  // namespace
+
+TEST(ModeTable, IkFailureKeepsThePrecomputedPathAndCountsIt) {
+  TableRig r(false);
+  FailingIk f;
+  go_to_working_pose(r);
+  MotionItem* m = r.plan_line(0.03);
+  const kin::CartesianTrajectory ct = m->ct;  // copy of the plan (the RT side uses the queued one)
+  m->ct.ik = kin::IkSolver{&failing_ik, &f};
+  r.ctl->motions().commit();
+  const std::uint64_t first = r.spy->cycle + 1;
+  r.cycle();  // starts it
+  r.run_until(Mode::idle, 10000, "line with failing IK");
+  const Telemetry t = r.ctl->telemetry();
+  CHECK(t.state == ArmState::idle);
+  CHECK(t.cause == FaultCause::none);
+  LONGS_EQUAL(2, t.done_id);  // finished, not refused
+  CHECK(f.failed > 100);
+  LONGS_EQUAL(f.failed, t.ik_fallbacks);
+  // every sample of the line is the precomputed joint value at its time
+  double worst = 0;
+  int samples = 0;
+  for (const auto& w : r.spy->writes) {
+    if (w.cycle < first) continue;
+    const double tt = static_cast<double>(w.cycle - first + 1) * 1e-3;
+    if (tt >= ct.duration) break;
+    kin::JointVector q, qd, qdd;
+    ct.sample_precomputed(tt, q, qd, qdd);
+    for (int j = 0; j < 6; ++j) worst = std::fmax(worst, std::fabs(q[j] - w.setpoint[static_cast<std::size_t>(j)]));
+    ++samples;
+  }
+  CHECK(samples > 100);
+  CHECK_TEXT(worst < 1e-12, std::to_string(worst).c_str());
+  LONGS_EQUAL(samples + 1, f.failed);  // + the last sample, at the end (then the goal is written)
+}
+
+TEST(ModeTable, IkFailureOfSomeSamplesCountsExactlyThose) {
+  TableRig r(false);
+  FailingIk f;
+  f.fail_every = 3;
+  go_to_working_pose(r);
+  MotionItem* m = r.plan_line(0.03);
+  const kin::CartesianTrajectory ct = m->ct;
+  m->ct.ik = kin::IkSolver{&failing_ik, &f};
+  r.ctl->motions().commit();
+  const std::uint64_t first = r.spy->cycle + 1;
+  r.cycle();  // starts it
+  r.run_until(Mode::idle, 10000, "line with IK failing every third sample");
+  LONGS_EQUAL(f.failed, r.ctl->telemetry().ik_fallbacks);
+  CHECK(f.failed > 30 && f.calls > 3 * f.failed - 3);
+  // failed samples are the precomputed value; solved ones are the IK's (10 urad off on joint 1)
+  int k = 0;
+  for (const auto& w : r.spy->writes) {
+    if (w.cycle < first) continue;
+    const double tt = static_cast<double>(w.cycle - first + 1) * 1e-3;
+    if (tt >= ct.duration) break;
+    ++k;
+    kin::JointVector q, qd, qdd;
+    ct.sample_precomputed(tt, q, qd, qdd);
+    const double off = w.setpoint[0] - q[0];
+    if (k % 3 == 0) DOUBLES_EQUAL(0.0, off, 1e-12);
+    else DOUBLES_EQUAL(1e-5, off, 1e-12);
+  }
+  CHECK(k > 90);
+}
+
