@@ -120,6 +120,23 @@ TEST(Process, BadConfigRefusedNamingTheKey) {
   CHECK_TEXT(out.find("loop.rate_hz") != std::string::npos, out.c_str());
 }
 
+TEST(Process, HomePoseOutsideTheJointLimitsRefusedNamingTheKey) {
+  // Checked against the robot at start (App::build -> validate_for_chain): PUMA 560
+  // joint 3 is limited to [-52, 232] deg.
+  char path[] = "/tmp/armfw_cfg_XXXXXX";
+  const int fd = mkstemp(path);
+  CHECK(fd >= 0);
+  const std::string text = "bus.can = \"sim\"\n[motion]\nhome_deg = [0, 0, 300, 0, 0, 0]\n";
+  CHECK(write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size()));
+  close(fd);
+  int st = 0;
+  const std::string out = run_capture(emulator_prefix() + ARMFW_PATH + " --config " + path + " 2>&1 </dev/null", st);
+  unlink(path);
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 2, out.c_str());
+  CHECK_TEXT(out.find("motion.home_deg") != std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("joint 3") != std::string::npos, out.c_str());
+}
+
 TEST(Process, PtyConsoleDrivenByArmctl) {
   int errpipe[2];
   CHECK(pipe(errpipe) == 0);

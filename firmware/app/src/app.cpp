@@ -44,6 +44,9 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   kin::LoadResult lr = kin::load_robot(cfg.robot);
   if (!lr.ok) return "robot: " + lr.error;
   chain = lr.chain;
+  // The checks that need the robot (home pose within the limits, [[drive]] count and limits,
+  // ranges that fit the drives' 32-bit counts): the key table's, in firmware/config.
+  if (const std::string e = validate_for_chain(cfg, chain); !e.empty()) return "config: " + e;
   const int n = chain.n_joints;
   if (n < 1 || n > static_cast<int>(hal::kMaxServoJoints)) return "robot: joint count not supported by the servo bus";
   if (!cfg.home_deg.empty() && static_cast<int>(cfg.home_deg.size()) != n)
