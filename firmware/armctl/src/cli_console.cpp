@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "servoarm/armctl/cli_common.hpp"
+#include "servoarm/console/command_table.hpp"
 
 #ifdef SERVOARM_CLI_CAN
 #include "servoarm/hal/isotp.hpp"
@@ -87,6 +88,8 @@ int open_tty(const std::string& path, int baud, std::string& err) {
 const char* kConsoleUsage =
     "usage: armctl console (--serial PATH [--baud N] | --can IFACE [--tx-id ID] [--rx-id ID])\n"
     "                      [--timeout SEC] [-c LINE]...\n"
+    "       armctl console --reference   print the command reference of docs/console.md (from the\n"
+    "                                    firmware's command table)\n"
     "  --serial PATH   serial device or pty printed by armfw (--pty)\n"
     "  --baud N        baud rate (default 115200)\n"
     "  --can IFACE     SocketCAN interface (can0, vcan0): armfw's console over ISO-TP (ISO 15765-2)\n"
@@ -410,6 +413,9 @@ int console_main(int argc, char** argv) {
     auto value = [&]() -> const char* { return i + 1 < argc ? argv[++i] : nullptr; };
     if (a == "--help" || a == "-h") {
       std::fputs(kConsoleUsage, stdout);
+      return kExitOk;
+    } else if (a == "--reference") {
+      std::fputs(console_reference_markdown().c_str(), stdout);
       return kExitOk;
     } else if (a == "--serial") {
       const char* v = value();

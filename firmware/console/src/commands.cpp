@@ -1,5 +1,7 @@
 #include "servoarm/console/commands.hpp"
 
+#include "servoarm/console/command_table.hpp"
+
 #include <cfenv>
 #include <cmath>
 #include <cstdarg>
@@ -152,18 +154,6 @@ Words split(std::string_view line) {
   }
   return ws;
 }
-
-struct Named {
-  const char* name;
-  Cmd cmd;
-};
-constexpr Named kNames[] = {
-    {"help", Cmd::help},     {"status", Cmd::status}, {"enable", Cmd::enable}, {"disable", Cmd::disable},
-    {"home", Cmd::home},     {"movej", Cmd::movej},   {"movel", Cmd::movel},   {"stop", Cmd::stop},
-    {"estop", Cmd::estop},   {"reset", Cmd::reset},   {"fk", Cmd::fk},         {"ik", Cmd::ik},
-    {"limits", Cmd::limits}, {"stats", Cmd::stats},   {"config", Cmd::config}, {"wait", Cmd::wait},
-    {"hold", Cmd::hold},     {"resume", Cmd::resume},
-};
 
 ParseResult parse_numbers(const Words& ws, int first, Command& out, bool allow_speed, const char* name) {
   out.count = 0;
@@ -379,62 +369,64 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
   }
   const std::string_view head = ws.w[0];
   if (looks_like_gcode(head)) return parse_gcode(line, modal, out);
-  Cmd cmd = Cmd::none;
-  for (const Named& nm : kNames)
-    if (ieq(head, nm.name)) cmd = nm.cmd;
-  if (cmd == Cmd::none) return fail(CmdError::unknown_command, "unknown command '%.*s' (try help)", int(head.size() > 24 ? 24 : head.size()), head.data());
-  c.cmd = cmd;
-  const int nargs = ws.n - 1;
-  switch (cmd) {
-    case Cmd::help:
-      if (nargs > 1) return fail(CmdError::arg_count, "help takes at most one topic");
+  // The command table: a two-word entry ("home zero") before the one-word one.
+  const CommandSpec* spec = nullptr;
+  int used = 0;
+  for (const CommandSpec& e : kCommands) {
+    const std::string_view name(e.name);
+    const std::size_t sp = name.find(' ');
+    const int words = sp == std::string_view::npos ? 1 : 2;
+    if (words == 2 ? ws.n >= 2 && ieq(head, name.substr(0, sp)) && ieq(ws.w[1], name.substr(sp + 1)) : ieq(head, name)) {
+      if (words > used) spec = &e, used = words;
+    }
+  }
+  if (spec == nullptr) return fail(CmdError::unknown_command, "unknown command '%.*s' (try help)", int(head.size() > 24 ? 24 : head.size()), head.data());
+  c.cmd = spec->cmd;
+  const int nargs = ws.n - used;
+  const char* name = spec->name;
+  switch (spec->args) {
+    case ArgShape::none:
+      if (nargs != 0) {
+        // Name the longer forms of the same word ("home takes no arguments (or: home zero)").
+        const CommandSpec* longer = nullptr;
+        for (const CommandSpec& e : kCommands)
+          if (&e != spec && std::string_view(e.name).rfind(std::string_view(name), 0) == 0 && e.name[std::strlen(name)] == ' ')
+            longer = &e;
+        if (longer != nullptr) return fail(CmdError::arg_count, "%s takes no arguments (or: %s)", name, longer->usage);
+        return fail(CmdError::arg_count, "%s takes no arguments", name);
+      }
+      break;
+    case ArgShape::topic:
+      if (nargs > 1) return fail(CmdError::arg_count, "%s takes at most one topic", name);
       if (nargs == 1) {
         const std::string_view t = ws.w[1];
         const std::size_t k = t.size() < c.topic.size() - 1 ? t.size() : c.topic.size() - 1;
         std::memcpy(c.topic.data(), t.data(), k);
       }
       break;
-    case Cmd::home:
-      if (nargs == 1 && ieq(ws.w[1], "zero")) {
-        c.cmd = Cmd::home_zero;
-        break;
-      }
-      if (nargs != 0) return fail(CmdError::arg_count, "home takes no argument or 'zero'");
-      break;
-    case Cmd::status: case Cmd::enable: case Cmd::disable: case Cmd::stop: case Cmd::estop: case Cmd::stats:
-    case Cmd::reset: case Cmd::limits: case Cmd::config: case Cmd::wait: case Cmd::hold: case Cmd::resume:
-      if (nargs != 0) return fail(CmdError::arg_count, "%s takes no arguments", to_string(cmd));
-      break;
-    case Cmd::movej: {
-      ParseResult r = parse_numbers(ws, 1, c, true, "movej");
+    case ArgShape::joints_speed: {
+      ParseResult r = parse_numbers(ws, used, c, true, name);
       if (!r.ok()) return r;
-      if (c.count != n_joints) return fail(CmdError::arg_count, "movej needs %d joint values, got %d", n_joints, c.count);
+      if (c.count != n_joints) return fail(CmdError::arg_count, "%s needs %d joint values, got %d", name, n_joints, c.count);
       if (c.has_speed && (c.speed > 100 || c.speed < kMinJointSpeedPct))
-        return fail(CmdError::out_of_range, "movej: speed=%g is outside [%g, 100] (percent)", c.speed, kMinJointSpeedPct);
+        return fail(CmdError::out_of_range, "%s: speed=%g is outside [%g, 100] (percent)", name, c.speed, kMinJointSpeedPct);
       break;
     }
-    case Cmd::movel: {
-      ParseResult r = parse_numbers(ws, 1, c, true, "movel");
+    case ArgShape::pose_speed:
+    case ArgShape::pose: {
+      ParseResult r = parse_numbers(ws, used, c, spec->args == ArgShape::pose_speed, name);
       if (!r.ok()) return r;
-      if (c.count != 3 && c.count != 6) return fail(CmdError::arg_count, "movel needs x y z [rx ry rz], got %d values", c.count);
+      if (c.count != 3 && c.count != 6) return fail(CmdError::arg_count, "%s needs x y z [rx ry rz], got %d values", name, c.count);
       if (c.has_speed && c.speed < kMinLinearSpeedMmS)
-        return fail(CmdError::out_of_range, "movel: speed=%g mm/s is below the minimum %g mm/s", c.speed, kMinLinearSpeedMmS);
+        return fail(CmdError::out_of_range, "%s: speed=%g mm/s is below the minimum %g mm/s", name, c.speed, kMinLinearSpeedMmS);
       break;
     }
-    case Cmd::ik: {
-      ParseResult r = parse_numbers(ws, 1, c, false, "ik");
+    case ArgShape::joints_opt: {
+      ParseResult r = parse_numbers(ws, used, c, false, name);
       if (!r.ok()) return r;
-      if (c.count != 3 && c.count != 6) return fail(CmdError::arg_count, "ik needs x y z [rx ry rz], got %d values", c.count);
+      if (c.count != 0 && c.count != n_joints) return fail(CmdError::arg_count, "%s takes no values or %d joint values, got %d", name, n_joints, c.count);
       break;
     }
-    case Cmd::fk: {
-      ParseResult r = parse_numbers(ws, 1, c, false, "fk");
-      if (!r.ok()) return r;
-      if (c.count != 0 && c.count != n_joints) return fail(CmdError::arg_count, "fk takes no values or %d joint values, got %d", n_joints, c.count);
-      break;
-    }
-    case Cmd::none: case Cmd::dwell: case Cmd::position: case Cmd::gmove: case Cmd::temperature: case Cmd::home_zero:
-      return fail(CmdError::internal, "unreachable command kind");
   }
   out = c;
   return {};

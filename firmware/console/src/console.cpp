@@ -7,6 +7,7 @@
 #include <memory>
 #include <thread>
 
+#include "servoarm/console/command_table.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -411,55 +412,15 @@ void Console::do_limits(Session& s) {
 }
 
 void Console::do_help(Session& s, std::string_view topic) {
-  static const char* kHelp =
-      "commands (one per line; answers: ok [data] | error: <code> <message>):\n"
-      "  help [topic]           this text\n"
-      "  status                 state, queue, joints (deg / mm), tool pose\n"
-      "  enable | disable       power the drives up / down (disable while moving stops first)\n"
-      "  home                   joint move to the home pose\n"
-      "  home zero              (disabled arm) the current joint positions become joint zero until\n"
-      "                         restart; answers the drives' zero_offset = [...] for the config file\n"
-      "  movej j1..jn [speed=%] joint move; joints in deg (prismatic mm); speed 1-100 % (default 50)\n"
-      "  movel x y z [rx ry rz] [speed=mm/s]   straight line of the tool point; x y z in mm;\n"
-      "                         rx ry rz in deg, fixed-axis roll-pitch-yaw: R = Rz(rz) Ry(ry) Rx(rx);\n"
-      "                         without rx ry rz the tool keeps its orientation\n"
-      "  stop                   ramp down and drop the queued moves\n"
-      "  estop                  emergency stop (quick stop, drives off); then reset + enable\n"
-      "  reset                  clear a fault / e-stop (drives stay disabled)\n"
-      "  fk [j1..jn]            tool pose of the given (or current) joints\n"
-      "  ik x y z [rx ry rz]    joints for a tool pose, nearest to the current joints\n"
-      "  limits                 joint limits and speeds\n"
-      "  stats                  control-loop statistics (cycles, overruns, latency, compute)\n"
-      "  config                 effective configuration\n"
-      "  wait                   answer when every queued move has finished\n"
-      "  hold | resume          feed hold / resume (same as ! and ~)\n"
-      "realtime characters: ? status report, ! feed hold, ~ resume, Ctrl-X e-stop\n"
-      "G-code: G0/G1 X Y Z [A B C] [F] (A B C = rx ry rz deg, F units/min), G4 P<ms>|S<s>, G20/G21,\n"
-      "        G28 (home), G90/G91, M17 (enable), M18/M84 (disable), M112 (e-stop), M114 (position),\n"
-      "        M400 (wait), M105/M110 (accepted for senders)\n";
-  if (!topic.empty()) {
-    // Print the lines mentioning the topic.
-    std::string_view h(kHelp);
-    bool any = false;
-    std::size_t pos = 0;
-    while (pos < h.size()) {
-      const std::size_t e = h.find('\n', pos);
-      const std::string_view line = h.substr(pos, e - pos);
-      if (line.find(topic) != std::string_view::npos) {
-        s.out += line;
-        s.out += '\n';
-        any = true;
-      }
-      pos = e + 1;
-    }
-    if (!any) {
-      answer_error(s, CmdError::unknown_command, fmt("no help on '%.*s'", int(topic.size()), topic.data()));
-      return;
-    }
-  } else {
-    s.out += kHelp;
+  if (!help_text(topic, units_line(), s.out)) {
+    answer_error(s, CmdError::unknown_command, fmt("no help on '%.*s'", int(topic.size()), topic.data()));
+    return;
   }
   answer_ok(s);
+}
+
+std::string Console::units_line() const {
+  return "units: lengths mm, angles deg (joints: deg, prismatic mm), linear speeds mm/s";
 }
 
 void Console::execute(Session& s, std::string_view line) {

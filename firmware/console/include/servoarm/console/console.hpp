@@ -119,6 +119,8 @@ class Console {
   void queue_linear(Session& s, const kin::Pose& target, double speed_m_s);
   void queue_dwell(Session& s, double secs);
   void do_help(Session& s, std::string_view topic);
+  /// `help`'s first line: the units in use.
+  std::string units_line() const;
   void do_fk(Session& s, const Command& c);
   void do_ik(Session& s, const Command& c);
   void do_limits(Session& s);

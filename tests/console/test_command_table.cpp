@@ -1,0 +1,121 @@
+// The console's command table (command_table.hpp): every entry is reachable by the
+// parser and appears in `help`; docs/console.md holds exactly the reference the table
+// produces between its markers (a command added without regenerating the page fails
+// here, with the diff).
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string>
+
+#include "servoarm/console/command_table.hpp"
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm::fw;
+
+namespace {
+constexpr int kN = 6;
+
+bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+std::string read_file(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+/// A line with arguments of the entry's shape that must parse.
+std::string sample_line(const CommandSpec& e) {
+  std::string l = e.name;
+  switch (e.args) {
+    case ArgShape::none: break;
+    case ArgShape::topic: l += " movel"; break;
+    case ArgShape::joints_speed: l += " 0 10 20 0 30 0 speed=20"; break;
+    case ArgShape::pose_speed: l += " 400 0 300 180 0 90 speed=50"; break;
+    case ArgShape::pose: l += " 400 0 300"; break;
+    case ArgShape::joints_opt: l += " 0 10 20 0 30 0"; break;
+  }
+  return l;
+}
+}  // namespace
+
+TEST_GROUP(CommandTable){};
+
+TEST(CommandTable, EveryEntryIsReachableByTheParser) {
+  std::set<std::string> names;
+  std::set<int> cmds;
+  for (const CommandSpec& e : kCommands) {
+    CHECK_TEXT(names.insert(e.name).second, e.name);                    // one row per name
+    CHECK_TEXT(cmds.insert(static_cast<int>(e.cmd)).second, e.name);    // one row per Cmd
+    CHECK_TEXT(std::string(e.usage).rfind(e.name, 0) == 0, e.usage);    // usage starts with the name
+    CHECK_TEXT(*e.help != '\0', e.name);
+    CHECK_TEXT(find_command(e.cmd) == &e, e.name);
+    for (const std::string& line : {sample_line(e), std::string(e.name)}) {
+      if (line == e.name && (e.args == ArgShape::joints_speed || e.args == ArgShape::pose_speed || e.args == ArgShape::pose))
+        continue;  // these need values
+      GcodeModal m;
+      Command c;
+      const ParseResult r = parse_line(line, kN, m, c);
+      if (!r.ok()) FAIL(("'" + line + "' refused: " + r.message.data()).c_str());
+      if (c.cmd != e.cmd) FAIL(("'" + line + "' parsed as " + to_string(c.cmd) + ", not " + to_string(e.cmd)).c_str());
+      // upper case too
+      std::string up = line;
+      for (char& ch : up) ch = static_cast<char>(ch >= 'a' && ch <= 'z' ? ch - 'a' + 'A' : ch);
+      Command cu;
+      CHECK_TEXT(parse_line(up, kN, m, cu).ok() && cu.cmd == e.cmd, up.c_str());
+    }
+  }
+  // The kinds no command word names are the G-code ones (and none).
+  for (Cmd k : {Cmd::none, Cmd::dwell, Cmd::position, Cmd::gmove, Cmd::temperature}) CHECK(find_command(k) == nullptr);
+}
+
+TEST(CommandTable, EveryEntryAppearsInHelp) {
+  std::string all;
+  CHECK(help_text("", "units: test", all));
+  CHECK_TEXT(all.rfind("commands (one per line", 0) == 0, all.c_str());
+  CHECK_TEXT(has(all, "\nunits: test\n"), all.c_str());
+  for (const CommandSpec& e : kCommands) {
+    CHECK_TEXT(has(all, std::string("  ") + e.usage + " "), e.usage);
+    CHECK_TEXT(has(all, e.help), e.help);
+    std::string one;
+    CHECK_TEXT(help_text(e.name, "", one), e.name);
+    CHECK_TEXT(has(one, e.usage), one.c_str());
+    if (*e.details) CHECK_TEXT(has(one, e.details), one.c_str());
+  }
+  // `help home` is both home entries; a G-code or a word gives the lines mentioning it.
+  std::string home;
+  CHECK(help_text("home", "", home));
+  CHECK_TEXT(has(home, "  home ") && has(home, "  home zero"), home.c_str());
+  std::string g1;
+  CHECK(help_text("G1", "", g1));
+  CHECK_TEXT(has(g1, "G1 X Y Z") && !has(g1, "movej"), g1.c_str());
+  std::string none = "untouched";
+  CHECK(!help_text("frobnicate", "", none));
+  STRCMP_EQUAL("untouched", none.c_str());
+}
+
+TEST(CommandTable, ReferencePageIsGeneratedFromTheTable) {
+  const std::string page = read_file(std::string(SERVOARM_SOURCE_DIR) + "/docs/console.md");
+  CHECK(page.size() > 1000);
+  const std::string why = console_reference_mismatch(page);
+  if (!why.empty()) FAIL(why.c_str());
+  for (const CommandSpec& e : kCommands) CHECK_TEXT(has(page, std::string("| `") + e.usage + "` |"), e.usage);
+  // the check itself: a row added by hand, a row missing, a changed text, no markers
+  const std::string row = "| `stop` |";
+  const auto at = page.find(row);
+  CHECK(at != std::string::npos);
+  const auto eol = page.find('\n', at);
+  std::string extra = page;
+  extra.insert(eol + 1, "| `frobnicate` | a command added by hand |  |\n");
+  const std::string e1 = console_reference_mismatch(extra);
+  CHECK_TEXT(has(e1, "- line ") && has(e1, "frobnicate") && has(e1, "regenerate"), e1.c_str());
+  std::string missing = page;
+  missing.erase(at, eol + 1 - at);
+  const std::string e2 = console_reference_mismatch(missing);
+  CHECK_TEXT(has(e2, "+ " + row), e2.c_str());
+  std::string changed = page;
+  changed.replace(at + row.size(), 5, " RAMP");
+  CHECK(!console_reference_mismatch(changed).empty());
+  CHECK(has(console_reference_mismatch("# no markers\n"), "markers"));
+}
