@@ -222,8 +222,23 @@ bool Console::motion_state_ok(Session& s) {
   return false;
 }
 
-void Console::queue_joint(Session& s, const kin::JointVector& goal, double pct) {
+MoveJoints Console::joint_request(const Command& c) const {
+  MoveJoints m;
+  if (c.cmd == Cmd::home) {
+    m.goal = cfg_.home;
+    m.speed_pct = cfg_.default_joint_speed_pct;
+    return m;
+  }
+  m.goal = kin::JointVector(n_);
+  for (int j = 0; j < n_; ++j) m.goal[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
+  m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
+  return m;
+}
+
+void Console::queue(Session& s, const MoveJoints& req) {
   if (!motion_state_ok(s)) return;
+  const kin::JointVector& goal = req.goal;
+  const double pct = req.speed_pct > 0 ? req.speed_pct : cfg_.default_joint_speed_pct;
   const auto& lim = ctl_.limits();
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
@@ -259,8 +274,11 @@ void Console::queue_joint(Session& s, const kin::JointVector& goal, double pct) 
   answer_ok(s, fmt("queued id=%u duration=%.3fs", unsigned(tail_id_), dur));
 }
 
-void Console::queue_linear(Session& s, const kin::Pose& target, double speed) {
+void Console::queue(Session& s, const MoveLine& req) {
   if (!motion_state_ok(s)) return;
+  double speed = req.rapid ? cfg_.max_linear_speed : (req.speed > 0 ? req.speed : cfg_.default_linear_speed);
+  if (req.clamp_speed && speed > cfg_.max_linear_speed) speed = cfg_.max_linear_speed;
+  const kin::Pose& target = req.target;
   if (!(speed >= kMinLinearSpeedMmS * 1e-3) || speed > cfg_.max_linear_speed + 1e-12) {
     answer_error(s, CmdError::out_of_range, fmt("linear speed %g mm/s outside [%g, %g]", speed * 1e3, kMinLinearSpeedMmS,
                                                 cfg_.max_linear_speed * 1e3));
@@ -335,23 +353,29 @@ kin::Pose Console::pose_from_values(const Command& c, const kin::JointVector& q_
   return p;
 }
 
-void Console::do_gmove(Session& s, const Command& c) {
-  const kin::JointVector q0 = tail();
+MoveLine Console::line_request(const Command& c) const {
+  MoveLine m;
+  if (c.cmd == Cmd::movel) {
+    m.target = pose_from_values(c, tail());
+    m.speed = c.has_speed ? c.speed * 1e-3 : 0.0;
+    return m;
+  }
+  // G0/G1: the axes given replace (G90) or move (G91) the queue's end pose; the others keep it.
   kin::Pose cur;
-  kin::forward(chain_, q0, cur);
-  Eigen::Vector3d pos = cur.translation() * 1e3;
-  Eigen::Vector3d rpy = kin::rpy_from_rotation(cur.linear()) / kDeg;
+  kin::forward(chain_, tail(), cur);
+  m.target = cur;
+  Eigen::Vector3d rpy = kin::rpy_from_rotation(cur.linear());
   for (int k = 0; k < 6; ++k) {
     if (!(c.axis_mask & (1u << k))) continue;
-    double& v = k < 3 ? pos[k] : rpy[k - 3];
-    v = c.relative ? v + c.vals[static_cast<std::size_t>(k)] : c.vals[static_cast<std::size_t>(k)];
+    const double v = c.vals[static_cast<std::size_t>(k)];
+    if (k < 3) m.target.translation()[k] = (c.relative ? cur.translation()[k] * 1e3 + v : v) * 1e-3;
+    else rpy[k - 3] = c.relative ? rpy[k - 3] + v * kDeg : v * kDeg;
   }
-  kin::Pose target = cur;
-  target.translation() = pos * 1e-3;
-  if (c.axis_mask & 0x38) target.linear() = kin::rotation_from_rpy(rpy[0] * kDeg, rpy[1] * kDeg, rpy[2] * kDeg);
-  double speed = c.rapid ? cfg_.max_linear_speed : (c.has_speed ? c.speed * 1e-3 : cfg_.default_linear_speed);
-  if (speed > cfg_.max_linear_speed) speed = cfg_.max_linear_speed;  // senders' F is clamped, as GRBL does
-  queue_linear(s, target, speed);
+  if (c.axis_mask & 0x38) m.target.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+  m.rapid = c.rapid;
+  m.speed = c.has_speed ? c.speed * 1e-3 : 0.0;
+  m.clamp_speed = true;  // senders' F is clamped, as GRBL does
+  return m;
 }
 
 void Console::do_fk(Session& s, const Command& c) {
@@ -469,19 +493,10 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::hold: simple(RequestOp::hold); return;
     case Cmd::resume: simple(RequestOp::resume); return;
     case Cmd::home_zero: simple(RequestOp::set_zero); return;
-    case Cmd::home: queue_joint(s, cfg_.home, cfg_.default_joint_speed_pct); return;
-    case Cmd::movej: {
-      kin::JointVector q(n_);
-      for (int j = 0; j < n_; ++j) q[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
-      queue_joint(s, q, c.has_speed ? c.speed : cfg_.default_joint_speed_pct);
-      return;
-    }
-    case Cmd::movel: {
-      const kin::Pose target = pose_from_values(c, tail());
-      queue_linear(s, target, c.has_speed ? c.speed * 1e-3 : cfg_.default_linear_speed);
-      return;
-    }
-    case Cmd::gmove: do_gmove(s, c); return;
+    case Cmd::home:
+    case Cmd::movej: queue(s, joint_request(c)); return;
+    case Cmd::movel:
+    case Cmd::gmove: queue(s, line_request(c)); return;
     case Cmd::dwell: queue_dwell(s, c.vals[0]); return;
     case Cmd::fk: do_fk(s, c); return;
     case Cmd::ik: do_ik(s, c); return;

@@ -23,6 +23,7 @@
 #include <string_view>
 
 #include "servoarm/console/commands.hpp"
+#include "servoarm/console/requests.hpp"
 #include "servoarm/rt/controller.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
@@ -103,6 +104,14 @@ class Console {
   /// Joint values of the end of the motion queue (or the commanded position).
   kin::JointVector tail() const;
   const ConsoleConfig& config() const { return cfg_; }
+  /// The canonical request of a movel or G0/G1 command (Cmd::movel, Cmd::gmove), from the queue's end.
+  MoveLine line_request(const Command& c) const;
+  /// The canonical request of a movej, home or G28 command (Cmd::movej, Cmd::home).
+  MoveJoints joint_request(const Command& c) const;
+  /// Validate and queue a request; the answer (ok queued ... | error: ...) goes to s.out.
+  void queue(Session& s, const MoveLine& m);
+  void queue(Session& s, const MoveJoints& m);
+
   /// Motions queued by this console so far (ids 1..n).
   std::uint32_t last_motion_id() const { return next_id_ - 1; }
 
@@ -115,8 +124,6 @@ class Console {
   bool settle(Session& s);
   /// out_of_range answer when a planned move would take longer than max_move_duration_s.
   bool duration_ok(Session& s, const char* what, double duration_s);
-  void queue_joint(Session& s, const kin::JointVector& goal, double pct);
-  void queue_linear(Session& s, const kin::Pose& target, double speed_m_s);
   void queue_dwell(Session& s, double secs);
   void do_help(Session& s, std::string_view topic);
   /// `help`'s first line: the units in use.
@@ -124,7 +131,6 @@ class Console {
   void do_fk(Session& s, const Command& c);
   void do_ik(Session& s, const Command& c);
   void do_limits(Session& s);
-  void do_gmove(Session& s, const Command& c);
   kin::Pose pose_from_values(const Command& c, const kin::JointVector& q_ref) const;
   std::string pose_text(const kin::JointVector& q) const;
   std::string joints_text(const kin::JointVector& q) const;

@@ -1,0 +1,114 @@
+// The canonical requests (requests.hpp): movel and G0/G1 build one MoveLine, movej,
+// home and G28 one MoveJoints, and one function validates and queues each. The same
+// move typed either way queues the same motion (same knots, same duration).
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include "console_rig.hpp"
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm;
+using namespace servoarm::fw;
+using test::answer_ok;
+
+namespace {
+
+/// Queue `line`, copy the motion it queued, then `stop` (drops it; the queue's end is the
+/// commanded position again, so the next line starts from the same place).
+std::unique_ptr<MotionItem> queued_by(test::ConsoleRig& r, const std::string& line) {
+  const std::string a = r.cmd(line);
+  if (!answer_ok(a)) FAIL((line + ": " + a).c_str());
+  MotionItem* m = r.app.ctl->motions().front();
+  if (m == nullptr) FAIL((line + ": nothing queued").c_str());
+  auto copy = std::make_unique<MotionItem>(*m);
+  const std::string st = r.cmd("stop");
+  if (!answer_ok(st)) FAIL(("stop: " + st).c_str());
+  for (int i = 0; i < 3000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  CHECK(r.app.ctl->motions().empty());
+  return copy;
+}
+
+void check_same_line(const MotionItem& a, const MotionItem& b, const std::string& what) {
+  CHECK_TEXT(a.kind == MotionKind::cartesian && b.kind == MotionKind::cartesian, what.c_str());
+  CHECK_TEXT(a.ct.duration == b.ct.duration, (what + ": durations " + std::to_string(a.ct.duration) + " vs " +
+                                              std::to_string(b.ct.duration)).c_str());
+  CHECK_TEXT(a.ct.n == b.ct.n && a.ct.n == 6, what.c_str());
+  double worst = 0;
+  for (int k = 0; k <= kin::kMovelKnots; ++k)
+    for (int j = 0; j < a.ct.n; ++j) {
+      const auto ku = static_cast<std::size_t>(k), ju = static_cast<std::size_t>(j);
+      worst = std::fmax(worst, std::fabs(a.ct.q_knot[ku][ju] - b.ct.q_knot[ku][ju]));
+      worst = std::fmax(worst, std::fabs(a.ct.dq_knot[ku][ju] - b.ct.dq_knot[ku][ju]));
+    }
+  CHECK_TEXT(worst == 0, (what + ": knots differ by " + std::to_string(worst)).c_str());
+  CHECK_TEXT((a.goal - b.goal).cwiseAbs().maxCoeff() == 0, what.c_str());
+  CHECK_TEXT(a.ct.p1 == b.ct.p1, what.c_str());
+}
+
+}  // namespace
+
+TEST_GROUP(ConsoleRequests){};
+
+TEST(ConsoleRequests, MovelAndTheEquivalentG1QueueTheSameMotion) {
+  test::ConsoleRig r;
+  r.enable();
+  CHECK(answer_ok(r.cmd("movej 20 -40 160 10 -50 30")));
+  CHECK(answer_ok(r.cmd("wait")));
+  // Position only (orientation kept), then position and orientation; mm/s vs mm/min.
+  const auto a1 = queued_by(r, "movel 500 100 300 speed=50");
+  const auto b1 = queued_by(r, "G1 X500 Y100 Z300 F3000");
+  check_same_line(*a1, *b1, "movel x y z / G1 X Y Z");
+  const auto a2 = queued_by(r, "movel 500 100 300 170 10 80 speed=120");
+  const auto b2 = queued_by(r, "G1 X500 Y100 Z300 A170 B10 C80 F7200");
+  check_same_line(*a2, *b2, "movel x y z rx ry rz / G1 X Y Z A B C");
+  // G20: inches; G0 = the maximum linear speed = movel at that speed.
+  const double vmax = r.app.console->config().max_linear_speed * 1e3;
+  char l3[160];  // the millimetres G20 makes of the inches, printed exactly
+  std::snprintf(l3, sizeof l3, "movel %.17g %.17g %.17g speed=%.17g", 20 * 25.4, 4 * 25.4, 12 * 25.4, vmax);
+  const auto a3 = queued_by(r, l3);
+  CHECK(answer_ok(r.cmd("G20")));
+  const auto b3 = queued_by(r, "G0 X20 Y4 Z12");
+  CHECK(answer_ok(r.cmd("G21")));
+  check_same_line(*a3, *b3, "movel / G20 G0");
+}
+
+TEST(ConsoleRequests, FrontEndsBuildOneCanonicalRequest) {
+  test::ConsoleRig r;
+  r.enable();
+  CHECK(answer_ok(r.cmd("movej 20 -40 160 10 -50 30")));
+  CHECK(answer_ok(r.cmd("wait")));
+  GcodeModal m;
+  Command mv, g1, g0;
+  CHECK(parse_line("movel 500 100 300 speed=50", 6, m, mv).ok());
+  CHECK(parse_line("G1 X500 Y100 Z300 F3000", 6, m, g1).ok());
+  CHECK(parse_line("G0 X500 Y100 Z300", 6, m, g0).ok());
+  const MoveLine l1 = r.app.console->line_request(mv), l2 = r.app.console->line_request(g1),
+                 l3 = r.app.console->line_request(g0);
+  CHECK(l1.target.matrix() == l2.target.matrix() && l2.target.matrix() == l3.target.matrix());
+  DOUBLES_EQUAL(0.05, l1.speed, 1e-15);
+  DOUBLES_EQUAL(0.05, l2.speed, 1e-15);
+  CHECK(!l1.rapid && !l2.rapid && l3.rapid);
+  CHECK(!l1.clamp_speed && l2.clamp_speed);  // movel refuses above the maximum, G-code F is clamped
+  // movej, home and G28: one MoveJoints.
+  Command mj, home, g28;
+  CHECK(parse_line("movej 0 10 20 0 30 0 speed=20", 6, m, mj).ok());
+  CHECK(parse_line("home", 6, m, home).ok());
+  CHECK(parse_line("G28", 6, m, g28).ok());
+  const MoveJoints j1 = r.app.console->joint_request(mj);
+  DOUBLES_EQUAL(20, j1.speed_pct, 0);
+  DOUBLES_EQUAL(10 * M_PI / 180, j1.goal[1], 1e-15);
+  const MoveJoints h1 = r.app.console->joint_request(home), h2 = r.app.console->joint_request(g28);
+  CHECK(h1.goal == h2.goal && h1.speed_pct == h2.speed_pct);
+  CHECK(h1.goal == r.app.console->config().home);
+  // Same answers for the same refusal, whichever front end: speed above the maximum (movel) is refused,
+  // the G-code F is clamped; an unreachable target is refused by both with the same code.
+  const std::string too_fast = r.cmd("movel 500 100 300 speed=99999");
+  CHECK_TEXT(too_fast.rfind("error: out_of_range linear speed", 0) == 0, too_fast.c_str());
+  const std::string far1 = r.cmd("movel 5000 0 0"), far2 = r.cmd("G1 X5000 Y0 Z0");
+  CHECK_TEXT(far1.rfind("error: ", 0) == 0 && far1.find(" movel refused: ") != std::string::npos, far1.c_str());
+  STRCMP_EQUAL(far1.c_str(), far2.c_str());
+  CHECK(r.app.ctl->motions().empty());
+}
