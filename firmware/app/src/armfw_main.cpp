@@ -22,15 +22,6 @@
 #include "servoarm/app/app.hpp"
 #ifdef SERVOARM_WITH_SIM
 #include "servoarm/sim/sim_plant.hpp"  // --sim: the only firmware file that uses host_sim
-#else
-#include "servoarm/hal/sim_bus.hpp"
-namespace servoarm::sim {  // built without host_sim (robot-controller build): --sim is refused
-struct SimPlant {
-  void start_thread() {}
-  void stop_thread() {}
-  hal::SimBus& bus() { std::abort(); }
-};
-}  // namespace servoarm::sim
 #endif
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/console/transport.hpp"
@@ -333,8 +324,7 @@ int main(int argc, char** argv) {
     plant = std::make_unique<sim::SimPlant>(clock, nodes);
     return &plant->master_bus();
   };
-#else
-  sim::SimPlant* const plant = nullptr;
+#else  // built without host_sim (robot-controller build): no virtual drives
   if (cfg.can == "sim") {
     std::fprintf(stderr, "armfw: bus.can = \"sim\" (--sim): this armfw was built without the virtual drives (host_sim)\n");
     return 2;
@@ -345,7 +335,13 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "armfw: %s\n", err.c_str());
     return 2;
   }
-  if (plant) plant->start_thread();  // the drives answer the bring-up's SDOs from their own thread
+  hal::SimBus* sim_bus = nullptr;  // the virtual drives' bus (console.can = "sim")
+#ifdef SERVOARM_WITH_SIM
+  if (plant) {
+    plant->start_thread();  // the drives answer the bring-up's SDOs from their own thread
+    sim_bus = &plant->bus();
+  }
+#endif
   err = app.boot();
   if (!err.empty()) {
     std::fprintf(stderr, "armfw: %s\n", err.c_str());
@@ -414,7 +410,7 @@ int main(int argc, char** argv) {
         cc.iface = app.cfg.console_can;
         cc.rx_id = static_cast<std::uint32_t>(app.cfg.console_can_rx_id);
         cc.tx_id = static_cast<std::uint32_t>(app.cfg.console_can_tx_id);
-        const std::string e = can.open(cc, plant ? &plant->bus() : nullptr, ct);
+        const std::string e = can.open(cc, sim_bus, ct);
         if (!e.empty()) {
           std::fprintf(stderr, "armfw: can console: %s\n", e.c_str());
           rc = 1;
@@ -441,7 +437,9 @@ int main(int argc, char** argv) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   loop.stop();
+#ifdef SERVOARM_WITH_SIM
   if (plant) plant->stop_thread();
+#endif
   if (bench <= 0) std::fprintf(stderr, "armfw: exit: %s\n", app.console->stats_text().c_str());
   return rc;
 }
