@@ -35,7 +35,7 @@ struct CodeSpec {
   const char* help;
 };
 constexpr CodeSpec kGcodes[] = {
-    {"G0 X Y Z [A B C]", "linear tool move at the maximum linear speed (A B C = rx ry rz, angle unit)"},
+    {"G0 X Y Z [A B C]", "linear tool move at the maximum linear speed (A B C = rx ry rz in degrees)"},
     {"G1 X Y Z [A B C] [F]", "linear tool move; F in G20/G21 length units per minute, clamped to the maximum"},
     {"G4 P<ms> | S<s>", "dwell"},
     {"G20 | G21", "X Y Z and F in inches | millimetres"},
@@ -44,12 +44,12 @@ constexpr CodeSpec kGcodes[] = {
     {"M17", "enable"},
     {"M18 | M84", "disable"},
     {"M112", "e-stop"},
-    {"M114", "position: `X: Y: Z: A: B: C:` (G20/G21 length units, angle unit), then `ok`"},
+    {"M114", "position: `X: Y: Z: A: B: C:` (G20/G21 length units, degrees), then `ok`"},
     {"M400", "wait"},
     {"M105 | M110", "accepted so that senders connect (`ok T:0 /0 B:0 /0` | line numbers not tracked)"},
 };
 constexpr CodeSpec kRealtime[] = {
-    {"?", "status report `<Idle|MPos:x,y,z|J:j1,...|Q:n>`"},
+    {"?", "status report `<Idle|MPos:x,y,z|J:j1,...|Q:n>` (MPos in mm, J in the joint units)"},
     {"!", "feed hold (linear moves stop on the line)"},
     {"~", "resume"},
     {"Ctrl-X (0x18)", "e-stop; discards the partial line, answers every line not executed yet with `error: estop`"},

@@ -353,7 +353,7 @@ bool looks_like_gcode(std::string_view w) {
 
 }  // namespace
 
-ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, Command& out) {
+ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, Command& out, const ConsoleUnits& units) {
   if (line.size() > kMaxLine) return fail(CmdError::overlong, "line longer than %zu characters", kMaxLine);
   while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) line.remove_suffix(1);
   for (char ch : line) {
@@ -417,8 +417,10 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       ParseResult r = parse_numbers(ws, used, c, spec->args == ArgShape::pose_speed, name);
       if (!r.ok()) return r;
       if (c.count != 3 && c.count != 6) return fail(CmdError::arg_count, "%s needs x y z [rx ry rz], got %d values", name, c.count);
-      if (c.has_speed && c.speed < kMinLinearSpeedMmS)
-        return fail(CmdError::out_of_range, "%s: speed=%g mm/s is below the minimum %g mm/s", name, c.speed, kMinLinearSpeedMmS);
+      const double vmin = units.length == LengthUnit::mm ? kMinLinearSpeedMmS : kMinLinearSpeedMmS * 1e-3;
+      if (c.has_speed && c.speed < vmin)
+        return fail(CmdError::out_of_range, "%s: speed=%g %s/s is below the minimum %g %s/s", name, c.speed,
+                    units.length_name(), vmin, units.length_name());
       break;
     }
     case ArgShape::joints_opt: {

@@ -66,10 +66,10 @@ kin::IkSolver Console::ik_solver() const {
 }
 
 double Console::to_si(int j, double user) const {
-  return chain_.joint(j).type == kin::JointType::prismatic ? user * 1e-3 : user * kDeg;
+  return cfg_.units.joint_in(chain_, j, user);
 }
 double Console::to_user(int j, double si) const {
-  return chain_.joint(j).type == kin::JointType::prismatic ? si * 1e3 : si / kDeg;
+  return cfg_.units.joint_out(chain_, j, si);
 }
 
 kin::JointVector Console::tail() const {
@@ -87,7 +87,11 @@ kin::JointVector Console::tail() const {
 
 std::string Console::joints_text(const kin::JointVector& q) const {
   std::string s;
-  for (int j = 0; j < q.size(); ++j) s += fmt("%s%.3f", j ? " " : "", to_user(j, q[j]));
+  const ConsoleUnits& u = cfg_.units;
+  for (int j = 0; j < q.size(); ++j) {
+    const int d = chain_.joint(j).type == kin::JointType::prismatic ? u.length_decimals() : u.angle_decimals();
+    s += fmt("%s%.*f", j ? " " : "", d, to_user(j, q[j]));
+  }
   return s;
 }
 
@@ -95,8 +99,11 @@ std::string Console::pose_text(const kin::JointVector& q) const {
   kin::Pose p;
   if (kin::forward(chain_, q, p) != kin::Status::ok) return "x=nan";
   const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear());
-  return fmt("x=%.3f y=%.3f z=%.3f rx=%.3f ry=%.3f rz=%.3f", p.translation().x() * 1e3, p.translation().y() * 1e3,
-             p.translation().z() * 1e3, rpy[0] / kDeg, rpy[1] / kDeg, rpy[2] / kDeg);
+  const ConsoleUnits& u = cfg_.units;
+  const int L = u.length_decimals(), A = u.angle_decimals();
+  return fmt("x=%.*f y=%.*f z=%.*f rx=%.*f ry=%.*f rz=%.*f", L, u.length_out(p.translation().x()), L,
+             u.length_out(p.translation().y()), L, u.length_out(p.translation().z()), A, u.angle_out(rpy[0]), A,
+             u.angle_out(rpy[1]), A, u.angle_out(rpy[2]));
 }
 
 void Console::answer_error(Session& s, CmdError e, const std::string& msg) {
@@ -135,8 +142,10 @@ std::string Console::status_text() const {
   const Telemetry t = ctl_.telemetry();
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
-  std::string s = fmt("state=%s%s queue=%u joints=[%s] deg pose=[%s] mm,deg", to_string(t.state),
-                      t.holding ? " hold=1" : "", unsigned(t.queued), joints_text(q).c_str(), pose_text(q).c_str());
+  const ConsoleUnits& u = cfg_.units;
+  std::string s = fmt("state=%s%s queue=%u joints=[%s] %s pose=[%s] %s,%s", to_string(t.state), t.holding ? " hold=1" : "",
+                      unsigned(t.queued), joints_text(q).c_str(), u.angle_name(), pose_text(q).c_str(), u.length_name(),
+                      u.angle_name());
   if (t.fault_text[0]) s += fmt(" fault=\"%s\"", t.fault_text);
   return s;
 }
@@ -160,7 +169,9 @@ std::string Console::grbl_report() const {
   kin::forward(chain_, q, p);
   std::string s = fmt("<%s|MPos:%.3f,%.3f,%.3f|J:", st, p.translation().x() * 1e3, p.translation().y() * 1e3,
                       p.translation().z() * 1e3);
-  for (int j = 0; j < n_; ++j) s += fmt("%s%.2f", j ? "," : "", to_user(j, q[j]));
+  // MPos: G-code lengths (mm, as GRBL reports them); J: the console's joint units.
+  const int d = cfg_.units.angle == AngleUnit::deg && cfg_.units.length == LengthUnit::mm ? 2 : 5;
+  for (int j = 0; j < n_; ++j) s += fmt("%s%.*f", j ? "," : "", d, to_user(j, q[j]));
   s += fmt("|Q:%u>", unsigned(t.queued));
   return s;
 }
@@ -280,8 +291,11 @@ void Console::queue(Session& s, const MoveLine& req) {
   if (req.clamp_speed && speed > cfg_.max_linear_speed) speed = cfg_.max_linear_speed;
   const kin::Pose& target = req.target;
   if (!(speed >= kMinLinearSpeedMmS * 1e-3) || speed > cfg_.max_linear_speed + 1e-12) {
-    answer_error(s, CmdError::out_of_range, fmt("linear speed %g mm/s outside [%g, %g]", speed * 1e3, kMinLinearSpeedMmS,
-                                                cfg_.max_linear_speed * 1e3));
+    const ConsoleUnits& u = cfg_.units;
+    answer_error(s, CmdError::out_of_range,
+                 fmt("linear speed %g %s/s outside [%g, %g]", u.length_out(speed), u.length_name(),
+                     u.length == LengthUnit::mm ? kMinLinearSpeedMmS : kMinLinearSpeedMmS * 1e-3,
+                     u.length_out(cfg_.max_linear_speed)));
     return;
   }
   MotionItem* m = ctl_.motions().back();
@@ -296,8 +310,10 @@ void Console::queue(Session& s, const MoveLine& req) {
   const kin::JointVector q0 = tail();
   const kin::MotionStatus ms = kin::plan_movel(chain_, q0, target, cl, mo, ik_solver(), m->ct, &rep);
   if (!kin::is_ok(ms)) {
-    std::string where = fmt("at s=%.2f (x=%.1f y=%.1f z=%.1f mm)", rep.s, rep.position.x() * 1e3, rep.position.y() * 1e3,
-                            rep.position.z() * 1e3);
+    const ConsoleUnits& u = cfg_.units;
+    const int L = u.length == LengthUnit::mm ? 1 : 4;
+    std::string where = fmt("at s=%.2f (x=%.*f y=%.*f z=%.*f %s)", rep.s, L, u.length_out(rep.position.x()), L,
+                            u.length_out(rep.position.y()), L, u.length_out(rep.position.z()), u.length_name());
     if (rep.joint >= 0) where += fmt(" joint %d", rep.joint + 1);
     answer_error(s, motion_error(ms), fmt("movel refused: %s %s", kin::to_string(ms), where.c_str()));
     return;
@@ -348,8 +364,9 @@ kin::Pose Console::pose_from_values(const Command& c, const kin::JointVector& q_
   kin::Pose cur;
   kin::forward(chain_, q_ref, cur);
   kin::Pose p = cur;
-  p.translation() = Eigen::Vector3d(c.vals[0], c.vals[1], c.vals[2]) * 1e-3;
-  if (c.count == 6) p.linear() = kin::rotation_from_rpy(c.vals[3] * kDeg, c.vals[4] * kDeg, c.vals[5] * kDeg);
+  const ConsoleUnits& u = cfg_.units;
+  p.translation() = Eigen::Vector3d(u.length_in(c.vals[0]), u.length_in(c.vals[1]), u.length_in(c.vals[2]));
+  if (c.count == 6) p.linear() = kin::rotation_from_rpy(u.angle_in(c.vals[3]), u.angle_in(c.vals[4]), u.angle_in(c.vals[5]));
   return p;
 }
 
@@ -357,10 +374,12 @@ MoveLine Console::line_request(const Command& c) const {
   MoveLine m;
   if (c.cmd == Cmd::movel) {
     m.target = pose_from_values(c, tail());
-    m.speed = c.has_speed ? c.speed * 1e-3 : 0.0;
+    m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
     return m;
   }
   // G0/G1: the axes given replace (G90) or move (G91) the queue's end pose; the others keep it.
+  // G-code's units (the parser made G20 inches mm): mm, degrees, F in mm/s.
+  const ConsoleUnits& u = kGcodeUnits;
   kin::Pose cur;
   kin::forward(chain_, tail(), cur);
   m.target = cur;
@@ -368,12 +387,12 @@ MoveLine Console::line_request(const Command& c) const {
   for (int k = 0; k < 6; ++k) {
     if (!(c.axis_mask & (1u << k))) continue;
     const double v = c.vals[static_cast<std::size_t>(k)];
-    if (k < 3) m.target.translation()[k] = (c.relative ? cur.translation()[k] * 1e3 + v : v) * 1e-3;
-    else rpy[k - 3] = c.relative ? rpy[k - 3] + v * kDeg : v * kDeg;
+    if (k < 3) m.target.translation()[k] = u.length_in(c.relative ? u.length_out(cur.translation()[k]) + v : v);
+    else rpy[k - 3] = c.relative ? rpy[k - 3] + u.angle_in(v) : u.angle_in(v);
   }
   if (c.axis_mask & 0x38) m.target.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
   m.rapid = c.rapid;
-  m.speed = c.has_speed ? c.speed * 1e-3 : 0.0;
+  m.speed = c.has_speed ? u.length_in(c.speed) : 0.0;
   m.clamp_speed = true;  // senders' F is clamped, as GRBL does
   return m;
 }
@@ -415,7 +434,7 @@ void Console::do_ik(Session& s, const Command& c) {
     answer_error(s, CmdError::limits, fmt("nearest solution [%s] is outside the joint limits", joints_text(q).c_str()));
     return;
   }
-  std::string d = fmt("joints=[%s] deg", joints_text(q).c_str());
+  std::string d = fmt("joints=[%s] %s", joints_text(q).c_str(), cfg_.units.angle_name());
   if (solutions >= 0) d += fmt(" solutions=%d", solutions);
   if (st == kin::Status::singular) d += " warning=singular";
   answer_ok(s, d);
@@ -423,15 +442,20 @@ void Console::do_ik(Session& s, const Command& c) {
 
 void Console::do_limits(Session& s) {
   const auto& lim = ctl_.limits();
+  const ConsoleUnits& u = cfg_.units;
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
     const bool pr = chain_.joint(j).type == kin::JointType::prismatic;
-    s.out += fmt("joint %d: %s [%.3f, %.3f] %s  vmax=%.3f amax=%.3f jmax=%.3f %s/s^k\n", j + 1, pr ? "prismatic" : "revolute",
-                 to_user(j, lim.lower[ju]), to_user(j, lim.upper[ju]), pr ? "mm" : "deg", to_user(j, lim.dyn[ju].max_velocity),
-                 to_user(j, lim.dyn[ju].max_acceleration), to_user(j, lim.dyn[ju].max_jerk), pr ? "mm" : "deg");
+    const int d = pr ? u.length_decimals() : u.angle_decimals();
+    s.out += fmt("joint %d: %s [%.*f, %.*f] %s  vmax=%.*f amax=%.*f jmax=%.*f %s/s^k\n", j + 1, pr ? "prismatic" : "revolute", d,
+                 to_user(j, lim.lower[ju]), d, to_user(j, lim.upper[ju]), u.joint_name(chain_, j), d,
+                 to_user(j, lim.dyn[ju].max_velocity), d, to_user(j, lim.dyn[ju].max_acceleration), d,
+                 to_user(j, lim.dyn[ju].max_jerk), u.joint_name(chain_, j));
   }
-  s.out += fmt("linear speed: default %.1f mm/s, max %.1f mm/s; following error limit %.3f deg\n", cfg_.default_linear_speed * 1e3,
-               cfg_.max_linear_speed * 1e3, ctl_.config().following_error / kDeg);
+  const int v = u.length == LengthUnit::mm ? 1 : 4;
+  s.out += fmt("linear speed: default %.*f %s/s, max %.*f %s/s; following error limit %.*f %s\n", v,
+               u.length_out(cfg_.default_linear_speed), u.length_name(), v, u.length_out(cfg_.max_linear_speed), u.length_name(),
+               u.angle_decimals(), u.angle_out(ctl_.config().following_error), u.angle_name());
   answer_ok(s);
 }
 
@@ -444,13 +468,13 @@ void Console::do_help(Session& s, std::string_view topic) {
 }
 
 std::string Console::units_line() const {
-  return "units: lengths mm, angles deg (joints: deg, prismatic mm), linear speeds mm/s";
+  return cfg_.units.help_line();
 }
 
 void Console::execute(Session& s, std::string_view line) {
   ++s.lines_done;
   Command c;
-  const ParseResult pr = parse_line(line, n_, s.modal, c);
+  const ParseResult pr = parse_line(line, n_, s.modal, c, cfg_.units);
   if (!pr.ok()) {
     answer_error(s, pr.error, pr.message.data());
     return;

@@ -3,15 +3,18 @@
 // clock, no allocation; the only state is the G-code modal state passed in,
 // which changes only when the line parses.
 //
-// Units on the console (stated in `help`): joint values in degrees (revolute)
-// or millimetres (prismatic); positions in millimetres; orientations rx ry rz
-// in degrees as fixed-axis roll-pitch-yaw: R = Rz(rz) * Ry(ry) * Rx(rx).
-// G-code X Y Z follow G20/G21 (inches/mm), A B C are rx ry rz in degrees,
-// F is in length units per minute.
+// Units on the console (stated in `help`, units.hpp): the robot description's
+// (mm or m, deg or rad): joint values in the angle unit (revolute) or the length
+// unit (prismatic); positions in the length unit; orientations rx ry rz in the
+// angle unit as fixed-axis roll-pitch-yaw: R = Rz(rz) * Ry(ry) * Rx(rx). The
+// parser keeps the values as typed; the console converts them (ConsoleUnits).
+// G-code X Y Z follow G20/G21 (inches/mm; the parser converts them to mm), A B C
+// are rx ry rz in degrees, F is in G20/G21 length units per minute.
 #include <array>
 #include <cstdint>
 #include <string_view>
 
+#include "servoarm/console/units.hpp"
 #include "servoarm/kinematics/types.hpp"
 
 namespace servoarm::fw {
@@ -72,9 +75,9 @@ struct GcodeModal {
 struct Command {
   Cmd cmd = Cmd::none;
   int count = 0;                        ///< numbers in vals
-  std::array<double, 8> vals{};         ///< as typed (deg / mm), G-code converted to mm / deg
+  std::array<double, 8> vals{};         ///< as typed (console units), G-code converted to mm / deg
   bool has_speed = false;
-  double speed = 0;                     ///< movej: percent (0,100]; movel: mm/s; gmove: mm/s (from F)
+  double speed = 0;                     ///< movej: percent (0,100]; movel: length unit/s; gmove: mm/s (from F)
   std::uint8_t axis_mask = 0;           ///< gmove: bit 0..5 = X Y Z A B C given
   bool relative = false;                ///< gmove: G91 in effect
   bool rapid = false;                   ///< gmove: G0
@@ -89,8 +92,10 @@ struct ParseResult {
 };
 
 /// Parse one line (without the newline). `n_joints` sets how many values movej
-/// and fk take. `modal` is updated only on success.
-ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, Command& out);
+/// and fk take. `modal` is updated only on success. `units`: the console's (the
+/// bounds of movel's speed= are checked in them).
+ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, Command& out,
+                       const ConsoleUnits& units = {});
 
 /// GRBL-style realtime characters, acted on as soon as they arrive (never part of a line).
 inline constexpr char kRtStatus = '?';

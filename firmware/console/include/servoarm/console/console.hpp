@@ -39,6 +39,9 @@ struct ConsoleConfig {
   double reply_timeout_s = 1.0;              ///< wait for the control thread to answer a request
   double max_move_duration_s = 600.0;        ///< longest move accepted (movej, movel, G0/G1, home): out_of_range beyond
   std::string config_text;                   ///< what `config` prints (the effective configuration)
+  /// What the command language reads and writes (help and status name them); the robot
+  /// description's: App sets units_of(chain). G-code keeps G20/G21 mm/inch and degrees.
+  ConsoleUnits units{};
 };
 
 /// One connected client: its partial line, queued lines, G-code modal state.

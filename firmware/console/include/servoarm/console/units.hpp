@@ -1,0 +1,49 @@
+#pragma once
+// The console's units: one conversion table for every front end. Inside
+// everything is SI (m, rad); the command language reads and writes the robot
+// description's units (length_unit = "mm" | "m", angle_unit = "deg" | "rad"),
+// G-code its own: lengths in G21 mm / G20 inches, A B C in degrees (the
+// machine-tool convention, whatever the description says). Joint values:
+// the angle unit for revolute joints, the length unit for prismatic ones.
+#include <cstdint>
+
+#include "servoarm/kinematics/chain.hpp"
+
+namespace servoarm::fw {
+
+enum class LengthUnit : std::uint8_t { mm, m };
+enum class AngleUnit : std::uint8_t { deg, rad };
+const char* to_string(LengthUnit u);
+const char* to_string(AngleUnit u);
+
+struct ConsoleUnits {
+  LengthUnit length = LengthUnit::mm;
+  AngleUnit angle = AngleUnit::deg;
+
+  /// User value -> SI (m, rad) and back.
+  double length_in(double user) const;
+  double length_out(double si) const;
+  double angle_in(double user) const;
+  double angle_out(double si) const;
+  /// Joint j of `chain` (revolute: angle unit, prismatic: length unit).
+  double joint_in(const kin::Chain& chain, int j, double user) const;
+  double joint_out(const kin::Chain& chain, int j, double si) const;
+  const char* joint_name(const kin::Chain& chain, int j) const;
+  const char* length_name() const { return to_string(length); }
+  const char* angle_name() const { return to_string(angle); }
+  /// Decimals that print a position (0.001 mm, 1e-6 m) and an angle (0.001 deg, 1e-6 rad).
+  int length_decimals() const { return length == LengthUnit::mm ? 3 : 6; }
+  int angle_decimals() const { return angle == AngleUnit::deg ? 3 : 6; }
+  /// The `help` line naming them.
+  const char* help_line() const;
+};
+
+/// The units of a loaded robot description (kin::Chain::length_unit / angle_unit: SI per
+/// user unit; 1 = m / rad, anything else mm / deg, the only other units descriptions allow).
+ConsoleUnits units_of(const kin::Chain& chain);
+
+/// What G-code's X Y Z A B C and F are in once parse_line has read them (it converts
+/// G20 inches to mm): mm and degrees.
+inline constexpr ConsoleUnits kGcodeUnits{LengthUnit::mm, AngleUnit::deg};
+
+}  // namespace servoarm::fw

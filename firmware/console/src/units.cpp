@@ -1,0 +1,59 @@
+#include "servoarm/console/units.hpp"
+
+#include <cmath>
+
+namespace servoarm::fw {
+
+namespace {
+constexpr double kDeg = M_PI / 180.0;
+}
+
+const char* to_string(LengthUnit u) {
+  switch (u) {
+    case LengthUnit::mm: return "mm";
+    case LengthUnit::m: return "m";
+  }
+  return "?";
+}
+
+const char* to_string(AngleUnit u) {
+  switch (u) {
+    case AngleUnit::deg: return "deg";
+    case AngleUnit::rad: return "rad";
+  }
+  return "?";
+}
+
+// Written as the console always computed them (x * 1e-3, x * 1e3, x * kDeg, x / kDeg),
+// so mm / deg answers are bit for bit what they were.
+double ConsoleUnits::length_in(double user) const { return length == LengthUnit::mm ? user * 1e-3 : user; }
+double ConsoleUnits::length_out(double si) const { return length == LengthUnit::mm ? si * 1e3 : si; }
+double ConsoleUnits::angle_in(double user) const { return angle == AngleUnit::deg ? user * kDeg : user; }
+double ConsoleUnits::angle_out(double si) const { return angle == AngleUnit::deg ? si / kDeg : si; }
+
+double ConsoleUnits::joint_in(const kin::Chain& chain, int j, double user) const {
+  return chain.joint(j).type == kin::JointType::prismatic ? length_in(user) : angle_in(user);
+}
+double ConsoleUnits::joint_out(const kin::Chain& chain, int j, double si) const {
+  return chain.joint(j).type == kin::JointType::prismatic ? length_out(si) : angle_out(si);
+}
+const char* ConsoleUnits::joint_name(const kin::Chain& chain, int j) const {
+  return chain.joint(j).type == kin::JointType::prismatic ? length_name() : angle_name();
+}
+
+const char* ConsoleUnits::help_line() const {
+  if (length == LengthUnit::mm)
+    return angle == AngleUnit::deg ? "units: lengths mm, angles deg (revolute joints deg, prismatic mm), speeds mm/s"
+                                   : "units: lengths mm, angles rad (revolute joints rad, prismatic mm), speeds mm/s";
+  return angle == AngleUnit::deg ? "units: lengths m, angles deg (revolute joints deg, prismatic m), speeds m/s"
+                                 : "units: lengths m, angles rad (revolute joints rad, prismatic m), speeds m/s";
+}
+
+ConsoleUnits units_of(const kin::Chain& chain) {
+  ConsoleUnits u;
+  u.length = chain.length_unit == 1.0 ? LengthUnit::m : LengthUnit::mm;
+  u.angle = chain.angle_unit == 1.0 ? AngleUnit::rad : AngleUnit::deg;
+  return u;
+}
+
+}  // namespace servoarm::fw
