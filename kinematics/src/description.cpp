@@ -3,6 +3,10 @@
 // error that names the file, the joint (1-based, in chain order) and the key.
 #include "servoarm/kinematics/description.hpp"
 
+#include <Eigen/Eigenvalues>
+
+#include "servoarm/kinematics/dynamics.hpp"
+
 #include <cmath>
 #include <fstream>
 #include <set>
@@ -98,9 +102,63 @@ Pose read_transform(const Reader& rd, const toml::value& t, const std::string& w
   return T;
 }
 
+// Inertial keys of one row (docs/dynamics.md): mass [kg], com [length unit, DH frame of
+// the row], inertia [kg m^2, about the COM, DH frame: ixx iyy izz ixy ixz iyz],
+// rotor_inertia [kg m^2, motor side], gear_ratio [motor turns per joint turn],
+// friction = [viscous, coulomb] [N m s/rad, N m; N s/m, N for a prismatic joint].
+// A fixed row may carry mass, com and inertia (a body rigidly attached to the one
+// before it); rotor_inertia, gear_ratio and friction are refused there.
+void read_inertial(const Reader& rd, const toml::value& j, const std::string& where, Chain& chain, double L) {
+  const bool any = j.contains("mass") || j.contains("com") || j.contains("inertia") ||
+                   j.contains("rotor_inertia") || j.contains("gear_ratio") || j.contains("friction");
+  if (!any) return;
+  LinkInertial li;
+  if (j.contains("mass")) {
+    li.mass = rd.number(j.at("mass"), where, "mass");
+    if (li.mass < 0) rd.fail(where, "key 'mass': must not be negative (kg)");
+  }
+  if (j.contains("com")) {
+    if (!j.contains("mass")) rd.fail(where, "key 'com': needs 'mass'");
+    double c[3];
+    rd.numbers(j.at("com"), where, "com", c, 3);
+    for (int k = 0; k < 3; ++k) li.com[static_cast<std::size_t>(k)] = c[k] * L;
+    if (std::sqrt(li.com[0] * li.com[0] + li.com[1] * li.com[1] + li.com[2] * li.com[2]) > 10.0)
+      rd.fail(where, "key 'com': more than 10 m from the frame origin (wrong length unit?)");
+  }
+  if (j.contains("inertia")) {
+    double I[6];
+    rd.numbers(j.at("inertia"), where, "inertia", I, 6);
+    for (int k = 0; k < 6; ++k) li.inertia[static_cast<std::size_t>(k)] = I[k];
+    Eigen::Matrix3d M;
+    M << I[0], I[3], I[4], I[3], I[1], I[5], I[4], I[5], I[2];
+    const Eigen::Vector3d e = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(M, Eigen::EigenvaluesOnly).eigenvalues();
+    const double tol = 1e-9 * std::max(1e-12, e.cwiseAbs().maxCoeff());
+    if (e.minCoeff() < -tol)
+      rd.fail(where, "key 'inertia': not positive semi-definite (kg m^2 about the COM: ixx iyy izz ixy ixz iyz)");
+    if (e[0] + e[1] < e[2] - tol)
+      rd.fail(where, "key 'inertia': principal moments violate the triangle inequality (I1 + I2 >= I3)");
+  }
+  if (j.contains("rotor_inertia")) {
+    li.rotor_inertia = rd.number(j.at("rotor_inertia"), where, "rotor_inertia");
+    if (li.rotor_inertia < 0) rd.fail(where, "key 'rotor_inertia': must not be negative (kg m^2)");
+  }
+  if (j.contains("gear_ratio")) {
+    li.gear_ratio = rd.number(j.at("gear_ratio"), where, "gear_ratio");
+    if (li.gear_ratio == 0) rd.fail(where, "key 'gear_ratio': must not be 0");
+  }
+  if (j.contains("friction")) {
+    double f[2];
+    rd.numbers(j.at("friction"), where, "friction", f, 2);
+    if (f[0] < 0 || f[1] < 0) rd.fail(where, "key 'friction': [viscous, coulomb] must not be negative");
+    li.viscous = f[0];
+    li.coulomb = f[1];
+  }
+  if (set_inertial(chain, chain.n_rows - 1, li) != Status::ok) rd.fail(where, "inertial data rejected");
+}
+
 Chain parse(const toml::value& root, const Reader& rd) {
   if (!root.is_table()) rd.fail("", "the file is not a TOML table");
-  rd.only_keys(root, {"name", "convention", "length_unit", "angle_unit", "joint", "tool", "base", "summary"}, "");
+  rd.only_keys(root, {"name", "convention", "length_unit", "angle_unit", "joint", "tool", "base", "summary", "gravity"}, "");
   auto need = [&](const char* key) -> const toml::value& {
     if (!root.contains(key)) rd.fail("", std::string("key '") + key + "' is missing");
     return root.at(key);
@@ -144,7 +202,8 @@ Chain parse(const toml::value& root, const Reader& rd) {
     const std::string where = "joint " + std::to_string(i + 1);
     const toml::value& j = arr[i];
     if (!j.is_table()) rd.fail(where, "expected a table");
-    rd.only_keys(j, {"type", "theta", "d", "a", "alpha", "direction", "limits", "max_velocity", "max_acceleration", "max_jerk", "name"}, where);
+    rd.only_keys(j, {"type", "theta", "d", "a", "alpha", "direction", "limits", "max_velocity", "max_acceleration", "max_jerk", "name",
+                    "mass", "com", "inertia", "rotor_inertia", "gear_ratio", "friction"}, where);
     if (!j.contains("type")) rd.fail(where, "key 'type' is missing (revolute, prismatic or fixed)");
     const std::string type = rd.string(j.at("type"), where, "type");
     DhRow row;
@@ -166,7 +225,8 @@ Chain parse(const toml::value& root, const Reader& rd) {
     if (j.contains("a")) row.a = rd.number(j.at("a"), where, "a") * L;
     if (j.contains("alpha")) row.alpha = rd.number(j.at("alpha"), where, "alpha") * A;
     const double ju = row.type == JointType::prismatic ? L : A;  // joint unit
-    for (const char* k : {"direction", "limits", "max_velocity", "max_acceleration", "max_jerk"})
+    for (const char* k : {"direction", "limits", "max_velocity", "max_acceleration", "max_jerk", "rotor_inertia",
+                          "gear_ratio", "friction"})
       if (!joint && j.contains(k)) rd.fail(where, std::string("key '") + k + "' does not apply to a fixed row");
     if (j.contains("direction")) {
       const double dir = rd.number(j.at("direction"), where, "direction");
@@ -197,11 +257,20 @@ Chain parse(const toml::value& root, const Reader& rd) {
       }
     }
     if (add_row(chain, row) != Status::ok) rd.fail(where, "row rejected (capacity or bad value)");
+    read_inertial(rd, j, where, chain, L);
   }
   if (chain.n_joints == 0) rd.fail("", "the chain has no joints (only fixed rows)");
   if (root.contains("tool")) set_tool(chain, read_transform(rd, root.at("tool"), "tool", L, A));
   if (root.contains("base")) chain.base = read_transform(rd, root.at("base"), "base", L, A);
   if (root.contains("summary")) (void)rd.string(root.at("summary"), "", "summary");
+  if (root.contains("gravity")) {
+    double g[3];
+    rd.numbers(root.at("gravity"), "", "gravity", g, 3);
+    if (!chain.has_inertial) rd.fail("", "key 'gravity': no joint has inertial data (mass, inertia)");
+    if (std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]) > 100)
+      rd.fail("", "key 'gravity': more than 100 m/s^2");
+    chain.gravity = {g[0], g[1], g[2]};
+  }
   return chain;
 }
 

@@ -67,6 +67,45 @@ TEST(Description, EveryKeyAndUnitIsApplied) {
   DOUBLES_EQUAL(1.5, m.chain.rows[0].alpha, 0);
 }
 
+TEST(Description, InertialKeysAndUnits) {
+  const std::string text = with_header(
+      "gravity = [0, 9.81, 0]\n"
+      "[[joint]]\ntype = \"revolute\"\nalpha = 90\nmass = 2.5\ncom = [10, 20, 30]\n"
+      "inertia = [0.1, 0.2, 0.25, 0.01, 0.02, 0.03]\nrotor_inertia = 2e-4\ngear_ratio = -50\nfriction = [0.5, 1.5]\n"
+      "[[joint]]\ntype = \"fixed\"\nmass = 1\ncom = [0, 0, 100]\n"
+      "[[joint]]\ntype = \"prismatic\"\n");
+  const kin::LoadResult r = kin::load_description(text, "t.toml");
+  if (!r.ok) FAIL(r.error.c_str());
+  const kin::Chain& c = r.chain;
+  CHECK(c.has_inertial);
+  DOUBLES_EQUAL(9.81, c.gravity[1], 0);
+  const kin::LinkInertial& L = c.inertial[0];
+  DOUBLES_EQUAL(2.5, L.mass, 0);
+  DOUBLES_EQUAL(0.010, L.com[0], 1e-15);  // mm -> m
+  DOUBLES_EQUAL(0.030, L.com[2], 1e-15);
+  DOUBLES_EQUAL(0.25, L.inertia[2], 0);   // kg m^2 whatever the length unit
+  DOUBLES_EQUAL(0.03, L.inertia[5], 0);
+  DOUBLES_EQUAL(2e-4, L.rotor_inertia, 0);
+  DOUBLES_EQUAL(-50, L.gear_ratio, 0);
+  DOUBLES_EQUAL(0.5, L.viscous, 0);
+  DOUBLES_EQUAL(1.5, L.coulomb, 0);
+  DOUBLES_EQUAL(1.0, c.inertial[1].mass, 0);  // a fixed row carries mass
+  DOUBLES_EQUAL(0.1, c.inertial[1].com[2], 1e-15);
+  DOUBLES_EQUAL(0.0, c.inertial[2].mass, 0);
+  // Without inertial keys: no data, default gravity.
+  const kin::LoadResult plain = kin::load_description(with_header(kJoint), "p.toml");
+  CHECK(plain.ok);
+  CHECK(!plain.chain.has_inertial);
+  DOUBLES_EQUAL(-9.81, plain.chain.gravity[2], 0);
+  // The built-in PUMA 560 carries the AKB data (total 23.45 kg on links 2-6).
+  const kin::Chain puma = model("puma560");
+  CHECK(puma.has_inertial);
+  double m = 0;
+  for (const auto& li : puma.inertial) m += li.mass;
+  DOUBLES_EQUAL(23.45, m, 1e-12);
+  DOUBLES_EQUAL(107.815, puma.inertial[1].gear_ratio, 0);
+}
+
 TEST(Description, EveryErrorNamesTheKeyAndTheJoint) {
   const std::string j = kJoint;
   const std::vector<std::pair<std::string, std::pair<const char*, const char*>>> cases = {
@@ -103,6 +142,25 @@ TEST(Description, EveryErrorNamesTheKeyAndTheJoint) {
       {with_header(j + "tool = 3\n"), {"joint 1", "'tool' is not known"}},
       {"name = \"x\"\nconvention = ", {"not valid TOML", ""}},
       {"this is not toml\n", {"not valid TOML", ""}},
+      // inertial keys (docs/dynamics.md)
+      {with_header(j + "mass = -1\n"), {"joint 1", "'mass': must not be negative"}},
+      {with_header(j + "mass = nan\n"), {"joint 1", "'mass': value is not finite"}},
+      {with_header(j + "mass = 1\ncom = [0, 0]\n"), {"joint 1", "'com': expected 3 numbers"}},
+      {with_header(j + "com = [0, 0, 1]\n"), {"joint 1", "'com': needs 'mass'"}},
+      {with_header(j + "mass = 1\ncom = [0, 0, 10001]\n"), {"joint 1", "'com': more than 10 m"}},
+      {with_header(j + "inertia = [1, 1, -1, 0, 0, 0]\n"), {"joint 1", "'inertia': not positive semi-definite"}},
+      {with_header(j + "inertia = [1, 1, 1, 2, 0, 0]\n"), {"joint 1", "'inertia': not positive semi-definite"}},
+      {with_header(j + "inertia = [0.1, 0.1, 1, 0, 0, 0]\n"), {"joint 1", "triangle inequality"}},
+      {with_header(j + "inertia = [1, 1, 1]\n"), {"joint 1", "'inertia': expected 6 numbers"}},
+      {with_header(j + "rotor_inertia = -1e-4\n"), {"joint 1", "'rotor_inertia'"}},
+      {with_header(j + "gear_ratio = 0\n"), {"joint 1", "'gear_ratio': must not be 0"}},
+      {with_header(j + "friction = [0.1, -1]\n"), {"joint 1", "'friction'"}},
+      {with_header(j + "friction = 0.1\n"), {"joint 1", "'friction'"}},
+      {with_header(j + "[[joint]]\ntype = \"fixed\"\nfriction = [1, 1]\n"), {"joint 2", "'friction' does not apply to a fixed row"}},
+      {with_header(j + "[[joint]]\ntype = \"fixed\"\nrotor_inertia = 1\n"), {"joint 2", "'rotor_inertia' does not apply"}},
+      {with_header("gravity = [0, 0, -9.81]\n" + j), {"'gravity'", "no joint has inertial data"}},
+      {with_header("gravity = [0, -9.81]\n" + j + "mass = 1\n"), {"'gravity'", "expected 3 numbers"}},
+      {with_header("gravity = [0, 0, -1000]\n" + j + "mass = 1\n"), {"'gravity'", "more than 100"}},
   };
   // capacity: 9 joints, 17 rows
   std::string nine, seventeen;

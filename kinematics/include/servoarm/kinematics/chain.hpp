@@ -54,6 +54,25 @@ struct DhRow {
   std::uint8_t alpha_kind = 0;
 };
 
+/// Inertial parameters of the rigid body attached to one DH row (SI), read from the
+/// description's mass/com/inertia/rotor_inertia/gear_ratio/friction keys (docs/dynamics.md).
+/// The body of row i moves with frame i; a fixed row's body is rigidly attached to the
+/// body before it. Set with set_inertial() (dynamics.hpp), which fills the derived part.
+struct LinkInertial {
+  double mass = 0;                     ///< kg
+  std::array<double, 3> com{};         ///< m, centre of mass in the row's DH frame
+  std::array<double, 6> inertia{};     ///< kg m^2 about the COM, DH frame: ixx iyy izz ixy ixz iyz
+  double rotor_inertia = 0;            ///< kg m^2 (or kg), motor side
+  double gear_ratio = 1;               ///< motor turns per joint turn; reflected inertia G^2 Jm
+  double viscous = 0;                  ///< N m s/rad (N s/m), joint side
+  double coulomb = 0;                  ///< N m (N), joint side
+  // Derived by set_inertial(), in the frame right after the row's joint motion
+  // (standard: frame i * (Tx(a) Rx(alpha))^-1; modified: frame i): m*com and the
+  // inertia about that frame's origin (xx yy zz xy xz yz).
+  std::array<double, 3> mc{};
+  std::array<double, 6> io{};
+};
+
 /// A serial chain of up to kMaxRows DH rows (kMaxJoints of them joints).
 struct Chain {
   std::array<char, 48> name{};
@@ -68,6 +87,11 @@ struct Chain {
   /// Units the description was written in (display/console only; the chain is SI).
   double length_unit = 1.0;  ///< metres per user length unit (0.001 for mm)
   double angle_unit = 1.0;   ///< radians per user angle unit (pi/180 for deg)
+  /// Dynamics (dynamics.hpp): per-row inertial data, parallel to rows; gravity in the
+  /// world frame (the frame chain.base is given in), m/s^2.
+  std::array<LinkInertial, kMaxRows> inertial{};
+  bool has_inertial = false;  ///< false: the dynamics functions return unsupported
+  std::array<double, 3> gravity{0.0, 0.0, -9.81};
 
   const DhRow& joint(int j) const { return rows[static_cast<std::size_t>(joint_row[static_cast<std::size_t>(j)])]; }
   DhRow& joint(int j) { return rows[static_cast<std::size_t>(joint_row[static_cast<std::size_t>(j)])]; }
