@@ -19,10 +19,16 @@
 //   max_velocity = 180           # optional, joint units per second (and /s^2, /s^3 below)
 //   max_acceleration = 720
 //   max_jerk = 7200
+//   mass = 2.5                   # optional inertial data (docs/dynamics.md): kg
+//   com = [0, 10, 50]            # length unit, in the row's DH frame
+//   inertia = [ixx, iyy, izz, ixy, ixz, iyz]   # kg m^2 about the COM
+//   rotor_inertia = 2e-4         # kg m^2 (motor side); gear_ratio = 100
+//   friction = [0.5, 0.2]        # viscous N m s/rad, Coulomb N m (not on fixed rows)
 //   [tool]                       # optional: xyz (length unit) + rpy (angle unit)
 //   xyz = [0, 0, 100]
 //   rpy = [0, 0, 0]
 //   [base]                       # optional, same keys
+//   gravity = [0, 0, -9.81]      # top level, m/s^2, world frame (default shown)
 #include <span>
 #include <string>
 #include <string_view>
