@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "servoarm/armctl/cli_common.hpp"
+#include "servoarm/console/ik_options.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"
@@ -32,7 +33,8 @@ const char* kPlanUsage =
     "movej: every joint starts and arrives together (time-synchronised), from rest to rest.\n"
     "movel: the tool follows the straight line (orientation by slerp); the path is checked\n"
     "       first (IK at every point, joint limits, branch, singularity) and the move is\n"
-    "       refused with the reason and place, or slowed near a singularity.\n"
+    "       refused with the reason and place, or slowed near a singularity. IK is armfw's\n"
+    "       own (nearest solution within the joint limits), so the samples are armfw's.\n"
     "Units are the description's (built-in models: mm and degrees).\n"
     "\n"
     "options:\n"
@@ -42,7 +44,7 @@ const char* kPlanUsage =
     "                                   (prismatic: 250 mm/s, 1000 mm/s^2, 10000 mm/s^3).\n"
     "  --override PCT                   speed override 1..100 (default 100)\n"
     "  --speed V --accel A              movel: tool speed / acceleration (length units/s, /s^2;\n"
-    "                                   default 250 mm/s, 1000 mm/s^2; jerk = 10 x accel)\n"
+    "                                   default 250 mm/s, 1000 mm/s^2; jerk = 10 x accel, as armfw)\n"
     "  --angular W                      movel: tool angular speed (angle units/s, default 57.3 deg/s)\n"
     "  --no-slowdown                    movel: refuse instead of slowing near a singularity\n"
     "  --rate HZ                        sample rate of the CSV/SVG (default 1000)\n"
@@ -272,6 +274,18 @@ Samples sample_all(const kin::Chain& c, double duration, double rate, SampleFn f
 
 }  // namespace
 
+kin::MotionStatus plan_movel_preview(const kin::Chain& chain, const kin::JointVector& q0, const kin::Pose& target,
+                                     const kin::CartesianLimits& limits, const kin::MovelOptions& options,
+                                     kin::IkModel& model, kin::CartesianTrajectory& out, kin::PathReport* report) {
+  // The firmware's IK (armfw's App passes the console no model when ik_prepare fails or
+  // finds no closed form: firmware_ik_solver then uses the Newton fallback, as here).
+  const bool prepared = kin::ik_prepare(chain, model) == kin::Status::ok;
+  const kin::IkSolver ik = firmware_ik_solver(prepared ? &model : nullptr);
+  const kin::MotionStatus st = kin::plan_movel(chain, q0, target, limits, options, ik, out, report);
+  out.ik = ik;
+  return st;
+}
+
 int cli_plan(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--help") || !std::strcmp(argv[i], "-h")) {
@@ -343,13 +357,9 @@ int cli_plan(int argc, char** argv) {
   opt.override = ov;
   opt.allow_slowdown = !a.no_slowdown;
   auto tr = std::make_unique<kin::CartesianTrajectory>();  // ~40 kB: not on the stack
-  // IK: kinematics/ik (closed form where the chain has one, else numerical);
-  // the damped-Newton fallback only if the chain cannot be analysed.
   auto model = std::make_unique<kin::IkModel>();
-  kin::IkSolver ik{&kin::ik_nearest_for_motion, model.get()};
-  if (kin::ik_prepare(chain, *model) != kin::Status::ok) ik = kin::IkSolver{&kin::ik_nearest_newton, nullptr};
   kin::PathReport rep;
-  const kin::MotionStatus st = kin::plan_movel(chain, q0, target, cl, opt, ik, *tr, &rep);
+  const kin::MotionStatus st = plan_movel_preview(chain, q0, target, cl, opt, *model, *tr, &rep);
   const double L = chain.length_unit;
   if (!kin::is_ok(st)) {
     std::fprintf(stderr, "armctl: movel refused: %s at %s %% of the line, tool at (%s, %s, %s) %s", kin::to_string(st),

@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "servoarm/console/command_table.hpp"
+#include "servoarm/console/ik_options.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -60,10 +61,8 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
 
 // IK of movel's path check and of the control thread's Cartesian sampling: the App's
 // model (closed form or numeric) when the chain has one, else the damped-Newton fallback.
-kin::IkSolver Console::ik_solver() const {
-  if (ik_ != nullptr) return kin::IkSolver{&kin::ik_nearest_fn, const_cast<kin::IkModel*>(ik_)};
-  return kin::IkSolver{&kin::ik_nearest_newton, nullptr};
-}
+// The firmware's options (ik_options.hpp), the same armctl plan previews with.
+kin::IkSolver Console::ik_solver() const { return firmware_ik_solver(ik_); }
 
 double Console::to_si(int j, double user) const {
   return cfg_.units.joint_in(chain_, j, user);
