@@ -211,15 +211,15 @@ void Controller::step_ramp() {
 
 // The drives stop on their own ramps: follow their measured positions (so the
 // setpoints never pull against the ramp and enabling later never jumps); power
-// down once none is powered any more (`stopping`: operation enabled on its way down,
-// or quick stop active with speed; `enabled`), or at the timeout.
+// down once none reports motion any more (the HAL says `enabling` while a drive
+// is operation enabled or quick-stop active with speed), or at the timeout.
 void Controller::step_drive_stop() {
   stop_t_ += period_s_;
   bool moving = false;
   for (int j = 0; j < n_; ++j) {
     const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
     if (fb.valid) cmd_.pos[j] = fb.position;
-    if (fb.state == hal::JointState::stopping || fb.state == hal::JointState::enabled) moving = true;
+    if (fb.state == hal::JointState::enabling || fb.state == hal::JointState::enabled) moving = true;
   }
   cmd_.vel.setZero();
   cmd_.acc.setZero();
@@ -777,6 +777,7 @@ void Controller::step_motion() {
 void Controller::validate_and_write(TimePoint now) {
   const bool is_powered = powered(mode_);
   if (is_powered) {
+    const bool stopping_ramp = ramping(mode_);  // a stop may cross a limit it was already about to
     for (int j = 0; j < n_; ++j) {
       const double q = cmd_.pos[j];
       char d[64];
@@ -786,7 +787,6 @@ void Controller::validate_and_write(TimePoint now) {
         break;
       }
       const auto ju = static_cast<std::size_t>(j);
-      const bool stopping_ramp = ramping(mode_);  // a stop may cross a limit it was already about to
       if (!stopping_ramp && (q < limits_.lower[ju] - cfg_.position_tolerance || q > limits_.upper[ju] + cfg_.position_tolerance)) {
         std::snprintf(d, sizeof d, "%.5f outside [%.5f, %.5f]", q, limits_.lower[ju], limits_.upper[ju]);
         cmd_.pos[j] = std::fmin(std::fmax(q, limits_.lower[ju]), limits_.upper[ju]);
