@@ -350,6 +350,31 @@ TEST(Dynamics, BadInputWrongSizeAndNoInertialData) {
   CHECK(kin::set_inertial(massless, 0, L) == kin::Status::bad_input);
 }
 
+// Independent of Newton-Euler: g(q) is the gradient of the potential energy
+// V(q) = -sum m_i gravity . c_i(q), the COMs placed by forward_frames (central differences).
+TEST(Dynamics, GravityIsTheGradientOfThePotentialEnergy) {
+  for (const kin::Chain& c : models_with_inertia()) {
+    std::mt19937_64 rng(6000 + static_cast<unsigned>(c.n_rows));
+    const kin::JointVector zero = kin::JointVector::Zero(c.n_joints);
+    double worst = 0;
+    for (int s = 0; s < 200; ++s) {
+      const kin::JointVector q = random_q(c, rng);
+      kin::JointVector g;
+      CHECK(kin::gravity_torques(c, q, g) == kin::Status::ok);
+      kin::JointVector num(c.n_joints);
+      const double h = 1e-6;
+      for (int j = 0; j < c.n_joints; ++j) {
+        kin::JointVector qp = q, qm = q;
+        qp[j] += h, qm[j] -= h;
+        num[j] = (energy(c, qp, zero) - energy(c, qm, zero)) / (2 * h);
+      }
+      worst = std::max(worst, rel_err(g, num));
+    }
+    std::printf("\n  %s: gravity vs dV/dq worst relative error %.2e", c.name.data(), worst);
+    CHECK(worst < 1e-7);
+  }
+}
+
 // puma560 at the zero pose: joint 1 vertical (no gravity torque); joint 2 holds link 2
 // (17.4 kg, COM 68 mm out), link 3 (4.8 kg at 0.43 m) and the wrist: about 37 N m.
 TEST(Dynamics, Puma560GravityAtZeroPose) {
