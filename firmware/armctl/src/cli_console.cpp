@@ -2,7 +2,6 @@
 
 #include <fcntl.h>
 #include <poll.h>
-#include <termios.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -23,6 +22,7 @@
 #include "servoarm/console/command_table.hpp"
 
 #ifdef SERVOARM_CLI_CAN
+#include "servoarm/hal/serial_port.hpp"
 #include "servoarm/hal/isotp.hpp"
 #include "servoarm/hal/socketcan_bus.hpp"
 #endif
@@ -37,8 +37,7 @@ namespace servoarm::fw {
 
 namespace {
 
-// armctl links only the CLI library (plus hal for CAN), so the few lines of termios
-// set-up live here (armfw's side is firmware/console/src/transport.cpp).
+// Serial ports and ptys are opened by hal::SerialPort (serial_port.hpp), as in armfw.
 bool write_all(int fd, const std::string& s) {
   std::size_t off = 0;
   while (off < s.size()) {
@@ -53,37 +52,6 @@ bool write_all(int fd, const std::string& s) {
   return true;
 }
 
-int open_tty(const std::string& path, int baud, std::string& err) {
-  speed_t sp = B115200;
-  switch (baud) {
-    case 9600: sp = B9600; break;
-    case 19200: sp = B19200; break;
-    case 38400: sp = B38400; break;
-    case 57600: sp = B57600; break;
-    case 115200: sp = B115200; break;
-    case 230400: sp = B230400; break;
-    case 460800: sp = B460800; break;
-    case 921600: sp = B921600; break;
-    default: err = "unsupported baud rate " + std::to_string(baud); return -1;
-  }
-  const int fd = ::open(path.c_str(), O_RDWR | O_NOCTTY);
-  if (fd < 0) {
-    err = path + ": " + std::strerror(errno);
-    return -1;
-  }
-  termios tio{};
-  if (tcgetattr(fd, &tio) != 0) {
-    err = path + ": not a terminal";
-    ::close(fd);
-    return -1;
-  }
-  cfmakeraw(&tio);
-  tio.c_cflag |= CLOCAL | CREAD;
-  cfsetispeed(&tio, sp);
-  cfsetospeed(&tio, sp);
-  tcsetattr(fd, TCSANOW, &tio);
-  return fd;
-}
 
 const char* kConsoleUsage =
     "usage: armctl console (--serial PATH [--baud N] | --can IFACE [--tx-id ID] [--rx-id ID])\n"
@@ -451,11 +419,14 @@ int console_main(int argc, char** argv) {
   std::unique_ptr<Link> link;
   std::string where;
   if (!path.empty()) {
-    std::string e;
-    const int fd = open_tty(path, baud, e);
-    if (fd < 0) return usage_error("console: " + e);
-    link = std::make_unique<TtyLink>(fd);
+#ifdef SERVOARM_CLI_CAN
+    hal::SerialPort port;
+    if (port.open(path, baud) != hal::Status::ok) return usage_error("console: " + port.message());
+    link = std::make_unique<TtyLink>(port.release());
     where = path;
+#else
+    return usage_error("console: --serial: this armctl was built without the hal library (no serial support)");
+#endif
   } else {
 #ifdef SERVOARM_CLI_CAN
     auto c = std::make_unique<CanLink>();

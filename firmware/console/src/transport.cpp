@@ -3,7 +3,6 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <sys/socket.h>
-#include <termios.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -13,6 +12,7 @@
 
 #include "servoarm/console/commands.hpp"
 #include "servoarm/console/console.hpp"
+#include "servoarm/hal/serial_port.hpp"
 
 namespace servoarm::fw {
 
@@ -24,73 +24,25 @@ FdTransport::~FdTransport() {
   if (keep >= 0) ::close(keep);
 }
 
-static void make_raw(int fd) {
-  termios tio{};
-  if (tcgetattr(fd, &tio) != 0) return;
-  cfmakeraw(&tio);
-  tio.c_cc[VMIN] = 1;
-  tio.c_cc[VTIME] = 0;
-  tcsetattr(fd, TCSANOW, &tio);
-}
-
+// Opening is hal's (serial_port.hpp); the transport takes the descriptors over.
 std::string open_pty(FdTransport& t) {
-  const int m = posix_openpt(O_RDWR | O_NOCTTY);
-  if (m < 0) return std::string("posix_openpt: ") + std::strerror(errno);
-  if (grantpt(m) != 0 || unlockpt(m) != 0) {
-    ::close(m);
-    return std::string("grantpt/unlockpt: ") + std::strerror(errno);
-  }
-  char name[128];
-  if (ptsname_r(m, name, sizeof name) != 0) {
-    ::close(m);
-    return "ptsname failed";
-  }
-  const int s = ::open(name, O_RDWR | O_NOCTTY);
-  if (s >= 0) make_raw(s);
-  make_raw(m);
-  fcntl(m, F_SETFL, fcntl(m, F_GETFL) | O_NONBLOCK);
+  hal::PtyPair pty;
+  std::string e;
+  if (hal::open_pty(pty, e) != hal::Status::ok) return e;
   t.name = "pty";
-  t.rd = t.wr = m;
-  t.keep = s;
-  t.path = name;
+  t.path = pty.slave.path();
+  t.rd = t.wr = pty.master.release();
+  t.keep = pty.slave.release();
   t.owns = true;
   return "";
 }
 
 std::string open_serial(FdTransport& t, const std::string& path, int baud) {
-  speed_t sp = B115200;
-  switch (baud) {
-    case 9600: sp = B9600; break;
-    case 19200: sp = B19200; break;
-    case 38400: sp = B38400; break;
-    case 57600: sp = B57600; break;
-    case 115200: sp = B115200; break;
-    case 230400: sp = B230400; break;
-    case 460800: sp = B460800; break;
-    case 921600: sp = B921600; break;
-    default: return "unsupported baud rate " + std::to_string(baud);
-  }
-  const int fd = ::open(path.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK);
-  if (fd < 0) return path + ": " + std::strerror(errno);
-  termios tio{};
-  if (tcgetattr(fd, &tio) != 0) {
-    const std::string e = path + ": not a terminal (" + std::strerror(errno) + ")";
-    ::close(fd);
-    return e;
-  }
-  cfmakeraw(&tio);
-  tio.c_cflag |= CLOCAL | CREAD;
-  tio.c_cflag &= ~static_cast<tcflag_t>(CRTSCTS | CSTOPB);
-  cfsetispeed(&tio, sp);
-  cfsetospeed(&tio, sp);
-  if (tcsetattr(fd, TCSANOW, &tio) != 0) {
-    const std::string e = path + ": tcsetattr: " + std::strerror(errno);
-    ::close(fd);
-    return e;
-  }
+  hal::SerialPort port;
+  if (port.open(path, baud) != hal::Status::ok) return port.message();
   t.name = "serial";
-  t.rd = t.wr = fd;
   t.path = path;
+  t.rd = t.wr = port.release();
   t.owns = true;
   return "";
 }
