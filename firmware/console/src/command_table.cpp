@@ -74,8 +74,8 @@ std::string full_help(std::string_view units_line) {
   std::string o = "commands (one per line; answers: ok [data] | error: <code> <message>):\n";
   if (!units_line.empty()) o += std::string(units_line) + "\n";
   for (const CommandSpec& e : kCommands) o += entry_line(e);
-  o += "realtime characters:";
-  for (const CodeSpec& r : kRealtime) o += std::string(" ") + r.code + (&r == &kRealtime[3] ? "\n" : ",");
+  o += "realtime characters (act at once, never part of a line):\n";
+  for (const CodeSpec& r : kRealtime) o += "  " + pad(r.code, 32) + r.help + "\n";
   o += "G-code:\n";
   for (const CodeSpec& g : kGcodes) o += "  " + pad(g.code, 32) + g.help + "\n";
   return o;
