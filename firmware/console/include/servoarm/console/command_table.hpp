@@ -45,8 +45,13 @@ inline constexpr CommandSpec kCommands[] = {
      "[fault=\"...\"]`",
      true},
     {"enable", Cmd::enable, ArgShape::none, "enable", "power the drives up",
-     "answers once every drive is in operation enabled (or with the fault)", false},
-    {"disable", Cmd::disable, ArgShape::none, "disable", "power the drives down (while moving: stops first)", "", false},
+     "answers when every drive is operation enabled, sends position feedback younger than "
+     "`safety.feedback_timeout_ms` and a heartbeat within its consumer time (`bus.heartbeat_timeout_ms`); a drive "
+     "that has gone silent answers `error: fault enable failed: joint 3 feedback_invalid: ...` (or `heartbeat_lost`) "
+     "and nothing is powered",
+     false},
+    {"disable", Cmd::disable, ArgShape::none, "disable", "power the drives down (while moving: stops first)",
+     "drops every queued move, also one queued in the same cycle", false},
     {"home", Cmd::home, ArgShape::none, "home", "joint move to the home pose (motion.home_deg)", "", false},
     {"home zero", Cmd::home_zero, ArgShape::none, "home zero",
      "(disabled arm) the current joint positions become joint zero until restart",
@@ -63,7 +68,10 @@ inline constexpr CommandSpec kCommands[] = {
      "speed in length units/s (default motion.linear_speed_mm_s, at most motion.max_linear_speed_mm_s); refused "
      "before moving with the reason (`unreachable`, `limits`, `singular`, `branch`) and where on the line",
      false},
-    {"stop", Cmd::stop, ArgShape::none, "stop", "ramp down and drop the queued moves", "", false},
+    {"stop", Cmd::stop, ArgShape::none, "stop", "ramp down and drop the queued moves",
+     "drops every queued move, in any state (`ok not moving; 1 queued move dropped` when a move queued in the same "
+     "cycle had not started yet)",
+     false},
     {"estop", Cmd::estop, ArgShape::none, "estop", "emergency stop (quick stop, drives off, latched); then reset + enable",
      "", false},
     {"reset", Cmd::reset, ArgShape::none, "reset", "clear a fault / e-stop (drives stay disabled)", "", false},
@@ -73,12 +81,16 @@ inline constexpr CommandSpec kCommands[] = {
     {"limits", Cmd::limits, ArgShape::none, "limits", "joint limits and speeds", "", true},
     {"stats", Cmd::stats, ArgShape::none, "stats", "control-loop statistics (cycles, overruns, latency, compute)",
      "`cycles overruns rate_hz latency_us={min mean p99 max} compute_us={...} max_following_error_deg "
-     "[estop_latency_us]`",
+     "[estop_latency_us] [events_dropped] [output_dropped_lines output_dropped_bytes]`; takes no argument (`stats "
+     "zero` is refused: a query never changes state)",
      true},
     {"config", Cmd::config, ArgShape::none, "config", "effective configuration (TOML)", "", true},
     {"wait", Cmd::wait, ArgShape::none, "wait", "answer when every queued move has finished (or with the fault)", "",
      false},
-    {"hold", Cmd::hold, ArgShape::none, "hold", "feed hold (same as !)", "", false},
+    {"hold", Cmd::hold, ArgShape::none, "hold", "feed hold (same as !)",
+     "with moves queued but not started yet, holds the queue (GRBL Hold: `?` says `Hold`); `resume` runs it, "
+     "`stop` drops it",
+     false},
     {"resume", Cmd::resume, ArgShape::none, "resume", "resume after a feed hold (same as ~)", "", false},
 };
 
