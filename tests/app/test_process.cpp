@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 #include <thread>
 #include <vector>
@@ -135,6 +136,30 @@ TEST(Process, HomePoseOutsideTheJointLimitsRefusedNamingTheKey) {
   CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 2, out.c_str());
   CHECK_TEXT(out.find("motion.home_deg") != std::string::npos, out.c_str());
   CHECK_TEXT(out.find("joint 3") != std::string::npos, out.c_str());
+}
+
+TEST(Process, ConsoleSpeaksTheDescriptionsUnits) {
+  // rr_planar written in metres and radians: armfw's console answers in m and rad.
+  // fk at (0, pi/2): x = a1 = 0.3 m, y = a2 = 0.25 m.
+  char path[] = "/tmp/armfw_robot_XXXXXX.toml";
+  const int fd = mkstemps(path, 5);
+  CHECK(fd >= 0);
+  const std::string text =
+      "name = \"rr_m_rad\"\nconvention = \"standard\"\nlength_unit = \"m\"\nangle_unit = \"rad\"\n"
+      "[[joint]]\ntype = \"revolute\"\na = 0.3\nlimits = [-3.1, 3.1]\n"
+      "[[joint]]\ntype = \"revolute\"\na = 0.25\nlimits = [-3.1, 3.1]\n";
+  CHECK(write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size()));
+  close(fd);
+  int st = 0;
+  const std::string out = run_capture("printf 'fk 0 1.5707963267949\\n' | timeout 60 " + emulator_prefix() + ARMFW_PATH +
+                                          " --sim --priority 0 --robot " + path + " 2>&1",
+                                      st);
+  unlink(path);
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
+  const auto xp = out.find("x="), yp = out.find("y=");
+  CHECK_TEXT(xp != std::string::npos && yp != std::string::npos, out.c_str());
+  const double x = std::atof(out.c_str() + xp + 2), y = std::atof(out.c_str() + yp + 2);
+  CHECK_TEXT(std::fabs(x - 0.3) < 1e-3 && std::fabs(y - 0.25) < 1e-3, out.c_str());
 }
 
 TEST(Process, PtyConsoleDrivenByArmctl) {

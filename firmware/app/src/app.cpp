@@ -3,6 +3,7 @@
 #include <cmath>
 #include <vector>
 
+#include "servoarm/console/units.hpp"
 #include "servoarm/kinematics/description.hpp"
 
 namespace servoarm::fw {
@@ -32,6 +33,7 @@ ConsoleConfig App::console_config() const {
       c.home[j] = chain.joint(j).type == kin::JointType::prismatic ? v * 1e-3 : v * M_PI / 180.0;
     }
   }
+  c.units = units_of(chain);  // the console speaks the description's units (mm or m, deg or rad)
   c.config_text = to_toml(cfg);
   return c;
 }
