@@ -14,7 +14,7 @@
 #   /lib/systemd/system/servoarm.service     the firmware, real-time limits, service user
 #   /lib/systemd/system/servoarm-can.service CAN interface bring-up (root oneshot)
 #   /usr/lib/servoarm/servoarm-can-up        its script
-#   /usr/share/doc/servoarm/README.md
+#   /usr/share/doc/servoarm/README.md, docs/*.md   the manual (the units' Documentation=)
 set(_pkg ${CMAKE_CURRENT_LIST_DIR}/packaging)
 
 set(SERVOARM_SYSCONFDIR "/etc" CACHE PATH "Where the package's configuration files go (absolute)")
@@ -29,6 +29,8 @@ install(FILES ${_pkg}/servoarm.service ${_pkg}/servoarm-can.service DESTINATION 
         COMPONENT servoarm)
 install(PROGRAMS ${_pkg}/servoarm-can-up DESTINATION lib/servoarm COMPONENT servoarm)
 install(FILES ${PROJECT_SOURCE_DIR}/README.md DESTINATION share/doc/servoarm COMPONENT servoarm)
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs/ DESTINATION share/doc/servoarm/docs COMPONENT servoarm
+        FILES_MATCHING PATTERN "*.md")
 
 # ---------------------------------------------------------------------------
 # CPack: one Debian package, "servoarm".

@@ -191,7 +191,8 @@ TEST(Package, FileList) {
   std::vector<std::string> want = {
       "./etc/servoarm/armfw.toml", "./etc/default/servoarm", "./lib/systemd/system/servoarm.service",
       "./lib/systemd/system/servoarm-can.service", "./usr/lib/servoarm/servoarm-can-up",
-      "./usr/share/servoarm/models/puma560.toml", "./usr/share/doc/servoarm/README.md"};
+      "./usr/share/servoarm/models/puma560.toml", "./usr/share/doc/servoarm/README.md",
+      "./usr/share/doc/servoarm/docs/deployment.md"};  // the units' Documentation=
   if (HAVE_ARMCTL) want.push_back("./usr/bin/armctl");
   if (HAVE_ARMFW) want.push_back("./usr/bin/armfw");
   for (const auto& w : want) CHECK_TEXT(has(c.out, " " + w + "\n"), (w + " missing from:\n" + c.out).c_str());
