@@ -242,7 +242,7 @@ Chain parse(const toml::value& root, const Reader& rd) {
       row.upper = lim[1] * ju;
     }
     if (joint) {
-      // Defaults: a moderate industrial arm (documented in the README).
+      // Defaults: a moderate industrial arm (documented in docs/kinematics.md).
       const bool rev = row.type == JointType::revolute;
       row.dynamics.max_velocity = rev ? M_PI : 0.5;
       row.dynamics.max_acceleration = rev ? 4 * M_PI : 2.0;
