@@ -16,6 +16,7 @@ const char* to_string(JointState s) {
     case JointState::enabling: return "enabling";
     case JointState::enabled: return "enabled";
     case JointState::fault: return "fault";
+    case JointState::stopping: return "stopping";
   }
   return "unknown";
 }
@@ -345,7 +346,8 @@ Status CanopenServoBus::set_position_zero(std::size_t j) {
   if (j >= cfg_.joint_count) return Status::invalid_argument;
   JointFeedback& fb = fb_[j];
   if (!joints_[j].have_status || !fb.valid) return Status::not_configured;
-  if (fb.state == JointState::enabled || fb.state == JointState::enabling) return Status::bad_state;
+  if (fb.state == JointState::enabled || fb.state == JointState::enabling || fb.state == JointState::stopping)
+    return Status::bad_state;
   JointScaling& s = cfg_.joints[j].scaling;
   s.zero_offset = joints_[j].actual_counts;
   fb.position = s.to_joint(joints_[j].actual_counts);  // 0 from now on
@@ -397,11 +399,11 @@ Status CanopenServoBus::read(TimePoint now) {
           break;
         case cia402::Target::disabled:
         case cia402::Target::quick_stop:
-          // Still powered (or still ramping down in quick stop with speed): not yet disabled.
+          // Still powered (or still ramping down in quick stop with speed): stopping, not yet disabled.
           fb.state = jt.have_status && (jt.state == cia402::State::operation_enabled ||
                                         (jt.state == cia402::State::quick_stop_active &&
                                          std::fabs(fb.velocity) > 1e-9))
-                         ? JointState::enabling
+                         ? JointState::stopping
                          : JointState::disabled;
           break;
       }

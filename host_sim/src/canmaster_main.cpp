@@ -427,7 +427,7 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
     master.read(now);
     master.write(sp, now);
     bool all = true;
-    for (std::size_t j = 0; j < n; ++j) all = all && master.feedback(j).state != JointState::enabling;
+    for (std::size_t j = 0; j < n; ++j) all = all && master.feedback(j).state != JointState::enabling && master.feedback(j).state != JointState::stopping;
     if (all) break;
     clock.sleep_until(now + period);
   }

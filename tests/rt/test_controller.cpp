@@ -93,12 +93,14 @@ struct Rig {
     for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
     return q;
   }
-  /// Some drive still powered (enabling/enabled; quick stop active with speed counts as enabling).
+  /// Some drive still powered (enabling, enabled, or stopping: on its way down / quick stop
+  /// active with speed).
   bool any_powered() const {
     const Telemetry t = tel();
     for (int j = 0; j < 6; ++j)
       if (t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabling) ||
-          t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabled))
+          t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::enabled) ||
+          t.joint_state[std::size_t(j)] == std::uint8_t(hal::JointState::stopping))
         return true;
     return false;
   }

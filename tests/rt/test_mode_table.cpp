@@ -615,3 +615,63 @@ TEST(ModeTable, IkFailureOfSomeSamplesCountsExactlyThose) {
   CHECK(k > 90);
 }
 
+// ---------------------------------------------------------------------------
+// hal::JointState::stopping: powered on the way down, never reported as `enabling`
+// ---------------------------------------------------------------------------
+
+// An e-stop with the drives' quick stop: while they ramp on their own the joints say
+// `stopping` (never `enabling`), the controller follows them, and it powers down in
+// the first cycle after none is `stopping` or `enabled` any more.
+TEST(ModeTable, DriveQuickStopReportsStoppingUntilRest) {
+  sim::MotorParams motor;
+  motor.max_accel = 4.0 * 131072;  // drives that take a while to stop (4 rev/s^2)
+  TableRig r(true, motor);
+  enter(r, Mode::moving);
+  r.request(RequestOp::estop);
+  r.expect(Mode::estop_quick_stop, "estop");
+  int stopping_cycles = 0;
+  bool powered_now = true;  // some joint stopping / enabled in the feedback the last cycle read
+  for (int i = 0; i < 3000 && r.mode() == Mode::estop_quick_stop; ++i) {
+    r.cycle();
+    powered_now = false;
+    for (std::size_t j = 0; j < 6; ++j) {
+      const hal::JointState s = r.spy->feedback(j).state;
+      CHECK_TEXT(s != hal::JointState::enabling, "a stopping drive reported as enabling");
+      CHECK_TEXT(s != hal::JointState::fault, "fault during the quick stop");
+      if (s == hal::JointState::stopping || s == hal::JointState::enabled) powered_now = true;
+      // a powered joint cannot be re-zeroed
+      if (s == hal::JointState::stopping) LONGS_EQUAL(int(hal::Status::bad_state), int(r.app.servo->set_position_zero(j)));
+    }
+    if (powered_now) ++stopping_cycles;
+  }
+  r.expect(Mode::estop, "quick stop finished");
+  CHECK_TEXT(!powered_now, "powered down while a drive was still stopping");
+  CHECK_TEXT(stopping_cycles > 20, std::to_string(stopping_cycles).c_str());  // the drives' ramp, not one cycle
+  // power-down: one disable, in the cycle the mode became estop
+  const std::vector<Call> last = r.spy->calls_in(r.spy->cycle);
+  CHECK(last == kDisable);
+  for (std::size_t j = 0; j < 6; ++j) CHECK(r.spy->feedback(j).state != hal::JointState::stopping);
+}
+
+// `disable` of an idle arm: the joints go stopping -> disabled, not enabling -> disabled.
+TEST(ModeTable, DisableReportsStoppingThenDisabled) {
+  TableRig r(false);
+  r.enable();
+  r.request(RequestOp::disable);
+  r.expect(Mode::disabled, "disable");
+  bool saw_stopping = false;
+  for (int i = 0; i < 500; ++i) {
+    bool all_disabled = true;
+    for (std::size_t j = 0; j < 6; ++j) {
+      const hal::JointState s = r.spy->feedback(j).state;
+      CHECK(s != hal::JointState::enabling);
+      saw_stopping = saw_stopping || s == hal::JointState::stopping;
+      all_disabled = all_disabled && s == hal::JointState::disabled;
+    }
+    if (all_disabled) break;
+    r.cycle();
+  }
+  CHECK(saw_stopping);
+  for (std::size_t j = 0; j < 6; ++j) LONGS_EQUAL(int(hal::JointState::disabled), int(r.spy->feedback(j).state));
+  STRCMP_EQUAL("stopping", hal::to_string(hal::JointState::stopping));
+}

@@ -211,15 +211,15 @@ void Controller::step_ramp() {
 
 // The drives stop on their own ramps: follow their measured positions (so the
 // setpoints never pull against the ramp and enabling later never jumps); power
-// down once none reports motion any more (the HAL says `enabling` while a drive
-// is operation enabled or quick-stop active with speed), or at the timeout.
+// down once none is powered any more (`stopping`: operation enabled on its way down,
+// or quick stop active with speed; `enabled`), or at the timeout.
 void Controller::step_drive_stop() {
   stop_t_ += period_s_;
   bool moving = false;
   for (int j = 0; j < n_; ++j) {
     const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
     if (fb.valid) cmd_.pos[j] = fb.position;
-    if (fb.state == hal::JointState::enabling || fb.state == hal::JointState::enabled) moving = true;
+    if (fb.state == hal::JointState::stopping || fb.state == hal::JointState::enabled) moving = true;
   }
   cmd_.vel.setZero();
   cmd_.acc.setZero();

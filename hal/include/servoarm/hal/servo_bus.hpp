@@ -17,10 +17,11 @@ inline constexpr std::size_t kMaxServoJoints = 8;
 enum class JointState : std::uint8_t {
   offline,   ///< not started, or never heard from
   disabled,  ///< powered down (no torque)
-  enabling,  ///< in transition: walking the power state machine towards the requested
-             ///< state (enable, disable or quick stop), or still ramping down
+  enabling,  ///< powering up: walking the power state machine towards operation enabled
   enabled,   ///< operation enabled: following setpoints
   fault,     ///< latched fault: see JointFeedback::fault and error_code
+  stopping,  ///< asked to power down or quick stop but still powered: operation enabled
+             ///< on its way down, or quick stop active while still moving (its own ramp)
 };
 const char* to_string(JointState s);
 
@@ -84,7 +85,7 @@ class ServoBus {
   /// to put into the configuration. Only while the joint is not powered (a powered joint
   /// would see its setpoint jump).
   /// @retval ok; invalid_argument (no such joint); not_configured (no position feedback yet);
-  ///         bad_state (joint enabled or enabling); not_supported (protocol without it)
+  ///         bad_state (joint enabled, enabling or stopping); not_supported (protocol without it)
   virtual Status set_position_zero(std::size_t j) {
     (void)j;
     return Status::not_supported;
