@@ -41,9 +41,10 @@ const char* kUsage =
 #ifdef SERVOARM_HAVE_CLI_PLAN
     "Offline trajectory planning (prints duration and peaks; --csv and --svg write the samples):\n"
     "  armctl plan movej --robot NAME|FILE --from q1..qn --to q1..qn [--vmax V] [--amax A] [--jmax J]\n"
-    "                    [--override PCT] [--rate HZ] [--csv FILE] [--svg FILE]\n"
+    "                    [--override PCT] [--max-duration S] [--rate HZ] [--csv FILE] [--svg FILE]\n"
     "  armctl plan movel --robot NAME|FILE --from q1..qn (--to q1..qn | --xyz X Y Z [--rpy R P Y | --quat W X Y Z])\n"
-    "                    [--speed V] [--accel A] [--angular W] [--override PCT] [--no-slowdown] [--csv FILE] [--svg FILE]\n"
+    "                    [--speed V] [--accel A] [--angular W] [--override PCT] [--no-slowdown]\n"
+    "                    [--vmax V] [--amax A] [--jmax J] [--max-duration S] [--rate HZ] [--csv FILE] [--svg FILE]\n"
 #endif
 #ifdef SERVOARM_HAVE_CLI_CONSOLE
     "Console client of the firmware (armfw), interactive (line editing, history) or one-shot -c:\n"
@@ -54,7 +55,8 @@ const char* kUsage =
 #endif
     "\n"
     "Each command takes --help. Exit status: 0 ok, 1 valid request that failed\n"
-    "(e.g. unreachable), 2 bad usage or bad input.\n";
+    "(e.g. unreachable), 2 bad usage or bad input (one line on stderr naming the option or\n"
+    "value; a result that is not finite is such an error: --json output never holds nan or inf).\n";
 
 }  // namespace
 

@@ -1,5 +1,7 @@
 #include "servoarm/armctl/cli_common.hpp"
 
+#include <sys/stat.h>
+
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -22,10 +24,38 @@ int usage_error(const std::string& message) {
 }
 
 std::string num(double v) {
+  if (!std::isfinite(v)) return "null";
   if (std::abs(v) < 5e-13) v = 0;  // round-off dust and "-0" print as 0
   char buf[40];
   std::snprintf(buf, sizeof buf, "%.10g", v);
   return buf;
+}
+
+bool all_finite(const double* v, int n) {
+  for (int i = 0; i < n; ++i)
+    if (!std::isfinite(v[i])) return false;
+  return true;
+}
+
+kin::LoadResult load_robot_checked(const std::string& name_or_path) {
+  bool builtin = false;
+  for (const auto& m : kin::builtin_models()) builtin = builtin || name_or_path == m.name;
+  struct stat st {};
+  if (!builtin && ::stat(name_or_path.c_str(), &st) == 0) {
+    kin::LoadResult r;
+    if (!S_ISREG(st.st_mode)) {
+      r.error = name_or_path + ": not a regular file (" +
+                (S_ISDIR(st.st_mode) ? "a directory" : S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISCHR(st.st_mode) ? "a device" : "not a file") +
+                "): --robot takes a built-in model name or a .toml description file";
+      return r;
+    }
+    if (st.st_size > kMaxDescriptionBytes) {
+      r.error = name_or_path + ": " + std::to_string(st.st_size) + " bytes, more than the " +
+                std::to_string(kMaxDescriptionBytes) + " a robot description may have";
+      return r;
+    }
+  }
+  return kin::load_robot(name_or_path);
 }
 
 std::string json_array(const double* v, int n) {

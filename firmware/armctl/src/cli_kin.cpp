@@ -1,6 +1,7 @@
 // armctl kin fk | jacobian | models
 #include "servoarm/armctl/cli_kin.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -24,13 +25,15 @@ const char* kFkUsage =
     "usage: armctl kin fk --robot NAME|FILE [--json] [--strict] q1 ... qn\n"
     "  Forward kinematics: tool pose for the given joint values, in the units of the\n"
     "  description (built-in models: mm and degrees). A value outside its joint's\n"
-    "  limits is a warning, or an error with --strict.\n";
+    "  limits is a warning, or an error with --strict. Joint values for which the pose\n"
+    "  is not finite (1e308) are an error (exit 2): nothing is printed, --json included.\n";
 const char* kJacUsage =
     "usage: armctl kin jacobian --robot NAME|FILE [--json] [--strict] q1 ... qn\n"
     "  Geometric Jacobian at the tool point in the base frame: rows vx vy vz wx wy wz,\n"
     "  one column per joint. Linear rows in <length unit> per rad (revolute) or per\n"
     "  <length unit> (prismatic); angular rows in rad per rad (0 for prismatic joints).\n"
-    "  Also prints the manipulability and the condition number.\n";
+    "  Also prints the manipulability and the condition number (--json: null when singular).\n"
+    "  A Jacobian that is not finite (joint values like 1e308) is an error (exit 2).\n";
 
 // Returns -1 to continue, otherwise an exit code.
 int parse(int argc, char** argv, const char* usage, KinArgs& a) {
@@ -62,7 +65,7 @@ int parse(int argc, char** argv, const char* usage, KinArgs& a) {
 
 // Load the robot and the joints; -1 to continue.
 int prepare(const KinArgs& a, kin::Chain& chain, kin::JointVector& q) {
-  const kin::LoadResult r = kin::load_robot(a.robot);
+  const kin::LoadResult r = load_robot_checked(a.robot);
   if (!r.ok) return usage_error(r.error);
   chain = r.chain;
   std::string err;
@@ -86,6 +89,31 @@ int prepare(const KinArgs& a, kin::Chain& chain, kin::JointVector& q) {
   return -1;
 }
 
+// One line naming what is not finite, and the joint values furthest outside their limits.
+int not_finite_error(const char* what, const kin::Chain& chain, const kin::JointVector& q) {
+  std::string worst;
+  double far = 0;
+  for (int j = 0; j < chain.n_joints; ++j) {
+    const kin::DhRow& r = chain.joint(j);
+    const double out = std::max(r.lower - q[j], q[j] - r.upper);
+    if (out > far) {
+      far = out;
+      worst = ", joint " + std::to_string(j + 1) + " = " + num(q[j] * chain.joint_user_scale(j)) + " " +
+              joint_unit_name(chain, j) + " is far outside its limits";
+    }
+  }
+  std::fprintf(stderr, "armctl: %s is not finite for these joint values%s\n", what, worst.c_str());
+  return kExitUsage;
+}
+
+// A matrix entry for people: fixed point while it fits the column, otherwise %g.
+std::string cell(double v) {
+  char b[40];
+  if (std::abs(v) < 5e-13) v = 0;
+  std::snprintf(b, sizeof b, std::abs(v) < 1e7 ? "%12.6f" : "%12.5g", v);
+  return b;
+}
+
 }  // namespace
 
 int cli_kin_fk(int argc, char** argv) {
@@ -107,6 +135,10 @@ int cli_kin_fk(int argc, char** argv) {
   const double zyz1[3] = {z.branch[1].alpha * A, z.branch[1].beta * A, z.branch[1].gamma * A};
   const double qq[4] = {quat.w(), quat.x(), quat.y(), quat.z()};
   const std::vector<double> ju = joints_to_user(chain, q);
+  // A pose that is not finite (joint values like 1e308) is an error, never printed.
+  if (!all_finite(p.data(), 3) || !all_finite(R.data(), 9)) return not_finite_error("the tool pose", chain, q);
+  if (!all_finite(zyz0, 3) || !all_finite(zyz1, 3) || !all_finite(rpy.data(), 3) || !all_finite(qq, 4))
+    return not_finite_error("the tool orientation", chain, q);
   if (a.json) {
     std::string s = "{\"robot\": \"" + std::string(chain.name.data()) + "\", \"length_unit\": \"" +
                     length_unit_name(chain) + "\", \"angle_unit\": \"" + angle_unit_name(chain) + "\", ";
@@ -152,7 +184,9 @@ int cli_kin_jacobian(int argc, char** argv) {
   if ((rc = prepare(a, chain, q)) >= 0) return rc;
   kin::Jacobian J;
   if (kin::jacobian(chain, q, J) != kin::Status::ok) return usage_error("Jacobian failed");
+  if (!all_finite(J.data(), static_cast<int>(J.size()))) return not_finite_error("the Jacobian", chain, q);
   const double m = kin::manipulability(J), cond = kin::condition_number(J);
+  if (!std::isfinite(m)) return not_finite_error("the manipulability", chain, q);
   kin::Jacobian Ju = J;
   for (int j = 0; j < chain.n_joints; ++j)
     if (chain.joint(j).type == kin::JointType::revolute) Ju.block<3, 1>(0, j) /= chain.length_unit;
@@ -174,7 +208,7 @@ int cli_kin_jacobian(int argc, char** argv) {
   const char* names[6] = {"vx", "vy", "vz", "wx", "wy", "wz"};
   for (int r = 0; r < 6; ++r) {
     std::printf("  %s", names[r]);
-    for (int j = 0; j < chain.n_joints; ++j) std::printf(" %12.6f", std::abs(Ju(r, j)) < 5e-13 ? 0.0 : Ju(r, j));
+    for (int j = 0; j < chain.n_joints; ++j) std::printf(" %s", cell(Ju(r, j)).c_str());
     std::printf("\n");
   }
   std::printf("manipulability %s   condition number %s%s\n", num(m).c_str(), std::isfinite(cond) ? num(cond).c_str() : "inf",

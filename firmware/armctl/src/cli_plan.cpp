@@ -39,24 +39,41 @@ const char* kPlanUsage =
     "\n"
     "options:\n"
     "  --vmax V / --amax A / --jmax J   cap every joint's velocity / acceleration / jerk\n"
-    "                                   (joint units per s, s^2, s^3). Joints without limits in the\n"
+    "                                   (joint units per s, s^2, s^3; > 0: leave an option out for\n"
+    "                                   the description's limits). Joints without limits in the\n"
     "                                   description get 90 deg/s, 360 deg/s^2, 3600 deg/s^3\n"
     "                                   (prismatic: 250 mm/s, 1000 mm/s^2, 10000 mm/s^3).\n"
     "  --override PCT                   speed override 1..100 (default 100)\n"
-    "  --speed V --accel A              movel: tool speed / acceleration (length units/s, /s^2;\n"
+    "  --speed V --accel A              movel: tool speed / acceleration (length units/s, /s^2, > 0;\n"
     "                                   default 250 mm/s, 1000 mm/s^2; jerk = 10 x accel, as armfw)\n"
-    "  --angular W                      movel: tool angular speed (angle units/s, default 57.3 deg/s)\n"
+    "  --angular W                      movel: tool angular speed (angle units/s, > 0, default 57.3 deg/s)\n"
     "  --no-slowdown                    movel: refuse instead of slowing near a singularity\n"
-    "  --rate HZ                        sample rate of the CSV/SVG (default 1000)\n"
+    "  --max-duration S                 refuse a move that lasts longer (0 < S <= 86400, default 600 s,\n"
+    "                                   armfw's motion.max_move_duration_s)\n"
+    "  --rate HZ                        sample rate of the CSV/SVG (1..100000, default 1000; at most\n"
+    "                                   1000000 samples per move)\n"
     "  --csv FILE                       t, q1..qn, v1..vn, a1..an per sample (description units)\n"
-    "  --svg FILE                       plot of position, velocity, acceleration per joint\n";
+    "  --svg FILE                       plot of position, velocity, acceleration per joint\n"
+    "Bad input (exit 2, one line naming the option): a limit <= 0, a missing value, a movel option\n"
+    "given to movej, a move longer than --max-duration or with too many samples (nothing is written),\n"
+    "--xyz beyond 1 km, --rpy angles beyond 3600 deg, a --to pose that is not finite.\n";
+
+// Bounds of what armctl plans and writes: a move longer than --max-duration (default
+// armfw's motion.max_move_duration_s, 600 s) or more than kMaxSamples samples is refused
+// (exit 2) naming the option, before anything is sampled or written.
+constexpr double kDefaultMaxDuration = 600;  // s
+constexpr double kMaxMaxDuration = 86400;    // s: --max-duration at most one day
+constexpr long kMaxSamples = 1000000;
+constexpr double kMaxOrientationDeg = 3600;  // --rpy angles: 10 turns
+constexpr double kMaxPositionM = 1000;       // --xyz coordinates: 1 km
 
 struct Args {
   std::string kind, robot, csv, svg;
   std::vector<double> from, to, xyz, rpy, quat;
   double vmax = 0, amax = 0, jmax = 0, override_pct = 100, rate = 1000;
-  double speed = 0, accel = 0, angular = 0;
+  double speed = 0, accel = 0, angular = 0, max_duration = kDefaultMaxDuration;
   bool no_slowdown = false;
+  std::vector<std::string> lowered;  // "--vmax 1e-06": the limit options given, for messages
 };
 
 bool is_option(const char* s) { return s[0] == '-' && s[1] == '-'; }
@@ -66,13 +83,14 @@ std::string parse(int argc, char** argv, Args& a) {
   if (argc < 2) return "plan needs a move kind: movej or movel";
   a.kind = argv[1];
   if (a.kind != "movej" && a.kind != "movel") return "unknown plan kind '" + a.kind + "' (movej or movel)";
+  const bool movej = a.kind == "movej";
   for (int i = 2; i < argc; ++i) {
     const std::string o = argv[i];
     auto list = [&](std::vector<double>& out) -> std::string {
       out.clear();
       while (i + 1 < argc && !is_option(argv[i + 1])) {
         double v;
-        if (!parse_number(argv[i + 1], v)) return o + ": '" + argv[i + 1] + "' is not a number";
+        if (!parse_number(argv[i + 1], v)) return o + ": '" + argv[i + 1] + "' is not a finite number";
         out.push_back(v);
         ++i;
       }
@@ -80,15 +98,26 @@ std::string parse(int argc, char** argv, Args& a) {
       return "";
     };
     auto one = [&](double& out) -> std::string {
-      if (i + 1 >= argc) return o + " needs a value";
-      if (!parse_number(argv[i + 1], out)) return o + ": '" + argv[i + 1] + "' is not a number";
+      if (i + 1 >= argc || is_option(argv[i + 1])) return o + " needs a value";
+      if (!parse_number(argv[i + 1], out)) return o + ": '" + argv[i + 1] + "' is not a finite number";
       ++i;
       return "";
     };
+    // A limit: > 0 (0 does not mean "default": leave the option out for that).
+    auto limit = [&](double& out) -> std::string {
+      std::string e = one(out);
+      if (!e.empty()) return e;
+      if (!(out > 0)) return o + " must be > 0, got " + argv[i] + " (leave it out for the default)";
+      a.lowered.push_back(o + " " + argv[i]);
+      return "";
+    };
     auto text = [&](std::string& out) -> std::string {
-      if (i + 1 >= argc) return o + " needs a value";
+      if (i + 1 >= argc || is_option(argv[i + 1])) return o + " needs a value";
       out = argv[++i];
       return "";
+    };
+    auto movel_only = [&]() -> std::string {
+      return movej ? o + " is a movel option (movej takes --vmax, --amax, --jmax, --override)" : "";
     };
     std::string e;
     if (o == "--robot") e = text(a.robot);
@@ -96,18 +125,19 @@ std::string parse(int argc, char** argv, Args& a) {
     else if (o == "--svg") e = text(a.svg);
     else if (o == "--from") e = list(a.from);
     else if (o == "--to") e = list(a.to);
-    else if (o == "--xyz") e = list(a.xyz);
-    else if (o == "--rpy") e = list(a.rpy);
-    else if (o == "--quat") e = list(a.quat);
-    else if (o == "--vmax") e = one(a.vmax);
-    else if (o == "--amax") e = one(a.amax);
-    else if (o == "--jmax") e = one(a.jmax);
+    else if (o == "--xyz") (e = movel_only()).empty() && (e = list(a.xyz)).empty();
+    else if (o == "--rpy") (e = movel_only()).empty() && (e = list(a.rpy)).empty();
+    else if (o == "--quat") (e = movel_only()).empty() && (e = list(a.quat)).empty();
+    else if (o == "--vmax") e = limit(a.vmax);
+    else if (o == "--amax") e = limit(a.amax);
+    else if (o == "--jmax") e = limit(a.jmax);
     else if (o == "--override") e = one(a.override_pct);
     else if (o == "--rate") e = one(a.rate);
-    else if (o == "--speed") e = one(a.speed);
-    else if (o == "--accel") e = one(a.accel);
-    else if (o == "--angular") e = one(a.angular);
-    else if (o == "--no-slowdown") a.no_slowdown = true;
+    else if (o == "--max-duration") e = one(a.max_duration);
+    else if (o == "--speed") (e = movel_only()).empty() && (e = limit(a.speed)).empty();
+    else if (o == "--accel") (e = movel_only()).empty() && (e = limit(a.accel)).empty();
+    else if (o == "--angular") (e = movel_only()).empty() && (e = limit(a.angular)).empty();
+    else if (o == "--no-slowdown") (e = movel_only()).empty() && (a.no_slowdown = true);
     else return "unknown option '" + o + "' (see armctl plan --help)";
     if (!e.empty()) return e;
   }
@@ -118,12 +148,36 @@ std::string parse(int argc, char** argv, Args& a) {
   if (!a.xyz.empty() && a.xyz.size() != 3) return "--xyz needs 3 values";
   if (!a.rpy.empty() && a.rpy.size() != 3) return "--rpy needs 3 values";
   if (!a.quat.empty() && a.quat.size() != 4) return "--quat needs 4 values";
+  if (!a.rpy.empty() && !a.quat.empty()) return "give either --rpy or --quat, not both";
   if (!a.to.empty() && !a.xyz.empty()) return "give either --to or --xyz, not both";
+  if (!a.to.empty() && (!a.rpy.empty() || !a.quat.empty())) return "--rpy and --quat go with --xyz, not with --to";
   if (!(a.override_pct >= 1 && a.override_pct <= 100)) return "--override must be within 1..100";
+  if (a.override_pct < 100) a.lowered.push_back("--override " + num(a.override_pct));
   if (!(a.rate >= 1 && a.rate <= 100000)) return "--rate must be within 1..100000 Hz";
-  for (double v : {a.vmax, a.amax, a.jmax, a.speed, a.accel, a.angular})
-    if (v < 0) return "limits must be positive";
+  if (!(a.max_duration > 0 && a.max_duration <= kMaxMaxDuration))
+    return "--max-duration must be within 0..86400 s, got " + num(a.max_duration);
   return "";
+}
+
+// Refuses (exit 2) a move longer than --max-duration, or with more samples than
+// kMaxSamples at --rate, naming what to change. Returns -1 to go on.
+int check_duration(const Args& a, double duration) {
+  if (!(duration <= a.max_duration)) {
+    std::string why;
+    for (const std::string& l : a.lowered) why += (why.empty() ? "" : ", ") + l;
+    std::fprintf(stderr, "armctl: the move would take %s s, more than --max-duration %s s%s\n", num(duration).c_str(),
+                 num(a.max_duration).c_str(),
+                 why.empty() ? " (the description's limits are too low for it)"
+                             : (": " + why + (a.lowered.size() > 1 ? " (one of them is too low)" : " is too low")).c_str());
+    return kExitUsage;
+  }
+  const double n = std::floor(duration * a.rate) + 2;
+  if (n > static_cast<double>(kMaxSamples)) {
+    std::fprintf(stderr, "armctl: --rate %s Hz over the %s s move gives %s samples, more than %ld: lower --rate\n",
+                 num(a.rate).c_str(), num(duration).c_str(), num(n).c_str(), kMaxSamples);
+    return kExitUsage;
+  }
+  return -1;
 }
 
 // Joint limits in SI: the description's, defaults where missing, capped by --vmax/--amax/--jmax.
@@ -296,7 +350,7 @@ int cli_plan(int argc, char** argv) {
   Args a;
   const std::string err = parse(argc, argv, a);
   if (!err.empty()) return usage_error(err);
-  const kin::LoadResult r = kin::load_robot(a.robot);
+  const kin::LoadResult r = load_robot_checked(a.robot);
   if (!r.ok) return usage_error(r.error);
   kin::Chain chain = r.chain;
   bool defaulted = false;
@@ -321,6 +375,7 @@ int cli_plan(int argc, char** argv) {
       std::fprintf(stderr, "armctl: movej refused: %s\n%s", kin::to_string(st), rep.c_str());
       return kExitFailed;
     }
+    if (const int rc = check_duration(a, tr.duration); rc >= 0) return rc;
     std::printf("movej on %s: duration %s s (override %s %%)\n", chain.name.data(), num(tr.duration).c_str(),
                 num(a.override_pct).c_str());
     const Samples s = sample_all(chain, tr.duration, a.rate, [&tr](double t, kin::JointVector& q, kin::JointVector& v,
@@ -337,7 +392,16 @@ int cli_plan(int argc, char** argv) {
     kin::JointVector q1;
     if (!joints_from_user(chain, a.to, q1, e)) return usage_error("--to: " + e);
     kin::forward(chain, q1, target);
+    if (!all_finite(target.matrix().data(), 16)) return usage_error("--to: the tool pose is not finite for these joint values");
   } else {
+    for (double x : a.xyz)
+      if (!(std::abs(x * chain.length_unit) <= kMaxPositionM))
+        return usage_error("--xyz: " + num(x) + " " + length_unit_name(chain) + " is not a plausible position (at most " +
+                           num(kMaxPositionM / chain.length_unit) + " " + length_unit_name(chain) + ")");
+    for (double r : a.rpy)
+      if (!(std::abs(r * chain.angle_unit) <= kMaxOrientationDeg * M_PI / 180))
+        return usage_error("--rpy: " + num(r) + " " + angle_unit_name(chain) + " is not a plausible angle (at most " +
+                           num(kMaxOrientationDeg * M_PI / 180 / chain.angle_unit) + " " + angle_unit_name(chain) + ")");
     target.translation() = Eigen::Vector3d(a.xyz[0], a.xyz[1], a.xyz[2]) * chain.length_unit;
     if (!a.rpy.empty()) {
       target.linear() = kin::rotation_from_rpy(a.rpy[0] * chain.angle_unit, a.rpy[1] * chain.angle_unit,
@@ -370,6 +434,7 @@ int cli_plan(int argc, char** argv) {
     std::fprintf(stderr, "\n");
     return kExitFailed;
   }
+  if (const int rc = check_duration(a, tr->duration); rc >= 0) return rc;
   std::printf("movel on %s: duration %s s, line %s %s, rotation %s %s (override %s %%)\n", chain.name.data(),
               num(tr->duration).c_str(), num(tr->length / L).c_str(), length_unit_name(chain),
               num(tr->angle / chain.angle_unit).c_str(), angle_unit_name(chain), num(a.override_pct).c_str());

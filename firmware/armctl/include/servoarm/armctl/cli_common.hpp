@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/description.hpp"
 
 namespace servoarm::fw {
 
@@ -24,9 +25,18 @@ bool parse_number(const char* s, double& out);
 int usage_error(const std::string& message);
 
 /// Format a double compactly for people and JSON (no trailing zeros, %.10g-like).
+/// A value that is not finite prints as `null`: armctl's JSON never holds nan or inf
+/// (and the commands refuse non-finite results before printing them, see all_finite).
 std::string num(double v);
+/// True when every one of the n values is finite.
+bool all_finite(const double* v, int n);
 /// JSON array of numbers.
 std::string json_array(const double* v, int n);
+
+/// kin::load_robot, but a path that is not a regular file (a directory, a FIFO,
+/// /dev/zero) or is larger than kMaxDescriptionBytes is refused first, naming the path.
+inline constexpr long kMaxDescriptionBytes = 1 << 20;
+kin::LoadResult load_robot_checked(const std::string& name_or_path);
 
 /// Joint values typed by a user (description units) -> SI; checks the count.
 /// On error fills `error` (one line) and returns false.
