@@ -5,17 +5,15 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <memory>
-#include <mutex>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "servoarm/armctl/cli_common.hpp"
@@ -30,7 +28,9 @@
 // Line editing and history: Debian's libedit (BSD licence, readline-compatible API,
 // `libedit-dev`, pkg-config `libedit`) rather than GNU readline (GPL) or hand-written
 // terminal code.
-#include <editline/readline.h>
+#include <histedit.h>
+#include <clocale>
+#include <cwchar>
 #endif
 
 namespace servoarm::fw {
@@ -64,11 +64,16 @@ const char* kConsoleUsage =
     "  --tx-id ID      11-bit id armctl sends on = armfw's console.can_rx_id (default 0x7E0)\n"
     "  --rx-id ID      11-bit id armctl receives on = armfw's console.can_tx_id (default 0x7E8)\n"
     "                  (ids: 0x7E0 hex or 2016 decimal)\n"
-    "  --timeout SEC   how long to wait for each answer (default 60; `wait` can take long)\n"
-    "  -c LINE         send LINE, print the answer; repeatable; without -c: interactive\n"
-    "                  (line editing and history in ~/.armctl_history when built with libedit;\n"
-    "                  a line holding only ?, ! or ~ sends that realtime character;\n"
-    "                  ^X sends Ctrl-X, the e-stop; Ctrl-D quits)\n"
+    "  --timeout SEC   how long to wait for each answer (default 60, at most 86400; `wait` can take long)\n"
+    "  -c LINE         send LINE, print the answer (up to its ok / error:); repeatable;\n"
+    "                  without -c: interactive (line editing and history in ~/.armctl_history\n"
+    "                  when built with libedit; answers that arrive while a line is half typed\n"
+    "                  are printed above it and the line is redrawn; Ctrl-D quits)\n"
+    "  realtime characters, as a -c LINE or a typed line of their own: ?, !, ~, ^X (Ctrl-X,\n"
+    "                  the e-stop), 0x85 (jog cancel; the bytes 0x18 and 0x85 themselves too).\n"
+    "                  They have no ok: -c '?' prints the status report that comes back;\n"
+    "                  -c '!' (and ~, ^X, 0x85) sends the character and then a ?, and prints\n"
+    "                  what came back up to that report (the state after the character)\n"
     "Exit status: 0 every answer ok, 1 an answer was error: (or timed out), 2 usage / device error.\n";
 
 // The device: a byte stream (serial / pty) or ISO-TP messages on a CAN interface.
@@ -229,11 +234,66 @@ int await_answer(Link& link, std::string& buf, double timeout_s) {
   }
 }
 
-// A typed line -> what goes to the device.
+// A typed line -> what goes to the device: a line alone holding ?, !, ~, ^X (or the
+// byte 0x18), 0x85 (or the byte 0x85) is that realtime character, anything else a line.
 std::string device_bytes(const std::string& line) {
   if (line == "?" || line == "!" || line == "~") return line;
-  if (line == "^X") return std::string(1, '\x18');
+  if (line == "^X" || line == "\x18") return std::string(1, '\x18');
+  if (line == "0x85" || line == "\x85") return std::string(1, '\x85');
   return line + "\n";
+}
+
+bool is_realtime_bytes(const std::string& b) { return b.size() == 1 && b[0] != '\n'; }
+
+// Read until the status report (a line "<...>") arrives; lines before it (alarms,
+// the error of a realtime character) are printed as they come. Returns 0 the report
+// came, 1 an error: line came or no report within the timeout, 2 device failure.
+int await_report(Link& link, std::string& buf, double timeout_s) {
+  const auto t0 = std::chrono::steady_clock::now();
+  int rc = 0;
+  for (;;) {
+    std::size_t nl;
+    while ((nl = buf.find('\n')) != std::string::npos) {
+      std::string line = buf.substr(0, nl);
+      buf.erase(0, nl + 1);
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      if (line.rfind("alarm:", 0) == 0) {
+        std::fprintf(stderr, "%s\n", line.c_str());
+        continue;
+      }
+      std::printf("%s\n", line.c_str());
+      std::fflush(stdout);
+      if (line.rfind("error:", 0) == 0) rc = 1;
+      if (line.rfind("<", 0) == 0) return rc;
+    }
+    const double left = timeout_s - std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (left <= 0) {
+      std::fprintf(stderr, "armctl: no status report within %.0f s\n", timeout_s);
+      return 1;
+    }
+    if (!wait_and_pump(link, buf, static_cast<int>(left * 1000) + 1)) {
+      std::fprintf(stderr, "armctl: %s\n", link.error.c_str());
+      return 2;
+    }
+  }
+}
+
+// One -c item. A line waits for its ok / error:. A realtime character has no ok: `?`
+// waits for its status report and prints it; `!`, `~`, Ctrl-X and 0x85 are followed
+// by a `?`, whose report comes after the firmware has acted on the character (and
+// after any error it answered), and that report is printed. 0 ok, 1 error/timeout, 2 device.
+int run_one(Link& link, std::string& buf, const std::string& l, double timeout_s) {
+  const std::string bytes = device_bytes(l);
+  if (!link.send(bytes)) {
+    std::fprintf(stderr, "armctl: %s\n", link.error.c_str());
+    return 2;
+  }
+  if (!is_realtime_bytes(bytes)) return await_answer(link, buf, timeout_s);
+  if (bytes != "?" && !link.send("?")) {
+    std::fprintf(stderr, "armctl: %s\n", link.error.c_str());
+    return 2;
+  }
+  return await_report(link, buf, timeout_s);
 }
 
 // Interactive without line editing (stdin not a terminal, or no libedit): stdin
@@ -283,78 +343,117 @@ std::string history_path() {
   return home && *home ? std::string(home) + "/.armctl_history" : std::string();
 }
 
-// Interactive with line editing: the main thread edits lines with libedit's
-// readline(); an I/O thread owns the device (and, for CAN, the ISO-TP endpoint),
-// sends the lines handed over to it and prints answers and alarms as they come.
-// (libedit's callback interface would allow one thread, but it mis-reads arrow-key
-// escape sequences in that mode, see the README.)
-int interactive_edit(Link& link, const std::string& prompt) {
-  int wake[2];
-  if (::pipe2(wake, O_CLOEXEC | O_NONBLOCK) != 0) return interactive_plain(link);
-  std::mutex mu;
-  std::deque<std::string> to_send;
-  std::atomic<bool> done{false}, failed{false};
-  std::thread io([&] {
-    std::string buf;
-    while (!done.load()) {
-      bool woken = false;
-      if (!wait_and_pump(link, buf, 100, wake[0], &woken)) {
-        std::fprintf(stderr, "\narmctl: %s (press Enter)\n", link.error.c_str());
-        failed = true;
-        break;
+// Interactive with line editing (libedit's own API, histedit.h), in one thread: libedit
+// reads keys through getc_fn, which waits on the keyboard and the device together.
+// Complete lines from the device are printed above the line being typed, and libedit
+// then redraws the prompt and the half-typed line (EL_REFRESH), cursor where it was.
+struct EditCtx {
+  Link* link = nullptr;
+  std::string prompt, from_device, keys;
+  std::size_t key_pos = 0;
+  std::mbstate_t mb{};
+  bool failed = false;
+};
+
+// Print the complete lines that came from the device on a fresh line, then redraw.
+void print_device_lines(EditLine* el, EditCtx& c) {
+  const std::size_t end = c.from_device.rfind('\n');
+  if (end == std::string::npos) return;  // wait for the rest of the line
+  std::fputs("\r\033[K", stdout);
+  std::fwrite(c.from_device.data(), 1, end + 1, stdout);
+  c.from_device.erase(0, end + 1);
+  std::fflush(stdout);
+  el_set(el, EL_REFRESH);
+}
+
+int getc_fn(EditLine* el, wchar_t* wc) {
+  EditCtx* c = nullptr;
+  el_get(el, EL_CLIENTDATA, &c);
+  for (;;) {
+    while (c->key_pos < c->keys.size()) {  // decode what the keyboard sent (UTF-8)
+      const std::size_t n = std::mbrtowc(wc, c->keys.data() + c->key_pos, c->keys.size() - c->key_pos, &c->mb);
+      if (n == static_cast<std::size_t>(-2)) break;  // incomplete: read more
+      if (n == static_cast<std::size_t>(-1)) {      // not UTF-8: take the byte
+        c->mb = std::mbstate_t{};
+        *wc = static_cast<unsigned char>(c->keys[c->key_pos++]);
+        return 1;
       }
-      if (woken) {
-        char tmp[64];
-        while (::read(wake[0], tmp, sizeof tmp) > 0) {}
-        std::deque<std::string> q;
-        {
-          std::lock_guard<std::mutex> lk(mu);
-          q.swap(to_send);
-        }
-        for (const std::string& b : q) {
-          if (!link.send(b)) {
-            std::fprintf(stderr, "\narmctl: %s (press Enter)\n", link.error.c_str());
-            failed = true;
-            break;
-          }
-        }
-        if (failed) break;
-      }
-      if (!buf.empty()) {
-        // Answers arrive while the prompt is shown: print them on a fresh line.
-        std::fputs("\r\033[K", stdout);
-        std::fwrite(buf.data(), 1, buf.size(), stdout);
-        if (buf.back() == '\n') std::fputs(prompt.c_str(), stdout);  // (text typed meanwhile is kept, not redrawn)
-        std::fflush(stdout);
-        buf.clear();
-      }
+      c->key_pos += n == 0 ? 1 : n;
+      return 1;
     }
-  });
-  const std::string hist = history_path();
-  using_history();
-  stifle_history(1000);
-  if (!hist.empty()) read_history(hist.c_str());
-  while (!failed.load()) {
-    char* line = readline(prompt.c_str());
-    if (line == nullptr) break;  // Ctrl-D
-    const std::string l(line);
-    if (!l.empty()) add_history(line);
-    std::free(line);
-    {
-      std::lock_guard<std::mutex> lk(mu);
-      to_send.push_back(device_bytes(l));
+    c->keys.erase(0, c->key_pos);
+    c->key_pos = 0;
+    bool key = false;
+    if (!wait_and_pump(*c->link, c->from_device, -1, 0, &key)) {
+      std::fprintf(stderr, "\r\033[Karmctl: %s\n", c->link->error.c_str());
+      c->failed = true;
+      return -1;
     }
-    if (::write(wake[1], "x", 1) < 0) {}
+    print_device_lines(el, *c);
+    if (key) {
+      char tmp[256];
+      const ssize_t r = ::read(0, tmp, sizeof tmp);
+      if (r == 0) return 0;  // end of input
+      if (r < 0) {
+        if (errno == EINTR || errno == EAGAIN) continue;
+        return -1;
+      }
+      c->keys.append(tmp, static_cast<std::size_t>(r));
+    }
   }
+}
+
+char* prompt_fn(EditLine* el) {
+  EditCtx* c = nullptr;
+  el_get(el, EL_CLIENTDATA, &c);
+  return c->prompt.data();
+}
+
+int interactive_edit(Link& link, const std::string& prompt) {
+  std::setlocale(LC_CTYPE, "");
+  EditCtx c;
+  c.link = &link;
+  c.prompt = prompt;
+  EditLine* el = el_init("armctl", stdin, stdout, stderr);
+  if (el == nullptr) return interactive_plain(link);
+  History* h = history_init();
+  HistEvent ev;
+  history(h, &ev, H_SETSIZE, 1000);
+  history(h, &ev, H_SETUNIQUE, 1);
+  const std::string hist = history_path();
+  if (!hist.empty()) history(h, &ev, H_LOAD, hist.c_str());
+  el_set(el, EL_CLIENTDATA, &c);
+  el_set(el, EL_EDITOR, "emacs");
+  el_set(el, EL_SIGNAL, 1);
+  el_set(el, EL_PROMPT, prompt_fn);
+  el_set(el, EL_HIST, history, h);
+  el_set(el, EL_GETCFN, getc_fn);
+  el_source(el, nullptr);  // ~/.editrc, as other libedit programs
+  for (;;) {
+    int count = 0;
+    const char* line = el_gets(el, &count);
+    if (line == nullptr || count <= 0 || c.failed) break;  // Ctrl-D, end of input, device gone
+    std::string l(line, static_cast<std::size_t>(count));
+    while (!l.empty() && (l.back() == '\n' || l.back() == '\r')) l.pop_back();
+    if (!l.empty()) history(h, &ev, H_ENTER, l.c_str());
+    if (!link.send(device_bytes(l))) {
+      std::fprintf(stderr, "armctl: %s\n", link.error.c_str());
+      c.failed = true;
+      break;
+    }
+  }
+  el_end(el);  // the terminal back as it was
   std::fputc('\n', stdout);
   // Let the answer to the last line arrive before leaving.
-  std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  done = true;
-  io.join();
-  ::close(wake[0]);
-  ::close(wake[1]);
-  if (!hist.empty()) write_history(hist.c_str());
-  return failed.load() ? kExitUsage : kExitOk;
+  const auto t0 = std::chrono::steady_clock::now();
+  while (!c.failed && std::chrono::steady_clock::now() - t0 < std::chrono::milliseconds(200)) {
+    if (!wait_and_pump(link, c.from_device, 50)) break;
+  }
+  std::fwrite(c.from_device.data(), 1, c.from_device.size(), stdout);
+  std::fflush(stdout);
+  if (!hist.empty()) history(h, &ev, H_SAVE, hist.c_str());
+  history_end(h);
+  return c.failed ? kExitUsage : kExitOk;
 }
 #endif
 
@@ -400,11 +499,13 @@ int console_main(int argc, char** argv) {
     } else if (a == "--baud") {
       const char* v = value();
       double d = 0;
-      if (!v || !parse_number(v, d) || d < 1) return usage_error("--baud needs a rate");
+      if (!v || !parse_number(v, d) || d < 50 || d > 4000000 || d != std::floor(d))
+        return usage_error(std::string("--baud needs a whole rate in bits/s (50..4000000, e.g. 115200), got '") + (v ? v : "") + "'");
       baud = static_cast<int>(d);
     } else if (a == "--timeout") {
       const char* v = value();
-      if (!v || !parse_number(v, timeout_s) || timeout_s <= 0) return usage_error("--timeout needs seconds > 0");
+      if (!v || !parse_number(v, timeout_s) || !(timeout_s > 0 && timeout_s <= 86400))
+        return usage_error(std::string("--timeout needs seconds within 0..86400, got '") + (v ? v : "") + "'");
     } else if (a == "-c") {
       const char* v = value();
       if (!v) return usage_error("-c needs a command line");
@@ -446,11 +547,7 @@ int console_main(int argc, char** argv) {
   if (!lines.empty()) {
     for (const std::string& l : lines) {
       if (l.find('\n') != std::string::npos) return usage_error("console: -c takes one line");
-      if (!link->send(device_bytes(l))) {
-        std::fprintf(stderr, "armctl: %s\n", link->error.c_str());
-        return kExitUsage;
-      }
-      const int r = await_answer(*link, buf, timeout_s);
+      const int r = run_one(*link, buf, l, timeout_s);
       if (r == 2) return kExitUsage;
       if (r != 0) rc = kExitFailed;
     }
