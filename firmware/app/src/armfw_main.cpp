@@ -24,6 +24,7 @@
 #include "servoarm/sim/sim_plant.hpp"  // --sim: the only firmware file that uses host_sim
 #endif
 #include "servoarm/rt/rt_loop.hpp"
+#include "servoarm/console/number.hpp"
 #include "servoarm/console/transport.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
@@ -260,9 +261,8 @@ int main(int argc, char** argv) {
     };
     auto number = [&](const char* what, double lo, double hi) {
       const char* v = value(what);
-      char* end = nullptr;
-      const double d = std::strtod(v, &end);
-      if (end == v || *end != '\0' || !std::isfinite(d) || d < lo || d > hi) {
+      double d = 0;
+      if (parse_decimal(v, d) != Num::ok || d < lo || d > hi) {
         std::fprintf(stderr, "armfw: %s: '%s' is not a number within %g..%g\n", what, v, lo, hi);
         std::exit(2);
       }

@@ -1,5 +1,7 @@
 #include "servoarm/armctl/cli_common.hpp"
 
+#include "servoarm/console/number.hpp"
+
 #include <sys/stat.h>
 
 #include <cerrno>
@@ -9,13 +11,9 @@
 namespace servoarm::fw {
 
 bool parse_number(const char* s, double& out) {
-  if (!s || !*s) return false;
-  errno = 0;
-  char* end = nullptr;
-  const double v = std::strtod(s, &end);
-  if (end == s || *end != '\0' || errno == ERANGE || !std::isfinite(v)) return false;
-  out = v;
-  return true;
+  // The console's decimal reader (servoarm/console/number.hpp): one grammar for every
+  // number typed at armctl, armfw or the console.
+  return s && parse_decimal(s, out) == Num::ok;
 }
 
 int usage_error(const std::string& message) {

@@ -1,6 +1,7 @@
 #include "servoarm/console/commands.hpp"
 
 #include "servoarm/console/command_table.hpp"
+#include "servoarm/console/number.hpp"
 
 #include <cfenv>
 #include <cmath>
@@ -93,44 +94,6 @@ bool ieq(std::string_view a, std::string_view b) {
   return true;
 }
 
-/// Strict decimal: [+-]digits[.digits][(e|E)[+-]digits]; at least one digit in the mantissa.
-enum class Num { ok, bad, not_finite };
-Num parse_number(std::string_view s, double& out) {
-  if (s.empty() || s.size() > 40) return Num::bad;
-  std::size_t i = 0;
-  if (s[i] == '+' || s[i] == '-') ++i;
-  std::size_t digits = 0;
-  while (i < s.size() && s[i] >= '0' && s[i] <= '9') ++i, ++digits;
-  if (i < s.size() && s[i] == '.') {
-    ++i;
-    while (i < s.size() && s[i] >= '0' && s[i] <= '9') ++i, ++digits;
-  }
-  if (digits == 0) {
-    // Name the usual suspects explicitly.
-    std::string_view rest = s.substr(s[0] == '+' || s[0] == '-' ? 1 : 0);
-    if (ieq(rest, "nan") || ieq(rest, "inf") || ieq(rest, "infinity")) return Num::not_finite;
-    return Num::bad;
-  }
-  if (i < s.size() && (s[i] == 'e' || s[i] == 'E')) {
-    ++i;
-    if (i < s.size() && (s[i] == '+' || s[i] == '-')) ++i;
-    std::size_t ed = 0;
-    while (i < s.size() && s[i] >= '0' && s[i] <= '9') ++i, ++ed;
-    if (ed == 0) return Num::bad;
-  }
-  if (i != s.size()) return Num::bad;
-  char buf[48];
-  std::memcpy(buf, s.data(), s.size());
-  buf[s.size()] = '\0';
-  // strtod raises FE_OVERFLOW/FE_UNDERFLOW for 1e400 / 1e-400; the result is
-  // checked here, so the flags are cleared (the tests' IEEE754 plugin watches them).
-  const double v = std::strtod(buf, nullptr);
-  std::feclearexcept(FE_OVERFLOW | FE_UNDERFLOW);
-  if (!std::isfinite(v)) return Num::not_finite;
-  out = v;
-  return Num::ok;
-}
-
 struct Words {
   std::array<std::string_view, 24> w{};
   int n = 0;
@@ -165,7 +128,7 @@ ParseResult parse_numbers(const Words& ws, int first, Command& out, bool allow_s
         return fail(CmdError::bad_option, "%s: unknown option '%.*s' (only speed=)", name, int(eq), w.data());
       if (out.has_speed) return fail(CmdError::bad_option, "%s: speed given twice", name);
       double v = 0;
-      switch (parse_number(w.substr(eq + 1), v)) {
+      switch (parse_decimal(w.substr(eq + 1), v)) {
         case Num::ok: break;
         case Num::bad: return fail(CmdError::bad_number, "%s: speed '%.*s' is not a number", name, int(w.size() - eq - 1), w.data() + eq + 1);
         case Num::not_finite: return fail(CmdError::not_finite, "%s: speed is not finite", name);
@@ -178,7 +141,7 @@ ParseResult parse_numbers(const Words& ws, int first, Command& out, bool allow_s
     if (out.has_speed) return fail(CmdError::bad_option, "%s: options go after the values", name);
     if (out.count >= static_cast<int>(out.vals.size())) return fail(CmdError::arg_count, "%s: too many values", name);
     double v = 0;
-    switch (parse_number(w, v)) {
+    switch (parse_decimal(w, v)) {
       case Num::ok: break;
       case Num::bad: return fail(CmdError::bad_number, "%s: '%.*s' is not a number", name, int(w.size()), w.data());
       case Num::not_finite: return fail(CmdError::not_finite, "%s: value %d is not finite", name, out.count + 1);
@@ -211,7 +174,7 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
     double cs = 0;
     std::string_view tail = s.substr(star + 1);
     while (!tail.empty() && (tail.back() == ' ' || tail.back() == '\t')) tail.remove_suffix(1);
-    if (parse_number(tail, cs) != Num::ok || cs < 0 || cs > 255 || cs != std::floor(cs))
+    if (parse_decimal(tail, cs) != Num::ok || cs < 0 || cs > 255 || cs != std::floor(cs))
       return fail(CmdError::checksum, "G-code: bad checksum field");
     unsigned x = 0;
     for (std::size_t i = 0; i < star; ++i) x ^= static_cast<unsigned char>(line[i]);
@@ -241,7 +204,7 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
     while (j < s.size() && ((s[j] >= '0' && s[j] <= '9') || s[j] == '.')) ++j;
     double v = 0;
     if (j == i) return fail(CmdError::bad_number, "G-code: '%c' has no number", L);
-    switch (parse_number(s.substr(i, j - i), v)) {
+    switch (parse_decimal(s.substr(i, j - i), v)) {
       case Num::ok: break;
       case Num::bad: return fail(CmdError::bad_number, "G-code: '%c%.*s' is not a number", L, int(j - i), s.data() + i);
       case Num::not_finite: return fail(CmdError::not_finite, "G-code: '%c' value is not finite", L);
