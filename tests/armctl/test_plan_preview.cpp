@@ -84,8 +84,8 @@ TEST(PlanPreview, ArmctlPlanMovelSamplesAreTheFirmwares) {
     const std::string a = r.cmd(line);
     if (!test::answer_ok(a)) FAIL((std::string(line) + ": " + a).c_str());
     const MotionItem* m = r.app.ctl->motions().front();
-    CHECK(m != nullptr && m->kind == MotionKind::cartesian);
-    const kin::CartesianTrajectory& fw_ct = m->ct;
+    CHECK(m != nullptr && m->kind() == MotionKind::cartesian);
+    const kin::CartesianTrajectory& fw_ct = std::get_if<CartesianMove>(&m->payload)->path;
 
     // armctl's plan code on armctl's own load of the robot.
     const kin::LoadResult lr = kin::load_robot("puma560");

@@ -31,21 +31,23 @@ std::unique_ptr<MotionItem> queued_by(test::ConsoleRig& r, const std::string& li
   return copy;
 }
 
-void check_same_line(const MotionItem& a, const MotionItem& b, const std::string& what) {
-  CHECK_TEXT(a.kind == MotionKind::cartesian && b.kind == MotionKind::cartesian, what.c_str());
-  CHECK_TEXT(a.ct.duration == b.ct.duration, (what + ": durations " + std::to_string(a.ct.duration) + " vs " +
-                                              std::to_string(b.ct.duration)).c_str());
-  CHECK_TEXT(a.ct.n == b.ct.n && a.ct.n == 6, what.c_str());
+void check_same_line(const MotionItem& ma, const MotionItem& mb, const std::string& what) {
+  CHECK_TEXT(ma.kind() == MotionKind::cartesian && mb.kind() == MotionKind::cartesian, what.c_str());
+  const auto& a = *std::get_if<CartesianMove>(&ma.payload);
+  const auto& b = *std::get_if<CartesianMove>(&mb.payload);
+  CHECK_TEXT(a.path.duration == b.path.duration, (what + ": durations " + std::to_string(a.path.duration) + " vs " +
+                                              std::to_string(b.path.duration)).c_str());
+  CHECK_TEXT(a.path.n == b.path.n && a.path.n == 6, what.c_str());
   double worst = 0;
   for (int k = 0; k <= kin::kMovelKnots; ++k)
-    for (int j = 0; j < a.ct.n; ++j) {
+    for (int j = 0; j < a.path.n; ++j) {
       const auto ku = static_cast<std::size_t>(k), ju = static_cast<std::size_t>(j);
-      worst = std::fmax(worst, std::fabs(a.ct.q_knot[ku][ju] - b.ct.q_knot[ku][ju]));
-      worst = std::fmax(worst, std::fabs(a.ct.dq_knot[ku][ju] - b.ct.dq_knot[ku][ju]));
+      worst = std::fmax(worst, std::fabs(a.path.q_knot[ku][ju] - b.path.q_knot[ku][ju]));
+      worst = std::fmax(worst, std::fabs(a.path.dq_knot[ku][ju] - b.path.dq_knot[ku][ju]));
     }
   CHECK_TEXT(worst == 0, (what + ": knots differ by " + std::to_string(worst)).c_str());
-  CHECK_TEXT((a.goal - b.goal).cwiseAbs().maxCoeff() == 0, what.c_str());
-  CHECK_TEXT(a.ct.p1 == b.ct.p1, what.c_str());
+  CHECK_TEXT((ma.goal() - mb.goal()).cwiseAbs().maxCoeff() == 0, what.c_str());
+  CHECK_TEXT(a.path.p1 == b.path.p1, what.c_str());
 }
 
 }  // namespace
@@ -111,4 +113,53 @@ TEST(ConsoleRequests, FrontEndsBuildOneCanonicalRequest) {
   CHECK_TEXT(far1.rfind("error: ", 0) == 0 && far1.find(" movel refused: ") != std::string::npos, far1.c_str());
   STRCMP_EQUAL(far1.c_str(), far2.c_str());
   CHECK(r.app.ctl->motions().empty());
+}
+
+// A joint move is planned once: by the console, from the queue's end. Back-to-back joint
+// and Cartesian moves each start exactly where the previous one ended, so the RT thread
+// runs every console plan as it is (no second plan), and the setpoints it writes are the
+// console plan's samples. A joint item committed without a plan (or whose start is not
+// where the arm is) is planned again at start, and counted.
+TEST(ConsoleRequests, AJointMoveIsPlannedOnceByTheConsole) {
+  test::ConsoleRig r;
+  r.enable();
+  const std::uint64_t replans0 = r.app.ctl->telemetry().joint_replans;
+  const std::string a = r.cmd("movej 20 -40 160 10 -50 30");
+  CHECK_TEXT(answer_ok(a), a.c_str());
+  const MotionItem first = *r.app.ctl->motions().front();
+  CHECK(first.kind() == MotionKind::joint);
+  const kin::JointTrajectory plan = std::get_if<JointMove>(&first.payload)->plan;
+  CHECK(plan.n == 6 && plan.duration > 0.5);
+  for (const char* l : {"movej 0 -30 150 0 -40 0 speed=50", "movel 400 100 300", "movej 10 -20 140 5 -30 10"}) {
+    const std::string b = r.cmd(l);
+    CHECK_TEXT(answer_ok(b), (std::string(l) + ": " + b).c_str());
+  }
+  // The first move's setpoints are its console plan's samples, bit for bit.
+  double worst = 0;
+  int n = 0;
+  for (int k = 1; k < 100000 && r.app.ctl->telemetry().running_id == 0; ++k) r.cycle();  // started
+  double t = 0;
+  while (r.app.ctl->telemetry().running_id == first.id) {
+    t += 1e-3;
+    const Telemetry tel = r.app.ctl->telemetry();
+    kin::JointState s;
+    plan.sample(t, s);
+    for (int j = 0; j < 6; ++j) worst = std::fmax(worst, std::fabs(s.pos[j] - tel.q_cmd[static_cast<std::size_t>(j)]));
+    ++n;
+    r.cycle();
+  }
+  CHECK(n > 500);
+  CHECK_TEXT(worst == 0, std::to_string(worst).c_str());
+  const std::string w = r.cmd("wait");
+  CHECK_TEXT(answer_ok(w), w.c_str());
+  LONGS_EQUAL(0, r.app.ctl->telemetry().joint_replans - replans0);
+  // An item with no plan is planned at start, and that is counted.
+  MotionItem* m = r.app.ctl->motions().back();
+  JointMove& jm = m->payload.emplace<JointMove>();
+  m->id = 9000;
+  jm.goal = first.goal();
+  r.app.ctl->motions().commit();
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().done_id != 9000; ++i) r.cycle();
+  LONGS_EQUAL(9000, r.app.ctl->telemetry().done_id);
+  LONGS_EQUAL(1, r.app.ctl->telemetry().joint_replans - replans0);
 }

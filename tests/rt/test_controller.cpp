@@ -951,11 +951,11 @@ TEST(Controller, MoveCommittedOnAStaleStateNeverStartsAndIsReported) {
     // What the console commits on a stale "idle": a joint move to joint 4 = 90 deg.
     MotionItem* m = r.app.ctl->motions().back();
     CHECK(m != nullptr);
-    m->kind = MotionKind::joint;
+    JointMove& jm = m->payload.emplace<JointMove>();
     m->id = 4242;
-    m->goal = r.q_cmd();
-    m->goal[3] = 90 * kDeg;
-    m->override = 0.5;
+    jm.goal = r.q_cmd();
+    jm.goal[3] = 90 * kDeg;
+    jm.override = 0.5;
     r.app.ctl->motions().commit();
     r.cycle();
     LONGS_EQUAL(0, r.tel().queued);

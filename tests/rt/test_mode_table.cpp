@@ -98,11 +98,11 @@ struct TableRig {
   /// A joint move that runs long enough to be at speed when the request comes.
   void start_joint_move() {
     MotionItem* m = ctl->motions().back();
-    m->kind = MotionKind::joint;
+    JointMove& jm = m->payload.emplace<JointMove>();
     m->id = 1;
-    m->override = 1.0;
-    m->goal = q_cmd();
-    for (int j = 0; j < 6; ++j) m->goal[j] += (j % 2 ? -40.0 : 40.0) * kDeg;
+    jm.override = 1.0;
+    jm.goal = q_cmd();
+    for (int j = 0; j < 6; ++j) jm.goal[j] += (j % 2 ? -40.0 : 40.0) * kDeg;
     ctl->motions().commit();
     cycles(150);
     expect(Mode::moving, "joint move");
@@ -114,22 +114,21 @@ struct TableRig {
     kin::forward(app.chain, q_cmd(), p);
     p.translation().x() += dx;
     const kin::IkSolver ik{&kin::ik_nearest_fn, app.ik.get()};
-    const kin::MotionStatus st = kin::plan_movel(app.chain, q_cmd(), p, kin::CartesianLimits{}, kin::MovelOptions{}, ik, m->ct);
+    kin::CartesianTrajectory& path = m->payload.emplace<CartesianMove>().path;
+    const kin::MotionStatus st = kin::plan_movel(app.chain, q_cmd(), p, kin::CartesianLimits{}, kin::MovelOptions{}, ik, path);
     CHECK_TEXT(kin::is_ok(st), kin::to_string(st));
-    m->kind = MotionKind::cartesian;
     m->id = 2;
-    m->goal = m->ct.goal;
     return m;
   }
   /// Move to the demo's working pose, then start a 60 mm line and run into it.
   void start_line() {
     MotionItem* m = ctl->motions().back();
-    m->kind = MotionKind::joint;
+    JointMove& jm = m->payload.emplace<JointMove>();
     m->id = 1;
-    m->override = 1.0;
-    m->goal = kin::JointVector(6);
-    m->goal << 20, -40, 160, 10, -50, 30;
-    m->goal *= kDeg;
+    jm.override = 1.0;
+    jm.goal = kin::JointVector(6);
+    jm.goal << 20, -40, 160, 10, -50, 30;
+    jm.goal *= kDeg;
     ctl->motions().commit();
     cycle();  // starts it
     run_until(Mode::idle, 10000, "move to the working pose");
@@ -539,12 +538,12 @@ kin::Status failing_ik(const kin::Chain& chain, const kin::Pose& target, const k
 void go_to_working_pose(TableRig& r) {
   r.enable();
   MotionItem* m = r.ctl->motions().back();
-  m->kind = MotionKind::joint;
+  JointMove& jm = m->payload.emplace<JointMove>();
   m->id = 1;
-  m->override = 1.0;
-  m->goal = kin::JointVector(6);
-  m->goal << 20, -40, 160, 10, -50, 30;
-  m->goal *= kDeg;
+  jm.override = 1.0;
+  jm.goal = kin::JointVector(6);
+  jm.goal << 20, -40, 160, 10, -50, 30;
+  jm.goal *= kDeg;
   r.ctl->motions().commit();
   r.cycle();  // starts it
   r.run_until(Mode::idle, 10000, "move to the working pose");
@@ -556,8 +555,8 @@ TEST(ModeTable, IkFailureKeepsThePrecomputedPathAndCountsIt) {
   FailingIk f;
   go_to_working_pose(r);
   MotionItem* m = r.plan_line(0.03);
-  const kin::CartesianTrajectory ct = m->ct;  // copy of the plan (the RT side uses the queued one)
-  m->ct.ik = kin::IkSolver{&failing_ik, &f};
+  const kin::CartesianTrajectory ct = std::get<CartesianMove>(m->payload).path;  // copy of the plan (the RT side uses the queued one)
+  std::get<CartesianMove>(m->payload).path.ik = kin::IkSolver{&failing_ik, &f};
   r.ctl->motions().commit();
   const std::uint64_t first = r.spy->cycle + 1;
   r.cycle();  // starts it
@@ -591,8 +590,8 @@ TEST(ModeTable, IkFailureOfSomeSamplesCountsExactlyThose) {
   f.fail_every = 3;
   go_to_working_pose(r);
   MotionItem* m = r.plan_line(0.03);
-  const kin::CartesianTrajectory ct = m->ct;
-  m->ct.ik = kin::IkSolver{&failing_ik, &f};
+  const kin::CartesianTrajectory ct = std::get<CartesianMove>(m->payload).path;
+  std::get<CartesianMove>(m->payload).path.ik = kin::IkSolver{&failing_ik, &f};
   r.ctl->motions().commit();
   const std::uint64_t first = r.spy->cycle + 1;
   r.cycle();  // starts it

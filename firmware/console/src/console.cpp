@@ -263,20 +263,21 @@ void Console::queue(Session& s, const MoveJoints& req) {
     answer_error(s, CmdError::busy, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
     return;
   }
-  // Check the plan from the queue's end (the RT thread plans again from the actual state at start).
+  // The one plan of the move, from the queue's end: the RT thread runs it as it is when
+  // the arm is there at start (it plans again only when it is not: Telemetry::joint_replans).
+  JointMove& jm = m->payload.emplace<JointMove>();
+  jm.goal = goal;
+  jm.override = pct / 100.0;
   kin::MovejOptions o;
-  o.override = pct / 100.0;
-  const kin::MotionStatus ms = kin::plan_movej(lim, kin::JointState::rest(tail()), goal, o, m->jt);
+  o.override = jm.override;
+  const kin::MotionStatus ms = kin::plan_movej(lim, kin::JointState::rest(tail()), goal, o, jm.plan);
   if (!kin::is_ok(ms)) {
     answer_error(s, motion_error(ms), fmt("movej refused: %s", kin::to_string(ms)));
     return;
   }
-  if (!duration_ok(s, "movej", m->jt.duration)) return;
-  m->kind = MotionKind::joint;
+  if (!duration_ok(s, "movej", jm.plan.duration)) return;
   m->id = next_id_++;
-  m->goal = goal;
-  m->override = o.override;
-  const double dur = m->jt.duration;
+  const double dur = jm.plan.duration;
   ctl_.motions().commit();
   tail_ = goal;
   tail_id_ = m->id;
@@ -307,7 +308,8 @@ void Console::queue(Session& s, const MoveLine& req) {
   kin::MovelOptions mo;
   kin::PathReport rep;
   const kin::JointVector q0 = tail();
-  const kin::MotionStatus ms = kin::plan_movel(chain_, q0, target, cl, mo, ik_solver(), m->ct, &rep);
+  kin::CartesianTrajectory& path = m->payload.emplace<CartesianMove>().path;
+  const kin::MotionStatus ms = kin::plan_movel(chain_, q0, target, cl, mo, ik_solver(), path, &rep);
   if (!kin::is_ok(ms)) {
     const ConsoleUnits& u = cfg_.units;
     const int L = u.length == LengthUnit::mm ? 1 : 4;
@@ -317,15 +319,12 @@ void Console::queue(Session& s, const MoveLine& req) {
     answer_error(s, motion_error(ms), fmt("movel refused: %s %s", kin::to_string(ms), where.c_str()));
     return;
   }
-  if (!duration_ok(s, "movel", m->ct.duration)) return;
-  m->kind = MotionKind::cartesian;
+  if (!duration_ok(s, "movel", path.duration)) return;
   m->id = next_id_++;
-  m->goal = m->ct.goal;
-  m->override = 1.0;
-  m->ct.ik = ik_solver();
-  const double dur = m->ct.duration;
-  const double slow = m->ct.slowdown;
-  tail_ = m->goal;
+  path.ik = ik_solver();
+  const double dur = path.duration;
+  const double slow = path.slowdown;
+  tail_ = path.goal;
   tail_id_ = m->id;
   tail_gen_ = ctl_.telemetry().generation;
   ctl_.motions().commit();
@@ -348,10 +347,10 @@ void Console::queue_dwell(Session& s, double secs) {
     return;
   }
   const kin::JointVector q = tail();
-  m->kind = MotionKind::dwell;
+  DwellMove& d = m->payload.emplace<DwellMove>();
+  d.at = q;
+  d.seconds = secs;
   m->id = next_id_++;
-  m->goal = q;
-  m->dwell_s = secs;
   tail_ = q;
   tail_id_ = m->id;
   tail_gen_ = ctl_.telemetry().generation;

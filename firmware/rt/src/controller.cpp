@@ -563,9 +563,9 @@ void Controller::hold_motion(const Request& r) {
   if (running_ == nullptr) {
     set_mode(Mode::held);  // between two moves: the rest of the queue is held
   } else {
-    switch (running_->kind) {
+    switch (running_->kind()) {
       case MotionKind::cartesian:
-        kin::stop_movel(running_->ct, motion_t_);  // stops on the line
+        kin::stop_movel(std::get_if<CartesianMove>(&running_->payload)->path, motion_t_);  // stops on the line
         motion_t_ = 0;
         set_mode(Mode::hold_line);
         break;
@@ -578,13 +578,14 @@ void Controller::hold_motion(const Request& r) {
 
 void Controller::resume_motion(const Request& r) {
   set_mode(Mode::moving);
-  if (running_ != nullptr && running_->kind == MotionKind::cartesian) {
-    kin::resume_movel(running_->ct, motion_t_, 1.0);
+  if (auto* c = running_ ? std::get_if<CartesianMove>(&running_->payload) : nullptr) {
+    kin::resume_movel(c->path, motion_t_, 1.0);
     motion_t_ = 0;
-  } else if (running_ != nullptr && running_->kind == MotionKind::joint) {
+  } else if (auto* jm = running_ ? std::get_if<JointMove>(&running_->payload) : nullptr) {
+    // The interrupted move ramped down off its plan: plan the rest from where it stopped.
     kin::MovejOptions o;
-    o.override = running_->override;
-    if (kin::plan_movej(limits_, cmd_, running_->goal, o, running_->jt) != kin::MotionStatus::ok) {
+    o.override = jm->override;
+    if (kin::plan_movej(limits_, cmd_, jm->goal, o, jm->plan) != kin::MotionStatus::ok) {
       finish_motion(true, RtResult::plan_failed);
       reply(r.seq, RtResult::plan_failed, "cannot re-plan the interrupted move");
       return;
@@ -647,14 +648,26 @@ void Controller::finish_motion(bool refused, RtResult why) {
   }
 }
 
+bool Controller::starts_here(const kin::JointTrajectory& plan) const {
+  if (plan.n != n_) return false;
+  kin::JointState s0;
+  plan.sample(-1.0, s0);  // t < 0: exactly the start state
+  for (int j = 0; j < n_; ++j)
+    if (s0.pos[j] != cmd_.pos[j] || s0.vel[j] != 0.0 || cmd_.vel[j] != 0.0) return false;
+  return true;
+}
+
 bool Controller::start_next_motion() {
   while (MotionItem* m = motions_.front()) {
     motion_t_ = 0;
-    switch (m->kind) {
+    switch (m->kind()) {
       case MotionKind::joint: {
+        JointMove& jm = *std::get_if<JointMove>(&m->payload);
+        if (starts_here(jm.plan)) break;  // the console's plan, as it is
         kin::MovejOptions o;
-        o.override = m->override;
-        if (kin::plan_movej(limits_, kin::JointState::rest(cmd_.pos), m->goal, o, m->jt) != kin::MotionStatus::ok) {
+        o.override = jm.override;
+        ++joint_replans_;
+        if (kin::plan_movej(limits_, kin::JointState::rest(cmd_.pos), jm.goal, o, jm.plan) != kin::MotionStatus::ok) {
           running_ = m;
           finish_motion(true, RtResult::plan_failed);
           continue;
@@ -662,9 +675,10 @@ bool Controller::start_next_motion() {
         break;
       }
       case MotionKind::cartesian: {
+        const kin::CartesianTrajectory& path = std::get_if<CartesianMove>(&m->payload)->path;
         double dev = 0;
         for (int j = 0; j < n_; ++j)
-          dev = std::fmax(dev, std::fabs(m->ct.q_knot[0][static_cast<std::size_t>(j)] - cmd_.pos[j]));
+          dev = std::fmax(dev, std::fabs(path.q_knot[0][static_cast<std::size_t>(j)] - cmd_.pos[j]));
         if (dev > 1e-6) {
           running_ = m;
           finish_motion(true, RtResult::start_moved);
@@ -739,32 +753,36 @@ void Controller::step_motion() {
   // moving or hold_line, running_ set
   motion_t_ += period_s_;
   bool done = false;
-  switch (running_->kind) {
-    case MotionKind::joint:
-      running_->jt.sample(motion_t_, cmd_);
-      done = motion_t_ >= running_->jt.duration;
+  switch (running_->kind()) {
+    case MotionKind::joint: {
+      const kin::JointTrajectory& plan = std::get_if<JointMove>(&running_->payload)->plan;
+      plan.sample(motion_t_, cmd_);
+      done = motion_t_ >= plan.duration;
       break;
-    case MotionKind::cartesian:
+    }
+    case MotionKind::cartesian: {
+      kin::CartesianTrajectory& path = std::get_if<CartesianMove>(&running_->payload)->path;
       // IK at the exact pose; when it fails the precomputed joint value of the path is
       // kept (the console checked the whole path with IK, and validate_and_write checks
       // the setpoint as every other one), and the sample is counted (Telemetry::ik_fallbacks).
-      if (running_->ct.sample_ik(motion_t_, cmd_.pos, cmd_.vel, cmd_.acc) < kin::Status::ok) ++ik_fallbacks_;
+      if (path.sample_ik(motion_t_, cmd_.pos, cmd_.vel, cmd_.acc) < kin::Status::ok) ++ik_fallbacks_;
       if (mode_ == Mode::hold_line) {
-        if (motion_t_ >= running_->ct.duration) {  // at rest on the line
-          motion_t_ = running_->ct.duration;
+        if (motion_t_ >= path.duration) {  // at rest on the line
+          motion_t_ = path.duration;
           set_mode(Mode::held);
         }
         return;
       }
-      done = motion_t_ >= running_->ct.duration;
+      done = motion_t_ >= path.duration;
       break;
+    }
     case MotionKind::dwell:
-      done = motion_t_ >= running_->dwell_s;
+      done = motion_t_ >= std::get_if<DwellMove>(&running_->payload)->seconds;
       break;
   }
   if (done) {
-    if (running_->kind != MotionKind::dwell) {
-      cmd_.pos = running_->goal;
+    if (running_->kind() != MotionKind::dwell) {
+      cmd_.pos = running_->goal();
       cmd_.vel.setZero();
       cmd_.acc.setZero();
     }
@@ -853,6 +871,7 @@ void Controller::publish() {
   t.max_following_error = max_follow_;
   t.estop_latency_ns = estop_latency_;
   t.ik_fallbacks = ik_fallbacks_;
+  t.joint_replans = joint_replans_;
   telemetry_.write(t);
 }
 

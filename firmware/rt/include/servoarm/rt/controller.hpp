@@ -116,6 +116,8 @@ class Controller {
   void step_drive_stop();
   void follow_measured();
   bool start_next_motion();
+  /// The arm is at rest exactly where `plan` starts (so it runs as it is).
+  bool starts_here(const kin::JointTrajectory& plan) const;
   void step_motion();
   void finish_motion(bool refused, RtResult why);
   void validate_and_write(TimePoint now);
@@ -161,6 +163,7 @@ class Controller {
   MotionItem* running_ = nullptr;   ///< front of motions_ while executing (moving, hold_*, held)
   double motion_t_ = 0;
   std::uint64_t ik_fallbacks_ = 0;
+  std::uint64_t joint_replans_ = 0;
   std::uint32_t done_id_ = 0;
   std::uint64_t generation_ = 0;
   FaultCause cause_ = FaultCause::none;

@@ -3,6 +3,7 @@
 // queued motions, events and the telemetry snapshot (controller.hpp has the queues).
 #include <array>
 #include <cstdint>
+#include <variant>
 
 #include "servoarm/rt/mode_table.hpp"
 #include "servoarm/rt/stats.hpp"
@@ -52,20 +53,44 @@ struct Reply {
   char message[160] = {};
 };
 
-enum class MotionKind : std::uint8_t { joint, cartesian, dwell };
+enum class MotionKind : std::uint8_t { joint, cartesian, dwell };  // the index of MotionItem::payload
 const char* to_string(MotionKind k);
 
-/// One queued motion. Joint moves are planned on the RT thread when they start
-/// (plan_movej from the actual state: ~us, bounded, heap-free); Cartesian moves
-/// come planned (path checked) by the console thread from the queue's end pose.
+/// A joint move, planned by the console thread from the queue's end (a rest at the
+/// previous motion's goal). The RT thread runs that plan as it is when the arm is where
+/// it starts (the usual case: one plan per move); only when it is not (no plan given, or
+/// the arm is elsewhere) does it plan again from the actual state at start, and counts
+/// it (Telemetry::joint_replans).
+struct JointMove {
+  kin::JointVector goal;          ///< target (rad / m)
+  double override = 1.0;          ///< speed override 0.01..1
+  kin::JointTrajectory plan;      ///< plan.n == 0: none given (the RT thread plans at start)
+};
+
+/// A straight tool line, planned and path-checked by the console thread from the
+/// queue's end; refused at start (start_moved) when the arm is not where it begins.
+struct CartesianMove {
+  kin::CartesianTrajectory path;  ///< path.goal: joint values at the end
+};
+
+/// Standing still where the previous motion ended.
+struct DwellMove {
+  kin::JointVector at;            ///< the joint values held
+  double seconds = 0.0;
+};
+
+/// One queued motion: an id and one payload (one goal), never two.
 struct MotionItem {
-  MotionKind kind = MotionKind::joint;
   std::uint32_t id = 0;
-  kin::JointVector goal;          ///< joint: target; cartesian: joint values at the end
-  double override = 1.0;          ///< joint: speed override 0.01..1
-  double dwell_s = 0.0;           ///< dwell: seconds
-  kin::JointTrajectory jt;        ///< joint: filled by the RT thread at start
-  kin::CartesianTrajectory ct;    ///< cartesian: planned by the console thread
+  std::variant<JointMove, CartesianMove, DwellMove> payload;
+
+  MotionKind kind() const { return static_cast<MotionKind>(payload.index()); }
+  /// Where the arm is at rest when the motion has finished.
+  const kin::JointVector& goal() const {
+    if (const auto* j = std::get_if<JointMove>(&payload)) return j->goal;
+    if (const auto* c = std::get_if<CartesianMove>(&payload)) return c->path.goal;
+    return std::get_if<DwellMove>(&payload)->at;
+  }
 };
 
 enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state };
@@ -103,6 +128,9 @@ struct Telemetry {
   /// Cartesian samples whose IK at the exact pose failed: the cycle kept the precomputed
   /// (path-checked) joint value there instead; counted since boot, never reset.
   std::uint64_t ik_fallbacks = 0;
+  /// Joint moves the RT thread had to plan again at start because the arm was not where
+  /// the console's plan begins (or none was given); since boot.
+  std::uint64_t joint_replans = 0;
 };
 
 }  // namespace servoarm::fw
