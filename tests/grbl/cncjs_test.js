@@ -141,24 +141,31 @@ async function startArmfw(args, work) {
   const conf = path.join(work, 'armfw.toml');
   // A working pose for $H: the PUMA 560's zero pose has the wrist singular (joint 5 = 0),
   // where linear moves are refused; this one is well inside the workspace.
-  fs.writeFileSync(conf, 'motion.home_deg = [0, -30, 150, 0, -60, 0]\n');
-  const proc = spawnLogged('armfw', args.armfw,
-    ['--sim', '--robot', args.robot, '--config', conf, '--pty', '--dialect', 'grbl', '--priority', '0'],
-    {}, path.join(work, 'armfw.log'));
+  let toml = 'motion.home_deg = [0, -30, 150, 0, -60, 0]\n';
+  const argv = ['--sim', '--robot', args.robot, '--config', conf, '--pty', '--priority', '0'];
+  // The GRBL dialect on the pty only, when armfw can say so (console.pty_dialect): stdin
+  // keeps the native language the test reads the joints with. Otherwise every console.
+  const keys = childProcess.spawnSync(args.armfw, ['--config-keys'], { encoding: 'utf8', timeout: 20000 }).stdout || '';
+  if (/^console\.pty_dialect\b/m.test(keys)) toml += 'console.pty_dialect = "grbl"\n';
+  else argv.push('--dialect', 'grbl');
+  fs.writeFileSync(conf, toml);
+  const proc = spawnLogged('armfw', args.armfw, argv, {}, path.join(work, 'armfw.log'));
   const pty = await until('armfw to print "console pty: PATH"', 30000, () => {
     if (proc.exited) throw new Error(`armfw exited (${proc.exited.code}) before opening its pty:\n${proc.err}`);
     const m = /console pty: (\S+)/.exec(proc.err + proc.out);
     return m ? m[1] : undefined;
   });
-  // One native line on armfw's stdin; resolves with its final answer line.
+  // One line on armfw's stdin; resolves with everything it printed up to its final answer
+  // (`ok ...`, `error...`; in the GRBL dialect data comes on [MSG:...] lines before `ok`).
   let pending = Promise.resolve();
   const native = (line) => {
     const run = pending.then(async () => {
       const from = proc.out.length;
       proc.stdin.write(`${line}\n`);
       return until(`armfw's answer to '${line}' on stdin`, 20000, () => {
-        const m = /^(ok.*|error.*)$/m.exec(proc.out.slice(from));
-        return m ? m[1] : undefined;
+        const out = proc.out.slice(from);
+        const m = /^(ok.*|error.*)$/m.exec(out);
+        return m ? out.slice(0, m.index + m[0].length) : undefined;
       });
     });
     pending = run.catch(() => {});
