@@ -14,7 +14,11 @@ TEST_GROUP(KdlReference){};
 TEST(KdlReference, ForwardKinematicsAndJacobianOfEveryBuiltinModel) {
   constexpr int kConfigs = 10000;
   int models = 0;
+  // The models of issue 19 must be among them (OPW and UR classes).
+  int issue19 = 0;
   for (const auto& m : kin::builtin_models()) {
+    for (const char* want : {"abb_irb2400", "kuka_kr6_r700", "ur5e", "ur10e"})
+      if (std::string(m.name) == want) ++issue19;
     const kin::Chain c = model(m.name);
     const KDL::Chain kc = to_kdl(c);
     LONGS_EQUAL(c.n_joints, static_cast<long>(kc.getNrOfJoints()));
@@ -47,7 +51,8 @@ TEST(KdlReference, ForwardKinematicsAndJacobianOfEveryBuiltinModel) {
     }
     ++models;
   }
-  CHECK(models >= 12);
+  CHECK(models >= 16);
+  LONGS_EQUAL(4, issue19);
 }
 
 // Random chains: both conventions, every row type, general and special alphas

@@ -67,6 +67,23 @@ struct IkSolverData {
   double wrist_phi = 0;
   /// Per joint: wrapping into the limits (see IkJointWrap).
   std::array<IkJointWrap, kMaxJoints> wrap{};
+  // Axes 2 and 3 parallel, not parallel to axis 1 (the OPW class; solve_position's
+  // case P): joint 1 first. Every point fixed after the J3 motion keeps its
+  // component along n_par, so  p0 . Rz(m1) n_par = beta  gives m1; then the
+  // distance from axis 2, g(m3) = |(C2 Rz(m3) w)_xy|^2 = g_par . (1, c3, s3)
+  // in the frame of joint 2 (C1), gives m3, and m2 turns it onto the target.
+  // The UR arm (axes 2, 3, 4 parallel, ur.cpp) uses the same data with
+  // n_par = axis 4 and w = the frame-4 origin (C3's translation).
+  bool par23 = false;
+  Eigen::Vector3d n_par = Eigen::Vector3d::UnitZ();  ///< frame after J1 motion
+  double beta = 0;                                   ///< n_par . (w3 or the UR wrist point)
+  Eigen::Vector3d w_par = Eigen::Vector3d::Zero();   ///< the point w, frame after J3 motion
+  Eigen::Vector3d g_par = Eigen::Vector3d::Zero();
+  // UR wrist (ur.cpp): axis 5 normal to axis 4, axes 5 and 6 meet at a point fixed in
+  // the tool (IkModel::w_tool). Axis 4 seen from the frame after the J6 motion:
+  // u(m5) = C5^T Rz(-m5) C4^T e_z, whose z component is ur_u5 . (1, c5, s5).
+  Eigen::Vector3d ur_u5 = Eigen::Vector3d::Zero();
+  Eigen::Vector3d ur_c4z = Eigen::Vector3d::UnitZ();  ///< C4^T e_z
 };
 static_assert(sizeof(IkSolverData) <= IkSolverStorage::kBytes, "raise IkSolverStorage::kBytes (ik.hpp)");
 static_assert(IkSolverStorage::kBytes - sizeof(IkSolverData) < 256, "lower IkSolverStorage::kBytes (ik.hpp)");
@@ -271,6 +288,24 @@ inline Roots solve_basis(double a, double b, double c, bool prismatic, double to
   return r;
 }
 
+/// Revolute roots phi +- t closer than 2e-6 rad (|sin 2t| < 2e-6: t near 0
+/// or pi) are one configuration, the stretched / folded arm or the shoulder
+/// at its boundary: keep one root, phi (or phi + pi), labelled +1. The kept
+/// root is verified like any other (it misses the exact roots by ~t^2).
+/// Not for joint 5 (theta5 = +-t are the two wrist configurations).
+inline bool merge_close_roots(Roots& r) {
+  if (r.n != 2) return false;
+  // sin 2t and cos 2t from the two roots (t = pi/2 also has sin 2t = 0)
+  if (!(std::abs(r.s[0] * r.c[1] - r.c[0] * r.s[1]) < 2e-6) || r.c[0] * r.c[1] + r.s[0] * r.s[1] < 0) return false;
+  const double c = r.c[0] + r.c[1], s = r.s[0] + r.s[1];
+  const double h = std::sqrt(c * c + s * s);
+  r.c[0] = c / h;
+  r.s[0] = s / h;
+  r.v[0] = detail::atan2_poly(r.s[0], r.c[0]);
+  r.n = 1;
+  return true;
+}
+
 // ---------------------------------------------------------------------------
 // Position subproblem: (m2, m3) candidates
 // ---------------------------------------------------------------------------
@@ -305,6 +340,10 @@ inline Eigen::Vector3d basis_cs(bool prismatic, double c, double s) {
 /// the degree-8 resultant (solve_position_resultant, polynomial.cpp). <= 8.
 int solve_position(const IkSolverData& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out,
                    bool angles = true);
+
+/// Case P of solve_position (IkSolverData::par23; position.cpp): <= 4 candidates.
+int solve_position_parallel(const IkSolverData& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out,
+                            bool angles);
 
 /// The general case of solve_position: q2 eliminated by the resultant, a
 /// polynomial of degree <= 8 in tan(q3/2) (or d3), roots from its companion
@@ -341,6 +380,9 @@ void solve_spherical(const IkModel& m, const Pose& target, const JointVector* q_
 /// from q_current with no restarts, 100 iterations (selection.cpp).
 /// ok: q_out set; unreachable: no convergence; bad_input / wrong_size.
 Status ik_nearest_numeric(const Chain& chain, const Pose& target, const JointVector& q_current, JointVector& q_out);
+
+/// Every solution of a UR-type arm (ur.cpp).
+void solve_ur(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
 
 /// Every solution of a reduced arm: planar_2r, planar_3, spatial_3, pitch_4 (reduced.cpp).
 void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);

@@ -19,6 +19,9 @@ const char* to_string(IkMethod m) {
   switch (m) {
     case IkMethod::none: return "numeric";
     case IkMethod::spherical_wrist: return "spherical_wrist";
+    case IkMethod::opw: return "opw";
+    case IkMethod::ur: return "ur";
+    case IkMethod::spherical_general: return "spherical_general";
     case IkMethod::planar_2r: return "planar_2r";
     case IkMethod::planar_3: return "planar_3";
     case IkMethod::spatial_3: return "spatial_3";
@@ -216,6 +219,74 @@ void setup_position(IkSolverData& m) {
   }
 }
 
+// Case P of the position subproblem (IkSolverData::par23): axes 2 and 3 revolute
+// and parallel, not parallel to axis 1; w: the point that follows (frame after
+// the J3 motion), f_w: its place in the frame after J1 motion at m2 = m3 = 0.
+bool setup_parallel(IkSolverData& m, const Eigen::Vector3d& w, const Eigen::Vector3d& f_w) {
+  m.par23 = false;
+  if (prism(m, 0) || prism(m, 1) || prism(m, 2)) return false;
+  const Eigen::Vector3d z3 = C(m, 2).linear().col(2);  // axis 3 in the frame of joint 2
+  if (std::hypot(z3.x(), z3.y()) > 1e-9) return false;
+  const Eigen::Vector3d n = C(m, 1).linear().col(2);
+  if (std::hypot(n.x(), n.y()) < 1e-6) return false;  // axis 2 (nearly) parallel to axis 1
+  m.n_par = n;
+  m.beta = n.dot(f_w);
+  m.w_par = w;
+  // g(m3) = |(C2 Rz(m3) w)_xy|^2 = G0 + G1 c3 + G2 s3
+  auto g = [&](double a) {
+    const Eigen::Vector3d v = C(m, 2) * (rot_z(a) * w);
+    return v.x() * v.x() + v.y() * v.y();
+  };
+  const double g0 = g(0), g1 = g(kPi / 2), g2 = g(kPi);
+  m.g_par = {0.5 * (g0 + g2), 0.5 * (g0 - g2), g1 - 0.5 * (g0 + g2)};
+  m.par23 = true;
+  return true;
+}
+
+// UR-type arm (ur.cpp): 6 revolute joints, axes 2, 3, 4 parallel and not
+// parallel to axis 1, axis 5 normal to them, axes 5 and 6 meeting.
+bool detect_ur(IkModel& model) {
+  IkSolverData& m = solver_data(model);
+  if (m.n != 6) return false;
+  for (int j = 0; j < 6; ++j)
+    if (prism(m, j)) return false;
+  const Eigen::Vector3d z4 = C(m, 3).linear().col(2);  // axis 4 in the frame of joint 3
+  if (std::hypot(z4.x(), z4.y()) > 1e-9) return false;
+  // Axes 5 and 6 in the frame after the J4 motion (m5 = 0).
+  const Pose T6 = C(m, 4) * C(m, 5);
+  const Eigen::Vector3d a5 = C(m, 4).linear().col(2), p5 = C(m, 4).translation();
+  const Eigen::Vector3d a6 = T6.linear().col(2), p6 = T6.translation();
+  if (std::abs(a5.z()) > 1e-9) return false;        // axis 5 normal to axis 4
+  if (a5.cross(a6).norm() < 1e-6) return false;     // axes 5, 6 parallel
+  double s = 0, t = 0;
+  if (line_closest(p5, a5, p6, a6, s, t) > 1e-9 * m.scale) return false;
+  const Eigen::Vector3d Q4 = p5 + s * a5;
+  const Eigen::Vector3d Q1 = C(m, 1) * (C(m, 2) * (C(m, 3) * Q4));
+  if (!setup_parallel(m, C(m, 3).translation(), Q1)) return false;
+  model.w_tool = (C(m, 4) * C(m, 5) * C(m, 6)).inverse() * Q4;
+  m.w3 = Q4;
+  m.ur_c4z = C(m, 4).linear().transpose().col(2);
+  auto uz = [&](double a) { return C(m, 5).linear().col(2).dot(rot_z(-a) * m.ur_c4z); };
+  const double u0 = uz(0), u1 = uz(kPi / 2), u2 = uz(kPi);
+  m.ur_u5 = {0.5 * (u0 + u2), 0.5 * (u0 - u2), u1 - 0.5 * (u0 + u2)};
+  if (std::hypot(m.ur_u5[1], m.ur_u5[2]) < 1e-9) {
+    m.par23 = false;
+    return false;
+  }
+  // Shoulder direction (for ik_branch_of's callers and docs): normal to axes 1 and 2.
+  const Eigen::Vector3d sd = Eigen::Vector3d::UnitZ().cross(m.n_par);
+  m.shoulder_dir = sd.normalized();
+  return true;
+}
+
+// True when one of E1, E2 involves only q2 or only q3 (solve_position's cases A, B).
+bool position_decoupled(const IkSolverData& m) {
+  auto dep2 = [](const Eigen::Matrix3d& M) { return M.bottomRows<2>().cwiseAbs().maxCoeff() > 0; };
+  auto dep3 = [](const Eigen::Matrix3d& M) { return M.rightCols<2>().cwiseAbs().maxCoeff() > 0; };
+  const bool d12 = dep2(m.M1), d13 = dep3(m.M1), d22 = dep2(m.M2), d23 = dep3(m.M2);
+  return (!d12 && d13) || (!d22 && d23) || (!d13 && d12) || (!d23 && d22);
+}
+
 bool detect_spherical_wrist(IkModel& model) {
   IkSolverData& m = solver_data(model);
   if (m.n != 6 || prism(m, 0) || prism(m, 3) || prism(m, 4) || prism(m, 5)) return false;
@@ -329,10 +400,23 @@ Status ik_prepare(const Chain& chain, IkModel& model) {
   detail::decompose(chain, d);
   model.method = IkMethod::none;
   if (detail::detect_spherical_wrist(model)) {
-    model.method = IkMethod::spherical_wrist;
+    // Which position subproblem (position.cpp): one of E1, E2 involves only
+    // q2 or only q3 (PUMA, Stanford); else axes 2 and 3 parallel (OPW class:
+    // joint 1 first); else the degree-8 resultant.
+    model.method = detail::position_decoupled(d)      ? IkMethod::spherical_wrist
+                   : detail::setup_parallel(d, d.w3, detail::f_of(d, 0, 0, d.w3)) ? IkMethod::opw
+                                                                        : IkMethod::spherical_general;
     return Status::ok;
   }
-  if (detail::detect_reduced(model)) return Status::ok;
+  if (detail::detect_ur(model)) {
+    model.method = IkMethod::ur;
+    return Status::ok;
+  }
+  if (detail::detect_reduced(model)) {
+    if (model.method == IkMethod::spatial_3 && !detail::position_decoupled(d))
+      detail::setup_parallel(d, d.w3, detail::f_of(d, 0, 0, d.w3));
+    return Status::ok;
+  }
   return Status::ok;
 }
 
@@ -356,10 +440,16 @@ void ik_solve_all(const IkModel& model, const Pose& target, const JointVector* q
     result.status = Status::bad_input;
     return;
   }
-  if (model.method == IkMethod::spherical_wrist) {
-    detail::solve_spherical(model, target, q_ref, result);
-  } else {
-    detail::solve_reduced(model, target, q_ref, result);
+  switch (model.method) {
+    case IkMethod::spherical_wrist:
+    case IkMethod::opw:
+    case IkMethod::spherical_general: detail::solve_spherical(model, target, q_ref, result); break;
+    case IkMethod::ur: detail::solve_ur(model, target, q_ref, result); break;
+    case IkMethod::planar_2r:
+    case IkMethod::planar_3:
+    case IkMethod::spatial_3:
+    case IkMethod::pitch_4: detail::solve_reduced(model, target, q_ref, result); break;
+    case IkMethod::none: break;
   }
   detail::finish_status(result);
 }

@@ -146,7 +146,62 @@ int solve_position(const IkSolverData& m, const Eigen::Vector3d& p0, const doubl
     }
     return n;
   }
+  if (m.par23) return solve_position_parallel(m, p0, ref_m2, out, angles);
   return solve_position_resultant(m, M1, M2, tol1, out);
+}
+
+// Case P (axes 2 and 3 parallel, see IkSolverData::par23): m1 from the
+// component along n_par, m3 from the distance to axis 2, m2 by one angle.
+int solve_position_parallel(const IkSolverData& m, const Eigen::Vector3d& p0, const double* ref_m2, PosCand* out,
+                            bool angles) {
+  const Eigen::Vector3d& n = m.n_par;
+  const double tol1 = 1e-12 * m.scale * m.scale, tol2 = 1e-12 * m.scale;
+  Roots r1 = solve_basis(p0.z() * n.z() - m.beta, p0.x() * n.x() + p0.y() * n.y(), p0.y() * n.x() - p0.x() * n.y(),
+                         false, tol2, false);
+  if (r1.free) {  // p0 on axis 1: every m1 gives the same point in the frame after J1
+    r1.n = 1;
+    r1.c[0] = 1;
+    r1.s[0] = 0;
+  }
+  merge_close_roots(r1);
+  const Eigen::Matrix3d& R1 = C(m, 1).linear();
+  const Eigen::Vector3d& t1 = C(m, 1).translation();
+  const Eigen::Matrix3d& R2 = C(m, 2).linear();
+  const Eigen::Vector3d& t2 = C(m, 2).translation();
+  int n_out = 0;
+  for (int i = 0; i < r1.n; ++i) {
+    const double c1 = r1.c[i], s1 = r1.s[i];
+    const Eigen::Vector3d p1(c1 * p0.x() + s1 * p0.y(), c1 * p0.y() - s1 * p0.x(), p0.z());  // Rz(-m1) p0
+    const Eigen::Vector3d u = R1.transpose() * (p1 - t1);  // frame of joint 2
+    const double d2 = u.x() * u.x() + u.y() * u.y();
+    Roots r3 = solve_basis(m.g_par[0] - d2, m.g_par[1], m.g_par[2], false, tol1, angles);
+    if (r3.free) continue;  // w on axis 3 and axis 3 on axis 2: not an arm
+    merge_close_roots(r3);
+    for (int k = 0; k < r3.n; ++k) {
+      const double c3 = r3.c[k], s3 = r3.s[k];
+      const Eigen::Vector3d w(c3 * m.w_par.x() - s3 * m.w_par.y(), s3 * m.w_par.x() + c3 * m.w_par.y(), m.w_par.z());
+      const Eigen::Vector3d v = R2 * w + t2;
+      PosCand& o = out[n_out++];
+      o = PosCand{};
+      o.c3 = c3;
+      o.s3 = s3;
+      o.m3 = r3.v[k];
+      o.elbow = r3.label[k];
+      const double cr = v.x() * u.y() - v.y() * u.x(), dt = v.x() * u.x() + v.y() * u.y();
+      const double r2 = cr * cr + dt * dt;
+      if (r2 <= 1e-24 * m.scale * m.scale * m.scale * m.scale) {  // w on axis 2: m2 free (keep it)
+        o.free2 = true;
+        o.m2 = ref_m2 ? *ref_m2 : 0.0;
+        set_pair(false, o.m2, o.c2, o.s2);
+      } else {
+        const double ir = 1.0 / std::sqrt(r2);
+        o.c2 = dt * ir;
+        o.s2 = cr * ir;
+        o.m2 = angles ? detail::atan2_poly(o.s2, o.c2) : 0.0;
+      }
+    }
+  }
+  return n_out;
 }
 
 // Finish a candidate (motion values m, SI joints = dir*m): wrap, verify by

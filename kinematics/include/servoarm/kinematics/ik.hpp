@@ -27,6 +27,19 @@
 //    Newton. q1 follows from atan2; the wrist from
 //        R3^T R C6^T = Rz(m4) C4 Rz(m5) C5 Rz(m6)
 //    (two m5 roots, then m4 and m6 by atan2). Up to 8 solutions.
+//    The method names the position subproblem: spherical_wrist (one of E1,
+//    E2 decoupled), opw (axes 2 and 3 parallel and not parallel to axis 1:
+//    the ortho-parallel arms of ABB, KUKA, Fanuc... with any shoulder offset
+//    a1, elbow offset a2, lateral offset b -- every point after joint 3 keeps
+//    its component along axis 2, which gives q1 first (two roots), then the
+//    distance from axis 2 gives q3 (two), one angle q2), spherical_general
+//    (neither: the degree-8 resultant, the general path).
+//  * ur: 6 revolute joints, axes 2, 3, 4 parallel (not parallel to axis 1),
+//    axis 5 normal to them, axes 5 and 6 meeting (Universal Robots and the
+//    cobots built like them). q1 from the point where axes 5 and 6 meet (its
+//    component along axis 2 is constant), q5 from axis 6's component along
+//    axis 2, q6 from the direction of axis 4 in the tool, then q3, q2, q4 in
+//    the plane of the parallel axes (ur.cpp). Up to 8 solutions.
 //  * planar_2r (RR; chapter 4.1 of seed 002): two parallel revolute axes.
 //  * planar_3 (RRR and RLR with tool angle phi; seed 002 4.2, 4.3):
 //    three joints whose rotation axes are all parallel.
@@ -48,7 +61,7 @@
 // Sources, kinematics/src/ik/: model.cpp (ik_prepare: decomposition and
 // classification; ik_solve_all's dispatch), position.cpp (joints 1-3 in
 // closed form, candidate verification), polynomial.cpp (the degree-8
-// resultant path), spherical_wrist.cpp, reduced.cpp (the chapter-4 arms),
+// resultant path), spherical_wrist.cpp, ur.cpp, reduced.cpp (the chapter-4 arms),
 // selection.cpp (ik_branch_of, ik_choose, ik_solve_nearest), numeric.cpp
 // (ik_numeric); ik_detail.hpp: what they share. The IkSolver adapter for
 // motion: motion_ik.hpp.
@@ -66,7 +79,10 @@ inline constexpr int kMaxIkSolutions = 16;
 
 enum class IkMethod : std::uint8_t {
   none,             ///< no closed form fits: use ik_numeric()
-  spherical_wrist,  ///< 6 joints, spherical wrist (Pieper)
+  spherical_wrist,  ///< 6 joints, spherical wrist (Pieper), one of E1/E2 decoupled (PUMA, Stanford)
+  opw,              ///< 6 joints, spherical wrist, axes 2 and 3 parallel (OPW class: ABB, KUKA, ...)
+  ur,               ///< 6 joints, axes 2, 3, 4 parallel, UR wrist (Universal Robots and alike)
+  spherical_general,  ///< 6 joints, spherical wrist, neither: the degree-8 resultant (general path)
   planar_2r,        ///< RR planar: position in the plane
   planar_3,         ///< RRR / RLR planar: position in the plane + tool angle phi
   spatial_3,        ///< TRR-like: 3 joints, tool position
@@ -126,7 +142,7 @@ struct IkSolverAccess;  // idem
 /// sizeof(IkSolverData) where that is defined (static_assert).
 class IkSolverStorage {
  public:
-  static constexpr std::size_t kBytes = 2304;
+  static constexpr std::size_t kBytes = 2432;
   static constexpr std::size_t kAlign = EIGEN_MAX_STATIC_ALIGN_BYTES > 16 ? EIGEN_MAX_STATIC_ALIGN_BYTES : 16;
   IkSolverStorage();
   IkSolverStorage(const IkSolverStorage& other);

@@ -1,0 +1,261 @@
+// Inverse kinematics, the UR-type arm (IkMethod::ur): six revolute joints,
+// axes 2, 3, 4 parallel (direction n) and not parallel to axis 1, axis 5
+// normal to n, axes 5 and 6 meeting at a point Q fixed in the tool
+// (IkModel::w_tool). Recognised from the decomposition C0 J1 C1 ... J6 C6
+// (either DH convention, offsets, reversed joints), never from the name.
+//
+//   joint 1   Q is fixed in the link after joint 4, so its component along n
+//             is a constant beta:  Q0 . Rz(m1) n = beta          (2 roots)
+//   joint 5   axis 4 seen from the frame after joint 6, u(m5) = C5^T Rz(-m5)
+//             C4^T e_z, has the z component (axis 6 . n) of the target:
+//             u5 . (1, c5, s5) = (Rz(m1) n) . z6                 (2 roots)
+//   joint 6   u(m5) = Rz(m6) v with v = axis 4 in the target's frame after
+//             joint 6: one angle (free at theta5 = 0: kept at the reference)
+//   2, 3, 4   the frame after joint 4 follows from the target and m1, m5, m6;
+//             its origin's distance from axis 2 gives m3 (2 roots), one angle
+//             gives m2, the rotation left about n gives m4.
+// Up to 8 solutions, tagged shoulder (m1 root), wrist (m5 root), elbow (m3
+// root). Each is verified exactly to rounding through the same decomposition:
+// the target's frame after joint 4 against the one that (m2, m3, m4) produce,
+//   rotation  |Rz(m4) - X|_F,  X = (C1 Rz2 C2 Rz3 C3)^T R14
+//   position  |(Rz(m4) - X) L + Y^T (o_fk - o)|   (L: tool origin in frame 4)
+// A candidate that misses 1e-9 m / 1e-9 rad (a root clamped at the reach
+// limit, digits lost at a singularity) goes through add_candidate (the
+// chain's FK and a few Gauss-Newton steps). Real-time, heap-free.
+#include <cmath>
+
+#include "../fast_trig.hpp"
+#include "ik_detail.hpp"
+
+namespace servoarm::kin::detail {
+namespace {
+
+struct Rot2 {
+  double c = 1, s = 0;
+};
+
+// (c, s) of the angle that turns (ax, ay) onto (bx, by); false if either is ~0.
+inline bool angle_from_to(double ax, double ay, double bx, double by, double tiny2, Rot2& r) {
+  const double cr = ax * by - ay * bx, dt = ax * bx + ay * by;
+  const double r2 = cr * cr + dt * dt;
+  if (!(r2 > tiny2)) return false;
+  const double ir = 1.0 / std::sqrt(r2);
+  r.c = dt * ir;
+  r.s = cr * ir;
+  return true;
+}
+
+// Rz(c, s) * v
+inline Eigen::Vector3d rz(const Rot2& a, const Eigen::Vector3d& v) {
+  return {a.c * v.x() - a.s * v.y(), a.s * v.x() + a.c * v.y(), v.z()};
+}
+// R * Rz(c, s)
+inline Eigen::Matrix3d mul_rz(const Eigen::Matrix3d& R, const Rot2& a) {
+  Eigen::Matrix3d Y;
+  Y.col(0) = a.c * R.col(0) + a.s * R.col(1);
+  Y.col(1) = a.c * R.col(1) - a.s * R.col(0);
+  Y.col(2) = R.col(2);
+  return Y;
+}
+
+// |sin 2t| of a pair of roots phi +- t (0 when they merge, t = 0 or pi).
+inline double merge_measure(const Roots& r) {
+  if (r.n < 2) return 0.0;
+  if (r.c[0] * r.c[1] + r.s[0] * r.s[1] < 0) return 1.0;  // t near pi/2
+  return std::abs(r.s[0] * r.c[1] - r.c[0] * r.s[1]);
+}
+
+}  // namespace
+
+void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  double mref[6] = {0, 0, 0, 0, 0, 0};
+  if (q_ref)
+    for (int j = 0; j < 6; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
+  const Eigen::Matrix3d& C0R = C(m, 0).linear();
+  // The target in the frame after C0: tool rotation, the frame after the J6
+  // motion (F, t6), the wrist point Q.
+  const Eigen::Matrix3d F0 = C0R.transpose() * target.linear();
+  const Eigen::Vector3d pt0 = C0R.transpose() * (target.translation() - C(m, 0).translation());
+  const Eigen::Matrix3d F = F0 * C(m, 6).linear().transpose();
+  const Eigen::Vector3d t6 = pt0 - F * C(m, 6).translation();
+  const Eigen::Vector3d q0 = pt0 + F0 * model.w_tool;
+  const Eigen::Vector3d z6 = F.col(2);
+  const Eigen::Vector3d& n = m.n_par;
+  const double tol1 = 1e-12 * m.scale * m.scale, tol2 = 1e-12 * m.scale;
+  const double tiny2 = 1e-36 * m.scale * m.scale * m.scale * m.scale;
+
+  Roots r1 = solve_basis(q0.z() * n.z() - m.beta, q0.x() * n.x() + q0.y() * n.y(), q0.y() * n.x() - q0.x() * n.y(),
+                         false, tol2, false);
+  bool free1 = false;
+  if (r1.free) {  // Q on axis 1 and beta = Q.n: joint 1 free (kept)
+    free1 = true;
+    r1.n = 1;
+    detail::sincos_poly(mref[0], r1.s[0], r1.c[0]);
+  }
+  const double sh_merge = merge_measure(r1);
+  merge_close_roots(r1);
+  const std::uint8_t sing1 = (free1 || r1.n == 1 || sh_merge < 2.0 * kNearSingular) ? kSingularShoulder : 0;
+
+  const Eigen::Matrix3d& R1 = C(m, 1).linear();
+  const Eigen::Vector3d& t1 = C(m, 1).translation();
+  const Eigen::Matrix3d& R2 = C(m, 2).linear();
+  const Eigen::Vector3d& t2 = C(m, 2).translation();
+  const Eigen::Matrix3d& R3 = C(m, 3).linear();
+  const Eigen::Matrix3d& R4 = C(m, 4).linear();
+  const Eigen::Vector3d& t4 = C(m, 4).translation();
+  const Eigen::Matrix3d& R5 = C(m, 5).linear();
+  const Eigen::Vector3d& t5 = C(m, 5).translation();
+  const Eigen::Vector3d& t6c = C(m, 6).translation();
+
+  // Candidates: (s, c) pairs of every motion, angles in one batch at the end.
+  struct Cand {
+    Rot2 a[6];
+    Branch br;
+    std::uint8_t sing;
+    double ep, er;
+  };
+  Cand cand[8];
+  int nc = 0;
+  for (int i = 0; i < r1.n; ++i) {
+    const Rot2 a1{r1.c[i], r1.s[i]};
+    const Eigen::Vector3d nb = rz(a1, n);       // n in the frame after C0
+    const Eigen::Vector3d v = F.transpose() * nb;  // n in the target's frame after J6
+    const Roots r5 = solve_basis(m.ur_u5[0] - nb.dot(z6), m.ur_u5[1], m.ur_u5[2], false, 1e-12, false);
+    if (r5.n == 0) continue;
+    const double wr_merge = merge_measure(r5);
+    for (int k = 0; k < r5.n; ++k) {
+      const Rot2 a5{r5.c[k], r5.s[k]};
+      const Eigen::Vector3d u = R5.transpose() * rz({a5.c, -a5.s}, m.ur_c4z);
+      std::uint8_t sing = sing1;
+      const double uxy2 = u.x() * u.x() + u.y() * u.y();
+      if (uxy2 < kNearSingular * kNearSingular || wr_merge < 2.0 * kNearSingular) sing |= kSingularWrist;
+      Rot2 a6;
+      if (!angle_from_to(v.x(), v.y(), u.x(), u.y(), 1e-40, a6))  // theta5 = 0: joint 6 kept
+        detail::sincos_poly(mref[5], a6.s, a6.c);
+      // K = C4 Rz5 C5 Rz6: the frame after J4 motion is P6 K^-1.
+      const Eigen::Matrix3d R45 = mul_rz(R4, a5) * R5;
+      const Eigen::Matrix3d KR = mul_rz(R45, a6);
+      const Eigen::Vector3d Kt = t4 + mul_rz(R4, a5) * t5;
+      const Eigen::Vector3d L = Kt + KR * t6c;  // tool origin in the frame after J4 motion
+      const Eigen::Matrix3d P4R = F * KR.transpose();
+      const Eigen::Vector3d P4t = t6 - P4R * Kt;
+      // In the frame after J1 motion.
+      const Rot2 a1i{a1.c, -a1.s};
+      Eigen::Matrix3d R14;
+      for (int c = 0; c < 3; ++c) R14.col(c) = rz(a1i, P4R.col(c));
+      const Eigen::Vector3d o = rz(a1i, P4t);
+      const Eigen::Vector3d u2 = R1.transpose() * (o - t1);  // frame of joint 2
+      const double d2 = u2.x() * u2.x() + u2.y() * u2.y();
+      Roots r3 = solve_basis(m.g_par[0] - d2, m.g_par[1], m.g_par[2], false, tol1, false);
+      if (r3.free) continue;
+      const double el_merge = r3.n == 1 ? 0.0 : merge_measure(r3);
+      merge_close_roots(r3);
+      for (int e = 0; e < r3.n && nc < 8; ++e) {
+        const Rot2 a3{r3.c[e], r3.s[e]};
+        const Eigen::Vector3d w = R2 * rz(a3, m.w_par) + t2;
+        Cand& cd = cand[nc];
+        cd.sing = sing;
+        if (el_merge < 2.0 * kNearSingular) cd.sing |= kSingularElbow;
+        Rot2 a2;
+        if (!angle_from_to(w.x(), w.y(), u2.x(), u2.y(), tiny2, a2)) {  // frame-4 origin on axis 2
+          detail::sincos_poly(mref[1], a2.s, a2.c);
+          cd.sing |= kSingularShoulder;
+        }
+        const Eigen::Matrix3d Y = mul_rz(mul_rz(R1, a2) * R2, a3) * R3;
+        const Eigen::Matrix3d X = Y.transpose() * R14;
+        Rot2 a4;
+        if (!angle_from_to(1.0, 0.0, X(0, 0), X(1, 0), 1e-40, a4)) a4 = Rot2{};
+        // Verification (exact to rounding): the frame after J4 motion that
+        // (m2, m3, m4) give against the target's.
+        Eigen::Matrix3d D;
+        D << a4.c - X(0, 0), -a4.s - X(0, 1), -X(0, 2), a4.s - X(1, 0), a4.c - X(1, 1), -X(1, 2), -X(2, 0), -X(2, 1),
+            1.0 - X(2, 2);
+        const Eigen::Vector3d o_fk = R1 * rz(a2, w) + t1;
+        const Eigen::Vector3d ev = D * L + Y.transpose() * (o_fk - o);
+        const double f2 = D.squaredNorm();
+        cd.ep = ev.norm();
+        cd.er = f2 < 1e-8 ? std::sqrt(0.5 * f2) : 2.0 * std::asin(std::min(1.0, std::sqrt(f2 / 8.0)));
+        cd.a[0] = a1;
+        cd.a[1] = a2;
+        cd.a[2] = a3;
+        cd.a[3] = a4;
+        cd.a[4] = a5;
+        cd.a[5] = a6;
+        cd.br.shoulder = r1.label[i];
+        cd.br.wrist = r5.label[k];
+        cd.br.elbow = r3.label[e];
+        ++nc;
+      }
+    }
+  }
+  if (nc == 0) return;
+  // Every angle in one batch (pairs).
+  double sy[48], sx[48], ang[48];
+  for (int k = 0; k < nc; ++k)
+    for (int j = 0; j < 6; ++j) {
+      sy[k * 6 + j] = cand[k].a[j].s;
+      sx[k * 6 + j] = cand[k].a[j].c;
+    }
+  for (int i = 0; i < nc * 6; i += 2) detail::atan2_poly_x2(sy + i, sx + i, ang + i);
+  double ref[6], dir[6];
+  bool narrow[6];
+  for (int j = 0; j < 6; ++j) {
+    ref[j] = q_ref ? (*q_ref)[j] : 0.0;
+    dir[j] = m.dir[static_cast<std::size_t>(j)];
+    narrow[j] = detail::narrow_applies(m.wrap[static_cast<std::size_t>(j)], ref[j]);
+  }
+  auto wrap = [&](int j, double v) {
+    const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
+    const double w = v > kPi ? v - 2.0 * kPi : (v <= -kPi ? v + 2.0 * kPi : v);
+    if (narrow[j]) return detail::wrap_narrow(jw, w);
+    return detail::wrap_into_limits(w, jw.lo, jw.hi, ref[j]);
+  };
+  auto same_joint = [](double a, double b) {
+    const double d = std::abs(a - b);
+    return d <= 1e-7 || (d >= 2.0 * kPi - 2e-7 && std::abs(fast_wrap(a - b)) <= 1e-7);
+  };
+  bool foreign = false;
+  for (int k = 0; k < nc; ++k) {
+    const Cand& cd = cand[k];
+    const double* mot = ang + k * 6;
+    if (!(cd.ep <= kVerifyPos && cd.er <= kVerifyRot)) {
+      if (cd.ep < 1e-4 * m.scale && cd.er < 1e-4) {
+        const int before = res.count;
+        add_candidate(model, target, q_ref, mot, cd.br, cd.sing, false, res);
+        foreign = foreign || res.count > before;
+      }
+      continue;
+    }
+    if (res.count >= kMaxIkSolutions) break;
+    double q[6];
+    bool in = true;
+    for (int j = 0; j < 6; ++j) {
+      q[j] = wrap(j, dir[j] * mot[j]);
+      const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
+      in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
+    }
+    // Duplicates only where roots (nearly) merged: singular candidates, or
+    // against add_candidate's solutions.
+    if (cd.sing || foreign) {
+      bool dup = false;
+      for (int t = 0; t < res.count && !dup; ++t) {
+        const JointVector& o = res.solutions[static_cast<std::size_t>(t)].q;
+        bool same = true;
+        for (int j = 0; j < 6 && same; ++j) same = same_joint(q[j], o[j]);
+        dup = same;
+      }
+      if (dup) continue;
+    }
+    IkSolution& sol = res.solutions[static_cast<std::size_t>(res.count++)];
+    sol.q.resize(6);
+    for (int j = 0; j < 6; ++j) sol.q[j] = q[j];
+    sol.branch = cd.br;
+    sol.within_limits = in;
+    sol.singular = cd.sing;
+    sol.position_error = cd.ep;
+    sol.rotation_error = cd.er;
+  }
+}
+
+}  // namespace servoarm::kin::detail
