@@ -176,13 +176,14 @@ async function startArmfw(args, work) {
 
 // ---- cncjs ------------------------------------------------------------------------------
 
-async function startCncjs(cncjsBin, work) {
+async function startCncjs(cncjsBin, work, devicePath) {
   const home = path.join(work, 'home');  // cncjs keeps its sessions under $HOME
   fs.mkdirSync(home, { recursive: true });
   const secret = crypto.randomBytes(24).toString('hex');
   const rc = path.join(work, 'cncrc.json');
-  // watchDirectory unset, no users: the token's id/name are not checked against a list.
-  fs.writeFileSync(rc, JSON.stringify({ secret, state: { allowAnonymousUsageDataCollection: false } }, null, 2));
+  // No users: the token's id/name are not checked against a list. `ports`: cncjs lists only
+  // the serial ports udev knows, never a pty, unless it is named here (docs/grbl-senders.md).
+  fs.writeFileSync(rc, JSON.stringify({ secret, ports: [{ path: devicePath, manufacturer: 'servoarm pty' }] }, null, 2));
   const port = await freePort();
   const proc = spawnLogged('cncjs', process.execPath,
     [cncjsBin, '--host', '127.0.0.1', '--port', String(port), '--config', rc, '--controller', 'Grbl', '-v'],
@@ -350,13 +351,21 @@ async function run(args) {
     port = armfw.pty;
     step(`armfw --sim --dialect grbl: pty ${port}`);
   }
-  const cncjs = await startCncjs(cncjsBin, work);
+  const cncjs = await startCncjs(cncjsBin, work, port);
   step(`cncjs 1.11.5 listening on ${cncjs.url}`);
 
   const c = new CncjsClient(io, cncjs.url, signToken(cncjs.secret, { id: 'servoarm-ci', name: 'servoarm-ci' }));
   const startup = await c.connected();
   if (!startup.loadedControllers.includes('Grbl')) throw new Error(`cncjs loaded ${startup.loadedControllers}, no Grbl`);
   step('socket.io: authenticated (JWT signed with the secret of its config)');
+
+  // the port list cncjs's Connection widget shows: the pty, named in its configuration
+  const list = await new Promise((resolve) => {
+    c.socket.once('serialport:list', resolve);
+    c.socket.emit('list');
+  });
+  if (!list.some((e) => e.port === port)) throw new Error(`cncjs's port list ${JSON.stringify(list)} has no ${port}`);
+  step(`port list has ${port} (from the config's "ports")`);
 
   // -- detection: banner, $$ (sent by cncjs itself), ? and $G polling
   await c.open(port);
@@ -464,6 +473,15 @@ async function run(args) {
   c.command('gcode:resume');
   await until('Run after gcode:resume (~)', 10000, () => (c.active === 'Run' ? true : undefined));
   step('gcode:resume (~): Run');
+
+  // feed override buttons: -10 % (0x92) twice, then 100 % (0x90); cncjs sends them UTF-8 encoded
+  const ov = () => ((c.state.status || {}).ov || [])[0];
+  c.command('feedOverride', -10);
+  c.command('feedOverride', -10);
+  await until(`Ov: 80 after two feed override -10 % (Ov now ${ov()})`, 5000, () => (ov() === 80 ? true : undefined));
+  c.command('feedOverride', 0);
+  await until(`Ov: 100 after feed override reset (Ov now ${ov()})`, 5000, () => (ov() === 100 ? true : undefined));
+  step('feedOverride -10, -10, 0 (0x92 0x92 0x90): Ov 80, then 100');
 
   // feed hold / cycle start (cncjs's Feedhold and Cycle Start buttons: ! and ~ only)
   await until('two thirds of the program acknowledged', 120000, () => (c.sender.received >= 33 ? true : undefined));
