@@ -299,6 +299,16 @@ async function waitIdle(c, what, ms = 60000, settle = 600) {
   }, 50);
 }
 
+// Lines through cncjs's feeder (its MDI / jog path: one line at a time, each after the
+// previous answer); resolves with the answer (`ok` or `error:...`) to the last one.
+async function feed(c, ...lines) {
+  const from = c.reads.length;
+  for (const l of lines) c.command('gcode', l);
+  const answers = () => c.reads.slice(from).filter((l) => /^(ok|error:)/.test(l));
+  await until(`the answers to ${lines.join(' / ')}`, 60000, () => (answers().length >= lines.length ? true : undefined));
+  return answers()[lines.length - 1];
+}
+
 function noNewErrors(c, from, what) {
   const e = c.errors.slice(from);
   if (e.length) throw new Error(`${what}: the firmware answered ${e.join(' | ')}`);
@@ -400,19 +410,25 @@ async function run(args) {
   }
   from = c.reads.length;
   c.command('homing');
-  await until('the answer to $H', 120000, () => (c.reads.slice(from).some((l) => /^(ok|error:)/.test(l)) ? true : undefined));
-  await waitIdle(c, '$H', 120000);
-  noNewErrors(c, errs, '$H');
+  const homed = await until('the answer to $H', 120000, () => c.reads.slice(from).find((l) => /^(ok|error:)/.test(l)));
+  let how = '$H';
+  if (/^error:5\b/.test(homed)) {
+    // GRBL's "homing not enabled": a firmware without a homing cycle may say so; G28 goes
+    // to the home pose (motion.home_deg) as cncjs's Go To G28 would.
+    step(`$H answered ${homed} (homing not enabled): G28 instead`);
+    errs = c.errors.length;
+    await feed(c, 'G28');
+    how = 'G28';
+  }
+  await waitIdle(c, how, 120000);
+  noNewErrors(c, errs, how);
   const home = c.mpos();
-  if (!home.every(Number.isFinite)) throw new Error(`MPos after $H is not three numbers: ${JSON.stringify(c.state.status)}`);
-  step(`$H: Idle at MPos ${fmt(home)}`);
+  if (!home.every(Number.isFinite)) throw new Error(`MPos after ${how} is not three numbers: ${JSON.stringify(c.state.status)}`);
+  step(`${how}: Idle at MPos ${fmt(home)}`);
 
   // -- jog: cncjs's Axes widget (its jog buttons send G91, G0 <axis><step>, G90 as three lines)
   errs = c.errors.length;
-  c.command('gcode', 'G91');
-  c.command('gcode', 'G0 X10');
-  c.command('gcode', 'G90');
-  await until('the widget jog to start', 10000, () => (dist(c.mpos(), home) > 0.01 ? true : undefined));
+  await feed(c, 'G91', 'G0 X10', 'G90');
   await waitIdle(c, 'widget jog X+10');
   noNewErrors(c, errs, 'widget jog (G91 / G0 X10 / G90)');
   let p = c.mpos();
@@ -421,16 +437,16 @@ async function run(args) {
 
   // -- GRBL jogging: $J= lines (cncjs's MDI / pendants), a jog cancel (cncjs's jogCancel: 0x85)
   let before = p;
-  c.command('gcode', '$J=G91 G21 X-10 Y5 F1200');
+  await feed(c, '$J=G91 G21 X-10 Y5 F600');
   await until('state Jog for $J=', 10000, () => (c.active === 'Jog' ? true : undefined));
   await waitIdle(c, '$J= jog');
-  noNewErrors(c, errs, '$J=G91 G21 X-10 Y5 F1200');
+  noNewErrors(c, errs, '$J=G91 G21 X-10 Y5 F600');
   p = c.mpos();
   expectNear('after $J=G91 X-10 Y5', p, [before[0] - 10, before[1] + 5, before[2]], 0.01);
   step(`$J=G91 X-10 Y5 F1200: Jog, then Idle at ${fmt(p)}`);
 
   before = p;
-  c.command('gcode', '$J=G91 G21 Y-60 F600');  // 6 s at 600 mm/min
+  await feed(c, '$J=G91 G21 Y-60 F600');  // 6 s at 600 mm/min
   await until('state Jog for the long $J=', 10000, () => (c.active === 'Jog' ? true : undefined));
   await sleep(1000);
   c.command('jogCancel');
@@ -444,7 +460,7 @@ async function run(args) {
   noNewErrors(c, errs, 'jog cancel');
   step(`jogCancel (0x85) after 1 s: Idle ${((Date.now() - cancelAt) / 1000).toFixed(2)} s later, travelled ${travelled.toFixed(2)} of 60 mm`);
   // back to the start of the program (an absolute jog)
-  c.command('gcode', `$J=G90 G21 X${home[0].toFixed(3)} Y${home[1].toFixed(3)} Z${home[2].toFixed(3)} F3000`);
+  await feed(c, `$J=G90 G21 X${home[0].toFixed(3)} Y${home[1].toFixed(3)} Z${home[2].toFixed(3)} F3000`);
   await until('the absolute jog to start', 10000, () => (c.active === 'Jog' ? true : undefined));
   await waitIdle(c, '$J=G90 back to the home pose');
   expectNear('after $J=G90 to the home pose', c.mpos(), home, 0.01);
