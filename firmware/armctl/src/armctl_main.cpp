@@ -11,6 +11,7 @@
 #include "servoarm/armctl/cli_ik.hpp"
 #define SERVOARM_HAVE_CLI_IK 1
 #endif
+#include "servoarm/armctl/cli_workspace.hpp"
 #if __has_include("servoarm/armctl/cli_console.hpp")
 #include "servoarm/armctl/cli_console.hpp"
 #define SERVOARM_HAVE_CLI_CONSOLE 1
@@ -31,6 +32,10 @@ const char* kUsage =
     "                                                      tool pose (position, rotation, ZYZ, RPY, quaternion)\n"
     "  armctl kin jacobian --robot NAME|FILE [--json] [--strict] q1 ... qn\n"
     "                                                      geometric Jacobian, manipulability, condition number\n"
+    "  armctl kin workspace --robot NAME|FILE [--plane xz|xy|yz] [--grid N] [--pose q1..qn]\n"
+    "                       [--svg FILE] [--csv FILE]\n"
+    "                                                      reachable region of the tool point in a\n"
+    "                                                      plane through the base, its area, a plot\n"
 #ifdef SERVOARM_HAVE_CLI_IK
     "  armctl kin ik --robot NAME|FILE --xyz X Y Z (--zyz A B G | --rpy R P Y | --quat W X Y Z)\n"
     "                [--all] [--near q1..qn] [--keep-branch] [--json]\n"
@@ -78,6 +83,7 @@ int main(int argc, char** argv) {
     if (sub == "fk") return cli_kin_fk(sub_argc, sub_argv);
     if (sub == "jacobian") return cli_kin_jacobian(sub_argc, sub_argv);
     if (sub == "models") return cli_kin_models(sub_argc, sub_argv);
+    if (sub == "workspace") return cli_kin_workspace(sub_argc, sub_argv);
 #ifdef SERVOARM_HAVE_CLI_IK
     if (sub == "ik") return cli_kin_ik(sub_argc, sub_argv);
     if (sub == "precision") return cli_kin_precision(sub_argc, sub_argv);

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "servoarm/armctl/cli_common.hpp"
+#include "servoarm/armctl/cli_svg.hpp"
 #include "servoarm/console/ik_options.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -53,7 +54,9 @@ const char* kPlanUsage =
     "  --rate HZ                        sample rate of the CSV/SVG (1..100000, default 1000; at most\n"
     "                                   1000000 samples per move)\n"
     "  --csv FILE                       t, q1..qn, v1..vn, a1..an per sample (description units)\n"
-    "  --svg FILE                       plot of position, velocity, acceleration per joint\n"
+    "  --svg FILE                       plot of position, velocity, acceleration per joint against time\n"
+    "                                   (round ticks, units, legend); movel: and the tool path seen\n"
+    "                                   from above (x-y) and from the side (x-z)\n"
     "Bad input (exit 2, one line naming the option): a limit <= 0, a missing value, a movel option\n"
     "given to movej, a move longer than --max-duration or with too many samples (nothing is written),\n"
     "--xyz beyond 1 km, --rpy angles beyond 3600 deg, a --to pose that is not finite.\n";
@@ -201,6 +204,7 @@ bool apply_limits(kin::Chain& c, const Args& a, bool& defaulted) {
 struct Samples {
   std::vector<double> t;
   std::vector<std::vector<double>> q, v, a;  // [joint][sample], description units
+  std::vector<double> x, y, z;               // movel: tool position per sample (length unit)
 };
 
 bool write_csv(const std::string& path, const kin::Chain& c, const Samples& s) {
@@ -220,63 +224,86 @@ bool write_csv(const std::string& path, const kin::Chain& c, const Samples& s) {
   return std::fclose(f) == 0;
 }
 
-// Three stacked panels (position, velocity, acceleration), one polyline per joint.
+// A number for a title: 4 significant digits.
+std::string short_num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.4g", std::abs(v) < 5e-13 ? 0.0 : v);
+  return b;
+}
+
+// Three stacked panels (position, velocity, acceleration against time), one line per
+// joint, ticks at round values, a legend; for movel also the tool path seen from above
+// (x-y) and from the side (x-z), one scale on both axes, with its start and end.
 bool write_svg(const std::string& path, const kin::Chain& c, const Samples& s, const std::string& title) {
-  std::FILE* f = std::fopen(path.c_str(), "w");
-  if (!f) return false;
+  namespace sv = svg;
   const int n = c.n_joints;
-  const double W = 900, H = 260, left = 80, right = 130, top = 40, gap = 30;
-  const double pw = W - left - right;
-  const double total_h = top + 3 * (H + gap);
-  static const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"};
-  std::fprintf(f, "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%g\" height=\"%g\" font-family=\"sans-serif\" font-size=\"12\">\n",
-               W, total_h);
-  std::fprintf(f, "<rect width=\"100%%\" height=\"100%%\" fill=\"white\"/>\n");
-  std::fprintf(f, "<text x=\"%g\" y=\"22\" font-size=\"15\">%s</text>\n", left, title.c_str());
-  const double T = s.t.empty() ? 1.0 : std::max(s.t.back(), 1e-9);
-  const std::string unit = angle_unit_name(c);
+  const bool tool = !s.x.empty();
+  const double left = 92, pw = 620, ph = 210, top = 54, gap = 62;
+  const double legend_x = left + pw + 16, path_x = legend_x + 150, path_w = 400;
+  const double W = tool ? path_x + path_w + 30 : legend_x + 150, H = top + 3 * ph + 2 * gap + 50;
+  sv::Doc d(W, H);
+  d.text(left, 26, title, "start", 15);
+  // units: one name when every joint has the same, otherwise "deg, mm"
+  std::string unit = joint_unit_name(c, 0);
+  for (int j = 1; j < n; ++j)
+    if (unit.find(joint_unit_name(c, j)) == std::string::npos) unit += std::string(", ") + joint_unit_name(c, j);
+  const bool mixed = unit.find(',') != std::string::npos;
   const char* names[] = {"position", "velocity", "acceleration"};
-  const std::string units[] = {unit, unit + "/s", unit + "/s^2"};
+  const std::string per[] = {"", "/s", "/s\u00b2"};
   const std::vector<std::vector<double>>* data[] = {&s.q, &s.v, &s.a};
+  const double T = s.t.empty() ? 1.0 : std::max(s.t.back(), 1e-9);
   for (int p = 0; p < 3; ++p) {
-    const double y0 = top + p * (H + gap);
     double lo = 1e300, hi = -1e300;
     for (int j = 0; j < n; ++j)
       for (double x : (*data[p])[static_cast<std::size_t>(j)]) lo = std::min(lo, x), hi = std::max(hi, x);
-    if (!(hi > lo)) lo -= 1, hi += 1;
-    const double pad = 0.05 * (hi - lo);
-    lo -= pad;
-    hi += pad;
-    auto X = [&](double t) { return left + pw * t / T; };
-    auto Y = [&](double v) { return y0 + H - H * (v - lo) / (hi - lo); };
-    std::fprintf(f, "<rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\" fill=\"none\" stroke=\"#888\"/>\n", left, y0, pw, H);
-    std::fprintf(f, "<text x=\"%g\" y=\"%g\" transform=\"rotate(-90 %g %g)\" text-anchor=\"middle\">%s [%s]</text>\n", 20.0,
-                 y0 + H / 2, 20.0, y0 + H / 2, names[p], units[p].c_str());
-    for (int k = 0; k <= 4; ++k) {  // value ticks
-      const double v = lo + (hi - lo) * k / 4;
-      std::fprintf(f, "<line x1=\"%g\" y1=\"%g\" x2=\"%g\" y2=\"%g\" stroke=\"#eee\"/>\n", left, Y(v), left + pw, Y(v));
-      std::fprintf(f, "<text x=\"%g\" y=\"%g\" text-anchor=\"end\">%s</text>\n", left - 4, Y(v) + 4, num(v).c_str());
+    if (lo > hi) lo = hi = 0;
+    const double pad = 0.04 * (hi - lo);
+    sv::Panel pn = sv::make_panel(left, top + p * (ph + gap), pw, ph, 0, T, lo - pad, hi + pad);
+    pn.x0 = 0, pn.x1 = T, pn.xstep = sv::nice_step(T, 8);  // time: exactly the move
+    std::string u = mixed ? "" : unit + per[p];
+    if (mixed) {
+      for (int j = 0; j < n; ++j)
+        if (u.find(std::string(joint_unit_name(c, j)) + per[p]) == std::string::npos)
+          u += (u.empty() ? "" : ", ") + std::string(joint_unit_name(c, j)) + per[p];
     }
-    if (lo < 0 && hi > 0)
-      std::fprintf(f, "<line x1=\"%g\" y1=\"%g\" x2=\"%g\" y2=\"%g\" stroke=\"#aaa\"/>\n", left, Y(0), left + pw, Y(0));
-    for (int k = 0; k <= 5; ++k) {  // time ticks
-      const double t = T * k / 5;
-      std::fprintf(f, "<text x=\"%g\" y=\"%g\" text-anchor=\"middle\">%s s</text>\n", X(t), y0 + H + 14, num(t).c_str());
-    }
-    const std::size_t stride = std::max<std::size_t>(1, s.t.size() / 1500);  // keep files small
-    for (int j = 0; j < n; ++j) {
-      const auto& v = (*data[p])[static_cast<std::size_t>(j)];
-      std::fprintf(f, "<polyline fill=\"none\" stroke=\"%s\" stroke-width=\"1.5\" points=\"", colors[j % 8]);
-      for (std::size_t k = 0; k < s.t.size(); k += stride) std::fprintf(f, "%.2f,%.2f ", X(s.t[k]), Y(v[k]));
-      if (!s.t.empty()) std::fprintf(f, "%.2f,%.2f", X(s.t.back()), Y(v.back()));
-      std::fprintf(f, "\"/>\n");
-      if (p == 0)
-        std::fprintf(f, "<text x=\"%g\" y=\"%g\" fill=\"%s\">joint %d</text>\n", left + pw + 12, y0 + 16 + 16.0 * j,
-                     colors[j % 8], j + 1);
+    d.axes(pn, p == 2 ? "time [s]" : "", std::string(names[p]) + " [" + u + "]");
+    if (p < 2) d.text(pn.px + pn.pw / 2, pn.py + pn.ph + 32, "time [s]", "middle", 11, "#555");
+    for (int j = 0; j < n; ++j) d.polyline(pn, s.t, (*data[p])[static_cast<std::size_t>(j)], sv::color(j));
+  }
+  std::vector<sv::Doc::Entry> legend;
+  for (int j = 0; j < n; ++j)
+    legend.push_back({"joint " + std::to_string(j + 1) + (mixed ? std::string(" (") + joint_unit_name(c, j) + ")" : ""),
+                      sv::color(j), "line"});
+  d.legend(legend_x, top, legend);
+  if (tool) {
+    const std::string L = length_unit_name(c);
+    const std::vector<double>* other[] = {&s.y, &s.z};
+    const char* oname[] = {"y", "z"};
+    const char* view[] = {"tool path from above (x-y)", "tool path from the side (x-z)"};
+    const double vh = (3 * ph + 2 * gap - 60) / 2;
+    for (int k = 0; k < 2; ++k) {
+      const auto& ox = s.x;
+      const auto& oy = *other[k];
+      double xl = *std::min_element(ox.begin(), ox.end()), xh = *std::max_element(ox.begin(), ox.end());
+      double yl = *std::min_element(oy.begin(), oy.end()), yh = *std::max_element(oy.begin(), oy.end());
+      const double span = std::max({xh - xl, yh - yl, 10e-3 / c.length_unit});  // at least 10 mm wide
+      const double cx = (xl + xh) / 2, cy = (yl + yh) / 2;
+      const double h = 0.6 * span;
+      const double py = top + k * (vh + 60);
+      sv::Panel pn = sv::make_panel(path_x + 20, py + 18, path_w - 20, vh - 18, cx - h, cx + h, cy - h, cy + h, true);
+      d.text(pn.px, py + 10, view[k], "start", 12);
+      d.axes(pn, std::string("x [") + L + "]", std::string(oname[k]) + " [" + L + "]");
+      d.polyline(pn, ox, oy, "#333", 2);
+      char b[200];
+      std::snprintf(b, sizeof b, "<circle cx=\"%.1f\" cy=\"%.1f\" r=\"5\" fill=\"#2ca02c\"/>\n", pn.X(ox.front()), pn.Y(oy.front()));
+      d.raw(b);
+      std::snprintf(b, sizeof b, "<circle cx=\"%.1f\" cy=\"%.1f\" r=\"5\" fill=\"#d62728\"/>\n", pn.X(ox.back()), pn.Y(oy.back()));
+      d.raw(b);
+      if (k == 0)
+        d.legend(pn.px + 8, pn.py + 8, {{"tool path", "#333", "line"}, {"start", "#2ca02c", "dot"}, {"end", "#d62728", "dot"}}, 11);
     }
   }
-  std::fprintf(f, "</svg>\n");
-  return std::fclose(f) == 0;
+  return d.write(path);
 }
 
 void print_peaks(const kin::Chain& c, const Samples& s) {
@@ -381,7 +408,7 @@ int cli_plan(int argc, char** argv) {
     const Samples s = sample_all(chain, tr.duration, a.rate, [&tr](double t, kin::JointVector& q, kin::JointVector& v,
                                                                   kin::JointVector& acc) { tr.sample(t, q, v, acc); });
     print_peaks(chain, s);
-    return outputs(a, chain, s, std::string("movej ") + chain.name.data() + ", " + num(tr.duration) + " s");
+    return outputs(a, chain, s, std::string("movej ") + chain.name.data() + ", " + short_num(tr.duration) + " s");
   }
 
   // movel
@@ -442,10 +469,23 @@ int cli_plan(int argc, char** argv) {
     std::printf("slowed %sx near a singularity at %s %% of the line (joint %d sets the pace)\n", num(rep.slowdown).c_str(),
                 num(100 * rep.s).c_str(), rep.joint + 1);
   std::printf("largest Jacobian condition number on the line: %s\n", num(rep.max_condition).c_str());
-  const Samples s = sample_all(chain, tr->duration, a.rate, [&tr](double t, kin::JointVector& q, kin::JointVector& v,
-                                                                 kin::JointVector& acc) { tr->sample_ik(t, q, v, acc); });
+  Samples s = sample_all(chain, tr->duration, a.rate, [&tr](double t, kin::JointVector& q, kin::JointVector& v,
+                                                           kin::JointVector& acc) { tr->sample_ik(t, q, v, acc); });
+  if (!a.svg.empty()) {  // the tool path (top and side views): FK of the sampled joints
+    kin::JointVector q(chain.n_joints);
+    kin::Pose T;
+    for (std::size_t k = 0; k < s.t.size(); ++k) {
+      for (int j = 0; j < chain.n_joints; ++j) q[j] = s.q[static_cast<std::size_t>(j)][k] / chain.joint_user_scale(j);
+      kin::forward(chain, q, T);
+      s.x.push_back(T.translation().x() / L);
+      s.y.push_back(T.translation().y() / L);
+      s.z.push_back(T.translation().z() / L);
+    }
+  }
   print_peaks(chain, s);
-  return outputs(a, chain, s, std::string("movel ") + chain.name.data() + ", " + num(tr->duration) + " s");
+  return outputs(a, chain, s, std::string("movel ") + chain.name.data() + ", " + short_num(tr->duration) + " s, line " +
+                                  short_num(tr->length / L) + " " + length_unit_name(chain) + ", rotation " +
+                                  short_num(tr->angle / chain.angle_unit) + " " + angle_unit_name(chain));
 }
 
 }  // namespace servoarm::fw

@@ -1,0 +1,629 @@
+// armctl kin workspace (see cli_workspace.hpp).
+#include "servoarm/armctl/cli_workspace.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <random>
+
+#include "servoarm/armctl/cli_common.hpp"
+#include "servoarm/armctl/cli_svg.hpp"
+
+namespace servoarm::fw {
+namespace {
+
+constexpr double kTwoPi = 2 * M_PI;
+
+const char* kWorkspaceUsage =
+    "usage: armctl kin workspace --robot NAME|FILE [--plane xz|xy|yz] [--grid N] [--pose q1..qn]\n"
+    "                            [--svg FILE] [--csv FILE]\n"
+    "  The region the tool point reaches in a plane through the base, joint limits respected\n"
+    "  (seed 002 3.8), and its area. A planar arm (every tool point in one base plane, e.g.\n"
+    "  rr_planar) is drawn in its own plane; an arm whose joint 1 turns about the base z axis\n"
+    "  in the plane given (default xz: the side view; xy: the top view at z = 0).\n"
+    "  --grid N     raster cells along the longer side (100..2000, default 400)\n"
+    "  --pose q..   the reference pose drawn (description units; default 0, clamped to the limits)\n"
+    "  --svg FILE   the filled region, the arm in the reference pose, axes in the length unit, legend\n"
+    "  --csv FILE   the region as runs of cells: one row per run, v, u_from, u_to (cell centres,\n"
+    "               length unit; header names the axes, e.g. z,x_from,x_to)\n"
+    "  Exit: 0 ok, 1 no area in that plane (a planar arm's other planes) or an arm of another\n"
+    "  kind, 2 bad usage.\n";
+
+int axis_index(char c) { return c == 'x' ? 0 : c == 'y' ? 1 : 2; }
+
+struct Range {
+  double lo, hi;
+};
+
+// The quad raster: cells [u0 + i cell, ...) x [v0 + j cell, ...).
+struct Raster {
+  double u0 = 0, v0 = 0, cell = 1;
+  int nu = 0, nv = 0;
+  std::vector<std::uint8_t> on;
+  void set(double u, double v) {
+    const int i = static_cast<int>(std::floor((u - u0) / cell)), j = static_cast<int>(std::floor((v - v0) / cell));
+    if (i >= 0 && i < nu && j >= 0 && j < nv) on[static_cast<std::size_t>(j) * nu + i] = 1;
+  }
+  // Fill the cells whose centre lies inside the polygon (even-odd), and the cells of its corners.
+  void fill(const double (*p)[2], int n) {
+    double vmin = p[0][1], vmax = p[0][1];
+    for (int k = 0; k < n; ++k) {
+      set(p[k][0], p[k][1]);
+      vmin = std::min(vmin, p[k][1]), vmax = std::max(vmax, p[k][1]);
+    }
+    const int j0 = std::max(0, static_cast<int>(std::ceil((vmin - v0) / cell - 0.5)));
+    const int j1 = std::min(nv - 1, static_cast<int>(std::floor((vmax - v0) / cell - 0.5)));
+    for (int j = j0; j <= j1; ++j) {
+      const double v = v0 + (j + 0.5) * cell;
+      double xs[8];
+      int m = 0;
+      for (int k = 0; k < n && m < 8; ++k) {
+        const double* a = p[k];
+        const double* b = p[(k + 1) % n];
+        if ((a[1] <= v) != (b[1] <= v)) xs[m++] = a[0] + (v - a[1]) * (b[0] - a[0]) / (b[1] - a[1]);
+      }
+      for (int a = 1; a < m; ++a)  // insertion sort of at most n crossings
+        for (int b = a; b > 0 && xs[b - 1] > xs[b]; --b) std::swap(xs[b - 1], xs[b]);
+      for (int k = 0; k + 1 < m; k += 2) {
+        const int i0 = std::max(0, static_cast<int>(std::ceil((xs[k] - u0) / cell - 0.5)));
+        const int i1 = std::min(nu - 1, static_cast<int>(std::floor((xs[k + 1] - u0) / cell - 0.5)));
+        for (int i = i0; i <= i1; ++i) on[static_cast<std::size_t>(j) * nu + i] = 1;
+      }
+    }
+  }
+};
+
+// Points of one joint-space slice: the tool position of every (a, b) grid node.
+struct Kind {
+  bool planar = false;
+  int normal = 2;      // planar: the constant coordinate
+  double level = 0;    // planar: its value
+  bool turning = false;
+  double sign = 1;     // turning: azimuth change per joint 1 change (+1 or -1)
+};
+
+double wrap(double a) { return a - kTwoPi * std::floor((a + M_PI) / kTwoPi); }  // to [-pi, pi)
+
+// Azimuth psi reachable from azimuth phi (at q0ref) by joint 1 within [lo, hi]?
+bool reaches(double phi, double psi, const Range& r0, double q0ref, double sign) {
+  if (r0.hi - r0.lo >= kTwoPi - 1e-9) return true;
+  const double a = sign > 0 ? phi + (r0.lo - q0ref) : phi - (r0.hi - q0ref);  // azimuth interval [a, a + span]
+  const double off = wrap(psi - a) + (wrap(psi - a) < 0 ? kTwoPi : 0);        // psi - a in [0, 2pi)
+  return off <= (r0.hi - r0.lo) + 1e-12;
+}
+
+}  // namespace
+
+WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOptions& opt) {
+  WorkspaceResult res;
+  auto fail = [&](int st, const std::string& e) {
+    res.status = st;
+    res.error = e;
+    return res;
+  };
+  const int n = chain.n_joints;
+  if (n < 1) return fail(2, "the robot has no joints");
+  if (opt.grid < 100 || opt.grid > 2000) return fail(2, "--grid must be within 100..2000, got " + std::to_string(opt.grid));
+  // Joint ranges: the limits; a revolute joint turns at most one turn.
+  std::vector<Range> rg(static_cast<std::size_t>(n));
+  for (int j = 0; j < n; ++j) {
+    const kin::DhRow& r = chain.joint(j);
+    Range x{r.lower, r.upper};
+    if (r.type == kin::JointType::prismatic) {
+      if (!std::isfinite(x.lo) || !std::isfinite(x.hi))
+        return fail(2, "joint " + std::to_string(j + 1) + " is prismatic without limits: its stroke is needed");
+    } else {
+      if (!std::isfinite(x.lo)) x.lo = std::isfinite(x.hi) ? x.hi - kTwoPi : -M_PI;
+      if (!std::isfinite(x.hi) || x.hi - x.lo > kTwoPi) x.hi = x.lo + kTwoPi;
+    }
+    rg[static_cast<std::size_t>(j)] = x;
+  }
+  // The reference pose.
+  kin::JointVector qref(n);
+  if (!opt.pose.empty()) {
+    std::string e;
+    if (!joints_from_user(chain, opt.pose, qref, e)) return fail(2, "--pose: " + e);
+    std::string rep;
+    if (limit_violations(chain, qref, rep) > 0) return fail(2, "--pose is outside the joint limits: " + rep.substr(0, rep.find('\n')));
+  } else {
+    for (int j = 0; j < n; ++j) qref[j] = std::clamp(0.0, rg[static_cast<std::size_t>(j)].lo, rg[static_cast<std::size_t>(j)].hi);
+  }
+  res.pose = qref;
+
+  // What kind of arm: sample it.
+  std::mt19937 rng(20261201);
+  auto random_q = [&]() {
+    kin::JointVector q(n);
+    for (int j = 0; j < n; ++j)
+      q[j] = std::uniform_real_distribution<double>(rg[static_cast<std::size_t>(j)].lo, rg[static_cast<std::size_t>(j)].hi)(rng);
+    return q;
+  };
+  kin::Pose T;
+  auto tip = [&](const kin::JointVector& q) {
+    kin::forward(chain, q, T);
+    ++res.evaluations;
+    return Eigen::Vector3d(T.translation());
+  };
+  double scale = 0;
+  Eigen::Vector3d lo3 = Eigen::Vector3d::Constant(1e300), hi3 = Eigen::Vector3d::Constant(-1e300);
+  std::vector<kin::JointVector> probes;
+  for (int k = 0; k < 64; ++k) {
+    probes.push_back(random_q());
+    const Eigen::Vector3d p = tip(probes.back());
+    if (!p.allFinite()) return fail(2, "the tool position is not finite inside the joint limits");
+    lo3 = lo3.cwiseMin(p), hi3 = hi3.cwiseMax(p);
+    scale = std::max(scale, p.norm());
+  }
+  const double tol = 1e-9 * std::max(scale, 1e-3);
+  Kind kind;
+  for (int k = 0; k < 3; ++k)
+    if (hi3[k] - lo3[k] < tol) {
+      kind.planar = true;
+      kind.normal = k;
+      kind.level = (hi3[k] + lo3[k]) / 2;
+    }
+  if (!kind.planar && chain.joint(0).type == kin::JointType::revolute) {
+    bool ok = true;
+    double sgn = 0;
+    for (int k = 0; k < 16 && ok; ++k) {
+      kin::JointVector q = probes[static_cast<std::size_t>(k)];
+      const Eigen::Vector3d p = tip(q);
+      const double rho = std::hypot(p.x(), p.y());
+      for (double d : {0.3, -0.7}) {
+        kin::JointVector q2 = q;
+        q2[0] += d;
+        const Eigen::Vector3d p2 = tip(q2);
+        if (std::abs(p2.z() - p.z()) > tol || std::abs(std::hypot(p2.x(), p2.y()) - rho) > tol) ok = false;
+        if (rho > 1e-6 * scale) {
+          const double turn = wrap(std::atan2(p2.y(), p2.x()) - std::atan2(p.y(), p.x()));
+          const double s = std::abs(turn - d) < 1e-6 ? 1 : std::abs(turn + d) < 1e-6 ? -1 : 0;
+          if (s == 0 || (sgn != 0 && s != sgn)) ok = false;
+          sgn = s;
+        }
+      }
+    }
+    kind.turning = ok && sgn != 0;
+    kind.sign = sgn;
+  }
+  std::string plane = opt.plane;
+  if (plane.empty()) plane = kind.planar ? (kind.normal == 2 ? "xy" : kind.normal == 1 ? "xz" : "yz") : "xz";
+  if (plane != "xz" && plane != "xy" && plane != "yz") return fail(2, "--plane must be xz, xy or yz, got '" + plane + "'");
+  res.plane = plane;
+  res.u = plane[0], res.v = plane[1];
+  const int normal = 3 - axis_index(res.u) - axis_index(res.v);
+  if (kind.planar) {
+    if (normal != kind.normal) {
+      const std::string own = kind.normal == 2 ? "xy" : kind.normal == 1 ? "xz" : "yz";
+      return fail(1, std::string(chain.name.data()) + " moves in the " + own + " plane: its " + plane +
+                         " section is a line, not an area (use --plane " + own + ")");
+    }
+    res.method = "planar";
+    res.level = kind.level;
+  } else if (kind.turning) {
+    res.method = "turning";
+  } else {
+    return fail(1, std::string(chain.name.data()) +
+                       ": neither planar nor turned about the base z axis by joint 1: kin workspace does not handle this arm");
+  }
+
+  // The joints that move the tool point (joint 1 of a turning arm is solved for).
+  const int first = kind.turning ? 1 : 0;
+  std::vector<double> sweep(static_cast<std::size_t>(n), 0);
+  for (int k = 0; k < 16; ++k) {
+    const kin::JointVector& q = probes[static_cast<std::size_t>(k)];
+    const Eigen::Vector3d p = tip(q);
+    for (int j = first; j < n; ++j) {
+      kin::JointVector q2 = q;
+      q2[j] += 1e-5;
+      const double sens = (tip(q2) - p).norm() / 1e-5;
+      const Range& r = rg[static_cast<std::size_t>(j)];
+      sweep[static_cast<std::size_t>(j)] = std::max(sweep[static_cast<std::size_t>(j)], sens * (r.hi - r.lo));
+    }
+  }
+  std::vector<int> moving;
+  for (int j = first; j < n; ++j)
+    if (sweep[static_cast<std::size_t>(j)] > 1e-6 * std::max(scale, 1e-3)) moving.push_back(j);
+  std::sort(moving.begin(), moving.end(), [&](int a, int b) { return sweep[static_cast<std::size_t>(a)] > sweep[static_cast<std::size_t>(b)]; });
+  const bool one_side_only = kind.turning && moving.size() == 1;  // e.g. a turning arm with one more joint
+  if (moving.size() < 2 && !one_side_only)
+    return fail(1, std::string(chain.name.data()) + ": the tool point moves along a curve, not over an area");
+  if (one_side_only) return fail(1, std::string(chain.name.data()) + ": in the " + plane + " plane the tool point moves along a curve");
+  const int ja = moving[0], jb = moving[1];
+  const Range r0 = rg[0];
+  const double q0ref = kind.turning ? qref[0] : 0;
+
+  // Map one tool point to plane points: up to two (u, v) for a turning arm in xz / yz.
+  const int iu = axis_index(res.u), iv = axis_index(res.v);
+  const bool slice = kind.turning && plane == "xy";
+  const double psi_plus = iu == 0 ? 0 : M_PI / 2;  // azimuth of the +u half-plane (xz: +x, yz: +y)
+
+  // Pass 1 (coarse) finds the extent, pass 2 fills the raster.
+  struct Node {
+    double u[2], v[2];
+    bool ok[2];
+    double rho, z, phi;
+    double s, w;  // turning: along / across the slice's reference azimuth (see below)
+  };
+  Raster ras;
+  std::vector<std::uint8_t> polar;  // slice: [rho bin][azimuth bin]
+  int n_rho = 0, n_az = 0;
+  double umin = 1e300, umax = -1e300, vmin = 1e300, vmax = -1e300;
+  for (int pass = 0; pass < 2; ++pass) {
+    if (pass == 1) {
+      // the coarse pass saw fewer points: widen its extent by 5 % on every side
+      const double pu = 0.05 * (umax - umin), pv = 0.05 * (vmax - vmin), pm = std::max(pu, pv);
+      umin -= pm, umax += pm, vmin -= pm, vmax += pm;
+      const double su = umax - umin, sv = vmax - vmin;
+      if (slice) {
+        const double rmax = std::max({std::abs(umin), std::abs(umax), 1e-6});
+        ras.cell = 2 * rmax / opt.grid;
+        n_rho = static_cast<int>(std::ceil(rmax / ras.cell)) + 3;
+        n_az = std::clamp(static_cast<int>(std::ceil(kTwoPi * rmax / ras.cell)), 360, 8192);
+        polar.assign(static_cast<std::size_t>(n_rho) * n_az, 0);
+      } else {
+        ras.cell = std::max(su, sv) / opt.grid;
+        if (!(ras.cell > 0)) return fail(1, std::string(chain.name.data()) + ": the reachable set is a point");
+        ras.u0 = umin - 3 * ras.cell, ras.v0 = vmin - 3 * ras.cell;
+        ras.nu = static_cast<int>(std::ceil(su / ras.cell)) + 6;
+        ras.nv = static_cast<int>(std::ceil(sv / ras.cell)) + 6;
+        ras.on.assign(static_cast<std::size_t>(ras.nu) * ras.nv, 0);
+      }
+    }
+    const int m = pass == 0 ? 24 : 120;  // steps of the two quad joints
+    std::vector<int> steps;              // of the other moving joints
+    long combos = 1;
+    for (std::size_t k = 2; k < moving.size(); ++k) {
+      const double cell_est = pass == 0 ? 1e300 : ras.cell;
+      int s = pass == 0 ? 3 : static_cast<int>(std::ceil(sweep[static_cast<std::size_t>(moving[k])] / (3 * cell_est)));
+      s = std::clamp(s, 3, 17);
+      steps.push_back(s);
+      combos *= s;
+    }
+    while (combos > 300) {  // budget: about 300 slices of (m + 1)^2 points
+      auto it = std::max_element(steps.begin(), steps.end());
+      combos = combos / *it * (*it - 1);
+      --*it;
+    }
+    std::vector<Node> grid(static_cast<std::size_t>((m + 1) * (m + 1)));
+    std::vector<int> idx(steps.size(), 0);
+    for (long c = 0; c < combos; ++c) {
+      kin::JointVector q = qref;
+      if (kind.turning) q[0] = q0ref;
+      for (std::size_t k = 0; k < steps.size(); ++k) {
+        const Range& r = rg[static_cast<std::size_t>(moving[k + 2])];
+        q[moving[k + 2]] = r.lo + (r.hi - r.lo) * idx[k] / (steps[k] - 1);
+      }
+      for (int a = 0; a <= m; ++a)
+        for (int b = 0; b <= m; ++b) {
+          q[ja] = rg[static_cast<std::size_t>(ja)].lo + (rg[static_cast<std::size_t>(ja)].hi - rg[static_cast<std::size_t>(ja)].lo) * a / m;
+          q[jb] = rg[static_cast<std::size_t>(jb)].lo + (rg[static_cast<std::size_t>(jb)].hi - rg[static_cast<std::size_t>(jb)].lo) * b / m;
+          const Eigen::Vector3d p = tip(q);
+          Node& nd = grid[static_cast<std::size_t>(a * (m + 1) + b)];
+          if (kind.planar) {
+            nd.u[0] = p[iu], nd.v[0] = p[iv], nd.ok[0] = true, nd.ok[1] = false;
+          } else {
+            nd.rho = std::hypot(p.x(), p.y()), nd.z = p.z(), nd.phi = std::atan2(p.y(), p.x());
+            nd.u[0] = nd.rho, nd.u[1] = -nd.rho, nd.v[0] = nd.v[1] = nd.z;
+            nd.ok[0] = reaches(nd.phi, psi_plus, r0, q0ref, kind.sign);
+            nd.ok[1] = reaches(nd.phi, psi_plus + M_PI, r0, q0ref, kind.sign);
+          }
+          if (pass == 0) {
+            for (int s = 0; s < 2; ++s) {
+              if (!nd.ok[s] && !slice) continue;
+              umin = std::min(umin, nd.u[s]), umax = std::max(umax, nd.u[s]);
+              vmin = std::min(vmin, nd.v[s]), vmax = std::max(vmax, nd.v[s]);
+            }
+          }
+        }
+      // A quad whose corners lie on both sides of the z axis would fold over at rho = 0
+      // (rho = |s|) and leave holes along the axis. When the slice's points lie in one
+      // vertical plane through the axis (w ~ 0), such a quad is turned as a whole instead:
+      // its corners keep their signed distance s along the plane's direction e.
+      double ex = 1, ey = 0, best = -1;
+      if (kind.turning) {
+        for (const Node& nd : grid)
+          if (nd.rho > best) best = nd.rho, ex = std::cos(nd.phi), ey = std::sin(nd.phi);
+        for (Node& nd : grid) {
+          const double x = nd.rho * std::cos(nd.phi), y = nd.rho * std::sin(nd.phi);
+          nd.s = x * ex + y * ey, nd.w = -x * ey + y * ex;
+        }
+      }
+      const double phi_e = std::atan2(ey, ex);
+      const bool e_plus = kind.turning && reaches(phi_e, psi_plus, r0, q0ref, kind.sign);
+      const bool e_minus = kind.turning && reaches(phi_e, psi_plus + M_PI, r0, q0ref, kind.sign);
+      if (pass == 1) {
+        for (int a = 0; a < m; ++a)
+          for (int b = 0; b < m; ++b) {
+            const Node* c4[4] = {&grid[static_cast<std::size_t>(a * (m + 1) + b)], &grid[static_cast<std::size_t>((a + 1) * (m + 1) + b)],
+                                 &grid[static_cast<std::size_t>((a + 1) * (m + 1) + b + 1)], &grid[static_cast<std::size_t>(a * (m + 1) + b + 1)]};
+            if (slice) {
+              // Where the quad (rho, z) crosses z = 0, and the azimuths joint 1 gives it.
+              // (A quad across the axis in one vertical plane: its signed s, as above.)
+              bool pos = false, neg = false;
+              double wmax = 0;
+              for (int k = 0; k < 4; ++k) pos = pos || c4[k]->s > 0, neg = neg || c4[k]->s < 0, wmax = std::max(wmax, std::abs(c4[k]->w));
+              const bool signed_s = pos && neg && wmax < 2 * ras.cell;
+              double rlo = 1e300, rhi = -1e300;
+              for (int k = 0; k < 4; ++k) {
+                const Node& e = *c4[k];
+                const Node& f = *c4[(k + 1) % 4];
+                const double re = signed_s ? e.s : e.rho, rf = signed_s ? f.s : f.rho;
+                if (e.z == 0) rlo = std::min(rlo, re), rhi = std::max(rhi, re);
+                if ((e.z < 0) != (f.z < 0) && e.z != f.z) {
+                  const double r = re + (0 - e.z) * (rf - re) / (f.z - e.z);
+                  rlo = std::min(rlo, r), rhi = std::max(rhi, r);
+                }
+              }
+              if (rlo > rhi) continue;
+              if (signed_s) {  // the crossing spans the axis when its ends have both signs
+                const double a0 = std::abs(rlo), a1 = std::abs(rhi);
+                rhi = std::max(a0, a1);
+                rlo = rlo < 0 && rhi > 0 ? 0.0 : std::min(a0, a1);
+                rhi = std::max(a0, a1);
+              }
+              double plo = c4[0]->phi, phi_hi = c4[0]->phi;
+              for (int k = 1; k < 4; ++k) {
+                const double d = c4[0]->phi + wrap(c4[k]->phi - c4[0]->phi);
+                plo = std::min(plo, d), phi_hi = std::max(phi_hi, d);
+              }
+              const bool full = r0.hi - r0.lo >= kTwoPi - 1e-9;
+              const double a0 = kind.sign > 0 ? plo + (r0.lo - q0ref) : plo - (r0.hi - q0ref);
+              const double a1 = a0 + (r0.hi - r0.lo) + (phi_hi - plo);
+              const int b0 = static_cast<int>(std::floor(rlo / ras.cell)), b1 = std::min(n_rho - 1, static_cast<int>(std::floor(rhi / ras.cell)));
+              for (int rb = std::max(0, b0); rb <= b1; ++rb) {
+                std::uint8_t* row = &polar[static_cast<std::size_t>(rb) * n_az];
+                if (full) {
+                  std::fill(row, row + n_az, 1);
+                  continue;
+                }
+                const int k0 = static_cast<int>(std::floor((a0 + M_PI) / kTwoPi * n_az));
+                const int k1 = static_cast<int>(std::ceil((a1 + M_PI) / kTwoPi * n_az));
+                for (int k = k0; k <= k1 && k - k0 <= n_az; ++k) row[((k % n_az) + n_az) % n_az] = 1;
+              }
+              continue;
+            }
+            if (kind.turning) {
+              bool pos = false, neg = false;
+              double wmax = 0;
+              for (int k = 0; k < 4; ++k) pos = pos || c4[k]->s > 0, neg = neg || c4[k]->s < 0, wmax = std::max(wmax, std::abs(c4[k]->w));
+              if (pos && neg && wmax < 2 * ras.cell) {
+                for (int side = 0; side < 2; ++side) {
+                  if (!(side == 0 ? e_plus : e_minus)) continue;
+                  double poly[4][2];
+                  for (int k = 0; k < 4; ++k) poly[k][0] = side == 0 ? c4[k]->s : -c4[k]->s, poly[k][1] = c4[k]->z;
+                  ras.fill(poly, 4);
+                }
+                continue;
+              }
+            }
+            for (int s = 0; s < 2; ++s) {
+              if (!(c4[0]->ok[s] && c4[1]->ok[s] && c4[2]->ok[s] && c4[3]->ok[s])) continue;
+              double poly[4][2];
+              for (int k = 0; k < 4; ++k) poly[k][0] = c4[k]->u[s], poly[k][1] = c4[k]->v[s];
+              ras.fill(poly, 4);
+            }
+          }
+      }
+      for (std::size_t k = 0; k < idx.size(); ++k) {  // next combination
+        if (++idx[k] < steps[k]) break;
+        idx[k] = 0;
+      }
+    }
+  }
+  if (slice) {  // the xy plane from the ring of radii reached at z = 0
+    const double rmax = (n_rho - 3) * ras.cell;
+    ras.u0 = ras.v0 = -rmax - 2 * ras.cell;
+    ras.nu = ras.nv = static_cast<int>(std::ceil(2 * rmax / ras.cell)) + 4;
+    ras.on.assign(static_cast<std::size_t>(ras.nu) * ras.nv, 0);
+    for (int j = 0; j < ras.nv; ++j)
+      for (int i = 0; i < ras.nu; ++i) {
+        const double x = ras.u0 + (i + 0.5) * ras.cell, y = ras.v0 + (j + 0.5) * ras.cell;
+        const int rb = static_cast<int>(std::floor(std::hypot(x, y) / ras.cell));
+        if (rb >= n_rho) continue;
+        const int k = std::clamp(static_cast<int>(std::floor((std::atan2(y, x) + M_PI) / kTwoPi * n_az)), 0, n_az - 1);
+        ras.on[static_cast<std::size_t>(j) * ras.nu + i] = polar[static_cast<std::size_t>(rb) * n_az + k];
+      }
+  }
+  // Area: full cells, boundary cells (a 4-neighbour empty) counted half.
+  long full = 0, edge = 0;
+  for (int j = 0; j < ras.nv; ++j)
+    for (int i = 0; i < ras.nu; ++i) {
+      if (!ras.on[static_cast<std::size_t>(j) * ras.nu + i]) continue;
+      auto at = [&](int a, int b) { return a >= 0 && a < ras.nu && b >= 0 && b < ras.nv && ras.on[static_cast<std::size_t>(b) * ras.nu + a]; };
+      if (at(i - 1, j) && at(i + 1, j) && at(i, j - 1) && at(i, j + 1)) ++full;
+      else ++edge;
+    }
+  res.area = (static_cast<double>(full) + 0.5 * static_cast<double>(edge)) * ras.cell * ras.cell;
+  if (!(res.area > 0)) return fail(1, std::string(chain.name.data()) + ": no reachable area in the " + plane + " plane");
+  res.u0 = ras.u0, res.v0 = ras.v0, res.cell = ras.cell, res.nu = ras.nu, res.nv = ras.nv;
+  res.on = std::move(ras.on);
+  return res;
+}
+
+namespace {
+
+bool write_csv(const std::string& path, const kin::Chain& c, const WorkspaceResult& w) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) return false;
+  const double L = c.length_unit;
+  std::fprintf(f, "%c,%c_from,%c_to\n", w.v, w.u, w.u);
+  for (int j = 0; j < w.nv; ++j)
+    for (int i = 0; i < w.nu; ++i) {
+      if (!w.at(i, j) || (i > 0 && w.at(i - 1, j))) continue;
+      int k = i;
+      while (k + 1 < w.nu && w.at(k + 1, j)) ++k;
+      std::fprintf(f, "%.6g,%.6g,%.6g\n", w.vc(j) / L, w.uc(i) / L, w.uc(k) / L);
+    }
+  return std::fclose(f) == 0;
+}
+
+std::string area_text(const kin::Chain& c, double area_m2) {
+  char b[120];
+  const double user = area_m2 / (c.length_unit * c.length_unit);
+  if (c.length_unit == 1.0) std::snprintf(b, sizeof b, "%.4g m\u00b2", area_m2);
+  else std::snprintf(b, sizeof b, "%.4g m\u00b2 (%.4g %s\u00b2)", area_m2, user, length_unit_name(c));
+  return b;
+}
+
+bool write_svg(const std::string& path, const kin::Chain& c, const WorkspaceResult& w) {
+  namespace sv = svg;
+  const double L = c.length_unit;
+  const std::string lu = length_unit_name(c);
+  // The arm in the reference pose: frame origins, then the tool point (turned into the
+  // plane's +u side by joint 1 when the arm turns and its limits allow).
+  kin::JointVector q = w.pose;
+  kin::Pose T;
+  kin::forward(c, q, T);
+  if (w.method == "turning") {
+    const double phi = std::atan2(T.translation().y(), T.translation().x());
+    const double target = w.u == 'x' ? 0 : w.u == 'y' ? M_PI / 2 : 0;
+    for (double s : {1.0, -1.0}) {
+      kin::JointVector q2 = q;
+      q2[0] = q[0] + s * wrap(target - phi);
+      kin::Pose T2;
+      kin::forward(c, q2, T2);
+      const double phi2 = std::atan2(T2.translation().y(), T2.translation().x());
+      if (std::abs(wrap(phi2 - target)) < 1e-6 && q2[0] >= c.joint(0).lower && q2[0] <= c.joint(0).upper) {
+        q = q2;
+        break;
+      }
+    }
+  }
+  kin::FrameSet fs;
+  kin::forward_frames(c, q, fs, T);
+  const int iu = axis_index(w.u), iv = axis_index(w.v);
+  std::vector<double> au, av;
+  for (int k = 0; k <= c.n_rows; ++k) au.push_back(fs.frame[k].translation()[iu] / L), av.push_back(fs.frame[k].translation()[iv] / L);
+  au.push_back(T.translation()[iu] / L), av.push_back(T.translation()[iv] / L);
+
+  double ulo = 1e300, uhi = -1e300, vlo = 1e300, vhi = -1e300;
+  for (int j = 0; j < w.nv; ++j)
+    for (int i = 0; i < w.nu; ++i)
+      if (w.at(i, j)) ulo = std::min(ulo, w.uc(i)), uhi = std::max(uhi, w.uc(i)), vlo = std::min(vlo, w.vc(j)), vhi = std::max(vhi, w.vc(j));
+  ulo = std::min(ulo / L, 0.0), uhi = std::max(uhi / L, 0.0), vlo = std::min(vlo / L, 0.0), vhi = std::max(vhi / L, 0.0);
+  for (std::size_t k = 0; k < au.size(); ++k) ulo = std::min(ulo, au[k]), uhi = std::max(uhi, au[k]), vlo = std::min(vlo, av[k]), vhi = std::max(vhi, av[k]);
+  const double pad = 0.05 * std::max(uhi - ulo, vhi - vlo);
+  const double W = 900, H = 820;
+  sv::Doc d(W, H);
+  const sv::Panel p = sv::make_panel(90, 60, 560, 700, ulo - pad, uhi + pad, vlo - pad, vhi + pad, true, 7, 8);
+  char title[200];
+  std::snprintf(title, sizeof title, "%s: workspace in the %s plane (%c = %s %s), area %s", c.name.data(), w.plane.c_str(),
+                "xyz"[3 - iu - iv], num(w.level / L).c_str(), lu.c_str(), area_text(c, w.area).c_str());
+  d.text(90, 28, title, "start", 15);
+  d.text(90, 46, "tool point, joint limits respected; grid " + std::to_string(std::max(w.nu, w.nv)) + " cells of " +
+                     num(std::round(w.cell / L * 1000) / 1000) + " " + lu,
+         "start", 11, "#555");
+  d.axes(p, std::string(1, w.u) + " [" + lu + "]", std::string(1, w.v) + " [" + lu + "]");
+  // The region: one rectangle per run of cells in a row.
+  std::string g = "<g fill=\"#9ecae1\" stroke=\"none\" shape-rendering=\"crispEdges\">\n";
+  char b[200];
+  const double px = p.pw / (p.x1 - p.x0);  // pixels per length unit
+  for (int j = 0; j < w.nv; ++j)
+    for (int i = 0; i < w.nu; ++i) {
+      if (!w.at(i, j) || (i > 0 && w.at(i - 1, j))) continue;
+      int k = i;
+      while (k + 1 < w.nu && w.at(k + 1, j)) ++k;
+      const double x0 = p.X((w.u0 + i * w.cell) / L), y1 = p.Y((w.v0 + (j + 1) * w.cell) / L);
+      std::snprintf(b, sizeof b, "<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\"/>\n", x0, y1,
+                    (k - i + 1) * w.cell / L * px + 0.05, w.cell / L * px + 0.05);
+      g += b;
+    }
+  g += "</g>\n";
+  d.raw(g);
+  d.polyline(p, au, av, "#222", 3);
+  for (std::size_t k = 0; k + 1 < au.size(); ++k) {
+    std::snprintf(b, sizeof b, "<circle cx=\"%.1f\" cy=\"%.1f\" r=\"3.5\" fill=\"white\" stroke=\"#222\" stroke-width=\"1.5\"/>\n",
+                  p.X(au[k]), p.Y(av[k]));
+    d.raw(b);
+  }
+  std::snprintf(b, sizeof b, "<circle cx=\"%.1f\" cy=\"%.1f\" r=\"5\" fill=\"#d62728\"/>\n", p.X(au.back()), p.Y(av.back()));
+  d.raw(b);
+  std::snprintf(b, sizeof b, "<rect x=\"%.1f\" y=\"%.1f\" width=\"12\" height=\"12\" fill=\"#222\"/>\n", p.X(0) - 6, p.Y(0) - 6);
+  d.raw(b);
+  std::string pose;
+  const std::vector<double> qu = joints_to_user(c, q);
+  for (double x : qu) pose += (pose.empty() ? "" : " ") + num(std::round(x * 100) / 100);
+  d.legend(p.px + p.pw + 20, p.py, {{"reachable region", "#9ecae1", "fill"},
+                                     {"arm, reference pose", "#222", "line"},
+                                     {"tool point", "#d62728", "dot"},
+                                     {"base (origin)", "#222", "fill"}});
+  d.text(p.px + p.pw + 20, p.py + 110, "reference pose [" + std::string(angle_unit_name(c)) + "/" + lu + "]:", "start", 11);
+  d.text(p.px + p.pw + 20, p.py + 126, pose, "start", 11);
+  d.text(p.px + p.pw + 20, p.py + 150, w.method == "planar" ? "planar arm" : "joint 1 turns about z", "start", 11, "#555");
+  return d.write(path);
+}
+
+}  // namespace
+
+int cli_kin_workspace(int argc, char** argv) {
+  std::string robot, svg_path, csv_path;
+  WorkspaceOptions opt;
+  for (int i = 1; i < argc; ++i) {
+    const std::string s = argv[i];
+    auto value = [&]() -> const char* {
+      return i + 1 < argc && !(argv[i + 1][0] == '-' && argv[i + 1][1] == '-') ? argv[++i] : nullptr;
+    };
+    if (s == "--help" || s == "-h") {
+      std::fputs(kWorkspaceUsage, stdout);
+      return kExitOk;
+    } else if (s == "--robot" || s == "--svg" || s == "--csv" || s == "--plane") {
+      const char* v = value();
+      if (!v) return usage_error(s + " needs a value");
+      (s == "--robot" ? robot : s == "--svg" ? svg_path : s == "--csv" ? csv_path : opt.plane) = v;
+    } else if (s == "--grid") {
+      const char* v = value();
+      double g = 0;
+      if (!v || !parse_number(v, g) || g != std::floor(g) || g < 100 || g > 2000)
+        return usage_error(std::string("--grid needs a whole number of cells within 100..2000, got '") + (v ? v : "") + "'");
+      opt.grid = static_cast<int>(g);
+    } else if (s == "--pose") {
+      opt.pose.clear();
+      while (i + 1 < argc && !(argv[i + 1][0] == '-' && argv[i + 1][1] == '-')) {
+        double x;
+        if (!parse_number(argv[i + 1], x)) return usage_error(std::string("--pose: '") + argv[i + 1] + "' is not a finite number");
+        opt.pose.push_back(x);
+        ++i;
+      }
+      if (opt.pose.empty()) return usage_error("--pose needs the joint values");
+    } else {
+      return usage_error("unknown argument '" + s + "' (see armctl kin workspace --help)");
+    }
+  }
+  if (robot.empty()) return usage_error("--robot is required (see armctl kin models)");
+  if (!opt.plane.empty() && opt.plane != "xz" && opt.plane != "xy" && opt.plane != "yz")
+    return usage_error("--plane must be xz, xy or yz, got '" + opt.plane + "'");
+  const kin::LoadResult lr = load_robot_checked(robot);
+  if (!lr.ok) return usage_error(lr.error);
+  const kin::Chain& chain = lr.chain;
+  const WorkspaceResult w = compute_workspace(chain, opt);
+  if (w.status != 0) {
+    std::fprintf(stderr, "armctl: %s\n", w.error.c_str());
+    return w.status == 2 ? kExitUsage : kExitFailed;
+  }
+  const double L = chain.length_unit;
+  double ulo = 1e300, uhi = -1e300, vlo = 1e300, vhi = -1e300;
+  for (int j = 0; j < w.nv; ++j)
+    for (int i = 0; i < w.nu; ++i)
+      if (w.at(i, j)) ulo = std::min(ulo, w.uc(i)), uhi = std::max(uhi, w.uc(i)), vlo = std::min(vlo, w.vc(j)), vhi = std::max(vhi, w.vc(j));
+  const char* lu = length_unit_name(chain);
+  const int normal = 3 - axis_index(w.u) - axis_index(w.v);
+  std::printf("workspace of %s in the %s plane (%c = %s %s): area %s\n", chain.name.data(), w.plane.c_str(), "xyz"[normal],
+              num(w.level / L).c_str(), lu, area_text(chain, w.area).c_str());
+  std::printf("  %c from %s to %s %s, %c from %s to %s %s (cell centres); grid of %s %s cells, %ld FK evaluations; %s\n",
+              w.u, num(std::round(ulo / L * 10) / 10).c_str(), num(std::round(uhi / L * 10) / 10).c_str(), lu, w.v,
+              num(std::round(vlo / L * 10) / 10).c_str(), num(std::round(vhi / L * 10) / 10).c_str(), lu,
+              num(std::round(w.cell / L * 1000) / 1000).c_str(), lu, w.evaluations,
+              w.method == "planar" ? "planar arm" : "joint 1 turns about the base z axis (solved for, limits kept)");
+  if (!csv_path.empty()) {
+    if (!write_csv(csv_path, chain, w)) return usage_error("cannot write " + csv_path);
+    std::printf("csv: %s\n", csv_path.c_str());
+  }
+  if (!svg_path.empty()) {
+    if (!write_svg(svg_path, chain, w)) return usage_error("cannot write " + svg_path);
+    std::printf("svg: %s\n", svg_path.c_str());
+  }
+  return kExitOk;
+}
+
+}  // namespace servoarm::fw
