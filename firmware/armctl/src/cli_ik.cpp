@@ -19,7 +19,8 @@ const char* kIkUsage =
     "                     [--all] [--near q1..qn] [--keep-branch] [--json]\n"
     "  Inverse kinematics of the tool pose, in the units of the description (built-in\n"
     "  models: mm and degrees). ZYZ: R = Rz(A) Ry(B) Rz(G); RPY: R = Rz(Y) Ry(P) Rx(R).\n"
-    "  Closed form (every solution) where the arm has one, numerical otherwise.\n"
+    "  Closed form (every solution) where the arm has one, numerical otherwise; the\n"
+    "  output names the method and the path (closed form, general, numeric).\n"
     "  Without --all: the solution nearest to --near (default: all joints 0) within the\n"
     "  limits (--keep-branch: on the same shoulder/elbow/wrist branch as --near).\n"
     "  Arms that control fewer than 6 coordinates read what they control: the tool\n"
@@ -63,6 +64,37 @@ void take_list(int argc, char** argv, int& i, std::vector<double>& out, std::str
 std::string branch_json(const kin::Branch& b) {
   return "{\"shoulder\": " + std::to_string(b.shoulder) + ", \"elbow\": " + std::to_string(b.elbow) +
          ", \"wrist\": " + std::to_string(b.wrist) + "}";
+}
+
+// Which IK path solved it, said in the output (issue 19: a model that is
+// almost but not exactly of a closed-form class must say it did not take it).
+const char* ik_path(kin::IkMethod m) {
+  switch (m) {
+    case kin::IkMethod::none: return "numeric";
+    case kin::IkMethod::spherical_general: return "general";
+    case kin::IkMethod::spherical_wrist:
+    case kin::IkMethod::opw:
+    case kin::IkMethod::ur:
+    case kin::IkMethod::planar_2r:
+    case kin::IkMethod::planar_3:
+    case kin::IkMethod::spatial_3:
+    case kin::IkMethod::pitch_4: return "closed_form";
+  }
+  return "numeric";
+}
+const char* ik_path_text(kin::IkMethod m) {
+  switch (m) {
+    case kin::IkMethod::none: return "numerical solver (no closed form fits these DH rows)";
+    case kin::IkMethod::spherical_general: return "general path (spherical wrist, degree-8 resultant)";
+    case kin::IkMethod::spherical_wrist:
+    case kin::IkMethod::opw:
+    case kin::IkMethod::ur:
+    case kin::IkMethod::planar_2r:
+    case kin::IkMethod::planar_3:
+    case kin::IkMethod::spatial_3:
+    case kin::IkMethod::pitch_4: return "closed form";
+  }
+  return "";
 }
 
 std::string kinds(std::uint8_t k) {
@@ -190,7 +222,7 @@ int cli_kin_ik(int argc, char** argv) {
   if (status_text.empty()) status_text = kin::to_string(status);
   if (json) {
     std::string s = "{\"robot\": \"" + std::string(chain.name.data()) + "\", \"method\": \"" + method +
-                    "\", \"status\": \"" + status_text + "\", \"length_unit\": \"" +
+                    "\", \"path\": \"" + ik_path(model.method) + "\", \"status\": \"" + status_text + "\", \"length_unit\": \"" +
                     length_unit_name(chain) + "\", \"angle_unit\": \"" + angle_unit_name(chain) + "\"";
     if (iterations >= 0)
       s += ", \"iterations\": " + std::to_string(iterations) + ", \"position_residual\": " +
@@ -206,7 +238,8 @@ int cli_kin_ik(int argc, char** argv) {
     s += "]}";
     std::printf("%s\n", s.c_str());
   } else {
-    std::printf("robot %s: method %s, status %s\n", chain.name.data(), method, status_text.c_str());
+    std::printf("robot %s: method %s (%s), status %s\n", chain.name.data(), method, ik_path_text(model.method),
+                status_text.c_str());
     if (iterations >= 0)
       std::printf("numerical: %d iterations, residual %s %s, %s %s\n", iterations,
                   num(residual_p / chain.length_unit).c_str(), length_unit_name(chain), num(residual_r / A).c_str(),
