@@ -1,19 +1,13 @@
 #include "servoarm/config/config.hpp"
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <sstream>
-#include <toml.hpp>
-
 #include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/file_input.hpp"
 
 namespace servoarm::fw {
 
@@ -390,59 +384,56 @@ std::string drive_label(std::size_t i) { return "drive[" + std::to_string(i + 1)
 struct Reader {
   std::string origin;
   std::string err;
-  bool fail(const std::string& key, const std::string& why) {
-    if (err.empty()) err = origin + ": " + key + ": " + why;
+  /// Record the first error: "<origin>:<line>:<column>: <key>: <why>".
+  bool fail(const toml::node& at, const std::string& key, const std::string& why) {
+    if (err.empty()) err = kin::source_text(at.source(), origin) + ": " + key + ": " + why;
     return false;
   }
-  static std::string shown(const toml::value& v) {
-    std::ostringstream os;
-    os << v;
-    std::string s = os.str();
-    std::replace(s.begin(), s.end(), '\n', ' ');
-    if (s.size() > 40) s = s.substr(0, 37) + "...";
-    return s;
-  }
-  bool number(const toml::value& v, const std::string& key, double& out) {
-    if (v.is_integer()) out = static_cast<double>(v.as_integer());
-    else if (v.is_floating()) out = v.as_floating();
-    else return fail(key, "expected a number (got " + shown(v) + ")");
-    if (!std::isfinite(out)) return fail(key, "must be a finite number (got " + shown(v) + ")");
+  static std::string shown(const toml::node& v) { return kin::value_text(v); }
+  bool number(const toml::node& v, const std::string& key, double& out) {
+    if (const auto* i = v.as_integer()) out = static_cast<double>(i->get());
+    else if (const auto* f = v.as_floating_point()) out = f->get();
+    else return fail(v, key, "expected a number (got " + shown(v) + ")");
+    if (!std::isfinite(out)) return fail(v, key, "must be a finite number (got " + shown(v) + ")");
     return true;
   }
 
   /// Read `v` into key `k` of `s`. False (and err set) when the type is wrong or the
   /// file writes the "unset" value of a key that does not allow it.
   template <class S>
-  bool read(const Key<S>& k, const toml::value& v, const std::string& label, S& s) {
+  bool read(const Key<S>& k, const toml::node& v, const std::string& label, S& s) {
     bool ok = std::visit(
         [&](auto m) -> bool {
           using T = std::decay_t<decltype(s.*m)>;
           T& out = s.*m;
           if constexpr (std::is_same_v<T, bool>) {
-            if (!v.is_boolean()) return fail(label, "expected true or false (got " + shown(v) + ")");
-            out = v.as_boolean();
+            const auto* b = v.as_boolean();
+            if (!b) return fail(v, label, "expected true or false (got " + shown(v) + ")");
+            out = b->get();
           } else if constexpr (std::is_same_v<T, int> || std::is_same_v<T, std::int64_t>) {
-            if (!v.is_integer()) return fail(label, "expected an integer (got " + shown(v) + ")");
-            const std::int64_t i = v.as_integer();
+            const auto* n = v.as_integer();
+            if (!n) return fail(v, label, "expected an integer (got " + shown(v) + ")");
+            const std::int64_t i = n->get();
             if constexpr (std::is_same_v<T, int>) {
               // Refused here, before it is narrowed: validate() could not see it.
               if (i < std::numeric_limits<int>::min() || i > std::numeric_limits<int>::max())
-                return fail(label, "integer out of range (got " + std::to_string(i) + ")");
+                return fail(v, label, "integer out of range (got " + std::to_string(i) + ")");
             }
             out = static_cast<T>(i);
           } else if constexpr (std::is_same_v<T, double>) {
             if (!number(v, label, out)) return false;
           } else if constexpr (std::is_same_v<T, std::string>) {
-            if (!v.is_string()) return fail(label, "expected a string (got " + shown(v) + ")");
-            out = v.as_string().str;
+            const auto* str = v.as_string();
+            if (!str) return fail(v, label, "expected a string (got " + shown(v) + ")");
+            out = str->get();
           } else {
-            if (!v.is_array()) return fail(label, "expected an array of numbers (got " + shown(v) + ")");
-            const auto& a = v.as_array();
-            if (a.size() > k.max_len || a.size() < k.min_len)
-              return fail(label, "expected " + range_of(k) + " (got " + std::to_string(a.size()) + " values)");
-            std::vector<double> tmp(a.size());
-            for (std::size_t i = 0; i < a.size(); ++i)
-              if (!number(a[i], label + "[" + std::to_string(i) + "]", tmp[i])) return false;
+            const auto* a = v.as_array();
+            if (!a) return fail(v, label, "expected an array of numbers (got " + shown(v) + ")");
+            if (a->size() > k.max_len || a->size() < k.min_len)
+              return fail(v, label, "expected " + range_of(k) + " (got " + std::to_string(a->size()) + " values)");
+            std::vector<double> tmp(a->size());
+            for (std::size_t i = 0; i < a->size(); ++i)
+              if (!number(*a->get(i), label + "[" + std::to_string(i) + "]", tmp[i])) return false;
             out = std::move(tmp);
           }
           return true;
@@ -450,7 +441,7 @@ struct Reader {
         k.member);
     if (!ok) return false;
     if (!k.unset_writable && is_unset(k, s))
-      return fail(label, value_of(k, s) + " is not allowed: " + range_of(k) + " (leave the key out for " + k.unset_text + ")");
+      return fail(v, label, value_of(k, s) + " is not allowed: " + range_of(k) + " (leave the key out for " + k.unset_text + ")");
     return true;
   }
 };
@@ -484,105 +475,49 @@ std::vector<std::string> sorted_keys(const Map& m) {
   return out;
 }
 
-bool read_drive(Reader& r, const toml::value& t, std::size_t index, DriveConfig& d) {
+bool read_drive(Reader& r, const toml::node& t, std::size_t index, DriveConfig& d) {
   const std::string where = drive_label(index);
-  if (!t.is_table()) return r.fail(where, "expected a table");
-  const auto& tab = t.as_table();
-  for (const std::string& name : sorted_keys(tab)) {
+  const toml::table* tab = t.as_table();
+  if (!tab) return r.fail(t, where, "expected a table");
+  for (const auto& [name, value] : *tab) {  // toml::table is ordered by key
     const DriveKey* k = nullptr;
     for (const DriveKey& e : kDriveTable)
-      if (name == e.name) k = &e;
+      if (name.str() == e.name) k = &e;
     if (!k) {
       std::vector<std::string> names;
       for (const DriveKey& e : kDriveTable) names.push_back(e.name);
-      return r.fail(where + "." + name, "unknown key (" + joined(names) + ")");
+      return r.fail(value, where + "." + std::string(name.str()), "unknown key (" + joined(names) + ")");
     }
-    if (!r.read(*k, tab.at(name), where + "." + name, d)) return false;
+    if (!r.read(*k, value, where + "." + k->name, d)) return false;
   }
   return true;
 }
 
-/// Where the text is not UTF-8 (TOML requires it; Debian's toml11 3.7.1 reads past
-/// the end of a literal string holding invalid UTF-8): "line L, column C", or "".
-std::string utf8_problem(const std::string& t) {
-  std::size_t line = 1, col = 1;
-  for (std::size_t i = 0; i < t.size();) {
-    const std::size_t n = utf8_len(t, i);
-    if (n == 0 || t[i] == '\0') return "line " + std::to_string(line) + ", column " + std::to_string(col);
-    if (t[i] == '\n') ++line, col = 0;
-    i += n;
-    ++col;
-  }
-  return "";
-}
-
-/// Where brackets nest deeper than kMaxDepth outside strings and comments ("line L,
-/// column C"), or "". toml11 parses nesting recursively: `x = ` and 20 000 `[` overflow
-/// its stack (SIGSEGV), so such text never reaches it.
-constexpr int kMaxDepth = 32;
-std::string nesting_problem(const std::string& t) {
-  int depth = 0;
-  std::size_t line = 1, col = 0;
-  for (std::size_t i = 0; i < t.size(); ++i) {
-    const char c = t[i];
-    ++col;
-    if (c == '\n') {
-      ++line, col = 0;
-    } else if (c == '#') {  // comment to the end of the line
-      while (i + 1 < t.size() && t[i + 1] != '\n') ++i;
-    } else if (c == '"' || c == '\'') {
-      const bool multi = t.compare(i, 3, std::string(3, c)) == 0;
-      const std::string close = multi ? std::string(3, c) : std::string(1, c);
-      i += close.size();
-      while (i < t.size() && t.compare(i, close.size(), close) != 0) {
-        if (t[i] == '\n') {
-          if (!multi) break;  // an unterminated one-line string: toml11 reports it
-          ++line, col = 0;
-        }
-        if (c == '"' && t[i] == '\\') ++i;  // escape in a basic string
-        ++i;
-      }
-      i += close.size() - 1;
-    } else if (c == '[' || c == '{') {
-      if (++depth > kMaxDepth)
-        return "line " + std::to_string(line) + ", column " + std::to_string(col) + ": nested deeper than " +
-               std::to_string(kMaxDepth) + " levels";
-    } else if ((c == ']' || c == '}') && depth > 0) {
-      --depth;
-    }
-  }
-  return "";
-}
-
-/// toml11's multi-line message as one line: "origin:L:C: syntax: what" (the line and
-/// column from its " L | text" and "   | ^--- ..." rows).
-std::string syntax_message(const std::string& origin, const std::string& what) {
-  std::vector<std::string> rows;
-  for (std::size_t a = 0; a <= what.size();) {
-    const std::size_t b = std::min(what.find('\n', a), what.size());
-    rows.push_back(what.substr(a, b - a));
-    a = b + 1;
-  }
-  std::string msg = rows.empty() ? what : rows[0];
-  if (msg.rfind("[error] ", 0) == 0) msg.erase(0, 8);
-  std::string where;
-  for (std::size_t r = 1; r + 1 < rows.size() && where.empty(); ++r) {
-    const std::string& row = rows[r];
-    const std::size_t bar = row.find(" | ");
-    if (bar == std::string::npos || bar == 0) continue;
-    const std::size_t digits = row.find_first_not_of(' ');
-    if (digits >= bar || row.find_first_not_of("0123456789", digits) != bar) continue;
-    const std::string& mark = rows[r + 1];
-    const std::size_t caret = mark.find('^');
-    if (caret == std::string::npos || mark.size() <= bar + 1 || mark[bar + 1] != '|' || caret < bar + 3) continue;
-    where = row.substr(digits, bar - digits) + ":" + std::to_string(caret - (bar + 3) + 1);
-  }
-  return origin + (where.empty() ? "" : ":" + where) + ": syntax: " + msg;
-}
-
 /// Configuration files are small (the shipped one is 3 KiB, six [[drive]] tables add
-/// 1 KiB); the cap also bounds toml11's time on long arrays (quadratic in 3.7.1).
-constexpr std::size_t kMaxFileBytes = 64 * 1024;
+/// 1 KiB): the cap of every file the firmware reads (kinematics/file_input.hpp).
+constexpr std::size_t kMaxFileBytes = kin::kMaxInputFileBytes;
+
+/// The node a validate() message is about: its label ("loop.rate_hz", "drive[2].limits",
+/// "motion.home_deg[0]"; drive numbers 1-based) looked up in the parsed file, or null.
+const toml::node* node_of_label(const toml::table& top, const std::string& msg) {
+  const std::size_t colon = msg.find(": ");
+  if (colon == std::string::npos) return nullptr;
+  std::string path = msg.substr(0, colon);
+  if (path.rfind("drive[", 0) == 0) {  // 1-based in messages, 0-based in toml++ paths
+    const std::size_t close = path.find(']');
+    int n = 0;
+    const auto r = std::from_chars(path.data() + 6, path.data() + close, n);
+    if (close == std::string::npos || r.ec != std::errc() || n < 1) return nullptr;
+    path = "drive[" + std::to_string(n - 1) + path.substr(close);
+  }
+  const toml::node* n = toml::at_path(top, path).node();
+  if (!n && !path.empty() && path.back() == ']') n = toml::at_path(top, path.substr(0, path.rfind('['))).node();
+  // A relation broken by a key the file does not write (its default): the other key the
+  // message names, which the file does write.
+  for (const ConfigKey& k : kConfigTable)
+    if (!n && msg.find(k.name, colon) != std::string::npos) n = toml::at_path(top, k.name).node();
+  return n;
+}
 
 }  // namespace
 
@@ -685,101 +620,64 @@ std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
 }
 
 std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
-  if (text.size() > kMaxFileBytes)
-    return origin + ": larger than " + std::to_string(kMaxFileBytes) + " bytes (" + std::to_string(text.size()) + ")";
-  if (const std::string at = utf8_problem(text); !at.empty()) return origin + ": " + at + ": not UTF-8 text";
-  if (const std::string at = nesting_problem(text); !at.empty()) return origin + ": " + at;
+  kin::TomlDocument doc = kin::parse_toml(text, origin, kMaxFileBytes);  // size, UTF-8, nesting, syntax
+  if (!doc.error.empty()) return doc.error;
+  const toml::table& top = doc.table;
   Reader r{origin, {}};
-  toml::value root;
-  try {
-    std::istringstream is(text);
-    root = toml::parse(is, origin);
-  } catch (const std::exception& e) {
-    return syntax_message(origin, e.what());
-  }
-  if (!root.is_table()) return origin + ": not a TOML table";
-  const auto& top = root.as_table();
   const std::vector<std::string> secs = sections();
   FwConfig c = cfg;
-  // Unknown names first (sorted, so the message does not depend on hash order).
-  for (const std::string& name : sorted_keys(top)) {
-    const toml::value& v = top.at(name);
+  auto at = [&](const toml::node& n) { return kin::source_text(n.source(), origin) + ": "; };
+  // Unknown names first (toml::table is ordered by key: the message does not depend on the file's order).
+  for (const auto& [key, v] : top) {
+    const std::string name(key.str());
     if (name == "drive") continue;
     if (std::find(secs.begin(), secs.end(), name) != secs.end()) {
-      if (!v.is_table()) return origin + ": " + name + ": expected a [" + name + "] table";
-      for (const std::string& leaf : sorted_keys(v.as_table())) {
-        const std::string full = name + "." + leaf;
+      const toml::table* t = v.as_table();
+      if (!t) return at(v) + name + ": expected a [" + name + "] table";
+      for (const auto& [leaf, lv] : *t) {
+        const std::string full = name + "." + std::string(leaf.str());
         bool known = false;
         for (const ConfigKey& k : kConfigTable) known = known || full == k.name;
-        if (!known) return origin + ": " + full + ": unknown key (see armfw --config-keys)";
+        if (!known) return at(lv) + full + ": unknown key (see armfw --config-keys)";
       }
       continue;
     }
     bool known = false;
     for (const ConfigKey& k : kConfigTable) known = known || (name == k.name && section_of(k.name).empty());
     if (!known)
-      return origin + ": " + name + ": " +
+      return at(v) + name + ": " +
              (v.is_table() ? "unknown section (" + joined(secs) + ", [[drive]])" : "unknown key (see armfw --config-keys)");
   }
   // Then every key in table order.
   for (const ConfigKey& k : kConfigTable) {
     const std::string sec = section_of(k.name);
-    const toml::value* v = nullptr;
-    if (sec.empty()) {
-      if (top.count(k.name)) v = &top.at(k.name);
-    } else if (top.count(sec)) {
-      const auto& t = top.at(sec).as_table();
-      const std::string leaf = k.name + sec.size() + 1;
-      if (t.count(leaf)) v = &t.at(leaf);
-    }
+    const toml::node* v = nullptr;
+    if (sec.empty()) v = top.get(k.name);
+    else if (const toml::table* t = top.get_as<toml::table>(sec)) v = t->get(k.name + sec.size() + 1);
     if (v && !r.read(k, *v, k.name, c)) return r.err;
   }
-  if (top.count("drive")) {
-    const toml::value& v = top.at("drive");
-    if (!v.is_array()) return origin + ": drive: expected [[drive]] tables";
+  if (const toml::node* v = top.get("drive")) {
+    const toml::array* a = v->as_array();
+    if (!a) return at(*v) + "drive: expected [[drive]] tables";
     c.drives.clear();
-    for (const auto& t : v.as_array()) {
+    for (const toml::node& t : *a) {
       DriveConfig d;
       if (!read_drive(r, t, c.drives.size(), d)) return r.err;
       c.drives.push_back(d);
     }
   }
   const std::string bad = validate(c);
-  if (!bad.empty()) return origin + ": " + bad;
+  if (!bad.empty()) {
+    const toml::node* n = node_of_label(top, bad);
+    return (n ? at(*n) : origin + ": ") + bad;
+  }
   cfg = c;
   return "";
 }
 
 std::string load_config_file(const std::string& path, FwConfig& cfg) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);  // O_NONBLOCK: a FIFO must not hang us
-  if (fd < 0) return path + ": cannot open: " + std::strerror(errno);
-  struct stat st{};
-  std::string why;
-  if (::fstat(fd, &st) != 0) why = std::string("cannot stat: ") + std::strerror(errno);
-  else if (S_ISDIR(st.st_mode)) why = "is a directory, not a file";
-  else if (!S_ISREG(st.st_mode)) why = "not a regular file";
-  else if (st.st_size > static_cast<off_t>(kMaxFileBytes))  // off_t: no wrap on 32-bit size_t (armhf)
-    why = "larger than " + std::to_string(kMaxFileBytes) + " bytes (" + std::to_string(st.st_size) + ")";
   std::string text;
-  if (why.empty()) {
-    char buf[8192];
-    for (;;) {
-      const ssize_t n = ::read(fd, buf, sizeof buf);
-      if (n < 0 && errno == EINTR) continue;
-      if (n < 0) {
-        why = std::string("read error: ") + std::strerror(errno);
-        break;
-      }
-      if (n == 0) break;
-      text.append(buf, static_cast<std::size_t>(n));
-      if (text.size() > kMaxFileBytes) {
-        why = "larger than " + std::to_string(kMaxFileBytes) + " bytes";
-        break;
-      }
-    }
-  }
-  ::close(fd);
-  if (!why.empty()) return path + ": " + why;
+  if (std::string e = kin::read_text_file(path, text, kMaxFileBytes); !e.empty()) return e;
   return load_config_text(text, path, cfg);
 }
 

@@ -1,8 +1,12 @@
 #pragma once
 // Robot description files (TOML) and the built-in models.
 //
-// Set-up code, not real-time: it allocates and uses toml11 (which throws; every
-// exception is caught here and turned into an error message).
+// Set-up code, not real-time: it allocates. Files are read through file_input.hpp
+// (size cap, regular files only, toml++: UTF-8 validated, nesting bounded); every
+// error is one line "<file>:<line>:<column>: joint N: key 'k': what is wrong".
+// Values outside plausible ranges are refused (lengths and prismatic limits 100 m,
+// theta/alpha/rpy one turn, revolute limits 10 turns, velocity/acceleration/jerk
+// 100 rad/s, 1e4 rad/s^2, 1e6 rad/s^3 or 10 m/s, 1e3 m/s^2, 1e5 m/s^3, mass 1e4 kg).
 //
 //   name = "my_arm"
 //   convention = "standard"      # or "modified"
