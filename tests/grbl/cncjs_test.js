@@ -71,9 +71,13 @@ function step(msg) {
 }
 
 // Resolves with the first value of probe() that is not undefined; rejects after ms naming what.
+// While `failFast` is set, it throws at once when failFast() names a failure.
+let failFast = null;
 async function until(what, ms, probe, every = 20) {
   const end = Date.now() + ms;
   for (;;) {
+    const f = failFast && failFast();
+    if (f) throw new Error(`waiting for ${what}: ${f}`);
     const v = probe();
     if (v !== undefined && v !== false) return v;
     if (Date.now() > end) throw new Error(`timeout (${ms / 1000} s) waiting for ${what}`);
@@ -225,7 +229,12 @@ class CncjsClient {
     this.socket.on('serialport:read', (line) => {
       logTraffic('<', line);
       this.reads.push(line);
-      if (/^(error|ALARM):/.test(line)) this.errors.push(line);
+      // errors, alarms, and armfw's word that a line it had acknowledged did not run
+      if (/^(error|ALARM):/.test(line) || /^\[MSG:.*\b(refused|dropped|not run)\b/.test(line)) {
+        // cncjs prints the program line an error answers as "> line (ln=N)" just before it
+        const prev = this.reads[this.reads.length - 2] || '';
+        this.errors.push(/^> /.test(prev) ? `${line} for ${prev.slice(2)}` : line);
+      }
     });
     this.socket.on('serialport:write', (data) => logTraffic('>', data));
     this.socket.on('serialport:error', (e) => this.errors.push(`serialport:error ${JSON.stringify(e)}`));
@@ -274,12 +283,21 @@ class CncjsClient {
 
 // ---- checks -----------------------------------------------------------------------------
 
+// Positions cncjs shows (MPos: FK of the measured joints) against where the arm was sent: the
+// virtual drives come to rest a few hundredths of a millimetre from the target (seen: up to
+// 0.05 mm at 800 mm reach). FK of the joints `status` prints (3 decimals, 0.0005 deg
+// rounding each, up to 1 m of lever arm: <= 0.05 mm) against MPos: 0.1 mm.
+const POS_TOL = 0.1;
+const FK_TOL = 0.1;
 const fmt = (v) => `(${v.map((x) => x.toFixed(3)).join(', ')})`;
 const dist = (a, b) => Math.hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]);
 function expectNear(what, got, want, tol) {
   const d = dist(got, want);
   if (!(d <= tol)) throw new Error(`${what}: at ${fmt(got)}, expected ${fmt(want)} (off by ${d.toFixed(4)} mm, tolerance ${tol})`);
+  worst[what.split(' ')[0]] = Math.max(worst[what.split(' ')[0]] || 0, d);
+  return d;
 }
+const worst = {};
 
 // Idle for `settle` ms with an unchanged position (one status report is not enough: a move
 // queued a moment ago may not have started).
@@ -309,6 +327,18 @@ async function feed(c, ...lines) {
   return answers()[lines.length - 1];
 }
 
+// Errors that follow cncjs's extended realtime bytes (sent as UTF-8: C2 85, C2 90..): a
+// firmware that keeps the 0xC2 in the next line answers that line (often cncjs's own $G
+// poll) with an error. Recorded as a gap; the scenario goes on.
+function utf8Gap(c, from, what) {
+  const e = c.errors.slice(from);
+  if (e.length) {
+    gaps.push(`${what}: cncjs sends it UTF-8 encoded (0xC2 first) and the firmware answered ${e.join(' | ')} ` +
+              '(the 0xC2 went into the next line; GRBL drops bytes >= 0x80 that are not realtime commands)');
+  }
+  return c.errors.length;
+}
+
 function noNewErrors(c, from, what) {
   const e = c.errors.slice(from);
   if (e.length) throw new Error(`${what}: the firmware answered ${e.join(' | ')}`);
@@ -317,10 +347,10 @@ function noNewErrors(c, from, what) {
 // 50 lines: setup, a closed polygon around the start point in three heights, and a last
 // absolute line to `end`. Every line is a plain GRBL line cncjs's sender streams as is.
 function makeProgram(start, end) {
-  const lines = ['(servoarm: cncjs sender test, 50 lines)', 'G21 G90 G94', 'G1 F3000'];
+  const lines = ['(servoarm: cncjs sender test, 50 lines)', 'G21 G90', 'G1 F3000'];
   const n = 50 - lines.length - 1;
   for (let i = 0; i < n; ++i) {
-    const a = (2 * Math.PI * i) / 16;
+    const a = (2 * Math.PI * (i + 1)) / 16;
     const r = 20 + 5 * Math.sin(i / 5);
     const x = start[0] + r * Math.cos(a) - 20;
     const y = start[1] + r * Math.sin(a);
@@ -345,6 +375,8 @@ async function fkOfCurrentJoints(args, armfw) {
 }
 
 // ---- the scenario -----------------------------------------------------------------------
+
+const gaps = [];  // what cncjs needs and did not get, where the scenario could go on anyway
 
 async function run(args) {
   const { io, cncjsBin } = requireInstalled();
@@ -380,15 +412,22 @@ async function run(args) {
   // -- detection: banner, $$ (sent by cncjs itself), ? and $G polling
   await c.open(port);
   step(`opened ${port} as a Grbl controller`);
-  await until('the startup banner "Grbl 1.1h [\'$\' for help]" (cncjs records its version)', 15000,
-    () => (c.settings.version ? true : undefined));
-  if (c.settings.version !== '1.1h') throw new Error(`banner version '${c.settings.version}', expected 1.1h`);
+  // The banner must come after cncjs opened the port (a line written to the pty before is
+  // lost). Without it cncjs sends ? after 2 s and goes on without a version: the rest of the
+  // scenario still runs, and the test fails at the end naming the gap.
+  try {
+    await until('the startup banner', 6000, () => (c.settings.version ? true : undefined));
+  } catch (e) {
+    gaps.push('no banner "Grbl 1.1h [\'$\' for help]" after cncjs opened the port (cncjs detected the ' +
+              'controller through its ? fallback 2 s later, without a version)');
+  }
+  if (c.settings.version && c.settings.version !== '1.1h') gaps.push(`banner version '${c.settings.version}', expected 1.1h`);
   await until('the $$ settings cncjs asks for at connect', 15000,
     () => (Object.keys(c.settings.settings || {}).some((k) => /^\$\d+$/.test(k)) ? true : undefined));
   await until('a status report (cncjs polls ? every 250 ms)', 15000, () => (c.active ? true : undefined));
   await until('the $G parser state (cncjs polls $G)', 15000,
     () => (((c.state.parserstate || {}).modal || {}).units ? true : undefined));
-  step(`detected: version ${c.settings.version}, ${Object.keys(c.settings.settings).length} $$ settings, ` +
+  step(`detected: version ${c.settings.version || '(none)'}, ${Object.keys(c.settings.settings).length} $$ settings, ` +
        `state ${c.active}, modal ${JSON.stringify(c.state.parserstate.modal)}`);
 
   // $# and $I as a user types them in cncjs's console
@@ -432,8 +471,8 @@ async function run(args) {
   await waitIdle(c, 'widget jog X+10');
   noNewErrors(c, errs, 'widget jog (G91 / G0 X10 / G90)');
   let p = c.mpos();
-  expectNear('after the widget jog X+10', p, [home[0] + 10, home[1], home[2]], 0.01);
-  step(`widget jog X+10: MPos ${fmt(p)}`);
+  let off = expectNear('after the widget jog X+10', p, [home[0] + 10, home[1], home[2]], POS_TOL);
+  step(`widget jog X+10: MPos ${fmt(p)} (${off.toFixed(3)} mm from the target)`);
 
   // -- GRBL jogging: $J= lines (cncjs's MDI / pendants), a jog cancel (cncjs's jogCancel: 0x85)
   let before = p;
@@ -442,8 +481,8 @@ async function run(args) {
   await waitIdle(c, '$J= jog');
   noNewErrors(c, errs, '$J=G91 G21 X-10 Y5 F600');
   p = c.mpos();
-  expectNear('after $J=G91 X-10 Y5', p, [before[0] - 10, before[1] + 5, before[2]], 0.01);
-  step(`$J=G91 X-10 Y5 F1200: Jog, then Idle at ${fmt(p)}`);
+  off = expectNear('after $J=G91 X-10 Y5', p, [before[0] - 10, before[1] + 5, before[2]], POS_TOL);
+  step(`$J=G91 X-10 Y5 F600: Jog, then Idle at ${fmt(p)} (${off.toFixed(3)} mm from the target)`);
 
   before = p;
   await feed(c, '$J=G91 G21 Y-60 F600');  // 6 s at 600 mm/min
@@ -457,13 +496,13 @@ async function run(args) {
   if (!(travelled > 2 && travelled < 40)) {
     throw new Error(`jog cancel: travelled ${travelled.toFixed(3)} mm of 60 (expected stopped early, after ~10 mm)`);
   }
-  noNewErrors(c, errs, 'jog cancel');
+  errs = utf8Gap(c, errs, 'jogCancel (0x85)');
   step(`jogCancel (0x85) after 1 s: Idle ${((Date.now() - cancelAt) / 1000).toFixed(2)} s later, travelled ${travelled.toFixed(2)} of 60 mm`);
   // back to the start of the program (an absolute jog)
   await feed(c, `$J=G90 G21 X${home[0].toFixed(3)} Y${home[1].toFixed(3)} Z${home[2].toFixed(3)} F3000`);
   await until('the absolute jog to start', 10000, () => (c.active === 'Jog' ? true : undefined));
   await waitIdle(c, '$J=G90 back to the home pose');
-  expectNear('after $J=G90 to the home pose', c.mpos(), home, 0.01);
+  expectNear('after $J=G90 to the home pose', c.mpos(), home, POS_TOL);
   noNewErrors(c, errs, '$J=G90');
   step('$J=G90 X.. Y.. Z..: back at the home pose');
 
@@ -475,6 +514,9 @@ async function run(args) {
   const loaded = await c.commandCb('gcode:load', 'servoarm-test.nc', program.join('\n'));
   step(`gcode:load: ${loaded.total} lines (cncjs appends %wait, sent as G4 P0.5)`);
   errs = c.errors.length;
+  // an error during the program pauses cncjs's workflow: say which line and why, at once
+  const progErrs = errs;
+  failFast = () => (c.errors.length > progErrs ? `the firmware answered, during the program: ${c.errors.slice(progErrs).join(' | ')}` : null);
   c.command('gcode:start');
   await until('the program to run (Run)', 10000, () => (c.active === 'Run' ? true : undefined));
 
@@ -484,7 +526,7 @@ async function run(args) {
   await until('Hold:0 after gcode:pause (!)', 10000, () => (c.active === 'Hold' && c.subState === 0 ? true : undefined));
   const held = c.mpos();
   await sleep(1500);
-  expectNear('in Hold:0 (the arm must stand still)', c.mpos(), held, 0.001);
+  expectNear('in Hold:0 (the arm must stand still)', c.mpos(), held, 0.01);
   step(`gcode:pause (!): Hold:0 at ${fmt(held)}, still after 1.5 s; sender ${c.sender.received}/${c.sender.total}`);
   c.command('gcode:resume');
   await until('Run after gcode:resume (~)', 10000, () => (c.active === 'Run' ? true : undefined));
@@ -497,6 +539,8 @@ async function run(args) {
   await until(`Ov: 80 after two feed override -10 % (Ov now ${ov()})`, 5000, () => (ov() === 80 ? true : undefined));
   c.command('feedOverride', 0);
   await until(`Ov: 100 after feed override reset (Ov now ${ov()})`, 5000, () => (ov() === 100 ? true : undefined));
+  await sleep(600);  // the next $G poll carries a stray 0xC2, if any
+  errs = utf8Gap(c, errs, 'feedOverride (0x92, 0x90)');
   step('feedOverride -10, -10, 0 (0x92 0x92 0x90): Ov 80, then 100');
 
   // feed hold / cycle start (cncjs's Feedhold and Cycle Start buttons: ! and ~ only)
@@ -505,7 +549,7 @@ async function run(args) {
   await until('Hold:0 after feedhold', 10000, () => (c.active === 'Hold' && c.subState === 0 ? true : undefined));
   const held2 = c.mpos();
   await sleep(1000);
-  expectNear('in Hold:0 after feedhold', c.mpos(), held2, 0.001);
+  expectNear('in Hold:0 after feedhold', c.mpos(), held2, 0.01);
   c.command('cyclestart');
   await until('Run after cyclestart', 10000, () => (c.active === 'Run' ? true : undefined));
   step(`feedhold (!) / cyclestart (~): held at ${fmt(held2)}, running again`);
@@ -513,16 +557,17 @@ async function run(args) {
   await until('the sender to finish and cncjs to end the workflow (workflow idle)', 180000,
     () => (c.senderMax.received === loaded.total && c.workflow === 'idle' ? true : undefined), 100);
   await waitIdle(c, 'program end');
+  failFast = null;
   noNewErrors(c, errs, 'the program');
   p = c.mpos();
-  expectNear('at the end of the program', p, end, 0.01);
-  step(`program done: ${c.senderMax.received}/${loaded.total} lines acknowledged, no error, MPos ${fmt(p)}`);
+  off = expectNear('at the end of the program', p, end, POS_TOL);
+  step(`program done: ${c.senderMax.received}/${loaded.total} lines acknowledged, no error, MPos ${fmt(p)} (${off.toFixed(3)} mm from its last point)`);
 
   // -- the end position against the kinematics: FK of the joints armfw reports
   if (armfw) {
     const fk = await fkOfCurrentJoints(args, armfw);
-    expectNear(`cncjs's MPos against armctl kin fk of joints [${fk.joints.join(', ')}]`, p, fk.pos, 0.01);
-    step(`armctl kin fk of the joints [${fk.joints.map((j) => j.toFixed(3)).join(', ')}] = ${fmt(fk.pos)}: matches`);
+    off = expectNear(`cncjs's MPos against armctl kin fk of joints [${fk.joints.join(', ')}]`, p, fk.pos, FK_TOL);
+    step(`armctl kin fk of the joints [${fk.joints.map((j) => j.toFixed(3)).join(', ')}] = ${fmt(fk.pos)}: ${off.toFixed(3)} mm from MPos`);
   }
 
   // a state walk the report must have shown
@@ -530,6 +575,7 @@ async function run(args) {
   for (const s of ['Idle', 'Jog', 'Run', 'Hold']) if (!seen.has(s)) throw new Error(`state ${s} never reported`);
   c.close();
   step(`states seen: ${[...new Set(c.states.map((s) => s.name))].join(' ')}`);
+  if (gaps.length) throw new Error(`the scenario ran, but:\n  - ${gaps.join('\n  - ')}`);
 }
 
 async function main() {
@@ -551,6 +597,7 @@ async function main() {
     step('PASSED');
   } catch (e) {
     process.stderr.write(`grbl_cncjs: FAILED: ${e.message}\n`);
+    if (gaps.length && !/the scenario ran, but/.test(e.message)) process.stderr.write(`  and before that:\n  - ${gaps.join('\n  - ')}\n`);
     for (const p of children) process.stderr.write(`  (${path.basename(p.logPath)}: ${p.logPath})\n`);
     rc = 1;
   }
