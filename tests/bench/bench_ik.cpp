@@ -8,6 +8,16 @@
 //   ik_numeric/<model>/kdl_nr_jl   KDL Newton-Raphson with joint limits
 //   ik_numeric/<model>/kdl_lma     KDL Levenberg-Marquardt (no limits; success
 //                                  counts only results within the limits)
+//   ik/<opw|ur model>/servoarm     issue 19: every solution (verified) of 1 024 poses
+//   ik/<opw model>/general_path    the same arm forced onto the degree-8 path
+//                                  (what it took before the OPW closed form)
+//   ik/<ur model>/numeric_near     what a UR arm had before: one numerical
+//                                  solution from a start 0.05 rad away
+//   ik/abb_irb2400_twist/servoarm  near-miss (0.01 deg twist of axes 2, 3): the
+//                                  general path it takes, with ist6 forced onto it
+//   ik_class/<model>/<class>/servoarm  per-class worst cases of the OPW and UR
+//                                  arms: theta5 = 0, 1e-9, 1e-5, elbow stretched,
+//                                  shoulder singular, unreachable
 // Success: |dp| <= 1e-6 m, |drot| <= 1e-6 rad, within the limits.
 #include <benchmark/benchmark.h>
 
@@ -19,6 +29,7 @@
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
+#include "../../kinematics/src/ik/ik_detail.hpp"
 
 #ifdef SERVOARM_WITH_KDL
 #include <kdl/chainfksolverpos_recursive.hpp>
@@ -192,6 +203,159 @@ void ik_numeric_kdl(benchmark::State& st, const char* name) {
 }
 #endif
 
+// ---------------------------------------------------------------------------
+// Issue 19: the OPW and UR classes, 1 024 poses each.
+// ---------------------------------------------------------------------------
+constexpr int kPoses19 = 1024;
+
+enum class Path19 { closed, general, numeric_near };
+
+struct Fixture19 {
+  kin::Chain chain;
+  kin::IkModel model;
+  std::vector<kin::Pose> targets;
+  std::vector<kin::JointVector> qs, refs;
+};
+
+// The model of `name`; twist: axes 2 and 3 0.01 deg out of parallel.
+kin::Chain chain19(const char* name, bool twist) {
+  const auto r = kin::load_robot(name);
+  if (!r.ok) std::abort();
+  if (!twist) return r.chain;
+  kin::Chain t = r.chain;
+  t.n_rows = 0;
+  t.n_joints = 0;
+  for (int i = 0; i < r.chain.n_rows; ++i) {
+    kin::DhRow row = r.chain.rows[static_cast<std::size_t>(i)];
+    if (i == 1) row.alpha += 0.01 * M_PI / 180;
+    kin::add_row(t, row);
+  }
+  return t;
+}
+
+// Motion of joint 1 and the key point (OPW: wrist centre, UR: where axes 5
+// and 6 meet) in the frame after the J1 motion.
+Eigen::Vector3d key_point_j1(const kin::IkModel& m, const kin::JointVector& q) {
+  const auto& d = kin::detail::solver_data(m);
+  kin::Pose T;
+  kin::forward(m.chain, q, T);
+  const Eigen::Vector3d p0 = d.C[0].inverse() * (T * m.w_tool);
+  const double m1 = d.dir[0] * q[0];
+  return Eigen::AngleAxisd(-m1, Eigen::Vector3d::UnitZ()) * p0;
+}
+
+// q with joint 2 moved so that the key point lies in the plane of axes 1 and
+// 2 (shoulder singular: the two joint-1 roots merge); false if no sign change.
+bool make_shoulder_singular(const kin::IkModel& m, kin::JointVector& q) {
+  const Eigen::Vector3d sd = kin::detail::solver_data(m).shoulder_dir;
+  auto g = [&](double q2) {
+    kin::JointVector x = q;
+    x[1] = q2;
+    return sd.dot(key_point_j1(m, x));
+  };
+  const double lo = m.chain.joint(1).lower, hi = m.chain.joint(1).upper;
+  double a = lo, ga = g(a);
+  for (int i = 1; i <= 64; ++i) {
+    double b = lo + (hi - lo) * i / 64.0;
+    const double gb = g(b);
+    if ((ga < 0) != (gb < 0)) {
+      for (int it = 0; it < 80; ++it) {
+        const double c = 0.5 * (a + b), gc = g(c);
+        if ((ga < 0) != (gc < 0)) b = c;
+        else { a = c; ga = gc; }
+      }
+      q[1] = 0.5 * (a + b);
+      return true;
+    }
+    a = b;
+    ga = gb;
+  }
+  return false;
+}
+
+enum class Class19 { random, theta5_zero, theta5_1e9, theta5_1e5, elbow_stretched, shoulder_singular, unreachable };
+
+// Classes where a joint is free (theta5 = 0; the shoulder singularity of an
+// arm without lateral offset: the wrist centre on axis 1): solved with a
+// random reference joint vector (the free joint keeps it).
+bool family(Class19 c) { return c == Class19::theta5_zero || c == Class19::shoulder_singular; }
+
+const Fixture19& fixture19(const char* name, bool twist, Class19 cls) {
+  static std::vector<std::pair<std::string, Fixture19>> cache;
+  const std::string key = std::string(name) + (twist ? "+twist" : "") + std::to_string(static_cast<int>(cls));
+  for (auto& [n, f] : cache)
+    if (n == key) return f;
+  Fixture19 f;
+  f.chain = chain19(name, twist);
+  kin::ik_prepare(f.chain, f.model);
+  const auto& d = kin::detail::solver_data(f.model);
+  std::mt19937_64 rng(1900 + static_cast<int>(cls));
+  while (static_cast<int>(f.targets.size()) < kPoses19) {
+    kin::JointVector q = random_joints(f.chain, rng);
+    if (cls == Class19::theta5_zero) q[4] = 0;
+    if (cls == Class19::theta5_1e9) q[4] = 1e-9;
+    if (cls == Class19::theta5_1e5) q[4] = 1e-5;
+    if (cls == Class19::elbow_stretched)  // maximum distance from axis 2: m3 = atan2(G2, G1)
+      q[2] = std::atan2(d.g_par[2], d.g_par[1]) / d.dir[2];
+    if (cls == Class19::shoulder_singular && !make_shoulder_singular(f.model, q)) continue;
+    kin::Pose T;
+    kin::forward(f.chain, q, T);
+    if (cls == Class19::unreachable) T.translation() *= 3.0;
+    f.targets.push_back(T);
+    f.qs.push_back(q);
+    kin::JointVector near = q;
+    for (int j = 0; j < near.size(); ++j) near[j] += 0.05;
+    f.refs.push_back(family(cls) ? random_joints(f.chain, rng) : near);
+  }
+  cache.emplace_back(key, std::move(f));
+  return cache.back().second;
+}
+
+void ik19(benchmark::State& st, const char* name, bool twist, Path19 path, Class19 cls) {
+  const Fixture19& f0 = fixture19(name, twist, cls);
+  kin::IkModel model = f0.model;
+  if (path == Path19::general) {  // the degree-8 resultant, as before the OPW case
+    kin::detail::solver_data(model).par23 = false;
+    model.method = kin::IkMethod::spherical_general;
+  }
+  kin::IkResult r;
+  kin::JointVector out;
+  std::size_t i = 0;
+  long sols = 0, n = 0, found = 0;
+  for (auto _ : st) {
+    const std::size_t k = i++ % kPoses19;
+    if (path == Path19::numeric_near) {
+      const kin::Status s = kin::detail::ik_nearest_numeric(f0.chain, f0.targets[k], f0.refs[k], out);
+      benchmark::DoNotOptimize(out);
+      sols += s == kin::Status::ok ? 1 : 0;
+    } else {
+      kin::ik_solve_all(model, f0.targets[k], family(cls) ? &f0.refs[k] : nullptr, r);
+      benchmark::DoNotOptimize(r);
+      sols += r.count;
+    }
+    ++n;
+  }
+  // Outside the timing: how often the original configuration is among them.
+  // Singular families (a joint free): the original as the reference.
+  if (path != Path19::numeric_near && cls != Class19::unreachable) {
+    for (int k = 0; k < kPoses19; ++k) {
+      kin::ik_solve_all(model, f0.targets[static_cast<std::size_t>(k)],
+                        family(cls) ? &f0.qs[static_cast<std::size_t>(k)] : nullptr, r);
+      for (int s = 0; s < r.count; ++s) {
+        double g = 0;
+        for (int j = 0; j < 6; ++j)
+          g = std::max(g, std::abs(kin::wrap_pi(r.solutions[static_cast<std::size_t>(s)].q[j] - f0.qs[static_cast<std::size_t>(k)][j])));
+        if (g < 1e-6) {
+          ++found;
+          break;
+        }
+      }
+    }
+    st.counters["original_found"] = static_cast<double>(found) / kPoses19;
+  }
+  st.counters["solutions"] = static_cast<double>(sols) / static_cast<double>(n);
+}
+
 const char* const kClosed[] = {"puma560", "puma560_craig", "stanford", "cylindrical_rpp_rrr", "ist6",
                                "rr_planar", "rrr_planar", "rlr_planar", "trr", "trl_r", "vvl_r"};
 const char* const kNumeric[] = {"puma560", "stanford", "ist6", "vvr_vr"};
@@ -203,6 +367,32 @@ const char* const kNumeric[] = {"puma560", "stanford", "ist6", "vvr_vr"};
   benchmark::RegisterBenchmark("ik_class/puma560/theta5_1e-9/servoarm", ik_class, PoseClass::theta5_1e9);
   benchmark::RegisterBenchmark("ik_class/puma560/theta5_1e-5/servoarm", ik_class, PoseClass::theta5_1e5);
   benchmark::RegisterBenchmark("ik_class/puma560/unreachable/servoarm", ik_class, PoseClass::unreachable);
+  for (const char* m : {"abb_irb2400", "kuka_kr6_r700", "ur5e", "ur10e"}) {
+    const bool opw = m[0] != 'u';
+    benchmark::RegisterBenchmark((std::string("ik/") + m + "/servoarm").c_str(), ik19, m, false, Path19::closed,
+                                 Class19::random);
+    if (opw)
+      benchmark::RegisterBenchmark((std::string("ik/") + m + "/general_path").c_str(), ik19, m, false, Path19::general,
+                                   Class19::random);
+    else
+      benchmark::RegisterBenchmark((std::string("ik/") + m + "/numeric_near").c_str(), ik19, m, false,
+                                   Path19::numeric_near, Class19::random);
+  }
+  benchmark::RegisterBenchmark("ik/ist6/general_path", ik19, "ist6", false, Path19::general, Class19::random);
+  benchmark::RegisterBenchmark("ik/abb_irb2400_twist/servoarm", ik19, "abb_irb2400", true, Path19::closed,
+                               Class19::random);
+  for (const char* m : {"abb_irb2400", "ur5e"}) {
+    const std::pair<const char*, Class19> classes[] = {{"theta5_zero", Class19::theta5_zero},
+                                                       {"theta5_1e-9", Class19::theta5_1e9},
+                                                       {"theta5_1e-5", Class19::theta5_1e5},
+                                                       {"elbow_stretched", Class19::elbow_stretched},
+                                                       {"shoulder_singular", Class19::shoulder_singular},
+                                                       {"unreachable", Class19::unreachable}};
+    for (const auto& [cn, cls] : classes)
+      benchmark::RegisterBenchmark((std::string("ik_class/") + m + "/" + cn + "/servoarm").c_str(), ik19, m, false,
+                                   Path19::closed, cls);
+  }
+  benchmark::RegisterBenchmark("ik_numeric/ur5e/servoarm", ik_numeric_servoarm, "ur5e");
   for (const char* m : kNumeric) {
     benchmark::RegisterBenchmark((std::string("ik_numeric/") + m + "/servoarm").c_str(), ik_numeric_servoarm, m);
 #ifdef SERVOARM_WITH_KDL

@@ -84,6 +84,7 @@ struct IkSolverData {
   // u(m5) = C5^T Rz(-m5) C4^T e_z, whose z component is ur_u5 . (1, c5, s5).
   Eigen::Vector3d ur_u5 = Eigen::Vector3d::Zero();
   Eigen::Vector3d ur_c4z = Eigen::Vector3d::UnitZ();  ///< C4^T e_z
+  bool ur_tilt = false;  ///< u_z = cos(m5 - phi5) exactly (ur_u5 = (0, h = 1)): see ur.cpp wrist_roots
 };
 static_assert(sizeof(IkSolverData) <= IkSolverStorage::kBytes, "raise IkSolverStorage::kBytes (ik.hpp)");
 static_assert(IkSolverStorage::kBytes - sizeof(IkSolverData) < 256, "lower IkSolverStorage::kBytes (ik.hpp)");

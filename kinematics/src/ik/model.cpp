@@ -269,6 +269,7 @@ bool detect_ur(IkModel& model) {
   auto uz = [&](double a) { return C(m, 5).linear().col(2).dot(rot_z(-a) * m.ur_c4z); };
   const double u0 = uz(0), u1 = uz(kPi / 2), u2 = uz(kPi);
   m.ur_u5 = {0.5 * (u0 + u2), 0.5 * (u0 - u2), u1 - 0.5 * (u0 + u2)};
+  m.ur_tilt = std::abs(m.ur_u5[0]) < 1e-12 && std::abs(std::hypot(m.ur_u5[1], m.ur_u5[2]) - 1.0) < 1e-12;
   if (std::hypot(m.ur_u5[1], m.ur_u5[2]) < 1e-9) {
     m.par23 = false;
     return false;

@@ -22,6 +22,7 @@
 // A candidate that misses 1e-9 m / 1e-9 rad (a root clamped at the reach
 // limit, digits lost at a singularity) goes through add_candidate (the
 // chain's FK and a few Gauss-Newton steps). Real-time, heap-free.
+#include <algorithm>
 #include <cmath>
 
 #include "../fast_trig.hpp"
@@ -63,6 +64,37 @@ inline double merge_measure(const Roots& r) {
   if (r.n < 2) return 0.0;
   if (r.c[0] * r.c[1] + r.s[0] * r.s[1] < 0) return 1.0;  // t near pi/2
   return std::abs(r.s[0] * r.c[1] - r.c[0] * r.s[1]);
+}
+
+// Joint 5: u5 . (1, c5, s5) = vz, i.e. cos t = k = (vz - W0) / h with the
+// roots phi5 +- t. Near theta5 = 0 (k -> +-1) 1 -+ k computed as 1 -+ vz
+// loses every digit of t (acos near 1): where u_z = cos(m5 - phi5) exactly
+// (W0 = 0, h = 1: axis 5 normal to axes 4 and 6, the UR wrist) they come from
+// the tilt |v_xy|^2 = 1 - vz^2 instead, exact to rounding:
+// 1 - vz = |v_xy|^2 / (1 + vz). No merging: theta5 = +-t are two wrist
+// configurations (q4, q6 differ by pi) however small t is.
+Roots wrist_roots(const IkSolverData& m, double vz, double vxy2) {
+  Roots r;
+  const double W0 = m.ur_u5[0], W1 = m.ur_u5[1], W2 = m.ur_u5[2];
+  const double h = std::sqrt(W1 * W1 + W2 * W2);
+  const double k = (vz - W0) / h;
+  double um = 1.0 - k, up = 1.0 + k;
+  if (m.ur_tilt) {
+    if (vz > 0.5) um = vxy2 / (1.0 + vz);
+    else if (vz < -0.5) up = vxy2 / (1.0 - vz);
+  }
+  if (um < -1e-9 || up < -1e-9) return r;
+  um = std::max(um, 0.0);
+  up = std::max(up, 0.0);
+  const double st = std::sqrt(um * up);
+  const double ct = std::clamp(0.5 * (up - um), -1.0, 1.0);
+  const double cp = W1 / h, sp = W2 / h;
+  r.c[0] = cp * ct - sp * st;  // phi + t
+  r.s[0] = sp * ct + cp * st;
+  r.c[1] = cp * ct + sp * st;  // phi - t
+  r.s[1] = sp * ct - cp * st;
+  r.n = st > 0 ? 2 : 1;
+  return r;
 }
 
 }  // namespace
@@ -121,7 +153,7 @@ void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref
     const Rot2 a1{r1.c[i], r1.s[i]};
     const Eigen::Vector3d nb = rz(a1, n);       // n in the frame after C0
     const Eigen::Vector3d v = F.transpose() * nb;  // n in the target's frame after J6
-    const Roots r5 = solve_basis(m.ur_u5[0] - nb.dot(z6), m.ur_u5[1], m.ur_u5[2], false, 1e-12, false);
+    const Roots r5 = wrist_roots(m, nb.dot(z6), v.x() * v.x() + v.y() * v.y());
     if (r5.n == 0) continue;
     const double wr_merge = merge_measure(r5);
     for (int k = 0; k < r5.n; ++k) {
