@@ -128,19 +128,19 @@ std::string parse(int argc, char** argv, Args& a) {
     else if (o == "--svg") e = text(a.svg);
     else if (o == "--from") e = list(a.from);
     else if (o == "--to") e = list(a.to);
-    else if (o == "--xyz") (e = movel_only()).empty() && (e = list(a.xyz)).empty();
-    else if (o == "--rpy") (e = movel_only()).empty() && (e = list(a.rpy)).empty();
-    else if (o == "--quat") (e = movel_only()).empty() && (e = list(a.quat)).empty();
+    else if (o == "--xyz") e = movej ? movel_only() : list(a.xyz);
+    else if (o == "--rpy") e = movej ? movel_only() : list(a.rpy);
+    else if (o == "--quat") e = movej ? movel_only() : list(a.quat);
     else if (o == "--vmax") e = limit(a.vmax);
     else if (o == "--amax") e = limit(a.amax);
     else if (o == "--jmax") e = limit(a.jmax);
     else if (o == "--override") e = one(a.override_pct);
     else if (o == "--rate") e = one(a.rate);
     else if (o == "--max-duration") e = one(a.max_duration);
-    else if (o == "--speed") (e = movel_only()).empty() && (e = limit(a.speed)).empty();
-    else if (o == "--accel") (e = movel_only()).empty() && (e = limit(a.accel)).empty();
-    else if (o == "--angular") (e = movel_only()).empty() && (e = limit(a.angular)).empty();
-    else if (o == "--no-slowdown") (e = movel_only()).empty() && (a.no_slowdown = true);
+    else if (o == "--speed") e = movej ? movel_only() : limit(a.speed);
+    else if (o == "--accel") e = movej ? movel_only() : limit(a.accel);
+    else if (o == "--angular") e = movej ? movel_only() : limit(a.angular);
+    else if (o == "--no-slowdown") e = movel_only(), a.no_slowdown = true;
     else return "unknown option '" + o + "' (see armctl plan --help)";
     if (!e.empty()) return e;
   }
