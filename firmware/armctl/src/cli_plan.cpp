@@ -275,6 +275,8 @@ bool write_svg(const std::string& path, const kin::Chain& c, const Samples& s, c
     legend.push_back({"joint " + std::to_string(j + 1) + (mixed ? std::string(" (") + joint_unit_name(c, j) + ")" : ""),
                       sv::color(j), "line"});
   d.legend(legend_x, top, legend);
+  if (tool)  // the path views' legend under the joints', clear of the paths
+    d.legend(legend_x, top + 18.0 * n + 30, {{"tool path", "#333", "line"}, {"start", "#2ca02c", "dot"}, {"end", "#d62728", "dot"}});
   if (tool) {
     const std::string L = length_unit_name(c);
     const std::vector<double>* other[] = {&s.y, &s.z};
@@ -299,8 +301,6 @@ bool write_svg(const std::string& path, const kin::Chain& c, const Samples& s, c
       d.raw(b);
       std::snprintf(b, sizeof b, "<circle cx=\"%.1f\" cy=\"%.1f\" r=\"5\" fill=\"#d62728\"/>\n", pn.X(ox.back()), pn.Y(oy.back()));
       d.raw(b);
-      if (k == 0)
-        d.legend(pn.px + 8, pn.py + 8, {{"tool path", "#333", "line"}, {"start", "#2ca02c", "dot"}, {"end", "#d62728", "dot"}}, 11);
     }
   }
   return d.write(path);
