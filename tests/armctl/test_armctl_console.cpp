@@ -61,6 +61,8 @@ struct Pty {
   }
 };
 
+std::string g_home;  // HOME of an interactive armctl (a temporary directory)
+
 struct Child {
   pid_t pid = -1;
   int out = -1;  // armctl's stdout + stderr (one-shot runs), -1 when on a terminal
@@ -92,7 +94,7 @@ Child start_armctl(const std::vector<std::string>& args, const std::string& tty 
       dup2(t, 1);
       dup2(t, 2);
       setenv("TERM", "xterm", 1);
-      setenv("HOME", "/tmp", 1);  // the history file: /tmp/.armctl_history
+      if (!g_home.empty()) setenv("HOME", g_home.c_str(), 1);  // the history file goes there, not into ~
     }
     execv(argv[0], argv.data());
     _exit(127);
@@ -222,6 +224,9 @@ TEST(ArmctlConsole, BadOptionValuesAreRefused) {
 #ifdef SERVOARM_TEST_LIBEDIT
 TEST(ArmctlConsole, AnswerWhileTypingRedrawsTheHalfTypedLine) {
   Pty fw, term;
+  char home[] = "/tmp/servoarm_armctl_home_XXXXXX";
+  CHECK(mkdtemp(home) != nullptr);
+  g_home = home;
   Child c = start_armctl({"console", "--serial", fw.slave}, term.slave);
   std::string screen;
   CHECK_TEXT(term.read_until(screen, "arm> ", 10), screen.c_str());
@@ -243,5 +248,10 @@ TEST(ArmctlConsole, AnswerWhileTypingRedrawsTheHalfTypedLine) {
   term.write_str("\x04");  // Ctrl-D quits
   std::string out;
   LONGS_EQUAL(0, finish(c, out, 10));
+  const std::string hist = g_home + "/.armctl_history";
+  CHECK_TEXT(std::remove(hist.c_str()) == 0, "no history written");  // the line went into the history
+  rmdir(g_home.c_str());
+  g_home = std::string();  // (its buffer is freed here, inside the test, for the leak detector)
+  g_home.shrink_to_fit();
 }
 #endif
