@@ -269,6 +269,14 @@ bool detect_ur(IkModel& model) {
   auto uz = [&](double a) { return C(m, 5).linear().col(2).dot(rot_z(-a) * m.ur_c4z); };
   const double u0 = uz(0), u1 = uz(kPi / 2), u2 = uz(kPi);
   m.ur_u5 = {0.5 * (u0 + u2), 0.5 * (u0 - u2), u1 - 0.5 * (u0 + u2)};
+  {
+    const Eigen::Matrix3d& R2 = C(m, 2).linear();
+    const Eigen::Matrix3d& R3 = C(m, 3).linear();
+    m.ur_zrot = std::abs(R2(2, 2) - 1.0) < 1e-15 && std::abs(R3(2, 2) - 1.0) < 1e-15;
+    const double g = std::atan2(R2(1, 0), R2(0, 0)) + std::atan2(R3(1, 0), R3(0, 0));
+    m.ur_gc = std::cos(g);
+    m.ur_gs = std::sin(g);
+  }
   m.ur_tilt = std::abs(m.ur_u5[0]) < 1e-12 && std::abs(std::hypot(m.ur_u5[1], m.ur_u5[2]) - 1.0) < 1e-12;
   if (std::hypot(m.ur_u5[1], m.ur_u5[2]) < 1e-9) {
     m.par23 = false;

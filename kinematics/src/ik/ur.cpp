@@ -99,7 +99,9 @@ Roots wrist_roots(const IkSolverData& m, double vz, double vxy2) {
 
 }  // namespace
 
-void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
+// Flattened (the Eigen products, solve_basis and the helpers inlined), as
+// solve_reduced and add_candidate are.
+[[gnu::flatten]] void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
   const IkSolverData& m = solver_data(model);
   double mref[6] = {0, 0, 0, 0, 0, 0};
   if (q_ref)
@@ -141,8 +143,19 @@ void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref
   const Eigen::Vector3d& t6c = C(m, 6).translation();
 
   // Candidates: (s, c) pairs of every motion, angles in one batch at the end.
+  // Every (cos, sin) pair once, in slots (joint 1: per shoulder root; 5, 6:
+  // per wrist root; 2, 3, 4 per candidate): one atan2 and one wrap each.
+  double sy[36], sx[36];
+  std::int8_t sj[36];
+  int ns = 0;
+  auto slot = [&](const Rot2& a, int j) {
+    sy[ns] = a.s;
+    sx[ns] = a.c;
+    sj[ns] = static_cast<std::int8_t>(j);
+    return static_cast<std::int8_t>(ns++);
+  };
   struct Cand {
-    Rot2 a[6];
+    std::int8_t sl[6];
     Branch br;
     std::uint8_t sing;
     double ep, er;
@@ -151,6 +164,7 @@ void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref
   int nc = 0;
   for (int i = 0; i < r1.n; ++i) {
     const Rot2 a1{r1.c[i], r1.s[i]};
+    std::int8_t sl1 = -1;
     const Eigen::Vector3d nb = rz(a1, n);       // n in the frame after C0
     const Eigen::Vector3d v = F.transpose() * nb;  // n in the target's frame after J6
     const Roots r5 = wrist_roots(m, nb.dot(z6), v.x() * v.x() + v.y() * v.y());
@@ -158,6 +172,7 @@ void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref
     const double wr_merge = merge_measure(r5);
     for (int k = 0; k < r5.n; ++k) {
       const Rot2 a5{r5.c[k], r5.s[k]};
+      std::int8_t sl5 = -1, sl6 = -1;
       const Eigen::Vector3d u = R5.transpose() * rz({a5.c, -a5.s}, m.ur_c4z);
       std::uint8_t sing = sing1;
       const double uxy2 = u.x() * u.x() + u.y() * u.y();
@@ -183,6 +198,25 @@ void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref
       if (r3.free) continue;
       const double el_merge = r3.n == 1 ? 0.0 : merge_measure(r3);
       merge_close_roots(r3);
+      // C2, C3 rotations about z (ur_zrot, the usual DH rows): then
+      // C1 Rz2 C2 Rz3 C3 = C1 Rz(sigma), sigma = m2 + m3 + gamma, and with
+      // Z = C1^T R14 = Rz(mu) (exactly, for a solution) m4 = mu - sigma; the
+      // rotation error |Rz(mu) - Z|_F and the part (Rz(mu) - Z) L of the
+      // position error are the same for both elbow roots (computed once):
+      // per root only |E5 + Rz(m2) w - u2| remains (rotation-invariant form
+      // of the verification above).
+      Rot2 mu;
+      double f2z = 0;
+      Eigen::Vector3d E5 = Eigen::Vector3d::Zero();
+      if (m.ur_zrot) {
+        const Eigen::Matrix3d Z = R1.transpose() * R14;
+        if (!angle_from_to(1.0, 0.0, Z(0, 0), Z(1, 0), 1e-40, mu)) mu = Rot2{};
+        Eigen::Matrix3d Dz;
+        Dz << mu.c - Z(0, 0), -mu.s - Z(0, 1), -Z(0, 2), mu.s - Z(1, 0), mu.c - Z(1, 1), -Z(1, 2), -Z(2, 0), -Z(2, 1),
+            1.0 - Z(2, 2);
+        f2z = Dz.squaredNorm();
+        E5 = Dz * L;
+      }
       for (int e = 0; e < r3.n && nc < 8; ++e) {
         const Rot2 a3{r3.c[e], r3.s[e]};
         const Eigen::Vector3d w = R2 * rz(a3, m.w_par) + t2;
@@ -194,26 +228,39 @@ void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref
           detail::sincos_poly(mref[1], a2.s, a2.c);
           cd.sing |= kSingularShoulder;
         }
-        const Eigen::Matrix3d Y = mul_rz(mul_rz(R1, a2) * R2, a3) * R3;
-        const Eigen::Matrix3d X = Y.transpose() * R14;
         Rot2 a4;
-        if (!angle_from_to(1.0, 0.0, X(0, 0), X(1, 0), 1e-40, a4)) a4 = Rot2{};
-        // Verification (exact to rounding): the frame after J4 motion that
-        // (m2, m3, m4) give against the target's.
-        Eigen::Matrix3d D;
-        D << a4.c - X(0, 0), -a4.s - X(0, 1), -X(0, 2), a4.s - X(1, 0), a4.c - X(1, 1), -X(1, 2), -X(2, 0), -X(2, 1),
-            1.0 - X(2, 2);
-        const Eigen::Vector3d o_fk = R1 * rz(a2, w) + t1;
-        const Eigen::Vector3d ev = D * L + Y.transpose() * (o_fk - o);
-        const double f2 = D.squaredNorm();
-        cd.ep = ev.norm();
+        double f2 = f2z;
+        if (m.ur_zrot) {
+          const Rot2 s23{a2.c * a3.c - a2.s * a3.s, a2.s * a3.c + a2.c * a3.s};
+          const Rot2 sg{s23.c * m.ur_gc - s23.s * m.ur_gs, s23.s * m.ur_gc + s23.c * m.ur_gs};
+          a4 = Rot2{mu.c * sg.c + mu.s * sg.s, mu.s * sg.c - mu.c * sg.s};  // mu - sigma
+          cd.ep = (E5 + rz(a2, w) - u2).norm();
+        } else {
+          const Eigen::Matrix3d Y = mul_rz(mul_rz(R1, a2) * R2, a3) * R3;
+          const Eigen::Matrix3d X = Y.transpose() * R14;
+          if (!angle_from_to(1.0, 0.0, X(0, 0), X(1, 0), 1e-40, a4)) a4 = Rot2{};
+          // Verification (exact to rounding): the frame after J4 motion that
+          // (m2, m3, m4) give against the target's.
+          Eigen::Matrix3d D;
+          D << a4.c - X(0, 0), -a4.s - X(0, 1), -X(0, 2), a4.s - X(1, 0), a4.c - X(1, 1), -X(1, 2), -X(2, 0),
+              -X(2, 1), 1.0 - X(2, 2);
+          const Eigen::Vector3d o_fk = R1 * rz(a2, w) + t1;
+          const Eigen::Vector3d ev = D * L + Y.transpose() * (o_fk - o);
+          f2 = D.squaredNorm();
+          cd.ep = ev.norm();
+        }
         cd.er = f2 < 1e-8 ? std::sqrt(0.5 * f2) : 2.0 * std::asin(std::min(1.0, std::sqrt(f2 / 8.0)));
-        cd.a[0] = a1;
-        cd.a[1] = a2;
-        cd.a[2] = a3;
-        cd.a[3] = a4;
-        cd.a[4] = a5;
-        cd.a[5] = a6;
+        if (sl1 < 0) sl1 = slot(a1, 0);
+        if (sl5 < 0) {
+          sl5 = slot(a5, 4);
+          sl6 = slot(a6, 5);
+        }
+        cd.sl[0] = sl1;
+        cd.sl[1] = slot(a2, 1);
+        cd.sl[2] = slot(a3, 2);
+        cd.sl[3] = slot(a4, 3);
+        cd.sl[4] = sl5;
+        cd.sl[5] = sl6;
         cd.br.shoulder = r1.label[i];
         cd.br.wrist = r5.label[k];
         cd.br.elbow = r3.label[e];
@@ -223,13 +270,13 @@ void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref
   }
   if (nc == 0) return;
   // Every angle in one batch (pairs).
-  double sy[48], sx[48], ang[48];
-  for (int k = 0; k < nc; ++k)
-    for (int j = 0; j < 6; ++j) {
-      sy[k * 6 + j] = cand[k].a[j].s;
-      sx[k * 6 + j] = cand[k].a[j].c;
-    }
-  for (int i = 0; i < nc * 6; i += 2) detail::atan2_poly_x2(sy + i, sx + i, ang + i);
+  double ang[36];
+  if (ns & 1) {
+    sy[ns] = 0.0;
+    sx[ns] = 1.0;
+    sj[ns] = 0;
+  }
+  for (int i = 0; i < ns; i += 2) detail::atan2_poly_x2(sy + i, sx + i, ang + i);
   double ref[6], dir[6];
   bool narrow[6];
   for (int j = 0; j < 6; ++j) {
@@ -247,10 +294,20 @@ void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref
     const double d = std::abs(a - b);
     return d <= 1e-7 || (d >= 2.0 * kPi - 2e-7 && std::abs(fast_wrap(a - b)) <= 1e-7);
   };
+  // Joint values and limit checks per slot.
+  double qs[36];
+  bool ins[36];
+  for (int i = 0; i < ns; ++i) {
+    const int j = sj[i];
+    qs[i] = wrap(j, dir[j] * ang[i]);
+    const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
+    ins[i] = (qs[i] >= jw.lo9) & (qs[i] <= jw.hi9);
+  }
   bool foreign = false;
   for (int k = 0; k < nc; ++k) {
     const Cand& cd = cand[k];
-    const double* mot = ang + k * 6;
+    double mot[6];
+    for (int j = 0; j < 6; ++j) mot[j] = ang[cd.sl[j]];
     if (!(cd.ep <= kVerifyPos && cd.er <= kVerifyRot)) {
       if (cd.ep < 1e-4 * m.scale && cd.er < 1e-4) {
         const int before = res.count;
@@ -263,9 +320,8 @@ void solve_ur(const IkModel& model, const Pose& target, const JointVector* q_ref
     double q[6];
     bool in = true;
     for (int j = 0; j < 6; ++j) {
-      q[j] = wrap(j, dir[j] * mot[j]);
-      const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
-      in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
+      q[j] = qs[cd.sl[j]];
+      in &= ins[cd.sl[j]];
     }
     // Duplicates only where roots (nearly) merged: singular candidates, or
     // against add_candidate's solutions.
