@@ -9,9 +9,117 @@
 #include <cerrno>
 #include <cfenv>
 #include <charconv>
+#include <cstdint>
+#include <cstdio>
 #include <cstring>
 
 namespace servoarm::kin {
+
+namespace {
+
+/// Length of the valid UTF-8 sequence at t[i] (1 for ASCII), 0 when it is not one.
+std::size_t utf8_len(std::string_view t, std::size_t i, std::uint32_t& cp) {
+  const auto c = static_cast<unsigned char>(t[i]);
+  std::size_t n = 0;
+  if (c < 0x80) {
+    cp = c;
+    return 1;
+  }
+  if (c >= 0xC2 && c <= 0xDF) n = 2, cp = c & 0x1Fu;
+  else if (c >= 0xE0 && c <= 0xEF) n = 3, cp = c & 0x0Fu;
+  else if (c >= 0xF0 && c <= 0xF4) n = 4, cp = c & 0x07u;
+  else return 0;
+  if (i + n > t.size()) return 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    const auto d = static_cast<unsigned char>(t[i + k]);
+    if ((d & 0xC0u) != 0x80u) return 0;
+    cp = (cp << 6) | (d & 0x3Fu);
+  }
+  if ((n == 3 && cp < 0x800) || (n == 4 && (cp < 0x10000 || cp > 0x10FFFF)) || (cp >= 0xD800 && cp <= 0xDFFF)) return 0;
+  return n;
+}
+
+/// toml++ 3.3 asks is_non_ascii_horizontal_whitespace() about non-ASCII characters it
+/// meets outside string values (bare text, quoted keys, table headers, after a
+/// line-ending backslash), and that function reaches __builtin_unreachable for most of
+/// U+00A1-U+0499, U+1492-U+188B, U+1C86-U+207F and U+2F6E-U+3367: undefined behaviour
+/// on a file holding just "é" (found by tests/fuzz/fuzz_description). So toml++ is never
+/// shown a non-ASCII character: in basic strings (keys and values) each becomes its
+/// \uXXXX / \UXXXXXXXX escape (the same string), in comments a space (nobody reads
+/// them), and anywhere else -- bare text, literal strings (which cannot hold escapes),
+/// right after a backslash -- the text is refused here with its line and column.
+/// Invalid UTF-8 is left for toml++ to report. Columns of later errors on a line with
+/// escaped characters are counted in the escaped text.
+std::string ascii_only(std::string_view t, std::string& where) {
+  std::string out;
+  out.reserve(t.size() + t.size() / 4);
+  std::size_t line = 1, col = 1;
+  enum class In { text, comment, basic, ml_basic, literal, ml_literal } in = In::text;
+  bool escape = false;
+  for (std::size_t i = 0; i < t.size();) {
+    std::uint32_t cp = 0;
+    const std::size_t n = utf8_len(t, i, cp);
+    if (n == 0) {  // not UTF-8: toml++ reports it
+      out.append(t.substr(i));
+      return out;
+    }
+    const char c = t[i];
+    auto starts = [&](const char* s) { return t.compare(i, std::strlen(s), s) == 0; };
+    if (n > 1) {
+      if (in == In::comment) {
+        out += ' ';
+      } else if ((in == In::basic || in == In::ml_basic) && !escape) {
+        char b[12];
+        std::snprintf(b, sizeof b, cp > 0xFFFF ? "\\U%08X" : "\\u%04X", static_cast<unsigned>(cp));
+        out += b;
+      } else {
+        where = std::to_string(line) + ":" + std::to_string(col) +
+                (in == In::text ? ": a non-ASCII character outside a string or comment"
+                                : ": a non-ASCII character in a literal ('...') string or after a backslash "
+                                  "(write it in a \"...\" string)");
+        return out;
+      }
+      i += n;
+      ++col;
+      escape = false;
+      continue;
+    }
+    std::size_t take = 1;
+    switch (in) {
+      case In::text:
+        if (c == '#') in = In::comment;
+        else if (starts("\"\"\"")) in = In::ml_basic, take = 3;
+        else if (c == '"') in = In::basic;
+        else if (starts("'''")) in = In::ml_literal, take = 3;
+        else if (c == '\'') in = In::literal;
+        break;
+      case In::comment:
+        if (c == '\n') in = In::text;
+        break;
+      case In::basic:
+      case In::ml_basic:
+        if (escape) escape = false;
+        else if (c == '\\') escape = true;
+        else if (in == In::basic && (c == '"' || c == '\n')) in = In::text;
+        else if (in == In::ml_basic && starts("\"\"\"")) in = In::text, take = 3;
+        break;
+      case In::literal:
+        if (c == '\'' || c == '\n') in = In::text;
+        break;
+      case In::ml_literal:
+        if (starts("'''")) in = In::text, take = 3;
+        break;
+    }
+    for (std::size_t k = 0; k < take && i < t.size(); ++k, ++i) {
+      out += t[i];
+      if (t[i] == '\n') ++line, col = 1;
+      else ++col;
+    }
+  }
+  return out;
+}
+
+}  // namespace
 
 std::string read_text_file(const std::string& path, std::string& text, std::size_t max_bytes) {
   // O_NONBLOCK: opening a FIFO without a writer must not hang; fstat then refuses it.
@@ -61,9 +169,15 @@ TomlDocument parse_toml(std::string_view text, const std::string& origin, std::s
   }
   // toml++ reads 1e400 with the C library, which raises FE_OVERFLOW (the number is then
   // refused as out of range): the floating-point flags are left as they were before.
+  std::string where;
+  const std::string ascii = ascii_only(text, where);
+  if (!where.empty()) {
+    doc.error = origin + ":" + where;
+    return doc;
+  }
   std::fenv_t fenv;
   std::feholdexcept(&fenv);
-  toml::parse_result r = toml::parse(text, std::string_view(origin));
+  toml::parse_result r = toml::parse(std::string_view(ascii), std::string_view(origin));
   std::fesetenv(&fenv);
   if (!r) {
     const toml::parse_error& e = r.error();
