@@ -47,11 +47,6 @@ kin::LoadResult load_robot_checked(const std::string& name_or_path) {
                 "): --robot takes a built-in model name or a .toml description file";
       return r;
     }
-    if (st.st_size > kMaxDescriptionBytes) {
-      r.error = name_or_path + ": " + std::to_string(st.st_size) + " bytes, more than the " +
-                std::to_string(kMaxDescriptionBytes) + " a robot description may have";
-      return r;
-    }
   }
   return kin::load_robot(name_or_path);
 }

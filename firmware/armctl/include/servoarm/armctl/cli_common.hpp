@@ -34,8 +34,8 @@ bool all_finite(const double* v, int n);
 std::string json_array(const double* v, int n);
 
 /// kin::load_robot, but a path that is not a regular file (a directory, a FIFO,
-/// /dev/zero) or is larger than kMaxDescriptionBytes is refused first, naming the path.
-inline constexpr long kMaxDescriptionBytes = 1 << 20;
+/// /dev/zero) is refused first, naming the path and what it is (the loader itself caps
+/// the size: kin::kMaxInputFileBytes, file_input.hpp).
 kin::LoadResult load_robot_checked(const std::string& name_or_path);
 
 /// Joint values typed by a user (description units) -> SI; checks the count.
