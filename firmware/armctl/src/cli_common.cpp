@@ -51,6 +51,23 @@ kin::LoadResult load_robot_checked(const std::string& name_or_path) {
   return kin::load_robot(name_or_path);
 }
 
+std::string check_position(const char* option, const std::vector<double>& values, const kin::Chain& chain) {
+  for (double x : values)
+    if (!(std::abs(x * chain.length_unit) <= kMaxPositionM))
+      return std::string(option) + ": " + num(x) + " " + length_unit_name(chain) + " is not a plausible position (at most " +
+             num(kMaxPositionM / chain.length_unit) + " " + length_unit_name(chain) + ")";
+  return "";
+}
+
+std::string check_angles(const char* option, const std::vector<double>& values, const kin::Chain& chain) {
+  const double max_rad = kMaxOrientationDeg * M_PI / 180;
+  for (double r : values)
+    if (!(std::abs(r * chain.angle_unit) <= max_rad))
+      return std::string(option) + ": " + num(r) + " " + angle_unit_name(chain) + " is not a plausible angle (at most " +
+             num(max_rad / chain.angle_unit) + " " + angle_unit_name(chain) + ")";
+  return "";
+}
+
 std::string json_array(const double* v, int n) {
   std::string s = "[";
   for (int i = 0; i < n; ++i) s += (i ? ", " : "") + num(v[i]);

@@ -67,8 +67,7 @@ const char* kPlanUsage =
 constexpr double kDefaultMaxDuration = 600;  // s
 constexpr double kMaxMaxDuration = 86400;    // s: --max-duration at most one day
 constexpr long kMaxSamples = 1000000;
-constexpr double kMaxOrientationDeg = 3600;  // --rpy angles: 10 turns
-constexpr double kMaxPositionM = 1000;       // --xyz coordinates: 1 km
+// (--xyz and --rpy bounds: kMaxPositionM, kMaxOrientationDeg in cli_common.hpp)
 
 struct Args {
   std::string kind, robot, csv, svg;
@@ -421,14 +420,8 @@ int cli_plan(int argc, char** argv) {
     kin::forward(chain, q1, target);
     if (!all_finite(target.matrix().data(), 16)) return usage_error("--to: the tool pose is not finite for these joint values");
   } else {
-    for (double x : a.xyz)
-      if (!(std::abs(x * chain.length_unit) <= kMaxPositionM))
-        return usage_error("--xyz: " + num(x) + " " + length_unit_name(chain) + " is not a plausible position (at most " +
-                           num(kMaxPositionM / chain.length_unit) + " " + length_unit_name(chain) + ")");
-    for (double r : a.rpy)
-      if (!(std::abs(r * chain.angle_unit) <= kMaxOrientationDeg * M_PI / 180))
-        return usage_error("--rpy: " + num(r) + " " + angle_unit_name(chain) + " is not a plausible angle (at most " +
-                           num(kMaxOrientationDeg * M_PI / 180 / chain.angle_unit) + " " + angle_unit_name(chain) + ")");
+    if (const std::string e2 = check_position("--xyz", a.xyz, chain); !e2.empty()) return usage_error(e2);
+    if (const std::string e2 = check_angles("--rpy", a.rpy, chain); !e2.empty()) return usage_error(e2);
     target.translation() = Eigen::Vector3d(a.xyz[0], a.xyz[1], a.xyz[2]) * chain.length_unit;
     if (!a.rpy.empty()) {
       target.linear() = kin::rotation_from_rpy(a.rpy[0] * chain.angle_unit, a.rpy[1] * chain.angle_unit,

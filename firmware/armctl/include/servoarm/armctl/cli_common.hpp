@@ -38,6 +38,15 @@ std::string json_array(const double* v, int n);
 /// the size: kin::kMaxInputFileBytes, file_input.hpp).
 kin::LoadResult load_robot_checked(const std::string& name_or_path);
 
+/// Plausible targets typed by a user (description units): a position coordinate at most
+/// kMaxPositionM, an orientation angle (rpy, zyz) at most kMaxOrientationDeg. Each returns
+/// "" or one line naming the option and the value, e.g. "--rpy: 1e+300 deg is not a
+/// plausible angle (at most 3600 deg)".
+inline constexpr double kMaxPositionM = 1000;       // 1 km
+inline constexpr double kMaxOrientationDeg = 3600;  // 10 turns
+std::string check_position(const char* option, const std::vector<double>& values, const kin::Chain& chain);
+std::string check_angles(const char* option, const std::vector<double>& values, const kin::Chain& chain);
+
 /// Joint values typed by a user (description units) -> SI; checks the count.
 /// On error fills `error` (one line) and returns false.
 bool joints_from_user(const kin::Chain& chain, const std::vector<double>& values, kin::JointVector& q,
