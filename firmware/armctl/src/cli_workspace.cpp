@@ -511,8 +511,9 @@ bool write_svg(const std::string& path, const kin::Chain& c, const WorkspaceResu
   std::snprintf(title, sizeof title, "%s: workspace in the %s plane (%c = %s %s), area %s", c.name.data(), w.plane.c_str(),
                 "xyz"[3 - iu - iv], num(w.level / L).c_str(), lu.c_str(), area_text(c, w.area).c_str());
   d.text(90, 28, title, "start", 15);
-  d.text(90, 46, "tool point, joint limits respected; grid " + std::to_string(std::max(w.nu, w.nv)) + " cells of " +
-                     num(std::round(w.cell / L * 1000) / 1000) + " " + lu,
+  char cell[32];
+  std::snprintf(cell, sizeof cell, "%.3g", w.cell / L);
+  d.text(90, 46, "tool point, joint limits respected; grid " + std::to_string(std::max(w.nu, w.nv)) + " cells of " + cell + " " + lu,
          "start", 11, "#555");
   d.axes(p, std::string(1, w.u) + " [" + lu + "]", std::string(1, w.v) + " [" + lu + "]");
   // The region: one rectangle per run of cells in a row.
@@ -610,10 +611,14 @@ int cli_kin_workspace(int argc, char** argv) {
   const int normal = 3 - axis_index(w.u) - axis_index(w.v);
   std::printf("workspace of %s in the %s plane (%c = %s %s): area %s\n", chain.name.data(), w.plane.c_str(), "xyz"[normal],
               num(w.level / L).c_str(), lu, area_text(chain, w.area).c_str());
+  auto g4 = [](double v) {  // 4 significant digits, whatever the unit
+    char b[32];
+    std::snprintf(b, sizeof b, "%.4g", std::abs(v) < 5e-13 ? 0.0 : v);
+    return std::string(b);
+  };
   std::printf("  %c from %s to %s %s, %c from %s to %s %s (cell centres); grid of %s %s cells, %ld FK evaluations; %s\n",
-              w.u, num(std::round(ulo / L * 10) / 10).c_str(), num(std::round(uhi / L * 10) / 10).c_str(), lu, w.v,
-              num(std::round(vlo / L * 10) / 10).c_str(), num(std::round(vhi / L * 10) / 10).c_str(), lu,
-              num(std::round(w.cell / L * 1000) / 1000).c_str(), lu, w.evaluations,
+              w.u, g4(ulo / L).c_str(), g4(uhi / L).c_str(), lu, w.v, g4(vlo / L).c_str(), g4(vhi / L).c_str(), lu,
+              g4(w.cell / L).c_str(), lu, w.evaluations,
               w.method == "planar" ? "planar arm" : "joint 1 turns about the base z axis (solved for, limits kept)");
   if (!csv_path.empty()) {
     if (!write_csv(csv_path, chain, w)) return usage_error("cannot write " + csv_path);
