@@ -42,7 +42,7 @@ class Reader {
   /// Record the first error: "<origin>[:line:col]: [where: ]what". Returns false.
   bool fail(const toml::node* at, const std::string& where, const std::string& what) {
     if (error_.empty())
-      error_ = (at ? source_text(at->source(), origin_) : origin_) + ": " + (where.empty() ? "" : where + ": ") + what;
+      error_ = one_line((at ? source_text(at->source(), origin_) : origin_) + ": " + (where.empty() ? "" : where + ": ") + what);
     return false;
   }
   bool failed() const { return !error_.empty(); }

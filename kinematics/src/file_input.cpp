@@ -164,7 +164,7 @@ std::string source_text(const toml::source_region& where, const std::string& ori
 TomlDocument parse_toml(std::string_view text, const std::string& origin, std::size_t max_bytes) {
   TomlDocument doc;
   if (text.size() > max_bytes) {
-    doc.error = origin + ": larger than " + std::to_string(max_bytes) + " bytes (" + std::to_string(text.size()) + ")";
+    doc.error = one_line(origin) + ": larger than " + std::to_string(max_bytes) + " bytes (" + std::to_string(text.size()) + ")";
     return doc;
   }
   // toml++ reads 1e400 with the C library, which raises FE_OVERFLOW (the number is then
@@ -172,7 +172,7 @@ TomlDocument parse_toml(std::string_view text, const std::string& origin, std::s
   std::string where;
   const std::string ascii = ascii_only(text, where);
   if (!where.empty()) {
-    doc.error = origin + ":" + where;
+    doc.error = one_line(origin + ":" + where);
     return doc;
   }
   std::fenv_t fenv;
@@ -181,14 +181,33 @@ TomlDocument parse_toml(std::string_view text, const std::string& origin, std::s
   std::fesetenv(&fenv);
   if (!r) {
     const toml::parse_error& e = r.error();
-    std::string what(e.description());
-    for (char& c : what)
-      if (c == '\n' || c == '\r') c = ' ';
-    doc.error = source_text(e.source(), origin) + ": not valid TOML: " + what;
+    doc.error = one_line(source_text(e.source(), origin) + ": not valid TOML: " + std::string(e.description()));
     return doc;
   }
   doc.table = std::move(r).table();
   return doc;
+}
+
+std::string one_line(std::string msg) {
+  std::string out;
+  out.reserve(msg.size());
+  for (const char ch : msg) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (c >= 0x20 && c != 0x7F) {
+      out += ch;
+    } else if (c == '\n') {
+      out += "\\n";
+    } else if (c == '\t') {
+      out += "\\t";
+    } else if (c == '\r') {
+      out += "\\r";
+    } else {
+      char b[8];
+      std::snprintf(b, sizeof b, "\\x%02X", c);
+      out += b;
+    }
+  }
+  return out;
 }
 
 const char* type_name(const toml::node& v) {

@@ -167,6 +167,9 @@ TEST(Description, EveryErrorNamesTheKeyAndTheJoint) {
       {with_header(j + "gear_ratio = 1e-300\n"), {"joint 1: key 'gear_ratio'", "plausible range"}},
       {with_header(j + "friction = [1e300, 0]\n"), {"joint 1: key 'friction'", "1e5"}},
       {with_header(j + "name = 5\n"), {"joint 1: key 'name'", "expected a string"}},
+      // a string holding a newline stays one line in the message (found by fuzzing)
+      {with_header(j + "[[joint]]\ntype = \"rev\\nute\"\n"), {"joint 2", "got \"rev\\nute\""}},
+      {with_header(j + "\"a\\tb\" = 1\n"), {"joint 1", "key 'a\\tb' is not known"}},
       {"this is not toml\n", {"not valid TOML", ""}},
       // inertial keys (docs/dynamics.md)
       {with_header(j + "mass = -1\n"), {"joint 1", "'mass': must not be negative"}},

@@ -619,7 +619,8 @@ std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
   return "";
 }
 
-std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
+namespace {
+std::string load_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
   kin::TomlDocument doc = kin::parse_toml(text, origin, kMaxFileBytes);  // size, UTF-8, nesting, syntax
   if (!doc.error.empty()) return doc.error;
   const toml::table& top = doc.table;
@@ -673,6 +674,11 @@ std::string load_config_text(const std::string& text, const std::string& origin,
   }
   cfg = c;
   return "";
+}
+}  // namespace
+
+std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
+  return kin::one_line(load_text(text, origin, cfg));  // a key or string from the file may hold a newline
 }
 
 std::string load_config_file(const std::string& path, FwConfig& cfg) {

@@ -72,6 +72,10 @@ std::string source_text(const toml::source_region& where, const std::string& ori
 /// "an array", "a table", "a date/time".
 const char* type_name(const toml::node& v);
 
+/// `msg` as one line: control characters a file can put into a key or a string (newline,
+/// tab, ...) written as \n, \t, \r or \xHH. Loaders pass every message through it.
+std::string one_line(std::string msg);
+
 /// A value as the file wrote it (strings quoted), shortened to about 40 characters.
 std::string value_text(const toml::node& v);
 
