@@ -35,6 +35,7 @@ std::string sample_line(const CommandSpec& e) {
     case ArgShape::pose_speed: l += " 400 0 300 180 0 90 speed=50"; break;
     case ArgShape::pose: l += " 400 0 300"; break;
     case ArgShape::joints_opt: l += " 0 10 20 0 30 0"; break;
+    case ArgShape::jog: l += " j3 +5 speed=20"; break;
   }
   return l;
 }
@@ -118,4 +119,27 @@ TEST(CommandTable, ReferencePageIsGeneratedFromTheTable) {
   changed.replace(at + row.size(), 5, " RAMP");
   CHECK(!console_reference_mismatch(changed).empty());
   CHECK(has(console_reference_mismatch("# no markers\n"), "markers"));
+}
+
+// The GRBL '$' table: every entry parses to its Cmd (the $J= one with G-code words), is in
+// `help` and in the reference page; settings writes and unknown $ words are refused.
+TEST(CommandTable, EveryGrblEntryIsReachableAndListed) {
+  std::string help;
+  CHECK(help_text("", "", help));
+  const std::string ref = console_reference_markdown();
+  for (const GrblSpec& g : kGrblCommands) {
+    const std::string line = std::string("$") + g.word + (std::string(g.word) == "J=" ? "G91 X1 F100" : "");
+    GcodeModal m;
+    Command c;
+    const ParseResult r = parse_line(line, kN, m, c);
+    if (!r.ok()) FAIL(("'" + line + "' refused: " + r.message.data()).c_str());
+    CHECK_TEXT(c.cmd == g.cmd, line.c_str());
+    CHECK_TEXT(has(help, g.usage), g.usage);
+    CHECK_TEXT(has(ref, g.usage), g.usage);
+  }
+  for (const char* bad : {"$Q", "$100=5", "$J", "$JG91 X1 F100", "$RST=*"}) {
+    GcodeModal m;
+    Command c;
+    CHECK_TEXT(!parse_line(bad, kN, m, c).ok(), bad);
+  }
 }

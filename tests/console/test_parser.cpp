@@ -281,7 +281,7 @@ TEST(Parser, GcodeModalStateAndUnits) {
 TEST(Parser, MalformedGcode) {
   const Bad cases[] = {
       {"G2 X1 Y1 I1", CmdError::unsupported},
-      {"G17", CmdError::unsupported},
+      {"G18", CmdError::unsupported},  // (G17, the XY plane, is accepted: senders send it)
       {"M3 S1000", CmdError::unsupported},
       {"M999", CmdError::unsupported},
       {"G1 E5", CmdError::unsupported},

@@ -919,6 +919,9 @@ TEST(Controller, StopHoldDisableInTheCycleAMoveIsQueuedCancelIt) {
         case RequestOp::reset:
         case RequestOp::resume:
         case RequestOp::set_zero:
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive:  // (not among the requests of this test)
           CHECK_TEXT(t.state == ArmState::estop, what.c_str());
           LONGS_EQUAL(0, t.queued);
           break;

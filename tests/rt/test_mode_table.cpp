@@ -66,10 +66,21 @@ struct TableRig {
   }
   Mode mode() const { return ctl->mode(); }
   /// Send a request, run one cycle, return its reply (the cycle it ran in: spy->cycle).
-  Reply request(RequestOp op) {
+  /// RequestOp::jog carries a joint jog of joint 1 by +10 deg at 50 %, or `jog` when given.
+  Reply request(RequestOp op, const JogSpec* jog = nullptr) {
     Request r;
     r.op = op;
     r.seq = ++seq;
+    if (op == RequestOp::jog) {
+      if (jog != nullptr) {
+        r.jog = *jog;
+      } else {
+        r.jog.space = JogSpace::joint;
+        r.jog.q_goal = q_cmd();
+        r.jog.q_goal[0] += 10 * kDeg;
+        r.jog.override = 0.5;
+      }
+    }
     if (!ctl->requests().push(r)) FAIL("request queue full");
     cycle();
     Reply rep;
@@ -206,6 +217,20 @@ void enter(TableRig& r, Mode m) {
       enter(r, Mode::estop_ramp);
       r.run_until(Mode::estop, 3000, "estop ramp");
       return;
+    case Mode::jogging: {
+      r.enable();
+      JogSpec js;  // joint 1 towards its upper limit, continuous, a deadman longer than the test
+      js.space = JogSpace::joint;
+      js.continuous = true;
+      js.deadman_s = 60;
+      js.q_goal = r.q_cmd();
+      js.q_goal[0] = kin::limits_from(r.app.chain).upper[0];
+      js.override = 0.3;
+      r.request(RequestOp::jog, &js);
+      r.cycles(150);
+      r.expect(Mode::jogging, "continuous jog");
+      return;
+    }
   }
 }
 
@@ -224,10 +249,11 @@ const std::vector<Call> kEnable{Call::enable};
 const std::vector<Call> kQuick{Call::quick_stop};
 const std::vector<Call> kZero6(6, Call::set_zero);
 
-constexpr RtResult ok = RtResult::ok, bad = RtResult::bad_state, flt = RtResult::fault;
+constexpr RtResult ok = RtResult::ok, bad = RtResult::bad_state, flt = RtResult::fault, busy = RtResult::busy;
 
 // What every request does in every mode (ramp configuration; the quick-stop rows with
-// the drives' quick stop). Columns: enable, disable, stop, estop, reset, hold, resume, set_zero.
+// the drives' quick stop). Columns: enable, disable, stop, estop, reset, hold, resume, set_zero,
+// jog, jog_cancel, jog_keepalive.
 Expect expected(Mode m, RequestOp op) {
   // Requests that do nothing but answer, the same in many modes.
   const auto stays = [m](RtResult res, const char* text) { return Expect{res, text, m, kNone}; };
@@ -235,6 +261,30 @@ Expect expected(Mode m, RequestOp op) {
   const Expect not_moving = stays(ok, "not moving");
   const Expect not_holding = stays(ok, "not holding");
   const Expect no_zero = stays(bad, "home zero needs the arm disabled (it is ");
+  // The jog columns: outside the jogging mode a cancel / keep-alive only answers; a jog
+  // starts from idle only.
+  if (m != Mode::jogging && (op == RequestOp::jog_cancel || op == RequestOp::jog_keepalive)) return stays(ok, "not jogging");
+  if (m != Mode::jogging && op == RequestOp::jog) {
+    switch (m) {
+      case Mode::boot:
+      case Mode::disabled:
+      case Mode::enabling: return stays(bad, "jog needs the arm enabled (it is ");
+      case Mode::idle: return {ok, "jogging", Mode::jogging, kNone};
+      case Mode::moving:
+      case Mode::hold_ramp:
+      case Mode::hold_line:
+      case Mode::held: return stays(busy, "a move is running (or held): jog refused");
+      case Mode::stopping_to_idle:
+      case Mode::stopping_to_disabled: return stays(bad, "stopping; retry");
+      case Mode::fault_ramp:
+      case Mode::fault_quick_stop:
+      case Mode::fault: return stays(flt, "in fault: send reset first");
+      case Mode::estop_ramp:
+      case Mode::estop_quick_stop:
+      case Mode::estop: return stays(flt, "in estop: send reset first");
+      case Mode::jogging: break;
+    }
+  }
   switch (m) {
     case Mode::boot:
       switch (op) {
@@ -246,6 +296,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return not_moving;
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::disabled:
@@ -258,6 +311,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return not_moving;
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return {ok, "zero_offset = [", Mode::disabled, kZero6};
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::enabling:
@@ -270,6 +326,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return not_moving;
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::idle:
@@ -283,6 +342,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return not_moving;  // nothing queued
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::moving:
@@ -295,6 +357,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return {ok, "feed hold", Mode::hold_ramp, kNone};
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::hold_ramp:
@@ -307,6 +372,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return stays(ok, "already holding");
         case RequestOp::resume: return stays(bad, "still ramping down; retry");
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::hold_line:
@@ -319,6 +387,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return stays(ok, "already holding");
         case RequestOp::resume: return {ok, "resumed", Mode::moving, kNone};
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::held:  // a joint move held at rest: a stop's ramp from rest ends in the same cycle
@@ -331,6 +402,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return stays(ok, "already holding");
         case RequestOp::resume: return {ok, "resumed", Mode::moving, kNone};
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::stopping_to_idle:
@@ -344,6 +418,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return not_moving;
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::fault_ramp:
@@ -358,6 +435,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return not_moving;
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::fault:
@@ -370,6 +450,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return not_moving;
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::estop_ramp:
@@ -383,6 +466,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return not_moving;
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
       }
       break;
     case Mode::estop:
@@ -395,6 +481,24 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::hold: return not_moving;
         case RequestOp::resume: return not_holding;
         case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive: break;  // (above)
+      }
+      break;
+    case Mode::jogging:  // a continuous joint jog, at speed
+      switch (op) {
+        case RequestOp::enable: return stays(ok, "already enabled");
+        case RequestOp::disable: return {ok, "stopping, then disabling", Mode::stopping_to_disabled, kNone};
+        case RequestOp::stop: return {ok, "stopping", Mode::stopping_to_idle, kNone};
+        case RequestOp::estop: return {ok, "estop", Mode::estop_ramp, kNone};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return stays(ok, "jog cancelled");  // GRBL: a feed hold cancels a jog
+        case RequestOp::resume: return not_holding;
+        case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog: return stays(ok, "jog retargeted");
+        case RequestOp::jog_cancel: return stays(ok, "jog cancelled");
+        case RequestOp::jog_keepalive: return stays(ok, "jog refreshed");
       }
       break;
   }
@@ -451,8 +555,9 @@ void check_pair(Mode m, RequestOp op, bool drive_quick_stop, const Expect& e) {
   }
 }
 
-constexpr RequestOp kOps[] = {RequestOp::enable, RequestOp::disable, RequestOp::stop,  RequestOp::estop,
-                              RequestOp::reset,  RequestOp::hold,    RequestOp::resume, RequestOp::set_zero};
+constexpr RequestOp kOps[] = {RequestOp::enable, RequestOp::disable,  RequestOp::stop,       RequestOp::estop,
+                              RequestOp::reset,  RequestOp::hold,     RequestOp::resume,     RequestOp::set_zero,
+                              RequestOp::jog,    RequestOp::jog_cancel, RequestOp::jog_keepalive};
 
 void walk_mode(Mode m) {
   for (RequestOp op : kOps) check_pair(m, op, false, expected(m, op));
@@ -497,12 +602,14 @@ TEST(ModeTable, Fault) { walk_mode(Mode::fault); }
 TEST(ModeTable, EstopRamp) { walk_mode(Mode::estop_ramp); }
 TEST(ModeTable, EstopQuickStop) { walk_mode(Mode::estop_quick_stop); }
 TEST(ModeTable, Estop) { walk_mode(Mode::estop); }
+TEST(ModeTable, Jogging) { walk_mode(Mode::jogging); }
 
 // With safety.stop = "drive", an e-stop of a powered arm is the drives' quick stop
 // (controlword 0x0002 in the same cycle), also over a ramp already running.
 TEST(ModeTable, DriveQuickStopTakesOverEveryPoweredMode) {
   const Expect to_quick{ok, "estop", Mode::estop_quick_stop, kQuick};
-  for (Mode m : {Mode::moving, Mode::hold_ramp, Mode::hold_line, Mode::stopping_to_idle, Mode::stopping_to_disabled})
+  for (Mode m : {Mode::moving, Mode::hold_ramp, Mode::hold_line, Mode::stopping_to_idle, Mode::stopping_to_disabled,
+                 Mode::jogging})
     check_pair(m, RequestOp::estop, true, to_quick);
   // a fault while moving is a quick stop too, and the e-stop after it keeps it
   check_pair(Mode::fault_quick_stop, RequestOp::estop, true, {ok, "estop", Mode::estop_quick_stop, kNone});

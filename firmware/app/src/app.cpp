@@ -34,6 +34,10 @@ ConsoleConfig App::console_config() const {
     }
   }
   c.units = units_of(chain);  // the console speaks the description's units (mm or m, deg or rad)
+  c.robot_name = cfg.robot;
+  c.jog_deadman_s = cfg.console_jog_deadman_ms * 1e-3;
+  c.jog_speed_pct = cfg.console_jog_speed_pct;
+  c.dialect = cfg.console_dialect == "grbl" ? Dialect::grbl : Dialect::native;
   c.config_text = to_toml(cfg);
   return c;
 }

@@ -51,6 +51,9 @@ int usage(FILE* f, int code) {
                "  --priority N          SCHED_FIFO priority 1..99, 0 = normal scheduling (default 80)\n"
                "  --cpu N               pin the control thread to CPU N\n"
                "  --pty                 also open a pty console and print its path\n"
+               "  --dialect grbl|native the consoles' language: GRBL 1.1 for G-code senders (cncjs, UGS,\n"
+               "                        bCNC: banner, $ commands, error:N, <Idle|MPos:..> reports) or servoarm's\n"
+               "                        own (default; console.dialect, console.pty_dialect, console.serial_dialect)\n"
                "  --serial PATH [--baud N]   also run a console on a serial TTY\n"
                "  --can-console IFACE   also run a console over CAN (ISO-TP) on IFACE (vcan0, can0, or sim);\n"
                "                        ids from console.can_rx_id / can_tx_id (default 0x7E0 in, 0x7E8 out)\n"
@@ -247,6 +250,7 @@ int run_bench(App& app, double seconds) {
 int main(int argc, char** argv) {
   FwConfig cfg;
   bool sim = false, demo = false, interactive = false, pty = false, no_stdin = false;
+  std::string dialect;
   std::string config_file, robot, serial, can_console;
   double bench = -1, rate = -1;
   int priority = -1, cpu = -2, baud = -1;
@@ -278,6 +282,13 @@ int main(int argc, char** argv) {
     else if (a == "--priority") priority = static_cast<int>(number("--priority", 0, 99));
     else if (a == "--cpu") cpu = static_cast<int>(number("--cpu", 0, 1023));
     else if (a == "--pty") pty = true;
+    else if (a == "--dialect") {
+      dialect = value("--dialect");
+      if (dialect != "grbl" && dialect != "native") {
+        std::fprintf(stderr, "armfw: --dialect: '%s' is not grbl or native\n", dialect.c_str());
+        return 2;
+      }
+    }
     else if (a == "--serial") serial = value("--serial");
     else if (a == "--can-console") can_console = value("--can-console");
     else if (a == "--baud") baud = static_cast<int>(number("--baud", 1, 4000000));
@@ -311,6 +322,7 @@ int main(int argc, char** argv) {
   if (priority >= 0) cfg.priority = priority;
   if (cpu >= -1) cfg.cpu = cpu;
   if (pty) cfg.console_pty = true;
+  if (!dialect.empty()) cfg.console_dialect = dialect, cfg.console_pty_dialect = cfg.console_serial_dialect = "";
   if (!serial.empty()) cfg.console_serial = serial;
   if (baud > 0) cfg.console_baud = baud;
   if (!can_console.empty()) cfg.console_can = can_console;
@@ -379,6 +391,14 @@ int main(int argc, char** argv) {
       std::vector<FdTransport*> ts;
       FdTransport in, pt, se, ct;
       CanConsole can;
+      auto dialect_of = [&](const std::string& own) {
+        const std::string& d = own.empty() ? app.cfg.console_dialect : own;
+        return d == "grbl" ? Dialect::grbl : Dialect::native;
+      };
+      in.dialect = dialect_of("");
+      pt.dialect = dialect_of(app.cfg.console_pty_dialect);
+      se.dialect = dialect_of(app.cfg.console_serial_dialect);
+      ct.dialect = dialect_of("");
       if (app.cfg.console_stdin) {
         in.name = "stdin";
         in.rd = 0;

@@ -21,6 +21,8 @@ namespace {
 constexpr double kBauds[] = {9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600};
 constexpr double kDirections[] = {1, -1};
 constexpr const char* kStops[] = {"ramp", "drive"};
+constexpr const char* kDialects[] = {"native", "grbl"};
+constexpr const char* kTransportDialects[] = {"", "native", "grbl"};
 constexpr double kTwo31 = 2147483648.0;  // counts_per_rev below 2^31: a revolution fits the drive's int32 position
 constexpr double kMaxLength = 1e5;       // deg or mm: |limits| and |home| (277 turns, 100 m)
 
@@ -114,6 +116,20 @@ const ConfigKey kConfigTable[] = {
     K{"console.can_tx_id", &F::console_can_tx_id, "", "11-bit CAN id armfw answers on (ISO-TP)"}
         .in_hex().rule_text("an 11-bit id (0x000..0x7FF)")
         .related(can_tx_id_free, "outside the CANopen ids of nodes 1..127 and LSS, not console.can_rx_id"),
+    K{"console.dialect", &F::console_dialect, "",
+      "the consoles' language: `\"native\"` (servoarm's) or `\"grbl\"` (GRBL 1.1 for G-code senders such as cncjs: "
+      "banner, `$` commands, `error:N`, `<Idle|MPos:...>` reports, the ok of a motion line delayed while the queue is "
+      "full); docs/grbl-senders.md"}
+        .among(std::span<const char* const>(kDialects)),
+    K{"console.pty_dialect", &F::console_pty_dialect, "", "the pty console's language; `\"\"` = console.dialect"}
+        .among(std::span<const char* const>(kTransportDialects)),
+    K{"console.serial_dialect", &F::console_serial_dialect, "", "the serial console's language; `\"\"` = console.dialect"}
+        .among(std::span<const char* const>(kTransportDialects)),
+    K{"console.jog_deadman_ms", &F::console_jog_deadman_ms, "ms",
+      "a continuous jog stops by itself unless a jog line (or `jog` alone) comes within this time"}.within(20, 5000),
+    K{"console.jog_speed_pct", &F::console_jog_speed_pct, "%",
+      "jog speed without speed=: percent of the joint limits (joint jog) or of the maximum linear and angular speeds "
+      "(tool jog)"}.within(1, 100),
 };
 
 using D = DriveConfig;

@@ -17,6 +17,7 @@ const char* to_string(ArgShape a) {
     case ArgShape::pose_speed: return "pose_speed";
     case ArgShape::pose: return "pose";
     case ArgShape::joints_opt: return "joints_opt";
+    case ArgShape::jog: return "jog";
   }
   return "?";
 }
@@ -37,10 +38,11 @@ struct CodeSpec {
 constexpr CodeSpec kGcodes[] = {
     {"G0 X Y Z [A B C]", "linear tool move at the maximum linear speed (A B C = rx ry rz in degrees)"},
     {"G1 X Y Z [A B C] [F]", "linear tool move; F in G20/G21 length units per minute, clamped to the maximum"},
-    {"G4 P<ms> | S<s>", "dwell"},
+    {"G4 P<ms> | S<s>", "dwell (GRBL dialect: P in seconds, as GRBL and LinuxCNC read it)"},
     {"G20 | G21", "X Y Z and F in inches | millimetres"},
     {"G28", "home (as `home`)"},
     {"G90 | G91", "absolute | relative X Y Z A B C"},
+    {"G17 G54 G94 | M5 M9 | M2 M30", "accepted, nothing to do (the only plane, work offset and feed mode; no spindle or coolant; program end)"},
     {"M17", "enable"},
     {"M18 | M84", "disable"},
     {"M112", "e-stop"},
@@ -52,7 +54,12 @@ constexpr CodeSpec kRealtime[] = {
     {"?", "status report `<Idle|MPos:x,y,z|J:j1,...|Q:n>` (MPos in mm, J in the joint units)"},
     {"!", "feed hold (linear moves stop on the line)"},
     {"~", "resume"},
-    {"Ctrl-X (0x18)", "e-stop; discards the partial line, answers every line not executed yet with `error: estop`"},
+    {"Ctrl-X (0x18)",
+     "e-stop; discards the partial line, answers every line not executed yet with `error: estop` (GRBL dialect: a "
+     "soft reset, the banner again; an e-stop only while the arm moves)"},
+    {"0x85", "jog cancel: the jog decelerates to rest; jog lines not executed yet are answered, not run"},
+    {"other bytes >= 0x80", "GRBL dialect: dropped unanswered (senders send 0x85 and the overrides UTF-8 encoded); native: refused in the line"},
+    {"0x90 0x91 0x92 0x93 0x94", "feed override: 100 %, +10 %, -10 %, +1 %, -1 % (10-200 %); acts on jogs and moves"},
 };
 
 bool ieq(std::string_view a, std::string_view b) {
@@ -78,6 +85,8 @@ std::string full_help(std::string_view units_line) {
   for (const CodeSpec& r : kRealtime) o += "  " + pad(r.code, 32) + r.help + "\n";
   o += "G-code:\n";
   for (const CodeSpec& g : kGcodes) o += "  " + pad(g.code, 32) + g.help + "\n";
+  o += "GRBL $ commands:\n";
+  for (const GrblSpec& g : kGrblCommands) o += "  " + pad(g.usage, 32) + g.help + (g.query ? " [query]" : "") + "\n";
   return o;
 }
 
@@ -165,6 +174,9 @@ std::string console_reference_markdown() {
   for (const CodeSpec& r : kRealtime) o += "| `" + cell(r.code) + "` | " + cell(r.help) + " |\n";
   o += "\n### G-code\n\n| code | effect |\n| --- | --- |\n";
   for (const CodeSpec& g : kGcodes) o += "| `" + cell(g.code) + "` | " + cell(g.help) + " |\n";
+  o += "\n### GRBL $ commands\n\n| command | what it does | query |\n| --- | --- | --- |\n";
+  for (const GrblSpec& g : kGrblCommands)
+    o += "| `" + cell(g.usage) + "` | " + cell(g.help) + " | " + (g.query ? "yes" : "") + " |\n";
   o += std::string("\n") + kEnd + "\n";
   return o;
 }

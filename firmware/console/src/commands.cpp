@@ -66,6 +66,16 @@ const char* to_string(Cmd c) {
     case Cmd::position: return "position";
     case Cmd::gmove: return "gmove";
     case Cmd::temperature: return "temperature";
+    case Cmd::jog: return "jog";
+    case Cmd::grbl_jog: return "$J";
+    case Cmd::grbl_settings: return "$$";
+    case Cmd::grbl_params: return "$#";
+    case Cmd::grbl_state: return "$G";
+    case Cmd::grbl_info: return "$I";
+    case Cmd::grbl_unlock: return "$X";
+    case Cmd::grbl_home: return "$H";
+    case Cmd::grbl_check: return "$C";
+    case Cmd::grbl_help: return "$";
   }
   return "?";
 }
@@ -155,7 +165,9 @@ ParseResult parse_numbers(const Words& ws, int first, Command& out, bool allow_s
 // G-code
 // ---------------------------------------------------------------------------
 
-ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) {
+/// `jog`: the words of a $J= line (GRBL): axis words without G0/G1, G90/G91 and G20/G21
+/// for this line only (the modal state is not changed), G53 accepted, F required.
+ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, bool jog = false) {
   // Strip comments: ';' to end of line, '(...)' inline.
   char buf[kMaxLine + 1];
   std::size_t n = 0;
@@ -168,16 +180,18 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
   }
   if (paren != 0) return fail(CmdError::bad_number, "G-code: unclosed '('");
   std::string_view s(buf, n);
-  // Checksum "*nn": XOR of every byte before '*' (RepRap).
+  // Checksum "*nn" (RepRap): the XOR of every byte of the line as sent before the '*',
+  // comments included; the field is the last '*' of the line.
   const std::size_t star = s.find('*');
   if (star != std::string_view::npos) {
+    const std::size_t raw_star = line.rfind('*');
     double cs = 0;
-    std::string_view tail = s.substr(star + 1);
+    std::string_view tail = line.substr(raw_star + 1);
     while (!tail.empty() && (tail.back() == ' ' || tail.back() == '\t')) tail.remove_suffix(1);
     if (parse_decimal(tail, cs) != Num::ok || cs < 0 || cs > 255 || cs != std::floor(cs))
       return fail(CmdError::checksum, "G-code: bad checksum field");
     unsigned x = 0;
-    for (std::size_t i = 0; i < star; ++i) x ^= static_cast<unsigned char>(line[i]);
+    for (std::size_t i = 0; i < raw_star; ++i) x ^= static_cast<unsigned char>(line[i]);
     if (x != static_cast<unsigned>(cs)) return fail(CmdError::checksum, "G-code: checksum %u, line says %u", x, unsigned(cs));
     s = s.substr(0, star);
   }
@@ -191,6 +205,7 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
   std::array<bool, 6> given{};
   std::array<double, 6> axis{};
   double p = -1, sval = -1, f = -1;
+  bool g53 = false;
   std::size_t i = 0;
   while (i < s.size()) {
     char L = s[i];
@@ -213,8 +228,17 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
     switch (L) {
       case 'N': break;  // line number: accepted and ignored
       case 'G': {
+        // Exact codes only: G1, G01, G1.0 are G1; G0.95 or G1.01 are no code of ours.
         const int g = static_cast<int>(std::lround(v * 10));
-        if (g == 900) m.relative = false;
+        if (std::fabs(v * 10 - g) > 1e-9 || g % 10 != 0)
+          return fail(CmdError::unsupported, "G-code: G%g not supported (G0 G1 G4 G20 G21 G28 G90 G91)", v);
+        if (jog && !(g == 900 || g == 910 || g == 200 || g == 210 || g == 530))
+          return fail(CmdError::unsupported, "$J: G%g not allowed in a jog line (G20 G21 G53 G90 G91 only)", v);
+        if (g == 530) g53 = true;
+        else if (g == 170 || g == 940 || g == 540) {
+          // G17 (XY plane), G94 (feed per minute), G54 (work offset 1 = the base frame): the
+          // only modes there are here; CAM and sender headers send them.
+        } else if (g == 900) m.relative = false;
         else if (g == 910) m.relative = true;
         else if (g == 200) m.unit_mm = 25.4;
         else if (g == 210) m.unit_mm = 1.0;
@@ -232,8 +256,9 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
       }
       case 'M': {
         const int mc = static_cast<int>(std::lround(v));
-        if (v != mc || !(mc == 17 || mc == 18 || mc == 84 || mc == 112 || mc == 114 || mc == 400 || mc == 105 || mc == 110))
-          return fail(CmdError::unsupported, "G-code: M%g not supported (M17 M18 M84 M105 M110 M112 M114 M400)", v);
+        if (v != mc || !(mc == 17 || mc == 18 || mc == 84 || mc == 112 || mc == 114 || mc == 400 || mc == 105 ||
+                         mc == 110 || mc == 5 || mc == 9 || mc == 2 || mc == 30))
+          return fail(CmdError::unsupported, "G-code: M%g not supported (M2 M5 M9 M17 M18 M30 M84 M105 M110 M112 M114 M400)", v);
         if (motion >= 0 || other >= 0) return fail(CmdError::arg_count, "G-code: two motion/action codes on one line");
         other = mc;
         other_letter = 'M';
@@ -248,15 +273,41 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
       }
       case 'F':
         if (!(v > 0)) return fail(CmdError::out_of_range, "G-code: F must be > 0");
+        if (f >= 0) return fail(CmdError::arg_count, "G-code: F given twice");
         f = v;
         break;
-      case 'P': p = v; break;
-      case 'S': sval = v; break;
+      case 'P':
+      case 'S':
+        if (jog) return fail(CmdError::unsupported, "$J: word '%c' not allowed in a jog line", L);
+        if (v < 0) return fail(CmdError::out_of_range, "G-code: %c must be >= 0 (got %g)", L, v);
+        if ((L == 'P' ? p : sval) >= 0) return fail(CmdError::arg_count, "G-code: %c given twice", L);
+        (L == 'P' ? p : sval) = v;
+        break;
       default:
         return fail(CmdError::unsupported, "G-code: word '%c' not supported", L);
     }
   }
+  (void)g53;  // G53 (machine coordinates): the jog's frame is the base frame either way
   const bool any_axis = given[0] || given[1] || given[2] || given[3] || given[4] || given[5];
+  if (jog) {
+    if (motion >= 0 || other >= 0) return fail(CmdError::unsupported, "$J: motion and M codes are not allowed in a jog line");
+    if (f < 0) return fail(CmdError::out_of_range, "$J: a jog line needs F (feed, length units per minute)");
+    if (!any_axis) return fail(CmdError::arg_count, "$J: no axis words");
+    if (f * m.unit_mm / 60.0 < kMinLinearSpeedMmS)
+      return fail(CmdError::out_of_range, "$J: F%g is below the minimum feed %g mm/min", f, kMinLinearSpeedMmS * 60.0 / m.unit_mm);
+    c.cmd = Cmd::grbl_jog;
+    c.relative = m.relative;
+    for (int k = 0; k < 6; ++k) {
+      if (!given[static_cast<std::size_t>(k)]) continue;
+      c.axis_mask = static_cast<std::uint8_t>(c.axis_mask | (1u << k));
+      c.vals[static_cast<std::size_t>(k)] = k < 3 ? axis[static_cast<std::size_t>(k)] * m.unit_mm : axis[static_cast<std::size_t>(k)];
+    }
+    c.count = 6;
+    c.has_speed = true;
+    c.speed = f * m.unit_mm / 60.0;
+    out = c;  // the modal state is the line's own: not kept
+    return {};
+  }
   if (f > 0 && f * m.unit_mm / 60.0 < kMinLinearSpeedMmS)
     return fail(CmdError::out_of_range, "G-code: F%g is below the minimum feed %g mm/min", f, kMinLinearSpeedMmS * 60.0 / m.unit_mm);
   if (f > 0) m.feed_mm_s = f * m.unit_mm / 60.0;
@@ -281,7 +332,7 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
     if (other_letter == 'G' && other == 4) {
       if (p >= 0 && sval >= 0) return fail(CmdError::arg_count, "G-code: G4 takes P (ms) or S (s), not both");
       if (p < 0 && sval < 0) return fail(CmdError::arg_count, "G-code: G4 needs P (milliseconds) or S (seconds)");
-      const double secs = p >= 0 ? p / 1000.0 : sval;
+      const double secs = p >= 0 ? (m.dwell_p_seconds ? p : p / 1000.0) : sval;
       if (secs > 3600) return fail(CmdError::out_of_range, "G-code: G4 dwell longer than an hour");
       c.cmd = Cmd::dwell;
       c.count = 1;
@@ -295,7 +346,7 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
       else if (other == 114) c.cmd = Cmd::position;
       else if (other == 400) c.cmd = Cmd::wait;
       else if (other == 105) c.cmd = Cmd::temperature;
-      else c.cmd = Cmd::none;  // M110: line numbers are not tracked
+      else c.cmd = Cmd::none;  // M110: line numbers are not tracked; M5 / M9: no spindle, no coolant; M2 / M30: program end
     }
   } else {
     if (any_axis) return fail(CmdError::arg_count, "G-code: axis words without G0/G1");
@@ -304,6 +355,97 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out) 
   }
   modal = m;
   out = c;
+  return {};
+}
+
+/// A GRBL '$' line (the '$' first): $J=<words>, or a word of kGrblCommands.
+ParseResult parse_grbl(std::string_view line, GcodeModal& modal, Command& out) {
+  std::string_view t = line.substr(1);
+  while (!t.empty() && (t.back() == ' ' || t.back() == '\t')) t.remove_suffix(1);
+  if (t.size() >= 2 && (t[0] == 'J' || t[0] == 'j') && t[1] == '=') return parse_gcode(t.substr(2), modal, out, true);
+  if (!t.empty() && (t[0] == 'J' || t[0] == 'j')) return fail(CmdError::bad_option, "$J needs '=' and G-code words ($J=G91 X10 F600)");
+  for (const GrblSpec& g : kGrblCommands) {
+    if (!ieq(t, g.word)) continue;
+    Command c;
+    c.cmd = g.cmd;
+    out = c;
+    return {};
+  }
+  if (!t.empty() && t[0] >= '0' && t[0] <= '9' && t.find('=') != std::string_view::npos)
+    return fail(CmdError::unsupported, "$%.*s: settings are read-only here (they come from the configuration file; $$ lists them)",
+                int(t.size() > 20 ? 20 : t.size()), t.data());
+  return fail(CmdError::unknown_command, "unknown $ command '$%.*s' ($ lists them)", int(t.size() > 20 ? 20 : t.size()), t.data());
+}
+
+/// `jog` arguments: nothing (keep-alive), `stop`, or an axis and a value, then options.
+ParseResult parse_jog(const Words& ws, int first, int n_joints, const ConsoleUnits& units, Command& c) {
+  (void)units;
+  const int nargs = ws.n - first;
+  if (nargs == 0) {
+    c.jog_op = JogOp::keepalive;
+    return {};
+  }
+  const std::string_view a = ws.w[first];
+  if (ieq(a, "stop")) {
+    if (nargs != 1) return fail(CmdError::arg_count, "jog stop takes no arguments");
+    c.jog_op = JogOp::stop;
+    return {};
+  }
+  static constexpr const char* kTool[] = {"x", "y", "z", "rx", "ry", "rz"};
+  bool found = false;
+  for (int k = 0; k < 6; ++k)
+    if (ieq(a, kTool[k])) c.jog_tool = true, c.jog_axis = k, found = true;
+  if (!found && a.size() >= 2 && (a[0] == 'j' || a[0] == 'J')) {
+    double jn = 0;
+    if (parse_decimal(a.substr(1), jn) == Num::ok && jn == std::floor(jn) && jn >= 1 && jn <= n_joints)
+      c.jog_axis = static_cast<int>(jn) - 1, found = true;
+    else
+      return fail(CmdError::out_of_range, "jog: no joint '%.*s' (j1..j%d)", int(a.size() > 8 ? 8 : a.size()), a.data(), n_joints);
+  }
+  if (!found)
+    return fail(CmdError::bad_option, "jog: unknown axis '%.*s' (j1..j%d, x y z rx ry rz, or stop)",
+                int(a.size() > 8 ? 8 : a.size()), a.data(), n_joints);
+  if (nargs < 2) return fail(CmdError::arg_count, "jog %.*s needs a value: +v, -v, + or -", int(a.size()), a.data());
+  const std::string_view v = ws.w[first + 1];
+  if (v == "+" || v == "-") {
+    c.jog_op = JogOp::continuous;
+    c.jog_dir = v == "+" ? 1 : -1;
+  } else {
+    double d = 0;
+    switch (parse_decimal(v, d)) {
+      case Num::ok: break;
+      case Num::bad: return fail(CmdError::bad_number, "jog: '%.*s' is not a number (or + / -)", int(v.size() > 20 ? 20 : v.size()), v.data());
+      case Num::not_finite: return fail(CmdError::not_finite, "jog: the value is not finite");
+    }
+    if (d == 0) return fail(CmdError::out_of_range, "jog: a jog of 0 moves nothing");
+    c.jog_op = JogOp::increment;
+    c.vals[0] = d;
+    c.count = 1;
+  }
+  for (int i = first + 2; i < ws.n; ++i) {
+    const std::string_view w = ws.w[i];
+    const std::size_t eq = w.find('=');
+    const std::string_view key = w.substr(0, eq), val = eq == std::string_view::npos ? std::string_view() : w.substr(eq + 1);
+    if (eq == std::string_view::npos) return fail(CmdError::arg_count, "jog: unexpected '%.*s'", int(w.size() > 20 ? 20 : w.size()), w.data());
+    if (ieq(key, "speed")) {
+      double sp = 0;
+      switch (parse_decimal(val, sp)) {
+        case Num::ok: break;
+        case Num::bad: return fail(CmdError::bad_number, "jog: speed '%.*s' is not a number", int(val.size() > 20 ? 20 : val.size()), val.data());
+        case Num::not_finite: return fail(CmdError::not_finite, "jog: speed is not finite");
+      }
+      if (sp < kMinJointSpeedPct || sp > 100) return fail(CmdError::out_of_range, "jog: speed=%g is outside [%g, 100] (percent)", sp, kMinJointSpeedPct);
+      c.has_speed = true;
+      c.speed = sp;
+    } else if (ieq(key, "frame")) {
+      if (!c.jog_tool) return fail(CmdError::bad_option, "jog: frame= is for tool axes (x y z rx ry rz), not joints");
+      if (ieq(val, "base")) c.jog_frame = JogFrame::base;
+      else if (ieq(val, "tool")) c.jog_frame = JogFrame::tool;
+      else return fail(CmdError::bad_option, "jog: frame=%.*s unknown (base or tool)", int(val.size() > 20 ? 20 : val.size()), val.data());
+    } else {
+      return fail(CmdError::bad_option, "jog: unknown option '%.*s' (speed=, frame=)", int(key.size() > 20 ? 20 : key.size()), key.data());
+    }
+  }
   return {};
 }
 
@@ -331,6 +473,7 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
     return {};
   }
   const std::string_view head = ws.w[0];
+  if (head[0] == '$') return parse_grbl(line.substr(line.find('$')), modal, out);
   if (looks_like_gcode(head)) return parse_gcode(line, modal, out);
   // The command table: a two-word entry ("home zero") before the one-word one.
   const CommandSpec* spec = nullptr;
@@ -390,6 +533,11 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       ParseResult r = parse_numbers(ws, used, c, false, name);
       if (!r.ok()) return r;
       if (c.count != 0 && c.count != n_joints) return fail(CmdError::arg_count, "%s takes no values or %d joint values, got %d", name, n_joints, c.count);
+      break;
+    }
+    case ArgShape::jog: {
+      ParseResult r = parse_jog(ws, used, n_joints, units, c);
+      if (!r.ok()) return r;
       break;
     }
   }

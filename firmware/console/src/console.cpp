@@ -16,6 +16,34 @@
 namespace servoarm::fw {
 
 namespace {
+/// GRBL 1.1's error numbers (grbl/report.h) for our codes, where one applies.
+int grbl_error(CmdError e) {
+  switch (e) {
+    case CmdError::ok: return 0;
+    case CmdError::overlong: return 11;         // line overflow
+    case CmdError::binary: return 1;            // expected command letter
+    case CmdError::unknown_command: return 20;  // unsupported command (a '$' one: 3)
+    case CmdError::arg_count: return 28;        // value word missing / wrong count
+    case CmdError::bad_number: return 2;        // bad number format
+    case CmdError::not_finite: return 2;
+    case CmdError::bad_option: return 20;
+    case CmdError::out_of_range: return 33;     // invalid target (also F <= 0)
+    case CmdError::unsupported: return 20;
+    case CmdError::checksum: return 20;
+    case CmdError::busy: return 8;              // not idle
+    case CmdError::bad_state: return 9;         // locked (alarm / jog state)
+    case CmdError::fault: return 9;
+    case CmdError::unreachable: return 15;      // (jog) target exceeds travel
+    case CmdError::limits: return 15;
+    case CmdError::singular: return 33;
+    case CmdError::branch: return 33;
+    case CmdError::plan_failed: return 33;
+    case CmdError::timeout: return 20;
+    case CmdError::estop: return 9;
+    case CmdError::internal: return 20;
+  }
+  return 20;
+}
 constexpr double kDeg = M_PI / 180.0;
 
 std::string fmt(const char* f, ...) __attribute__((format(printf, 1, 2)));
@@ -106,6 +134,11 @@ std::string Console::pose_text(const kin::JointVector& q) const {
 }
 
 void Console::answer_error(Session& s, CmdError e, const std::string& msg) {
+  if (s.dialect == Dialect::grbl) {
+    // GRBL senders match `error:N`; the text goes on a [MSG:] line before it.
+    s.out += fmt("[MSG:%s: %s]\nerror:%d\n", to_string(e), msg.c_str(), grbl_error(e));
+    return;
+  }
   s.out += "error: ";
   s.out += to_string(e);
   s.out += ' ';
@@ -114,12 +147,41 @@ void Console::answer_error(Session& s, CmdError e, const std::string& msg) {
 }
 
 void Console::answer_ok(Session& s, const std::string& data) {
+  if (s.dialect == Dialect::grbl) {
+    if (!data.empty()) s.out += "[MSG:" + data + "]\n";
+    s.out += "ok\n";
+    return;
+  }
   s.out += data.empty() ? "ok\n" : "ok " + data + "\n";
+}
+
+bool Console::request(const Request& rq, Reply& out) {
+  Request r = rq;
+  r.seq = ++seq_;
+  if (!ctl_.requests().push(r)) {
+    out.result = RtResult::busy;
+    std::snprintf(out.message, sizeof out.message, "request queue full");
+    return true;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  for (;;) {
+    Reply p;
+    while (ctl_.replies().pop(p))
+      if (p.seq == r.seq) {
+        out = p;
+        return true;
+      }
+    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(cfg_.reply_timeout_s)) return false;
+    idle_();
+  }
 }
 
 bool Console::request(RequestOp op, Reply& out) {
   const std::uint32_t seq = ++seq_;
-  if (!ctl_.requests().push(Request{op, seq})) {
+  Request rq;
+  rq.op = op;
+  rq.seq = seq;
+  if (!ctl_.requests().push(rq)) {
     out.result = RtResult::busy;
     std::snprintf(out.message, sizeof out.message, "request queue full");
     return true;
@@ -135,6 +197,27 @@ bool Console::request(RequestOp op, Reply& out) {
     if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(cfg_.reply_timeout_s)) return false;
     idle_();
   }
+}
+
+const char* to_string(Dialect d) {
+  switch (d) {
+    case Dialect::native: return "native";
+    case Dialect::grbl: return "grbl";
+  }
+  return "?";
+}
+
+kin::JointVector Console::commanded_joints() const {
+  const Telemetry t = ctl_.telemetry();
+  kin::JointVector q(n_);
+  for (int j = 0; j < n_; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+  return q;
+}
+
+kin::Pose Console::commanded_pose() const {
+  kin::Pose p;
+  kin::forward(chain_, commanded_joints(), p);
+  return p;
 }
 
 std::string Console::status_text() const {
@@ -161,6 +244,7 @@ std::string Console::grbl_report() const {
     case ArmState::stopping: st = "Stop"; break;
     case ArmState::fault: st = "Alarm"; break;
     case ArmState::estop: st = "Estop"; break;
+    case ArmState::jogging: st = "Jog"; break;
   }
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
@@ -173,6 +257,35 @@ std::string Console::grbl_report() const {
   for (int j = 0; j < n_; ++j) s += fmt("%s%.*f", j ? "," : "", d, to_user(j, q[j]));
   s += fmt("|Q:%u>", unsigned(t.queued));
   return s;
+}
+
+std::string Console::grbl_report(const Session& s) const {
+  if (s.dialect != Dialect::grbl) return grbl_report();
+  // GRBL 1.1: <State|MPos:x,y,z|FS:feed,spindle|Ov:feed,rapid,spindle|Bf:blocks,bytes>
+  const Telemetry t = ctl_.telemetry();
+  const char* st = "Idle";
+  switch (t.state) {
+    case ArmState::boot:
+    case ArmState::disabled:
+    case ArmState::fault:
+    case ArmState::estop: st = "Alarm"; break;  // GRBL locks out motion until $X
+    case ArmState::enabling:
+    case ArmState::stopping: st = "Run"; break;
+    case ArmState::idle: st = s.check_mode ? "Check" : "Idle"; break;
+    case ArmState::moving: st = t.mode == Mode::held ? "Hold:0" : t.holding ? "Hold:1" : "Run"; break;
+    case ArmState::jogging: st = "Jog"; break;
+  }
+  kin::JointVector q(n_);
+  for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+  kin::Pose p;
+  kin::forward(chain_, q, p);
+  std::size_t pending = s.partial.size();
+  for (const std::string& l : s.lines) pending += l.size() + 1;
+  const long rx_free = static_cast<long>(kGrblRxBuffer) - static_cast<long>(pending);
+  const long blocks_free = static_cast<long>(kMotionQueue) - static_cast<long>(t.queued);
+  return fmt("<%s|MPos:%.3f,%.3f,%.3f|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld>", st, p.translation().x() * 1e3,
+             p.translation().y() * 1e3, p.translation().z() * 1e3, feed_now_ * 60e3, feed_pct_,
+             blocks_free < 0 ? 0 : blocks_free, rx_free < 0 ? 0 : rx_free);
 }
 
 std::string Console::stats_text() const {
@@ -193,18 +306,39 @@ std::string Console::stats_text() const {
 }
 
 std::string Console::drain_events() {
-  std::string out;
+  std::string native, grbl;
+  drain_events(native, grbl);
+  return native;
+}
+
+void Console::drain_events(std::string& native, std::string& grbl) {
   Event e;
   while (ctl_.events().pop(e)) {
     switch (e.kind) {
-      case EventKind::fault: out += fmt("alarm: fault %s\n", e.message); break;
-      case EventKind::estop: out += "alarm: estop (send reset, then enable)\n"; break;
-      case EventKind::motion_refused: out += fmt("alarm: %s\n", e.message); break;
+      case EventKind::fault:
+        native += fmt("alarm: fault %s\n", e.message);
+        // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits)
+        grbl += fmt("ALARM:%d\n[MSG:fault %s]\n", e.cause == FaultCause::setpoint_position ? 2 : 1, e.message);
+        jog_tail_valid_ = false;
+        break;
+      case EventKind::estop:
+        native += "alarm: estop (send reset, then enable)\n";
+        grbl += "ALARM:10\n[MSG:e-stop: $X to reset and enable]\n";  // grblHAL: 10 = e-stop
+        jog_tail_valid_ = false;
+        break;
+      case EventKind::motion_refused:
+        native += fmt("alarm: %s\n", e.message);
+        grbl += fmt("[MSG:%s]\n", e.message);
+        break;
+      case EventKind::jog_stopped:
+        native += fmt("alarm: %s\n", e.message);
+        grbl += fmt("[MSG:%s]\n", e.message);
+        jog_tail_valid_ = false;
+        break;
       case EventKind::motion_done:
       case EventKind::state: break;
     }
   }
-  return out;
 }
 
 bool Console::motion_state_ok(Session& s) {
@@ -212,6 +346,9 @@ bool Console::motion_state_ok(Session& s) {
   switch (t.state) {
     case ArmState::idle:
     case ArmState::moving: return true;
+    case ArmState::jogging:
+      answer_error(s, CmdError::bad_state, "a jog is running: jog stop (or 0x85) first");
+      return false;
     case ArmState::enabling:
       answer_error(s, CmdError::bad_state, "drives still enabling; retry (or wait)");
       return false;
@@ -246,9 +383,11 @@ MoveJoints Console::joint_request(const Command& c) const {
 }
 
 void Console::queue(Session& s, const MoveJoints& req) {
-  if (!motion_state_ok(s)) return;
+  if (!s.check_mode && !motion_state_ok(s)) return;
   const kin::JointVector& goal = req.goal;
-  const double pct = req.speed_pct > 0 ? req.speed_pct : cfg_.default_joint_speed_pct;
+  // the feed override (GRBL 0x90..0x94) scales moves queued from now on
+  const double pct = std::fmin(100.0, std::fmax(kMinJointSpeedPct, (req.speed_pct > 0 ? req.speed_pct : cfg_.default_joint_speed_pct) *
+                                                                       feed_pct_ / 100.0));
   const auto& lim = ctl_.limits();
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
@@ -270,12 +409,17 @@ void Console::queue(Session& s, const MoveJoints& req) {
   jm.override = pct / 100.0;
   kin::MovejOptions o;
   o.override = jm.override;
-  const kin::MotionStatus ms = kin::plan_movej(lim, kin::JointState::rest(tail()), goal, o, jm.plan);
+  const kin::MotionStatus ms = kin::plan_movej(lim, kin::JointState::rest(s.check_mode ? s.check_tail : tail()), goal, o, jm.plan);
   if (!kin::is_ok(ms)) {
     answer_error(s, motion_error(ms), fmt("movej refused: %s", kin::to_string(ms)));
     return;
   }
   if (!duration_ok(s, "movej", jm.plan.duration)) return;
+  if (s.check_mode) {  // checked, not queued
+    s.check_tail = goal;
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs", jm.plan.duration));
+    return;
+  }
   m->id = next_id_++;
   const double dur = jm.plan.duration;
   ctl_.motions().commit();
@@ -286,9 +430,10 @@ void Console::queue(Session& s, const MoveJoints& req) {
 }
 
 void Console::queue(Session& s, const MoveLine& req) {
-  if (!motion_state_ok(s)) return;
+  if (!s.check_mode && !motion_state_ok(s)) return;
   double speed = req.rapid ? cfg_.max_linear_speed : (req.speed > 0 ? req.speed : cfg_.default_linear_speed);
   if (req.clamp_speed && speed > cfg_.max_linear_speed) speed = cfg_.max_linear_speed;
+  if (feed_pct_ != 100) speed = std::fmin(speed * feed_pct_ / 100.0, cfg_.max_linear_speed);  // feed override
   const kin::Pose& target = req.target;
   if (!(speed >= kMinLinearSpeedMmS * 1e-3) || speed > cfg_.max_linear_speed + 1e-12) {
     const ConsoleUnits& u = cfg_.units;
@@ -307,7 +452,7 @@ void Console::queue(Session& s, const MoveLine& req) {
   cl.linear_velocity = speed;
   kin::MovelOptions mo;
   kin::PathReport rep;
-  const kin::JointVector q0 = tail();
+  const kin::JointVector q0 = s.check_mode ? s.check_tail : tail();
   kin::CartesianTrajectory& path = m->payload.emplace<CartesianMove>().path;
   const kin::MotionStatus ms = kin::plan_movel(chain_, q0, target, cl, mo, ik_solver(), path, &rep);
   if (!kin::is_ok(ms)) {
@@ -320,6 +465,12 @@ void Console::queue(Session& s, const MoveLine& req) {
     return;
   }
   if (!duration_ok(s, "movel", path.duration)) return;
+  if (s.check_mode) {  // checked, not queued
+    s.check_tail = path.goal;
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs", path.duration));
+    return;
+  }
+  feed_now_ = speed;
   m->id = next_id_++;
   path.ik = ik_solver();
   const double dur = path.duration;
@@ -340,6 +491,10 @@ bool Console::duration_ok(Session& s, const char* what, double duration_s) {
 }
 
 void Console::queue_dwell(Session& s, double secs) {
+  if (s.check_mode) {
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked");
+    return;
+  }
   if (!motion_state_ok(s)) return;
   MotionItem* m = ctl_.motions().back();
   if (m == nullptr) {
@@ -368,10 +523,11 @@ kin::Pose Console::pose_from_values(const Command& c, const kin::JointVector& q_
   return p;
 }
 
-MoveLine Console::line_request(const Command& c) const {
+MoveLine Console::line_request(const Command& c, const kin::JointVector* from) const {
   MoveLine m;
+  const kin::JointVector base = from != nullptr ? *from : tail();
   if (c.cmd == Cmd::movel) {
-    m.target = pose_from_values(c, tail());
+    m.target = pose_from_values(c, base);
     m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
     return m;
   }
@@ -379,7 +535,7 @@ MoveLine Console::line_request(const Command& c) const {
   // G-code's units (the parser made G20 inches mm): mm, degrees, F in mm/s.
   const ConsoleUnits& u = kGcodeUnits;
   kin::Pose cur;
-  kin::forward(chain_, tail(), cur);
+  kin::forward(chain_, base, cur);
   m.target = cur;
   Eigen::Vector3d rpy = kin::rpy_from_rotation(cur.linear());
   for (int k = 0; k < 6; ++k) {
@@ -497,6 +653,10 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::help: do_help(s, std::string_view(c.topic.data())); return;
     case Cmd::status: answer_ok(s, status_text()); return;
     case Cmd::enable:
+      if (s.check_mode) {
+        answer_ok(s, "check mode: not run");
+        return;
+      }
       if (!request(RequestOp::enable, r)) {
         answer_error(s, CmdError::timeout, "control thread did not answer enable");
         return;
@@ -518,7 +678,7 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::home:
     case Cmd::movej: queue(s, joint_request(c)); return;
     case Cmd::movel:
-    case Cmd::gmove: queue(s, line_request(c)); return;
+    case Cmd::gmove: queue(s, line_request(c, s.check_mode ? &s.check_tail : nullptr)); return;
     case Cmd::dwell: queue_dwell(s, c.vals[0]); return;
     case Cmd::fk: do_fk(s, c); return;
     case Cmd::ik: do_ik(s, c); return;
@@ -544,6 +704,16 @@ void Console::execute(Session& s, std::string_view line) {
       return;
     }
     case Cmd::temperature: answer_ok(s, "T:0 /0 B:0 /0"); return;
+    case Cmd::jog: do_jog(s, c); return;
+    case Cmd::grbl_jog: do_grbl_jog(s, c); return;
+    case Cmd::grbl_settings:
+    case Cmd::grbl_params:
+    case Cmd::grbl_state:
+    case Cmd::grbl_info:
+    case Cmd::grbl_unlock:
+    case Cmd::grbl_home:
+    case Cmd::grbl_check:
+    case Cmd::grbl_help: do_grbl(s, c); return;
   }
 }
 
@@ -554,6 +724,7 @@ bool Console::settle(Session& s) {
       case ArmState::enabling: return true;
       case ArmState::idle:
       case ArmState::moving:
+      case ArmState::jogging:
         s.enabling = false;
         answer_ok(s, "enabled");
         break;
@@ -583,6 +754,7 @@ bool Console::settle(Session& s) {
         break;
       case ArmState::moving:
       case ArmState::stopping:
+      case ArmState::jogging:
       case ArmState::enabling: return true;  // still busy
       case ArmState::boot:
       case ArmState::disabled:
@@ -598,6 +770,15 @@ bool Console::settle(Session& s) {
 
 bool Console::run_one(Session& s) {
   if (settle(s) || s.lines.empty()) return false;
+  if (s.dialect == Dialect::grbl && !s.check_mode && ctl_.motions().full()) {
+    // GRBL: a motion line waits for room in the queue (its `ok` comes then: senders count
+    // characters and stream ahead); the native language answers `error: busy` instead.
+    Command c;
+    GcodeModal m = s.modal;
+    if (parse_line(s.lines.front(), n_, m, c, cfg_.units).ok() &&
+        (c.cmd == Cmd::gmove || c.cmd == Cmd::movel || c.cmd == Cmd::movej || c.cmd == Cmd::home || c.cmd == Cmd::dwell))
+      return false;
+  }
   const std::string line = std::move(s.lines.front());
   s.lines.pop_front();
   execute(s, line);
@@ -618,32 +799,94 @@ void Console::end_of_input(Session& s) {
   if (!s.partial.empty() || s.discarding) accept(s, "\n");
 }
 
+void Console::realtime(Session& s, char ch) {
+  Reply r;
+  if (is_feed_override(ch)) {
+    // GRBL feed override, 10..200 %: the speed of jogs and of moves queued from now on.
+    const auto u = static_cast<unsigned char>(ch);
+    int v = feed_pct_;
+    if (u == kRtFeed100) v = 100;
+    else if (u == kRtFeedPlus10) v += 10;
+    else if (u == kRtFeedMinus10) v -= 10;
+    else if (u == kRtFeedPlus1) v += 1;
+    else if (u == kRtFeedMinus1) v -= 1;
+    feed_pct_ = v < 10 ? 10 : v > 200 ? 200 : v;
+    return;
+  }
+  switch (ch) {
+    case kRtStatus: s.out += grbl_report(s) + "\n"; break;
+    case kRtHold: if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n"; break;
+    case kRtResume: if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n"; break;
+    case kRtJogCancel: {
+      if (!request(RequestOp::jog_cancel, r)) s.out += "error: timeout jog cancel not acknowledged\n";
+      jog_tail_valid_ = false;
+      // Jog lines received but not run yet are answered, not run: a cancel always wins.
+      for (auto it = s.lines.begin(); it != s.lines.end();) {
+        const std::string_view l(*it);
+        const std::size_t k = l.find_first_not_of(" \t");
+        const bool jog_line = k != std::string_view::npos &&
+                              (l.substr(k, 3) == "$J=" || l.substr(k, 3) == "$j=" || l.substr(k, 4) == "jog ");
+        if (!jog_line) {
+          ++it;
+          continue;
+        }
+        answer_error(s, CmdError::estop, fmt("'%.40s' not run: jog cancelled (0x85)", it->c_str()));
+        it = s.lines.erase(it);
+      }
+      break;
+    }
+    case kRtReset: {
+      // GRBL dialect: a soft reset; it stops the arm (an e-stop) only when something moves,
+      // else the queue is dropped and the banner printed again. Native: always an e-stop.
+      const Telemetry t = ctl_.telemetry();
+      const bool moving = t.state == ArmState::moving || t.state == ArmState::jogging || t.state == ArmState::stopping;
+      const RequestOp op = s.dialect == Dialect::grbl && !moving ? RequestOp::stop : RequestOp::estop;
+      if (!request(op, r)) s.out += "error: timeout e-stop not acknowledged\n";
+      s.partial.clear();
+      s.discarding = false;
+      // A pending wait / enable is answered first (in order), then every complete line
+      // not executed yet gets its answer: not executing them is right, leaving them
+      // unanswered would hang a sender that counts answers.
+      settle(s);
+      for (const std::string& l : s.lines)
+        answer_error(s, CmdError::estop,
+                     fmt("'%.40s%s' not executed: e-stop (Ctrl-X) before it ran", l.c_str(), l.size() > 40 ? "..." : ""));
+      s.lines.clear();
+      s.check_mode = false;
+      jog_tail_valid_ = false;
+      greet(s);
+      break;
+    }
+    default: break;
+  }
+}
+
+void Console::greet(Session& s) {
+  if (s.dialect != Dialect::grbl) return;
+  s.out += "\r\nGrbl 1.1h ['$' for help]\r\n";
+  const ArmState st = ctl_.telemetry().state;
+  if (st == ArmState::disabled || st == ArmState::fault || st == ArmState::estop || st == ArmState::boot)
+    s.out += "[MSG:'$X' to unlock (reset and enable the drives)]\r\n";
+}
+
+void Console::client_gone(Session& s) {
+  Reply r;
+  if (ctl_.telemetry().state == ArmState::jogging) request(RequestOp::jog_cancel, r);
+  jog_tail_valid_ = false;
+  s.partial.clear();
+  s.check_mode = false;
+}
+
 void Console::accept(Session& s, std::string_view bytes) {
   for (char ch : bytes) {
     if (is_realtime(ch)) {
-      Reply r;
-      switch (ch) {
-        case kRtStatus: s.out += grbl_report() + "\n"; break;
-        case kRtHold: if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n"; break;
-        case kRtResume: if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n"; break;
-        case kRtReset: {
-          if (!request(RequestOp::estop, r)) s.out += "error: timeout e-stop not acknowledged\n";
-          s.partial.clear();
-          s.discarding = false;
-          // A pending wait / enable is answered first (in order), then every complete line
-          // not executed yet gets its answer: not executing them is right, leaving them
-          // unanswered would hang a sender that counts answers.
-          settle(s);
-          for (const std::string& l : s.lines)
-            answer_error(s, CmdError::estop,
-                         fmt("'%.40s%s' not executed: e-stop (Ctrl-X) before it ran", l.c_str(), l.size() > 40 ? "..." : ""));
-          s.lines.clear();
-          break;
-        }
-        default: break;
-      }
+      realtime(s, ch);
       continue;
     }
+    // GRBL: bytes above 0x7F that are no realtime command are dropped unanswered (cncjs
+    // sends 0x85 / 0x90.. UTF-8 encoded, as C2 85...). The native language refuses them in
+    // the line (error: binary).
+    if (s.dialect == Dialect::grbl && static_cast<unsigned char>(ch) >= 0x80) continue;
     const bool crlf = ch == '\n' && s.after_cr;
     s.after_cr = ch == '\r';
     if (crlf) continue;  // CR LF ends one line, not two
@@ -664,6 +907,290 @@ void Console::accept(Session& s, std::string_view bytes) {
       s.discarding = true;
       s.partial.clear();
     }
+  }
+}
+
+// ---------------------------------------------------------------------------
+// Jogging (jog.hpp runs it on the control thread; here the targets are computed)
+// ---------------------------------------------------------------------------
+
+JogSpec Console::tool_jog_spec(double pct) const {
+  JogSpec js;
+  js.space = JogSpace::tool;
+  js.linear_speed = pct / 100.0 * cfg_.max_linear_speed;
+  js.angular_speed = pct / 100.0 * cfg_.cartesian.angular_velocity;
+  js.limits = cfg_.cartesian;
+  js.ik = ik_solver();
+  js.deadman_s = cfg_.jog_deadman_s;
+  return js;
+}
+
+void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit) {
+  Request rq;
+  rq.op = RequestOp::jog;
+  rq.jog = spec;
+  Reply r;
+  if (!request(rq, r)) {
+    answer_error(s, CmdError::timeout, "control thread did not answer the jog");
+    return;
+  }
+  switch (r.result) {
+    case RtResult::ok: break;
+    case RtResult::busy: answer_error(s, CmdError::busy, r.message); return;
+    case RtResult::fault: answer_error(s, CmdError::fault, r.message); return;
+    case RtResult::bad_state:
+    case RtResult::start_moved:
+    case RtResult::plan_failed: answer_error(s, CmdError::bad_state, r.message); return;
+  }
+  if (clamped >= 0) {
+    const ConsoleUnits& u = cfg_.units;
+    answer_error(s, CmdError::limits,
+                 fmt("jog: joint %d stops at its limit %.3f %s (asked %.3f); jogging to the limit", clamped + 1,
+                     to_user(clamped, limit), u.joint_name(chain_, clamped), to_user(clamped, asked)));
+    return;
+  }
+  answer_ok(s, r.message);
+}
+
+void Console::do_jog(Session& s, const Command& c) {
+  Reply r;
+  if (c.jog_op == JogOp::keepalive || c.jog_op == JogOp::stop) {
+    const RequestOp op = c.jog_op == JogOp::stop ? RequestOp::jog_cancel : RequestOp::jog_keepalive;
+    if (!request(op, r)) {
+      answer_error(s, CmdError::timeout, fmt("control thread did not answer %s", to_string(op)));
+      return;
+    }
+    if (c.jog_op == JogOp::stop) jog_tail_valid_ = false;
+    answer_ok(s, r.message);
+    return;
+  }
+  if (s.check_mode) {
+    answer_ok(s, "check mode: jog not run");
+    return;
+  }
+  const Telemetry t = ctl_.telemetry();
+  const bool jogging = t.state == ArmState::jogging && jog_tail_valid_;
+  double pct = (c.has_speed ? c.speed : cfg_.jog_speed_pct) * feed_pct_ / 100.0;
+  pct = std::fmin(100.0, std::fmax(kMinJointSpeedPct, pct));
+  const bool continuous = c.jog_op == JogOp::continuous;
+  if (!c.jog_tool) {
+    const int j = c.jog_axis;
+    const auto ju = static_cast<std::size_t>(j);
+    const auto& lim = ctl_.limits();
+    kin::JointVector goal = jogging && !jog_tail_tool_ ? jog_q_tail_ : commanded_joints();
+    int clamped = -1;
+    double asked = 0;
+    if (continuous) {
+      goal[j] = c.jog_dir > 0 ? lim.upper[ju] : lim.lower[ju];
+    } else {
+      asked = goal[j] + to_si(j, c.vals[0]);
+      const double to = std::fmin(std::fmax(asked, lim.lower[ju]), lim.upper[ju]);
+      if (to != asked) clamped = j;
+      if (to == goal[j]) {
+        answer_error(s, CmdError::limits,
+                     fmt("jog: joint %d is at its limit %.3f %s; nothing moved", j + 1, to_user(j, to), cfg_.units.joint_name(chain_, j)));
+        return;
+      }
+      goal[j] = to;
+    }
+    JogSpec js;
+    js.space = JogSpace::joint;
+    js.continuous = continuous;
+    js.deadman_s = cfg_.jog_deadman_s;
+    js.q_goal = goal;
+    js.axis = j;
+    js.override = pct / 100.0;
+    const std::size_t before = s.out.size();
+    send_jog(s, js, clamped, asked, goal[j]);
+    if (s.out.compare(before, 5, "error") == 0 && clamped < 0) return;
+    jog_q_tail_ = goal;
+    jog_tail_tool_ = false;
+    jog_tail_valid_ = !continuous;
+    return;
+  }
+  // Tool jog: along / about an axis of the base or of the tool (as it is at the jog's start).
+  JogSpec js = tool_jog_spec(pct);
+  js.continuous = continuous;
+  const kin::Pose here = jogging && jog_tail_tool_ ? jog_x_tail_ : commanded_pose();
+  if (jogging && jog_tail_tool_ && c.jog_frame == jog_frame_kind_) js.frame = jog_frame_;
+  else if (c.jog_frame == JogFrame::tool) js.frame = commanded_pose().linear();
+  else js.frame = Eigen::Matrix3d::Identity();
+  if (continuous) {
+    js.axis = c.jog_axis;
+    js.direction = c.jog_dir;
+  } else {
+    kin::Pose target = here;
+    const int k = c.jog_axis;
+    if (k < 3) {
+      target.translation() += js.frame.col(k) * cfg_.units.length_in(c.vals[0]);
+    } else {
+      const Eigen::Vector3d axis = js.frame.col(k - 3);
+      target.linear() = Eigen::AngleAxisd(cfg_.units.angle_in(c.vals[0]), axis).toRotationMatrix() * here.linear();
+    }
+    kin::JointVector q(n_);
+    if (ik_solver().fn(chain_, target, commanded_joints(), q, ik_solver().ctx) < kin::Status::ok) {
+      answer_error(s, CmdError::unreachable, "jog: the target has no IK solution within the joint limits; nothing moved");
+      return;
+    }
+    js.target = target;
+    jog_x_tail_ = target;
+  }
+  const std::size_t before = s.out.size();
+  send_jog(s, js, -1, 0, 0);
+  if (s.out.compare(before, 5, "error") == 0 || s.out.compare(before, 5, "[MSG:") == 0) {
+    jog_tail_valid_ = false;
+    return;
+  }
+  jog_tail_tool_ = true;
+  jog_tail_valid_ = !continuous;
+  jog_frame_ = js.frame;
+  jog_frame_kind_ = c.jog_frame;
+  feed_now_ = js.linear_speed;
+}
+
+void Console::do_grbl_jog(Session& s, const Command& c) {
+  if (s.check_mode) {
+    answer_ok(s);
+    return;
+  }
+  const Telemetry t = ctl_.telemetry();
+  const bool jogging = t.state == ArmState::jogging && jog_tail_valid_ && jog_tail_tool_ && jog_frame_kind_ == JogFrame::base;
+  const kin::Pose here = jogging ? jog_x_tail_ : commanded_pose();
+  kin::Pose target = here;
+  Eigen::Vector3d rpy = kin::rpy_from_rotation(here.linear());
+  for (int k = 0; k < 6; ++k) {
+    if (!(c.axis_mask & (1u << k))) continue;
+    const double v = c.vals[static_cast<std::size_t>(k)];  // mm / deg (the parser converted G20)
+    if (k < 3) target.translation()[k] = c.relative ? here.translation()[k] + v * 1e-3 : v * 1e-3;
+    else rpy[k - 3] = c.relative ? rpy[k - 3] + v * kDeg : v * kDeg;
+  }
+  if (c.axis_mask & 0x38) target.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+  kin::JointVector q(n_);
+  if (ik_solver().fn(chain_, target, commanded_joints(), q, ik_solver().ctx) < kin::Status::ok) {
+    answer_error(s, CmdError::unreachable, "$J: the target has no IK solution within the joint limits; nothing moved");
+    return;
+  }
+  JogSpec js = tool_jog_spec(100.0 * feed_pct_ / 100.0 > 100 ? 100 : feed_pct_);
+  // F is the path speed (GRBL clamps a jog's feed to the maximum rate); the override scales it.
+  js.linear_speed = std::fmin(c.speed * 1e-3 * feed_pct_ / 100.0, cfg_.max_linear_speed);
+  js.frame = Eigen::Matrix3d::Identity();
+  js.target = target;
+  const std::size_t before = s.out.size();
+  send_jog(s, js, -1, 0, 0);
+  if (s.out.compare(before, 5, "error") == 0 || s.out.compare(before, 5, "[MSG:") == 0) {
+    jog_tail_valid_ = false;
+    return;
+  }
+  jog_x_tail_ = target;
+  jog_tail_tool_ = true;
+  jog_tail_valid_ = true;
+  jog_frame_ = js.frame;
+  jog_frame_kind_ = JogFrame::base;
+  feed_now_ = js.linear_speed;
+}
+
+// ---------------------------------------------------------------------------
+// GRBL $ commands
+// ---------------------------------------------------------------------------
+
+std::string Console::grbl_settings() const {
+  // Only the GRBL settings that mean something on an arm; the configuration file sets them.
+  double reach = 0;
+  for (int j = 0; j < n_; ++j) reach += std::hypot(chain_.joint(j).a, chain_.joint(j).d);
+  const double vmax = cfg_.max_linear_speed * 60e3;       // mm/min
+  const double amax = cfg_.cartesian.linear_acceleration * 1e3;  // mm/s^2
+  std::string o;
+  o += "$10=3\n";   // status report: MPos and buffer data
+  o += "$13=0\n";   // report in mm
+  o += "$20=1\n";   // soft limits: the joint limits, always on
+  o += "$21=0\n";   // hard limits: none (the drives' own)
+  o += "$22=0\n";   // homing cycle: not configured
+  o += "$30=0\n$31=0\n$32=0\n";  // no spindle, no laser
+  for (int k = 0; k < 3; ++k) o += fmt("$%d=%.3f\n", 110 + k, vmax);
+  for (int k = 0; k < 3; ++k) o += fmt("$%d=%.3f\n", 120 + k, amax);
+  for (int k = 0; k < 3; ++k) o += fmt("$%d=%.3f\n", 130 + k, 2e3 * reach);
+  return o;
+}
+
+void Console::do_grbl(Session& s, const Command& c) {
+  Reply r;
+  switch (c.cmd) {
+    case Cmd::grbl_help:
+      s.out += "[HLP:$$ $# $G $I $X $H $C $J=line ? ! ~ ctrl-x 0x85]\n";
+      answer_ok(s);
+      return;
+    case Cmd::grbl_settings:
+      s.out += grbl_settings();
+      answer_ok(s);
+      return;
+    case Cmd::grbl_params: {
+      // No work offsets yet: G54..G59 are the base frame.
+      for (const char* g : {"G54", "G55", "G56", "G57", "G58", "G59"}) s.out += fmt("[%s:0.000,0.000,0.000]\n", g);
+      kin::Pose h;
+      kin::forward(chain_, cfg_.home, h);
+      s.out += fmt("[G28:%.3f,%.3f,%.3f]\n[G30:0.000,0.000,0.000]\n[G92:0.000,0.000,0.000]\n[TLO:0.000]\n"
+                   "[PRB:0.000,0.000,0.000:0]\n",
+                   h.translation().x() * 1e3, h.translation().y() * 1e3, h.translation().z() * 1e3);
+      answer_ok(s);
+      return;
+    }
+    case Cmd::grbl_state:
+      s.out += fmt("[GC:G0 G54 G17 %s %s G94 M5 M9 T0 F%.0f S0]\n", s.modal.unit_mm == 1.0 ? "G21" : "G20",
+                   s.modal.relative ? "G91" : "G90", s.modal.feed_mm_s * 60.0 / s.modal.unit_mm);
+      answer_ok(s);
+      return;
+    case Cmd::grbl_info:
+      s.out += fmt("[VER:1.1h.servoarm:%s]\n[OPT:V,%zu,%zu]\n", cfg_.robot_name.c_str(), kMotionQueue, kGrblRxBuffer);
+      answer_ok(s);
+      return;
+    case Cmd::grbl_unlock: {
+      // GRBL's "kill alarm lock": here, reset a fault / e-stop, then power the drives up.
+      const ArmState st = ctl_.telemetry().state;
+      if (st == ArmState::fault || st == ArmState::estop) {
+        if (!request(RequestOp::reset, r) || r.result != RtResult::ok) {
+          answer_error(s, CmdError::bad_state, fmt("$X: reset refused: %s", r.message));
+          return;
+        }
+      }
+      const ArmState now = ctl_.telemetry().state;
+      if (now == ArmState::idle || now == ArmState::moving || now == ArmState::jogging) {
+        answer_ok(s, "already unlocked");
+        return;
+      }
+      if (!request(RequestOp::enable, r)) {
+        answer_error(s, CmdError::timeout, "control thread did not answer enable");
+        return;
+      }
+      if (r.result != RtResult::ok) {
+        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, r.message);
+        return;
+      }
+      s.enabling = true;
+      settle(s);
+      return;
+    }
+    case Cmd::grbl_home:
+      if (s.dialect == Dialect::grbl) s.out += "[MSG:homing cycle not configured (motion.home_deg is `home` / G28)]\nerror:5\n";
+      else answer_error(s, CmdError::unsupported, "$H: homing cycle not configured (`home` / G28 move to motion.home_deg)");
+      return;
+    case Cmd::grbl_check:
+      if (!s.check_mode) {
+        const ArmState st = ctl_.telemetry().state;
+        if (st != ArmState::idle && st != ArmState::disabled) {
+          answer_error(s, CmdError::busy, fmt("$C: check mode needs the arm at rest (it is %s)", to_string(st)));
+          return;
+        }
+        s.check_mode = true;
+        s.check_tail = tail();
+        s.out += s.dialect == Dialect::grbl ? "[MSG:Enabled]\n" : "";
+        answer_ok(s, s.dialect == Dialect::grbl ? "" : "check mode on: G-code is parsed and checked, nothing moves");
+      } else {
+        s.check_mode = false;
+        s.out += s.dialect == Dialect::grbl ? "[MSG:Disabled]\n" : "";
+        answer_ok(s, s.dialect == Dialect::grbl ? "" : "check mode off");
+      }
+      return;
+    default: answer_error(s, CmdError::internal, "not a $ command"); return;
   }
 }
 

@@ -32,8 +32,11 @@ std::string open_pty(FdTransport& t) {
   t.name = "pty";
   t.path = pty.slave.path();
   t.rd = t.wr = pty.master.release();
-  t.keep = pty.slave.release();
+  // No slave fd of our own: with none open the master reports POLLHUP, which is how a
+  // client's coming and going is seen (the tty's raw settings stay with the master).
+  pty.slave.close();
   t.owns = true;
+  t.no_peer = true;
   return "";
 }
 
@@ -71,6 +74,9 @@ ConsoleServer::ConsoleServer(Console& console, const std::vector<FdTransport*>& 
     : console_(console), ts_(ts), sessions_(ts.size()), pfds_(2 * ts.size()) {
   for (std::size_t i = 0; i < ts.size(); ++i) {
     sessions_[i].name = ts[i]->name;
+    sessions_[i].dialect = ts[i]->dialect;
+    sessions_[i].modal.dwell_p_seconds = ts[i]->dialect == Dialect::grbl;  // GRBL's G4 P is seconds
+    if (!ts[i]->no_peer) console_.greet(sessions_[i]);  // GRBL dialect: the banner senders look for (a pty: when a client opens it)
     const int fl = ts[i]->wr >= 0 ? fcntl(ts[i]->wr, F_GETFL) : -1;
     ts[i]->wr_nonblocking = fl >= 0 && (fl & O_NONBLOCK) != 0;
   }
@@ -81,15 +87,32 @@ ConsoleServer::ConsoleServer(Console& console, const std::vector<FdTransport*>& 
 void ConsoleServer::sweep(int timeout_ms) {
   for (std::size_t i = 0; i < ts_.size(); ++i) {
     FdTransport& t = *ts_[i];
-    pfds_[2 * i] = pollfd{t.eof ? -1 : t.rd, POLLIN, 0};
-    const bool want_out = !t.pending.empty() && t.wr >= 0;
+    if (t.no_peer) {  // a pty nobody has open: has a client come?
+      pollfd p{t.rd, POLLIN, 0};
+      if (::poll(&p, 1, 0) >= 0 && !(p.revents & POLLHUP)) {
+        t.no_peer = false;
+        t.pending.clear();
+        console_.greet(sessions_[i]);  // what a GRBL sender waits for after opening the port
+      }
+    }
+    pfds_[2 * i] = pollfd{t.eof || t.no_peer ? -1 : t.rd, POLLIN, 0};
+    const bool want_out = !t.pending.empty() && t.wr >= 0 && !t.no_peer;
     pfds_[2 * i + 1] = pollfd{want_out ? t.wr : -1, POLLOUT, 0};
   }
   ::poll(pfds_.data(), pfds_.size(), timeout_ms);
   for (std::size_t i = 0; i < ts_.size(); ++i) {
     FdTransport& t = *ts_[i];
     Session& s = sessions_[i];
-    if (t.eof || !(pfds_[2 * i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
+    if (t.eof || t.no_peer || !(pfds_[2 * i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
+    if (t.name == "pty" && (pfds_[2 * i].revents & POLLHUP) && !(pfds_[2 * i].revents & POLLIN)) {
+      // The client closed the pty: it is gone. Its jog stops now; what it sent and did not
+      // run yet is dropped (nobody is there to read the answers).
+      t.no_peer = true;
+      t.pending.clear();
+      s.lines.clear();
+      console_.client_gone(s);
+      continue;
+    }
     char buf[4096];
     const ssize_t r = ::read(t.rd, buf, sizeof buf);
     if (r > 0) {
@@ -98,8 +121,10 @@ void ConsoleServer::sweep(int timeout_ms) {
       if (t.name == "stdin") {
         t.eof = true;
         console_.end_of_input(s);  // a last line without newline (even an overlong one) is answered
+        console_.client_gone(s);   // and a jog it ran stops now, not at its deadman
       } else if (t.name == "can") {
         t.eof = true;  // the bridge thread is gone
+        console_.client_gone(s);
       }
     }
   }
@@ -175,13 +200,14 @@ bool ConsoleServer::round(int timeout_ms, bool exit_on_eof) {
     }
     if (!any) break;
   }
-  const std::string ev = console_.drain_events();
+  std::string ev, ev_grbl;
+  console_.drain_events(ev, ev_grbl);
   bool all_eof_done = true;
   for (std::size_t i = 0; i < ts_.size(); ++i) {
     FdTransport& t = *ts_[i];
     Session& s = sessions_[i];
     console_.poll(s);  // finish a wait that is done (lines were run above)
-    if (!ev.empty()) s.out += ev;
+    s.out += s.dialect == Dialect::grbl ? ev_grbl : ev;
     queue_output(i);
     write_some(i);
     if (t.name == "stdin" && !(t.eof && !console_.busy(s))) all_eof_done = false;

@@ -52,6 +52,7 @@ const char* to_string(EventKind k) {
     case EventKind::motion_done: return "motion_done";
     case EventKind::motion_refused: return "motion_refused";
     case EventKind::state: return "state";
+    case EventKind::jog_stopped: return "jog_stopped";
   }
   return "?";
 }
@@ -76,6 +77,7 @@ Controller::Controller(hal::ServoBus& bus, const kin::Chain& chain, const Contro
   cmd_ = kin::JointState::rest(kin::JointVector::Zero(n_));
   q_act_ = kin::JointVector::Zero(n_);
   q_prev_ = kin::JointVector::Zero(n_);
+  jog_.configure(chain_, limits_, period_s_);
 }
 
 hal::Status Controller::boot(TimePoint now, TimePoint deadline) {
@@ -139,6 +141,10 @@ void Controller::emit(EventKind k, FaultCause c, int joint, std::uint32_t id, co
 
 void Controller::set_mode(Mode m) {
   if (m == mode_) return;
+  if (mode_ == Mode::jogging) {
+    jog_.reset();  // whatever ends the jogging mode ends the jog
+    ++generation_;  // and the arm is not where the console's last queued move left it
+  }
   mode_ = m;
   mode_since_ = now_;
 }
@@ -177,7 +183,8 @@ void Controller::end_of_ramp(Mode ramp) {
     case Mode::fault_quick_stop:
     case Mode::fault:
     case Mode::estop_quick_stop:
-    case Mode::estop: return;  // not a ramp
+    case Mode::estop:
+    case Mode::jogging: return;  // not a ramp
   }
 }
 
@@ -241,7 +248,8 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
     case Mode::hold_line:
     case Mode::held:
     case Mode::stopping_to_idle:
-    case Mode::stopping_to_disabled: how = Reaction::emergency_stop; break;
+    case Mode::stopping_to_disabled:
+    case Mode::jogging: how = Reaction::emergency_stop; break;
     case Mode::boot:
     case Mode::disabled:
     case Mode::estop_ramp:        // a fault during an e-stop powers down at once
@@ -295,7 +303,8 @@ void Controller::supervise(TimePoint now) {
     case Mode::hold_line:
     case Mode::held:
     case Mode::stopping_to_idle:
-    case Mode::stopping_to_disabled: w = Watch::all; break;
+    case Mode::stopping_to_disabled:
+    case Mode::jogging: w = Watch::all; break;
   }
   const bool all_checks = w == Watch::all;
   for (int j = 0; j < n_; ++j) {
@@ -498,6 +507,41 @@ void Controller::run(Action a, const Request& r, TimePoint now) {
     case Action::refuse_set_zero:
       std::snprintf(m, sizeof m, "home zero needs the arm disabled (it is %s)", to_string(arm_state(mode_)));
       reply(r.seq, RtResult::bad_state, m);
+      return;
+    // jog
+    case Action::start_jog:
+      if (!motions_.empty()) {  // queued in this same cycle: the move goes first, the jog is refused
+        reply(r.seq, RtResult::busy, "moves are queued: jog refused");
+        return;
+      }
+      [[fallthrough]];
+    case Action::update_jog: {
+      const char* why = "";
+      if (!jog_.set(r.jog, cmd_, now, why)) {
+        std::snprintf(m, sizeof m, "jog refused: %s", why);
+        reply(r.seq, RtResult::bad_state, m);
+        return;
+      }
+      if (a == Action::start_jog) ++generation_;  // the setpoint leaves the queue's end: the console re-reads it
+      set_mode(Mode::jogging);
+      reply(r.seq, RtResult::ok, a == Action::start_jog ? "jogging" : "jog retargeted");
+      return;
+    }
+    case Action::refuse_jog_moving:
+      reply(r.seq, RtResult::busy, "a move is running (or held): jog refused");
+      return;
+    case Action::refuse_jog_not_enabled:
+      std::snprintf(m, sizeof m, "jog needs the arm enabled (it is %s)", to_string(arm_state(mode_)));
+      reply(r.seq, RtResult::bad_state, m);
+      return;
+    case Action::cancel_jog:
+      jog_.stop(cmd_);
+      reply(r.seq, RtResult::ok, "jog cancelled");
+      return;
+    case Action::not_jogging: reply(r.seq, RtResult::ok, "not jogging"); return;
+    case Action::refresh_jog:
+      jog_.refresh(now);
+      reply(r.seq, RtResult::ok, "jog refreshed");
       return;
   }
 }
@@ -714,6 +758,38 @@ void Controller::follow_measured() {
   have_prev_ = false;
 }
 
+void Controller::step_jog() {
+  const JogEnd e = jog_.step(cmd_, now_);
+  if (e == JogEnd::running) return;
+  if (e != JogEnd::done) {
+    char d[sizeof(Event::message)];
+    const int j = jog_.joint();
+    switch (e) {
+      case JogEnd::deadman:
+        std::snprintf(d, sizeof d, "jog stopped: not refreshed within its deadman time (%.0f ms)", 1e3 * jog_.deadman_s());
+        break;
+      case JogEnd::limit: std::snprintf(d, sizeof d, "jog stopped: joint %d at its limit", j + 1); break;
+      case JogEnd::singular:
+        std::snprintf(d, sizeof d, "jog stopped near a singularity: joint %d would exceed its velocity limit", j + 1);
+        break;
+      case JogEnd::unreachable: std::snprintf(d, sizeof d, "jog stopped: the next pose has no IK solution"); break;
+      case JogEnd::running:
+      case JogEnd::done: d[0] = '\0'; break;
+    }
+    emit(EventKind::jog_stopped, FaultCause::none, j, 0, d);
+  }
+  if (jog_.needs_joint_ramp()) {
+    // The tool jog gave up its line: ramp down in joint space from its last velocities.
+    // Its accelerations are finite differences of IK solutions (large near a singularity):
+    // the ramp starts from zero acceleration, so no joint overshoots its velocity.
+    cmd_.acc.setZero();
+    begin_ramp(Mode::stopping_to_idle);
+    return;
+  }
+  cmd_ = kin::JointState::rest(cmd_.pos);
+  set_mode(Mode::idle);
+}
+
 void Controller::step_motion() {
   switch (mode_) {
     case Mode::fault_quick_stop:
@@ -728,6 +804,7 @@ void Controller::step_motion() {
     case Mode::enabling:
     case Mode::fault:
     case Mode::estop: follow_measured(); return;
+    case Mode::jogging: step_jog(); return;
     case Mode::held:
       // At rest, the motion kept (joint / dwell / Cartesian stopped on its line). A held
       // queue that has not started goes idle once nothing is left of it.

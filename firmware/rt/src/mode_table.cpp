@@ -12,6 +12,7 @@ const char* to_string(ArmState s) {
     case ArmState::stopping: return "stopping";
     case ArmState::fault: return "fault";
     case ArmState::estop: return "estop";
+    case ArmState::jogging: return "jogging";
   }
   return "?";
 }
@@ -26,6 +27,9 @@ const char* to_string(RequestOp op) {
     case RequestOp::hold: return "hold";
     case RequestOp::resume: return "resume";
     case RequestOp::set_zero: return "set_zero";
+    case RequestOp::jog: return "jog";
+    case RequestOp::jog_cancel: return "jog_cancel";
+    case RequestOp::jog_keepalive: return "jog_keepalive";
   }
   return "?";
 }
@@ -48,6 +52,7 @@ const char* to_string(Mode m) {
     case Mode::estop_ramp: return "estop_ramp";
     case Mode::estop_quick_stop: return "estop_quick_stop";
     case Mode::estop: return "estop";
+    case Mode::jogging: return "jogging";
   }
   return "?";
 }
@@ -83,6 +88,13 @@ const char* to_string(Action a) {
     case Action::not_holding: return "not_holding";
     case Action::set_zero: return "set_zero";
     case Action::refuse_set_zero: return "refuse_set_zero";
+    case Action::start_jog: return "start_jog";
+    case Action::update_jog: return "update_jog";
+    case Action::refuse_jog_moving: return "refuse_jog_moving";
+    case Action::refuse_jog_not_enabled: return "refuse_jog_not_enabled";
+    case Action::cancel_jog: return "cancel_jog";
+    case Action::not_jogging: return "not_jogging";
+    case Action::refresh_jog: return "refresh_jog";
   }
   return "?";
 }
@@ -90,9 +102,9 @@ const char* to_string(Action a) {
 // Every mode's row names its own mode's expected ArmState in the comments above; what
 // can be checked at compile time is checked here.
 static_assert(kRequestTable.size() == kModes);
-static_assert(static_cast<std::size_t>(Mode::estop) + 1 == kModes);
-static_assert(static_cast<std::size_t>(RequestOp::set_zero) + 1 == kRequestOps);
-static_assert(static_cast<std::size_t>(Action::refuse_set_zero) + 1 == kActions);
+static_assert(static_cast<std::size_t>(Mode::jogging) + 1 == kModes);
+static_assert(static_cast<std::size_t>(RequestOp::jog_keepalive) + 1 == kRequestOps);
+static_assert(static_cast<std::size_t>(Action::refresh_jog) + 1 == kActions);
 static_assert(action_for(Mode::disabled, RequestOp::enable) == Action::power_up);
 static_assert(action_for(Mode::estop, RequestOp::reset) == Action::reset_latched);
 

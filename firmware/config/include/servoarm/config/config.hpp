@@ -78,6 +78,11 @@ struct FwConfig {
   std::string console_can;             ///< "" = none, "sim", or a SocketCAN interface
   int console_can_rx_id = 0x7E0;       ///< ISO-TP: requests to armfw
   int console_can_tx_id = 0x7E8;       ///< ISO-TP: armfw's answers
+  std::string console_dialect = "native";  ///< "native" or "grbl" (GRBL 1.1 for G-code senders): every transport
+  std::string console_pty_dialect;     ///< "" = console.dialect
+  std::string console_serial_dialect;  ///< "" = console.dialect
+  double console_jog_deadman_ms = 250.0;  ///< a continuous jog not refreshed this long stops
+  double console_jog_speed_pct = 10.0;    ///< jog speed without speed=
 
   bool operator==(const FwConfig&) const = default;
 };

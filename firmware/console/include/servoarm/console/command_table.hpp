@@ -25,6 +25,7 @@ enum class ArgShape : std::uint8_t {
   pose_speed,    ///< x y z [rx ry rz], then [speed=length/s] (movel)
   pose,          ///< x y z [rx ry rz], no options (ik)
   joints_opt,    ///< nothing or exactly n joint values (fk)
+  jog,           ///< nothing, `stop`, or <axis> <+v, -v, + or ->, then [speed=%] [frame=base or tool] (jog)
 };
 const char* to_string(ArgShape a);
 
@@ -92,6 +93,40 @@ inline constexpr CommandSpec kCommands[] = {
      "`stop` drops it",
      false},
     {"resume", Cmd::resume, ArgShape::none, "resume", "resume after a feed hold (same as ~)", "", false},
+    {"jog", Cmd::jog, ArgShape::jog, "jog <axis> <+v, -v, + or -> [speed=%] [frame=base or tool]; jog stop; jog",
+     "jog a joint (j1..jn) or the tool (x y z rx ry rz) by v, or continuously (+ / -); `jog` alone keeps a "
+     "continuous jog alive, `jog stop` ends it",
+     "a continuous jog stops by itself unless a jog line comes within console.jog_deadman_ms (the sender's "
+     "keep-alive); lines streamed back to back retarget the running jog without stopping. speed: percent of the "
+     "joint limits (joint jog, default console.jog_speed_pct) or of motion.max_linear_speed_mm_s and the angular "
+     "limit (tool jog). frame: the base's axes or the tool's as they were when the jog started (default base). At "
+     "a joint limit a jog stops on the limit (`alarm: jog stopped: joint 3 at its limit`); near a singularity a "
+     "tool jog slows, then stops and says which joint. Refused (`error: busy`) while a move runs",
+     false},
+};
+
+/// GRBL '$' commands (both dialects; the GRBL dialect's `help` is `$`). `word` is what
+/// follows the '$' (`J=` takes G-code words after it).
+struct GrblSpec {
+  const char* word;
+  Cmd cmd;
+  const char* usage;
+  const char* help;
+  bool query;
+};
+inline constexpr GrblSpec kGrblCommands[] = {
+    {"", Cmd::grbl_help, "$", "GRBL help: the $ commands", true},
+    {"$", Cmd::grbl_settings, "$$", "settings as `$N=value` (the GRBL numbers that mean something here, read-only)", true},
+    {"#", Cmd::grbl_params, "$#", "coordinate offsets `[G54:x,y,z]`...", true},
+    {"G", Cmd::grbl_state, "$G", "parser state `[GC:G1 G54 G17 G21 G90 G94 M5 M9 T0 F.. S0]`", true},
+    {"I", Cmd::grbl_info, "$I", "build info `[VER:1.1h.servoarm:<robot>]` `[OPT:V,<blocks>,<rx bytes>]`", true},
+    {"X", Cmd::grbl_unlock, "$X", "unlock: reset a fault / e-stop and enable the drives", false},
+    {"H", Cmd::grbl_home, "$H", "homing cycle (error:5 until homing is configured)", false},
+    {"C", Cmd::grbl_check, "$C", "check mode on/off: G-code is parsed and its moves planned and checked, nothing moves", false},
+    {"J=", Cmd::grbl_jog, "$J=[G90 or G91] [G20 or G21] [G53] X.. Y.. Z.. [A B C] F..",
+     "jog the tool in the base frame (G91 incremental, G90 absolute; F required, in G20/G21 units per minute); "
+     "jog lines run back to back without stopping; 0x85 cancels",
+     false},
 };
 
 /// The table entry of `cmd`, nullptr for the kinds no command word names (none,

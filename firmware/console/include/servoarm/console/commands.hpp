@@ -63,13 +63,35 @@ enum class Cmd : std::uint8_t {
   gmove,     ///< G0/G1 (axes in `axis_mask`, values in vals[0..5])
   home_zero, ///< `home zero`: the current joint positions become joint zero (arm disabled)
   temperature,  ///< M105 (senders poll it): answers ok T:0 /0
+  jog,       ///< `jog ...` (JogOp in Command::jog_op); GRBL `$J=` is grbl_jog
+  // GRBL '$' commands (the GRBL dialect's, accepted in both dialects)
+  grbl_jog,       ///< $J=<G-code words> (axes in axis_mask / vals, relative, speed from F: required)
+  grbl_settings,  ///< $$
+  grbl_params,    ///< $#
+  grbl_state,     ///< $G
+  grbl_info,      ///< $I
+  grbl_unlock,    ///< $X
+  grbl_home,      ///< $H
+  grbl_check,     ///< $C
+  grbl_help,      ///< $
 };
+
+/// What a `jog` line asks for.
+enum class JogOp : std::uint8_t {
+  keepalive,    ///< `jog` alone: refreshes a continuous jog's deadman
+  stop,         ///< `jog stop`: decelerate to rest
+  increment,    ///< `jog j3 +5`, `jog x -10`: by vals[0] (joint units / length / angle unit)
+  continuous,   ///< `jog j3 +`, `jog rz -`: until stopped, a limit, or the deadman
+};
+/// The frame of a tool jog (`frame=`).
+enum class JogFrame : std::uint8_t { base, tool };
 const char* to_string(Cmd c);
 
 struct GcodeModal {
   bool relative = false;   ///< G91
   double unit_mm = 1.0;    ///< 1 (G21) or 25.4 (G20)
   double feed_mm_s = 0.0;  ///< last F (0 = none given yet: use the default speed)
+  bool dwell_p_seconds = false;  ///< G4 P in seconds (GRBL, LinuxCNC) rather than milliseconds (RepRap)
 };
 
 struct Command {
@@ -83,6 +105,12 @@ struct Command {
   bool rapid = false;                   ///< gmove: G0
   bool gcode = false;                   ///< line was G-code
   std::array<char, 16> topic{};         ///< `help <topic>`
+  // jog
+  JogOp jog_op = JogOp::keepalive;
+  bool jog_tool = false;                ///< tool-space axis (x y z rx ry rz) rather than a joint
+  int jog_axis = 0;                     ///< joint (0-based), or 0..5 = x y z rx ry rz
+  int jog_dir = 1;                      ///< continuous: +1 / -1
+  JogFrame jog_frame = JogFrame::base;
 };
 
 struct ParseResult {
@@ -102,6 +130,16 @@ inline constexpr char kRtStatus = '?';
 inline constexpr char kRtHold = '!';
 inline constexpr char kRtResume = '~';
 inline constexpr char kRtReset = 0x18;  ///< Ctrl-X: e-stop / soft reset
-inline bool is_realtime(char c) { return c == kRtStatus || c == kRtHold || c == kRtResume || c == kRtReset; }
+inline constexpr char kRtJogCancel = static_cast<char>(0x85);  ///< GRBL jog cancel: decelerate the jog to rest
+/// GRBL feed override bytes: 0x90 100 %, 0x91 +10 %, 0x92 -10 %, 0x93 +1 %, 0x94 -1 %.
+inline constexpr unsigned char kRtFeed100 = 0x90, kRtFeedPlus10 = 0x91, kRtFeedMinus10 = 0x92, kRtFeedPlus1 = 0x93,
+                               kRtFeedMinus1 = 0x94;
+inline bool is_feed_override(char c) {
+  const auto u = static_cast<unsigned char>(c);
+  return u >= kRtFeed100 && u <= kRtFeedMinus1;
+}
+inline bool is_realtime(char c) {
+  return c == kRtStatus || c == kRtHold || c == kRtResume || c == kRtReset || c == kRtJogCancel || is_feed_override(c);
+}
 
 }  // namespace servoarm::fw

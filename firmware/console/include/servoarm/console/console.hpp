@@ -30,6 +30,13 @@
 
 namespace servoarm::fw {
 
+/// How a session talks: servoarm's own language (`ok ...` / `error: <code> <text>` /
+/// `alarm: ...`), or GRBL 1.1's for G-code senders (banner `Grbl 1.1h ['$' for help]`,
+/// `ok` / `error:N` with a `[MSG:text]` line before it, `ALARM:N`, `<Idle|MPos:..|FS:..|
+/// Ov:..|Bf:..>` reports). Both accept every command, G-code and `$` command.
+enum class Dialect : std::uint8_t { native, grbl };
+const char* to_string(Dialect d);
+
 struct ConsoleConfig {
   double default_joint_speed_pct = 50.0;     ///< movej / home without speed=
   double default_linear_speed = 0.1;         ///< m/s: movel / G1 without speed/F
@@ -42,6 +49,10 @@ struct ConsoleConfig {
   /// What the command language reads and writes (help and status name them); the robot
   /// description's: App sets units_of(chain). G-code keeps G20/G21 mm/inch and degrees.
   ConsoleUnits units{};
+  double jog_deadman_s = 0.25;               ///< a continuous jog not refreshed this long stops
+  double jog_speed_pct = 10.0;               ///< jog speed without speed=: percent of the joint / tool limits
+  Dialect dialect = Dialect::native;         ///< of sessions that do not choose their own
+  std::string robot_name;                    ///< for $I
 };
 
 /// One connected client: its partial line, queued lines, G-code modal state.
@@ -56,6 +67,9 @@ struct Session {
   bool enabling = false;               ///< `enable` / M17 waits for operation enabled
   std::string out;                     ///< text to send to the client
   std::uint64_t lines_done = 0;
+  Dialect dialect = Dialect::native;
+  bool check_mode = false;             ///< GRBL $C: G-code parsed and checked, nothing moves
+  kin::JointVector check_tail;         ///< check mode: where the checked moves end
 };
 
 class Console {
@@ -89,6 +103,8 @@ class Console {
   void execute(Session& s, std::string_view line);
   /// Drain control-thread events into text lines ("alarm: ..."), for every session.
   std::string drain_events();
+  /// The same, in both dialects at once (each session takes its own).
+  void drain_events(std::string& native, std::string& grbl);
 
   /// True while the session has work pending (queued lines or a wait).
   bool busy(const Session& s) const { return s.waiting || s.enabling || !s.lines.empty(); }
@@ -101,6 +117,8 @@ class Console {
   std::string status_text() const;
   /// GRBL-style report for '?': <Idle|MPos:x,y,z|J:...|Q:n>
   std::string grbl_report() const;
+  /// The report for `s`'s dialect: GRBL 1.1's `<Idle|MPos:..|FS:..|Ov:..|Bf:..>` in the GRBL dialect.
+  std::string grbl_report(const Session& s) const;
   /// Human-readable statistics (the `stats` answer without "ok ").
   std::string stats_text() const;
 
@@ -108,18 +126,41 @@ class Console {
   kin::JointVector tail() const;
   const ConsoleConfig& config() const { return cfg_; }
   /// The canonical request of a movel or G0/G1 command (Cmd::movel, Cmd::gmove), from the queue's end.
-  MoveLine line_request(const Command& c) const;
+  /// `from`: the joints relative G-code and a movel without orientation start from (default: tail()).
+  MoveLine line_request(const Command& c, const kin::JointVector* from = nullptr) const;
   /// The canonical request of a movej, home or G28 command (Cmd::movej, Cmd::home).
   MoveJoints joint_request(const Command& c) const;
   /// Validate and queue a request; the answer (ok queued ... | error: ...) goes to s.out.
   void queue(Session& s, const MoveLine& m);
   void queue(Session& s, const MoveJoints& m);
 
+  /// GRBL dialect: the start-up / reset banner into s.out (native: nothing).
+  void greet(Session& s);
+  /// The transport lost its client (pty closed, socket gone): a jog is cancelled at once
+  /// (its deadman would stop it too).
+  void client_gone(Session& s);
+  /// Feed override in percent (10..200; GRBL 0x90..0x94): scales the speed of jogs and
+  /// of moves queued from now on.
+  int feed_override() const { return feed_pct_; }
+
   /// Motions queued by this console so far (ids 1..n).
   std::uint32_t last_motion_id() const { return next_id_ - 1; }
 
  private:
   bool request(RequestOp op, Reply& out);
+  bool request(const Request& rq, Reply& out);
+  void do_jog(Session& s, const Command& c);
+  void do_grbl_jog(Session& s, const Command& c);
+  /// Send a jog request; answer ok / the error. `clamped` >= 0: the target was cut at that
+  /// joint's limit (answered as an error naming it, though the jog runs).
+  void send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit);
+  JogSpec tool_jog_spec(double pct) const;
+  void do_grbl(Session& s, const Command& c);
+  std::string grbl_settings() const;
+  void realtime(Session& s, char ch);
+  /// The tool pose of the commanded joints.
+  kin::Pose commanded_pose() const;
+  kin::JointVector commanded_joints() const;
   void answer_error(Session& s, CmdError e, const std::string& msg);
   void answer_ok(Session& s, const std::string& data = {});
   bool motion_state_ok(Session& s);
@@ -153,6 +194,18 @@ class Console {
   std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
   kin::IkSolver ik_solver() const;
   const kin::IkModel* ik_ = nullptr;  ///< the App's (outlives the console); nullptr: numeric fallback
+  // Jogging: where the running jog is going (GRBL jog lines are relative to it).
+  bool jog_tail_valid_ = false;
+  bool jog_tail_tool_ = false;
+  kin::JointVector jog_q_tail_;
+  kin::Pose jog_x_tail_ = kin::Pose::Identity();
+  Eigen::Matrix3d jog_frame_ = Eigen::Matrix3d::Identity();  ///< the running tool jog's frame
+  JogFrame jog_frame_kind_ = JogFrame::base;
+  int feed_pct_ = 100;
+  double feed_now_ = 0;  ///< m/s of the last jog or linear move queued (FS:)
 };
+
+/// The receive buffer a GRBL sender counts characters against (Bf:'s second field).
+inline constexpr std::size_t kGrblRxBuffer = 128;
 
 }  // namespace servoarm::fw

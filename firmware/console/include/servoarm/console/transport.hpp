@@ -24,10 +24,16 @@ namespace servoarm::fw {
 struct FdTransport {
   std::string name;
   int rd = -1, wr = -1;
-  int keep = -1;          ///< pty: our own slave fd (keeps the master readable with no client)
+  int keep = -1;          ///< a slave fd kept open (none for armfw's pty: a client's hang-up is then seen)
+  /// pty: no client has the slave open (the master reports POLLHUP). ConsoleServer leaves
+  /// it out of its poll then, checks each round whether a client has come (then greets
+  /// it: the GRBL banner), and treats a hang-up as the client gone (a jog it ran stops,
+  /// the lines it sent and that did not run yet are dropped).
+  bool no_peer = false;
   std::string path;       ///< pty slave / serial device path
   bool eof = false;
   bool owns = false;
+  Dialect dialect = Dialect::native;  ///< how its session talks (ConsoleServer greets GRBL ones)
   // Output side (ConsoleServer): answers not written yet, and what a client that did
   // not read lost.
   std::string pending;

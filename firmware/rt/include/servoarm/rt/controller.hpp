@@ -23,6 +23,7 @@
 #include <atomic>
 #include <cstdint>
 
+#include "servoarm/rt/jog.hpp"
 #include "servoarm/rt/messages.hpp"
 #include "servoarm/rt/mode_table.hpp"
 #include "servoarm/rt/seqlock.hpp"
@@ -119,6 +120,7 @@ class Controller {
   /// The arm is at rest exactly where `plan` starts (so it runs as it is).
   bool starts_here(const kin::JointTrajectory& plan) const;
   void step_motion();
+  void step_jog();
   void finish_motion(bool refused, RtResult why);
   void validate_and_write(TimePoint now);
   void publish();
@@ -158,6 +160,7 @@ class Controller {
   kin::JointVector q_act_;
   kin::JointVector q_prev_;         ///< last setpoint written
   bool have_prev_ = false;
+  Jogger jog_;                      ///< data of the jogging mode
   kin::JointTrajectory stop_traj_;  ///< data of the ramping modes (ramping(mode_))
   double stop_t_ = 0;               ///< time into stop_traj_, or into the drives' quick stop
   MotionItem* running_ = nullptr;   ///< front of motions_ while executing (moving, hold_*, held)

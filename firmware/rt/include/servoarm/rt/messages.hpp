@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <variant>
 
+#include "servoarm/rt/jog.hpp"
 #include "servoarm/rt/mode_table.hpp"
 #include "servoarm/rt/stats.hpp"
 #include "servoarm/kinematics/chain.hpp"
@@ -45,6 +46,9 @@ const char* to_string(RtResult r);
 struct Request {
   RequestOp op = RequestOp::stop;
   std::uint32_t seq = 0;
+  JogSpec jog;  ///< RequestOp::jog: what to jog (SI)
+  Request() = default;
+  Request(RequestOp o, std::uint32_t s) : op(o), seq(s) {}
 };
 
 struct Reply {
@@ -93,7 +97,9 @@ struct MotionItem {
   }
 };
 
-enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state };
+/// jog_stopped: a jog ended on its own other than at its target (deadman, a joint limit,
+/// a singularity, no IK solution); the message says why and names the joint.
+enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state, jog_stopped };
 const char* to_string(EventKind k);
 
 struct Event {

@@ -26,14 +26,17 @@ enum class ArmState : std::uint8_t {
   stopping,  ///< `stop` or `disable`: ramping down; then idle (or disabled)
   fault,     ///< supervisor fault: quick stop, then drives disabled; needs `reset` + `enable`
   estop,     ///< emergency stop: quick stop, then drives disabled; needs `reset` + `enable`
+  jogging,   ///< a jog (joint or tool) runs, or decelerates after `jog stop` / 0x85 / its deadman
 };
 const char* to_string(ArmState s);
 
 /// set_zero: `home zero`, the current joint positions become joint zero (ServoBus::set_position_zero);
 /// only in the disabled state, and only when 0 lies within every joint's limits.
-enum class RequestOp : std::uint8_t { enable, disable, stop, estop, reset, hold, resume, set_zero };
+/// jog: start a jog or retarget the running one (Request::jog); jog_cancel: decelerate the
+/// jog to rest (`jog stop`, GRBL 0x85); jog_keepalive: refresh a continuous jog's deadman.
+enum class RequestOp : std::uint8_t { enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive };
 const char* to_string(RequestOp op);
-inline constexpr std::size_t kRequestOps = 8;
+inline constexpr std::size_t kRequestOps = 11;
 
 /// The controller's mode. "ramp" = the controller ramps every joint to rest along its
 /// stop trajectory (drives powered, following the setpoints); "quick stop" = the drives
@@ -56,8 +59,9 @@ enum class Mode : std::uint8_t {
   estop_ramp,        ///< emergency stop: ramping to rest, then drives disabled
   estop_quick_stop,  ///< emergency stop: drives' quick stop, then drives disabled
   estop,             ///< emergency stop latched, drives disabled; needs reset
+  jogging,           ///< a jog runs (Jogger, jog.hpp), or decelerates to rest; then idle
 };
-inline constexpr std::size_t kModes = 16;
+inline constexpr std::size_t kModes = 17;
 const char* to_string(Mode m);
 
 /// The one function from mode to what the console sees.
@@ -79,6 +83,7 @@ constexpr ArmState arm_state(Mode m) {
     case Mode::estop_ramp:
     case Mode::estop_quick_stop:
     case Mode::estop: return ArmState::estop;
+    case Mode::jogging: return ArmState::jogging;
   }
   return ArmState::fault;
 }
@@ -99,7 +104,8 @@ constexpr bool powered(Mode m) {
     case Mode::stopping_to_idle:
     case Mode::stopping_to_disabled:
     case Mode::fault_ramp:
-    case Mode::estop_ramp: return true;
+    case Mode::estop_ramp:
+    case Mode::jogging: return true;
     case Mode::boot:
     case Mode::disabled:
     case Mode::enabling:
@@ -156,63 +162,91 @@ enum class Action : std::uint8_t {
   // set_zero
   set_zero,               ///< disabled: joint zero = current position (all joints or none)
   refuse_set_zero,        ///< bad_state "home zero needs the arm disabled (it is <state>)"
+  // jog
+  start_jog,              ///< idle, nothing queued: the jog starts -> jogging (bad_state if it cannot)
+  update_jog,             ///< jogging: the running jog is retargeted from where it is (no stop between)
+  refuse_jog_moving,      ///< busy "a move is running (or held): jog refused" (GRBL: no $J while a program runs)
+  refuse_jog_not_enabled, ///< bad_state "jog needs the arm enabled (it is <state>)"
+  cancel_jog,             ///< jogging: decelerate to rest on the jog's path, then idle
+  not_jogging,            ///< ok "not jogging"
+  refresh_jog,            ///< jogging: the deadman is refreshed
 };
-inline constexpr std::size_t kActions = 29;
+inline constexpr std::size_t kActions = 36;
 const char* to_string(Action a);
 
 using RequestRow = std::array<Action, kRequestOps>;  ///< indexed by RequestOp
 
 /// (mode x request) -> action. Rows in Mode order, columns in RequestOp order:
-///   enable, disable, stop, estop, reset, hold, resume, set_zero.
+///   enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive.
 inline constexpr std::array<RequestRow, kModes> kRequestTable = {{
     // boot
     {Action::refuse_not_started, Action::disable_drives, Action::drop_queue, Action::estop_at_rest,
-     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging},
     // disabled
     {Action::power_up, Action::disable_now, Action::drop_queue, Action::estop_at_rest, Action::nothing_to_reset,
-     Action::not_moving, Action::not_holding, Action::set_zero},
+     Action::not_moving, Action::not_holding, Action::set_zero,
+     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging},
     // enabling
     {Action::already_enabled, Action::disable_now, Action::drop_queue, Action::estop_at_rest, Action::nothing_to_reset,
-     Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging},
     // idle
     {Action::already_enabled, Action::disable_now, Action::drop_queue, Action::estop_stop, Action::nothing_to_reset,
-     Action::hold_queue, Action::not_holding, Action::refuse_set_zero},
+     Action::hold_queue, Action::not_holding, Action::refuse_set_zero,
+     Action::start_jog, Action::not_jogging, Action::not_jogging},
     // moving
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
-     Action::nothing_to_reset, Action::hold_motion, Action::not_holding, Action::refuse_set_zero},
+     Action::nothing_to_reset, Action::hold_motion, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging},
     // hold_ramp
     {Action::already_enabled, Action::keep_ramp_then_disable, Action::keep_ramp_to_idle, Action::estop_keep_ramp,
-     Action::nothing_to_reset, Action::already_holding, Action::refuse_still_ramping, Action::refuse_set_zero},
+     Action::nothing_to_reset, Action::already_holding, Action::refuse_still_ramping, Action::refuse_set_zero,
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging},
     // hold_line
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
-     Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero},
+     Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero,
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging},
     // held
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
-     Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero},
+     Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero,
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging},
     // stopping_to_idle
     {Action::refuse_stopping, Action::keep_ramp_then_disable, Action::drop_queue, Action::estop_keep_ramp,
-     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_stopping, Action::not_jogging, Action::not_jogging},
     // stopping_to_disabled
     {Action::refuse_stopping, Action::keep_ramp_then_disable, Action::drop_queue, Action::estop_keep_ramp,
-     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_stopping, Action::not_jogging, Action::not_jogging},
     // fault_ramp
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_keep_ramp,
-     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
     // fault_quick_stop
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_keep_quick_stop,
-     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
     // fault
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_at_rest,
-     Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
     // estop_ramp
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
-     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
     // estop_quick_stop
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
-     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
     // estop
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
-     Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero},
+     Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
+    // jogging (hold = GRBL's feed hold during a jog: the jog is cancelled)
+    {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
+     Action::nothing_to_reset, Action::cancel_jog, Action::not_holding, Action::refuse_set_zero,
+     Action::update_jog, Action::cancel_jog, Action::refresh_jog},
 }};
 
 constexpr Action action_for(Mode m, RequestOp op) {

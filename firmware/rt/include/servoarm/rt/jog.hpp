@@ -1,0 +1,132 @@
+#pragma once
+// Jogging on the RT thread: a joint or a tool-space jog that can be started, retargeted,
+// refreshed and stopped from whatever state the arm is in, jerk-limited throughout.
+//
+// A joint jog is a jerk-limited joint trajectory to a target (the next increment's end,
+// or the joint's limit for a continuous jog), replanned from the current state whenever
+// the target changes (so GRBL jog lines streamed back to back never stop between them).
+//
+// A tool-space jog moves the tool along / about the axes of a frame fixed at the jog's
+// start (the base, or the tool as it was then): six "virtual axes" c = (x, y, z, rx, ry,
+// rz) -- the tool point's offset from its start in that frame and the rotation vector
+// applied in that frame -- follow a jerk-limited trajectory (the same planner as joint
+// moves, with the tool-space limits), and each cycle the pose c(t) is solved by the
+// console's IK (nearest to the current joints). What it refuses to do:
+//  - spin a joint to keep the tool on the line near a singularity: when a joint would
+//    need more than kSlowRatio of its velocity limit the jog slows (its clock runs slower,
+//    the rate of slowing bounded), and when that is not enough it stops in joint space
+//    and says which joint (JogEnd::singular);
+//  - run into a joint limit: when a joint's stopping distance reaches its limit the jog
+//    stops in joint space before it (JogEnd::limit, naming the joint);
+//  - move without being asked: a continuous jog stops (on its line) when it has not been
+//    refreshed within its deadman time (JogEnd::deadman).
+// Heap-free, no locks, no exceptions: it runs inside Controller::cycle.
+#include <cstdint>
+
+#include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/trajectory.hpp"
+#include "servoarm/kinematics/trajectory_cartesian.hpp"
+#include "servoarm/hal/time.hpp"
+
+namespace servoarm::fw {
+
+enum class JogSpace : std::uint8_t { joint, tool };
+
+/// What the console asks for (Request::jog). SI units.
+struct JogSpec {
+  JogSpace space = JogSpace::joint;
+  /// Continuous: runs until stopped, at a limit, or when not refreshed within deadman_s.
+  bool continuous = false;
+  double deadman_s = 0.25;
+  // joint jog
+  kin::JointVector q_goal;       ///< absolute joint target (continuous: the limit in the jog's direction)
+  double override = 1.0;         ///< fraction of the joint limits, [0.01, 1]
+  // tool-space jog
+  kin::Pose target = kin::Pose::Identity();  ///< increment: the tool pose to end at (base frame)
+  int axis = 0;                  ///< joint jog: the joint (0-based); tool jog (continuous): 0..5 = x y z rx ry rz
+  int direction = 1;             ///< continuous: +1 / -1
+  Eigen::Matrix3d frame = Eigen::Matrix3d::Identity();  ///< the frame's orientation in the base (columns = its axes)
+  double linear_speed = 0.05;    ///< m/s along the path
+  double angular_speed = 0.5;    ///< rad/s about the path
+  kin::CartesianLimits limits{}; ///< accelerations and jerks (velocities are the speeds above)
+  kin::IkSolver ik{};            ///< the console's IK (nearest, within the limits)
+};
+
+/// Why a jog ended (Jogger::step's result once it is over).
+enum class JogEnd : std::uint8_t {
+  running,    ///< still moving
+  done,       ///< at rest at its target, or stopped as asked
+  deadman,    ///< continuous jog not refreshed in time: stopped on its path
+  limit,      ///< stopped before a joint limit (joint named)
+  singular,   ///< stopped near a singularity: a joint would exceed its velocity limit (joint named)
+  unreachable,///< the IK found no solution for the next pose: stopped (joint -1)
+};
+const char* to_string(JogEnd e);
+
+class Jogger {
+ public:
+  /// A joint needing more than this fraction of its velocity limit slows the tool jog.
+  static constexpr double kSlowRatio = 0.7;
+  /// Slowed below this fraction of its speed, the tool jog stops (JogEnd::singular).
+  static constexpr double kMinScale = 0.05;
+  /// A joint that would need more than this fraction of its velocity limit stops the tool jog.
+  static constexpr double kStopRatio = 0.9;
+
+  void configure(const kin::Chain& chain, const kin::JointLimits& limits, double period_s);
+
+  /// Start a jog, or retarget the running one, from `cmd` (any state). False (and
+  /// `why` set, nothing changed) when it cannot: a tool jog while a joint jog runs or the
+  /// other way round, a tool jog in another frame than the running one, a bad spec.
+  bool set(const JogSpec& spec, const kin::JointState& cmd, hal::TimePoint now, const char*& why);
+  /// A continuous jog's deadman is refreshed.
+  void refresh(hal::TimePoint now) { last_refresh_ = now; }
+  /// Decelerate to rest on the path (joint: in joint space; tool: on the tool's line).
+  void stop(const kin::JointState& cmd);
+  bool active() const { return active_; }
+  bool stopping() const { return stopping_; }
+  JogSpace space() const { return spec_.space; }
+  double deadman_s() const { return spec_.deadman_s; }
+
+  /// One control period: the next commanded state into `cmd`. Returns running until the
+  /// jog is over; then why (joint(): the joint concerned, or -1). After an end other than
+  /// done / deadman the caller ramps the arm to rest in joint space (stop_in_joint_space()).
+  JogEnd step(kin::JointState& cmd, hal::TimePoint now);
+  int joint() const { return joint_; }
+  /// The tool jog gave up its line (limit / singular / unreachable): the caller ramps down.
+  bool needs_joint_ramp() const { return needs_ramp_; }
+  /// Current time scaling of a tool jog (1 = full speed; < 1 slowed near a singularity).
+  double scale() const { return scale_; }
+  void reset() { active_ = stopping_ = needs_ramp_ = deadman_ = false; }
+
+ private:
+  bool plan_joint(const kin::JointState& cmd);
+  bool plan_tool(const kin::JointVector& c_goal);
+  void tool_pose(const kin::JointState& c, kin::Pose& out) const;
+  JogEnd end(JogEnd e, int joint, bool ramp);
+
+  const kin::Chain* chain_ = nullptr;
+  kin::JointLimits limits_{};
+  double dt_ = 1e-3;
+  int n_ = 0;
+
+  JogSpec spec_{};
+  bool active_ = false;
+  bool stopping_ = false;
+  bool needs_ramp_ = false;
+  bool deadman_ = false;          ///< the running stop is the deadman's
+  int joint_ = -1;
+  hal::TimePoint last_refresh_ = 0;
+
+  // joint jog, and the tool jog's virtual axes: the plan being sampled
+  kin::JointTrajectory plan_{};
+  double t_ = 0;
+  // tool jog
+  kin::Pose origin_ = kin::Pose::Identity();  ///< tool pose at the jog's start
+  Eigen::Matrix3d frame_ = Eigen::Matrix3d::Identity();
+  kin::JointLimits vlimits_{};                 ///< limits of the six virtual axes
+  kin::JointState c_;                          ///< virtual axes' state at t_
+  double scale_ = 1.0;
+  kin::JointVector q_prev_;
+};
+
+}  // namespace servoarm::fw

@@ -1,0 +1,265 @@
+#include "servoarm/rt/jog.hpp"
+
+#include <cmath>
+
+#include <Eigen/Geometry>
+
+namespace servoarm::fw {
+
+const char* to_string(JogEnd e) {
+  switch (e) {
+    case JogEnd::running: return "running";
+    case JogEnd::done: return "done";
+    case JogEnd::deadman: return "deadman";
+    case JogEnd::limit: return "limit";
+    case JogEnd::singular: return "singular";
+    case JogEnd::unreachable: return "unreachable";
+  }
+  return "?";
+}
+
+namespace {
+constexpr int kAxes = 6;                // x y z rx ry rz
+constexpr double kFar = 100.0;          // m / rad: the target of a continuous tool jog along its axis
+constexpr double kScaleStep = 0.01;     // per cycle: how fast a tool jog may slow down or speed up again
+constexpr double kFloor = 1e-3;         // per-axis limits never below this fraction (the planner needs > 0)
+bool finite(const kin::JointVector& v, int n) {
+  for (int i = 0; i < n; ++i)
+    if (!std::isfinite(v[i])) return false;
+  return true;
+}
+}  // namespace
+
+void Jogger::configure(const kin::Chain& chain, const kin::JointLimits& limits, double period_s) {
+  chain_ = &chain;
+  limits_ = limits;
+  dt_ = period_s;
+  n_ = limits.n;
+  vlimits_.n = kAxes;
+  for (int a = 0; a < kAxes; ++a) {
+    vlimits_.lower[static_cast<std::size_t>(a)] = -1e6;
+    vlimits_.upper[static_cast<std::size_t>(a)] = 1e6;
+  }
+  c_ = kin::JointState::rest(kin::JointVector::Zero(kAxes));
+  q_prev_ = kin::JointVector::Zero(n_);
+}
+
+JogEnd Jogger::end(JogEnd e, int joint, bool ramp) {
+  active_ = false;
+  deadman_ = false;
+  stopping_ = false;
+  needs_ramp_ = ramp;
+  joint_ = joint;
+  return e;
+}
+
+bool Jogger::plan_joint(const kin::JointState& cmd) {
+  // The jog's speed is a fraction of each joint's velocity limit; accelerations and jerks
+  // stay the joint's own (a speed override would scale them too, and a slow jog would
+  // then start and stop sluggishly).
+  kin::JointLimits L = limits_;
+  for (int j = 0; j < n_; ++j) L.dyn[static_cast<std::size_t>(j)].max_velocity *= spec_.override;
+  if (kin::plan_movej(L, cmd, spec_.q_goal, kin::MovejOptions{}, plan_) != kin::MotionStatus::ok) return false;
+  t_ = 0;
+  return true;
+}
+
+// Per-axis limits proportional to the axis's share of the move, so that a move from rest
+// is a straight line at the asked speed (the planner synchronises the axes).
+bool Jogger::plan_tool(const kin::JointVector& c_goal) {
+  const kin::JointVector d = c_goal - c_.pos;
+  const double lin = d.head<3>().norm(), ang = d.tail<3>().norm();
+  const kin::CartesianLimits& L = spec_.limits;
+  for (int a = 0; a < kAxes; ++a) {
+    const bool linear = a < 3;
+    const double share = linear ? (lin > 0 ? std::fabs(d[a]) / lin : 0.0) : (ang > 0 ? std::fabs(d[a]) / ang : 0.0);
+    const double f = std::fmax(share, kFloor);
+    kin::JointDynamics& dy = vlimits_.dyn[static_cast<std::size_t>(a)];
+    dy.max_velocity = f * (linear ? spec_.linear_speed : spec_.angular_speed);
+    dy.max_acceleration = f * (linear ? L.linear_acceleration : L.angular_acceleration);
+    dy.max_jerk = f * (linear ? L.linear_jerk : L.angular_jerk);
+  }
+  // The state of the virtual axes in real time (the clock may have been slowed).
+  kin::JointState s = c_;
+  s.vel *= scale_;
+  s.acc *= scale_ * scale_;
+  if (kin::plan_movej(vlimits_, s, c_goal, kin::MovejOptions{}, plan_) != kin::MotionStatus::ok) return false;
+  c_ = s;
+  t_ = 0;
+  scale_ = 1.0;
+  return true;
+}
+
+void Jogger::tool_pose(const kin::JointState& c, kin::Pose& out) const {
+  const Eigen::Vector3d p = frame_ * Eigen::Vector3d(c.pos[0], c.pos[1], c.pos[2]);
+  const Eigen::Vector3d r = frame_ * Eigen::Vector3d(c.pos[3], c.pos[4], c.pos[5]);
+  const double angle = r.norm();
+  const Eigen::Matrix3d R = angle > 0 ? Eigen::AngleAxisd(angle, r / angle).toRotationMatrix() : Eigen::Matrix3d::Identity();
+  out.linear() = R * origin_.linear();
+  out.translation() = origin_.translation() + p;
+}
+
+bool Jogger::set(const JogSpec& spec, const kin::JointState& cmd, hal::TimePoint now, const char*& why) {
+  if (chain_ == nullptr) {
+    why = "jog not configured";
+    return false;
+  }
+  if (active_ && spec.space != spec_.space) {
+    why = spec.space == JogSpace::tool ? "a joint jog is running: jog stop first" : "a tool jog is running: jog stop first";
+    return false;
+  }
+  if (spec.space == JogSpace::joint) {
+    if (spec.q_goal.size() != n_ || !finite(spec.q_goal, n_) || !(spec.override >= 0.01 && spec.override <= 1.0)) {
+      why = "bad joint jog";
+      return false;
+    }
+    const JogSpec old = spec_;
+    spec_ = spec;
+    if (!plan_joint(cmd)) {
+      spec_ = old;
+      why = "jog cannot be planned from here (it would overshoot a joint limit)";
+      return false;
+    }
+  } else {
+    if (spec.ik.fn == nullptr || !(spec.linear_speed > 0) || !(spec.angular_speed > 0) ||
+        !std::isfinite(spec.linear_speed) || !std::isfinite(spec.angular_speed)) {
+      why = "bad tool jog";
+      return false;
+    }
+    if (active_ && !spec_.frame.isApprox(spec.frame, 1e-12)) {
+      why = "a jog in another frame is running: jog stop first";
+      return false;
+    }
+    const JogSpec old = spec_;
+    const bool fresh = !active_;
+    spec_ = spec;
+    if (fresh) {
+      kin::forward(*chain_, cmd.pos, origin_);
+      frame_ = spec.frame;
+      c_ = kin::JointState::rest(kin::JointVector::Zero(kAxes));
+      scale_ = 1.0;
+    }
+    kin::JointVector goal = c_.pos;
+    if (spec.continuous) {
+      goal[spec.axis] = c_.pos[spec.axis] + spec.direction * kFar;
+    } else {
+      const Eigen::Vector3d dp = frame_.transpose() * (spec.target.translation() - origin_.translation());
+      const Eigen::AngleAxisd aa(spec.target.linear() * origin_.linear().transpose());
+      const Eigen::Vector3d dr = frame_.transpose() * (aa.axis() * aa.angle());
+      goal << dp.x(), dp.y(), dp.z(), dr.x(), dr.y(), dr.z();
+    }
+    if (!finite(goal, kAxes) || !plan_tool(goal)) {
+      spec_ = old;
+      why = "tool jog cannot be planned";
+      return false;
+    }
+  }
+  stopping_ = false;
+  deadman_ = false;
+  needs_ramp_ = false;
+  joint_ = -1;
+  active_ = true;
+  last_refresh_ = now;
+  q_prev_ = cmd.pos;
+  return true;
+}
+
+void Jogger::stop(const kin::JointState& cmd) {
+  if (!active_ || stopping_) return;
+  kin::MovejOptions o;
+  if (spec_.space == JogSpace::joint) {
+    if (kin::plan_stop(limits_, cmd, o, plan_) != kin::MotionStatus::ok) {
+      end(JogEnd::done, -1, true);
+      return;
+    }
+  } else {
+    kin::JointState s = c_;
+    s.vel *= scale_;
+    s.acc *= scale_ * scale_;
+    if (kin::plan_stop(vlimits_, s, o, plan_) != kin::MotionStatus::ok) {
+      end(JogEnd::done, -1, true);
+      return;
+    }
+    c_ = s;
+    scale_ = 1.0;
+  }
+  t_ = 0;
+  stopping_ = true;
+}
+
+JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
+  if (!active_) return JogEnd::done;
+  const bool expired = spec_.continuous && !stopping_ &&
+                       static_cast<double>(now - last_refresh_) * 1e-9 > spec_.deadman_s;
+  if (expired) {
+    stop(cmd);
+    deadman_ = true;
+  }
+  if (!active_) return JogEnd::done;  // (no stop could be planned)
+  const JogEnd at_end = deadman_ ? JogEnd::deadman : JogEnd::done;
+
+  if (spec_.space == JogSpace::joint) {
+    t_ += dt_;
+    plan_.sample(t_, cmd);
+    if (t_ < plan_.duration) return JogEnd::running;
+    // A continuous joint jog that ran to its target has reached the joint's limit.
+    if (spec_.continuous && !stopping_) return end(JogEnd::limit, spec_.axis, false);
+    return end(at_end, -1, false);
+  }
+
+  // Tool jog: try the next pose at the current time scale; slow down when a joint would
+  // need more than kSlowRatio of its velocity limit.
+  auto solve = [&](double t, kin::JointState& c, kin::JointVector& q, double& ratio, int& worst) {
+    plan_.sample(t, c);
+    kin::Pose x;
+    tool_pose(c, x);
+    if (spec_.ik.fn(*chain_, x, cmd.pos, q, spec_.ik.ctx) < kin::Status::ok) return false;
+    ratio = 0;
+    worst = -1;
+    for (int j = 0; j < n_; ++j) {
+      const double r = std::fabs(q[j] - cmd.pos[j]) / (limits_.dyn[static_cast<std::size_t>(j)].max_velocity * dt_);
+      if (r > ratio) ratio = r, worst = j;
+    }
+    return true;
+  };
+  kin::JointState c;
+  kin::JointVector q;
+  double ratio = 0;
+  int worst = -1;
+  double scale = scale_;
+  if (!solve(t_ + dt_ * scale, c, q, ratio, worst)) return end(JogEnd::unreachable, -1, true);
+  // A joint's step scales with the clock: at scale 1 it would need about ratio / scale.
+  const double at_full = scale > 0 ? ratio / scale : ratio;
+  const double want = at_full > 0 ? std::fmin(1.0, kSlowRatio / at_full) : 1.0;
+  const double next = std::fmin(1.0, std::fmin(std::fmax(want, scale_ - kScaleStep), scale_ + kScaleStep));
+  if (next != scale) {
+    scale = next;
+    if (!solve(t_ + dt_ * scale, c, q, ratio, worst)) return end(JogEnd::unreachable, -1, true);
+  }
+  // Above kStopRatio of a limit (slowing could not keep up) the jog gives up its line; the
+  // caller's joint ramp then starts below the limit.
+  if (ratio > kStopRatio || (scale < kMinScale && want < scale)) return end(JogEnd::singular, worst, true);
+  // Joint limits: stop before a joint's stopping distance reaches its limit.
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    const double v = (q[j] - cmd.pos[j]) / dt_;
+    const double a = limits_.dyn[ju].max_acceleration, jk = limits_.dyn[ju].max_jerk;
+    const double reach = v * v / (2 * a) + std::fabs(v) * (a / jk + dt_);
+    if ((v > 0 && q[j] + reach > limits_.upper[ju]) || (v < 0 && q[j] - reach < limits_.lower[ju]) ||
+        q[j] > limits_.upper[ju] || q[j] < limits_.lower[ju])
+      return end(JogEnd::limit, j, true);
+  }
+  const kin::JointVector vel = (q - cmd.pos) / dt_;
+  cmd.acc = (vel - cmd.vel) / dt_;
+  cmd.vel = vel;
+  cmd.pos = q;
+  scale_ = scale;
+  t_ += dt_ * scale;
+  c_ = c;
+  if (t_ < plan_.duration) return JogEnd::running;
+  cmd.vel.setZero();
+  cmd.acc.setZero();
+  return end(at_end, -1, false);
+}
+
+}  // namespace servoarm::fw
