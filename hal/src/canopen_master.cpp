@@ -21,6 +21,15 @@ const char* to_string(JointState s) {
   return "unknown";
 }
 
+const char* to_string(PdoUse u) {
+  switch (u) {
+    case PdoUse::off: return "off";
+    case PdoUse::optional: return "optional";
+    case PdoUse::required: return "required";
+  }
+  return "unknown";
+}
+
 CanopenMasterConfig CanopenMasterConfig::consecutive(std::uint8_t first, std::size_t count, const JointScaling& s) {
   CanopenMasterConfig c;
   c.joint_count = count;
@@ -138,6 +147,14 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
       jt.state = st;
       jt.have_status = true;
       jt.actual_counts = pos;
+      if (jt.off_velocity < 0) {
+        // No 606Ch mapped: the velocity from successive positions (receive times).
+        if (jt.prev_pos_time != 0 && now > jt.prev_pos_time)
+          fb.velocity = cfg_.joints[j].scaling.to_joint(pos) - cfg_.joints[j].scaling.to_joint(jt.prev_pos);
+        if (jt.prev_pos_time != 0 && now > jt.prev_pos_time) fb.velocity /= double(now - jt.prev_pos_time) * 1e-9;
+        jt.prev_pos_time = now;
+        jt.prev_pos = pos;
+      }
       fb.statusword = sw;
       fb.drive_state = std::uint8_t(st);
       fb.position = cfg_.joints[j].scaling.to_joint(pos);
@@ -152,11 +169,21 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
       return;
     }
     case kTpdo2: {
-      std::int32_t vel;
-      std::uint16_t code;
-      if (!pdo::decode_tpdo2(f, vel, code)) break;
-      fb.velocity = cfg_.joints[j].scaling.velocity_to_joint(vel);
-      if (code != 0) fb.error_code = code;
+      // Decoded with the layout start() mapped (default: velocity + error code, 6 bytes).
+      if (jt.tpdo2_len == 0 || f.len != jt.tpdo2_len) break;
+      if (jt.off_velocity >= 0) {
+        const std::int32_t vel = std::int32_t(get_u32(&f.data[jt.off_velocity]));
+        fb.velocity = cfg_.joints[j].scaling.velocity_to_joint(vel);
+      }
+      if (jt.off_error >= 0) {
+        const std::uint16_t code = get_u16(&f.data[jt.off_error]);
+        if (code != 0) fb.error_code = code;
+      }
+      if (jt.off_torque >= 0) {
+        const std::int16_t tq = std::int16_t(get_u16(&f.data[jt.off_torque]));
+        fb.torque = double(tq) * jt.torque_per_mille;
+        fb.has_torque = true;
+      }
       return;
     }
     case kEmcy: {
@@ -187,43 +214,99 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
   ++ignored_;
 }
 
+Status CanopenServoBus::sdo_write(std::uint8_t n, std::uint16_t index, std::uint8_t sub, std::uint8_t size,
+                                  std::uint32_t value, const char* what) {
+  std::uint8_t b[4];
+  put_u32(b, value);
+  const SdoResult r = sdo_.download(n, index, sub, b, size);
+  if (r.status != Status::ok) {
+    std::snprintf(error_, sizeof error_, "node %u: SDO write 0x%04X:%u = 0x%X (%s) failed: %s (abort 0x%08X: %s)",
+                  unsigned(n), unsigned(index), unsigned(sub), unsigned(value), what, to_string(r.status),
+                  unsigned(r.abort_code), r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+  }
+  return r.status;
+}
+
+Status CanopenServoBus::map_pdo(std::size_t j, std::uint16_t comm, std::uint16_t map, std::uint32_t cob,
+                                const MapEntry* entries, std::size_t count, bool* mapped, const char* pdo_name) {
+  const std::uint8_t n = joints_[j].node;
+  char what[64];
+  std::snprintf(what, sizeof what, "%s off", pdo_name);
+  if (const Status s = sdo_write(n, comm, 1, 4, 0x80000000u | cob, what); s != Status::ok) return s;
+  bool dropped[8] = {};
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    std::snprintf(what, sizeof what, "%s mapping cleared", pdo_name);
+    if (const Status s = sdo_write(n, map, 0, 1, 0, what); s != Status::ok) return s;
+    std::uint8_t sub = 0;
+    for (std::size_t k = 0; k < count; ++k) {
+      const MapEntry& e = entries[k];
+      mapped[k] = false;
+      if (e.use == PdoUse::off || dropped[k]) continue;
+      // Many drives refuse an entry they lack or cannot map when it is written (CiA 301:
+      // abort 06040041h; 06020000h on some); no extra frames when everything is there.
+      std::uint8_t b[4];
+      put_u32(b, (std::uint32_t(e.index) << 16) | e.bits);
+      const SdoResult r = sdo_.download(n, map, std::uint8_t(sub + 1), b, 4);
+      if (r.status == Status::ok) {
+        mapped[k] = true;
+        ++sub;
+        continue;
+      }
+      if (r.status != Status::sdo_abort || e.use == PdoUse::required) {
+        std::snprintf(error_, sizeof error_, "node %u: %s needs 0x%04X (%s), which the drive %s: %s (abort 0x%08X: %s)",
+                      unsigned(n), pdo_name, unsigned(e.index), e.what,
+                      r.abort_code == sdo::kAbortNoObject ? "does not have" : "cannot map", to_string(r.status),
+                      unsigned(r.abort_code), r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+        return r.status;
+      }
+      // optional and refused: left out of the frame
+    }
+    if (sub == 0) return Status::ok;  // nothing to send: the PDO stays off
+    std::uint8_t b[4];
+    put_u32(b, sub);
+    const SdoResult r = sdo_.download(n, map, 0, b, 1);
+    if (r.status == Status::ok) {
+      std::snprintf(what, sizeof what, "%s synchronous", pdo_name);
+      if (const Status s = sdo_write(n, comm, 2, 1, 1, what); s != Status::ok) return s;
+      std::snprintf(what, sizeof what, "%s on", pdo_name);
+      return sdo_write(n, comm, 1, 4, cob, what);
+    }
+    // Other drives check the entries only when the count is written: find the object the
+    // drive lacks (its upload aborts) and drop it when it is optional.
+    bool found = false;
+    for (std::size_t k = 0; k < count && r.status == Status::sdo_abort; ++k) {
+      if (!mapped[k]) continue;
+      std::uint8_t probe[4];
+      const SdoResult p = sdo_.upload(n, entries[k].index, 0, probe, sizeof probe);
+      if (p.status == Status::ok) continue;
+      if (entries[k].use == PdoUse::required || p.status != Status::sdo_abort) {
+        std::snprintf(error_, sizeof error_, "node %u: %s needs 0x%04X (%s), which the drive does not have: %s (abort 0x%08X: %s)",
+                      unsigned(n), pdo_name, unsigned(entries[k].index), entries[k].what, to_string(p.status),
+                      unsigned(p.abort_code), p.abort_code ? sdo::abort_text(p.abort_code) : "-");
+        return p.status != Status::ok ? p.status : Status::protocol_error;
+      }
+      dropped[k] = true;
+      found = true;
+    }
+    if (!found || attempt == 1) {
+      char list[48] = {};
+      std::size_t used = 0;
+      for (std::size_t k = 0; k < count && used + 8 < sizeof list; ++k)
+        if (mapped[k]) used += std::size_t(std::snprintf(list + used, sizeof list - used, "%s0x%04X", used ? "+" : "",
+                                                         unsigned(entries[k].index)));
+      std::snprintf(error_, sizeof error_, "node %u: %s mapping %s refused (0x%04X:0 = %u): %s (abort 0x%08X: %s)",
+                    unsigned(n), pdo_name, list, unsigned(map), unsigned(sub), to_string(r.status),
+                    unsigned(r.abort_code), r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+      return r.status;
+    }
+  }
+  return Status::protocol_error;  // not reached: the second attempt returns
+}
+
 Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
   const std::uint8_t n = joints_[j].node;
-  struct W {
-    std::uint16_t index;
-    std::uint8_t sub;
-    std::uint8_t size;
-    std::uint32_t value;
-  };
+  Joint& jt = joints_[j];
   const std::uint32_t hb_ms = std::uint32_t(cfg_.heartbeat_period / kMillisecond);
-  const W writes[] = {
-      {0x1017, 0, 2, hb_ms},
-      {cia402::kModesOfOperation, 0, 1, std::uint32_t(cia402::kModeCsp)},
-      // RPDO1: disable, map controlword + target position, synchronous, enable.
-      {0x1400, 1, 4, 0x80000000u | (kRpdo1 + n)},
-      {0x1600, 0, 1, 0},
-      {0x1600, 1, 4, 0x60400010},
-      {0x1600, 2, 4, 0x607A0020},
-      {0x1600, 0, 1, 2},
-      {0x1400, 2, 1, 1},
-      {0x1400, 1, 4, kRpdo1 + n},
-      // TPDO1: statusword + position actual, every SYNC.
-      {0x1800, 1, 4, 0x80000000u | (kTpdo1 + n)},
-      {0x1A00, 0, 1, 0},
-      {0x1A00, 1, 4, 0x60410010},
-      {0x1A00, 2, 4, 0x60640020},
-      {0x1A00, 0, 1, 2},
-      {0x1800, 2, 1, 1},
-      {0x1800, 1, 4, kTpdo1 + n},
-      // TPDO2: velocity actual + error code, every SYNC.
-      {0x1801, 1, 4, 0x80000000u | (kTpdo2 + n)},
-      {0x1A01, 0, 1, 0},
-      {0x1A01, 1, 4, 0x606C0020},
-      {0x1A01, 2, 4, 0x603F0010},
-      {0x1A01, 0, 1, 2},
-      {0x1801, 2, 1, 1},
-      {0x1801, 1, 4, kTpdo2 + n},
-  };
   std::uint32_t devtype = 0;
   SdoResult r = sdo_.read_u32(n, 0x1000, 0, devtype);
   if (r.status != Status::ok) {
@@ -238,19 +321,53 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
   std::uint8_t name[sizeof joints_[j].name - 1] = {};
   r = sdo_.upload(n, 0x1008, 0, name, sizeof name);
   if (r.status == Status::ok) std::memcpy(joints_[j].name, name, r.size);
-  for (const W& w : writes) {
-    if (clock_.now() > deadline) {
-      std::snprintf(error_, sizeof error_, "node %u: bring-up deadline passed", unsigned(n));
-      return Status::timeout;
-    }
-    std::uint8_t b[4];
-    put_u32(b, w.value);
-    r = sdo_.download(n, w.index, w.sub, b, w.size);
-    if (r.status != Status::ok) {
-      std::snprintf(error_, sizeof error_, "node %u: SDO write 0x%04X:%u = 0x%X failed: %s (abort 0x%08X: %s)",
-                    unsigned(n), unsigned(w.index), unsigned(w.sub), unsigned(w.value), to_string(r.status),
-                    unsigned(r.abort_code), r.abort_code ? sdo::abort_text(r.abort_code) : "-");
-      return r.status;
+  auto late = [&] {
+    if (clock_.now() <= deadline) return false;
+    std::snprintf(error_, sizeof error_, "node %u: bring-up deadline passed", unsigned(n));
+    return true;
+  };
+  if (late()) return Status::timeout;
+  if (const Status s = sdo_write(n, 0x1017, 0, 2, hb_ms, "heartbeat producer time"); s != Status::ok) return s;
+  if (const Status s = sdo_write(n, cia402::kModesOfOperation, 0, 1, std::uint32_t(cia402::kModeCsp),
+                                 "mode of operation: cyclic synchronous position");
+      s != Status::ok)
+    return s;
+  // RPDO1 and TPDO1: required objects; TPDO2: what the configuration asks for and the drive has.
+  const MapEntry rpdo1[] = {{cia402::kControlword, 16, PdoUse::required, "controlword"},
+                            {cia402::kTargetPosition, 32, PdoUse::required, "target position"}};
+  const MapEntry tpdo1[] = {{cia402::kStatusword, 16, PdoUse::required, "statusword"},
+                            {cia402::kPositionActual, 32, PdoUse::required, "position actual"}};
+  const MapEntry tpdo2[] = {{cia402::kVelocityActual, 32, cfg_.tpdo2.velocity, "velocity actual"},
+                            {cia402::kErrorCode, 16, cfg_.tpdo2.error_code, "error code"},
+                            {cia402::kTorqueActual, 16, cfg_.tpdo2.torque, "torque actual"}};
+  bool m1[2], m2[2], m3[3];
+  if (late()) return Status::timeout;
+  if (const Status s = map_pdo(j, 0x1400, 0x1600, kRpdo1 + n, rpdo1, 2, m1, "RPDO1"); s != Status::ok) return s;
+  if (late()) return Status::timeout;
+  if (const Status s = map_pdo(j, 0x1800, 0x1A00, kTpdo1 + n, tpdo1, 2, m2, "TPDO1"); s != Status::ok) return s;
+  if (late()) return Status::timeout;
+  if (const Status s = map_pdo(j, 0x1801, 0x1A01, kTpdo2 + n, tpdo2, 3, m3, "TPDO2"); s != Status::ok) return s;
+  std::uint8_t off = 0;
+  jt.off_velocity = jt.off_error = jt.off_torque = -1;
+  if (m3[0]) jt.off_velocity = std::int8_t(off), off += 4;
+  if (m3[1]) jt.off_error = std::int8_t(off), off += 2;
+  if (m3[2]) jt.off_torque = std::int8_t(off), off += 2;
+  jt.tpdo2_len = off;
+  jt.torque_per_mille = 0;
+  if (m3[2]) {
+    // 6077h is per mille of the rated torque 6076h (mN m, motor side): joint side x gear ratio.
+    std::uint32_t rated = 0;
+    r = sdo_.read_u32(n, cia402::kRatedTorque, 0, rated);
+    if (r.status != Status::ok || rated == 0) {
+      if (cfg_.tpdo2.torque == PdoUse::required) {
+        std::snprintf(error_, sizeof error_, "node %u: torque actual 0x6077 needs the rated torque 0x6076: %s",
+                      unsigned(n), r.status != Status::ok ? to_string(r.status) : "it reads 0");
+        return r.status != Status::ok ? r.status : Status::protocol_error;
+      }
+      jt.off_torque = -1;  // optional: without a scale the torque is not reported
+    } else {
+      const JointScaling& sc = cfg_.joints[j].scaling;
+      jt.torque_per_mille = double(rated) * 1e-6 * sc.gear_ratio * double(sc.direction);
     }
   }
   const double qsd = cfg_.joints[j].quick_stop_decel;
@@ -267,6 +384,17 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
     }
   }
   return Status::ok;
+}
+
+bool CanopenServoBus::maps(std::size_t j, std::uint16_t object) const {
+  if (j >= cfg_.joint_count) return false;
+  const Joint& jt = joints_[j];
+  switch (object) {
+    case cia402::kVelocityActual: return jt.off_velocity >= 0;
+    case cia402::kErrorCode: return jt.off_error >= 0;
+    case cia402::kTorqueActual: return jt.off_torque >= 0;
+    default: return false;
+  }
 }
 
 Status CanopenServoBus::start(TimePoint deadline) {
@@ -307,6 +435,7 @@ Status CanopenServoBus::start(TimePoint deadline) {
     // processed this start command may still say pre-operational.
     joints_[j].nmt = NmtState::boot_up;
     joints_[j].have_status = false;
+    joints_[j].prev_pos_time = 0;
     fb_[j] = JointFeedback{};
     fb_[j].state = JointState::disabled;
     joints_[j].hb_watch_since = now;  // consumer starts counting now (last_heartbeat stays a real one)
@@ -328,9 +457,12 @@ void CanopenServoBus::enable() {
       joints_[j].resetting = true;
       joints_[j].hb_watch_since = now;  // the consumer restarts; enabled needs a real heartbeat (read())
     }
-    if (joints_[j].have_status &&
-        (joints_[j].state == cia402::State::fault || joints_[j].state == cia402::State::fault_reaction_active))
-      joints_[j].resetting = true;  // a drive that faulted while disabled gets its reset too
+    // A drive that faulted while disabled gets its reset too, and so does one whose state is
+    // not known yet (right after start(): a drive that powered up in FAULT is reset with a
+    // rising edge of controlword bit 7 instead of being reported as faulted at once).
+    if (!joints_[j].have_status || joints_[j].state == cia402::State::fault ||
+        joints_[j].state == cia402::State::fault_reaction_active)
+      joints_[j].resetting = true;
     joints_[j].state_since = now;
   }
 }
@@ -393,7 +525,10 @@ Status CanopenServoBus::read(TimePoint now) {
             fb.state = JointState::enabling;
             if (now - jt.state_since > cfg_.state_timeout) {
               jt.refused_in = jt.state;
-              set_fault(j, Status::drive_refused, now);
+              // Still in fault after the resets: the drive's own error, with its code.
+              const bool in_fault =
+                  jt.state == cia402::State::fault || jt.state == cia402::State::fault_reaction_active;
+              set_fault(j, in_fault ? Status::drive_fault : Status::drive_refused, now);
             }
           }
           break;

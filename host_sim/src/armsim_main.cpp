@@ -1,5 +1,6 @@
 // armsim: virtual CiA 402 servo drives on a SocketCAN interface (e.g. vcan0).
 #include <algorithm>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <cstring>
@@ -10,6 +11,8 @@
 #include "servoarm/hal/clock.hpp"
 #include "servoarm/hal/socketcan_bus.hpp"
 #include "servoarm/sim/cli.hpp"
+#include "servoarm/kinematics/description.hpp"
+#include "servoarm/sim/arm_plant.hpp"
 #include "servoarm/sim/virtual_drive.hpp"
 
 using namespace servoarm;
@@ -41,6 +44,28 @@ const char* kUsage =
     "  --amax REV_PER_S2       acceleration limit (default 400)\n"
     "  --window COUNTS         following error window 0x6065 (default 13107)\n"
     "  --seed N                random seed for noise and drops (default 1)\n"
+    "\n"
+    "Plant (default first-order: each drive its own massless first-order motor, --lag-ms):\n"
+    "  --plant dynamic         the drives move one rigid-body arm (--robot): each drive's position and\n"
+    "                          velocity loop commands a joint torque, the arm's forward dynamics (gravity,\n"
+    "                          friction, brakes) are integrated with RK4 at --step-us; nodes = joints in order\n"
+    "  --robot NAME|FILE       built-in model or description file with inertial data (default puma560)\n"
+    "  --gear-ratio G          motor revolutions per joint revolution, all joints (default 1)\n"
+    "  --step-us N             integration step = the drives' loop period (default 100)\n"
+    "  --bandwidth HZ          velocity-loop bandwidth for the automatic gains (default 40)\n"
+    "  --kp X                  position-loop gain, 1/s, every joint (default bandwidth x 2 pi / 4)\n"
+    "  --ki X                  velocity-loop integral gain, 1/s, every joint (default 0 = off)\n"
+    "  --gains J:KP,KV,KI,TMAX joint J's loop: KP 1/s, KV N m s/rad, KI 1/s, torque limit N m (0 = automatic)\n"
+    "  --friction J:VISC,COUL  extra friction on joint J (N m s/rad, N m) on top of the description's\n"
+    "  --no-brakes             unpowered joints swing freely (default: holding brakes lock them)\n"
+    "  --no-gravity            ignore the description's gravity\n"
+    "  --stop J:DEG[:-]        rigid stop: joint J cannot pass DEG (mm for prismatic) upwards (':-': downwards)\n"
+    "  --tool-force FX,FY,FZ   constant force at the tool point, world frame, N\n"
+    "  --joint-torque J:NM     constant external torque on joint J\n"
+    "  --without LIST          objects the drives lack, e.g. 0x606C,0x603F (a drive with less: SDO\n"
+    "                          access aborts 06020000h, mapping it 06040041h)\n"
+    "  --check-map-entries     refuse a PDO mapping entry for an object it lacks when the entry is\n"
+    "                          written (default: when the count, sub 0, is written)\n"
     "  --status-every SEC      print one status line per node every SEC seconds\n"
     "  --verbose               print NMT/CiA 402 state changes\n"
     "\n"
@@ -77,7 +102,11 @@ int main(int argc, char** argv) {
   std::vector<std::uint8_t> nodes = {1, 2, 3, 4, 5, 6};
   double duration = 0, status_every = 0, lag_ms = 2, vmax = 10, amax = 400;
   std::uint32_t hb_ms = 0, window = 13107, seed = 1, cpr = 131072;
-  bool verbose = false;
+  bool verbose = false, check_entries = false, dynamic = false;
+  sim::ArmPlantParams pp;
+  std::string robot = "puma560";
+  double gear = 1.0, stop_user = 0;
+  std::vector<std::uint16_t> without;
   std::vector<Scheduled> schedule;
   std::vector<cli::FaultArg> refuse, noise, drops;
 
@@ -94,6 +123,17 @@ int main(int argc, char** argv) {
       return 0;
     } else if (a == "--verbose") {
       verbose = true;
+    } else if (a == "--check-map-entries") {
+      check_entries = true;
+    } else if (a == "--no-brakes") {
+      pp.brakes = false;
+    } else if (a == "--no-gravity") {
+      pp.gravity = false;
+    } else if (a == "--plant") {
+      if (i + 1 >= argc) return usage_error("--plant needs first-order or dynamic");
+      const std::string k = argv[++i];
+      if (k != "first-order" && k != "dynamic") return usage_error("bad --plant '" + k + "' (first-order or dynamic)");
+      dynamic = k == "dynamic";
     } else if (!value(v)) {
       return usage_error("unknown option or missing value: " + a);
     } else if (a == "--iface") {
@@ -119,6 +159,80 @@ int main(int argc, char** argv) {
       if (!cli::parse_double(v, amax) || amax <= 0) return usage_error("bad --amax");
     } else if (a == "--window") {
       if (!cli::parse_uint(v, 0xFFFFFFFFu, window)) return usage_error("bad --window");
+    } else if (a == "--without") {
+      std::size_t p = 0;
+      while (p <= v.size()) {
+        const std::size_t q = std::min(v.find(',', p), v.size());
+        std::uint32_t idx = 0;
+        if (!cli::parse_uint(v.substr(p, q - p), 0xFFFF, idx) || idx < 0x1000)
+          return usage_error("bad --without '" + v + "' (object indices 0x1000..0xFFFF, e.g. 0x606C,0x603F)");
+        without.push_back(std::uint16_t(idx));
+        p = q + 1;
+      }
+    } else if (a == "--robot") {
+      robot = v;
+    } else if (a == "--gear-ratio") {
+      if (!cli::parse_double(v, gear) || gear < 1e-3 || gear > 1e5) return usage_error("bad --gear-ratio (1e-3..1e5)");
+    } else if (a == "--step-us") {
+      std::uint32_t us = 0;
+      if (!cli::parse_uint(v, 2000, us) || us < 10) return usage_error("bad --step-us (10..2000)");
+      pp.step = Duration(us) * kMicrosecond;
+    } else if (a == "--bandwidth") {
+      if (!cli::parse_double(v, pp.velocity_bandwidth_hz) || pp.velocity_bandwidth_hz <= 0 ||
+          pp.velocity_bandwidth_hz > 2000)
+        return usage_error("bad --bandwidth HZ (0..2000)");
+    } else if (a == "--kp" || a == "--ki") {
+      double x = 0;
+      if (!cli::parse_double(v, x) || x < 0 || x > 1e5) return usage_error("bad " + a + " (0..1e5 1/s)");
+      for (auto& g : pp.gains) (a == "--kp" ? g.kp : g.ki) = x;
+    } else if (a == "--gains" || a == "--friction" || a == "--joint-torque" || a == "--stop") {
+      // J:LIST of numbers
+      const std::size_t colon = v.find(':');
+      std::uint32_t jn = 0;
+      if (colon == std::string::npos || !cli::parse_uint(v.substr(0, colon), 8, jn) || jn == 0)
+        return usage_error("bad " + a + " '" + v + "' (joint number 1..8 first, then ':')");
+      std::vector<double> xs;
+      std::string rest = v.substr(colon + 1), tail;
+      if (a == "--stop" && rest.size() > 2 && rest.compare(rest.size() - 2, 2, ":-") == 0) {
+        tail = "-";
+        rest.resize(rest.size() - 2);
+      }
+      std::size_t p = 0;
+      while (p <= rest.size()) {
+        const std::size_t q = std::min(rest.find(',', p), rest.size());
+        double x = 0;
+        if (!cli::parse_double(rest.substr(p, q - p), x)) return usage_error("bad " + a + " '" + v + "': not a number");
+        xs.push_back(x);
+        p = q + 1;
+      }
+      const std::size_t k = jn - 1;
+      if (a == "--gains") {
+        if (xs.size() != 4 || xs[0] < 0 || xs[1] < 0 || xs[2] < 0 || xs[3] < 0)
+          return usage_error("bad --gains '" + v + "' (J:KP,KV,KI,TMAX, each >= 0; 0 = automatic)");
+        pp.gains[k] = sim::ServoGains{xs[0], xs[1], xs[2], xs[3]};
+      } else if (a == "--friction") {
+        if (xs.size() != 2 || xs[0] < 0 || xs[1] < 0) return usage_error("bad --friction '" + v + "' (J:VISCOUS,COULOMB >= 0)");
+        pp.extra_viscous[k] = xs[0];
+        pp.extra_coulomb[k] = xs[1];
+      } else if (a == "--joint-torque") {
+        if (xs.size() != 1) return usage_error("bad --joint-torque '" + v + "' (J:NM)");
+        pp.external_torque[k] = xs[0];
+      } else {
+        if (xs.size() != 1) return usage_error("bad --stop '" + v + "' (J:DEG or J:DEG:-)");
+        pp.stop.joint = int(k);
+        stop_user = xs[0];
+        pp.stop.side = tail == "-" ? -1 : 1;
+      }
+    } else if (a == "--tool-force") {
+      double f[3];
+      std::size_t p = 0;
+      for (int c = 0; c < 3; ++c) {
+        const std::size_t q = std::min(v.find(',', p), v.size());
+        if (p > v.size() || !cli::parse_double(v.substr(p, q - p), f[c])) return usage_error("bad --tool-force (FX,FY,FZ in N)");
+        p = q + 1;
+      }
+      if (p <= v.size()) return usage_error("bad --tool-force (FX,FY,FZ in N)");
+      pp.tool_force = Eigen::Vector3d(f[0], f[1], f[2]);
     } else if (a == "--seed") {
       if (!cli::parse_uint(v, 0xFFFFFFFFu, seed)) return usage_error("bad --seed");
     } else if (a == "--silent" || a == "--stop-heartbeat") {
@@ -174,7 +288,43 @@ int main(int argc, char** argv) {
   motor.max_velocity = vmax * cpr;
   motor.max_accel = amax * cpr;
   motor.following_window = window;
+  motor.check_map_entries = check_entries;
   sim::ArmSim arm(bus, nodes, motor, seed);
+  for (std::size_t i = 0; i < arm.size(); ++i)
+    for (std::uint16_t idx : without) arm.at(i).od_remove(idx);
+  MonotonicClock clock;
+  const TimePoint t0 = clock.now();
+  arm.power_on(t0);
+  if (dynamic) {
+    kin::LoadResult lr = kin::load_robot(robot);
+    if (!lr.ok) return usage_error("--robot: " + lr.error);
+    if (pp.stop.joint >= lr.chain.n_joints) return usage_error("--stop: the robot has no joint " + std::to_string(pp.stop.joint + 1));
+    if (pp.stop.joint >= 0)
+      pp.stop.position = stop_user * (lr.chain.joint(pp.stop.joint).type == kin::JointType::prismatic ? 1e-3
+                                                                                                         : M_PI / 180.0);
+    std::vector<JointScaling> sc(arm.size());
+    for (std::size_t i = 0; i < sc.size(); ++i) {
+      sc[i].counts_per_unit = cpr;
+      sc[i].gear_ratio = gear;
+      if (int(i) < lr.chain.n_joints && lr.chain.joint(int(i)).type == kin::JointType::prismatic)
+        sc[i].kind = JointScaling::Kind::prismatic;
+    }
+    const std::string e = arm.use_dynamic_plant(lr.chain, sc, pp);
+    if (!e.empty()) {
+      std::fprintf(stderr, "armsim: --plant dynamic: %s\n", e.c_str());
+      return 2;
+    }
+    sim::ArmPlant& pl = *arm.plant();
+    std::printf("armsim plant=dynamic robot=%s step_us=%lld integrator=rk4 brakes=%s\n", robot.c_str(),
+                static_cast<long long>(pp.step / kMicrosecond), pp.brakes ? "on" : "off");
+    for (int j = 0; j < pl.joints(); ++j) {
+      const auto& in = pl.info(j);
+      std::printf("armsim joint=%d node=%u kp=%.4g kv=%.4g ki=%.4g torque_limit=%.4g rated_torque_mnm=%.0f "
+                  "max_inertia=%.4g max_gravity=%.4g\n",
+                  j + 1, unsigned(arm.at(std::size_t(j)).node()), in.gains.kp, in.gains.kv, in.gains.ki,
+                  in.gains.torque_limit, in.rated_torque_mnm, in.max_inertia, in.max_gravity);
+    }
+  }
   auto each = [&](std::uint8_t node, auto fn) {
     for (std::size_t i = 0; i < arm.size(); ++i)
       if (node == 0 || arm.at(i).node() == node) fn(arm.at(i));
@@ -191,9 +341,6 @@ int main(int argc, char** argv) {
     each(f.node, [x](sim::VirtualDrive& d) { d.faults().tx_drop_rate = x; });
   }
 
-  MonotonicClock clock;
-  const TimePoint t0 = clock.now();
-  arm.power_on(t0);
   if (hb_ms > 0) {
     for (std::size_t i = 0; i < arm.size(); ++i) arm.at(i).od_write(0x1017, 0, hb_ms);
   }
@@ -270,10 +417,12 @@ int main(int argc, char** argv) {
       next_status += TimePoint(status_every * 1e9);
       for (std::size_t i = 0; i < arm.size(); ++i) {
         const auto& d = arm.at(i);
-        std::printf("armsim status t=%.3f node=%u nmt=%s cia402=%s position=%.0f target=%d syncs=%llu\n",
+        std::printf("armsim status t=%.3f node=%u nmt=%s cia402=%s position=%.0f target=%d syncs=%llu",
                     double(clock.now() - t0) * 1e-9, unsigned(d.node()), canopen::to_string(d.nmt()),
                     cia402::to_string(d.state()), d.position(), int(d.target()),
                     static_cast<unsigned long long>(d.syncs_seen()));
+        if (d.on_plant()) std::printf(" torque=%.3f", d.torque());
+        std::printf("\n");
       }
       std::fflush(stdout);
     }

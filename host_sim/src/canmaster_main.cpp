@@ -63,6 +63,9 @@ const char* kUsage =
     "                          fault came during an outage (heartbeat_lost / bus_off) and, with --recover,\n"
     "                          every joint was enabled again and followed the sine within --tolerance\n"
     "                          (without it, an outage fails the run)\n"
+    "  --tpdo2 LIST            what TPDO2 carries: velocity, error_code, torque, each optional (left out\n"
+    "                          when the drive lacks it) or NAME:required (bring-up fails naming it);\n"
+    "                          'none' = no TPDO2 (default velocity,error_code)\n"
     "  --no-filters            receive every frame (default: kernel filters pass only frames whose\n"
     "                          node part, id & 0x7F, is one of --nodes)\n"
     "  --quiet                 only the final result line\n"
@@ -104,7 +107,38 @@ struct Options {
   bool filters = true;
   std::uint32_t roundtrip = 0, roundtrip_timeout_ms = 500;
   bool recover = false, expect_outage = false;
+  FeedbackObjects tpdo2{};
 };
+
+// "velocity,error_code", "velocity:required,torque", "none": what TPDO2 carries.
+bool parse_tpdo2(const std::string& v, FeedbackObjects& out) {
+  FeedbackObjects f;
+  f.velocity = f.error_code = f.torque = PdoUse::off;
+  if (v == "none") {
+    out = f;
+    return true;
+  }
+  std::size_t p = 0;
+  while (p <= v.size()) {
+    const std::size_t q = std::min(v.find(',', p), v.size());
+    std::string item = v.substr(p, q - p);
+    PdoUse use = PdoUse::optional;
+    const std::size_t colon = item.find(':');
+    if (colon != std::string::npos) {
+      const std::string u = item.substr(colon + 1);
+      if (u == "required") use = PdoUse::required;
+      else if (u != "optional") return false;
+      item.resize(colon);
+    }
+    if (item == "velocity") f.velocity = use;
+    else if (item == "error_code") f.error_code = use;
+    else if (item == "torque") f.torque = use;
+    else return false;
+    p = q + 1;
+  }
+  out = f;
+  return true;
+}
 
 struct SimParts {
   std::unique_ptr<SimBus> bus;
@@ -149,6 +183,15 @@ bool roundtrip_phase(CanopenServoBus& master, CanBus& bus, Clock& clock, const O
       first_bad = b;
     }
   };
+  // TPDO2 expected from the nodes that have one; decoded when it is the default layout.
+  std::size_t n2 = 0;
+  std::array<bool, kMaxServoJoints> std_tpdo2{};
+  for (std::size_t j = 0; j < n; ++j) {
+    const bool v = master.maps(j, cia402::kVelocityActual), e = master.maps(j, cia402::kErrorCode),
+               t = master.maps(j, cia402::kTorqueActual);
+    if (v || e || t) ++n2;
+    std_tpdo2[j] = v && e && !t;
+  }
   TimePoint next = clock.now();
   for (std::uint32_t r = 0; r < o.roundtrip; ++r) {
     std::array<std::uint8_t, kMaxServoJoints> got1{}, got2{};
@@ -158,7 +201,7 @@ bool roundtrip_phase(CanopenServoBus& master, CanBus& bus, Clock& clock, const O
     const TimePoint deadline = t_send + timeout;
     TimePoint t1 = 0;
     CanFrame f;
-    while (c1 < n || c2 < n) {
+    while (c1 < n || c2 < n2) {
       const Status st = bus.receive(f, deadline);
       if (st != Status::ok) break;
       const TimePoint at = clock.now();
@@ -183,7 +226,9 @@ bool roundtrip_phase(CanopenServoBus& master, CanBus& bus, Clock& clock, const O
       } else {
         std::int32_t vel = 0;
         std::uint16_t ec = 0;
-        if (!pdo::decode_tpdo2(f, vel, ec)) note_bad("TPDO2 does not decode", f, r);
+        if (!std_tpdo2[std::size_t(j)]) {
+          // another layout (--tpdo2): counted, not decoded here
+        } else if (!pdo::decode_tpdo2(f, vel, ec)) note_bad("TPDO2 does not decode", f, r);
         else if (got2[std::size_t(j)]) note_bad("second TPDO2 in one round", f, r);
         else if (ec != 0) note_bad("TPDO2 carries an error code", f, r);
         if (!got2[std::size_t(j)]) {
@@ -191,15 +236,15 @@ bool roundtrip_phase(CanopenServoBus& master, CanBus& bus, Clock& clock, const O
           ++c2;
         }
       }
-      if (c1 == n && c2 == n) rt_all.push_back(double(at - t_send) * 1e-3);
+      if (c1 == n && c2 == n2) rt_all.push_back(double(at - t_send) * 1e-3);
     }
     if (c1 == n) rt1.push_back(double(t1 - t_send) * 1e-3);
-    if (c1 < n || c2 < n) {
+    if (c1 < n || c2 < n2) {
       ++lost;
       if (first_bad.empty() && lost == 1) {
         char b[160];
         std::snprintf(b, sizeof b, "round %u lost: %zu of %zu TPDO1, %zu of %zu TPDO2 within %u ms", unsigned(r), c1, n,
-                      c2, n, unsigned(o.roundtrip_timeout_ms));
+                      c2, n2, unsigned(o.roundtrip_timeout_ms));
         first_bad = b;
       }
     }
@@ -236,6 +281,7 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
   cfg.sdo_timeout = Duration(o.sdo_timeout_ms) * kMillisecond;
   cfg.state_timeout = Duration(o.enable_timeout_ms) * kMillisecond;
   cfg.set_bus_filters = o.filters;
+  cfg.tpdo2 = o.tpdo2;
   CanopenServoBus master(bus, clock, cfg);
   if (master.config_status() != Status::ok) {
     std::fprintf(stderr, "canmaster: %s\n", master.last_error());
@@ -254,8 +300,13 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
   if (!o.quiet) {
     std::printf("bringup status=ok elapsed_ms=%.1f\n", bring_ms);
     for (std::size_t j = 0; j < n; ++j)
-      std::printf("node id=%u name=\"%s\" state=%s\n", unsigned(o.nodes[j]), master.device_name(j),
-                  to_string(master.feedback(j).state));
+      std::printf("node id=%u name=\"%s\" state=%s tpdo2=%s%s%s%s\n", unsigned(o.nodes[j]), master.device_name(j),
+                  to_string(master.feedback(j).state), master.maps(j, cia402::kVelocityActual) ? "+606C" : "",
+                  master.maps(j, cia402::kErrorCode) ? "+603F" : "", master.maps(j, cia402::kTorqueActual) ? "+6077" : "",
+                  master.maps(j, cia402::kVelocityActual) || master.maps(j, cia402::kErrorCode) ||
+                          master.maps(j, cia402::kTorqueActual)
+                      ? ""
+                      : "none");
     std::fflush(stdout);
   }
   bool roundtrip_ok = true;
@@ -504,6 +555,10 @@ int main(int argc, char** argv) {
       o.quiet = true;
     } else if (a == "--no-filters") {
       o.filters = false;
+    } else if (a == "--tpdo2") {
+      if (!value() || !parse_tpdo2(v, o.tpdo2))
+        return usage_error("bad --tpdo2 '" + v + "' (e.g. velocity,error_code or velocity:required,torque; "
+                           "'none' for no TPDO2)");
     } else if (a == "--recover") {
       o.recover = true;
     } else if (a == "--expect-outage") {

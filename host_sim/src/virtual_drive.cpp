@@ -1,5 +1,7 @@
 #include "servoarm/sim/virtual_drive.hpp"
 
+#include "servoarm/sim/arm_plant.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -57,6 +59,13 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kVelocityActual, 0, 4, false, true, 0);
   add(c402::kTargetPosition, 0, 4, true, true, 0);
   add(c402::kFollowingErrorActual, 0, 4, false, true, 0);
+  // Torque: rated torque (mN m, motor side), torque actual (per mille of it; the
+  // first-order plant has no mass and reports 0, the dynamic plant its loop's torque),
+  // and the CSP feed-forward offsets the dynamic plant's loop adds.
+  add(c402::kRatedTorque, 0, 4, false, false, motor_.rated_torque_mnm);
+  add(c402::kTorqueActual, 0, 2, false, true, 0);
+  add(c402::kVelocityOffset, 0, 4, true, true, 0);
+  add(c402::kTorqueOffset, 0, 2, true, true, 0);
   // Quick stop: option code (6: ramp down with 6085h, stay in quick stop
   // active; 2: the same, then switch on disabled; 1/5: as 2/6 -- this model
   // has no separate slow-down ramp; 0: power off at once, the unpowered motor
@@ -102,6 +111,12 @@ bool VirtualDrive::od_write(std::uint16_t index, std::uint8_t sub, std::uint32_t
   e->value = value;
   if (index == 0x1017) next_hb_ = t_;
   return true;
+}
+
+bool VirtualDrive::od_remove(std::uint16_t index) {
+  const std::size_t before = od_.size();
+  std::erase_if(od_, [index](const Entry& e) { return e.index == index; });
+  return od_.size() != before;
 }
 
 void VirtualDrive::set(std::uint16_t index, std::uint32_t v) {
@@ -155,7 +170,7 @@ void VirtualDrive::handle(const CanFrame& f, TimePoint now, CanBus& bus) {
   }
   if (nmt_ == NmtState::stopped) return;
   if (f.id == kSdoRx + node_) {
-    if (f.len == 8) handle_sdo(f, bus);
+    if (f.len == 8) handle_sdo(f, now, bus);
     return;
   }
   if (nmt_ != NmtState::operational) return;
@@ -237,6 +252,12 @@ std::uint32_t VirtualDrive::sdo_write(Entry& e, const std::uint8_t* data, std::s
       if (const std::uint32_t a = check_mapping(e.index, v)) return a;
     } else if (get(e.index, 0) != 0) {
       return sdo::kAbortDeviceState;  // CiA 301: set sub 0 to 0 before changing entries
+    } else if (v != 0 && motor_.check_map_entries) {
+      // Like many drives, check each entry as it is written: an object this drive lacks
+      // or cannot map is refused here (by default only at sub 0, like others).
+      const Entry* m = find(std::uint16_t(v >> 16), std::uint8_t(v >> 8));
+      if (!m || !m->mappable || (e.index < 0x1800 && !m->writable)) return sdo::kAbortNotMappable;
+      if ((v & 0xFF) != std::uint32_t(m->size) * 8) return sdo::kAbortParamIncompatible;
     }
   }
   if (is_comm && e.sub == 1) {
@@ -252,10 +273,23 @@ std::uint32_t VirtualDrive::sdo_write(Entry& e, const std::uint8_t* data, std::s
   e.value = v;
   if (e.index == c402::kModesOfOperation) set(c402::kModesDisplay, v);
   if (e.index == 0x1017) next_hb_ = t_;
+  // A controlword (or target) written by SDO acts when it is written, in any NMT state
+  // where SDO works (pre-operational too), as on a real drive: not at the next SYNC.
+  if (e.index == c402::kControlword || e.index == c402::kTargetPosition) sdo_actuate_ = true;
   return 0;
 }
 
-void VirtualDrive::handle_sdo(const CanFrame& f, CanBus& bus) {
+void VirtualDrive::handle_sdo(const CanFrame& f, TimePoint now, CanBus& bus) {
+  sdo_actuate_ = false;
+  serve_sdo(f, bus);
+  if (sdo_actuate_) {
+    sdo_actuate_ = false;
+    advance(now, bus);  // the motor runs up to the write, then the new command acts
+    apply_controlword(now, bus);
+  }
+}
+
+void VirtualDrive::serve_sdo(const CanFrame& f, CanBus& bus) {
   const std::uint8_t c = f.data[0];
   const std::uint8_t cs = sdo::cs_of(c);
   if (cs == sdo::kAbort) {
@@ -418,9 +452,20 @@ void VirtualDrive::apply_controlword(TimePoint now, CanBus& bus) {
   if (t == 4 && (faults_.refuse_enable || std::int8_t(get(c402::kModesDisplay)) != c402::kModeCsp)) {
     next = state_;  // refuses: stays switched on
   }
-  if (t == 4 || t == 16) target_ = std::int32_t(std::lround(pos_));  // no jump on enable
+  if (t == 11 && plant_) {  // quick stop on the plant: ramp the velocity demand down from here
+    qs_ramping_ = true;
+    qs_vref_ = vel_ / (double(scaling_.direction) * scaling_.counts_per_si());
+  }
+  if (t == 4 || t == 16) {
+    integ_ = 0;
+    // No jump on enable: the demand starts where the shaft stands (607Ah too, so a master
+    // that enables by SDO before it ever wrote a target does not send the motor to 0).
+    target_ = std::int32_t(std::lround(pos_));
+    set(c402::kTargetPosition, std::uint32_t(target_));
+  }
   if (t == 11 && std::int16_t(get(c402::kQuickStopOption)) == 0) next = c402::State::switch_on_disabled;
-  if (t == 15) {  // fault reset: clear the error and say so
+  if (t == 15 && faults_.fault_persists) next = state_;  // the cause is still there: stays in fault
+  if (t == 15 && !faults_.fault_persists) {  // fault reset: clear the error and say so
     set(c402::kErrorCode, 0);
     set(0x1001, 0);
     tx(bus, encode_emcy(node_, Emcy{}));
@@ -445,6 +490,10 @@ void VirtualDrive::inject_emcy(std::uint16_t code, TimePoint now, CanBus& bus) {
 }
 
 void VirtualDrive::advance(TimePoint now, CanBus& bus) {
+  if (plant_) {
+    plant_->advance(now, bus);  // every drive of the arm and the dynamics, in lockstep
+    return;
+  }
   if (now <= t_) return;
   const double dt = double(motor_.substep) * 1e-9;
   while (t_ + motor_.substep <= now) {
@@ -458,23 +507,104 @@ void VirtualDrive::advance(TimePoint now, CanBus& bus) {
     const double dv = std::clamp(v_des - vel_, -amax * dt, amax * dt);
     vel_ += dv;
     pos_ += vel_ * dt;
-    if (state_ == c402::State::quick_stop_active && vel_ == 0.0) {
-      const std::int16_t o = std::int16_t(get(c402::kQuickStopOption));
-      if (o == 1 || o == 2) state_ = c402::State::switch_on_disabled;  // at rest: transition 12
-    }
-    if (powered) {
-      const double fe = double(target_) - pos_;
-      set(c402::kFollowingErrorActual, std::uint32_t(std::int32_t(std::lround(fe))));
-      const std::uint32_t window = get(c402::kFollowingErrorWindow);
-      if (window != 0xFFFFFFFFu && std::fabs(fe) > double(window)) {
-        inject_emcy(0x8611, t_, bus);
-      }
+    after_substep(bus, vel_ == 0.0);
+  }
+  publish_feedback();
+}
+
+void VirtualDrive::after_substep(CanBus& bus, bool at_rest) {
+  if (state_ == c402::State::quick_stop_active && at_rest) {
+    const std::int16_t o = std::int16_t(get(c402::kQuickStopOption));
+    if (o == 1 || o == 2) state_ = c402::State::switch_on_disabled;  // at rest: transition 12
+  }
+  if (state_ == c402::State::operation_enabled) {
+    const double fe = double(target_) - pos_;
+    set(c402::kFollowingErrorActual, std::uint32_t(std::int32_t(std::lround(fe))));
+    const std::uint32_t window = get(c402::kFollowingErrorWindow);
+    if (window != 0xFFFFFFFFu && std::fabs(fe) > double(window)) {
+      inject_emcy(0x8611, t_, bus);
     }
   }
+}
+
+void VirtualDrive::publish_feedback() {
   // Encoder quantisation: the drive reports whole counts.
   set(c402::kPositionActual, std::uint32_t(std::int32_t(std::floor(pos_))));
   set(c402::kVelocityActual, std::uint32_t(std::int32_t(std::lround(vel_))));
+  if (torque_unit_ != 0) {
+    const double t = std::clamp(std::round(torque_ / torque_unit_), -32768.0, 32767.0);
+    set(c402::kTorqueActual, std::uint32_t(std::uint16_t(std::int16_t(t))));
+  }
   update_statusword();
+}
+
+void VirtualDrive::attach_plant(ArmPlant* plant, const hal::JointScaling& s, double kp, double kv, double ki,
+                                double torque_limit, std::uint32_t rated_torque_mnm) {
+  plant_ = plant;
+  scaling_ = s;
+  kp_ = kp;
+  kv_ = kv;
+  ki_ = ki;
+  tmax_ = torque_limit;
+  if (Entry* e = find(c402::kRatedTorque, 0)) e->value = e->initial = rated_torque_mnm;
+  torque_unit_ = double(rated_torque_mnm) * 1e-6 * s.gear_ratio * double(s.direction);
+  integ_ = 0;
+  qs_ramping_ = false;
+}
+
+// The drive's loops on the plant, once per step (joint units): position P, velocity PI,
+// the CSP offsets 60B1h/60B2h, the torque limit; quick stop ramps the velocity demand down
+// with 6085h, then holds. Unpowered: no torque.
+double VirtualDrive::servo_torque(double q, double qd, double h) {
+  const double cps = scaling_.counts_per_si();
+  const double vmax = motor_.max_velocity / cps;
+  auto limit = [this](double t) { return std::clamp(t, -tmax_, tmax_); };
+  switch (state_) {
+    case c402::State::operation_enabled: {
+      qs_ramping_ = false;
+      const double qt = scaling_.to_joint(target_);
+      const double v_off = scaling_.velocity_to_joint(std::int32_t(get(c402::kVelocityOffset)));
+      const double v = std::clamp(kp_ * (qt - q) + v_off, -vmax, vmax);
+      const double e = v - qd;
+      if (ki_ > 0 && kv_ > 0) {
+        integ_ += ki_ * e * h;
+        const double imax = tmax_ / kv_;  // anti-windup: the integral alone never exceeds the limit
+        integ_ = std::clamp(integ_, -imax, imax);
+      }
+      const double t_off = double(std::int16_t(get(c402::kTorqueOffset))) * torque_unit_;
+      return limit(kv_ * (e + integ_) + t_off);
+    }
+    case c402::State::quick_stop_active: {
+      if (qs_ramping_) {
+        const double dec = std::max(double(get(c402::kQuickStopDecel)), 1.0) / cps * h;
+        qs_vref_ = qs_vref_ > 0 ? std::max(0.0, qs_vref_ - dec) : std::min(0.0, qs_vref_ + dec);
+        if (qs_vref_ == 0.0) {
+          qs_ramping_ = false;
+          hold_q_ = q;
+        }
+        return limit(kv_ * (qs_vref_ - qd));
+      }
+      return limit(kv_ * (kp_ * (hold_q_ - q) - qd));
+    }
+    case c402::State::not_ready_to_switch_on:
+    case c402::State::switch_on_disabled:
+    case c402::State::ready_to_switch_on:
+    case c402::State::switched_on:
+    case c402::State::fault_reaction_active:
+    case c402::State::fault:
+      break;
+  }
+  integ_ = 0;
+  return 0.0;
+}
+
+void VirtualDrive::plant_update(TimePoint t, double q, double qd, double torque, CanBus& bus) {
+  t_ = t;
+  const double k = double(scaling_.direction) * scaling_.counts_per_si();
+  pos_ = double(scaling_.zero_offset) + k * q;
+  vel_ = k * qd;
+  torque_ = torque;
+  after_substep(bus, !qs_ramping_ && std::fabs(qd) < 5e-3);
 }
 
 void VirtualDrive::update_statusword() {
@@ -507,6 +637,20 @@ ArmSim::ArmSim(CanBus& bus, std::span<const std::uint8_t> nodes, const MotorPara
     : bus_(bus) {
   drives_.reserve(nodes.size());
   for (std::uint8_t n : nodes) drives_.emplace_back(n, motor, seed);
+}
+
+ArmSim::~ArmSim() = default;
+
+std::string ArmSim::use_dynamic_plant(const kin::Chain& chain, std::span<const hal::JointScaling> scaling,
+                                      const ArmPlantParams& params) {
+  if (drives_.size() != static_cast<std::size_t>(chain.n_joints))
+    return "dynamic plant: " + std::to_string(drives_.size()) + " drives for the " + std::to_string(chain.n_joints) +
+           " joints of '" + std::string(chain.name.data()) + "'";
+  auto p = std::make_unique<ArmPlant>();
+  if (std::string e = p->configure(chain, scaling, params); !e.empty()) return e;
+  plant_ = std::move(p);
+  for (std::size_t i = 0; i < drives_.size(); ++i) plant_->attach(int(i), &drives_[i]);
+  return "";
 }
 
 void ArmSim::power_on(TimePoint now) {

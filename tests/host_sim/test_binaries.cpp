@@ -182,3 +182,35 @@ TEST(Binaries, SimModeScenarios) {
   LONGS_EQUAL(1, run_alone({CANMASTER_PATH, "--sim", "--bringup", "--hold", "0.5", "--sim-emcy", "2:0x4310@0.1",
                             "--quiet"}));
 }
+
+// Issue 15: `armsim --emcy 1:0x2310@0` with canmaster. Node 1 is in FAULT before the master
+// starts; bring-up resets it (controlword bit 7 rising edge) and enables every node.
+TEST(Binaries, DriveInFaultAtPowerOnIsResetByBringUp) {
+  Run r = run_pair({"--nodes", "1-3", "--bringup", "--hold", "0.5", "--hb-timeout-ms", kSlowHb},
+                   {"--nodes", "1-3", "--emcy", "1:0x2310@0", "--duration", "5"});
+  if (r.master_rc != 0) std::printf("%s\n", r.master_out.c_str());
+  STRCMP_CONTAINS("node=1 kind=emcy code=0x2310", r.sim_out.c_str());
+  STRCMP_CONTAINS("bringup status=ok", r.master_out.c_str());
+  STRCMP_CONTAINS("node id=1 name=\"servoarm virtual drive 1\" state=enabled", r.master_out.c_str());
+  STRCMP_CONTAINS("result status=ok", r.master_out.c_str());
+  LONGS_EQUAL(0, r.master_rc);
+}
+
+// Issue 15: a CSP drive without 606Ch and 603Fh is brought up without TPDO2 (both are
+// optional by default); asking for velocity as required names the missing object (exit 4).
+TEST(Binaries, DriveWithoutOptionalObjectsIsBroughtUp) {
+  Run r = run_pair({"--nodes", "1-2", "--bringup", "--stream-sine", "1", "--hb-timeout-ms", kSlowHb},
+                   {"--nodes", "1-2", "--without", "0x606C,0x603F", "--duration", "5"});
+  if (r.master_rc != 0) std::printf("%s\n", r.master_out.c_str());
+  STRCMP_CONTAINS("bringup status=ok", r.master_out.c_str());
+  STRCMP_CONTAINS("node id=2 name=\"servoarm virtual drive 2\" state=enabled tpdo2=none", r.master_out.c_str());
+  STRCMP_CONTAINS("result status=ok", r.master_out.c_str());
+  LONGS_EQUAL(0, r.master_rc);
+  Run q = run_pair({"--nodes", "1-2", "--bringup", "--hold", "0.2", "--tpdo2", "velocity:required,error_code",
+                    "--hb-timeout-ms", kSlowHb},
+                   {"--nodes", "1-2", "--without", "0x606C", "--check-map-entries", "--duration", "4"});
+  STRCMP_CONTAINS("TPDO2 needs 0x606C (velocity actual), which the drive cannot map", q.master_out.c_str());
+  LONGS_EQUAL(4, q.master_rc);
+  LONGS_EQUAL(2, run_alone({CANMASTER_PATH, "--sim", "--bringup", "--tpdo2", "speed"}));
+  LONGS_EQUAL(2, run_alone({ARMSIM_PATH, "--iface", "vcan0", "--without", "0x60"}));
+}

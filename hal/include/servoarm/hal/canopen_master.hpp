@@ -5,8 +5,13 @@
 // Process data (set up explicitly by start(), classic CAN, 8-byte limit):
 //   RPDO1 0x200+n  controlword 0x6040 (u16) + target position 0x607A (i32)  6 bytes, acted on at SYNC
 //   TPDO1 0x180+n  statusword 0x6041 (u16) + position actual 0x6064 (i32)   6 bytes, every SYNC
-//   TPDO2 0x280+n  velocity actual 0x606C (i32) + error code 0x603F (u16)    6 bytes, every SYNC
+//   TPDO2 0x280+n  what CanopenMasterConfig::tpdo2 asks for and the drive has, in this order:
+//                  velocity actual 0x606C (i32), error code 0x603F (u16), torque actual
+//                  0x6077 (i16); by default velocity + error code (6 bytes), each optional:
+//                  a drive without one is brought up without it; with none, TPDO2 stays off.
 // (statusword + position + velocity is 10 bytes, more than one classic frame holds.)
+// RPDO1 and TPDO1's objects are required: a drive that lacks one is refused, naming it.
+// Without 606Ch the velocity is the difference of successive positions over their receive times.
 // Each write() sends the RPDOs then one SYNC (0x080), so the master is the SYNC producer.
 // Heartbeat consumer: each node produces every `heartbeat_period`; a node is
 // reported lost when nothing arrived for its `heartbeat_timeout`, checked at
@@ -35,6 +40,23 @@ struct CanopenJointConfig {
   double quick_stop_decel = 0;
 };
 
+/// How bring-up treats one feedback object of TPDO2.
+enum class PdoUse : std::uint8_t {
+  off,       ///< not mapped
+  optional,  ///< mapped when the drive has it and can map it, left out otherwise
+  required,  ///< bring-up fails, naming the object, when the drive lacks it or cannot map it
+};
+const char* to_string(PdoUse u);
+
+/// The objects bring-up maps into TPDO2 (order in the frame: velocity, error code, torque).
+struct FeedbackObjects {
+  PdoUse velocity = PdoUse::optional;    ///< 606Ch velocity actual (INTEGER32, counts/s)
+  PdoUse error_code = PdoUse::optional;  ///< 603Fh error code (UNSIGNED16)
+  /// 6077h torque actual (INTEGER16, per mille of the rated torque 6076h, read at bring-up;
+  /// JointFeedback::torque = it x 6076h x gear ratio x direction, joint side).
+  PdoUse torque = PdoUse::off;
+};
+
 struct CanopenMasterConfig {
   std::array<CanopenJointConfig, kMaxServoJoints> joints{};
   std::size_t joint_count = 0;
@@ -48,6 +70,8 @@ struct CanopenMasterConfig {
   /// a flood of foreign frames then never reaches the cycle. Off by default because the
   /// bus may be shared (e.g. a console over ISO-TP on the same endpoint).
   bool set_bus_filters = false;
+  /// TPDO2's feedback objects (see the top of this file).
+  FeedbackObjects tpdo2{};
 
   /// Convenience: nodes first..first+count-1 with the same scaling.
   static CanopenMasterConfig consecutive(std::uint8_t first, std::size_t count, const JointScaling& s = {});
@@ -100,6 +124,12 @@ class CanopenServoBus final : public ServoBus {
   std::int32_t last_target_counts(std::size_t j) const { return joints_[j].target_counts; }
   /// Frames received that no codec accepted (unknown ids, wrong lengths): robustness counter.
   std::uint64_t ignored_frames() const { return ignored_; }
+  /// Joint j's scaling as the master uses it (zero offset included): what a simulator needs
+  /// to turn the drive's counts into the joint (armfw --sim --plant dynamic).
+  const JointScaling& scaling(std::size_t j) const { return cfg_.joints[j < cfg_.joint_count ? j : 0].scaling; }
+  /// Set-up/diagnostics: true when start() mapped `object` (0x606C, 0x603F, 0x6077) into
+  /// joint j's TPDO2.
+  bool maps(std::size_t j, std::uint16_t object) const;
   /// Set-up/diagnostics: device name read from 0x1008 during start() ("" if none).
   const char* device_name(std::size_t j) const { return joints_[j].name; }
   /// Set-up/diagnostics: describe joint j's fault in `buf` ("node 3: heartbeat_lost ...").
@@ -123,10 +153,28 @@ class CanopenServoBus final : public ServoBus {
     std::int32_t target_counts = 0;
     Duration hb_timeout = 0;
     TimePoint hb_watch_since = 0;  ///< heartbeat consumer start (start(), enable() out of a fault)
+    // TPDO2 layout as mapped by start(): frame length and byte offsets (-1 = not mapped).
+    std::uint8_t tpdo2_len = 0;
+    std::int8_t off_velocity = -1, off_error = -1, off_torque = -1;
+    double torque_per_mille = 0;  ///< joint-side N m (N) per 6077h unit
+    TimePoint prev_pos_time = 0;  ///< without 606Ch: the previous TPDO1's time and position
+    std::int32_t prev_pos = 0;
     char name[32] = {};
+  };
+  struct MapEntry {
+    std::uint16_t index;
+    std::uint8_t bits;
+    PdoUse use;
+    const char* what;
   };
   void set_fault(std::size_t j, Status why, TimePoint now);
   Status setup_node(std::size_t j, TimePoint deadline);
+  Status sdo_write(std::uint8_t node, std::uint16_t index, std::uint8_t sub, std::uint8_t size, std::uint32_t value,
+                   const char* what);
+  /// Map `entries` into one PDO (comm 0x14xx/0x18xx, map 0x16xx/0x1Axx) and enable it with
+  /// `cob` (left disabled when nothing was mapped); `mapped[k]` says which entries made it.
+  Status map_pdo(std::size_t j, std::uint16_t comm, std::uint16_t map, std::uint32_t cob, const MapEntry* entries,
+                 std::size_t count, bool* mapped, const char* pdo_name);
   static void sink(void* ctx, const CanFrame& f);
 
   CanBus& bus_;

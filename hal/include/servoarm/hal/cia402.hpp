@@ -19,6 +19,10 @@ inline constexpr std::uint16_t kTargetPosition = 0x607A;
 inline constexpr std::uint16_t kQuickStopOption = 0x605A;  ///< INTEGER16 quick stop option code
 inline constexpr std::uint16_t kQuickStopDecel = 0x6085;   ///< UNSIGNED32 quick stop deceleration
 inline constexpr std::uint16_t kFollowingErrorActual = 0x60F4;
+inline constexpr std::uint16_t kRatedTorque = 0x6076;    ///< UNSIGNED32 motor rated torque, mN m
+inline constexpr std::uint16_t kTorqueActual = 0x6077;   ///< INTEGER16 per mille of 6076h
+inline constexpr std::uint16_t kVelocityOffset = 0x60B1; ///< INTEGER32 velocity feed-forward, counts/s
+inline constexpr std::uint16_t kTorqueOffset = 0x60B2;   ///< INTEGER16 torque feed-forward, per mille of 6076h
 inline constexpr std::int8_t kModeCsp = 8;  ///< cyclic synchronous position
 inline constexpr std::uint32_t kDeviceTypeProfile = 402;  ///< low 16 bits of 0x1000
 

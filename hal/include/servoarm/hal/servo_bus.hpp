@@ -28,6 +28,9 @@ const char* to_string(JointState s);
 struct JointFeedback {
   double position = 0.0;        ///< rad (revolute) or m (prismatic)
   double velocity = 0.0;        ///< rad/s or m/s
+  double torque = 0.0;          ///< N m (N), joint side, as the drive measures it (CANopen: 6077h
+                                ///< when mapped, FeedbackObjects::torque); 0 when not reported
+  bool has_torque = false;      ///< torque comes from the drive
   std::uint16_t statusword = 0; ///< raw drive status (CiA 402 0x6041 for CANopen)
   std::uint8_t drive_state = 0; ///< protocol state (cia402::State for CANopen)
   JointState state = JointState::offline;
