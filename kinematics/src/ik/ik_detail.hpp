@@ -84,6 +84,9 @@ struct IkSolverData {
   // u(m5) = C5^T Rz(-m5) C4^T e_z, whose z component is ur_u5 . (1, c5, s5).
   Eigen::Vector3d ur_u5 = Eigen::Vector3d::Zero();
   Eigen::Vector3d ur_c4z = Eigen::Vector3d::UnitZ();  ///< C4^T e_z
+  // planar_2r (reduced.cpp): |(C1 Rz(m2) w3)_xy|^2 = red_co . (1, c2, s2).
+  Eigen::Vector3d red_co = Eigen::Vector3d::Zero();
+  bool red_fast = false;
   bool ur_zrot = false;           ///< C2, C3 rotate about z: C1 Rz2 C2 Rz3 C3 = C1 Rz(m2 + m3 + gamma)
   double ur_gc = 1, ur_gs = 0;     ///< cos, sin gamma
   bool ur_tilt = false;  ///< u_z = cos(m5 - phi5) exactly (ur_u5 = (0, h = 1)): see ur.cpp wrist_roots

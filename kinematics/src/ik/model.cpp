@@ -374,6 +374,13 @@ bool detect_reduced(IkModel& model) {
   if (planar && m.n == 2 && !prism(m, 1)) {
     model.method = IkMethod::planar_2r;
     m.w3 = C(m, 2).translation();  // tool point after the J2 motion
+    auto g = [&](double a) {
+      const Eigen::Vector3d f = C(m, 1) * (rot_z(a) * m.w3);
+      return f.x() * f.x() + f.y() * f.y();
+    };
+    const double g0 = g(0), g1 = g(kPi / 2), g2 = g(kPi);
+    m.red_co = {0.5 * (g0 + g2), 0.5 * (g0 - g2), g1 - 0.5 * (g0 + g2)};
+    m.red_fast = true;
     return true;
   }
   if (planar && m.n == 3 && !prism(m, 2)) {

@@ -25,6 +25,90 @@ Eigen::Vector3d fit_basis(bool prismatic, G g) {
   return B.inverse() * v;
 }
 
+// planar_2r (RR) in closed form with the cheap check (issue 19: reduced arms
+// <= 100 ns): the coefficients of |f(m2)_xy|^2 are fitted at set-up
+// (IkSolverData::red_co); each root's tool point is verified through the
+// decomposition, |Rz(m1) C1 Rz(m2) w - p0| (exact to rounding, C0 rigid),
+// wrapped and stored here; only a candidate that misses 1e-9 m goes through
+// add_candidate (the chain's FK and Gauss-Newton). Elbow singular: the two
+// roots merged (|sin 2t| < 2e-6, as merge_close_roots).
+void solve_planar_2r(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  const Eigen::Vector3d p0 = C(m, 0).linear().transpose() * (target.translation() - C(m, 0).translation());
+  const double tol = 1e-12 * m.scale * m.scale;
+  Roots r2 = solve_basis(m.red_co[0] - (p0.x() * p0.x() + p0.y() * p0.y()), m.red_co[1], m.red_co[2], false, tol, false);
+  if (r2.free || r2.n == 0) return;
+  const bool merged = r2.n == 1 || merge_close_roots(r2);
+  const Eigen::Matrix3d& R1 = C(m, 1).linear();
+  const Eigen::Vector3d& t1 = C(m, 1).translation();
+  const double ref0 = q_ref ? (*q_ref)[0] : 0.0, ref1 = q_ref ? (*q_ref)[1] : 0.0;
+  const double p0xy2 = p0.x() * p0.x() + p0.y() * p0.y();
+  double sy[4], sx[4], ang[4];
+  double ep[2];
+  std::uint8_t sing[2];
+  for (int i = 0; i < r2.n; ++i) {
+    const double c2 = r2.c[i], s2 = r2.s[i];
+    const Eigen::Vector3d w(c2 * m.w3.x() - s2 * m.w3.y(), s2 * m.w3.x() + c2 * m.w3.y(), m.w3.z());
+    const Eigen::Vector3d f = R1 * w + t1;
+    const double cr = f.x() * p0.y() - f.y() * p0.x(), dt = f.x() * p0.x() + f.y() * p0.y();
+    const double r = cr * cr + dt * dt;
+    double c1 = 1, s1 = 0;
+    sing[i] = merged ? kSingularElbow : 0;
+    if (r > 1e-36 * m.scale * m.scale * m.scale * m.scale && p0xy2 > 1e-18 * m.scale * m.scale) {
+      const double ir = 1.0 / std::sqrt(r);
+      c1 = dt * ir;
+      s1 = cr * ir;
+    } else {  // tool point on axis 1: joint 1 free (kept)
+      detail::sincos_poly(m.dir[0] * ref0, s1, c1);
+      sing[i] |= kSingularShoulder;
+    }
+    const Eigen::Vector3d d(c1 * f.x() - s1 * f.y() - p0.x(), s1 * f.x() + c1 * f.y() - p0.y(), f.z() - p0.z());
+    ep[i] = d.norm();
+    sy[2 * i] = s1;
+    sx[2 * i] = c1;
+    sy[2 * i + 1] = s2;
+    sx[2 * i + 1] = c2;
+  }
+  if (r2.n == 1) {
+    sy[2] = sy[3] = 0;
+    sx[2] = sx[3] = 1;
+  }
+  detail::atan2_poly_x2(sy, sx, ang);
+  detail::atan2_poly_x2(sy + 2, sx + 2, ang + 2);
+  for (int i = 0; i < r2.n; ++i) {
+    const double mot[2] = {ang[2 * i], ang[2 * i + 1]};
+    Branch br;
+    br.elbow = r2.label[i];
+    if (!(ep[i] <= kVerifyPos)) {  // misses the tolerance: the chain's FK and Gauss-Newton
+      if (ep[i] < 1e-4 * m.scale) add_candidate(model, target, q_ref, mot, br, sing[i], true, res);
+      continue;
+    }
+    double q[2];
+    bool in = true;
+    for (int j = 0; j < 2; ++j) {
+      const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
+      const double v = m.dir[static_cast<std::size_t>(j)] * mot[j];
+      q[j] = jw.kind == 0 ? v : detail::wrap_into_limits(fast_wrap(v), jw.lo, jw.hi, j == 0 ? ref0 : ref1);
+      in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
+    }
+    bool dup = false;
+    for (int t = 0; t < res.count && !dup; ++t) {
+      const JointVector& o = res.solutions[static_cast<std::size_t>(t)].q;
+      dup = joint_distance(model.chain, 0, q[0], o[0]) <= 1e-7 && joint_distance(model.chain, 1, q[1], o[1]) <= 1e-7;
+    }
+    if (dup || res.count >= kMaxIkSolutions) continue;
+    IkSolution& sol = res.solutions[static_cast<std::size_t>(res.count++)];
+    sol.q.resize(2);
+    sol.q[0] = q[0];
+    sol.q[1] = q[1];
+    sol.branch = br;
+    sol.within_limits = in;
+    sol.singular = sing[i];
+    sol.position_error = ep[i];
+    sol.rotation_error = 0;
+  }
+}
+
 }  // namespace
 
 // Flattened (the Eigen products and decompositions of the elbow test and
@@ -35,6 +119,10 @@ Eigen::Vector3d fit_basis(bool prismatic, G g) {
   double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
   if (q_ref)
     for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
+  if (model.method == IkMethod::planar_2r && m.red_fast) {
+    solve_planar_2r(model, target, q_ref, res);
+    return;
+  }
   const Pose C0i = C(m, 0).inverse();
   const double tol = 1e-12 * m.scale * m.scale;
   if (model.method == IkMethod::spatial_3) {
