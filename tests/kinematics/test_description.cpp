@@ -263,11 +263,11 @@ TEST(Description, FileInputIsCheckedAndCapped) {
     }
     return best;
   };
-  // A hang guard only (valgrind: 12 s): the time per element is not constant enough on a
+  // A hang guard only (valgrind: 12-37 s): the time per element is not constant enough on a
   // shared machine to test linearity here (0.13 us to 16 000 elements, 0.77 us at 32 000
   // with -O2, memory effects); the figures and toml11's 2.2 s are in tests/bench/RESULTS.md.
   const double t30k = parse_seconds(30000);
-  CHECK_TEXT(t30k < 30.0, (std::to_string(t30k) + " s for 30000 elements").c_str());
+  CHECK_TEXT(t30k < 120.0, (std::to_string(t30k) + " s for 30000 elements").c_str());
   // non-ASCII text: toml++ 3.3 has undefined behaviour on it outside string values (a file
   // of just "\xC3\xA9" reached __builtin_unreachable; found by fuzzing): basic strings carry
   // it (escaped for toml++), comments are fine, anywhere else it is refused with line:column
