@@ -50,6 +50,7 @@ int usage(FILE* f, int code) {
                "  --rate HZ             control rate 250..4000 (default 1000)\n"
                "  --priority N          SCHED_FIFO priority 1..99, 0 = normal scheduling (default 80)\n"
                "  --cpu N               pin the control thread to CPU N\n"
+               "  --plant KIND          with --sim: first-order (default) or dynamic (rigid-body arm; needs inertial data)\n"
                "  --pty                 also open a pty console and print its path\n"
                "  --dialect grbl|native the consoles' language: GRBL 1.1 for G-code senders (cncjs, UGS,\n"
                "                        bCNC: banner, $ commands, error:N, <Idle|MPos:..> reports) or servoarm's\n"
@@ -251,6 +252,7 @@ int main(int argc, char** argv) {
   FwConfig cfg;
   bool sim = false, demo = false, interactive = false, pty = false, no_stdin = false;
   std::string dialect;
+  std::string plant_kind = "first-order";
   std::string config_file, robot, serial, can_console;
   double bench = -1, rate = -1;
   int priority = -1, cpu = -2, baud = -1;
@@ -282,6 +284,13 @@ int main(int argc, char** argv) {
     else if (a == "--priority") priority = static_cast<int>(number("--priority", 0, 99));
     else if (a == "--cpu") cpu = static_cast<int>(number("--cpu", 0, 1023));
     else if (a == "--pty") pty = true;
+    else if (a == "--plant") {
+      plant_kind = value("--plant");
+      if (plant_kind != "first-order" && plant_kind != "dynamic") {
+        std::fprintf(stderr, "armfw: --plant: '%s' is not first-order or dynamic\n", plant_kind.c_str());
+        return 2;
+      }
+    }
     else if (a == "--dialect") {
       dialect = value("--dialect");
       if (dialect != "grbl" && dialect != "native") {
@@ -304,6 +313,10 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "armfw: unknown argument '%s'\n", a.c_str());
       return usage(stderr, 2);
     }
+  }
+  if (plant_kind == "dynamic" && !sim) {
+    std::fprintf(stderr, "armfw: --plant dynamic needs --sim (it is the virtual drives' arm)\n");
+    return 2;
   }
   if (!sim && config_file.empty()) {
     std::fprintf(stderr, "armfw: give --sim or --config FILE\n");
@@ -349,6 +362,15 @@ int main(int argc, char** argv) {
   }
   hal::SimBus* sim_bus = nullptr;  // the virtual drives' bus (console.can = "sim")
 #ifdef SERVOARM_WITH_SIM
+  if (plant && plant_kind == "dynamic") {
+    std::vector<hal::JointScaling> sc;
+    for (std::size_t j = 0; j < app.servo->joint_count(); ++j) sc.push_back(app.servo->scaling(j));
+    const std::string e = plant->use_dynamic_plant(app.chain, sc);
+    if (!e.empty()) {
+      std::fprintf(stderr, "armfw: --plant dynamic: %s\n", e.c_str());
+      return 2;
+    }
+  }
   if (plant) {
     plant->start_thread();  // the drives answer the bring-up's SDOs from their own thread
     sim_bus = &plant->bus();
