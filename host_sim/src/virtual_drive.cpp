@@ -356,7 +356,7 @@ void VirtualDrive::serve_sdo(const CanFrame& f, CanBus& bus) {
         return;
       }
       const std::size_t n = std::min(e->domain.size(), sdo_buf_.size());
-      std::memcpy(sdo_buf_.data(), e->domain.data(), n);
+      if (n > 0) std::memcpy(sdo_buf_.data(), e->domain.data(), n);  // an empty domain has no data pointer
       if (n >= 1 && n <= 4) {
         sdo_mode_ = SdoMode::idle;
         tx(bus, sdo::upload_response(node_, index, sub, sdo_buf_.data(), std::uint32_t(n)));
