@@ -392,9 +392,15 @@ int cli_plan(int argc, char** argv) {
   if (a.kind == "movej") {
     kin::JointVector q1;
     if (!joints_from_user(chain, a.to, q1, e)) return usage_error("--to: " + e);
+    // A lower bound of the duration (distance over speed) is checked before planning: with
+    // absurd limits the planner's own result depends on the platform's rounding.
+    const kin::JointLimits lim = kin::limits_from(chain);
+    double at_least = 0;
+    for (int j = 0; j < chain.n_joints; ++j)
+      at_least = std::max(at_least, std::fabs(q1[j] - q0[j]) / (lim.dyn[static_cast<std::size_t>(j)].max_velocity * ov));
+    if (at_least > a.max_duration) return check_duration(a, at_least);
     kin::JointTrajectory tr;
-    const kin::MotionStatus st =
-        kin::plan_movej(kin::limits_from(chain), kin::JointState::rest(q0), q1, kin::MovejOptions{ov}, tr);
+    const kin::MotionStatus st = kin::plan_movej(lim, kin::JointState::rest(q0), q1, kin::MovejOptions{ov}, tr);
     if (!kin::is_ok(st)) {
       std::string rep;
       limit_violations(chain, q1, rep);
