@@ -648,6 +648,8 @@ void CanopenServoBus::describe_fault(std::size_t j, char* buf, std::size_t size)
     case Status::sdo_abort:
     case Status::protocol_error:
     case Status::not_configured:
+    case Status::aborted:
+    case Status::homing_error:
     case Status::capacity:
     case Status::not_supported:
     case Status::bad_state:

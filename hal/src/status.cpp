@@ -22,6 +22,8 @@ const char* to_string(Status s) {
     case Status::capacity: return "capacity";
     case Status::not_supported: return "not_supported";
     case Status::bad_state: return "bad_state";
+    case Status::aborted: return "aborted";
+    case Status::homing_error: return "homing_error";
   }
   return "unknown_status";
 }
@@ -46,6 +48,8 @@ const char* describe(Status s) {
     case Status::capacity: return "more items than the fixed capacity";
     case Status::not_supported: return "operation not supported by this backend";
     case Status::bad_state: return "not allowed in the current state";
+    case Status::aborted: return "stopped on request before it completed";
+    case Status::homing_error: return "homing failed: homing error reported, or the home mark or hard stop was not found";
   }
   return "unknown status";
 }

@@ -341,6 +341,8 @@ void Controller::supervise(TimePoint now) {
         case hal::Status::not_configured:
         case hal::Status::capacity:
         case hal::Status::not_supported:
+        case hal::Status::aborted:
+        case hal::Status::homing_error:
         case hal::Status::bad_state: c = FaultCause::bus_error; break;
       }
       std::snprintf(d, sizeof d, "%s, error code 0x%04X", hal::to_string(fb.fault), unsigned(fb.error_code));

@@ -45,6 +45,48 @@ struct JointFeedback {
   Duration age = -1;            ///< now - last_feedback at the last read(), -1 = none yet
 };
 
+/// How a joint establishes its zero at power-up (issue 17, docs/servo-bus.md#homing).
+enum class HomingKind : std::uint8_t {
+  none,       ///< absolute encoder: the drive's position is valid at power-up, no homing
+  cia402,     ///< the drive's own Homing Mode (6060h = 6) with method HomingSpec::method (6098h)
+  hard_stop,  ///< no switch: the master moves the joint slowly in cyclic position mode until the
+              ///< following error or the torque passes a threshold, backs off, takes that as offset
+};
+const char* to_string(HomingKind k);
+
+/// One joint's homing parameters, in joint units (rad or m), set up before ServoBus::start().
+struct HomingSpec {
+  HomingKind kind = HomingKind::none;
+  std::int8_t method = 0;         ///< cia402: CiA 402 homing method number (6098h)
+  double speed_switch = 0.0;      ///< cia402: 6099h:01 search for switch; hard_stop: approach speed,
+                                  ///< its sign is the direction (joint units / s)
+  double speed_zero = 0.0;        ///< cia402: 6099h:02 search for zero (joint units / s)
+  double acceleration = 0.0;      ///< cia402: 609Ah; hard_stop: approach/back-off acceleration
+  double offset = 0.0;            ///< joint position at the home mark (cia402: 607Ch), or at the
+                                  ///< backed-off point (hard_stop)
+  Duration timeout = 0;           ///< the whole homing of this joint; 0 = not set (refused)
+  double following_limit = 0.0;   ///< hard_stop: |demanded - actual| that means contact
+  double torque_limit = 0.0;      ///< hard_stop: |torque| (N m / N) that means contact; 0 = unused
+  double backoff = 0.0;           ///< hard_stop: distance moved back from the contact (> 0)
+};
+
+/// Where one joint's homing stands (ServoBus::homing()).
+enum class HomingPhase : std::uint8_t {
+  idle,      ///< not started since power-up (or aborted): not homed unless kind == none
+  running,   ///< in progress: the master, not the caller's setpoints, moves this joint
+  attained,  ///< done: the joint's position is valid in joint coordinates; the drive is back in
+             ///< cyclic synchronous position mode holding its actual position
+  failed,    ///< homing error, timeout or abort: see HomingProgress::status / ServoBus::last_error()
+};
+const char* to_string(HomingPhase p);
+
+struct HomingProgress {
+  HomingPhase phase = HomingPhase::idle;
+  Status status = Status::ok;   ///< why failed: timeout, drive_refused (homing error bit 13 or the
+                                ///< mode was not accepted), bad_state, drive_fault, heartbeat_lost...
+  std::uint8_t step = 0;        ///< protocol-specific step, for progress reports
+};
+
 class ServoBus {
  public:
   virtual ~ServoBus() = default;
@@ -97,6 +139,32 @@ class ServoBus {
   virtual std::int64_t zero_offset(std::size_t j) const {
     (void)j;
     return 0;
+  }
+
+  /// Real-time: start homing joint `j` as configured (HomingSpec). The joint must be enabled
+  /// (operation enabled); from then until the phase leaves `running` the master moves it and
+  /// write() ignores its setpoint. When attained, the joint's feedback position jumps to its
+  /// homed coordinates: the caller re-reads it before sending setpoints again.
+  /// @retval ok (started; also when kind == none: attained at once); invalid_argument (no such
+  ///         joint); bad_state (joint not enabled, or already homing); not_supported
+  virtual Status start_homing(std::size_t j, TimePoint now) {
+    (void)j;
+    (void)now;
+    return Status::not_supported;
+  }
+  /// Real-time: abort joint `j`'s homing (no-op if not running): the drive stops (halt, then
+  /// back to cyclic position mode at its actual position) and the phase becomes failed with
+  /// status `aborted`; the joint stays unhomed.
+  virtual void abort_homing(std::size_t j) { (void)j; }
+  /// Real-time: joint `j`'s homing phase. Joints with kind == none report attained.
+  virtual HomingProgress homing(std::size_t j) const {
+    (void)j;
+    return {HomingPhase::attained, Status::ok, 0};
+  }
+  /// Joint `j`'s configured homing kind (none when the protocol has no homing).
+  virtual HomingKind homing_kind(std::size_t j) const {
+    (void)j;
+    return HomingKind::none;
   }
 
   /// Real-time: latest feedback of joint `j` (j < joint_count()).

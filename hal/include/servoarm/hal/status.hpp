@@ -27,6 +27,9 @@ enum class Status : std::int8_t {
   capacity = -12,        ///< more nodes/filters/joints than the fixed capacity
   not_supported = -13,   ///< the backend/protocol does not offer this operation
   bad_state = -14,       ///< not allowed in the joint's current state (e.g. enabled)
+  aborted = -15,         ///< stopped on request before it completed (e.g. homing aborted)
+  homing_error = -16,    ///< homing failed: the drive's homing error bit (6041h bit 13), or the
+                         ///< home mark / hard stop was not found within the travel or timeout
 };
 
 /// Short name of a status, e.g. "bus_off". Never returns null.

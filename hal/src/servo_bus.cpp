@@ -1,0 +1,24 @@
+#include "servoarm/hal/servo_bus.hpp"
+
+namespace servoarm::hal {
+
+const char* to_string(HomingKind k) {
+  switch (k) {
+    case HomingKind::none: return "none";
+    case HomingKind::cia402: return "cia402";
+    case HomingKind::hard_stop: return "hard_stop";
+  }
+  return "unknown";
+}
+
+const char* to_string(HomingPhase p) {
+  switch (p) {
+    case HomingPhase::idle: return "idle";
+    case HomingPhase::running: return "running";
+    case HomingPhase::attained: return "attained";
+    case HomingPhase::failed: return "failed";
+  }
+  return "unknown";
+}
+
+}  // namespace servoarm::hal
