@@ -305,6 +305,21 @@ TEST(ArmctlIk, BadInputIsOneLineAndExitStatus2) {
       {"kin precision --robot puma560 --resolution 0.01 0.01 0.01 0.01 0.01 nan 0 0 0 0 0 0", "'nan' is not a finite number"},
       {"kin precision --robot puma560 0 0 0 0 0 0", "--resolution d1..dn is required"},
       {"kin precision --resolution 1 1", "--robot is required"},
+      // absurd targets name the option (cli_common's check_position / check_angles)
+      {"kin ik --robot puma560 --xyz 400 100 300 --rpy 1e300 0 0", "--rpy: 1e+300 deg is not a plausible angle"},
+      {"kin ik --robot puma560 --xyz 400 100 300 --rpy 0 0 -3601", "--rpy: -3601 deg is not a plausible angle"},
+      {"kin ik --robot puma560 --xyz 400 100 300 --zyz 0 1e300 0", "--zyz: 1e+300 deg is not a plausible angle"},
+      {"kin ik --robot puma560 --xyz 1e300 100 300 --zyz 0 0 0", "--xyz: 1e+300 mm is not a plausible position"},
+      {"kin ik --robot puma560 --xyz 400 -2e6 300 --rpy 0 0 0", "--xyz: -2000000 mm is not a plausible position"},
+      {"kin ik --robot trr --xyz 0 0 -1e308", "--xyz: -1e+308 mm is not a plausible position"},
+      {"kin ik --robot ist6 --xyz 1e300 0 0 --quat 1 0 0 0", "--xyz: 1e+300 mm"},
+      // --robot through the same checked loader as kin fk / plan
+      {"kin ik --robot /tmp --xyz 400 100 300 --zyz 0 0 0", "/tmp: not a regular file (a directory)"},
+      {"kin ik --robot /dev/zero --xyz 400 100 300 --zyz 0 0 0", "/dev/zero: not a regular file"},
+      {"kin precision --robot /tmp --resolution 0.1 0.1 10 20", "/tmp: not a regular file (a directory)"},
+      // a sum that overflows is refused, not printed as null
+      {"kin precision --robot rr_planar --resolution 1e308 1e308 10 20", "precision: the tool position error is not finite"},
+      {"kin precision --robot rr_planar --resolution 1e308 1e308 10 20 --json", "is not finite"},
   };
   for (const Case& k : cases) {
     const auto r = run_command(kArmctl + " " + k.args);
@@ -313,6 +328,20 @@ TEST(ArmctlIk, BadInputIsOneLineAndExitStatus2) {
     CHECK_TEXT(r.err.find(k.expect) != std::string::npos, label.c_str());
     CHECK_TEXT(r.out.empty(), label.c_str());
   }
+}
+
+TEST(ArmctlIk, HugeQuaternionComponentsGiveTheRotationOfTheirDirection) {
+  // Only the direction of --quat counts: 1e300 1e300 0 0 is Rx(90 deg) (w*w would overflow
+  // if summed unscaled), and the answer is that of 1 1 0 0.
+  const auto a = run_command(kArmctl + " kin ik --robot puma560 --xyz 400 150 300 --quat 1e300 1e300 0 0 --all --json");
+  const auto b = run_command(kArmctl + " kin ik --robot puma560 --xyz 400 150 300 --quat 1 1 0 0 --all --json");
+  LONGS_EQUAL_TEXT(0, a.status, (a.out + a.err).c_str());
+  LONGS_EQUAL_TEXT(0, b.status, (b.out + b.err).c_str());
+  CHECK(!solutions(a.out).empty());
+  STRCMP_EQUAL(b.out.c_str(), a.out.c_str());
+  // at the 3600 deg bound the angle is still accepted
+  const auto c = run_command(kArmctl + " kin ik --robot puma560 --xyz 400 150 300 --rpy 3600 0 0 --json");
+  LONGS_EQUAL_TEXT(0, c.status, (c.out + c.err).c_str());
 }
 
 TEST(ArmctlIk, PrecisionMatchesCentralDifferences) {

@@ -1,6 +1,7 @@
 // armctl kin ik | precision
 #include "servoarm/armctl/cli_ik.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -146,9 +147,25 @@ int cli_kin_ik(int argc, char** argv) {
   if (robot.empty()) return usage_error("--robot is required (see armctl kin models)");
   if (!have_xyz) return usage_error("--xyz X Y Z is required");
   if (keep && !have_near) return usage_error("--keep-branch needs --near q1..qn (the current joints)");
-  const kin::LoadResult lr = kin::load_robot(robot);
+  const kin::LoadResult lr = load_robot_checked(robot);
   if (!lr.ok) return usage_error(lr.error);
   const kin::Chain& chain = lr.chain;
+  // Plausible targets only (cli_common: at most 1 km, 3600 deg), naming the option: an
+  // absurd value (1e300) would otherwise reach the solver as an overflowed pose.
+  if (const std::string e = check_position("--xyz", {xyz[0], xyz[1], xyz[2]}, chain); !e.empty())
+    return usage_error(e);
+  if (rot == kZyz || rot == kRpy) {
+    if (const std::string e = check_angles(rot == kZyz ? "--zyz" : "--rpy", {ang[0], ang[1], ang[2]}, chain);
+        !e.empty())
+      return usage_error(e);
+  } else if (rot == kQuat) {
+    // Only the direction of the quaternion counts; scale by the largest component so that
+    // w*w + ... cannot overflow (1e300 1 0 0 is the identity's neighbour, not an error).
+    double big = 0;
+    for (int k = 0; k < 4; ++k) big = std::max(big, std::abs(ang[k]));
+    if (big > 0)
+      for (int k = 0; k < 4; ++k) ang[k] /= big;
+  }
   kin::IkModel model;
   if (kin::ik_prepare(chain, model) != kin::Status::ok) return usage_error("cannot analyse this chain");
   const bool position_only = model.method == kin::IkMethod::planar_2r || model.method == kin::IkMethod::spatial_3;
@@ -292,7 +309,7 @@ int cli_kin_precision(int argc, char** argv) {
   }
   if (robot.empty()) return usage_error("--robot is required (see armctl kin models)");
   if (!have_res) return usage_error("--resolution d1..dn is required");
-  const kin::LoadResult lr = kin::load_robot(robot);
+  const kin::LoadResult lr = load_robot_checked(robot);
   if (!lr.ok) return usage_error(lr.error);
   const kin::Chain& chain = lr.chain;
   const auto n = static_cast<std::size_t>(chain.n_joints);
@@ -314,6 +331,9 @@ int cli_kin_precision(int argc, char** argv) {
   const kin::Status st = kin::cartesian_precision(chain, qs, dq, dw);
   if (st != kin::Status::ok) return usage_error(std::string("precision: ") + kin::to_string(st));
   dw /= chain.length_unit;
+  // Huge resolutions or joint values (1e308) overflow the sum: an error, never printed.
+  if (!all_finite(dw.data(), 3))
+    return usage_error("precision: the tool position error is not finite for these resolutions and joint values");
   if (json) {
     std::printf("{\"robot\": \"%s\", \"length_unit\": \"%s\", \"dx\": %s, \"dy\": %s, \"dz\": %s}\n", chain.name.data(),
                 length_unit_name(chain), num(dw.x()).c_str(), num(dw.y()).c_str(), num(dw.z()).c_str());
