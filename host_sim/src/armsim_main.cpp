@@ -69,6 +69,25 @@ const char* kUsage =
     "  --status-every SEC      print one status line per node every SEC seconds\n"
     "  --verbose               print NMT/CiA 402 state changes\n"
     "\n"
+    "Switches and homing (issue 17; positions in encoder counts of the drive before homing, 'inf' /\n"
+    "'-inf' for none; NODE is a node id or 'all'). 60FDh reports them; Homing Mode (6060h = 6)\n"
+    "with methods 1-7, 11, 17-23, 27, 33, 34, 35, 37 (docs/servo-bus.md#homing):\n"
+    "  --home-switch NODE:LO[,HI]   home switch active on [LO, HI] (default HI = inf: a positive home switch)\n"
+    "  --limits NODE:NEG,POS        negative / positive limit switches, active at or beyond\n"
+    "  --end-stops NODE:NEG,POS     mechanical end stops: the shaft stops there, the following error grows\n"
+    "  --index NODE:PERIOD[,PHASE]  index pulse every PERIOD counts at PHASE (default one per --counts-per-rev, 0)\n"
+    "  --max-travel NODE:COUNTS     homing error after this much travel without the mark (default none)\n"
+    "  --no-homing NODE             the drive has no homing mode (6502h bit 5 clear; 6060h = 6 refused)\n"
+    "  --modes NODE:MASK            6502h supported drive modes as reported (e.g. 0x252)\n"
+    "Conformance behaviours of real drives:\n"
+    "  --sdo-delay-ms NODE:N        every SDO reply N ms late\n"
+    "  --boot-delay-ms NODE:N       the boot-up (heartbeat, first SDO answers) N ms after start\n"
+    "  --never-attained NODE        homing reaches home but never sets statusword bit 12\n"
+    "  --halt-blocks-mode NODE      a mode change written while controlword bit 8 (halt) is set acts only\n"
+    "                               once halt clears\n"
+    "  --refuse-same-mode NODE      writing 6060h with the mode already active aborts 08000022h\n"
+    "  --reset-on-level NODE        a fault reset on bit 7 set, without the rising edge CiA 402 requires\n"
+    "\n"
     "Fault injection (NODE is a node id or 'all'; @SEC = seconds after start, default 0):\n"
     "  --silent NODE[@SEC]          node stops sending and ignores the bus (unplugged)\n"
     "  --stop-heartbeat NODE[@SEC]  only the heartbeat producer stops\n"
@@ -77,7 +96,10 @@ const char* kUsage =
     "  --noise NODE:COUNTS          uniform +-COUNTS noise on the reported position\n"
     "  --drop-rate NODE:P           each frame the node sends is lost with probability P\n"
     "\n"
-    "Output: 'armsim ready iface=... nodes=...' once the socket is open, then event lines.\n"
+    "Output: 'armsim ready iface=... nodes=...' once the socket is open, then event lines, e.g.\n"
+    "'armsim homed t=SEC node=N method=M mark=COUNTS physical=COUNTS position=COUNTS' when a homing\n"
+    "attains (mark: where the drive found its home mark, physical: where the shaft stands, both in the\n"
+    "counts before homing; position: 6064h).\n"
     "Exit status: 0 normal end (duration, signal, or --fd peer closed), 2 usage error,\n"
     "3 cannot open the interface.\n";
 
@@ -109,6 +131,12 @@ int main(int argc, char** argv) {
   std::vector<std::uint16_t> without;
   std::vector<Scheduled> schedule;
   std::vector<cli::FaultArg> refuse, noise, drops;
+  struct HomingArg {
+    std::string opt;
+    cli::FaultArg arg;
+    std::vector<double> xs;
+  };
+  std::vector<HomingArg> homing_args;
 
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -246,6 +274,43 @@ int main(int argc, char** argv) {
         return usage_error("bad --emcy '" + v + "' (NODE:CODE[@SEC], CODE e.g. 0x2310)");
       s.code = std::uint16_t(code);
       schedule.push_back(s);
+    } else if (a == "--no-homing" || a == "--never-attained" || a == "--halt-blocks-mode" ||
+               a == "--refuse-same-mode" || a == "--reset-on-level") {
+      HomingArg h{a, {}, {}};
+      if (!cli::parse_fault(v, false, h.arg) || !h.arg.value.empty() || h.arg.at != 0)
+        return usage_error("bad " + a + " '" + v + "' (NODE or all)");
+      homing_args.push_back(h);
+    } else if (a == "--home-switch" || a == "--limits" || a == "--end-stops" || a == "--index" || a == "--max-travel" ||
+               a == "--modes" || a == "--sdo-delay-ms" || a == "--boot-delay-ms") {
+      HomingArg h{a, {}, {}};
+      if (!cli::parse_fault(v, true, h.arg) || h.arg.at != 0) return usage_error("bad " + a + " '" + v + "' (NODE:VALUES)");
+      std::size_t p = 0;
+      const std::string& t = h.arg.value;
+      while (p <= t.size()) {
+        const std::size_t q = std::min(t.find(',', p), t.size());
+        const std::string x = t.substr(p, q - p);
+        double d = 0;
+        if (x == "inf" || x == "+inf") d = sim::DriveSwitches::kNone;
+        else if (x == "-inf") d = -sim::DriveSwitches::kNone;
+        else if (std::uint32_t u = 0; x.rfind("0x", 0) == 0 && cli::parse_uint(x, 0xFFFFFFFFu, u)) d = double(u);
+        else if (!cli::parse_double(x, d)) return usage_error("bad " + a + " '" + v + "': '" + x + "' is not a number");
+        h.xs.push_back(d);
+        p = q + 1;
+      }
+      const std::size_t n = h.xs.size();
+      const bool two = a == "--limits" || a == "--end-stops";
+      const bool ok = two ? n == 2 && h.xs[0] < h.xs[1]
+                      : a == "--home-switch" ? (n == 1 || n == 2) && (n == 1 || h.xs[0] <= h.xs[1])
+                      : a == "--index" ? (n == 1 || n == 2) && h.xs[0] > 0 && std::isfinite(h.xs[0])
+                      : n == 1 && h.xs[0] >= 0 && std::isfinite(h.xs[0]);
+      if (!ok) {
+        const char* form = two ? "NODE:NEG,POS with NEG < POS"
+                           : a == "--home-switch" ? "NODE:LO[,HI] with LO <= HI"
+                           : a == "--index" ? "NODE:PERIOD[,PHASE], PERIOD > 0"
+                           : "NODE:VALUE, VALUE >= 0";
+        return usage_error("bad " + a + " '" + v + "' (" + form + ")");
+      }
+      homing_args.push_back(h);
     } else if (a == "--refuse-enable") {
       cli::FaultArg f;
       if (!cli::parse_fault(v, false, f)) return usage_error("bad --refuse-enable");
@@ -292,6 +357,34 @@ int main(int argc, char** argv) {
   sim::ArmSim arm(bus, nodes, motor, seed);
   for (std::size_t i = 0; i < arm.size(); ++i)
     for (std::uint16_t idx : without) arm.at(i).od_remove(idx);
+  for (auto& h : homing_args) {
+    if (h.arg.node != 0 && !arm.node(h.arg.node))
+      return usage_error(h.opt + ": node " + std::to_string(h.arg.node) + " not in --nodes");
+  }
+  for (std::size_t i = 0; i < arm.size(); ++i) {
+    sim::VirtualDrive& d = arm.at(i);
+    d.switches().index_period = double(cpr);
+    sim::DriveQuirks q = d.quirks();
+    for (auto& h : homing_args) {
+      if (h.arg.node != 0 && h.arg.node != d.node()) continue;
+      sim::DriveSwitches& s = d.switches();
+      const auto& x = h.xs;
+      if (h.opt == "--home-switch") s.home_lo = x[0], s.home_hi = x.size() > 1 ? x[1] : sim::DriveSwitches::kNone;
+      else if (h.opt == "--limits") s.neg_limit = x[0], s.pos_limit = x[1];
+      else if (h.opt == "--end-stops") s.end_neg = x[0], s.end_pos = x[1];
+      else if (h.opt == "--index") s.index_period = x[0], s.index_phase = x.size() > 1 ? x[1] : 0.0;
+      else if (h.opt == "--max-travel") s.max_travel = x[0];
+      else if (h.opt == "--modes") q.supported_modes = std::uint32_t(x[0]);
+      else if (h.opt == "--sdo-delay-ms") q.sdo_delay = Duration(x[0] * 1e6);
+      else if (h.opt == "--boot-delay-ms") q.boot_delay = Duration(x[0] * 1e6);
+      else if (h.opt == "--no-homing") q.no_homing = true;
+      else if (h.opt == "--never-attained") q.never_attained = true;
+      else if (h.opt == "--halt-blocks-mode") q.halt_blocks_mode_change = true;
+      else if (h.opt == "--refuse-same-mode") q.refuse_same_mode = true;
+      else if (h.opt == "--reset-on-level") q.fault_reset_on_level = true;
+    }
+    d.set_quirks(q);
+  }
   MonotonicClock clock;
   const TimePoint t0 = clock.now();
   arm.power_on(t0);
@@ -349,6 +442,7 @@ int main(int argc, char** argv) {
   std::printf("\n");
   std::fflush(stdout);
 
+  std::vector<double> last_mark(arm.size(), std::nan(""));
   std::vector<cia402::State> last_state(arm.size());
   std::vector<canopen::NmtState> last_nmt(arm.size());
   for (std::size_t i = 0; i < arm.size(); ++i) {
@@ -401,6 +495,24 @@ int main(int argc, char** argv) {
       if (st != last_err) std::fprintf(stderr, "armsim: receive: %s (%s); retrying\n", to_string(st), bus.message());
       last_err = st;
       clock.sleep_until(next_tick);  // no busy loop while the interface is down
+    }
+    for (std::size_t i = 0; i < arm.size(); ++i) {
+      const auto& d = arm.at(i);
+      const double m = d.home_mark();
+      // Once the homing attained (statusword bit 12 in homing mode), once per new mark.
+      std::uint32_t sw = 0;
+      d.od_read(cia402::kStatusword, 0, sw);
+      if (!std::isnan(m) && (sw & cia402::kSwHomingAttained) && d.mode_display() == cia402::kModeHoming &&
+          !(m == last_mark[i])) {
+        last_mark[i] = m;
+        std::uint32_t method = 0, pos = 0;
+        d.od_read(cia402::kHomingMethod, 0, method);
+        d.od_read(cia402::kPositionActual, 0, pos);
+        std::printf("armsim homed t=%.3f node=%u method=%d mark=%.0f physical=%.1f position=%d\n",
+                    double(clock.now() - t0) * 1e-9, unsigned(d.node()), int(std::int8_t(method)), m,
+                    d.physical_position(), int(std::int32_t(pos)));
+        std::fflush(stdout);
+      }
     }
     if (verbose) {
       for (std::size_t i = 0; i < arm.size(); ++i) {

@@ -74,6 +74,16 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kQuickStopOption, 0, 2, true, false, 6);
   add(c402::kQuickStopDecel, 0, 4, true, false,
       std::uint32_t(std::clamp(std::round(motor_.max_accel), 1.0, 4294967295.0)));
+  // Homing (issue 17): switches, method, speeds (counts/s), acceleration (counts/s^2, 0 = the
+  // motor's limit), home offset, supported modes.
+  add(c402::kDigitalInputs, 0, 4, false, true, 0);
+  add(c402::kHomingMethod, 0, 1, true, false, 35);
+  add(c402::kHomingSpeeds, 0, 1, false, false, 2);
+  add(c402::kHomingSpeeds, 1, 4, true, false, 131072);
+  add(c402::kHomingSpeeds, 2, 4, true, false, 13107);
+  add(c402::kHomingAccel, 0, 4, true, false, 0);
+  add(c402::kHomeOffset, 0, 4, true, false, 0);
+  add(c402::kSupportedModes, 0, 4, false, false, c402::kSupportsCsp | c402::kSupportsHoming);
   Entry* name = find(0x1008, 0);
   char buf[48];
   const int n = std::snprintf(buf, sizeof buf, "servoarm virtual drive %u", unsigned(node));
@@ -147,10 +157,32 @@ double VirtualDrive::uniform() {
 void VirtualDrive::tx(CanBus& bus, const CanFrame& f) {
   if (faults_.silent) return;
   if (faults_.tx_drop_rate > 0 && uniform() < faults_.tx_drop_rate) return;
+  if (quirks_.sdo_delay > 0 && f.id == kSdoTx + node_) {
+    delayed_.emplace_back(now_ + quirks_.sdo_delay, f);  // sent by tick() when due
+    return;
+  }
   bus.send(f);
 }
 
+void VirtualDrive::set_quirks(const DriveQuirks& q) {
+  quirks_ = q;
+  std::uint32_t modes = c402::kSupportsCsp | (q.no_homing ? 0u : c402::kSupportsHoming);
+  if (q.supported_modes != 0) modes = q.supported_modes;
+  if (Entry* e = find(c402::kSupportedModes, 0)) e->value = e->initial = modes;
+}
+
 void VirtualDrive::power_on(TimePoint now, CanBus& bus) {
+  if (quirks_.boot_delay > 0) {  // a slow boot: silent until then (tick() finishes it)
+    booted_ = false;
+    boot_at_ = now + quirks_.boot_delay;
+    t_ = now;
+    return;
+  }
+  boot(now, bus);
+}
+
+void VirtualDrive::boot(TimePoint now, CanBus& bus) {
+  boot_at_ = 0;
   t_ = now;
   booted_ = true;
   nmt_ = NmtState::pre_operational;
@@ -162,6 +194,7 @@ void VirtualDrive::power_on(TimePoint now, CanBus& bus) {
 
 void VirtualDrive::handle(const CanFrame& f, TimePoint now, CanBus& bus) {
   if (faults_.silent || !booted_ || f.error || f.extended || f.rtr || f.fd) return;
+  now_ = now;
   if (f.id == kNmt) {
     NmtCommand cmd;
     std::uint8_t target;
@@ -212,6 +245,8 @@ void VirtualDrive::handle_nmt(NmtCommand cmd, TimePoint now, CanBus& bus) {
         state_ = c402::State::switch_on_disabled;
         prev_cw_ = 0;
         target_ = std::int32_t(std::lround(pos_));
+        h_ = Homing{};
+        has_pending_mode_ = false;
       }
       power_on(now, bus);
       break;
@@ -264,14 +299,34 @@ std::uint32_t VirtualDrive::sdo_write(Entry& e, const std::uint8_t* data, std::s
     if ((v & 0x3FFFF800u) != 0) return sdo::kAbortValueRange;  // 11-bit ids only
   }
   if (is_comm && e.sub == 2 && v > 240 && v < 254) return sdo::kAbortValueRange;
-  if (e.index == c402::kModesOfOperation && std::int8_t(v) != c402::kModeCsp && v != 0) return sdo::kAbortValueRange;
+  if (e.index == c402::kModesOfOperation) {
+    const std::int8_t m = std::int8_t(v);
+    const std::uint32_t modes = get(c402::kSupportedModes);
+    const bool ok = m == 0 || (m == c402::kModeCsp && (modes & c402::kSupportsCsp)) ||
+                    (m == c402::kModeHoming && (modes & c402::kSupportsHoming));
+    if (!ok) return sdo::kAbortValueRange;
+    if (quirks_.refuse_same_mode && m == std::int8_t(get(c402::kModesDisplay))) return sdo::kAbortDeviceState;
+  }
+  if (e.index == c402::kHomingMethod) {
+    const std::int8_t m = std::int8_t(v);
+    const bool ok = (m >= 1 && m <= 7) || m == 11 || (m >= 17 && m <= 23) || m == 27 || (m >= 33 && m <= 35) ||
+                    m == 37;
+    if (!ok) return sdo::kAbortValueRange;
+  }
   if (e.index == c402::kQuickStopOption) {
     const std::int16_t o = std::int16_t(v);
     if (!(o == 0 || o == 1 || o == 2 || o == 5 || o == 6)) return sdo::kAbortValueRange;
   }
   if (e.index == c402::kQuickStopDecel && v == 0) return sdo::kAbortValueRange;
   e.value = v;
-  if (e.index == c402::kModesOfOperation) set(c402::kModesDisplay, v);
+  if (e.index == c402::kModesOfOperation) {
+    if (quirks_.halt_blocks_mode_change && (get(c402::kControlword) & c402::kCwHalt)) {
+      pending_mode_ = std::int8_t(v);  // shows (and acts) once the halt bit is clear
+      has_pending_mode_ = true;
+    } else {
+      set_mode(std::int8_t(v));
+    }
+  }
   if (e.index == 0x1017) next_hb_ = t_;
   // A controlword (or target) written by SDO acts when it is written, in any NMT state
   // where SDO works (pre-operational too), as on a real drive: not at the next SYNC.
@@ -447,7 +502,10 @@ void VirtualDrive::apply_controlword(TimePoint now, CanBus& bus) {
   (void)now;
   const std::uint16_t cw = std::uint16_t(get(c402::kControlword));
   int t = 0;
-  c402::State next = c402::apply_controlword(state_, cw, prev_cw_, &t);
+  const std::uint16_t before = prev_cw_;
+  std::uint16_t prev = prev_cw_;
+  if (quirks_.fault_reset_on_level) prev = std::uint16_t(prev & ~c402::cw::kFaultReset);  // any bit 7 resets
+  c402::State next = c402::apply_controlword(state_, cw, prev, &t);
   prev_cw_ = cw;
   if (t == 4 && (faults_.refuse_enable || std::int8_t(get(c402::kModesDisplay)) != c402::kModeCsp)) {
     next = state_;  // refuses: stays switched on
@@ -471,8 +529,223 @@ void VirtualDrive::apply_controlword(TimePoint now, CanBus& bus) {
     tx(bus, encode_emcy(node_, Emcy{}));
   }
   state_ = next;
-  if (state_ == c402::State::operation_enabled) target_ = std::int32_t(get(c402::kTargetPosition));
+  if (has_pending_mode_ && !(cw & c402::kCwHalt)) {  // halt_blocks_mode_change: acts now
+    has_pending_mode_ = false;
+    set_mode(pending_mode_);
+  }
+  const bool homing_active = h_.phase == HPhase::search || h_.phase == HPhase::final_edge ||
+                             h_.phase == HPhase::index || h_.phase == HPhase::to_home;
+  if (state_ == c402::State::operation_enabled && mode_display() == c402::kModeHoming) {
+    // Homing mode: the homing generator owns the demand; 607Ah is not used.
+    const bool rise = (cw & c402::kCwHomingStart) && !(before & c402::kCwHomingStart);
+    const bool fall = !(cw & c402::kCwHomingStart) && (before & c402::kCwHomingStart);
+    if (t == 4 || t == 16) h_.demand = double(target_), h_.v = 0;
+    if (rise) {
+      homing_start();
+    } else if (fall && homing_active) {
+      h_.phase = HPhase::interrupted;  // bit 4 back to 0: homing interrupted, the drive stops
+    }
+  } else if (state_ == c402::State::operation_enabled) {
+    target_ = std::int32_t(get(c402::kTargetPosition));
+  } else if (homing_active) {
+    h_.phase = HPhase::interrupted;  // powered down (or fault) mid-homing
+    h_.v = 0;
+  }
   update_statusword();
+}
+
+void VirtualDrive::set_mode(std::int8_t m) {
+  const std::int8_t old = mode_display();
+  set(c402::kModesDisplay, std::uint32_t(std::uint8_t(m)));
+  if (old == m) return;
+  // No jump at a mode change: the demand starts where the shaft stands.
+  target_ = std::int32_t(std::lround(pos_));
+  set(c402::kTargetPosition, std::uint32_t(target_));
+  if (old == c402::kModeHoming) h_.phase = HPhase::idle;  // statusword 10/12/13 belong to homing mode
+  h_.v = 0;
+  h_.demand = double(target_);
+}
+
+std::uint32_t VirtualDrive::digital_inputs() const {
+  const double p = pos_ - shift_;
+  std::uint32_t v = 0;
+  if (p <= switches_.neg_limit) v |= c402::kDiNegLimit;
+  if (p >= switches_.pos_limit) v |= c402::kDiPosLimit;
+  if (home_active(p)) v |= c402::kDiHome;
+  return v;
+}
+
+bool VirtualDrive::signal_at(double p) const {
+  switch (h_.signal) {
+    case 1: return p <= switches_.neg_limit;
+    case 2: return p >= switches_.pos_limit;
+    default: return home_active(p);
+  }
+}
+
+namespace {
+/// The first index pulse strictly beyond `p` moving in `dir`.
+double next_index(double p, int dir, double period, double phase) {
+  if (!(period > 0)) return dir > 0 ? DriveSwitches::kNone : -DriveSwitches::kNone;
+  const double k = (p - phase) / period;
+  const double n = dir > 0 ? std::floor(k) + 1 : std::ceil(k) - 1;
+  return phase + n * period;
+}
+}  // namespace
+
+void VirtualDrive::homing_start() {
+  const std::int8_t method = std::int8_t(get(c402::kHomingMethod));
+  Homing h;
+  h.demand = double(target_);
+  h.v = 0;
+  const double p = pos_ - shift_;
+  const double sw = double(get(c402::kHomingSpeeds, 1)), sz = double(get(c402::kHomingSpeeds, 2));
+  const bool home_now = home_active(p);
+  // signal, edge, direction crossing it, signal state before the edge, index, initial direction, reversal
+  auto table = [&](int signal, double edge, int d_final, bool want, bool index, int d_init, bool rev) {
+    h.signal = signal;
+    h.edge = edge;
+    h.d_final = d_final;
+    h.want_before = want;
+    h.use_index = index;
+    h.may_reverse = rev;
+    h.dir = d_init;
+    h.speed = sw;
+    h.phase = HPhase::search;
+  };
+  const struct {
+    double neg, pos, lo, hi;
+  } g{switches_.neg_limit, switches_.pos_limit, switches_.home_lo, switches_.home_hi};
+  switch (method) {
+    case 1: case 17: table(1, g.neg, +1, true, method == 1, -1, false); break;
+    case 2: case 18: table(2, g.pos, -1, true, method == 2, +1, false); break;
+    case 3: case 19: table(0, g.lo, -1, true, method == 3, home_now ? -1 : +1, false); break;
+    case 4: case 20: table(0, g.lo, +1, false, method == 4, home_now ? -1 : +1, false); break;
+    case 5: case 21: table(0, g.hi, +1, true, method == 5, home_now ? +1 : -1, false); break;
+    case 6: case 22: table(0, g.hi, -1, false, method == 6, home_now ? +1 : -1, false); break;
+    case 7: case 23: table(0, g.lo, -1, true, method == 7, +1, true); break;
+    case 11: case 27: table(0, g.hi, +1, true, method == 11, -1, true); break;
+    case 33: case 34:
+      h.dir = h.d_final = method == 33 ? -1 : +1;
+      h.speed = sz;
+      h.phase = HPhase::index;
+      h.index_at = next_index(p, h.dir, switches_.index_period, switches_.index_phase);
+      break;
+    case 35: case 37:
+      h_ = h;
+      homing_capture(p);  // the current position is the home mark
+      return;
+    default:
+      h.phase = HPhase::error;
+      break;
+  }
+  h_ = h;
+  if (h_.phase == HPhase::search && signal_at(p) == h_.want_before) {
+    h_.phase = HPhase::final_edge;  // already on the near side of the edge: approach it slowly
+    h_.dir = h_.d_final;
+    h_.speed = sz;
+  }
+}
+
+void VirtualDrive::homing_capture(double mark) {
+  const double shift = double(std::int32_t(get(c402::kHomeOffset))) - mark;
+  const double d = shift - shift_;
+  pos_ += d;
+  h_.demand += d;
+  target_ = std::int32_t(std::lround(std::clamp(h_.demand, -2147483648.0, 2147483647.0)));
+  shift_ = shift;
+  home_mark_ = mark;
+  h_.goal = double(std::int32_t(get(c402::kHomeOffset)));
+  h_.speed = double(get(c402::kHomingSpeeds, 2));
+  h_.phase = HPhase::to_home;
+}
+
+void VirtualDrive::homing_fail() {
+  h_.phase = HPhase::error;  // the generator ramps the demand down to a stop
+}
+
+void VirtualDrive::homing_substep(double dt, bool halt) {
+  double a = double(get(c402::kHomingAccel));
+  if (!(a > 0)) a = motor_.max_accel;
+  double vt = 0;
+  switch (h_.phase) {
+    case HPhase::search:
+    case HPhase::final_edge:
+    case HPhase::index:
+      vt = halt ? 0.0 : double(h_.dir) * h_.speed;
+      break;
+    case HPhase::to_home: {
+      const double d = h_.goal - h_.demand;
+      const double vmax = std::min(h_.speed, std::sqrt(2.0 * a * std::fabs(d)));
+      vt = halt ? 0.0 : (d > 0 ? vmax : -vmax);
+      break;
+    }
+    case HPhase::idle:
+    case HPhase::attained:
+    case HPhase::error:
+    case HPhase::interrupted:
+      break;
+  }
+  h_.v += std::clamp(vt - h_.v, -a * dt, a * dt);
+  const double step = h_.v * dt;
+  if (h_.phase == HPhase::to_home && !halt &&
+      (std::fabs(h_.goal - h_.demand) <= std::fabs(step) || std::fabs(h_.goal - h_.demand) < 0.5)) {
+    h_.demand = h_.goal;  // on the mark: no overshoot of the demand
+    h_.v = 0;
+  } else {
+    h_.demand += step;
+  }
+  h_.travel += std::fabs(step);
+  target_ = std::int32_t(std::lround(std::clamp(h_.demand, -2147483648.0, 2147483647.0)));
+}
+
+void VirtualDrive::homing_after(double p0, double p1) {
+  const bool running = h_.phase == HPhase::search || h_.phase == HPhase::final_edge || h_.phase == HPhase::index;
+  if (running) {
+    // The switch was never found: the end stop, the second limit switch, or the travel limit.
+    if (at_stop_ || (switches_.max_travel > 0 && h_.travel > switches_.max_travel)) return homing_fail();
+    // Running onto a limit switch (its edge, moving towards it) that is not the one sought.
+    const bool nl = p1 <= switches_.neg_limit && p0 > switches_.neg_limit && h_.signal != 1;
+    const bool pl = p1 >= switches_.pos_limit && p0 < switches_.pos_limit && h_.signal != 2;
+    if (nl || pl) {
+      if (h_.phase == HPhase::search && h_.may_reverse && !h_.reversed) {
+        h_.reversed = true;
+        h_.dir = -h_.dir;
+      } else {
+        return homing_fail();
+      }
+    }
+  }
+  switch (h_.phase) {
+    case HPhase::search:
+      if (signal_at(p1) == h_.want_before) {  // on the near side of the edge: reverse if needed, slow down
+        h_.phase = HPhase::final_edge;
+        h_.dir = h_.d_final;
+        h_.speed = double(get(c402::kHomingSpeeds, 2));
+      }
+      break;
+    case HPhase::final_edge:
+      if (signal_at(p0) == h_.want_before && signal_at(p1) != h_.want_before && (p1 - p0) * h_.d_final > 0) {
+        if (h_.use_index) {
+          h_.phase = HPhase::index;
+          h_.index_at = next_index(h_.edge, h_.d_final, switches_.index_period, switches_.index_phase);
+        } else {
+          homing_capture(h_.edge);  // the edge is latched where the switch is (a hardware capture)
+        }
+      }
+      break;
+    case HPhase::index:
+      if ((p1 - h_.index_at) * h_.dir >= 0 && (p0 - h_.index_at) * h_.dir < 0) homing_capture(h_.index_at);
+      break;
+    case HPhase::to_home:
+      if (h_.demand == h_.goal && std::fabs(pos_ - h_.goal) < 0.5 && std::fabs(vel_) < 100) h_.phase = HPhase::attained;
+      break;
+    case HPhase::idle:
+    case HPhase::attained:
+    case HPhase::error:
+    case HPhase::interrupted:
+      break;
+  }
 }
 
 void VirtualDrive::inject_emcy(std::uint16_t code, TimePoint now, CanBus& bus) {
@@ -496,8 +769,13 @@ void VirtualDrive::advance(TimePoint now, CanBus& bus) {
   }
   if (now <= t_) return;
   const double dt = double(motor_.substep) * 1e-9;
+  const bool homing_mode = mode_display() == c402::kModeHoming;
+  const bool halt = (get(c402::kControlword) & c402::kCwHalt) != 0;
   while (t_ + motor_.substep <= now) {
     t_ += motor_.substep;
+    const bool homing = homing_mode && state_ == c402::State::operation_enabled;
+    if (homing) homing_substep(dt, halt);
+    const double p0 = pos_ - shift_;
     double v_des = 0.0;
     const bool powered = state_ == c402::State::operation_enabled;
     if (powered) v_des = (double(target_) - pos_) / motor_.lag;
@@ -507,6 +785,19 @@ void VirtualDrive::advance(TimePoint now, CanBus& bus) {
     const double dv = std::clamp(v_des - vel_, -amax * dt, amax * dt);
     vel_ += dv;
     pos_ += vel_ * dt;
+    // Mechanical end stops: the shaft stops there, whatever the demand.
+    const double p = pos_ - shift_;
+    at_stop_ = false;
+    if (p < switches_.end_neg) {
+      pos_ = switches_.end_neg + shift_;
+      vel_ = std::max(vel_, 0.0);
+      at_stop_ = true;
+    } else if (p > switches_.end_pos) {
+      pos_ = switches_.end_pos + shift_;
+      vel_ = std::min(vel_, 0.0);
+      at_stop_ = true;
+    }
+    if (homing) homing_after(p0, pos_ - shift_);
     after_substep(bus, vel_ == 0.0);
   }
   publish_feedback();
@@ -534,7 +825,17 @@ void VirtualDrive::publish_feedback() {
   if (torque_unit_ != 0) {
     const double t = std::clamp(std::round(torque_ / torque_unit_), -32768.0, 32767.0);
     set(c402::kTorqueActual, std::uint32_t(std::uint16_t(std::int16_t(t))));
+  } else {
+    // First-order motor: massless, no torque while free; pushing on an end stop it reports
+    // the push, proportional to the following error (the following error window = 1000 per mille).
+    double t = 0;
+    if (at_stop_) {
+      const double w = std::max(1.0, double(get(c402::kFollowingErrorWindow)));
+      t = std::clamp(std::round(1000.0 * (double(target_) - pos_) / w), -32768.0, 32767.0);
+    }
+    set(c402::kTorqueActual, std::uint32_t(std::uint16_t(std::int16_t(t))));
   }
+  set(c402::kDigitalInputs, digital_inputs());
   update_statusword();
 }
 
@@ -562,7 +863,8 @@ double VirtualDrive::servo_torque(double q, double qd, double h) {
   switch (state_) {
     case c402::State::operation_enabled: {
       qs_ramping_ = false;
-      const double qt = scaling_.to_joint(target_);
+      if (mode_display() == c402::kModeHoming) homing_substep(h, (get(c402::kControlword) & c402::kCwHalt) != 0);
+      const double qt = scaling_.to_joint(std::int32_t(std::lround(double(target_) - shift_)));
       const double v_off = scaling_.velocity_to_joint(std::int32_t(get(c402::kVelocityOffset)));
       const double v = std::clamp(kp_ * (qt - q) + v_off, -vmax, vmax);
       const double e = v - qd;
@@ -601,7 +903,9 @@ double VirtualDrive::servo_torque(double q, double qd, double h) {
 void VirtualDrive::plant_update(TimePoint t, double q, double qd, double torque, CanBus& bus) {
   t_ = t;
   const double k = double(scaling_.direction) * scaling_.counts_per_si();
-  pos_ = double(scaling_.zero_offset) + k * q;
+  const double p0 = pos_ - shift_;
+  pos_ = double(scaling_.zero_offset) + k * q + shift_;
+  if (state_ == c402::State::operation_enabled && mode_display() == c402::kModeHoming) homing_after(p0, pos_ - shift_);
   vel_ = k * qd;
   torque_ = torque;
   after_substep(bus, !qs_ramping_ && std::fabs(qd) < 5e-3);
@@ -613,11 +917,47 @@ void VirtualDrive::update_statusword() {
       state_ == c402::State::quick_stop_active || state_ == c402::State::ready_to_switch_on)
     sw |= c402::kSwVoltageEnabled;
   sw |= c402::kSwRemote;
-  if (state_ == c402::State::operation_enabled && std::fabs(double(target_) - pos_) < 10.0) sw |= c402::kSwTargetReached;
+  if (mode_display() == c402::kModeHoming) {
+    // Homing mode (CiA 402): bit 10 target reached (stopped: not started, interrupted, halted,
+    // done or failed), bit 12 homing attained, bit 13 homing error.
+    const bool stopped = h_.v == 0.0 && std::fabs(vel_) < 100.0;
+    switch (h_.phase) {
+      case HPhase::idle:
+      case HPhase::interrupted:
+        if (stopped) sw |= c402::kSwTargetReached;
+        break;
+      case HPhase::search:
+      case HPhase::final_edge:
+      case HPhase::index:
+      case HPhase::to_home:
+        if (stopped && (get(c402::kControlword) & c402::kCwHalt)) sw |= c402::kSwTargetReached;
+        break;
+      case HPhase::attained:
+        sw |= c402::kSwTargetReached;
+        if (!quirks_.never_attained) sw |= c402::kSwHomingAttained;
+        break;
+      case HPhase::error:
+        sw |= c402::kSwHomingError;
+        if (stopped) sw |= c402::kSwTargetReached;
+        break;
+    }
+  } else if (state_ == c402::State::operation_enabled && std::fabs(double(target_) - pos_) < 10.0) {
+    sw |= c402::kSwTargetReached;
+  }
   set(c402::kStatusword, sw);
 }
 
 void VirtualDrive::tick(TimePoint now, CanBus& bus) {
+  now_ = now;
+  if (!booted_ && boot_at_ != 0 && now >= boot_at_) boot(now, bus);
+  if (!delayed_.empty()) {  // quirks().sdo_delay: replies that are due now, in order
+    std::size_t k = 0;
+    while (k < delayed_.size() && delayed_[k].first <= now) {
+      if (!faults_.silent) bus.send(delayed_[k].second);
+      ++k;
+    }
+    delayed_.erase(delayed_.begin(), delayed_.begin() + std::ptrdiff_t(k));
+  }
   if (!booted_) return;
   advance(now, bus);
   const std::uint32_t hb_ms = get(0x1017);

@@ -23,7 +23,21 @@ inline constexpr std::uint16_t kRatedTorque = 0x6076;    ///< UNSIGNED32 motor r
 inline constexpr std::uint16_t kTorqueActual = 0x6077;   ///< INTEGER16 per mille of 6076h
 inline constexpr std::uint16_t kVelocityOffset = 0x60B1; ///< INTEGER32 velocity feed-forward, counts/s
 inline constexpr std::uint16_t kTorqueOffset = 0x60B2;   ///< INTEGER16 torque feed-forward, per mille of 6076h
+inline constexpr std::uint16_t kHomeOffset = 0x607C;      ///< INTEGER32 home offset (6064h at the home mark)
+inline constexpr std::uint16_t kHomingMethod = 0x6098;    ///< INTEGER8 homing method
+inline constexpr std::uint16_t kHomingSpeeds = 0x6099;    ///< :01 search for switch, :02 search for zero (UNSIGNED32)
+inline constexpr std::uint16_t kHomingAccel = 0x609A;     ///< UNSIGNED32 homing acceleration
+inline constexpr std::uint16_t kDigitalInputs = 0x60FD;   ///< UNSIGNED32: bit 0 neg. limit, 1 pos. limit, 2 home
+inline constexpr std::uint16_t kSupportedModes = 0x6502;  ///< UNSIGNED32 supported drive modes
 inline constexpr std::int8_t kModeCsp = 8;  ///< cyclic synchronous position
+inline constexpr std::int8_t kModeHoming = 6;
+/// 6502h bits (CiA 402): 0 pp, 1 vl, 2 pv, 3 tq, 5 hm, 6 ip, 7 csp, 8 csv, 9 cst.
+inline constexpr std::uint32_t kSupportsHoming = 1u << 5;
+inline constexpr std::uint32_t kSupportsCsp = 1u << 7;
+/// 60FDh bits.
+inline constexpr std::uint32_t kDiNegLimit = 1u << 0;
+inline constexpr std::uint32_t kDiPosLimit = 1u << 1;
+inline constexpr std::uint32_t kDiHome = 1u << 2;
 inline constexpr std::uint32_t kDeviceTypeProfile = 402;  ///< low 16 bits of 0x1000
 
 enum class State : std::uint8_t {
@@ -50,6 +64,11 @@ inline constexpr std::uint16_t kSwWarning = 1u << 7;
 inline constexpr std::uint16_t kSwRemote = 1u << 9;
 inline constexpr std::uint16_t kSwTargetReached = 1u << 10;
 inline constexpr std::uint16_t kSwFollowingError = 1u << 13;  ///< CSP: following error
+inline constexpr std::uint16_t kSwHomingAttained = 1u << 12;  ///< homing mode: homing attained
+inline constexpr std::uint16_t kSwHomingError = 1u << 13;     ///< homing mode: homing error
+/// Controlword bits beside the state commands.
+inline constexpr std::uint16_t kCwHomingStart = 1u << 4;  ///< homing mode: 0->1 starts, 1->0 interrupts
+inline constexpr std::uint16_t kCwHalt = 1u << 8;
 
 /// State from a statusword (CiA 402 table 30, masks 0x4F / 0x6F).
 State decode_statusword(std::uint16_t sw);

@@ -10,10 +10,21 @@
 // error monitoring (0x6065 window -> EMCY 0x8611 + fault). It behaves like a
 // drive, not an echo: the position it reports trails the setpoint.
 //
+// Homing (issue 17, docs/servo-bus.md#homing): simulated limit switches, a home switch,
+// an index pulse once per motor revolution and mechanical end stops (DriveSwitches, in the
+// drive's physical counts: the position before any homing); 60FDh reports the switches
+// (bit 0 negative limit, bit 1 positive limit, bit 2 home switch). Homing Mode (6060h = 6)
+// with 6098h, 6099h:01/:02, 609Ah, 607Ch: controlword bit 4 rising edge starts, falling edge
+// interrupts, bit 8 halts; statusword bits 10/12/13 as CiA 402 defines them in homing mode.
+// At the home mark the drive's position becomes 607Ch (6064h = 607Ch there) and it stops on
+// the mark. Methods 1-7, 11, 17-23, 27 (switches, with or without index), 33, 34 (index),
+// 35, 37 (current position); others are refused when written to 6098h (06090030h).
+//
 // Time is passed in (TimePoint, ns): the simulation runs on a ManualClock in
 // tests and on CLOCK_MONOTONIC in `armsim`.
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <span>
 #include <string>
@@ -56,6 +67,38 @@ struct DriveFaults {
   bool fault_persists = false;     ///< a fault reset (6040h bit 7 rising) leaves the drive in fault
 };
 
+/// Switches and mechanics, in the drive's physical counts (its position before any homing).
+struct DriveSwitches {
+  static constexpr double kNone = std::numeric_limits<double>::infinity();
+  double neg_limit = -kNone;  ///< negative limit switch: active at or below (60FDh bit 0)
+  double pos_limit = kNone;   ///< positive limit switch: active at or above (60FDh bit 1)
+  /// Home switch: active on [home_lo, home_hi] (60FDh bit 2). An infinite end makes a one-sided
+  /// switch: home_hi = +inf is a "positive home switch" (methods 3, 4, 19, 20), home_lo = -inf
+  /// a "negative" one (5, 6, 21, 22); a cam of finite width suits 7, 11, 23, 27. home_lo >
+  /// home_hi (the default) = no home switch.
+  double home_lo = kNone, home_hi = -kNone;
+  double index_period = 131072;  ///< index pulse every this many counts (one motor revolution)
+  double index_phase = 0;        ///< ... at index_phase + k x index_period
+  double end_neg = -kNone;       ///< mechanical end stops: the position is clamped there; the
+  double end_pos = kNone;        ///< following error grows and 6077h reports the push
+  double max_travel = 0;         ///< homing error after this much travel without the mark (0 = none)
+};
+
+/// Behaviours of real drives that masters trip over (issue 17). Set before power_on()
+/// (boot_delay) or at any time (the others); set_quirks() keeps 6502h in step.
+struct DriveQuirks {
+  bool no_homing = false;            ///< 6502h without homing mode (bit 5); 6060h = 6 aborts 06090030h
+  std::uint32_t supported_modes = 0; ///< 6502h as reported (0 = the model's: 0xA0, CSP + homing)
+  bool halt_blocks_mode_change = false;  ///< 6060h written while 6040h bit 8 is set shows in 6061h
+                                         ///< (and acts) only once bit 8 is clear again
+  bool refuse_same_mode = false;     ///< writing 6060h with the mode already shown in 6061h aborts 08000022h
+  Duration sdo_delay = 0;            ///< every SDO reply is sent this much later
+  Duration boot_delay = 0;           ///< power_on(): silent for this long, then the boot-up heartbeat
+  bool never_attained = false;       ///< homing reaches home and stops but never sets statusword bit 12
+  bool fault_reset_on_level = false; ///< lenient: bit 7 set resets a fault without a rising edge
+                                     ///< (default: only a rising edge does, as CiA 402 says)
+};
+
 class ArmPlant;
 struct ArmPlantParams;
 
@@ -74,7 +117,21 @@ class VirtualDrive {
   void inject_emcy(std::uint16_t code, TimePoint now, CanBus& bus);
 
   DriveFaults& faults() { return faults_; }
+  DriveSwitches& switches() { return switches_; }
+  const DriveQuirks& quirks() const { return quirks_; }
+  void set_quirks(const DriveQuirks& q);
   std::uint8_t node() const { return node_; }
+  /// Counts added to the physical position by the last homing (reported = physical + shift).
+  double home_shift() const { return shift_; }
+  /// Physical position (counts): what the switches see.
+  double physical_position() const { return pos_ - shift_; }
+  /// Where the last homing found its mark, in physical counts (NaN before).
+  double home_mark() const { return home_mark_; }
+  /// 60FDh as it is now.
+  std::uint32_t digital_inputs() const;
+  /// True while the position is clamped at a mechanical end stop.
+  bool at_end_stop() const { return at_stop_; }
+  std::int8_t mode_display() const { return std::int8_t(get(hal::cia402::kModesDisplay)); }
   hal::cia402::State state() const { return state_; }
   hal::canopen::NmtState nmt() const { return nmt_; }
   double position() const { return pos_; }        ///< counts, unquantised
@@ -137,6 +194,16 @@ class VirtualDrive {
   std::uint32_t get(std::uint16_t index, std::uint8_t sub = 0) const;
   void tx(CanBus& bus, const CanFrame& f);
   double uniform();  // [0,1)
+  // Homing: the demand generator (per motor substep), its switch/edge logic, the mode change.
+  void homing_start();
+  void homing_substep(double dt, bool halt);
+  void homing_after(double p0, double p1);
+  void homing_capture(double mark);
+  void homing_fail();
+  void set_mode(std::int8_t m);
+  bool home_active(double p) const { return p >= switches_.home_lo && p <= switches_.home_hi; }
+  bool signal_at(double p) const;
+  void boot(TimePoint now, CanBus& bus);
 
   std::uint8_t node_;
   MotorParams motor_;
@@ -173,6 +240,35 @@ class VirtualDrive {
   bool sdo_toggle_ = false;
   std::size_t sdo_off_ = 0, sdo_size_ = 0;
   std::array<std::uint8_t, 64> sdo_buf_{};
+  // Switches, quirks, homing.
+  DriveSwitches switches_{};
+  DriveQuirks quirks_{};
+  TimePoint now_ = 0;      ///< time of the frame being handled (SDO delay)
+  TimePoint boot_at_ = 0;  ///< boot_delay: when the boot-up happens (0 = not pending)
+  std::vector<std::pair<TimePoint, CanFrame>> delayed_;  ///< SDO replies not yet sent
+  std::int8_t pending_mode_ = 0;  ///< halt_blocks_mode_change: written, not yet shown
+  bool has_pending_mode_ = false;
+  bool at_stop_ = false;
+  double shift_ = 0;       ///< reported = physical + shift_
+  double home_mark_ = std::numeric_limits<double>::quiet_NaN();
+  enum class HPhase : std::uint8_t { idle, search, final_edge, index, to_home, attained, error, interrupted };
+  struct Homing {
+    HPhase phase = HPhase::idle;
+    int dir = 0;            ///< direction of the demand, +1 / -1
+    double speed = 0;       ///< counts/s of the current phase
+    double v = 0;           ///< demand velocity, counts/s
+    double demand = 0;      ///< demand position, reported counts
+    double goal = 0;        ///< to_home: the mark (607Ch)
+    double travel = 0;      ///< |distance| since the start
+    double edge = 0;        ///< the edge sought, physical counts
+    double index_at = 0;    ///< index phase: the pulse sought, physical counts
+    int d_final = 0;        ///< direction in which the edge is crossed
+    bool want_before = false;  ///< the signal's state just before the edge (moving d_final)
+    bool use_index = false;
+    bool may_reverse = false;  ///< a limit switch reverses the search (methods 7-14, 23-30)
+    bool reversed = false;
+    int signal = 0;         ///< 0 home switch, 1 negative limit, 2 positive limit
+  } h_{};
 };
 
 /// A set of virtual drives sharing one bus endpoint (what `armsim` runs).
