@@ -108,6 +108,109 @@ CanopenServoBus::CanopenServoBus(CanBus& bus, Clock& clock, const CanopenMasterC
     joints_[j].node = jc.node_id;
     joints_[j].hb_timeout = jc.heartbeat_timeout > 0 ? jc.heartbeat_timeout : cfg_.heartbeat_timeout;
   }
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    if (const Status s = validate_homing(j); s != Status::ok) {
+      config_status_ = s;
+      cfg_.joint_count = 0;
+      joint_of_node_.fill(-1);
+      return;
+    }
+  }
+}
+
+namespace {
+enum HStep : std::uint8_t {
+  hs_idle = 0,
+  hs_w_method,
+  hs_w_speed1,
+  hs_w_speed2,
+  hs_w_accel,
+  hs_w_offset,
+  hs_r_mode,
+  hs_w_mode,
+  hs_r_mode_check,
+  hs_start_low,
+  hs_running,
+  hs_halting,
+  hs_unhalt,
+  hs_w_csp,
+  hs_r_csp,
+  hs_done,
+  hs_approach = 20,
+  hs_backoff,
+  hs_settle,
+};
+bool finite(double x) { return std::isfinite(x); }
+}  // namespace
+
+const char* CanopenServoBus::homing_step_name(std::uint8_t step) {
+  switch (step) {
+    case hs_idle: return "idle";
+    case hs_w_method: return "writing the method 6098h";
+    case hs_w_speed1: return "writing the switch search speed 6099h:01";
+    case hs_w_speed2: return "writing the zero search speed 6099h:02";
+    case hs_w_accel: return "writing the homing acceleration 609Ah";
+    case hs_w_offset: return "writing the home offset 607Ch";
+    case hs_r_mode: return "reading the mode 6061h";
+    case hs_w_mode: return "writing homing mode 6060h = 6";
+    case hs_r_mode_check: return "waiting for homing mode in 6061h";
+    case hs_start_low: return "starting (controlword bit 4)";
+    case hs_running: return "waiting for homing attained (statusword bits 10, 12)";
+    case hs_halting: return "halting";
+    case hs_unhalt: return "leaving homing";
+    case hs_w_csp: return "writing cyclic synchronous position 6060h = 8";
+    case hs_r_csp: return "waiting for cyclic synchronous position in 6061h";
+    case hs_done: return "done";
+    case hs_approach: return "approaching the hard stop";
+    case hs_backoff: return "backing off the hard stop";
+    case hs_settle: return "settling at the backed-off point";
+    default: return "unknown";
+  }
+}
+
+std::int32_t CanopenServoBus::home_offset_counts(std::size_t j) const {
+  const JointScaling& sc = cfg_.joints[j].scaling;
+  const double c = double(sc.zero_offset) + std::nearbyint(double(sc.direction) * cfg_.joints[j].homing.offset * sc.counts_per_si());
+  return std::int32_t(std::clamp(c, -2147483648.0, 2147483647.0));
+}
+
+Status CanopenServoBus::validate_homing(std::size_t j) {
+  const HomingSpec& h = cfg_.joints[j].homing;
+  const JointScaling& sc = cfg_.joints[j].scaling;
+  auto bad = [&](const char* what, double got) {
+    std::snprintf(error_, sizeof error_, "joint %zu (node %u): homing %s (got %g)", j, unsigned(cfg_.joints[j].node_id),
+                  what, got);
+    return Status::invalid_argument;
+  };
+  switch (h.kind) {
+    case HomingKind::none: return Status::ok;
+    case HomingKind::cia402: {
+      const int m = h.method;
+      if (m == 0 || m == 36 || m > 37)
+        return bad("method must be a CiA 402 method 1..35 or 37 (or a negative manufacturer method)", double(m));
+      if (!finite(h.speed_switch) || h.speed_switch <= 0) return bad("speed_switch must be finite and > 0", h.speed_switch);
+      if (!finite(h.speed_zero) || h.speed_zero <= 0) return bad("speed_zero must be finite and > 0", h.speed_zero);
+      if (!finite(h.acceleration) || h.acceleration < 0) return bad("acceleration must be finite and >= 0", h.acceleration);
+      const double off = double(sc.zero_offset) + double(sc.direction) * h.offset * sc.counts_per_si();
+      if (!finite(h.offset) || !(off >= -2147483648.0 && off <= 2147483647.0))
+        return bad("offset must be finite and within the drive's 32-bit position range", h.offset);
+      const double v1 = h.speed_switch * sc.counts_per_si(), v2 = h.speed_zero * sc.counts_per_si();
+      const double a = h.acceleration * sc.counts_per_si();
+      if (v1 > 4294967295.0 || v2 > 4294967295.0 || a > 4294967295.0)
+        return bad("speed or acceleration beyond the drive's 32-bit range", std::max(v1, std::max(v2, a)));
+      break;
+    }
+    case HomingKind::hard_stop:
+      if (!finite(h.speed_switch) || h.speed_switch == 0) return bad("speed_switch must be finite and not 0 (its sign is the direction)", h.speed_switch);
+      if (!finite(h.acceleration) || h.acceleration <= 0) return bad("acceleration must be finite and > 0", h.acceleration);
+      if (!finite(h.following_limit) || h.following_limit <= 0) return bad("following_limit must be finite and > 0", h.following_limit);
+      if (!finite(h.torque_limit) || h.torque_limit < 0) return bad("torque_limit must be finite and >= 0", h.torque_limit);
+      if (!finite(h.backoff) || h.backoff <= 0) return bad("backoff must be finite and > 0", h.backoff);
+      if (!finite(h.offset)) return bad("offset must be finite", h.offset);
+      break;
+  }
+  if (h.timeout <= 0) return bad("timeout must be > 0 (ms)", double(h.timeout) / double(kMillisecond));
+  return Status::ok;
 }
 
 void CanopenServoBus::sink(void* ctx, const CanFrame& f) {
@@ -147,6 +250,7 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
       jt.state = st;
       jt.have_status = true;
       jt.actual_counts = pos;
+      if (jt.tpdos < 1000) ++jt.tpdos;
       if (jt.off_velocity < 0) {
         // No 606Ch mapped: the velocity from successive positions (receive times).
         if (jt.prev_pos_time != 0 && now > jt.prev_pos_time)
@@ -207,6 +311,7 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
       return;
     }
     case kSdoTx:
+      if (jt.sdo.on_frame(f)) return;  // the homing's non-blocking transfer
       break;  // late SDO answer after a timeout: ignore
     default:
       break;
@@ -308,10 +413,26 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
   Joint& jt = joints_[j];
   const std::uint32_t hb_ms = std::uint32_t(cfg_.heartbeat_period / kMillisecond);
   std::uint32_t devtype = 0;
-  SdoResult r = sdo_.read_u32(n, 0x1000, 0, devtype);
+  // A node still booting does not answer: ask again until the boot timeout (counted from start()).
+  int attempts = 0;
+  SdoResult r;
+  for (;;) {
+    ++attempts;
+    r = sdo_.read_u32(n, 0x1000, 0, devtype);
+    if (r.status != Status::timeout) break;
+    const TimePoint t = clock_.now();
+    if (t + cfg_.boot_retry > boot_end_ || t > deadline) break;
+    clock_.sleep_until(t + cfg_.boot_retry);
+    bus_.send(encode_nmt(NmtCommand::enter_pre_operational, n));
+  }
   if (r.status != Status::ok) {
-    std::snprintf(error_, sizeof error_, "node %u: reading device type 0x1000 failed: %s%s%s", unsigned(n),
-                  to_string(r.status), r.abort_code ? ", " : "", r.abort_code ? sdo::abort_text(r.abort_code) : "");
+    if (attempts > 1)
+      std::snprintf(error_, sizeof error_,
+                    "node %u: no answer to SDO 0x1000 (device type) within the boot timeout of %lld ms (%d attempts): %s",
+                    unsigned(n), static_cast<long long>(cfg_.boot_timeout / kMillisecond), attempts, to_string(r.status));
+    else
+      std::snprintf(error_, sizeof error_, "node %u: reading device type 0x1000 failed: %s%s%s", unsigned(n),
+                    to_string(r.status), r.abort_code ? ", " : "", r.abort_code ? sdo::abort_text(r.abort_code) : "");
     return r.status;
   }
   if ((devtype & 0xFFFF) != cia402::kDeviceTypeProfile) {
@@ -328,10 +449,65 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
   };
   if (late()) return Status::timeout;
   if (const Status s = sdo_write(n, 0x1017, 0, 2, hb_ms, "heartbeat producer time"); s != Status::ok) return s;
-  if (const Status s = sdo_write(n, cia402::kModesOfOperation, 0, 1, std::uint32_t(cia402::kModeCsp),
-                                 "mode of operation: cyclic synchronous position");
-      s != Status::ok)
-    return s;
+  // Supported modes (6502h): CSP is required; homing mode for a joint that homes with the drive.
+  // A drive without 6502h is taken at its word (the 6061h checks below and at homing catch it).
+  jt.modes = 0;
+  std::uint32_t modes = 0;
+  r = sdo_.read_u32(n, cia402::kSupportedModes, 0, modes);
+  const HomingSpec& hs = cfg_.joints[j].homing;
+  if (r.status == Status::ok) {
+    jt.modes = modes;
+    if (!(modes & cia402::kSupportsCsp)) {
+      std::snprintf(error_, sizeof error_,
+                    "joint %zu (node %u): the drive does not support cyclic synchronous position mode (6502h = 0x%08X)", j,
+                    unsigned(n), unsigned(modes));
+      return Status::not_supported;
+    }
+    if (hs.kind == HomingKind::cia402 && !(modes & cia402::kSupportsHoming)) {
+      std::snprintf(error_, sizeof error_,
+                    "joint %zu (node %u): homing method %d configured but the drive does not support homing mode "
+                    "(6502h = 0x%08X)",
+                    j, unsigned(n), int(hs.method), unsigned(modes));
+      return Status::not_supported;
+    }
+  } else if (r.status != Status::sdo_abort) {
+    std::snprintf(error_, sizeof error_, "node %u: reading supported drive modes 0x6502 failed: %s", unsigned(n),
+                  to_string(r.status));
+    return r.status;
+  }
+  if (hs.kind == HomingKind::cia402) {
+    // The method now, so a method the drive lacks is refused at bring-up rather than at `home`.
+    std::uint8_t b = std::uint8_t(hs.method);
+    r = sdo_.download(n, cia402::kHomingMethod, 0, &b, 1);
+    if (r.status != Status::ok) {
+      std::snprintf(error_, sizeof error_, "joint %zu (node %u): homing method %d refused by the drive (6098h): %s (abort 0x%08X: %s)",
+                    j, unsigned(n), int(hs.method), to_string(r.status), unsigned(r.abort_code),
+                    r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+      return r.status;
+    }
+  }
+  // CSP: written only when 6061h does not already show it (some drives abort a request for the
+  // mode they are in), then checked in 6061h.
+  std::uint32_t shown = 0;
+  r = sdo_.read_u32(n, cia402::kModesDisplay, 0, shown);
+  if (r.status != Status::ok || std::int8_t(shown) != cia402::kModeCsp) {
+    if (const Status s = sdo_write(n, cia402::kModesOfOperation, 0, 1, std::uint32_t(cia402::kModeCsp),
+                                   "mode of operation: cyclic synchronous position");
+        s != Status::ok)
+      return s;
+    for (int k = 0; k < 10; ++k) {
+      r = sdo_.read_u32(n, cia402::kModesDisplay, 0, shown);
+      if (r.status == Status::ok && std::int8_t(shown) == cia402::kModeCsp) break;
+      if (r.status == Status::sdo_abort) break;  // no 6061h: taken at its word
+      if (k == 9) {
+        std::snprintf(error_, sizeof error_,
+                      "node %u: mode of operation 6060h = 8 written but 6061h shows %d (cyclic synchronous position not taken)",
+                      unsigned(n), int(std::int8_t(shown)));
+        return Status::drive_refused;
+      }
+      clock_.sleep_until(clock_.now() + 2 * kMillisecond);
+    }
+  }
   // RPDO1 and TPDO1: required objects; TPDO2: what the configuration asks for and the drive has.
   const MapEntry rpdo1[] = {{cia402::kControlword, 16, PdoUse::required, "controlword"},
                             {cia402::kTargetPosition, 32, PdoUse::required, "target position"}};
@@ -405,6 +581,17 @@ Status CanopenServoBus::start(TimePoint deadline) {
   }
   started_ = false;
   error_[0] = '\0';
+  boot_end_ = clock_.now() + cfg_.boot_timeout;
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    Joint& jt = joints_[j];
+    jt.hphase = HomingPhase::idle;  // a zero this power cycle only: homed again after every start()
+    jt.hstatus = Status::ok;
+    jt.hstep = hs_idle;
+    jt.cw_extra = 0;
+    jt.habort = false;
+    jt.hmsg[0] = '\0';
+    jt.sdo = SdoTransfer{};
+  }
   if (cfg_.set_bus_filters) {
     CanFilter filters[kMaxServoJoints];
     // joint_count <= kMaxServoJoints (checked in the constructor); the min() tells GCC's
@@ -545,11 +732,11 @@ Status CanopenServoBus::read(TimePoint now) {
     }
     if (fb.state == JointState::fault && worst == Status::ok) worst = fb.fault;
   }
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) advance_homing(j, now);
   return worst != Status::ok ? worst : bus_status;
 }
 
 Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) {
-  (void)now;
   if (!started_) return Status::not_configured;
   Status result = setpoints.size() == cfg_.joint_count ? Status::ok : Status::invalid_argument;
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
@@ -562,12 +749,24 @@ Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) 
     }
     const bool faulted = fb.state == JointState::fault;
     cia402::Target t = faulted ? cia402::Target::disabled : target_;
-    const std::uint16_t cw = cia402::next_controlword(jt.state, t, jt.reset_phase);
+    std::uint16_t cw = cia402::next_controlword(jt.state, t, jt.reset_phase);
     jt.reset_phase = !jt.reset_phase;
     std::int32_t target = jt.actual_counts;
     const bool following = !faulted && target_ == cia402::Target::enabled && jt.have_status &&
                            jt.state == cia402::State::operation_enabled;
-    if (following) {
+    if (jt.hold_once) {
+      // Homing ended in this cycle's read(): a setpoint computed before it is in the old
+      // coordinates, so this cycle holds.
+      jt.hold_once = false;
+      target = jt.target_counts;
+      if (!faulted) cw = std::uint16_t(cw | jt.cw_extra);
+    } else if (jt.hphase == HomingPhase::running) {
+      // The master moves a homing joint: the caller's setpoint is ignored. Drive homing: the
+      // target follows the actual position (unused in homing mode, right when CSP resumes).
+      if (jt.writes < 1000) ++jt.writes;
+      if (!faulted) cw = std::uint16_t(cw | jt.cw_extra);
+      if (cfg_.joints[j].homing.kind == HomingKind::hard_stop && following) hard_stop_write(j, now), target = jt.target_counts;
+    } else if (following) {
       if (j < setpoints.size() && cfg_.joints[j].scaling.to_counts(setpoints[j], target)) {
       } else {
         target = jt.target_counts;  // bad setpoint: hold the last good one
@@ -611,6 +810,312 @@ Status CanopenServoBus::enable_blocking(TimePoint deadline, Duration period) {
     write(std::span<const double>(hold, cfg_.joint_count), now);
     next += period;
     clock_.sleep_until(next);
+  }
+}
+
+// --- homing (real time) ---------------------------------------------------------------
+
+Status CanopenServoBus::start_homing(std::size_t j, TimePoint now) {
+  if (j >= cfg_.joint_count) return Status::invalid_argument;
+  if (!started_) return Status::not_configured;
+  Joint& jt = joints_[j];
+  const HomingSpec& hs = cfg_.joints[j].homing;
+  if (jt.hphase == HomingPhase::running) return Status::bad_state;
+  if (hs.kind == HomingKind::none) {
+    jt.hphase = HomingPhase::attained;
+    jt.hstatus = Status::ok;
+    return Status::ok;
+  }
+  if (fb_[j].state != JointState::enabled) return Status::bad_state;
+  jt.hphase = HomingPhase::running;
+  jt.hstatus = Status::ok;
+  jt.habort = false;
+  jt.hmsg[0] = '\0';
+  jt.cw_extra = 0;
+  jt.hstarted = now;
+  jt.sdo = SdoTransfer{};  // a transfer left over from an earlier homing is abandoned
+  if (hs.kind == HomingKind::cia402) {
+    homing_step(j, hs_w_method, now);
+  } else {
+    jt.hs_demand = double(jt.target_counts);
+    jt.hs_v = 0;
+    jt.hs_last = now;
+    homing_step(j, hs_approach, now);
+  }
+  return Status::ok;
+}
+
+void CanopenServoBus::abort_homing(std::size_t j) {
+  if (j < cfg_.joint_count && joints_[j].hphase == HomingPhase::running) joints_[j].habort = true;
+}
+
+HomingProgress CanopenServoBus::homing(std::size_t j) const {
+  if (j >= cfg_.joint_count) return {HomingPhase::idle, Status::invalid_argument, 0};
+  if (cfg_.joints[j].homing.kind == HomingKind::none) return {HomingPhase::attained, Status::ok, 0};
+  const Joint& jt = joints_[j];
+  return {jt.hphase, jt.hstatus, jt.hstep};
+}
+
+void CanopenServoBus::describe_homing(std::size_t j, char* buf, std::size_t size) const {
+  if (size == 0) return;
+  buf[0] = '\0';
+  if (j >= cfg_.joint_count) return;
+  std::snprintf(buf, size, "%s", joints_[j].hmsg);
+}
+
+void CanopenServoBus::homing_step(std::size_t j, std::uint8_t step, TimePoint now) {
+  Joint& jt = joints_[j];
+  jt.hstep = step;
+  jt.hstep_since = now;
+  jt.tpdos = 0;
+  jt.writes = 0;
+  jt.retries = 0;
+}
+
+void CanopenServoBus::homing_fail(std::size_t j, Status why, TimePoint now) {
+  Joint& jt = joints_[j];
+  const HomingSpec& hs = cfg_.joints[j].homing;
+  if (jt.hstatus == Status::ok) jt.hstatus = why;
+  if (jt.hmsg[0] == '\0') {
+    if (why == Status::timeout)
+      std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing timeout after %lld ms %s (statusword 0x%04X)", j,
+                    unsigned(jt.node), static_cast<long long>(hs.timeout / kMillisecond), homing_step_name(jt.hstep),
+                    unsigned(fb_[j].statusword));
+    else
+      std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing %s while %s (statusword 0x%04X)", j,
+                    unsigned(jt.node), to_string(why), homing_step_name(jt.hstep), unsigned(fb_[j].statusword));
+  }
+  std::snprintf(error_, sizeof error_, "%s", jt.hmsg);
+  if (hs.kind == HomingKind::cia402 && jt.hstep >= hs_w_mode && jt.hstep <= hs_running) {
+    // The drive may be in homing mode: halt it, then back to CSP at its actual position.
+    jt.cw_extra = cia402::kCwHalt;
+    homing_step(j, hs_halting, now);
+    return;
+  }
+  if (jt.hstep >= hs_halting && jt.hstep <= hs_r_csp) return;  // already on the way back
+  homing_finish(j, now);
+}
+
+void CanopenServoBus::homing_finish(std::size_t j, TimePoint now) {
+  Joint& jt = joints_[j];
+  jt.cw_extra = 0;
+  jt.target_counts = jt.actual_counts;  // holds where it stands
+  jt.hs_demand = double(jt.actual_counts);
+  jt.hs_v = 0;
+  jt.hphase = jt.hstatus == Status::ok ? HomingPhase::attained : HomingPhase::failed;
+  jt.hold_once = true;
+  homing_step(j, hs_done, now);
+}
+
+void CanopenServoBus::hard_stop_write(std::size_t j, TimePoint now) {
+  Joint& jt = joints_[j];
+  const HomingSpec& hs = cfg_.joints[j].homing;
+  const JointScaling& sc = cfg_.joints[j].scaling;
+  double dt = jt.hs_last != 0 && now > jt.hs_last ? double(now - jt.hs_last) * 1e-9 : 0.0;
+  dt = std::min(dt, 0.05);
+  jt.hs_last = now;
+  const double cps = sc.counts_per_si();
+  const double a = hs.acceleration * cps, vmax = std::fabs(hs.speed_switch) * cps;
+  const double dir = (hs.speed_switch > 0 ? 1.0 : -1.0) * double(sc.direction);  // in counts
+  switch (jt.hstep) {
+    case hs_approach: {
+      jt.hs_v += std::clamp(dir * vmax - jt.hs_v, -a * dt, a * dt);
+      jt.hs_demand += jt.hs_v * dt;
+      break;
+    }
+    case hs_backoff: {
+      const double d = jt.hs_goal - jt.hs_demand;
+      const double vt = (d > 0 ? 1.0 : -1.0) * std::min(vmax, std::sqrt(2.0 * a * std::fabs(d)));
+      jt.hs_v += std::clamp(vt - jt.hs_v, -a * dt, a * dt);
+      const double step = jt.hs_v * dt;
+      if (std::fabs(d) <= std::fabs(step) || std::fabs(d) < 0.5) {
+        jt.hs_demand = jt.hs_goal;
+        jt.hs_v = 0;
+      } else {
+        jt.hs_demand += step;
+      }
+      break;
+    }
+    default: break;
+  }
+  jt.target_counts = std::int32_t(std::lround(std::clamp(jt.hs_demand, -2147483648.0, 2147483647.0)));
+}
+
+void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
+  Joint& jt = joints_[j];
+  if (jt.hphase != HomingPhase::running) return;
+  JointFeedback& fb = fb_[j];
+  const HomingSpec& hs = cfg_.joints[j].homing;
+  const JointScaling& sc = cfg_.joints[j].scaling;
+  jt.sdo.poll(bus_, now);
+  const bool returning = jt.hstep >= hs_halting && jt.hstep <= hs_r_csp;
+  if (!returning) {
+    Status why = Status::ok;
+    if (fb.state == JointState::fault) why = fb.fault;
+    else if (fb.state != JointState::enabled) why = Status::bad_state;
+    else if (jt.habort) why = Status::aborted;
+    else if (now - jt.hstarted > hs.timeout) why = Status::timeout;
+    if (why != Status::ok) {
+      homing_fail(j, why, now);
+      if (jt.hphase != HomingPhase::running) return;
+    }
+  } else if (now - jt.hstep_since > 2 * kSecond + 4 * cfg_.sdo_timeout) {
+    // The drive does not come back to CSP: it cannot follow setpoints, so it faults.
+    std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: the drive did not return to cyclic "
+                  "synchronous position (%s)", j, unsigned(jt.node), homing_step_name(jt.hstep));
+    std::snprintf(error_, sizeof error_, "%s", jt.hmsg);
+    if (jt.hstatus == Status::ok) jt.hstatus = Status::drive_refused;
+    set_fault(j, Status::drive_refused, now);
+    homing_finish(j, now);
+    return;
+  }
+  // One expedited SDO transfer per step: true once it succeeded; a failure fails the homing.
+  auto sdo_step = [&](bool write, std::uint16_t index, std::uint8_t sub, std::uint8_t size, std::uint32_t value) {
+    if (jt.sdo.state() == SdoTransfer::State::idle) {
+      if (write) jt.sdo.begin_write(bus_, jt.node, index, sub, size, value, now, cfg_.sdo_timeout);
+      else jt.sdo.begin_read(bus_, jt.node, index, sub, now, cfg_.sdo_timeout);
+      return false;  // a bus error: tried again next cycle
+    }
+    if (!jt.sdo.done()) return false;
+    jt.sdo.clear();
+    if (jt.sdo.result() == Status::ok) return true;
+    std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: SDO %s 0x%04X:%u failed: %s (abort 0x%08X: %s)",
+                  j, unsigned(jt.node), write ? "write" : "read", unsigned(index), unsigned(sub),
+                  to_string(jt.sdo.result()), unsigned(jt.sdo.abort_code()),
+                  jt.sdo.abort_code() ? sdo::abort_text(jt.sdo.abort_code()) : "-");
+    const Status why = jt.sdo.result() == Status::sdo_abort ? Status::drive_refused : jt.sdo.result();
+    if (returning) {
+      if (jt.hstatus == Status::ok) jt.hstatus = why;
+      std::snprintf(error_, sizeof error_, "%s", jt.hmsg);
+      set_fault(j, Status::drive_refused, now);
+      homing_finish(j, now);
+    } else {
+      homing_fail(j, why, now);
+    }
+    return false;
+  };
+  const double cps = sc.counts_per_si();
+  auto u32 = [](double x) { return std::uint32_t(std::clamp(std::round(x), 0.0, 4294967295.0)); };
+  const std::uint16_t sw = fb.statusword;
+  switch (jt.hstep) {
+    case hs_w_method:
+      if (sdo_step(true, cia402::kHomingMethod, 0, 1, std::uint8_t(hs.method))) homing_step(j, hs_w_speed1, now);
+      break;
+    case hs_w_speed1:
+      if (sdo_step(true, cia402::kHomingSpeeds, 1, 4, u32(hs.speed_switch * cps))) homing_step(j, hs_w_speed2, now);
+      break;
+    case hs_w_speed2:
+      if (sdo_step(true, cia402::kHomingSpeeds, 2, 4, u32(hs.speed_zero * cps)))
+        homing_step(j, hs.acceleration > 0 ? hs_w_accel : hs_w_offset, now);
+      break;
+    case hs_w_accel:
+      if (sdo_step(true, cia402::kHomingAccel, 0, 4, u32(hs.acceleration * cps))) homing_step(j, hs_w_offset, now);
+      break;
+    case hs_w_offset:
+      if (sdo_step(true, cia402::kHomeOffset, 0, 4, std::uint32_t(home_offset_counts(j)))) homing_step(j, hs_r_mode, now);
+      break;
+    case hs_r_mode:
+      // Not re-requesting the mode the drive is already in (some drives abort that).
+      if (sdo_step(false, cia402::kModesDisplay, 0, 0, 0))
+        homing_step(j, std::int8_t(jt.sdo.value()) == cia402::kModeHoming ? hs_start_low : hs_w_mode, now);
+      break;
+    case hs_w_mode:
+      if (sdo_step(true, cia402::kModesOfOperation, 0, 1, std::uint8_t(cia402::kModeHoming))) homing_step(j, hs_r_mode_check, now);
+      break;
+    case hs_r_mode_check:
+      if (sdo_step(false, cia402::kModesDisplay, 0, 0, 0)) {
+        if (std::int8_t(jt.sdo.value()) == cia402::kModeHoming) {
+          homing_step(j, hs_start_low, now);
+        } else if (++jt.retries > 50) {
+          std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: 6060h = 6 written but 6061h shows %d",
+                        j, unsigned(jt.node), int(std::int8_t(jt.sdo.value())));
+          homing_fail(j, Status::drive_refused, now);
+        }
+      }
+      break;
+    case hs_start_low:
+      // Bit 4 low for two cycles, then high: the rising edge starts the drive's homing.
+      jt.cw_extra = 0;
+      if (jt.writes >= 2) {
+        homing_step(j, hs_running, now);
+        jt.cw_extra = cia402::kCwHomingStart;
+      }
+      break;
+    case hs_running:
+      if (jt.tpdos < 3) break;  // statuswords sampled after the drive saw bit 4
+      if (sw & cia402::kSwHomingError) {
+        homing_fail(j, Status::homing_error, now);
+      } else if ((sw & cia402::kSwHomingAttained) && (sw & cia402::kSwTargetReached)) {
+        jt.cw_extra = 0;
+        homing_step(j, hs_unhalt, now);
+      }
+      break;
+    case hs_halting:
+      jt.cw_extra = cia402::kCwHalt;  // bit 4 low, halt: the drive stops
+      if ((jt.tpdos >= 3 && (sw & cia402::kSwTargetReached)) || now - jt.hstep_since > 300 * kMillisecond ||
+          fb.state == JointState::fault)
+        homing_step(j, hs_unhalt, now);
+      break;
+    case hs_unhalt:
+      // Halt cleared (and bit 4 low) before the mode change: some drives take no mode change
+      // while halted. Two cycles so the RPDO reached the drive before the SDO.
+      jt.cw_extra = 0;
+      if (jt.writes >= 2) homing_step(j, hs_w_csp, now);
+      break;
+    case hs_w_csp:
+      if (sdo_step(true, cia402::kModesOfOperation, 0, 1, std::uint8_t(cia402::kModeCsp))) homing_step(j, hs_r_csp, now);
+      break;
+    case hs_r_csp:
+      if (sdo_step(false, cia402::kModesDisplay, 0, 0, 0)) {
+        if (std::int8_t(jt.sdo.value()) == cia402::kModeCsp) {
+          if (jt.hstatus == Status::ok) jt.hmsg[0] = '\0';
+          homing_finish(j, now);
+        } else if (++jt.retries > 50) {
+          std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: 6060h = 8 written but 6061h shows %d",
+                        j, unsigned(jt.node), int(std::int8_t(jt.sdo.value())));
+          std::snprintf(error_, sizeof error_, "%s", jt.hmsg);
+          if (jt.hstatus == Status::ok) jt.hstatus = Status::drive_refused;
+          set_fault(j, Status::drive_refused, now);
+          homing_finish(j, now);
+        }
+      }
+      break;
+    case hs_approach: {
+      if (jt.tpdos < 3) break;
+      const double fe = std::fabs(double(jt.target_counts) - double(jt.actual_counts)) / cps;
+      const bool push = hs.torque_limit > 0 && fb.has_torque && std::fabs(fb.torque) > hs.torque_limit;
+      if (fe > hs.following_limit || push) {
+        // Contact: stop pushing (the demand goes to where the joint stands), then back off.
+        const double dir = (hs.speed_switch > 0 ? 1.0 : -1.0) * double(sc.direction);
+        jt.hs_demand = double(jt.actual_counts);
+        jt.hs_v = 0;
+        jt.hs_goal = std::nearbyint(double(jt.actual_counts) - dir * hs.backoff * cps);
+        jt.target_counts = jt.actual_counts;
+        homing_step(j, hs_backoff, now);
+      }
+      break;
+    }
+    case hs_backoff:
+      if (jt.hs_demand == jt.hs_goal && jt.hs_v == 0) homing_step(j, hs_settle, now);
+      break;
+    case hs_settle:
+      if (jt.tpdos >= 3 && (std::abs(double(jt.actual_counts) - jt.hs_goal) <= 1.0 ||
+                            now - jt.hstep_since > 500 * kMillisecond)) {
+        // The backed-off point reads `offset` from now on.
+        JointScaling& s = cfg_.joints[j].scaling;
+        const std::int32_t goal = std::int32_t(jt.hs_goal);
+        s.zero_offset = std::int32_t(std::clamp(double(goal) - std::nearbyint(double(s.direction) * hs.offset * cps),
+                                                -2147483648.0, 2147483647.0));
+        fb.position = s.to_joint(jt.actual_counts);
+        jt.hstatus = Status::ok;
+        jt.hmsg[0] = '\0';
+        homing_finish(j, now);
+        jt.target_counts = goal;
+        jt.hs_demand = double(goal);
+      }
+      break;
+    default:
+      break;
   }
 }
 

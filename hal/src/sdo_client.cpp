@@ -124,4 +124,80 @@ SdoResult SdoClient::read_u32(std::uint8_t node, std::uint16_t index, std::uint8
   return r;
 }
 
+Status SdoTransfer::begin_write(CanBus& bus, std::uint8_t node, std::uint16_t index, std::uint8_t sub,
+                                std::uint8_t size, std::uint32_t value, TimePoint now, Duration timeout) {
+  if (state_ == State::pending) return Status::bad_state;
+  if (!valid_node(node) || size < 1 || size > 4) return Status::invalid_argument;
+  std::uint8_t b[4];
+  put_u32(b, value);
+  const Status s = bus.send(sdo::initiate_download(node, index, sub, b, size));
+  if (!is_ok(s)) return s;
+  state_ = State::pending;
+  write_ = true;
+  node_ = node;
+  index_ = index;
+  sub_ = sub;
+  deadline_ = now + timeout;
+  result_ = Status::ok;
+  abort_code_ = 0;
+  value_ = value;
+  return Status::ok;
+}
+
+Status SdoTransfer::begin_read(CanBus& bus, std::uint8_t node, std::uint16_t index, std::uint8_t sub, TimePoint now,
+                               Duration timeout) {
+  if (state_ == State::pending) return Status::bad_state;
+  if (!valid_node(node)) return Status::invalid_argument;
+  const Status s = bus.send(sdo::initiate_upload(node, index, sub));
+  if (!is_ok(s)) return s;
+  state_ = State::pending;
+  write_ = false;
+  node_ = node;
+  index_ = index;
+  sub_ = sub;
+  deadline_ = now + timeout;
+  result_ = Status::ok;
+  abort_code_ = 0;
+  value_ = 0;
+  return Status::ok;
+}
+
+bool SdoTransfer::on_frame(const CanFrame& f) {
+  if (state_ != State::pending || f.error || f.extended || f.rtr || f.id != kSdoTx + node_ || f.len != 8) return false;
+  const std::uint8_t c = f.data[0];
+  const std::uint8_t cs = sdo::cs_of(c);
+  state_ = State::done;
+  if (cs == sdo::kAbort) {
+    result_ = Status::sdo_abort;
+    abort_code_ = get_u32(&f.data[4]);
+    return true;
+  }
+  if (sdo::index_of(f) != index_ || sdo::sub_of(f) != sub_) {
+    result_ = Status::protocol_error;  // an answer for another object: a late one
+    return true;
+  }
+  if (write_) {
+    result_ = cs == sdo::kScsInitiateDownload ? Status::ok : Status::protocol_error;
+    return true;
+  }
+  if (cs != sdo::kScsInitiateUpload || !(c & 0x02)) {  // only expedited uploads here
+    result_ = Status::protocol_error;
+    return true;
+  }
+  const std::size_t n = (c & 0x01) ? std::size_t(4 - ((c >> 2) & 3)) : 4;
+  std::uint32_t v = 0;
+  for (std::size_t i = 0; i < n; ++i) v |= std::uint32_t(f.data[4 + i]) << (8 * i);
+  value_ = v;
+  result_ = Status::ok;
+  return true;
+}
+
+void SdoTransfer::poll(CanBus& bus, TimePoint now) {
+  if (state_ != State::pending || now <= deadline_) return;
+  bus.send(sdo::abort(node_, false, index_, sub_, sdo::kAbortTimeout));
+  state_ = State::done;
+  result_ = Status::timeout;
+  abort_code_ = sdo::kAbortTimeout;
+}
+
 }  // namespace servoarm::hal

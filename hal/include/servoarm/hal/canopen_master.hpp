@@ -16,6 +16,26 @@
 // Heartbeat consumer: each node produces every `heartbeat_period`; a node is
 // reported lost when nothing arrived for its `heartbeat_timeout`, checked at
 // every read() - so within timeout + one cycle.
+//
+// Homing (issue 17, docs/servo-bus.md#homing), per joint (CanopenJointConfig::homing):
+//   start():  6502h read: a drive without CSP (bit 7), or without homing mode (bit 5) for a
+//             joint with HomingKind::cia402, is refused naming the joint; 6098h written (a
+//             method the drive refuses is refused at bring-up, naming the joint).
+//   cia402:   a per-joint state machine advanced in read() with non-blocking expedited SDO
+//             (one outstanding per node; answers routed from read(), timed against `now`):
+//             6098h, 6099h:01/:02, 609Ah, 607Ch, 6061h read (6060h = 6 written only when the
+//             drive is not already in it, then checked in 6061h), controlword bit 4 low then
+//             high in RPDO1, statusword bits 10/12/13 from TPDO1, bit 4 low, 6060h = 8 checked
+//             in 6061h; the RPDO target follows the actual position throughout, so nothing
+//             jumps when CSP resumes. 607Ch = zero_offset + round(direction x offset x counts
+//             per unit): the drive's 6064h at the mark is 607Ch, so the joint reads `offset`
+//             there with the configured JointScaling::zero_offset unchanged.
+//   hard_stop: the master moves the joint in CSP (acceleration-limited ramp to speed_switch)
+//             until |target - actual| > following_limit or |torque| > torque_limit (6077h mapped),
+//             backs off by `backoff` and moves zero_offset so that the joint reads `offset` there.
+//   Failures: timeout (HomingSpec::timeout), homing_error (bit 13, or no contact), aborted,
+//             drive_refused (mode not taken), the joint's fault (drive_fault, heartbeat_lost):
+//             the drive is halted (bit 8), taken back to CSP at its actual position, unhomed.
 #include <array>
 #include <cstdint>
 
@@ -38,6 +58,8 @@ struct CanopenJointConfig {
   /// drive's own setting. The drive ramps down with it on the Quick Stop command
   /// (and on its 605Ah option code's terms).
   double quick_stop_decel = 0;
+  /// How this joint establishes its zero (docs/servo-bus.md#homing); validated by the constructor.
+  HomingSpec homing{};
 };
 
 /// How bring-up treats one feedback object of TPDO2.
@@ -62,7 +84,12 @@ struct CanopenMasterConfig {
   std::size_t joint_count = 0;
   Duration heartbeat_period = 50 * kMillisecond;    ///< written to each node's 0x1017
   Duration heartbeat_timeout = 150 * kMillisecond;  ///< consumer time (default per node)
-  Duration sdo_timeout = 100 * kMillisecond;
+  Duration sdo_timeout = 100 * kMillisecond;        ///< SDO answer timeout (bring-up and homing)
+  /// Boot-up: a node that does not answer its first SDO (0x1000) is asked again (NMT
+  /// pre-operational + SDO) every `boot_retry` until `boot_timeout` has passed since start();
+  /// 0 = one attempt (a drive that is still booting is refused at once).
+  Duration boot_timeout = 0;
+  Duration boot_retry = 200 * kMillisecond;
   Duration state_timeout = 500 * kMillisecond;      ///< max time a drive may sit in one state while enabling
   bool produce_sync = true;
   /// start() installs receive filters on the bus that pass only frames whose node part
@@ -108,6 +135,20 @@ class CanopenServoBus final : public ServoBus {
   }
   const JointFeedback& feedback(std::size_t j) const override { return fb_[j < cfg_.joint_count ? j : 0]; }
   const char* last_error() const override { return error_; }
+
+  Status start_homing(std::size_t j, TimePoint now) override;
+  void abort_homing(std::size_t j) override;
+  HomingProgress homing(std::size_t j) const override;
+  HomingKind homing_kind(std::size_t j) const override {
+    return j < cfg_.joint_count ? cfg_.joints[j].homing.kind : HomingKind::none;
+  }
+  /// Real-time: describe joint j's homing outcome in `buf` ("joint 3 (node 3): homing timeout
+  /// after 2000 ms waiting for homing attained (statusword 0x0637)"; "" when not failed).
+  void describe_homing(std::size_t j, char* buf, std::size_t size) const;
+  /// Set-up/diagnostics: 6502h as read by start() (0 when the drive has none).
+  std::uint32_t supported_modes(std::size_t j) const { return j < cfg_.joint_count ? joints_[j].modes : 0; }
+  /// Name of a homing step (HomingProgress::step) for progress reports.
+  static const char* homing_step_name(std::uint8_t step);
 
   /// Set-up helper: run read/write cycles with the current measured positions
   /// held, every `period`, until every joint is enabled (ok), a joint faults, or
@@ -160,6 +201,22 @@ class CanopenServoBus final : public ServoBus {
     TimePoint prev_pos_time = 0;  ///< without 606Ch: the previous TPDO1's time and position
     std::int32_t prev_pos = 0;
     char name[32] = {};
+    std::uint32_t modes = 0;  ///< 6502h (0 = not read)
+    // Homing (real time).
+    SdoTransfer sdo{};
+    HomingPhase hphase = HomingPhase::idle;
+    Status hstatus = Status::ok;   ///< the outcome reported once back in CSP
+    std::uint8_t hstep = 0;        ///< HStep
+    bool habort = false;           ///< abort_homing() asked
+    bool hold_once = false;        ///< the write() after homing ended holds (old-coordinate setpoint)
+    std::uint16_t cw_extra = 0;    ///< bits or-ed into the controlword (4: homing start, 8: halt)
+    TimePoint hstarted = 0, hstep_since = 0;
+    int tpdos = 0;                 ///< TPDO1 frames seen since the step began
+    int writes = 0;                ///< write() cycles since the step began
+    int retries = 0;
+    double hs_demand = 0, hs_v = 0, hs_goal = 0;  ///< hard_stop: counts, counts/s
+    TimePoint hs_last = 0;
+    char hmsg[128] = {};
   };
   struct MapEntry {
     std::uint16_t index;
@@ -176,6 +233,13 @@ class CanopenServoBus final : public ServoBus {
   Status map_pdo(std::size_t j, std::uint16_t comm, std::uint16_t map, std::uint32_t cob, const MapEntry* entries,
                  std::size_t count, bool* mapped, const char* pdo_name);
   static void sink(void* ctx, const CanFrame& f);
+  Status validate_homing(std::size_t j);
+  void advance_homing(std::size_t j, TimePoint now);
+  void homing_step(std::size_t j, std::uint8_t step, TimePoint now);
+  void homing_fail(std::size_t j, Status why, TimePoint now);
+  void homing_finish(std::size_t j, TimePoint now);
+  void hard_stop_write(std::size_t j, TimePoint now);
+  std::int32_t home_offset_counts(std::size_t j) const;
 
   CanBus& bus_;
   Clock& clock_;
@@ -187,6 +251,7 @@ class CanopenServoBus final : public ServoBus {
   std::array<std::int8_t, 128> joint_of_node_{};  // -1 = not ours
   cia402::Target target_ = cia402::Target::disabled;
   bool started_ = false;
+  TimePoint boot_end_ = 0;  ///< start(): until when a silent node is asked again
   std::uint64_t ignored_ = 0;
   char error_[192] = {};
 };

@@ -58,4 +58,48 @@ class SdoClient {
   FrameSink other_;
 };
 
+/// Real-time: one non-blocking expedited SDO transfer (1..4 bytes) to one node. begin_*()
+/// sends the request; the owner hands every received SDO answer frame (0x580 + node) to
+/// on_frame() and calls poll() each cycle; poll() times the transfer out (and sends the abort
+/// 05040000h) when `now` passes the deadline. One transfer outstanding per object (one per
+/// node: the SDO server answers one request at a time). No allocation, no blocking.
+class SdoTransfer {
+ public:
+  enum class State : std::uint8_t { idle, pending, done };
+
+  /// @retval ok (sent); bad_state (one is pending); invalid_argument (node, size); bus errors
+  Status begin_write(CanBus& bus, std::uint8_t node, std::uint16_t index, std::uint8_t sub, std::uint8_t size,
+                     std::uint32_t value, TimePoint now, Duration timeout);
+  Status begin_read(CanBus& bus, std::uint8_t node, std::uint16_t index, std::uint8_t sub, TimePoint now,
+                    Duration timeout);
+  /// True when `f` was this transfer's answer (consumed: state done, result set).
+  bool on_frame(const CanFrame& f);
+  /// Times a pending transfer out against `now` (result timeout, abort sent).
+  void poll(CanBus& bus, TimePoint now);
+  /// done -> idle (the result stays readable).
+  void clear() { state_ = State::idle; }
+
+  State state() const { return state_; }
+  bool pending() const { return state_ == State::pending; }
+  bool done() const { return state_ == State::done; }
+  /// ok, timeout, sdo_abort (abort_code()), protocol_error (answer for another object or
+  /// a command that does not fit).
+  Status result() const { return result_; }
+  std::uint32_t abort_code() const { return abort_code_; }
+  std::uint32_t value() const { return value_; }  ///< read: the value, zero-extended
+  std::uint16_t index() const { return index_; }
+  std::uint8_t sub() const { return sub_; }
+
+ private:
+  State state_ = State::idle;
+  bool write_ = false;
+  std::uint8_t node_ = 0;
+  std::uint16_t index_ = 0;
+  std::uint8_t sub_ = 0;
+  TimePoint deadline_ = 0;
+  Status result_ = Status::ok;
+  std::uint32_t abort_code_ = 0;
+  std::uint32_t value_ = 0;
+};
+
 }  // namespace servoarm::hal
