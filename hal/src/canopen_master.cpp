@@ -486,26 +486,21 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
       return r.status;
     }
   }
-  // CSP: written only when 6061h does not already show it (some drives abort a request for the
-  // mode they are in), then checked in 6061h.
-  std::uint32_t shown = 0;
-  r = sdo_.read_u32(n, cia402::kModesDisplay, 0, shown);
-  if (r.status != Status::ok || std::int8_t(shown) != cia402::kModeCsp) {
-    if (const Status s = sdo_write(n, cia402::kModesOfOperation, 0, 1, std::uint32_t(cia402::kModeCsp),
-                                   "mode of operation: cyclic synchronous position");
-        s != Status::ok)
-      return s;
-    for (int k = 0; k < 10; ++k) {
-      r = sdo_.read_u32(n, cia402::kModesDisplay, 0, shown);
-      if (r.status == Status::ok && std::int8_t(shown) == cia402::kModeCsp) break;
-      if (r.status == Status::sdo_abort) break;  // no 6061h: taken at its word
-      if (k == 9) {
-        std::snprintf(error_, sizeof error_,
-                      "node %u: mode of operation 6060h = 8 written but 6061h shows %d (cyclic synchronous position not taken)",
-                      unsigned(n), int(std::int8_t(shown)));
-        return Status::drive_refused;
-      }
-      clock_.sleep_until(clock_.now() + 2 * kMillisecond);
+  // CSP. Some drives abort a request for the mode they are already in (ros2_canopen #445):
+  // then 6061h decides (no extra frames for the drives that accept it).
+  {
+    std::uint8_t b = std::uint8_t(cia402::kModeCsp);
+    r = sdo_.download(n, cia402::kModesOfOperation, 0, &b, 1);
+    if (r.status == Status::sdo_abort) {
+      std::uint32_t shown = 0;
+      const SdoResult d = sdo_.read_u32(n, cia402::kModesDisplay, 0, shown);
+      if (d.status == Status::ok && std::int8_t(shown) == cia402::kModeCsp) r.status = Status::ok;
+    }
+    if (r.status != Status::ok) {
+      std::snprintf(error_, sizeof error_, "node %u: SDO write 0x6060:0 = 0x8 (mode of operation: cyclic synchronous position) failed: %s (abort 0x%08X: %s)",
+                    unsigned(n), to_string(r.status), unsigned(r.abort_code),
+                    r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+      return r.status;
     }
   }
   // RPDO1 and TPDO1: required objects; TPDO2: what the configuration asks for and the drive has.
