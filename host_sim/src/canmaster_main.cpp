@@ -68,6 +68,13 @@ const char* kUsage =
     "                          'none' = no TPDO2 (default velocity,error_code)\n"
     "  --no-filters            receive every frame (default: kernel filters pass only frames whose\n"
     "                          node part, id & 0x7F, is one of --nodes)\n"
+    "  --home NODE:METHOD      after bring-up, home NODE with its drive's CiA 402 homing METHOD (6098h), or\n"
+    "                          NODE:hard_stop[:DIR] (push against the end stop, DIR + or -, default -); repeat\n"
+    "                          for more nodes, all home together. Then the phases below, from the homed positions\n"
+    "  --home-speeds SW,ZERO   homing speeds in motor rev/s: search for switch, for zero (default 1,0.1)\n"
+    "  --home-accel REV_S2     homing acceleration (default 20)\n"
+    "  --home-offset COUNTS    the position (counts) at the home mark, 607Ch (default 0)\n"
+    "  --home-timeout SEC      per joint (default 30)\n"
     "  --quiet                 only the final result line\n"
     "\n"
     "Output (stdout, one record per line, key=value):\n"
@@ -82,6 +89,8 @@ const char* kUsage =
     "  recover t=SEC joints=N                  (--recover: enable() called again after an outage)\n"
     "  roundtrip rounds=N complete=.. lost=.. bad_frames=.. min_us=.. median_us=.. p99_us=.. max_us=..\n"
     "            all_tpdo_median_us=.. all_tpdo_p99_us=.. timestamps=kernel_ns|kernel_us|receive detail=\"..\"\n"
+    "  homed node=N kind=cia402|hard_stop method=M status=ok|<status> time_s=.. position_counts=.. detail=\"..\"\n"
+    "  homing status=ok|fail elapsed_s=..        (--home)\n"
     "  joint node=N max_err_rad=.. state=.. age_ms=..\n"
     "  result status=ok|fail cycles=.. late_cycles=.. max_err_rad=.. ignored_frames=.. tx_errors=.. reopens=..\n"
     "         reason=\"..\"\n"
@@ -108,6 +117,14 @@ struct Options {
   std::uint32_t roundtrip = 0, roundtrip_timeout_ms = 500;
   bool recover = false, expect_outage = false;
   FeedbackObjects tpdo2{};
+  struct Home {
+    std::uint8_t node = 0;
+    HomingKind kind = HomingKind::cia402;
+    int method = 0;
+    int dir = -1;
+  };
+  std::vector<Home> home;
+  double home_sw = 1.0, home_zero = 0.1, home_accel = 20, home_offset = 0, home_timeout = 30;
 };
 
 // "velocity,error_code", "velocity:required,torque", "none": what TPDO2 carries.
@@ -282,6 +299,20 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
   cfg.state_timeout = Duration(o.enable_timeout_ms) * kMillisecond;
   cfg.set_bus_filters = o.filters;
   cfg.tpdo2 = o.tpdo2;
+  const double rev = 2 * std::numbers::pi;  // rad per motor revolution (gear 1)
+  for (const auto& h : o.home) {
+    const std::size_t j = std::size_t(std::find(o.nodes.begin(), o.nodes.end(), h.node) - o.nodes.begin());
+    HomingSpec& hs = cfg.joints[j].homing;
+    hs.kind = h.kind;
+    hs.method = std::int8_t(h.method);
+    hs.speed_switch = o.home_sw * rev * (h.kind == HomingKind::hard_stop ? double(h.dir) : 1.0);
+    hs.speed_zero = o.home_zero * rev;
+    hs.acceleration = o.home_accel * rev;
+    hs.offset = o.home_offset / sc.counts_per_si();
+    hs.timeout = Duration(o.home_timeout * 1e9);
+    hs.following_limit = 0.01;
+    hs.backoff = 0.05;
+  }
   CanopenServoBus master(bus, clock, cfg);
   if (master.config_status() != Status::ok) {
     std::fprintf(stderr, "canmaster: %s\n", master.last_error());
@@ -313,9 +344,76 @@ int run(CanBus& bus, Clock& clock, const Options& o, sim::ArmSim* arm, SocketCan
   if (o.roundtrip > 0)
     roundtrip_ok = roundtrip_phase(master, bus, clock, o, scb ? to_string(scb->rx_timestamps()) : arm ? "simulated" : "receive");
 
+  // --home: every configured joint homes at once; the others hold.
+  if (!o.home.empty()) {
+    const TimePoint th = clock.now();
+    std::vector<TimePoint> done_at(n, 0);
+    std::vector<double> hold(n);
+    for (std::size_t j = 0; j < n; ++j) {
+      if (cfg.joints[j].homing.kind == HomingKind::none) continue;
+      if (const Status hs = master.start_homing(j, th); hs != Status::ok) {
+        std::printf("homed node=%u status=%s detail=\"start_homing refused\"\n", unsigned(o.nodes[j]), to_string(hs));
+        std::printf("result status=fail cycles=0 late_cycles=0 max_err_rad=0 reason=\"homing refused\"\n");
+        return 1;
+      }
+    }
+    TimePoint nx = th;
+    bool all = false;
+    while (!all && clock.now() - th < Duration((o.home_timeout + 10) * 1e9)) {
+      const TimePoint now = clock.now();
+      master.read(now);
+      all = true;
+      for (std::size_t j = 0; j < n; ++j) {
+        hold[j] = master.feedback(j).position;
+        if (master.homing(j).phase == HomingPhase::running) all = false;
+        else if (done_at[j] == 0) done_at[j] = now;
+      }
+      master.write(std::span<const double>(hold.data(), n), now);
+      nx += period;
+      if (nx < clock.now()) nx = clock.now();
+      clock.sleep_until(nx);
+    }
+    // A few cycles more: the positions settle, the feedback is fresh.
+    for (int k = 0; k < 20; ++k) {
+      const TimePoint now = clock.now();
+      master.read(now);
+      for (std::size_t j = 0; j < n; ++j) hold[j] = master.feedback(j).position;
+      master.write(std::span<const double>(hold.data(), n), now);
+      nx += period;
+      if (nx < clock.now()) nx = clock.now();
+      clock.sleep_until(nx);
+    }
+    bool ok = true;
+    for (std::size_t j = 0; j < n; ++j) {
+      const HomingSpec& hs = cfg.joints[j].homing;
+      if (hs.kind == HomingKind::none) continue;
+      const HomingProgress p = master.homing(j);
+      char detail[160];
+      master.describe_homing(j, detail, sizeof detail);
+      std::int32_t counts = 0;
+      master.scaling(j).to_counts(master.feedback(j).position, counts);
+      ok = ok && p.phase == HomingPhase::attained;
+      std::printf("homed node=%u kind=%s method=%d status=%s time_s=%.3f position_counts=%d detail=\"%s\"\n",
+                  unsigned(o.nodes[j]), to_string(hs.kind), int(hs.method),
+                  p.phase == HomingPhase::attained ? "ok" : to_string(p.status),
+                  double((done_at[j] ? done_at[j] : clock.now()) - th) * 1e-9, int(counts), detail);
+    }
+    std::printf("homing status=%s elapsed_s=%.3f\n", ok ? "ok" : "fail", double(clock.now() - th) * 1e-9);
+    std::fflush(stdout);
+    if (!ok) {
+      std::printf("result status=fail cycles=0 late_cycles=0 max_err_rad=0 reason=\"homing failed\"\n");
+      return 1;
+    }
+    if (o.stream == 0 && o.hold == 0 && o.roundtrip == 0) {
+      std::printf("result status=ok cycles=0 late_cycles=0 max_err_rad=0 ignored_frames=%llu tx_errors=0 reopens=0 reason=\"\"\n",
+                  static_cast<unsigned long long>(master.ignored_frames()));
+      return 0;
+    }
+  }
+
   // Cyclic phases.
   std::vector<double> p0(n), sp(n), max_err(n, 0.0);
-  for (std::size_t j = 0; j < n; ++j) p0[j] = master.feedback(j).position;
+  for (std::size_t j = 0; j < n; ++j) p0[j] = sp[j] = master.feedback(j).position;  // --hold alone holds here
   constexpr int kHist = 16;
   std::vector<std::array<double, kHist>> hist(n);
   for (std::size_t j = 0; j < n; ++j) hist[j].fill(p0[j]);
@@ -610,10 +708,44 @@ int main(int argc, char** argv) {
           (emcy && (!sim::cli::parse_uint(f.value, 0xFFFF, code) || code == 0)))
         return usage_error("bad " + a + " (NODE@SEC or NODE:CODE@SEC)");
       (emcy ? o.sim_emcy : o.sim_silent).push_back(f);
+    } else if (a == "--home") {
+      if (!value()) return usage_error("--home needs NODE:METHOD or NODE:hard_stop[:+|-]");
+      const std::size_t c = v.find(':');
+      std::uint32_t node = 0, m = 0;
+      Options::Home h;
+      if (c == std::string::npos || !sim::cli::parse_uint(v.substr(0, c), 127, node) || node == 0)
+        return usage_error("bad --home '" + v + "' (NODE:METHOD, e.g. 3:19, or NODE:hard_stop[:+|-])");
+      const std::string rest = v.substr(c + 1);
+      if (rest.rfind("hard_stop", 0) == 0) {
+        h.kind = HomingKind::hard_stop;
+        if (rest == "hard_stop:+") h.dir = 1;
+        else if (rest != "hard_stop" && rest != "hard_stop:-") return usage_error("bad --home '" + v + "' (hard_stop[:+|-])");
+      } else if (!sim::cli::parse_uint(rest, 127, m) || m == 0 || m == 36 || m > 37) {
+        return usage_error("bad --home '" + v + "': METHOD must be a CiA 402 homing method 1..35 or 37");
+      }
+      h.node = std::uint8_t(node);
+      h.method = int(m);
+      o.home.push_back(h);
+    } else if (a == "--home-speeds") {
+      if (!value()) return usage_error("--home-speeds needs SW,ZERO");
+      const std::size_t c = v.find(',');
+      if (c == std::string::npos || !sim::cli::parse_double(v.substr(0, c), o.home_sw) ||
+          !sim::cli::parse_double(v.substr(c + 1), o.home_zero) || o.home_sw <= 0 || o.home_zero <= 0)
+        return usage_error("bad --home-speeds '" + v + "' (SW,ZERO in rev/s, both > 0)");
+    } else if (a == "--home-accel") {
+      if (!num(o.home_accel, 1e-6)) return usage_error("bad --home-accel (> 0 rev/s^2)");
+    } else if (a == "--home-offset") {
+      if (!value() || !sim::cli::parse_double(v, o.home_offset) || std::fabs(o.home_offset) > 1e9)
+        return usage_error("bad --home-offset COUNTS");
+    } else if (a == "--home-timeout") {
+      if (!num(o.home_timeout, 0.001)) return usage_error("bad --home-timeout SEC (> 0)");
     } else {
       return usage_error("unknown option " + a);
     }
   }
+  for (const auto& h : o.home)
+    if (std::find(o.nodes.begin(), o.nodes.end(), h.node) == o.nodes.end())
+      return usage_error("--home node " + std::to_string(h.node) + " is not in --nodes");
   if (int(o.sim) + int(!o.iface.empty()) + int(o.fd >= 0) != 1)
     return usage_error("give exactly one of --iface NAME, --fd N or --sim");
   if (!o.bringup) return usage_error("nothing to do: add --bringup (and --roundtrip / --stream-sine / --hold)");
