@@ -1,0 +1,220 @@
+// Soak: the firmware's own pieces as `armfw --sim` runs them (App, console, the real RT
+// thread on CLOCK_MONOTONIC at 1 kHz, the virtual drives stepped on the control thread
+// right before each cycle) running a looping program of joint moves, straight lines,
+// G-code, a dwell, a feed hold, a stop and jogs for SERVOARM_SOAK_S seconds (default 20).
+// At the end:
+//  - no fault: the arm is idle, no fault cause, no fault event seen;
+//  - late cycles: missed deadlines (Telemetry::overruns) at most 1 % of the cycles, judged
+//    when the machine was not starved (load average <= cores) or SERVOARM_SOAK_STRICT=1
+//    (this runs without RT priority on shared machines; the figure is always printed);
+//  - memory: no allocation on the RT thread over the whole run (the allocation counter),
+//    and the resident set (/proc/self/statm) grown by at most 1 MiB after the first pass
+//    of the program (not judged in sanitizer builds: ASan's quarantine holds freed blocks);
+//  - every command answered: each line sent got one final answer (ok / error), and
+//    every one that should succeed did.
+// The figures (cycles, overruns, latency p99 / max, RSS, lines) are printed; a long run:
+// SERVOARM_SOAK_S=600 tests/rt/fw_soak (docs/building-and-testing.md, "Soak").
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "alloc_counter.hpp"
+#include "sim_app.hpp"
+#include "servoarm/rt/mode_table.hpp"
+#include "servoarm/rt/rt_loop.hpp"
+
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+#define SERVOARM_SOAK_SANITIZER 1
+#endif
+#endif
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm;
+using namespace servoarm::fw;
+
+namespace {
+
+long rss_kib() {
+  long pages_total = 0, pages_rss = 0;
+  std::FILE* f = std::fopen("/proc/self/statm", "r");
+  if (f == nullptr) return -1;
+  const int n = std::fscanf(f, "%ld %ld", &pages_total, &pages_rss);
+  std::fclose(f);
+  if (n != 2) return -1;
+  return pages_rss * (::sysconf(_SC_PAGESIZE) / 1024);
+}
+
+double load_average() {
+  double l = -1;
+  std::FILE* f = std::fopen("/proc/loadavg", "r");
+  if (f == nullptr) return -1;
+  if (std::fscanf(f, "%lf", &l) != 1) l = -1;
+  std::fclose(f);
+  return l;
+}
+
+double soak_seconds() {
+  const char* s = std::getenv("SERVOARM_SOAK_S");
+  if (s == nullptr || *s == '\0') return 20.0;
+  char* end = nullptr;
+  const double v = std::strtod(s, &end);
+  if (end == s || *end != '\0' || !(v > 0) || v > 86400) {
+    std::fprintf(stderr, "SERVOARM_SOAK_S=%s: not a number of seconds in (0, 86400]; using 20\n", s);
+    return 20.0;
+  }
+  return v;
+}
+
+// The final line of an answer: "ok..." or "error: ...".
+std::string last_line(const std::string& a) {
+  if (a.empty() || a.back() != '\n') return "";
+  const auto p = a.rfind('\n', a.size() - 2);
+  return a.substr(p == std::string::npos ? 0 : p + 1);
+}
+
+}  // namespace
+
+TEST_GROUP(Soak){};
+
+TEST(Soak, LoopingProgramRunsCleanWithFlatMemory) {
+  const double duration = soak_seconds();
+  test::SimApp app;
+  FwConfig cfg;
+  cfg.can = "sim";
+  cfg.priority = 0;  // tests run without RT privileges everywhere
+  cfg.lock_memory = false;
+  const std::string e = app.build(cfg);
+  CHECK_TEXT(e.empty(), e.c_str());
+  const std::string b = app.boot();
+  CHECK_TEXT(b.empty(), b.c_str());
+  app.plant->stop_thread();  // from here the drives are stepped on the control thread (armfw --sim)
+  LoopConfig lc;
+  lc.priority = 0;
+  lc.lock_memory = false;
+  RtLoop loop(*app.ctl, lc);
+  loop.set_pre_cycle(&sim::SimPlant::step_hook, app.plant.get());
+  std::size_t rt_allocs = 999;
+  loop.on_thread_start = [] { test::alloc_count_begin(); };
+  loop.on_thread_exit = [&] { rt_allocs = test::alloc_count_end(); };
+  CHECK(loop.start());
+
+  Session s;
+  long lines = 0, answered = 0, errors = 0;
+  std::string events, first_bad;
+  auto run = [&](const std::string& line) {
+    s.out.clear();
+    app.console->execute(s, line);
+    for (int i = 0; i < 60000 && app.console->busy(s); ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      app.console->poll(s);
+    }
+    ++lines;
+    const std::string last = last_line(s.out);
+    if (last.rfind("ok", 0) == 0) {
+      ++answered;
+    } else if (last.rfind("error: ", 0) == 0) {
+      ++answered;
+      ++errors;
+      if (first_bad.empty()) first_bad = "'" + line + "' answered " + last;
+    } else if (first_bad.empty()) {
+      const Telemetry t = app.ctl->telemetry();
+      first_bad = "'" + line + "' not answered: '" + s.out + "' (state " + to_string(t.state) + ", mode " + to_string(t.mode) + ")";
+    }
+    events += app.console->drain_events();
+  };
+  auto sleep_ms = [](int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); };
+
+  run("enable");
+  for (int i = 0; i < 2000 && app.ctl->telemetry().state != ArmState::idle; ++i) sleep_ms(1);
+  // One pass of the program: about 6 s of motion.
+  auto pass = [&](int k) {
+    const int d = k % 3;  // a little variation between passes
+    char l[160];
+    std::snprintf(l, sizeof l, "movej %d -40 160 10 -50 30 speed=100", 20 + 5 * d);
+    run(l);
+    run("wait");
+    run("movel 700 380 120 speed=250");
+    run("movel 650 300 200 speed=200");
+    run("G91");
+    run("G1 Z-20 F3000");
+    run("G1 X10 Y-10 F2400");
+    run("G90");
+    run("G4 P20");
+    run("M400");
+    run("jog j1 +5");
+    run("jog j6 -10");
+    run("wait");
+    run("movej 10 -20 30 5 20 -15 speed=80");
+    sleep_ms(150);
+    app.console->feed(s, "!");  // feed hold; resume once held (a resume during the hold ramp is ignored)
+    for (int i = 0; i < 5000 && app.ctl->telemetry().mode != Mode::held; ++i) sleep_ms(1);
+    app.console->feed(s, "~");
+    s.out.clear();
+    run("wait");
+    run("movej 40 -30 60 0 30 0 speed=60");
+    sleep_ms(200);
+    run("stop");
+    run("wait");
+    run("home");
+    run("wait");
+    run("status");
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+  pass(0);
+  const long rss0 = rss_kib();
+  long rss_max = rss0;
+  int passes = 1;
+  while (elapsed() < duration && first_bad.empty() && app.ctl->telemetry().cause == FaultCause::none) {
+    pass(passes++);
+    rss_max = std::max(rss_max, rss_kib());
+  }
+  loop.stop();
+  const long rss1 = rss_kib();
+  const Telemetry t = app.ctl->telemetry();
+  const double secs = elapsed();
+  std::printf("\n[soak] %.0f s, %d passes, %ld lines (%ld answered, %ld errors), %llu cycles, %llu overruns "
+              "(%.4f %%), latency p99 %.1f us max %.1f us, RSS %ld -> %ld KiB (max %ld), RT allocations %zu, "
+              "max following error %.4f deg\n",
+              secs, passes, lines, answered, errors, static_cast<unsigned long long>(t.cycles),
+              static_cast<unsigned long long>(t.overruns), 100.0 * double(t.overruns) / double(std::max<std::uint64_t>(1, t.cycles)),
+              t.latency.p99_us, t.latency.max_us, rss0, rss1, rss_max, rt_allocs,
+              t.max_following_error * 180 / M_PI);
+  CHECK_TEXT(first_bad.empty(), first_bad.c_str());
+  LONGS_EQUAL(lines, answered);
+  LONGS_EQUAL(0, errors);
+  CHECK_TEXT(t.state == ArmState::idle && t.cause == FaultCause::none, (std::string(to_string(t.state)) + " " + t.fault_text).c_str());
+  CHECK_TEXT(events.find("alarm") == std::string::npos, events.c_str());
+  CHECK(t.cycles > static_cast<std::uint64_t>(0.5 * secs * 1000));  // the loop kept running
+  // The late-cycle bound is a real-time figure: judged when the machine had a core for the
+  // loop (1-minute load average at most the core count) or with SERVOARM_SOAK_STRICT=1;
+  // on a starved machine the figure above is reported and the reason printed, never a
+  // false failure (the other checks hold everywhere).
+  const double load = load_average();
+  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+  const char* strict = std::getenv("SERVOARM_SOAK_STRICT");
+  if ((strict != nullptr && std::string(strict) == "1") || (load >= 0 && load <= cores)) {
+    CHECK_TEXT(double(t.overruns) <= 0.01 * double(t.cycles),
+               (std::to_string(t.overruns) + " of " + std::to_string(t.cycles) + " cycles late").c_str());
+  } else {
+    std::printf("[soak] late-cycle bound (1 %% of cycles) not judged: load average %.2f on %u cores "
+                "(SERVOARM_SOAK_STRICT=1 judges it anyway)\n", load, cores);
+  }
+  LONGS_EQUAL(0, rt_allocs);
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__) || defined(SERVOARM_SOAK_SANITIZER)
+  // ASan keeps freed blocks in its quarantine (and TSan its shadow), so the resident set
+  // grows with the console's ordinary churn: not a leak; the RT counter above still holds.
+  std::printf("[soak] RSS bound not judged in a sanitizer build\n");
+#else
+  CHECK_TEXT(rss_max - rss0 <= 1024, (std::to_string(rss0) + " -> " + std::to_string(rss_max) + " KiB").c_str());
+#endif
+}
