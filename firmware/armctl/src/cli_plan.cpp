@@ -392,12 +392,18 @@ int cli_plan(int argc, char** argv) {
   if (a.kind == "movej") {
     kin::JointVector q1;
     if (!joints_from_user(chain, a.to, q1, e)) return usage_error("--to: " + e);
-    // A lower bound of the duration (distance over speed) is checked before planning: with
-    // absurd limits the planner's own result depends on the platform's rounding.
+    // A lower bound of the duration is checked before planning: with absurd limits the
+    // planner's own result depends on the platform's rounding. Rest to rest over a distance
+    // d: T >= d / v, T >= 2 sqrt(d / a) and T >= cbrt(32 d / j), with the override scaling
+    // v, a and j as the planner does (v s, a s^2, j s^3).
     const kin::JointLimits lim = kin::limits_from(chain);
     double at_least = 0;
-    for (int j = 0; j < chain.n_joints; ++j)
-      at_least = std::max(at_least, std::fabs(q1[j] - q0[j]) / (lim.dyn[static_cast<std::size_t>(j)].max_velocity * ov));
+    for (int j = 0; j < chain.n_joints; ++j) {
+      const kin::JointDynamics& dy = lim.dyn[static_cast<std::size_t>(j)];
+      const double d = std::fabs(q1[j] - q0[j]);
+      at_least = std::max({at_least, d / (dy.max_velocity * ov), 2.0 * std::sqrt(d / (dy.max_acceleration * ov * ov)),
+                           std::cbrt(32.0 * d / (dy.max_jerk * ov * ov * ov))});
+    }
     if (at_least > a.max_duration) return check_duration(a, at_least);
     kin::JointTrajectory tr;
     const kin::MotionStatus st = kin::plan_movej(lim, kin::JointState::rest(q0), q1, kin::MovejOptions{ov}, tr);
