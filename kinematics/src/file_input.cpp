@@ -156,6 +156,43 @@ std::string read_text_file(const std::string& path, std::string& text, std::size
   return "";
 }
 
+std::string write_text_file_atomic(const std::string& path, std::string_view text) {
+  const std::string tmp = path + ".tmp";
+  auto failed = [&](const char* step, int err) { return path + ": " + step + " failed: " + std::strerror(err); };
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOFOLLOW, 0644);
+  if (fd < 0) return failed("creating the temporary file", errno);
+  std::size_t done = 0;
+  int err = 0;
+  const char* step = nullptr;
+  while (done < text.size()) {
+    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      err = n < 0 ? errno : EIO;
+      step = "writing";
+      break;
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  if (step == nullptr && ::fsync(fd) != 0) err = errno, step = "fsync";
+  if (::close(fd) != 0 && step == nullptr) err = errno, step = "closing";
+  if (step == nullptr && ::rename(tmp.c_str(), path.c_str()) != 0) err = errno, step = "renaming";
+  if (step != nullptr) {
+    ::unlink(tmp.c_str());
+    return failed(step, err);
+  }
+  // The rename is durable once the directory is: fsync it (best effort: some file
+  // systems refuse fsync on a directory; the file itself is complete either way).
+  const std::size_t slash = path.rfind('/');
+  const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    (void)::fsync(dfd);
+    ::close(dfd);
+  }
+  return "";
+}
+
 std::string source_text(const toml::source_region& where, const std::string& origin) {
   if (where.begin.line == 0) return origin;
   return origin + ":" + std::to_string(where.begin.line) + ":" + std::to_string(where.begin.column);

@@ -36,6 +36,8 @@ std::string sample_line(const CommandSpec& e) {
     case ArgShape::pose: l += " 400 0 300"; break;
     case ArgShape::joints_opt: l += " 0 10 20 0 30 0"; break;
     case ArgShape::jog: l += " j3 +5 speed=20"; break;
+    case ArgShape::tool: l += " grip 0 0 100 0 0 0 mass=1 com=0,0,40"; break;
+    case ArgShape::frame: l += " table 400 0 0 0 0 90"; break;
   }
   return l;
 }

@@ -39,6 +39,9 @@ ConsoleConfig App::console_config() const {
   c.jog_speed_pct = cfg.console_jog_speed_pct;
   c.dialect = cfg.console_dialect == "grbl" ? Dialect::grbl : Dialect::native;
   c.config_text = to_toml(cfg);
+  // Only an absolute path (armfw resolves console.frames_file against the configuration
+  // file's folder): a relative one would land in whatever the working directory is.
+  if (!cfg.console_frames_file.empty() && cfg.console_frames_file[0] == '/') c.frames_file = cfg.console_frames_file;
   return c;
 }
 
@@ -140,6 +143,7 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   ik_ready = kin::ik_prepare(chain, *ik) == kin::Status::ok && ik->method != kin::IkMethod::none;
   ctl = std::make_unique<Controller>(*servo, chain, controller_config());
   console = std::make_unique<Console>(*ctl, console_config(), ik_ready ? ik.get() : nullptr);
+  if (const std::string e = console->load_frames(); !e.empty()) return "frames file refused: " + e;
   return "";
 }
 

@@ -127,6 +127,11 @@ const ConfigKey kConfigTable[] = {
         .among(std::span<const char* const>(kTransportDialects)),
     K{"console.jog_deadman_ms", &F::console_jog_deadman_ms, "ms",
       "a continuous jog stops by itself unless a jog line (or `jog` alone) comes within this time"}.within(20, 5000),
+    K{"console.frames_file", &F::console_frames_file, "",
+      "where the named tools and user frames are kept (`tool`, `frame`, G10 L2; written atomically); a relative "
+      "path is relative to the configuration file's folder; `\"\"` = not kept (also the default of `armfw --sim` "
+      "without --config; `armfw --frames FILE` sets it)"}
+        .length(0, 4095),
     K{"console.jog_speed_pct", &F::console_jog_speed_pct, "%",
       "jog speed without speed=: percent of the joint limits (joint jog) or of the maximum linear and angular speeds "
       "(tool jog)"}.within(1, 100),

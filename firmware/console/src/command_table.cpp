@@ -18,6 +18,8 @@ const char* to_string(ArgShape a) {
     case ArgShape::pose: return "pose";
     case ArgShape::joints_opt: return "joints_opt";
     case ArgShape::jog: return "jog";
+    case ArgShape::tool: return "tool";
+    case ArgShape::frame: return "frame";
   }
   return "?";
 }
@@ -36,17 +38,23 @@ struct CodeSpec {
   const char* help;
 };
 constexpr CodeSpec kGcodes[] = {
-    {"G0 X Y Z [A B C]", "linear tool move at the maximum linear speed (A B C = rx ry rz in degrees)"},
+    {"G0 X Y Z [A B C]", "linear tool move at the maximum linear speed (A B C = rx ry rz in degrees); X Y Z A B C "
+                         "are the active tool's point in the active user frame (`tool`, `frame`, G54..G59)"},
     {"G1 X Y Z [A B C] [F]", "linear tool move; F in G20/G21 length units per minute, clamped to the maximum"},
     {"G4 P<ms> | S<s>", "dwell (GRBL dialect: P in seconds, as GRBL and LinuxCNC read it)"},
     {"G20 | G21", "X Y Z and F in inches | millimetres"},
     {"G28", "home (as `home`)"},
     {"G90 | G91", "absolute | relative X Y Z A B C"},
-    {"G17 G54 G94 | M5 M9 | M2 M30", "accepted, nothing to do (the only plane, work offset and feed mode; no spindle or coolant; program end)"},
+    {"G10 L2 P<0-6> [X Y Z A B C]", "set work offset n (frame g5(3+n), P0 the active one): its origin X Y Z (mm) and "
+                                     "orientation A B C (deg) in the base; axes not given are kept; kept in the frames file"},
+    {"G54 .. G59", "select the user frame g54 .. g59 (identity until G10 L2 sets it), on a line of its own"},
+    {"G53", "on a G0/G1 line: that line in machine coordinates (the base frame)"},
+    {"G17 G94 | M5 M9 | M2 M30", "accepted, nothing to do (the only plane and feed mode; no spindle or coolant; program end)"},
     {"M17", "enable"},
     {"M18 | M84", "disable"},
     {"M112", "e-stop"},
-    {"M114", "position: `X: Y: Z: A: B: C:` (G20/G21 length units, degrees), then `ok`"},
+    {"M114", "position of the active tool's point in the active user frame: `X: Y: Z: A: B: C:` (G20/G21 length "
+             "units, degrees), then `ok`"},
     {"M400", "wait"},
     {"M105 | M110", "accepted so that senders connect (`ok T:0 /0 B:0 /0` | line numbers not tracked)"},
 };

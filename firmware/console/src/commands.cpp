@@ -35,6 +35,7 @@ const char* to_string(CmdError e) {
     case CmdError::plan_failed: return "plan_failed";
     case CmdError::timeout: return "timeout";
     case CmdError::estop: return "estop";
+    case CmdError::storage: return "storage";
     case CmdError::internal: return "internal";
   }
   return "?";
@@ -67,6 +68,8 @@ const char* to_string(Cmd c) {
     case Cmd::gmove: return "gmove";
     case Cmd::temperature: return "temperature";
     case Cmd::jog: return "jog";
+    case Cmd::tool: return "tool";
+    case Cmd::frame: return "frame";
     case Cmd::grbl_jog: return "$J";
     case Cmd::grbl_settings: return "$$";
     case Cmd::grbl_params: return "$#";
@@ -204,8 +207,9 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
   char other_letter = 0;
   std::array<bool, 6> given{};
   std::array<double, 6> axis{};
-  double p = -1, sval = -1, f = -1;
+  double p = -1, sval = -1, f = -1, l = -1;
   bool g53 = false;
+  int wcs = -1;              // G54..G59: 1..6
   std::size_t i = 0;
   while (i < s.size()) {
     char L = s[i];
@@ -231,13 +235,16 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
         // Exact codes only: G1, G01, G1.0 are G1; G0.95 or G1.01 are no code of ours.
         const int g = static_cast<int>(std::lround(v * 10));
         if (std::fabs(v * 10 - g) > 1e-9 || g % 10 != 0)
-          return fail(CmdError::unsupported, "G-code: G%g not supported (G0 G1 G4 G20 G21 G28 G90 G91)", v);
+          return fail(CmdError::unsupported, "G-code: G%g not supported (G0 G1 G4 G10 G20 G21 G28 G54-G59 G90 G91)", v);
         if (jog && !(g == 900 || g == 910 || g == 200 || g == 210 || g == 530))
           return fail(CmdError::unsupported, "$J: G%g not allowed in a jog line (G20 G21 G53 G90 G91 only)", v);
         if (g == 530) g53 = true;
-        else if (g == 170 || g == 940 || g == 540) {
-          // G17 (XY plane), G94 (feed per minute), G54 (work offset 1 = the base frame): the
-          // only modes there are here; CAM and sender headers send them.
+        else if (g == 170 || g == 940) {
+          // G17 (XY plane), G94 (feed per minute): the only modes there are here; CAM and
+          // sender headers send them.
+        } else if (g >= 540 && g <= 590) {
+          if (wcs >= 0) return fail(CmdError::arg_count, "G-code: two of G54..G59 on one line");
+          wcs = (g - 540) / 10 + 1;
         } else if (g == 900) m.relative = false;
         else if (g == 910) m.relative = true;
         else if (g == 200) m.unit_mm = 25.4;
@@ -245,12 +252,12 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
         else if (g == 0 || g == 10) {
           if (motion >= 0 || other >= 0) return fail(CmdError::arg_count, "G-code: two motion/action codes on one line");
           motion = g / 10;
-        } else if (g == 40 || g == 280) {
+        } else if (g == 40 || g == 280 || g == 100) {
           if (motion >= 0 || other >= 0) return fail(CmdError::arg_count, "G-code: two motion/action codes on one line");
           other = g / 10;
           other_letter = 'G';
         } else {
-          return fail(CmdError::unsupported, "G-code: G%g not supported (G0 G1 G4 G20 G21 G28 G90 G91)", v);
+          return fail(CmdError::unsupported, "G-code: G%g not supported (G0 G1 G4 G10 G20 G21 G28 G54-G59 G90 G91)", v);
         }
         break;
       }
@@ -276,6 +283,12 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
         if (f >= 0) return fail(CmdError::arg_count, "G-code: F given twice");
         f = v;
         break;
+      case 'L':
+        if (jog) return fail(CmdError::unsupported, "$J: word 'L' not allowed in a jog line");
+        if (l >= 0) return fail(CmdError::arg_count, "G-code: L given twice");
+        if (v < 0) return fail(CmdError::out_of_range, "G-code: L must be >= 0 (got %g)", v);
+        l = v;
+        break;
       case 'P':
       case 'S':
         if (jog) return fail(CmdError::unsupported, "$J: word '%c' not allowed in a jog line", L);
@@ -287,7 +300,6 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
         return fail(CmdError::unsupported, "G-code: word '%c' not supported", L);
     }
   }
-  (void)g53;  // G53 (machine coordinates): the jog's frame is the base frame either way
   const bool any_axis = given[0] || given[1] || given[2] || given[3] || given[4] || given[5];
   if (jog) {
     if (motion >= 0 || other >= 0) return fail(CmdError::unsupported, "$J: motion and M codes are not allowed in a jog line");
@@ -297,6 +309,7 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
       return fail(CmdError::out_of_range, "$J: F%g is below the minimum feed %g mm/min", f, kMinLinearSpeedMmS * 60.0 / m.unit_mm);
     c.cmd = Cmd::grbl_jog;
     c.relative = m.relative;
+    c.g53 = g53;
     for (int k = 0; k < 6; ++k) {
       if (!given[static_cast<std::size_t>(k)]) continue;
       c.axis_mask = static_cast<std::uint8_t>(c.axis_mask | (1u << k));
@@ -311,10 +324,36 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
   if (f > 0 && f * m.unit_mm / 60.0 < kMinLinearSpeedMmS)
     return fail(CmdError::out_of_range, "G-code: F%g is below the minimum feed %g mm/min", f, kMinLinearSpeedMmS * 60.0 / m.unit_mm);
   if (f > 0) m.feed_mm_s = f * m.unit_mm / 60.0;
+  if (l >= 0 && !(other_letter == 'G' && other == 10)) return fail(CmdError::arg_count, "G-code: L without G10");
+  if (wcs >= 0 && (motion >= 0 || other >= 0))
+    return fail(CmdError::unsupported, "G-code: G%d with a motion or action code: put G54..G59 on a line of its own", 53 + wcs);
+  if (other_letter == 'G' && other == 10) {
+    // G10 L2 Pn: set work offset n (frame g5(3+n)); P0 = the active one. Absolute values
+    // (mm / deg), axes not given keep theirs.
+    if (l < 0) return fail(CmdError::arg_count, "G-code: G10 needs L2 (G10 L2 Pn X.. Y.. Z.. A.. B.. C..)");
+    if (l != 2) return fail(CmdError::unsupported, "G-code: G10 L%g not supported (G10 L2 only: set a work offset)", l);
+    if (p < 0) return fail(CmdError::arg_count, "G-code: G10 L2 needs P0..P6 (P0: the active frame, P1..P6: G54..G59)");
+    if (p > 6 || p != std::floor(p)) return fail(CmdError::out_of_range, "G-code: G10 L2 P%g: P must be 0..6", p);
+    if (sval >= 0) return fail(CmdError::bad_option, "G-code: G10 takes no S");
+    if (!any_axis) return fail(CmdError::arg_count, "G-code: G10 L2 P%g without axis words changes nothing", p);
+    c.cmd = Cmd::frame;
+    c.frame_op = FrameOp::set_axes;
+    c.g10_p = static_cast<int>(p);
+    for (int k = 0; k < 6; ++k) {
+      if (!given[static_cast<std::size_t>(k)]) continue;
+      c.axis_mask = static_cast<std::uint8_t>(c.axis_mask | (1u << k));
+      c.vals[static_cast<std::size_t>(k)] = k < 3 ? axis[static_cast<std::size_t>(k)] * m.unit_mm : axis[static_cast<std::size_t>(k)];
+    }
+    c.count = 6;
+    modal = m;
+    out = c;
+    return {};
+  }
   if (motion >= 0) {
     if (p >= 0 || sval >= 0) return fail(CmdError::bad_option, "G-code: P/S not allowed with G%d", motion);
     c.cmd = any_axis ? Cmd::gmove : Cmd::none;
     c.rapid = motion == 0;
+    c.g53 = g53;  // this line in machine coordinates (the base frame), whatever G54..G59 says
     c.relative = m.relative;
     for (int k = 0; k < 6; ++k) {
       if (!given[static_cast<std::size_t>(k)]) continue;
@@ -352,6 +391,11 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
     if (any_axis) return fail(CmdError::arg_count, "G-code: axis words without G0/G1");
     if (p >= 0 || sval >= 0) return fail(CmdError::arg_count, "G-code: P/S without G4");
     c.cmd = Cmd::none;  // modal-only line (G90, G21 F600, N5, ...)
+    if (wcs >= 0) {     // G54..G59 (with modal codes): select frame g54..g59
+      c.cmd = Cmd::frame;
+      c.frame_op = FrameOp::select;
+      std::snprintf(c.name.data(), c.name.size(), "g5%d", 3 + wcs);
+    }
   }
   modal = m;
   out = c;
@@ -441,11 +485,100 @@ ParseResult parse_jog(const Words& ws, int first, int n_joints, const ConsoleUni
       if (!c.jog_tool) return fail(CmdError::bad_option, "jog: frame= is for tool axes (x y z rx ry rz), not joints");
       if (ieq(val, "base")) c.jog_frame = JogFrame::base;
       else if (ieq(val, "tool")) c.jog_frame = JogFrame::tool;
-      else return fail(CmdError::bad_option, "jog: frame=%.*s unknown (base or tool)", int(val.size() > 20 ? 20 : val.size()), val.data());
+      else if (ieq(val, "user")) c.jog_frame = JogFrame::user;
+      else return fail(CmdError::bad_option, "jog: frame=%.*s unknown (base, tool or user)", int(val.size() > 20 ? 20 : val.size()), val.data());
     } else {
       return fail(CmdError::bad_option, "jog: unknown option '%.*s' (speed=, frame=)", int(key.size() > 20 ? 20 : key.size()), key.data());
     }
   }
+  return {};
+}
+
+/// `tool ...` / `frame ...` arguments (frames.hpp has the rules the console checks again).
+ParseResult parse_named(const Words& ws, int first, bool is_tool, const ConsoleUnits& units, Command& c) {
+  (void)units;
+  const char* what = is_tool ? "tool" : "frame";
+  const int nargs = ws.n - first;
+  auto put_name = [&](std::string_view n) -> ParseResult {
+    if (n.empty() || n.size() >= c.name.size())
+      return fail(CmdError::bad_option, "%s: name '%.*s' must be 1..%zu characters", what, int(n.size() > 30 ? 30 : n.size()),
+                  n.data(), c.name.size() - 1);
+    for (std::size_t i = 0; i < n.size(); ++i) {
+      const char ch = n[i];
+      const bool letter = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z');
+      const bool more = (ch >= '0' && ch <= '9') || ch == '_' || ch == '-';
+      if (!(letter || (i > 0 && more)))
+        return fail(CmdError::bad_option, "%s: name '%.*s': letters, digits, _ and - only, starting with a letter", what,
+                    int(n.size()), n.data());
+    }
+    std::memcpy(c.name.data(), n.data(), n.size());
+    return {};
+  };
+  if (nargs == 0) {
+    c.frame_op = FrameOp::list;
+    return {};
+  }
+  if (ieq(ws.w[first], "delete")) {
+    if (nargs != 2) return fail(CmdError::arg_count, "%s delete takes one name", what);
+    c.frame_op = FrameOp::remove;
+    return put_name(ws.w[first + 1]);
+  }
+  ParseResult r = put_name(ws.w[first]);
+  if (!r.ok()) return r;
+  if (nargs == 1) {
+    c.frame_op = FrameOp::select;
+    return {};
+  }
+  c.frame_op = FrameOp::define;
+  c.count = 0;
+  for (int k = first + 1; k < ws.n; ++k) {
+    const std::string_view w = ws.w[static_cast<std::size_t>(k)];
+    const std::size_t eq = w.find('=');
+    if (eq == std::string_view::npos) {
+      if (c.has_mass || c.has_com) return fail(CmdError::bad_option, "%s: options go after the values", what);
+      if (c.count >= 6) return fail(CmdError::arg_count, "%s: too many values (x y z rx ry rz)", what);
+      double v = 0;
+      switch (parse_decimal(w, v)) {
+        case Num::ok: break;
+        case Num::bad: return fail(CmdError::bad_number, "%s: '%.*s' is not a number", what, int(w.size() > 20 ? 20 : w.size()), w.data());
+        case Num::not_finite: return fail(CmdError::not_finite, "%s: value %d is not finite", what, c.count + 1);
+      }
+      c.vals[static_cast<std::size_t>(c.count++)] = v;
+      continue;
+    }
+    const std::string_view key = w.substr(0, eq), val = w.substr(eq + 1);
+    if (!is_tool) return fail(CmdError::bad_option, "frame: unknown option '%.*s' (a frame takes x y z rx ry rz only)", int(key.size() > 20 ? 20 : key.size()), key.data());
+    if (ieq(key, "mass")) {
+      if (c.has_mass) return fail(CmdError::bad_option, "tool: mass given twice");
+      switch (parse_decimal(val, c.mass)) {
+        case Num::ok: break;
+        case Num::bad: return fail(CmdError::bad_number, "tool: mass '%.*s' is not a number", int(val.size() > 20 ? 20 : val.size()), val.data());
+        case Num::not_finite: return fail(CmdError::not_finite, "tool: mass is not finite");
+      }
+      if (c.mass < 0) return fail(CmdError::out_of_range, "tool: mass must be >= 0 kg (got %g)", c.mass);
+      c.has_mass = true;
+    } else if (ieq(key, "com")) {
+      if (c.has_com) return fail(CmdError::bad_option, "tool: com given twice");
+      std::string_view rest = val;
+      for (int i = 0; i < 3; ++i) {
+        const std::size_t comma = rest.find(',');
+        if ((i < 2) != (comma != std::string_view::npos))
+          return fail(CmdError::arg_count, "tool: com needs three values x,y,z");
+        const std::string_view part = rest.substr(0, comma);
+        switch (parse_decimal(part, c.com[static_cast<std::size_t>(i)])) {
+          case Num::ok: break;
+          case Num::bad: return fail(CmdError::bad_number, "tool: com value '%.*s' is not a number", int(part.size() > 20 ? 20 : part.size()), part.data());
+          case Num::not_finite: return fail(CmdError::not_finite, "tool: com value %d is not finite", i + 1);
+        }
+        rest = comma == std::string_view::npos ? std::string_view() : rest.substr(comma + 1);
+      }
+      c.has_com = true;
+    } else {
+      return fail(CmdError::bad_option, "tool: unknown option '%.*s' (mass=, com=)", int(key.size() > 20 ? 20 : key.size()), key.data());
+    }
+  }
+  if (c.count != 6) return fail(CmdError::arg_count, "%s %s needs x y z rx ry rz, got %d values", what, c.name.data(), c.count);
+  if (c.has_com && !c.has_mass) return fail(CmdError::bad_option, "tool: com= needs mass=");
   return {};
 }
 
@@ -537,6 +670,12 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
     }
     case ArgShape::jog: {
       ParseResult r = parse_jog(ws, used, n_joints, units, c);
+      if (!r.ok()) return r;
+      break;
+    }
+    case ArgShape::tool:
+    case ArgShape::frame: {
+      ParseResult r = parse_named(ws, used, spec->args == ArgShape::tool, units, c);
       if (!r.ok()) return r;
       break;
     }

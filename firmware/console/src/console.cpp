@@ -1,5 +1,7 @@
 #include "servoarm/console/console.hpp"
 
+#include <utility>
+
 #include <chrono>
 #include <cstdarg>
 #include <cmath>
@@ -40,6 +42,7 @@ int grbl_error(CmdError e) {
     case CmdError::plan_failed: return 33;
     case CmdError::timeout: return 20;
     case CmdError::estop: return 9;
+    case CmdError::storage: return 7;           // setting read fail (GRBL's EEPROM error)
     case CmdError::internal: return 20;
   }
   return 20;
@@ -85,12 +88,32 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
   }
   tail_ = kin::JointVector::Zero(n_);
   idle_ = [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); };
+  auto t0 = std::make_unique<ToolSlot>();
+  t0->def.name = "tool0";
+  t0->chain = chain_;
+  t0->model = ik_;
+  tools_.push_back(std::move(t0));
+  NamedPose base;
+  base.name = "base";
+  frames_.push_back(base);
 }
 
 // IK of movel's path check and of the control thread's Cartesian sampling: the App's
 // model (closed form or numeric) when the chain has one, else the damped-Newton fallback.
 // The firmware's options (ik_options.hpp), the same armctl plan previews with.
-kin::IkSolver Console::ik_solver() const { return firmware_ik_solver(ik_); }
+kin::IkSolver Console::ik_solver() const { return firmware_ik_solver(tool_slot().model); }
+
+kin::Pose Console::tcp(const kin::JointVector& q) const {
+  kin::Pose p = kin::Pose::Identity();
+  if (kin::forward(tool_slot().chain, q, p) != kin::Status::ok) p.translation().setConstant(std::nan(""));
+  return p;
+}
+
+kin::Pose Console::pose_in_frame(const kin::JointVector& q) const { return user_frame().inverse() * tcp(q); }
+
+std::string Console::where_text() const {
+  return "tool=" + tools_[sel_tool()]->def.name + " frame=" + frames_[sel_frame()].name;
+}
 
 double Console::to_si(int j, double user) const {
   return cfg_.units.joint_in(chain_, j, user);
@@ -124,7 +147,8 @@ std::string Console::joints_text(const kin::JointVector& q) const {
 
 std::string Console::pose_text(const kin::JointVector& q) const {
   kin::Pose p;
-  if (kin::forward(chain_, q, p) != kin::Status::ok) return "x=nan";
+  p = pose_in_frame(q);
+  if (!p.translation().allFinite()) return "x=nan";
   const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear());
   const ConsoleUnits& u = cfg_.units;
   const int L = u.length_decimals(), A = u.angle_decimals();
@@ -214,22 +238,38 @@ kin::JointVector Console::commanded_joints() const {
   return q;
 }
 
-kin::Pose Console::commanded_pose() const {
-  kin::Pose p;
-  kin::forward(chain_, commanded_joints(), p);
-  return p;
-}
+kin::Pose Console::commanded_pose() const { return tcp(commanded_joints()); }
 
 std::string Console::status_text() const {
   const Telemetry t = ctl_.telemetry();
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
   const ConsoleUnits& u = cfg_.units;
-  std::string s = fmt("state=%s%s queue=%u joints=[%s] %s pose=[%s] %s,%s", to_string(t.state), t.holding ? " hold=1" : "",
+  std::string s = fmt("state=%s%s queue=%u joints=[%s] %s pose=[%s] %s,%s %s", to_string(t.state), t.holding ? " hold=1" : "",
                       unsigned(t.queued), joints_text(q).c_str(), u.angle_name(), pose_text(q).c_str(), u.length_name(),
-                      u.angle_name());
+                      u.angle_name(), where_text().c_str());
   if (t.fault_text[0]) s += fmt(" fault=\"%s\"", t.fault_text);
   return s;
+}
+
+// The position field of a GRBL report, in mm, of the active tool's point: `MPos:` (the base
+// frame) with no user frame active; with one, `WPos:` in it and `WCO:` its origin in the
+// base (what GRBL reports for a work offset; a sender shows WPos either way).
+std::string Console::grbl_position(const kin::JointVector& q) const {
+  if (frame_ == 0) {
+    const kin::Pose p = tcp(q);
+    return fmt("MPos:%.3f,%.3f,%.3f", p.translation().x() * 1e3, p.translation().y() * 1e3, p.translation().z() * 1e3);
+  }
+  const kin::Pose w = pose_in_frame(q);
+  const Eigen::Vector3d o = frames_[frame_].pose.translation() * 1e3;
+  return fmt("WPos:%.3f,%.3f,%.3f|WCO:%.3f,%.3f,%.3f", w.translation().x() * 1e3, w.translation().y() * 1e3,
+             w.translation().z() * 1e3, o.x(), o.y(), o.z());
+}
+
+std::string Console::grbl_wcs() const {
+  const std::string& n = frames_[sel_frame()].name;
+  if (n.size() == 3 && n[0] == 'g' && n[1] == '5' && n[2] >= '4' && n[2] <= '9') return "G" + n.substr(1);
+  return "G54";  // base or a named frame: GRBL has no word for it (`frame` says which)
 }
 
 std::string Console::grbl_report() const {
@@ -248,10 +288,7 @@ std::string Console::grbl_report() const {
   }
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
-  kin::Pose p;
-  kin::forward(chain_, q, p);
-  std::string s = fmt("<%s|MPos:%.3f,%.3f,%.3f|J:", st, p.translation().x() * 1e3, p.translation().y() * 1e3,
-                      p.translation().z() * 1e3);
+  std::string s = fmt("<%s|%s|J:", st, grbl_position(q).c_str());
   // MPos: G-code lengths (mm, as GRBL reports them); J: the console's joint units.
   const int d = cfg_.units.angle == AngleUnit::deg && cfg_.units.length == LengthUnit::mm ? 2 : 5;
   for (int j = 0; j < n_; ++j) s += fmt("%s%.*f", j ? "," : "", d, to_user(j, q[j]));
@@ -277,14 +314,11 @@ std::string Console::grbl_report(const Session& s) const {
   }
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
-  kin::Pose p;
-  kin::forward(chain_, q, p);
   std::size_t pending = s.partial.size();
   for (const std::string& l : s.lines) pending += l.size() + 1;
   const long rx_free = static_cast<long>(kGrblRxBuffer) - static_cast<long>(pending);
   const long blocks_free = static_cast<long>(kMotionQueue) - static_cast<long>(t.queued);
-  return fmt("<%s|MPos:%.3f,%.3f,%.3f|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld>", st, p.translation().x() * 1e3,
-             p.translation().y() * 1e3, p.translation().z() * 1e3, feed_now_ * 60e3, feed_pct_,
+  return fmt("<%s|%s|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld>", st, grbl_position(q).c_str(), feed_now_ * 60e3, feed_pct_,
              blocks_free < 0 ? 0 : blocks_free, rx_free < 0 ? 0 : rx_free);
 }
 
@@ -454,12 +488,13 @@ void Console::queue(Session& s, const MoveLine& req) {
   kin::PathReport rep;
   const kin::JointVector q0 = s.check_mode ? s.check_tail : tail();
   kin::CartesianTrajectory& path = m->payload.emplace<CartesianMove>().path;
-  const kin::MotionStatus ms = kin::plan_movel(chain_, q0, target, cl, mo, ik_solver(), path, &rep);
+  const kin::MotionStatus ms = kin::plan_movel(tool_slot().chain, q0, target, cl, mo, ik_solver(), path, &rep);
   if (!kin::is_ok(ms)) {
     const ConsoleUnits& u = cfg_.units;
     const int L = u.length == LengthUnit::mm ? 1 : 4;
-    std::string where = fmt("at s=%.2f (x=%.*f y=%.*f z=%.*f %s)", rep.s, L, u.length_out(rep.position.x()), L,
-                            u.length_out(rep.position.y()), L, u.length_out(rep.position.z()), u.length_name());
+    const Eigen::Vector3d at = user_frame().inverse() * rep.position;
+    std::string where = fmt("at s=%.2f (x=%.*f y=%.*f z=%.*f %s)", rep.s, L, u.length_out(at.x()), L,
+                            u.length_out(at.y()), L, u.length_out(at.z()), u.length_name());
     if (rep.joint >= 0) where += fmt(" joint %d", rep.joint + 1);
     answer_error(s, motion_error(ms), fmt("movel refused: %s %s", kin::to_string(ms), where.c_str()));
     return;
@@ -513,14 +548,13 @@ void Console::queue_dwell(Session& s, double secs) {
   answer_ok(s, fmt("queued id=%u dwell=%.3fs", unsigned(tail_id_), secs));
 }
 
+// x y z [rx ry rz] in the active user frame (orientation kept when not given) -> the base frame.
 kin::Pose Console::pose_from_values(const Command& c, const kin::JointVector& q_ref) const {
-  kin::Pose cur;
-  kin::forward(chain_, q_ref, cur);
-  kin::Pose p = cur;
+  kin::Pose p = pose_in_frame(q_ref);
   const ConsoleUnits& u = cfg_.units;
   p.translation() = Eigen::Vector3d(u.length_in(c.vals[0]), u.length_in(c.vals[1]), u.length_in(c.vals[2]));
   if (c.count == 6) p.linear() = kin::rotation_from_rpy(u.angle_in(c.vals[3]), u.angle_in(c.vals[4]), u.angle_in(c.vals[5]));
-  return p;
+  return user_frame() * p;
 }
 
 MoveLine Console::line_request(const Command& c, const kin::JointVector* from) const {
@@ -533,9 +567,10 @@ MoveLine Console::line_request(const Command& c, const kin::JointVector* from) c
   }
   // G0/G1: the axes given replace (G90) or move (G91) the queue's end pose; the others keep it.
   // G-code's units (the parser made G20 inches mm): mm, degrees, F in mm/s.
+  // The axes are the active user frame's (G54..G59), the point the active tool's.
   const ConsoleUnits& u = kGcodeUnits;
-  kin::Pose cur;
-  kin::forward(chain_, base, cur);
+  const kin::Pose F = c.g53 ? kin::Pose::Identity() : user_frame();  // G53: machine coordinates
+  const kin::Pose cur = F.inverse() * tcp(base);
   m.target = cur;
   Eigen::Vector3d rpy = kin::rpy_from_rotation(cur.linear());
   for (int k = 0; k < 6; ++k) {
@@ -545,6 +580,7 @@ MoveLine Console::line_request(const Command& c, const kin::JointVector* from) c
     else rpy[k - 3] = c.relative ? rpy[k - 3] + u.angle_in(v) : u.angle_in(v);
   }
   if (c.axis_mask & 0x38) m.target.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+  m.target = F * m.target;
   m.rapid = c.rapid;
   m.speed = c.has_speed ? u.length_in(c.speed) : 0.0;
   m.clamp_speed = true;  // senders' F is clamped, as GRBL does
@@ -560,7 +596,12 @@ void Console::do_fk(Session& s, const Command& c) {
     for (int j = 0; j < n_; ++j) q[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
   }
   const bool inside = kin::within_limits(chain_, q);
-  answer_ok(s, pose_text(q) + (inside ? "" : " warning=outside_joint_limits"));
+  const std::string pose = pose_text(q);
+  if (pose.rfind("x=nan", 0) == 0) {
+    answer_error(s, CmdError::not_finite, "fk: the pose of these joints is not finite");
+    return;
+  }
+  answer_ok(s, pose + " " + where_text() + (inside ? "" : " warning=outside_joint_limits"));
 }
 
 void Console::do_ik(Session& s, const Command& c) {
@@ -571,13 +612,14 @@ void Console::do_ik(Session& s, const Command& c) {
   kin::JointVector q(n_);
   kin::Status st = kin::Status::unreachable;
   int solutions = -1;
-  if (ik_ != nullptr) {
+  const ToolSlot& tool = tool_slot();
+  if (tool.model != nullptr) {
     auto res = std::make_unique<kin::IkResult>();
-    kin::ik_solve_all(*ik_, target, &qc, *res);
+    kin::ik_solve_all(*tool.model, target, &qc, *res);
     solutions = res->count;
-    st = kin::ik_solve_nearest(*ik_, target, qc, q);
+    st = kin::ik_solve_nearest(*tool.model, target, qc, q);
   } else {
-    st = kin::ik_nearest_newton(chain_, target, qc, q, nullptr);
+    st = kin::ik_nearest_newton(tool.chain, target, qc, q, nullptr);
   }
   if (!kin::is_ok(st)) {
     answer_error(s, st == kin::Status::out_of_limits ? CmdError::limits : CmdError::unreachable,
@@ -590,6 +632,7 @@ void Console::do_ik(Session& s, const Command& c) {
   }
   std::string d = fmt("joints=[%s] %s", joints_text(q).c_str(), cfg_.units.angle_name());
   if (solutions >= 0) d += fmt(" solutions=%d", solutions);
+  d += " " + where_text();
   if (st == kin::Status::singular) d += " warning=singular";
   answer_ok(s, d);
 }
@@ -627,6 +670,11 @@ std::string Console::units_line() const {
 
 void Console::execute(Session& s, std::string_view line) {
   ++s.lines_done;
+  struct Selected {  // the session whose tool/frame selection applies (check mode has its own)
+    const Session*& sel;
+    ~Selected() { sel = nullptr; }
+  } selected{sel_};
+  sel_ = &s;
   Command c;
   const ParseResult pr = parse_line(line, n_, s.modal, c, cfg_.units);
   if (!pr.ok()) {
@@ -694,8 +742,7 @@ void Console::execute(Session& s, std::string_view line) {
       const Telemetry t = ctl_.telemetry();
       kin::JointVector q(n_);
       for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
-      kin::Pose p;
-      kin::forward(chain_, q, p);
+      const kin::Pose p = pose_in_frame(q);  // the active tool's point in the active user frame
       const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear()) / kDeg;
       const double u = s.modal.unit_mm;
       s.out += fmt("X:%.3f Y:%.3f Z:%.3f A:%.3f B:%.3f C:%.3f\n", p.translation().x() * 1e3 / u, p.translation().y() * 1e3 / u,
@@ -705,6 +752,8 @@ void Console::execute(Session& s, std::string_view line) {
     }
     case Cmd::temperature: answer_ok(s, "T:0 /0 B:0 /0"); return;
     case Cmd::jog: do_jog(s, c); return;
+    case Cmd::tool: do_tool(s, c); return;
+    case Cmd::frame: do_frame(s, c); return;
     case Cmd::grbl_jog: do_grbl_jog(s, c); return;
     case Cmd::grbl_settings:
     case Cmd::grbl_params:
@@ -921,6 +970,7 @@ JogSpec Console::tool_jog_spec(double pct) const {
   js.angular_speed = pct / 100.0 * cfg_.cartesian.angular_velocity;
   js.limits = cfg_.cartesian;
   js.ik = ik_solver();
+  js.chain = &tool_slot().chain;
   js.deadman_s = cfg_.jog_deadman_s;
   return js;
 }
@@ -1014,6 +1064,7 @@ void Console::do_jog(Session& s, const Command& c) {
   const kin::Pose here = jogging && jog_tail_tool_ ? jog_x_tail_ : commanded_pose();
   if (jogging && jog_tail_tool_ && c.jog_frame == jog_frame_kind_) js.frame = jog_frame_;
   else if (c.jog_frame == JogFrame::tool) js.frame = commanded_pose().linear();
+  else if (c.jog_frame == JogFrame::user) js.frame = user_frame().linear();
   else js.frame = Eigen::Matrix3d::Identity();
   if (continuous) {
     js.axis = c.jog_axis;
@@ -1028,7 +1079,7 @@ void Console::do_jog(Session& s, const Command& c) {
       target.linear() = Eigen::AngleAxisd(cfg_.units.angle_in(c.vals[0]), axis).toRotationMatrix() * here.linear();
     }
     kin::JointVector q(n_);
-    if (ik_solver().fn(chain_, target, commanded_joints(), q, ik_solver().ctx) < kin::Status::ok) {
+    if (ik_solver().fn(tool_slot().chain, target, commanded_joints(), q, ik_solver().ctx) < kin::Status::ok) {
       answer_error(s, CmdError::unreachable, "jog: the target has no IK solution within the joint limits; nothing moved");
       return;
     }
@@ -1054,8 +1105,11 @@ void Console::do_grbl_jog(Session& s, const Command& c) {
     return;
   }
   const Telemetry t = ctl_.telemetry();
-  const bool jogging = t.state == ArmState::jogging && jog_tail_valid_ && jog_tail_tool_ && jog_frame_kind_ == JogFrame::base;
-  const kin::Pose here = jogging ? jog_x_tail_ : commanded_pose();
+  // In the active user frame (G54..G59), or the base with G53 (machine coordinates).
+  const kin::Pose F = c.g53 ? kin::Pose::Identity() : user_frame();
+  const JogFrame kind = c.g53 || frame_ == 0 ? JogFrame::base : JogFrame::user;
+  const bool jogging = t.state == ArmState::jogging && jog_tail_valid_ && jog_tail_tool_ && jog_frame_kind_ == kind;
+  const kin::Pose here = F.inverse() * (jogging ? jog_x_tail_ : commanded_pose());
   kin::Pose target = here;
   Eigen::Vector3d rpy = kin::rpy_from_rotation(here.linear());
   for (int k = 0; k < 6; ++k) {
@@ -1065,15 +1119,16 @@ void Console::do_grbl_jog(Session& s, const Command& c) {
     else rpy[k - 3] = c.relative ? rpy[k - 3] + v * kDeg : v * kDeg;
   }
   if (c.axis_mask & 0x38) target.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+  target = F * target;
   kin::JointVector q(n_);
-  if (ik_solver().fn(chain_, target, commanded_joints(), q, ik_solver().ctx) < kin::Status::ok) {
+  if (ik_solver().fn(tool_slot().chain, target, commanded_joints(), q, ik_solver().ctx) < kin::Status::ok) {
     answer_error(s, CmdError::unreachable, "$J: the target has no IK solution within the joint limits; nothing moved");
     return;
   }
   JogSpec js = tool_jog_spec(100.0 * feed_pct_ / 100.0 > 100 ? 100 : feed_pct_);
   // F is the path speed (GRBL clamps a jog's feed to the maximum rate); the override scales it.
   js.linear_speed = std::fmin(c.speed * 1e-3 * feed_pct_ / 100.0, cfg_.max_linear_speed);
-  js.frame = Eigen::Matrix3d::Identity();
+  js.frame = F.linear();
   js.target = target;
   const std::size_t before = s.out.size();
   send_jog(s, js, -1, 0, 0);
@@ -1085,7 +1140,7 @@ void Console::do_grbl_jog(Session& s, const Command& c) {
   jog_tail_tool_ = true;
   jog_tail_valid_ = true;
   jog_frame_ = js.frame;
-  jog_frame_kind_ = JogFrame::base;
+  jog_frame_kind_ = kind;
   feed_now_ = js.linear_speed;
 }
 
@@ -1124,10 +1179,15 @@ void Console::do_grbl(Session& s, const Command& c) {
       answer_ok(s);
       return;
     case Cmd::grbl_params: {
-      // No work offsets yet: G54..G59 are the base frame.
-      for (const char* g : {"G54", "G55", "G56", "G57", "G58", "G59"}) s.out += fmt("[%s:0.000,0.000,0.000]\n", g);
-      kin::Pose h;
-      kin::forward(chain_, cfg_.home, h);
+      // Work offsets: the origins of the user frames g54..g59 in the base (mm; their
+      // orientations are in the frames file and `frame`).
+      for (int g = 54; g <= 59; ++g) {
+        Eigen::Vector3d o = Eigen::Vector3d::Zero();
+        for (const NamedPose& f : frames_)
+          if (f.name == "g" + std::to_string(g)) o = f.pose.translation() * 1e3;
+        s.out += fmt("[G%d:%.3f,%.3f,%.3f]\n", g, o.x(), o.y(), o.z());
+      }
+      const kin::Pose h = tcp(cfg_.home);
       s.out += fmt("[G28:%.3f,%.3f,%.3f]\n[G30:0.000,0.000,0.000]\n[G92:0.000,0.000,0.000]\n[TLO:0.000]\n"
                    "[PRB:0.000,0.000,0.000:0]\n",
                    h.translation().x() * 1e3, h.translation().y() * 1e3, h.translation().z() * 1e3);
@@ -1135,7 +1195,7 @@ void Console::do_grbl(Session& s, const Command& c) {
       return;
     }
     case Cmd::grbl_state:
-      s.out += fmt("[GC:G0 G54 G17 %s %s G94 M5 M9 T0 F%.0f S0]\n", s.modal.unit_mm == 1.0 ? "G21" : "G20",
+      s.out += fmt("[GC:G0 %s G17 %s %s G94 M5 M9 T0 F%.0f S0]\n", grbl_wcs().c_str(), s.modal.unit_mm == 1.0 ? "G21" : "G20",
                    s.modal.relative ? "G91" : "G90", s.modal.feed_mm_s * 60.0 / s.modal.unit_mm);
       answer_ok(s);
       return;
@@ -1182,6 +1242,8 @@ void Console::do_grbl(Session& s, const Command& c) {
         }
         s.check_mode = true;
         s.check_tail = tail();
+        s.check_tool = tool_;
+        s.check_frame = frame_;
         s.out += s.dialect == Dialect::grbl ? "[MSG:Enabled]\n" : "";
         answer_ok(s, s.dialect == Dialect::grbl ? "" : "check mode on: G-code is parsed and checked, nothing moves");
       } else {
@@ -1192,6 +1254,355 @@ void Console::do_grbl(Session& s, const Command& c) {
       return;
     default: answer_error(s, CmdError::internal, "not a $ command"); return;
   }
+}
+
+}  // namespace servoarm::fw
+
+// ---------------------------------------------------------------------------
+// Tools and user frames (frames.hpp)
+// ---------------------------------------------------------------------------
+
+namespace servoarm::fw {
+
+std::unique_ptr<Console::ToolSlot> Console::make_tool(const NamedPose& def) const {
+  auto t = std::make_unique<ToolSlot>();
+  t->def = def;
+  t->chain = chain_;
+  kin::set_tool(t->chain, chain_.tool * def.pose);
+  // The tool's own IK model: the closed form of the arm still holds with any TCP (it is
+  // a fixed transform after the last joint); without one, the numeric fallback.
+  if (ik_ != nullptr) {
+    t->own = std::make_unique<kin::IkModel>();
+    if (kin::ik_prepare(t->chain, *t->own) == kin::Status::ok && t->own->method != kin::IkMethod::none) t->model = t->own.get();
+    else t->own.reset();
+  }
+  return t;
+}
+
+std::string Console::frames_refusal() const {
+  const Telemetry t = ctl_.telemetry();
+  switch (t.state) {
+    case ArmState::moving:
+    case ArmState::jogging:
+    case ArmState::stopping:
+      return fmt("refused while the arm is %s", to_string(t.state));
+    case ArmState::boot:
+    case ArmState::disabled:
+    case ArmState::enabling:
+    case ArmState::idle:
+    case ArmState::fault:
+    case ArmState::estop: break;
+  }
+  if (!ctl_.motions().empty() || t.queued > 0) return fmt("refused while %u moves are queued (wait, or stop)", unsigned(t.queued));
+  return "";
+}
+
+FramesData Console::frames_data() const {
+  FramesData d;
+  for (std::size_t i = 1; i < tools_.size(); ++i) d.tools.push_back(tools_[i]->def);
+  for (std::size_t i = 1; i < frames_.size(); ++i) d.frames.push_back(frames_[i]);
+  d.active_tool = tools_[tool_]->def.name;
+  d.active_frame = frames_[frame_].name;
+  return d;
+}
+
+std::string Console::save_frames() const {
+  if (cfg_.frames_file.empty()) return "";
+  return save_frames_file(cfg_.frames_file, frames_data());
+}
+
+std::string Console::load_frames() {
+  if (cfg_.frames_file.empty()) return "";
+  FramesData d;
+  const std::string err = load_frames_file(cfg_.frames_file, d);
+  if (!err.empty()) return err;
+  tools_.resize(1);
+  frames_.resize(1);
+  tool_ = frame_ = 0;
+  for (const NamedPose& t : d.tools) {
+    tools_.push_back(make_tool(t));
+    if (t.name == d.active_tool) tool_ = tools_.size() - 1;
+  }
+  for (const NamedPose& f : d.frames) {
+    frames_.push_back(f);
+    if (f.name == d.active_frame) frame_ = frames_.size() - 1;
+  }
+  return "";
+}
+
+namespace {
+std::string pose_values(const kin::Pose& p, const ConsoleUnits& u) {
+  const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear());
+  const int L = u.length_decimals(), A = u.angle_decimals();
+  return fmt("x=%.*f y=%.*f z=%.*f rx=%.*f ry=%.*f rz=%.*f", L, u.length_out(p.translation().x()), L,
+             u.length_out(p.translation().y()), L, u.length_out(p.translation().z()), A, u.angle_out(rpy[0]), A,
+             u.angle_out(rpy[1]), A, u.angle_out(rpy[2]));
+}
+template <class List, class Name>
+std::size_t find_named(const List& l, std::string_view n, Name name) {
+  for (std::size_t i = 0; i < l.size(); ++i)
+    if (name(l[i]) == n) return i;
+  return l.size();
+}
+}  // namespace
+
+void Console::do_tool(Session& s, const Command& c) {
+  const ConsoleUnits& u = cfg_.units;
+  const std::string_view name(c.name.data());
+  auto slot_name = [](const std::unique_ptr<ToolSlot>& t) -> const std::string& { return t->def.name; };
+  const std::size_t at = find_named(tools_, name, slot_name);
+  const std::string unsaved = cfg_.frames_file.empty() ? " (not kept: no frames file, console.frames_file)" : "";
+  if (c.frame_op == FrameOp::list) {
+    for (std::size_t i = 0; i < tools_.size(); ++i) {
+      const ToolSlot& t = *tools_[i];
+      s.out += fmt("%s %s %s", i == sel_tool() ? "*" : " ", t.def.name.c_str(),
+                   i == 0 ? "(the flange)" : pose_values(t.def.pose, u).c_str());
+      if (t.def.has_payload)
+        s.out += fmt(" mass=%g com=%g,%g,%g", t.def.mass, u.length_out(t.def.com.x()), u.length_out(t.def.com.y()),
+                     u.length_out(t.def.com.z()));
+      s.out += '\n';
+    }
+    answer_ok(s, fmt("%zu tools, active %s%s", tools_.size(), tools_[sel_tool()]->def.name.c_str(), unsaved.c_str()));
+    return;
+  }
+  if (c.frame_op == FrameOp::select) {
+    if (at == tools_.size()) {
+      answer_error(s, CmdError::bad_option, fmt("tool %.*s is not defined (tool lists them)", int(name.size()), name.data()));
+      return;
+    }
+    if (s.check_mode) {
+      s.check_tool = at;
+      answer_ok(s, fmt("check mode: tool=%s for the check", tools_[at]->def.name.c_str()));
+      return;
+    }
+    const std::string no = frames_refusal();
+    if (!no.empty()) {
+      answer_error(s, CmdError::bad_state, "tool: " + no);
+      return;
+    }
+    const std::size_t old = tool_;
+    tool_ = at;
+    const std::string err = save_frames();
+    if (!err.empty()) {
+      tool_ = old;
+      answer_error(s, CmdError::storage, "tool not changed: " + err);
+      return;
+    }
+    answer_ok(s, "tool=" + tools_[at]->def.name + unsaved);
+    return;
+  }
+  if (s.check_mode) {  // as GRBL's $C: definitions are not made in check mode
+    answer_ok(s, "check mode: not run");
+    return;
+  }
+  std::string why = check_frame_name(name, true);
+  if (why.empty()) why = frames_refusal();
+  if (!why.empty()) {
+    answer_error(s, why.rfind("refused", 0) == 0 ? CmdError::bad_state : CmdError::bad_option, "tool: " + why);
+    return;
+  }
+  if (c.frame_op == FrameOp::remove) {
+    if (at == tools_.size()) {
+      answer_error(s, CmdError::bad_option, fmt("tool %.*s is not defined", int(name.size()), name.data()));
+      return;
+    }
+    if (at == tool_) {
+      answer_error(s, CmdError::bad_state, fmt("tool %.*s is active: select another first", int(name.size()), name.data()));
+      return;
+    }
+    std::unique_ptr<ToolSlot> keep = std::move(tools_[at]);
+    tools_.erase(tools_.begin() + static_cast<std::ptrdiff_t>(at));
+    if (tool_ > at) --tool_;
+    const std::string err = save_frames();
+    if (!err.empty()) {
+      tools_.insert(tools_.begin() + static_cast<std::ptrdiff_t>(at), std::move(keep));
+      if (tool_ >= at) ++tool_;
+      answer_error(s, CmdError::storage, "tool not deleted: " + err);
+      return;
+    }
+    answer_ok(s, fmt("tool %.*s deleted", int(name.size()), name.data()));
+    return;
+  }
+  // define
+  const double xyz[3] = {u.length_in(c.vals[0]), u.length_in(c.vals[1]), u.length_in(c.vals[2])};
+  const double rpy[3] = {u.angle_in(c.vals[3]), u.angle_in(c.vals[4]), u.angle_in(c.vals[5])};
+  const double com[3] = {u.length_in(c.com[0]), u.length_in(c.com[1]), u.length_in(c.com[2])};
+  why = check_frame_values(xyz, rpy, c.has_mass, c.mass, com);
+  if (!why.empty()) {
+    answer_error(s, CmdError::out_of_range, fmt("tool %.*s: ", int(name.size()), name.data()) + why);
+    return;
+  }
+  if (at == tools_.size() && tools_.size() >= kMaxTools) {
+    answer_error(s, CmdError::busy, fmt("tool: %zu tools already (tool delete NAME first)", kMaxTools));
+    return;
+  }
+  NamedPose def;
+  def.name = std::string(name);
+  def.pose.translation() = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
+  def.pose.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+  def.has_payload = c.has_mass;
+  def.mass = c.mass;
+  def.com = Eigen::Vector3d(com[0], com[1], com[2]);
+  std::unique_ptr<ToolSlot> fresh = make_tool(def);
+  std::unique_ptr<ToolSlot> old;
+  if (at == tools_.size()) tools_.push_back(std::move(fresh));
+  else old = std::exchange(tools_[at], std::move(fresh));
+  const std::string err = save_frames();
+  if (!err.empty()) {
+    if (old) tools_[at] = std::move(old);
+    else tools_.pop_back();
+    answer_error(s, CmdError::storage, "tool not defined: " + err);
+    return;
+  }
+  answer_ok(s, fmt("tool %s %s %s%s", def.name.c_str(), old ? "redefined" : "defined", pose_values(def.pose, u).c_str(),
+                   ((at == tool_ ? " (active)" : "") + unsaved).c_str()));
+}
+
+void Console::do_frame(Session& s, const Command& c) {
+  const ConsoleUnits& u = cfg_.units;
+  std::string name(c.name.data());
+  auto frame_name = [](const NamedPose& f) -> const std::string& { return f.name; };
+  const std::string unsaved = cfg_.frames_file.empty() ? " (not kept: no frames file, console.frames_file)" : "";
+  if (c.frame_op == FrameOp::list) {
+    for (std::size_t i = 0; i < frames_.size(); ++i)
+      s.out += fmt("%s %s %s\n", i == sel_frame() ? "*" : " ", frames_[i].name.c_str(),
+                   i == 0 ? "(the base frame)" : pose_values(frames_[i].pose, u).c_str());
+    answer_ok(s, fmt("%zu frames, active %s%s", frames_.size(), frames_[sel_frame()].name.c_str(), unsaved.c_str()));
+    return;
+  }
+  if (c.frame_op == FrameOp::set_axes) {  // G10 L2 Pn
+    if (c.g10_p == 0) {
+      name = frames_[sel_frame()].name;
+      if (sel_frame() == 0) {
+        answer_error(s, CmdError::bad_state, "G10 L2 P0: the active frame is base, which cannot be set (select G54..G59 first)");
+        return;
+      }
+    } else {
+      name = "g5" + std::to_string(3 + c.g10_p);
+    }
+  }
+  std::size_t at = find_named(frames_, name, frame_name);
+  const bool g5x = name.size() == 3 && name[0] == 'g' && name[1] == '5' && name[2] >= '4' && name[2] <= '9';
+  if (c.frame_op == FrameOp::select) {
+    if (at == frames_.size() && !g5x) {
+      answer_error(s, CmdError::bad_option, "frame " + name + " is not defined (frame lists them)");
+      return;
+    }
+    if (s.check_mode) {
+      if (at == frames_.size()) {  // g54..g59 not set yet: the identity, as the active one would be
+        answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "check mode: frame=" + name + " (not set: the base frame)");
+        s.check_frame = 0;
+        return;
+      }
+      s.check_frame = at;
+      answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "check mode: frame=" + name + " for the check");
+      return;
+    }
+    const std::string no = frames_refusal();
+    if (!no.empty()) {
+      answer_error(s, CmdError::bad_state, (c.gcode ? fmt("G%s: ", name.c_str() + 1) : std::string("frame: ")) + no);
+      return;
+    }
+    bool added = false;
+    if (at == frames_.size()) {  // G54..G59 before G10 L2 set it: an identity frame of that name
+      if (frames_.size() >= kMaxFrames) {
+        answer_error(s, CmdError::busy, fmt("frame: %zu frames already (frame delete NAME first)", kMaxFrames));
+        return;
+      }
+      NamedPose f;
+      f.name = name;
+      frames_.push_back(f);
+      added = true;
+    }
+    const std::size_t old = frame_;
+    frame_ = at;
+    const std::string err = save_frames();
+    if (!err.empty()) {
+      frame_ = old;
+      if (added) frames_.pop_back();
+      answer_error(s, CmdError::storage, "frame not changed: " + err);
+      return;
+    }
+    answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "frame=" + name + unsaved);
+    return;
+  }
+  if (s.check_mode) {
+    answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "check mode: not run");
+    return;
+  }
+  std::string why = check_frame_name(name, false);
+  if (why.empty()) why = frames_refusal();
+  if (!why.empty()) {
+    answer_error(s, why.rfind("refused", 0) == 0 ? CmdError::bad_state : CmdError::bad_option,
+                 (c.gcode ? std::string("G10: ") : std::string("frame: ")) + why);
+    return;
+  }
+  if (c.frame_op == FrameOp::remove) {
+    if (at == frames_.size()) {
+      answer_error(s, CmdError::bad_option, "frame " + name + " is not defined");
+      return;
+    }
+    if (at == frame_) {
+      answer_error(s, CmdError::bad_state, "frame " + name + " is active: select another first");
+      return;
+    }
+    const NamedPose keep = frames_[at];
+    frames_.erase(frames_.begin() + static_cast<std::ptrdiff_t>(at));
+    if (frame_ > at) --frame_;
+    const std::string err = save_frames();
+    if (!err.empty()) {
+      frames_.insert(frames_.begin() + static_cast<std::ptrdiff_t>(at), keep);
+      if (frame_ >= at) ++frame_;
+      answer_error(s, CmdError::storage, "frame not deleted: " + err);
+      return;
+    }
+    answer_ok(s, "frame " + name + " deleted");
+    return;
+  }
+  // define (frame NAME x y z rx ry rz: console units) or G10 L2 (mm / deg, axes not given kept)
+  double xyz[3], rpy[3];
+  if (c.frame_op == FrameOp::set_axes) {
+    const kin::Pose cur = at < frames_.size() ? frames_[at].pose : kin::Pose::Identity();
+    const Eigen::Vector3d r = kin::rpy_from_rotation(cur.linear());
+    for (int k = 0; k < 3; ++k) {
+      xyz[k] = c.axis_mask & (1u << k) ? c.vals[static_cast<std::size_t>(k)] * 1e-3 : cur.translation()[k];
+      rpy[k] = c.axis_mask & (1u << (k + 3)) ? c.vals[static_cast<std::size_t>(k + 3)] * kDeg : r[k];
+    }
+  } else {
+    for (int k = 0; k < 3; ++k) {
+      xyz[k] = u.length_in(c.vals[static_cast<std::size_t>(k)]);
+      rpy[k] = u.angle_in(c.vals[static_cast<std::size_t>(k + 3)]);
+    }
+  }
+  const double none[3] = {0, 0, 0};
+  why = check_frame_values(xyz, rpy, false, 0, none);
+  if (!why.empty()) {
+    answer_error(s, CmdError::out_of_range, (c.gcode ? std::string("G10: frame ") : std::string("frame ")) + name + ": " + why);
+    return;
+  }
+  if (at == frames_.size() && frames_.size() >= kMaxFrames) {
+    answer_error(s, CmdError::busy, fmt("frame: %zu frames already (frame delete NAME first)", kMaxFrames));
+    return;
+  }
+  NamedPose def;
+  def.name = name;
+  def.pose.translation() = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
+  def.pose.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+  const bool fresh = at == frames_.size();
+  NamedPose old;
+  if (fresh) frames_.push_back(def);
+  else old = std::exchange(frames_[at], def);
+  const std::string err = save_frames();
+  if (!err.empty()) {
+    if (fresh) frames_.pop_back();
+    else frames_[at] = old;
+    answer_error(s, CmdError::storage, "frame not set: " + err);
+    return;
+  }
+  answer_ok(s, s.dialect == Dialect::grbl && c.gcode
+                   ? ""
+                   : fmt("frame %s %s %s%s", name.c_str(), fresh ? "defined" : "redefined", pose_values(def.pose, u).c_str(),
+                         ((at == frame_ ? " (active)" : "") + unsaved).c_str()));
 }
 
 }  // namespace servoarm::fw

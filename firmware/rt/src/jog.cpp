@@ -130,11 +130,15 @@ bool Jogger::set(const JogSpec& spec, const kin::JointState& cmd, hal::TimePoint
       why = "a jog in another frame is running: jog stop first";
       return false;
     }
+    if (active_ && spec_.chain != spec.chain) {
+      why = "a jog with another tool is running: jog stop first";
+      return false;
+    }
     const JogSpec old = spec_;
     const bool fresh = !active_;
     spec_ = spec;
     if (fresh) {
-      kin::forward(*chain_, cmd.pos, origin_);
+      kin::forward(spec.chain != nullptr ? *spec.chain : *chain_, cmd.pos, origin_);
       frame_ = spec.frame;
       c_ = kin::JointState::rest(kin::JointVector::Zero(kAxes));
       scale_ = 1.0;
@@ -213,7 +217,7 @@ JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
     plan_.sample(t, c);
     kin::Pose x;
     tool_pose(c, x);
-    if (spec_.ik.fn(*chain_, x, cmd.pos, q, spec_.ik.ctx) < kin::Status::ok) return false;
+    if (spec_.ik.fn(spec_.chain != nullptr ? *spec_.chain : *chain_, x, cmd.pos, q, spec_.ik.ctx) < kin::Status::ok) return false;
     ratio = 0;
     worst = -1;
     for (int j = 0; j < n_; ++j) {

@@ -53,6 +53,13 @@ inline constexpr std::size_t kMaxInputFileBytes = 64 * 1024;
 /// a regular file, larger than N bytes, read error: <errno text>).
 std::string read_text_file(const std::string& path, std::string& text, std::size_t max_bytes = kMaxInputFileBytes);
 
+/// Replace `path` with `text` atomically: written to "<path>.tmp" in the same directory,
+/// fsync'ed, renamed over `path`, and the directory fsync'ed, so that a power cut leaves
+/// the old file or the new one, never part of one. Returns "" on success, otherwise
+/// "<path>: <step> failed: <errno text>" (the old file is untouched, the temporary removed).
+/// A symbolic link at `path` is replaced by a regular file (the link's target is untouched).
+std::string write_text_file_atomic(const std::string& path, std::string_view text);
+
 /// A parsed TOML document: `table` when `error` is empty.
 struct TomlDocument {
   toml::table table;

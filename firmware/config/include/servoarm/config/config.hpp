@@ -83,6 +83,7 @@ struct FwConfig {
   std::string console_serial_dialect;  ///< "" = console.dialect
   double console_jog_deadman_ms = 250.0;  ///< a continuous jog not refreshed this long stops
   double console_jog_speed_pct = 10.0;    ///< jog speed without speed=
+  std::string console_frames_file = "frames.toml";  ///< tools and user frames; relative: to the config file's folder; "" = not kept
 
   bool operator==(const FwConfig&) const = default;
 };

@@ -25,7 +25,9 @@ enum class ArgShape : std::uint8_t {
   pose_speed,    ///< x y z [rx ry rz], then [speed=length/s] (movel)
   pose,          ///< x y z [rx ry rz], no options (ik)
   joints_opt,    ///< nothing or exactly n joint values (fk)
-  jog,           ///< nothing, `stop`, or <axis> <+v, -v, + or ->, then [speed=%] [frame=base or tool] (jog)
+  jog,           ///< nothing, `stop`, or <axis> <+v, -v, + or ->, then [speed=%] [frame=base, tool or user] (jog)
+  tool,          ///< nothing, NAME, `delete NAME`, or NAME x y z rx ry rz [mass=kg] [com=x,y,z] (tool)
+  frame,         ///< nothing, NAME, `delete NAME`, or NAME x y z rx ry rz (frame)
 };
 const char* to_string(ArgShape a);
 
@@ -93,15 +95,32 @@ inline constexpr CommandSpec kCommands[] = {
      "`stop` drops it",
      false},
     {"resume", Cmd::resume, ArgShape::none, "resume", "resume after a feed hold (same as ~)", "", false},
-    {"jog", Cmd::jog, ArgShape::jog, "jog <axis> <+v, -v, + or -> [speed=%] [frame=base or tool]; jog stop; jog",
+    {"jog", Cmd::jog, ArgShape::jog, "jog <axis> <+v, -v, + or -> [speed=%] [frame=base, tool or user]; jog stop; jog",
      "jog a joint (j1..jn) or the tool (x y z rx ry rz) by v, or continuously (+ / -); `jog` alone keeps a "
      "continuous jog alive, `jog stop` ends it",
      "a continuous jog stops by itself unless a jog line comes within console.jog_deadman_ms (the sender's "
      "keep-alive); lines streamed back to back retarget the running jog without stopping. speed: percent of the "
      "joint limits (joint jog, default console.jog_speed_pct) or of motion.max_linear_speed_mm_s and the angular "
-     "limit (tool jog). frame: the base's axes or the tool's as they were when the jog started (default base). At "
+     "limit (tool jog). frame: the base's axes, the tool's as they were when the jog started, or the active user "
+     "frame's (`frame`; default base); the point moved is the active tool's (`tool`). At "
      "a joint limit a jog stops on the limit (`alarm: jog stopped: joint 3 at its limit`); near a singularity a "
      "tool jog slows, then stops and says which joint. Refused (`error: busy`) while a move runs",
+     false},
+    {"tool", Cmd::tool, ArgShape::tool, "tool [NAME [x y z rx ry rz [mass=kg] [com=x,y,z]]]; tool delete NAME",
+     "tools (TCP offsets from the flange): list, select NAME, define NAME, delete NAME; tool0 is the flange",
+     "`tool` lists them (`*` marks the active one); `tool NAME` selects one: Cartesian moves, jogs, fk, ik, "
+     "status, M114 and the GRBL report then use its tool point; `tool NAME x y z rx ry rz` defines (or redefines) "
+     "one: the tool point and orientation in the flange frame, in the length and angle units (payload: mass= in "
+     "kg, com= x,y,z in the length unit, kept for dynamics). Definitions and the selection are kept in the frames "
+     "file (console.frames_file), written atomically; a definition that cannot be saved is not made. Refused "
+     "while the arm moves, jogs or has moves queued (`error: bad_state`)",
+     false},
+    {"frame", Cmd::frame, ArgShape::frame, "frame [NAME [x y z rx ry rz]]; frame delete NAME",
+     "user frames (work objects): list, select NAME, define NAME, delete NAME; base is the base frame",
+     "a user frame is a pose in the base frame; with one selected, Cartesian targets (movel, ik, G0/G1, $J=) are "
+     "in it and poses (fk, status, M114, the GRBL report) are reported in it. G54..G59 select the frames g54..g59 "
+     "(identity until set), `G10 L2 Pn X.. Y.. Z.. A.. B.. C..` sets g5(3+n) (P0: the active one; axes not given "
+     "are kept). Kept in the frames file like the tools; refused while the arm moves, jogs or has moves queued",
      false},
 };
 
@@ -124,7 +143,8 @@ inline constexpr GrblSpec kGrblCommands[] = {
     {"H", Cmd::grbl_home, "$H", "homing cycle (error:5 until homing is configured)", false},
     {"C", Cmd::grbl_check, "$C", "check mode on/off: G-code is parsed and its moves planned and checked, nothing moves", false},
     {"J=", Cmd::grbl_jog, "$J=[G90 or G91] [G20 or G21] [G53] X.. Y.. Z.. [A B C] F..",
-     "jog the tool in the base frame (G91 incremental, G90 absolute; F required, in G20/G21 units per minute); "
+     "jog the tool point in the active user frame, G53: the base frame (G91 incremental, G90 absolute; F required, "
+     "in G20/G21 units per minute); "
      "jog lines run back to back without stopping; 0x85 cancels",
      false},
 };

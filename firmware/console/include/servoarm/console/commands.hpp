@@ -49,6 +49,7 @@ enum class CmdError : std::uint8_t {
   plan_failed,       ///< planner refused (message says why)
   timeout,           ///< control thread did not answer in time
   estop,             ///< line dropped, not executed: an e-stop (Ctrl-X) arrived before it ran
+  storage,           ///< a file could not be written (the frames file): nothing changed, the old file kept
   internal,          ///< should not happen (message says what)
 };
 const char* to_string(CmdError e);
@@ -64,6 +65,8 @@ enum class Cmd : std::uint8_t {
   home_zero, ///< `home zero`: the current joint positions become joint zero (arm disabled)
   temperature,  ///< M105 (senders poll it): answers ok T:0 /0
   jog,       ///< `jog ...` (JogOp in Command::jog_op); GRBL `$J=` is grbl_jog
+  tool,      ///< `tool [NAME [x y z rx ry rz [mass= com=]]]`, `tool delete NAME` (FrameOp in frame_op)
+  frame,     ///< `frame ...` likewise; G54..G59 select g54..g59; G10 L2 Pn sets one (frame_op set_axes)
   // GRBL '$' commands (the GRBL dialect's, accepted in both dialects)
   grbl_jog,       ///< $J=<G-code words> (axes in axis_mask / vals, relative, speed from F: required)
   grbl_settings,  ///< $$
@@ -83,8 +86,16 @@ enum class JogOp : std::uint8_t {
   increment,    ///< `jog j3 +5`, `jog x -10`: by vals[0] (joint units / length / angle unit)
   continuous,   ///< `jog j3 +`, `jog rz -`: until stopped, a limit, or the deadman
 };
-/// The frame of a tool jog (`frame=`).
-enum class JogFrame : std::uint8_t { base, tool };
+/// The frame of a tool jog (`frame=`): the base's axes, the tool's, or the active user frame's.
+enum class JogFrame : std::uint8_t { base, tool, user };
+/// What a `tool` / `frame` line (or G54..G59, G10 L2) asks for.
+enum class FrameOp : std::uint8_t {
+  list,      ///< `tool` / `frame`: list them, the active one marked
+  select,    ///< `tool NAME` / `frame NAME` / G54..G59
+  define,    ///< `tool NAME x y z rx ry rz [mass=kg com=x,y,z]` / `frame NAME x y z rx ry rz`
+  remove,    ///< `tool delete NAME` / `frame delete NAME`
+  set_axes,  ///< G10 L2 Pn: the axes in axis_mask (vals[0..5], mm / deg) replace frame gN's; P0 = the active one
+};
 const char* to_string(Cmd c);
 
 struct GcodeModal {
@@ -104,6 +115,7 @@ struct Command {
   bool relative = false;                ///< gmove: G91 in effect
   bool rapid = false;                   ///< gmove: G0
   bool gcode = false;                   ///< line was G-code
+  bool g53 = false;                     ///< $J=: G53 (machine coordinates: the base frame, not the user frame)
   std::array<char, 16> topic{};         ///< `help <topic>`
   // jog
   JogOp jog_op = JogOp::keepalive;
@@ -111,6 +123,14 @@ struct Command {
   int jog_axis = 0;                     ///< joint (0-based), or 0..5 = x y z rx ry rz
   int jog_dir = 1;                      ///< continuous: +1 / -1
   JogFrame jog_frame = JogFrame::base;
+  // tool / frame
+  FrameOp frame_op = FrameOp::list;
+  std::array<char, 24> name{};          ///< tool / frame name (checked: letters, digits, _ -)
+  int g10_p = -1;                       ///< G10 L2 P: 0 = active user frame, 1..6 = g54..g59
+  bool has_mass = false;
+  double mass = 0;                      ///< kg
+  bool has_com = false;
+  std::array<double, 3> com{};          ///< length unit, in the tool frame
 };
 
 struct ParseResult {

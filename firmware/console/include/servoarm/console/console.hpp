@@ -21,8 +21,10 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "servoarm/console/commands.hpp"
+#include "servoarm/console/frames.hpp"
 #include "servoarm/console/requests.hpp"
 #include "servoarm/rt/controller.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -53,6 +55,9 @@ struct ConsoleConfig {
   double jog_speed_pct = 10.0;               ///< jog speed without speed=: percent of the joint / tool limits
   Dialect dialect = Dialect::native;         ///< of sessions that do not choose their own
   std::string robot_name;                    ///< for $I
+  /// Where the tools and user frames are kept (frames.hpp); "" = in memory only (they are
+  /// lost at exit, and `tool` / `frame` say so). App resolves console.frames_file.
+  std::string frames_file;
 };
 
 /// One connected client: its partial line, queued lines, G-code modal state.
@@ -70,6 +75,8 @@ struct Session {
   Dialect dialect = Dialect::native;
   bool check_mode = false;             ///< GRBL $C: G-code parsed and checked, nothing moves
   kin::JointVector check_tail;         ///< check mode: where the checked moves end
+  std::size_t check_tool = 0;          ///< check mode: the tool / frame G-code selects for the check
+  std::size_t check_frame = 0;         ///<   (definitions are not made in check mode, as GRBL's $C)
 };
 
 class Console {
@@ -143,6 +150,16 @@ class Console {
   /// of moves queued from now on.
   int feed_override() const { return feed_pct_; }
 
+  /// Load the tools and user frames of cfg.frames_file (a missing file: none yet). Call once,
+  /// before any line. "" or the one-line error (file:line:column); on error nothing is loaded
+  /// and armfw does not start (the file is never overwritten).
+  std::string load_frames();
+  /// Names of the active tool ("tool0" = the flange) and user frame ("base").
+  const std::string& active_tool() const { return tools_[tool_]->def.name; }
+  const std::string& active_frame() const { return frames_[frame_].name; }
+  /// The tool point's pose of joints `q` in the active user frame (SI), with the active tool.
+  kin::Pose pose_in_frame(const kin::JointVector& q) const;
+
   /// Motions queued by this console so far (ids 1..n).
   std::uint32_t last_motion_id() const { return next_id_ - 1; }
 
@@ -194,6 +211,37 @@ class Console {
   std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
   kin::IkSolver ik_solver() const;
   const kin::IkModel* ik_ = nullptr;  ///< the App's (outlives the console); nullptr: numeric fallback
+  // Tools and user frames (frames.hpp). A tool's chain is the controller's with the tool's
+  // TCP appended (its own IK model prepared from it); queued Cartesian moves and jogs point
+  // at it, so a slot is changed only while nothing moves, jogs or is queued. unique_ptr:
+  // stable addresses. [0] = tool0 (the flange: ik_), frames_[0] = base.
+  struct ToolSlot {
+    NamedPose def;
+    kin::Chain chain;
+    std::unique_ptr<kin::IkModel> own;
+    const kin::IkModel* model = nullptr;  ///< own.get(), ik_ for tool0, nullptr: numeric fallback
+  };
+  std::vector<std::unique_ptr<ToolSlot>> tools_;
+  std::vector<NamedPose> frames_;
+  std::size_t tool_ = 0, frame_ = 0;
+  const Session* sel_ = nullptr;   ///< the session executing a line (check mode has its own selection)
+  std::size_t sel_tool() const { return sel_ != nullptr && sel_->check_mode ? sel_->check_tool : tool_; }
+  std::size_t sel_frame() const { return sel_ != nullptr && sel_->check_mode ? sel_->check_frame : frame_; }
+  const ToolSlot& tool_slot() const { return *tools_[sel_tool()]; }
+  const kin::Pose& user_frame() const { return frames_[sel_frame()].pose; }
+  /// The active tool point's pose in the base frame.
+  kin::Pose tcp(const kin::JointVector& q) const;
+  std::unique_ptr<ToolSlot> make_tool(const NamedPose& def) const;
+  /// "" when tools and frames may change now, else why not.
+  std::string frames_refusal() const;
+  FramesData frames_data() const;
+  /// Save the frames file ("" ok, or the error); nothing to do without a file.
+  std::string save_frames() const;
+  void do_tool(Session& s, const Command& c);
+  void do_frame(Session& s, const Command& c);
+  std::string where_text() const;  ///< "tool=NAME frame=NAME"
+  std::string grbl_position(const kin::JointVector& q) const;
+  std::string grbl_wcs() const;  ///< "G54".."G59" for $G
   // Jogging: where the running jog is going (GRBL jog lines are relative to it).
   bool jog_tail_valid_ = false;
   bool jog_tail_tool_ = false;

@@ -50,6 +50,10 @@ struct JogSpec {
   double angular_speed = 0.5;    ///< rad/s about the path
   kin::CartesianLimits limits{}; ///< accelerations and jerks (velocities are the speeds above)
   kin::IkSolver ik{};            ///< the console's IK (nearest, within the limits)
+  /// Tool jog: the chain whose tool point moves (the active tool's: its `tool` is the TCP),
+  /// the one `ik` solves; nullptr = the controller's chain (the flange, tool0). The console
+  /// keeps it alive and unchanged while a jog may run (tool changes are refused then).
+  const kin::Chain* chain = nullptr;
 };
 
 /// Why a jog ended (Jogger::step's result once it is over).
