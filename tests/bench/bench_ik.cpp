@@ -15,6 +15,8 @@
 //                                  solution from a start 0.05 rad away
 //   ik/abb_irb2400_twist/servoarm  near-miss (0.01 deg twist of axes 2, 3): the
 //                                  general path it takes, with ist6 forced onto it
+//   ik_reduced/<model>/servoarm    issue 19: the reduced arms, 1 024 poses, all solutions
+//   ik_reduced/<model>/chain_path  the same verified through the chain's FK (as before)
 //   ik_class/<model>/<class>/servoarm  per-class worst cases of the OPW and UR
 //                                  arms: theta5 = 0, 1e-9, 1e-5, elbow stretched,
 //                                  shoulder singular, unreachable
@@ -356,6 +358,30 @@ void ik19(benchmark::State& st, const char* name, bool twist, Path19 path, Class
   st.counters["solutions"] = static_cast<double>(sols) / static_cast<double>(n);
 }
 
+// Issue 19, reduced arms (<= 100 ns for all their solutions): 1 024 poses from random
+// in-limit joints; servoarm = ik_solve_all (the cheap paths: verified through the
+// decomposition), chain_path = the same candidates each through the chain's FK and
+// Jacobian (detail::solve_reduced_slow, what ik_solve_all did before; not planar_2r).
+void ik_reduced(benchmark::State& st, const char* name, bool chain_path) {
+  const Fixture19& f = fixture19(name, false, Class19::random);
+  kin::IkResult r;
+  std::size_t i = 0;
+  long sols = 0, n = 0;
+  for (auto _ : st) {
+    const kin::Pose& T = f.targets[i++ % kPoses19];
+    if (chain_path) {
+      r.count = 0;
+      kin::detail::solve_reduced_slow(f.model, T, nullptr, r);
+    } else {
+      kin::ik_solve_all(f.model, T, nullptr, r);
+    }
+    benchmark::DoNotOptimize(r);
+    sols += r.count;
+    ++n;
+  }
+  st.counters["solutions"] = static_cast<double>(sols) / static_cast<double>(n);
+}
+
 const char* const kClosed[] = {"puma560", "puma560_craig", "stanford", "cylindrical_rpp_rrr", "ist6",
                                "rr_planar", "rrr_planar", "rlr_planar", "trr", "trl_r", "vvl_r"};
 const char* const kNumeric[] = {"puma560", "stanford", "ist6", "vvr_vr"};
@@ -377,6 +403,11 @@ const char* const kNumeric[] = {"puma560", "stanford", "ist6", "vvr_vr"};
     else
       benchmark::RegisterBenchmark((std::string("ik/") + m + "/numeric_near").c_str(), ik19, m, false,
                                    Path19::numeric_near, Class19::random);
+  }
+  for (const char* m : {"rr_planar", "rrr_planar", "rlr_planar", "trr", "trl_r", "vvl_r"}) {
+    benchmark::RegisterBenchmark((std::string("ik_reduced/") + m + "/servoarm").c_str(), ik_reduced, m, false);
+    if (std::string(m) != "rr_planar")
+      benchmark::RegisterBenchmark((std::string("ik_reduced/") + m + "/chain_path").c_str(), ik_reduced, m, true);
   }
   benchmark::RegisterBenchmark("ik/ist6/general_path", ik19, "ist6", false, Path19::general, Class19::random);
   benchmark::RegisterBenchmark("ik/abb_irb2400_twist/servoarm", ik19, "abb_irb2400", true, Path19::closed,

@@ -181,3 +181,103 @@ TEST(IkReduced, StretchedElbowIsOneSingularSolution) {
   CHECK(r.singular_kinds & kin::kSingularElbow);
   STRCMP_EQUAL("singular", kin::to_string(r.status));
 }
+
+#include "../../kinematics/src/ik/ik_detail.hpp"
+
+namespace {
+// The reference: every candidate through the chain's FK, Gauss-Newton and Jacobian
+// (detail::solve_reduced_slow, what solve_reduced did before its cheap paths), with
+// ik_solve_all's status rule.
+void solve_slow(const kin::IkModel& m, const kin::Pose& T, const kin::JointVector* ref, kin::IkResult& r) {
+  r.count = 0;
+  r.singular_kinds = 0;
+  kin::detail::solve_reduced_slow(m, T, ref, r);
+  bool any_in = false;
+  for (int i = 0; i < r.count; ++i) {
+    r.singular_kinds |= r.solutions[static_cast<std::size_t>(i)].singular;
+    any_in = any_in || r.solutions[static_cast<std::size_t>(i)].within_limits;
+  }
+  r.status = r.count == 0 ? kin::Status::unreachable
+             : !any_in    ? kin::Status::out_of_limits
+             : r.singular_kinds ? kin::Status::singular
+                                : kin::Status::ok;
+}
+}  // namespace
+
+TEST(IkReduced, CheapPathGivesWhatTheChainPathGives) {
+  // Issue 19 (reduced arms <= 100 ns): planar_3, spatial_3 and pitch_4 verify through the
+  // decomposition, not the chain's FK. Same solutions (1e-9), order, branches, limits and
+  // singular flags as the chain path, on random poses, with and without a reference, on
+  // poses with the elbow stretched or folded (joint 2 / 3 at 0 or pi, the prismatic joint
+  // at a limit), and out of reach.
+  const int n = std::max(2000, samples() / 10);
+  for (const Case& k : kCases) {
+    if (std::string(k.method) == "planar_2r") continue;
+    kin::IkModel m;
+    kin::ik_prepare(model(k.name), m);
+    CHECK_TEXT(kin::detail::solver_data(m).red_fast, k.name);
+    std::mt19937_64 rng(1919);
+    int flagged = 0;
+    for (int s = 0; s < n; ++s) {
+      kin::JointVector q = random_q(m.chain, rng);
+      const int cls = s % 5;
+      const int e = std::string(k.method) == "planar_3" ? 1 : 2;  // the joint that stretches the arm
+      if (cls == 1 || cls == 2) {
+        const kin::DhRow& row = m.chain.joint(e);
+        if (row.type == kin::JointType::revolute) q[e] = cls == 1 ? 0.0 : M_PI - 1e-9;
+        else q[e] = cls == 1 ? row.lower : row.upper;
+      }
+      kin::Pose T = fk(m.chain, q);
+      if (cls == 3) T.translation() *= 4.0;
+      const kin::JointVector ref = random_q(m.chain, rng);
+      for (const kin::JointVector* r : {static_cast<const kin::JointVector*>(nullptr), &ref}) {
+        kin::IkResult fast, slow;
+        kin::ik_solve_all(m, T, r, fast);
+        solve_slow(m, T, r, slow);
+        const std::string what = std::string(k.name) + " " + describe(q) + (r ? " ref " + describe(*r) : "");
+        STRCMP_EQUAL_TEXT(kin::to_string(slow.status), kin::to_string(fast.status), what.c_str());
+        LONGS_EQUAL_TEXT(slow.singular_kinds, fast.singular_kinds, what.c_str());
+        if (fast.singular_kinds) ++flagged;
+        if (cls == 1 || cls == 2) {
+          // Stretched / folded: the two roots lie ~1e-8 rad apart. The cheap path keeps
+          // them where they verify (one solution after de-duplication, as planar_2r); the
+          // chain path's Gauss-Newton may move them apart: the same configurations to 1e-6.
+          CHECK_TEXT(fast.count >= 1 && fast.count <= slow.count,
+                     (what + " counts " + std::to_string(fast.count) + " / " + std::to_string(slow.count)).c_str());
+          auto covered = [&](const kin::IkResult& x, const kin::IkResult& y) {
+            for (int i = 0; i < x.count; ++i) {
+              bool near = false;
+              for (int j = 0; j < y.count && !near; ++j)
+                near = gap(m.chain, x.solutions[static_cast<std::size_t>(i)].q, y.solutions[static_cast<std::size_t>(j)].q) < 1e-6;
+              if (!near) return false;
+            }
+            return true;
+          };
+          CHECK_TEXT(covered(fast, slow) && covered(slow, fast), what.c_str());
+          for (int i = 0; i < fast.count; ++i) {
+            const kin::Pose X = fk(m.chain, fast.solutions[static_cast<std::size_t>(i)].q);
+            CHECK_TEXT((X.translation() - T.translation()).norm() <= 1e-9, what.c_str());
+          }
+          continue;
+        }
+        LONGS_EQUAL_TEXT(slow.count, fast.count, what.c_str());
+        for (int i = 0; i < fast.count; ++i) {
+          const auto& a = fast.solutions[static_cast<std::size_t>(i)];
+          const auto& b = slow.solutions[static_cast<std::size_t>(i)];
+          // near-singular (flagged): a root clamped ~1e-8 rad off, polished by the chain path
+          const double tol = a.singular ? 1e-6 : 1e-9;
+          CHECK_TEXT(gap(m.chain, a.q, b.q) < tol, (what + " solution " + describe(a.q) + " vs " + describe(b.q)).c_str());
+          LONGS_EQUAL_TEXT(b.branch.shoulder, a.branch.shoulder, what.c_str());
+          LONGS_EQUAL_TEXT(b.branch.elbow, a.branch.elbow, what.c_str());
+          CHECK_TEXT(a.within_limits == b.within_limits, what.c_str());
+          LONGS_EQUAL_TEXT(b.singular, a.singular, what.c_str());
+          // and it is what it says: the chain's FK reaches the (reachable part of the) target
+          const kin::Pose X = fk(m.chain, a.q);
+          CHECK_TEXT((X.translation() - T.translation()).norm() <= 1e-9, what.c_str());
+          CHECK_TEXT(a.position_error <= 1e-9 && a.rotation_error <= 1e-9, what.c_str());
+        }
+      }
+    }
+    std::printf("\n  %-12s %d poses: cheap path = chain path, %d results flagged singular", k.name, n, flagged);
+  }
+}

@@ -85,8 +85,16 @@ struct IkSolverData {
   Eigen::Vector3d ur_u5 = Eigen::Vector3d::Zero();
   Eigen::Vector3d ur_c4z = Eigen::Vector3d::UnitZ();  ///< C4^T e_z
   // planar_2r (reduced.cpp): |(C1 Rz(m2) w3)_xy|^2 = red_co . (1, c2, s2).
+  // planar_3: the same for J2 (revolute or prismatic basis); pitch_4:
+  // |C2 J3(m3) w3|^2 = red_co . basis(m3). Fitted at set-up (target-independent).
   Eigen::Vector3d red_co = Eigen::Vector3d::Zero();
   bool red_fast = false;
+  // pitch_4 (reduced.cpp): Rrest = C2 C3 C4 rotations, axis 2 in the tool frame
+  // (red_n2 = row 2 of Rrest), and axis 2 in the frame after J1 motion as a unit
+  // (cos, sin) pair of its xy direction (red_u, red_v).
+  Eigen::Matrix3d red_Rrest = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d red_n2 = Eigen::Vector3d::UnitZ();
+  double red_u = 1, red_v = 0;
   bool ur_zrot = false;           ///< C2, C3 rotate about z: C1 Rz2 C2 Rz3 C3 = C1 Rz(m2 + m3 + gamma)
   double ur_gc = 1, ur_gs = 0;     ///< cos, sin gamma
   bool ur_tilt = false;  ///< u_z = cos(m5 - phi5) exactly (ur_u5 = (0, h = 1)): see ur.cpp wrist_roots
@@ -392,5 +400,9 @@ void solve_ur(const IkModel& m, const Pose& target, const JointVector* q_ref, Ik
 
 /// Every solution of a reduced arm: planar_2r, planar_3, spatial_3, pitch_4 (reduced.cpp).
 void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
+/// The same through the chain's FK and Jacobian for every candidate (what
+/// solve_reduced did before its cheap paths; their fallback for degenerate
+/// targets, and the reference they are tested against). Not for planar_2r.
+void solve_reduced_slow(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
 
 }  // namespace servoarm::kin::detail

@@ -360,6 +360,20 @@ void axes_at_zero(const IkSolverData& m, Eigen::Vector3d* z) {
   }
 }
 
+// Coefficients (a, b, c) of g(m) = a + b x + c y in the basis of a joint's
+// motion, from three samples of g (as reduced.cpp's fit_basis did per call).
+template <typename G>
+Eigen::Vector3d fit_reduced(bool prismatic, G g) {
+  const double s[3] = {0.0, prismatic ? 1.0 : kPi / 2, prismatic ? -1.0 : kPi};
+  Eigen::Matrix3d B;
+  Eigen::Vector3d v;
+  for (int i = 0; i < 3; ++i) {
+    B.row(i) = basis(prismatic, s[i]).transpose();
+    v[i] = g(s[i]);
+  }
+  return B.inverse() * v;
+}
+
 bool detect_reduced(IkModel& model) {
   IkSolverData& m = solver_data(model);
   if (m.n < 2 || m.n > 4 || prism(m, 0)) return false;
@@ -386,12 +400,18 @@ bool detect_reduced(IkModel& model) {
   if (planar && m.n == 3 && !prism(m, 2)) {
     model.method = IkMethod::planar_3;
     m.w3 = C(m, 2).translation();  // a point of axis 3, frame after J2 motion
+    m.red_co = fit_reduced(prism(m, 1), [&](double m2) {
+      const Eigen::Vector3d f = C(m, 1) * (joint_motion(prism(m, 1), m2) * m.w3);
+      return f.x() * f.x() + f.y() * f.y();
+    });
+    m.red_fast = detail::all_finite(m.red_co);
     return true;
   }
   if (m.n == 3) {
     model.method = IkMethod::spatial_3;
     m.w3 = C(m, 3).translation();  // tool point after the J3 motion
     setup_position(m);
+    m.red_fast = true;  // reduced.cpp's cheap path (solve_position's pairs)
     // Position only: needs one equation free of q2 or of q3, or the resultant.
     return true;
   }
@@ -399,6 +419,18 @@ bool detect_reduced(IkModel& model) {
       (prism(m, 2) || parallel(z[2], z[1]))) {
     model.method = IkMethod::pitch_4;
     m.w3 = C(m, 3).translation();  // a point of axis 4, frame after J3 motion
+    m.red_co = fit_reduced(prism(m, 2), [&](double m3) {
+      return (C(m, 2) * (joint_motion(prism(m, 2), m3) * m.w3)).squaredNorm();
+    });
+    m.red_Rrest = C(m, 2).linear() * C(m, 3).linear() * C(m, 4).linear();
+    m.red_n2 = m.red_Rrest.transpose().col(2);
+    const Eigen::Vector3d n21 = C(m, 1).linear().col(2);
+    const double h = std::hypot(n21.x(), n21.y());
+    if (h > 1e-9) {
+      m.red_u = n21.x() / h;
+      m.red_v = n21.y() / h;
+      m.red_fast = detail::all_finite(m.red_co);
+    }
     return true;
   }
   return false;
