@@ -1,0 +1,98 @@
+// Blending (blend.hpp): the cost of appending one blended segment to a queue
+// that is executing, and of one sample.
+//   plan/blend_append6/servoarm   append one random 6-joint waypoint with a blend
+//                                 tolerance (1-D profile x 3 candidate shares, the
+//                                 overlap search with its exact limit checks);
+//                                 the queue is retired as it goes, t_earliest = the
+//                                 time 10 ms after the previous segment's start
+//   plan/blend_append6_exact/servoarm  same with tolerance 0 (exact stops): the
+//                                 cost of one segment without the search
+//   sample/blend6/servoarm        one sample (pos, vel, acc) of the queue
+// Counters: checks = exact limit checks per append (mean).
+#include <benchmark/benchmark.h>
+
+#include <random>
+#include <vector>
+
+#include "servoarm/kinematics/blend.hpp"
+
+namespace {
+using namespace servoarm;
+
+constexpr int kInputs = 1024;
+
+kin::JointLimits blend_limits() {
+  kin::JointLimits l;
+  l.n = 6;
+  for (int i = 0; i < 6; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    l.dyn[k] = i < 3 ? kin::JointDynamics{2.0, 8.0, 80.0} : kin::JointDynamics{3.0, 15.0, 150.0};
+    l.lower[k] = -3.0;
+    l.upper[k] = 3.0;
+  }
+  return l;
+}
+
+const std::vector<kin::JointVector>& waypoints() {
+  static const std::vector<kin::JointVector> w = [] {
+    std::mt19937_64 rng(99);
+    std::uniform_real_distribution<double> u(-2.0, 2.0);
+    std::vector<kin::JointVector> v;
+    for (int k = 0; k < kInputs; ++k) {
+      kin::JointVector q(6);
+      for (int i = 0; i < 6; ++i) q[i] = u(rng);
+      v.push_back(q);
+    }
+    return v;
+  }();
+  return w;
+}
+
+kin::JointBlendQueue<16> g_queue;
+
+void append_bench(benchmark::State& state, double tol) {
+  const auto& w = waypoints();
+  g_queue.reset(blend_limits(), w[0]);
+  std::size_t k = 1;
+  double checks = 0, appends = 0;
+  for (auto _ : state) {
+    if (g_queue.size() >= 8) {
+      // The RT thread has moved on: retire what has ended (not timed).
+      state.PauseTiming();
+      g_queue.retire(g_queue.at(g_queue.size() - 4).end());
+      state.ResumeTiming();
+    }
+    const double t_earliest = g_queue.empty() ? 0.0 : g_queue.at(g_queue.size() - 1).start + 0.01;
+    kin::BlendReport rep;
+    const kin::BlendStatus s = g_queue.append(w[k], tol, t_earliest, &rep);
+    benchmark::DoNotOptimize(s);
+    checks += rep.checks;
+    appends += 1;
+    k = k + 1 < w.size() ? k + 1 : 1;
+  }
+  state.counters["checks"] = checks / std::max(appends, 1.0);
+}
+
+void BM_BlendAppend(benchmark::State& state) { append_bench(state, 0.3); }
+BENCHMARK(BM_BlendAppend)->Name("plan/blend_append6/servoarm");
+
+void BM_BlendAppendExact(benchmark::State& state) { append_bench(state, 0.0); }
+BENCHMARK(BM_BlendAppendExact)->Name("plan/blend_append6_exact/servoarm");
+
+void BM_BlendSample(benchmark::State& state) {
+  const auto& w = waypoints();
+  g_queue.reset(blend_limits(), w[0]);
+  for (int k = 1; k < 12; ++k) g_queue.append(w[static_cast<std::size_t>(k)], 0.3);
+  const double T = g_queue.end_time();
+  kin::JointVector p, v, a;
+  double t = 0;
+  for (auto _ : state) {
+    g_queue.sample(t, p, v, a);
+    benchmark::DoNotOptimize(p.data());
+    t += 0.000731;
+    if (t > T) t = 0;
+  }
+}
+BENCHMARK(BM_BlendSample)->Name("sample/blend6/servoarm");
+
+}  // namespace
