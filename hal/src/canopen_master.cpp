@@ -453,8 +453,9 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
   // A drive without 6502h is taken at its word (the 6061h checks below and at homing catch it).
   jt.modes = 0;
   std::uint32_t modes = 0;
-  r = sdo_.read_u32(n, cia402::kSupportedModes, 0, modes);
   const HomingSpec& hs = cfg_.joints[j].homing;
+  if (cfg_.check_supported_modes || hs.kind == HomingKind::cia402) r = sdo_.read_u32(n, cia402::kSupportedModes, 0, modes);
+  else r.status = Status::sdo_abort;  // not asked: taken at its word
   if (r.status == Status::ok) {
     jt.modes = modes;
     if (!(modes & cia402::kSupportsCsp)) {

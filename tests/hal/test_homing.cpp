@@ -281,13 +281,24 @@ TEST(Homing, DriveWithoutHomingIsRefusedAtStartNamingTheJoint) {
 
 TEST(Homing, Epos4StyleModeMaskAndAMethodTheDriveLacks) {
   // 0x252 in CiA 402's layout: bits 1, 4, 6, 9 - neither CSP (bit 7) nor homing (bit 5).
-  Rig r(2);
+  Rig r(2, [](CanopenMasterConfig& cfg) { cfg.check_supported_modes = true; });
   sim::DriveQuirks q;
   q.supported_modes = 0x252;
   r.drive(1).set_quirks(q);
   LONGS_EQUAL(int(Status::not_supported), int(r.start()));
   STRCMP_EQUAL("joint 1 (node 2): the drive does not support cyclic synchronous position mode (6502h = 0x00000252)",
                r.master->last_error());
+  // Not asked (the default, no drive homing): the 6060h = 8 request decides, as before.
+  Rig r0(2);
+  r0.drive(1).set_quirks(q);
+  LONGS_EQUAL(int(Status::sdo_abort), int(r0.start()));
+  STRCMP_CONTAINS("node 2: SDO write 0x6060:0 = 0x8 (mode of operation: cyclic synchronous position) failed",
+                  r0.master->last_error());
+  // A homing joint reads 6502h anyway, and 0x252 has no homing (bit 5) either.
+  Rig r1(2, [](CanopenMasterConfig& cfg) { cfg.joints[1].homing = drive_homing(21); });
+  r1.drive(1).set_quirks(q);
+  LONGS_EQUAL(int(Status::not_supported), int(r1.start()));
+  STRCMP_CONTAINS("joint 1 (node 2): the drive does not support cyclic synchronous position mode", r1.master->last_error());
   // With CSP but without homing, and homing configured:
   Rig r2(2, [](CanopenMasterConfig& cfg) { cfg.joints[1].homing = drive_homing(21); });
   q.supported_modes = 0x252 | cia402::kSupportsCsp;

@@ -18,8 +18,9 @@
 // every read() - so within timeout + one cycle.
 //
 // Homing (issue 17, docs/servo-bus.md#homing), per joint (CanopenJointConfig::homing):
-//   start():  6502h read: a drive without CSP (bit 7), or without homing mode (bit 5) for a
-//             joint with HomingKind::cia402, is refused naming the joint; 6098h written (a
+//   start():  6502h read (for HomingKind::cia402 joints, or every joint with
+//             check_supported_modes): a drive without CSP (bit 7), or without homing mode
+//             (bit 5) for a cia402 joint, is refused naming the joint; 6098h written (a
 //             method the drive refuses is refused at bring-up, naming the joint).
 //   cia402:   a per-joint state machine advanced in read() with non-blocking expedited SDO
 //             (one outstanding per node; answers routed from read(), timed against `now`):
@@ -90,6 +91,10 @@ struct CanopenMasterConfig {
   /// 0 = one attempt (a drive that is still booting is refused at once).
   Duration boot_timeout = 0;
   Duration boot_retry = 200 * kMillisecond;
+  /// Read 6502h (supported drive modes) at bring-up for every joint and refuse a drive without
+  /// CSP (bit 7). Off by default: then only joints with HomingKind::cia402 read it (and need
+  /// bits 5 and 7), and a plain CSP bring-up sends the same frames as before issue 17.
+  bool check_supported_modes = false;
   Duration state_timeout = 500 * kMillisecond;      ///< max time a drive may sit in one state while enabling
   bool produce_sync = true;
   /// start() installs receive filters on the bus that pass only frames whose node part
@@ -144,7 +149,7 @@ class CanopenServoBus final : public ServoBus {
   }
   /// Real-time: describe joint j's homing outcome in `buf` ("joint 3 (node 3): homing timeout
   /// after 2000 ms waiting for homing attained (statusword 0x0637)"; "" when not failed).
-  void describe_homing(std::size_t j, char* buf, std::size_t size) const;
+  void describe_homing(std::size_t j, char* buf, std::size_t size) const override;
   /// Set-up/diagnostics: 6502h as read by start() (0 when the drive has none).
   std::uint32_t supported_modes(std::size_t j) const { return j < cfg_.joint_count ? joints_[j].modes : 0; }
   /// Name of a homing step (HomingProgress::step) for progress reports.

@@ -161,6 +161,13 @@ class ServoBus {
     (void)j;
     return {HomingPhase::attained, Status::ok, 0};
   }
+  /// Real-time: one line on joint `j`'s failed homing, naming the joint and the cause, into
+  /// `buf` (e.g. "joint 1 (node 2): homing timeout after 1500 ms waiting for homing attained
+  /// (statusword bits 10, 12) (statusword 0x0637)"); "" when its homing did not fail.
+  virtual void describe_homing(std::size_t j, char* buf, std::size_t size) const {
+    (void)j;
+    if (size > 0) buf[0] = '\0';
+  }
   /// Joint `j`'s configured homing kind (none when the protocol has no homing).
   virtual HomingKind homing_kind(std::size_t j) const {
     (void)j;
