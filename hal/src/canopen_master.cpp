@@ -975,10 +975,17 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
     if (!jt.sdo.done()) return false;
     jt.sdo.clear();
     if (jt.sdo.result() == Status::ok) return true;
-    std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: SDO %s 0x%04X:%u failed: %s (abort 0x%08X: %s)",
-                  j, unsigned(jt.node), write ? "write" : "read", unsigned(index), unsigned(sub),
-                  to_string(jt.sdo.result()), unsigned(jt.sdo.abort_code()),
-                  jt.sdo.abort_code() ? sdo::abort_text(jt.sdo.abort_code()) : "-");
+    if (returning && jt.hstatus != Status::ok && jt.hmsg[0] != '\0') {
+      // Keep the cause; say that the way back failed too.
+      const std::size_t used = std::strlen(jt.hmsg);
+      std::snprintf(jt.hmsg + used, sizeof jt.hmsg - used, "; back to CSP: SDO %s 0x%04X %s",
+                    write ? "write" : "read", unsigned(index), to_string(jt.sdo.result()));
+    } else {
+      std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: SDO %s 0x%04X:%u failed: %s (abort 0x%08X: %s)",
+                    j, unsigned(jt.node), write ? "write" : "read", unsigned(index), unsigned(sub),
+                    to_string(jt.sdo.result()), unsigned(jt.sdo.abort_code()),
+                    jt.sdo.abort_code() ? sdo::abort_text(jt.sdo.abort_code()) : "-");
+    }
     const Status why = jt.sdo.result() == Status::sdo_abort ? Status::drive_refused : jt.sdo.result();
     if (returning) {
       if (jt.hstatus == Status::ok) jt.hstatus = why;

@@ -604,3 +604,27 @@ TEST(Homing, SeededRunsSpreadOfThePositionAfterHoming) {
                 m, runs, lo, hi, hi - lo, tsum / runs);
   }
 }
+
+TEST(Homing, AFaultOrHeartbeatLossDuringHomingFailsIt) {
+  for (int kind = 0; kind < 2; ++kind) {
+    Rig r(2, [](CanopenMasterConfig& cfg) { cfg.joints[1].homing = drive_homing(19); });
+    r.drive(1).switches().home_lo = 1e7;  // far away: still searching
+    r.drive(1).switches().home_hi = kInf;
+    r.bring_up();
+    LONGS_EQUAL(int(Status::ok), int(r.master->start_homing(1, r.rig.clock.now())));
+    for (int k = 0; k < 300; ++k) r.cycle();
+    if (kind == 0) r.drive(1).inject_emcy(0x2310, r.rig.clock.now(), *r.rig.sim_ep);
+    else r.drive(1).faults().silent = true;
+    for (int k = 0; k < 3000 && r.master->homing(1).phase == HomingPhase::running; ++k) r.cycle();
+    const HomingProgress p = r.master->homing(1);
+    LONGS_EQUAL(int(HomingPhase::failed), int(p.phase));
+    LONGS_EQUAL(int(kind == 0 ? Status::drive_fault : Status::heartbeat_lost), int(p.status));
+    char msg[192];
+    r.master->describe_homing(1, msg, sizeof msg);
+    STRCMP_CONTAINS(kind == 0 ? "joint 1 (node 2): homing drive_fault" : "joint 1 (node 2): homing heartbeat_lost", msg);
+    LONGS_EQUAL(int(JointState::fault), int(r.master->feedback(1).state));
+    // The other joint is untouched; the faulted drive was taken back to CSP when it could answer.
+    LONGS_EQUAL(int(JointState::enabled), int(r.master->feedback(0).state));
+    if (kind == 0) LONGS_EQUAL(cia402::kModeCsp, r.drive(1).mode_display());
+  }
+}

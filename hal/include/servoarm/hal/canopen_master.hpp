@@ -221,7 +221,7 @@ class CanopenServoBus final : public ServoBus {
     int retries = 0;
     double hs_demand = 0, hs_v = 0, hs_goal = 0;  ///< hard_stop: counts, counts/s
     TimePoint hs_last = 0;
-    char hmsg[128] = {};
+    char hmsg[192] = {};
   };
   struct MapEntry {
     std::uint16_t index;
