@@ -55,13 +55,17 @@
 // exact checks) for which all of the above hold, and for which the new segment
 // starts no earlier than `t_earliest` (the past, and what the RT thread is
 // about to sample, is never changed). If no overlap > 0 passes, the corner is
-// an exact stop. A limit is never exceeded: every accepted overlap has been
+// an exact stop (also chosen where stopping is faster than the best blend). A limit is never exceeded: every accepted overlap has been
 // checked, and tau = 0 (an exact stop) always passes.
 //
-// Appending is bounded work: appending segment k+1 plans one 1-D profile and
-// searches the overlap with segment k only; nothing already queued changes
-// (segment k's profile is kept as it is -- superposition adds the new segment
-// on top). See tests/bench/bench_blend.cpp for the time per segment.
+// Appending is bounded work: appending segment k+1 plans at most four 1-D
+// profiles (three candidates for k+1, and k again at full limits) and searches
+// the overlap with segment k only: at most 6 searches (3 candidates, with k as
+// it is and replanned) of at most 43 exact checks each. Nothing
+// that has started changes: segment k is replanned only if it starts after
+// t_earliest and from rest (then nothing before it depends on its profile), and
+// superposition adds segment k+1 on top of what is queued. See
+// tests/bench/bench_blend.cpp for the time per segment.
 //
 // Real-time: sample() is O(log Capacity) and never fails; retire() is O(1)
 // amortised. Both heap-free.
