@@ -377,6 +377,8 @@ Eigen::Vector3d fit_reduced(bool prismatic, G g) {
 bool detect_reduced(IkModel& model) {
   IkSolverData& m = solver_data(model);
   if (m.n < 2 || m.n > 4 || prism(m, 0)) return false;
+  // reduced.cpp multiplies by these as copies of signed columns where they are one
+  for (int i = 0; i <= m.n; ++i) m.perm[static_cast<std::size_t>(i)] = signed_perm(C(m, i).linear());
   Eigen::Vector3d z[kMaxJoints];
   axes_at_zero(m, z);
   const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();

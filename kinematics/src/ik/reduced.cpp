@@ -143,6 +143,17 @@ inline void turn(Eigen::Matrix3d& R, bool prismatic, double c, double s) {
   R.col(1) = c * b - s * a;
 }
 
+// A times the rotation of C_i: where that is a signed permutation (the usual
+// 0 / +-90 degree DH angles; IkSolverData::perm) a copy of signed columns.
+inline Eigen::Matrix3d mul_c(const IkSolverData& m, const Eigen::Matrix3d& A, int i) {
+  const IkSignedPerm& p = m.perm[static_cast<std::size_t>(i)];
+  if (!p.is) return A * C(m, i).linear();
+  Eigen::Matrix3d out;
+  for (int k = 0; k < 3; ++k)
+    out.col(k) = p.sign[static_cast<std::size_t>(k)] * A.col(p.idx[static_cast<std::size_t>(k)]);
+  return out;
+}
+
 // (c, s) of atan2(y1, x1) - atan2(y0, x0) for (x0, y0) -> (x1, y1) (the
 // rotation about z turning one onto the other); false when either is ~0.
 inline bool turn_between(double x0, double y0, double x1, double y1, double eps2, double& c, double& s) {
@@ -172,8 +183,7 @@ void store_reduced(const IkModel& model, const Pose& target, const JointVector* 
     if (prism(m, j)) t += mc.c[j] * R.col(2);
     else turn(R, false, mc.c[j], mc.s[j]);
     t += R * C(m, j + 1).translation();
-    const Eigen::Matrix3d Rn = R * C(m, j + 1).linear();
-    R = Rn;
+    R = mul_c(m, R, j + 1);
   }
   if (k_elbow > 0) {
     Eigen::Vector3d col[3];
@@ -233,18 +243,18 @@ void solve_planar_3_fast(const IkModel& model, const Pose& target, const double*
   const IkSolverData& m = solver_data(model);
   const Eigen::Matrix3d& R0 = C(m, 0).linear();
   const Eigen::Matrix3d& Rn = C(m, m.n).linear();
-  const Eigen::Matrix3d X = R0.transpose() * target.linear() * Rn.transpose();
-  double cp = X(0, 0), sp = X(1, 0);
+  // X = R0^T R_target Rn^T: only X(0, 0), X(1, 0) are needed
+  const Eigen::Vector3d xv = target.linear() * Rn.row(0).transpose();
+  double cp = R0.col(0).dot(xv), sp = R0.col(1).dot(xv);
   const double hp = cp * cp + sp * sp;
   if (!(hp > 1e-24)) return solve_reduced_slow(model, target, q_ref, res);
   const double ih = 1.0 / std::sqrt(hp);
   cp *= ih;
   sp *= ih;
-  Eigen::Matrix3d Rz0;
-  Rz0 << cp, -sp, 0, sp, cp, 0, 0, 0, 1;
+  Eigen::Matrix3d R0z = R0;  // R0 Rz(psi) = eff.R Rn^T
+  turn(R0z, false, cp, sp);
   Pose eff;
-  const Eigen::Matrix3d R0z = R0 * Rz0;  // eff.R Rn^T
-  eff.linear() = R0z * Rn;
+  eff.linear() = mul_c(m, R0z, m.n);
   eff.translation() = target.translation();
   // frame after the last joint motion: P = eff.t - R0z Rn^T... = eff.t - eff.R Cn^-1 part
   const Eigen::Vector3d P = target.translation() - R0z * C(m, m.n).translation();
@@ -267,16 +277,16 @@ void solve_planar_3_fast(const IkModel& model, const Pose& target, const double*
     }
     const Eigen::Vector3d f = C(m, 1) * w;
     double c1, s1;
-    if (std::hypot(f.x(), f.y()) < 1e-9 * m.scale ||
+    if (f.x() * f.x() + f.y() * f.y() < 1e-18 * m.scale * m.scale ||
         !turn_between(f.x(), f.y(), p0.x(), p0.y(), 1e-36 * m.scale * m.scale * m.scale * m.scale, c1, s1))
       detail::sincos_poly(mref[0], s1, c1);
     set_rev(mc, 0, c1, s1);
     // J3 from the rotation: Rz(m3) = (R_before)^T eff.R Rn^T, R_before = R0 Rz1 C1 J2 C2
     Eigen::Matrix3d Rb = R0;
     turn(Rb, false, c1, s1);
-    Rb = (Rb * C(m, 1).linear()).eval();
+    Rb = mul_c(m, Rb, 1);
     turn(Rb, p1, mc.c[1], mc.s[1]);
-    Rb = (Rb * C(m, 2).linear()).eval();
+    Rb = mul_c(m, Rb, 2);
     double c3 = Rb.col(0).dot(R0z.col(0)), s3 = Rb.col(1).dot(R0z.col(0));
     const double h3 = c3 * c3 + s3 * s3;
     if (!(h3 > 1e-24)) continue;
@@ -303,9 +313,10 @@ void solve_pitch_4_fast(const IkModel& model, const Pose& target, const JointVec
   const double c1 = a * m.red_u + b * m.red_v, s1 = b * m.red_u - a * m.red_v;
   Eigen::Matrix3d R1 = R0;
   turn(R1, false, c1, s1);
-  R1 = (R1 * C(m, 1).linear()).eval();
-  const Eigen::Matrix3d X = R1.transpose() * target.linear() * m.red_Rrest.transpose();
-  double cs = X(0, 0), ss = X(1, 0);
+  R1 = mul_c(m, R1, 1);
+  // X = R1^T R_target Rrest^T: only X(0, 0), X(1, 0) are needed
+  const Eigen::Vector3d xv = target.linear() * m.red_Rrest.row(0).transpose();
+  double cs = R1.col(0).dot(xv), ss = R1.col(1).dot(xv);
   const double hs = cs * cs + ss * ss;
   if (!(hs > 1e-24)) return solve_reduced_slow(model, target, q_ref, res);
   const double is = 1.0 / std::sqrt(hs);
@@ -346,9 +357,9 @@ void solve_pitch_4_fast(const IkModel& model, const Pose& target, const JointVec
     // J4: Rz(m4) = (R1 Rz2 C2 J3 C3)^T Rt
     Eigen::Matrix3d Rb = R1;
     turn(Rb, false, c2, s2);
-    Rb = (Rb * C(m, 2).linear()).eval();
+    Rb = mul_c(m, Rb, 2);
     turn(Rb, p2, mc.c[2], mc.s[2]);
-    Rb = (Rb * C(m, 3).linear()).eval();
+    Rb = mul_c(m, Rb, 3);
     double c4 = Rb.col(0).dot(Rt.col(0)), s4 = Rb.col(1).dot(Rt.col(0));
     const double h4 = c4 * c4 + s4 * s4;
     if (!(h4 > 1e-24)) continue;
@@ -389,7 +400,7 @@ void solve_spatial_3_fast(const IkModel& model, const Pose& target, const double
     const Eigen::Vector3d f = C(m, 1) * w;
     std::uint8_t sing = 0;
     double c1, s1;
-    if (std::hypot(f.x(), f.y()) < 1e-9 * m.scale ||
+    if (f.x() * f.x() + f.y() * f.y() < 1e-18 * m.scale * m.scale ||
         !turn_between(f.x(), f.y(), p0.x(), p0.y(), 1e-36 * m.scale * m.scale * m.scale * m.scale, c1, s1)) {
       detail::sincos_poly(mref[0], s1, c1);
       sing |= kSingularShoulder;
