@@ -452,6 +452,16 @@ int cli_plan(int argc, char** argv) {
   kin::MovelOptions opt;
   opt.override = ov;
   opt.allow_slowdown = !a.no_slowdown;
+  {
+    // As for movej: a lower bound of the duration before planning (the planner's answer to
+    // absurd limits depends on the platform's rounding). Unscaled limits: an override only
+    // lengthens the move, so the bound holds.
+    const double len = (target.translation() - x0.translation()).norm();
+    const double ang = Eigen::AngleAxisd(x0.linear().transpose() * target.linear()).angle();
+    const double at_least = std::max({len / cl.linear_velocity, ang / cl.angular_velocity,
+                                      2.0 * std::sqrt(len / cl.linear_acceleration)});
+    if (at_least > a.max_duration) return check_duration(a, at_least);
+  }
   auto tr = std::make_unique<kin::CartesianTrajectory>();  // ~40 kB: not on the stack
   auto model = std::make_unique<kin::IkModel>();
   kin::PathReport rep;
