@@ -212,6 +212,18 @@ TEST(ConsoleFrames, G10L2SetsAWorkOffsetAndG54ToG59SelectOne) {
   CHECK_TEXT(answer_ok(r.cmd("G10 L2 P0 Z30")), r.s.out.c_str());
   a = r.cmd("$#");
   CHECK_TEXT(has(a, "[G55:100.000,-50.000,30.000]"), a.c_str());
+  // G10 L20: "zero here" - the tool point gets the given coordinates in frame g56
+  CHECK_TEXT(answer_ok(r.cmd("G10 L20 P3 X0 Y0 Z10")), r.s.out.c_str());
+  CHECK(answer_ok(r.cmd("G56")));
+  {
+    std::string l = "fk";  // at the commanded joints (L20 takes where the arm is commanded to be)
+    char b[32];
+    for (int j = 0; j < 6; ++j) std::snprintf(b, sizeof b, " %.9f", r.q()[j] / kDeg), l += b;
+    a = r.cmd(l);
+  }
+  CHECK_TEXT(std::fabs(field(a, "x")) < 1e-6 && std::fabs(field(a, "y")) < 1e-6 && std::fabs(field(a, "z") - 10) < 1e-6 &&
+                 has(a, "frame=g56"), a.c_str());
+  CHECK(answer_ok(r.cmd("G55")));
   // the GRBL report gives the work position and the offset
   r.s.dialect = Dialect::grbl;
   a = r.app.console->grbl_report(r.s);
@@ -270,7 +282,8 @@ TEST(ConsoleFrames, BadToolAndFrameInputIsAOneLineErrorAndChangesNothing) {
       {"frame base 0 0 0 0 0 0", "error: bad_option"},
       {"frame f1 0 0 0 0 0 0 mass=1", "error: bad_option"},
       {"frame nosuch", "error: bad_option"},
-      {"G10 L20 P1 X0", "error: unsupported"},
+      {"G10 L3 P1 X0", "error: unsupported"},
+      {"G10 L20 P1 A5", "error: unsupported"},
       {"G10 L2 P7 X0", "error: out_of_range"},
       {"G10 L2 X0", "error: arg_count"},
       {"G10 P1 X0", "error: arg_count"},

@@ -47,6 +47,8 @@ constexpr CodeSpec kGcodes[] = {
     {"G90 | G91", "absolute | relative X Y Z A B C"},
     {"G10 L2 P<0-6> [X Y Z A B C]", "set work offset n (frame g5(3+n), P0 the active one): its origin X Y Z (mm) and "
                                      "orientation A B C (deg) in the base; axes not given are kept; kept in the frames file"},
+    {"G10 L20 P<0-6> [X Y Z]", "set work offset n so that the tool point, where it is now, has these coordinates in it "
+                               "(the frame's orientation kept): a sender's \"zero here\""},
     {"G54 .. G59", "select the user frame g54 .. g59 (identity until G10 L2 sets it), on a line of its own"},
     {"G53", "on a G0/G1 line: that line in machine coordinates (the base frame)"},
     {"G17 G94 | M5 M9 | M2 M30", "accepted, nothing to do (the only plane and feed mode; no spindle or coolant; program end)"},

@@ -330,8 +330,10 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
   if (other_letter == 'G' && other == 10) {
     // G10 L2 Pn: set work offset n (frame g5(3+n)); P0 = the active one. Absolute values
     // (mm / deg), axes not given keep theirs.
-    if (l < 0) return fail(CmdError::arg_count, "G-code: G10 needs L2 (G10 L2 Pn X.. Y.. Z.. A.. B.. C..)");
-    if (l != 2) return fail(CmdError::unsupported, "G-code: G10 L%g not supported (G10 L2 only: set a work offset)", l);
+    if (l < 0) return fail(CmdError::arg_count, "G-code: G10 needs L2 or L20 (G10 L2 Pn X.. Y.. Z.. A.. B.. C..)");
+    if (l != 2 && l != 20) return fail(CmdError::unsupported, "G-code: G10 L%g not supported (G10 L2 or L20: set a work offset)", l);
+    if (l == 20 && (given[3] || given[4] || given[5]))
+      return fail(CmdError::unsupported, "G-code: G10 L20 takes X Y Z only (the frame's orientation is kept; G10 L2 sets A B C)");
     if (p < 0) return fail(CmdError::arg_count, "G-code: G10 L2 needs P0..P6 (P0: the active frame, P1..P6: G54..G59)");
     if (p > 6 || p != std::floor(p)) return fail(CmdError::out_of_range, "G-code: G10 L2 P%g: P must be 0..6", p);
     if (sval >= 0) return fail(CmdError::bad_option, "G-code: G10 takes no S");
@@ -339,6 +341,7 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
     c.cmd = Cmd::frame;
     c.frame_op = FrameOp::set_axes;
     c.g10_p = static_cast<int>(p);
+    c.g10_l20 = l == 20;
     for (int k = 0; k < 6; ++k) {
       if (!given[static_cast<std::size_t>(k)]) continue;
       c.axis_mask = static_cast<std::uint8_t>(c.axis_mask | (1u << k));

@@ -1561,7 +1561,18 @@ void Console::do_frame(Session& s, const Command& c) {
   }
   // define (frame NAME x y z rx ry rz: console units) or G10 L2 (mm / deg, axes not given kept)
   double xyz[3], rpy[3];
-  if (c.frame_op == FrameOp::set_axes) {
+  if (c.frame_op == FrameOp::set_axes && c.g10_l20) {
+    // G10 L20: move the frame's origin (its axes kept) so that the tool point, where it is
+    // now, has the given coordinates in it: w = R^T (p - t), w_k := v_k, t = p - R w.
+    const kin::Pose cur = at < frames_.size() ? frames_[at].pose : kin::Pose::Identity();
+    const Eigen::Vector3d p = tcp(tail()).translation();
+    Eigen::Vector3d w = cur.linear().transpose() * (p - cur.translation());
+    for (int k = 0; k < 3; ++k)
+      if (c.axis_mask & (1u << k)) w[k] = c.vals[static_cast<std::size_t>(k)] * 1e-3;
+    const Eigen::Vector3d t = p - cur.linear() * w;
+    const Eigen::Vector3d r = kin::rpy_from_rotation(cur.linear());
+    for (int k = 0; k < 3; ++k) xyz[k] = t[k], rpy[k] = r[k];
+  } else if (c.frame_op == FrameOp::set_axes) {
     const kin::Pose cur = at < frames_.size() ? frames_[at].pose : kin::Pose::Identity();
     const Eigen::Vector3d r = kin::rpy_from_rotation(cur.linear());
     for (int k = 0; k < 3; ++k) {

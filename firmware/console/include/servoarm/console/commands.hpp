@@ -126,7 +126,8 @@ struct Command {
   // tool / frame
   FrameOp frame_op = FrameOp::list;
   std::array<char, 24> name{};          ///< tool / frame name (checked: letters, digits, _ -)
-  int g10_p = -1;                       ///< G10 L2 P: 0 = active user frame, 1..6 = g54..g59
+  int g10_p = -1;                       ///< G10 L2 / L20 P: 0 = active user frame, 1..6 = g54..g59
+  bool g10_l20 = false;                 ///< G10 L20: the axes given are where the tool point is now, in that frame
   bool has_mass = false;
   double mass = 0;                      ///< kg
   bool has_com = false;
