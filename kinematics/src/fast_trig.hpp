@@ -13,6 +13,8 @@
 // sin to r^15 (first omitted term < 5e-17), cos to r^16 (< 3e-18). Measured
 // against std::sin/std::cos over 1e6 arguments in [-50, 50]: max error 2.3e-16
 // (see tests/kinematics/test_fast_trig.cpp).
+#include <bit>
+#include <cstdint>
 #include <cmath>
 
 #include "lanes.hpp"
@@ -29,7 +31,8 @@ inline void sincos_poly(double x, double& s, double& c) {
   // Round to nearest with the 1.5*2^52 trick: std::nearbyint is a libm call
   // on baseline x86-64 (no SSE4.1 roundsd). Exact for |x * 2/pi| < 2^51.
   constexpr double magic = 6755399441055744.0;
-  const double k = (x * two_over_pi + magic) - magic;
+  const double km = x * two_over_pi + magic;  // k in the low mantissa bits (2^51 + k: k mod 4 exact)
+  const double k = km - magic;
   const double r = ((x - k * p1) - k * p2) - k * p3;
   const double r2 = r * r;
   // sin r = r (1 - r2/3! + r2^2/5! - ... - r2^7/15!)
@@ -42,7 +45,10 @@ inline void sincos_poly(double x, double& s, double& c) {
       r2 * (1.0 / 479001600 + r2 * (-1.0 / 87178291200.0 + r2 * (1.0 / 20922789888000.0))))))));
   const double sr = r * ps;
   const double cr = pc;
-  const long q = static_cast<long>(k) & 3;
+  // The quadrant from km's bits, not static_cast<long>(k): that is undefined behaviour for
+  // |x| beyond the range of long (UBSan: `armctl kin fk --json 1e308 ...`); the bits are the
+  // same integer wherever the reduction is exact and merely meaningless beyond it.
+  const long q = static_cast<long>(std::bit_cast<std::uint64_t>(km) & 3u);
   const bool swap = (q & 1) != 0;
   const double sin_base = swap ? cr : sr;
   const double cos_base = swap ? sr : cr;
