@@ -23,7 +23,6 @@ using namespace servoarm;
 using namespace servoarm::fw;
 
 namespace {
-constexpr double kDeg = M_PI / 180.0;
 bool has(const std::string& s, const std::string& p) { return s.find(p) != std::string::npos; }
 
 struct GrblRig : test::ConsoleRig {
