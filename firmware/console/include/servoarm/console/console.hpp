@@ -225,8 +225,16 @@ class Console {
   std::vector<NamedPose> frames_;
   std::size_t tool_ = 0, frame_ = 0;
   const Session* sel_ = nullptr;   ///< the session executing a line (check mode has its own selection)
-  std::size_t sel_tool() const { return sel_ != nullptr && sel_->check_mode ? sel_->check_tool : tool_; }
-  std::size_t sel_frame() const { return sel_ != nullptr && sel_->check_mode ? sel_->check_frame : frame_; }
+  // A session in check mode keeps its own selection; another session may delete a tool or
+  // frame meanwhile, so an index past the end falls back to tool0 / base.
+  std::size_t sel_tool() const {
+    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_tool : tool_;
+    return i < tools_.size() ? i : 0;
+  }
+  std::size_t sel_frame() const {
+    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_frame : frame_;
+    return i < frames_.size() ? i : 0;
+  }
   const ToolSlot& tool_slot() const { return *tools_[sel_tool()]; }
   const kin::Pose& user_frame() const { return frames_[sel_frame()].pose; }
   /// The active tool point's pose in the base frame.
