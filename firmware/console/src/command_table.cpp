@@ -2,6 +2,7 @@
 // dispatch: `help`, `help <topic>` and the command reference of docs/console.md.
 // Console thread / armctl: allocates.
 #include "servoarm/console/command_table.hpp"
+#include "servoarm/console/number.hpp"
 
 #include <algorithm>
 #include <cstring>
@@ -72,16 +73,6 @@ constexpr CodeSpec kRealtime[] = {
     {"0x90 0x91 0x92 0x93 0x94", "feed override: 100 %, +10 %, -10 %, +1 %, -1 % (10-200 %); acts on jogs and moves"},
 };
 
-bool ieq(std::string_view a, std::string_view b) {
-  if (a.size() != b.size()) return false;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    char x = a[i], y = b[i];
-    if (x >= 'A' && x <= 'Z') x = static_cast<char>(x - 'A' + 'a');
-    if (y >= 'A' && y <= 'Z') y = static_cast<char>(y - 'A' + 'a');
-    if (x != y) return false;
-  }
-  return true;
-}
 
 std::string pad(std::string s, std::size_t w) { return s.size() < w ? s.append(w - s.size(), ' ') : s + "  "; }
 

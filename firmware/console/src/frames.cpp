@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "servoarm/console/number.hpp"
 #include "servoarm/kinematics/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
@@ -19,17 +20,6 @@ constexpr double kDegRad = 3.14159265358979323846 / 180.0;
 bool name_char(char c, bool first) {
   if ((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z')) return true;
   return !first && ((c >= '0' && c <= '9') || c == '_' || c == '-');
-}
-
-bool same_word(std::string_view a, std::string_view b) {
-  if (a.size() != b.size()) return false;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    char x = a[i], y = b[i];
-    if (x >= 'A' && x <= 'Z') x = static_cast<char>(x - 'A' + 'a');
-    if (y >= 'A' && y <= 'Z') y = static_cast<char>(y - 'A' + 'a');
-    if (x != y) return false;
-  }
-  return true;
 }
 
 std::string shown(std::string_view name) {
@@ -132,9 +122,9 @@ std::string check_frame_name(std::string_view name, bool is_tool) {
     if (!name_char(name[i], i == 0))
       return std::string(what) + " name '" + shown(name) +
              "': letters, digits, '_' and '-' only, starting with a letter";
-  if (same_word(name, "delete")) return std::string(what) + " name 'delete' is reserved (tool delete NAME)";
-  if (is_tool && same_word(name, "tool0")) return "tool0 is the flange: it cannot be redefined";
-  if (!is_tool && same_word(name, "base")) return "base is the base frame: it cannot be redefined";
+  if (ieq(name, "delete")) return std::string(what) + " name 'delete' is reserved (tool delete NAME)";
+  if (is_tool && ieq(name, "tool0")) return "tool0 is the flange: it cannot be redefined";
+  if (!is_tool && ieq(name, "base")) return "base is the base frame: it cannot be redefined";
   return "";
 }
 

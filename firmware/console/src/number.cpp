@@ -6,7 +6,7 @@
 #include <cstring>
 
 namespace servoarm::fw {
-namespace {
+
 bool ieq(std::string_view a, std::string_view b) {
   if (a.size() != b.size()) return false;
   for (std::size_t i = 0; i < a.size(); ++i) {
@@ -17,7 +17,6 @@ bool ieq(std::string_view a, std::string_view b) {
   }
   return true;
 }
-}  // namespace
 
 Num parse_decimal(std::string_view s, double& out) {
   if (s.empty() || s.size() > 40) return Num::bad;

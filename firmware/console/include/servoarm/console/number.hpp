@@ -19,4 +19,8 @@ enum class Num {
 /// Parse `s` as a strict decimal; `out` is written only on Num::ok.
 Num parse_decimal(std::string_view s, double& out);
 
+/// ASCII case-insensitive equality: how every word of the text front ends is matched
+/// (command words, options, `$` words, reserved names).
+bool ieq(std::string_view a, std::string_view b);
+
 }  // namespace servoarm::fw
