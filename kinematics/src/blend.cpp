@@ -184,7 +184,10 @@ BlendStatus blend_append(BlendCore& core, std::span<BlendSegment> seg, const Joi
   }
   BlendSegment* prev = core.count ? &seg[slot(seg, core.head + core.count - 1)] : nullptr;
   const JointVector from = prev ? JointVector(prev->from + prev->delta) : core.rest;
-  const JointVector delta = w - from;
+  // Zero-filled first: gcc 12 for armhf (-O3) warns that the fixed-capacity vector's
+  // coefficients "may be used uninitialized" after `w - from` (-Werror breaks that build).
+  JointVector delta = JointVector::Zero(w.size());
+  delta = w - from;
   const double length = delta.norm();
   if (!(length > kZeroLength)) {
     if (prev) prev->tolerance = tolerance;
