@@ -1,6 +1,7 @@
 // armctl: the servoarm command-line tool (host side, non-real-time).
 //   armctl kin ...    offline kinematics on a built-in model or a description file
 //   armctl plan ...   offline trajectory planning (when built with the motion module)
+//   armctl program check ...  whole-program validation offline
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -15,6 +16,10 @@
 #if __has_include("servoarm/armctl/cli_console.hpp")
 #include "servoarm/armctl/cli_console.hpp"
 #define SERVOARM_HAVE_CLI_CONSOLE 1
+#endif
+#if __has_include("servoarm/armctl/cli_program.hpp")
+#include "servoarm/armctl/cli_program.hpp"
+#define SERVOARM_HAVE_CLI_PROGRAM 1
 #endif
 #if __has_include("servoarm/armctl/cli_plan.hpp")
 #include "servoarm/armctl/cli_plan.hpp"
@@ -50,6 +55,12 @@ const char* kUsage =
     "  armctl plan movel --robot NAME|FILE --from q1..qn (--to q1..qn | --xyz X Y Z [--rpy R P Y | --quat W X Y Z])\n"
     "                    [--speed V] [--accel A] [--angular W] [--override PCT] [--no-slowdown]\n"
     "                    [--vmax V] [--amax A] [--jmax J] [--max-duration S] [--rate HZ] [--csv FILE] [--svg FILE]\n"
+#endif
+#ifdef SERVOARM_HAVE_CLI_PROGRAM
+    "Programs (the native command language or G-code; docs/programs.md):\n"
+    "  armctl program check FILE --robot NAME|FILE [--points FILE] [--programs DIR] [--from q1..qn]\n"
+    "                                                      every line parsed, every target solved and\n"
+    "                                                      every path checked before anything moves\n"
 #endif
 #ifdef SERVOARM_HAVE_CLI_CONSOLE
     "Console client of the firmware (armfw), interactive (line editing, history) or one-shot -c:\n"
@@ -92,6 +103,9 @@ int main(int argc, char** argv) {
   }
 #ifdef SERVOARM_HAVE_CLI_PLAN
   if (cmd == "plan") return cli_plan(argc - 1, argv + 1);
+#endif
+#ifdef SERVOARM_HAVE_CLI_PROGRAM
+  if (cmd == "program") return cli_program(argc - 1, argv + 1);
 #endif
 #ifdef SERVOARM_HAVE_CLI_CONSOLE
   if (cmd == "console") return console_main(argc, argv);  // armfw console client (serial / pty / CAN)

@@ -1,0 +1,44 @@
+#pragma once
+// armctl program check FILE --robot NAME|FILE [--points FILE] [--programs DIR] [--from q1..qn]
+//                       [--joint-speed PCT] [--linear-speed V]
+//
+// Whole-program validation offline (issue 18): the program is loaded as armfw loads it
+// (servoarm_program: the console's parser, repeats and calls expanded, @points resolved),
+// then every move is planned from the pose the previous line leaves, with the firmware's
+// own IK (firmware_ik_solver, as `armctl plan movel`): movej and home against the joint
+// limits, movel / G0 / G1 with movel's path check (IK at every knot, limits, branch,
+// singularity). The first bad line is answered "<file>:<line>: <reason>" (exit 2); a good
+// program prints the number of steps and moves and the planned cycle time (exit 0).
+#include <string>
+
+#include "servoarm/kinematics/chain.hpp"
+#include "servoarm/program/program.hpp"
+
+namespace servoarm::fw {
+
+/// What checking a loaded program found.
+struct ProgramCheck {
+  bool ok = false;
+  std::string error;        ///< "<file>:<line>: <reason>" when !ok
+  int moves = 0, joint_moves = 0, line_moves = 0, dwells = 0;
+  double cycle_time = 0;    ///< s: every move to rest, plus the dwells
+  kin::JointVector q_end;   ///< where the program leaves the arm
+};
+
+/// Defaults a program's moves take without speed= / F (armfw's motion.joint_speed_pct and
+/// motion.linear_speed_mm_s), and the limit it may not exceed (motion.max_linear_speed_mm_s).
+struct ProgramCheckOptions {
+  double joint_speed_pct = 50;
+  double linear_speed = 0.1;        ///< m/s
+  double max_linear_speed = 0.25;   ///< m/s
+  double max_move_duration = 600;   ///< s (motion.max_move_duration_s)
+};
+
+/// Plan every step of `prog` on `chain` (SI limits set) from rest at `q0`.
+ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, const prog::PointsData* points,
+                           const kin::JointVector& q0, const ProgramCheckOptions& options);
+
+/// argv[0] is "program". Returns 0 (valid), 2 (bad usage, bad input or a bad line).
+int cli_program(int argc, char** argv);
+
+}  // namespace servoarm::fw

@@ -1,0 +1,316 @@
+// armctl program check: whole-program validation offline (cli_program.hpp).
+#include "servoarm/armctl/cli_program.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "servoarm/armctl/cli_common.hpp"
+#include "servoarm/armctl/cli_plan.hpp"
+#include "servoarm/console/commands.hpp"
+#include "servoarm/console/units.hpp"
+#include "servoarm/kinematics/ik.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+#include "servoarm/kinematics/trajectory.hpp"
+#include "servoarm/kinematics/trajectory_cartesian.hpp"
+#include "servoarm/program/points.hpp"
+#include "servoarm/program/program.hpp"
+
+namespace servoarm::fw {
+
+namespace {
+
+const char* kProgramUsage =
+    "usage: armctl program check FILE --robot NAME|FILE [--points FILE] [--programs DIR]\n"
+    "                            [--from q1..qn] [--joint-speed PCT] [--linear-speed V]\n"
+    "\n"
+    "Checks a whole program offline, as armfw checks it before anything moves: every line\n"
+    "parsed by the console's parser (repeat/end and call expanded, @points resolved), every\n"
+    "target solved by the firmware's IK from the pose the previous line leaves, every path\n"
+    "checked (movej/home: joint limits; movel/G0/G1: movel's path check -- IK at every point,\n"
+    "joint limits, branch changes, singularities). The first bad line is answered\n"
+    "FILE:LINE: reason (exit 2); a good program prints its moves and planned cycle time.\n"
+    "Units are the description's (built-in models: mm and degrees); G-code's are mm and deg.\n"
+    "\n"
+    "options:\n"
+    "  --robot NAME|FILE     the arm (a built-in model or a description file); required\n"
+    "  --points FILE         teach points for @NAME (a servoarm-points-1 file)\n"
+    "  --programs DIR        where `call NAME` looks (default: the program's own folder)\n"
+    "  --from q1..qn         where the arm starts, at rest (default: joint zero clamped into the\n"
+    "                        limits, armfw's default home)\n"
+    "  --joint-speed PCT     movej / home without speed= (default 50, motion.joint_speed_pct)\n"
+    "  --linear-speed V      movel / G1 without speed= / F, length units/s (default 100 mm/s,\n"
+    "                        motion.linear_speed_mm_s; at most 250 mm/s, motion.max_linear_speed_mm_s)\n"
+    "Joints without limits in the description get 90 deg/s, 360 deg/s^2, 3600 deg/s^3\n"
+    "(prismatic: 250 mm/s, 1000 mm/s^2, 10000 mm/s^3), as armctl plan.\n"
+    "Not checked offline yet: tool and frame changes inside a program (refused: check those\n"
+    "with armfw's $C), blends (each move is planned to rest).\n";
+
+bool is_option(const char* s) { return s[0] == '-' && s[1] == '-'; }
+
+// The description's joint limits, the armctl plan defaults where it has none.
+void default_limits(kin::Chain& c) {
+  for (int j = 0; j < c.n_joints; ++j) {
+    kin::JointDynamics& d = c.joint(j).dynamics;
+    const bool prismatic = c.joint(j).type == kin::JointType::prismatic;
+    if (!(d.max_velocity > 0)) d.max_velocity = prismatic ? 0.25 : M_PI / 2;
+    if (!(d.max_acceleration > 0)) d.max_acceleration = prismatic ? 1.0 : 2 * M_PI;
+    if (!(d.max_jerk > 0)) d.max_jerk = prismatic ? 10.0 : 20 * M_PI;
+  }
+}
+
+struct Checker {
+  const kin::Chain& chain;
+  const prog::Program& prog;
+  const prog::PointsData* points;
+  const ProgramCheckOptions& opt;
+  ConsoleUnits units;
+  kin::JointLimits lim;
+  std::unique_ptr<kin::IkModel> model = std::make_unique<kin::IkModel>();
+  std::unique_ptr<kin::CartesianTrajectory> path = std::make_unique<kin::CartesianTrajectory>();
+  ProgramCheck out;
+  kin::JointVector q;
+
+  bool fail(const prog::ProgramStep& s, const std::string& why) {
+    out.ok = false;
+    out.error = prog.where(s) + ": " + why;
+    return false;
+  }
+  std::string joints_text(const kin::JointVector& v) const {
+    std::string t;
+    for (int j = 0; j < v.size(); ++j) t += (j ? " " : "") + num(units.joint_out(chain, j, v[j]));
+    return t;
+  }
+
+  bool movej(const prog::ProgramStep& s, const kin::JointVector& goal, double pct) {
+    for (int j = 0; j < chain.n_joints; ++j) {
+      const auto k = static_cast<std::size_t>(j);
+      if (!(goal[j] >= lim.lower[k] - 1e-9 && goal[j] <= lim.upper[k] + 1e-9))
+        return fail(s, "movej refused: joint " + std::to_string(j + 1) + " = " + num(units.joint_out(chain, j, goal[j])) +
+                           " outside [" + num(units.joint_out(chain, j, lim.lower[k])) + ", " +
+                           num(units.joint_out(chain, j, lim.upper[k])) + "] " + units.joint_name(chain, j));
+    }
+    auto tr = std::make_unique<kin::JointTrajectory>();
+    const kin::MotionStatus st = kin::plan_movej(lim, kin::JointState::rest(q), goal, kin::MovejOptions{pct / 100.0}, *tr);
+    if (!kin::is_ok(st)) return fail(s, std::string("movej refused: ") + kin::to_string(st));
+    if (!(tr->duration <= opt.max_move_duration))
+      return fail(s, "movej refused: it would take " + num(tr->duration) + " s, more than " + num(opt.max_move_duration) + " s");
+    out.cycle_time += tr->duration;
+    ++out.moves;
+    ++out.joint_moves;
+    q = goal;
+    return true;
+  }
+
+  bool movel(const prog::ProgramStep& s, const kin::Pose& target, double speed) {
+    if (!(speed > 0) || speed > opt.max_linear_speed + 1e-12)
+      return fail(s, "linear speed " + num(units.length_out(speed)) + " " + units.length_name() + "/s outside (0, " +
+                         num(units.length_out(opt.max_linear_speed)) + "]");
+    kin::CartesianLimits cl;
+    cl.linear_velocity = speed;
+    kin::PathReport rep;
+    // A lower bound of the duration first (absurd targets are refused before planning).
+    kin::Pose x0;
+    kin::forward(chain, q, x0);
+    const double len = (target.translation() - x0.translation()).norm();
+    if (!(len / speed <= opt.max_move_duration))
+      return fail(s, "movel refused: it would take more than " + num(opt.max_move_duration) + " s");
+    const kin::MotionStatus st = plan_movel_preview(chain, q, target, cl, kin::MovelOptions{}, *model, *path, &rep);
+    if (!kin::is_ok(st)) {
+      const Eigen::Vector3d& p = rep.position;
+      auto r3 = [&](double si) { return num(std::round(units.length_out(si) * 1000) / 1000); };
+      std::string why = std::string("movel refused: ") + kin::to_string(st) + " at " + num(std::round(100 * rep.s)) +
+                        " % of the line, tool at (" + r3(p.x()) + ", " + r3(p.y()) + ", " + r3(p.z()) + ") " +
+                        units.length_name();
+      if (rep.joint >= 0) why += ", joint " + std::to_string(rep.joint + 1);
+      if (st == kin::MotionStatus::no_ik_solution && rep.s >= 1 - 1e-9) why += " (the target is out of reach)";
+      return fail(s, why);
+    }
+    if (!(path->duration <= opt.max_move_duration))
+      return fail(s, "movel refused: it would take " + num(path->duration) + " s, more than " + num(opt.max_move_duration) + " s");
+    out.cycle_time += path->duration;
+    ++out.moves;
+    ++out.line_moves;
+    q = path->goal;
+    return true;
+  }
+
+  // The joint move to the home / park pose (armfw's default: joint zero clamped into the limits).
+  bool step_park(const prog::ProgramStep& s) {
+    kin::JointVector goal(chain.n_joints);
+    for (int j = 0; j < chain.n_joints; ++j)
+      goal[j] = std::clamp(0.0, lim.lower[static_cast<std::size_t>(j)], lim.upper[static_cast<std::size_t>(j)]);
+    return movej(s, goal, opt.joint_speed_pct);
+  }
+
+  bool step(const prog::ProgramStep& s) {
+    const Command& c = s.cmd;
+    switch (c.cmd) {
+      case Cmd::movej: {
+        kin::JointVector goal(chain.n_joints);
+        if (s.point >= 0) goal = points->points[static_cast<std::size_t>(s.point)].q;
+        else
+          for (int j = 0; j < chain.n_joints; ++j) goal[j] = units.joint_in(chain, j, c.vals[static_cast<std::size_t>(j)]);
+        return movej(s, goal, c.has_speed ? c.speed : opt.joint_speed_pct);
+      }
+      case Cmd::home:
+        return step_park(s);
+      case Cmd::movel: {
+        kin::Pose target;
+        if (s.point >= 0) {
+          if (kin::forward(chain, points->points[static_cast<std::size_t>(s.point)].q, target) != kin::Status::ok)
+            return fail(s, "movel refused: the point's pose is not finite");
+        } else {
+          kin::forward(chain, q, target);  // orientation kept when only x y z are given
+          target.translation() = Eigen::Vector3d(units.length_in(c.vals[0]), units.length_in(c.vals[1]), units.length_in(c.vals[2]));
+          if (c.count == 6)
+            target.linear() = kin::rotation_from_rpy(units.angle_in(c.vals[3]), units.angle_in(c.vals[4]), units.angle_in(c.vals[5]));
+        }
+        return movel(s, target, c.has_speed ? units.length_in(c.speed) : opt.linear_speed);
+      }
+      case Cmd::gmove: {  // as the console's line_request: G-code mm / deg, the base frame (offline)
+        const ConsoleUnits& u = kGcodeUnits;
+        kin::Pose cur;
+        kin::forward(chain, q, cur);
+        kin::Pose target = cur;
+        Eigen::Vector3d rpy = kin::rpy_from_rotation(cur.linear());
+        for (int k = 0; k < 6; ++k) {
+          if (!(c.axis_mask & (1u << k))) continue;
+          const double v = c.vals[static_cast<std::size_t>(k)];
+          if (k < 3) target.translation()[k] = u.length_in(c.relative ? u.length_out(cur.translation()[k]) + v : v);
+          else rpy[k - 3] = c.relative ? rpy[k - 3] + u.angle_in(v) : u.angle_in(v);
+        }
+        if (c.axis_mask & 0x38) target.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+        if (c.axis_mask == 0) return true;  // G1 F.. alone: modal only
+        double speed = c.rapid ? opt.max_linear_speed : (c.has_speed ? u.length_in(c.speed) : opt.linear_speed);
+        speed = std::min(speed, opt.max_linear_speed);  // senders' F is clamped, as GRBL does
+        return movel(s, target, speed);
+      }
+      case Cmd::dwell:
+        out.cycle_time += c.vals[0];
+        ++out.dwells;
+        return true;
+      case Cmd::tool:
+      case Cmd::frame:
+        if (c.frame_op == FrameOp::list) return true;
+        return fail(s, "tool and frame changes are not checked offline yet (check this program with armfw's $C)");
+      default:
+        // `park` (G28: the joint move to motion.home_deg) is being added to the console's
+        // table beside `home`; matched by name so that this builds before and after.
+        if (std::strcmp(to_string(c.cmd), "park") == 0) return step_park(s);
+        return true;  // no motion: enable, wait, status, queries, modal-only G-code
+    }
+  }
+};
+
+}  // namespace
+
+ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, const prog::PointsData* points,
+                           const kin::JointVector& q0, const ProgramCheckOptions& options) {
+  Checker ck{chain, prog, points, options, units_of(chain), kin::limits_from(chain), std::make_unique<kin::IkModel>(),
+             std::make_unique<kin::CartesianTrajectory>(), ProgramCheck{}, q0};
+  ck.q = q0;
+  ck.out.ok = true;
+  for (const prog::ProgramStep& s : prog.steps)
+    if (!ck.step(s)) break;
+  ck.out.q_end = ck.q;
+  return ck.out;
+}
+
+int cli_program(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i)
+    if (!std::strcmp(argv[i], "--help") || !std::strcmp(argv[i], "-h")) {
+      std::fputs(kProgramUsage, stdout);
+      return kExitOk;
+    }
+  if (argc < 2 || std::strcmp(argv[1], "check") != 0)
+    return usage_error(argc < 2 ? "program needs a command: check (see armctl program --help)"
+                                : std::string("unknown program command '") + argv[1] + "' (check)");
+  std::string file, robot, points_file, dir;
+  std::vector<double> from;
+  double joint_pct = 50, linear = 0;
+  for (int i = 2; i < argc; ++i) {
+    const std::string o = argv[i];
+    auto text = [&](std::string& out) -> std::string {
+      if (i + 1 >= argc || is_option(argv[i + 1])) return o + " needs a value";
+      out = argv[++i];
+      return "";
+    };
+    auto one = [&](double& out) -> std::string {
+      if (i + 1 >= argc || is_option(argv[i + 1])) return o + " needs a value";
+      if (!parse_number(argv[i + 1], out)) return o + ": '" + argv[i + 1] + "' is not a finite number";
+      ++i;
+      return "";
+    };
+    std::string e;
+    if (o == "--robot") e = text(robot);
+    else if (o == "--points") e = text(points_file);
+    else if (o == "--programs") e = text(dir);
+    else if (o == "--joint-speed") e = one(joint_pct);
+    else if (o == "--linear-speed") e = one(linear);
+    else if (o == "--from") {
+      while (i + 1 < argc && !is_option(argv[i + 1])) {
+        double v;
+        if (!parse_number(argv[i + 1], v)) return usage_error("--from: '" + std::string(argv[i + 1]) + "' is not a finite number");
+        from.push_back(v);
+        ++i;
+      }
+      if (from.empty()) e = "--from needs values";
+    } else if (!is_option(argv[i]) && file.empty()) file = o;
+    else return usage_error("unknown option '" + o + "' (see armctl program --help)");
+    if (!e.empty()) return usage_error(e);
+  }
+  if (file.empty()) return usage_error("program check needs a program FILE");
+  if (robot.empty()) return usage_error("--robot is required");
+  if (!(joint_pct >= 1 && joint_pct <= 100)) return usage_error("--joint-speed must be within 1..100 (percent)");
+  const kin::LoadResult r = load_robot_checked(robot);
+  if (!r.ok) return usage_error(r.error);
+  kin::Chain chain = r.chain;
+  default_limits(chain);
+  const ConsoleUnits units = units_of(chain);
+  ProgramCheckOptions opt;
+  opt.joint_speed_pct = joint_pct;
+  if (linear != 0) {
+    opt.linear_speed = units.length_in(linear);
+    if (!(opt.linear_speed > 0 && opt.linear_speed <= opt.max_linear_speed))
+      return usage_error("--linear-speed must be > 0 and at most " + num(units.length_out(opt.max_linear_speed)) + " " +
+                         units.length_name() + "/s");
+  }
+  kin::JointVector q0(chain.n_joints);
+  if (!from.empty()) {
+    std::string e;
+    if (!joints_from_user(chain, from, q0, e)) return usage_error("--from: " + e);
+    std::string rep;
+    if (limit_violations(chain, q0, rep) > 0) return usage_error("--from is outside the joint limits:\n" + rep);
+  } else {
+    for (int j = 0; j < chain.n_joints; ++j) q0[j] = std::clamp(0.0, chain.joint(j).lower, chain.joint(j).upper);
+  }
+  prog::PointsData points;
+  if (!points_file.empty()) {
+    bool missing = false;
+    const std::string e = prog::load_points_file(points_file, chain.n_joints, points, &missing);
+    if (!e.empty()) return usage_error(e);
+    if (missing) return usage_error(points_file + ": no such points file");
+  }
+  prog::ProgramContext ctx;
+  ctx.chain = &chain;
+  ctx.units = units;
+  ctx.dir = dir;
+  ctx.points = points_file.empty() ? nullptr : &points;
+  prog::Program program;
+  if (const std::string e = prog::load_program(file, ctx, program); !e.empty()) return usage_error(e);
+  const ProgramCheck ck = check_program(chain, program, ctx.points, q0, opt);
+  if (!ck.ok) return usage_error(ck.error);
+  std::printf("ok: %s on %s: %zu steps from %zu file%s, %d moves (%d joint, %d linear), %d dwells, planned cycle time %s s "
+              "(every move to rest)\n",
+              file.c_str(), chain.name.data(), program.steps.size(), program.files.size(),
+              program.files.size() == 1 ? "" : "s", ck.moves, ck.joint_moves, ck.line_moves, ck.dwells,
+              num(ck.cycle_time).c_str());
+  return kExitOk;
+}
+
+}  // namespace servoarm::fw

@@ -1,0 +1,138 @@
+// armctl program check as a process (issue 18): the issue's bad-input list refused with
+// file:line and exit 2, a good program answered with its moves and cycle time (checked
+// against the closed form of a jerk-limited rest-to-rest move), CRLF = LF.
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+#include "../armctl/run_command.hpp"
+#include "servoarm/kinematics/description.hpp"
+#include "tmp_dir.hpp"
+
+// CppUTest last: its leak detector redefines new.
+#include <CppUTest/TestHarness.h>
+
+using servoarm::test::make_tmp_dir;
+using servoarm::test::remove_tree;
+using servoarm::test::run_command;
+using servoarm::test::write_file;
+
+namespace {
+
+const std::string kArmctl = ARMCTL_PATH;
+
+double cycle_time(const std::string& out) {
+  const std::size_t k = out.find("planned cycle time ");
+  if (k == std::string::npos) return -1;
+  return std::atof(out.c_str() + k + 19);
+}
+
+}  // namespace
+
+TEST_GROUP(CliProgram) {
+  std::string dir;
+  void setup() override {
+    MemoryLeakWarningPlugin::saveAndDisableNewDeleteOverloads();
+    dir = make_tmp_dir();
+  }
+  void teardown() override {
+    remove_tree(dir);
+    std::string().swap(dir);  // allocated with the leak detector off: freed with it off
+    MemoryLeakWarningPlugin::restoreNewDeleteOverloads();
+  }
+  servoarm::test::CommandResult check(const std::string& name, const std::string& text, const std::string& extra = "") {
+    write_file(dir + "/" + name, text);
+    return run_command(kArmctl + " program check " + dir + "/" + name + " --robot puma560 " + extra);
+  }
+  void bad(const std::string& name, const std::string& text, const std::string& where, const std::string& what,
+           const std::string& extra = "") {
+    const auto r = check(name, text, extra);
+    LONGS_EQUAL_TEXT(2, r.status, (r.out + r.err).c_str());
+    CHECK_TEXT(r.err.find(where) != std::string::npos, (r.err + "   [expected " + where + "]").c_str());
+    CHECK_TEXT(r.err.find(what) != std::string::npos, (r.err + "   [expected " + what + "]").c_str());
+    CHECK_TEXT(r.out.find("ok:") == std::string::npos, r.out.c_str());
+  }
+};
+
+TEST(CliProgram, GoodProgramCycleTimeIsTheClosedForm) {
+  // One movej of joint 1 by d = 90 deg at 50 %: joint 1's limits (the loader's) scaled by
+  // the override s as the planner does: v s, a s^2, j s^3. Where the profile reaches both
+  // (v >= a^2/j, d >= v (v/a + a/j)) the closed form is T = d/v + v/a + a/j. Then a dwell of
+  // 1.25 s and the way back (the same time).
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK(lr.ok);
+  const servoarm::kin::JointDynamics dy = lr.chain.joint(0).dynamics;
+  const double s = 0.5, d = M_PI / 2, v = dy.max_velocity * s, a = dy.max_acceleration * s * s, j = dy.max_jerk * s * s * s;
+  CHECK(v >= a * a / j && d >= v * (v / a + a / j));
+  const double T = d / v + v / a + a / j;
+  const auto r = check("one.arm", "movej 90 0 0 0 0 0\ndwell 1.25\nmovej 0 0 0 0 0 0 speed=50\n");
+  LONGS_EQUAL_TEXT(0, r.status, r.err.c_str());
+  CHECK_TEXT(r.out.find("2 moves (2 joint, 0 linear), 1 dwells") != std::string::npos, r.out.c_str());
+  DOUBLES_EQUAL(T + 1.25 + T, cycle_time(r.out), 1e-6);
+}
+
+TEST(CliProgram, CrlfIsLf) {
+  const std::string text = "movej 10 -20 30 0 40 0\nmovel 500 100 300\nrepeat 2\nmovej 0 -30 40 0 30 0\nend\n";
+  std::string crlf;
+  for (char c : text) crlf += c == '\n' ? std::string("\r\n") : std::string(1, c);
+  const auto a = check("lf.arm", text), b = check("crlf.arm", crlf);
+  LONGS_EQUAL_TEXT(0, a.status, a.err.c_str());
+  LONGS_EQUAL_TEXT(0, b.status, b.err.c_str());
+  CHECK(cycle_time(a.out) > 0);
+  DOUBLES_EQUAL(cycle_time(a.out), cycle_time(b.out), 0);
+}
+
+TEST(CliProgram, UnreachableTargetAtLine317Of1000) {
+  std::string text;
+  for (int i = 1; i <= 1000; ++i) {
+    if (i == 317) text += "movel 5000 0 0\n";  // 5 m away: the arm reaches about 0.9 m
+    else if (i < 317) text += i % 2 ? "movej 10 -20 30 0 40 0\n" : "movej 0 -30 40 0 30 0\n";
+    else text += "wait\n";
+  }
+  bad("long.arm", text, "long.arm:317:", "movel refused");
+}
+
+TEST(CliProgram, TheIssuesBadInputList) {
+  bad("u.arm", "movej 0 0 0 0 0 0\nfrobnicate\n", "u.arm:2:", "unknown command");
+  bad("e.arm", "wait\nrepeat 2\nwait\n", "e.arm:2:", "repeat without end");
+  write_file(dir + "/r2.arm", "call r1\n");
+  bad("r1.arm", "wait\ncall r2\n", "r2.arm:1:", "recursion");
+  bad("p.arm", "movej @nowhere\n", "p.arm:1:", "unknown point @nowhere");
+  bad("b.arm", std::string("wait\n\0\0\0\xff", 9), "b.arm:2:", "binary data");
+  bad("l.arm", "movej 0 0 0 0 0 0\nmovej 200 0 0 0 0 0\n", "l.arm:2:", "joint 1 = 200 outside [-160, 160] deg");
+  bad("g.gcode", "G21\nG1 X5000 Y0 Z0 F600\n", "g.gcode:2:", "movel refused");
+  // 100 MB: refused by its size, before it is read
+  write_file(dir + "/huge.arm", "wait\n");
+  CHECK_EQUAL(0, ::truncate((dir + "/huge.arm").c_str(), 100L * 1000 * 1000));
+  const auto h = run_command(kArmctl + " program check " + dir + "/huge.arm --robot puma560");
+  LONGS_EQUAL(2, h.status);
+  CHECK_TEXT(h.err.find("larger than") != std::string::npos, h.err.c_str());
+}
+
+TEST(CliProgram, PointsFileUsedAndACorruptOneRefused) {
+  // Joints in rad: (0.2, -0.5, 0.6, 0, 0.4, 0)
+  write_file(dir + "/points.toml",
+             "format = \"servoarm-points-1\"\n[point.pick]\njoints = [0.2, -0.5, 0.6, 0.0, 0.4, 0.0]\n"
+             "xyz = [0.0, 0.0, 0.0]\nrpy = [0.0, 0.0, 0.0]\n");
+  const auto r = check("pts.arm", "movej @pick\nmovel 500 100 300\nmovel @pick\n", "--points " + dir + "/points.toml");
+  LONGS_EQUAL_TEXT(0, r.status, r.err.c_str());
+  CHECK_TEXT(r.out.find("3 moves (1 joint, 2 linear)") != std::string::npos, r.out.c_str());
+  write_file(dir + "/bad.toml", "format = \"servoarm-points-1\"\n[point.pick]\njoints = [1, 2]\nxyz = [0,0,0]\nrpy = [0,0,0]\n");
+  const auto b = check("pts.arm", "movej @pick\n", "--points " + dir + "/bad.toml");
+  LONGS_EQUAL(2, b.status);
+  CHECK_TEXT(b.err.find("bad.toml:3:") != std::string::npos, b.err.c_str());
+}
+
+TEST(CliProgram, UsageErrors) {
+  LONGS_EQUAL(2, run_command(kArmctl + " program").status);
+  LONGS_EQUAL(2, run_command(kArmctl + " program run x").status);
+  LONGS_EQUAL(2, run_command(kArmctl + " program check").status);
+  const auto n = run_command(kArmctl + " program check " + dir + "/none.arm --robot puma560");
+  LONGS_EQUAL(2, n.status);
+  CHECK(n.err.find("none.arm") != std::string::npos);
+  const auto h = run_command(kArmctl + " program --help");
+  LONGS_EQUAL(0, h.status);
+  CHECK(h.out.find("armctl program check FILE") != std::string::npos);
+}
