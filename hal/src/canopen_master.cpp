@@ -244,7 +244,15 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
     case kTpdo1: {
       std::uint16_t sw;
       std::int32_t pos;
-      if (!pdo::decode_tpdo1(f, sw, pos)) break;
+      if (jt.tpdo1_len == 7) {
+        // Torque mode mapped: statusword, position actual, modes of operation display 6061h.
+        if (f.len != 7) break;
+        sw = get_u16(&f.data[0]);
+        pos = std::int32_t(get_u32(&f.data[2]));
+        jt.mode_shown = std::int8_t(f.data[6]);
+      } else if (!pdo::decode_tpdo1(f, sw, pos)) {
+        break;
+      }
       const cia402::State st = cia402::decode_statusword(sw);
       if (!jt.have_status || st != jt.state) jt.state_since = now;
       jt.state = st;
@@ -454,7 +462,10 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
   jt.modes = 0;
   std::uint32_t modes = 0;
   const HomingSpec& hs = cfg_.joints[j].homing;
-  if (cfg_.check_supported_modes || hs.kind == HomingKind::cia402) r = sdo_.read_u32(n, cia402::kSupportedModes, 0, modes);
+  const bool want_cst = cfg_.rpdo2.torque_mode != PdoUse::off;
+  bool cst_ok = want_cst;  // no 6502h: taken at its word (6061h decides when switching)
+  if (cfg_.check_supported_modes || hs.kind == HomingKind::cia402 || want_cst)
+    r = sdo_.read_u32(n, cia402::kSupportedModes, 0, modes);
   else r.status = Status::sdo_abort;  // not asked: taken at its word
   if (r.status == Status::ok) {
     jt.modes = modes;
@@ -470,6 +481,16 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
                     "(6502h = 0x%08X)",
                     j, unsigned(n), int(hs.method), unsigned(modes));
       return Status::not_supported;
+    }
+    if (want_cst && !(modes & cia402::kSupportsCst)) {
+      cst_ok = false;
+      if (cfg_.rpdo2.torque_mode == PdoUse::required) {
+        std::snprintf(error_, sizeof error_,
+                      "joint %zu (node %u): torque mode required but the drive does not support cyclic synchronous "
+                      "torque mode (6502h = 0x%08X)",
+                      j, unsigned(n), unsigned(modes));
+        return Status::not_supported;
+      }
     }
   } else if (r.status != Status::sdo_abort) {
     std::snprintf(error_, sizeof error_, "node %u: reading supported drive modes 0x6502 failed: %s", unsigned(n),
@@ -505,20 +526,53 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
     }
   }
   // RPDO1 and TPDO1: required objects; TPDO2: what the configuration asks for and the drive has.
+  // Torque mode (issue 20): 6060h/6061h ride in RPDO1/TPDO1 (a mode change within one cycle).
+  const PdoUse tq_use = cst_ok ? cfg_.rpdo2.torque_mode : PdoUse::off;
   const MapEntry rpdo1[] = {{cia402::kControlword, 16, PdoUse::required, "controlword"},
-                            {cia402::kTargetPosition, 32, PdoUse::required, "target position"}};
+                            {cia402::kTargetPosition, 32, PdoUse::required, "target position"},
+                            {cia402::kModesOfOperation, 8, tq_use, "modes of operation"}};
   const MapEntry tpdo1[] = {{cia402::kStatusword, 16, PdoUse::required, "statusword"},
-                            {cia402::kPositionActual, 32, PdoUse::required, "position actual"}};
+                            {cia402::kPositionActual, 32, PdoUse::required, "position actual"},
+                            {cia402::kModesDisplay, 8, tq_use, "modes of operation display"}};
+  const MapEntry rpdo2[] = {{cia402::kVelocityOffset, 32, cfg_.rpdo2.velocity_offset, "velocity offset"},
+                            {cia402::kTorqueOffset, 16, cfg_.rpdo2.torque_offset, "torque offset"},
+                            {cia402::kTargetTorque, 16, tq_use, "target torque"}};
+  bool m4[3] = {};
   const MapEntry tpdo2[] = {{cia402::kVelocityActual, 32, cfg_.tpdo2.velocity, "velocity actual"},
                             {cia402::kErrorCode, 16, cfg_.tpdo2.error_code, "error code"},
                             {cia402::kTorqueActual, 16, cfg_.tpdo2.torque, "torque actual"}};
-  bool m1[2], m2[2], m3[3];
+  bool m1[3], m2[3], m3[3];
   if (late()) return Status::timeout;
-  if (const Status s = map_pdo(j, 0x1400, 0x1600, kRpdo1 + n, rpdo1, 2, m1, "RPDO1"); s != Status::ok) return s;
+  if (const Status s = map_pdo(j, 0x1400, 0x1600, kRpdo1 + n, rpdo1, 3, m1, "RPDO1"); s != Status::ok) return s;
   if (late()) return Status::timeout;
-  if (const Status s = map_pdo(j, 0x1800, 0x1A00, kTpdo1 + n, tpdo1, 2, m2, "TPDO1"); s != Status::ok) return s;
+  if (const Status s = map_pdo(j, 0x1800, 0x1A00, kTpdo1 + n, tpdo1, 3, m2, "TPDO1"); s != Status::ok) return s;
   if (late()) return Status::timeout;
   if (const Status s = map_pdo(j, 0x1801, 0x1A01, kTpdo2 + n, tpdo2, 3, m3, "TPDO2"); s != Status::ok) return s;
+  const bool want_rpdo2 = cfg_.rpdo2.velocity_offset != PdoUse::off || cfg_.rpdo2.torque_offset != PdoUse::off ||
+                          tq_use != PdoUse::off;
+  if (want_rpdo2) {
+    if (late()) return Status::timeout;
+    if (const Status s = map_pdo(j, 0x1401, 0x1601, kRpdo2 + n, rpdo2, 3, m4, "RPDO2"); s != Status::ok) return s;
+  }
+  jt.rpdo1_len = m1[2] ? 7 : 6;
+  jt.tpdo1_len = m2[2] ? 7 : 6;
+  jt.mode_shown = 0;
+  jt.cmode = CyclicMode::position;
+  jt.cstatus = Status::ok;
+  jt.have_tq_target = false;
+  jt.ff_pending = false;
+  jt.tq_target = 0;
+  {
+    std::uint8_t o = 0;
+    jt.off_vel_off = jt.off_tq_off = jt.off_tq_target = -1;
+    if (m4[0]) jt.off_vel_off = std::int8_t(o), o += 4;
+    if (m4[1]) jt.off_tq_off = std::int8_t(o), o += 2;
+    if (m4[2]) jt.off_tq_target = std::int8_t(o), o += 2;
+    jt.rpdo2_len = o;
+  }
+  // Torque mode needs all three of its objects (an optional one the drive refused: none).
+  jt.torque_mode = m1[2] && m2[2] && m4[2];
+  // (An optional mode byte mapped without the rest is sent as CSP: the mode never changes.)
   std::uint8_t off = 0;
   jt.off_velocity = jt.off_error = jt.off_torque = -1;
   if (m3[0]) jt.off_velocity = std::int8_t(off), off += 4;
@@ -526,20 +580,34 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
   if (m3[2]) jt.off_torque = std::int8_t(off), off += 2;
   jt.tpdo2_len = off;
   jt.torque_per_mille = 0;
-  if (m3[2]) {
-    // 6077h is per mille of the rated torque 6076h (mN m, motor side): joint side x gear ratio.
+  if (m3[2] || m4[1] || m4[2]) {
+    // 6077h, 60B2h and 6071h are per mille of the rated torque (6076h, mN m, motor side, or
+    // CanopenJointConfig::rated_torque in N m): joint side x gear ratio x direction.
+    const JointScaling& sc = cfg_.joints[j].scaling;
+    const double given = cfg_.joints[j].rated_torque;
     std::uint32_t rated = 0;
-    r = sdo_.read_u32(n, cia402::kRatedTorque, 0, rated);
-    if (r.status != Status::ok || rated == 0) {
-      if (cfg_.tpdo2.torque == PdoUse::required) {
-        std::snprintf(error_, sizeof error_, "node %u: torque actual 0x6077 needs the rated torque 0x6076: %s",
-                      unsigned(n), r.status != Status::ok ? to_string(r.status) : "it reads 0");
-        return r.status != Status::ok ? r.status : Status::protocol_error;
-      }
-      jt.off_torque = -1;  // optional: without a scale the torque is not reported
+    if (given > 0) {
+      jt.torque_per_mille = given * 1e-3 * sc.gear_ratio * double(sc.direction);
     } else {
-      const JointScaling& sc = cfg_.joints[j].scaling;
-      jt.torque_per_mille = double(rated) * 1e-6 * sc.gear_ratio * double(sc.direction);
+      r = sdo_.read_u32(n, cia402::kRatedTorque, 0, rated);
+      if (r.status == Status::ok && rated != 0) {
+        jt.torque_per_mille = double(rated) * 1e-6 * sc.gear_ratio * double(sc.direction);
+      } else {
+        const bool required = (m3[2] && cfg_.tpdo2.torque == PdoUse::required) ||
+                              (m4[1] && cfg_.rpdo2.torque_offset == PdoUse::required) ||
+                              (m4[2] && cfg_.rpdo2.torque_mode == PdoUse::required);
+        if (required) {
+          std::snprintf(error_, sizeof error_, "node %u: %s needs the rated torque 0x6076: %s", unsigned(n),
+                        m3[2] && cfg_.tpdo2.torque == PdoUse::required ? "torque actual 0x6077"
+                        : m4[1] && cfg_.rpdo2.torque_offset == PdoUse::required ? "torque offset 0x60B2"
+                                                                                : "target torque 0x6071",
+                        r.status != Status::ok ? to_string(r.status) : "it reads 0");
+          return r.status != Status::ok ? r.status : Status::protocol_error;
+        }
+        // optional: without a scale the torque is not reported and not commanded
+        jt.off_torque = -1;
+        jt.torque_mode = false;  // 60B2h stays in the frame, sent as 0
+      }
     }
   }
   const double qsd = cfg_.joints[j].quick_stop_decel;
@@ -729,6 +797,7 @@ Status CanopenServoBus::read(TimePoint now) {
     if (fb.state == JointState::fault && worst == Status::ok) worst = fb.fault;
   }
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) advance_homing(j, now);
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) advance_cyclic_mode(j, now);
   return worst != Status::ok ? worst : bus_status;
 }
 
@@ -762,6 +831,10 @@ Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) 
       if (jt.writes < 1000) ++jt.writes;
       if (!faulted) cw = std::uint16_t(cw | jt.cw_extra);
       if (cfg_.joints[j].homing.kind == HomingKind::hard_stop && following) hard_stop_write(j, now), target = jt.target_counts;
+    } else if (jt.cmode == CyclicMode::leaving_torque) {
+      target = jt.target_counts;  // back to CSP where the joint stood when it left torque mode
+    } else if (jt.cmode != CyclicMode::position) {
+      // Torque mode (or on the way): the target follows the actual position, so CSP resumes there.
     } else if (following) {
       if (j < setpoints.size() && cfg_.joints[j].scaling.to_counts(setpoints[j], target)) {
       } else {
@@ -770,8 +843,32 @@ Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) 
       }
     }
     jt.target_counts = target;
-    const Status s = bus_.send(pdo::encode_rpdo1(jt.node, cw, target));
+    CanFrame f = pdo::encode_rpdo1(jt.node, cw, target);
+    if (jt.rpdo1_len == 7) {
+      f.len = 7;
+      f.data[6] = std::uint8_t(mode_to_send(j));
+    }
+    Status s = bus_.send(f);
     if (!is_ok(s) && is_ok(result)) result = s;
+    if (jt.rpdo2_len > 0) {
+      // Offsets only while following setpoints in CSP (one-shot: cleared below); the target
+      // torque while in (or entering, leaving) torque mode.
+      const bool csp_following = following && jt.cmode == CyclicMode::position &&
+                                 jt.hphase != HomingPhase::running && jt.ff_pending;
+      const bool torque = jt.cmode != CyclicMode::position && !faulted;
+      jt.sent_vel_off = csp_following ? jt.ff_vel : 0;
+      jt.sent_tq_off = csp_following ? jt.ff_tq : std::int16_t(0);
+      jt.sent_tq_target = torque ? jt.tq_target : std::int16_t(0);
+      CanFrame g;
+      g.id = kRpdo2 + jt.node;
+      g.len = jt.rpdo2_len;
+      if (jt.off_vel_off >= 0) put_u32(&g.data[jt.off_vel_off], std::uint32_t(jt.sent_vel_off));
+      if (jt.off_tq_off >= 0) put_u16(&g.data[jt.off_tq_off], std::uint16_t(jt.sent_tq_off));
+      if (jt.off_tq_target >= 0) put_u16(&g.data[jt.off_tq_target], std::uint16_t(jt.sent_tq_target));
+      s = bus_.send(g);
+      if (!is_ok(s) && is_ok(result)) result = s;
+    }
+    jt.ff_pending = false;
   }
   if (cfg_.produce_sync) {
     const Status s = bus_.send(encode_sync());
@@ -1118,6 +1215,146 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
       }
       break;
     default:
+      break;
+  }
+}
+
+// --- feed-forward and torque mode (real time, issue 20) ---------------------------------
+
+JointCapabilities CanopenServoBus::capabilities(std::size_t j) const {
+  JointCapabilities c;
+  if (j >= cfg_.joint_count) return c;
+  const Joint& jt = joints_[j];
+  c.velocity_offset = jt.off_vel_off >= 0;
+  c.torque_offset = jt.off_tq_off >= 0 && jt.torque_per_mille != 0;
+  c.torque_mode = jt.torque_mode && jt.torque_per_mille != 0;
+  c.measured_torque = jt.off_torque >= 0;
+  return c;
+}
+
+namespace {
+// Joint torque -> per mille of the rated torque (INTEGER16); false when out of range.
+bool torque_units(double torque, double unit, std::int16_t& out) {
+  if (!std::isfinite(torque) || unit == 0) return false;
+  const double v = std::nearbyint(torque / unit);
+  if (!(v >= -32768.0 && v <= 32767.0)) return false;
+  out = std::int16_t(v);
+  return true;
+}
+}  // namespace
+
+Status CanopenServoBus::set_feed_forward(std::size_t j, double velocity, double torque) {
+  if (j >= cfg_.joint_count) return Status::invalid_argument;
+  Joint& jt = joints_[j];
+  const JointCapabilities c = capabilities(j);
+  if (!c.velocity_offset && !c.torque_offset) return Status::not_supported;
+  jt.ff_pending = false;
+  jt.ff_vel = 0;
+  jt.ff_tq = 0;
+  if (!std::isfinite(velocity) || !std::isfinite(torque)) return Status::invalid_argument;
+  std::int32_t vc = 0;
+  std::int16_t tc = 0;
+  if (c.velocity_offset) {
+    const JointScaling& sc = cfg_.joints[j].scaling;
+    const double v = std::nearbyint(double(sc.direction) * velocity * sc.counts_per_si());
+    if (!(v >= -2147483648.0 && v <= 2147483647.0)) return Status::invalid_argument;
+    vc = std::int32_t(v);
+  }
+  if (c.torque_offset && !torque_units(torque, jt.torque_per_mille, tc)) return Status::invalid_argument;
+  jt.ff_vel = vc;
+  jt.ff_tq = tc;
+  jt.ff_pending = true;
+  return Status::ok;
+}
+
+Status CanopenServoBus::set_target_torque(std::size_t j, double torque) {
+  if (j >= cfg_.joint_count) return Status::invalid_argument;
+  Joint& jt = joints_[j];
+  if (!capabilities(j).torque_mode) return Status::not_supported;
+  std::int16_t t = 0;
+  if (!torque_units(torque, jt.torque_per_mille, t)) return Status::invalid_argument;
+  jt.tq_target = t;
+  jt.have_tq_target = true;
+  return Status::ok;
+}
+
+Status CanopenServoBus::set_torque_mode(std::size_t j, bool on) {
+  if (j >= cfg_.joint_count) return Status::invalid_argument;
+  Joint& jt = joints_[j];
+  if (!on) {
+    if (jt.cmode == CyclicMode::entering_torque || jt.cmode == CyclicMode::torque) {
+      jt.cmode = CyclicMode::leaving_torque;
+      jt.cmode_since = clock_.now();
+      jt.cstatus = Status::ok;
+      jt.target_counts = jt.actual_counts;  // holds where it stands
+    }
+    return Status::ok;
+  }
+  if (!capabilities(j).torque_mode) return Status::not_supported;
+  if (jt.cmode == CyclicMode::entering_torque || jt.cmode == CyclicMode::torque) return Status::ok;
+  if (jt.cmode == CyclicMode::leaving_torque || fb_[j].state != JointState::enabled ||
+      target_ != cia402::Target::enabled || jt.hphase == HomingPhase::running || !jt.have_tq_target)
+    return Status::bad_state;
+  jt.cmode = CyclicMode::entering_torque;
+  jt.cmode_since = clock_.now();
+  jt.cstatus = Status::ok;
+  return Status::ok;
+}
+
+std::int8_t CanopenServoBus::mode_to_send(std::size_t j) const {
+  const Joint& jt = joints_[j];
+  // A drive homing (its own homing mode) is told homing mode here too, from the step that
+  // writes 6060h = 6 until the one that writes 8 again (what the SDO writes say).
+  if (jt.hphase == HomingPhase::running && cfg_.joints[j].homing.kind == HomingKind::cia402 && jt.hstep >= hs_w_mode &&
+      jt.hstep <= hs_unhalt)
+    return cia402::kModeHoming;
+  const bool cst = jt.torque_mode && (jt.cmode == CyclicMode::entering_torque || jt.cmode == CyclicMode::torque);
+  return cst ? cia402::kModeCst : cia402::kModeCsp;
+}
+
+void CanopenServoBus::advance_cyclic_mode(std::size_t j, TimePoint now) {
+  Joint& jt = joints_[j];
+  if (jt.cmode == CyclicMode::position) return;
+  const JointFeedback& fb = fb_[j];
+  if ((fb.state != JointState::enabled || target_ != cia402::Target::enabled) && jt.cmode != CyclicMode::leaving_torque) {
+    // A fault, heartbeat loss, disable or quick stop: back to CSP at once (the next RPDO1 says 8).
+    jt.cstatus = fb.state == JointState::fault ? fb.fault : Status::aborted;
+    jt.cmode = CyclicMode::leaving_torque;
+    jt.cmode_since = now;
+    jt.target_counts = jt.actual_counts;
+  }
+  switch (jt.cmode) {
+    case CyclicMode::entering_torque:
+      if (jt.mode_shown == cia402::kModeCst) {
+        jt.cmode = CyclicMode::torque;
+      } else if (now - jt.cmode_since > cfg_.state_timeout) {
+        std::snprintf(error_, sizeof error_,
+                      "joint %zu (node %u): torque mode: 6060h = 10 sent but 6061h shows %d after %lld ms", j,
+                      unsigned(jt.node), int(jt.mode_shown), static_cast<long long>(cfg_.state_timeout / kMillisecond));
+        jt.cstatus = Status::drive_refused;
+        jt.cmode = CyclicMode::leaving_torque;
+        jt.cmode_since = now;
+        jt.target_counts = jt.actual_counts;
+      }
+      break;
+    case CyclicMode::leaving_torque:
+      if (jt.mode_shown == cia402::kModeCsp) {
+        jt.cmode = CyclicMode::position;
+        jt.have_tq_target = false;
+        jt.hold_once = true;  // this cycle's setpoint was computed before the caller knew
+      } else if (now - jt.cmode_since > cfg_.state_timeout) {
+        // The drive stays in torque mode: it cannot hold a position, so it faults.
+        std::snprintf(error_, sizeof error_,
+                      "joint %zu (node %u): torque mode: 6060h = 8 sent but 6061h shows %d after %lld ms", j,
+                      unsigned(jt.node), int(jt.mode_shown), static_cast<long long>(cfg_.state_timeout / kMillisecond));
+        if (jt.cstatus == Status::ok) jt.cstatus = Status::drive_refused;
+        set_fault(j, Status::drive_refused, now);
+        jt.cmode = CyclicMode::position;
+        jt.have_tq_target = false;
+      }
+      break;
+    case CyclicMode::position:
+    case CyclicMode::torque:
       break;
   }
 }

@@ -21,4 +21,14 @@ const char* to_string(HomingPhase p) {
   return "unknown";
 }
 
+const char* to_string(CyclicMode m) {
+  switch (m) {
+    case CyclicMode::position: return "position";
+    case CyclicMode::entering_torque: return "entering_torque";
+    case CyclicMode::torque: return "torque";
+    case CyclicMode::leaving_torque: return "leaving_torque";
+  }
+  return "unknown";
+}
+
 }  // namespace servoarm::hal

@@ -66,6 +66,9 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kTorqueActual, 0, 2, false, true, 0);
   add(c402::kVelocityOffset, 0, 4, true, true, 0);
   add(c402::kTorqueOffset, 0, 2, true, true, 0);
+  // Cyclic synchronous torque (issue 20): target torque, per mille of 6076h. Only a drive on
+  // the dynamic plant offers CST (6502h bit 9): the first-order motor has no torque.
+  add(c402::kTargetTorque, 0, 2, true, true, 0);
   // Quick stop: option code (6: ramp down with 6085h, stay in quick stop
   // active; 2: the same, then switch on disabled; 1/5: as 2/6 -- this model
   // has no separate slow-down ramp; 0: power off at once, the unpowered motor
@@ -166,9 +169,21 @@ void VirtualDrive::tx(CanBus& bus, const CanFrame& f) {
 
 void VirtualDrive::set_quirks(const DriveQuirks& q) {
   quirks_ = q;
-  std::uint32_t modes = c402::kSupportsCsp | (q.no_homing ? 0u : c402::kSupportsHoming);
-  if (q.supported_modes != 0) modes = q.supported_modes;
+  update_supported_modes();
+}
+
+void VirtualDrive::update_supported_modes() {
+  std::uint32_t modes = c402::kSupportsCsp | (quirks_.no_homing ? 0u : c402::kSupportsHoming);
+  if (plant_ && !quirks_.no_cst) modes |= c402::kSupportsCst;
+  if (quirks_.supported_modes != 0) modes = quirks_.supported_modes;
   if (Entry* e = find(c402::kSupportedModes, 0)) e->value = e->initial = modes;
+}
+
+bool VirtualDrive::mode_allowed(std::int8_t m) const {
+  const std::uint32_t modes = get(c402::kSupportedModes);
+  return m == 0 || (m == c402::kModeCsp && (modes & c402::kSupportsCsp)) ||
+         (m == c402::kModeHoming && (modes & c402::kSupportsHoming)) ||
+         (m == c402::kModeCst && (modes & c402::kSupportsCst) && plant_ != nullptr);
 }
 
 void VirtualDrive::power_on(TimePoint now, CanBus& bus) {
@@ -301,10 +316,7 @@ std::uint32_t VirtualDrive::sdo_write(Entry& e, const std::uint8_t* data, std::s
   if (is_comm && e.sub == 2 && v > 240 && v < 254) return sdo::kAbortValueRange;
   if (e.index == c402::kModesOfOperation) {
     const std::int8_t m = std::int8_t(v);
-    const std::uint32_t modes = get(c402::kSupportedModes);
-    const bool ok = m == 0 || (m == c402::kModeCsp && (modes & c402::kSupportsCsp)) ||
-                    (m == c402::kModeHoming && (modes & c402::kSupportsHoming));
-    if (!ok) return sdo::kAbortValueRange;
+    if (!mode_allowed(m)) return sdo::kAbortValueRange;
     if (quirks_.refuse_same_mode && m == std::int8_t(get(c402::kModesDisplay))) return sdo::kAbortDeviceState;
   }
   if (e.index == c402::kHomingMethod) {
@@ -453,8 +465,22 @@ void VirtualDrive::apply_rpdo(int p, const CanFrame& f) {
     if (!e) return;
     std::uint32_t v = 0;
     for (std::size_t i = 0; i < bytes; ++i) v |= std::uint32_t(f.data[off + i]) << (8 * i);
-    e->value = v;
     off += bytes;
+    if (e->index == c402::kModesOfOperation) {
+      // 6060h by PDO (issue 20: the master switches CSP <-> CST within a cycle): a mode the
+      // drive lacks is ignored (6061h tells the master); a change acts as when written by SDO.
+      const std::int8_t m = std::int8_t(v);
+      if (!mode_allowed(m) || m == mode_display()) continue;
+      e->value = v;
+      if (quirks_.halt_blocks_mode_change && (get(c402::kControlword) & c402::kCwHalt)) {
+        pending_mode_ = m;
+        has_pending_mode_ = true;
+      } else {
+        set_mode(m);
+      }
+      continue;
+    }
+    e->value = v;
   }
 }
 
@@ -507,7 +533,7 @@ void VirtualDrive::apply_controlword(TimePoint now, CanBus& bus) {
   if (quirks_.fault_reset_on_level) prev = std::uint16_t(prev & ~c402::cw::kFaultReset);  // any bit 7 resets
   c402::State next = c402::apply_controlword(state_, cw, prev, &t);
   prev_cw_ = cw;
-  if (t == 4 && (faults_.refuse_enable || std::int8_t(get(c402::kModesDisplay)) != c402::kModeCsp)) {
+  if (t == 4 && (faults_.refuse_enable || (mode_display() != c402::kModeCsp && mode_display() != c402::kModeCst))) {
     next = state_;  // refuses: stays switched on
   }
   if (t == 11 && plant_) {  // quick stop on the plant: ramp the velocity demand down from here
@@ -808,7 +834,12 @@ void VirtualDrive::after_substep(CanBus& bus, bool at_rest) {
     const std::int16_t o = std::int16_t(get(c402::kQuickStopOption));
     if (o == 1 || o == 2) state_ = c402::State::switch_on_disabled;  // at rest: transition 12
   }
-  if (state_ == c402::State::operation_enabled) {
+  if (state_ == c402::State::operation_enabled && mode_display() == c402::kModeCst) {
+    // CST: no position demand, no following error; the demand follows the shaft so that
+    // CSP resumes where the joint stands.
+    target_ = std::int32_t(std::lround(pos_));
+    set(c402::kFollowingErrorActual, 0);
+  } else if (state_ == c402::State::operation_enabled) {
     const double fe = double(target_) - pos_;
     set(c402::kFollowingErrorActual, std::uint32_t(std::int32_t(std::lround(fe))));
     const std::uint32_t window = get(c402::kFollowingErrorWindow);
@@ -848,6 +879,7 @@ void VirtualDrive::attach_plant(ArmPlant* plant, const hal::JointScaling& s, dou
   ki_ = ki;
   tmax_ = torque_limit;
   if (Entry* e = find(c402::kRatedTorque, 0)) e->value = e->initial = rated_torque_mnm;
+  update_supported_modes();  // CST offered on the plant
   torque_unit_ = double(rated_torque_mnm) * 1e-6 * s.gear_ratio * double(s.direction);
   integ_ = 0;
   qs_ramping_ = false;
@@ -863,6 +895,14 @@ double VirtualDrive::servo_torque(double q, double qd, double h) {
   switch (state_) {
     case c402::State::operation_enabled: {
       qs_ramping_ = false;
+      if (mode_display() == c402::kModeCst) {
+        // Cyclic synchronous torque: target torque 6071h + torque offset 60B2h, saturated at
+        // the drive's torque limit.
+        integ_ = 0;
+        const double t = (double(std::int16_t(get(c402::kTargetTorque))) +
+                          double(std::int16_t(get(c402::kTorqueOffset)))) * torque_unit_;
+        return limit(t);
+      }
       if (mode_display() == c402::kModeHoming) homing_substep(h, (get(c402::kControlword) & c402::kCwHalt) != 0);
       const double qt = scaling_.to_joint(std::int32_t(std::lround(double(target_) - shift_)));
       const double v_off = scaling_.velocity_to_joint(std::int32_t(get(c402::kVelocityOffset)));

@@ -10,6 +10,9 @@
 //                  0x6077 (i16); by default velocity + error code (6 bytes), each optional:
 //                  a drive without one is brought up without it; with none, TPDO2 stays off.
 // (statusword + position + velocity is 10 bytes, more than one classic frame holds.)
+//   RPDO2 0x300+n  what CanopenMasterConfig::rpdo2 asks for (off by default, issue 20): velocity
+//                  offset 0x60B1 (i32), torque offset 0x60B2 (i16), target torque 0x6071 (i16);
+//                  torque mode adds 0x6060 (i8) to RPDO1 and 0x6061 (i8) to TPDO1 (7 bytes each).
 // RPDO1 and TPDO1's objects are required: a drive that lacks one is refused, naming it.
 // Without 606Ch the velocity is the difference of successive positions over their receive times.
 // Each write() sends the RPDOs then one SYNC (0x080), so the master is the SYNC producer.
@@ -61,6 +64,9 @@ struct CanopenJointConfig {
   double quick_stop_decel = 0;
   /// How this joint establishes its zero (docs/servo-bus.md#homing); validated by the constructor.
   HomingSpec homing{};
+  /// Motor rated torque in N m (motor side), the unit of 6071h/6077h/60B2h (per mille of it):
+  /// 0 = read the drive's 6076h at bring-up (when a torque object is mapped).
+  double rated_torque = 0;
 };
 
 /// How bring-up treats one feedback object of TPDO2.
@@ -78,6 +84,19 @@ struct FeedbackObjects {
   /// 6077h torque actual (INTEGER16, per mille of the rated torque 6076h, read at bring-up;
   /// JointFeedback::torque = it x 6076h x gear ratio x direction, joint side).
   PdoUse torque = PdoUse::off;
+};
+
+/// The command objects bring-up maps beyond RPDO1's (issue 20). RPDO2 0x300+n carries, in this
+/// order, velocity offset 60B1h (INTEGER32, counts/s), torque offset 60B2h (INTEGER16, per mille
+/// of the rated torque) and target torque 6071h (INTEGER16, per mille): 8 bytes with all three.
+/// Torque mode also appends modes of operation 6060h (INTEGER8) to RPDO1 (7 bytes) and modes of
+/// operation display 6061h (INTEGER8) to TPDO1 (7 bytes), so that the mode changes at a SYNC,
+/// within one cycle, and is checked at the next; 6502h must show CST (bit 9) where the drive has
+/// 6502h. All off by default: the frames are those of before.
+struct CommandObjects {
+  PdoUse velocity_offset = PdoUse::off;  ///< 60B1h: ServoBus::set_feed_forward's velocity
+  PdoUse torque_offset = PdoUse::off;    ///< 60B2h: ServoBus::set_feed_forward's torque
+  PdoUse torque_mode = PdoUse::off;      ///< 6071h + 6060h + 6061h: ServoBus::set_torque_mode
 };
 
 struct CanopenMasterConfig {
@@ -104,6 +123,8 @@ struct CanopenMasterConfig {
   bool set_bus_filters = false;
   /// TPDO2's feedback objects (see the top of this file).
   FeedbackObjects tpdo2{};
+  /// Feed-forward and torque mode objects (RPDO2; see CommandObjects).
+  CommandObjects rpdo2{};
 
   /// Convenience: nodes first..first+count-1 with the same scaling.
   static CanopenMasterConfig consecutive(std::uint8_t first, std::size_t count, const JointScaling& s = {});
@@ -140,6 +161,21 @@ class CanopenServoBus final : public ServoBus {
   }
   const JointFeedback& feedback(std::size_t j) const override { return fb_[j < cfg_.joint_count ? j : 0]; }
   const char* last_error() const override { return error_; }
+
+  JointCapabilities capabilities(std::size_t j) const override;
+  Status set_feed_forward(std::size_t j, double velocity, double torque) override;
+  Status set_target_torque(std::size_t j, double torque) override;
+  Status set_torque_mode(std::size_t j, bool on) override;
+  CyclicModeState cyclic_mode(std::size_t j) const override {
+    return j < cfg_.joint_count ? CyclicModeState{joints_[j].cmode, joints_[j].cstatus} : CyclicModeState{};
+  }
+  /// Real-time: the last RPDO2 values sent for joint j (tests/diagnostics): 60B1h counts/s,
+  /// 60B2h and 6071h per mille.
+  std::int32_t last_velocity_offset(std::size_t j) const { return joints_[j].sent_vel_off; }
+  std::int16_t last_torque_offset(std::size_t j) const { return joints_[j].sent_tq_off; }
+  std::int16_t last_target_torque(std::size_t j) const { return joints_[j].sent_tq_target; }
+  /// Joint-side N m (N) per unit of 6071h/6077h/60B2h (0 when no torque object is mapped).
+  double torque_unit(std::size_t j) const { return j < cfg_.joint_count ? joints_[j].torque_per_mille : 0; }
 
   Status start_homing(std::size_t j, TimePoint now) override;
   void abort_homing(std::size_t j) override;
@@ -202,7 +238,21 @@ class CanopenServoBus final : public ServoBus {
     // TPDO2 layout as mapped by start(): frame length and byte offsets (-1 = not mapped).
     std::uint8_t tpdo2_len = 0;
     std::int8_t off_velocity = -1, off_error = -1, off_torque = -1;
-    double torque_per_mille = 0;  ///< joint-side N m (N) per 6077h unit
+    double torque_per_mille = 0;  ///< joint-side N m (N) per 6077h/60B2h/6071h unit
+    // Issue 20: RPDO1/TPDO1 lengths (7 with 6060h/6061h), RPDO2 layout (-1 = not mapped).
+    std::uint8_t rpdo1_len = 6, tpdo1_len = 6, rpdo2_len = 0;
+    std::int8_t off_vel_off = -1, off_tq_off = -1, off_tq_target = -1;
+    bool torque_mode = false;       ///< CST usable on this joint
+    std::int8_t mode_shown = 0;     ///< 6061h from TPDO1 (0 = not mapped / not seen)
+    CyclicMode cmode = CyclicMode::position;
+    Status cstatus = Status::ok;
+    TimePoint cmode_since = 0;
+    bool have_tq_target = false;
+    bool ff_pending = false;        ///< set_feed_forward() since the last write()
+    std::int32_t ff_vel = 0;        ///< counts/s
+    std::int16_t ff_tq = 0, tq_target = 0;  ///< per mille
+    std::int32_t sent_vel_off = 0;
+    std::int16_t sent_tq_off = 0, sent_tq_target = 0;
     TimePoint prev_pos_time = 0;  ///< without 606Ch: the previous TPDO1's time and position
     std::int32_t prev_pos = 0;
     char name[32] = {};
@@ -230,6 +280,8 @@ class CanopenServoBus final : public ServoBus {
     const char* what;
   };
   void set_fault(std::size_t j, Status why, TimePoint now);
+  void advance_cyclic_mode(std::size_t j, TimePoint now);
+  std::int8_t mode_to_send(std::size_t j) const;
   Status setup_node(std::size_t j, TimePoint deadline);
   Status sdo_write(std::uint8_t node, std::uint16_t index, std::uint8_t sub, std::uint8_t size, std::uint32_t value,
                    const char* what);

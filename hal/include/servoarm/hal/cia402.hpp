@@ -29,11 +29,14 @@ inline constexpr std::uint16_t kHomingSpeeds = 0x6099;    ///< :01 search for sw
 inline constexpr std::uint16_t kHomingAccel = 0x609A;     ///< UNSIGNED32 homing acceleration
 inline constexpr std::uint16_t kDigitalInputs = 0x60FD;   ///< UNSIGNED32: bit 0 neg. limit, 1 pos. limit, 2 home
 inline constexpr std::uint16_t kSupportedModes = 0x6502;  ///< UNSIGNED32 supported drive modes
+inline constexpr std::uint16_t kTargetTorque = 0x6071;   ///< INTEGER16 CST target torque, per mille of 6076h
 inline constexpr std::int8_t kModeCsp = 8;  ///< cyclic synchronous position
+inline constexpr std::int8_t kModeCst = 10; ///< cyclic synchronous torque
 inline constexpr std::int8_t kModeHoming = 6;
 /// 6502h bits (CiA 402): 0 pp, 1 vl, 2 pv, 3 tq, 5 hm, 6 ip, 7 csp, 8 csv, 9 cst.
 inline constexpr std::uint32_t kSupportsHoming = 1u << 5;
 inline constexpr std::uint32_t kSupportsCsp = 1u << 7;
+inline constexpr std::uint32_t kSupportsCst = 1u << 9;
 /// 60FDh bits.
 inline constexpr std::uint32_t kDiNegLimit = 1u << 0;
 inline constexpr std::uint32_t kDiPosLimit = 1u << 1;

@@ -87,6 +87,30 @@ struct HomingProgress {
   std::uint8_t step = 0;        ///< protocol-specific step, for progress reports
 };
 
+/// Cyclic mode of one joint (issue 20, docs/servo-bus.md#feed-forward-and-torque-mode).
+enum class CyclicMode : std::uint8_t {
+  position,         ///< cyclic synchronous position (CiA 402 CSP, 6060h = 8): write()'s setpoints
+  entering_torque,  ///< asked for torque mode (6060h = 10 sent), the drive does not show it yet
+  torque,           ///< cyclic synchronous torque (CST, 6061h = 10): set_target_torque()'s torque
+  leaving_torque,   ///< back to CSP asked (6060h = 8 sent, holding where the joint was)
+};
+const char* to_string(CyclicMode m);
+
+struct CyclicModeState {
+  CyclicMode mode = CyclicMode::position;
+  Status status = Status::ok;  ///< why the last torque mode ended other than by request:
+                               ///< drive_refused (6061h never showed 10), the joint's fault,
+                               ///< aborted (disable / quick stop); ok otherwise
+};
+
+/// What one joint can do beyond CSP, as brought up (all false for protocols without it).
+struct JointCapabilities {
+  bool velocity_offset = false;  ///< set_feed_forward's velocity reaches the drive (CANopen: 60B1h mapped)
+  bool torque_offset = false;    ///< set_feed_forward's torque reaches the drive (60B2h mapped)
+  bool torque_mode = false;      ///< set_torque_mode works (CST supported and 6060h/6061h/6071h mapped)
+  bool measured_torque = false;  ///< JointFeedback::torque comes from the drive (6077h mapped)
+};
+
 class ServoBus {
  public:
   virtual ~ServoBus() = default;
@@ -172,6 +196,58 @@ class ServoBus {
   virtual HomingKind homing_kind(std::size_t j) const {
     (void)j;
     return HomingKind::none;
+  }
+
+  // --- Feed-forward and torque mode (issue 20). Defaults: not supported. -----------------
+
+  /// Joint `j`'s capabilities as brought up (after start()).
+  virtual JointCapabilities capabilities(std::size_t j) const {
+    (void)j;
+    return {};
+  }
+  /// Real-time: feed-forward for joint `j`'s next write() in position mode: `velocity` (rad/s or
+  /// m/s, CANopen 60B1h) added to the drive's velocity demand and `torque` (N m or N, joint side,
+  /// CANopen 60B2h) added to its torque demand. One-shot: write() sends it once and clears it,
+  /// so the caller gives it every cycle and a caller that stops giving it sends none (offsets are
+  /// 0 while a joint is not following: disabled, homing, in torque mode). A part the drive does
+  /// not take (capabilities()) is dropped.
+  /// @retval ok; invalid_argument (no such joint; NaN/Inf, or beyond the drive's object range:
+  ///         this joint's offsets are cleared); not_supported (neither offset mapped)
+  virtual Status set_feed_forward(std::size_t j, double velocity, double torque) {
+    (void)j;
+    (void)velocity;
+    (void)torque;
+    return Status::not_supported;
+  }
+  /// Real-time: the torque (N m or N, joint side; CANopen 6071h) joint `j` applies in torque
+  /// mode, sent with every write() from now on (kept until changed). Give it before
+  /// set_torque_mode(j, true).
+  /// @retval ok; invalid_argument (no such joint, NaN/Inf or beyond the object's range:
+  ///         unchanged); not_supported (no torque mode on this joint)
+  virtual Status set_target_torque(std::size_t j, double torque) {
+    (void)j;
+    (void)torque;
+    return Status::not_supported;
+  }
+  /// Real-time: switch joint `j` to torque mode (on) or back to position mode (off). On: the
+  /// joint must be enabled, in position mode, not homing, with a target torque given since it
+  /// last left torque mode; the mode is reached when the drive shows it (cyclic_mode()). Off:
+  /// from the next write() the joint holds where it stands (the caller's setpoint for it is
+  /// ignored until cyclic_mode() says position again, and in the write() of the cycle whose
+  /// read() saw it turn; the caller then re-reads its position).
+  /// A fault, heartbeat loss, disable() or quick_stop() takes the joint back to position mode
+  /// by itself (status says why).
+  /// @retval ok (also when already in / on the way to the asked mode); invalid_argument (no such
+  ///         joint); not_supported (no torque mode here); bad_state (on: not enabled, homing,
+  ///         leaving torque mode, or no target torque given)
+  virtual Status set_torque_mode(std::size_t j, bool on) {
+    (void)j;
+    return on ? Status::not_supported : Status::ok;
+  }
+  /// Real-time: joint `j`'s cyclic mode and why its last torque mode ended.
+  virtual CyclicModeState cyclic_mode(std::size_t j) const {
+    (void)j;
+    return {};
   }
 
   /// Real-time: latest feedback of joint `j` (j < joint_count()).

@@ -97,6 +97,8 @@ struct DriveQuirks {
   bool never_attained = false;       ///< homing reaches home and stops but never sets statusword bit 12
   bool fault_reset_on_level = false; ///< lenient: bit 7 set resets a fault without a rising edge
                                      ///< (default: only a rising edge does, as CiA 402 says)
+  bool no_cst = false;               ///< on the dynamic plant, still no cyclic synchronous torque
+                                     ///< (6502h without bit 9; 6060h = 10 aborts 06090030h)
 };
 
 class ArmPlant;
@@ -201,6 +203,8 @@ class VirtualDrive {
   void homing_capture(double mark);
   void homing_fail();
   void set_mode(std::int8_t m);
+  void update_supported_modes();
+  bool mode_allowed(std::int8_t m) const;
   bool home_active(double p) const { return p >= switches_.home_lo && p <= switches_.home_hi; }
   bool signal_at(double p) const;
   void boot(TimePoint now, CanBus& bus);
