@@ -509,6 +509,15 @@ void VirtualDrive::send_tpdo(int p, CanBus& bus) {
 void VirtualDrive::on_sync(TimePoint now, CanBus& bus) {
   ++syncs_;
   advance(now, bus);
+  if (plant_ && tq_n_ > 0 && torque_unit_ != 0) {
+    // On the plant 6077h at a SYNC is the mean of the loop's torque since the previous SYNC
+    // (a drive's filtered current): the torque steps with every new target and decays within
+    // the cycle, and a sample at the SYNC alone would miss most of that impulse.
+    const double t = std::clamp(std::round(tq_sum_ / double(tq_n_) / torque_unit_), -32768.0, 32767.0);
+    set(c402::kTorqueActual, std::uint32_t(std::uint16_t(std::int16_t(t))));
+  }
+  tq_sum_ = 0;
+  tq_n_ = 0;
   // Inputs are sampled at the SYNC...
   for (int p = 0; p < 2; ++p) {
     const std::uint32_t type = get(kTpdoComm[p], 2);
@@ -948,6 +957,8 @@ void VirtualDrive::plant_update(TimePoint t, double q, double qd, double torque,
   if (state_ == c402::State::operation_enabled && mode_display() == c402::kModeHoming) homing_after(p0, pos_ - shift_);
   vel_ = k * qd;
   torque_ = torque;
+  tq_sum_ += torque;
+  ++tq_n_;
   after_substep(bus, !qs_ramping_ && std::fabs(qd) < 5e-3);
 }
 

@@ -230,6 +230,8 @@ class VirtualDrive {
   double hold_q_ = 0;       ///< quick stop at rest: where it holds
   bool qs_ramping_ = false;
   double torque_unit_ = 0;  ///< joint N m per 6077h/60B2h unit (per mille of 6076h x G x dir)
+  double tq_sum_ = 0;       ///< plant: the loop's torque summed over the steps since the last SYNC
+  int tq_n_ = 0;
   std::int32_t target_ = 0;
   std::uint64_t syncs_ = 0;
   std::uint64_t rng_;
