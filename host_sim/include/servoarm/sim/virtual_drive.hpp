@@ -20,6 +20,10 @@
 // the mark. Methods 1-7, 11, 17-23, 27 (switches, with or without index), 33, 34 (index),
 // 35, 37 (current position); others are refused when written to 6098h (06090030h).
 //
+// Torque (issue 20): on the dynamic plant (ArmPlant) the drive also offers cyclic synchronous
+// torque (6060h = 10, 6502h bit 9, target torque 6071h + 60B2h, saturated), and 6060h may be
+// mapped into an RPDO (a mode change at the SYNC); docs/servo-bus.md#feed-forward-and-torque-mode.
+//
 // Time is passed in (TimePoint, ns): the simulation runs on a ManualClock in
 // tests and on CLOCK_MONOTONIC in `armsim`.
 #include <array>
