@@ -372,6 +372,7 @@ TEST(Config, EveryDocumentedKeyIsAccepted) {
   d.max_velocity = 30;
   d.heartbeat_timeout_ms = 200;
   d.quick_stop_decel = 720.5;
+  d.homing_method = "19";  // a joint that homes: its homing.* keys are written too
   c.drives = {d, d};
   c.drives[1].node = 8;
   const std::string toml = to_toml(c);
@@ -672,4 +673,85 @@ TEST(Config, FileInputIsCheckedAndCapped) {
   // with -O2, memory effects); the figures and toml11's 2.2 s are in tests/bench/RESULTS.md.
   const double t30k = parse_seconds(30000);
   CHECK_TEXT(t30k < 120.0, (std::to_string(t30k) + " s for 30000 elements").c_str());
+}
+
+// Homing keys (issue 17): per [[drive]] `homing.*` (a dotted key: the sub-table `homing`) and
+// [homing]; bad input is refused at start naming the key. The expected texts are written here.
+TEST(Config, HomingKeysAreReadAndBadOnesRefusedNamingTheKey) {
+  const std::string six_drives_head = "[[drive]]\n";
+  auto drives = [](const std::string& first) {
+    std::string t = "[[drive]]\n" + first;
+    for (int i = 0; i < 5; ++i) t += "[[drive]]\n";
+    return t;
+  };
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(drives("homing.method = 19\nhoming.speed_switch = 12.5\nhoming.offset = -3\n"
+                                           "homing.timeout_s = 4\n") +
+                                        "[homing]\norder = [[3], [2], [1], [4, 5, 6]]\nunhomed_jog_pct = 20\n",
+                                    "t.toml", c)
+                       .c_str());
+  LONGS_EQUAL(6, c.drives.size());
+  STRCMP_EQUAL("19", c.drives[0].homing_method.c_str());
+  DOUBLES_EQUAL(12.5, c.drives[0].homing_speed_switch, 0);
+  DOUBLES_EQUAL(-3, c.drives[0].homing_offset, 0);
+  DOUBLES_EQUAL(4, c.drives[0].homing_timeout_s, 0);
+  STRCMP_EQUAL("none", c.drives[1].homing_method.c_str());  // the default: an absolute encoder
+  CHECK((c.homing_order == std::vector<std::vector<int>>{{3}, {2}, {1}, {4, 5, 6}}));
+  DOUBLES_EQUAL(20, c.homing_unhomed_jog_pct, 0);
+  // the effective configuration writes the method as a number and loads back to the same
+  const std::string t = to_toml(c);
+  CHECK_TEXT(t.find("homing.method = 19\n") != std::string::npos, t.c_str());
+  CHECK_TEXT(t.find("order = [[3], [2], [1], [4, 5, 6]]\n") != std::string::npos, t.c_str());
+  FwConfig back;
+  STRCMP_EQUAL("", load_config_text(t, "back.toml", back).c_str());
+  CHECK(back == c);
+  // "none" and "hard_stop" as strings, and the string form of a number
+  FwConfig h;
+  STRCMP_EQUAL("", load_config_text(drives("homing.method = \"hard_stop\"\nhoming.direction = 1\n"), "h.toml", h).c_str());
+  STRCMP_EQUAL("hard_stop", h.drives[0].homing_method.c_str());
+  STRCMP_EQUAL("", load_config_text(drives("homing.method = \"35\"\n"), "h.toml", h).c_str());
+  // refusals, each naming its key
+  const struct {
+    std::string text;
+    const char* want;
+  } bad[] = {
+      {drives("homing.method = 36\n"), "drive[1].homing.method: must be \"none\", \"hard_stop\" or a CiA 402 homing method"},
+      {drives("homing.method = 0\n"), "drive[1].homing.method: must be"},
+      {drives("homing.method = 40\n"), "(got 40)"},
+      {drives("homing.method = -129\n"), "drive[1].homing.method"},
+      {drives("homing.method = \"switch\"\n"), "(got switch)"},
+      {drives("homing.method = 1.5\n"), "drive[1].homing.method: expected a string or an integer"},
+      {drives("homing.speed_switch = 0\n"), "drive[1].homing.speed_switch: must be within (0, 1000000]"},
+      {drives("homing.speed_switch = -5\n"), "drive[1].homing.speed_switch: must be within"},
+      {drives("homing.speed_zero = nan\n"), "drive[1].homing.speed_zero: must be a finite number"},
+      {drives("homing.speed_zero = 0\n"), "drive[1].homing.speed_zero"},
+      {drives("homing.timeout_s = 0\n"), "drive[1].homing.timeout_s: must be within (0, 3600]"},
+      {drives("homing.acceleration = 0\n"), "drive[1].homing.acceleration"},
+      {drives("homing.backoff = 0\n"), "drive[1].homing.backoff"},
+      {drives("homing.direction = 0\n"), "drive[1].homing.direction: must be one of 1, -1"},
+      {drives("homing.bogus = 1\n"), "drive[1].homing.bogus: unknown key"},
+      {"[homing]\norder = [[1, 2], [2, 3, 4, 5, 6]]\n", "homing.order: joint 2 is named twice"},
+      {"[homing]\norder = [[1], []]\n", "homing.order[1]: an empty group"},
+      {"[homing]\norder = [[0, 1]]\n", "homing.order[0]: must be within [1, 8]"},
+      {"[homing]\norder = [1, 2]\n", "homing.order[0]: expected an array of joint numbers"},
+      {"[homing]\nunhomed_jog_pct = 0\n", "homing.unhomed_jog_pct: must be within [1, 100]"},
+  };
+  for (const auto& b : bad) {
+    FwConfig k;
+    const std::string e = load_config_text(b.text, "bad.toml", k);
+    CHECK_TEXT(e.find(b.want) != std::string::npos, ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
+    CHECK_TEXT(k == FwConfig{}, b.want);  // untouched
+  }
+  (void)six_drives_head;
+  // the robot's checks: every joint named once when the order is given
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  FwConfig o;
+  o.homing_order = {{3}, {2}, {1}, {4, 5, 6}};
+  STRCMP_EQUAL("", validate_for_chain(o, lr.chain).c_str());
+  o.homing_order = {{3}, {2}, {1}, {4, 5}};
+  STRCMP_EQUAL("homing.order: joint 6 is missing (name every joint once, or leave the key out)",
+               validate_for_chain(o, lr.chain).c_str());
+  o.homing_order = {{3}, {2}, {1}, {4, 5, 6, 7}};
+  STRCMP_EQUAL("homing.order[3]: joint 7 does not exist (puma560 has 6)", validate_for_chain(o, lr.chain).c_str());
 }

@@ -55,6 +55,22 @@ std::string drive_limits_ordered(const DriveConfig& d, const FwConfig&) {
   return d.limits.size() == 2 && !(d.limits[0] < d.limits[1]) ? "lower must be below upper" : "";
 }
 
+std::string homing_order_once(const FwConfig& c, const FwConfig&) {
+  std::vector<int> seen;
+  for (const auto& g : c.homing_order)
+    for (const int j : g) {
+      if (std::find(seen.begin(), seen.end(), j) != seen.end())
+        return "joint " + std::to_string(j) + " is named twice (each joint in one group, once)";
+      seen.push_back(j);
+    }
+  return "";
+}
+std::string homing_method_known(const DriveConfig& d, const FwConfig&) {
+  if (d.homing_method == "none" || d.homing_method == "hard_stop" || homing_method_number(d.homing_method) != 0) return "";
+  return "must be \"none\", \"hard_stop\" or a CiA 402 homing method 1..35, 37 or -128..-1 (got " +
+         (d.homing_method.empty() ? std::string("\"\"") : d.homing_method) + ")";
+}
+
 using K = ConfigKey;
 using F = FwConfig;
 const ConfigKey kConfigTable[] = {
@@ -92,16 +108,25 @@ const ConfigKey kConfigTable[] = {
     K{"safety.drive_stop_timeout_s", &F::drive_stop_timeout_s, "s",
       "with stop = \"drive\": power the drives down after this long even if one still reports motion"}.within(0.05, 60),
     K{"motion.home_deg", &F::home_deg, "deg (mm)",
-      "home pose for `home` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
+      "park pose for `park` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
       "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
     K{"motion.joint_speed_pct", &F::joint_speed_pct, "%",
-      "movej / home speed without speed=, percent of each joint's velocity limit"}.within(1, 100),
+      "movej / park speed without speed=, percent of each joint's velocity limit"}.within(1, 100),
     K{"motion.linear_speed_mm_s", &F::linear_speed_mm_s, "mm/s", "movel / G1 speed without speed= / F"}
         .within(0.01, 5000).related(linear_speed_at_most_max, "at most motion.max_linear_speed_mm_s"),
     K{"motion.max_linear_speed_mm_s", &F::max_linear_speed_mm_s, "mm/s",
       "highest linear speed: speed= and F are clamped to it; G0 moves at it"}.within(0.01, 5000),
     K{"motion.max_move_duration_s", &F::max_move_duration_s, "s",
       "longest move the console accepts; longer moves are refused with out_of_range"}.within(1, 86400),
+    K{"homing.order", &F::homing_order, "",
+      "homing groups run one after the other, joints inside a group together (1-based joint numbers, e.g. "
+      "`[[3], [2], [1], [4, 5, 6]]`: the wrist clear of the table first); `[]` = one group of every joint. Given, it "
+      "names every joint exactly once. Joints with homing.method = \"none\" count as homed at power-up"}
+        .within(1, kin::kMaxJoints).length(0, kin::kMaxJoints)
+        .related(homing_order_once, "each joint once"),
+    K{"homing.unhomed_jog_pct", &F::homing_unhomed_jog_pct, "%",
+      "while a joint is not homed, joint jogs run at this percent of the speed asked (Cartesian moves, tool jogs, "
+      "movej, park and G-code moves are refused until every joint is homed)"}.within(1, 100),
     K{"console.stdin", &F::console_stdin, "", "console on stdin/stdout"},
     K{"console.pty", &F::console_pty, "", "open a pseudo-terminal console and print its path"},
     K{"console.serial", &F::console_serial, "", "serial device for a console (e.g. `/dev/ttyS0`); `\"\"` = none"}
@@ -164,6 +189,31 @@ const DriveKey kDriveTable[] = {
        "joint-side deceleration written to the drive's 6085h quick stop deceleration at bring-up (how fast it stops "
        "on its own with safety.stop = \"drive\"); 0 = leave the drive's own"}
         .above(0, 1e7).unset_means(0, "the drive's own", true),
+    DK{"homing.method", &D::homing_method, "",
+       "how the joint finds its zero at power-up: `\"none\"` = absolute encoder (homed at start), a CiA 402 homing "
+       "method number (6098h: 1..35, 37 or a negative manufacturer method; the drive's own Homing Mode), or "
+       "`\"hard_stop\"` (no switch: the master drives the joint slowly against its mechanical stop, backs off)"}
+        .integer_too().length(1, 16).rule_text("\"none\", \"hard_stop\" or a method 1..35, 37, -128..-1")
+        .related(homing_method_known, "a known method"),
+    DK{"homing.speed_switch", &D::homing_speed_switch, "deg/s (mm/s)",
+       "search for the switch (6099h:01); hard_stop: the approach speed"}.above(0, 1e6),
+    DK{"homing.speed_zero", &D::homing_speed_zero, "deg/s (mm/s)", "search for zero (6099h:02)"}.above(0, 1e6),
+    DK{"homing.acceleration", &D::homing_acceleration, "deg/s^2 (mm/s^2)",
+       "homing acceleration (609Ah); hard_stop: of the approach and the back-off"}.above(0, 1e7),
+    DK{"homing.offset", &D::homing_offset, "deg (mm)",
+       "joint position at the home mark (written as 607Ch home offset) or, hard_stop, at the backed-off point"}
+        .within(-kMaxLength, kMaxLength),
+    DK{"homing.timeout_s", &D::homing_timeout_s, "s", "longest homing of this joint; longer fails it (arm disabled)"}
+        .above(0, 3600),
+    DK{"homing.direction", &D::homing_direction, "", "hard_stop: direction of the approach"}
+        .among(std::span<const double>(kDirections)),
+    DK{"homing.following_limit", &D::homing_following_limit, "deg (mm)",
+       "hard_stop: |demanded - actual| that means the stop is reached"}.above(0, 180),
+    DK{"homing.torque_limit", &D::homing_torque_limit, "N m (N)",
+       "hard_stop: |torque| (6077h, when the drive reports it) that means the stop is reached; 0 = unused"}
+        .within(0, 1e6),
+    DK{"homing.backoff", &D::homing_backoff, "deg (mm)", "hard_stop: distance moved back from the stop"}
+        .above(0, kMaxLength),
 };
 
 // ---------------------------------------------------------------------------
@@ -262,10 +312,18 @@ std::string value_of(const Key<S>& k, const S& s) {
         if constexpr (std::is_same_v<T, bool>) return v ? "true" : "false";
         else if constexpr (std::is_same_v<T, int> || std::is_same_v<T, std::int64_t>) return int_text(v, k.hex);
         else if constexpr (std::is_same_v<T, double>) return num_text(v);
-        else if constexpr (std::is_same_v<T, std::string>) return toml_string(v);
-        else {
+        else if constexpr (std::is_same_v<T, std::string>) return k.or_integer && homing_method_number(v) != 0 ? v : toml_string(v);
+        else if constexpr (std::is_same_v<T, std::vector<double>>) {
           std::string o = "[";
           for (std::size_t i = 0; i < v.size(); ++i) o += (i ? ", " : "") + num_text(v[i]);
+          return o + "]";
+        } else {
+          std::string o = "[";
+          for (std::size_t i = 0; i < v.size(); ++i) {
+            o += i ? ", [" : "[";
+            for (std::size_t e = 0; e < v[i].size(); ++e) o += (e ? ", " : "") + std::to_string(v[i][e]);
+            o += "]";
+          }
           return o + "]";
         }
       },
@@ -306,6 +364,9 @@ std::string range_of(const Key<S>& k) {
       r = (k.min_len == k.max_len ? std::to_string(k.min_len) : std::to_string(k.min_len) + ".." + std::to_string(k.max_len)) +
           " values, each " + numeric_range(k);
       break;
+    case 6:
+      r = "0.." + std::to_string(k.max_len) + " groups (lists) of integers " + numeric_range(k);
+      break;
     default: r = k.rule ? k.rule : numeric_range(k);
   }
   if (k.relation_text) r += (r.empty() ? "" : ", ") + std::string(k.relation_text);
@@ -344,7 +405,8 @@ bool is_unset(const Key<S>& k, const S& s) {
   return std::visit(
       [&](auto m) -> bool {
         using T = std::decay_t<decltype(s.*m)>;
-        if constexpr (std::is_same_v<T, std::vector<double>>) return (s.*m).empty();
+        if constexpr (std::is_same_v<T, std::vector<double>> || std::is_same_v<T, std::vector<std::vector<int>>>)
+          return (s.*m).empty();
         else if constexpr (std::is_same_v<T, std::string> || std::is_same_v<T, bool>) return false;
         else return static_cast<double>(s.*m) == k.unset;
       },
@@ -382,6 +444,18 @@ std::string key_problem(const Key<S>& k, const S& s, const FwConfig& whole, cons
           for (std::size_t i = 0; i < v.size() && why.empty(); ++i) {
             const std::string p = number_problem(k, v[i]);
             if (!p.empty()) why = "\x01" + std::to_string(i) + "\x02" + p;  // element index, rewritten below
+          }
+        } else if constexpr (std::is_same_v<T, std::vector<std::vector<int>>>) {
+          if (v.size() > k.max_len) {
+            why = "must hold at most " + std::to_string(k.max_len) + " groups (got " + std::to_string(v.size()) + ")";
+            return;
+          }
+          for (std::size_t i = 0; i < v.size() && why.empty(); ++i) {
+            if (v[i].empty()) why = "\x01" + std::to_string(i) + "\x02" + "an empty group";
+            for (std::size_t e = 0; e < v[i].size() && why.empty(); ++e) {
+              const std::string p = number_problem(k, static_cast<double>(v[i][e]));
+              if (!p.empty()) why = "\x01" + std::to_string(i) + "\x02" + p;
+            }
           }
         } else {
           why = number_problem(k, static_cast<double>(v));
@@ -445,8 +519,31 @@ struct Reader {
             if (!number(v, label, out)) return false;
           } else if constexpr (std::is_same_v<T, std::string>) {
             const auto* str = v.as_string();
-            if (!str) return fail(v, label, "expected a string (got " + shown(v) + ")");
+            if (k.or_integer && v.as_integer()) {
+              out = std::to_string(v.as_integer()->get());
+              return true;
+            }
+            if (!str) return fail(v, label, std::string(k.or_integer ? "expected a string or an integer" : "expected a string") + " (got " + shown(v) + ")");
             out = str->get();
+          } else if constexpr (std::is_same_v<T, std::vector<std::vector<int>>>) {
+            const auto* a = v.as_array();
+            if (!a) return fail(v, label, "expected an array of arrays of integers (got " + shown(v) + ")");
+            if (a->size() > k.max_len) return fail(v, label, "expected " + range_of(k) + " (got " + std::to_string(a->size()) + " groups)");
+            std::vector<std::vector<int>> tmp;
+            for (std::size_t i = 0; i < a->size(); ++i) {
+              const std::string li = label + "[" + std::to_string(i) + "]";
+              const auto* g = a->get(i)->as_array();
+              if (!g) return fail(*a->get(i), li, "expected an array of joint numbers (got " + shown(*a->get(i)) + ")");
+              if (g->size() > k.max_len) return fail(*g, li, "more than " + std::to_string(k.max_len) + " joints");
+              tmp.emplace_back();
+              for (std::size_t e = 0; e < g->size(); ++e) {
+                const auto* n = g->get(e)->as_integer();
+                if (!n) return fail(*g->get(e), li, "expected an integer joint number (got " + shown(*g->get(e)) + ")");
+                if (n->get() < -1000000 || n->get() > 1000000) return fail(*g->get(e), li, "integer out of range (got " + std::to_string(n->get()) + ")");
+                tmp.back().push_back(static_cast<int>(n->get()));
+              }
+            }
+            out = std::move(tmp);
           } else {
             const auto* a = v.as_array();
             if (!a) return fail(v, label, "expected an array of numbers (got " + shown(v) + ")");
@@ -500,16 +597,26 @@ bool read_drive(Reader& r, const toml::node& t, std::size_t index, DriveConfig& 
   const std::string where = drive_label(index);
   const toml::table* tab = t.as_table();
   if (!tab) return r.fail(t, where, "expected a table");
+  // The keys, with `homing.x = ...` (a dotted key: the sub-table `homing`) flattened to "homing.x".
+  std::vector<std::pair<std::string, const toml::node*>> entries;
   for (const auto& [name, value] : *tab) {  // toml::table is ordered by key
+    const std::string n(name.str());
+    if (n == "homing" && value.is_table()) {
+      for (const auto& [sub, sv] : *value.as_table()) entries.emplace_back("homing." + std::string(sub.str()), &sv);
+      continue;
+    }
+    entries.emplace_back(n, &value);
+  }
+  for (const auto& [name, value] : entries) {
     const DriveKey* k = nullptr;
     for (const DriveKey& e : kDriveTable)
-      if (name.str() == e.name) k = &e;
+      if (name == e.name) k = &e;
     if (!k) {
       std::vector<std::string> names;
       for (const DriveKey& e : kDriveTable) names.push_back(e.name);
-      return r.fail(value, where + "." + std::string(name.str()), "unknown key (" + joined(names) + ")");
+      return r.fail(*value, where + "." + name, "unknown key (" + joined(names) + ")");
     }
-    if (!r.read(*k, value, where + "." + k->name, d)) return false;
+    if (!r.read(*k, *value, where + "." + k->name, d)) return false;
   }
   return true;
 }
@@ -551,6 +658,15 @@ std::string range_text(const DriveKey& k) { return range_of(k); }
 std::string default_text(const ConfigKey& k) { return default_of(k); }
 std::string default_text(const DriveKey& k) { return default_of(k); }
 
+int homing_method_number(const std::string& m) {
+  if (m.empty() || m.size() > 4) return 0;
+  int v = 0;
+  const auto r = std::from_chars(m.data(), m.data() + m.size(), v);
+  if (r.ec != std::errc() || r.ptr != m.data() + m.size()) return 0;
+  if ((v >= 1 && v <= 35) || v == 37 || (v >= -128 && v <= -1)) return v;
+  return 0;
+}
+
 const char* can_console_id_problem(int id) {
   // CANopen predefined connection set (CiA 301) of nodes 1..127: NMT 0x000, SYNC 0x080,
   // EMCY 0x081-0x0FF, TIME 0x100, PDOs 0x181-0x57F, SDO 0x581-0x67F, heartbeat 0x701-0x77F;
@@ -589,6 +705,19 @@ std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
   if (!c.drives.empty() && static_cast<int>(c.drives.size()) != n)
     return "drive: " + std::to_string(c.drives.size()) + " [[drive]] tables for the " + std::to_string(n) +
            " joints of " + robot + " (give one per joint, or none)";
+  if (!c.homing_order.empty()) {
+    std::vector<bool> named(static_cast<std::size_t>(n), false);
+    for (std::size_t g = 0; g < c.homing_order.size(); ++g)
+      for (const int j : c.homing_order[g]) {
+        if (j > n)
+          return "homing.order[" + std::to_string(g) + "]: joint " + std::to_string(j) + " does not exist (" + robot +
+                 " has " + std::to_string(n) + ")";
+        named[static_cast<std::size_t>(j - 1)] = true;
+      }
+    for (int j = 0; j < n; ++j)
+      if (!named[static_cast<std::size_t>(j)])
+        return "homing.order: joint " + std::to_string(j + 1) + " is missing (name every joint once, or leave the key out)";
+  }
   for (int j = 0; j < n; ++j) {
     const kin::DhRow& row = chain.joint(j);
     const bool prismatic = row.type == kin::JointType::prismatic;
@@ -720,7 +849,11 @@ std::string to_toml(const FwConfig& c) {
   for (const DriveConfig& d : c.drives) {
     out += "[[drive]]\n";
     for (const DriveKey& k : kDriveTable) {
-      if (!is_unset(k, d)) out += std::string(k.name) + " = " + value_of(k, d) + "\n";
+      if (is_unset(k, d)) continue;
+      // A joint that does not home: its other homing keys only when they differ from the defaults.
+      const bool homing_detail = std::strncmp(k.name, "homing.", 7) == 0 && std::strcmp(k.name, "homing.method") != 0;
+      if (homing_detail && d.homing_method == "none" && value_of(k, d) == value_of(k, DriveConfig{})) continue;
+      out += std::string(k.name) + " = " + value_of(k, d) + "\n";
     }
   }
   return out;

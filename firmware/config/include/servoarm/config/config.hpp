@@ -38,6 +38,17 @@ struct DriveConfig {
   double max_velocity = 0;               ///< deg/s or mm/s; 0 = the description's
   double heartbeat_timeout_ms = 0;       ///< 0 = bus.heartbeat_timeout_ms
   double quick_stop_decel = 0;           ///< deg/s^2 or mm/s^2 written to 6085h; 0 = leave the drive's
+  // homing (docs/configuration.md#homing; hal::HomingSpec): joint units deg (mm)
+  std::string homing_method = "none";    ///< "none" (absolute encoder), "hard_stop", or a CiA 402 6098h method ("19")
+  double homing_speed_switch = 10.0;     ///< deg/s: 6099h:01 search for switch; hard_stop: approach speed
+  double homing_speed_zero = 1.0;        ///< deg/s: 6099h:02 search for zero
+  double homing_acceleration = 100.0;    ///< deg/s^2: 609Ah; hard_stop: approach / back-off acceleration
+  double homing_offset = 0.0;            ///< deg: joint position at the home mark (607Ch) / the backed-off point
+  double homing_timeout_s = 30.0;        ///< the whole homing of this joint
+  int homing_direction = -1;             ///< hard_stop: direction of the approach (+1 / -1)
+  double homing_following_limit = 2.0;   ///< deg: hard_stop: |demanded - actual| that means contact
+  double homing_torque_limit = 0.0;      ///< N m (N): hard_stop: |torque| that means contact; 0 = unused
+  double homing_backoff = 2.0;           ///< deg: hard_stop: distance moved back from the contact
 
   bool operator==(const DriveConfig&) const = default;
 };
@@ -70,6 +81,9 @@ struct FwConfig {
   double linear_speed_mm_s = 100.0;
   double max_linear_speed_mm_s = 250.0;
   double max_move_duration_s = 600.0;  ///< longest move the console accepts (longer: out_of_range)
+  // [homing]
+  std::vector<std::vector<int>> homing_order;  ///< groups of 1-based joints, run one after the other; [] = one group of all
+  double homing_unhomed_jog_pct = 25.0;  ///< joint jogs of an unhomed arm run at this percent of the speed asked
   // [console]
   bool console_stdin = true;
   bool console_pty = false;
@@ -98,7 +112,8 @@ struct FwConfig {
 template <class S>
 struct Key {
   using Member =
-      std::variant<bool S::*, int S::*, std::int64_t S::*, double S::*, std::string S::*, std::vector<double> S::*>;
+      std::variant<bool S::*, int S::*, std::int64_t S::*, double S::*, std::string S::*, std::vector<double> S::*,
+                   std::vector<std::vector<int>> S::*>;
   /// Returns "" or why the value is refused ("must be above bus.heartbeat_period_ms (50)").
   using Relation = std::string (*)(const S& s, const FwConfig& whole);
 
@@ -116,6 +131,8 @@ struct Key {
   Relation relation = nullptr;
   const char* relation_text = nullptr;         ///< shown after the range ("above bus.heartbeat_period_ms")
   bool hex = false;                            ///< integers written as 0x...
+  bool or_integer = false;                     ///< strings: an integer is accepted too (kept as its decimal text,
+                                               ///< written back unquoted): homing.method = 19 or "none"
   bool has_unset = false;                      ///< a value meaning "not set: inherit" (lists: empty)
   double unset = 0;
   bool unset_writable = false;                 ///< may the file write the unset value itself?
@@ -131,6 +148,7 @@ struct Key {
   constexpr Key rule_text(const char* r) const { Key k = *this; k.rule = r; return k; }
   constexpr Key related(Relation f, const char* text) const { Key k = *this; k.relation = f; k.relation_text = text; return k; }
   constexpr Key in_hex() const { Key k = *this; k.hex = true; return k; }
+  constexpr Key integer_too() const { Key k = *this; k.or_integer = true; return k; }
   /// `value` (lists: empty) means "inherit `text`"; `writable`: a file may write it.
   constexpr Key unset_means(double value, const char* text, bool writable) const {
     Key k = *this; k.has_unset = true; k.unset = value; k.unset_text = text; k.unset_writable = writable; return k;
@@ -164,7 +182,8 @@ std::string load_config_text(const std::string& text, const std::string& origin,
 /// Range checks of every key (table order, first problem). "" when valid, else
 /// "key: reason (got value)".
 std::string validate(const FwConfig& cfg);
-/// Checks that need the robot: motion.home_deg has one value per joint within the
+/// Checks that need the robot: homing.order names every joint exactly once (when given),
+/// motion.home_deg has one value per joint within the
 /// joint's limits (the description's, narrowed by drive.limits), drive.limits lie
 /// within the description's, [[drive]] count, every joint's range fits the drive's
 /// 32-bit position at its scaling, one count is finer than the following-error limit,
@@ -172,6 +191,8 @@ std::string validate(const FwConfig& cfg);
 std::string validate_for_chain(const FwConfig& cfg, const kin::Chain& chain);
 /// Why `id` cannot be a console ISO-TP id (not 11-bit, or a CANopen id of nodes 1..127), or null.
 const char* can_console_id_problem(int id);
+/// drive.homing.method as a number: 1..35, 37 or -128..-1 (CiA 402 6098h); 0 for "none" / "hard_stop" / not a method.
+int homing_method_number(const std::string& method);
 /// The effective configuration as TOML (what `config` prints); loads back to `cfg`.
 /// Unset [[drive]] keys are left out.
 std::string to_toml(const FwConfig& cfg);
