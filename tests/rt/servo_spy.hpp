@@ -21,13 +21,15 @@ namespace servoarm::test {
 
 class ServoSpy final : public hal::ServoBus {
  public:
-  enum class Call : std::uint8_t { enable, disable, quick_stop, set_zero };
+  enum class Call : std::uint8_t { enable, disable, quick_stop, set_zero, start_homing, abort_homing };
   static const char* to_string(Call c) {
     switch (c) {
       case Call::enable: return "enable";
       case Call::disable: return "disable";
       case Call::quick_stop: return "quick_stop";
       case Call::set_zero: return "set_zero";
+      case Call::start_homing: return "start_homing";
+      case Call::abort_homing: return "abort_homing";
     }
     return "?";
   }
@@ -86,6 +88,17 @@ class ServoSpy final : public hal::ServoBus {
     return inner_.set_position_zero(j);
   }
   std::int64_t zero_offset(std::size_t j) const override { return inner_.zero_offset(j); }
+  hal::Status start_homing(std::size_t j, hal::TimePoint now) override {
+    record(Call::start_homing);
+    return inner_.start_homing(j, now);
+  }
+  void abort_homing(std::size_t j) override {
+    if (inner_.homing(j).phase == hal::HomingPhase::running) record(Call::abort_homing);
+    inner_.abort_homing(j);
+  }
+  hal::HomingProgress homing(std::size_t j) const override { return inner_.homing(j); }
+  void describe_homing(std::size_t j, char* buf, std::size_t size) const override { inner_.describe_homing(j, buf, size); }
+  hal::HomingKind homing_kind(std::size_t j) const override { return inner_.homing_kind(j); }
   const hal::JointFeedback& feedback(std::size_t j) const override { return inner_.feedback(j); }
   const char* last_error() const override { return inner_.last_error(); }
 

@@ -352,12 +352,12 @@ TEST(Controller, EstopFromEveryState) {
     // Nothing moves until reset + enable.
     CHECK(is_error(r.cmd("movej 0 0 0 0 0 0")));
     CHECK(is_error(r.cmd("enable")));
-    CHECK(is_error(r.cmd("home")));
+    CHECK(is_error(r.cmd("park")));
     if (which == 4) continue;  // the silent drive stays silent: enable would fault again
     CHECK(is_ok(r.cmd("reset")));
     CHECK(r.tel().state == ArmState::disabled);
     r.enable();
-    CHECK(is_ok(r.cmd("home")));
+    CHECK(is_ok(r.cmd("park")));
     CHECK(is_ok(r.cmd("wait")));
     LONGS_EQUAL(0, r.rt_allocs);
   }
@@ -611,7 +611,7 @@ TEST(Controller, EmcyFaultsNamingTheJoint) {
   r.run(1.0);
   CHECK(is_ok(r.cmd("reset")));
   r.enable();
-  CHECK(is_ok(r.cmd("home")));
+  CHECK(is_ok(r.cmd("park")));
   CHECK(is_ok(r.cmd("wait")));
   LONGS_EQUAL(0, r.rt_allocs);
 }
@@ -787,7 +787,7 @@ TEST(Controller, StopDropsQueueAndDisableWhileMovingStopsFirst) {
 TEST(Controller, AllocationFreeOverAFullRunWithEveryKindOfMove) {
   Rig r;
   r.enable();
-  const char* script[] = {"home", "movej 20 -40 160 10 -50 30 speed=80", "wait", "movel 650 380 150 speed=150",
+  const char* script[] = {"park", "movej 20 -40 160 10 -50 30 speed=80", "wait", "movel 650 380 150 speed=150",
                           "G91", "G1 X-20 Z10 F3000", "G90", "G4 P50", "G0 X640", "M400", "stats", "status", "fk",
                           "ik 600 380 150"};
   for (const char* l : script) {
@@ -808,7 +808,7 @@ TEST(Controller, AllocationFreeOverAFullRunWithEveryKindOfMove) {
   r.run(0.5);
   CHECK(is_ok(r.cmd("reset")));
   r.enable();
-  CHECK(is_ok(r.cmd("home")));
+  CHECK(is_ok(r.cmd("park")));
   r.run(0.1);
   r.app.plant->inject_silent(4);
   r.run(0.5);
@@ -921,7 +921,8 @@ TEST(Controller, StopHoldDisableInTheCycleAMoveIsQueuedCancelIt) {
         case RequestOp::set_zero:
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive:  // (not among the requests of this test)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home:  // (not among the requests of this test)
           CHECK_TEXT(t.state == ArmState::estop, what.c_str());
           LONGS_EQUAL(0, t.queued);
           break;
@@ -995,9 +996,9 @@ TEST(Controller, QueriesNeverChangeState) {
       CHECK_TEXT(std::fabs(t1.q_act[std::size_t(j)] - t0.q_act[std::size_t(j)]) < 1e-9, (std::string(q) + ": " + a).c_str());
     }
   }
-  // ... and `home` afterwards still has the way back to do.
+  // ... and `park` afterwards still has the way back to do.
   r.enable();
-  const std::string h = r.cmd("home");
+  const std::string h = r.cmd("park");
   CHECK_TEXT(h.find("duration=0.000s") == std::string::npos, h.c_str());
 }
 
@@ -1156,7 +1157,7 @@ TEST(RtThread, RealLoopRunsMovesWithoutAllocatingOnTheControlThread) {
   CHECK(is_ok(run("wait")));
   CHECK(is_ok(run("movel 700 380 120 speed=250")));
   CHECK(is_ok(run("G4 P20")));
-  CHECK(is_ok(run("home")));
+  CHECK(is_ok(run("park")));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   app.console->feed(s, "!");
   std::this_thread::sleep_for(std::chrono::milliseconds(200));

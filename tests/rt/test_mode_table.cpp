@@ -38,11 +38,19 @@ struct TableRig {
   hal::Duration period = hal::kMillisecond;
   std::uint32_t seq = 100;
 
-  explicit TableRig(bool drive_quick_stop, const sim::MotorParams& motor = {}) {
+  /// `homing`: joint 1 homes with CiA 402 method 19 and no home switch on its drive (the search
+  /// goes on until the 60 s timeout: the homing modes last), the others are absolute.
+  explicit TableRig(bool drive_quick_stop, const sim::MotorParams& motor = {}, bool homing = false) {
     app.sim_motor = motor;
     FwConfig cfg;
     cfg.can = "sim";
     cfg.stop = drive_quick_stop ? "drive" : "ramp";
+    if (homing) {
+      cfg.drives.resize(6);
+      cfg.drives[0].homing_method = "19";
+      cfg.drives[0].homing_speed_switch = 5;
+      cfg.drives[0].homing_timeout_s = 60;
+    }
     const std::string e = app.build(cfg, &clock);
     if (!e.empty()) FAIL(e.c_str());
     clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
@@ -71,6 +79,7 @@ struct TableRig {
     Request r;
     r.op = op;
     r.seq = ++seq;
+    r.joints = 0;  // home: every joint
     if (op == RequestOp::jog) {
       if (jog != nullptr) {
         r.jog = *jog;
@@ -231,10 +240,22 @@ void enter(TableRig& r, Mode m) {
       r.expect(Mode::jogging, "continuous jog");
       return;
     }
+    case Mode::homing:  // (a homing rig: joint 1 searches its switch)
+      r.enable();
+      r.request(RequestOp::home);
+      r.cycles(50);
+      r.expect(Mode::homing, "homing");
+      return;
+    case Mode::homing_abort:
+      enter(r, Mode::homing);
+      r.request(RequestOp::stop);
+      r.expect(Mode::homing_abort, "homing aborted");
+      return;
   }
 }
 
 bool needs_drive_quick_stop(Mode m) { return m == Mode::fault_quick_stop || m == Mode::estop_quick_stop; }
+bool needs_homing(Mode m) { return m == Mode::homing || m == Mode::homing_abort; }
 
 struct Expect {
   RtResult result;
@@ -248,12 +269,16 @@ const std::vector<Call> kDisable{Call::disable};
 const std::vector<Call> kEnable{Call::enable};
 const std::vector<Call> kQuick{Call::quick_stop};
 const std::vector<Call> kZero6(6, Call::set_zero);
+const std::vector<Call> kStart6(6, Call::start_homing);
+const std::vector<Call> kAbort{Call::abort_homing};
+const std::vector<Call> kAbortDisable{Call::abort_homing, Call::disable};
 
 constexpr RtResult ok = RtResult::ok, bad = RtResult::bad_state, flt = RtResult::fault, busy = RtResult::busy;
 
 // What every request does in every mode (ramp configuration; the quick-stop rows with
 // the drives' quick stop). Columns: enable, disable, stop, estop, reset, hold, resume, set_zero,
-// jog, jog_cancel, jog_keepalive.
+// jog, jog_cancel, jog_keepalive, home. The homing rows with joint 1 searching its switch (TableRig
+// `homing`); elsewhere every joint is absolute, so a homing cycle ends in the cycle it starts.
 Expect expected(Mode m, RequestOp op) {
   // Requests that do nothing but answer, the same in many modes.
   const auto stays = [m](RtResult res, const char* text) { return Expect{res, text, m, kNone}; };
@@ -264,6 +289,63 @@ Expect expected(Mode m, RequestOp op) {
   // The jog columns: outside the jogging mode a cancel / keep-alive only answers; a jog
   // starts from idle only.
   if (m != Mode::jogging && (op == RequestOp::jog_cancel || op == RequestOp::jog_keepalive)) return stays(ok, "not jogging");
+  // The home column outside the homing modes.
+  if (op == RequestOp::home && !needs_homing(m)) {
+    switch (m) {
+      case Mode::boot: return stays(bad, "drives not started");
+      case Mode::disabled:
+      case Mode::enabling: return stays(bad, "home needs the arm enabled (it is ");
+      // absolute joints: every one attained at once, the cycle over in the same control cycle
+      case Mode::idle: return {ok, "homing: group 1 of 1 (joints 1, 2, 3, 4, 5, 6)", Mode::idle, kStart6};
+      case Mode::moving:
+      case Mode::hold_ramp:
+      case Mode::hold_line:
+      case Mode::held:
+      case Mode::jogging: return stays(busy, "a move or jog is running (or held): home refused");
+      case Mode::stopping_to_idle:
+      case Mode::stopping_to_disabled: return stays(bad, "stopping; retry");
+      case Mode::fault_ramp:
+      case Mode::fault_quick_stop:
+      case Mode::fault: return stays(flt, "in fault: send reset first");
+      case Mode::estop_ramp:
+      case Mode::estop_quick_stop:
+      case Mode::estop: return stays(flt, "in estop: send reset first");
+      case Mode::homing:
+      case Mode::homing_abort: break;
+    }
+  }
+  if (m == Mode::homing) {  // joint 1 is being homed by its drive
+    switch (op) {
+      case RequestOp::enable: return stays(ok, "already enabled");
+      case RequestOp::disable: return {ok, "homing aborted; disabled", Mode::disabled, kAbortDisable};
+      case RequestOp::stop:
+      case RequestOp::hold: return {ok, "homing aborted: joint 1 left unhomed", Mode::homing_abort, kAbort};
+      case RequestOp::estop: return {ok, "estop", Mode::estop, kAbortDisable};
+      case RequestOp::reset: return nothing_to_reset;
+      case RequestOp::resume: return not_holding;
+      case RequestOp::set_zero: return no_zero;
+      case RequestOp::jog:
+      case RequestOp::home: return stays(busy, "homing runs: stop it first");
+      case RequestOp::jog_cancel:
+      case RequestOp::jog_keepalive: return stays(ok, "not jogging");
+    }
+  }
+  if (m == Mode::homing_abort) {  // joint 1's drive halting and going back to CSP
+    switch (op) {
+      case RequestOp::enable: return stays(bad, "stopping; retry");
+      case RequestOp::disable: return {ok, "homing aborted; disabled", Mode::disabled, kAbortDisable};
+      case RequestOp::stop: return stays(ok, "stopping");
+      case RequestOp::estop: return {ok, "estop", Mode::estop, kAbortDisable};
+      case RequestOp::reset: return nothing_to_reset;
+      case RequestOp::hold: return not_moving;
+      case RequestOp::resume: return not_holding;
+      case RequestOp::set_zero: return no_zero;
+      case RequestOp::jog:
+      case RequestOp::home: return stays(bad, "stopping; retry");
+      case RequestOp::jog_cancel:
+      case RequestOp::jog_keepalive: return stays(ok, "not jogging");
+    }
+  }
   if (m != Mode::jogging && op == RequestOp::jog) {
     switch (m) {
       case Mode::boot:
@@ -282,7 +364,9 @@ Expect expected(Mode m, RequestOp op) {
       case Mode::estop_ramp:
       case Mode::estop_quick_stop:
       case Mode::estop: return stays(flt, "in estop: send reset first");
-      case Mode::jogging: break;
+      case Mode::jogging:
+      case Mode::homing:
+      case Mode::homing_abort: break;
     }
   }
   switch (m) {
@@ -298,7 +382,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::disabled:
@@ -313,7 +398,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return {ok, "zero_offset = [", Mode::disabled, kZero6};
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::enabling:
@@ -328,7 +414,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::idle:
@@ -344,7 +431,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::moving:
@@ -359,7 +447,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::hold_ramp:
@@ -374,7 +463,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::hold_line:
@@ -389,7 +479,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::held:  // a joint move held at rest: a stop's ramp from rest ends in the same cycle
@@ -404,7 +495,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::stopping_to_idle:
@@ -420,7 +512,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::fault_ramp:
@@ -437,7 +530,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::fault:
@@ -452,7 +546,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::estop_ramp:
@@ -468,7 +563,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::estop:
@@ -483,7 +579,8 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
-        case RequestOp::jog_keepalive: break;  // (above)
+        case RequestOp::jog_keepalive:
+        case RequestOp::home: break;  // (above)
       }
       break;
     case Mode::jogging:  // a continuous joint jog, at speed
@@ -499,8 +596,11 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog: return stays(ok, "jog retargeted");
         case RequestOp::jog_cancel: return stays(ok, "jog cancelled");
         case RequestOp::jog_keepalive: return stays(ok, "jog refreshed");
+        case RequestOp::home: break;  // (above)
       }
       break;
+    case Mode::homing:
+    case Mode::homing_abort: break;  // (above)
   }
   FAIL("unreachable");
   return stays(ok, "");
@@ -514,7 +614,7 @@ std::string calls_text(const std::vector<Call>& c) {
 
 /// One (mode, request) case: enter the mode, send the request, check reply, mode and bus.
 void check_pair(Mode m, RequestOp op, bool drive_quick_stop, const Expect& e) {
-  TableRig r(drive_quick_stop || needs_drive_quick_stop(m));
+  TableRig r(drive_quick_stop || needs_drive_quick_stop(m), {}, needs_homing(m));
   enter(r, m);
   r.expect(m, "entering");
   // The setpoint written in the cycle before the request (to check continuity).
@@ -557,7 +657,7 @@ void check_pair(Mode m, RequestOp op, bool drive_quick_stop, const Expect& e) {
 
 constexpr RequestOp kOps[] = {RequestOp::enable, RequestOp::disable,  RequestOp::stop,       RequestOp::estop,
                               RequestOp::reset,  RequestOp::hold,     RequestOp::resume,     RequestOp::set_zero,
-                              RequestOp::jog,    RequestOp::jog_cancel, RequestOp::jog_keepalive};
+                              RequestOp::jog,    RequestOp::jog_cancel, RequestOp::jog_keepalive, RequestOp::home};
 
 void walk_mode(Mode m) {
   for (RequestOp op : kOps) check_pair(m, op, false, expected(m, op));
@@ -603,6 +703,8 @@ TEST(ModeTable, EstopRamp) { walk_mode(Mode::estop_ramp); }
 TEST(ModeTable, EstopQuickStop) { walk_mode(Mode::estop_quick_stop); }
 TEST(ModeTable, Estop) { walk_mode(Mode::estop); }
 TEST(ModeTable, Jogging) { walk_mode(Mode::jogging); }
+TEST(ModeTable, Homing) { walk_mode(Mode::homing); }
+TEST(ModeTable, HomingAbort) { walk_mode(Mode::homing_abort); }
 
 // With safety.stop = "drive", an e-stop of a powered arm is the drives' quick stop
 // (controlword 0x0002 in the same cycle), also over a ramp already running.

@@ -164,7 +164,7 @@ TEST(Soak, LoopingProgramRunsCleanWithFlatMemory) {
     sleep_ms(200);
     run("stop");
     run("wait");
-    run("home");
+    run("park");
     run("wait");
     run("status");
   };

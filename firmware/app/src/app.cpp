@@ -16,7 +16,40 @@ ControllerConfig App::controller_config() const {
   c.feedback_timeout = cfg.feedback_timeout_ms * 1e-3;
   c.drive_quick_stop = cfg.stop == "drive";
   c.drive_stop_timeout = cfg.drive_stop_timeout_s;
+  c.unhomed_jog_scale = cfg.homing_unhomed_jog_pct / 100.0;
+  // homing.order (1-based joints) -> bit masks; [] = one group of every joint
+  c.homing_groups = 0;
+  if (cfg.homing_order.empty()) {
+    c.homing_group_mask[0] = static_cast<std::uint16_t>((1u << chain.n_joints) - 1u);
+    c.homing_groups = 1;
+  } else {
+    for (const auto& g : cfg.homing_order) {
+      std::uint16_t m = 0;
+      for (const int j : g) m = static_cast<std::uint16_t>(m | (1u << (j - 1)));
+      c.homing_group_mask[static_cast<std::size_t>(c.homing_groups++)] = m;
+    }
+  }
   return c;
+}
+
+hal::HomingSpec App::homing_spec(int j) const {
+  hal::HomingSpec h;
+  if (cfg.drives.empty()) return h;  // no [[drive]] tables: every joint absolute (kind none)
+  const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
+  const double unit = chain.joint(j).type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;  // SI per deg / mm
+  if (d.homing_method == "none") return h;
+  h.kind = d.homing_method == "hard_stop" ? hal::HomingKind::hard_stop : hal::HomingKind::cia402;
+  h.method = static_cast<std::int8_t>(homing_method_number(d.homing_method));
+  h.speed_switch = d.homing_speed_switch * unit;
+  if (h.kind == hal::HomingKind::hard_stop) h.speed_switch *= d.homing_direction;  // the sign is the direction
+  h.speed_zero = d.homing_speed_zero * unit;
+  h.acceleration = d.homing_acceleration * unit;
+  h.offset = d.homing_offset * unit;
+  h.timeout = static_cast<hal::Duration>(d.homing_timeout_s * 1e9);
+  h.following_limit = d.homing_following_limit * unit;
+  h.torque_limit = d.homing_torque_limit;
+  h.backoff = d.homing_backoff * unit;
+  return h;
 }
 
 ConsoleConfig App::console_config() const {
@@ -136,9 +169,11 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
       const double unit = chain.joint(j).type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;
       jc.quick_stop_decel = cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel * unit * jc.scaling.counts_per_si();
     }
+    if (!cfg.drives.empty()) jc.homing = homing_spec(j);
   }
   servo = std::make_unique<hal::CanopenServoBus>(*canbus, *clock, mc);
-  if (servo->config_status() != hal::Status::ok) return std::string("bus: ") + hal::to_string(servo->config_status());
+  if (servo->config_status() != hal::Status::ok)
+    return std::string("bus: ") + hal::to_string(servo->config_status()) + (servo->last_error()[0] ? ": " : "") + servo->last_error();
   ik = std::make_unique<kin::IkModel>();
   ik_ready = kin::ik_prepare(chain, *ik) == kin::Status::ok && ik->method != kin::IkMethod::none;
   ctl = std::make_unique<Controller>(*servo, chain, controller_config());

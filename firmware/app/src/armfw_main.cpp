@@ -147,9 +147,9 @@ int run_demo(App& app) {
   for (int i = 0; i < 400 && app.ctl->telemetry().state == ArmState::enabling; ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   d.run("status", false);
-  d.run("home");
+  d.run("park");
   d.run("wait");
-  reached.push_back({"home", joint_err_deg(app.console->config().home), "deg"});
+  reached.push_back({"park", joint_err_deg(app.console->config().home), "deg"});
 
   // A joint move to a working pose (degrees), then linear moves around it.
   const bool puma = n == 6;
@@ -193,7 +193,7 @@ int run_demo(App& app) {
   d.run("movel 5000 0 0");
   --d.errors;  // expected
   // Feed hold during a move, then resume.
-  d.run("home");
+  d.run("park");
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   std::printf("> ! (feed hold)\n");
   app.console->feed(d.s, "!");
@@ -202,7 +202,7 @@ int run_demo(App& app) {
   std::printf("> ~ (resume)\n");
   app.console->feed(d.s, "~");
   d.run("wait");
-  reached.push_back({"home after feed hold", joint_err_deg(app.console->config().home), "deg"});
+  reached.push_back({"park after feed hold", joint_err_deg(app.console->config().home), "deg"});
   d.run("stats", false);
   d.run("disable", false);
 

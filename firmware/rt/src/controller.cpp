@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 
 namespace servoarm::fw {
 
@@ -20,6 +21,7 @@ const char* to_string(FaultCause c) {
     case FaultCause::setpoint_position: return "setpoint_position";
     case FaultCause::setpoint_velocity: return "setpoint_velocity";
     case FaultCause::feedback_invalid: return "feedback_invalid";
+    case FaultCause::homing_failed: return "homing_failed";
   }
   return "?";
 }
@@ -32,6 +34,7 @@ const char* to_string(RtResult r) {
     case RtResult::busy: return "busy";
     case RtResult::start_moved: return "start_moved";
     case RtResult::plan_failed: return "plan_failed";
+    case RtResult::not_homed: return "not_homed";
   }
   return "?";
 }
@@ -53,6 +56,7 @@ const char* to_string(EventKind k) {
     case EventKind::motion_refused: return "motion_refused";
     case EventKind::state: return "state";
     case EventKind::jog_stopped: return "jog_stopped";
+    case EventKind::homing: return "homing";
   }
   return "?";
 }
@@ -84,6 +88,8 @@ hal::Status Controller::boot(TimePoint now, TimePoint deadline) {
   const hal::Status st = bus_.start(deadline);
   if (st != hal::Status::ok) return st;
   now_ = now;
+  zeroed_ = 0;  // the bus's start() unhomed every joint: no zero is assumed from before
+  hrunning_ = 0;
   bus_.read(now);
   hold_measured();
   for (int j = 0; j < n_; ++j) emcy_seen_[static_cast<std::size_t>(j)] = bus_.feedback(static_cast<std::size_t>(j)).emcy_count;
@@ -184,7 +190,9 @@ void Controller::end_of_ramp(Mode ramp) {
     case Mode::fault:
     case Mode::estop_quick_stop:
     case Mode::estop:
-    case Mode::jogging: return;  // not a ramp
+    case Mode::jogging:
+    case Mode::homing:
+    case Mode::homing_abort: return;  // not a ramp
   }
 }
 
@@ -255,8 +263,14 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
     case Mode::estop_ramp:        // a fault during an e-stop powers down at once
     case Mode::estop_quick_stop:
     case Mode::estop: how = Reaction::at_rest; break;
+    case Mode::homing:        // the drives move the homed joints: homing is aborted, the drives powered down
+    case Mode::homing_abort: how = Reaction::at_rest; break;
   }
   if (how == Reaction::latched) return;
+  if (hrunning_ != 0) {
+    abort_running_homing();
+    hrunning_ = 0;
+  }
   cause_ = c;
   fault_joint_ = joint;
   if (joint >= 0)
@@ -304,7 +318,9 @@ void Controller::supervise(TimePoint now) {
     case Mode::held:
     case Mode::stopping_to_idle:
     case Mode::stopping_to_disabled:
-    case Mode::jogging: w = Watch::all; break;
+    case Mode::jogging:
+    case Mode::homing:
+    case Mode::homing_abort: w = Watch::all; break;
   }
   const bool all_checks = w == Watch::all;
   for (int j = 0; j < n_; ++j) {
@@ -366,7 +382,8 @@ void Controller::supervise(TimePoint now) {
       raise_fault(FaultCause::feedback_invalid, j, d);
       return;
     }
-    if (all_checks && cfg_.check_following_error && have_prev_) {
+    const bool master_moves = (hrunning_ >> j) & 1u;  // homing: no setpoint of ours to follow
+    if (all_checks && cfg_.check_following_error && have_prev_ && !master_moves) {
       const double e = std::fabs(q_prev_[j] - fb.position);
       if (e > max_follow_) max_follow_ = e;
       if (e > cfg_.following_error) {
@@ -519,7 +536,18 @@ void Controller::run(Action a, const Request& r, TimePoint now) {
       [[fallthrough]];
     case Action::update_jog: {
       const char* why = "";
-      if (!jog_.set(r.jog, cmd_, now, why)) {
+      const std::uint16_t unhomed = static_cast<std::uint16_t>(all_joints() & ~homed_mask());
+      if (unhomed != 0 && r.jog.space == JogSpace::tool) {
+        char j[48];
+        joints_text(j, sizeof j, unhomed);
+        std::snprintf(m, sizeof m, "tool jog refused: %s not homed (home first; joint jogs run at %.0f %%)", j,
+                      100.0 * cfg_.unhomed_jog_scale);
+        reply(r.seq, RtResult::not_homed, m);
+        return;
+      }
+      Request slow = r;  // an unhomed arm jogs its joints at the reduced speed only
+      if (unhomed != 0) slow.jog.override = std::fmax(0.01, r.jog.override * cfg_.unhomed_jog_scale);
+      if (!jog_.set(slow.jog, cmd_, now, why)) {
         std::snprintf(m, sizeof m, "jog refused: %s", why);
         reply(r.seq, RtResult::bad_state, m);
         return;
@@ -545,6 +573,48 @@ void Controller::run(Action a, const Request& r, TimePoint now) {
       jog_.refresh(now);
       reply(r.seq, RtResult::ok, "jog refreshed");
       return;
+    // home
+    case Action::start_homing: start_homing(r); return;
+    case Action::refuse_home_not_enabled:
+      std::snprintf(m, sizeof m, "home needs the arm enabled (it is %s)", to_string(arm_state(mode_)));
+      reply(r.seq, RtResult::bad_state, m);
+      return;
+    case Action::refuse_home_moving:
+      reply(r.seq, RtResult::busy, "a move or jog is running (or held): home refused");
+      return;
+    case Action::refuse_homing:
+      reply(r.seq, RtResult::busy, "homing runs: stop it first (stop, !, Ctrl-X)");
+      return;
+    // stop / hold / disable / estop while homing
+    case Action::abort_homing: {
+      char j[48];
+      joints_text(j, sizeof j, hrunning_);
+      flush_motions();
+      abort_running_homing();
+      set_mode(Mode::homing_abort);
+      std::snprintf(m, sizeof m, "homing aborted: %s left unhomed", hrunning_ ? j : "no joint");
+      emit(EventKind::homing, FaultCause::none, -1, 0, m);
+      reply(r.seq, RtResult::ok, m);
+      return;
+    }
+    case Action::abort_homing_disable:
+      flush_motions();
+      abort_running_homing();
+      hrunning_ = 0;
+      power_down(Mode::disabled);
+      hold_measured();
+      emit(EventKind::homing, FaultCause::none, -1, 0, "homing aborted: disabled");
+      reply(r.seq, RtResult::ok, "homing aborted; disabled");
+      return;
+    case Action::estop_abort_homing: {
+      const std::size_t dropped = begin_estop(now);
+      abort_running_homing();
+      hrunning_ = 0;
+      power_down(Mode::estop);
+      emit(EventKind::homing, FaultCause::none, -1, 0, "homing aborted: emergency stop");
+      estop_done(r, dropped);
+      return;
+    }
   }
 }
 
@@ -671,8 +741,191 @@ void Controller::set_zero(const Request& r) {
       len += std::snprintf(m + len, sizeof m - static_cast<std::size_t>(len), "%s%lld%s", j ? ", " : "",
                            static_cast<long long>(bus_.zero_offset(static_cast<std::size_t>(j))), j + 1 == n_ ? "]" : "");
   }
+  zeroed_ = all_joints();  // a zero declared this power cycle: the joints count as homed
   hold_measured();
   reply(r.seq, RtResult::ok, m);
+}
+
+// ---------------------------------------------------------------------------
+// Homing
+// ---------------------------------------------------------------------------
+
+void Controller::joints_text(char* buf, std::size_t cap, std::uint16_t mask) {
+  int len = 0, count = 0;
+  for (int j = 0; j < 16; ++j)
+    if ((mask >> j) & 1u) ++count;
+  len = std::snprintf(buf, cap, "%s", count == 1 ? "joint" : "joints");
+  int k = 0;
+  for (int j = 0; j < 16 && len > 0 && static_cast<std::size_t>(len) < cap; ++j)
+    if ((mask >> j) & 1u)
+      len += std::snprintf(buf + len, cap - static_cast<std::size_t>(len), "%s%d", k++ ? ", " : " ", j + 1);
+}
+
+std::uint16_t Controller::homed_mask() const {
+  std::uint16_t m = zeroed_;
+  for (int j = 0; j < n_; ++j)
+    if (bus_.homing(static_cast<std::size_t>(j)).phase == hal::HomingPhase::attained) m = static_cast<std::uint16_t>(m | (1u << j));
+  return static_cast<std::uint16_t>(m & ~hrunning_);
+}
+
+void Controller::abort_running_homing() {
+  for (int j = 0; j < n_; ++j)
+    if ((hrunning_ >> j) & 1u) bus_.abort_homing(static_cast<std::size_t>(j));
+}
+
+void Controller::homing_failed(int j, const char* why) {
+  hrunning_ = static_cast<std::uint16_t>(hrunning_ & ~(1u << j));
+  abort_running_homing();  // the rest of the group stops too
+  hrunning_ = 0;
+  cause_ = FaultCause::homing_failed;
+  fault_joint_ = j;
+  if (why != nullptr && why[0] != '\0') {
+    copy_text(fault_text_, sizeof fault_text_, why);
+  } else {
+    // The bus's line names the joint its own way ("joint 1 (node 2): ..." with 0-based joints
+    // in the CANopen master): the firmware's joints are 1-based everywhere, so the line is
+    // re-headed "joint <j+1> (node N): <cause>".
+    char d[sizeof fault_text_];
+    bus_.describe_homing(static_cast<std::size_t>(j), d, sizeof d);
+    const char* node = std::strstr(d, "(node ");
+    const char* rest = node != nullptr ? std::strstr(node, "): ") : nullptr;
+    std::size_t len = 0;
+    auto append = [&](const char* src, std::size_t count) {
+      for (std::size_t i = 0; i < count && src[i] != '\0' && len + 1 < sizeof fault_text_; ++i) fault_text_[len++] = src[i];
+      fault_text_[len] = '\0';
+    };
+    char head[24];
+    std::snprintf(head, sizeof head, "joint %d", j + 1);
+    append(head, sizeof head);
+    if (d[0] == '\0') {
+      append(": homing failed", 64);
+    } else if (std::strncmp(d, "joint ", 6) == 0 && rest != nullptr) {
+      append(" ", 1);
+      append(node, static_cast<std::size_t>(rest + 1 - node));  // "(node 2)"
+      append(": ", 2);
+      append(rest + 3, sizeof d);
+    } else {
+      append(": ", 2);
+      append(d, sizeof d);
+    }
+  }
+  flush_motions();
+  power_down(Mode::fault);  // the master left the drive enabled in CSP: the arm is disabled, never moving
+  hold_measured();
+  emit(EventKind::fault, FaultCause::homing_failed, j, 0, fault_text_);
+}
+
+void Controller::start_homing(const Request& r) {
+  char m[sizeof(Reply::message)];
+  if (!motions_.empty()) {
+    reply(r.seq, RtResult::busy, "moves are queued: home refused");
+    return;
+  }
+  hgroup_n_ = 0;
+  if (r.joints != 0) {
+    hgroups_[0] = static_cast<std::uint16_t>(r.joints & all_joints());
+    hgroup_n_ = hgroups_[0] != 0 ? 1 : 0;
+  } else if (cfg_.homing_groups <= 0) {
+    hgroups_[0] = all_joints();
+    hgroup_n_ = 1;
+  } else {
+    for (int g = 0; g < cfg_.homing_groups && g < static_cast<int>(hgroups_.size()); ++g) {
+      const auto mask = static_cast<std::uint16_t>(cfg_.homing_group_mask[static_cast<std::size_t>(g)] & all_joints());
+      if (mask != 0) hgroups_[static_cast<std::size_t>(hgroup_n_++)] = mask;
+    }
+  }
+  if (hgroup_n_ == 0) {
+    reply(r.seq, RtResult::bad_state, "home: no such joint");
+    return;
+  }
+  hgroup_i_ = 0;
+  cmd_ = kin::JointState::rest(cmd_.pos);
+  ++generation_;  // the positions jump: the console re-reads them
+  if (!start_homing_group()) {
+    std::snprintf(m, sizeof m, "homing failed: %s", fault_text_);
+    reply(r.seq, RtResult::fault, m);
+    return;
+  }
+  set_mode(Mode::homing);
+  char j[48];
+  joints_text(j, sizeof j, hgroups_[0]);
+  std::snprintf(m, sizeof m, "homing: group 1 of %d (%s)", hgroup_n_, j);
+  reply(r.seq, RtResult::ok, m);
+}
+
+bool Controller::start_homing_group() {
+  const std::uint16_t g = hgroups_[static_cast<std::size_t>(hgroup_i_)];
+  for (int j = 0; j < n_; ++j) {
+    if (!((g >> j) & 1u)) continue;
+    const hal::Status st = bus_.start_homing(static_cast<std::size_t>(j), now_);
+    if (st != hal::Status::ok) {
+      char d[sizeof fault_text_];
+      std::snprintf(d, sizeof d, "joint %d: homing not started: %s", j + 1, hal::describe(st));
+      homing_failed(j, d);
+      return false;
+    }
+    zeroed_ = static_cast<std::uint16_t>(zeroed_ & ~(1u << j));
+    hrunning_ = static_cast<std::uint16_t>(hrunning_ | (1u << j));
+    char e[sizeof(Event::message)];
+    std::snprintf(e, sizeof e, "joint %d homing (group %d of %d, %s)", j + 1, hgroup_i_ + 1, hgroup_n_,
+                  hal::to_string(bus_.homing_kind(static_cast<std::size_t>(j))));
+    emit(EventKind::homing, FaultCause::none, j, 0, e);
+  }
+  return true;
+}
+
+// The joints the master homes follow their measured positions (so the setpoint is the measured,
+// jumped, position when the homing ends: never the old one); the others hold.
+void Controller::step_homing() {
+  for (int j = 0; j < n_; ++j) {
+    if (!((hrunning_ >> j) & 1u)) continue;
+    const auto ju = static_cast<std::size_t>(j);
+    const hal::JointFeedback& fb = bus_.feedback(ju);
+    if (fb.valid) cmd_.pos[j] = fb.position;
+    cmd_.vel[j] = 0;
+    cmd_.acc[j] = 0;
+    const hal::HomingProgress p = bus_.homing(ju);
+    if (p.phase == hal::HomingPhase::running) continue;
+    hrunning_ = static_cast<std::uint16_t>(hrunning_ & ~(1u << j));
+    q_prev_[j] = cmd_.pos[j];  // the jump to the homed coordinates is no setpoint step
+    char e[sizeof(Event::message)];
+    if (mode_ == Mode::homing_abort) {
+      std::snprintf(e, sizeof e, "joint %d homing aborted: not homed", j + 1);
+      emit(EventKind::homing, FaultCause::none, j, 0, e);
+      continue;
+    }
+    if (p.phase != hal::HomingPhase::attained) {
+      homing_failed(j, nullptr);
+      return;
+    }
+    if (!(cmd_.pos[j] >= limits_.lower[ju] - cfg_.position_tolerance && cmd_.pos[j] <= limits_.upper[ju] + cfg_.position_tolerance)) {
+      char d[sizeof fault_text_];
+      std::snprintf(d, sizeof d, "joint %d homed at %.5f, outside its limits [%.5f, %.5f]: check drive.homing.offset", j + 1,
+                    cmd_.pos[j], limits_.lower[ju], limits_.upper[ju]);
+      homing_failed(j, d);
+      return;
+    }
+    std::snprintf(e, sizeof e, "joint %d homed", j + 1);
+    emit(EventKind::homing, FaultCause::none, j, 0, e);
+  }
+  if (hrunning_ != 0) return;
+  if (mode_ == Mode::homing && ++hgroup_i_ < hgroup_n_) {
+    if (start_homing_group()) return;
+    return;  // failed: the arm is disabled
+  }
+  const bool done = mode_ == Mode::homing;
+  hold_measured();
+  set_mode(Mode::idle);
+  const std::uint16_t unhomed = static_cast<std::uint16_t>(all_joints() & ~homed_mask());
+  char e[sizeof(Event::message)];
+  if (unhomed == 0) {
+    std::snprintf(e, sizeof e, "%s: every joint homed", done ? "homing done" : "homing stopped");
+  } else {
+    char j[48];
+    joints_text(j, sizeof j, unhomed);
+    std::snprintf(e, sizeof e, "%s: %s not homed", done ? "homing done" : "homing stopped", j);
+  }
+  emit(EventKind::homing, FaultCause::none, -1, 0, e);
 }
 
 // ---------------------------------------------------------------------------
@@ -706,6 +959,11 @@ bool Controller::starts_here(const kin::JointTrajectory& plan) const {
 bool Controller::start_next_motion() {
   while (MotionItem* m = motions_.front()) {
     motion_t_ = 0;
+    if (m->kind() != MotionKind::dwell && !all_homed()) {  // (the console refuses these first)
+      running_ = m;
+      finish_motion(true, RtResult::not_homed);
+      continue;
+    }
     switch (m->kind()) {
       case MotionKind::joint: {
         JointMove& jm = *std::get_if<JointMove>(&m->payload);
@@ -807,6 +1065,8 @@ void Controller::step_motion() {
     case Mode::fault:
     case Mode::estop: follow_measured(); return;
     case Mode::jogging: step_jog(); return;
+    case Mode::homing:
+    case Mode::homing_abort: step_homing(); return;
     case Mode::held:
       // At rest, the motion kept (joint / dwell / Cartesian stopped on its line). A held
       // queue that has not started goes idle once nothing is left of it.
@@ -876,6 +1136,7 @@ void Controller::validate_and_write(TimePoint now) {
   if (is_powered) {
     const bool stopping_ramp = ramping(mode_);  // a stop may cross a limit it was already about to
     for (int j = 0; j < n_; ++j) {
+      if ((hrunning_ >> j) & 1u) continue;  // the master moves it (homing): write() ignores its setpoint
       const double q = cmd_.pos[j];
       char d[64];
       if (!std::isfinite(q)) {
@@ -951,6 +1212,20 @@ void Controller::publish() {
   t.estop_latency_ns = estop_latency_;
   t.ik_fallbacks = ik_fallbacks_;
   t.joint_replans = joint_replans_;
+  t.homed = homed_mask();
+  t.homing_now = hrunning_;
+  t.homing_failed = 0;
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    const hal::HomingProgress hp = bus_.homing(ju);
+    t.homing_phase[ju] = static_cast<std::uint8_t>(hp.phase);
+    if (hp.phase == hal::HomingPhase::failed && hp.status != hal::Status::aborted)
+      t.homing_failed = static_cast<std::uint16_t>(t.homing_failed | (1u << j));
+    t.homing_kind[ju] = static_cast<std::uint8_t>(bus_.homing_kind(ju));
+  }
+  const bool homing_mode = mode_ == Mode::homing || mode_ == Mode::homing_abort;
+  t.homing_group = static_cast<std::uint8_t>(homing_mode ? hgroup_i_ + 1 : 0);
+  t.homing_groups = static_cast<std::uint8_t>(homing_mode ? hgroup_n_ : 0);
   telemetry_.write(t);
 }
 

@@ -13,6 +13,7 @@ const char* to_string(ArmState s) {
     case ArmState::fault: return "fault";
     case ArmState::estop: return "estop";
     case ArmState::jogging: return "jogging";
+    case ArmState::homing: return "homing";
   }
   return "?";
 }
@@ -30,6 +31,7 @@ const char* to_string(RequestOp op) {
     case RequestOp::jog: return "jog";
     case RequestOp::jog_cancel: return "jog_cancel";
     case RequestOp::jog_keepalive: return "jog_keepalive";
+    case RequestOp::home: return "home";
   }
   return "?";
 }
@@ -53,6 +55,8 @@ const char* to_string(Mode m) {
     case Mode::estop_quick_stop: return "estop_quick_stop";
     case Mode::estop: return "estop";
     case Mode::jogging: return "jogging";
+    case Mode::homing: return "homing";
+    case Mode::homing_abort: return "homing_abort";
   }
   return "?";
 }
@@ -95,6 +99,13 @@ const char* to_string(Action a) {
     case Action::cancel_jog: return "cancel_jog";
     case Action::not_jogging: return "not_jogging";
     case Action::refresh_jog: return "refresh_jog";
+    case Action::start_homing: return "start_homing";
+    case Action::refuse_home_not_enabled: return "refuse_home_not_enabled";
+    case Action::refuse_home_moving: return "refuse_home_moving";
+    case Action::refuse_homing: return "refuse_homing";
+    case Action::abort_homing: return "abort_homing";
+    case Action::abort_homing_disable: return "abort_homing_disable";
+    case Action::estop_abort_homing: return "estop_abort_homing";
   }
   return "?";
 }
@@ -102,9 +113,9 @@ const char* to_string(Action a) {
 // Every mode's row names its own mode's expected ArmState in the comments above; what
 // can be checked at compile time is checked here.
 static_assert(kRequestTable.size() == kModes);
-static_assert(static_cast<std::size_t>(Mode::jogging) + 1 == kModes);
-static_assert(static_cast<std::size_t>(RequestOp::jog_keepalive) + 1 == kRequestOps);
-static_assert(static_cast<std::size_t>(Action::refresh_jog) + 1 == kActions);
+static_assert(static_cast<std::size_t>(Mode::homing_abort) + 1 == kModes);
+static_assert(static_cast<std::size_t>(RequestOp::home) + 1 == kRequestOps);
+static_assert(static_cast<std::size_t>(Action::estop_abort_homing) + 1 == kActions);
 static_assert(action_for(Mode::disabled, RequestOp::enable) == Action::power_up);
 static_assert(action_for(Mode::estop, RequestOp::reset) == Action::reset_latched);
 

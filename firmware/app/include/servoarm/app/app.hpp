@@ -50,6 +50,8 @@ struct App {
   /// virtual drives on a real clock, their thread must be running (SimPlant::start_thread).
   std::string boot();
   ControllerConfig controller_config() const;
+  /// Joint j's homing (drive.homing.*, deg / mm -> SI) as the CANopen master takes it.
+  hal::HomingSpec homing_spec(int j) const;
   ConsoleConfig console_config() const;
 };
 

@@ -56,6 +56,13 @@ struct ControllerConfig {
   ///    (or after drive_stop_timeout).
   bool drive_quick_stop = false;
   double drive_stop_timeout = 2.0;     ///< s: longest drive-side quick stop before power-down anyway
+  /// Homing (RequestOp::home): the groups of joints homed together, in order (bit j = joint j);
+  /// homing_groups == 0: one group of every joint.
+  std::array<std::uint16_t, kin::kMaxJoints> homing_group_mask{};
+  int homing_groups = 0;
+  /// While a joint is not homed: joint jogs run at this fraction of the speed asked; tool jogs and
+  /// every queued joint / Cartesian move are refused (RtResult::not_homed).
+  double unhomed_jog_scale = 0.25;
 };
 
 inline constexpr std::size_t kMotionQueue = 16;
@@ -138,6 +145,22 @@ class Controller {
   void reset_latched(const Request& r);
   void hold_motion(const Request& r);
   void resume_motion(const Request& r);
+  void start_homing(const Request& r);
+
+  // Homing (the homing modes' data: the groups, the one running, the joints the master moves)
+  /// Bit j: joint j is homed (the bus says attained, or `home zero` set it this power cycle).
+  std::uint16_t homed_mask() const;
+  bool all_homed() const { return homed_mask() == all_joints(); }
+  std::uint16_t all_joints() const { return static_cast<std::uint16_t>((1u << n_) - 1u); }
+  /// Start group hgroup_i_: false when a drive refused (homing failed, arm disabled).
+  bool start_homing_group();
+  void step_homing();
+  /// Abort every joint the master homes now (they stay unhomed); hrunning_ is kept (homing_abort waits for them).
+  void abort_running_homing();
+  /// Joint j's homing failed: the arm is disabled, the cause (`why`, or ServoBus::describe_homing) latched.
+  void homing_failed(int j, const char* why);
+  /// "joints 2, 3" of `mask` into buf.
+  static void joints_text(char* buf, std::size_t cap, std::uint16_t mask);
 
   hal::ServoBus& bus_;
   const kin::Chain& chain_;
@@ -167,6 +190,10 @@ class Controller {
   double motion_t_ = 0;
   std::uint64_t ik_fallbacks_ = 0;
   std::uint64_t joint_replans_ = 0;
+  std::array<std::uint16_t, kin::kMaxJoints> hgroups_{};
+  int hgroup_n_ = 0, hgroup_i_ = 0;
+  std::uint16_t hrunning_ = 0;      ///< joints the master moves now (homing / homing_abort): their setpoints follow
+  std::uint16_t zeroed_ = 0;        ///< joints whose zero `home zero` set this power cycle
   std::uint32_t done_id_ = 0;
   std::uint64_t generation_ = 0;
   FaultCause cause_ = FaultCause::none;

@@ -29,6 +29,7 @@ enum class FaultCause : std::uint8_t {
   setpoint_position,  ///< setpoint outside the joint position limits
   setpoint_velocity,  ///< setpoint step faster than the joint velocity limit
   feedback_invalid,   ///< no (or stale) position feedback from an enabled joint
+  homing_failed,      ///< a joint's homing failed (timeout, homing error, refused): the arm is disabled
 };
 const char* to_string(FaultCause c);
 
@@ -40,6 +41,7 @@ enum class RtResult : std::uint8_t {
   busy,        ///< queue full
   start_moved, ///< a planned Cartesian move no longer starts where the arm is
   plan_failed, ///< the RT-side plan of a joint move failed
+  not_homed,   ///< refused: a joint is not homed (its zero not established this power cycle)
 };
 const char* to_string(RtResult r);
 
@@ -47,6 +49,7 @@ struct Request {
   RequestOp op = RequestOp::stop;
   std::uint32_t seq = 0;
   JogSpec jog;  ///< RequestOp::jog: what to jog (SI)
+  std::uint16_t joints = 0;  ///< RequestOp::home: bit j = joint j, as one group; 0 = every joint by the homing order
   Request() = default;
   Request(RequestOp o, std::uint32_t s) : op(o), seq(s) {}
 };
@@ -99,7 +102,8 @@ struct MotionItem {
 
 /// jog_stopped: a jog ended on its own other than at its target (deadman, a joint limit,
 /// a singularity, no IK solution); the message says why and names the joint.
-enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state, jog_stopped };
+/// homing: progress of the homing cycle (a joint started, homed, aborted; the cycle done), `joint` named.
+enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state, jog_stopped, homing };
 const char* to_string(EventKind k);
 
 struct Event {
@@ -137,6 +141,16 @@ struct Telemetry {
   /// Joint moves the RT thread had to plan again at start because the arm was not where
   /// the console's plan begins (or none was given); since boot.
   std::uint64_t joint_replans = 0;
+  // Homing (ServoBus::homing, docs/firmware.md#homing)
+  std::uint16_t homed = 0;         ///< bit j: joint j's zero is established this power cycle (or it is absolute)
+  std::uint16_t homing_now = 0;    ///< bit j: the master homes joint j now
+  std::uint16_t homing_failed = 0; ///< bit j: joint j's last homing failed (not aborted: that leaves it unhomed)
+  std::array<std::uint8_t, kin::kMaxJoints> homing_phase{};  ///< hal::HomingPhase per joint
+  std::array<std::uint8_t, kin::kMaxJoints> homing_kind{};   ///< hal::HomingKind per joint
+  std::uint8_t homing_group = 0;   ///< group running (1-based; 0 = none)
+  std::uint8_t homing_groups = 0;  ///< groups of the running cycle
+  /// True when every joint is homed.
+  bool all_homed() const { return n > 0 && homed == static_cast<std::uint16_t>((1u << n) - 1u); }
 };
 
 }  // namespace servoarm::fw

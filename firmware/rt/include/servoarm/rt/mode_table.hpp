@@ -27,6 +27,7 @@ enum class ArmState : std::uint8_t {
   fault,     ///< supervisor fault: quick stop, then drives disabled; needs `reset` + `enable`
   estop,     ///< emergency stop: quick stop, then drives disabled; needs `reset` + `enable`
   jogging,   ///< a jog (joint or tool) runs, or decelerates after `jog stop` / 0x85 / its deadman
+  homing,    ///< the homing cycle runs (`home`, `$H`): the drives, not the setpoints, move the joints homed
 };
 const char* to_string(ArmState s);
 
@@ -34,9 +35,13 @@ const char* to_string(ArmState s);
 /// only in the disabled state, and only when 0 lies within every joint's limits.
 /// jog: start a jog or retarget the running one (Request::jog); jog_cancel: decelerate the
 /// jog to rest (`jog stop`, GRBL 0x85); jog_keepalive: refresh a continuous jog's deadman.
-enum class RequestOp : std::uint8_t { enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive };
+/// home: run the homing cycle (Request::joints: those joints as one group; 0 = every joint,
+/// group after group of ControllerConfig's homing order).
+enum class RequestOp : std::uint8_t {
+  enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive, home
+};
 const char* to_string(RequestOp op);
-inline constexpr std::size_t kRequestOps = 11;
+inline constexpr std::size_t kRequestOps = 12;
 
 /// The controller's mode. "ramp" = the controller ramps every joint to rest along its
 /// stop trajectory (drives powered, following the setpoints); "quick stop" = the drives
@@ -60,8 +65,10 @@ enum class Mode : std::uint8_t {
   estop_quick_stop,  ///< emergency stop: drives' quick stop, then drives disabled
   estop,             ///< emergency stop latched, drives disabled; needs reset
   jogging,           ///< a jog runs (Jogger, jog.hpp), or decelerates to rest; then idle
+  homing,            ///< homing groups run one after the other (the master moves the joints of the group)
+  homing_abort,      ///< homing aborted (`stop`, `!`): waiting for the drives to halt and return to CSP; then idle
 };
-inline constexpr std::size_t kModes = 17;
+inline constexpr std::size_t kModes = 19;
 const char* to_string(Mode m);
 
 /// The one function from mode to what the console sees.
@@ -84,6 +91,8 @@ constexpr ArmState arm_state(Mode m) {
     case Mode::estop_quick_stop:
     case Mode::estop: return ArmState::estop;
     case Mode::jogging: return ArmState::jogging;
+    case Mode::homing: return ArmState::homing;
+    case Mode::homing_abort: return ArmState::stopping;
   }
   return ArmState::fault;
 }
@@ -105,7 +114,9 @@ constexpr bool powered(Mode m) {
     case Mode::stopping_to_disabled:
     case Mode::fault_ramp:
     case Mode::estop_ramp:
-    case Mode::jogging: return true;
+    case Mode::jogging:
+    case Mode::homing:
+    case Mode::homing_abort: return true;
     case Mode::boot:
     case Mode::disabled:
     case Mode::enabling:
@@ -170,83 +181,100 @@ enum class Action : std::uint8_t {
   cancel_jog,             ///< jogging: decelerate to rest on the jog's path, then idle
   not_jogging,            ///< ok "not jogging"
   refresh_jog,            ///< jogging: the deadman is refreshed
+  // home
+  start_homing,           ///< idle, nothing queued: the first group starts -> homing (fault if a drive refuses)
+  refuse_home_not_enabled,///< bad_state "home needs the arm enabled (it is <state>)"
+  refuse_home_moving,     ///< busy "a move or jog is running (or held): home refused"
+  refuse_homing,          ///< busy "homing runs: stop it first (stop, !, Ctrl-X)" (jog, home while homing)
+  // stop / hold / disable / estop while homing
+  abort_homing,           ///< abort the running joints (left unhomed) -> homing_abort, then idle
+  abort_homing_disable,   ///< abort the running joints, power down -> disabled
+  estop_abort_homing,     ///< abort the running joints, power down -> estop
 };
-inline constexpr std::size_t kActions = 36;
+inline constexpr std::size_t kActions = 43;
 const char* to_string(Action a);
 
 using RequestRow = std::array<Action, kRequestOps>;  ///< indexed by RequestOp
 
 /// (mode x request) -> action. Rows in Mode order, columns in RequestOp order:
-///   enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive.
+///   enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive, home.
 inline constexpr std::array<RequestRow, kModes> kRequestTable = {{
     // boot
     {Action::refuse_not_started, Action::disable_drives, Action::drop_queue, Action::estop_at_rest,
      Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging},
+     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging, Action::refuse_not_started},
     // disabled
     {Action::power_up, Action::disable_now, Action::drop_queue, Action::estop_at_rest, Action::nothing_to_reset,
      Action::not_moving, Action::not_holding, Action::set_zero,
-     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging},
+     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging, Action::refuse_home_not_enabled},
     // enabling
     {Action::already_enabled, Action::disable_now, Action::drop_queue, Action::estop_at_rest, Action::nothing_to_reset,
      Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging},
+     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging, Action::refuse_home_not_enabled},
     // idle
     {Action::already_enabled, Action::disable_now, Action::drop_queue, Action::estop_stop, Action::nothing_to_reset,
      Action::hold_queue, Action::not_holding, Action::refuse_set_zero,
-     Action::start_jog, Action::not_jogging, Action::not_jogging},
+     Action::start_jog, Action::not_jogging, Action::not_jogging, Action::start_homing},
     // moving
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
      Action::nothing_to_reset, Action::hold_motion, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging},
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving},
     // hold_ramp
     {Action::already_enabled, Action::keep_ramp_then_disable, Action::keep_ramp_to_idle, Action::estop_keep_ramp,
      Action::nothing_to_reset, Action::already_holding, Action::refuse_still_ramping, Action::refuse_set_zero,
-     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging},
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving},
     // hold_line
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
      Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero,
-     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging},
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving},
     // held
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
      Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero,
-     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging},
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving},
     // stopping_to_idle
     {Action::refuse_stopping, Action::keep_ramp_then_disable, Action::drop_queue, Action::estop_keep_ramp,
      Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_stopping, Action::not_jogging, Action::not_jogging},
+     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping},
     // stopping_to_disabled
     {Action::refuse_stopping, Action::keep_ramp_then_disable, Action::drop_queue, Action::estop_keep_ramp,
      Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_stopping, Action::not_jogging, Action::not_jogging},
+     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping},
     // fault_ramp
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_keep_ramp,
      Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
     // fault_quick_stop
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_keep_quick_stop,
      Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
     // fault
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_at_rest,
      Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
     // estop_ramp
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
      Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
     // estop_quick_stop
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
      Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
     // estop
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
      Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
     // jogging (hold = GRBL's feed hold during a jog: the jog is cancelled)
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
      Action::nothing_to_reset, Action::cancel_jog, Action::not_holding, Action::refuse_set_zero,
-     Action::update_jog, Action::cancel_jog, Action::refresh_jog},
+     Action::update_jog, Action::cancel_jog, Action::refresh_jog, Action::refuse_home_moving},
+    // homing (hold = GRBL's `!`: aborts the homing cycle as `stop` does)
+    {Action::already_enabled, Action::abort_homing_disable, Action::abort_homing, Action::estop_abort_homing,
+     Action::nothing_to_reset, Action::abort_homing, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_homing, Action::not_jogging, Action::not_jogging, Action::refuse_homing},
+    // homing_abort
+    {Action::refuse_stopping, Action::abort_homing_disable, Action::drop_queue, Action::estop_abort_homing,
+     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping},
 }};
 
 constexpr Action action_for(Mode m, RequestOp op) {
