@@ -38,6 +38,7 @@ std::string sample_line(const CommandSpec& e) {
     case ArgShape::jog: l += " j3 +5 speed=20"; break;
     case ArgShape::tool: l += " grip 0 0 100 0 0 0 mass=1 com=0,0,40"; break;
     case ArgShape::frame: l += " table 400 0 0 0 0 90"; break;
+    case ArgShape::joint_word: l += " j3"; break;
   }
   return l;
 }

@@ -1,5 +1,5 @@
 // The canonical requests (requests.hpp): movel and G0/G1 build one MoveLine, movej,
-// home and G28 one MoveJoints, and one function validates and queues each. The same
+// park and G28 one MoveJoints, and one function validates and queues each. The same
 // move typed either way queues the same motion (same knots, same duration).
 #include <cmath>
 #include <cstdio>
@@ -94,10 +94,10 @@ TEST(ConsoleRequests, FrontEndsBuildOneCanonicalRequest) {
   DOUBLES_EQUAL(0.05, l2.speed, 1e-15);
   CHECK(!l1.rapid && !l2.rapid && l3.rapid);
   CHECK(!l1.clamp_speed && l2.clamp_speed);  // movel refuses above the maximum, G-code F is clamped
-  // movej, home and G28: one MoveJoints.
+  // movej, park and G28: one MoveJoints.
   Command mj, home, g28;
   CHECK(parse_line("movej 0 10 20 0 30 0 speed=20", 6, m, mj).ok());
-  CHECK(parse_line("home", 6, m, home).ok());
+  CHECK(parse_line("park", 6, m, home).ok());
   CHECK(parse_line("G28", 6, m, g28).ok());
   const MoveJoints j1 = r.app.console->joint_request(mj);
   DOUBLES_EQUAL(20, j1.speed_pct, 0);

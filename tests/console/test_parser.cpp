@@ -49,6 +49,9 @@ TEST(Parser, GoodCommands) {
       {"enable", Cmd::enable, 0},
       {"disable", Cmd::disable, 0},
       {"home", Cmd::home, 0},
+      {"home j3", Cmd::home, 0},
+      {"HOME J6", Cmd::home, 0},
+      {"park", Cmd::park, 0},
       {"movej 0 45 -45 0 0 0", Cmd::movej, 6},
       {"movej 0 45 -45 0 0 0 speed=20", Cmd::movej, 6},
       {"movej 1e1 -2.5 .5 3. +4 0 speed=100", Cmd::movej, 6},
@@ -113,6 +116,11 @@ TEST(Parser, MalformedCommands) {
       {"enable 1", CmdError::arg_count},
       {"disable x", CmdError::arg_count},
       {"home 0", CmdError::arg_count},
+      {"home j0", CmdError::out_of_range},
+      {"home j7", CmdError::out_of_range},
+      {"home j1 j2", CmdError::arg_count},
+      {"home jx", CmdError::arg_count},
+      {"park 1", CmdError::arg_count},
       {"stop now", CmdError::arg_count},
       {"estop 1", CmdError::arg_count},
       {"reset all", CmdError::arg_count},
@@ -196,6 +204,7 @@ TEST(Parser, EveryCommandRefusesWrongArgumentsNamingItself) {
       {"stats", "x y"},   {"config", "zero"},    {"wait", "zero"},    {"hold", "zero"},    {"resume", "zero"},
       {"home", "1"},      {"home", "zero zero"}, {"help", "a b"},     {"movej", "1 2 3"},  {"movel", "1 2"},
       {"ik", "1 2"},      {"fk", "1 2 3"},       {"movej", "zero"},   {"fk", "zero"},      {"ik", "zero 1 2"},
+      {"park", "1"},      {"home", "j1 j2"},
   };
   for (const Case& k : cases) {
     const std::string line = std::string(k.word) + " " + k.args;
@@ -225,7 +234,7 @@ TEST(Parser, GoodGcode) {
       {"G91", Cmd::none, 0},
       {"G20", Cmd::none, 0},
       {"G21 G90", Cmd::none, 0},
-      {"G28", Cmd::home, 0},
+      {"G28", Cmd::park, 0},
       {"G4 P500", Cmd::dwell, 1},
       {"G4 S2", Cmd::dwell, 1},
       {"M17", Cmd::enable, 0},
@@ -367,4 +376,22 @@ TEST(Parser, SeededRandomGarbageNeverCrashesAndNeverMoves) {
 TEST(Parser, EveryErrorCodeHasAName) {
   for (int e = 0; e <= static_cast<int>(CmdError::internal); ++e)
     CHECK(std::strcmp(to_string(static_cast<CmdError>(e)), "?") != 0);
+}
+
+// `home` alone homes every joint (home_joint -1), `home jN` joint N (0-based N-1); G28 is park.
+TEST(Parser, HomeNamesTheJointAndG28IsPark) {
+  const struct {
+    const char* line;
+    Cmd cmd;
+    int joint;
+  } cases[] = {{"home", Cmd::home, -1}, {"home j1", Cmd::home, 0}, {"home J6", Cmd::home, 5},
+               {"park", Cmd::park, -1}, {"G28", Cmd::park, -1},    {"$H", Cmd::grbl_home, -1}};
+  for (const auto& k : cases) {
+    GcodeModal m;
+    Command c;
+    const ParseResult r = parse_line(k.line, 6, m, c);
+    CHECK_TEXT(r.ok(), k.line);
+    CHECK_TEXT(c.cmd == k.cmd, k.line);
+    LONGS_EQUAL_TEXT(k.joint, c.home_joint, k.line);
+  }
 }

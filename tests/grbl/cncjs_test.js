@@ -452,13 +452,16 @@ async function run(args) {
   const homed = await until('the answer to $H', 120000, () => c.reads.slice(from).find((l) => /^(ok|error:)/.test(l)));
   let how = '$H';
   if (/^error:5\b/.test(homed)) {
-    // GRBL's "homing not enabled": a firmware without a homing cycle may say so; G28 goes
-    // to the home pose (motion.home_deg) as cncjs's Go To G28 would.
-    step(`$H answered ${homed} (homing not enabled): G28 instead`);
+    // GRBL's "homing not enabled": a firmware without a homing cycle may say so.
+    step(`$H answered ${homed} (homing not enabled)`);
     errs = c.errors.length;
-    await feed(c, 'G28');
-    how = 'G28';
+  } else {
+    await waitIdle(c, how, 120000);
   }
+  // $H establishes the joints' zeros (it does not go anywhere: armfw --sim's joints are
+  // absolute); G28 goes to the park pose (motion.home_deg) as cncjs's Go To G28 would.
+  await feed(c, 'G28');
+  how = `${how}, G28`;
   await waitIdle(c, how, 120000);
   noNewErrors(c, errs, how);
   const home = c.mpos();

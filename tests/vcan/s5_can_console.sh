@@ -2,7 +2,7 @@
 # console on vcan0 too, ISO-TP 0x7E0 -> armfw, 0x7E8 <- armfw) and armsim (6
 # virtual CiA 402 drives) as separate processes.
 #   1. driven by the kernel's ISO-TP (can-utils isotpsend / isotprecv, the
-#      independent implementation): enable, home, movej reach their targets
+#      independent implementation): enable, park, movej reach their targets
 #      (status), malformed lines answer error:, `?` answers a report;
 #   2. driven by armctl console --can (armfw's own ISO-TP code on both ends):
 #      fk, movel to a point 40 mm away, wait, status at that point;
@@ -36,8 +36,8 @@ wait_until 30 "an answer to binary garbage" _more_finals "$_n"
 expect_error "isotp: binary garbage" "$(isotp_text | grep -E '^(ok|error:)' | tail -n 1)"
 expect_ok "isotp: enable" "$(isotp_ask enable 60)"
 wait_state idle 60
-expect_ok "isotp: home" "$(isotp_ask home)"
-expect_ok "isotp: wait (home)" "$(isotp_ask wait 120)"
+expect_ok "isotp: park" "$(isotp_ask park)"
+expect_ok "isotp: wait (park)" "$(isotp_ask wait 120)"
 expect_ok "isotp: movej" "$(isotp_ask 'movej 20 -40 160 10 -50 30 speed=60')"
 expect_ok "isotp: wait (movej)" "$(isotp_ask wait 120)"
 st=$(isotp_ask status)

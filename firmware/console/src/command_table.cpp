@@ -21,6 +21,7 @@ const char* to_string(ArgShape a) {
     case ArgShape::jog: return "jog";
     case ArgShape::tool: return "tool";
     case ArgShape::frame: return "frame";
+    case ArgShape::joint_word: return "joint_word";
   }
   return "?";
 }
@@ -44,7 +45,7 @@ constexpr CodeSpec kGcodes[] = {
     {"G1 X Y Z [A B C] [F]", "linear tool move; F in G20/G21 length units per minute, clamped to the maximum"},
     {"G4 P<ms> | S<s>", "dwell (GRBL dialect: P in seconds, as GRBL and LinuxCNC read it)"},
     {"G20 | G21", "X Y Z and F in inches | millimetres"},
-    {"G28", "home (as `home`)"},
+    {"G28", "park: joint move to the park pose (as `park`)"},
     {"G90 | G91", "absolute | relative X Y Z A B C"},
     {"G10 L2 P<0-6> [X Y Z A B C]", "set work offset n (frame g5(3+n), P0 the active one): its origin X Y Z (mm) and "
                                      "orientation A B C (deg) in the base; axes not given are kept; kept in the frames file"},
@@ -63,7 +64,7 @@ constexpr CodeSpec kGcodes[] = {
 };
 constexpr CodeSpec kRealtime[] = {
     {"?", "status report `<Idle|MPos:x,y,z|J:j1,...|Q:n>` (MPos in mm, J in the joint units)"},
-    {"!", "feed hold (linear moves stop on the line)"},
+    {"!", "feed hold (linear moves stop on the line); aborts a homing cycle"},
     {"~", "resume"},
     {"Ctrl-X (0x18)",
      "e-stop; discards the partial line, answers every line not executed yet with `error: estop` (GRBL dialect: a "

@@ -36,6 +36,7 @@ const char* to_string(CmdError e) {
     case CmdError::timeout: return "timeout";
     case CmdError::estop: return "estop";
     case CmdError::storage: return "storage";
+    case CmdError::not_homed: return "not_homed";
     case CmdError::internal: return "internal";
   }
   return "?";
@@ -50,6 +51,7 @@ const char* to_string(Cmd c) {
     case Cmd::disable: return "disable";
     case Cmd::home: return "home";
     case Cmd::home_zero: return "home zero";
+    case Cmd::park: return "park";
     case Cmd::movej: return "movej";
     case Cmd::movel: return "movel";
     case Cmd::stop: return "stop";
@@ -371,7 +373,7 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
       c.vals[0] = secs;
     } else {
       if (p >= 0 || sval >= 0) return fail(CmdError::bad_option, "G-code: %c%d takes no P/S", other_letter, other);
-      if (other_letter == 'G') c.cmd = Cmd::home;
+      if (other_letter == 'G') c.cmd = Cmd::park;  // G28: the park pose (`home` is the homing cycle, $H)
       else if (other == 17) c.cmd = Cmd::enable;
       else if (other == 18 || other == 84) c.cmd = Cmd::disable;
       else if (other == 112) c.cmd = Cmd::estop;
@@ -670,6 +672,22 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
     case ArgShape::frame: {
       ParseResult r = parse_named(ws, used, spec->args == ArgShape::tool, units, c);
       if (!r.ok()) return r;
+      break;
+    }
+    case ArgShape::joint_word: {
+      if (nargs > 1) return fail(CmdError::arg_count, "%s takes at most one joint (j1..j%d)", name, n_joints);
+      if (nargs == 1) {
+        const std::string_view w = ws.w[used];
+        int j = 0;
+        bool digits = w.size() >= 2 && w.size() <= 3 && (w[0] == 'j' || w[0] == 'J');
+        for (std::size_t i = 1; digits && i < w.size(); ++i) {
+          digits = w[i] >= '0' && w[i] <= '9';
+          j = j * 10 + (w[i] - '0');
+        }
+        if (!digits) return fail(CmdError::arg_count, "%s: '%.*s' is not a joint (j1..j%d, or: home zero)", name, int(w.size() > 20 ? 20 : w.size()), w.data(), n_joints);
+        if (j < 1 || j > n_joints) return fail(CmdError::out_of_range, "%s: joint %d does not exist (j1..j%d)", name, j, n_joints);
+        c.home_joint = j - 1;
+      }
       break;
     }
   }

@@ -43,6 +43,7 @@ int grbl_error(CmdError e) {
     case CmdError::timeout: return 20;
     case CmdError::estop: return 9;
     case CmdError::storage: return 7;           // setting read fail (GRBL's EEPROM error)
+    case CmdError::not_homed: return 9;        // locked (GRBL: alarm until homed)
     case CmdError::internal: return 20;
   }
   return 20;
@@ -248,8 +249,33 @@ std::string Console::status_text() const {
   std::string s = fmt("state=%s%s queue=%u joints=[%s] %s pose=[%s] %s,%s %s", to_string(t.state), t.holding ? " hold=1" : "",
                       unsigned(t.queued), joints_text(q).c_str(), u.angle_name(), pose_text(q).c_str(), u.length_name(),
                       u.angle_name(), where_text().c_str());
+  s += " homing=[" + homing_text(t) + "]";
   if (t.fault_text[0]) s += fmt(" fault=\"%s\"", t.fault_text);
   return s;
+}
+
+std::string Console::homing_text(const Telemetry& t) const {
+  std::string o;
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    const char* w = "unhomed";
+    if ((t.homing_now >> j) & 1u) w = "homing";
+    else if (static_cast<hal::HomingKind>(t.homing_kind[ju]) == hal::HomingKind::none) w = "absolute";
+    else if ((t.homed >> j) & 1u) w = "homed";
+    else if ((t.homing_failed >> j) & 1u) w = "failed";
+    o += (j ? " " : "") + std::string(w);
+  }
+  return o;
+}
+
+std::string Console::unhomed_refusal(const Telemetry& t) const {
+  if (t.all_homed()) return "";
+  std::string j;
+  int count = 0;
+  for (int k = 0; k < n_; ++k)
+    if (!((t.homed >> k) & 1u)) j += fmt("%s%d", count++ ? ", " : " ", k + 1);
+  return fmt("joint%s%s not homed: run `home` (or `home jN`); until then only joint jogs move, at %.0f %%", count == 1 ? "" : "s",
+             j.c_str(), 100.0 * ctl_.config().unhomed_jog_scale);
 }
 
 // The position field of a GRBL report, in mm, of the active tool's point: `MPos:` (the base
@@ -285,6 +311,7 @@ std::string Console::grbl_report() const {
     case ArmState::fault: st = "Alarm"; break;
     case ArmState::estop: st = "Estop"; break;
     case ArmState::jogging: st = "Jog"; break;
+    case ArmState::homing: st = "Home"; break;
   }
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
@@ -311,6 +338,7 @@ std::string Console::grbl_report(const Session& s) const {
     case ArmState::idle: st = s.check_mode ? "Check" : "Idle"; break;
     case ArmState::moving: st = t.mode == Mode::held ? "Hold:0" : t.holding ? "Hold:1" : "Run"; break;
     case ArmState::jogging: st = "Jog"; break;
+    case ArmState::homing: st = "Home"; break;
   }
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
@@ -351,8 +379,10 @@ void Console::drain_events(std::string& native, std::string& grbl) {
     switch (e.kind) {
       case EventKind::fault:
         native += fmt("alarm: fault %s\n", e.message);
-        // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits)
-        grbl += fmt("ALARM:%d\n[MSG:fault %s]\n", e.cause == FaultCause::setpoint_position ? 2 : 1, e.message);
+        // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits),
+        // 9 homing fail (GRBL: the switch not found)
+        grbl += fmt("ALARM:%d\n[MSG:fault %s]\n",
+                    e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, e.message);
         jog_tail_valid_ = false;
         break;
       case EventKind::estop:
@@ -369,6 +399,10 @@ void Console::drain_events(std::string& native, std::string& grbl) {
         grbl += fmt("[MSG:%s]\n", e.message);
         jog_tail_valid_ = false;
         break;
+      case EventKind::homing:
+        native += fmt("homing: %s\n", e.message);
+        grbl += fmt("[MSG:homing: %s]\n", e.message);
+        break;
       case EventKind::motion_done:
       case EventKind::state: break;
     }
@@ -382,6 +416,9 @@ bool Console::motion_state_ok(Session& s) {
     case ArmState::moving: return true;
     case ArmState::jogging:
       answer_error(s, CmdError::bad_state, "a jog is running: jog stop (or 0x85) first");
+      return false;
+    case ArmState::homing:
+      answer_error(s, CmdError::bad_state, "homing runs: `wait` for it (or stop it)");
       return false;
     case ArmState::enabling:
       answer_error(s, CmdError::bad_state, "drives still enabling; retry (or wait)");
@@ -405,7 +442,7 @@ bool Console::motion_state_ok(Session& s) {
 
 MoveJoints Console::joint_request(const Command& c) const {
   MoveJoints m;
-  if (c.cmd == Cmd::home) {
+  if (c.cmd == Cmd::park) {
     m.goal = cfg_.home;
     m.speed_pct = cfg_.default_joint_speed_pct;
     return m;
@@ -416,8 +453,17 @@ MoveJoints Console::joint_request(const Command& c) const {
   return m;
 }
 
+bool Console::homed_ok(Session& s) {
+  if (s.check_mode) return true;  // nothing moves
+  const std::string why = unhomed_refusal(ctl_.telemetry());
+  if (why.empty()) return true;
+  answer_error(s, CmdError::not_homed, why);
+  return false;
+}
+
 void Console::queue(Session& s, const MoveJoints& req) {
   if (!s.check_mode && !motion_state_ok(s)) return;
+  if (!homed_ok(s)) return;  // an absolute joint target means nothing in coordinates not established
   const kin::JointVector& goal = req.goal;
   // the feed override (GRBL 0x90..0x94) scales moves queued from now on
   const double pct = std::fmin(100.0, std::fmax(kMinJointSpeedPct, (req.speed_pct > 0 ? req.speed_pct : cfg_.default_joint_speed_pct) *
@@ -465,6 +511,7 @@ void Console::queue(Session& s, const MoveJoints& req) {
 
 void Console::queue(Session& s, const MoveLine& req) {
   if (!s.check_mode && !motion_state_ok(s)) return;
+  if (!homed_ok(s)) return;
   double speed = req.rapid ? cfg_.max_linear_speed : (req.speed > 0 ? req.speed : cfg_.default_linear_speed);
   if (req.clamp_speed && speed > cfg_.max_linear_speed) speed = cfg_.max_linear_speed;
   if (feed_pct_ != 100) speed = std::fmin(speed * feed_pct_ / 100.0, cfg_.max_linear_speed);  // feed override
@@ -694,6 +741,7 @@ void Console::execute(Session& s, std::string_view line) {
       case RtResult::busy: answer_error(s, CmdError::busy, r.message); return;
       case RtResult::start_moved:
       case RtResult::plan_failed: answer_error(s, CmdError::plan_failed, r.message); return;
+      case RtResult::not_homed: answer_error(s, CmdError::not_homed, r.message); return;
     }
   };
   switch (c.cmd) {
@@ -723,7 +771,8 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::hold: simple(RequestOp::hold); return;
     case Cmd::resume: simple(RequestOp::resume); return;
     case Cmd::home_zero: simple(RequestOp::set_zero); return;
-    case Cmd::home:
+    case Cmd::home: do_home(s, c); return;
+    case Cmd::park:
     case Cmd::movej: queue(s, joint_request(c)); return;
     case Cmd::movel:
     case Cmd::gmove: queue(s, line_request(c, s.check_mode ? &s.check_tail : nullptr)); return;
@@ -774,6 +823,7 @@ bool Console::settle(Session& s) {
       case ArmState::idle:
       case ArmState::moving:
       case ArmState::jogging:
+      case ArmState::homing:
         s.enabling = false;
         answer_ok(s, "enabled");
         break;
@@ -790,6 +840,15 @@ bool Console::settle(Session& s) {
         break;
     }
   }
+  if (s.homing) {  // $H: answered when the homing cycle has ended
+    const Telemetry t = ctl_.telemetry();
+    if (t.state == ArmState::homing || t.mode == Mode::homing_abort) return true;
+    s.homing = false;
+    if (t.state == ArmState::fault) answer_error(s, CmdError::fault, fmt("homing failed: %s", t.fault_text));
+    else if (t.state == ArmState::estop) answer_error(s, CmdError::fault, "homing aborted: e-stop");
+    else if (!t.all_homed()) answer_error(s, CmdError::not_homed, "homing stopped: " + unhomed_refusal(t));
+    else answer_ok(s, "homed");
+  }
   if (s.waiting) {
     const Telemetry t = ctl_.telemetry();
     switch (t.state) {
@@ -804,6 +863,7 @@ bool Console::settle(Session& s) {
       case ArmState::moving:
       case ArmState::stopping:
       case ArmState::jogging:
+      case ArmState::homing:
       case ArmState::enabling: return true;  // still busy
       case ArmState::boot:
       case ArmState::disabled:
@@ -825,7 +885,7 @@ bool Console::run_one(Session& s) {
     Command c;
     GcodeModal m = s.modal;
     if (parse_line(s.lines.front(), n_, m, c, cfg_.units).ok() &&
-        (c.cmd == Cmd::gmove || c.cmd == Cmd::movel || c.cmd == Cmd::movej || c.cmd == Cmd::home || c.cmd == Cmd::dwell))
+        (c.cmd == Cmd::gmove || c.cmd == Cmd::movel || c.cmd == Cmd::movej || c.cmd == Cmd::park || c.cmd == Cmd::dwell))
       return false;
   }
   const std::string line = std::move(s.lines.front());
@@ -888,7 +948,8 @@ void Console::realtime(Session& s, char ch) {
       // GRBL dialect: a soft reset; it stops the arm (an e-stop) only when something moves,
       // else the queue is dropped and the banner printed again. Native: always an e-stop.
       const Telemetry t = ctl_.telemetry();
-      const bool moving = t.state == ArmState::moving || t.state == ArmState::jogging || t.state == ArmState::stopping;
+      const bool moving = t.state == ArmState::moving || t.state == ArmState::jogging || t.state == ArmState::stopping ||
+                          t.state == ArmState::homing;  // Ctrl-X during homing: an e-stop (the joints stay unhomed)
       const RequestOp op = s.dialect == Dialect::grbl && !moving ? RequestOp::stop : RequestOp::estop;
       if (!request(op, r)) s.out += "error: timeout e-stop not acknowledged\n";
       s.partial.clear();
@@ -975,6 +1036,37 @@ JogSpec Console::tool_jog_spec(double pct) const {
   return js;
 }
 
+void Console::do_home(Session& s, const Command& c) {
+  if (s.check_mode) {
+    answer_ok(s, "check mode: not run");
+    return;
+  }
+  Request rq(RequestOp::home, 0);
+  rq.joints = c.home_joint >= 0 ? static_cast<std::uint16_t>(1u << c.home_joint) : 0;
+  Reply r;
+  if (!request(rq, r)) {
+    answer_error(s, CmdError::timeout, "control thread did not answer home");
+    return;
+  }
+  switch (r.result) {
+    case RtResult::ok: break;
+    case RtResult::busy: answer_error(s, CmdError::busy, r.message); return;
+    case RtResult::fault: answer_error(s, CmdError::fault, r.message); return;
+    case RtResult::not_homed:
+    case RtResult::bad_state:
+    case RtResult::start_moved:
+    case RtResult::plan_failed: answer_error(s, CmdError::bad_state, r.message); return;
+  }
+  jog_tail_valid_ = false;
+  if (c.cmd == Cmd::grbl_home) {  // GRBL: $H answers when the cycle has ended (state Home meanwhile)
+    s.homing = true;
+    if (s.dialect == Dialect::grbl) s.out += fmt("[MSG:%s]\n", r.message);
+    settle(s);
+    return;
+  }
+  answer_ok(s, r.message);
+}
+
 void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit) {
   Request rq;
   rq.op = RequestOp::jog;
@@ -988,6 +1080,7 @@ void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double aske
     case RtResult::ok: break;
     case RtResult::busy: answer_error(s, CmdError::busy, r.message); return;
     case RtResult::fault: answer_error(s, CmdError::fault, r.message); return;
+    case RtResult::not_homed: answer_error(s, CmdError::not_homed, r.message); return;
     case RtResult::bad_state:
     case RtResult::start_moved:
     case RtResult::plan_failed: answer_error(s, CmdError::bad_state, r.message); return;
@@ -1159,7 +1252,7 @@ std::string Console::grbl_settings() const {
   o += "$13=0\n";   // report in mm
   o += "$20=1\n";   // soft limits: the joint limits, always on
   o += "$21=0\n";   // hard limits: none (the drives' own)
-  o += "$22=0\n";   // homing cycle: not configured
+  o += "$22=1\n";   // homing cycle: $H runs it (drive.homing.method per joint)
   o += "$30=0\n$31=0\n$32=0\n";  // no spindle, no laser
   for (int k = 0; k < 3; ++k) o += fmt("$%d=%.3f\n", 110 + k, vmax);
   for (int k = 0; k < 3; ++k) o += fmt("$%d=%.3f\n", 120 + k, amax);
@@ -1229,10 +1322,7 @@ void Console::do_grbl(Session& s, const Command& c) {
       settle(s);
       return;
     }
-    case Cmd::grbl_home:
-      if (s.dialect == Dialect::grbl) s.out += "[MSG:homing cycle not configured (motion.home_deg is `home` / G28)]\nerror:5\n";
-      else answer_error(s, CmdError::unsupported, "$H: homing cycle not configured (`home` / G28 move to motion.home_deg)");
-      return;
+    case Cmd::grbl_home: do_home(s, c); return;
     case Cmd::grbl_check:
       if (!s.check_mode) {
         const ArmState st = ctl_.telemetry().state;
@@ -1285,6 +1375,7 @@ std::string Console::frames_refusal() const {
     case ArmState::moving:
     case ArmState::jogging:
     case ArmState::stopping:
+    case ArmState::homing:
       return fmt("refused while the arm is %s", to_string(t.state));
     case ArmState::boot:
     case ArmState::disabled:

@@ -28,6 +28,7 @@ enum class ArgShape : std::uint8_t {
   jog,           ///< nothing, `stop`, or <axis> <+v, -v, + or ->, then [speed=%] [frame=base, tool or user] (jog)
   tool,          ///< nothing, NAME, `delete NAME`, or NAME x y z rx ry rz [mass=kg] [com=x,y,z] (tool)
   frame,         ///< nothing, NAME, `delete NAME`, or NAME x y z rx ry rz (frame)
+  joint_word,    ///< nothing or one joint jN (home)
 };
 const char* to_string(ArgShape a);
 
@@ -55,13 +56,25 @@ inline constexpr CommandSpec kCommands[] = {
      false},
     {"disable", Cmd::disable, ArgShape::none, "disable", "power the drives down (while moving: stops first)",
      "drops every queued move, also one queued in the same cycle", false},
-    {"home", Cmd::home, ArgShape::none, "home", "joint move to the home pose (motion.home_deg)", "", false},
+    {"home", Cmd::home, ArgShape::joint_word, "home [jN]",
+     "homing cycle: every joint, group after group of homing.order (or joint N alone); `wait` answers when it ends",
+     "answers `ok homing: group 1 of 4 (joint 3)` at once; progress comes as `homing: joint 3 homing (group 1 of 4, "
+     "cia402)`, `homing: joint 3 homed`, `homing: homing done: every joint homed` lines. Needs the arm enabled and "
+     "idle. `stop`, `!` and Ctrl-X abort it (the joints being homed stay unhomed; Ctrl-X is an e-stop); a joint that "
+     "fails (switch never found, timeout, drive refused) disables the arm: `alarm: fault joint 3 (node 3): homing "
+     "timeout ...`. Joints with drive.homing.method = \"none\" (absolute encoders) are homed at power-up; until every "
+     "joint is homed, Cartesian moves, tool jogs, movej, park and G-code moves are refused (`error: not_homed` naming "
+     "the joints) and joint jogs run at homing.unhomed_jog_pct of their speed. `status` shows each joint's homing",
+     false},
     {"home zero", Cmd::home_zero, ArgShape::none, "home zero",
      "(disabled arm) the current joint positions become joint zero until restart",
      "homing on the current position, for incremental encoders: the master moves each joint's zero offset in its "
      "scaling; the drives are not written to. Answers `ok zero_offset = [c1, ...]` (drive counts at the new zero, "
-     "for the config file). Refused while powered (`error: bad_state`), or when 0 is outside a joint's limits",
+     "for the config file). Refused while powered (`error: bad_state`), or when 0 is outside a joint's limits. The "
+     "joints count as homed afterwards (until restart)",
      false},
+    {"park", Cmd::park, ArgShape::none, "park", "joint move to the park pose (motion.home_deg; G28)",
+     "as `movej` to motion.home_deg at motion.joint_speed_pct; refused until every joint is homed", false},
     {"movej", Cmd::movej, ArgShape::joints_speed, "movej j1..jn [speed=%]",
      "joint move; joints in the joint units; speed 1-100 % of the joint limits (default 50)",
      "answers `ok queued id=N duration=T` once the move is checked and queued", false},
@@ -140,7 +153,8 @@ inline constexpr GrblSpec kGrblCommands[] = {
     {"G", Cmd::grbl_state, "$G", "parser state `[GC:G1 G54 G17 G21 G90 G94 M5 M9 T0 F.. S0]`", true},
     {"I", Cmd::grbl_info, "$I", "build info `[VER:1.1h.servoarm:<robot>]` `[OPT:V,<blocks>,<rx bytes>]`", true},
     {"X", Cmd::grbl_unlock, "$X", "unlock: reset a fault / e-stop and enable the drives", false},
-    {"H", Cmd::grbl_home, "$H", "homing cycle (error:5 until homing is configured)", false},
+    {"H", Cmd::grbl_home, "$H", "homing cycle (as `home`; answers ok when it has ended, state `Home` meanwhile; a "
+     "failure raises ALARM:9)", false},
     {"C", Cmd::grbl_check, "$C", "check mode on/off: G-code is parsed and its moves planned and checked, nothing moves", false},
     {"J=", Cmd::grbl_jog, "$J=[G90 or G91] [G20 or G21] [G53] X.. Y.. Z.. [A B C] F..",
      "jog the tool point in the active user frame, G53: the base frame (G91 incremental, G90 absolute; F required, "

@@ -50,6 +50,7 @@ enum class CmdError : std::uint8_t {
   timeout,           ///< control thread did not answer in time
   estop,             ///< line dropped, not executed: an e-stop (Ctrl-X) arrived before it ran
   storage,           ///< a file could not be written (the frames file): nothing changed, the old file kept
+  not_homed,         ///< refused: a joint is not homed (message names them): `home` first
   internal,          ///< should not happen (message says what)
 };
 const char* to_string(CmdError e);
@@ -63,6 +64,7 @@ enum class Cmd : std::uint8_t {
   position,  ///< M114
   gmove,     ///< G0/G1 (axes in `axis_mask`, values in vals[0..5])
   home_zero, ///< `home zero`: the current joint positions become joint zero (arm disabled)
+  park,      ///< `park` / G28: joint move to the park pose (motion.home_deg); `home` is the homing cycle
   temperature,  ///< M105 (senders poll it): answers ok T:0 /0
   jog,       ///< `jog ...` (JogOp in Command::jog_op); GRBL `$J=` is grbl_jog
   tool,      ///< `tool [NAME [x y z rx ry rz [mass= com=]]]`, `tool delete NAME` (FrameOp in frame_op)
@@ -117,6 +119,7 @@ struct Command {
   bool gcode = false;                   ///< line was G-code
   bool g53 = false;                     ///< $J=: G53 (machine coordinates: the base frame, not the user frame)
   std::array<char, 16> topic{};         ///< `help <topic>`
+  int home_joint = -1;                  ///< `home jN`: joint N-1; -1 = every joint, by homing.order
   // jog
   JogOp jog_op = JogOp::keepalive;
   bool jog_tool = false;                ///< tool-space axis (x y z rx ry rz) rather than a joint

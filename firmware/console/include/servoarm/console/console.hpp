@@ -12,7 +12,7 @@
 // '!' feed hold, '~' resume, Ctrl-X (0x18) e-stop and discards the partial line.
 //
 // `enable` answers once every drive is in operation enabled (or with the fault).
-// Motion commands (movej, movel, home, G0/G1, G28, G4) answer `ok` when the
+// Motion commands (movej, movel, park, G0/G1, G28, G4) answer `ok` when the
 // move is checked and queued (GRBL semantics); `wait` / M400 answer when the
 // queue has run empty. A full queue answers `error: busy` and queues nothing.
 #include <cstdint>
@@ -40,13 +40,13 @@ enum class Dialect : std::uint8_t { native, grbl };
 const char* to_string(Dialect d);
 
 struct ConsoleConfig {
-  double default_joint_speed_pct = 50.0;     ///< movej / home without speed=
+  double default_joint_speed_pct = 50.0;     ///< movej / park without speed=
   double default_linear_speed = 0.1;         ///< m/s: movel / G1 without speed/F
   double max_linear_speed = 0.25;            ///< m/s: upper bound of speed= / F, and G0
   kin::JointVector home;                     ///< SI; empty = all zeros clamped into the limits
   kin::CartesianLimits cartesian{};          ///< linear_velocity is replaced per move
   double reply_timeout_s = 1.0;              ///< wait for the control thread to answer a request
-  double max_move_duration_s = 600.0;        ///< longest move accepted (movej, movel, G0/G1, home): out_of_range beyond
+  double max_move_duration_s = 600.0;        ///< longest move accepted (movej, movel, G0/G1, park): out_of_range beyond
   std::string config_text;                   ///< what `config` prints (the effective configuration)
   /// What the command language reads and writes (help and status name them); the robot
   /// description's: App sets units_of(chain). G-code keeps G20/G21 mm/inch and degrees.
@@ -70,6 +70,7 @@ struct Session {
   GcodeModal modal;
   bool waiting = false;                ///< `wait` / M400 in progress
   bool enabling = false;               ///< `enable` / M17 waits for operation enabled
+  bool homing = false;                 ///< `$H` waits for the homing cycle to end
   std::string out;                     ///< text to send to the client
   std::uint64_t lines_done = 0;
   Dialect dialect = Dialect::native;
@@ -114,7 +115,7 @@ class Console {
   void drain_events(std::string& native, std::string& grbl);
 
   /// True while the session has work pending (queued lines or a wait).
-  bool busy(const Session& s) const { return s.waiting || s.enabling || !s.lines.empty(); }
+  bool busy(const Session& s) const { return s.waiting || s.enabling || s.homing || !s.lines.empty(); }
 
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
   /// Single-threaded tests set it to run a control cycle.
@@ -135,7 +136,7 @@ class Console {
   /// The canonical request of a movel or G0/G1 command (Cmd::movel, Cmd::gmove), from the queue's end.
   /// `from`: the joints relative G-code and a movel without orientation start from (default: tail()).
   MoveLine line_request(const Command& c, const kin::JointVector* from = nullptr) const;
-  /// The canonical request of a movej, home or G28 command (Cmd::movej, Cmd::home).
+  /// The canonical request of a movej, park or G28 command (Cmd::movej, Cmd::park).
   MoveJoints joint_request(const Command& c) const;
   /// Validate and queue a request; the answer (ok queued ... | error: ...) goes to s.out.
   void queue(Session& s, const MoveLine& m);
@@ -173,6 +174,14 @@ class Console {
   void send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit);
   JogSpec tool_jog_spec(double pct) const;
   void do_grbl(Session& s, const Command& c);
+  /// `home [jN]` (answered at once, progress as `homing:` lines) and `$H` (answered when it has ended).
+  void do_home(Session& s, const Command& c);
+  /// Cartesian moves, movej, park, G-code moves: "" when every joint is homed, else which are not.
+  std::string unhomed_refusal(const Telemetry& t) const;
+  /// False (and the not_homed answer) when a joint is not homed.
+  bool homed_ok(Session& s);
+  /// status's homing=[...]: absolute, homed, homing, failed or unhomed per joint.
+  std::string homing_text(const Telemetry& t) const;
   std::string grbl_settings() const;
   void realtime(Session& s, char ch);
   /// The tool pose of the commanded joints.
