@@ -16,6 +16,7 @@
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
+#include "alloc_counter.hpp"
 
 // CppUTest last: its leak detector redefines new.
 #include <CppUTest/TestHarness.h>
@@ -402,4 +403,34 @@ TEST(BlendPath, BadInputRefusedNothingQueued) {
   LONGS_EQUAL(0, Q->size());
   CHECK(Q->append_joint(q_start(), 1.0, 0.0) == BlendStatus::zero_length);
   LONGS_EQUAL(0, Q->size());
+}
+
+// Nothing on the append, sampling or retire path touches the heap (the queue lives in a
+// slot allocated before).
+TEST(BlendPath, AllocationFree) {
+  const Chain& c = the_puma();
+  auto Q = std::make_unique<Queue>();
+  const PathBlendConfig cfg = config(c);
+  const Pose x0 = fk(c, q_start());
+  JointVector w = q_start();
+  w[0] += 0.2;
+  servoarm::test::AllocScope scope;
+  Q->reset(cfg, q_start());
+  double sink = 0;
+  for (int i = 1; i <= 6; ++i) {
+    Pose x = x0;
+    x.translation() += Eigen::Vector3d(0.003 * i, (i % 2 ? 0.01 : 0.0), 0.0);
+    sink += static_cast<int>(Q->append_line(x, CartesianLimits{}, MovelOptions{}, 0.001));
+  }
+  sink += static_cast<int>(Q->append_joint(w, 1.0, 0.0));
+  JointVector seed = q_start(), q(6);
+  for (double t = 0; t < Q->end_time(); t += 1.0 / kRate) {
+    Q->sample(t, seed, q);
+    seed = q;
+    sink += q.sum();
+  }
+  Q->retire(Q->end_time());
+  const std::size_t n = scope.end();
+  CHECK(std::isfinite(sink));
+  LONGS_EQUAL(0, n);
 }
