@@ -30,7 +30,7 @@ Status feed_forward(const Chain& chain, const JointVector& q, const JointVector&
   if (q.size() != n || qd.size() != n || qdd.size() != n) return Status::wrong_size;
   if (!finite(q) || !finite(qd) || !finite(qdd)) return Status::bad_input;
   if (!chain.has_inertial) return Status::unsupported;
-  JointVector tau(n);
+  JointVector tau = JointVector::Zero(n);
   const Status s = inverse_dynamics(chain, q, qd, qdd, tau);  // friction included
   if (s != Status::ok) return s;
   out.torque = tau;
@@ -50,7 +50,7 @@ Status free_drive_torque(const Chain& chain, const JointVector& q, const JointVe
   if (!finite(q) || !finite(qd) || !finite(damping) || (damping.size() > 0 && damping.minCoeff() < 0))
     return Status::bad_input;
   if (!chain.has_inertial) return Status::unsupported;
-  JointVector g(n), f(n);
+  JointVector g = JointVector::Zero(n), f = JointVector::Zero(n);
   Status s = gravity_torques(chain, q, g);
   if (s != Status::ok) return s;
   s = friction_torques(chain, qd, f);
@@ -88,8 +88,8 @@ Status CollisionObserver::update(const JointVector& q, const JointVector& qd, co
   if (!finite(q) || !finite(qd) || !finite(tau)) return Status::bad_input;
   if (started_ && !(dt > 0 && std::isfinite(dt))) return Status::bad_input;
   const Chain& c = *chain_;
-  MassMatrix M(n_, n_);
-  JointVector cqd(n_), g(n_), f(n_);
+  MassMatrix M = MassMatrix::Zero(n_, n_);
+  JointVector cqd = JointVector::Zero(n_), g = JointVector::Zero(n_), f = JointVector::Zero(n_);
   if (mass_matrix(c, q, M) != Status::ok || coriolis(c, q, qd, cqd) != Status::ok ||
       gravity_torques(c, q, g) != Status::ok || friction_torques(c, qd, f) != Status::ok)
     return Status::unsupported;
