@@ -1,4 +1,4 @@
-#include "alloc_counter.hpp"
+#include "alloc_counter_count.hpp"
 
 #include <cstdlib>
 #include <cstring>
@@ -12,28 +12,8 @@ void* __libc_memalign(size_t, size_t);
 }
 
 namespace {
-thread_local bool t_counting = false;
-thread_local std::size_t t_count = 0;
-inline void note() {
-  if (t_counting) ++t_count;
-}
+inline void note() { servoarm::test::count_allocation(); }
 }  // namespace
-
-namespace servoarm::test {
-void alloc_count_begin() {
-  t_count = 0;
-  t_counting = true;
-}
-std::size_t alloc_count_end() {
-  t_counting = false;
-  return t_count;
-}
-std::size_t alloc_count_now() { return t_count; }
-void probe_malloc_free() {
-  void* volatile p = std::malloc(16);
-  std::free(p);
-}
-}  // namespace servoarm::test
 
 extern "C" {
 void* malloc(size_t n) {
