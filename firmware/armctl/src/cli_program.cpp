@@ -11,6 +11,7 @@
 
 #include "servoarm/armctl/cli_common.hpp"
 #include "servoarm/armctl/cli_plan.hpp"
+#include "servoarm/config/config.hpp"
 #include "servoarm/console/commands.hpp"
 #include "servoarm/console/units.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -25,24 +26,37 @@ namespace servoarm::fw {
 namespace {
 
 const char* kProgramUsage =
-    "usage: armctl program check FILE --robot NAME|FILE [--points FILE] [--programs DIR]\n"
-    "                            [--from q1..qn] [--joint-speed PCT] [--linear-speed V]\n"
+    "usage: armctl program check FILE --robot NAME|FILE [--config FILE] [--points FILE] [--programs DIR]\n"
+    "                            [--from q1..qn] [--unhomed] [--joint-speed PCT] [--linear-speed V]\n"
     "\n"
     "Checks a whole program offline, as armfw checks it before anything moves: every line\n"
     "parsed by the console's parser (repeat/end and call expanded, @points resolved), every\n"
     "target solved by the firmware's IK from the pose the previous line leaves, every path\n"
-    "checked (movej/home: joint limits; movel/G0/G1: movel's path check -- IK at every point,\n"
+    "checked (movej/park/G28: joint limits; movel/G0/G1: movel's path check -- IK at every point,\n"
     "joint limits, branch changes, singularities). The first bad line is answered\n"
     "FILE:LINE: reason (exit 2); a good program prints its moves and planned cycle time.\n"
     "Units are the description's (built-in models: mm and degrees); G-code's are mm and deg.\n"
     "\n"
+    "`home` / `home jN` is the homing cycle, as armfw runs it: each joint it homes is left at its\n"
+    "drive.homing.offset (method \"none\", an absolute encoder: where it was); refused when moves\n"
+    "are still queued (put `wait` before it) or when the homed position is outside the joint's\n"
+    "limits; a move right after it without `wait` is refused (armfw refuses moves while homing\n"
+    "runs). The homing itself is not timed. `park` / G28 is the joint move to motion.home_deg.\n"
+    "\n"
     "options:\n"
-    "  --robot NAME|FILE     the arm (a built-in model or a description file); required\n"
+    "  --robot NAME|FILE     the arm (a built-in model or a description file); required unless\n"
+    "                        --config names it (robot = ...)\n"
+    "  --config FILE         armfw's configuration: the homing of each joint (drive.homing.*),\n"
+    "                        the park pose (motion.home_deg), drive.limits, drive.max_velocity and\n"
+    "                        the motion.* speed defaults; without it armfw's defaults (no [[drive]]\n"
+    "                        tables: every joint absolute, `home` moves nothing)\n"
     "  --points FILE         teach points for @NAME (a servoarm-points-1 file)\n"
     "  --programs DIR        where `call NAME` looks (default: the program's own folder)\n"
     "  --from q1..qn         where the arm starts, at rest (default: joint zero clamped into the\n"
-    "                        limits, armfw's default home)\n"
-    "  --joint-speed PCT     movej / home without speed= (default 50, motion.joint_speed_pct)\n"
+    "                        limits, armfw's default park pose)\n"
+    "  --unhomed             start as at power-up: joints whose homing.method is not \"none\" are not\n"
+    "                        homed; every move before `home` has homed them is refused (not_homed)\n"
+    "  --joint-speed PCT     movej / park without speed= (default 50, motion.joint_speed_pct)\n"
     "  --linear-speed V      movel / G1 without speed= / F, length units/s (default 100 mm/s,\n"
     "                        motion.linear_speed_mm_s; at most 250 mm/s, motion.max_linear_speed_mm_s)\n"
     "Joints without limits in the description get 90 deg/s, 360 deg/s^2, 3600 deg/s^3\n"
@@ -63,6 +77,42 @@ void default_limits(kin::Chain& c) {
   }
 }
 
+// What armfw takes from its configuration for a program (App::build / console_config, which
+// this mirrors: drive.limits narrow the description's, drive.max_velocity lowers its velocity
+// limit; motion.* are the console's defaults; drive.homing.* say how each joint homes).
+// `cfg` passed validate_for_chain. Returns "" or why the configuration cannot apply.
+std::string apply_config(const FwConfig& cfg, kin::Chain& chain, ProgramCheckOptions& opt) {
+  const int n = chain.n_joints;
+  for (int j = 0; j < n && j < static_cast<int>(cfg.drives.size()); ++j) {
+    const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
+    kin::DhRow& row = chain.joint(j);
+    const double unit = row.type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;
+    if (!d.limits.empty()) row.lower = d.limits[0] * unit, row.upper = d.limits[1] * unit;
+    if (d.max_velocity > 0) {
+      const double v = d.max_velocity * unit;
+      if (row.dynamics.max_velocity > 0 && v > row.dynamics.max_velocity * (1 + 1e-12))
+        return "drive[" + std::to_string(j + 1) + "].max_velocity: " + num(d.max_velocity) + " is above the robot description's " +
+               num(row.dynamics.max_velocity / unit);
+      row.dynamics.max_velocity = v;
+    }
+    JointHomingPlan h;
+    h.method = d.homing_method;
+    h.absolute = d.homing_method == "none";
+    h.offset = d.homing_offset * unit;
+    opt.homing.push_back(h);
+  }
+  if (!cfg.home_deg.empty()) {
+    opt.park.resize(n);  // (resize, not a moved temporary: gcc 12 -O2 warns on Eigen's copy)
+    for (int j = 0; j < n; ++j)
+      opt.park[j] = cfg.home_deg[static_cast<std::size_t>(j)] * (chain.joint(j).type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0);
+  }
+  opt.joint_speed_pct = cfg.joint_speed_pct;
+  opt.linear_speed = cfg.linear_speed_mm_s * 1e-3;
+  opt.max_linear_speed = cfg.max_linear_speed_mm_s * 1e-3;
+  opt.max_move_duration = cfg.max_move_duration_s;
+  return "";
+}
+
 struct Checker {
   const kin::Chain& chain;
   const prog::Program& prog;
@@ -74,6 +124,9 @@ struct Checker {
   std::unique_ptr<kin::CartesianTrajectory> path = std::make_unique<kin::CartesianTrajectory>();
   ProgramCheck out;
   kin::JointVector q;
+  std::uint32_t homed = ~0u;                   ///< bit j: joint j homed (established this power cycle)
+  int queued = 0;                              ///< moves and dwells queued since the last `wait`
+  const prog::ProgramStep* homing = nullptr;   ///< the `home` line whose cycle runs (until `wait`)
 
   bool fail(const prog::ProgramStep& s, const std::string& why) {
     out.ok = false;
@@ -86,7 +139,23 @@ struct Checker {
     return t;
   }
 
+  // What the console answers a move (or dwell) in this state, "" when it would accept it.
+  std::string refusal(const char* what, bool needs_homed) const {
+    if (homing != nullptr)
+      return std::string(what) + " refused: the homing cycle of " + prog.where(*homing) +
+             " still runs (armfw refuses moves until it ends: put `wait` after `home`)";
+    if (!needs_homed) return "";
+    std::string j;
+    int count = 0;
+    for (int k = 0; k < chain.n_joints; ++k)
+      if (!((homed >> k) & 1u)) j += (count++ ? ", " : " ") + std::to_string(k + 1);
+    if (count == 0) return "";
+    return std::string(what) + " refused: not_homed: joint" + (count == 1 ? "" : "s") + j +
+           " not homed (armfw refuses every move of an unhomed arm: `home` first)";
+  }
+
   bool movej(const prog::ProgramStep& s, const kin::JointVector& goal, double pct) {
+    if (const std::string r = refusal(to_string(s.cmd.cmd), true); !r.empty()) return fail(s, r);
     for (int j = 0; j < chain.n_joints; ++j) {
       const auto k = static_cast<std::size_t>(j);
       if (!(goal[j] >= lim.lower[k] - 1e-9 && goal[j] <= lim.upper[k] + 1e-9))
@@ -102,11 +171,13 @@ struct Checker {
     out.cycle_time += tr->duration;
     ++out.moves;
     ++out.joint_moves;
+    ++queued;
     q = goal;
     return true;
   }
 
   bool movel(const prog::ProgramStep& s, const kin::Pose& target, double speed) {
+    if (const std::string r = refusal(s.cmd.cmd == Cmd::gmove ? "G-code move" : "movel", true); !r.empty()) return fail(s, r);
     if (!(speed > 0) || speed > opt.max_linear_speed + 1e-12)
       return fail(s, "linear speed " + num(units.length_out(speed)) + " " + units.length_name() + "/s outside (0, " +
                          num(units.length_out(opt.max_linear_speed)) + "]");
@@ -135,16 +206,52 @@ struct Checker {
     out.cycle_time += path->duration;
     ++out.moves;
     ++out.line_moves;
+    ++queued;
     q = path->goal;
     return true;
   }
 
-  // The joint move to the home / park pose (armfw's default: joint zero clamped into the limits).
+  // park / G28: the joint move to motion.home_deg (armfw's default: joint zero clamped into the limits).
   bool step_park(const prog::ProgramStep& s) {
     kin::JointVector goal(chain.n_joints);
     for (int j = 0; j < chain.n_joints; ++j)
-      goal[j] = std::clamp(0.0, lim.lower[static_cast<std::size_t>(j)], lim.upper[static_cast<std::size_t>(j)]);
+      goal[j] = opt.park.size() == chain.n_joints
+                    ? opt.park[j]
+                    : std::clamp(0.0, lim.lower[static_cast<std::size_t>(j)], lim.upper[static_cast<std::size_t>(j)]);
     return movej(s, goal, opt.joint_speed_pct);
+  }
+
+  // home / home jN: the homing cycle, as the console and the controller run it. Refused with
+  // moves queued (the controller's "moves are queued: home refused") or while a cycle runs;
+  // each joint homed reads its drive.homing.offset afterwards (the drive holds at its mark,
+  // hard_stop at the backed-off point), which must lie within its limits (else armfw fails
+  // that joint's homing and disables the arm); "none" joints stay where they are.
+  bool step_home(const prog::ProgramStep& s) {
+    const Command& c = s.cmd;
+    if (homing != nullptr)
+      return fail(s, "home refused: the homing cycle of " + prog.where(*homing) + " still runs (put `wait` after it)");
+    if (queued > 0)
+      return fail(s, "home refused: " + std::to_string(queued) + " move" + (queued == 1 ? " is" : "s are") +
+                         " still queued (armfw homes an arm at rest only: put `wait` before `home`)");
+    for (int j = 0; j < chain.n_joints; ++j) {
+      if (c.home_joint >= 0 && j != c.home_joint) continue;
+      const auto k = static_cast<std::size_t>(j);
+      const bool absolute = opt.homing.size() != static_cast<std::size_t>(chain.n_joints) || opt.homing[k].absolute;
+      if (!absolute) {
+        const double p = opt.homing[k].offset;
+        if (!(p >= lim.lower[k] - 1e-9 && p <= lim.upper[k] + 1e-9))
+          return fail(s, "home refused: joint " + std::to_string(j + 1) + " (homing.method " + opt.homing[k].method +
+                             ") homes to " + num(units.joint_out(chain, j, p)) + " " + units.joint_name(chain, j) +
+                             " (drive[" + std::to_string(j + 1) + "].homing.offset), outside its limits [" +
+                             num(units.joint_out(chain, j, lim.lower[k])) + ", " + num(units.joint_out(chain, j, lim.upper[k])) +
+                             "] " + units.joint_name(chain, j) + ": armfw fails that homing and disables the arm");
+        q[j] = p;
+      }
+      homed |= 1u << j;
+    }
+    ++out.homings;
+    homing = &s;
+    return true;
   }
 
   bool step(const prog::ProgramStep& s) {
@@ -157,8 +264,12 @@ struct Checker {
           for (int j = 0; j < chain.n_joints; ++j) goal[j] = units.joint_in(chain, j, c.vals[static_cast<std::size_t>(j)]);
         return movej(s, goal, c.has_speed ? c.speed : opt.joint_speed_pct);
       }
-      case Cmd::home:
-        return step_park(s);
+      case Cmd::home: return step_home(s);
+      case Cmd::park: return step_park(s);
+      case Cmd::wait:  // the console's: until the queued moves (and a homing cycle) are done
+        queued = 0;
+        homing = nullptr;
+        return true;
       case Cmd::movel: {
         kin::Pose target;
         if (s.point >= 0) {
@@ -190,19 +301,18 @@ struct Checker {
         speed = std::min(speed, opt.max_linear_speed);  // senders' F is clamped, as GRBL does
         return movel(s, target, speed);
       }
-      case Cmd::dwell:
+      case Cmd::dwell:  // queued as a motion (the console refuses it while homing runs)
+        if (const std::string r = refusal("dwell", false); !r.empty()) return fail(s, r);
         out.cycle_time += c.vals[0];
         ++out.dwells;
+        ++queued;
         return true;
       case Cmd::tool:
       case Cmd::frame:
         if (c.frame_op == FrameOp::list) return true;
         return fail(s, "tool and frame changes are not checked offline yet (check this program with armfw's $C)");
       default:
-        // `park` (G28: the joint move to motion.home_deg) is being added to the console's
-        // table beside `home`; matched by name so that this builds before and after.
-        if (std::strcmp(to_string(c.cmd), "park") == 0) return step_park(s);
-        return true;  // no motion: enable, wait, status, queries, modal-only G-code
+        return true;  // no motion: enable, status, queries, modal-only G-code
     }
   }
 };
@@ -215,6 +325,9 @@ ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, c
              std::make_unique<kin::CartesianTrajectory>(), ProgramCheck{}, q0};
   ck.q = q0;
   ck.out.ok = true;
+  if (options.start_unhomed && options.homing.size() == static_cast<std::size_t>(chain.n_joints))
+    for (int j = 0; j < chain.n_joints; ++j)
+      if (!options.homing[static_cast<std::size_t>(j)].absolute) ck.homed &= ~(1u << j);
   for (const prog::ProgramStep& s : prog.steps)
     if (!ck.step(s)) break;
   ck.out.q_end = ck.q;
@@ -230,9 +343,10 @@ int cli_program(int argc, char** argv) {
   if (argc < 2 || std::strcmp(argv[1], "check") != 0)
     return usage_error(argc < 2 ? "program needs a command: check (see armctl program --help)"
                                 : std::string("unknown program command '") + argv[1] + "' (check)");
-  std::string file, robot, points_file, dir;
+  std::string file, robot, points_file, dir, config_file;
   std::vector<double> from;
-  double joint_pct = 50, linear = 0;
+  double joint_pct = 0, linear = 0;
+  bool unhomed = false;
   for (int i = 2; i < argc; ++i) {
     const std::string o = argv[i];
     auto text = [&](std::string& out) -> std::string {
@@ -248,6 +362,8 @@ int cli_program(int argc, char** argv) {
     };
     std::string e;
     if (o == "--robot") e = text(robot);
+    else if (o == "--config") e = text(config_file);
+    else if (o == "--unhomed") unhomed = true;
     else if (o == "--points") e = text(points_file);
     else if (o == "--programs") e = text(dir);
     else if (o == "--joint-speed") e = one(joint_pct);
@@ -265,15 +381,26 @@ int cli_program(int argc, char** argv) {
     if (!e.empty()) return usage_error(e);
   }
   if (file.empty()) return usage_error("program check needs a program FILE");
-  if (robot.empty()) return usage_error("--robot is required");
-  if (!(joint_pct >= 1 && joint_pct <= 100)) return usage_error("--joint-speed must be within 1..100 (percent)");
+  FwConfig cfg;  // armfw's defaults unless --config
+  if (!config_file.empty()) {
+    if (const std::string e = load_config_file(config_file, cfg); !e.empty()) return usage_error(e);
+    if (robot.empty()) robot = cfg.robot;
+  }
+  if (robot.empty()) return usage_error("--robot is required (or a --config that names the robot)");
+  if (joint_pct != 0 && !(joint_pct >= 1 && joint_pct <= 100)) return usage_error("--joint-speed must be within 1..100 (percent)");
   const kin::LoadResult r = load_robot_checked(robot);
   if (!r.ok) return usage_error(r.error);
   kin::Chain chain = r.chain;
+  ProgramCheckOptions opt;
+  if (!config_file.empty()) {
+    cfg.robot = robot;
+    if (const std::string e = validate_for_chain(cfg, chain); !e.empty()) return usage_error(config_file + ": " + e);
+    if (const std::string e = apply_config(cfg, chain, opt); !e.empty()) return usage_error(config_file + ": " + e);
+  }
   default_limits(chain);
   const ConsoleUnits units = units_of(chain);
-  ProgramCheckOptions opt;
-  opt.joint_speed_pct = joint_pct;
+  opt.start_unhomed = unhomed;
+  if (joint_pct != 0) opt.joint_speed_pct = joint_pct;
   if (linear != 0) {
     opt.linear_speed = units.length_in(linear);
     if (!(opt.linear_speed > 0 && opt.linear_speed <= opt.max_linear_speed))
@@ -305,10 +432,14 @@ int cli_program(int argc, char** argv) {
   if (const std::string e = prog::load_program(file, ctx, program); !e.empty()) return usage_error(e);
   const ProgramCheck ck = check_program(chain, program, ctx.points, q0, opt);
   if (!ck.ok) return usage_error(ck.error);
-  std::printf("ok: %s on %s: %zu steps from %zu file%s, %d moves (%d joint, %d linear), %d dwells, planned cycle time %s s "
+  std::string homings;
+  if (ck.homings > 0)
+    homings = ", " + std::to_string(ck.homings) + " homing cycle" + (ck.homings == 1 ? "" : "s") + " (not timed" +
+              (opt.homing.empty() ? ": no [[drive]] tables, every joint absolute, nothing moved" : "") + ")";
+  std::printf("ok: %s on %s: %zu steps from %zu file%s, %d moves (%d joint, %d linear), %d dwells%s, planned cycle time %s s "
               "(every move to rest)\n",
               file.c_str(), chain.name.data(), program.steps.size(), program.files.size(),
-              program.files.size() == 1 ? "" : "s", ck.moves, ck.joint_moves, ck.line_moves, ck.dwells,
+              program.files.size() == 1 ? "" : "s", ck.moves, ck.joint_moves, ck.line_moves, ck.dwells, homings.c_str(),
               num(ck.cycle_time).c_str());
   return kExitOk;
 }

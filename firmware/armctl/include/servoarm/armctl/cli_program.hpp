@@ -1,15 +1,22 @@
 #pragma once
-// armctl program check FILE --robot NAME|FILE [--points FILE] [--programs DIR] [--from q1..qn]
-//                       [--joint-speed PCT] [--linear-speed V]
+// armctl program check FILE --robot NAME|FILE [--config FILE] [--points FILE] [--programs DIR]
+//                       [--from q1..qn] [--unhomed] [--joint-speed PCT] [--linear-speed V]
 //
 // Whole-program validation offline (issue 18): the program is loaded as armfw loads it
 // (servoarm_program: the console's parser, repeats and calls expanded, @points resolved),
 // then every move is planned from the pose the previous line leaves, with the firmware's
-// own IK (firmware_ik_solver, as `armctl plan movel`): movej and home against the joint
+// own IK (firmware_ik_solver, as `armctl plan movel`): movej and park / G28 against the joint
 // limits, movel / G0 / G1 with movel's path check (IK at every knot, limits, branch,
-// singularity). The first bad line is answered "<file>:<line>: <reason>" (exit 2); a good
-// program prints the number of steps and moves and the planned cycle time (exit 0).
+// singularity). `home` is the homing cycle (issue 17), as the console runs it: it leaves
+// each joint at its drive.homing.offset (method "none": where it was), refused when moves
+// are still queued (no `wait` before it), when the homed position is outside the joint's
+// limits, and a move that follows it without `wait` is refused (the console refuses moves
+// while homing runs). With --unhomed the arm starts as at power-up: every move before `home`
+// has homed every joint is refused naming the joints (not_homed). The first bad line is
+// answered "<file>:<line>: <reason>" (exit 2); a good program prints the number of steps and
+// moves and the planned cycle time (exit 0).
 #include <string>
+#include <vector>
 
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/program/program.hpp"
@@ -21,17 +28,29 @@ struct ProgramCheck {
   bool ok = false;
   std::string error;        ///< "<file>:<line>: <reason>" when !ok
   int moves = 0, joint_moves = 0, line_moves = 0, dwells = 0;
+  int homings = 0;          ///< `home` / `home jN` lines (homing cycles: not timed offline)
   double cycle_time = 0;    ///< s: every move to rest, plus the dwells
   kin::JointVector q_end;   ///< where the program leaves the arm
 };
 
+/// How one joint homes, as armfw's configuration says (drive.homing.method, .offset).
+struct JointHomingPlan {
+  bool absolute = true;             ///< method "none": homed at power-up, `home` leaves it where it is
+  std::string method = "none";      ///< "none", "hard_stop" or the CiA 402 number ("19"), for messages
+  double offset = 0;                ///< SI: the joint's position after homing (607Ch / the backed-off point)
+};
+
 /// Defaults a program's moves take without speed= / F (armfw's motion.joint_speed_pct and
-/// motion.linear_speed_mm_s), and the limit it may not exceed (motion.max_linear_speed_mm_s).
+/// motion.linear_speed_mm_s), and the limit it may not exceed (motion.max_linear_speed_mm_s);
+/// the park pose and how each joint homes (armfw's configuration, armctl program check --config).
 struct ProgramCheckOptions {
   double joint_speed_pct = 50;
   double linear_speed = 0.1;        ///< m/s
   double max_linear_speed = 0.25;   ///< m/s
   double max_move_duration = 600;   ///< s (motion.max_move_duration_s)
+  kin::JointVector park;            ///< park / G28 goal (motion.home_deg); empty: joint zero clamped into the limits
+  std::vector<JointHomingPlan> homing;  ///< per joint; empty: every joint absolute (armfw without [[drive]] tables)
+  bool start_unhomed = false;       ///< start as at power-up: non-absolute joints not homed until `home`
 };
 
 /// Plan every step of `prog` on `chain` (SI limits set) from rest at `q0`.
