@@ -39,6 +39,9 @@ std::string sample_line(const CommandSpec& e) {
     case ArgShape::tool: l += " grip 0 0 100 0 0 0 mass=1 com=0,0,40"; break;
     case ArgShape::frame: l += " table 400 0 0 0 0 90"; break;
     case ArgShape::joint_word: l += " j3"; break;
+    case ArgShape::point_name: l += " pick"; break;
+    case ArgShape::program_name: l += " pick_place"; break;
+    case ArgShape::record: l += " start rate=50"; break;
   }
   return l;
 }
@@ -56,7 +59,8 @@ TEST(CommandTable, EveryEntryIsReachableByTheParser) {
     CHECK_TEXT(*e.help != '\0', e.name);
     CHECK_TEXT(find_command(e.cmd) == &e, e.name);
     for (const std::string& line : {sample_line(e), std::string(e.name)}) {
-      if (line == e.name && (e.args == ArgShape::joints_speed || e.args == ArgShape::pose_speed || e.args == ArgShape::pose))
+      if (line == e.name && (e.args == ArgShape::joints_speed || e.args == ArgShape::pose_speed || e.args == ArgShape::pose ||
+                             e.args == ArgShape::point_name || e.args == ArgShape::program_name || e.args == ArgShape::record))
         continue;  // these need values
       GcodeModal m;
       Command c;

@@ -75,6 +75,8 @@ ConsoleConfig App::console_config() const {
   // Only an absolute path (armfw resolves console.frames_file against the configuration
   // file's folder): a relative one would land in whatever the working directory is.
   if (!cfg.console_frames_file.empty() && cfg.console_frames_file[0] == '/') c.frames_file = cfg.console_frames_file;
+  if (!cfg.programs_points_file.empty() && cfg.programs_points_file[0] == '/') c.points_file = cfg.programs_points_file;
+  if (!cfg.programs_dir.empty() && cfg.programs_dir[0] == '/') c.programs_dir = cfg.programs_dir;
   return c;
 }
 
@@ -179,6 +181,7 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   ctl = std::make_unique<Controller>(*servo, chain, controller_config());
   console = std::make_unique<Console>(*ctl, console_config(), ik_ready ? ik.get() : nullptr);
   if (const std::string e = console->load_frames(); !e.empty()) return "frames file refused: " + e;
+  if (const std::string e = console->load_points(); !e.empty()) return "points file refused: " + e;
   return "";
 }
 

@@ -44,6 +44,10 @@ int usage(FILE* f, int code) {
                "  --config FILE         TOML configuration (armfw --config-keys lists every key)\n"
                "  --frames FILE         the tools and user frames file (default: console.frames_file, frames.toml\n"
                "                        next to --config; without --config none: tools and frames are not kept)\n"
+               "  --programs DIR        the programs folder (run, programs, record stop; default: programs.dir,\n"
+               "                        programs/ next to --config; without --config none)\n"
+               "  --points FILE         the teach points file (default: programs.points_file, points.toml next to\n"
+               "                        --config; without --config none: points are not kept)\n"
                "  --config-keys         print every configuration key (default, range, unit, doc) and exit\n"
                "  --config-reference    print the generated reference section of docs/configuration.md and exit\n"
                "  --demo                play the demo program through the console, print a summary, exit\n"
@@ -255,7 +259,7 @@ int main(int argc, char** argv) {
   bool sim = false, demo = false, interactive = false, pty = false, no_stdin = false;
   std::string dialect;
   std::string plant_kind = "first-order";
-  std::string config_file, frames_file, robot, serial, can_console;
+  std::string config_file, frames_file, programs_dir, points_file, robot, serial, can_console;
   double bench = -1, rate = -1;
   int priority = -1, cpu = -2, baud = -1;
   for (int i = 1; i < argc; ++i) {
@@ -280,6 +284,8 @@ int main(int argc, char** argv) {
     else if (a == "--robot") robot = value("--robot");
     else if (a == "--config") config_file = value("--config");
     else if (a == "--frames") frames_file = value("--frames");
+    else if (a == "--programs") programs_dir = value("--programs");
+    else if (a == "--points") points_file = value("--points");
     else if (a == "--demo") demo = true;
     else if (a == "--interactive") interactive = true;
     else if (a == "--bench-loop") bench = number("--bench-loop", 0.1, 86400);
@@ -335,16 +341,22 @@ int main(int argc, char** argv) {
   // The frames file: next to the configuration file (a relative console.frames_file), or
   // --frames; armfw --sim without --config keeps none unless told.
   // App keeps only an absolute path (a relative one would depend on the working directory).
-  if (!frames_file.empty()) cfg.console_frames_file = frames_file;
-  else if (config_file.empty()) cfg.console_frames_file.clear();
-  else if (!cfg.console_frames_file.empty() && cfg.console_frames_file[0] != '/') {
-    const std::size_t slash = config_file.rfind('/');
-    cfg.console_frames_file = (slash == std::string::npos ? std::string() : config_file.substr(0, slash + 1)) + cfg.console_frames_file;
-  }
-  if (!cfg.console_frames_file.empty() && cfg.console_frames_file[0] != '/') {
-    char cwd[4096];
-    if (::getcwd(cwd, sizeof cwd) != nullptr) cfg.console_frames_file = std::string(cwd) + "/" + cfg.console_frames_file;
-  }
+  // The same for the programs folder and the teach points (programs.dir, programs.points_file).
+  const auto resolve = [&](std::string& key, const std::string& flag) {
+    if (!flag.empty()) key = flag;
+    else if (config_file.empty()) key.clear();
+    else if (!key.empty() && key[0] != '/') {
+      const std::size_t slash = config_file.rfind('/');
+      key = (slash == std::string::npos ? std::string() : config_file.substr(0, slash + 1)) + key;
+    }
+    if (!key.empty() && key[0] != '/') {
+      char cwd[4096];
+      if (::getcwd(cwd, sizeof cwd) != nullptr) key = std::string(cwd) + "/" + key;
+    }
+  };
+  resolve(cfg.console_frames_file, frames_file);
+  resolve(cfg.programs_dir, programs_dir);
+  resolve(cfg.programs_points_file, points_file);
   if (sim) cfg.can = "sim";
   if (!robot.empty()) cfg.robot = robot;
   if (rate > 0) cfg.rate_hz = rate;

@@ -160,6 +160,17 @@ const ConfigKey kConfigTable[] = {
     K{"console.jog_speed_pct", &F::console_jog_speed_pct, "%",
       "jog speed without speed=: percent of the joint limits (joint jog) or of the maximum linear and angular speeds "
       "(tool jog)"}.within(1, 100),
+    K{"programs.dir", &F::programs_dir, "",
+      "the programs folder: native `.arm` and G-code files for `run NAME`, `programs`, `call` inside programs, and "
+      "where `record stop NAME` writes; a relative path is relative to the configuration file's folder; `\"\"` = none "
+      "(also the default of `armfw --sim` without --config; `armfw --programs DIR` sets it)"}
+        .length(0, 4095),
+    K{"programs.points_file", &F::programs_points_file, "",
+      "where the teach points are kept (`teach NAME`, `point delete`, `movej @NAME`; format servoarm-points-1, "
+      "written atomically, a corrupt or foreign file refused at start naming its line); relative to the "
+      "configuration file's folder; `\"\"` = not kept (the default of `armfw --sim` without --config; "
+      "`armfw --points FILE` sets it)"}
+        .length(0, 4095),
 };
 
 using D = DriveConfig;

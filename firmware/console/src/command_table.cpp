@@ -22,6 +22,9 @@ const char* to_string(ArgShape a) {
     case ArgShape::tool: return "tool";
     case ArgShape::frame: return "frame";
     case ArgShape::joint_word: return "joint_word";
+    case ArgShape::point_name: return "point_name";
+    case ArgShape::program_name: return "program_name";
+    case ArgShape::record: return "record";
   }
   return "?";
 }
@@ -64,8 +67,8 @@ constexpr CodeSpec kGcodes[] = {
 };
 constexpr CodeSpec kRealtime[] = {
     {"?", "status report `<Idle|MPos:x,y,z|J:j1,...|Q:n>` (MPos in mm, J in the joint units)"},
-    {"!", "feed hold (linear moves stop on the line); aborts a homing cycle"},
-    {"~", "resume"},
+    {"!", "feed hold (linear moves stop on the line; a running program is paused); aborts a homing cycle"},
+    {"~", "resume (a paused program goes on)"},
     {"Ctrl-X (0x18)",
      "e-stop; discards the partial line, answers every line not executed yet with `error: estop` (GRBL dialect: a "
      "soft reset, the banner again; an e-stop only while the arm moves)"},

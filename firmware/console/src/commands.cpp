@@ -37,6 +37,7 @@ const char* to_string(CmdError e) {
     case CmdError::estop: return "estop";
     case CmdError::storage: return "storage";
     case CmdError::not_homed: return "not_homed";
+    case CmdError::program: return "program";
     case CmdError::internal: return "internal";
   }
   return "?";
@@ -81,6 +82,15 @@ const char* to_string(Cmd c) {
     case Cmd::grbl_home: return "$H";
     case Cmd::grbl_check: return "$C";
     case Cmd::grbl_help: return "$";
+    case Cmd::teach: return "teach";
+    case Cmd::points: return "points";
+    case Cmd::point_delete: return "point delete";
+    case Cmd::programs: return "programs";
+    case Cmd::run: return "run";
+    case Cmd::pause: return "pause";
+    case Cmd::step: return "step";
+    case Cmd::abort: return "abort";
+    case Cmd::record: return "record";
   }
   return "?";
 }
@@ -129,8 +139,23 @@ ParseResult parse_numbers(const Words& ws, int first, Command& out, bool allow_s
     const std::string_view w = ws.w[static_cast<std::size_t>(k)];
     const std::size_t eq = w.find('=');
     if (eq != std::string_view::npos) {
+      if (allow_speed && ieq(w.substr(0, eq), "blend")) {
+        // blend=T: the tolerance the arm may pass this target by when the next move follows
+        if (out.has_blend) return fail(CmdError::bad_option, "%s: blend given twice", name);
+        double b = 0;
+        switch (parse_decimal(w.substr(eq + 1), b)) {
+          case Num::ok: break;
+          case Num::bad: return fail(CmdError::bad_number, "%s: blend '%.*s' is not a number", name, int(w.size() - eq - 1), w.data() + eq + 1);
+          case Num::not_finite: return fail(CmdError::not_finite, "%s: blend is not finite", name);
+        }
+        if (!(b >= 0) || b > 1e6) return fail(CmdError::out_of_range, "%s: blend must be >= 0 (0: exact stop)", name);
+        out.has_blend = true;
+        out.blend = b;
+        continue;
+      }
       if (!allow_speed || !ieq(w.substr(0, eq), "speed"))
-        return fail(CmdError::bad_option, "%s: unknown option '%.*s' (only speed=)", name, int(eq), w.data());
+        return fail(CmdError::bad_option, "%s: unknown option '%.*s' (only speed=%s)", name, int(eq), w.data(),
+                    allow_speed ? " and blend=" : "");
       if (out.has_speed) return fail(CmdError::bad_option, "%s: speed given twice", name);
       double v = 0;
       switch (parse_decimal(w.substr(eq + 1), v)) {
@@ -143,7 +168,7 @@ ParseResult parse_numbers(const Words& ws, int first, Command& out, bool allow_s
       out.speed = v;
       continue;
     }
-    if (out.has_speed) return fail(CmdError::bad_option, "%s: options go after the values", name);
+    if (out.has_speed || out.has_blend) return fail(CmdError::bad_option, "%s: options go after the values", name);
     if (out.count >= static_cast<int>(out.vals.size())) return fail(CmdError::arg_count, "%s: too many values", name);
     double v = 0;
     switch (parse_decimal(w, v)) {
@@ -577,6 +602,27 @@ ParseResult parse_named(const Words& ws, int first, bool is_tool, const ConsoleU
   return {};
 }
 
+/// A teach point name (letters, digits, _ and -, starting with a letter, 1..31) or, with
+/// `program`, a program name (also '.', 1..63, starting with a letter or digit) into c.word.
+ParseResult put_word(std::string_view n, bool program, const char* what, Command& c) {
+  const std::size_t max = program ? 63 : 31;
+  if (n.empty() || n.size() > max)
+    return fail(CmdError::bad_option, "%s: name '%.*s' must be 1..%zu characters", what, int(n.size() > 40 ? 40 : n.size()),
+                n.data(), max);
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    const char ch = n[i];
+    const bool letter = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z');
+    const bool digit = ch >= '0' && ch <= '9';
+    const bool ok = i == 0 ? (letter || (program && digit)) : (letter || digit || ch == '_' || ch == '-' || (program && ch == '.'));
+    if (!ok)
+      return fail(CmdError::bad_option, program ? "%s: program name '%.*s': letters, digits, _ - and . only (no path)"
+                                                : "%s: point name '%.*s': letters, digits, _ and - only, starting with a letter",
+                  what, int(n.size()), n.data());
+  }
+  std::memcpy(c.word.data(), n.data(), n.size());
+  return {};
+}
+
 bool looks_like_gcode(std::string_view w) {
   if (w.empty()) return false;
   const char L = w[0];
@@ -639,18 +685,36 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       }
       break;
     case ArgShape::joints_speed: {
-      ParseResult r = parse_numbers(ws, used, c, true, name);
+      int first = used;
+      if (nargs >= 1 && ws.w[used][0] == '@') {  // movej @NAME [speed=] [blend=]
+        ParseResult r = put_word(ws.w[used].substr(1), false, name, c);
+        if (!r.ok()) return r;
+        c.at_point = true;
+        ++first;
+      }
+      ParseResult r = parse_numbers(ws, first, c, true, name);
       if (!r.ok()) return r;
-      if (c.count != n_joints) return fail(CmdError::arg_count, "%s needs %d joint values, got %d", name, n_joints, c.count);
+      if (c.at_point && c.count != 0) return fail(CmdError::arg_count, "%s @%s takes options only (speed=, blend=)", name, c.word.data());
+      if (!c.at_point && c.count != n_joints)
+        return fail(CmdError::arg_count, "%s needs %d joint values (or @point), got %d", name, n_joints, c.count);
       if (c.has_speed && (c.speed > 100 || c.speed < kMinJointSpeedPct))
         return fail(CmdError::out_of_range, "%s: speed=%g is outside [%g, 100] (percent)", name, c.speed, kMinJointSpeedPct);
       break;
     }
     case ArgShape::pose_speed:
     case ArgShape::pose: {
-      ParseResult r = parse_numbers(ws, used, c, spec->args == ArgShape::pose_speed, name);
+      int first = used;
+      if (spec->args == ArgShape::pose_speed && nargs >= 1 && ws.w[used][0] == '@') {  // movel @NAME [speed=] [blend=]
+        ParseResult r = put_word(ws.w[used].substr(1), false, name, c);
+        if (!r.ok()) return r;
+        c.at_point = true;
+        ++first;
+      }
+      ParseResult r = parse_numbers(ws, first, c, spec->args == ArgShape::pose_speed, name);
       if (!r.ok()) return r;
-      if (c.count != 3 && c.count != 6) return fail(CmdError::arg_count, "%s needs x y z [rx ry rz], got %d values", name, c.count);
+      if (c.at_point && c.count != 0) return fail(CmdError::arg_count, "%s @%s takes options only (speed=, blend=)", name, c.word.data());
+      if (!c.at_point && c.count != 3 && c.count != 6)
+        return fail(CmdError::arg_count, "%s needs x y z [rx ry rz] (or @point), got %d values", name, c.count);
       const double vmin = units.length == LengthUnit::mm ? kMinLinearSpeedMmS : kMinLinearSpeedMmS * 1e-3;
       if (c.has_speed && c.speed < vmin)
         return fail(CmdError::out_of_range, "%s: speed=%g %s/s is below the minimum %g %s/s", name, c.speed,
@@ -672,6 +736,51 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
     case ArgShape::frame: {
       ParseResult r = parse_named(ws, used, spec->args == ArgShape::tool, units, c);
       if (!r.ok()) return r;
+      break;
+    }
+    case ArgShape::point_name:
+    case ArgShape::program_name: {
+      if (nargs != 1) return fail(CmdError::arg_count, "%s takes one name", name);
+      ParseResult r = put_word(ws.w[used], spec->args == ArgShape::program_name, name, c);
+      if (!r.ok()) return r;
+      break;
+    }
+    case ArgShape::record: {
+      if (nargs < 1) return fail(CmdError::arg_count, "record start [rate=Hz] | record stop NAME [tolerance=angle]");
+      const std::string_view op = ws.w[used];
+      int k = used + 1;
+      if (ieq(op, "stop")) {
+        if (nargs < 2 || std::string_view(ws.w[k]).find('=') != std::string_view::npos)
+          return fail(CmdError::arg_count, "record stop needs a program name (record stop NAME)");
+        ParseResult r = put_word(ws.w[k], true, "record stop", c);
+        if (!r.ok()) return r;
+        c.record_stop = true;
+        ++k;
+      } else if (!ieq(op, "start")) {
+        return fail(CmdError::bad_option, "record: '%.*s' is neither start nor stop", int(op.size() > 20 ? 20 : op.size()), op.data());
+      }
+      for (; k < ws.n; ++k) {
+        const std::string_view w = ws.w[k];
+        const std::size_t eq = w.find('=');
+        const std::string_view key = w.substr(0, eq);
+        const char* want = c.record_stop ? "tolerance" : "rate";
+        if (eq == std::string_view::npos || !ieq(key, want))
+          return fail(CmdError::bad_option, "record %s: unexpected '%.*s' (only %s=)", c.record_stop ? "stop" : "start",
+                      int(w.size() > 20 ? 20 : w.size()), w.data(), want);
+        double v = 0;
+        switch (parse_decimal(w.substr(eq + 1), v)) {
+          case Num::ok: break;
+          case Num::bad: return fail(CmdError::bad_number, "record: %s '%.*s' is not a number", want, int(w.size() - eq - 1), w.data() + eq + 1);
+          case Num::not_finite: return fail(CmdError::not_finite, "record: %s is not finite", want);
+        }
+        if (c.record_stop) {
+          if (!(v > 0)) return fail(CmdError::out_of_range, "record stop: tolerance must be > 0");
+          c.tolerance = v;
+        } else {
+          if (!(v >= 1 && v <= 1000)) return fail(CmdError::out_of_range, "record start: rate=%g outside [1, 1000] Hz", v);
+          c.rate = v;
+        }
+      }
       break;
     }
     case ArgShape::joint_word: {

@@ -44,6 +44,7 @@ int grbl_error(CmdError e) {
     case CmdError::estop: return 9;
     case CmdError::storage: return 7;           // setting read fail (GRBL's EEPROM error)
     case CmdError::not_homed: return 9;        // locked (GRBL: alarm until homed)
+    case CmdError::program: return 33;       // invalid target (a program line refused)
     case CmdError::internal: return 20;
   }
   return 20;
@@ -250,6 +251,8 @@ std::string Console::status_text() const {
                       unsigned(t.queued), joints_text(q).c_str(), u.angle_name(), pose_text(q).c_str(), u.length_name(),
                       u.angle_name(), where_text().c_str());
   s += " homing=[" + homing_text(t) + "]";
+  if (run_) s += " " + program_text();
+  if (rec_.active) s += fmt(" recording=%zu", rec_.samples.size());
   if (t.fault_text[0]) s += fmt(" fault=\"%s\"", t.fault_text);
   return s;
 }
@@ -319,8 +322,9 @@ std::string Console::grbl_report() const {
   // MPos: G-code lengths (mm, as GRBL reports them); J: the console's joint units.
   const int d = cfg_.units.angle == AngleUnit::deg && cfg_.units.length == LengthUnit::mm ? 2 : 5;
   for (int j = 0; j < n_; ++j) s += fmt("%s%.*f", j ? "," : "", d, to_user(j, q[j]));
-  s += fmt("|Q:%u>", unsigned(t.queued));
-  return s;
+  s += fmt("|Q:%u", unsigned(t.queued));
+  if (run_) s += fmt("|Pgm:%s,%s,%s", run_->name.c_str(), to_string(run_->state), program_where().c_str());
+  return s + ">";
 }
 
 std::string Console::grbl_report(const Session& s) const {
@@ -346,8 +350,11 @@ std::string Console::grbl_report(const Session& s) const {
   for (const std::string& l : s.lines) pending += l.size() + 1;
   const long rx_free = static_cast<long>(kGrblRxBuffer) - static_cast<long>(pending);
   const long blocks_free = static_cast<long>(kMotionQueue) - static_cast<long>(t.queued);
-  return fmt("<%s|%s|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld>", st, grbl_position(q).c_str(), feed_now_ * 60e3, feed_pct_,
-             blocks_free < 0 ? 0 : blocks_free, rx_free < 0 ? 0 : rx_free);
+  std::string pgm;  // GRBL 1.1's Ln: (the line), and the program and its state
+  if (run_ && run_->current < run_->prog.steps.size())
+    pgm = fmt("|Ln:%d|Pgm:%s,%s", run_->prog.steps[run_->current].line, run_->name.c_str(), to_string(run_->state));
+  return fmt("<%s|%s|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld%s>", st, grbl_position(q).c_str(), feed_now_ * 60e3, feed_pct_,
+             blocks_free < 0 ? 0 : blocks_free, rx_free < 0 ? 0 : rx_free, pgm.c_str());
 }
 
 std::string Console::stats_text() const {
@@ -374,6 +381,17 @@ std::string Console::drain_events() {
 }
 
 void Console::drain_events(std::string& native, std::string& grbl) {
+  tick();
+  if (!program_events_.empty()) {
+    native += program_events_;
+    std::size_t a = 0;  // GRBL: as [MSG:] lines
+    while (a < program_events_.size()) {
+      const std::size_t b = program_events_.find('\n', a);
+      grbl += "[MSG:" + program_events_.substr(a, b - a) + "]\n";
+      a = b + 1;
+    }
+    program_events_.clear();
+  }
   Event e;
   while (ctl_.events().pop(e)) {
     switch (e.kind) {
@@ -764,17 +782,37 @@ void Console::execute(Session& s, std::string_view line) {
       s.enabling = true;
       settle(s);
       return;
-    case Cmd::disable: simple(RequestOp::disable); return;
-    case Cmd::stop: simple(RequestOp::stop); return;
-    case Cmd::estop: simple(RequestOp::estop); return;
+    case Cmd::disable:
+      end_program("aborted at " + program_where() + ": disable");
+      simple(RequestOp::disable);
+      return;
+    case Cmd::stop:
+      end_program("aborted at " + program_where() + ": stop");
+      simple(RequestOp::stop);
+      return;
+    case Cmd::estop:
+      end_program("aborted at " + program_where() + ": e-stop");
+      simple(RequestOp::estop);
+      return;
     case Cmd::reset: simple(RequestOp::reset); return;
-    case Cmd::hold: simple(RequestOp::hold); return;
-    case Cmd::resume: simple(RequestOp::resume); return;
+    case Cmd::hold:
+      if (run_ && run_->state != RunState::paused) run_->state = RunState::paused;
+      simple(RequestOp::hold);
+      return;
+    case Cmd::resume: do_resume(s); return;
     case Cmd::home_zero: simple(RequestOp::set_zero); return;
     case Cmd::home: do_home(s, c); return;
     case Cmd::park:
-    case Cmd::movej: queue(s, joint_request(c)); return;
+    case Cmd::movej:
+      if (c.at_point) queue_at_point(s, c);
+      else queue(s, joint_request(c));
+      return;
     case Cmd::movel:
+      if (c.at_point) {
+        queue_at_point(s, c);
+        return;
+      }
+      [[fallthrough]];
     case Cmd::gmove: queue(s, line_request(c, s.check_mode ? &s.check_tail : nullptr)); return;
     case Cmd::dwell: queue_dwell(s, c.vals[0]); return;
     case Cmd::fk: do_fk(s, c); return;
@@ -812,6 +850,29 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::grbl_home:
     case Cmd::grbl_check:
     case Cmd::grbl_help: do_grbl(s, c); return;
+    case Cmd::teach: do_teach(s, c); return;
+    case Cmd::points: do_points(s); return;
+    case Cmd::point_delete: do_point_delete(s, c); return;
+    case Cmd::programs: do_programs(s); return;
+    case Cmd::run: do_run(s, c); return;
+    case Cmd::pause: do_pause(s); return;
+    case Cmd::step: do_step(s); return;
+    case Cmd::abort:
+      if (!run_) {
+        simple(RequestOp::stop);
+        return;
+      }
+      {
+        const std::string at = program_where(), name = run_->name;
+        end_program("aborted at " + at + ": abort");
+        if (!request(RequestOp::stop, r)) {
+          answer_error(s, CmdError::timeout, "control thread did not answer stop");
+          return;
+        }
+        answer_ok(s, "aborted " + name + " at " + at);
+      }
+      return;
+    case Cmd::record: do_record(s, c); return;
   }
 }
 
@@ -869,6 +930,8 @@ bool Console::settle(Session& s) {
       case ArmState::disabled:
       case ArmState::idle:
         if (!ctl_.motions().empty()) return true;  // producer-side view: exact, never stale
+        // a running program has more to come (its own `wait` lines wait for the queue only)
+        if (run_ && &s != &run_->ps && run_->state != RunState::paused) return true;
         s.waiting = false;
         answer_ok(s, fmt("idle %s", pose_text(tail()).c_str()));
         break;
@@ -897,6 +960,7 @@ bool Console::run_one(Session& s) {
 void Console::poll(Session& s) {
   while (run_one(s)) {
   }
+  tick();
 }
 
 void Console::feed(Session& s, std::string_view bytes) {
@@ -924,8 +988,14 @@ void Console::realtime(Session& s, char ch) {
   }
   switch (ch) {
     case kRtStatus: s.out += grbl_report(s) + "\n"; break;
-    case kRtHold: if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n"; break;
-    case kRtResume: if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n"; break;
+    case kRtHold:
+      if (run_) run_->state = RunState::paused;  // the program pauses with the hold
+      if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n";
+      break;
+    case kRtResume:
+      if (run_ && run_->state == RunState::paused) run_->state = RunState::running;
+      if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n";
+      break;
     case kRtJogCancel: {
       if (!request(RequestOp::jog_cancel, r)) s.out += "error: timeout jog cancel not acknowledged\n";
       jog_tail_valid_ = false;
@@ -951,6 +1021,7 @@ void Console::realtime(Session& s, char ch) {
       const bool moving = t.state == ArmState::moving || t.state == ArmState::jogging || t.state == ArmState::stopping ||
                           t.state == ArmState::homing;  // Ctrl-X during homing: an e-stop (the joints stay unhomed)
       const RequestOp op = s.dialect == Dialect::grbl && !moving ? RequestOp::stop : RequestOp::estop;
+      end_program("aborted at " + program_where() + (op == RequestOp::estop ? ": e-stop (Ctrl-X)" : ": soft reset (Ctrl-X)"));
       if (!request(op, r)) s.out += "error: timeout e-stop not acknowledged\n";
       s.partial.clear();
       s.discarding = false;

@@ -88,7 +88,8 @@ bool interactive_only(fw::Cmd c) {
   using fw::Cmd;
   for (Cmd x : {Cmd::help, Cmd::jog, Cmd::grbl_jog, Cmd::grbl_settings, Cmd::grbl_params, Cmd::grbl_state, Cmd::grbl_info,
                 Cmd::grbl_unlock, Cmd::grbl_home, Cmd::grbl_check, Cmd::grbl_help, Cmd::home_zero, Cmd::reset, Cmd::estop,
-                Cmd::stop, Cmd::hold, Cmd::resume})
+                Cmd::stop, Cmd::hold, Cmd::resume, Cmd::run, Cmd::pause, Cmd::step, Cmd::abort, Cmd::record, Cmd::teach,
+                Cmd::point_delete})
     if (c == x) return true;
   return false;
 }

@@ -98,6 +98,9 @@ struct FwConfig {
   double console_jog_deadman_ms = 250.0;  ///< a continuous jog not refreshed this long stops
   double console_jog_speed_pct = 10.0;    ///< jog speed without speed=
   std::string console_frames_file = "frames.toml";  ///< tools and user frames; relative: to the config file's folder; "" = not kept
+  // [programs]
+  std::string programs_dir = "programs";              ///< program files (`run`, `programs`, `record stop`); relative: to the config file's folder; "" = none
+  std::string programs_points_file = "points.toml";   ///< teach points; relative: to the config file's folder; "" = not kept
 
   bool operator==(const FwConfig&) const = default;
 };

@@ -29,6 +29,9 @@ enum class ArgShape : std::uint8_t {
   tool,          ///< nothing, NAME, `delete NAME`, or NAME x y z rx ry rz [mass=kg] [com=x,y,z] (tool)
   frame,         ///< nothing, NAME, `delete NAME`, or NAME x y z rx ry rz (frame)
   joint_word,    ///< nothing or one joint jN (home)
+  point_name,    ///< exactly one teach point name (teach, point delete)
+  program_name,  ///< exactly one program name (run)
+  record,        ///< `start [rate=Hz]` or `stop NAME [tolerance=angle]`
 };
 const char* to_string(ArgShape a);
 
@@ -75,11 +78,14 @@ inline constexpr CommandSpec kCommands[] = {
      false},
     {"park", Cmd::park, ArgShape::none, "park", "joint move to the park pose (motion.home_deg; G28)",
      "as `movej` to motion.home_deg at motion.joint_speed_pct; refused until every joint is homed", false},
-    {"movej", Cmd::movej, ArgShape::joints_speed, "movej j1..jn [speed=%]",
-     "joint move; joints in the joint units; speed 1-100 % of the joint limits (default 50)",
-     "answers `ok queued id=N duration=T` once the move is checked and queued", false},
-    {"movel", Cmd::movel, ArgShape::pose_speed, "movel x y z [rx ry rz] [speed=v]",
-     "straight line of the tool point; without rx ry rz the tool keeps its orientation",
+    {"movej", Cmd::movej, ArgShape::joints_speed, "movej j1..jn or @NAME [speed=%] [blend=angle]",
+     "joint move; joints in the joint units, or teach point NAME's joints; speed 1-100 % of the joint limits (default 50)",
+     "answers `ok queued id=N duration=T` once the move is checked and queued. blend= (angle unit, >= 0) is the "
+     "tolerance a program's move may pass its target by; it is checked and kept, and the controller's queue runs "
+     "every move to rest for now (docs/programs.md)", false},
+    {"movel", Cmd::movel, ArgShape::pose_speed, "movel x y z [rx ry rz] or @NAME [speed=v] [blend=length]",
+     "straight line of the tool point; without rx ry rz the tool keeps its orientation; @NAME: to where teach point "
+     "NAME's joints put the active tool",
      "x y z in the length unit, rx ry rz in the angle unit as fixed-axis roll-pitch-yaw R = Rz(rz) Ry(ry) Rx(rx), "
      "speed in length units/s (default motion.linear_speed_mm_s, at most motion.max_linear_speed_mm_s); refused "
      "before moving with the reason (`unreachable`, `limits`, `singular`, `branch`) and where on the line",
@@ -101,8 +107,8 @@ inline constexpr CommandSpec kCommands[] = {
      "zero` is refused: a query never changes state)",
      true},
     {"config", Cmd::config, ArgShape::none, "config", "effective configuration (TOML)", "", true},
-    {"wait", Cmd::wait, ArgShape::none, "wait", "answer when every queued move has finished (or with the fault)", "",
-     false},
+    {"wait", Cmd::wait, ArgShape::none, "wait", "answer when every queued move has finished (or with the fault)",
+     "while a program runs: when it has ended (or is paused)", false},
     {"hold", Cmd::hold, ArgShape::none, "hold", "feed hold (same as !)",
      "with moves queued but not started yet, holds the queue (GRBL Hold: `?` says `Hold`); `resume` runs it, "
      "`stop` drops it",
@@ -135,6 +141,50 @@ inline constexpr CommandSpec kCommands[] = {
      "(identity until set), `G10 L2 Pn X.. Y.. Z.. A.. B.. C..` sets g5(3+n) (P0: the active one; axes not given "
      "are kept). Kept in the frames file like the tools; refused while the arm moves, jogs or has moves queued",
      false},
+    {"teach", Cmd::teach, ArgShape::point_name, "teach NAME",
+     "store where the arm is as teach point NAME: its joints, the tool pose, the active tool and frame",
+     "the measured joints of a homed arm at rest (idle or disabled; refused while it moves, jogs or has moves queued); "
+     "a point of that name is replaced. Points are kept in the points file (programs.points_file, next to the "
+     "configuration; `armfw --points FILE`), written atomically: a point that cannot be saved is not made (`error: "
+     "storage`, the old file kept). Answers `ok taught NAME joints=[...] pose=[...] tool=T frame=F`. Names: letters, "
+     "digits, _ and -, starting with a letter, at most 31",
+     false},
+    {"points", Cmd::points, ArgShape::none, "points", "list the teach points (`movej @NAME`, `movel @NAME`)",
+     "one line per point `NAME joints=[...] pose=[...] tool=T frame=F` (joints in the joint units, the pose in the "
+     "base frame), then `ok N points`",
+     true},
+    {"point delete", Cmd::point_delete, ArgShape::point_name, "point delete NAME", "delete teach point NAME",
+     "saved at once (as teach); `error: bad_option` when there is none of that name", false},
+    {"programs", Cmd::programs, ArgShape::none, "programs", "list the program files of programs.dir",
+     "native `.arm` and G-code `.gcode .nc .ngc .gc` files, one per line, then `ok N programs in DIR`", true},
+    {"run", Cmd::run, ArgShape::program_name, "run NAME",
+     "check the whole program NAME (of programs.dir), then run it; nothing moves if a line is bad",
+     "every line parsed, every move planned and checked from the pose the previous line leaves (the console's own "
+     "check: the one `$C` check mode makes); the first bad line is answered `error: program FILE:LINE: reason` and "
+     "nothing moves. Needs an enabled, homed arm at rest with nothing queued (`error: not_homed` naming the joints). "
+     "Answers `ok running NAME: N steps` at once; progress comes as `program: ...` lines (`program: NAME done`, "
+     "`program: NAME aborted at FILE:LINE: reason`). The program's moves are fed to the motion queue from the console "
+     "thread, one ahead of the running one. `stop`, `abort`, `disable`, an e-stop or a fault end the program (the "
+     "rest is dropped); nothing resumes by itself after a restart. In check mode (`$C`) `run` checks only",
+     false},
+    {"pause", Cmd::pause, ArgShape::none, "pause",
+     "pause the running program at the end of the moves handed to the controller (`!`: feed hold at once)",
+     "no further line is fed; the arm finishes the running move and the one queued behind it, then the program is "
+     "`paused` at its next line. `!` holds at once (on the path, the program paused too); `resume` (or `~`) goes on, "
+     "`step` runs one more motion, `abort` ends it",
+     false},
+    {"step", Cmd::step, ArgShape::none, "step", "run the paused program's next motion (and the lines before it), then pause",
+     "after `!` with a move held: that move (and one queued behind it) is finished first", false},
+    {"abort", Cmd::abort, ArgShape::none, "abort", "end the running program: ramp down and drop its queued moves",
+     "answers `ok aborted NAME at FILE:LINE`; as `stop` when no program runs", false},
+    {"record", Cmd::record, ArgShape::record, "record start [rate=Hz]; record stop NAME [tolerance=angle]",
+     "record the joints while jogging; `record stop NAME` writes program NAME.arm of blended joint moves",
+     "start samples the measured joints at rate= Hz (default 50, 1..1000; at most 100 000 samples); stop writes "
+     "NAME.arm in programs.dir (atomically; an existing program of that name is replaced): the recorded path "
+     "decimated (Douglas-Peucker in joint space) so that the joint-space path of the moves, and each blend "
+     "(blend= half the tolerance), stay within tolerance= (angle unit, default 0.5 deg) of the recorded path. "
+     "Answers `ok recorded NAME.arm: N moves from M samples`",
+     false},
 };
 
 /// GRBL '$' commands (both dialects; the GRBL dialect's `help` is `$`). `word` is what
@@ -155,7 +205,8 @@ inline constexpr GrblSpec kGrblCommands[] = {
     {"X", Cmd::grbl_unlock, "$X", "unlock: reset a fault / e-stop and enable the drives", false},
     {"H", Cmd::grbl_home, "$H", "homing cycle (as `home`; answers ok when it has ended, state `Home` meanwhile; a "
      "failure raises ALARM:9)", false},
-    {"C", Cmd::grbl_check, "$C", "check mode on/off: G-code is parsed and its moves planned and checked, nothing moves", false},
+    {"C", Cmd::grbl_check, "$C", "check mode on/off: G-code is parsed and its moves planned and checked, nothing moves; "
+     "`run NAME` then checks the whole program only", false},
     {"J=", Cmd::grbl_jog, "$J=[G90 or G91] [G20 or G21] [G53] X.. Y.. Z.. [A B C] F..",
      "jog the tool point in the active user frame, G53: the base frame (G91 incremental, G90 absolute; F required, "
      "in G20/G21 units per minute); "

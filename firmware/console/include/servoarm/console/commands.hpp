@@ -51,6 +51,7 @@ enum class CmdError : std::uint8_t {
   estop,             ///< line dropped, not executed: an e-stop (Ctrl-X) arrived before it ran
   storage,           ///< a file could not be written (the frames file): nothing changed, the old file kept
   not_homed,         ///< refused: a joint is not homed (message names them): `home` first
+  program,           ///< a program refused before it ran (file:line: reason), or aborted (the line named)
   internal,          ///< should not happen (message says what)
 };
 const char* to_string(CmdError e);
@@ -79,6 +80,16 @@ enum class Cmd : std::uint8_t {
   grbl_home,      ///< $H
   grbl_check,     ///< $C
   grbl_help,      ///< $
+  // Teach points and programs (issue 18; the console's program runner, console.hpp)
+  teach,          ///< `teach NAME`: store the current joints (and tool pose) as point NAME
+  points,         ///< `points`: list the teach points
+  point_delete,   ///< `point delete NAME`
+  programs,       ///< `programs`: list the program files of programs.dir
+  run,            ///< `run NAME`: check the whole program, then run it (in check mode: check only)
+  pause,          ///< `pause`: feed hold, the program stops feeding moves (`pause !`: the same at once)
+  step,           ///< `step`: run the program's next motion, then pause
+  abort,          ///< `abort`: stop the arm and end the program
+  record,         ///< `record start [rate=Hz]` / `record stop NAME [tolerance=deg]`
 };
 
 /// What a `jog` line asks for.
@@ -135,6 +146,14 @@ struct Command {
   double mass = 0;                      ///< kg
   bool has_com = false;
   std::array<double, 3> com{};          ///< length unit, in the tool frame
+  // teach points and programs
+  std::array<char, 64> word{};          ///< point name (teach, point delete, movej/movel @NAME) or program name (run, record stop)
+  bool at_point = false;                ///< movej / movel @NAME: the target is teach point `word`
+  bool has_blend = false;
+  double blend = 0;                     ///< movej (angle unit) / movel (length unit) blend=: tolerance >= 0
+  bool record_stop = false;             ///< record: stop (else start)
+  double rate = 0;                      ///< record start rate= (Hz; 0: the default)
+  double tolerance = 0;                 ///< record stop tolerance= (angle unit; 0: the default)
 };
 
 struct ParseResult {

@@ -15,6 +15,7 @@
 // Motion commands (movej, movel, park, G0/G1, G28, G4) answer `ok` when the
 // move is checked and queued (GRBL semantics); `wait` / M400 answer when the
 // queue has run empty. A full queue answers `error: busy` and queues nothing.
+#include <cmath>
 #include <cstdint>
 #include <deque>
 #include <functional>
@@ -26,6 +27,8 @@
 #include "servoarm/console/commands.hpp"
 #include "servoarm/console/frames.hpp"
 #include "servoarm/console/requests.hpp"
+#include "servoarm/program/points.hpp"
+#include "servoarm/program/program.hpp"
 #include "servoarm/rt/controller.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
@@ -58,7 +61,24 @@ struct ConsoleConfig {
   /// Where the tools and user frames are kept (frames.hpp); "" = in memory only (they are
   /// lost at exit, and `tool` / `frame` say so). App resolves console.frames_file.
   std::string frames_file;
+  /// Teach points and programs (issue 18; App resolves programs.points_file and programs.dir):
+  /// "" = points in memory only (lost at exit) / no programs folder (`run`, `programs` and
+  /// `record stop` say so).
+  std::string points_file;
+  std::string programs_dir;
+  double record_rate_hz = 50.0;              ///< record start without rate=
+  double record_tolerance = 0.5 * M_PI / 180.0;  ///< rad: record stop without tolerance=
 };
+
+/// A program run by the console (`run NAME`): idle = none.
+enum class RunState : std::uint8_t {
+  idle,       ///< no program
+  running,    ///< lines are fed to the motion queue
+  pausing,    ///< `pause`: nothing more is fed; paused once the queued moves are done
+  paused,     ///< stopped between two lines (or held by `!` mid-move)
+  stepping,   ///< `step`: one motion fed, paused when it is done
+};
+const char* to_string(RunState r);
 
 /// One connected client: its partial line, queued lines, G-code modal state.
 struct Session {
@@ -161,6 +181,18 @@ class Console {
   /// The tool point's pose of joints `q` in the active user frame (SI), with the active tool.
   kin::Pose pose_in_frame(const kin::JointVector& q) const;
 
+  /// Load the teach points of cfg.points_file (a missing file: none yet). Call once, before any
+  /// line; "" or the error (file:line:column; armfw does not start, the file is kept).
+  std::string load_points();
+  const prog::PointsData& points() const { return points_; }
+  /// The program runner and the recorder: feed the running program's next lines into the
+  /// motion queue (one ahead of the running move), notice its end, a hold, a fault; take a
+  /// record sample. Console thread; poll() and drain_events() call it. Never blocks.
+  void tick();
+  RunState run_state() const { return run_ ? run_->state : RunState::idle; }
+  /// `program=NAME state=... line=FILE:LINE` of the running program ("" when none).
+  std::string program_text() const;
+
   /// Motions queued by this console so far (ids 1..n).
   std::uint32_t last_motion_id() const { return next_id_ - 1; }
 
@@ -259,6 +291,49 @@ class Console {
   std::string where_text() const;  ///< "tool=NAME frame=NAME"
   std::string grbl_position(const kin::JointVector& q) const;
   std::string grbl_wcs() const;  ///< "G54".."G59" for $G
+  // Teach points and programs (console_program.cpp)
+  prog::PointsData points_;
+  struct ProgramRun {
+    std::string name;
+    prog::Program prog;
+    std::size_t next = 0;       ///< next step to feed
+    std::size_t current = 0;    ///< step of the running motion (or the last fed)
+    RunState state = RunState::running;
+    Session ps;                 ///< the runner's own session (modal state, wait)
+    std::deque<std::pair<std::uint32_t, std::size_t>> fed;  ///< motion id -> step, not finished yet
+    std::uint64_t generation = 0;
+    double started_s = 0;
+    std::uint64_t started_cycle = 0;
+    bool step_fed = false;      ///< stepping: the one motion has been fed
+    bool busy = false;          ///< tick() is feeding (no re-entry)
+  };
+  std::unique_ptr<ProgramRun> run_;
+  std::string program_events_;  ///< `program: ...` lines for every session (drain_events)
+  struct Recording {
+    bool active = false;
+    double rate_hz = 50;
+    std::uint64_t last_cycle = 0;
+    std::vector<kin::JointVector> samples;
+  } rec_;
+  void do_teach(Session& s, const Command& c);
+  void do_points(Session& s);
+  void do_point_delete(Session& s, const Command& c);
+  void do_programs(Session& s);
+  void do_run(Session& s, const Command& c);
+  void do_pause(Session& s);
+  void do_step(Session& s);
+  void do_resume(Session& s);
+  void do_record(Session& s, const Command& c);
+  /// movej / movel @NAME typed at the console (Command::at_point).
+  void queue_at_point(Session& s, const Command& c);
+  /// Check every step of `p` from the queue's end with the console's check mode; "" or FILE:LINE: reason.
+  std::string check_program(const prog::Program& p);
+  /// Run one step in `ps` (its answer in ps.out).
+  void exec_step(Session& ps, const prog::ProgramStep& st);
+  /// End the program (if one runs) with `program: NAME <how>` (e.g. "aborted at f:3: stop").
+  void end_program(const std::string& how);
+  std::string program_where() const;  ///< FILE:LINE of the current step
+  std::string points_refusal() const;  ///< "" when points may change now
   // Jogging: where the running jog is going (GRBL jog lines are relative to it).
   bool jog_tail_valid_ = false;
   bool jog_tail_tool_ = false;

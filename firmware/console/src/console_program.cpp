@@ -1,0 +1,596 @@
+// The console's teach points, program runner and recorder (issue 18; console.hpp, docs/programs.md).
+// Console thread: allocates, does file I/O; talks to the control thread only through the
+// motion queue and requests, like every other command.
+#include <algorithm>
+#include <cmath>
+#include <cstdarg>
+#include <cstdio>
+
+#include "servoarm/console/console.hpp"
+#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+
+namespace servoarm::fw {
+
+namespace {
+
+std::string fmt(const char* f, ...) __attribute__((format(printf, 1, 2)));
+std::string fmt(const char* f, ...) {
+  char buf[512];
+  va_list ap;
+  va_start(ap, f);
+  std::vsnprintf(buf, sizeof buf, f, ap);
+  va_end(ap);
+  return buf;
+}
+
+/// "error: code text\n" -> "text"; "" when the answer is no error.
+std::string error_of(const std::string& out) {
+  const std::size_t k = out.rfind("error: ");
+  if (k == std::string::npos) return "";
+  std::string e = out.substr(k + 7);
+  while (!e.empty() && e.back() == '\n') e.pop_back();
+  const std::size_t sp = e.find(' ');  // the code, then the message
+  return sp == std::string::npos ? e : e.substr(0, sp) + ": " + e.substr(sp + 1);
+}
+
+enum class StepKind { motion, needs_idle, wait, other, refused };
+
+StepKind kind_of(Cmd c) {
+  switch (c) {
+    case Cmd::movej:
+    case Cmd::movel:
+    case Cmd::gmove:
+    case Cmd::park:
+    case Cmd::dwell: return StepKind::motion;
+    case Cmd::tool:
+    case Cmd::frame: return StepKind::needs_idle;
+    case Cmd::wait: return StepKind::wait;
+    case Cmd::enable:
+    case Cmd::disable:
+    case Cmd::home:
+    case Cmd::home_zero:
+    case Cmd::stop:
+    case Cmd::estop:
+    case Cmd::reset:
+    case Cmd::hold:
+    case Cmd::resume:
+    case Cmd::jog:
+    case Cmd::grbl_jog:
+    case Cmd::grbl_unlock:
+    case Cmd::grbl_home:
+    case Cmd::grbl_check:
+    case Cmd::teach:
+    case Cmd::point_delete:
+    case Cmd::run:
+    case Cmd::pause:
+    case Cmd::step:
+    case Cmd::abort:
+    case Cmd::record: return StepKind::refused;
+    case Cmd::none:
+    case Cmd::help:
+    case Cmd::status:
+    case Cmd::fk:
+    case Cmd::ik:
+    case Cmd::limits:
+    case Cmd::stats:
+    case Cmd::config:
+    case Cmd::position:
+    case Cmd::temperature:
+    case Cmd::grbl_settings:
+    case Cmd::grbl_params:
+    case Cmd::grbl_state:
+    case Cmd::grbl_info:
+    case Cmd::grbl_help:
+    case Cmd::points:
+    case Cmd::programs: return StepKind::other;
+  }
+  return StepKind::refused;
+}
+
+/// Douglas-Peucker on joint vectors (Euclidean in SI joint space): indices kept, first and last included.
+std::vector<std::size_t> decimate(const std::vector<kin::JointVector>& q, double tol) {
+  const std::size_t n = q.size();
+  std::vector<char> keep(n, 0);
+  if (n == 0) return {};
+  keep[0] = keep[n - 1] = 1;
+  std::vector<std::pair<std::size_t, std::size_t>> stack{{0, n - 1}};
+  while (!stack.empty()) {
+    const auto [a, b] = stack.back();
+    stack.pop_back();
+    if (b <= a + 1) continue;
+    const kin::JointVector d = q[b] - q[a];
+    const double dd = d.squaredNorm();
+    double worst = -1;
+    std::size_t at = a;
+    for (std::size_t i = a + 1; i < b; ++i) {
+      const kin::JointVector v = q[i] - q[a];
+      const double s = dd > 0 ? std::clamp(v.dot(d) / dd, 0.0, 1.0) : 0.0;
+      const double dist = (v - s * d).norm();
+      if (dist > worst) worst = dist, at = i;
+    }
+    if (worst > tol) {
+      keep[at] = 1;
+      stack.push_back({a, at});
+      stack.push_back({at, b});
+    }
+  }
+  std::vector<std::size_t> out;
+  for (std::size_t i = 0; i < n; ++i)
+    if (keep[i]) out.push_back(i);
+  return out;
+}
+
+constexpr std::size_t kMaxRecordSamples = 100000;
+
+}  // namespace
+
+const char* to_string(RunState r) {
+  switch (r) {
+    case RunState::idle: return "idle";
+    case RunState::running: return "running";
+    case RunState::pausing: return "pausing";
+    case RunState::paused: return "paused";
+    case RunState::stepping: return "stepping";
+  }
+  return "?";
+}
+
+// ---------------------------------------------------------------------------
+// Teach points
+// ---------------------------------------------------------------------------
+
+std::string Console::load_points() {
+  if (cfg_.points_file.empty()) return "";
+  prog::PointsData d;
+  const std::string e = prog::load_points_file(cfg_.points_file, n_, d);
+  if (!e.empty()) return e;
+  points_ = std::move(d);
+  return "";
+}
+
+std::string Console::points_refusal() const {
+  if (run_) return fmt("refused while program %s is %s (abort it first)", run_->name.c_str(), to_string(run_->state));
+  const Telemetry t = ctl_.telemetry();
+  switch (t.state) {
+    case ArmState::idle:
+    case ArmState::disabled: break;
+    case ArmState::boot:
+    case ArmState::enabling:
+    case ArmState::moving:
+    case ArmState::stopping:
+    case ArmState::fault:
+    case ArmState::estop:
+    case ArmState::jogging:
+    case ArmState::homing: return fmt("refused while the arm is %s (teach at rest)", to_string(t.state));
+  }
+  if (!ctl_.motions().empty()) return "refused while moves are queued";
+  return "";
+}
+
+void Console::do_teach(Session& s, const Command& c) {
+  const std::string name(c.word.data());
+  if (const std::string no = points_refusal(); !no.empty()) {
+    answer_error(s, CmdError::bad_state, "teach: " + no);
+    return;
+  }
+  if (!homed_ok(s)) return;  // a pose in coordinates not established means nothing
+  const Telemetry t = ctl_.telemetry();
+  prog::TeachPoint p;
+  p.name = name;
+  p.q = kin::JointVector(n_);
+  for (int j = 0; j < n_; ++j) p.q[j] = t.q_act[static_cast<std::size_t>(j)];
+  p.pose = tcp(p.q);
+  p.tool = tools_[sel_tool()]->def.name;
+  p.frame = frames_[sel_frame()].name;
+  prog::PointsData d = points_;
+  if (const std::string e = prog::put_point(d, p); !e.empty()) {
+    answer_error(s, CmdError::bad_option, "teach: " + e);
+    return;
+  }
+  if (!cfg_.points_file.empty()) {
+    if (const std::string e = prog::save_points_file(cfg_.points_file, d); !e.empty()) {
+      answer_error(s, CmdError::storage, "teach: " + e + "; point not taught, the file kept");
+      return;
+    }
+  }
+  points_ = std::move(d);
+  answer_ok(s, fmt("taught %s joints=[%s] pose=[%s] %s%s", name.c_str(), joints_text(p.q).c_str(), pose_text(p.q).c_str(),
+                   where_text().c_str(), cfg_.points_file.empty() ? " (not kept: no points file)" : ""));
+}
+
+void Console::do_points(Session& s) {
+  for (const prog::TeachPoint& p : points_.points) {
+    const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.pose.linear());
+    const ConsoleUnits& u = cfg_.units;
+    const int L = u.length_decimals(), A = u.angle_decimals();
+    s.out += fmt("%s joints=[%s] pose=[x=%.*f y=%.*f z=%.*f rx=%.*f ry=%.*f rz=%.*f] tool=%s frame=%s\n", p.name.c_str(),
+                 joints_text(p.q).c_str(), L, u.length_out(p.pose.translation().x()), L, u.length_out(p.pose.translation().y()),
+                 L, u.length_out(p.pose.translation().z()), A, u.angle_out(rpy[0]), A, u.angle_out(rpy[1]), A,
+                 u.angle_out(rpy[2]), p.tool.c_str(), p.frame.c_str());
+  }
+  answer_ok(s, fmt("%zu points%s", points_.points.size(), cfg_.points_file.empty() ? " (not kept: no points file)" : ""));
+}
+
+void Console::do_point_delete(Session& s, const Command& c) {
+  const std::string name(c.word.data());
+  if (const std::string no = points_refusal(); !no.empty() && run_) {
+    answer_error(s, CmdError::bad_state, "point delete: " + no);
+    return;
+  }
+  prog::PointsData d = points_;
+  if (!prog::delete_point(d, name)) {
+    answer_error(s, CmdError::bad_option, fmt("point delete: no point '%s' (%zu points: see points)", name.c_str(), d.points.size()));
+    return;
+  }
+  if (!cfg_.points_file.empty()) {
+    if (const std::string e = prog::save_points_file(cfg_.points_file, d); !e.empty()) {
+      answer_error(s, CmdError::storage, "point delete: " + e + "; nothing deleted, the file kept");
+      return;
+    }
+  }
+  points_ = std::move(d);
+  answer_ok(s, "deleted " + name);
+}
+
+void Console::queue_at_point(Session& s, const Command& c) {
+  const std::string name(c.word.data());
+  const prog::TeachPoint* p = prog::find_point(points_, name);
+  if (p == nullptr) {
+    answer_error(s, CmdError::bad_option, fmt("%s: no point '%s' (%zu points: see points)", to_string(c.cmd), name.c_str(),
+                                              points_.points.size()));
+    return;
+  }
+  if (p->q.size() != n_) {
+    answer_error(s, CmdError::bad_option, fmt("%s: point '%s' has %d joints, the arm %d", to_string(c.cmd), name.c_str(),
+                                              int(p->q.size()), n_));
+    return;
+  }
+  if (c.cmd == Cmd::movej) {
+    MoveJoints m;
+    m.goal = p->q;
+    m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
+    queue(s, m);
+    return;
+  }
+  MoveLine m;
+  m.target = tcp(p->q);  // where the point's joints put the active tool, on a straight line
+  m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
+  queue(s, m);
+}
+
+// ---------------------------------------------------------------------------
+// Programs
+// ---------------------------------------------------------------------------
+
+void Console::do_programs(Session& s) {
+  if (cfg_.programs_dir.empty()) {
+    answer_error(s, CmdError::bad_state, "programs: no programs folder (programs.dir, armfw --programs DIR)");
+    return;
+  }
+  std::vector<std::string> names;
+  if (const std::string e = prog::list_programs(cfg_.programs_dir, names); !e.empty()) {
+    answer_error(s, CmdError::storage, "programs: " + e);
+    return;
+  }
+  for (const std::string& n : names) s.out += n + "\n";
+  answer_ok(s, fmt("%zu programs in %s", names.size(), cfg_.programs_dir.c_str()));
+}
+
+void Console::exec_step(Session& ps, const prog::ProgramStep& st) {
+  const Session* prev = sel_;
+  sel_ = &ps;
+  if (st.point >= 0 && st.cmd.cmd == Cmd::movel && static_cast<std::size_t>(st.point) < points_.points.size()) {
+    MoveLine m;
+    m.target = tcp(points_.points[static_cast<std::size_t>(st.point)].q);
+    m.speed = st.cmd.has_speed ? cfg_.units.length_in(st.cmd.speed) : 0.0;
+    queue(ps, m);
+  } else {
+    execute(ps, st.text);
+  }
+  sel_ = prev;
+}
+
+std::string Console::check_program(const prog::Program& p) {
+  // The console's check mode (as `$C`): every move planned and path-checked from where the
+  // previous one ends, with the tool and frame the program selects; nothing is queued.
+  Session cs;
+  cs.name = "check";
+  cs.check_mode = true;
+  cs.check_tail = tail();
+  cs.check_tool = tool_;
+  cs.check_frame = frame_;
+  for (const prog::ProgramStep& st : p.steps) {
+    switch (kind_of(st.cmd.cmd)) {
+      case StepKind::refused:
+        return p.where(st) + ": " + to_string(st.cmd.cmd) +
+               " is not run inside a program (enable and home the arm before `run`; stop / abort from the console)";
+      case StepKind::wait:
+      case StepKind::other: continue;
+      case StepKind::motion:
+      case StepKind::needs_idle: break;
+    }
+    cs.out.clear();
+    exec_step(cs, st);
+    if (const std::string e = error_of(cs.out); !e.empty()) return p.where(st) + ": " + e;
+  }
+  return "";
+}
+
+void Console::do_run(Session& s, const Command& c) {
+  const std::string name(c.word.data());
+  if (cfg_.programs_dir.empty()) {
+    answer_error(s, CmdError::program, "run: no programs folder (programs.dir, armfw --programs DIR)");
+    return;
+  }
+  if (run_) {
+    answer_error(s, CmdError::bad_state, fmt("run: program %s is %s (abort it first)", run_->name.c_str(), to_string(run_->state)));
+    return;
+  }
+  if (!s.check_mode) {
+    if (!motion_state_ok(s)) return;
+    if (!homed_ok(s)) return;
+    const Telemetry t = ctl_.telemetry();
+    if (t.state != ArmState::idle || !ctl_.motions().empty()) {
+      answer_error(s, CmdError::bad_state, fmt("run: needs the arm at rest with nothing queued (it is %s, %zu queued)",
+                                               to_string(t.state), ctl_.motions().size()));
+      return;
+    }
+  }
+  const std::string path = prog::find_program(cfg_.programs_dir, name);
+  if (path.empty()) {
+    answer_error(s, CmdError::program, fmt("run: no program '%s' in %s (see programs)", name.c_str(), cfg_.programs_dir.c_str()));
+    return;
+  }
+  auto r = std::make_unique<ProgramRun>();
+  prog::ProgramContext ctx;
+  ctx.chain = &chain_;
+  ctx.units = cfg_.units;
+  ctx.dir = cfg_.programs_dir;
+  ctx.points = &points_;
+  if (const std::string e = prog::load_program(path, ctx, r->prog); !e.empty()) {
+    answer_error(s, CmdError::program, e + "; nothing moved");
+    return;
+  }
+  if (const std::string e = check_program(r->prog); !e.empty()) {
+    answer_error(s, CmdError::program, e + "; nothing moved");
+    return;
+  }
+  int moves = 0;
+  for (const prog::ProgramStep& st : r->prog.steps) moves += kind_of(st.cmd.cmd) == StepKind::motion ? 1 : 0;
+  if (s.check_mode) {
+    answer_ok(s, fmt("checked %s: %zu steps, %d moves; nothing moved (check mode)", name.c_str(), r->prog.steps.size(), moves));
+    return;
+  }
+  const Telemetry t = ctl_.telemetry();
+  r->name = name;
+  r->ps.name = "program " + name;
+  r->generation = t.generation;
+  r->started_cycle = t.cycles;
+  r->state = RunState::running;
+  run_ = std::move(r);
+  answer_ok(s, fmt("running %s: %zu steps, %d moves", name.c_str(), run_->prog.steps.size(), moves));
+  tick();
+}
+
+void Console::do_pause(Session& s) {
+  if (!run_) {
+    answer_error(s, CmdError::bad_state, "pause: no program runs (`hold` or `!` holds a move)");
+    return;
+  }
+  if (run_->state == RunState::running || run_->state == RunState::stepping) run_->state = RunState::pausing;
+  tick();
+  answer_ok(s, fmt("%s %s at %s", run_ ? to_string(run_->state) : "ended", run_ ? run_->name.c_str() : "",
+                   run_ ? program_where().c_str() : ""));
+}
+
+void Console::do_step(Session& s) {
+  if (!run_) {
+    answer_error(s, CmdError::bad_state, "step: no program runs");
+    return;
+  }
+  if (run_->state != RunState::paused) {
+    answer_error(s, CmdError::bad_state, fmt("step: program %s is %s (pause it first)", run_->name.c_str(), to_string(run_->state)));
+    return;
+  }
+  run_->state = RunState::stepping;
+  run_->step_fed = false;
+  const Telemetry t = ctl_.telemetry();
+  Reply r;
+  if (t.holding || t.mode == Mode::held) request(RequestOp::resume, r);  // a move held by `!` is finished first
+  tick();
+  answer_ok(s, fmt("stepping %s at %s", run_ ? run_->name.c_str() : "", run_ ? program_where().c_str() : "(ended)"));
+}
+
+void Console::do_resume(Session& s) {
+  Reply r;
+  if (run_ && (run_->state == RunState::paused || run_->state == RunState::pausing)) run_->state = RunState::running;
+  if (!request(RequestOp::resume, r)) {
+    answer_error(s, CmdError::timeout, "control thread did not answer resume");
+    return;
+  }
+  if (r.result != RtResult::ok && !run_) {
+    answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, r.message);
+    return;
+  }
+  tick();
+  if (run_) answer_ok(s, fmt("%s %s at %s", to_string(run_->state), run_->name.c_str(), program_where().c_str()));
+  else answer_ok(s, r.message);
+}
+
+std::string Console::program_where() const {
+  if (!run_ || run_->prog.steps.empty()) return "-";
+  const ProgramRun& r = *run_;
+  std::size_t i = r.fed.empty() ? std::min(r.next, r.prog.steps.size() - 1) : r.current;
+  return r.prog.where(r.prog.steps[std::min(i, r.prog.steps.size() - 1)]);
+}
+
+std::string Console::program_text() const {
+  if (!run_) return "";
+  return fmt("program=%s program_state=%s line=%s", run_->name.c_str(), to_string(run_->state), program_where().c_str());
+}
+
+void Console::end_program(const std::string& how) {
+  if (!run_) return;
+  program_events_ += "program: " + run_->name + " " + how + "\n";
+  run_.reset();
+}
+
+void Console::tick() {
+  const Telemetry t = ctl_.telemetry();
+  // The recorder: one sample every rate interval of control cycles.
+  if (rec_.active && rec_.samples.size() < kMaxRecordSamples) {
+    const double every = std::max(1.0, std::round(ctl_.config().rate_hz / rec_.rate_hz));
+    if (static_cast<double>(t.cycles - rec_.last_cycle) >= every) {
+      kin::JointVector q(n_);
+      for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+      rec_.samples.push_back(q);
+      rec_.last_cycle = t.cycles;
+    }
+  }
+  if (!run_ || run_->busy) return;
+  ProgramRun& r = *run_;
+  // Finished motions leave the list; its front is the running one.
+  while (!r.fed.empty() && (r.fed.front().first <= t.done_id || (t.running_id != 0 && r.fed.front().first < t.running_id)))
+    r.fed.pop_front();
+  if (!r.fed.empty()) r.current = r.fed.front().second;
+  switch (t.state) {
+    case ArmState::fault: end_program(fmt("aborted at %s: fault %s", program_where().c_str(), t.fault_text)); return;
+    case ArmState::estop: end_program("aborted at " + program_where() + ": e-stop"); return;
+    case ArmState::boot:
+    case ArmState::disabled: end_program("aborted at " + program_where() + ": the arm was disabled"); return;
+    case ArmState::jogging:
+    case ArmState::homing: end_program(fmt("aborted at %s: the arm is %s", program_where().c_str(), to_string(t.state))); return;
+    case ArmState::enabling:
+    case ArmState::idle:
+    case ArmState::moving:
+    case ArmState::stopping: break;
+  }
+  if (t.generation != r.generation) {  // the queue was dropped (a stop from elsewhere) or a move refused
+    end_program("aborted at " + program_where() + ": the motion queue was dropped");
+    return;
+  }
+  if (r.state == RunState::running && (t.mode == Mode::held || t.holding)) r.state = RunState::paused;
+  const bool at_rest = t.state == ArmState::idle && ctl_.motions().empty();
+  r.busy = true;
+  struct Busy {
+    bool& b;
+    ~Busy() { b = false; }
+  } busy{r.busy};
+  const auto fail = [&](std::size_t i, const std::string& e) {
+    const std::string at = r.prog.where(r.prog.steps[i]);
+    Reply rp;
+    request(RequestOp::stop, rp);  // the rest is dropped
+    end_program("aborted at " + at + ": " + e);
+  };
+  if (r.ps.waiting) {
+    r.ps.out.clear();
+    settle(r.ps);
+    if (r.ps.waiting) return;
+    if (const std::string e = error_of(r.ps.out); !e.empty()) {
+      fail(r.next == 0 ? 0 : r.next - 1, e);
+      return;
+    }
+  }
+  for (int guard = 0; guard < 64 && r.next < r.prog.steps.size(); ++guard) {
+    if (r.state != RunState::running && r.state != RunState::stepping) break;
+    const prog::ProgramStep& st = r.prog.steps[r.next];
+    const StepKind k = kind_of(st.cmd.cmd);
+    if (k == StepKind::motion) {
+      if (r.state == RunState::stepping && r.step_fed) break;
+      if (ctl_.motions().size() >= 2) break;  // one queued behind the running move
+      const Telemetry now = ctl_.telemetry();
+      if (now.state != ArmState::idle && now.state != ArmState::moving) break;
+      if (now.mode == Mode::held || now.holding) break;
+    } else if (k == StepKind::needs_idle) {
+      if (!(ctl_.telemetry().state == ArmState::idle && ctl_.motions().empty())) break;
+    }
+    r.ps.out.clear();
+    const std::size_t i = r.next++;
+    exec_step(r.ps, st);
+    if (const std::string e = error_of(r.ps.out); !e.empty()) {
+      fail(i, e);
+      return;
+    }
+    if (k == StepKind::motion) {
+      r.fed.emplace_back(last_motion_id(), i);
+      if (r.fed.size() == 1) r.current = i;
+      r.step_fed = true;
+    }
+    if (r.ps.waiting) break;  // `wait`: the next tick goes on when the queue is done
+  }
+  const bool rest_now = ctl_.telemetry().state == ArmState::idle && ctl_.motions().empty();
+  if (r.next >= r.prog.steps.size() && rest_now && at_rest && !r.ps.waiting) {
+    const double secs = static_cast<double>(ctl_.telemetry().cycles - r.started_cycle) / ctl_.config().rate_hz;
+    end_program(fmt("done: %zu steps in %.3f s", r.prog.steps.size(), secs));
+    return;
+  }
+  if ((r.state == RunState::pausing || (r.state == RunState::stepping && r.step_fed)) && rest_now && at_rest)
+    r.state = RunState::paused;
+}
+
+// ---------------------------------------------------------------------------
+// Record and playback
+// ---------------------------------------------------------------------------
+
+void Console::do_record(Session& s, const Command& c) {
+  const Telemetry t = ctl_.telemetry();
+  if (!c.record_stop) {
+    if (rec_.active) {
+      answer_error(s, CmdError::bad_state, fmt("record: already recording (%zu samples): record stop NAME", rec_.samples.size()));
+      return;
+    }
+    if (!homed_ok(s)) return;
+    rec_.active = true;
+    rec_.rate_hz = c.rate > 0 ? c.rate : cfg_.record_rate_hz;
+    rec_.samples.clear();
+    rec_.samples.reserve(kMaxRecordSamples);
+    rec_.last_cycle = t.cycles - static_cast<std::uint64_t>(std::max(1.0, ctl_.config().rate_hz / rec_.rate_hz)) - 1;
+    tick();  // the first sample: where the arm is now
+    answer_ok(s, fmt("recording at %g Hz: jog, then record stop NAME", rec_.rate_hz));
+    return;
+  }
+  if (!rec_.active) {
+    answer_error(s, CmdError::bad_state, "record stop: nothing is recorded (record start first)");
+    return;
+  }
+  std::string name(c.word.data());
+  if (cfg_.programs_dir.empty()) {
+    answer_error(s, CmdError::storage, "record stop: no programs folder (programs.dir, armfw --programs DIR); still recording");
+    return;
+  }
+  {  // the last sample: where the arm is now
+    kin::JointVector q(n_);
+    for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+    if (rec_.samples.empty() || (rec_.samples.back() - q).norm() > 0) rec_.samples.push_back(q);
+  }
+  const double tol = c.tolerance > 0 ? cfg_.units.angle_in(c.tolerance) : cfg_.record_tolerance;
+  // The moves follow the decimated polyline (within tol/2 of the samples) and each blend
+  // stays within blend = tol/2 of its corner, a sample: within tol of the recorded path.
+  const std::vector<std::size_t> keep = decimate(rec_.samples, 0.5 * tol);
+  const ConsoleUnits& u = cfg_.units;
+  std::string text = fmt("# recorded by armfw: record stop %s (%zu samples at %g Hz; within %g %s of the recorded path)\n",
+                         name.c_str(), rec_.samples.size(), rec_.rate_hz, u.angle_out(tol), u.angle_name());
+  int moves = 0;
+  for (std::size_t k = 0; k < keep.size(); ++k) {
+    const kin::JointVector& q = rec_.samples[keep[k]];
+    std::string line = "movej";
+    for (int j = 0; j < n_; ++j) line += fmt(" %.10g", to_user(j, q[j]));
+    line += fmt(" speed=%g", cfg_.default_joint_speed_pct);
+    if (k > 0 && k + 1 < keep.size()) line += fmt(" blend=%.6g", u.angle_out(0.5 * tol));
+    text += line + "\n";
+    ++moves;
+  }
+  if (name.size() < 4 || name.compare(name.size() - 4, 4, prog::kNativeExtension) != 0) name += prog::kNativeExtension;
+  const std::string path = cfg_.programs_dir + "/" + name;
+  if (const std::string e = kin::write_text_file_atomic(path, text); !e.empty()) {
+    answer_error(s, CmdError::storage, "record stop: " + e + "; still recording");
+    return;
+  }
+  const std::size_t n = rec_.samples.size();
+  rec_.active = false;
+  rec_.samples.clear();
+  answer_ok(s, fmt("recorded %s: %d moves from %zu samples", name.c_str(), moves, n));
+}
+
+}  // namespace servoarm::fw

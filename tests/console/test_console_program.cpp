@@ -1,0 +1,385 @@
+// Teach points and programs through the console (issue 18), on the puma560 with virtual
+// drives (console_rig.hpp: mm and degrees): teach / points / point delete / movej @NAME /
+// movel @NAME, run (whole-program check first: a bad line 7 answers line 7 and nothing
+// moves), pause / step / resume / abort, stop and faults ending a program with its line,
+// an unhomed arm refused naming the joints, $C + run = check only, and record -> replay
+// within the tolerance of the recorded path. Expected values come from the chain's FK and
+// the test's own samples, never from the console's code.
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "console_rig.hpp"
+#include "../program/tmp_dir.hpp"
+#include "servoarm/program/points.hpp"
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm;
+using namespace servoarm::fw;
+using test::answer_ok;
+
+namespace {
+constexpr double kDeg = M_PI / 180.0;
+bool has(const std::string& s, const std::string& p) { return s.find(p) != std::string::npos; }
+
+FwConfig with_dir(const std::string& dir, FwConfig c = {}) {
+  c.programs_dir = dir;
+  c.programs_points_file = dir + "/points.toml";
+  return c;
+}
+
+struct ProgRig : test::ConsoleRig {
+  std::string dir;
+  std::string events;
+  explicit ProgRig(const std::string& d, FwConfig c = {}) : test::ConsoleRig(with_dir(d, c)), dir(d) {}
+  Telemetry tel() const { return app.ctl->telemetry(); }
+  kin::JointVector q_cmd() const {
+    const Telemetry t = tel();
+    kin::JointVector v(6);
+    for (int j = 0; j < 6; ++j) v[j] = t.q_cmd[static_cast<std::size_t>(j)];
+    return v;
+  }
+  kin::JointVector q_act() const {
+    const Telemetry t = tel();
+    kin::JointVector v(6);
+    for (int j = 0; j < 6; ++j) v[j] = t.q_act[static_cast<std::size_t>(j)];
+    return v;
+  }
+  /// One control cycle, then the console's program runner and event drain.
+  void step1() {
+    cycle();
+    events += app.console->drain_events();
+  }
+  /// Cycles until pred() (true) or max cycles (false).
+  template <class P>
+  bool until(P pred, int max = 60000) {
+    for (int i = 0; i < max; ++i) {
+      if (pred()) return true;
+      step1();
+    }
+    return pred();
+  }
+  bool program_ended(int max = 60000) {
+    return until([&] { return app.console->run_state() == RunState::idle; }, max);
+  }
+  bool at_rest(int max = 60000) {
+    return until([&] { return tel().state == ArmState::idle && app.ctl->motions().empty(); }, max);
+  }
+  void write(const std::string& name, const std::string& text) { test::write_file(dir + "/" + name, text); }
+};
+
+struct Tmp {
+  std::string dir = test::make_tmp_dir();
+  ~Tmp() { test::remove_tree(dir); }
+};
+
+}  // namespace
+
+TEST_GROUP(ConsoleProgram){};
+
+// teach stores the measured joints (and the tool pose), kept in the points file; movej @NAME
+// goes back to them exactly; movel @NAME ends where FK of them puts the tool; point delete.
+TEST(ConsoleProgram, TeachThenMovejAtNameReachesIt) {
+  Tmp tmp;
+  ProgRig r(tmp.dir);
+  r.enable();
+  CHECK(answer_ok(r.cmd("movej 20 -40 160 10 -50 30")));
+  CHECK(answer_ok(r.cmd("wait")));
+  for (int i = 0; i < 300; ++i) r.step1();  // settle: the measured joints are where the setpoint is
+  const kin::JointVector taught = r.q_act();
+  const std::string a = r.cmd("teach pick");
+  CHECK_TEXT(answer_ok(a) && has(a, "taught pick") && has(a, "tool=tool0 frame=base"), a.c_str());
+  // kept in the points file, atomically, as the loader reads it
+  prog::PointsData d;
+  STRCMP_EQUAL("", prog::load_points_file(tmp.dir + "/points.toml", 6, d).c_str());
+  LONGS_EQUAL(1, d.points.size());
+  CHECK((d.points[0].q - taught).norm() == 0);
+  kin::Pose flange;
+  kin::forward(r.app.chain, taught, flange);
+  CHECK((d.points[0].pose.translation() - flange.translation()).norm() < 1e-12);
+  CHECK(has(r.cmd("points"), "pick joints=["));
+  // away, then back with movej @pick: exactly the taught joints
+  CHECK(answer_ok(r.cmd("movej 0 -45 180 0 45 0")));
+  CHECK(answer_ok(r.cmd("wait")));
+  CHECK(answer_ok(r.cmd("movej @pick speed=80")));
+  CHECK(answer_ok(r.cmd("wait")));
+  CHECK_TEXT((r.q_cmd() - taught).norm() < 1e-9, r.s.out.c_str());
+  // away, then movel @pick: the tool point where FK(taught) puts it
+  CHECK(answer_ok(r.cmd("movej 25 -40 160 10 -50 30")));
+  CHECK(answer_ok(r.cmd("wait")));
+  const std::string ml = r.cmd("movel @pick speed=100");
+  CHECK_TEXT(answer_ok(ml), ml.c_str());
+  CHECK(answer_ok(r.cmd("wait")));
+  kin::Pose end;
+  kin::forward(r.app.chain, r.q_cmd(), end);
+  CHECK((end.translation() - flange.translation()).norm() < 1e-6);
+  // bad names and unknown points: one line, nothing moves
+  CHECK(has(r.cmd("movej @nowhere"), "error: bad_option movej: no point 'nowhere'"));
+  CHECK(has(r.cmd("movej @pick 1 2 3"), "error: arg_count"));
+  CHECK(has(r.cmd("teach 9lives"), "error: bad_option"));
+  CHECK(answer_ok(r.cmd("point delete pick")));
+  CHECK(has(r.cmd("movej @pick"), "error: bad_option"));
+  STRCMP_EQUAL("", prog::load_points_file(tmp.dir + "/points.toml", 6, d).c_str());
+  LONGS_EQUAL(0, d.points.size());
+  CHECK(has(r.cmd("point delete pick"), "error: bad_option"));
+}
+
+// A points file that cannot be written: the point is not taught, the old file is kept.
+TEST(ConsoleProgram, ATeachThatCannotBeSavedIsNotMade) {
+  Tmp tmp;
+  FwConfig c;
+  c.programs_dir = tmp.dir;
+  c.programs_points_file = tmp.dir + "/no/such/dir/points.toml";
+  test::ConsoleRig r(c);
+  r.enable();
+  const std::string a = r.cmd("teach p");
+  CHECK_TEXT(has(a, "error: storage teach:"), a.c_str());
+  CHECK(has(r.cmd("points"), "ok 0 points"));
+}
+
+// run checks the whole program first: the first bad line is answered with file:line and the
+// reason, and nothing moves (the positions, the queue and the motion ids unchanged).
+TEST(ConsoleProgram, RunOfAProgramWithABadLine7AnswersLine7AndNothingMoves) {
+  struct Case {
+    const char* line7;
+    const char* expect;
+  };
+  const Case cases[] = {
+      {"movej 200 -45 180 0 45 0", "limits"},  // joint 1 outside [-160, 160]
+      {"movel 3000 0 0", "unreachable"},      // out of reach
+      {"frobnicate 1 2", "unknown command"},   // the loader's parser
+      {"movej @nowhere", "unknown point"},
+      {"enable", "not run inside a program"},
+  };
+  Tmp tmp;
+  ProgRig r(tmp.dir);
+  r.enable();
+  for (const Case& k : cases) {
+    r.write("bad.arm", std::string("movej 0 -45 180 0 45 0\n"
+                                   "movej 10 -45 180 0 45 0\n"
+                                   "# a comment\n"
+                                   "movej 20 -45 180 0 45 0 blend=5\n"
+                                   "dwell 0.1\n"
+                                   "movej 30 -45 180 0 45 0\n") +
+                           k.line7 + "\nmovej 0 -45 180 0 45 0\n");
+    const kin::JointVector q0 = r.q_act();
+    const std::uint32_t id0 = r.app.console->last_motion_id();
+    const std::string a = r.cmd("run bad");
+    const std::string want = "error: program " + tmp.dir + "/bad.arm:7: ";
+    CHECK_TEXT(has(a, want) && has(a, k.expect) && has(a, "nothing moved"), (std::string(k.line7) + " -> " + a).c_str());
+    CHECK(r.app.console->run_state() == RunState::idle);
+    for (int i = 0; i < 500; ++i) r.step1();
+    CHECK_TEXT((r.q_act() - q0).norm() < 1e-9, k.line7);
+    LONGS_EQUAL(id0, r.app.console->last_motion_id());
+    LONGS_EQUAL(0, r.tel().queued);
+  }
+  // G-code files too, and a program that does not exist
+  CHECK(answer_ok(r.cmd("movej 20 -40 160 10 -50 30")));
+  CHECK(answer_ok(r.cmd("wait")));
+  r.write("bad.nc", "G21 G91\nG1 X10 F3000\nG1 X3000\n");
+  const std::string g = r.cmd("run bad.nc");
+  CHECK_TEXT(has(g, "bad.nc:3: unreachable"), g.c_str());
+  CHECK(has(r.cmd("run none"), "error: program run: no program 'none'"));
+  CHECK(has(r.cmd("run ../x"), "error: bad_option"));
+  // $C (check mode): run checks only
+  r.write("good.arm", "movej 0 -45 180 0 45 0\nmovej 10 -45 180 0 45 0\n");
+  CHECK(answer_ok(r.cmd("$C")));
+  const kin::JointVector q0 = r.q_act();
+  const std::string c = r.cmd("run good");
+  CHECK_TEXT(answer_ok(c) && has(c, "checked good: 2 steps, 2 moves"), c.c_str());
+  const std::string cb = r.cmd("run bad");
+  CHECK_TEXT(has(cb, "bad.arm:7: enable is not run inside a program"), cb.c_str());
+  CHECK(answer_ok(r.cmd("$C")));
+  for (int i = 0; i < 300; ++i) r.step1();
+  CHECK((r.q_act() - q0).norm() < 1e-9);
+  CHECK(has(r.cmd("programs"), "bad.arm\nbad.nc\ngood.arm\nok 3 programs"));
+}
+
+// A program runs to its end; status and the report name the program, the line, the state.
+// pause stops it after the moves handed over; step runs exactly one more motion; resume ends it.
+TEST(ConsoleProgram, PauseStepResumeAndTheReports) {
+  Tmp tmp;
+  ProgRig r(tmp.dir);
+  r.enable();
+  std::string p;
+  for (int i = 0; i < 8; ++i) p += i % 2 ? "movej 0 -45 170 0 45 0\n" : "movej 20 -35 160 10 35 10\n";
+  r.write("p.arm", "# eight moves\n" + p);
+  const std::string a = r.cmd("run p");
+  CHECK_TEXT(answer_ok(a) && has(a, "running p: 8 steps, 8 moves"), a.c_str());
+  for (int i = 0; i < 200; ++i) r.step1();
+  const std::string st = r.cmd("status");
+  CHECK_TEXT(has(st, "program=p program_state=running line=" + tmp.dir + "/p.arm:2"), st.c_str());
+  CHECK(has(r.app.console->grbl_report(), "|Pgm:p,running," + tmp.dir + "/p.arm:2>"));
+  CHECK(has(r.cmd("run p"), "error: bad_state"));            // one program at a time
+  CHECK(has(r.cmd("teach x"), "error: bad_state teach: refused while program p"));
+  CHECK(answer_ok(r.cmd("pause")));
+  CHECK(r.until([&] { return r.app.console->run_state() == RunState::paused; }));
+  CHECK(r.at_rest());
+  const std::uint32_t done = r.tel().done_id;
+  CHECK(done >= 1 && done <= 2);  // the running move and the one queued behind it
+  const kin::JointVector held = r.q_cmd();
+  for (int i = 0; i < 1000; ++i) r.step1();
+  CHECK((r.q_cmd() - held).norm() == 0);
+  CHECK(has(r.cmd("status"), "program_state=paused"));
+  // step: one motion, then paused again
+  CHECK(answer_ok(r.cmd("step")));
+  CHECK(r.until([&] { return r.tel().done_id == done + 1 && r.app.console->run_state() == RunState::paused; }));
+  for (int i = 0; i < 500; ++i) r.step1();
+  LONGS_EQUAL(done + 1, r.tel().done_id);
+  // resume: to the end
+  CHECK(answer_ok(r.cmd("resume")));
+  CHECK(r.program_ended());
+  CHECK_TEXT(has(r.events, "program: p done: 8 steps in"), r.events.c_str());
+  LONGS_EQUAL(8, r.tel().done_id);
+  // `!` mid-move holds at once and pauses the program; `~` goes on
+  r.events.clear();
+  CHECK(answer_ok(r.cmd("run p")));
+  for (int i = 0; i < 300; ++i) r.step1();
+  r.app.console->feed(r.s, "!");
+  for (int i = 0; i < 1500; ++i) r.step1();
+  CHECK(r.app.console->run_state() == RunState::paused);
+  const kin::JointVector h2 = r.q_cmd();
+  for (int i = 0; i < 500; ++i) r.step1();
+  CHECK((r.q_cmd() - h2).norm() == 0);
+  r.app.console->feed(r.s, "~");
+  // `wait` typed at the console answers when the program has ended (not between its moves)
+  CHECK(answer_ok(r.cmd("wait")));
+  CHECK(r.app.console->run_state() == RunState::idle);
+  r.step1();
+  CHECK(has(r.events, "program: p done"));
+  LONGS_EQUAL(16, r.tel().done_id);
+}
+
+// abort, stop and an e-stop end the program saying where; the rest is dropped.
+TEST(ConsoleProgram, AbortStopAndEstopDropTheRest) {
+  Tmp tmp;
+  ProgRig r(tmp.dir);
+  r.enable();
+  r.write("p.arm", "movej 0 -45 170 0 45 0\nmovej 20 -35 160 10 35 10\nmovej 0 -45 170 0 45 0\nmovej 20 -35 160 10 35 10\n");
+  const char* how[] = {"abort", "stop", "estop"};
+  for (const char* h : how) {
+    r.events.clear();
+    if (r.tel().state != ArmState::idle) {
+      CHECK(answer_ok(r.cmd("reset")));
+      r.enable();
+    }
+    const std::uint32_t id0 = r.app.console->last_motion_id();
+    CHECK(answer_ok(r.cmd("run p")));
+    for (int i = 0; i < 300; ++i) r.step1();
+    const std::string a = r.cmd(h);
+    CHECK_TEXT(answer_ok(a), (std::string(h) + ": " + a).c_str());
+    CHECK(r.program_ended(10));
+    for (int i = 0; i < 5000; ++i) r.step1();
+    CHECK_TEXT(has(r.events, "program: p aborted at " + tmp.dir + "/p.arm:1: "), (std::string(h) + ": " + r.events).c_str());
+    CHECK_TEXT(r.app.console->last_motion_id() <= id0 + 2, h);  // nothing fed after it
+    CHECK(r.tel().done_id < id0 + 1 + 1);
+    CHECK(r.app.ctl->motions().empty());
+  }
+}
+
+// A drive fault during a run aborts it naming the line of the running move.
+TEST(ConsoleProgram, AFaultAbortsTheProgramWithItsLine) {
+  Tmp tmp;
+  ProgRig r(tmp.dir);
+  r.enable();
+  r.write("f.arm", "# a fault on the second move\nmovej 0 -45 170 0 45 0\nmovej 20 -35 160 10 35 10\nmovej 0 0 0 0 0 0\n");
+  const std::uint32_t id0 = r.app.console->last_motion_id();
+  CHECK(answer_ok(r.cmd("run f")));
+  CHECK(r.until([&] { return r.tel().running_id == id0 + 2; }));  // the second move (line 3) runs
+  for (int i = 0; i < 100; ++i) r.step1();
+  r.app.plant->inject_emcy(1, 0x2310);
+  CHECK(r.program_ended(5000));
+  CHECK_TEXT(has(r.events, "program: f aborted at " + tmp.dir + "/f.arm:3: fault"), r.events.c_str());
+  // nothing resumes by itself
+  for (int i = 0; i < 2000; ++i) r.step1();
+  CHECK(r.app.console->run_state() == RunState::idle);
+  CHECK(r.app.ctl->motions().empty());
+}
+
+// An unhomed arm refuses run, naming the joints; nothing is checked or moved.
+TEST(ConsoleProgram, AnUnhomedArmRefusesRunNamingTheJoints) {
+  Tmp tmp;
+  FwConfig c;
+  c.drives.resize(6);
+  c.drives[1].homing_method = "19";
+  c.drives[4].homing_method = "19";
+  ProgRig r(tmp.dir, c);
+  r.enable();
+  r.write("p.arm", "movej 0 -45 170 0 45 0\n");
+  const std::string a = r.cmd("run p");
+  CHECK_TEXT(has(a, "error: not_homed joints 2, 5 not homed"), a.c_str());
+  CHECK(r.app.console->run_state() == RunState::idle);
+  CHECK(has(r.cmd("teach x"), "error: not_homed"));
+  // disabled: refused too
+  CHECK(answer_ok(r.cmd("disable")));
+  for (int i = 0; i < 200; ++i) r.step1();
+  CHECK(has(r.cmd("run p"), "error: bad_state"));
+}
+
+namespace {
+/// Distance (rad, joint-space Euclidean) from q to the polyline `path`.
+double distance_to(const std::vector<kin::JointVector>& path, const kin::JointVector& q) {
+  double best = INFINITY;
+  for (std::size_t i = 0; i + 1 < path.size(); ++i) {
+    const kin::JointVector d = path[i + 1] - path[i], v = q - path[i];
+    const double dd = d.squaredNorm();
+    const double s = dd > 0 ? std::fmax(0.0, std::fmin(1.0, v.dot(d) / dd)) : 0.0;
+    best = std::fmin(best, (v - s * d).norm());
+  }
+  return best;
+}
+}  // namespace
+
+// record start / jogging / record stop NAME writes a program of blended joint moves; replaying
+// it keeps the arm within 0.5 deg (the default tolerance) of the path the joints took.
+TEST(ConsoleProgram, RecordThenReplayStaysWithinTheTolerance) {
+  Tmp tmp;
+  ProgRig r(tmp.dir);
+  r.enable();
+  CHECK(answer_ok(r.cmd("movej 0 -45 170 0 45 0")));
+  CHECK(answer_ok(r.cmd("wait")));
+  for (int i = 0; i < 300; ++i) r.step1();
+  std::vector<kin::JointVector> path{r.q_act()};
+  CHECK(answer_ok(r.cmd("record start rate=100")));
+  const char* jogs[] = {"jog j1 +25 speed=30", "jog j2 +15 speed=30", "jog j3 -20 speed=30", "jog j1 -10 speed=30", "jog j5 +20 speed=30"};
+  for (const char* j : jogs) {
+    const std::string a = r.cmd(j);
+    CHECK_TEXT(answer_ok(a), a.c_str());
+    for (int i = 0; i < 20000; ++i) {
+      r.step1();
+      path.push_back(r.q_act());
+      if (i > 10 && r.tel().state == ArmState::idle) break;
+    }
+  }
+  for (int i = 0; i < 300; ++i) {
+    r.step1();
+    path.push_back(r.q_act());
+  }
+  CHECK(has(r.cmd("status"), "recording="));
+  const std::string a = r.cmd("record stop rec");
+  CHECK_TEXT(answer_ok(a) && has(a, "recorded rec.arm:"), a.c_str());
+  const std::string text = test::read_file(tmp.dir + "/rec.arm");
+  CHECK_TEXT(has(text, "blend=0.25") && has(text, "movej "), text.c_str());
+  // back to the start, then replay
+  CHECK(answer_ok(r.cmd("movej 0 -45 170 0 45 0")));
+  CHECK(answer_ok(r.cmd("wait")));
+  const std::uint32_t first = r.app.console->last_motion_id() + 1;
+  CHECK(answer_ok(r.cmd("run rec")));
+  double worst = 0;
+  int samples = 0;
+  for (int i = 0; i < 200000 && r.app.console->run_state() != RunState::idle; ++i) {
+    r.step1();
+    if (r.tel().done_id < first) continue;  // the first move goes to the first sample
+    worst = std::fmax(worst, distance_to(path, r.q_cmd()));
+    ++samples;
+  }
+  CHECK_TEXT(has(r.events, "program: rec done"), r.events.c_str());
+  CHECK(samples > 1000);
+  CHECK_TEXT(worst <= 0.5 * kDeg, std::to_string(worst / kDeg).c_str());
+  CHECK((r.q_cmd() - path.back()).norm() < 0.5 * kDeg);
+  // bad input
+  CHECK(has(r.cmd("record stop x"), "error: bad_state"));
+  CHECK(has(r.cmd("record start rate=0"), "error: out_of_range"));
+  CHECK(has(r.cmd("record go"), "error: bad_option"));
+}
