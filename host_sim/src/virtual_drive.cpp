@@ -820,6 +820,9 @@ void VirtualDrive::advance(TimePoint now, CanBus& bus) {
     const double dv = std::clamp(v_des - vel_, -amax * dt, amax * dt);
     vel_ += dv;
     pos_ += vel_ * dt;
+    // Settled on a target at (or near) count 0 -- a homing offset of 0, a move to 0 -- the lag's
+    // exponential approach would go on into subnormal numbers (FE_UNDERFLOW): snap to it.
+    if (powered && std::fabs(double(target_) - pos_) < 1e-9 && std::fabs(vel_) < 1e-6) pos_ = double(target_), vel_ = 0.0;
     // Mechanical end stops: the shaft stops there, whatever the demand.
     const double p = pos_ - shift_;
     at_stop_ = false;

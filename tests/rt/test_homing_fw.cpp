@@ -338,3 +338,168 @@ TEST(FwHoming, ParkAndG28GoToTheParkPose) {
   }
   LONGS_EQUAL(0, r.rt_allocs);
 }
+
+namespace {
+
+FwConfig hard_stop_joint2(double timeout_s) {
+  FwConfig c = six_drives();
+  DriveConfig& d = c.drives[1];
+  d.homing_method = "hard_stop";
+  d.homing_direction = -1;          // towards the negative stop
+  d.homing_speed_switch = 5;        // deg/s: the slow approach
+  d.homing_acceleration = 50;       // deg/s^2
+  d.homing_following_limit = 0.5;   // deg of following error = contact
+  d.homing_backoff = 3;             // deg back from the stop
+  d.homing_offset = -60;            // deg there
+  d.homing_timeout_s = timeout_s;
+  return c;
+}
+
+/// Runs the cycles of a homing started by `home` until the arm leaves homing (or `limit_s`),
+/// recording per cycle what the drive of joint j does.
+struct Watch {
+  double peak_speed = 0;   ///< counts/s, over 100 ms windows of the shaft position
+  std::vector<double> pos; ///< the shaft, per cycle
+  bool touched = false;    ///< the shaft was at the end stop
+  bool csp = true;         ///< the drive stayed in cyclic synchronous position (6061h = 8)
+  double secs = 0;
+};
+Watch watch_homing(Rig& r, int j, double limit_s) {
+  Watch w;
+  const auto n = static_cast<int>(limit_s * 1e3);
+  for (int i = 0; i < n && (r.tel().state == ArmState::homing || i == 0); ++i) {
+    r.cycle();
+    r.app.console->poll(r.s);
+    sim::VirtualDrive& d = r.drive(j);
+    w.pos.push_back(d.physical_position());
+    if (w.pos.size() > 100) w.peak_speed = std::max(w.peak_speed, std::fabs(w.pos.back() - w.pos[w.pos.size() - 101]) / 0.1);
+    w.touched = w.touched || d.at_end_stop();
+    w.csp = w.csp && d.mode_display() == 8;
+    w.secs += 1e-3;
+  }
+  return w;
+}
+
+}  // namespace
+
+// hard_stop through the firmware (console `home`, controller, CANopen master, virtual drive
+// with a mechanical end stop): the master drives joint 2 slowly in cyclic position mode (the
+// drive never leaves CSP; peak speed homing.speed_switch) until the following error passes
+// homing.following_limit at the stop, backs off homing.backoff and takes homing.offset there:
+// the shaft ends at the stop + 3 deg, the joint reads -60 deg, homed; the arm can park.
+TEST(FwHoming, HardStopFindsTheEndStopBacksOffAndTakesTheOffset) {
+  const double stop = counts(-8);
+  Rig r(hard_stop_joint2(20), [&](Rig& rig) { rig.drive(1).switches().end_neg = stop; });
+  r.enable();
+  CHECK(!r.tel().all_homed());
+  CHECK_TEXT(has(r.cmd("home"), "ok homing: group 1 of 1"), r.s.out.c_str());
+  const Watch w = watch_homing(r, 1, 20);
+  CHECK_TEXT(is_ok(r.cmd("wait")), (r.s.out + r.native).c_str());
+  const Telemetry t = r.tel();
+  CHECK(t.state == ArmState::idle);
+  CHECK(t.all_homed());
+  CHECK(w.touched);  // it went to the stop
+  CHECK(w.csp);      // in cyclic synchronous position mode throughout (the master moves it)
+  CHECK(!r.drive(1).at_end_stop());  // and came back off it
+  CHECK_TEXT(w.peak_speed <= counts(5) * 1.1, std::to_string(w.peak_speed / counts(1)).c_str());  // slowly: 5 deg/s
+  CHECK(w.peak_speed >= counts(5) * 0.9);
+  DOUBLES_EQUAL(stop + counts(3), r.drive(1).physical_position(), 2.0);         // the stop + backoff, to 2 counts
+  DOUBLES_EQUAL(-60 * kDeg, t.q_act[1], 2.0 / kCountsPerRad);                    // reads homing.offset there
+  DOUBLES_EQUAL(t.q_act[1], t.q_cmd[1], 2.0 / kCountsPerRad);                    // setpoint re-taken
+  CHECK_TEXT(has(r.native, "homing: joint 2 homing (group 1 of 1, hard_stop)"), r.native.c_str());
+  CHECK_TEXT(has(r.native, "homing: joint 2 homed"), r.native.c_str());
+  CHECK_TEXT(has(r.cmd("status"), "homing=[absolute homed absolute absolute absolute absolute]"), r.s.out.c_str());
+  std::printf("\n  fw hard_stop: joint 2 homed in %.3f s (stop 8 deg away at 5 deg/s, backoff 3 deg), %.2f counts from stop + backoff\n",
+              w.secs, r.drive(1).physical_position() - (stop + counts(3)));
+  CHECK(is_ok(r.cmd("park")));
+  CHECK(is_ok(r.cmd("wait")));
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+// No stop within reach: the approach runs until homing.timeout_s; the arm is disabled, the
+// fault names joint 2 and the timeout, the joint stays unhomed and nothing moves afterwards.
+TEST(FwHoming, HardStopNeverReachedTimesOutNamingTheJoint) {
+  Rig r(hard_stop_joint2(1.0));  // no end stop at all
+  r.enable();
+  CHECK(is_ok(r.cmd("home")));
+  const Watch w = watch_homing(r, 1, 5);
+  CHECK(!w.touched);
+  DOUBLES_EQUAL(1.0, w.secs, 0.05);  // failed at the timeout
+  const std::string a = r.cmd("wait");
+  CHECK_TEXT(has(a, "error: fault") && has(a, "joint 2"), a.c_str());
+  const Telemetry t = r.tel();
+  CHECK(t.state == ArmState::fault);
+  CHECK(t.cause == FaultCause::homing_failed);
+  LONGS_EQUAL(1, t.fault_joint);
+  CHECK_TEXT(has(t.fault_text, "joint 2") && has(t.fault_text, "timeout"), t.fault_text);
+  CHECK_TEXT(has(r.native, "alarm: fault joint 2"), r.native.c_str());
+  CHECK(!((t.homed >> 1) & 1u));
+  r.run(0.2);
+  for (std::size_t j = 0; j < 6; ++j) CHECK(r.app.servo->feedback(j).state == hal::JointState::disabled);
+  const double p0 = r.drive(1).physical_position();
+  CHECK(p0 < counts(-3));  // it had moved towards the (missing) stop: about 4.5 deg in 1 s
+  r.run(0.5);
+  DOUBLES_EQUAL(p0, r.drive(1).physical_position(), 2.0);  // and nothing moves now
+  CHECK_TEXT(has(r.cmd("status"), "homing=[absolute failed"), r.s.out.c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+// Figures (docs/results): the homing time of each joint through the firmware, six methods in the
+// order groups [[3], [2], [1], [4, 5, 6]], 1 ms cycle, on the virtual drives; the timeline from the
+// controller's telemetry (homing_now per cycle). Asserted: the groups run one after another,
+// every joint homed, the whole cycle = the sum of the group spans (to a few cycles).
+TEST(FwHoming, FiguresTimePerMethodAndGroup) {
+  FwConfig c = six_drives();
+  c.homing_order = {{3}, {2}, {1}, {4, 5, 6}};
+  const char* method[6] = {"19", "hard_stop", "21", "34", "35", "17"};
+  for (int j = 0; j < 6; ++j) c.drives[static_cast<std::size_t>(j)].homing_method = method[j];
+  DriveConfig& h = c.drives[1];
+  h.homing_direction = -1;
+  h.homing_speed_switch = 5;
+  h.homing_acceleration = 50;
+  h.homing_following_limit = 0.5;
+  h.homing_backoff = 3;
+  h.homing_offset = -60;
+  Rig r(c, [&](Rig& rig) {
+    rig.drive(0).switches().home_lo = counts(4);   // 19: positive home switch 4 deg away
+    rig.drive(0).switches().home_hi = kInf;
+    rig.drive(1).switches().end_neg = counts(-8);  // hard_stop: the end stop 8 deg away
+    rig.drive(2).switches().home_lo = -kInf;       // 21: negative home switch, edge 3 deg away
+    rig.drive(2).switches().home_hi = counts(-3);
+    rig.drive(3).switches().index_phase = counts(5);  // 34: the index pulse 5 deg ahead
+    rig.drive(5).switches().neg_limit = counts(-6);   // 17: negative limit switch 6 deg away
+  });
+  r.enable();
+  CHECK(is_ok(r.cmd("home")));
+  long start[6], end[6];
+  for (int j = 0; j < 6; ++j) start[j] = end[j] = -1;
+  long k = 0;
+  for (; k < 60000 && (r.tel().state == ArmState::homing || k == 0); ++k) {
+    r.cycle();
+    r.app.console->poll(r.s);
+    const Telemetry t = r.tel();
+    for (int j = 0; j < 6; ++j) {
+      if ((t.homing_now >> j) & 1u) {
+        if (start[j] < 0) start[j] = k;
+        end[j] = k + 1;
+      }
+    }
+  }
+  CHECK_TEXT(is_ok(r.cmd("wait")), (r.s.out + r.native).c_str());
+  CHECK(r.tel().all_homed());
+  for (int j = 0; j < 6; ++j) CHECK_TEXT(start[j] >= 0, ("joint never homing: " + std::to_string(j + 1)).c_str());
+  CHECK(end[2] <= start[1]);
+  CHECK(end[1] <= start[0]);
+  for (int j = 3; j < 6; ++j) CHECK(end[0] <= start[j]);
+  const long g4 = *std::max_element(end + 3, end + 6) - std::min({start[3], start[4], start[5]});
+  const long spans = (end[2] - start[2]) + (end[1] - start[1]) + (end[0] - start[0]) + g4;
+  CHECK(std::labs(k - spans) <= 20);
+  std::printf("\n  fw homing, order [[3], [2], [1], [4, 5, 6]], 1 ms cycle (ms per joint, from telemetry):\n");
+  const char* what[6] = {"19 home switch 4 deg", "hard_stop, stop 8 deg, 5 deg/s", "21 home switch 3 deg",
+                         "34 index 5 deg", "35 current position", "17 limit switch 6 deg"};
+  const int group[6] = {3, 2, 1, 4, 4, 4};
+  for (int j = 0; j < 6; ++j)
+    std::printf("    joint %d group %d %-32s %6ld ms\n", j + 1, group[j], what[j], end[j] - start[j]);
+  std::printf("    group 4 span %ld ms; whole cycle %ld ms (sum of group spans %ld ms)\n", g4, k, spans);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
