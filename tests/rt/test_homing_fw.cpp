@@ -416,6 +416,29 @@ TEST(FwHoming, HardStopFindsTheEndStopBacksOffAndTakesTheOffset) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+// homing.torque_limit through the firmware: armfw maps 6077h (torque actual) into TPDO2 for it,
+// and the push on the stop is seen by the torque long before the 20 deg following limit would
+// see it (that would take 4 s more of pushing at 5 deg/s): the same end position, sooner.
+TEST(FwHoming, HardStopByTorqueWhenTheLimitIsSet) {
+  FwConfig c = hard_stop_joint2(20);
+  c.drives[1].homing_following_limit = 20;  // deg: far beyond what the push reaches first
+  c.drives[1].homing_torque_limit = 0.005;  // N m (the drive's 6076h: 1 N m; 6077h per mille)
+  const double stop = counts(-8);
+  Rig r(c, [&](Rig& rig) { rig.drive(1).switches().end_neg = stop; });
+  r.enable();
+  CHECK(is_ok(r.cmd("home")));
+  const Watch w = watch_homing(r, 1, 20);
+  CHECK_TEXT(is_ok(r.cmd("wait")), (r.s.out + r.native).c_str());
+  CHECK(r.tel().all_homed());
+  CHECK(w.touched);
+  CHECK_TEXT(r.app.servo->feedback(1).has_torque, "6077h not mapped");
+  CHECK_TEXT(w.secs < 3.5, std::to_string(w.secs).c_str());  // by following error: > 6 s
+  DOUBLES_EQUAL(stop + counts(3), r.drive(1).physical_position(), 2.0);
+  DOUBLES_EQUAL(-60 * kDeg, r.tel().q_act[1], 2.0 / kCountsPerRad);
+  std::printf("\n  fw hard_stop by torque: joint 2 homed in %.3f s\n", w.secs);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 // No stop within reach: the approach runs until homing.timeout_s; the arm is disabled, the
 // fault names joint 2 and the timeout, the joint stays unhomed and nothing moves afterwards.
 TEST(FwHoming, HardStopNeverReachedTimesOutNamingTheJoint) {

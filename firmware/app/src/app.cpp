@@ -172,6 +172,9 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
       jc.quick_stop_decel = cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel * unit * jc.scaling.counts_per_si();
     }
     if (!cfg.drives.empty()) jc.homing = homing_spec(j);
+    // hard_stop with homing.torque_limit: the drives' torque actual (6077h) into TPDO2 where
+    // they can map it (else the following error alone detects the stop, as documented)
+    if (jc.homing.kind == hal::HomingKind::hard_stop && jc.homing.torque_limit > 0) mc.tpdo2.torque = hal::PdoUse::optional;
   }
   servo = std::make_unique<hal::CanopenServoBus>(*canbus, *clock, mc);
   if (servo->config_status() != hal::Status::ok)
