@@ -358,7 +358,7 @@ Status CanopenServoBus::map_pdo(std::size_t j, std::uint16_t comm, std::uint16_t
       // Many drives refuse an entry they lack or cannot map when it is written (CiA 301:
       // abort 06040041h; 06020000h on some); no extra frames when everything is there.
       std::uint8_t b[4];
-      put_u32(b, (std::uint32_t(e.index) << 16) | e.bits);
+      put_u32(b, (std::uint32_t(e.index) << 16) | (std::uint32_t(e.sub) << 8) | e.bits);
       const SdoResult r = sdo_.download(n, map, std::uint8_t(sub + 1), b, 4);
       if (r.status == Status::ok) {
         mapped[k] = true;
@@ -553,6 +553,15 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
   if (want_rpdo2) {
     if (late()) return Status::timeout;
     if (const Status s = map_pdo(j, 0x1401, 0x1601, kRpdo2 + n, rpdo2, 3, m4, "RPDO2"); s != Status::ok) return s;
+  }
+  jt.rpdo3 = false;
+  jt.outputs = 0;
+  if (cfg_.joints[j].digital_outputs) {
+    const MapEntry rpdo3[] = {{cia402::kDigitalOutputs, 32, PdoUse::required, "digital outputs", 1}};
+    bool m5[1] = {};
+    if (late()) return Status::timeout;
+    if (const Status s = map_pdo(j, 0x1402, 0x1602, kRpdo3 + n, rpdo3, 1, m5, "RPDO3"); s != Status::ok) return s;
+    jt.rpdo3 = m5[0];
   }
   jt.rpdo1_len = m1[2] ? 7 : 6;
   jt.tpdo1_len = m2[2] ? 7 : 6;
@@ -869,6 +878,14 @@ Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) 
       if (!is_ok(s) && is_ok(result)) result = s;
     }
     jt.ff_pending = false;
+    if (jt.rpdo3) {
+      CanFrame g;
+      g.id = kRpdo3 + jt.node;
+      g.len = 4;
+      put_u32(&g.data[0], jt.outputs);
+      s = bus_.send(g);
+      if (!is_ok(s) && is_ok(result)) result = s;
+    }
   }
   if (cfg_.produce_sync) {
     const Status s = bus_.send(encode_sync());
@@ -1229,7 +1246,20 @@ JointCapabilities CanopenServoBus::capabilities(std::size_t j) const {
   c.torque_offset = jt.off_tq_off >= 0 && jt.torque_per_mille != 0;
   c.torque_mode = jt.torque_mode && jt.torque_per_mille != 0;
   c.measured_torque = jt.off_torque >= 0;
+  c.digital_outputs = jt.rpdo3;
   return c;
+}
+
+Status CanopenServoBus::set_digital_outputs(std::size_t j, std::uint32_t value) {
+  if (j >= cfg_.joint_count) return Status::invalid_argument;
+  Joint& jt = joints_[j];
+  if (!jt.rpdo3) return Status::not_supported;
+  jt.outputs = value;
+  return Status::ok;
+}
+
+std::uint32_t CanopenServoBus::digital_outputs(std::size_t j) const {
+  return j < cfg_.joint_count && joints_[j].rpdo3 ? joints_[j].outputs : 0;
 }
 
 namespace {

@@ -16,11 +16,12 @@ using hal::get_u32;
 using hal::put_u32;
 
 namespace {
-constexpr std::uint16_t kRpdoComm[2] = {0x1400, 0x1401};
-constexpr std::uint16_t kRpdoMap[2] = {0x1600, 0x1601};
+constexpr int kRpdos = 3;  // RPDO3: 60FEh:01 digital outputs (issue 18)
+constexpr std::uint16_t kRpdoComm[kRpdos] = {0x1400, 0x1401, 0x1402};
+constexpr std::uint16_t kRpdoMap[kRpdos] = {0x1600, 0x1601, 0x1602};
 constexpr std::uint16_t kTpdoComm[2] = {0x1800, 0x1801};
 constexpr std::uint16_t kTpdoMap[2] = {0x1A00, 0x1A01};
-constexpr std::uint32_t kRpdoBase[2] = {kRpdo1, kRpdo2};
+constexpr std::uint32_t kRpdoBase[kRpdos] = {kRpdo1, kRpdo2, hal::canopen::kRpdo3};
 constexpr std::uint32_t kTpdoBase[2] = {kTpdo1, kTpdo2};
 constexpr std::uint32_t kCobInvalid = 0x80000000u;
 }  // namespace
@@ -35,12 +36,14 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(0x1017, 0, 2, true, false, 0);            // producer heartbeat time, ms
   add(0x1018, 0, 1, false, false, 1);
   add(0x1018, 1, 4, false, false, 0x00000DEA);  // vendor id
-  for (int p = 0; p < 2; ++p) {
+  for (int p = 0; p < kRpdos; ++p) {
     add(kRpdoComm[p], 0, 1, false, false, 2);
     add(kRpdoComm[p], 1, 4, true, false, kCobInvalid | (kRpdoBase[p] + node));
     add(kRpdoComm[p], 2, 1, true, false, 0xFF);
     add(kRpdoMap[p], 0, 1, true, false, 0);
     for (std::uint8_t s = 1; s <= 8; ++s) add(kRpdoMap[p], s, 4, true, false, 0);
+  }
+  for (int p = 0; p < 2; ++p) {
     add(kTpdoComm[p], 0, 1, false, false, 2);
     add(kTpdoComm[p], 1, 4, true, false, kCobInvalid | (kTpdoBase[p] + node));
     add(kTpdoComm[p], 2, 1, true, false, 0xFF);
@@ -58,6 +61,8 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kFollowingErrorWindow, 0, 4, true, false, motor_.following_window);
   add(c402::kVelocityActual, 0, 4, false, true, 0);
   add(c402::kTargetPosition, 0, 4, true, true, 0);
+  add(c402::kDigitalOutputs, 0, 1, false, false, 1);  // 60FEh: physical outputs (:01), issue 18
+  add(c402::kDigitalOutputs, 1, 4, true, true, 0);
   add(c402::kFollowingErrorActual, 0, 4, false, true, 0);
   // Torque: rated torque (mN m, motor side), torque actual (per mille of it; the
   // first-order plant has no mass and reports 0, the dynamic plant its loop's torque),
@@ -226,7 +231,7 @@ void VirtualDrive::handle(const CanFrame& f, TimePoint now, CanBus& bus) {
     on_sync(now, bus);
     return;
   }
-  for (int p = 0; p < 2; ++p) {
+  for (int p = 0; p < kRpdos; ++p) {
     const std::uint32_t cob = get(kRpdoComm[p], 1);
     if ((cob & kCobInvalid) || f.id != (cob & 0x7FF)) continue;
     const std::uint32_t type = get(kRpdoComm[p], 2);
@@ -293,8 +298,8 @@ std::uint32_t VirtualDrive::sdo_write(Entry& e, const std::uint8_t* data, std::s
   if (len < e.size) return sdo::kAbortTooShort;
   std::uint32_t v = 0;
   for (std::size_t i = 0; i < len; ++i) v |= std::uint32_t(data[i]) << (8 * i);
-  const bool is_map = (e.index >= 0x1600 && e.index <= 0x1601) || (e.index >= 0x1A00 && e.index <= 0x1A01);
-  const bool is_comm = (e.index >= 0x1400 && e.index <= 0x1401) || (e.index >= 0x1800 && e.index <= 0x1801);
+  const bool is_map = (e.index >= 0x1600 && e.index <= 0x1602) || (e.index >= 0x1A00 && e.index <= 0x1A01);
+  const bool is_comm = (e.index >= 0x1400 && e.index <= 0x1402) || (e.index >= 0x1800 && e.index <= 0x1801);
   if (is_map) {
     const std::uint16_t comm = std::uint16_t(e.index - 0x200);
     if (!(get(comm, 1) & kCobInvalid)) return sdo::kAbortDeviceState;  // PDO must be disabled first
@@ -524,7 +529,7 @@ void VirtualDrive::on_sync(TimePoint now, CanBus& bus) {
     if (type >= 1 && type <= 240 && syncs_ % type == 0) send_tpdo(p, bus);
   }
   // ...and outputs received before it are actuated at it.
-  for (int p = 0; p < 2; ++p) {
+  for (int p = 0; p < kRpdos; ++p) {
     if (rpdo_pending_[p]) {
       apply_rpdo(p, rpdo_latch_[p]);
       rpdo_pending_[p] = false;

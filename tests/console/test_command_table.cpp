@@ -42,6 +42,7 @@ std::string sample_line(const CommandSpec& e) {
     case ArgShape::point_name: l += " pick"; break;
     case ArgShape::program_name: l += " pick_place"; break;
     case ArgShape::record: l += " start rate=50"; break;
+    case ArgShape::output: l += " gripper on"; break;
   }
   return l;
 }

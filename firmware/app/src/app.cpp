@@ -77,6 +77,8 @@ ConsoleConfig App::console_config() const {
   if (!cfg.console_frames_file.empty() && cfg.console_frames_file[0] == '/') c.frames_file = cfg.console_frames_file;
   if (!cfg.programs_points_file.empty() && cfg.programs_points_file[0] == '/') c.points_file = cfg.programs_points_file;
   if (!cfg.programs_dir.empty() && cfg.programs_dir[0] == '/') c.programs_dir = cfg.programs_dir;
+  for (std::size_t i = 0; i < cfg.outputs.size() && i < output_joint.size(); ++i)
+    c.outputs.push_back({cfg.outputs[i].name, output_joint[i], cfg.outputs[i].bit});
   return c;
 }
 
@@ -133,6 +135,17 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
                std::to_string(k + 1) + "'s too";
     nodes.push_back(static_cast<std::uint8_t>(id));
   }
+  // [[output]]: each on a drive of the arm (its 60FEh:01 mapped in RPDO3 at bring-up)
+  output_joint.clear();
+  for (std::size_t i = 0; i < cfg.outputs.size(); ++i) {
+    int jo = -1;
+    for (int j = 0; j < n; ++j)
+      if (nodes[static_cast<std::size_t>(j)] == cfg.outputs[i].node) jo = j;
+    if (jo < 0)
+      return "config: output[" + std::to_string(i + 1) + "].node: node " + std::to_string(cfg.outputs[i].node) +
+             " is no drive of the arm (nodes " + std::to_string(nodes.front()) + ".." + std::to_string(nodes.back()) + ")";
+    output_joint.push_back(jo);
+  }
   canbus = nullptr;
   if (cfg.can == "sim") {
     if (sim) canbus = sim(*clock, nodes);
@@ -175,6 +188,7 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
     // hard_stop with homing.torque_limit: the drives' torque actual (6077h) into TPDO2 where
     // they can map it (else the following error alone detects the stop, as documented)
     if (jc.homing.kind == hal::HomingKind::hard_stop && jc.homing.torque_limit > 0) mc.tpdo2.torque = hal::PdoUse::optional;
+    for (int jo : output_joint) jc.digital_outputs = jc.digital_outputs || jo == j;
   }
   servo = std::make_unique<hal::CanopenServoBus>(*canbus, *clock, mc);
   if (servo->config_status() != hal::Status::ok)

@@ -227,6 +227,17 @@ const DriveKey kDriveTable[] = {
         .above(0, kMaxLength),
 };
 
+using OC = OutputConfig;
+using OK = OutputKey;
+const OutputKey kOutputTable[] = {
+    OK{"name", &OC::name, "", "the output's name (`out NAME on|off`): letters, digits, _ and -, starting with a letter"}
+        .length(1, 31).rule_text("1..31 characters"),
+    OK{"node", &OC::node, "", "CANopen node of the drive whose 60FEh:01 physical outputs carry it (a drive of the arm)"}
+        .within(1, 127),
+    OK{"bit", &OC::bit, "", "bit of 60FEh:01 (CiA 402: 0 set brake, 16..31 the manufacturer's outputs)"}.within(0, 31),
+};
+
+
 // ---------------------------------------------------------------------------
 // Text helpers
 // ---------------------------------------------------------------------------
@@ -642,12 +653,13 @@ const toml::node* node_of_label(const toml::table& top, const std::string& msg) 
   const std::size_t colon = msg.find(": ");
   if (colon == std::string::npos) return nullptr;
   std::string path = msg.substr(0, colon);
-  if (path.rfind("drive[", 0) == 0) {  // 1-based in messages, 0-based in toml++ paths
+  for (const std::string pre : {"drive[", "output["}) {
+    if (path.rfind(pre, 0) != 0) continue;  // 1-based in messages, 0-based in toml++ paths
     const std::size_t close = path.find(']');
     int n = 0;
-    const auto r = std::from_chars(path.data() + 6, path.data() + close, n);
+    const auto r = std::from_chars(path.data() + pre.size(), path.data() + close, n);
     if (close == std::string::npos || r.ec != std::errc() || n < 1) return nullptr;
-    path = "drive[" + std::to_string(n - 1) + path.substr(close);
+    path = pre + std::to_string(n - 1) + path.substr(close);
   }
   const toml::node* n = toml::at_path(top, path).node();
   if (!n && !path.empty() && path.back() == ']') n = toml::at_path(top, path.substr(0, path.rfind('['))).node();
@@ -662,6 +674,7 @@ const toml::node* node_of_label(const toml::table& top, const std::string& msg) 
 
 std::span<const ConfigKey> config_keys() { return kConfigTable; }
 std::span<const DriveKey> drive_keys() { return kDriveTable; }
+std::span<const OutputKey> output_keys() { return kOutputTable; }
 std::string value_text(const ConfigKey& k, const FwConfig& s) { return value_of(k, s); }
 std::string value_text(const DriveKey& k, const DriveConfig& s) { return value_of(k, s); }
 std::string range_text(const ConfigKey& k) { return range_of(k); }
@@ -702,6 +715,28 @@ std::string validate(const FwConfig& c) {
         const std::string why = key_problem(k, c.drives[i], c, drive_label(i) + "." + k.name, relations);
         if (!why.empty()) return why;
       }
+    for (std::size_t i = 0; i < c.outputs.size(); ++i)
+      for (const OutputKey& k : kOutputTable) {
+        const std::string why = key_problem(k, c.outputs[i], c, "output[" + std::to_string(i + 1) + "]." + k.name, relations);
+        if (!why.empty()) return why;
+      }
+  }
+  // [[output]]: names valid and unique, one output per (node, bit)
+  for (std::size_t i = 0; i < c.outputs.size(); ++i) {
+    const OutputConfig& o = c.outputs[i];
+    const std::string at = "output[" + std::to_string(i + 1) + "]";
+    for (std::size_t k = 0; k < o.name.size(); ++k) {
+      const char ch = o.name[k];
+      const bool letter = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z');
+      if (!(letter || (k > 0 && ((ch >= '0' && ch <= '9') || ch == '_' || ch == '-'))))
+        return at + ".name: '" + o.name + "': letters, digits, _ and - only, starting with a letter";
+    }
+    for (std::size_t k = 0; k < i; ++k) {
+      if (c.outputs[k].name == o.name) return at + ".name: '" + o.name + "' is also output[" + std::to_string(k + 1) + "]'s";
+      if (c.outputs[k].node == o.node && c.outputs[k].bit == o.bit)
+        return at + ".bit: node " + std::to_string(o.node) + " bit " + std::to_string(o.bit) + " is also output[" +
+               std::to_string(k + 1) + "] (" + c.outputs[k].name + ")";
+    }
   }
   return "";
 }
@@ -792,7 +827,7 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
   // Unknown names first (toml::table is ordered by key: the message does not depend on the file's order).
   for (const auto& [key, v] : top) {
     const std::string name(key.str());
-    if (name == "drive") continue;
+    if (name == "drive" || name == "output") continue;
     if (std::find(secs.begin(), secs.end(), name) != secs.end()) {
       const toml::table* t = v.as_table();
       if (!t) return at(v) + name + ": expected a [" + name + "] table";
@@ -808,7 +843,7 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
     for (const ConfigKey& k : kConfigTable) known = known || (name == k.name && section_of(k.name).empty());
     if (!known)
       return at(v) + name + ": " +
-             (v.is_table() ? "unknown section (" + joined(secs) + ", [[drive]])" : "unknown key (see armfw --config-keys)");
+             (v.is_table() ? "unknown section (" + joined(secs) + ", [[drive]], [[output]])" : "unknown key (see armfw --config-keys)");
   }
   // Then every key in table order.
   for (const ConfigKey& k : kConfigTable) {
@@ -826,6 +861,27 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
       DriveConfig d;
       if (!read_drive(r, t, c.drives.size(), d)) return r.err;
       c.drives.push_back(d);
+    }
+  }
+  if (const toml::node* v = top.get("output")) {
+    const toml::array* a = v->as_array();
+    if (!a) return at(*v) + "output: expected [[output]] tables";
+    c.outputs.clear();
+    for (const toml::node& t : *a) {
+      const std::string where = "output[" + std::to_string(c.outputs.size() + 1) + "]";
+      const toml::table* tab = t.as_table();
+      if (!tab) return at(t) + where + ": expected a table";
+      OutputConfig o;
+      for (const auto& [name, value] : *tab) {
+        const OutputKey* k = nullptr;
+        for (const OutputKey& e : kOutputTable)
+          if (std::string(name.str()) == e.name) k = &e;
+        if (!k) return at(value) + where + "." + std::string(name.str()) + ": unknown key (name, node, bit)";
+        if (!r.read(*k, value, where + "." + k->name, o)) return r.err;
+      }
+      if (o.name.empty()) return at(t) + where + ".name: missing (every [[output]] has a name, node and bit)";
+      if (o.node == 0) return at(t) + where + ".node: missing (every [[output]] has a name, node and bit)";
+      c.outputs.push_back(o);
     }
   }
   const std::string bad = validate(c);
@@ -867,6 +923,10 @@ std::string to_toml(const FwConfig& c) {
       out += std::string(k.name) + " = " + value_of(k, d) + "\n";
     }
   }
+  for (const OutputConfig& o : c.outputs) {
+    out += "[[output]]\n";
+    for (const OutputKey& k : kOutputTable) out += std::string(k.name) + " = " + value_of(k, o) + "\n";
+  }
   return out;
 }
 
@@ -885,6 +945,8 @@ std::string config_keys_text() {
   for (const ConfigKey& k : kConfigTable) line(k.name, default_of(k), range_of(k), k.unit, k.doc);
   line("drive", "[]", "[[drive]] tables", "", "one table per joint in chain order, give all or none; their keys:");
   for (const DriveKey& k : kDriveTable) line(std::string("drive.") + k.name, default_of(k), range_of(k), k.unit, k.doc);
+  line("output", "[]", "[[output]] tables", "", "named digital outputs (out NAME on|off, M62..M65 P<index>); their keys:");
+  for (const OutputKey& k : kOutputTable) line(std::string("output.") + k.name, default_of(k), range_of(k), k.unit, k.doc);
   return o;
 }
 
@@ -940,6 +1002,12 @@ std::string config_reference_markdown() {
        "values). Every key is optional; a key left out inherits what the default column says.\n\n";
   o += kHeader;
   for (const DriveKey& k : kDriveTable) o += table_row(k, std::string("drive.") + k.name);
+  o += "\n### `[[output]]`\n\n"
+       "Named digital outputs (issue 18), in file order: `out NAME on|off` sets one at once, M64 / M65 P<index> "
+       "(0-based, the order here) too, M62 / M63 P<index> at the start of the next move. Every table has all three "
+       "keys; names and (node, bit) pairs are unique, the node one of the arm's drives.\n\n";
+  o += kHeader;
+  for (const OutputKey& k : kOutputTable) o += table_row(k, std::string("output.") + k.name);
   o += std::string("\n") + kEnd + "\n";
   return o;
 }

@@ -25,6 +25,7 @@ const char* to_string(ArgShape a) {
     case ArgShape::point_name: return "point_name";
     case ArgShape::program_name: return "program_name";
     case ArgShape::record: return "record";
+    case ArgShape::output: return "output";
   }
   return "?";
 }
@@ -63,6 +64,8 @@ constexpr CodeSpec kGcodes[] = {
     {"M114", "position of the active tool's point in the active user frame: `X: Y: Z: A: B: C:` (G20/G21 length "
              "units, degrees), then `ok`"},
     {"M400", "wait"},
+    {"M62 | M63 P<n>", "digital output n (0-based, [[output]] order) on | off at the start of the next move"},
+    {"M64 | M65 P<n>", "digital output n on | off at once"},
     {"M105 | M110", "accepted so that senders connect (`ok T:0 /0 B:0 /0` | line numbers not tracked)"},
 };
 constexpr CodeSpec kRealtime[] = {

@@ -91,6 +91,7 @@ const char* to_string(Cmd c) {
     case Cmd::step: return "step";
     case Cmd::abort: return "abort";
     case Cmd::record: return "record";
+    case Cmd::out: return "out";
   }
   return "?";
 }
@@ -281,8 +282,8 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
       case 'M': {
         const int mc = static_cast<int>(std::lround(v));
         if (v != mc || !(mc == 17 || mc == 18 || mc == 84 || mc == 112 || mc == 114 || mc == 400 || mc == 105 ||
-                         mc == 110 || mc == 5 || mc == 9 || mc == 2 || mc == 30))
-          return fail(CmdError::unsupported, "G-code: M%g not supported (M2 M5 M9 M17 M18 M30 M84 M105 M110 M112 M114 M400)", v);
+                         mc == 110 || mc == 5 || mc == 9 || mc == 2 || mc == 30 || (mc >= 62 && mc <= 65)))
+          return fail(CmdError::unsupported, "G-code: M%g not supported (M2 M5 M9 M17 M18 M30 M62-M65 M84 M105 M110 M112 M114 M400)", v);
         if (motion >= 0 || other >= 0) return fail(CmdError::arg_count, "G-code: two motion/action codes on one line");
         other = mc;
         other_letter = 'M';
@@ -396,6 +397,15 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
       c.cmd = Cmd::dwell;
       c.count = 1;
       c.vals[0] = secs;
+    } else if (other_letter == 'M' && other >= 62 && other <= 65) {
+      // M62 / M63 P<n>: output n on / off at the start of the next move; M64 / M65: at once
+      if (sval >= 0) return fail(CmdError::bad_option, "G-code: M%d takes P (the output number), no S", other);
+      if (p < 0) return fail(CmdError::arg_count, "G-code: M%d needs P<n> (the output number, 0-based: [[output]] order)", other);
+      if (p != std::floor(p) || p > 63) return fail(CmdError::out_of_range, "G-code: M%d P%g: P must be an output number 0..63", other, p);
+      c.cmd = Cmd::out;
+      c.out_index = static_cast<int>(p);
+      c.out_on = other == 62 || other == 64;
+      c.out_sync = other == 62 || other == 63;
     } else {
       if (p >= 0 || sval >= 0) return fail(CmdError::bad_option, "G-code: %c%d takes no P/S", other_letter, other);
       if (other_letter == 'G') c.cmd = Cmd::park;  // G28: the park pose (`home` is the homing cycle, $H)
@@ -743,6 +753,18 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       if (nargs != 1) return fail(CmdError::arg_count, "%s takes one name", name);
       ParseResult r = put_word(ws.w[used], spec->args == ArgShape::program_name, name, c);
       if (!r.ok()) return r;
+      break;
+    }
+    case ArgShape::output: {
+      if (nargs == 0) break;  // list
+      if (nargs != 2) return fail(CmdError::arg_count, "out NAME on|off (or out alone: list)");
+      ParseResult r = put_word(ws.w[used], false, name, c);
+      if (!r.ok()) return r;
+      const std::string_view v = ws.w[used + 1];
+      if (ieq(v, "on") || v == "1") c.out_on = true;
+      else if (ieq(v, "off") || v == "0") c.out_on = false;
+      else return fail(CmdError::bad_option, "out %s: '%.*s' is neither on nor off", c.word.data(), int(v.size() > 20 ? 20 : v.size()), v.data());
+      c.out_index = -2;  // by name
       break;
     }
     case ArgShape::record: {

@@ -519,6 +519,7 @@ void Console::queue(Session& s, const MoveJoints& req) {
     return;
   }
   m->id = next_id_++;
+  take_sync_outputs(*m);
   const double dur = jm.plan.duration;
   ctl_.motions().commit();
   tail_ = goal;
@@ -572,6 +573,7 @@ void Console::queue(Session& s, const MoveLine& req) {
   }
   feed_now_ = speed;
   m->id = next_id_++;
+  take_sync_outputs(*m);
   path.ik = ik_solver();
   const double dur = path.duration;
   const double slow = path.slowdown;
@@ -606,6 +608,7 @@ void Console::queue_dwell(Session& s, double secs) {
   d.at = q;
   d.seconds = secs;
   m->id = next_id_++;
+  m->n_outputs = 0;  // M62 / M63 wait for a move
   tail_ = q;
   tail_id_ = m->id;
   tail_gen_ = ctl_.telemetry().generation;
@@ -873,6 +876,7 @@ void Console::execute(Session& s, std::string_view line) {
       }
       return;
     case Cmd::record: do_record(s, c); return;
+    case Cmd::out: do_out(s, c); return;
   }
 }
 

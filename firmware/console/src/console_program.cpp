@@ -36,6 +36,11 @@ std::string error_of(const std::string& out) {
 
 enum class StepKind { motion, needs_idle, wait, other, refused };
 
+StepKind kind_of(Cmd c);
+StepKind kind_of(const Command& c) {
+  if (c.cmd == Cmd::out && c.out_sync) return StepKind::other;
+  return kind_of(c.cmd);
+}
 StepKind kind_of(Cmd c) {
   switch (c) {
     case Cmd::movej:
@@ -45,6 +50,7 @@ StepKind kind_of(Cmd c) {
     case Cmd::dwell: return StepKind::motion;
     case Cmd::tool:
     case Cmd::frame: return StepKind::needs_idle;
+    case Cmd::out: return StepKind::needs_idle;  // refined by the caller: M62 / M63 ride with the next move
     case Cmd::wait: return StepKind::wait;
     case Cmd::enable:
     case Cmd::disable:
@@ -301,7 +307,7 @@ std::string Console::check_program(const prog::Program& p) {
   cs.check_tool = tool_;
   cs.check_frame = frame_;
   for (const prog::ProgramStep& st : p.steps) {
-    switch (kind_of(st.cmd.cmd)) {
+    switch (kind_of(st.cmd)) {
       case StepKind::refused:
         return p.where(st) + ": " + to_string(st.cmd.cmd) +
                " is not run inside a program (enable and home the arm before `run`; stop / abort from the console)";
@@ -357,7 +363,7 @@ void Console::do_run(Session& s, const Command& c) {
     return;
   }
   int moves = 0;
-  for (const prog::ProgramStep& st : r->prog.steps) moves += kind_of(st.cmd.cmd) == StepKind::motion ? 1 : 0;
+  for (const prog::ProgramStep& st : r->prog.steps) moves += kind_of(st.cmd) == StepKind::motion ? 1 : 0;
   if (s.check_mode) {
     answer_ok(s, fmt("checked %s: %zu steps, %d moves; nothing moved (check mode)", name.c_str(), r->prog.steps.size(), moves));
     return;
@@ -495,7 +501,7 @@ void Console::tick() {
   for (int guard = 0; guard < 64 && r.next < r.prog.steps.size(); ++guard) {
     if (r.state != RunState::running && r.state != RunState::stepping) break;
     const prog::ProgramStep& st = r.prog.steps[r.next];
-    const StepKind k = kind_of(st.cmd.cmd);
+    const StepKind k = kind_of(st.cmd);
     if (k == StepKind::motion) {
       if (r.state == RunState::stepping && r.step_fed) break;
       if (ctl_.motions().size() >= 2) break;  // one queued behind the running move
@@ -591,6 +597,73 @@ void Console::do_record(Session& s, const Command& c) {
   rec_.active = false;
   rec_.samples.clear();
   answer_ok(s, fmt("recorded %s: %d moves from %zu samples", name.c_str(), moves, n));
+}
+
+// ---------------------------------------------------------------------------
+// Digital outputs
+// ---------------------------------------------------------------------------
+
+void Console::take_sync_outputs(MotionItem& m) {
+  m.n_outputs = n_sync_out_;
+  for (std::size_t k = 0; k < n_sync_out_; ++k) m.outputs[k] = sync_out_[k];
+  n_sync_out_ = 0;
+}
+
+void Console::do_out(Session& s, const Command& c) {
+  const auto& outs = cfg_.outputs;
+  if (c.out_index == -1) {  // list
+    const Telemetry t = ctl_.telemetry();
+    for (const ConsoleConfig::Output& o : outs) {
+      const bool on = (t.outputs[static_cast<std::size_t>(o.joint)] >> o.bit) & 1u;
+      s.out += fmt("%s joint=%d bit=%d %s\n", o.name.c_str(), o.joint + 1, o.bit, on ? "on" : "off");
+    }
+    answer_ok(s, fmt("%zu outputs", outs.size()));
+    return;
+  }
+  std::size_t i = outs.size();
+  if (c.out_index == -2) {
+    for (std::size_t k = 0; k < outs.size(); ++k)
+      if (outs[k].name == c.word.data()) i = k;
+    if (i == outs.size()) {
+      answer_error(s, CmdError::bad_option, fmt("out: no output '%s' (%zu outputs: [[output]] in the configuration)", c.word.data(), outs.size()));
+      return;
+    }
+  } else if (static_cast<std::size_t>(c.out_index) < outs.size()) {
+    i = static_cast<std::size_t>(c.out_index);
+  } else {
+    answer_error(s, CmdError::out_of_range, fmt("M6%d P%d: no output %d (%zu outputs: [[output]], 0-based)", c.out_sync ? (c.out_on ? 2 : 3) : (c.out_on ? 4 : 5),
+                                                c.out_index, c.out_index, outs.size()));
+    return;
+  }
+  const ConsoleConfig::Output& o = outs[i];
+  OutputChange ch;
+  ch.joint = static_cast<std::int8_t>(o.joint);
+  ch.mask = 1u << o.bit;
+  ch.value = c.out_on ? ch.mask : 0u;
+  if (s.check_mode) {
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked");
+    return;
+  }
+  if (c.out_sync) {  // M62 / M63: merged into the changes the next move carries
+    std::size_t k = 0;
+    while (k < n_sync_out_ && sync_out_[k].joint != ch.joint) ++k;
+    if (k == n_sync_out_) {
+      if (n_sync_out_ >= kMotionOutputs) {
+        answer_error(s, CmdError::busy, fmt("M62/M63: outputs of more than %zu drives wait for the next move", kMotionOutputs));
+        return;
+      }
+      sync_out_[n_sync_out_++] = OutputChange{ch.joint, 0, 0};
+    }
+    sync_out_[k].mask |= ch.mask;
+    sync_out_[k].value = (sync_out_[k].value & ~ch.mask) | ch.value;
+    answer_ok(s, fmt("%s %s at the start of the next move", o.name.c_str(), c.out_on ? "on" : "off"));
+    return;
+  }
+  if (!ctl_.outputs().push(ch)) {
+    answer_error(s, CmdError::busy, "out: output queue full; not set");
+    return;
+  }
+  answer_ok(s, fmt("%s %s", o.name.c_str(), c.out_on ? "on" : "off"));
 }
 
 }  // namespace servoarm::fw

@@ -993,6 +993,7 @@ bool Controller::start_next_motion() {
       case MotionKind::dwell: break;
     }
     running_ = m;
+    for (std::uint8_t k = 0; k < m->n_outputs && k < kMotionOutputs; ++k) apply_output(m->outputs[k]);  // M62 / M63
     return true;
   }
   return false;
@@ -1206,6 +1207,7 @@ void Controller::publish() {
   t.cycles = cycles_;
   t.overruns = overruns_;
   t.generation = generation_;
+  for (int j = 0; j < n_; ++j) t.outputs[static_cast<std::size_t>(j)] = bus_.digital_outputs(static_cast<std::size_t>(j));
   t.latency = latency_sum_;
   t.compute = compute_sum_;
   t.max_following_error = max_follow_;
@@ -1229,6 +1231,13 @@ void Controller::publish() {
   telemetry_.write(t);
 }
 
+void Controller::apply_output(const OutputChange& c) {
+  if (c.joint < 0 || c.joint >= n_) return;
+  const auto j = static_cast<std::size_t>(c.joint);
+  out_words_[j] = (out_words_[j] & ~c.mask) | (c.value & c.mask);
+  bus_.set_digital_outputs(j, out_words_[j]);  // not_supported: the console checked the mapping
+}
+
 void Controller::cycle(TimePoint now) {
   now_ = now;
   ++cycles_;
@@ -1238,6 +1247,9 @@ void Controller::cycle(TimePoint now) {
   // console requests (bounded per cycle)
   Request r;
   for (int i = 0; i < 4 && requests_.pop(r); ++i) handle_request(r, now);
+  // digital outputs set at once (M64 / M65, `out`), bounded per cycle
+  OutputChange oc;
+  for (int i = 0; i < 8 && outputs_.pop(oc); ++i) apply_output(oc);
   // 2 supervisor
   supervise(now);
   // 3 motion

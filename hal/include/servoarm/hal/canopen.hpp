@@ -16,6 +16,7 @@ inline constexpr std::uint32_t kTpdo1 = 0x180;    ///< + node
 inline constexpr std::uint32_t kRpdo1 = 0x200;    ///< + node
 inline constexpr std::uint32_t kTpdo2 = 0x280;    ///< + node
 inline constexpr std::uint32_t kRpdo2 = 0x300;    ///< + node
+inline constexpr std::uint32_t kRpdo3 = 0x400;    ///< + node (digital outputs 60FEh:01, issue 18)
 inline constexpr std::uint32_t kSdoTx = 0x580;    ///< server -> client, + node
 inline constexpr std::uint32_t kSdoRx = 0x600;    ///< client -> server, + node
 inline constexpr std::uint32_t kHeartbeat = 0x700;///< + node

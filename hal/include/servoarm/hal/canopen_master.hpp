@@ -67,6 +67,9 @@ struct CanopenJointConfig {
   /// Motor rated torque in N m (motor side), the unit of 6071h/6077h/60B2h (per mille of it):
   /// 0 = read the drive's 6076h at bring-up (when a torque object is mapped).
   double rated_torque = 0;
+  /// Digital outputs (issue 18): map 60FEh:01 into RPDO3 (0x400 + node) and send
+  /// ServoBus::set_digital_outputs' word with every write(); false = no RPDO3 (same frames).
+  bool digital_outputs = false;
 };
 
 /// How bring-up treats one feedback object of TPDO2.
@@ -164,6 +167,8 @@ class CanopenServoBus final : public ServoBus {
 
   JointCapabilities capabilities(std::size_t j) const override;
   Status set_feed_forward(std::size_t j, double velocity, double torque) override;
+  Status set_digital_outputs(std::size_t j, std::uint32_t value) override;
+  std::uint32_t digital_outputs(std::size_t j) const override;
   Status set_target_torque(std::size_t j, double torque) override;
   Status set_torque_mode(std::size_t j, bool on) override;
   CyclicModeState cyclic_mode(std::size_t j) const override {
@@ -241,6 +246,8 @@ class CanopenServoBus final : public ServoBus {
     double torque_per_mille = 0;  ///< joint-side N m (N) per 6077h/60B2h/6071h unit
     // Issue 20: RPDO1/TPDO1 lengths (7 with 6060h/6061h), RPDO2 layout (-1 = not mapped).
     std::uint8_t rpdo1_len = 6, tpdo1_len = 6, rpdo2_len = 0;
+    bool rpdo3 = false;             ///< 60FEh:01 mapped (digital outputs)
+    std::uint32_t outputs = 0;      ///< the 60FEh:01 word sent
     std::int8_t off_vel_off = -1, off_tq_off = -1, off_tq_target = -1;
     bool torque_mode = false;       ///< CST usable on this joint
     std::int8_t mode_shown = 0;     ///< 6061h from TPDO1 (0 = not mapped / not seen)
@@ -278,6 +285,7 @@ class CanopenServoBus final : public ServoBus {
     std::uint8_t bits;
     PdoUse use;
     const char* what;
+    std::uint8_t sub = 0;
   };
   void set_fault(std::size_t j, Status why, TimePoint now);
   void advance_cyclic_mode(std::size_t j, TimePoint now);

@@ -27,6 +27,7 @@ inline constexpr std::uint16_t kHomeOffset = 0x607C;      ///< INTEGER32 home of
 inline constexpr std::uint16_t kHomingMethod = 0x6098;    ///< INTEGER8 homing method
 inline constexpr std::uint16_t kHomingSpeeds = 0x6099;    ///< :01 search for switch, :02 search for zero (UNSIGNED32)
 inline constexpr std::uint16_t kHomingAccel = 0x609A;     ///< UNSIGNED32 homing acceleration
+inline constexpr std::uint16_t kDigitalOutputs = 0x60FE;  ///< :01 UNSIGNED32 physical outputs (bits 16..31 manufacturer's)
 inline constexpr std::uint16_t kDigitalInputs = 0x60FD;   ///< UNSIGNED32: bit 0 neg. limit, 1 pos. limit, 2 home
 inline constexpr std::uint16_t kSupportedModes = 0x6502;  ///< UNSIGNED32 supported drive modes
 inline constexpr std::uint16_t kTargetTorque = 0x6071;   ///< INTEGER16 CST target torque, per mille of 6076h

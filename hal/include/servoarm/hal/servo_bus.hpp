@@ -109,6 +109,7 @@ struct JointCapabilities {
   bool torque_offset = false;    ///< set_feed_forward's torque reaches the drive (60B2h mapped)
   bool torque_mode = false;      ///< set_torque_mode works (CST supported and 6060h/6061h/6071h mapped)
   bool measured_torque = false;  ///< JointFeedback::torque comes from the drive (6077h mapped)
+  bool digital_outputs = false;  ///< set_digital_outputs reaches the drive (CANopen: 60FEh:01 mapped, issue 18)
 };
 
 class ServoBus {
@@ -248,6 +249,20 @@ class ServoBus {
   virtual CyclicModeState cyclic_mode(std::size_t j) const {
     (void)j;
     return {};
+  }
+
+  /// Real-time: the physical digital outputs of joint `j`'s drive (CANopen 60FEh:01, one bit per
+  /// output), sent with every write() from now on (kept until changed).
+  /// @retval ok; invalid_argument (no such joint); not_supported (no outputs mapped on this joint)
+  virtual Status set_digital_outputs(std::size_t j, std::uint32_t value) {
+    (void)j;
+    (void)value;
+    return Status::not_supported;
+  }
+  /// Real-time: the outputs word joint `j`'s write() sends (0 when none are mapped).
+  virtual std::uint32_t digital_outputs(std::size_t j) const {
+    (void)j;
+    return 0;
   }
 
   /// Real-time: latest feedback of joint `j` (j < joint_count()).

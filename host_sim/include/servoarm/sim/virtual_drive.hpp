@@ -135,6 +135,8 @@ class VirtualDrive {
   double home_mark() const { return home_mark_; }
   /// 60FDh as it is now.
   std::uint32_t digital_inputs() const;
+  /// 60FEh:01: the physical digital outputs as last written (SDO or RPDO, acted on at the SYNC).
+  std::uint32_t digital_outputs() const { return get(hal::cia402::kDigitalOutputs, 1); }
   /// True while the position is clamped at a mechanical end stop.
   bool at_end_stop() const { return at_stop_; }
   std::int8_t mode_display() const { return std::int8_t(get(hal::cia402::kModesDisplay)); }
@@ -240,8 +242,8 @@ class VirtualDrive {
   std::uint64_t syncs_ = 0;
   std::uint64_t rng_;
   // Latched synchronous RPDO payloads (applied at the next SYNC).
-  std::array<CanFrame, 2> rpdo_latch_{};
-  std::array<bool, 2> rpdo_pending_{};
+  std::array<CanFrame, 3> rpdo_latch_{};   // RPDO1..3 (RPDO3: digital outputs, issue 18)
+  std::array<bool, 3> rpdo_pending_{};
   // SDO server state.
   enum class SdoMode : std::uint8_t { idle, download, upload };
   SdoMode sdo_mode_ = SdoMode::idle;

@@ -39,6 +39,8 @@ struct App {
   /// and by the control thread's Cartesian sampling; lives as long as the App.
   std::unique_ptr<kin::IkModel> ik;
   bool ik_ready = false;
+  /// [[output]] i is on joint output_joint[i]'s drive (its node), set by build().
+  std::vector<int> output_joint;
   std::unique_ptr<Controller> ctl;
   std::unique_ptr<Console> console;
 

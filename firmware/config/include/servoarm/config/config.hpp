@@ -53,6 +53,15 @@ struct DriveConfig {
   bool operator==(const DriveConfig&) const = default;
 };
 
+/// One [[output]] table (issue 18): a named digital output, bit `bit` of the 60FEh:01 physical
+/// outputs of the drive at CANopen node `node` (`out NAME on|off`, M62..M65 P<index>).
+struct OutputConfig {
+  std::string name;   ///< letters, digits, _ and -, starting with a letter
+  int node = 0;       ///< a drive of the arm
+  int bit = 0;        ///< 0..31 (CiA 402: bit 0 "set brake", 16..31 the manufacturer's outputs)
+  bool operator==(const OutputConfig&) const = default;
+};
+
 struct FwConfig {
   std::string robot = "puma560";       ///< built-in model name or a description file path
   // [loop]
@@ -98,6 +107,7 @@ struct FwConfig {
   double console_jog_deadman_ms = 250.0;  ///< a continuous jog not refreshed this long stops
   double console_jog_speed_pct = 10.0;    ///< jog speed without speed=
   std::string console_frames_file = "frames.toml";  ///< tools and user frames; relative: to the config file's folder; "" = not kept
+  std::vector<OutputConfig> outputs;  ///< [[output]] tables, in file order (M62..M65 P = index)
   // [programs]
   std::string programs_dir = "programs";              ///< program files (`run`, `programs`, `record stop`); relative: to the config file's folder; "" = none
   std::string programs_points_file = "points.toml";   ///< teach points; relative: to the config file's folder; "" = not kept
@@ -159,11 +169,14 @@ struct Key {
 };
 using ConfigKey = Key<FwConfig>;
 using DriveKey = Key<DriveConfig>;
+using OutputKey = Key<OutputConfig>;
 
 /// Every top-level and [section] key, in file order.
 std::span<const ConfigKey> config_keys();
 /// Every key of a [[drive]] table, in file order.
 std::span<const DriveKey> drive_keys();
+/// Every key of an [[output]] table.
+std::span<const OutputKey> output_keys();
 
 /// A key's value in `s` as TOML ("1000", "0x7E0", "\"sim\"", "[-90, 45]").
 std::string value_text(const ConfigKey& k, const FwConfig& s);

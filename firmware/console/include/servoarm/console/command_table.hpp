@@ -32,6 +32,7 @@ enum class ArgShape : std::uint8_t {
   point_name,    ///< exactly one teach point name (teach, point delete)
   program_name,  ///< exactly one program name (run)
   record,        ///< `start [rate=Hz]` or `stop NAME [tolerance=angle]`
+  output,        ///< nothing (list) or NAME on|off (out)
 };
 const char* to_string(ArgShape a);
 
@@ -184,6 +185,13 @@ inline constexpr CommandSpec kCommands[] = {
      "decimated (Douglas-Peucker in joint space) so that the joint-space path of the moves, and each blend "
      "(blend= half the tolerance), stay within tolerance= (angle unit, default 0.5 deg) of the recorded path. "
      "Answers `ok recorded NAME.arm: N moves from M samples`",
+     false},
+    {"out", Cmd::out, ArgShape::output, "out [NAME on/off]",
+     "digital output NAME ([[output]]: a drive's 60FEh:01 bit) on or off at once; `out` lists them",
+     "sent to the drive with the next control cycle's PDOs (M64 / M65 P<n> the same, n the output's index in "
+     "[[output]] order; M62 / M63 P<n>: at the start of the next move, in the cycle it starts). `out` lists "
+     "`NAME node=N bit=B on|off` then `ok N outputs`. In a program, `out` / M64 / M65 act once the moves before "
+     "them have finished (the gripper never switches mid-move); M62 / M63 ride with the next move",
      false},
 };
 

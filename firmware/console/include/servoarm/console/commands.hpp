@@ -90,6 +90,7 @@ enum class Cmd : std::uint8_t {
   step,           ///< `step`: run the program's next motion, then pause
   abort,          ///< `abort`: stop the arm and end the program
   record,         ///< `record start [rate=Hz]` / `record stop NAME [tolerance=deg]`
+  out,            ///< `out [NAME on|off]`; M62/M63 P<n> (at the next move's start), M64/M65 P<n> (at once)
 };
 
 /// What a `jog` line asks for.
@@ -154,6 +155,9 @@ struct Command {
   bool record_stop = false;             ///< record: stop (else start)
   double rate = 0;                      ///< record start rate= (Hz; 0: the default)
   double tolerance = 0;                 ///< record stop tolerance= (angle unit; 0: the default)
+  int out_index = -1;                   ///< out: -1 list, -2 by name (word), >= 0 M62..M65 P
+  bool out_on = false;
+  bool out_sync = false;                ///< M62 / M63: at the start of the next move
 };
 
 struct ParseResult {

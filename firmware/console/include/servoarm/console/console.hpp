@@ -68,6 +68,14 @@ struct ConsoleConfig {
   std::string programs_dir;
   double record_rate_hz = 50.0;              ///< record start without rate=
   double record_tolerance = 0.5 * M_PI / 180.0;  ///< rad: record stop without tolerance=
+  /// Named digital outputs ([[output]], in order: M62..M65 P = the index): bit `bit` of the
+  /// 60FEh:01 word of joint `joint`'s drive (App maps the node to the joint).
+  struct Output {
+    std::string name;
+    int joint = 0;
+    int bit = 0;
+  };
+  std::vector<Output> outputs;
 };
 
 /// A program run by the console (`run NAME`): idle = none.
@@ -324,6 +332,12 @@ class Console {
   void do_step(Session& s);
   void do_resume(Session& s);
   void do_record(Session& s, const Command& c);
+  void do_out(Session& s, const Command& c);
+  /// M62 / M63 changes waiting for the next move (one per joint, merged).
+  std::array<OutputChange, kMotionOutputs> sync_out_{};
+  std::uint8_t n_sync_out_ = 0;
+  /// Attach the waiting M62 / M63 changes to `m` (a move about to be committed) and clear them.
+  void take_sync_outputs(MotionItem& m);
   /// movej / movel @NAME typed at the console (Command::at_point).
   void queue_at_point(Session& s, const Command& c);
   /// Check every step of `p` from the queue's end with the console's check mode; "" or FILE:LINE: reason.

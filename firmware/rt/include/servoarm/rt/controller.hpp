@@ -17,6 +17,7 @@
 //   replies   (RT -> console)  Reply to each request, same sequence number
 //   motions   (console -> RT)  MotionItem: joint move, planned Cartesian move, dwell;
 //                              consumed in place (never copied on the RT side)
+//   outputs   (console -> RT)  OutputChange: a digital output set at once (M64 / M65, `out`)
 //   events    (RT -> console)  Event: faults, move finished/refused, state changes
 //   telemetry (RT -> anyone)   Telemetry snapshot (seqlock), published every cycle
 #include <array>
@@ -68,6 +69,7 @@ struct ControllerConfig {
 inline constexpr std::size_t kMotionQueue = 16;
 inline constexpr std::size_t kRequestQueue = 16;
 inline constexpr std::size_t kEventQueue = 64;
+inline constexpr std::size_t kOutputQueue = 16;
 
 class Controller {
  public:
@@ -89,6 +91,7 @@ class Controller {
   SpscQueue<Reply, kRequestQueue>& replies() { return replies_; }
   SpscQueue<MotionItem, kMotionQueue>& motions() { return motions_; }
   SpscQueue<Event, kEventQueue>& events() { return events_; }
+  SpscQueue<OutputChange, kOutputQueue>& outputs() { return outputs_; }
   Telemetry telemetry() const { return telemetry_.read(); }
 
   const kin::Chain& chain() const { return chain_; }
@@ -173,6 +176,9 @@ class Controller {
   SpscQueue<Reply, kRequestQueue> replies_;
   SpscQueue<MotionItem, kMotionQueue> motions_;
   SpscQueue<Event, kEventQueue> events_;
+  SpscQueue<OutputChange, kOutputQueue> outputs_;
+  std::array<std::uint32_t, kin::kMaxJoints> out_words_{};  ///< digital outputs sent (60FEh:01 per joint)
+  void apply_output(const OutputChange& c);
   Seqlock<Telemetry> telemetry_;
   std::atomic<std::uint64_t> events_dropped_{0};
 

@@ -86,10 +86,22 @@ struct DwellMove {
   double seconds = 0.0;
 };
 
+/// A digital output change (issue 18): joint `joint`'s drive outputs word (60FEh:01) becomes
+/// (word & ~mask) | value.
+struct OutputChange {
+  std::int8_t joint = -1;
+  std::uint32_t mask = 0;
+  std::uint32_t value = 0;
+};
+inline constexpr std::size_t kMotionOutputs = 4;  ///< output changes one motion carries (M62 / M63)
+
 /// One queued motion: an id and one payload (one goal), never two.
 struct MotionItem {
   std::uint32_t id = 0;
   std::variant<JointMove, CartesianMove, DwellMove> payload;
+  /// Output changes made in the cycle the motion starts (M62 / M63: in sync with it).
+  std::array<OutputChange, kMotionOutputs> outputs{};
+  std::uint8_t n_outputs = 0;
 
   MotionKind kind() const { return static_cast<MotionKind>(payload.index()); }
   /// Where the arm is at rest when the motion has finished.
@@ -149,6 +161,8 @@ struct Telemetry {
   std::array<std::uint8_t, kin::kMaxJoints> homing_kind{};   ///< hal::HomingKind per joint
   std::uint8_t homing_group = 0;   ///< group running (1-based; 0 = none)
   std::uint8_t homing_groups = 0;  ///< groups of the running cycle
+  /// Digital outputs (issue 18): the 60FEh:01 word each joint's drive is sent.
+  std::array<std::uint32_t, kin::kMaxJoints> outputs{};
   /// True when every joint is homed.
   bool all_homed() const { return n > 0 && homed == static_cast<std::uint16_t>((1u << n) - 1u); }
 };
