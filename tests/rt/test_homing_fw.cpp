@@ -416,6 +416,28 @@ TEST(FwHoming, HardStopFindsTheEndStopBacksOffAndTakesTheOffset) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+// A configured method the drive lacks (6502h without homing mode, armsim --no-homing) is
+// refused when armfw starts (App::boot fails), naming the drive's node and the method.
+TEST(FwHoming, AMethodTheDriveLacksIsRefusedAtStartNamingTheJoint) {
+  FwConfig c = six_drives();
+  c.can = "sim";
+  c.drives[2].homing_method = "19";
+  hal::ManualClock clock;
+  test::SimApp app;
+  const std::string e = app.build(c, &clock);
+  CHECK_TEXT(e.empty(), e.c_str());
+  clock.set_idle_hook([&](hal::TimePoint t) { app.plant->step(t); });
+  sim::DriveQuirks q;
+  q.no_homing = true;
+  app.plant->arm().at(2).set_quirks(q);
+  const std::string b = app.boot();
+  clock.set_idle_hook(nullptr);
+  // (The master's bring-up messages number joints from 0: "joint 2 (node 3)" here, while the
+  // controller's homing failures say "joint 3"; the node is what both agree on.)
+  CHECK_TEXT(has(b, "drive bring-up failed") && has(b, "(node 3)"), b.c_str());
+  CHECK_TEXT(has(b, "homing method 19") && has(b, "does not support homing mode"), b.c_str());
+}
+
 // homing.torque_limit through the firmware: armfw maps 6077h (torque actual) into TPDO2 for it,
 // and the push on the stop is seen by the torque long before the 20 deg following limit would
 // see it (that would take 4 s more of pushing at 5 deg/s): the same end position, sooner.
