@@ -383,6 +383,7 @@ TEST(ConsoleProgram, RecordThenReplayStaysWithinTheTolerance) {
   // bad input
   CHECK(has(r.cmd("record stop x"), "error: bad_state"));
   CHECK(has(r.cmd("record start rate=0"), "error: out_of_range"));
+  CHECK(has(r.cmd("record start rate=500"), "error: out_of_range"));
   CHECK(has(r.cmd("record go"), "error: bad_option"));
 }
 

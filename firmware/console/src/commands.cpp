@@ -799,7 +799,8 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
           if (!(v > 0)) return fail(CmdError::out_of_range, "record stop: tolerance must be > 0");
           c.tolerance = v;
         } else {
-          if (!(v >= 1 && v <= 1000)) return fail(CmdError::out_of_range, "record start: rate=%g outside [1, 1000] Hz", v);
+          // sampled on the console thread, whose loop runs at least every 10 ms
+          if (!(v >= 1 && v <= 100)) return fail(CmdError::out_of_range, "record start: rate=%g outside [1, 100] Hz", v);
           c.rate = v;
         }
       }

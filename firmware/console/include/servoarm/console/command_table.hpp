@@ -180,7 +180,7 @@ inline constexpr CommandSpec kCommands[] = {
      "answers `ok aborted NAME at FILE:LINE`; as `stop` when no program runs", false},
     {"record", Cmd::record, ArgShape::record, "record start [rate=Hz]; record stop NAME [tolerance=angle]",
      "record the joints while jogging; `record stop NAME` writes program NAME.arm of blended joint moves",
-     "start samples the measured joints at rate= Hz (default 50, 1..1000; at most 100 000 samples); stop writes "
+     "start samples the measured joints at rate= Hz (default 50, 1..100: on the console thread; at most 100 000 samples); stop writes "
      "NAME.arm in programs.dir (atomically; an existing program of that name is replaced): the recorded path "
      "decimated (Douglas-Peucker in joint space) so that the joint-space path of the moves, and each blend "
      "(blend= half the tolerance), stay within tolerance= (angle unit, default 0.5 deg) of the recorded path. "
