@@ -454,7 +454,7 @@ void Console::tick() {
       rec_.last_cycle = t.cycles;
     }
   }
-  if (!run_ || run_->busy) return;
+  if (!run_ || ticking_) return;
   ProgramRun& r = *run_;
   // Finished motions leave the list; its front is the running one.
   while (!r.fed.empty() && (r.fed.front().first <= t.done_id || (t.running_id != 0 && r.fed.front().first < t.running_id)))
@@ -478,11 +478,11 @@ void Console::tick() {
   }
   if (r.state == RunState::running && (t.mode == Mode::held || t.holding)) r.state = RunState::paused;
   const bool at_rest = t.state == ArmState::idle && ctl_.motions().empty();
-  r.busy = true;
+  ticking_ = true;  // a member, not the run's: end_program() frees the run inside this function
   struct Busy {
     bool& b;
     ~Busy() { b = false; }
-  } busy{r.busy};
+  } busy{ticking_};
   const auto fail = [&](std::size_t i, const std::string& e) {
     const std::string at = r.prog.where(r.prog.steps[i]);
     Reply rp;

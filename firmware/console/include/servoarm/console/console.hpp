@@ -313,9 +313,9 @@ class Console {
     double started_s = 0;
     std::uint64_t started_cycle = 0;
     bool step_fed = false;      ///< stepping: the one motion has been fed
-    bool busy = false;          ///< tick() is feeding (no re-entry)
   };
   std::unique_ptr<ProgramRun> run_;
+  bool ticking_ = false;        ///< tick() is feeding (no re-entry; the run may end inside it)
   std::string program_events_;  ///< `program: ...` lines for every session (drain_events)
   struct Recording {
     bool active = false;
