@@ -61,7 +61,7 @@ TEST_GROUP(ProgramHoming) {
     write_file(dir + "/" + name, text);
     return run_command(kArmctl + " program check " + dir + "/" + name + " " + extra);
   }
-  std::string cfg() const { return "--config " + dir + "/armfw.toml"; }
+  std::string cfg() const { return "--config " + dir + "/armfw.toml --stream"; }
   double good(const std::string& name, const std::string& text, const std::string& extra) {
     const auto r = check(name, text, extra);
     LONGS_EQUAL_TEXT(0, r.status, (r.out + r.err).c_str());
@@ -99,10 +99,10 @@ TEST(ProgramHoming, HomeLeavesEachJointAtItsOffset) {
 // Without --config armfw has no [[drive]] tables: every joint is absolute, `home` moves nothing.
 TEST(ProgramHoming, WithoutAConfigEveryJointIsAbsolute) {
   const std::string move = "movej -20 -60 120 -10 50 5\n";
-  const double a = good("h.arm", "home\nwait\n" + move, "--robot puma560 --from 30 -20 40 15 25 35 --unhomed");
+  const double a = good("h.arm", "home\nwait\n" + move, "--robot puma560 --stream --from 30 -20 40 15 25 35 --unhomed");
   const double b = good("m.arm", move, "--robot puma560 --from 30 -20 40 15 25 35");
   DOUBLES_EQUAL(b, a, 1e-9);
-  const auto r = check("h.arm", "home\nwait\n" + move, "--robot puma560");
+  const auto r = check("h.arm", "home\nwait\n" + move, "--robot puma560 --stream");
   CHECK_TEXT(r.out.find("every joint absolute, nothing moved") != std::string::npos, r.out.c_str());
 }
 
@@ -142,9 +142,24 @@ TEST(ProgramHoming, WhatArmfwRefusesIsRefused) {
   std::string off = kConfig;
   off.replace(off.find("homing.offset = 170"), 19, "homing.offset = 300");
   write_file(dir + "/off.toml", off);
-  bad("o.arm", "home\n", "--config " + dir + "/off.toml", "o.arm:1:",
+  bad("o.arm", "home\n", "--stream --config " + dir + "/off.toml", "o.arm:1:",
       "home refused: joint 3 (homing.method 21) homes to 300 deg (drive[3].homing.offset), outside its limits");
-  bad("o2.arm", "home j1\nwait\nhome j3\n", "--config " + dir + "/off.toml", "o2.arm:3:", "joint 3");
+  bad("o2.arm", "home j1\nwait\nhome j3\n", "--stream --config " + dir + "/off.toml", "o2.arm:3:", "joint 3");
+}
+
+// Without --stream the file is checked as armfw's `run` runs it: `home`, `enable`, `disable`
+// are not run inside a program, and an unhomed arm runs nothing (the console's not_homed).
+TEST(ProgramHoming, AsArmfwsRunHomeIsNotRunInsideAProgram) {
+  const std::string c = "--config " + dir + "/armfw.toml";
+  bad("r.arm", "park\nhome\n", c, "r.arm:2:", "home is not run inside a program by armfw's `run`");
+  bad("r2.arm", "enable\npark\n", c, "r2.arm:1:", "enable is not run inside a program");
+  bad("r3.arm", "park\ndisable\n", "--robot puma560", "r3.arm:2:", "disable is not run inside a program");
+  bad("r4.arm", "park\n", c + " --unhomed", "r4.arm:1:", "run refused: not_homed: joints 1, 2, 3, 5 not homed");
+  // a homed arm runs it (the default), and so does an all-absolute arm from power-up
+  CHECK(good("r5.arm", "park\nmovej 0 -30 40 0 30 0\n", c) > 0);
+  CHECK(good("r6.arm", "park\nmovej 0 -30 40 0 30 0\n", "--robot puma560 --unhomed") > 0);
+  // the same lines sent one by one: home allowed
+  CHECK(good("r7.arm", "enable\nhome\nwait\npark\n", c + " --stream --unhomed") > 0);
 }
 
 // A configuration armfw refuses is refused, naming the key; --robot may come from it.

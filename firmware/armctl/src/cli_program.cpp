@@ -27,7 +27,7 @@ namespace {
 
 const char* kProgramUsage =
     "usage: armctl program check FILE --robot NAME|FILE [--config FILE] [--points FILE] [--programs DIR]\n"
-    "                            [--from q1..qn] [--unhomed] [--joint-speed PCT] [--linear-speed V]\n"
+    "                            [--from q1..qn] [--unhomed] [--stream] [--joint-speed PCT] [--linear-speed V]\n"
     "\n"
     "Checks a whole program offline, as armfw checks it before anything moves: every line\n"
     "parsed by the console's parser (repeat/end and call expanded, @points resolved), every\n"
@@ -37,6 +37,10 @@ const char* kProgramUsage =
     "FILE:LINE: reason (exit 2); a good program prints its moves and planned cycle time.\n"
     "Units are the description's (built-in models: mm and degrees); G-code's are mm and deg.\n"
     "\n"
+    "By default the program is checked as armfw's `run` runs it: `home`, `enable` and `disable`\n"
+    "are not run inside a program (home and enable the arm first), and an unhomed arm (--unhomed)\n"
+    "runs none. With --stream it is checked as lines sent one by one to the console (armctl\n"
+    "console -c, a G-code sender), where\n"
     "`home` / `home jN` is the homing cycle, as armfw runs it: each joint it homes is left at its\n"
     "drive.homing.offset (method \"none\", an absolute encoder: where it was); refused when moves\n"
     "are still queued (put `wait` before it) or when the homed position is outside the joint's\n"
@@ -56,6 +60,8 @@ const char* kProgramUsage =
     "                        limits, armfw's default park pose)\n"
     "  --unhomed             start as at power-up: joints whose homing.method is not \"none\" are not\n"
     "                        homed; every move before `home` has homed them is refused (not_homed)\n"
+    "  --stream              lines sent one by one to the console, not armfw's `run`: `home`,\n"
+    "                        `enable`, `disable` allowed (home checked as above)\n"
     "  --joint-speed PCT     movej / park without speed= (default 50, motion.joint_speed_pct)\n"
     "  --linear-speed V      movel / G1 without speed= / F, length units/s (default 100 mm/s,\n"
     "                        motion.linear_speed_mm_s; at most 250 mm/s, motion.max_linear_speed_mm_s)\n"
@@ -65,6 +71,11 @@ const char* kProgramUsage =
     "with armfw's $C), blends (each move is planned to rest).\n";
 
 bool is_option(const char* s) { return s[0] == '-' && s[1] == '-'; }
+
+// What armfw's `run` answers for a line it does not run inside a program (console_program.cpp).
+const char* const kNotInRunTail =
+    " is not run inside a program by armfw's `run` (enable and home the arm before `run`); "
+    "--stream checks the file as lines sent one by one to the console";
 
 // The description's joint limits, the armctl plan defaults where it has none.
 void default_limits(kin::Chain& c) {
@@ -139,19 +150,24 @@ struct Checker {
     return t;
   }
 
+  // "joints 1, 3" (or "joint 2") not homed yet; "" when every joint is homed.
+  std::string unhomed_joints() const {
+    std::string j;
+    int count = 0;
+    for (int k = 0; k < chain.n_joints; ++k)
+      if (!((homed >> k) & 1u)) j += (count++ ? ", " : " ") + std::to_string(k + 1);
+    return count == 0 ? "" : std::string("joint") + (count == 1 ? "" : "s") + j;
+  }
+
   // What the console answers a move (or dwell) in this state, "" when it would accept it.
   std::string refusal(const char* what, bool needs_homed) const {
     if (homing != nullptr)
       return std::string(what) + " refused: the homing cycle of " + prog.where(*homing) +
              " still runs (armfw refuses moves until it ends: put `wait` after `home`)";
     if (!needs_homed) return "";
-    std::string j;
-    int count = 0;
-    for (int k = 0; k < chain.n_joints; ++k)
-      if (!((homed >> k) & 1u)) j += (count++ ? ", " : " ") + std::to_string(k + 1);
-    if (count == 0) return "";
-    return std::string(what) + " refused: not_homed: joint" + (count == 1 ? "" : "s") + j +
-           " not homed (armfw refuses every move of an unhomed arm: `home` first)";
+    const std::string j = unhomed_joints();
+    if (j.empty()) return "";
+    return std::string(what) + " refused: not_homed: " + j + " not homed (armfw refuses every move of an unhomed arm: `home` first)";
   }
 
   bool movej(const prog::ProgramStep& s, const kin::JointVector& goal, double pct) {
@@ -264,7 +280,13 @@ struct Checker {
           for (int j = 0; j < chain.n_joints; ++j) goal[j] = units.joint_in(chain, j, c.vals[static_cast<std::size_t>(j)]);
         return movej(s, goal, c.has_speed ? c.speed : opt.joint_speed_pct);
       }
-      case Cmd::home: return step_home(s);
+      case Cmd::home:
+        if (!opt.stream) return fail(s, std::string("home") + kNotInRunTail);
+        return step_home(s);
+      case Cmd::enable:
+      case Cmd::disable:
+        if (!opt.stream) return fail(s, std::string(to_string(c.cmd)) + kNotInRunTail);
+        return true;
       case Cmd::park: return step_park(s);
       case Cmd::wait:  // the console's: until the queued moves (and a homing cycle) are done
         queued = 0;
@@ -328,6 +350,17 @@ ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, c
   if (options.start_unhomed && options.homing.size() == static_cast<std::size_t>(chain.n_joints))
     for (int j = 0; j < chain.n_joints; ++j)
       if (!options.homing[static_cast<std::size_t>(j)].absolute) ck.homed &= ~(1u << j);
+  if (!options.stream && !prog.steps.empty()) {
+    // armfw's `run` starts only on a homed arm (the console's not_homed answer)
+    const std::string j = ck.unhomed_joints();
+    if (!j.empty()) {
+      ck.fail(prog.steps.front(), "run refused: not_homed: " + j +
+                                      " not homed (armfw's `run` starts only on a homed arm: home it first; --stream checks a "
+                                      "file that homes)");
+      ck.out.q_end = ck.q;
+      return ck.out;
+    }
+  }
   for (const prog::ProgramStep& s : prog.steps)
     if (!ck.step(s)) break;
   ck.out.q_end = ck.q;
@@ -346,7 +379,7 @@ int cli_program(int argc, char** argv) {
   std::string file, robot, points_file, dir, config_file;
   std::vector<double> from;
   double joint_pct = 0, linear = 0;
-  bool unhomed = false;
+  bool unhomed = false, stream = false;
   for (int i = 2; i < argc; ++i) {
     const std::string o = argv[i];
     auto text = [&](std::string& out) -> std::string {
@@ -364,6 +397,7 @@ int cli_program(int argc, char** argv) {
     if (o == "--robot") e = text(robot);
     else if (o == "--config") e = text(config_file);
     else if (o == "--unhomed") unhomed = true;
+    else if (o == "--stream") stream = true;
     else if (o == "--points") e = text(points_file);
     else if (o == "--programs") e = text(dir);
     else if (o == "--joint-speed") e = one(joint_pct);
@@ -400,6 +434,7 @@ int cli_program(int argc, char** argv) {
   default_limits(chain);
   const ConsoleUnits units = units_of(chain);
   opt.start_unhomed = unhomed;
+  opt.stream = stream;
   if (joint_pct != 0) opt.joint_speed_pct = joint_pct;
   if (linear != 0) {
     opt.linear_speed = units.length_in(linear);

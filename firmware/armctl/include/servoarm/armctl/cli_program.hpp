@@ -7,7 +7,10 @@
 // then every move is planned from the pose the previous line leaves, with the firmware's
 // own IK (firmware_ik_solver, as `armctl plan movel`): movej and park / G28 against the joint
 // limits, movel / G0 / G1 with movel's path check (IK at every knot, limits, branch,
-// singularity). `home` is the homing cycle (issue 17), as the console runs it: it leaves
+// singularity). By default as armfw's `run` runs a program: `home`, `enable`, `disable` are
+// refused inside it (home the arm before `run`) and an unhomed arm (--unhomed) runs nothing.
+// With --stream, as lines sent one by one to the console: `home` is the homing cycle (issue 17),
+// as the console runs it: it leaves
 // each joint at its drive.homing.offset (method "none": where it was), refused when moves
 // are still queued (no `wait` before it), when the homed position is outside the joint's
 // limits, and a move that follows it without `wait` is refused (the console refuses moves
@@ -51,6 +54,10 @@ struct ProgramCheckOptions {
   kin::JointVector park;            ///< park / G28 goal (motion.home_deg); empty: joint zero clamped into the limits
   std::vector<JointHomingPlan> homing;  ///< per joint; empty: every joint absolute (armfw without [[drive]] tables)
   bool start_unhomed = false;       ///< start as at power-up: non-absolute joints not homed until `home`
+  /// false (default): as armfw's `run` runs it (`home`, `enable`, `disable` are not run inside a
+  /// program; an unhomed arm runs none); true (--stream): as lines sent one by one to the console
+  /// (armctl console -c, a G-code sender), where `home` runs the homing cycle.
+  bool stream = false;
 };
 
 /// Plan every step of `prog` on `chain` (SI limits set) from rest at `q0`.
