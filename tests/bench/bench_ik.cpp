@@ -15,6 +15,10 @@
 //                                  solution from a start 0.05 rad away
 //   ik/abb_irb2400_twist/servoarm  near-miss (0.01 deg twist of axes 2, 3): the
 //                                  general path it takes, with ist6 forced onto it
+//   ik/ist6/general_path_eigen     the general path with the companion matrix's
+//   ik/abb_irb2400_twist/eigen_roots  eigenvalues only (before the root isolation)
+//   ik_class/ist6/<class>/general_path[_eigen]  its worst cases: theta5 = 0, 1e-9,
+//                                  elbow stretched (double roots), unreachable
 //   ik_reduced/<model>/servoarm    issue 19: the reduced arms, 1 024 poses, all solutions
 //   ik_reduced/<model>/chain_path  the same verified through the chain's FK (as before)
 //   ik_class/<model>/<class>/servoarm  per-class worst cases of the OPW and UR
@@ -210,7 +214,7 @@ void ik_numeric_kdl(benchmark::State& st, const char* name) {
 // ---------------------------------------------------------------------------
 constexpr int kPoses19 = 1024;
 
-enum class Path19 { closed, general, numeric_near };
+enum class Path19 { closed, general, general_eigen, numeric_near };
 
 struct Fixture19 {
   kin::Chain chain;
@@ -316,10 +320,11 @@ const Fixture19& fixture19(const char* name, bool twist, Class19 cls) {
 void ik19(benchmark::State& st, const char* name, bool twist, Path19 path, Class19 cls) {
   const Fixture19& f0 = fixture19(name, twist, cls);
   kin::IkModel model = f0.model;
-  if (path == Path19::general) {  // the degree-8 resultant, as before the OPW case
+  if (path == Path19::general || path == Path19::general_eigen) {  // the degree-8 resultant, as before the OPW case
     kin::detail::solver_data(model).par23 = false;
     model.method = kin::IkMethod::spherical_general;
   }
+  if (path == Path19::general_eigen) kin::detail::solver_data(model).eigen_roots = true;  // companion matrix only
   kin::IkResult r;
   kin::JointVector out;
   std::size_t i = 0;
@@ -410,8 +415,24 @@ const char* const kNumeric[] = {"puma560", "stanford", "ist6", "vvr_vr"};
       benchmark::RegisterBenchmark((std::string("ik_reduced/") + m + "/chain_path").c_str(), ik_reduced, m, true);
   }
   benchmark::RegisterBenchmark("ik/ist6/general_path", ik19, "ist6", false, Path19::general, Class19::random);
+  benchmark::RegisterBenchmark("ik/ist6/general_path_eigen", ik19, "ist6", false, Path19::general_eigen,
+                               Class19::random);
   benchmark::RegisterBenchmark("ik/abb_irb2400_twist/servoarm", ik19, "abb_irb2400", true, Path19::closed,
                                Class19::random);
+  benchmark::RegisterBenchmark("ik/abb_irb2400_twist/eigen_roots", ik19, "abb_irb2400", true, Path19::general_eigen,
+                               Class19::random);
+  {  // the general path's worst cases (ist6 forced onto it), isolation and companion matrix
+    const std::pair<const char*, Class19> classes[] = {{"theta5_zero", Class19::theta5_zero},
+                                                       {"theta5_1e-9", Class19::theta5_1e9},
+                                                       {"elbow_stretched", Class19::elbow_stretched},
+                                                       {"unreachable", Class19::unreachable}};
+    for (const auto& [cn, cls] : classes) {
+      benchmark::RegisterBenchmark((std::string("ik_class/ist6/") + cn + "/general_path").c_str(), ik19, "ist6", false,
+                                   Path19::general, cls);
+      benchmark::RegisterBenchmark((std::string("ik_class/ist6/") + cn + "/general_path_eigen").c_str(), ik19, "ist6",
+                                   false, Path19::general_eigen, cls);
+    }
+  }
   for (const char* m : {"abb_irb2400", "ur5e"}) {
     const std::pair<const char*, Class19> classes[] = {{"theta5_zero", Class19::theta5_zero},
                                                        {"theta5_1e-9", Class19::theta5_1e9},

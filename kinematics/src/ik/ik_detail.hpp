@@ -75,6 +75,10 @@ struct IkSolverData {
   // The UR arm (axes 2, 3, 4 parallel, ur.cpp) uses the same data with
   // n_par = axis 4 and w = the frame-4 origin (C3's translation).
   bool par23 = false;
+  /// The general path's roots from the companion matrix's eigenvalues only,
+  /// without the isolation tried first (polynomial.cpp: real_roots): for the
+  /// tests and benchmarks that compare the two; false after ik_prepare.
+  bool eigen_roots = false;
   Eigen::Vector3d n_par = Eigen::Vector3d::UnitZ();  ///< frame after J1 motion
   double beta = 0;                                   ///< n_par . (w3 or the UR wrist point)
   Eigen::Vector3d w_par = Eigen::Vector3d::Zero();   ///< the point w, frame after J3 motion
@@ -365,6 +369,24 @@ int solve_position_parallel(const IkSolverData& m, const Eigen::Vector3d& p0, co
 /// right-hand sides subtracted. Returns the number of candidates (<= 8).
 int solve_position_resultant(const IkSolverData& m, const Eigen::Matrix3d& M1, const Eigen::Matrix3d& M2, double tol1,
                              PosCand* out);
+
+/// Real roots of c[0] + c[1] x + ... + c[deg] x^deg (1 <= deg <= 8,
+/// c[deg] != 0), ascending, by isolation along the derivative chain
+/// (polynomial.cpp): each root of p^(k) between consecutive real roots of
+/// p^(k+1), where p^(k) is monotone, by safeguarded Newton in the bracket
+/// (the critical points where a derivative nearly touches zero, a complex
+/// pair within 1e-4 (1 + |x|) of the real axis, added as split points).
+/// Returns the count (<= deg) or -1 when unsure, for the companion matrix to
+/// answer: p itself nearly touches zero at a critical point (a near-double
+/// root, by the same 1e-4 rule: the companion path's pair there is what the
+/// path did before), some p^(k) at a root of its derivative is below
+/// Horner's running rounding bound (a double root), a non-finite value, a
+/// bracket not converged in 100 steps, an outer bracket not found in 60
+/// widenings, more roots than the degree.
+int real_roots_isolated(const double* c, int deg, double* out);
+/// The same from the eigenvalues of the deg x deg companion matrix (the
+/// fallback; imaginary part <= 1e-4 (1 + |real part|) counts as real).
+int real_roots_eigen(const double* c, int deg, double* out);
 
 // wrap_pi without a libm call for the small multiples of 2 pi that atan2
 // sums produce (std::remainder costs ~20 ns; it ran 100+ times per solve).

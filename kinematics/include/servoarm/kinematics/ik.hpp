@@ -23,8 +23,9 @@
 //    q2, q3 (PUMA, Stanford, cylindrical arms) both are solved in closed form
 //    (atan2/acos or a quadratic); otherwise (e.g. ist6, whose axes 1 and 2 do
 //    not meet) q2 is eliminated by the resultant, a polynomial of degree <= 8
-//    in tan(q3/2) (or d3) solved by its companion matrix and polished by
-//    Newton. q1 follows from atan2; the wrist from
+//    in tan(q3/2) (or d3) whose real roots are isolated along its
+//    derivative chain (its companion matrix's eigenvalues where that is
+//    unsure: near-double roots) and polished by Newton. q1 follows from atan2; the wrist from
 //        R3^T R C6^T = Rz(m4) C4 Rz(m5) C5 Rz(m6)
 //    (two m5 roots, then m4 and m6 by atan2). Up to 8 solutions.
 //    The method names the position subproblem: spherical_wrist (one of E1,
