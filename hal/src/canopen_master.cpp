@@ -1089,6 +1089,13 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
     if (!jt.sdo.done()) return false;
     jt.sdo.clear();
     if (jt.sdo.result() == Status::ok) return true;
+    // On the way back to CSP a timed-out transfer (a request or answer lost on a loaded bus) is
+    // sent again, up to 3 times: giving up leaves the drive in homing mode, where it cannot be
+    // enabled for cyclic setpoints again until it is restarted.
+    if (returning && jt.sdo.result() == Status::timeout && jt.retries < 3) {
+      ++jt.retries;
+      return false;
+    }
     if (returning && jt.hstatus != Status::ok && jt.hmsg[0] != '\0') {
       // Keep the cause; say that the way back failed too.
       const std::size_t used = std::strlen(jt.hmsg);

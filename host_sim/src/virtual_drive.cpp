@@ -380,6 +380,10 @@ void VirtualDrive::serve_sdo(const CanFrame& f, CanBus& bus) {
       if (!e) return abort(index, sub, find(index, 0) ? sdo::kAbortNoSub : sdo::kAbortNoObject);
       if (!e->writable) return abort(index, sub, sdo::kAbortReadOnly);
       if (c & 0x02) {  // expedited
+        if (quirks_.lose_csp_writes > 0 && index == c402::kModesOfOperation && sub == 0 && f.data[4] == c402::kModeCsp) {
+          --quirks_.lose_csp_writes;  // quirk: this request never arrived
+          return;
+        }
         const std::size_t n = (c & 0x01) ? std::size_t(4 - ((c >> 2) & 3)) : std::size_t(e->size ? e->size : 4);
         if (const std::uint32_t a = sdo_write(*e, &f.data[4], n)) return abort(index, sub, a);
         sdo_mode_ = SdoMode::idle;

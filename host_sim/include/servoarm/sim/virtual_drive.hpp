@@ -103,6 +103,8 @@ struct DriveQuirks {
                                      ///< (default: only a rising edge does, as CiA 402 says)
   bool no_cst = false;               ///< on the dynamic plant, still no cyclic synchronous torque
                                      ///< (6502h without bit 9; 6060h = 10 aborts 06090030h)
+  int lose_csp_writes = 0;           ///< the next N SDO writes of 6060h = 8 are lost (neither acted on
+                                     ///< nor answered: a frame dropped by a starved receiver)
 };
 
 class ArmPlant;
