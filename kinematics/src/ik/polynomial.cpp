@@ -75,8 +75,8 @@ bool refine_root(const double* a, double lo, double hi, bool pos_lo, double x, d
     }
     if ((p > 0) == pos_lo) lo = x;
     else hi = x;
-    const double xn = x - p / d;
-    const bool inside = xn >= lo && xn <= hi;  // false for d = 0 (a critical end point) and NaN
+    const double xn = d != 0 ? x - p / d : hi + (hi - lo);  // d = 0 (a critical end point): bisect
+    const bool inside = xn >= lo && xn <= hi;  // false for NaN too
     const double scale = 1 + std::abs(x);
     if (inside && std::abs(xn - x) <= tol * scale) {
       root = xn;
@@ -185,7 +185,7 @@ int chain_level(const double (&P)[9][9], bool top, double* r, int nr, double* o)
       if (pf == 0 || (pf > 0) == (s_inf > 0)) break;
       near = far;
       h *= f;
-      f *= 2;
+      f = std::min(2 * f, 16.0);
       far = x0 + dirn * h;
     }
     // Newton from the Taylor point (w = 0: of the sign at infinity) or the
@@ -404,9 +404,10 @@ int solve_position_resultant(const IkSolverData& m, const Eigen::Matrix3d& M1, c
     if (!p2) {
       const double D = a1[1] * a2[2] - a2[1] * a1[2];
       const double Nc = a2[0] * a1[2] - a1[0] * a2[2], Ns = a1[0] * a2[1] - a2[0] * a1[1];
-      if (std::abs(D) > 1e-9 * (std::abs(Nc) + std::abs(Ns))) {
+      const double nn = Nc * Nc + Ns * Ns;
+      if (nn > 0 && std::abs(D) > 1e-9 * (std::abs(Nc) + std::abs(Ns))) {
         // (cos, sin) = (Nc, Ns) / D, normalised
-        const double sg = D > 0 ? 1.0 : -1.0, h = sg / std::sqrt(Nc * Nc + Ns * Ns);
+        const double sg = D > 0 ? 1.0 : -1.0, h = sg / std::sqrt(nn);
         c2[nc++] = {atan2_poly(sg * Ns, sg * Nc), Nc * h, Ns * h};
       } else {
         const Roots r = solve_basis(a1[0], a1[1], a1[2], false, tol1);
