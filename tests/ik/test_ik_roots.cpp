@@ -8,7 +8,8 @@
 //    root is found, no root is invented, and isolation says "unsure" only
 //    where two real roots cannot be told from a complex pair in doubles.
 //  - Seeded IK sweeps on arms that take the general path (ist6 forced onto
-//    it, the OPW near-miss models): random poses, the wrist centre on the
+//    it, the OPW near-miss models, 24 random general arms with a spherical
+//    wrist in both conventions): random poses, the wrist centre on the
 //    workspace boundary and 1e-9 .. 1e-3 in or out of it (the resultant's
 //    double roots: tangency), near-singular wrists (theta5 in {0, +-1e-9,
 //    +-1e-7, +-1e-5}). Every arm configuration the companion path finds is
@@ -375,4 +376,40 @@ TEST(IkRoots, GeneralPathWorkspaceBoundaryAndSingularWristLoseNoConfiguration) {
                 arm.name, sb.poses, sb.eigen_configs, sb.isolation_configs, sw.poses, sw.eigen_configs,
                 sw.isolation_configs);
   }
+}
+
+// Random general arms: the first three DH rows with random link lengths,
+// offsets and twists (no two of axes 1-3 parallel or meeting by design), a
+// spherical wrist after them, in both conventions: every one takes the
+// general path, and on random poses and with theta5 near 0 the isolation
+// finds every configuration the companion path finds.
+TEST(IkRoots, RandomGeneralArmsSameConfigurationsAsTheCompanionPath) {
+  std::mt19937_64 rng(1902);
+  std::uniform_real_distribution<double> len(0.05, 0.6), off(-0.3, 0.3), tw(0.3, 2.8), th(-M_PI, M_PI);
+  SweepStats st;
+  int arms = 0;
+  for (int a = 0; a < 24; ++a) {
+    const double s1 = rng() % 2 ? 1 : -1, s2 = rng() % 2 ? 1 : -1;
+    const std::vector<kin::DhRow> rows = {rev(th(rng), len(rng), off(rng), s1 * tw(rng)),
+                                          rev(th(rng), off(rng), len(rng), s2 * tw(rng)),
+                                          rev(th(rng), off(rng), off(rng), M_PI / 2),
+                                          rev(0, len(rng), 0, -M_PI / 2),
+                                          rev(0, 0, 0, M_PI / 2),
+                                          rev(0, 0.1, 0, 0)};
+    const kin::Chain c = chain_of(rows, a % 2 == 1, "random_general");
+    kin::IkModel iso;
+    LONGS_EQUAL(0, static_cast<int>(kin::ik_prepare(c, iso)));
+    STRCMP_EQUAL("spherical_general", kin::to_string(iso.method));
+    kin::IkModel eig = iso;
+    kin::detail::solver_data(eig).eigen_roots = true;
+    ++arms;
+    for (int k = 0; k < 200; ++k) {
+      kin::JointVector q = random_q(iso.chain, rng);
+      if (k % 4 == 3) q[4] = (k % 8 == 3) ? 0.0 : 1e-9;
+      compare_paths(iso, eig, fk(iso.chain, q), &q, 1e-6, 0, "random general arm " + std::to_string(a) + " " + describe(q),
+                    st);
+    }
+  }
+  std::printf("\n  %d random general arms: %d poses, solutions companion %d, isolation %d", arms, st.poses,
+              st.eigen_configs, st.isolation_configs);
 }
