@@ -17,6 +17,21 @@ Status SdoClient::wait(std::uint8_t node, CanFrame& out, TimePoint deadline) {
   }
 }
 
+// The initiate answers and the abort carry the object; a segment answer does not.
+static bool names_another_object(const CanFrame& r, std::uint16_t index, std::uint8_t sub) {
+  const std::uint8_t cs = sdo::cs_of(r.data[0]);
+  const bool initiate = cs == sdo::kAbort || cs == sdo::kScsInitiateDownload || cs == sdo::kScsInitiateUpload;
+  return initiate && (sdo::index_of(r) != index || sdo::sub_of(r) != sub);
+}
+
+Status SdoClient::wait_initiate(std::uint8_t node, std::uint16_t index, std::uint8_t sub, CanFrame& out,
+                                TimePoint deadline) {
+  for (;;) {
+    const Status st = wait(node, out, deadline);
+    if (st != Status::ok || !names_another_object(out, index, sub)) return st;
+  }
+}
+
 SdoResult SdoClient::fail_abort(std::uint8_t node, std::uint16_t index, std::uint8_t sub, Status st,
                                 std::uint32_t code) {
   bus_.send(sdo::abort(node, false, index, sub, code));
@@ -29,7 +44,7 @@ SdoResult SdoClient::download(std::uint8_t node, std::uint16_t index, std::uint8
   const Status s0 = bus_.send(sdo::initiate_download(node, index, sub, data, std::uint32_t(len)));
   if (!is_ok(s0)) return {s0, 0, 0};
   CanFrame r;
-  Status st = wait(node, r, clock_.now() + timeout_);
+  Status st = wait_initiate(node, index, sub, r, clock_.now() + timeout_);
   if (st == Status::timeout) return fail_abort(node, index, sub, st, sdo::kAbortTimeout);
   if (st != Status::ok) return {st, 0, 0};
   if (sdo::cs_of(r.data[0]) == sdo::kAbort) return {Status::sdo_abort, get_u32(&r.data[4]), 0};
@@ -63,7 +78,7 @@ SdoResult SdoClient::upload(std::uint8_t node, std::uint16_t index, std::uint8_t
   const Status s0 = bus_.send(sdo::initiate_upload(node, index, sub));
   if (!is_ok(s0)) return {s0, 0, 0};
   CanFrame r;
-  Status st = wait(node, r, clock_.now() + timeout_);
+  Status st = wait_initiate(node, index, sub, r, clock_.now() + timeout_);
   if (st == Status::timeout) return fail_abort(node, index, sub, st, sdo::kAbortTimeout);
   if (st != Status::ok) return {st, 0, 0};
   const std::uint8_t c = r.data[0];
@@ -164,16 +179,13 @@ Status SdoTransfer::begin_read(CanBus& bus, std::uint8_t node, std::uint16_t ind
 
 bool SdoTransfer::on_frame(const CanFrame& f) {
   if (state_ != State::pending || f.error || f.extended || f.rtr || f.id != kSdoTx + node_ || f.len != 8) return false;
+  if (names_another_object(f, index_, sub_)) return true;  // a late answer to an earlier request: still pending
   const std::uint8_t c = f.data[0];
   const std::uint8_t cs = sdo::cs_of(c);
   state_ = State::done;
   if (cs == sdo::kAbort) {
     result_ = Status::sdo_abort;
     abort_code_ = get_u32(&f.data[4]);
-    return true;
-  }
-  if (sdo::index_of(f) != index_ || sdo::sub_of(f) != sub_) {
-    result_ = Status::protocol_error;  // an answer for another object: a late one
     return true;
   }
   if (write_) {

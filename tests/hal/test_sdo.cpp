@@ -183,6 +183,58 @@ TEST(SdoBadServer, ToggleErrorAborts) {
   clock.set_idle_hook(nullptr);
 }
 
+// A slow drive answers an earlier, timed-out request late: before each answer the
+// server sends an initiate response and an abort naming another object. Both are
+// skipped (the blocking client and the non-blocking transfer), not taken as the
+// answer; an answer of the wrong kind for the right object still fails.
+TEST(SdoBadServer, LateAnswersToEarlierRequestsAreSkipped) {
+  ManualClock clock;
+  SimBus bus(clock);
+  auto client_ep = bus.open(64);
+  auto server_ep = bus.open(64);
+  bool wrong_kind = false;
+  auto serve = [&] {
+    CanFrame f;
+    while (server_ep->receive(f, 0) == Status::ok) {
+      if (f.id != 0x605 || f.data[0] == 0x80) continue;  // the client's aborts need no answer
+      const std::uint8_t d[4] = {0x2A, 0, 0, 0};
+      server_ep->send(sdo::upload_response(5, 0x1017, 0, d, 2));      // late: another object
+      server_ep->send(sdo::abort(5, true, 0x1A01, 1, 0x06040041));    // late: another object
+      const std::uint16_t index = std::uint16_t(f.data[1] | (f.data[2] << 8));
+      if (f.data[0] == 0x40) {
+        server_ep->send(sdo::upload_response(5, index, f.data[3], d, 4));
+      } else if (wrong_kind) {
+        server_ep->send(sdo::upload_response(5, index, f.data[3], d, 4));  // an upload answer to a download
+      } else {
+        server_ep->send(sdo::download_response(5, index, f.data[3]));
+      }
+    }
+  };
+  clock.set_idle_hook([&](TimePoint) { serve(); });
+  SdoClient c(*client_ep, clock, 20 * kMillisecond);
+  std::uint32_t v = 0;
+  LONGS_EQUAL(int(Status::ok), int(c.read_u32(5, 0x6041, 0, v).status));
+  UNSIGNED_LONGS_EQUAL(0x2A, v);
+  LONGS_EQUAL(int(Status::ok), int(c.write_u8(5, 0x6060, 0, 6).status));
+  wrong_kind = true;
+  LONGS_EQUAL(int(Status::protocol_error), int(c.write_u8(5, 0x6060, 0, 8).status));
+  wrong_kind = false;
+  clock.set_idle_hook(nullptr);
+
+  CanFrame f;
+  serve();
+  while (client_ep->receive(f, 0) == Status::ok) {
+  }  // what the failed write left
+  SdoTransfer t;
+  LONGS_EQUAL(int(Status::ok), int(t.begin_write(*client_ep, 5, 0x6098, 0, 1, 19, clock.now(), 20 * kMillisecond)));
+  serve();
+  int answers = 0;
+  while (client_ep->receive(f, 0) == Status::ok) answers += t.on_frame(f) ? 1 : 0;
+  LONGS_EQUAL(3, answers);  // the two late ones consumed, then the answer
+  CHECK(t.done());
+  LONGS_EQUAL(int(Status::ok), int(t.result()));
+}
+
 // Quick stop objects of the virtual drive (CiA 402): 605Ah option code (the
 // codes the model implements) and 6085h deceleration (non-zero), readable back.
 TEST(Sdo, QuickStopObjectsValidatedLikeADrive) {

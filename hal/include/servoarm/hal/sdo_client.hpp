@@ -50,6 +50,10 @@ class SdoClient {
 
  private:
   Status wait(std::uint8_t node, CanFrame& out, TimePoint deadline);
+  /// wait() for the answer to an initiate request for index:sub: an initiate
+  /// response or abort naming another object is a late answer to an earlier,
+  /// timed-out request (a slow drive), skipped, not taken as this one's.
+  Status wait_initiate(std::uint8_t node, std::uint16_t index, std::uint8_t sub, CanFrame& out, TimePoint deadline);
   SdoResult fail_abort(std::uint8_t node, std::uint16_t index, std::uint8_t sub, Status st, std::uint32_t code);
 
   CanBus& bus_;
@@ -72,7 +76,9 @@ class SdoTransfer {
                      std::uint32_t value, TimePoint now, Duration timeout);
   Status begin_read(CanBus& bus, std::uint8_t node, std::uint16_t index, std::uint8_t sub, TimePoint now,
                     Duration timeout);
-  /// True when `f` was this transfer's answer (consumed: state done, result set).
+  /// True when `f` was this transfer's answer (consumed: state done, result set), or a
+  /// late answer (initiate response or abort) naming another object, to an earlier
+  /// timed-out request (consumed: still pending).
   bool on_frame(const CanFrame& f);
   /// Times a pending transfer out against `now` (result timeout, abort sent).
   void poll(CanBus& bus, TimePoint now);
@@ -82,8 +88,7 @@ class SdoTransfer {
   State state() const { return state_; }
   bool pending() const { return state_ == State::pending; }
   bool done() const { return state_ == State::done; }
-  /// ok, timeout, sdo_abort (abort_code()), protocol_error (answer for another object or
-  /// a command that does not fit).
+  /// ok, timeout, sdo_abort (abort_code()), protocol_error (a command that does not fit).
   Status result() const { return result_; }
   std::uint32_t abort_code() const { return abort_code_; }
   std::uint32_t value() const { return value_; }  ///< read: the value, zero-extended
