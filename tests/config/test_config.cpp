@@ -98,6 +98,7 @@ TEST(Config, DefaultsAreValidAndRoundTrip) {
   DOUBLES_EQUAL(1000.0, d.rate_hz, 0);
   CHECK(c == d);
   DOUBLES_EQUAL(600.0, c.max_move_duration_s, 0);  // the new key's default
+  DOUBLES_EQUAL(100.0, c.sdo_timeout_ms, 0);  // the master's fixed 100 ms before the key
 }
 
 TEST(Config, FullFileAccepted) {
@@ -293,6 +294,17 @@ TEST(Config, RangeEdgesNameKeyValueAndRange) {
   expect_refused("[[drive]]\nmax_velocity = -1\n", {"drive[1].max_velocity", "-1"});
   expect_refused("[[drive]]\nzero_offset = 2147483648\n", {"drive[1].zero_offset", "2147483648"});
   expect_accepted("[[drive]]\nzero_offset = -2147483648\n");
+  // CANopen master timeouts (issue 17): positive and bounded, the boot wait within the bring-up's
+  expect_accepted("[bus]\nsdo_timeout_ms = 1\nboot_timeout_ms = 0\nboot_retry_ms = 10\nstate_timeout_ms = 10\n");
+  expect_accepted("[bus]\nsdo_timeout_ms = 10000\nstart_timeout_s = 120\nboot_timeout_ms = 120000\n");
+  expect_refused("[bus]\nsdo_timeout_ms = 0\n", {"bus.sdo_timeout_ms", "(got 0)", "[1, 10000]", "ms"});
+  expect_refused("[bus]\nsdo_timeout_ms = 10001\n", {"bus.sdo_timeout_ms", "10001"});
+  expect_refused("[bus]\nsdo_timeout_ms = nan\n", {"bus.sdo_timeout_ms"});
+  expect_refused("[bus]\nboot_timeout_ms = -1\n", {"bus.boot_timeout_ms", "-1"});
+  expect_refused("[bus]\nboot_timeout_ms = 6000\n", {"bus.boot_timeout_ms", "at most bus.start_timeout_s (5 s)"});
+  expect_refused("[bus]\nboot_retry_ms = 0\n", {"bus.boot_retry_ms", "(got 0)"});
+  expect_refused("[bus]\nstate_timeout_ms = 5\n", {"bus.state_timeout_ms", "5", "[10, 60000]"});
+  expect_refused("[bus]\nstate_timeout_ms = \"long\"\n", {"bus.state_timeout_ms"});
   // integers: out of the key's range, and out of int before narrowing
   expect_refused("[loop]\npriority = 100\n", {"loop.priority", "0..99", "100"});
   expect_refused("[loop]\npriority = 4294967377\n", {"loop.priority", "4294967377"});  // 2^32 + 81: 81 after narrowing

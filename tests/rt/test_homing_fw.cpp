@@ -576,3 +576,35 @@ TEST(FwHoming, FiguresTimePerMethodAndGroup) {
   std::printf("    group 4 span %ld ms; whole cycle %ld ms (sum of group spans %ld ms)\n", g4, k, spans);
   LONGS_EQUAL(0, r.rt_allocs);
 }
+
+// bus.sdo_timeout_ms / boot_timeout_ms / boot_retry_ms / state_timeout_ms reach the CANopen
+// master: a drive whose SDO answers come 150 ms late fails the bring-up with the default
+// 100 ms timeout (naming its node) and starts with bus.sdo_timeout_ms = 300.
+TEST(FwHoming, BusTimeoutKeysReachTheMaster) {
+  for (const double sdo_ms : {100.0, 300.0}) {
+    FwConfig c;
+    c.can = "sim";
+    c.start_timeout_s = 20;
+    c.sdo_timeout_ms = sdo_ms;
+    c.boot_timeout_ms = 1500;
+    c.boot_retry_ms = 250;
+    c.state_timeout_ms = 700;
+    hal::ManualClock clock;
+    test::SimApp app;
+    const std::string e = app.build(c, &clock);
+    CHECK_TEXT(e.empty(), e.c_str());
+    const hal::CanopenMasterConfig& mc = app.servo->config();
+    LONGS_EQUAL(static_cast<long>(sdo_ms) * hal::kMillisecond, mc.sdo_timeout);
+    LONGS_EQUAL(1500 * hal::kMillisecond, mc.boot_timeout);
+    LONGS_EQUAL(250 * hal::kMillisecond, mc.boot_retry);
+    LONGS_EQUAL(700 * hal::kMillisecond, mc.state_timeout);
+    clock.set_idle_hook([&](hal::TimePoint t) { app.plant->step(t); });
+    sim::DriveQuirks q;
+    q.sdo_delay = 150 * hal::kMillisecond;
+    app.plant->arm().at(0).set_quirks(q);
+    const std::string b = app.boot();
+    clock.set_idle_hook(nullptr);
+    if (sdo_ms < 150) CHECK_TEXT(has(b, "drive bring-up failed") && has(b, "node 1"), b.c_str());
+    else CHECK_TEXT(b.empty(), b.c_str());
+  }
+}

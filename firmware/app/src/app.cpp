@@ -164,6 +164,10 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   mc.joint_count = static_cast<std::size_t>(n);
   mc.heartbeat_period = static_cast<hal::Duration>(cfg.heartbeat_period_ms * 1e6);
   mc.heartbeat_timeout = static_cast<hal::Duration>(cfg.heartbeat_timeout_ms * 1e6);
+  mc.sdo_timeout = static_cast<hal::Duration>(cfg.sdo_timeout_ms * 1e6);
+  mc.boot_timeout = static_cast<hal::Duration>(cfg.boot_timeout_ms * 1e6);
+  mc.boot_retry = static_cast<hal::Duration>(cfg.boot_retry_ms * 1e6);
+  mc.state_timeout = static_cast<hal::Duration>(cfg.state_timeout_ms * 1e6);
   for (int j = 0; j < n; ++j) {
     auto& jc = mc.joints[static_cast<std::size_t>(j)];
     jc.node_id = nodes[static_cast<std::size_t>(j)];

@@ -35,6 +35,10 @@ std::string bus_heartbeat_above_period(const FwConfig& c, const FwConfig&) {
   if (c.heartbeat_timeout_ms > c.heartbeat_period_ms) return "";
   return "must be above bus.heartbeat_period_ms (" + num_text(c.heartbeat_period_ms) + ")";
 }
+std::string boot_timeout_within_start(const FwConfig& c, const FwConfig&) {
+  if (c.boot_timeout_ms <= c.start_timeout_s * 1000.0) return "";
+  return "must be at most bus.start_timeout_s (" + num_text(c.start_timeout_s) + " s), which bounds the whole bring-up";
+}
 std::string linear_speed_at_most_max(const FwConfig& c, const FwConfig&) {
   if (c.linear_speed_mm_s <= c.max_linear_speed_mm_s) return "";
   return "must be at most motion.max_linear_speed_mm_s (" + num_text(c.max_linear_speed_mm_s) + ")";
@@ -95,6 +99,17 @@ const ConfigKey kConfigTable[] = {
       "heartbeat consumer time: a drive silent longer than this faults the arm"}
         .above(0, 60000).related(bus_heartbeat_above_period, "above bus.heartbeat_period_ms"),
     K{"bus.start_timeout_s", &F::start_timeout_s, "s", "time allowed for drive bring-up at start"}.above(0, 120),
+    K{"bus.sdo_timeout_ms", &F::sdo_timeout_ms, "ms",
+      "how long the master waits for a drive's SDO answer (bring-up, homing); a later answer fails the step naming "
+      "the node and the object"}.within(1, 10000),
+    K{"bus.boot_timeout_ms", &F::boot_timeout_ms, "ms",
+      "a drive that does not answer its first SDO (1000h) is asked again (NMT pre-operational + SDO) every "
+      "bus.boot_retry_ms until this long after start, for drives that take seconds to boot; 0 = one attempt"}
+        .within(0, 120000).related(boot_timeout_within_start, "at most bus.start_timeout_s"),
+    K{"bus.boot_retry_ms", &F::boot_retry_ms, "ms", "time between those boot-up attempts"}.within(10, 10000),
+    K{"bus.state_timeout_ms", &F::state_timeout_ms, "ms",
+      "longest a drive may sit in one CiA 402 state while being enabled, or show the old mode (6061h) after a mode "
+      "change; longer fails it naming the node"}.within(10, 60000),
     K{"safety.following_error_deg", &F::following_error_deg, "deg (mm)",
       "largest |commanded - actual| per joint (mm for prismatic joints)"}.above(0, 180),
     K{"safety.enable_timeout_s", &F::enable_timeout_s, "s", "time for every drive to reach operation enabled"}.above(0, 60),

@@ -150,6 +150,8 @@ class CanopenServoBus final : public ServoBus {
 
   /// invalid_argument (bad node id / scaling / duplicate node) or capacity; ok otherwise.
   Status config_status() const { return config_status_; }
+  /// The configuration as given (armfw maps its bus.* keys into it).
+  const CanopenMasterConfig& config() const { return cfg_; }
 
   std::size_t joint_count() const override { return cfg_.joint_count; }
   Status start(TimePoint deadline) override;

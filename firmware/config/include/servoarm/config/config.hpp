@@ -77,6 +77,10 @@ struct FwConfig {
   double heartbeat_period_ms = 50.0;
   double heartbeat_timeout_ms = 150.0;
   double start_timeout_s = 5.0;
+  double sdo_timeout_ms = 100.0;       ///< SDO answer timeout (bring-up, homing): hal sdo_timeout
+  double boot_timeout_ms = 0.0;        ///< a node still booting is asked again until then; 0 = one attempt
+  double boot_retry_ms = 200.0;        ///< time between the boot-up attempts
+  double state_timeout_ms = 500.0;     ///< longest a drive may sit in one CiA 402 state while enabling / changing mode
   std::vector<DriveConfig> drives;     ///< [[drive]] tables; empty = defaults for every joint
   // [safety]
   double following_error_deg = 5.0;
