@@ -556,6 +556,12 @@ TEST(Config, ChecksAgainstTheRobot) {
   STRCMP_EQUAL("", validate_for_chain(c, ch).c_str());
   c.home_deg = {0, -45, 180, 0, 100, 0};  // at the limit: fine
   STRCMP_EQUAL("", validate_for_chain(c, ch).c_str());
+  c.drives.resize(6);
+  c.drives[1].homing_method = "hard_stop";
+  c.drives[1].homing_offset = 45;  // an offset at the limit: fine
+  c.drives[0].homing_offset = 1000;  // method "none": the offset is never used
+  STRCMP_EQUAL("", validate_for_chain(c, ch).c_str());
+  c.drives.clear();
   struct Case {
     void (*set)(FwConfig&);
     const char* want;
@@ -594,6 +600,25 @@ TEST(Config, ChecksAgainstTheRobot) {
        },
        "bus.counts_per_rev: one count is 360000 deg on joint 1, not finer than safety.following_error_deg (5)"},
       {[](FwConfig& c) { c.gear_ratio = std::nan(""); }, "bus.gear_ratio: must be a finite number"},
+      {[](FwConfig& c) {  // a homed joint would stand at its offset: outside the description's limits
+         c.drives.resize(6);
+         c.drives[1].homing_method = "19";
+         c.drives[1].homing_offset = 60;
+       },
+       "drive[2].homing.offset: 60 deg is outside joint 2's limits [-225, 45] deg"},
+      {[](FwConfig& c) {  // hard_stop's backed-off point, outside the drive's narrowed limits
+         c.drives.resize(6);
+         c.drives[4].limits = {-90, 90};
+         c.drives[4].homing_method = "hard_stop";
+         c.drives[4].homing_offset = -95;
+       },
+       "drive[5].homing.offset: -95 deg is outside joint 5's limits [-90, 90] deg"},
+      {[](FwConfig& c) {  // the default offset 0 outside [10, 40]: refused for a joint that homes
+         c.drives.resize(6);
+         c.drives[0].limits = {10, 40};
+         c.drives[0].homing_method = "35";
+       },
+       "drive[1].homing.offset: 0 deg is outside joint 1's limits [10, 40] deg"},
   };
   for (const Case& k : cases) {
     FwConfig d;

@@ -227,7 +227,8 @@ const DriveKey kDriveTable[] = {
     DK{"homing.acceleration", &D::homing_acceleration, "deg/s^2 (mm/s^2)",
        "homing acceleration (609Ah); hard_stop: of the approach and the back-off"}.above(0, 1e7),
     DK{"homing.offset", &D::homing_offset, "deg (mm)",
-       "joint position at the home mark (written as 607Ch home offset) or, hard_stop, at the backed-off point"}
+       "joint position at the home mark (written as 607Ch home offset) or, hard_stop, at the backed-off point; "
+       "within the joint's limits (drive.limits or the description's) unless the method is \"none\""}
         .within(-kMaxLength, kMaxLength),
     DK{"homing.timeout_s", &D::homing_timeout_s, "s", "longest homing of this joint; longer fails it (arm disabled)"}
         .above(0, 3600),
@@ -800,6 +801,11 @@ std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
         return "motion.home_deg[" + std::to_string(j) + "]: " + shown_text(h) + u + " is outside joint " +
                std::to_string(j + 1) + "'s limits [" + shown_text(lo) + ", " + shown_text(hi) + "]" + u;
     }
+    // After homing the joint stands at its offset (the home mark's position, hard_stop the
+    // backed-off point): one outside the limits would leave a homed arm outside them.
+    if (d && d->homing_method != "none" && !(d->homing_offset >= lo - 1e-9 && d->homing_offset <= hi + 1e-9))
+      return w + "homing.offset: " + shown_text(d->homing_offset) + u + " is outside joint " + std::to_string(j + 1) +
+             "'s limits [" + shown_text(lo) + ", " + shown_text(hi) + "]" + u;
     // Drive scaling, as hal::JointScaling computes it: counts per joint unit.
     const bool own_counts = d && d->counts_per_rev > 0, own_gear = d && d->gear_ratio != 0;
     const double cpr = own_counts ? d->counts_per_rev : c.counts_per_rev;
