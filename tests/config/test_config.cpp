@@ -140,7 +140,9 @@ TEST(Config, ShippedConfigLoads) {
 TEST(Config, ShippedConfigAgreesWithTheKeyTable) {
   const std::string text = read_file(SERVOARM_SHIPPED_CONFIG);
   CHECK(text.size() > 500);
-  const std::set<std::string> service_choices = {"console.stdin", "console.pty"};
+  // (and the files armfw writes in its state folder: /etc/servoarm is read-only to the service)
+  const std::set<std::string> service_choices = {"console.stdin", "console.pty", "console.frames_file", "programs.dir",
+                                                 "programs.points_file"};
   auto find_key = [](const std::string& full) -> const ConfigKey* {
     for (const ConfigKey& k : config_keys())
       if (full == k.name) return &k;
@@ -197,6 +199,10 @@ TEST(Config, ShippedConfigAgreesWithTheKeyTable) {
   CHECK(ranges >= 2);
   CHECK(commented_keys >= 1);
   CHECK(!loaded.console_stdin && loaded.console_pty);  // the service choices themselves
+  // servoarm.service's StateDirectory=servoarm (owned by the service user): the only writable place
+  STRCMP_EQUAL("/var/lib/servoarm/programs", loaded.programs_dir.c_str());
+  STRCMP_EQUAL("/var/lib/servoarm/points.toml", loaded.programs_points_file.c_str());
+  STRCMP_EQUAL("/var/lib/servoarm/frames.toml", loaded.console_frames_file.c_str());
 }
 
 TEST(Config, BadFilesNameTheKeyAndLeaveConfigUntouched) {

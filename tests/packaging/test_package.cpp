@@ -259,6 +259,14 @@ TEST(Package, FirmwareUnit) {
   STRCMP_EQUAL("multi-user.target", one("WantedBy").c_str());
   STRCMP_EQUAL("servoarm-can.service", one("Requires").c_str());
   STRCMP_CONTAINS("servoarm-can.service", one("After").c_str());
+  // The state folder the shipped armfw.toml writes programs, points and frames into:
+  // created by systemd owned by User= (the rest of the file system is read-only to it).
+  STRCMP_EQUAL("strict", one("ProtectSystem").c_str());
+  STRCMP_EQUAL("servoarm servoarm/programs", one("StateDirectory").c_str());
+  const std::string conf = slurp(root + "/etc/servoarm/armfw.toml");
+  for (const char* k : {"dir = \"/var/lib/servoarm/programs\"", "points_file = \"/var/lib/servoarm/points.toml\"",
+                        "frames_file = \"/var/lib/servoarm/frames.toml\""})
+    STRCMP_CONTAINS(k, conf.c_str());
   const std::string exec = one("ExecStart");
   STRCMP_CONTAINS("/usr/bin/armfw --config /etc/servoarm/armfw.toml", exec.c_str());
   if (HAVE_ARMFW) CHECK_TEXT(mode_of(root + "/usr/bin/armfw") & S_IXUSR, "ExecStart binary not in the package");
