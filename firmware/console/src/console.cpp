@@ -468,6 +468,7 @@ MoveJoints Console::joint_request(const Command& c) const {
   m.goal = kin::JointVector(n_);
   for (int j = 0; j < n_; ++j) m.goal[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
   m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
+  m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : 0.0;
   return m;
 }
 
@@ -505,6 +506,7 @@ void Console::queue(Session& s, const MoveJoints& req) {
   JointMove& jm = m->payload.emplace<JointMove>();
   jm.goal = goal;
   jm.override = pct / 100.0;
+  jm.blend = req.blend > 0.0 && std::isfinite(req.blend) ? req.blend : 0.0;  // the controller blends into the next joint move
   kin::MovejOptions o;
   o.override = jm.override;
   const kin::MotionStatus ms = kin::plan_movej(lim, kin::JointState::rest(s.check_mode ? s.check_tail : tail()), goal, o, jm.plan);

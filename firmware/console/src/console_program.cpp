@@ -256,6 +256,7 @@ void Console::queue_at_point(Session& s, const Command& c) {
     MoveJoints m;
     m.goal = p->q;
     m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
+    m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : 0.0;
     queue(s, m);
     return;
   }
@@ -291,6 +292,8 @@ void Console::exec_step(Session& ps, const prog::ProgramStep& st) {
     m.target = tcp(points_.points[static_cast<std::size_t>(st.point)].q);
     m.speed = st.cmd.has_speed ? cfg_.units.length_in(st.cmd.speed) : 0.0;
     queue(ps, m);
+  } else if (st.cmd.cmd == Cmd::movej && st.blend > 0.0) {
+    execute(ps, st.text + fmt(" blend=%.17g", st.blend));  // the move's blend tolerance (console angle unit) to the controller
   } else {
     execute(ps, st.text);
   }

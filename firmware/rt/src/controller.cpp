@@ -107,12 +107,14 @@ void Controller::hold_measured() {
   cmd_ = kin::JointState::rest(q_act_);
   have_prev_ = false;
   ++generation_;
+  end_blend();
 }
 
 std::size_t Controller::flush_motions() {
   const std::size_t n = motions_.clear();
   ++generation_;
   running_ = nullptr;
+  end_blend();
   return n;
 }
 
@@ -197,6 +199,7 @@ void Controller::end_of_ramp(Mode ramp) {
 }
 
 void Controller::begin_ramp(Mode ramp) {
+  end_blend();  // a stop always wins: the ramp starts from the blended state, the run is over
   // Ramp every joint to rest from the commanded state with the full limits.
   kin::MovejOptions o;
   if (kin::plan_stop(limits_, cmd_, o, stop_traj_) == kin::MotionStatus::ok) {
@@ -208,6 +211,7 @@ void Controller::begin_ramp(Mode ramp) {
 }
 
 void Controller::begin_emergency_stop(Mode ramp, Mode quick_stop) {
+  end_blend();
   if (!cfg_.drive_quick_stop) {
     begin_ramp(ramp);
     return;
@@ -967,6 +971,7 @@ bool Controller::start_next_motion() {
     switch (m->kind()) {
       case MotionKind::joint: {
         JointMove& jm = *std::get_if<JointMove>(&m->payload);
+        if (jm.blend > 0.0 && begin_blend(jm)) break;  // the run's first segment (replaces the plan)
         if (starts_here(jm.plan)) break;  // the console's plan, as it is
         kin::MovejOptions o;
         o.override = jm.override;
@@ -1095,6 +1100,10 @@ void Controller::step_motion() {
   bool done = false;
   switch (running_->kind()) {
     case MotionKind::joint: {
+      if (blending_) {
+        step_blend();
+        return;
+      }
       const kin::JointTrajectory& plan = std::get_if<JointMove>(&running_->payload)->plan;
       plan.sample(motion_t_, cmd_);
       done = motion_t_ >= plan.duration;
@@ -1130,6 +1139,92 @@ void Controller::step_motion() {
     if (start_next_motion()) return;
     set_mode(Mode::idle);
   }
+}
+
+// ---------------------------------------------------------------------------
+// Blended joint moves (docs/motion.md#blending)
+// ---------------------------------------------------------------------------
+// Consecutive queued joint moves whose target carries a blend tolerance run as one
+// kin::JointBlendQueue: each move one straight joint-space segment, the next one
+// superposed on its end as far as the tolerance and every joint's velocity, acceleration
+// and jerk limits (scaled by the moves' override) allow, checked exactly by the queue; a
+// corner that cannot blend is an exact stop. The next move is appended while the arm
+// moves, at most one append per cycle (bounded, heap-free, never earlier than the next
+// sample: nothing already commanded changes). A move is done (motion_done) when its
+// segment has come to rest; the next one is then running_ (it has been moving since its
+// blend began). A run is only entered from rest and ends at rest; a stop, hold, fault,
+// e-stop or flush leaves it (end_blend) and the ramp starts from the blended state.
+
+bool Controller::begin_blend(const JointMove& jm) {
+  kin::JointLimits l = limits_;
+  const double o = jm.override;
+  if (!(o >= 0.01 && o <= 1.0)) return false;
+  for (int j = 0; j < n_; ++j)
+    if (cmd_.vel[j] != 0.0) return false;  // a run starts from rest only
+  for (int j = 0; j < n_; ++j) {
+    kin::JointDynamics& d = l.dyn[static_cast<std::size_t>(j)];
+    d.max_velocity *= o;
+    d.max_acceleration *= o * o;
+    d.max_jerk *= o * o * o;
+  }
+  blend_.reset(l, cmd_.pos);
+  const kin::BlendStatus st = blend_.append(jm.goal, jm.blend, 0.0);
+  if (!kin::is_ok(st) || st == kin::BlendStatus::zero_length) return false;
+  blending_ = true;
+  blend_closed_ = false;
+  blend_items_ = 1;
+  blend_t_ = 0;
+  blend_override_ = o;
+  return true;
+}
+
+void Controller::blend_more() {
+  if (!blending_ || blend_closed_ || blend_items_ >= kBlendSegments) return;
+  const MotionItem* last = motions_.peek(static_cast<std::size_t>(blend_items_ - 1));
+  const MotionItem* next = motions_.peek(static_cast<std::size_t>(blend_items_));
+  if (last == nullptr || next == nullptr) return;  // nothing queued after it yet: try again next cycle
+  const auto* lj = std::get_if<JointMove>(&last->payload);
+  const auto* nj = std::get_if<JointMove>(&next->payload);
+  if (lj == nullptr || !(lj->blend > 0.0) || nj == nullptr || nj->override != blend_override_ || next->n_outputs != 0) {
+    blend_closed_ = true;  // the run ends at rest at `last`; `next` starts as before
+    return;
+  }
+  kin::BlendReport rep;
+  const kin::BlendStatus st = blend_.append(nj->goal, nj->blend, blend_t_ + period_s_, &rep);
+  if (!kin::is_ok(st) || st == kin::BlendStatus::zero_length) {
+    blend_closed_ = true;
+    return;
+  }
+  if (rep.blend > 0.0) ++blends_;
+  ++blend_items_;
+}
+
+void Controller::step_blend() {
+  blend_more();
+  blend_t_ += period_s_;
+  blend_.sample(blend_t_, cmd_.pos, cmd_.vel, cmd_.acc);
+  const int before = blend_.size();
+  blend_.retire(blend_t_);
+  for (int ended = before - blend_.size(); ended > 0 && running_ != nullptr; --ended) {
+    const bool last = --blend_items_ == 0;
+    if (last) {
+      cmd_ = kin::JointState::rest(running_->goal());  // the run's end: at rest there
+      blending_ = false;
+    }
+    finish_motion(false, RtResult::ok);
+    if (last) {
+      if (!start_next_motion()) set_mode(Mode::idle);
+      return;
+    }
+    running_ = motions_.front();  // appended to the run: moving since its blend began
+    motion_t_ = 0;
+  }
+}
+
+void Controller::end_blend() {
+  blending_ = false;
+  blend_closed_ = false;
+  blend_items_ = 0;
 }
 
 void Controller::validate_and_write(TimePoint now) {
@@ -1214,6 +1309,7 @@ void Controller::publish() {
   t.estop_latency_ns = estop_latency_;
   t.ik_fallbacks = ik_fallbacks_;
   t.joint_replans = joint_replans_;
+  t.blended_corners = blends_;
   t.homed = homed_mask();
   t.homing_now = hrunning_;
   t.homing_failed = 0;

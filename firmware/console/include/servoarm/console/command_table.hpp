@@ -81,9 +81,10 @@ inline constexpr CommandSpec kCommands[] = {
      "as `movej` to motion.home_deg at motion.joint_speed_pct; refused until every joint is homed", false},
     {"movej", Cmd::movej, ArgShape::joints_speed, "movej j1..jn or @NAME [speed=%] [blend=angle]",
      "joint move; joints in the joint units, or teach point NAME's joints; speed 1-100 % of the joint limits (default 50)",
-     "answers `ok queued id=N duration=T` once the move is checked and queued. blend= (angle unit, >= 0) is the "
-     "tolerance a program's move may pass its target by; it is checked and kept, and the controller's queue runs "
-     "every move to rest for now (docs/programs.md)", false},
+     "answers `ok queued id=N duration=T` (the exact-stop duration) once the move is checked and queued. blend= "
+     "(angle unit, >= 0, joint-space distance) is the tolerance the arm may pass the target by when the next queued "
+     "move is a joint move: the controller blends the corner without stopping, within every joint's limits, or "
+     "stops there when it cannot (docs/motion.md#blending)", false},
     {"movel", Cmd::movel, ArgShape::pose_speed, "movel x y z [rx ry rz] or @NAME [speed=v] [blend=length]",
      "straight line of the tool point; without rx ry rz the tool keeps its orientation; @NAME: to where teach point "
      "NAME's joints put the active tool",

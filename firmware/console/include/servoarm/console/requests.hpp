@@ -20,6 +20,7 @@ struct MoveLine {
 struct MoveJoints {
   kin::JointVector goal;  ///< joint values (rad / m)
   double speed_pct = 0;   ///< percent of the joint limits, [1, 100]; 0: the console's default
+  double blend = 0;       ///< blend tolerance at `goal` (rad, joint-space Euclidean; movej blend=); 0: exact stop
 };
 
 }  // namespace servoarm::fw

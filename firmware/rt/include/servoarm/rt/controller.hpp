@@ -31,6 +31,7 @@
 #include "servoarm/rt/spsc_queue.hpp"
 #include "servoarm/rt/stats.hpp"
 #include "servoarm/hal/servo_bus.hpp"
+#include "servoarm/kinematics/blend.hpp"
 #include "servoarm/kinematics/chain.hpp"
 
 namespace servoarm::fw {
@@ -130,6 +131,16 @@ class Controller {
   /// The arm is at rest exactly where `plan` starts (so it runs as it is).
   bool starts_here(const kin::JointTrajectory& plan) const;
   void step_motion();
+  /// Blended joint moves (JointMove::blend > 0): start a blend run with `jm` from rest at
+  /// cmd_ (false: not blendable, run its plan as before).
+  bool begin_blend(const JointMove& jm);
+  /// Append the next queued joint move to the blend run when the last one appended blends
+  /// into it (bounded: one kin::blend_append, heap-free), at most one per cycle.
+  void blend_more();
+  /// One cycle of a blend run: sample, finish the motions whose segment has come to rest.
+  void step_blend();
+  /// Leave the blend run (a stop, hold, flush): the running move continues as a plain joint move.
+  void end_blend();
   void step_jog();
   void finish_motion(bool refused, RtResult why);
   void validate_and_write(TimePoint now);
@@ -193,6 +204,16 @@ class Controller {
   kin::JointTrajectory stop_traj_;  ///< data of the ramping modes (ramping(mode_))
   double stop_t_ = 0;               ///< time into stop_traj_, or into the drives' quick stop
   MotionItem* running_ = nullptr;   ///< front of motions_ while executing (moving, hold_*, held)
+  // Blend run (data of moving while consecutive joint moves blend; docs/motion.md#blending):
+  // the first blend_items_ motions of the queue (running_ the first) are the segments of blend_.
+  static constexpr int kBlendSegments = 4;
+  kin::JointBlendQueue<kBlendSegments> blend_;
+  bool blending_ = false;
+  bool blend_closed_ = false;       ///< no more appends to this run (it ends at rest)
+  int blend_items_ = 0;
+  double blend_t_ = 0;              ///< time on blend_'s time base (s)
+  double blend_override_ = 1.0;
+  std::uint64_t blends_ = 0;        ///< corners blended (overlap > 0), since boot
   double motion_t_ = 0;
   std::uint64_t ik_fallbacks_ = 0;
   std::uint64_t joint_replans_ = 0;

@@ -72,6 +72,11 @@ struct JointMove {
   kin::JointVector goal;          ///< target (rad / m)
   double override = 1.0;          ///< speed override 0.01..1
   kin::JointTrajectory plan;      ///< plan.n == 0: none given (the RT thread plans at start)
+  /// Blend tolerance at `goal` (rad, joint-space Euclidean norm; 0 = exact stop): when the
+  /// next queued motion is a joint move with the same override and no output changes, the
+  /// RT thread runs both through one blend queue (kin::JointBlendQueue) and the arm passes
+  /// within this distance of `goal` without stopping (docs/motion.md#blending).
+  double blend = 0.0;
 };
 
 /// A straight tool line, planned and path-checked by the console thread from the
@@ -153,6 +158,8 @@ struct Telemetry {
   /// Joint moves the RT thread had to plan again at start because the arm was not where
   /// the console's plan begins (or none was given); since boot.
   std::uint64_t joint_replans = 0;
+  /// Corners between queued joint moves the controller blended (passed without stopping); since boot.
+  std::uint64_t blended_corners = 0;
   // Homing (ServoBus::homing, docs/firmware.md#homing)
   std::uint16_t homed = 0;         ///< bit j: joint j's zero is established this power cycle (or it is absolute)
   std::uint16_t homing_now = 0;    ///< bit j: the master homes joint j now
