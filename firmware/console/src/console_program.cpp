@@ -105,14 +105,23 @@ std::vector<std::size_t> decimate(const std::vector<kin::JointVector>& q, double
     const auto [a, b] = stack.back();
     stack.pop_back();
     if (b <= a + 1) continue;
-    const kin::JointVector d = q[b] - q[a];
-    const double dd = d.squaredNorm();
+    // Plain loops over the joints, not Eigen temporaries: gcc 12 for armhf at -O2
+    // takes those for maybe-uninitialized (-Werror in the cross build).
+    const Eigen::Index m = q[a].size();
+    double dd = 0;
+    for (Eigen::Index j = 0; j < m; ++j) dd += (q[b][j] - q[a][j]) * (q[b][j] - q[a][j]);
     double worst = -1;
     std::size_t at = a;
     for (std::size_t i = a + 1; i < b; ++i) {
-      const kin::JointVector v = q[i] - q[a];
-      const double s = dd > 0 ? std::clamp(v.dot(d) / dd, 0.0, 1.0) : 0.0;
-      const double dist = (v - s * d).norm();
+      double vd = 0;
+      for (Eigen::Index j = 0; j < m; ++j) vd += (q[i][j] - q[a][j]) * (q[b][j] - q[a][j]);
+      const double s = dd > 0 ? std::clamp(vd / dd, 0.0, 1.0) : 0.0;
+      double dist2 = 0;
+      for (Eigen::Index j = 0; j < m; ++j) {
+        const double e = (q[i][j] - q[a][j]) - s * (q[b][j] - q[a][j]);
+        dist2 += e * e;
+      }
+      const double dist = std::sqrt(dist2);
       if (dist > worst) worst = dist, at = i;
     }
     if (worst > tol) {
@@ -569,9 +578,13 @@ void Console::do_record(Session& s, const Command& c) {
     return;
   }
   {  // the last sample: where the arm is now
-    kin::JointVector q(n_);
-    for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
-    if (rec_.samples.empty() || (rec_.samples.back() - q).norm() > 0) rec_.samples.push_back(q);
+    kin::JointVector q = kin::JointVector::Zero(n_);
+    bool moved = rec_.samples.empty();
+    for (int j = 0; j < n_; ++j) {
+      q[j] = t.q_act[static_cast<std::size_t>(j)];
+      if (!moved && rec_.samples.back()[j] != q[j]) moved = true;
+    }
+    if (moved) rec_.samples.push_back(q);
   }
   const double tol = c.tolerance > 0 ? cfg_.units.angle_in(c.tolerance) : cfg_.record_tolerance;
   // The moves follow the decimated polyline (within tol/2 of the samples) and each blend
