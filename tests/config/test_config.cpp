@@ -391,6 +391,8 @@ TEST(Config, EveryDocumentedKeyIsAccepted) {
   d.heartbeat_timeout_ms = 200;
   d.quick_stop_decel = 720.5;
   d.homing_method = "19";  // a joint that homes: its homing.* keys are written too
+  d.rated_torque = 0.64;
+  d.collision_threshold = 12.5;
   c.drives = {d, d};
   c.drives[1].node = 8;
   const std::string toml = to_toml(c);
@@ -797,4 +799,79 @@ TEST(Config, HomingKeysAreReadAndBadOnesRefusedNamingTheKey) {
                validate_for_chain(o, lr.chain).c_str());
   o.homing_order = {{3}, {2}, {1}, {4, 5, 6, 7}};
   STRCMP_EQUAL("homing.order[3]: joint 7 does not exist (puma560 has 6)", validate_for_chain(o, lr.chain).c_str());
+}
+
+// Issue 20: the [dynamics] keys, drive.rated_torque and drive.collision_threshold, and the
+// default blend tolerances (motion.default_blend_mm / _deg): defaults keep every part off (the
+// frames of before), values read, bad ones refused naming the key and the range.
+TEST(Config, DynamicsAndBlendKeysAreReadAndBadOnesRefusedNamingTheKey) {
+  const FwConfig def;
+  STRCMP_EQUAL("off", def.feed_forward.c_str());
+  CHECK(!def.collision && !def.freedrive);
+  DOUBLES_EQUAL(100, def.collision_gain, 0);
+  DOUBLES_EQUAL(1, def.collision_sensitivity, 0);
+  DOUBLES_EQUAL(15, def.collision_threshold_pct, 0);
+  DOUBLES_EQUAL(10, def.freedrive_damping, 0);
+  DOUBLES_EQUAL(0, def.default_blend_mm, 0);
+  DOUBLES_EQUAL(0, def.default_blend_deg, 0);
+  DOUBLES_EQUAL(0, DriveConfig{}.rated_torque, 0);
+  DOUBLES_EQUAL(0, DriveConfig{}.collision_threshold, 0);
+  auto drives = [](const std::string& first) {
+    std::string t = "[[drive]]\n" + first;
+    for (int i = 0; i < 5; ++i) t += "[[drive]]\n";
+    return t;
+  };
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[dynamics]\nfeed_forward = \"torque\"\ncollision = true\ncollision_gain = 50\n"
+                                    "collision_sensitivity = 2\ncollision_threshold_pct = 20\nfreedrive = true\n"
+                                    "freedrive_damping = 5\n[motion]\ndefault_blend_mm = 2.5\ndefault_blend_deg = 3\n" +
+                                        drives("rated_torque = 0.64\ncollision_threshold = 12.5\n"),
+                                    "d.toml", c)
+                   .c_str());
+  STRCMP_EQUAL("torque", c.feed_forward.c_str());
+  CHECK(c.collision && c.freedrive);
+  DOUBLES_EQUAL(50, c.collision_gain, 0);
+  DOUBLES_EQUAL(2, c.collision_sensitivity, 0);
+  DOUBLES_EQUAL(20, c.collision_threshold_pct, 0);
+  DOUBLES_EQUAL(5, c.freedrive_damping, 0);
+  DOUBLES_EQUAL(2.5, c.default_blend_mm, 0);
+  DOUBLES_EQUAL(3, c.default_blend_deg, 0);
+  DOUBLES_EQUAL(0.64, c.drives[0].rated_torque, 0);
+  DOUBLES_EQUAL(12.5, c.drives[0].collision_threshold, 0);
+  DOUBLES_EQUAL(0, c.drives[1].rated_torque, 0);  // unset: the drive's 6076h
+  FwConfig back;
+  const std::string t = to_toml(c);
+  CHECK_TEXT(has(t, "[dynamics]\nfeed_forward = \"torque\"\n"), t.c_str());
+  STRCMP_EQUAL("", load_config_text(t, "back.toml", back).c_str());
+  CHECK(back == c);
+  STRCMP_EQUAL("", load_config_text("[dynamics]\nfeed_forward = \"velocity\"\nfreedrive_damping = 0\n", "v.toml", c).c_str());
+  const struct {
+    std::string text;
+    const char* want;
+  } bad[] = {
+      {"[dynamics]\nfeed_forward = \"model\"\n", "dynamics.feed_forward: must be \"off\", \"velocity\" or \"torque\" (got \"model\")"},
+      {"[dynamics]\nfeed_forward = true\n", "dynamics.feed_forward: expected a string"},
+      {"[dynamics]\ncollision = 1\n", "dynamics.collision: expected true or false"},
+      {"[dynamics]\ncollision_gain = 0\n", "dynamics.collision_gain: must be within [1, 1000] 1/s (got 0)"},
+      {"[dynamics]\ncollision_gain = 5000\n", "dynamics.collision_gain: must be within [1, 1000]"},
+      {"[dynamics]\ncollision_sensitivity = 0\n", "dynamics.collision_sensitivity: must be within [0.1, 10] (got 0)"},
+      {"[dynamics]\ncollision_sensitivity = nan\n", "dynamics.collision_sensitivity: must be a finite number"},
+      {"[dynamics]\ncollision_threshold_pct = 0\n", "dynamics.collision_threshold_pct: must be within (0, 300] %"},
+      {"[dynamics]\nfreedrive_damping = -1\n", "dynamics.freedrive_damping: must be within [0, 100] 1/s (got -1)"},
+      {"[dynamics]\nfreedrive = \"yes\"\n", "dynamics.freedrive: expected true or false"},
+      {"[dynamics]\nbogus = 1\n", "dynamics.bogus: unknown key"},
+      {"[motion]\ndefault_blend_mm = 51\n", "motion.default_blend_mm: must be within [0, 50] mm (got 51)"},
+      {"[motion]\ndefault_blend_mm = -0.5\n", "motion.default_blend_mm: must be within [0, 50]"},
+      {"[motion]\ndefault_blend_deg = 31\n", "motion.default_blend_deg: must be within [0, 30] deg (got 31)"},
+      {drives("rated_torque = -1\n"), "drive[1].rated_torque: must be within (0, 100000] N m (N) (got -1)"},
+      {drives("collision_threshold = -2\n"), "drive[1].collision_threshold: must be within (0, 1000000] N m (N)"},
+      {drives("collision_threshold = inf\n"), "drive[1].collision_threshold: must be a finite number"},
+  };
+  for (const auto& b : bad) {
+    FwConfig k;
+    const std::string e = load_config_text(b.text, "bad.toml", k);
+    CHECK_TEXT(starts_with_position(e, "bad.toml"), e.c_str());
+    CHECK_TEXT(e.find(b.want) != std::string::npos, ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
+    CHECK_TEXT(k == FwConfig{}, b.want);  // untouched
+  }
 }

@@ -32,6 +32,26 @@ ControllerConfig App::controller_config() const {
   return c;
 }
 
+ModelControlConfig App::model_config() const {
+  ModelControlConfig m;
+  m.feed_forward = cfg.feed_forward == "torque"     ? FeedForwardKind::torque
+                   : cfg.feed_forward == "velocity" ? FeedForwardKind::velocity
+                                                    : FeedForwardKind::off;
+  m.collision = cfg.collision;
+  m.freedrive = cfg.freedrive;
+  m.collision_gain = cfg.collision_gain;
+  m.collision_sensitivity = cfg.collision_sensitivity;
+  m.collision_threshold_pct = cfg.collision_threshold_pct;
+  m.freedrive_damping = cfg.freedrive_damping;
+  for (int j = 0; j < chain.n_joints; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    if (!cfg.drives.empty()) m.collision_threshold[ju] = cfg.drives[ju].collision_threshold;
+    // 6071h/6077h/60B2h are per mille of the rated torque: the master's unit x 1000, joint side
+    if (servo) m.rated_torque[ju] = std::fabs(servo->torque_unit(ju)) * 1000.0;
+  }
+  return m;
+}
+
 hal::HomingSpec App::homing_spec(int j) const {
   hal::HomingSpec h;
   if (cfg.drives.empty()) return h;  // no [[drive]] tables: every joint absolute (kind none)
@@ -168,9 +188,17 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   mc.boot_timeout = static_cast<hal::Duration>(cfg.boot_timeout_ms * 1e6);
   mc.boot_retry = static_cast<hal::Duration>(cfg.boot_retry_ms * 1e6);
   mc.state_timeout = static_cast<hal::Duration>(cfg.state_timeout_ms * 1e6);
+  // [dynamics] (issue 20): RPDO2 and TPDO2's torque only when a part asks for them (else the
+  // frames of before). Optional: a drive that lacks an object is brought up without it, and the
+  // part that needs it is refused at boot() naming the joint (ModelControl::configure).
+  if (cfg.feed_forward != "off") mc.rpdo2.velocity_offset = hal::PdoUse::optional;
+  if (cfg.feed_forward == "torque") mc.rpdo2.torque_offset = hal::PdoUse::optional;
+  if (cfg.freedrive) mc.rpdo2.torque_mode = hal::PdoUse::optional;
+  if (cfg.collision) mc.tpdo2.torque = hal::PdoUse::optional;
   for (int j = 0; j < n; ++j) {
     auto& jc = mc.joints[static_cast<std::size_t>(j)];
     jc.node_id = nodes[static_cast<std::size_t>(j)];
+    if (!cfg.drives.empty()) jc.rated_torque = cfg.drives[static_cast<std::size_t>(j)].rated_torque;
     jc.scaling.counts_per_unit = cfg.counts_per_rev;
     jc.scaling.gear_ratio = cfg.gear_ratio;
     if (!cfg.drives.empty()) {
@@ -200,6 +228,7 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   ik = std::make_unique<kin::IkModel>();
   ik_ready = kin::ik_prepare(chain, *ik) == kin::Status::ok && ik->method != kin::IkMethod::none;
   ctl = std::make_unique<Controller>(*servo, chain, controller_config());
+  model = std::make_unique<ModelControl>();
   console = std::make_unique<Console>(*ctl, console_config(), ik_ready ? ik.get() : nullptr);
   if (const std::string e = console->load_frames(); !e.empty()) return "frames file refused: " + e;
   if (const std::string e = console->load_points(); !e.empty()) return "points file refused: " + e;
@@ -210,6 +239,9 @@ std::string App::boot() {
   const hal::TimePoint now = clock->now();
   const hal::Status st = ctl->boot(now, now + static_cast<hal::Duration>(cfg.start_timeout_s * 1e9));
   if (st != hal::Status::ok) return std::string("drive bring-up failed: ") + hal::to_string(st) + ": " + servo->last_error();
+  // The drives are up: what each can do and its rated torque are known. A part that cannot run
+  // is off with its reason (dynamics_notes()); everything else runs.
+  model->configure(chain, *servo, model_config());
   return "";
 }
 

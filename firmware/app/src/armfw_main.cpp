@@ -409,6 +409,18 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "armfw: %s\n", err.c_str());
     return 1;
   }
+  // [dynamics] parts asked for that cannot run on this robot / these drives: said, left off
+  // (everything else runs; docs/dynamics.md#using-the-model-in-the-firmware).
+  {
+    const std::string notes = app.dynamics_notes();
+    std::size_t a = 0;
+    while (a < notes.size()) {
+      std::size_t b = notes.find('\n', a);
+      if (b == std::string::npos) b = notes.size();
+      std::fprintf(stderr, "armfw: dynamics: %s\n", notes.substr(a, b - a).c_str());
+      a = b + 1;
+    }
+  }
   LoopConfig lc;
   lc.rate_hz = app.cfg.rate_hz;
   lc.priority = app.cfg.priority;

@@ -23,6 +23,7 @@ constexpr double kDirections[] = {1, -1};
 constexpr const char* kStops[] = {"ramp", "drive"};
 constexpr const char* kDialects[] = {"native", "grbl"};
 constexpr const char* kTransportDialects[] = {"", "native", "grbl"};
+constexpr const char* kFeedForward[] = {"off", "velocity", "torque"};
 constexpr double kTwo31 = 2147483648.0;  // counts_per_rev below 2^31: a revolution fits the drive's int32 position
 constexpr double kMaxLength = 1e5;       // deg or mm: |limits| and |home| (277 turns, 100 m)
 
@@ -133,6 +134,11 @@ const ConfigKey kConfigTable[] = {
       "highest linear speed: speed= and F are clamped to it; G0 moves at it"}.within(0.01, 5000),
     K{"motion.max_move_duration_s", &F::max_move_duration_s, "s",
       "longest move the console accepts; longer moves are refused with out_of_range"}.within(1, 86400),
+    K{"motion.default_blend_mm", &F::default_blend_mm, "mm",
+      "blend tolerance of movel / G1 without blend=: how far a corner may be cut to go on without stopping; 0 = "
+      "exact stop at every point"}.within(0, 50),
+    K{"motion.default_blend_deg", &F::default_blend_deg, "deg",
+      "blend tolerance of movej without blend= (per joint); 0 = exact stop at every point"}.within(0, 30),
     K{"homing.order", &F::homing_order, "",
       "homing groups run one after the other, joints inside a group together (1-based joint numbers, e.g. "
       "`[[3], [2], [1], [4, 5, 6]]`: the wrist clear of the table first); `[]` = one group of every joint. Given, it "
@@ -142,6 +148,32 @@ const ConfigKey kConfigTable[] = {
     K{"homing.unhomed_jog_pct", &F::homing_unhomed_jog_pct, "%",
       "while a joint is not homed, joint jogs run at this percent of the speed asked (Cartesian moves, tool jogs, "
       "movej, park and G-code moves are refused until every joint is homed)"}.within(1, 100),
+    K{"dynamics.feed_forward", &F::feed_forward, "",
+      "feed-forward sent with every setpoint in CSP (docs/dynamics.md#using-the-model-in-the-firmware): `\"off\"`; "
+      "`\"velocity\"` = the setpoint's velocity as velocity offset 60B1h (needs no model); `\"torque\"` = that and "
+      "the model torque M(q) qdd + c + g + friction as torque offset 60B2h (needs the robot's inertial data). Maps "
+      "RPDO2 at bring-up; when a drive cannot map what the kind needs, feed-forward stays off, said at start naming "
+      "the joint"}
+        .among(std::span<const char* const>(kFeedForward)),
+    K{"dynamics.collision", &F::collision, "",
+      "collision detection: a momentum observer on the drives' measured torque (6077h, mapped into TPDO2) against "
+      "the model, every cycle while the arm is powered (not during homing or free-drive); a residual above a joint's "
+      "threshold stops the arm with fault `collision` naming the joint. Needs inertial data and 6077h on every joint "
+      "(else off, said at start)"},
+    K{"dynamics.collision_gain", &F::collision_gain, "1/s",
+      "the observer's gain K: the residual follows the external torque with time constant 1/K"}.within(1, 1000),
+    K{"dynamics.collision_sensitivity", &F::collision_sensitivity, "",
+      "every threshold is divided by it: 2 halves them (more sensitive), 0.5 doubles them"}.within(0.1, 10),
+    K{"dynamics.collision_threshold_pct", &F::collision_threshold_pct, "%",
+      "a joint's collision threshold without drive.collision_threshold: this percent of its rated torque (joint "
+      "side: 6076h or drive.rated_torque x gear ratio)"}.above(0, 300),
+    K{"dynamics.freedrive", &F::freedrive, "",
+      "hand guiding (`freedrive on|off`): map cyclic synchronous torque (6060h/6061h in the PDOs, target torque 6071h "
+      "in RPDO2) on the drives that have it; `freedrive on` then commands gravity and friction compensation only. A "
+      "joint without it refuses `freedrive on` naming the joint"},
+    K{"dynamics.freedrive_damping", &F::freedrive_damping, "1/s",
+      "virtual viscous damping in free-drive, per joint this times the joint's largest inertia (so the arm does not "
+      "drift on the model's errors); 0 = none"}.within(0, 100),
     K{"console.stdin", &F::console_stdin, "", "console on stdin/stdout"},
     K{"console.pty", &F::console_pty, "", "open a pseudo-terminal console and print its path"},
     K{"console.serial", &F::console_serial, "", "serial device for a console (e.g. `/dev/ttyS0`); `\"\"` = none"}
@@ -241,6 +273,14 @@ const DriveKey kDriveTable[] = {
         .within(0, 1e6),
     DK{"homing.backoff", &D::homing_backoff, "deg (mm)", "hard_stop: distance moved back from the stop"}
         .above(0, kMaxLength),
+    DK{"rated_torque", &D::rated_torque, "N m (N)",
+       "the motor's rated torque (motor side), the unit of 6071h / 6077h / 60B2h (per mille of it); 0 = read the "
+       "drive's 6076h at bring-up (used when a torque object is mapped: dynamics.* or homing.torque_limit)"}
+        .above(0, 1e5).unset_means(0, "the drive's 6076h", true),
+    DK{"collision_threshold", &D::collision_threshold, "N m (N)",
+       "this joint's collision threshold (joint side, before dynamics.collision_sensitivity); 0 = "
+       "dynamics.collision_threshold_pct of its rated torque"}
+        .above(0, 1e6).unset_means(0, "dynamics.collision_threshold_pct of the rated torque", true),
 };
 
 using OC = OutputConfig;

@@ -14,6 +14,7 @@
 #include "servoarm/config/config.hpp"
 #include "servoarm/console/console.hpp"
 #include "servoarm/rt/controller.hpp"
+#include "servoarm/rt/model_control.hpp"
 #include "servoarm/hal/canopen_master.hpp"
 #include "servoarm/hal/clock.hpp"
 #include "servoarm/hal/socketcan_bus.hpp"
@@ -43,6 +44,9 @@ struct App {
   std::vector<int> output_joint;
   std::unique_ptr<Controller> ctl;
   std::unique_ptr<Console> console;
+  /// The dynamic model in the control cycle ([dynamics] keys): made by build(), configured by
+  /// boot() once the drives are up (their capabilities and rated torques are known then).
+  std::unique_ptr<ModelControl> model;
 
   /// Build everything (no threads started, drives not started). "" or the error.
   /// `clock` overrides the monotonic clock (tests pass a ManualClock); `sim` makes the
@@ -52,6 +56,12 @@ struct App {
   /// virtual drives on a real clock, their thread must be running (SimPlant::start_thread).
   std::string boot();
   ControllerConfig controller_config() const;
+  /// The [dynamics] and drive.collision_threshold keys in SI, with each joint's rated torque
+  /// (joint side) as the master brought it up: after boot().
+  ModelControlConfig model_config() const;
+  /// What boot() found about the [dynamics] parts asked for: one line per part refused ("" when
+  /// every part asked for runs); armfw prints it at start. The parts refused stay off.
+  std::string dynamics_notes() const { return model && model->configured() ? model->start_notes() : ""; }
   /// Joint j's homing (drive.homing.*, deg / mm -> SI) as the CANopen master takes it.
   hal::HomingSpec homing_spec(int j) const;
   ConsoleConfig console_config() const;

@@ -49,6 +49,9 @@ struct DriveConfig {
   double homing_following_limit = 2.0;   ///< deg: hard_stop: |demanded - actual| that means contact
   double homing_torque_limit = 0.0;      ///< N m (N): hard_stop: |torque| that means contact; 0 = unused
   double homing_backoff = 2.0;           ///< deg: hard_stop: distance moved back from the contact
+  // dynamics (issue 20, docs/dynamics.md#using-the-model-in-the-firmware)
+  double rated_torque = 0;               ///< N m (N), motor side: the unit of 6071h/6077h/60B2h; 0 = the drive's 6076h
+  double collision_threshold = 0;        ///< N m (N), joint side; 0 = dynamics.collision_threshold_pct of the rated torque
 
   bool operator==(const DriveConfig&) const = default;
 };
@@ -94,9 +97,19 @@ struct FwConfig {
   double linear_speed_mm_s = 100.0;
   double max_linear_speed_mm_s = 250.0;
   double max_move_duration_s = 600.0;  ///< longest move the console accepts (longer: out_of_range)
+  double default_blend_mm = 0.0;       ///< movel / G1 blend tolerance without blend=; 0 = exact stop
+  double default_blend_deg = 0.0;      ///< movej blend tolerance without blend=; 0 = exact stop
   // [homing]
   std::vector<std::vector<int>> homing_order;  ///< groups of 1-based joints, run one after the other; [] = one group of all
   double homing_unhomed_jog_pct = 25.0;  ///< joint jogs of an unhomed arm run at this percent of the speed asked
+  // [dynamics] (issue 20): the model in the control loop; every part off by default (the frames of before)
+  std::string feed_forward = "off";    ///< "off", "velocity" (60B1h), "torque" (60B1h + model torque 60B2h)
+  bool collision = false;              ///< momentum observer on the measured torque (6077h)
+  double collision_gain = 100.0;       ///< 1/s: the observer's bandwidth
+  double collision_sensitivity = 1.0;  ///< thresholds / sensitivity
+  double collision_threshold_pct = 15.0;  ///< % of a joint's rated torque (joint side) without drive.collision_threshold
+  bool freedrive = false;              ///< map cyclic synchronous torque (CST) for `freedrive on`
+  double freedrive_damping = 10.0;     ///< 1/s x the joint's largest inertia: virtual damping in free-drive
   // [console]
   bool console_stdin = true;
   bool console_pty = false;
