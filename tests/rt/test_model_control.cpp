@@ -448,6 +448,23 @@ TEST(ModelControl, FreeDriveEndsOnQuickStopAndOnALostHeartbeat) {
     }
     LONGS_EQUAL(0, rig.rt_allocs);
   }
+  {  // left (a fault reaction in the controller) and no longer stepped: off once the drives are in CSP
+    Rig rig;
+    ModelControl mc;
+    CHECK(mc.configure(rig.chain, *rig.master, rig.config(FeedForwardKind::torque, false, true)));
+    const std::vector<double> junk(6, 0.0);
+    rig.master->read(rig.clock.now());
+    LONGS_EQUAL(int(Status::ok), int(mc.freedrive_enter()));
+    for (int k = 0; k < 5; ++k) rig.cycle(junk, [&] { mc.freedrive_step(); });
+    mc.freedrive_leave();
+    const kin::JointState rest = kin::JointState::rest(rig.plant().q());
+    int k = 0;
+    for (; k < 10 && mc.freedrive_phase() != FreedrivePhase::off; ++k) rig.cycle(rig.hold(), [&] { mc.feed_forward(rest); });
+    LONGS_EQUAL(int(FreedrivePhase::off), int(mc.freedrive_phase()));
+    CHECK(k <= 3);
+    rig.cycle(rig.hold(), [&] { mc.feed_forward(rest); });
+    CHECK(mc.stats().ff_cycles >= 1);  // feed-forward runs again
+  }
 }
 
 // Refusals: one line naming the model or the joint; the part stays off and cannot be switched on;

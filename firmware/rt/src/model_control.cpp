@@ -207,7 +207,17 @@ bool ModelControl::measured(kin::JointVector& q, kin::JointVector& qd, kin::Join
   return ok;
 }
 
+void ModelControl::settle_leaving() {
+  if (phase_ != FreedrivePhase::leaving) return;
+  for (int j = 0; j < n_; ++j)
+    if (bus_->cyclic_mode(static_cast<std::size_t>(j)).mode != hal::CyclicMode::position) return;
+  phase_ = FreedrivePhase::off;
+  observer_.reset();
+  watching_ = false;
+}
+
 void ModelControl::feed_forward(const kin::JointState& cmd) {
+  settle_leaving();
   if (!ff_on_.load(std::memory_order_relaxed) || !available(ModelPart::feed_forward) || phase_ != FreedrivePhase::off)
     return;
   if (cmd.pos.size() != n_ || cmd.vel.size() != n_ || cmd.acc.size() != n_) {
@@ -232,6 +242,7 @@ void ModelControl::feed_forward(const kin::JointState& cmd) {
 
 bool ModelControl::observe(bool watch, double dt, kin::CollisionVerdict& verdict) {
   verdict = kin::CollisionVerdict{};
+  settle_leaving();
   bool on = watch && coll_on_.load(std::memory_order_relaxed) && available(ModelPart::collision) &&
             phase_ == FreedrivePhase::off && dt > 0;
   for (int j = 0; on && j < n_; ++j) {

@@ -139,7 +139,9 @@ class ModelControl {
   /// takes every joint back to CSP (leaving; last_error() says which and why). Returns the phase
   /// after this step: off once every joint is in CSP again.
   FreedrivePhase freedrive_step();
-  /// Back to CSP holding where each joint stands (from the next write()). No-op when off.
+  /// Back to CSP holding where each joint stands (from the next write()). No-op when off. The
+  /// phase becomes off once every drive shows CSP (freedrive_step(), or feed_forward() / observe()
+  /// of a later cycle).
   void freedrive_leave();
   FreedrivePhase freedrive_phase() const { return phase_; }
   /// Joint j's free-drive damping, N m s/rad (N s/m).
@@ -155,6 +157,9 @@ class ModelControl {
 
  private:
   bool measured(kin::JointVector& q, kin::JointVector& qd, kin::JointVector* tau) const;
+  /// leaving -> off once every joint shows CSP again (also when freedrive_step() is no longer
+  /// called: the controller left free-drive for a fault reaction).
+  void settle_leaving();
   void refuse(ModelPart p, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
 
   const kin::Chain* chain_ = nullptr;
