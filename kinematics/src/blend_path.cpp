@@ -27,9 +27,9 @@ Status own_q(const PathSegment& g, double t, JointVector& q) {
   return g.line.sample_ik(u, q, qd, qdd);
 }
 
-// Both segments moving (t in [B.start, A.end)): the sum of the motions.
-Status blended(const PathBlendConfig& cfg, const PathSegment& A, const PathSegment& B, double t, const JointVector& seed,
-               JointVector& q) {
+// Both segments moving (t in [B.start, A.end)): the sum of the motions. Line-line: the
+// IK of B's line (the chain and solver it was planned with, as the firmware's cfg).
+Status blended(const PathSegment& A, const PathSegment& B, double t, const JointVector& seed, JointVector& q) {
   if (A.kind == PathKind::line && B.kind == PathKind::line) {
     double sa, va, aa, sb, vb, ab;
     A.line.path_state(t - A.start, sa, va, aa);
@@ -38,7 +38,8 @@ Status blended(const PathBlendConfig& cfg, const PathSegment& A, const PathSegme
     x.translation() = B.line.p0 + (sa - 1.0) * (A.line.p1 - A.line.p0) + sb * (B.line.p1 - B.line.p0);
     const Eigen::Quaterniond ra = A.line.r0.slerp(sa, A.line.r1), rb = B.line.r0.slerp(sb, B.line.r1);
     x.linear() = (ra * A.line.r1.conjugate() * rb).normalized().toRotationMatrix();
-    return cfg.ik.fn(*cfg.chain, x, seed, q, cfg.ik.ctx);
+    if (B.line.chain == nullptr || B.line.ik.fn == nullptr) return Status::bad_input;
+    return B.line.ik.fn(*B.line.chain, x, seed, q, B.line.ik.ctx);
   }
   JointVector qa, qb;
   const Status s1 = own_q(A, t, qa);
@@ -49,16 +50,16 @@ Status blended(const PathBlendConfig& cfg, const PathSegment& A, const PathSegme
 
 bool positive_finite(double x) { return std::isfinite(x) && x > 0; }
 
-// Straight joint segment from rest to rest, override o: v o, a o^2, j o^3.
-bool plan_joint(const JointLimits& L, double o, PathSegment& b) {
+// Straight joint segment from rest to rest, override o: v o, a o^2 sa, j o^3 sj.
+bool plan_joint(const JointLimits& L, double o, double sa, double sj, PathSegment& b) {
   Limits1 sl{1e300, 1e300, 1e300};
   for (int i = 0; i < L.n; ++i) {
     const double di = std::fabs(b.delta[i]);
     if (!(di > 0)) continue;
     const JointDynamics& d = L.dyn[static_cast<std::size_t>(i)];
     sl.v = std::min(sl.v, o * d.max_velocity / di);
-    sl.a = std::min(sl.a, o * o * d.max_acceleration / di);
-    sl.j = std::min(sl.j, o * o * o * d.max_jerk / di);
+    sl.a = std::min(sl.a, sa * o * o * d.max_acceleration / di);
+    sl.j = std::min(sl.j, sj * o * o * o * d.max_jerk / di);
   }
   b.s.n = 0;
   const double T = plan_1d(0.0, 0.0, 0.0, 0.0, 1.0, sl, 0.0, b.s);
@@ -336,7 +337,25 @@ BlendStatus path_append_joint(PathBlendCore& core, std::span<PathSegment> seg, c
   if (forward(*core.cfg.chain, goal, nb.x_end) != Status::ok) return BlendStatus::bad_input;
   nb.tolerance = tolerance;
   nb.blend_in = nb.blend = nb.corner = 0;
-  if (!plan_joint(L, override, nb)) return BlendStatus::no_solution;
+  // A segment that blends (into its target, or out of the previous one) is planned with a
+  // share of the acceleration and jerk limits (PathBlendConfig::joint_share), so that its
+  // overlap with a neighbour can stay within them. The last one of a run (it blends in, not
+  // out) also tries the full acceleration with the shared jerk, and keeps what ends first.
+  const bool blends_in = core.count > 0 && seg[slot(seg, core.head + core.count - 1)].tolerance > 0;
+  const double sh = std::clamp(core.cfg.joint_share, 0.05, 1.0);
+  const bool shared = (blends_in || tolerance > 0) && sh < 1;
+  if (shared && blends_in && !(tolerance > 0)) {
+    double best_end = INFINITY, best_sa = sh;
+    for (const double sa : {sh, 1.0}) {
+      if (!plan_joint(L, override, sa, sh, nb)) continue;
+      PathBlendReport r;
+      if (!is_ok(blend_corner(core, seg, nb, t_earliest, &r))) continue;
+      if (nb.end() < best_end - 1e-9) best_end = nb.end(), best_sa = sa;
+    }
+    if (!plan_joint(L, override, best_sa, sh, nb)) return BlendStatus::no_solution;  // (the winner again: A's fields set by it)
+  } else if (!plan_joint(L, override, shared ? sh : 1.0, shared ? sh : 1.0, nb)) {
+    return BlendStatus::no_solution;
+  }
   const BlendStatus st = blend_corner(core, seg, nb, t_earliest, report);
   ++core.count;
   if (report) report->status = st;
@@ -387,9 +406,24 @@ Status path_sample(const PathBlendCore& core, std::span<const PathSegment> seg, 
   const PathSegment& K = seg[slot(seg, core.head + lo)];
   if (lo > 0) {
     const PathSegment& J = seg[slot(seg, core.head + lo - 1)];
-    if (t < J.end()) return blended(core.cfg, J, K, t, seed, q);
+    if (t < J.end()) return blended(J, K, t, seed, q);
   }
   return own_q(K, t, q);
+}
+
+Status path_sample_pair(const PathSegment* a, const PathSegment& b, double t, const JointVector& seed, JointVector& q) {
+  if (a != nullptr && t >= b.start && t < a->end()) return blended(*a, b, t, seed, q);
+  if (a != nullptr && t < b.start) return own_q(*a, t, q);
+  return own_q(b, t, q);
+}
+
+void path_segment_start(const PathSegment& g, int n, JointVector& q) {
+  q = JointVector::Zero(n);
+  if (g.kind == PathKind::joint) {
+    q = g.from;
+    return;
+  }
+  for (int i = 0; i < n; ++i) q[i] = g.line.q_knot[0][static_cast<std::size_t>(i)];
 }
 
 void path_retire(PathBlendCore& core, std::span<const PathSegment> seg, double t) {

@@ -545,3 +545,109 @@ TEST(ConsoleProgram, FiguresTwentyPointPickAndPlace) {
   // the controller blends (issue 18): at least 30 % shorter than with exact stops
   CHECK(cycle_s[1] <= 0.7 * cycle_s[0]);
 }
+
+// Blended lines and mixed corners in programs (issue 18): a movej with blend= before a movel
+// goes as a path segment (the runner looks at the next motion), so joint->line and
+// line->joint corners blend; a G-code program's G64 P blends its G1 corners, G61 stops
+// exactly. Corners checked against FK of the samples and the program's own numbers.
+TEST(ConsoleProgram, BlendedLinesAndMixedCornersInPrograms) {
+  Tmp tmp;
+  ProgRig r(tmp.dir);
+  r.enable();
+  const kin::Chain& chain = r.app.ctl->chain();
+  auto flange = [&](const kin::JointVector& q) {
+    kin::Pose x;
+    CHECK(kin::forward(chain, q, x) == kin::Status::ok);
+    return Eigen::Vector3d(x.translation());
+  };
+  auto v6deg = [](std::initializer_list<double> l) {
+    kin::JointVector v(6);
+    int k = 0;
+    for (double x : l) v[k++] = x * kDeg;
+    return v;
+  };
+  auto joints = [](const kin::JointVector& q) {
+    std::string t;
+    for (int j = 0; j < 6; ++j) { char b[32]; std::snprintf(b, sizeof b, " %.10g", q[j] / kDeg); t += b; }
+    return t;
+  };
+  auto xyz = [](const Eigen::Vector3d& p) {
+    char b[96];
+    std::snprintf(b, sizeof b, " %.6f %.6f %.6f", p.x() * 1e3, p.y() * 1e3, p.z() * 1e3);
+    return std::string(b);
+  };
+  const kin::JointVector home = v6deg({0, -30, 60, 0, 40, 0}), above = v6deg({25, -35, 70, 10, 35, 10}),
+                         other = v6deg({-20, -30, 65, -5, 40, -10});
+  const Eigen::Vector3d pa = flange(above), pick = pa + Eigen::Vector3d(0, 0, -0.08);
+  struct Out {
+    double cycle = 0;
+    std::uint64_t blended = 0;
+    std::vector<kin::JointVector> q;
+  };
+  auto run = [&](const std::string& name, const std::string& text) {
+    r.write(name, text);
+    CHECK(answer_ok(r.cmd("movej" + joints(home) + " speed=100")));
+    CHECK(answer_ok(r.cmd("wait")));
+    Out o;
+    const std::uint64_t b0 = r.tel().blended_corners;
+    const std::uint32_t first = r.app.console->last_motion_id() + 1;
+    const std::string a = r.cmd("run " + name);
+    CHECK_TEXT(answer_ok(a), a.c_str());
+    for (int i = 0; i < 200000 && r.app.console->run_state() != RunState::idle; ++i) {
+      r.step1();
+      if (r.tel().running_id >= first || r.tel().done_id >= first) o.q.push_back(r.q_cmd());
+    }
+    CHECK_TEXT(has(r.events, "program: " + name + " done"), r.events.c_str());
+    r.events.clear();
+    o.cycle = static_cast<double>(o.q.size()) / r.app.ctl->config().rate_hz;
+    o.blended = r.tel().blended_corners - b0;
+    return o;
+  };
+  auto mixed = [&](bool blend) {
+    return "movej" + joints(above) + " speed=100" + (blend ? " blend=20" : "") + "\n" +  //
+           "movel" + xyz(pick) + " speed=150\n" +                                           // the pick: exact
+           "movel" + xyz(pa) + " speed=150" + (blend ? " blend=25" : "") + "\n" +         //
+           "movej" + joints(other) + " speed=100\n";
+  };
+  const Out mb = run("mixed.arm", mixed(true)), mx = run("mixed_x.arm", mixed(false));
+  double c_above = INFINITY, c_up = INFINITY, c_pick = INFINITY;
+  for (const auto& q : mb.q) {
+    c_above = std::fmin(c_above, (q - above).norm());
+    c_pick = std::fmin(c_pick, (flange(q) - pick).norm());
+  }
+  // the way up passes pa a second time: the closest approach after the pick
+  std::size_t ip = 0;
+  for (std::size_t i = 0; i < mb.q.size(); ++i)
+    if ((flange(mb.q[i]) - pick).norm() <= c_pick + 1e-12) ip = i;
+  for (std::size_t i = ip; i < mb.q.size(); ++i) c_up = std::fmin(c_up, (flange(mb.q[i]) - pa).norm());
+  std::printf("\nprogram movej->movel->movel->movej: exact %.3f s, blended %.3f s (%llu corners); above %.3f deg, up %.2f mm, pick %.2e m\n",
+              mx.cycle, mb.cycle, static_cast<unsigned long long>(mb.blended), c_above / kDeg, c_up * 1e3, c_pick);
+  LONGS_EQUAL(2, mb.blended);
+  LONGS_EQUAL(0, mx.blended);
+  CHECK(c_above <= 20 * kDeg + 1e-9);
+  CHECK(c_above > 1e-4);
+  CHECK(c_up <= 25e-3 + 1e-9);
+  CHECK(c_up > 1e-5);
+  CHECK(c_pick < 1e-6);  // the exact stop is reached
+  CHECK(mb.cycle < mx.cycle);
+
+  // G-code: G64 P2 blends the corners of a zigzag, G61 stops at each
+  const Eigen::Vector3d p0 = flange(home);
+  auto zig = [&](const char* mode) {
+    std::string t = std::string("G21 G90\n") + mode + "\n";
+    Eigen::Vector3d p = p0;
+    for (int k = 0; k < 6; ++k) {
+      p += Eigen::Vector3d(-0.01, k % 2 == 0 ? 0.01 : -0.01, 0);
+      char b[96];
+      std::snprintf(b, sizeof b, "G1 X%.4f Y%.4f Z%.4f F6000\n", p.x() * 1e3, p.y() * 1e3, p.z() * 1e3);
+      t += b;
+    }
+    return t + "M30\n";
+  };
+  const Out gb = run("zig.nc", zig("G64 P2")), gx = run("zigx.nc", zig("G61"));
+  std::printf("\nG-code zigzag 6 x 14 mm at F6000: G61 %.3f s, G64 P2 %.3f s (%llu corners)\n", gx.cycle, gb.cycle,
+              static_cast<unsigned long long>(gb.blended));
+  LONGS_EQUAL(5, gb.blended);
+  LONGS_EQUAL(0, gx.blended);
+  CHECK(gb.cycle < gx.cycle);
+}

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdarg>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <memory>
 #include <thread>
@@ -98,6 +99,8 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
   NamedPose base;
   base.name = "base";
   frames_.push_back(base);
+  shadow_ = std::make_unique<PathShadow>();
+  check_shadow_ = std::make_unique<PathShadow>();
 }
 
 // IK of movel's path check and of the control thread's Cartesian sampling: the App's
@@ -468,7 +471,7 @@ MoveJoints Console::joint_request(const Command& c) const {
   m.goal = kin::JointVector(n_);
   for (int j = 0; j < n_; ++j) m.goal[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
   m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
-  m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : 0.0;
+  m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : -1.0;
   return m;
 }
 
@@ -506,7 +509,6 @@ void Console::queue(Session& s, const MoveJoints& req) {
   JointMove& jm = m->payload.emplace<JointMove>();
   jm.goal = goal;
   jm.override = pct / 100.0;
-  jm.blend = req.blend > 0.0 && std::isfinite(req.blend) ? req.blend : 0.0;  // the controller blends into the next joint move
   kin::MovejOptions o;
   o.override = jm.override;
   const kin::MotionStatus ms = kin::plan_movej(lim, kin::JointState::rest(s.check_mode ? s.check_tail : tail()), goal, o, jm.plan);
@@ -515,19 +517,111 @@ void Console::queue(Session& s, const MoveJoints& req) {
     return;
   }
   if (!duration_ok(s, "movej", jm.plan.duration)) return;
+  const double dur = jm.plan.duration;  // (jm is replaced when the move goes as a blended segment)
+  const PathResult pr = queue_path(s, m, false, goal, kin::Pose::Identity(), cfg_.cartesian, pct / 100.0,
+                                   blend_of(req.blend, false));
+  const std::string blended = pr.used && pr.blend > 0 ? fmt(" blend=%.3fs", pr.blend) : std::string();
+  if (!pr.used) jm.blend = blend_of(req.blend, false);  // the controller blends it into the next joint move
   if (s.check_mode) {  // checked, not queued
     s.check_tail = goal;
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs", jm.plan.duration));
+    if (!pr.used) s.check_time += dur, s.check_blends = false;
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs%s", dur, blended.c_str()));
     return;
   }
   m->id = next_id_++;
   take_sync_outputs(*m);
-  const double dur = jm.plan.duration;
   ctl_.motions().commit();
   tail_ = goal;
   tail_id_ = m->id;
+  shadow_tail_id_ = pr.used ? m->id : 0;
   tail_gen_ = ctl_.telemetry().generation;
-  answer_ok(s, fmt("queued id=%u duration=%.3fs", unsigned(tail_id_), dur));
+  answer_ok(s, fmt("queued id=%u duration=%.3fs%s", unsigned(tail_id_), dur, blended.c_str()));
+}
+
+// ---------------------------------------------------------------------------
+// Blended runs (docs/motion.md#blending)
+// ---------------------------------------------------------------------------
+// A move with a blend tolerance, and a move following one still queued, goes to the
+// controller as a PathMove: its segment planned alone from rest at the previous target and
+// its overlap with the segment before it chosen here by kin::PathBlendQueue (every joint's
+// velocity, acceleration and jerk, the tool speed of lines, IK at every sample of a
+// line-line overlap and the corner's tolerance, checked at the control rate on the run's
+// time base). The controller starts the segment at that time if it still can
+// (kPathLead: how far ahead of the run's newest sample a typed move is placed), else from
+// rest where the one before ends.
+
+namespace {
+constexpr double kPathLead = 0.15;  // s: console line handling + telemetry age, with margin
+}  // namespace
+
+double Console::blend_of(double given, bool line) const {
+  if (given >= 0) return given;
+  if (step_blend_ >= 0) return step_blend_;
+  return line ? cfg_.default_blend_m : cfg_.default_blend_rad;
+}
+
+Console::PathResult Console::queue_path(Session& s, MotionItem* m, bool line, const kin::JointVector& goal,
+                                        const kin::Pose& target, const kin::CartesianLimits& cl, double override,
+                                        double tol) {
+  PathResult r;
+  if (!std::isfinite(tol) || tol < 0) tol = 0;
+  PathShadow& q = s.check_mode ? *check_shadow_ : *shadow_;
+  const kin::Chain* chain = &tool_slot().chain;
+  bool linked = false;
+  double t_earliest = 0;
+  if (s.check_mode) {
+    linked = s.check_blends && q.size() > 0 && q.core.cfg.chain == chain;
+  } else {
+    const Telemetry t = ctl_.telemetry();
+    linked = shadow_tail_id_ != 0 && shadow_tail_id_ == tail_id_ && t.generation == tail_gen_ && t.done_id < tail_id_ &&
+             !ctl_.motions().empty() && q.size() > 0 && q.core.cfg.chain == chain && q.at(q.size() - 1).tolerance > 0;
+    if (linked && t.path_time >= 0) t_earliest = t.path_time + kPathLead;
+  }
+  // A plain move: no tolerance and nothing to blend out of; a joint move with a tolerance
+  // that no line follows (as far as the console knows: a program's next motion) blends in the
+  // controller's joint queue (JointMove::blend).
+  if (!linked && !(tol > 0 && (line || step_next_line_))) return r;
+  if (linked) {
+    if (q.size() >= 2) q.retire(q.at(q.size() - 1).start);  // keep the last two: the checks' window may reach both
+  } else {
+    kin::PathBlendConfig pc;
+    pc.limits = ctl_.limits();
+    pc.rate = 1.0 / ctl_.period_s();
+    pc.chain = chain;
+    pc.ik = ik_solver();
+    pc.joint_share = 0.5;  // blended joint segments share acceleration and jerk with their neighbour
+    q.reset(pc, s.check_mode ? s.check_tail : tail());
+    if (s.check_mode) s.check_run_base = s.check_time;
+  }
+  kin::PathBlendReport rep;
+  kin::BlendStatus st;
+  if (line) {
+    const kin::MovelOptions mo;
+    st = q.append_line(target, cl, mo, tol, t_earliest, &rep);
+  } else {
+    st = q.append_joint(goal, override, tol, t_earliest, &rep);
+  }
+  if (!kin::is_ok(st) || st == kin::BlendStatus::zero_length) {  // the plain move (checked already) instead
+    if (s.check_mode) s.check_blends = false;
+    else shadow_tail_id_ = 0;
+    return r;
+  }
+  const kin::PathSegment& g = q.at(q.size() - 1);
+  r.used = true;
+  r.blend = rep.blend;
+  r.corner = rep.corner;
+  r.limited_by = rep.limited_by;
+  r.end = g.end();
+  if (s.check_mode) {
+    s.check_blends = tol > 0;
+    s.check_time = s.check_run_base + g.end();
+    return r;
+  }
+  PathMove& pm = m->payload.emplace<PathMove>();
+  pm.seg = g;
+  pm.after = linked ? tail_id_ : 0;
+  pm.override = override;
+  return r;
 }
 
 void Console::queue(Session& s, const MoveLine& req) {
@@ -568,23 +662,29 @@ void Console::queue(Session& s, const MoveLine& req) {
     return;
   }
   if (!duration_ok(s, "movel", path.duration)) return;
+  path.ik = ik_solver();
+  const double dur = path.duration;  // (path is replaced when the move goes as a blended segment)
+  const double slow = path.slowdown;
+  const kin::JointVector goal = path.goal;
+  const PathResult pr = queue_path(s, m, true, goal, target, cl, 1.0, blend_of(req.blend, true));
+  const std::string blended = pr.used && pr.blend > 0 ? fmt(" blend=%.3fs", pr.blend) : std::string();
   if (s.check_mode) {  // checked, not queued
-    s.check_tail = path.goal;
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs", path.duration));
+    s.check_tail = goal;
+    if (!pr.used) s.check_time += dur, s.check_blends = false;
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs%s", dur, blended.c_str()));
     return;
   }
   feed_now_ = speed;
   m->id = next_id_++;
   take_sync_outputs(*m);
-  path.ik = ik_solver();
-  const double dur = path.duration;
-  const double slow = path.slowdown;
-  tail_ = path.goal;
+  tail_ = goal;
   tail_id_ = m->id;
+  shadow_tail_id_ = pr.used ? m->id : 0;
   tail_gen_ = ctl_.telemetry().generation;
   ctl_.motions().commit();
-  answer_ok(s, fmt("queued id=%u duration=%.3fs%s", unsigned(tail_id_), dur,
-                   ms == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", slow).c_str() : ""));
+  answer_ok(s, fmt("queued id=%u duration=%.3fs%s%s", unsigned(tail_id_), dur,
+                   ms == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", slow).c_str() : "",
+                   blended.c_str()));
 }
 
 bool Console::duration_ok(Session& s, const char* what, double duration_s) {
@@ -596,6 +696,8 @@ bool Console::duration_ok(Session& s, const char* what, double duration_s) {
 
 void Console::queue_dwell(Session& s, double secs) {
   if (s.check_mode) {
+    s.check_time += secs;
+    s.check_blends = false;
     answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked");
     return;
   }
@@ -633,6 +735,7 @@ MoveLine Console::line_request(const Command& c, const kin::JointVector* from) c
   if (c.cmd == Cmd::movel) {
     m.target = pose_from_values(c, base);
     m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
+    m.blend = c.has_blend ? cfg_.units.length_in(c.blend) : -1.0;
     return m;
   }
   // G0/G1: the axes given replace (G90) or move (G91) the queue's end pose; the others keep it.

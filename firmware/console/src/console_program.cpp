@@ -265,13 +265,14 @@ void Console::queue_at_point(Session& s, const Command& c) {
     MoveJoints m;
     m.goal = p->q;
     m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
-    m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : 0.0;
+    m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : -1.0;
     queue(s, m);
     return;
   }
   MoveLine m;
   m.target = tcp(p->q);  // where the point's joints put the active tool, on a straight line
   m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
+  m.blend = c.has_blend ? cfg_.units.length_in(c.blend) : -1.0;
   queue(s, m);
 }
 
@@ -293,19 +294,34 @@ void Console::do_programs(Session& s) {
   answer_ok(s, fmt("%zu programs in %s", names.size(), cfg_.programs_dir.c_str()));
 }
 
-void Console::exec_step(Session& ps, const prog::ProgramStep& st) {
+void Console::exec_step(Session& ps, const prog::Program& p, const prog::ProgramStep& st) {
   const Session* prev = sel_;
   sel_ = &ps;
+  // The step's blend tolerance (blend=, or the G-code program's G64 P / G61) for the move it
+  // queues, in SI; none given (< 0): the configured default (blend_of).
+  const bool gcode = static_cast<std::size_t>(st.file) < p.files.size() && prog::is_gcode_file(p.files[static_cast<std::size_t>(st.file)]);
+  step_blend_ = st.blend < 0 ? -1.0
+                : gcode      ? st.blend * 1e-3  // G-code: mm
+                : st.cmd.cmd == Cmd::movej ? cfg_.units.angle_in(st.blend)
+                                           : cfg_.units.length_in(st.blend);
+  step_next_line_ = false;
+  if (&st >= p.steps.data() && &st < p.steps.data() + p.steps.size()) {
+    for (std::size_t i = static_cast<std::size_t>(&st - p.steps.data()) + 1; i < p.steps.size(); ++i) {
+      const Cmd c = p.steps[i].cmd.cmd;
+      if (c == Cmd::movel || c == Cmd::gmove) step_next_line_ = true;
+      if (kind_of(p.steps[i].cmd) == StepKind::motion || kind_of(p.steps[i].cmd) == StepKind::needs_idle) break;
+    }
+  }
   if (st.point >= 0 && st.cmd.cmd == Cmd::movel && static_cast<std::size_t>(st.point) < points_.points.size()) {
     MoveLine m;
     m.target = tcp(points_.points[static_cast<std::size_t>(st.point)].q);
     m.speed = st.cmd.has_speed ? cfg_.units.length_in(st.cmd.speed) : 0.0;
     queue(ps, m);
-  } else if (st.cmd.cmd == Cmd::movej && st.blend > 0.0) {
-    execute(ps, st.text + fmt(" blend=%.17g", st.blend));  // the move's blend tolerance (console angle unit) to the controller
   } else {
     execute(ps, st.text);
   }
+  step_blend_ = -1;
+  step_next_line_ = false;
   sel_ = prev;
 }
 
@@ -329,7 +345,7 @@ std::string Console::check_program(const prog::Program& p) {
       case StepKind::needs_idle: break;
     }
     cs.out.clear();
-    exec_step(cs, st);
+    exec_step(cs, p, st);
     if (const std::string e = error_of(cs.out); !e.empty()) return p.where(st) + ": " + e;
   }
   return "";
@@ -525,7 +541,7 @@ void Console::tick() {
     }
     r.ps.out.clear();
     const std::size_t i = r.next++;
-    exec_step(r.ps, st);
+    exec_step(r.ps, r.prog, st);
     if (const std::string e = error_of(r.ps.out); !e.empty()) {
       fail(i, e);
       return;

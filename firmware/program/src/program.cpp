@@ -122,7 +122,7 @@ struct Loader {
   std::string err;
   // phase 2 state (execution order)
   fw::GcodeModal modal;
-  double gcode_blend = 0;  // mm, from G64 P / G61
+  double gcode_blend = -1;  // mm, from G64 P / G61 (0); < 0: neither seen (the configured default)
 
   std::string at(int file, int line) const { return files[static_cast<std::size_t>(file)]->path + ":" + std::to_string(line); }
   bool fail(int file, int line, const std::string& why) {

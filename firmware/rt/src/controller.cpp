@@ -44,6 +44,7 @@ const char* to_string(MotionKind k) {
     case MotionKind::joint: return "joint";
     case MotionKind::cartesian: return "cartesian";
     case MotionKind::dwell: return "dwell";
+    case MotionKind::path: return "path";
   }
   return "?";
 }
@@ -107,14 +108,14 @@ void Controller::hold_measured() {
   cmd_ = kin::JointState::rest(q_act_);
   have_prev_ = false;
   ++generation_;
-  end_blend();
+  end_path();
 }
 
 std::size_t Controller::flush_motions() {
   const std::size_t n = motions_.clear();
   ++generation_;
   running_ = nullptr;
-  end_blend();
+  end_path();
   return n;
 }
 
@@ -199,7 +200,7 @@ void Controller::end_of_ramp(Mode ramp) {
 }
 
 void Controller::begin_ramp(Mode ramp) {
-  end_blend();  // a stop always wins: the ramp starts from the blended state, the run is over
+  end_path();  // a stop always wins: the ramp starts from the blended state, the run is over
   // Ramp every joint to rest from the commanded state with the full limits.
   kin::MovejOptions o;
   if (kin::plan_stop(limits_, cmd_, o, stop_traj_) == kin::MotionStatus::ok) {
@@ -211,7 +212,7 @@ void Controller::begin_ramp(Mode ramp) {
 }
 
 void Controller::begin_emergency_stop(Mode ramp, Mode quick_stop) {
-  end_blend();
+  end_path();
   if (!cfg_.drive_quick_stop) {
     begin_ramp(ramp);
     return;
@@ -691,6 +692,7 @@ void Controller::hold_motion(const Request& r) {
         break;
       case MotionKind::joint: begin_ramp(Mode::hold_ramp); break;
       case MotionKind::dwell: set_mode(Mode::held); break;  // the dwell's clock stops
+      case MotionKind::path: hold_path(); break;
     }
   }
   reply(r.seq, RtResult::ok, "feed hold");
@@ -709,6 +711,24 @@ void Controller::resume_motion(const Request& r) {
       finish_motion(true, RtResult::plan_failed);
       reply(r.seq, RtResult::plan_failed, "cannot re-plan the interrupted move");
       return;
+    }
+    motion_t_ = 0;
+  } else if (auto* pm = running_ ? std::get_if<PathMove>(&running_->payload) : nullptr) {
+    if (path_phase_ == PathPhase::line) {
+      kin::resume_movel(pm->seg.line, motion_t_, 1.0);  // on along its line
+    } else if (path_phase_ == PathPhase::to_end || path_phase_ == PathPhase::to_start) {
+      // Ramped down off the run: a joint move to the segment's target (or, held in an
+      // overlap, back to its start: the corner the blend rounded, within the tolerance).
+      kin::MovejOptions o;
+      o.override = pm->override;
+      kin::JointVector target = pm->seg.q_end;
+      if (path_phase_ == PathPhase::to_start) kin::path_segment_start(pm->seg, n_, target);
+      if (kin::plan_movej(limits_, cmd_, target, o, resume_plan_) != kin::MotionStatus::ok) {
+        end_path();
+        finish_motion(true, RtResult::plan_failed);
+        reply(r.seq, RtResult::plan_failed, "cannot re-plan the interrupted move");
+        return;
+      }
     }
     motion_t_ = 0;
   }
@@ -996,6 +1016,13 @@ bool Controller::start_next_motion() {
         break;
       }
       case MotionKind::dwell: break;
+      case MotionKind::path:
+        if (!begin_path(*m)) {  // a run starts from rest where its first segment does
+          running_ = m;
+          finish_motion(true, RtResult::start_moved);
+          continue;
+        }
+        break;
     }
     running_ = m;
     for (std::uint8_t k = 0; k < m->n_outputs && k < kMotionOutputs; ++k) apply_output(m->outputs[k]);  // M62 / M63
@@ -1099,6 +1126,7 @@ void Controller::step_motion() {
   motion_t_ += period_s_;
   bool done = false;
   switch (running_->kind()) {
+    case MotionKind::path: step_path(); return;
     case MotionKind::joint: {
       if (blending_) {
         step_blend();
@@ -1227,6 +1255,165 @@ void Controller::end_blend() {
   blend_items_ = 0;
 }
 
+// ---------------------------------------------------------------------------
+// Blended runs (PathMove; docs/motion.md#blending)
+// ---------------------------------------------------------------------------
+// The console plans each segment (a joint move or a line) alone from rest at the previous
+// target and chooses its overlap with the one before it (kin::PathBlendQueue: checks of every
+// joint's limits, the tool speed and the corner tolerance, sampled at this rate on the run's
+// time base). Here the segments run in place in the motion queue: running_ and, from its
+// start time on, the next one (path_next_) when it blends out of running_; the sample is
+// their superposition (kin::path_sample_pair: one IK in a line-line overlap, as a movel
+// sample). The command's velocity and acceleration are the samples' differences (what a
+// stop ramps down from). A segment is done (motion_done) when it has ended; the next is then
+// running_. A segment that comes too late to start at its time (the console queued it after
+// the run passed it) starts from rest where the one before ends: an exact stop. A stop,
+// fault or e-stop ramps down from the blended state; a feed hold: hold_path.
+
+namespace {
+const kin::PathSegment& seg_of(const MotionItem& m) { return std::get_if<PathMove>(&m.payload)->seg; }
+}  // namespace
+
+bool Controller::begin_path(MotionItem& m) {
+  const kin::PathSegment& g = seg_of(m);
+  kin::JointVector q0(n_);
+  kin::path_segment_start(g, n_, q0);
+  for (int j = 0; j < n_; ++j)
+    if (std::fabs(q0[j] - cmd_.pos[j]) > 1e-6 || cmd_.vel[j] != 0.0) return false;
+  path_phase_ = PathPhase::run;
+  path_t0_ = g.start;  // on the console's time base: the overlaps it checked line up
+  path_k_ = 0;
+  path_next_ = nullptr;
+  path_late_ = false;
+  path_have_ahead_ = false;
+  motion_t_ = 0;
+  return true;
+}
+
+void Controller::step_path() {
+  kin::PathSegment& g = std::get_if<PathMove>(&running_->payload)->seg;
+  switch (path_phase_) {
+    case PathPhase::line:  // held on its line, resumed: a movel (motion_t_ from the hold)
+      if (g.line.sample_ik(motion_t_, cmd_.pos, cmd_.vel, cmd_.acc) < kin::Status::ok) ++ik_fallbacks_;
+      if (motion_t_ < g.line.duration) return;
+      if (mode_ == Mode::hold_line) {
+        motion_t_ = g.line.duration;
+        set_mode(Mode::held);
+        return;
+      }
+      break;  // done at rest at its target
+    case PathPhase::to_end:
+    case PathPhase::to_start:
+      resume_plan_.sample(motion_t_, cmd_);
+      if (motion_t_ < resume_plan_.duration) return;
+      cmd_ = kin::JointState::rest(resume_plan_.goal);
+      if (path_phase_ == PathPhase::to_start) {  // at its start: the segment runs from rest as planned
+        if (!begin_path(*running_)) {
+          end_path();
+          finish_motion(true, RtResult::start_moved);
+          if (!start_next_motion()) set_mode(Mode::idle);
+        }
+        return;
+      }
+      break;  // at its target
+    case PathPhase::none:  // (not entered without begin_path)
+    case PathPhase::run: {
+      // One sample ahead: the setpoint is the sample at t (taken last cycle), its velocity
+      // and acceleration central differences with the one at t + dt (what a stop ramps
+      // down from, accurate to O(dt^2): the ramp starts without an acceleration step).
+      ++path_k_;
+      const double t = path_time(), tn = t + period_s_;
+      if (!path_have_ahead_) {  // the run's first cycle
+        const kin::PathSegment* a0 = path_next_ != nullptr ? &g : nullptr;
+        const kin::PathSegment& b0 = path_next_ != nullptr ? seg_of(*path_next_) : g;
+        if (kin::path_sample_pair(a0, b0, t, cmd_.pos, path_ahead_) < kin::Status::ok) ++ik_fallbacks_;
+        path_have_ahead_ = true;
+      }
+      if (path_next_ == nullptr && !path_late_) {  // computed so far: up to t
+        MotionItem* nx = motions_.peek(1);
+        const PathMove* np = nx != nullptr ? std::get_if<PathMove>(&nx->payload) : nullptr;
+        if (np != nullptr && np->after == running_->id && nx->n_outputs == 0 && np->seg.start < g.end() - 1e-12) {
+          if (!(np->seg.start > t)) path_late_ = true;  // queued after its start time went by
+          else if (np->seg.start <= tn) {
+            path_next_ = nx;
+            ++blends_;
+          }
+        } else if (nx != nullptr) {
+          path_late_ = true;  // what follows does not blend out of this segment: rest at its target
+        }
+      }
+      kin::JointVector qn(n_);
+      const kin::PathSegment* a = path_next_ != nullptr ? &g : nullptr;
+      const kin::PathSegment& b = path_next_ != nullptr ? seg_of(*path_next_) : g;
+      if (kin::path_sample_pair(a, b, tn, path_ahead_, qn) < kin::Status::ok) ++ik_fallbacks_;
+      for (int j = 0; j < n_; ++j) {
+        const double q0 = cmd_.pos[j], q1 = path_ahead_[j], q2 = qn[j];
+        cmd_.pos[j] = q1;
+        cmd_.vel[j] = (q2 - q0) / (2 * period_s_);
+        cmd_.acc[j] = (q2 - 2 * q1 + q0) / (period_s_ * period_s_);
+      }
+      path_ahead_ = qn;
+      if (t < g.end()) return;
+      if (path_next_ != nullptr) {  // its segment is over; the next one has been moving since its start
+        finish_motion(false, RtResult::ok);
+        running_ = motions_.front();
+        path_next_ = nullptr;
+        path_late_ = false;
+        motion_t_ = 0;
+        return;
+      }
+      break;  // the run ends at rest at its target
+    }
+  }
+  cmd_ = kin::JointState::rest(g.q_end);
+  end_path();
+  finish_motion(false, RtResult::ok);
+  if (!start_next_motion()) set_mode(Mode::idle);
+}
+
+void Controller::hold_path() {
+  kin::PathSegment& g = std::get_if<PathMove>(&running_->payload)->seg;
+  PathPhase after = PathPhase::to_end;
+  switch (path_phase_) {
+    case PathPhase::line:
+      kin::stop_movel(g.line, motion_t_);
+      motion_t_ = 0;
+      set_mode(Mode::hold_line);
+      return;
+    case PathPhase::run: {
+      if (path_next_ != nullptr) {  // in an overlap: running_'s target was passed (within its tolerance)
+        finish_motion(false, RtResult::ok);
+        running_ = motions_.front();
+        after = PathPhase::to_start;
+        break;
+      }
+      const double u = path_time() - g.start;
+      if (g.kind == kin::PathKind::line && u >= 0 && u < g.duration) {  // a line alone: it stops on its line
+        kin::stop_movel(g.line, u);
+        path_phase_ = PathPhase::line;
+        path_next_ = nullptr;
+        motion_t_ = 0;
+        set_mode(Mode::hold_line);
+        return;
+      }
+      break;
+    }
+    case PathPhase::to_start: after = PathPhase::to_start; break;
+    case PathPhase::to_end:
+    case PathPhase::none: break;
+  }
+  begin_ramp(Mode::hold_ramp);  // (ends the run) from the blended state, in joint space
+  path_phase_ = after;          // resume_motion plans the joint move of this phase
+  motion_t_ = 0;
+}
+
+void Controller::end_path() {
+  end_blend();
+  path_phase_ = PathPhase::none;
+  path_next_ = nullptr;
+  path_late_ = false;
+}
+
 void Controller::validate_and_write(TimePoint now) {
   const bool is_powered = powered(mode_);
   if (is_powered) {
@@ -1310,6 +1497,8 @@ void Controller::publish() {
   t.ik_fallbacks = ik_fallbacks_;
   t.joint_replans = joint_replans_;
   t.blended_corners = blends_;
+  t.path_time = path_phase_ == PathPhase::run ? path_time() : -1.0;
+  t.path_id = path_phase_ == PathPhase::run && running_ != nullptr ? (path_next_ ? path_next_->id : running_->id) : 0u;
   t.homed = homed_mask();
   t.homing_now = hrunning_;
   t.homing_failed = 0;

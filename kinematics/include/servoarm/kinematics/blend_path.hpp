@@ -82,6 +82,13 @@ struct PathBlendConfig {
   double rate = 1000;        ///< Hz, the control rate the checks sample at
   double margin = 0.95;      ///< fraction of the velocity / acceleration limits a blend may use
   double max_joint_step = 0.25;  ///< rad (m) between samples: more is a branch change
+  /// Fraction of the acceleration and jerk limits a joint segment that blends (its target has
+  /// a tolerance, or the segment before it has one) is planned with; the last segment of a run
+  /// also tries the full acceleration with this jerk and keeps what ends first. 1: full
+  /// limits (the jerk phases of two overlapping segments, A's last and B's first, then add up
+  /// to twice the limit, so the checks leave small blends or none); 0.5: their sum stays within
+  /// the limits (the firmware's choice).
+  double joint_share = 1.0;
   const Chain* chain = nullptr;  ///< for FK (tool distances) and the lines' IK
   IkSolver ik{};             ///< the firmware's (make_ik_solver / firmware_ik_solver)
 };
@@ -119,6 +126,14 @@ BlendStatus path_append_line(PathBlendCore& core, std::span<PathSegment> seg, co
 Status path_sample(const PathBlendCore& core, std::span<const PathSegment> seg, double t, const JointVector& seed,
                    JointVector& q);
 void path_retire(PathBlendCore& core, std::span<const PathSegment> seg, double t);
+/// The same sample as path_sample, from two segments held elsewhere (the firmware's RT
+/// thread runs the segments in place in its motion queue): `b` at absolute time t, summed
+/// with `a` (the segment before it, or nullptr) while both move (b.start <= t < a->end()),
+/// `a` alone before b starts. Line-line overlaps solve IK with b.line's chain and solver.
+/// Returns the IK status (ok elsewhere). Heap-free.
+/// Joints where segment g starts (n joints): a joint move's `from`, a line's first knot.
+void path_segment_start(const PathSegment& g, int n, JointVector& q);
+Status path_sample_pair(const PathSegment* a, const PathSegment& b, double t, const JointVector& seed, JointVector& q);
 
 /// A queue of blended line and joint segments (Capacity x about 38 kB: keep it in a
 /// preallocated slot, never on a stack).

@@ -81,16 +81,21 @@ inline constexpr CommandSpec kCommands[] = {
      "as `movej` to motion.home_deg at motion.joint_speed_pct; refused until every joint is homed", false},
     {"movej", Cmd::movej, ArgShape::joints_speed, "movej j1..jn or @NAME [speed=%] [blend=angle]",
      "joint move; joints in the joint units, or teach point NAME's joints; speed 1-100 % of the joint limits (default 50)",
-     "answers `ok queued id=N duration=T` (the exact-stop duration) once the move is checked and queued. blend= "
-     "(angle unit, >= 0, joint-space distance) is the tolerance the arm may pass the target by when the next queued "
-     "move is a joint move: the controller blends the corner without stopping, within every joint's limits, or "
-     "stops there when it cannot (docs/motion.md#blending)", false},
+     "answers `ok queued id=N duration=T` (the exact-stop duration; ` blend=τs` when it blends out of the move "
+     "before) once the move is checked and queued. blend= (angle unit, >= 0, joint-space distance; default "
+     "motion.default_blend_deg) is the tolerance the arm may pass the target by when the next move follows: the "
+     "corner is blended without stopping, within every joint's limits, or is an exact stop when it cannot. A typed "
+     "movej blends into a following joint move; into a line only in a program, or after a blended line "
+     "(docs/motion.md#blending)", false},
     {"movel", Cmd::movel, ArgShape::pose_speed, "movel x y z [rx ry rz] or @NAME [speed=v] [blend=length]",
      "straight line of the tool point; without rx ry rz the tool keeps its orientation; @NAME: to where teach point "
      "NAME's joints put the active tool",
      "x y z in the length unit, rx ry rz in the angle unit as fixed-axis roll-pitch-yaw R = Rz(rz) Ry(ry) Rx(rx), "
      "speed in length units/s (default motion.linear_speed_mm_s, at most motion.max_linear_speed_mm_s); refused "
-     "before moving with the reason (`unreachable`, `limits`, `singular`, `branch`) and where on the line",
+     "before moving with the reason (`unreachable`, `limits`, `singular`, `branch`) and where on the line. blend= "
+     "(length unit, >= 0, tool-point distance; default motion.default_blend_mm): pass the target within it into the "
+     "next line or joint move, the corner checked like the line (every joint's limits, the tool speed, IK) or an "
+     "exact stop (docs/motion.md#blending)",
      false},
     {"stop", Cmd::stop, ArgShape::none, "stop", "ramp down and drop the queued moves",
      "drops every queued move, in any state (`ok not moving; 1 queued move dropped` when a move queued in the same "

@@ -76,6 +76,10 @@ struct ConsoleConfig {
     int bit = 0;
   };
   std::vector<Output> outputs;
+  /// Blend tolerance of a move that gives none (movej / movel without blend=, G0/G1 outside a
+  /// program's G64 P / G61): 0 = exact stop (App: motion.default_blend_deg / _mm).
+  double default_blend_rad = 0.0;            ///< movej: joint-space distance (rad)
+  double default_blend_m = 0.0;              ///< movel, G0/G1: tool-point distance (m)
 };
 
 /// A program run by the console (`run NAME`): idle = none.
@@ -106,6 +110,9 @@ struct Session {
   kin::JointVector check_tail;         ///< check mode: where the checked moves end
   std::size_t check_tool = 0;          ///< check mode: the tool / frame G-code selects for the check
   std::size_t check_frame = 0;         ///<   (definitions are not made in check mode, as GRBL's $C)
+  bool check_blends = false;           ///< check mode: the last checked move is a blended segment with a tolerance
+  double check_time = 0;               ///< check mode: end time of the checked moves (blended runs overlapped)
+  double check_run_base = 0;           ///< check mode: check_time where the current blended run began
 };
 
 class Console {
@@ -256,6 +263,31 @@ class Console {
   kin::JointVector tail_;
   std::uint32_t tail_id_ = 0;  ///< id of the motion whose goal tail_ holds (0: none)
   std::uint64_t tail_gen_ = 0; ///< controller generation when tail_ was set
+  // Blended runs (docs/motion.md#blending): the segments of the moves queued last, planned
+  // and blended here; the controller runs copies of them (PathMove). shadow_tail_id_: the
+  // motion the newest segment was queued as (0: none). check_shadow_: the same for check mode.
+  using PathShadow = kin::PathBlendQueue<4>;
+  std::unique_ptr<PathShadow> shadow_, check_shadow_;
+  std::uint32_t shadow_tail_id_ = 0;
+  /// The blend tolerance of the program step being queued (SI; < 0: none given), set by exec_step.
+  double step_blend_ = -1;
+  /// The program's next motion after the step being queued is a line (movel, G0/G1): a blended
+  /// movej goes as a PathMove so that the joint->line corner can blend (set by exec_step).
+  bool step_next_line_ = false;
+  struct PathResult {
+    bool used = false;         ///< the move went as a PathMove
+    double blend = 0;          ///< overlap with the move before it (s)
+    double corner = 0;         ///< the previous corner's distance bound (m or rad)
+    double end = 0;            ///< the segment's end on the run's time base (s)
+    const char* limited_by = "";
+  };
+  /// A move with blend tolerance `tol` (its kind's unit) or following a queued segment with a
+  /// tolerance: its segment planned and blended against the one before it, into m's payload
+  /// (PathMove; check mode: only checked). used == false: it goes as the plain move.
+  PathResult queue_path(Session& s, MotionItem* m, bool line, const kin::JointVector& goal, const kin::Pose& target,
+                        const kin::CartesianLimits& cl, double override, double tol);
+  /// The tolerance of a move: given (>= 0), else the program step's, else the configured default.
+  double blend_of(double given, bool line) const;
   std::function<void()> idle_;
   std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
   kin::IkSolver ik_solver() const;
@@ -343,7 +375,7 @@ class Console {
   /// Check every step of `p` from the queue's end with the console's check mode; "" or FILE:LINE: reason.
   std::string check_program(const prog::Program& p);
   /// Run one step in `ps` (its answer in ps.out).
-  void exec_step(Session& ps, const prog::ProgramStep& st);
+  void exec_step(Session& ps, const prog::Program& p, const prog::ProgramStep& st);
   /// End the program (if one runs) with `program: NAME <how>` (e.g. "aborted at f:3: stop").
   void end_program(const std::string& how);
   std::string program_where() const;  ///< FILE:LINE of the current step

@@ -14,13 +14,14 @@ struct MoveLine {
   double speed = 0;          ///< m/s; 0: the console's default linear speed
   bool rapid = false;        ///< G0: at the maximum linear speed (speed ignored)
   bool clamp_speed = false;  ///< G-code F: above the maximum is clamped (as GRBL does), not refused
+  double blend = -1;         ///< blend tolerance at `target` (m, tool point; movel blend=); 0: exact stop, < 0: the default
 };
 
 /// A jerk-limited, time-synchronised joint move from the end of the motion queue.
 struct MoveJoints {
   kin::JointVector goal;  ///< joint values (rad / m)
   double speed_pct = 0;   ///< percent of the joint limits, [1, 100]; 0: the console's default
-  double blend = 0;       ///< blend tolerance at `goal` (rad, joint-space Euclidean; movej blend=); 0: exact stop
+  double blend = -1;      ///< blend tolerance at `goal` (rad, joint-space Euclidean; movej blend=); 0: exact stop, < 0: the default
 };
 
 }  // namespace servoarm::fw

@@ -69,8 +69,9 @@ struct ProgramStep {
   fw::Command cmd;       ///< what the parser made of it
   int point = -1;        ///< index into the points for movej / movel @NAME, else -1. movel @NAME:
                          ///< the target is FK(point's joints) with the active tool (cmd.vals unused)
-  double blend = 0;      ///< blend tolerance of this move's target (console units: mm/m, deg/rad;
-                         ///< G-code: mm), 0 = exact stop
+  double blend = -1;     ///< blend tolerance of this move's target (console units: mm/m, deg/rad;
+                         ///< G-code: mm, from G64 P / G61), 0 = exact stop, < 0 = none given (the
+                         ///< console's configured default)
 };
 
 struct Program {

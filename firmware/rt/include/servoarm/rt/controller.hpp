@@ -32,6 +32,7 @@
 #include "servoarm/rt/stats.hpp"
 #include "servoarm/hal/servo_bus.hpp"
 #include "servoarm/kinematics/blend.hpp"
+#include "servoarm/kinematics/blend_path.hpp"
 #include "servoarm/kinematics/chain.hpp"
 
 namespace servoarm::fw {
@@ -141,6 +142,16 @@ class Controller {
   void step_blend();
   /// Leave the blend run (a stop, hold, flush): the running move continues as a plain joint move.
   void end_blend();
+  /// Blended runs (PathMove, docs/motion.md#blending): start the PathMove `m` from rest at
+  /// cmd_ (false: it does not start where the arm is).
+  bool begin_path(MotionItem& m);
+  /// One cycle of a running PathMove: open the next segment at its start when it blends out of
+  /// this one, sample (kin::path_sample_pair), finish the segment that has ended.
+  void step_path();
+  /// A feed hold while a PathMove runs: see hold_motion.
+  void hold_path();
+  /// Leave the run (a stop, fault, flush): nothing of it is sampled any more.
+  void end_path();
   void step_jog();
   void finish_motion(bool refused, RtResult why);
   void validate_and_write(TimePoint now);
@@ -213,7 +224,25 @@ class Controller {
   int blend_items_ = 0;
   double blend_t_ = 0;              ///< time on blend_'s time base (s)
   double blend_override_ = 1.0;
-  std::uint64_t blends_ = 0;        ///< corners blended (overlap > 0), since boot
+  // Blended run (data of moving while PathMoves run; docs/motion.md#blending). The run's time
+  // is path_t0_ + path_k_ / rate on the console's time base (integer steps: no drift).
+  enum class PathPhase : std::uint8_t {
+    none,      ///< no PathMove running
+    run,       ///< sampled on the run's time base
+    line,      ///< held on its line and resumed (stop_movel / resume_movel on seg.line, motion_t_)
+    to_end,    ///< after a hold: a joint move (resume_plan_) to the segment's target, then done
+    to_start,  ///< after a hold in an overlap: a joint move to the segment's start, then it runs from rest
+  };
+  PathPhase path_phase_ = PathPhase::none;
+  double path_t0_ = 0;
+  std::int64_t path_k_ = 0;
+  MotionItem* path_next_ = nullptr; ///< the next PathMove, opened: moving since its start (overlap with running_)
+  bool path_late_ = false;          ///< the next one came too late to overlap: it starts from rest
+  kin::JointTrajectory resume_plan_;  ///< phases to_end / to_start
+  kin::JointVector path_ahead_;     ///< phase run: the sample one period ahead of the setpoint
+  bool path_have_ahead_ = false;
+  double path_time() const { return path_t0_ + static_cast<double>(path_k_) * period_s_; }
+  std::uint64_t blends_ = 0;        ///< corners blended (a segment opened while the one before moved), since boot
   double motion_t_ = 0;
   std::uint64_t ik_fallbacks_ = 0;
   std::uint64_t joint_replans_ = 0;

@@ -10,6 +10,7 @@
 #include "servoarm/rt/stats.hpp"
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
+#include "servoarm/kinematics/blend_path.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 
 namespace servoarm::fw {
@@ -60,7 +61,7 @@ struct Reply {
   char message[160] = {};
 };
 
-enum class MotionKind : std::uint8_t { joint, cartesian, dwell };  // the index of MotionItem::payload
+enum class MotionKind : std::uint8_t { joint, cartesian, dwell, path };  // the index of MotionItem::payload
 const char* to_string(MotionKind k);
 
 /// A joint move, planned by the console thread from the queue's end (a rest at the
@@ -75,7 +76,8 @@ struct JointMove {
   /// Blend tolerance at `goal` (rad, joint-space Euclidean norm; 0 = exact stop): when the
   /// next queued motion is a joint move with the same override and no output changes, the
   /// RT thread runs both through one blend queue (kin::JointBlendQueue) and the arm passes
-  /// within this distance of `goal` without stopping (docs/motion.md#blending).
+  /// within this distance of `goal` without stopping (docs/motion.md#blending). Corners with
+  /// a line are PathMoves.
   double blend = 0.0;
 };
 
@@ -91,6 +93,20 @@ struct DwellMove {
   double seconds = 0.0;
 };
 
+/// One segment of a blended run (docs/motion.md#blending): a joint move or a straight line,
+/// planned alone from rest at the previous target and blended into the one before it by the
+/// console thread (kin::PathBlendQueue: the overlap chosen by checks sampled at the control
+/// rate). `seg.start` is on the run's time base (the console's). The RT thread starts the
+/// segment at that time while the motion `after` is still moving, so both overlap as checked
+/// (kin::path_sample_pair); when it comes too late for that, `after` is not the motion before
+/// it, or it carries output changes, it starts from rest where that one ends (an exact stop,
+/// still within every limit: each segment alone is a rest-to-rest plan).
+struct PathMove {
+  kin::PathSegment seg;
+  std::uint32_t after = 0;        ///< id of the motion it blends out of (0: none, from rest)
+  double override = 1.0;          ///< speed override it was planned with (a joint segment's; the move after a hold)
+};
+
 /// A digital output change (issue 18): joint `joint`'s drive outputs word (60FEh:01) becomes
 /// (word & ~mask) | value.
 struct OutputChange {
@@ -103,7 +119,7 @@ inline constexpr std::size_t kMotionOutputs = 4;  ///< output changes one motion
 /// One queued motion: an id and one payload (one goal), never two.
 struct MotionItem {
   std::uint32_t id = 0;
-  std::variant<JointMove, CartesianMove, DwellMove> payload;
+  std::variant<JointMove, CartesianMove, DwellMove, PathMove> payload;
   /// Output changes made in the cycle the motion starts (M62 / M63: in sync with it).
   std::array<OutputChange, kMotionOutputs> outputs{};
   std::uint8_t n_outputs = 0;
@@ -113,6 +129,7 @@ struct MotionItem {
   const kin::JointVector& goal() const {
     if (const auto* j = std::get_if<JointMove>(&payload)) return j->goal;
     if (const auto* c = std::get_if<CartesianMove>(&payload)) return c->path.goal;
+    if (const auto* p = std::get_if<PathMove>(&payload)) return p->seg.q_end;
     return std::get_if<DwellMove>(&payload)->at;
   }
 };
@@ -158,8 +175,13 @@ struct Telemetry {
   /// Joint moves the RT thread had to plan again at start because the arm was not where
   /// the console's plan begins (or none was given); since boot.
   std::uint64_t joint_replans = 0;
-  /// Corners between queued joint moves the controller blended (passed without stopping); since boot.
+  /// Corners of blended runs the controller passed without stopping (a segment started while
+  /// the one before it still moved); since boot.
   std::uint64_t blended_corners = 0;
+  /// Blended run (PathMove): the time on the run's time base of the last sample (s), -1 when
+  /// no run is sampled; path_id: the motion whose segment that run's newest sample belongs to.
+  double path_time = -1;
+  std::uint32_t path_id = 0;
   // Homing (ServoBus::homing, docs/firmware.md#homing)
   std::uint16_t homed = 0;         ///< bit j: joint j's zero is established this power cycle (or it is absolute)
   std::uint16_t homing_now = 0;    ///< bit j: the master homes joint j now
