@@ -922,7 +922,9 @@ TEST(Controller, StopHoldDisableInTheCycleAMoveIsQueuedCancelIt) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home:  // (not among the requests of this test)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off:  // (not among the requests of this test)
           CHECK_TEXT(t.state == ArmState::estop, what.c_str());
           LONGS_EQUAL(0, t.queued);
           break;

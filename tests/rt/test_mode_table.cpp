@@ -40,10 +40,13 @@ struct TableRig {
 
   /// `homing`: joint 1 homes with CiA 402 method 19 and no home switch on its drive (the search
   /// goes on until the 60 s timeout: the homing modes last), the others are absolute.
-  explicit TableRig(bool drive_quick_stop, const sim::MotorParams& motor = {}, bool homing = false) {
+  bool freedrive = false;  ///< the dynamic plant, [dynamics] freedrive, the model attached
+  explicit TableRig(bool drive_quick_stop, const sim::MotorParams& motor = {}, bool homing = false, bool fd = false)
+      : freedrive(fd) {
     app.sim_motor = motor;
     FwConfig cfg;
     cfg.can = "sim";
+    cfg.freedrive = fd;
     cfg.stop = drive_quick_stop ? "drive" : "ramp";
     if (homing) {
       cfg.drives.resize(6);
@@ -53,6 +56,15 @@ struct TableRig {
     }
     const std::string e = app.build(cfg, &clock);
     if (!e.empty()) FAIL(e.c_str());
+    if (fd) {  // torque mode needs the rigid-body plant
+      std::vector<hal::JointScaling> sc;
+      for (std::size_t j = 0; j < app.servo->joint_count(); ++j) sc.push_back(app.servo->scaling(j));
+      const std::string d = app.plant->use_dynamic_plant(app.chain, sc);
+      if (!d.empty()) FAIL(d.c_str());
+      kin::JointVector q(6);
+      q << 0, -0.6, 1.2, 0, 0.9, 0;
+      app.plant->arm().plant()->set_state(q, kin::JointVector::Zero(6));
+    }
     clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
     spy = std::make_unique<test::ServoSpy>(*app.servo);
     ctl = std::make_unique<Controller>(*spy, app.chain, app.controller_config());
@@ -64,6 +76,11 @@ struct TableRig {
   void boot() {
     const hal::TimePoint now = clock.now();
     if (ctl->boot(now, now + 5 * hal::kSecond) != hal::Status::ok) FAIL(spy->last_error());
+    if (freedrive) {  // what App::boot does: the model on this controller's bus
+      app.model->configure(app.chain, *spy, app.model_config());
+      if (!app.model->available(ModelPart::freedrive)) FAIL(app.model->refusal(ModelPart::freedrive));
+      ctl->set_model(app.model.get());
+    }
   }
   void cycle() {
     ctl->cycle(clock.now());
@@ -251,11 +268,23 @@ void enter(TableRig& r, Mode m) {
       r.request(RequestOp::stop);
       r.expect(Mode::homing_abort, "homing aborted");
       return;
+    case Mode::freedrive:  // (a freedrive rig: the dynamic plant, torque mode mapped, the model)
+      r.enable();
+      r.request(RequestOp::freedrive_on);
+      r.cycles(5);
+      r.expect(Mode::freedrive, "freedrive on");
+      return;
+    case Mode::freedrive_end:  // lasts one to three cycles (the drives back to CSP): not walked
+      enter(r, Mode::freedrive);
+      r.request(RequestOp::freedrive_off);
+      r.expect(Mode::freedrive_end, "freedrive off");
+      return;
   }
 }
 
 bool needs_drive_quick_stop(Mode m) { return m == Mode::fault_quick_stop || m == Mode::estop_quick_stop; }
 bool needs_homing(Mode m) { return m == Mode::homing || m == Mode::homing_abort; }
+bool needs_freedrive(Mode m) { return m == Mode::freedrive || m == Mode::freedrive_end; }
 
 struct Expect {
   RtResult result;
@@ -289,8 +318,56 @@ Expect expected(Mode m, RequestOp op) {
   // The jog columns: outside the jogging mode a cancel / keep-alive only answers; a jog
   // starts from idle only.
   if (m != Mode::jogging && (op == RequestOp::jog_cancel || op == RequestOp::jog_keepalive)) return stays(ok, "not jogging");
+  // The freedrive columns outside the freedrive mode (issue 20). The table rigs other than the
+  // freedrive one have no model attached: an idle arm refuses saying so.
+  if (op == RequestOp::freedrive_off && m != Mode::freedrive)
+    return stays(ok, m == Mode::freedrive_end ? "free-drive ending" : "free-drive off");
+  if (op == RequestOp::freedrive_on && m != Mode::freedrive) {
+    switch (m) {
+      case Mode::boot: return stays(bad, "drives not started");
+      case Mode::disabled:
+      case Mode::enabling: return stays(bad, "freedrive needs the arm enabled (it is ");
+      case Mode::idle: return stays(bad, "freedrive refused: no dynamic model");
+      case Mode::moving:
+      case Mode::hold_ramp:
+      case Mode::hold_line:
+      case Mode::held:
+      case Mode::jogging: return stays(busy, "a move, jog or homing is running (or held): freedrive refused");
+      case Mode::stopping_to_idle:
+      case Mode::stopping_to_disabled:
+      case Mode::homing_abort:
+      case Mode::freedrive_end: return stays(bad, "stopping; retry");
+      case Mode::fault_ramp:
+      case Mode::fault_quick_stop:
+      case Mode::fault: return stays(flt, "in fault: send reset first");
+      case Mode::estop_ramp:
+      case Mode::estop_quick_stop:
+      case Mode::estop: return stays(flt, "in estop: send reset first");
+      case Mode::homing: return stays(busy, "homing runs: stop it first");
+      case Mode::freedrive: break;
+    }
+  }
+  if (m == Mode::freedrive) {  // every drive in CST, the arm held against gravity
+    switch (op) {
+      case RequestOp::enable: return stays(ok, "already enabled");
+      case RequestOp::disable: return {ok, "disabled", Mode::disabled, kDisable};
+      case RequestOp::stop:
+      case RequestOp::hold:
+      case RequestOp::freedrive_off: return {ok, "free-drive off: holding where it stands", Mode::freedrive_end, kNone};
+      // the ramp from rest (the setpoint follows the measured pose) ends in the same cycle
+      case RequestOp::estop: return {ok, "estop", Mode::estop, kDisable};
+      case RequestOp::reset: return nothing_to_reset;
+      case RequestOp::resume: return not_holding;
+      case RequestOp::set_zero: return no_zero;
+      case RequestOp::jog: return stays(busy, "a move is running (or held): jog refused");
+      case RequestOp::home: return stays(busy, "a move or jog is running (or held): home refused");
+      case RequestOp::freedrive_on: return stays(ok, "free-drive on");
+      case RequestOp::jog_cancel:
+      case RequestOp::jog_keepalive: break;  // (above)
+    }
+  }
   // The home column outside the homing modes.
-  if (op == RequestOp::home && !needs_homing(m)) {
+  if (op == RequestOp::home && !needs_homing(m) && m != Mode::freedrive) {
     switch (m) {
       case Mode::boot: return stays(bad, "drives not started");
       case Mode::disabled:
@@ -303,7 +380,8 @@ Expect expected(Mode m, RequestOp op) {
       case Mode::held:
       case Mode::jogging: return stays(busy, "a move or jog is running (or held): home refused");
       case Mode::stopping_to_idle:
-      case Mode::stopping_to_disabled: return stays(bad, "stopping; retry");
+      case Mode::stopping_to_disabled:
+      case Mode::freedrive_end: return stays(bad, "stopping; retry");
       case Mode::fault_ramp:
       case Mode::fault_quick_stop:
       case Mode::fault: return stays(flt, "in fault: send reset first");
@@ -311,7 +389,8 @@ Expect expected(Mode m, RequestOp op) {
       case Mode::estop_quick_stop:
       case Mode::estop: return stays(flt, "in estop: send reset first");
       case Mode::homing:
-      case Mode::homing_abort: break;
+      case Mode::homing_abort:
+      case Mode::freedrive: break;
     }
   }
   if (m == Mode::homing) {  // joint 1 is being homed by its drive
@@ -328,6 +407,8 @@ Expect expected(Mode m, RequestOp op) {
       case RequestOp::home: return stays(busy, "homing runs: stop it first");
       case RequestOp::jog_cancel:
       case RequestOp::jog_keepalive: return stays(ok, "not jogging");
+      case RequestOp::freedrive_on:
+      case RequestOp::freedrive_off: break;  // (above)
     }
   }
   if (m == Mode::homing_abort) {  // joint 1's drive halting and going back to CSP
@@ -344,6 +425,8 @@ Expect expected(Mode m, RequestOp op) {
       case RequestOp::home: return stays(bad, "stopping; retry");
       case RequestOp::jog_cancel:
       case RequestOp::jog_keepalive: return stays(ok, "not jogging");
+      case RequestOp::freedrive_on:
+      case RequestOp::freedrive_off: break;  // (above)
     }
   }
   if (m != Mode::jogging && op == RequestOp::jog) {
@@ -357,7 +440,8 @@ Expect expected(Mode m, RequestOp op) {
       case Mode::hold_line:
       case Mode::held: return stays(busy, "a move is running (or held): jog refused");
       case Mode::stopping_to_idle:
-      case Mode::stopping_to_disabled: return stays(bad, "stopping; retry");
+      case Mode::stopping_to_disabled:
+      case Mode::freedrive_end: return stays(bad, "stopping; retry");
       case Mode::fault_ramp:
       case Mode::fault_quick_stop:
       case Mode::fault: return stays(flt, "in fault: send reset first");
@@ -366,7 +450,8 @@ Expect expected(Mode m, RequestOp op) {
       case Mode::estop: return stays(flt, "in estop: send reset first");
       case Mode::jogging:
       case Mode::homing:
-      case Mode::homing_abort: break;
+      case Mode::homing_abort:
+      case Mode::freedrive: break;
     }
   }
   switch (m) {
@@ -383,7 +468,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::disabled:
@@ -399,7 +486,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::enabling:
@@ -415,7 +504,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::idle:
@@ -432,7 +523,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::moving:
@@ -448,7 +541,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::hold_ramp:
@@ -464,7 +559,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::hold_line:
@@ -480,7 +577,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::held:  // a joint move held at rest: a stop's ramp from rest ends in the same cycle
@@ -496,7 +595,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::stopping_to_idle:
@@ -513,7 +614,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::fault_ramp:
@@ -531,7 +634,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::fault:
@@ -547,7 +652,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::estop_ramp:
@@ -564,7 +671,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::estop:
@@ -580,7 +689,9 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog:
         case RequestOp::jog_cancel:
         case RequestOp::jog_keepalive:
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::jogging:  // a continuous joint jog, at speed
@@ -596,11 +707,15 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::jog: return stays(ok, "jog retargeted");
         case RequestOp::jog_cancel: return stays(ok, "jog cancelled");
         case RequestOp::jog_keepalive: return stays(ok, "jog refreshed");
-        case RequestOp::home: break;  // (above)
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
       }
       break;
     case Mode::homing:
-    case Mode::homing_abort: break;  // (above)
+    case Mode::homing_abort:
+    case Mode::freedrive:
+    case Mode::freedrive_end: break;  // (above)
   }
   FAIL("unreachable");
   return stays(ok, "");
@@ -614,7 +729,7 @@ std::string calls_text(const std::vector<Call>& c) {
 
 /// One (mode, request) case: enter the mode, send the request, check reply, mode and bus.
 void check_pair(Mode m, RequestOp op, bool drive_quick_stop, const Expect& e) {
-  TableRig r(drive_quick_stop || needs_drive_quick_stop(m), {}, needs_homing(m));
+  TableRig r(drive_quick_stop || needs_drive_quick_stop(m), {}, needs_homing(m), needs_freedrive(m));
   enter(r, m);
   r.expect(m, "entering");
   // The setpoint written in the cycle before the request (to check continuity).
@@ -657,7 +772,8 @@ void check_pair(Mode m, RequestOp op, bool drive_quick_stop, const Expect& e) {
 
 constexpr RequestOp kOps[] = {RequestOp::enable, RequestOp::disable,  RequestOp::stop,       RequestOp::estop,
                               RequestOp::reset,  RequestOp::hold,     RequestOp::resume,     RequestOp::set_zero,
-                              RequestOp::jog,    RequestOp::jog_cancel, RequestOp::jog_keepalive, RequestOp::home};
+                              RequestOp::jog,    RequestOp::jog_cancel, RequestOp::jog_keepalive, RequestOp::home,
+                              RequestOp::freedrive_on, RequestOp::freedrive_off};
 
 void walk_mode(Mode m) {
   for (RequestOp op : kOps) check_pair(m, op, false, expected(m, op));
@@ -705,6 +821,7 @@ TEST(ModeTable, Estop) { walk_mode(Mode::estop); }
 TEST(ModeTable, Jogging) { walk_mode(Mode::jogging); }
 TEST(ModeTable, Homing) { walk_mode(Mode::homing); }
 TEST(ModeTable, HomingAbort) { walk_mode(Mode::homing_abort); }
+TEST(ModeTable, Freedrive) { walk_mode(Mode::freedrive); }  // (freedrive_end lasts 1-3 cycles: fw_dynamics)
 
 // With safety.stop = "drive", an e-stop of a powered arm is the drives' quick stop
 // (controlword 0x0002 in the same cycle), also over a ramp already running.

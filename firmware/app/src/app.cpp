@@ -79,6 +79,8 @@ ConsoleConfig App::console_config() const {
   c.max_linear_speed = cfg.max_linear_speed_mm_s * 1e-3;
   c.cartesian.linear_velocity = c.max_linear_speed;
   c.max_move_duration_s = cfg.max_move_duration_s;
+  c.default_blend_rad = cfg.default_blend_deg * M_PI / 180.0;  // motion.default_blend_deg: movej
+  c.default_blend_m = cfg.default_blend_mm * 1e-3;             // motion.default_blend_mm: movel, G0/G1
   if (!cfg.home_deg.empty()) {
     c.home = kin::JointVector::Zero(chain.n_joints);
     for (int j = 0; j < chain.n_joints; ++j) {
@@ -242,6 +244,7 @@ std::string App::boot() {
   // The drives are up: what each can do and its rated torque are known. A part that cannot run
   // is off with its reason (dynamics_notes()); everything else runs.
   model->configure(chain, *servo, model_config());
+  ctl->set_model(model.get());  // before the control thread starts
   return "";
 }
 

@@ -92,6 +92,11 @@ const char* to_string(Cmd c) {
     case Cmd::abort: return "abort";
     case Cmd::record: return "record";
     case Cmd::out: return "out";
+    case Cmd::freedrive: return "freedrive";
+    case Cmd::freedrive_on: return "freedrive on";
+    case Cmd::freedrive_off: return "freedrive off";
+    case Cmd::collision_on: return "collision on";
+    case Cmd::collision_off: return "collision off";
   }
   return "?";
 }

@@ -256,7 +256,24 @@ std::string Console::status_text() const {
   s += " homing=[" + homing_text(t) + "]";
   if (run_) s += " " + program_text();
   if (rec_.active) s += fmt(" recording=%zu", rec_.samples.size());
+  if (t.feed_forward != 0 || t.collision_on || t.freedrive != 0)  // (the dynamics parts, when one runs)
+    s += fmt(" feed_forward=%s collision=%s freedrive=%s", to_string(static_cast<FeedForwardKind>(t.feed_forward)),
+             t.collision_on ? "on" : "off", to_string(static_cast<FreedrivePhase>(t.freedrive)));
   if (t.fault_text[0]) s += fmt(" fault=\"%s\"", t.fault_text);
+  return s;
+}
+
+std::string Console::dynamics_text() const {
+  const Telemetry t = ctl_.telemetry();
+  const ModelControl* m = ctl_.model();
+  std::string s = fmt("freedrive=%s feed_forward=%s collision=%s", to_string(static_cast<FreedrivePhase>(t.freedrive)),
+                      to_string(static_cast<FeedForwardKind>(t.feed_forward)), t.collision_on ? "on" : "off");
+  if (t.collision_on || t.collisions > 0)
+    s += fmt(" peak=%.2f joint=%d alarms=%llu", t.collision_peak, t.collision_peak_joint + 1,
+             static_cast<unsigned long long>(t.collisions));
+  if (m == nullptr || !m->configured()) return s + " (no dynamic model)";
+  for (const ModelPart p : {ModelPart::feed_forward, ModelPart::collision, ModelPart::freedrive})
+    if (!m->available(p)) s += fmt("\n%s unavailable: %s", to_string(p), m->refusal(p));
   return s;
 }
 
@@ -318,6 +335,7 @@ std::string Console::grbl_report() const {
     case ArmState::estop: st = "Estop"; break;
     case ArmState::jogging: st = "Jog"; break;
     case ArmState::homing: st = "Home"; break;
+    case ArmState::freedrive: st = "Freedrive"; break;
   }
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
@@ -346,6 +364,7 @@ std::string Console::grbl_report(const Session& s) const {
     case ArmState::moving: st = t.mode == Mode::held ? "Hold:0" : t.holding ? "Hold:1" : "Run"; break;
     case ArmState::jogging: st = "Jog"; break;
     case ArmState::homing: st = "Home"; break;
+    case ArmState::freedrive: st = "Hold:0"; break;  // hand guiding: a sender must not stream moves
   }
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
@@ -369,6 +388,10 @@ std::string Console::stats_text() const {
                       static_cast<unsigned long long>(t.cycles), static_cast<unsigned long long>(t.overruns),
                       ctl_.config().rate_hz, one(t.latency).c_str(), one(t.compute).c_str(), t.max_following_error / kDeg);
   if (t.estop_latency_ns >= 0) s += fmt(" estop_latency_us=%.1f", static_cast<double>(t.estop_latency_ns) / 1e3);
+  if (t.feed_forward != 0 || t.collision_on)  // issue 20: the model's figures, when a part runs
+    s += fmt(" feed_forward_cycles=%llu collision_peak=%.2f collision_peak_joint=%d collisions=%llu",
+             static_cast<unsigned long long>(t.feed_forward_cycles), t.collision_peak, t.collision_peak_joint + 1,
+             static_cast<unsigned long long>(t.collisions));
   const auto dropped = ctl_.events_dropped();
   if (dropped) s += fmt(" events_dropped=%llu", static_cast<unsigned long long>(dropped));
   if (output_dropped_lines_ || output_dropped_bytes_)
@@ -424,6 +447,10 @@ void Console::drain_events(std::string& native, std::string& grbl) {
         native += fmt("homing: %s\n", e.message);
         grbl += fmt("[MSG:homing: %s]\n", e.message);
         break;
+      case EventKind::freedrive:
+        native += fmt("freedrive: %s\n", e.message);
+        grbl += fmt("[MSG:freedrive: %s]\n", e.message);
+        break;
       case EventKind::motion_done:
       case EventKind::state: break;
     }
@@ -440,6 +467,9 @@ bool Console::motion_state_ok(Session& s) {
       return false;
     case ArmState::homing:
       answer_error(s, CmdError::bad_state, "homing runs: `wait` for it (or stop it)");
+      return false;
+    case ArmState::freedrive:
+      answer_error(s, CmdError::bad_state, "free-drive is on: freedrive off first");
       return false;
     case ArmState::enabling:
       answer_error(s, CmdError::bad_state, "drives still enabling; retry (or wait)");
@@ -982,6 +1012,47 @@ void Console::execute(Session& s, std::string_view line) {
       return;
     case Cmd::record: do_record(s, c); return;
     case Cmd::out: do_out(s, c); return;
+    case Cmd::freedrive: {  // the refusals as lines of their own, then `ok <state>`
+      std::string d = dynamics_text();
+      const std::size_t nl = d.find('\n');
+      if (nl != std::string::npos) {
+        s.out += d.substr(nl + 1) + "\n";
+        d.resize(nl);
+      }
+      answer_ok(s, d);
+      return;
+    }
+    case Cmd::freedrive_on:
+      if (s.check_mode) {
+        answer_ok(s, "check mode: not run");
+        return;
+      }
+      simple(RequestOp::freedrive_on);
+      return;
+    case Cmd::collision_on:
+    case Cmd::collision_off: {
+      const bool on = c.cmd == Cmd::collision_on;
+      if (s.check_mode) {
+        answer_ok(s, "check mode: not run");
+        return;
+      }
+      if (!ctl_.set_collision_detection(on)) {
+        const ModelControl* m = ctl_.model();
+        answer_error(s, CmdError::bad_state,
+                     fmt("collision detection unavailable: %s",
+                         m != nullptr && m->configured() ? m->refusal(ModelPart::collision) : "no dynamic model"));
+        return;
+      }
+      answer_ok(s, on ? "collision detection on" : "collision detection off");
+      return;
+    }
+    case Cmd::freedrive_off:
+      if (s.check_mode) {
+        answer_ok(s, "check mode: not run");
+        return;
+      }
+      simple(RequestOp::freedrive_off);
+      return;
   }
 }
 
@@ -994,6 +1065,7 @@ bool Console::settle(Session& s) {
       case ArmState::moving:
       case ArmState::jogging:
       case ArmState::homing:
+      case ArmState::freedrive:
         s.enabling = false;
         answer_ok(s, "enabled");
         break;
@@ -1038,6 +1110,7 @@ bool Console::settle(Session& s) {
       case ArmState::boot:
       case ArmState::disabled:
       case ArmState::idle:
+      case ArmState::freedrive:
         if (!ctl_.motions().empty()) return true;  // producer-side view: exact, never stale
         // a running program has more to come (its own `wait` lines wait for the queue only)
         if (run_ && &s != &run_->ps && run_->state != RunState::paused) return true;
@@ -1556,6 +1629,7 @@ std::string Console::frames_refusal() const {
     case ArmState::jogging:
     case ArmState::stopping:
     case ArmState::homing:
+    case ArmState::freedrive:
       return fmt("refused while the arm is %s", to_string(t.state));
     case ArmState::boot:
     case ArmState::disabled:

@@ -72,7 +72,11 @@ StepKind kind_of(Cmd c) {
     case Cmd::pause:
     case Cmd::step:
     case Cmd::abort:
-    case Cmd::record: return StepKind::refused;
+    case Cmd::record:
+    case Cmd::freedrive_on:
+    case Cmd::freedrive_off:
+    case Cmd::collision_on:
+    case Cmd::collision_off: return StepKind::refused;
     case Cmd::none:
     case Cmd::help:
     case Cmd::status:
@@ -89,7 +93,8 @@ StepKind kind_of(Cmd c) {
     case Cmd::grbl_info:
     case Cmd::grbl_help:
     case Cmd::points:
-    case Cmd::programs: return StepKind::other;
+    case Cmd::programs:
+    case Cmd::freedrive: return StepKind::other;
   }
   return StepKind::refused;
 }
@@ -169,7 +174,8 @@ std::string Console::points_refusal() const {
   const Telemetry t = ctl_.telemetry();
   switch (t.state) {
     case ArmState::idle:
-    case ArmState::disabled: break;
+    case ArmState::disabled:
+    case ArmState::freedrive: break;  // teach where the hand put it
     case ArmState::boot:
     case ArmState::enabling:
     case ArmState::moving:
@@ -494,7 +500,8 @@ void Console::tick() {
     case ArmState::boot:
     case ArmState::disabled: end_program("aborted at " + program_where() + ": the arm was disabled"); return;
     case ArmState::jogging:
-    case ArmState::homing: end_program(fmt("aborted at %s: the arm is %s", program_where().c_str(), to_string(t.state))); return;
+    case ArmState::homing:
+    case ArmState::freedrive: end_program(fmt("aborted at %s: the arm is %s", program_where().c_str(), to_string(t.state))); return;
     case ArmState::enabling:
     case ArmState::idle:
     case ArmState::moving:

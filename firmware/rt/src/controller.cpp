@@ -22,6 +22,7 @@ const char* to_string(FaultCause c) {
     case FaultCause::setpoint_velocity: return "setpoint_velocity";
     case FaultCause::feedback_invalid: return "feedback_invalid";
     case FaultCause::homing_failed: return "homing_failed";
+    case FaultCause::collision: return "collision";
   }
   return "?";
 }
@@ -58,6 +59,7 @@ const char* to_string(EventKind k) {
     case EventKind::state: return "state";
     case EventKind::jog_stopped: return "jog_stopped";
     case EventKind::homing: return "homing";
+    case EventKind::freedrive: return "freedrive";
   }
   return "?";
 }
@@ -154,6 +156,13 @@ void Controller::set_mode(Mode m) {
     jog_.reset();  // whatever ends the jogging mode ends the jog
     ++generation_;  // and the arm is not where the console's last queued move left it
   }
+  if (mode_ == Mode::freedrive && model_ != nullptr) {
+    // Whatever ends free-drive (off, stop, a fault, e-stop, disable) takes every drive back to
+    // CSP holding where it stands, from this cycle's write (the bus does it by itself on faults,
+    // disable and quick stop too); the arm was moved by hand.
+    model_->freedrive_leave();
+    ++generation_;
+  }
   mode_ = m;
   mode_since_ = now_;
 }
@@ -195,7 +204,9 @@ void Controller::end_of_ramp(Mode ramp) {
     case Mode::estop:
     case Mode::jogging:
     case Mode::homing:
-    case Mode::homing_abort: return;  // not a ramp
+    case Mode::homing_abort:
+    case Mode::freedrive:
+    case Mode::freedrive_end: return;  // not a ramp
   }
 }
 
@@ -262,7 +273,9 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
     case Mode::held:
     case Mode::stopping_to_idle:
     case Mode::stopping_to_disabled:
-    case Mode::jogging: how = Reaction::emergency_stop; break;
+    case Mode::jogging:
+    case Mode::freedrive:      // every drive back to CSP where it stands (set_mode), then the reaction
+    case Mode::freedrive_end: how = Reaction::emergency_stop; break;
     case Mode::boot:
     case Mode::disabled:
     case Mode::estop_ramp:        // a fault during an e-stop powers down at once
@@ -325,7 +338,9 @@ void Controller::supervise(TimePoint now) {
     case Mode::stopping_to_disabled:
     case Mode::jogging:
     case Mode::homing:
-    case Mode::homing_abort: w = Watch::all; break;
+    case Mode::homing_abort:
+    case Mode::freedrive:
+    case Mode::freedrive_end: w = Watch::all; break;
   }
   const bool all_checks = w == Watch::all;
   for (int j = 0; j < n_; ++j) {
@@ -396,6 +411,23 @@ void Controller::supervise(TimePoint now) {
         raise_fault(FaultCause::following_error, j, d);
         return;
       }
+    }
+  }
+  if (model_ != nullptr) {
+    // Collision detection (issue 20): the momentum observer on this cycle's feedback, watched
+    // while the drives follow our setpoints (not homing; ModelControl leaves out free-drive and
+    // joints not enabled, and starts again afresh after any of them). On a verdict the arm stops
+    // where it is (not along the ramp of the commanded motion, which would push on into what it
+    // hit): the setpoint becomes the measured pose, then the fault reaction.
+    const bool watch = all_checks && hrunning_ == 0 && mode_ != Mode::homing && mode_ != Mode::homing_abort;
+    kin::CollisionVerdict v;
+    if (model_->observe(watch, period_s_, v)) {
+      char d[96];
+      model_->describe_collision(v, d, sizeof d);
+      cmd_ = kin::JointState::rest(q_act_);
+      have_prev_ = false;
+      raise_fault(FaultCause::collision, v.joint, d);
+      return;
     }
   }
   if (w == Watch::enabling) {
@@ -610,6 +642,23 @@ void Controller::run(Action a, const Request& r, TimePoint now) {
       hold_measured();
       emit(EventKind::homing, FaultCause::none, -1, 0, "homing aborted: disabled");
       reply(r.seq, RtResult::ok, "homing aborted; disabled");
+      return;
+    // free-drive (issue 20)
+    case Action::start_freedrive: start_freedrive(r); return;
+    case Action::already_freedrive: reply(r.seq, RtResult::ok, "free-drive on"); return;
+    case Action::refuse_freedrive_not_enabled:
+      std::snprintf(m, sizeof m, "freedrive needs the arm enabled (it is %s)", to_string(arm_state(mode_)));
+      reply(r.seq, RtResult::bad_state, m);
+      return;
+    case Action::refuse_freedrive_busy:
+      reply(r.seq, RtResult::busy, "a move, jog or homing is running (or held): freedrive refused");
+      return;
+    case Action::end_freedrive:
+      set_mode(Mode::freedrive_end);  // (set_mode: every drive back to CSP where it stands)
+      reply(r.seq, RtResult::ok, "free-drive off: holding where it stands");
+      return;
+    case Action::not_in_freedrive:
+      reply(r.seq, RtResult::ok, mode_ == Mode::freedrive_end ? "free-drive ending" : "free-drive off");
       return;
     case Action::estop_abort_homing: {
       const std::size_t dropped = begin_estop(now);
@@ -1051,6 +1100,52 @@ void Controller::follow_measured() {
   have_prev_ = false;
 }
 
+void Controller::start_freedrive(const Request& r) {
+  char m[sizeof(Reply::message)];
+  if (!motions_.empty()) {  // queued in this same cycle: the move goes first
+    reply(r.seq, RtResult::busy, "moves are queued: freedrive refused");
+    return;
+  }
+  if (!all_homed()) {  // the model's gravity at an unknown pose would push the arm
+    char j[48];
+    joints_text(j, sizeof j, static_cast<std::uint16_t>(all_joints() & ~homed_mask()));
+    std::snprintf(m, sizeof m, "freedrive refused: %s not homed (home first)", j);
+    reply(r.seq, RtResult::not_homed, m);
+    return;
+  }
+  if (model_ == nullptr) {
+    reply(r.seq, RtResult::bad_state, "freedrive refused: no dynamic model in this firmware");
+    return;
+  }
+  if (model_->freedrive_enter() != hal::Status::ok) {
+    std::snprintf(m, sizeof m, "freedrive refused: %.140s", model_->last_error());
+    reply(r.seq, RtResult::bad_state, m);
+    return;
+  }
+  set_mode(Mode::freedrive);
+  ++generation_;  // the arm will be moved by hand: the console re-reads the setpoint
+  emit(EventKind::freedrive, FaultCause::none, -1, 0, "free-drive on");
+  reply(r.seq, RtResult::ok, "free-drive on: gravity compensated; push the arm, `freedrive off` holds it");
+}
+
+void Controller::step_freedrive() {
+  // The drives in torque mode move the arm, not the setpoints: the setpoint follows the
+  // measured pose (write() ignores it in CST; CSP resumes where the drive stands). A move queued
+  // meanwhile is dropped with an event (the arm is not where the console planned it from).
+  follow_measured();
+  const FreedrivePhase ph = model_ != nullptr ? model_->freedrive_step() : FreedrivePhase::off;
+  if (mode_ == Mode::freedrive && ph != FreedrivePhase::entering && ph != FreedrivePhase::active) {
+    // a joint left torque mode by itself (refused, fault, heartbeat): every drive back to CSP
+    emit(EventKind::freedrive, FaultCause::none, -1, 0, model_ != nullptr ? model_->last_error() : "free-drive ended");
+    set_mode(Mode::freedrive_end);
+  }
+  if (mode_ == Mode::freedrive_end && ph == FreedrivePhase::off) {
+    hold_measured();  // the setpoint restarts from the measured pose
+    set_mode(Mode::idle);
+    emit(EventKind::freedrive, FaultCause::none, -1, 0, "free-drive off");
+  }
+}
+
 void Controller::step_jog() {
   const JogEnd e = jog_.step(cmd_, now_);
   if (e == JogEnd::running) return;
@@ -1100,6 +1195,8 @@ void Controller::step_motion() {
     case Mode::jogging: step_jog(); return;
     case Mode::homing:
     case Mode::homing_abort: step_homing(); return;
+    case Mode::freedrive:
+    case Mode::freedrive_end: step_freedrive(); return;
     case Mode::held:
       // At rest, the motion kept (joint / dwell / Cartesian stopped on its line). A held
       // queue that has not started goes idle once nothing is left of it.
@@ -1513,6 +1610,17 @@ void Controller::publish() {
   const bool homing_mode = mode_ == Mode::homing || mode_ == Mode::homing_abort;
   t.homing_group = static_cast<std::uint8_t>(homing_mode ? hgroup_i_ + 1 : 0);
   t.homing_groups = static_cast<std::uint8_t>(homing_mode ? hgroup_n_ : 0);
+  if (model_ != nullptr) {
+    const ModelControlStats& ms = model_->stats();
+    t.feed_forward = static_cast<std::uint8_t>(model_->feed_forward_on() ? model_->feed_forward_kind() : FeedForwardKind::off);
+    t.collision_on = model_->collision_on();
+    t.freedrive = static_cast<std::uint8_t>(model_->freedrive_phase());
+    t.collision_peak = ms.peak_ratio;
+    t.collision_peak_joint = static_cast<std::int8_t>(ms.peak_joint);
+    t.collision_ratio = ms.last_ratio;
+    t.collisions = ms.collisions;
+    t.feed_forward_cycles = ms.ff_cycles;
+  }
   telemetry_.write(t);
 }
 
@@ -1529,6 +1637,8 @@ void Controller::cycle(TimePoint now) {
   // 1 feedback
   bus_.read(now);
   for (int j = 0; j < n_; ++j) q_act_[j] = bus_.feedback(static_cast<std::size_t>(j)).position;
+  // free-drive: the hand moves the arm; whatever a request starts, it starts from where it is now
+  if (mode_ == Mode::freedrive || mode_ == Mode::freedrive_end) cmd_ = kin::JointState::rest(q_act_);
   // console requests (bounded per cycle)
   Request r;
   for (int i = 0; i < 4 && requests_.pop(r); ++i) handle_request(r, now);
@@ -1537,8 +1647,9 @@ void Controller::cycle(TimePoint now) {
   for (int i = 0; i < 8 && outputs_.pop(oc); ++i) apply_output(oc);
   // 2 supervisor
   supervise(now);
-  // 3 motion
+  // 3 motion, and the model's feed-forward of the setpoint (60B1h / 60B2h with this write)
   step_motion();
+  if (model_ != nullptr) model_->feed_forward(cmd_);
   // 4 + 5 validate, write setpoints + SYNC
   validate_and_write(now);
   // 6 telemetry (statistics are added by the loop through record_timing), then the replies

@@ -14,6 +14,7 @@ const char* to_string(ArmState s) {
     case ArmState::estop: return "estop";
     case ArmState::jogging: return "jogging";
     case ArmState::homing: return "homing";
+    case ArmState::freedrive: return "freedrive";
   }
   return "?";
 }
@@ -32,6 +33,8 @@ const char* to_string(RequestOp op) {
     case RequestOp::jog_cancel: return "jog_cancel";
     case RequestOp::jog_keepalive: return "jog_keepalive";
     case RequestOp::home: return "home";
+    case RequestOp::freedrive_on: return "freedrive_on";
+    case RequestOp::freedrive_off: return "freedrive_off";
   }
   return "?";
 }
@@ -57,6 +60,8 @@ const char* to_string(Mode m) {
     case Mode::jogging: return "jogging";
     case Mode::homing: return "homing";
     case Mode::homing_abort: return "homing_abort";
+    case Mode::freedrive: return "freedrive";
+    case Mode::freedrive_end: return "freedrive_end";
   }
   return "?";
 }
@@ -106,6 +111,12 @@ const char* to_string(Action a) {
     case Action::abort_homing: return "abort_homing";
     case Action::abort_homing_disable: return "abort_homing_disable";
     case Action::estop_abort_homing: return "estop_abort_homing";
+    case Action::start_freedrive: return "start_freedrive";
+    case Action::already_freedrive: return "already_freedrive";
+    case Action::refuse_freedrive_not_enabled: return "refuse_freedrive_not_enabled";
+    case Action::refuse_freedrive_busy: return "refuse_freedrive_busy";
+    case Action::end_freedrive: return "end_freedrive";
+    case Action::not_in_freedrive: return "not_in_freedrive";
   }
   return "?";
 }
@@ -113,9 +124,11 @@ const char* to_string(Action a) {
 // Every mode's row names its own mode's expected ArmState in the comments above; what
 // can be checked at compile time is checked here.
 static_assert(kRequestTable.size() == kModes);
-static_assert(static_cast<std::size_t>(Mode::homing_abort) + 1 == kModes);
-static_assert(static_cast<std::size_t>(RequestOp::home) + 1 == kRequestOps);
-static_assert(static_cast<std::size_t>(Action::estop_abort_homing) + 1 == kActions);
+static_assert(static_cast<std::size_t>(Mode::freedrive_end) + 1 == kModes);
+static_assert(static_cast<std::size_t>(RequestOp::freedrive_off) + 1 == kRequestOps);
+static_assert(static_cast<std::size_t>(Action::not_in_freedrive) + 1 == kActions);
+static_assert(action_for(Mode::idle, RequestOp::freedrive_on) == Action::start_freedrive);
+static_assert(action_for(Mode::freedrive, RequestOp::freedrive_off) == Action::end_freedrive);
 static_assert(action_for(Mode::disabled, RequestOp::enable) == Action::power_up);
 static_assert(action_for(Mode::estop, RequestOp::reset) == Action::reset_latched);
 

@@ -192,6 +192,30 @@ inline constexpr CommandSpec kCommands[] = {
      "(blend= half the tolerance), stay within tolerance= (angle unit, default 0.5 deg) of the recorded path. "
      "Answers `ok recorded NAME.arm: N moves from M samples`",
      false},
+    {"freedrive on", Cmd::freedrive_on, ArgShape::none, "freedrive on",
+     "hand guiding: every drive in torque mode (CST) holding the arm against gravity and friction; push it",
+     "needs an enabled, homed arm at rest with nothing queued, the robot's inertial data and drives with torque mode "
+     "([dynamics] freedrive = true maps it): refused otherwise naming the joint or the model (`error: bad_state "
+     "freedrive refused: joint 2: the drive has no cyclic synchronous torque mode ...`). No setpoints are sent "
+     "meanwhile; `record` and `teach` read where the arm is; moves are refused. A fault, a lost heartbeat, `stop`, "
+     "`!`, `disable` or `estop` end it as `freedrive off` does (then their own reaction). Collision detection is off "
+     "during free-drive and starts again afresh after it",
+     false},
+    {"freedrive off", Cmd::freedrive_off, ArgShape::none, "freedrive off",
+     "end hand guiding: back to position mode holding where the arm stands (within one cycle)",
+     "answers at once (`ok free-drive off: holding where it stands`); every drive shows CSP again one to three cycles "
+     "later, then the arm is idle with the setpoint at the measured pose", false},
+    {"freedrive", Cmd::freedrive, ArgShape::none, "freedrive",
+     "free-drive, feed-forward and collision detection: what runs, or why not",
+     "`freedrive=off|entering|active|leaving feed_forward=off|velocity|torque collision=on|off peak=R joint=J "
+     "alarms=N` and, for each part the configuration asks for that cannot run, its reason", true},
+    {"collision on", Cmd::collision_on, ArgShape::none, "collision on",
+     "collision detection on (the configuration's dynamics.collision sets it at start)",
+     "refused with the reason when it cannot run (`error: bad_state collision detection unavailable: joint 2: the "
+     "drive reports no torque ...`); the observer starts afresh", false},
+    {"collision off", Cmd::collision_off, ArgShape::none, "collision off",
+     "collision detection off: to move the arm clear of what it hit (it is still pressed against it: detected again "
+     "at once otherwise), then `collision on`", "", false},
     {"out", Cmd::out, ArgShape::output, "out [NAME on/off]",
      "digital output NAME ([[output]]: a drive's 60FEh:01 bit) on or off at once; `out` lists them",
      "sent to the drive with the next control cycle's PDOs (M64 / M65 P<n> the same, n the output's index in "

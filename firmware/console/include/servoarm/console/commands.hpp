@@ -91,6 +91,12 @@ enum class Cmd : std::uint8_t {
   abort,          ///< `abort`: stop the arm and end the program
   record,         ///< `record start [rate=Hz]` / `record stop NAME [tolerance=deg]`
   out,            ///< `out [NAME on|off]`; M62/M63 P<n> (at the next move's start), M64/M65 P<n> (at once)
+  // Hand guiding (issue 20, ModelControl)
+  freedrive,      ///< `freedrive`: free-drive, feed-forward and collision detection state (query)
+  freedrive_on,   ///< `freedrive on`: the drives to torque mode, gravity compensated; the arm moves when pushed
+  freedrive_off,  ///< `freedrive off`: back to position mode, holding where it stands
+  collision_on,   ///< `collision on`: collision detection on (when available)
+  collision_off,  ///< `collision off`: collision detection off (to move clear of what the arm hit)
 };
 
 /// What a `jog` line asks for.

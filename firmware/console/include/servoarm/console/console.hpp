@@ -164,6 +164,8 @@ class Console {
   std::string grbl_report(const Session& s) const;
   /// Human-readable statistics (the `stats` answer without "ok ").
   std::string stats_text() const;
+  /// `freedrive`: free-drive, feed-forward and collision detection (issue 20), and the refusals.
+  std::string dynamics_text() const;
 
   /// Joint values of the end of the motion queue (or the commanded position).
   kin::JointVector tail() const;

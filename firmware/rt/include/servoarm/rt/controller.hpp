@@ -27,6 +27,7 @@
 #include "servoarm/rt/jog.hpp"
 #include "servoarm/rt/messages.hpp"
 #include "servoarm/rt/mode_table.hpp"
+#include "servoarm/rt/model_control.hpp"
 #include "servoarm/rt/seqlock.hpp"
 #include "servoarm/rt/spsc_queue.hpp"
 #include "servoarm/rt/stats.hpp"
@@ -81,6 +82,17 @@ class Controller {
   /// Set-up (blocking, on the calling thread): start the drives (bus.start) and
   /// take the first feedback. Returns the bus status; on error bus.last_error() says why.
   hal::Status boot(TimePoint now, TimePoint deadline);
+
+  /// Set-up (before the control thread runs): the dynamic model the cycle uses (issue 20):
+  /// feed-forward of every setpoint, collision detection in the supervisor, the freedrive mode.
+  /// Configured (ModelControl::configure) on this controller's bus; outlives the controller.
+  /// nullptr (the default): none of them.
+  void set_model(ModelControl* m) { model_ = m; }
+  /// Set-up / the console: the model (its refusals are fixed once configured); nullptr = none.
+  const ModelControl* model() const { return model_; }
+  /// Any thread: collision detection on / off at run time (ModelControl::set_collision_on, an
+  /// atomic): false when there is no model or detection is not available (its refusal says why).
+  bool set_collision_detection(bool on) { return model_ != nullptr && model_->set_collision_on(on); }
 
   /// Real-time: one control cycle at time `now`.
   void cycle(TimePoint now);
@@ -171,6 +183,10 @@ class Controller {
   void hold_motion(const Request& r);
   void resume_motion(const Request& r);
   void start_homing(const Request& r);
+  void start_freedrive(const Request& r);
+  /// One cycle of the freedrive modes: the setpoint follows the measured pose, the model's
+  /// torques; freedrive_end -> idle once every drive is back in CSP.
+  void step_freedrive();
 
   // Homing (the homing modes' data: the groups, the one running, the joints the master moves)
   /// Bit j: joint j is homed (the bus says attained, or `home zero` set it this power cycle).
@@ -189,6 +205,7 @@ class Controller {
 
   hal::ServoBus& bus_;
   const kin::Chain& chain_;
+  ModelControl* model_ = nullptr;   ///< the dynamic model (issue 20), or none
   ControllerConfig cfg_;
   kin::JointLimits limits_;
   int n_ = 0;

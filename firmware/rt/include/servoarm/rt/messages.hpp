@@ -31,6 +31,7 @@ enum class FaultCause : std::uint8_t {
   setpoint_velocity,  ///< setpoint step faster than the joint velocity limit
   feedback_invalid,   ///< no (or stale) position feedback from an enabled joint
   homing_failed,      ///< a joint's homing failed (timeout, homing error, refused): the arm is disabled
+  collision,          ///< the collision observer's residual on a joint above its threshold (issue 20)
 };
 const char* to_string(FaultCause c);
 
@@ -137,7 +138,8 @@ struct MotionItem {
 /// jog_stopped: a jog ended on its own other than at its target (deadman, a joint limit,
 /// a singularity, no IK solution); the message says why and names the joint.
 /// homing: progress of the homing cycle (a joint started, homed, aborted; the cycle done), `joint` named.
-enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state, jog_stopped, homing };
+/// freedrive: free-drive on / off, or ended by a joint that left torque mode by itself (issue 20).
+enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state, jog_stopped, homing, freedrive };
 const char* to_string(EventKind k);
 
 struct Event {
@@ -192,6 +194,15 @@ struct Telemetry {
   std::uint8_t homing_groups = 0;  ///< groups of the running cycle
   /// Digital outputs (issue 18): the 60FEh:01 word each joint's drive is sent.
   std::array<std::uint32_t, kin::kMaxJoints> outputs{};
+  // The dynamic model (issue 20, ModelControl): what runs, and the collision observer's figures.
+  std::uint8_t feed_forward = 0;   ///< FeedForwardKind sent now (0 = off: none, refused, or switched off)
+  bool collision_on = false;       ///< the collision observer watches (detection on; it resets when not watched)
+  std::uint8_t freedrive = 0;      ///< FreedrivePhase
+  double collision_peak = 0;       ///< largest |r_j| / threshold_j since boot (sensitivity applied)
+  std::int8_t collision_peak_joint = -1;
+  double collision_ratio = 0;      ///< largest |r_j| / threshold_j of the last cycle
+  std::uint64_t collisions = 0;    ///< collision verdicts since boot
+  std::uint64_t feed_forward_cycles = 0;  ///< cycles with feed-forward given to the drives
   /// True when every joint is homed.
   bool all_homed() const { return n > 0 && homed == static_cast<std::uint16_t>((1u << n) - 1u); }
 };

@@ -28,6 +28,7 @@ enum class ArmState : std::uint8_t {
   estop,     ///< emergency stop: quick stop, then drives disabled; needs `reset` + `enable`
   jogging,   ///< a jog (joint or tool) runs, or decelerates after `jog stop` / 0x85 / its deadman
   homing,    ///< the homing cycle runs (`home`, `$H`): the drives, not the setpoints, move the joints homed
+  freedrive, ///< hand guiding (`freedrive on`): the drives in torque mode hold gravity only; the arm moves when pushed
 };
 const char* to_string(ArmState s);
 
@@ -37,11 +38,13 @@ const char* to_string(ArmState s);
 /// jog to rest (`jog stop`, GRBL 0x85); jog_keepalive: refresh a continuous jog's deadman.
 /// home: run the homing cycle (Request::joints: those joints as one group; 0 = every joint,
 /// group after group of ControllerConfig's homing order).
+/// freedrive_on / freedrive_off: hand guiding (issue 20; ModelControl, docs/dynamics.md).
 enum class RequestOp : std::uint8_t {
-  enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive, home
+  enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive, home,
+  freedrive_on, freedrive_off
 };
 const char* to_string(RequestOp op);
-inline constexpr std::size_t kRequestOps = 12;
+inline constexpr std::size_t kRequestOps = 14;
 
 /// The controller's mode. "ramp" = the controller ramps every joint to rest along its
 /// stop trajectory (drives powered, following the setpoints); "quick stop" = the drives
@@ -67,8 +70,12 @@ enum class Mode : std::uint8_t {
   jogging,           ///< a jog runs (Jogger, jog.hpp), or decelerates to rest; then idle
   homing,            ///< homing groups run one after the other (the master moves the joints of the group)
   homing_abort,      ///< homing aborted (`stop`, `!`): waiting for the drives to halt and return to CSP; then idle
+  freedrive,         ///< hand guiding: every drive in cyclic synchronous torque (CST) commanded gravity + friction
+                     ///< - damping from the measured state (ModelControl); no setpoints; `record` reads the pose
+  freedrive_end,     ///< back to CSP holding where each joint stands (`freedrive off`, `stop`, a joint that left
+                     ///< CST by itself); then idle with the setpoint at the measured pose
 };
-inline constexpr std::size_t kModes = 19;
+inline constexpr std::size_t kModes = 21;
 const char* to_string(Mode m);
 
 /// The one function from mode to what the console sees.
@@ -93,6 +100,8 @@ constexpr ArmState arm_state(Mode m) {
     case Mode::jogging: return ArmState::jogging;
     case Mode::homing: return ArmState::homing;
     case Mode::homing_abort: return ArmState::stopping;
+    case Mode::freedrive:
+    case Mode::freedrive_end: return ArmState::freedrive;
   }
   return ArmState::fault;
 }
@@ -102,7 +111,8 @@ constexpr bool holding(Mode m) { return m == Mode::hold_ramp || m == Mode::hold_
 
 /// The drives are powered and follow the controller's setpoints (which are then
 /// validated: finite, within the limits, not too fast). Not while enabling, nor during a
-/// drive-side quick stop (the controller only follows the drives then).
+/// drive-side quick stop (the controller only follows the drives then), nor in free-drive
+/// (the drives are in torque mode, or on their way back to CSP holding where they stand).
 constexpr bool powered(Mode m) {
   switch (m) {
     case Mode::idle:
@@ -123,7 +133,9 @@ constexpr bool powered(Mode m) {
     case Mode::fault_quick_stop:
     case Mode::fault:
     case Mode::estop_quick_stop:
-    case Mode::estop: return false;
+    case Mode::estop:
+    case Mode::freedrive:
+    case Mode::freedrive_end: return false;
   }
   return false;
 }
@@ -190,91 +202,129 @@ enum class Action : std::uint8_t {
   abort_homing,           ///< abort the running joints (left unhomed) -> homing_abort, then idle
   abort_homing_disable,   ///< abort the running joints, power down -> disabled
   estop_abort_homing,     ///< abort the running joints, power down -> estop
+  // freedrive_on / freedrive_off (issue 20)
+  start_freedrive,        ///< idle, nothing queued: every drive to torque mode -> freedrive (refused naming the
+                          ///< joint or the model when it cannot: bad_state)
+  already_freedrive,      ///< ok "free-drive on"
+  refuse_freedrive_not_enabled, ///< bad_state "freedrive needs the arm enabled (it is <state>)"
+  refuse_freedrive_busy,  ///< busy "a move, jog or homing is running (or held): freedrive refused"
+  end_freedrive,          ///< freedrive (`freedrive off`, `stop`, feed hold): back to CSP where it stands -> freedrive_end
+  not_in_freedrive,       ///< ok "free-drive off" (freedrive_end: "free-drive ending")
 };
-inline constexpr std::size_t kActions = 43;
+inline constexpr std::size_t kActions = 49;
 const char* to_string(Action a);
 
 using RequestRow = std::array<Action, kRequestOps>;  ///< indexed by RequestOp
 
 /// (mode x request) -> action. Rows in Mode order, columns in RequestOp order:
-///   enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive, home.
+///   enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive, home,
+///   freedrive_on, freedrive_off.
 inline constexpr std::array<RequestRow, kModes> kRequestTable = {{
     // boot
     {Action::refuse_not_started, Action::disable_drives, Action::drop_queue, Action::estop_at_rest,
      Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging, Action::refuse_not_started},
+     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging, Action::refuse_not_started,
+     Action::refuse_not_started, Action::not_in_freedrive},
     // disabled
     {Action::power_up, Action::disable_now, Action::drop_queue, Action::estop_at_rest, Action::nothing_to_reset,
      Action::not_moving, Action::not_holding, Action::set_zero,
-     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging, Action::refuse_home_not_enabled},
+     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging, Action::refuse_home_not_enabled,
+     Action::refuse_freedrive_not_enabled, Action::not_in_freedrive},
     // enabling
     {Action::already_enabled, Action::disable_now, Action::drop_queue, Action::estop_at_rest, Action::nothing_to_reset,
      Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging, Action::refuse_home_not_enabled},
+     Action::refuse_jog_not_enabled, Action::not_jogging, Action::not_jogging, Action::refuse_home_not_enabled,
+     Action::refuse_freedrive_not_enabled, Action::not_in_freedrive},
     // idle
     {Action::already_enabled, Action::disable_now, Action::drop_queue, Action::estop_stop, Action::nothing_to_reset,
      Action::hold_queue, Action::not_holding, Action::refuse_set_zero,
-     Action::start_jog, Action::not_jogging, Action::not_jogging, Action::start_homing},
+     Action::start_jog, Action::not_jogging, Action::not_jogging, Action::start_homing,
+     Action::start_freedrive, Action::not_in_freedrive},
     // moving
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
      Action::nothing_to_reset, Action::hold_motion, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving},
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving,
+     Action::refuse_freedrive_busy, Action::not_in_freedrive},
     // hold_ramp
     {Action::already_enabled, Action::keep_ramp_then_disable, Action::keep_ramp_to_idle, Action::estop_keep_ramp,
      Action::nothing_to_reset, Action::already_holding, Action::refuse_still_ramping, Action::refuse_set_zero,
-     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving},
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving,
+     Action::refuse_freedrive_busy, Action::not_in_freedrive},
     // hold_line
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
      Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero,
-     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving},
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving,
+     Action::refuse_freedrive_busy, Action::not_in_freedrive},
     // held
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
      Action::nothing_to_reset, Action::already_holding, Action::resume_motion, Action::refuse_set_zero,
-     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving},
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving,
+     Action::refuse_freedrive_busy, Action::not_in_freedrive},
     // stopping_to_idle
     {Action::refuse_stopping, Action::keep_ramp_then_disable, Action::drop_queue, Action::estop_keep_ramp,
      Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping},
+     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping,
+     Action::refuse_stopping, Action::not_in_freedrive},
     // stopping_to_disabled
     {Action::refuse_stopping, Action::keep_ramp_then_disable, Action::drop_queue, Action::estop_keep_ramp,
      Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping},
+     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping,
+     Action::refuse_stopping, Action::not_in_freedrive},
     // fault_ramp
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_keep_ramp,
      Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset,
+     Action::refuse_send_reset, Action::not_in_freedrive},
     // fault_quick_stop
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_keep_quick_stop,
      Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset,
+     Action::refuse_send_reset, Action::not_in_freedrive},
     // fault
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_at_rest,
      Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset,
+     Action::refuse_send_reset, Action::not_in_freedrive},
     // estop_ramp
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
      Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset,
+     Action::refuse_send_reset, Action::not_in_freedrive},
     // estop_quick_stop
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
      Action::refuse_still_stopping, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset,
+     Action::refuse_send_reset, Action::not_in_freedrive},
     // estop
     {Action::refuse_send_reset, Action::disable_drives, Action::drop_queue, Action::estop_again,
      Action::reset_latched, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset},
+     Action::refuse_send_reset, Action::not_jogging, Action::not_jogging, Action::refuse_send_reset,
+     Action::refuse_send_reset, Action::not_in_freedrive},
     // jogging (hold = GRBL's feed hold during a jog: the jog is cancelled)
     {Action::already_enabled, Action::ramp_then_disable, Action::ramp_to_idle, Action::estop_stop,
      Action::nothing_to_reset, Action::cancel_jog, Action::not_holding, Action::refuse_set_zero,
-     Action::update_jog, Action::cancel_jog, Action::refresh_jog, Action::refuse_home_moving},
+     Action::update_jog, Action::cancel_jog, Action::refresh_jog, Action::refuse_home_moving,
+     Action::refuse_freedrive_busy, Action::not_in_freedrive},
     // homing (hold = GRBL's `!`: aborts the homing cycle as `stop` does)
     {Action::already_enabled, Action::abort_homing_disable, Action::abort_homing, Action::estop_abort_homing,
      Action::nothing_to_reset, Action::abort_homing, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_homing, Action::not_jogging, Action::not_jogging, Action::refuse_homing},
+     Action::refuse_homing, Action::not_jogging, Action::not_jogging, Action::refuse_homing,
+     Action::refuse_homing, Action::not_in_freedrive},
     // homing_abort
     {Action::refuse_stopping, Action::abort_homing_disable, Action::drop_queue, Action::estop_abort_homing,
      Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
-     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping},
+     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping,
+     Action::refuse_stopping, Action::not_in_freedrive},
+    // freedrive (hand guiding: stop, feed hold and `freedrive off` hold where the arm stands)
+    {Action::already_enabled, Action::disable_now, Action::end_freedrive, Action::estop_stop,
+     Action::nothing_to_reset, Action::end_freedrive, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving,
+     Action::already_freedrive, Action::end_freedrive},
+    // freedrive_end (the drives back to CSP: one to three cycles)
+    {Action::already_enabled, Action::disable_now, Action::drop_queue, Action::estop_stop,
+     Action::nothing_to_reset, Action::not_moving, Action::not_holding, Action::refuse_set_zero,
+     Action::refuse_stopping, Action::not_jogging, Action::not_jogging, Action::refuse_stopping,
+     Action::refuse_stopping, Action::not_in_freedrive},
 }};
 
 constexpr Action action_for(Mode m, RequestOp op) {
