@@ -32,8 +32,7 @@ struct Rig {
   std::vector<kin::JointVector> q;  ///< q_cmd after every cycle (when recording)
   bool recording = false;
 
-  Rig() {
-    FwConfig cfg;
+  explicit Rig(FwConfig cfg = {}) {
     cfg.can = "sim";
     const std::string e = app.build(cfg, &clock);
     if (!e.empty()) FAIL(e.c_str());
@@ -563,4 +562,29 @@ TEST(FwPathBlend, HoldAndStopInABlendedRun) {
     CHECK(p.j <= 1.0 + 1e-6);
     LONGS_EQUAL(0, r.rt_allocs);
   }
+}
+
+// motion.default_blend_mm / _deg: the tolerance of moves that give none; blend=0 still stops.
+TEST(FwPathBlend, TheConfiguredDefaultBlendsMovesWithoutBlend) {
+  Rig r0;
+  const Eigen::Vector3d p0 = flange(r0, kS).translation();
+  const Eigen::Vector3d A = p0 + Eigen::Vector3d(-0.10, 0, 0), B = A + Eigen::Vector3d(0, 0.10, 0),
+                        C = B + Eigen::Vector3d(0, 0, -0.10);
+  FwConfig cfg;
+  cfg.default_blend_mm = 10;
+  cfg.default_blend_deg = 20;
+  Rig rd(cfg), rz(cfg);
+  const PathRun d = run_path(rd, {movel(A, 100, -1), movel(B, 100, -1), movel(C, 100, -1), movej(kS, -1)});
+  const PathRun z = run_path(rz, {movel(A, 100, 0), movel(B, 100, 0), movel(C, 100, 0), movej(kS, -1)});
+  std::printf("\nfw path blend default 10 mm / 20 deg: %.3f s (%llu corners); blend=0 given: %.3f s (%llu)\n", d.duration(),
+              static_cast<unsigned long long>(d.blended), z.duration(), static_cast<unsigned long long>(z.blended));
+  LONGS_EQUAL(3, d.blended);
+  CHECK(d.closest(A) <= 10e-3 + 1e-9);
+  CHECK(d.closest(A) > 1e-4);
+  LONGS_EQUAL(0, z.blended);
+  CHECK(z.closest(A) < 1e-6);
+  CHECK(d.duration() < z.duration());
+  CHECK(d.p.v <= 1.0 + 1e-6);
+  CHECK(d.p.a <= 1.0 + 1e-6);
+  CHECK(d.p.j <= 1.0 + 1e-6);
 }
