@@ -20,7 +20,9 @@
 //   ik_class/ist6/<class>/general_path[_eigen]  its worst cases: theta5 = 0, 1e-9,
 //                                  elbow stretched (double roots), unreachable
 //   ik_reduced/<model>/servoarm    issue 19: the reduced arms, 1 024 poses, all solutions
-//   ik_reduced/<model>/chain_path  the same verified through the chain's FK (as before)
+//   ik_reduced/<model>/path_3d     the 3-D cheap paths alone (what ik_solve_all ran
+//                                  before the 2-D closed forms; without its input checks)
+//   ik_reduced/<model>/chain_path  the same verified through the chain's FK (before that)
 //   ik_class/<model>/<class>/servoarm  per-class worst cases of the OPW and UR
 //                                  arms: theta5 = 0, 1e-9, 1e-5, elbow stretched,
 //                                  shoulder singular, unreachable
@@ -364,19 +366,24 @@ void ik19(benchmark::State& st, const char* name, bool twist, Path19 path, Class
 }
 
 // Issue 19, reduced arms (<= 100 ns for all their solutions): 1 024 poses from random
-// in-limit joints; servoarm = ik_solve_all (the cheap paths: verified through the
-// decomposition), chain_path = the same candidates each through the chain's FK and
-// Jacobian (detail::solve_reduced_slow, what ik_solve_all did before; not planar_2r).
-void ik_reduced(benchmark::State& st, const char* name, bool chain_path) {
+// in-limit joints; servoarm = ik_solve_all (the 2-D closed forms, verified by their own
+// forward map), path_3d = the 3-D cheap paths (verified through the decomposition's
+// products: ik_solve_all before the 2-D forms), chain_path = the same candidates each
+// through the chain's FK and Jacobian (detail::solve_reduced_slow; not planar_2r).
+enum class Reduced { solve_all, path_3d, chain_path };
+void ik_reduced(benchmark::State& st, const char* name, Reduced path) {
   const Fixture19& f = fixture19(name, false, Class19::random);
   kin::IkResult r;
   std::size_t i = 0;
   long sols = 0, n = 0;
   for (auto _ : st) {
     const kin::Pose& T = f.targets[i++ % kPoses19];
-    if (chain_path) {
+    if (path == Reduced::chain_path) {
       r.count = 0;
       kin::detail::solve_reduced_slow(f.model, T, nullptr, r);
+    } else if (path == Reduced::path_3d) {
+      r.count = 0;
+      kin::detail::solve_reduced_3d(f.model, T, nullptr, r);
     } else {
       kin::ik_solve_all(f.model, T, nullptr, r);
     }
@@ -410,9 +417,12 @@ const char* const kNumeric[] = {"puma560", "stanford", "ist6", "vvr_vr"};
                                    Path19::numeric_near, Class19::random);
   }
   for (const char* m : {"rr_planar", "rrr_planar", "rlr_planar", "trr", "trl_r", "vvl_r"}) {
-    benchmark::RegisterBenchmark((std::string("ik_reduced/") + m + "/servoarm").c_str(), ik_reduced, m, false);
+    benchmark::RegisterBenchmark((std::string("ik_reduced/") + m + "/servoarm").c_str(), ik_reduced, m,
+                                 Reduced::solve_all);
+    benchmark::RegisterBenchmark((std::string("ik_reduced/") + m + "/path_3d").c_str(), ik_reduced, m, Reduced::path_3d);
     if (std::string(m) != "rr_planar")
-      benchmark::RegisterBenchmark((std::string("ik_reduced/") + m + "/chain_path").c_str(), ik_reduced, m, true);
+      benchmark::RegisterBenchmark((std::string("ik_reduced/") + m + "/chain_path").c_str(), ik_reduced, m,
+                                   Reduced::chain_path);
   }
   benchmark::RegisterBenchmark("ik/ist6/general_path", ik19, "ist6", false, Path19::general, Class19::random);
   benchmark::RegisterBenchmark("ik/ist6/general_path_eigen", ik19, "ist6", false, Path19::general_eigen,

@@ -2,6 +2,7 @@
 // recognised from the DH rows: round trip on random configurations, the
 // original among the solutions, the seed's formulas, unreachable targets.
 #include <cstdlib>
+#include <vector>
 
 #include "servoarm/kinematics/ik.hpp"
 #include "kin_test_util.hpp"
@@ -279,5 +280,162 @@ TEST(IkReduced, CheapPathGivesWhatTheChainPathGives) {
       }
     }
     std::printf("\n  %-12s %d poses: cheap path = chain path, %d results flagged singular", k.name, n, flagged);
+  }
+}
+
+TEST(IkReduced, TwoDimensionalFormsAnswerRandomPoses) {
+  // Issue 19: the 2-D closed forms (detail::solve_reduced_2d: the forward map in the
+  // reduced coordinates as the check) answer every random pose themselves, not by
+  // handing it to the 3-D paths, and what they answer reproduces the target through
+  // the chain's FK; they are set up for every seed arm (IkSolverData::Planar).
+  const int n = std::max(2000, samples() / 10);
+  for (const Case& k : kCases) {
+    kin::IkModel m;
+    kin::ik_prepare(model(k.name), m);
+    if (std::string(k.method) != "spatial_3") CHECK_TEXT(kin::detail::solver_data(m).pl.on, k.name);
+    std::mt19937_64 rng(2020);
+    int answered = 0;
+    for (int s = 0; s < n; ++s) {
+      const kin::JointVector q = random_q(m.chain, rng);
+      const kin::Pose T = fk(m.chain, q);
+      const kin::JointVector ref = random_q(m.chain, rng);
+      kin::IkResult r2, all;
+      r2.count = 0;
+      const bool yes = kin::detail::solve_reduced_2d(m, T, s % 2 ? &ref : nullptr, r2);
+      kin::ik_solve_all(m, T, s % 2 ? &ref : nullptr, all);
+      if (!yes) continue;
+      ++answered;
+      const std::string what = std::string(k.name) + " " + describe(q);
+      LONGS_EQUAL_TEXT(all.count, r2.count, what.c_str());
+      bool in = false;
+      for (int i = 0; i < r2.count; ++i) {
+        const auto& a = r2.solutions[static_cast<std::size_t>(i)];
+        CHECK_TEXT(gap(m.chain, a.q, all.solutions[static_cast<std::size_t>(i)].q) == 0.0, what.c_str());
+        const kin::Pose X = fk(m.chain, a.q);
+        CHECK_TEXT((X.translation() - T.translation()).norm() <= 1e-9, what.c_str());
+        if (k.full_pose) CHECK_TEXT(kin::rotation_error(X.linear(), T.linear()).norm() <= 1e-9, what.c_str());
+        // the error the 2-D check reports is the chain's, to rounding
+        CHECK_TEXT(std::abs(a.position_error - (X.translation() - T.translation()).norm()) <= 1e-12, what.c_str());
+        in = in || gap(m.chain, a.q, q) < 1e-6;
+      }
+      CHECK_TEXT(in, (what + ": original not among the 2-D solutions").c_str());
+    }
+    std::printf("\n  %-12s %d poses: the 2-D form answered %d", k.name, n, answered);
+    CHECK_TEXT(answered == n, k.name);
+  }
+}
+
+TEST(IkReduced, PlanarCaseTablesFromTheSeedFormulas) {
+  // RRR (seed 002 4.2): the wrist point w = p - a3 (cos phi, sin phi), theta2 =
+  // +-acos((|w|^2 - a1^2 - a2^2) / (2 a1 a2)), theta1 = atan2(w) - atan2(a2 s2, a1 + a2 c2),
+  // theta3 = phi - theta1 - theta2. RLR (4.3): d2 = |w|, theta1 = atan2(w), theta3 = phi -
+  // theta1, and d2 = -|w| (out of the telescope's limits). Both solutions, each one.
+  struct Row {
+    double x, y, phi;
+  };
+  const Row rows[] = {{0.40, 0.20, 0.5},  {-0.30, 0.35, 2.8}, {0.05, -0.45, -1.9}, {0.62, 0.01, 0.02},
+                      {0.10, 0.12, -3.0}, {-0.5, -0.2, 1.2},  {0.0, 0.3, 0.0},     {0.2, -0.2, 3.1}};
+  kin::IkModel rrr, rlr;
+  kin::ik_prepare(model("rrr_planar"), rrr);
+  kin::ik_prepare(model("rlr_planar"), rlr);
+  const double a1 = 0.3, a2 = 0.25, a3 = 0.1;
+  for (const Row& w : rows) {
+    kin::Pose T = kin::Pose::Identity();
+    T.linear() = Eigen::AngleAxisd(w.phi, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    T.translation() << w.x, w.y, 0;
+    const double wx = w.x - a3 * std::cos(w.phi), wy = w.y - a3 * std::sin(w.phi);
+    const std::string what = std::to_string(w.x) + " " + std::to_string(w.y) + " " + std::to_string(w.phi);
+    {
+      const double k = (wx * wx + wy * wy - a1 * a1 - a2 * a2) / (2 * a1 * a2);
+      kin::IkResult r;
+      kin::ik_solve_all(rrr, T, nullptr, r);
+      if (std::abs(k) > 1) {
+        LONGS_EQUAL_TEXT(0, r.count, what.c_str());
+      } else {
+        LONGS_EQUAL_TEXT(2, r.count, what.c_str());
+        for (const double t2 : {std::acos(k), -std::acos(k)}) {
+          const double t1 = std::atan2(wy, wx) - std::atan2(a2 * std::sin(t2), a1 + a2 * std::cos(t2));
+          kin::JointVector e(3);
+          e << kin::wrap_pi(t1), t2, kin::wrap_pi(w.phi - t1 - t2);
+          int hits = 0;
+          for (int i = 0; i < r.count; ++i) hits += gap(rrr.chain, r.solutions[static_cast<std::size_t>(i)].q, e) < 1e-12;
+          LONGS_EQUAL_TEXT(1, hits, ("rrr " + what + " expected " + describe(e)).c_str());
+        }
+        CHECK_TEXT(r.solutions[0].branch.elbow != r.solutions[1].branch.elbow, what.c_str());
+      }
+    }
+    {
+      kin::IkResult r;
+      kin::ik_solve_all(rlr, T, nullptr, r);
+      LONGS_EQUAL_TEXT(2, r.count, what.c_str());
+      const double d = std::hypot(wx, wy), t1 = std::atan2(wy, wx);
+      for (const double s : {1.0, -1.0}) {
+        kin::JointVector e(3);
+        e << kin::wrap_pi(s > 0 ? t1 : t1 + M_PI), s * d, kin::wrap_pi(w.phi - (s > 0 ? t1 : t1 + M_PI));
+        int hits = 0;
+        for (int i = 0; i < r.count; ++i) {
+          const auto& x = r.solutions[static_cast<std::size_t>(i)];
+          if (gap(rlr.chain, x.q, e) < 1e-12) {
+            ++hits;
+            CHECK_TEXT(x.within_limits == (s > 0 && d >= 0.1 && d <= 0.5), what.c_str());
+          }
+        }
+        LONGS_EQUAL_TEXT(1, hits, ("rlr " + what + " expected " + describe(e)).c_str());
+      }
+    }
+  }
+}
+
+TEST(IkReduced, NothingTheNumericSearchFindsIsMissing) {
+  // A slow reference independent of the closed forms: ik_numeric from 40 random starts
+  // per pose collects the distinct solutions within the limits; each of them is among
+  // ik_solve_all's solutions (within 1e-6), and every solution of ours within the limits
+  // is found by the search, on 60 random poses per arm and 20 with the elbow stretched.
+  for (const Case& k : kCases) {
+    kin::IkModel m;
+    kin::ik_prepare(model(k.name), m);
+    std::mt19937_64 rng(404);
+    kin::IkNumericOptions opt;
+    opt.position_only = !k.full_pose;
+    opt.max_restarts = 0;
+    opt.max_iterations = 100;
+    opt.stall_iterations = 0;
+    int found_total = 0;
+    for (int s = 0; s < 80; ++s) {
+      kin::JointVector q = random_q(m.chain, rng);
+      if (s >= 60) {
+        const int e = std::string(k.method) == "planar_3" || std::string(k.method) == "planar_2r" ? 1 : 2;
+        if (m.chain.joint(e).type == kin::JointType::revolute) q[e] = 0.0;
+      }
+      const kin::Pose T = fk(m.chain, q);
+      kin::IkResult r;
+      kin::ik_solve_all(m, T, nullptr, r);
+      std::vector<kin::JointVector> num;
+      for (int t = 0; t < 40; ++t) {
+        kin::IkNumericResult nr;
+        kin::ik_numeric(m.chain, T, random_q(m.chain, rng), opt, nr);
+        if (nr.status != kin::Status::ok) continue;
+        bool dup = false;
+        for (const auto& x : num) dup = dup || gap(m.chain, x, nr.q) < 1e-5;
+        if (!dup) num.push_back(nr.q);
+      }
+      const std::string what = std::string(k.name) + " " + describe(q);
+      // stretched: a double root, the search stops ~sqrt(1e-9 / L) rad from it
+      const double tol = s >= 60 ? 1e-3 : 1e-5;
+      for (const auto& x : num) {
+        bool ours = false;
+        for (int i = 0; i < r.count; ++i) ours = ours || gap(m.chain, r.solutions[static_cast<std::size_t>(i)].q, x) < tol;
+        CHECK_TEXT(ours, (what + ": numeric solution " + describe(x) + " missing").c_str());
+      }
+      for (int i = 0; i < r.count; ++i) {
+        const auto& a = r.solutions[static_cast<std::size_t>(i)];
+        if (!a.within_limits) continue;
+        bool there = false;
+        for (const auto& x : num) there = there || gap(m.chain, a.q, x) < tol;
+        CHECK_TEXT(there, (what + ": ours " + describe(a.q) + " not found by the search").c_str());
+      }
+      found_total += static_cast<int>(num.size());
+    }
+    std::printf("\n  %-12s 80 poses: %d numeric solutions, all among ours", k.name, found_total);
   }
 }

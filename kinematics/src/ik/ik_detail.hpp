@@ -102,6 +102,24 @@ struct IkSolverData {
   bool ur_zrot = false;           ///< C2, C3 rotate about z: C1 Rz2 C2 Rz3 C3 = C1 Rz(m2 + m3 + gamma)
   double ur_gc = 1, ur_gs = 0;     ///< cos, sin gamma
   bool ur_tilt = false;  ///< u_z = cos(m5 - phi5) exactly (ur_u5 = (0, h = 1)): see ur.cpp wrist_roots
+  /// The reduced arms' 2-D closed forms (reduced.cpp, issue 19), set up by
+  /// model.cpp's detect_reduced and checked there against the decomposition
+  /// on sample joint values (off where the check fails: the 3-D cheap paths
+  /// answer). In the frame F whose z is the parallel axes (planar_2r,
+  /// planar_3: the frame after C0; pitch_4: joint 2's frame, C1) the point f
+  /// that the first of those joints turns is  f = sa + Rz(b) w  (middle joint
+  /// revolute, angle b) or  sa + b w  (prismatic, w its unit in-plane axis),
+  /// and the heading of the frame after the last motion is the sum of the
+  /// revolute angles plus gamma (planar_3, pitch_4); tn: the last constant
+  /// transform's translation (the tool point from that frame).
+  struct Planar {
+    bool on = false;
+    bool pri = false;                                ///< middle joint prismatic
+    double h = 0, hc = 1, hs = 0;                    ///< red_co's (b, c) = h (hc, hs), revolute middle joint
+    Eigen::Vector3d sa = Eigen::Vector3d::Zero(), w = Eigen::Vector3d::Zero(), tn = Eigen::Vector3d::Zero();
+    double gc = 1, gs = 0;                           ///< cos, sin gamma
+    Eigen::Vector3d z1 = Eigen::Vector3d::UnitZ(), o1 = Eigen::Vector3d::Zero();  ///< pitch_4: axis 1 in F
+  } pl;
 };
 static_assert(sizeof(IkSolverData) <= IkSolverStorage::kBytes, "raise IkSolverStorage::kBytes (ik.hpp)");
 static_assert(IkSolverStorage::kBytes - sizeof(IkSolverData) < 256, "lower IkSolverStorage::kBytes (ik.hpp)");
@@ -422,6 +440,15 @@ void solve_ur(const IkModel& m, const Pose& target, const JointVector* q_ref, Ik
 
 /// Every solution of a reduced arm: planar_2r, planar_3, spatial_3, pitch_4 (reduced.cpp).
 void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
+/// The 2-D closed forms alone (what solve_reduced tries first): true when
+/// they answered (res holds their solutions), false when they hand the
+/// target over (not set up for this arm, degenerate, a solution missing
+/// 1e-9; res.count may have grown then). For the tests.
+bool solve_reduced_2d(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
+/// The 3-D cheap paths alone (every joint's (cos, sin) pair, each candidate
+/// verified through the decomposition's 3x3 products): the 2-D forms'
+/// fallback, and what solve_reduced was before them (benchmark).
+void solve_reduced_3d(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
 /// The same through the chain's FK and Jacobian for every candidate (what
 /// solve_reduced did before its cheap paths; their fallback for degenerate
 /// targets, and the reference they are tested against). Not for planar_2r.

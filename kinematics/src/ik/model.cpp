@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 
 #include <Eigen/LU>
 
@@ -334,6 +335,17 @@ bool detect_spherical_wrist(IkModel& model) {
   return true;
 }
 
+// is_rotation() for a finite R (ik_solve_all checked that): R^T R - I by
+// its six distinct entries, det R by the triple product (half the
+// instructions of the general check; issue 19, the reduced arms' budget).
+bool rotation_within(const Eigen::Matrix3d& R, double tol) {
+  const Eigen::Vector3d a = R.col(0), b = R.col(1), c = R.col(2);
+  const double e = std::max({std::abs(a.dot(a) - 1.0), std::abs(b.dot(b) - 1.0), std::abs(c.dot(c) - 1.0),
+                             std::abs(a.dot(b)), std::abs(a.dot(c)), std::abs(b.dot(c))});
+  if (!(e <= tol)) return false;
+  return std::abs(a.dot(b.cross(c)) - 1.0) <= tol;
+}
+
 void finish_status(IkResult& res) {
   res.singular_kinds = 0;
   bool any_in = false;
@@ -374,6 +386,70 @@ Eigen::Vector3d fit_reduced(bool prismatic, G g) {
   return B.inverse() * v;
 }
 
+// The reduced arms' 2-D forms (IkSolverData::Planar, reduced.cpp). The
+// parallel axes are z of the frame F = C(first): the joints turn about z
+// there, the middle one turns about z too or slides in the plane. first = 0
+// (planar_2r, planar_3) or 1 (pitch_4: joint 2's frame). Switched on only
+// where the 2-D form reproduces the decomposition (F's part of it: J C ... J Cn)
+// to 1e-12 on sample joint values (a flipped z between the axes, or a
+// constant rotation that is not about z, leaves it off).
+void setup_planar(IkSolverData& m, int first, bool heading) {
+  IkSolverData::Planar pl;
+  const int b = first + 1;            // the middle joint
+  const int last = heading ? first + 2 : first + 1;
+  const Pose& Cb = C(m, b);           // after joint `first`'s motion to joint b's frame
+  const Eigen::Vector3d wb = C(m, b + 1).translation();  // the point after b's motion
+  pl.pri = prism(m, b);
+  if (pl.pri) {
+    pl.sa = Cb.translation() + Cb.linear() * wb;
+    pl.w = Cb.linear().col(2);
+  } else {
+    pl.sa = Cb.translation();
+    pl.w = Cb.linear() * wb;
+    const double hb = m.red_co[1], hcoef = m.red_co[2];
+    pl.h = std::sqrt(hb * hb + hcoef * hcoef);
+    if (!(pl.h > 1e-12 * m.scale * m.scale)) return;  // the equation free of b (solve_basis's tolerance)
+    pl.hc = hb / pl.h;
+    pl.hs = hcoef / pl.h;
+  }
+  if (heading) {
+    const Eigen::Matrix3d G = Cb.linear() * C(m, b + 1).linear();
+    const double g = std::atan2(G(1, 0), G(0, 0));
+    pl.gc = std::cos(g);
+    pl.gs = std::sin(g);
+    pl.tn = C(m, last + 1).translation();
+  }
+  if (first == 1) {
+    pl.z1 = C(m, 1).linear().transpose().col(2);
+    pl.o1 = -(C(m, 1).linear().transpose() * C(m, 1).translation());
+  }
+  // the check: F's part of the decomposition against the 2-D form
+  const double samples[4][3] = {{0.3, 0.7, -1.1}, {-2.0, 2.5, 0.4}, {1.3, -0.2, 2.9}, {-0.6, -2.8, -1.7}};
+  const double tol = 1e-12 * m.scale;
+  for (const auto& v : samples) {
+    const double mb = pl.pri ? v[1] * m.scale : v[1];
+    Pose T = joint_motion(false, v[0]) * Cb * joint_motion(pl.pri, mb);
+    Eigen::Vector3d f2;
+    if (heading) {
+      T = T * C(m, b + 1) * joint_motion(false, v[2]) * C(m, last + 1);
+    } else {
+      T = T * C(m, b + 1);
+    }
+    const Eigen::Vector3d f = pl.pri ? Eigen::Vector3d(pl.sa + mb * pl.w) : Eigen::Vector3d(pl.sa + rot_z(mb) * pl.w);
+    f2 = rot_z(v[0]) * f;
+    if (heading) {
+      const double hd = v[0] + (pl.pri ? 0.0 : mb) + v[2] + std::atan2(pl.gs, pl.gc);
+      f2 += rot_z(hd) * pl.tn;
+      const Eigen::Matrix3d R2 = rot_z(hd) * C(m, last + 1).linear();
+      if ((R2 - T.linear()).cwiseAbs().maxCoeff() > 1e-12) return;
+    }
+    if ((f2 - T.translation()).norm() > tol || !all_finite(f2)) return;
+  }
+  if (pl.pri && std::abs(pl.w.z()) > 1e-12) return;
+  pl.on = true;
+  m.pl = pl;
+}
+
 bool detect_reduced(IkModel& model) {
   IkSolverData& m = solver_data(model);
   if (m.n < 2 || m.n > 4 || prism(m, 0)) return false;
@@ -397,6 +473,7 @@ bool detect_reduced(IkModel& model) {
     const double g0 = g(0), g1 = g(kPi / 2), g2 = g(kPi);
     m.red_co = {0.5 * (g0 + g2), 0.5 * (g0 - g2), g1 - 0.5 * (g0 + g2)};
     m.red_fast = true;
+    setup_planar(m, 0, false);
     return true;
   }
   if (planar && m.n == 3 && !prism(m, 2)) {
@@ -407,6 +484,7 @@ bool detect_reduced(IkModel& model) {
       return f.x() * f.x() + f.y() * f.y();
     });
     m.red_fast = detail::all_finite(m.red_co);
+    if (m.red_fast) setup_planar(m, 0, true);
     return true;
   }
   if (m.n == 3) {
@@ -432,6 +510,7 @@ bool detect_reduced(IkModel& model) {
       m.red_u = n21.x() / h;
       m.red_v = n21.y() / h;
       m.red_fast = detail::all_finite(m.red_co);
+      if (m.red_fast) setup_planar(m, 1, true);
     }
     return true;
   }
@@ -484,9 +563,16 @@ void ik_solve_all(const IkModel& model, const Pose& target, const JointVector* q
     result.status = q_ref->size() != model.chain.n_joints ? Status::wrong_size : Status::bad_input;
     return;
   }
-  bool finite = true;
-  for (int i = 0; i < 16; ++i) finite = finite && std::isfinite(target.matrix().data()[i]);
-  if (!finite || !is_rotation(target.linear(), 1e-6)) {
+  // finite: every exponent field below 0x7ff (adding 1 to it carries into bit 63 only
+  // for Inf/NaN); integer operations, no floating-point exception, vectorised
+  std::uint64_t carry = 0;
+  for (int i = 0; i < 16; ++i) {
+    std::uint64_t u;
+    std::memcpy(&u, target.matrix().data() + i, sizeof u);
+    carry |= (u & 0x7ff0000000000000ull) + 0x0010000000000000ull;
+  }
+  const bool finite = (carry >> 63) == 0;
+  if (!finite || !detail::rotation_within(target.linear(), 1e-6)) {
     result.status = Status::bad_input;
     return;
   }

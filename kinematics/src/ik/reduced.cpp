@@ -415,7 +415,393 @@ void solve_spatial_3_fast(const IkModel& model, const Pose& target, const double
   }
 }
 
+// ---------------------------------------------------------------------------
+// The 2-D closed forms (issue 19: reduced arms <= 100 ns for all their
+// solutions). In the frame F of the parallel axes (IkSolverData::Planar,
+// checked at set-up against the decomposition) the arm is a planar chain:
+// the distance of the point f = sa + Rz(b) w (or sa + b w) from the first
+// axis gives the middle joint (red_co, its (h, phase) precomputed), one turn
+// of f onto the target point the first, the heading left the last. Each
+// solution is verified by the same 2-D forward map (tool point and heading
+// from its (cos, sin) pairs: the position error in metres, the heading's
+// |(cos, sin) - (cos, sin)_target| = 2 sin(angle / 2) as the rotation error,
+// what the 3-D paths measure), the elbow flag from the 2-D Jacobian columns
+// at that tool point. All or nothing: a degenerate target (heading or turn
+// undefined, an equation free) or a solution that misses 1e-9 hands the
+// whole target to the 3-D cheap path (solve_*_fast above: their answers).
+// ---------------------------------------------------------------------------
+
+// solve_basis for a revolute joint with (h, phase) of (b, c) precomputed: the
+// same roots bit for bit (h, hc, hs computed as solve_basis computes them).
+inline Roots roots_rev(double a, const IkSolverData::Planar& pl) {
+  Roots r;
+  double k = -a / pl.h;
+  if (k > 1.0) {
+    if (k > 1.0 + 1e-9) return r;
+    k = 1.0;
+  } else if (k < -1.0) {
+    if (k < -1.0 - 1e-9) return r;
+    k = -1.0;
+  }
+  const double st = std::sqrt((1.0 - k) * (1.0 + k));
+  r.c[0] = pl.hc * k - pl.hs * st;
+  r.s[0] = pl.hs * k + pl.hc * st;
+  r.c[1] = pl.hc * k + pl.hs * st;
+  r.s[1] = pl.hs * k - pl.hc * st;
+  r.n = st > 0 ? 2 : 1;
+  return r;
+}
+
+// Wrap, limit flags, de-duplication and storage of one verified solution (as
+// store_reduced's tail; mot: the motion values).
+inline void emit(const IkSolverData& m, const JointVector* q_ref, const double* mot, Branch br, std::uint8_t sing,
+                 double ep, double er, IkResult& res) {
+  const int n = m.n;
+  double q[4] = {0, 0, 0, 0};
+  bool in = true;
+  for (int j = 0; j < n; ++j) {
+    const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
+    const double v = m.dir[static_cast<std::size_t>(j)] * mot[j];
+    q[j] = jw.kind == 0 ? v : detail::wrap_into_limits(fast_wrap(v), jw.lo, jw.hi, q_ref ? (*q_ref)[j] : 0.0);
+    in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
+  }
+  if (!std::isfinite(q[0] + q[1] + q[2] + q[3])) return;
+  for (int i = 0; i < res.count; ++i) {
+    const JointVector& x = res.solutions[static_cast<std::size_t>(i)].q;
+    bool same = true;
+    for (int j = 0; j < n && same; ++j) {
+      const double d = q[j] - x[j];
+      same = (prism(m, j) ? std::abs(d) : std::abs(fast_wrap(d))) <= 1e-7;
+    }
+    if (same) return;
+  }
+  if (res.count >= kMaxIkSolutions) return;
+  IkSolution& sol = res.solutions[static_cast<std::size_t>(res.count++)];
+  sol.q.resize(n);
+  double* d = sol.q.data();  // storage for kMaxJoints: four stores, not a memcpy of n
+  d[0] = q[0];
+  d[1] = q[1];
+  d[2] = q[2];
+  d[3] = q[3];
+  sol.branch = br;
+  sol.within_limits = in;
+  sol.singular = sing;
+  sol.position_error = ep;
+  sol.rotation_error = er;
+}
+
+// One 2-D solution: the pairs of the first and middle joint and, with a
+// heading, the last joint's pair from the target heading (cp, sp) left.
+struct Sol2d {             // every field set by core_2d (no initialisers: not zeroed per call)
+  double ca, sa;  // first joint
+  double cb, sb;  // middle joint (prismatic: the value in cb)
+  double cc, sc;  // last joint (1, 0 without a heading)
+  double ep, er;
+  double tool[3];  // the verified tool point (F)
+  std::uint8_t sing;
+  std::int8_t elbow;
+};
+
+// The core: target point pt (F; the tool point) and heading (cp, sp) (with
+// heading) -> at most two verified solutions; false: hand over.
+inline bool core_2d(const IkSolverData& m, const Eigen::Vector3d& pt, bool heading, bool merge, double cp, double sp,
+                    const double* root_rhs, Sol2d* out, int& ns) {
+  const IkSolverData::Planar& pl = m.pl;
+  // the point that the first and middle joints place: joint 3's origin, or the tool point
+  const double Px = heading ? pt.x() - (cp * pl.tn.x() - sp * pl.tn.y()) : pt.x();
+  const double Py = heading ? pt.y() - (sp * pl.tn.x() + cp * pl.tn.y()) : pt.y();
+  const double P2 = Px * Px + Py * Py;
+  const double sc2 = m.scale * m.scale;
+  Roots r;
+  std::uint8_t merged = 0;
+  // root_rhs: the distance equation's right-hand side when it is not |P_xy|^2 (pitch_4: |g|^2)
+  const double rhs = root_rhs ? *root_rhs : P2;
+  if (pl.pri) {
+    r = solve_basis(m.red_co[0] - rhs, m.red_co[1], m.red_co[2], true, 1e-12 * sc2, false);
+    if (r.free) return false;
+  } else {
+    r = roots_rev(m.red_co[0] - rhs, pl);
+    // stretched / folded: one configuration (as the 3-D paths); planar_2r flags it
+    if (merge && r.n >= 1 && (merge_close_roots(r) || r.n == 1) && !heading) merged = kSingularElbow;
+  }
+  if (!(P2 > 1e-18 * sc2)) return false;  // point on the first axis: that joint is free
+  ns = r.n;
+  for (int i = 0; i < r.n; ++i) {
+    Sol2d& o = out[i];
+    o.elbow = r.label[i];
+    o.sing = merged;
+    o.er = 0;
+    o.cc = 1;
+    o.sc = 0;
+    double fx, fy, fz;
+    if (pl.pri) {
+      const double d = r.c[i];
+      o.cb = d;
+      o.sb = 0;
+      fx = pl.sa.x() + d * pl.w.x();
+      fy = pl.sa.y() + d * pl.w.y();
+      fz = pl.sa.z();
+    } else {
+      o.cb = r.c[i];
+      o.sb = r.s[i];
+      fx = pl.sa.x() + (o.cb * pl.w.x() - o.sb * pl.w.y());
+      fy = pl.sa.y() + (o.sb * pl.w.x() + o.cb * pl.w.y());
+      fz = pl.sa.z() + pl.w.z();
+    }
+    const double cr = fx * Py - fy * Px, dt = fx * Px + fy * Py;
+    const double rr = cr * cr + dt * dt;
+    if (!(rr > 1e-36 * sc2 * sc2) || !(fx * fx + fy * fy > 1e-18 * sc2)) return false;
+    const double ir = 1.0 / std::sqrt(rr);
+    o.ca = dt * ir;
+    o.sa = cr * ir;
+    // the forward map: P' = Rz(a) f, heading' = a + b + c + gamma, tool' = P' + Rz(heading') tn
+    double tx = o.ca * fx - o.sa * fy, ty = o.sa * fx + o.ca * fy, tzv = fz;
+    if (heading) {
+      // H = a + gamma (+ b): the heading before the last joint; c = psi - H
+      double hc = o.ca * pl.gc - o.sa * pl.gs, hs = o.sa * pl.gc + o.ca * pl.gs;
+      if (!pl.pri) {
+        const double x = hc * o.cb - hs * o.sb;
+        hs = hs * o.cb + hc * o.sb;
+        hc = x;
+      }
+      o.cc = cp * hc + sp * hs;
+      o.sc = sp * hc - cp * hs;
+      const double gc = hc * o.cc - hs * o.sc, gs = hs * o.cc + hc * o.sc;  // heading'
+      tx += gc * pl.tn.x() - gs * pl.tn.y();
+      ty += gs * pl.tn.x() + gc * pl.tn.y();
+      tzv += pl.tn.z();
+      o.er = std::sqrt((gc - cp) * (gc - cp) + (gs - sp) * (gs - sp));
+    }
+    const double ex = tx - pt.x(), ey = ty - pt.y(), ez = tzv - pt.z();
+    o.ep = std::sqrt(ex * ex + ey * ey + ez * ez);
+    if (!(o.ep <= kVerifyPos) || !(o.er <= kVerifyRot)) return false;
+    o.tool[0] = tx;
+    o.tool[1] = ty;
+    o.tool[2] = tzv;
+  }
+  return true;
+}
+
+// Elbow flag of planar_3 from the position columns of the first two joints at
+// the tool point (F: their axes along z): ez x tool, ez x (tool - Rz(a) sa) or
+// the prismatic axis Rz(a) w; |c1 x c2|^2 / (|c1|^2 |c2|^2) < kNearSingular^2
+// (the Gram determinant the 3-D path takes, by Lagrange's identity).
+inline bool elbow_2(const IkSolverData::Planar& pl, const Sol2d& o) {
+  const double ax = -o.tool[1], ay = o.tool[0];
+  double bx, by;
+  if (pl.pri) {
+    bx = o.ca * pl.w.x() - o.sa * pl.w.y();
+    by = o.sa * pl.w.x() + o.ca * pl.w.y();
+  } else {
+    const double ox = o.ca * pl.sa.x() - o.sa * pl.sa.y(), oy = o.sa * pl.sa.x() + o.ca * pl.sa.y();
+    bx = -(o.tool[1] - oy);
+    by = o.tool[0] - ox;
+  }
+  const double g00 = ax * ax + ay * ay, g11 = bx * bx + by * by, g01 = ax * bx + ay * by;
+  const double prod = g00 * g11, det = g00 * g11 - g01 * g01;
+  return prod > 0 && det / prod < kNearSingular * kNearSingular;
+}
+
+// planar_2r and planar_3 in 2-D (F = the frame after C0).
+bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  const bool heading = model.method == IkMethod::planar_3;
+  const Eigen::Matrix3d& R0 = C(m, 0).linear();
+  const Eigen::Vector3d pt = R0.transpose() * (target.translation() - C(m, 0).translation());
+  double cp = 1, sp = 0;
+  if (heading) {
+    const Eigen::Vector3d xv = target.linear() * C(m, m.n).linear().row(0).transpose();
+    cp = R0.col(0).dot(xv);
+    sp = R0.col(1).dot(xv);
+    const double hp = cp * cp + sp * sp;
+    if (!(hp > 1e-24)) return false;
+    const double ih = 1.0 / std::sqrt(hp);
+    cp *= ih;
+    sp *= ih;
+  }
+  Sol2d s[2];
+  int ns = 0;
+  if (!core_2d(m, pt, heading, !m.pl.pri, cp, sp, nullptr, s, ns)) return false;
+  // the angles two at a time: (a, b) per solution, then the two c (planar_3)
+  double y[6] = {0, 0, 0, 0, 0, 0}, x[6] = {1, 1, 1, 1, 1, 1}, ang[6];
+  for (int i = 0; i < ns; ++i) {
+    y[2 * i] = s[i].sa;
+    x[2 * i] = s[i].ca;
+    y[2 * i + 1] = s[i].sb;
+    x[2 * i + 1] = s[i].cb;
+    y[4 + i] = s[i].sc;
+    x[4 + i] = s[i].cc;
+  }
+  detail::atan2_poly_x2(y, x, ang);
+  if (ns == 2) detail::atan2_poly_x2(y + 2, x + 2, ang + 2);
+  if (heading) detail::atan2_poly_x2(y + 4, x + 4, ang + 4);
+  for (int i = 0; i < ns; ++i) {
+    double mot[3] = {ang[2 * i], m.pl.pri ? s[i].cb : ang[2 * i + 1], ang[4 + i]};
+    Branch br;
+    br.elbow = s[i].elbow;
+    const std::uint8_t sing = heading ? (elbow_2(m.pl, s[i]) ? kSingularElbow : 0) : s[i].sing;
+    emit(m, q_ref, mot, br, sing, s[i].ep, s[i].er, res);
+  }
+  return true;
+}
+
+// pitch_4 in 2-D: joint 1 and the pitch as solve_pitch_4_fast takes them,
+// then the core in joint 2's frame (F = C1 after the J1 motion); the elbow
+// flag from the first three joints' position columns (triple product).
+bool solve_pitch_4_2d(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  const IkSolverData::Planar& pl = m.pl;
+  const Eigen::Matrix3d& R0 = C(m, 0).linear();
+  const Eigen::Vector3d n2 = R0.transpose() * (target.linear() * m.red_n2);
+  const double hn = n2.x() * n2.x() + n2.y() * n2.y();
+  if (!(hn > 1e-24)) return false;
+  const double in = 1.0 / std::sqrt(hn);
+  const double a = n2.x() * in, b = n2.y() * in;
+  const double c1 = a * m.red_u + b * m.red_v, s1 = b * m.red_u - a * m.red_v;
+  Eigen::Matrix3d R1 = R0;
+  turn(R1, false, c1, s1);
+  R1 = mul_c(m, R1, 1);
+  const Eigen::Vector3d xv = target.linear() * m.red_Rrest.row(0).transpose();
+  double cs = R1.col(0).dot(xv), ss = R1.col(1).dot(xv);
+  const double hs = cs * cs + ss * ss;
+  if (!(hs > 1e-24)) return false;
+  const double is = 1.0 / std::sqrt(hs);
+  cs *= is;
+  ss *= is;
+  // heading in F: s + gamma
+  const double cp = cs * pl.gc - ss * pl.gs, sp = ss * pl.gc + cs * pl.gs;
+  // the tool point in F: C1^-1 Rz(-m1) R0^T (p - t0)
+  const Eigen::Vector3d p0 = R0.transpose() * (target.translation() - C(m, 0).translation());
+  const Eigen::Vector3d g(c1 * p0.x() + s1 * p0.y(), c1 * p0.y() - s1 * p0.x(), p0.z());
+  const Eigen::Vector3d pt = C(m, 1).linear().transpose() * (g - C(m, 1).translation());
+  // the distance equation in 3-D, as the 3-D path (|joint 4's origin|^2 in F)
+  const Eigen::Vector3d P(pt.x() - (cp * pl.tn.x() - sp * pl.tn.y()), pt.y() - (sp * pl.tn.x() + cp * pl.tn.y()),
+                          pt.z() - pl.tn.z());
+  const double rhs = P.squaredNorm();
+  Sol2d s[2];
+  int ns = 0;
+  if (!core_2d(m, pt, true, false, cp, sp, &rhs, s, ns)) return false;
+  double y[6] = {0, 0, 0, 0, 0, 0}, x[6] = {1, 1, 1, 1, 1, 1}, ang[6];
+  y[0] = s1;
+  x[0] = c1;
+  for (int i = 0; i < ns; ++i) {
+    y[1 + 2 * i] = s[i].sa;
+    x[1 + 2 * i] = s[i].ca;
+    y[2 + 2 * i] = s[i].sc;
+    x[2 + 2 * i] = s[i].cc;
+  }
+  detail::atan2_poly_x2(y, x, ang);
+  detail::atan2_poly_x2(y + 2, x + 2, ang + 2);
+  if (ns == 2) ang[4] = detail::atan2_poly(y[4], x[4]);
+  double mb[2] = {0, 0}, yb[2] = {0, 0}, xb[2] = {1, 1};
+  for (int i = 0; i < ns; ++i) {
+    mb[i] = xb[i] = s[i].cb;
+    yb[i] = s[i].sb;
+  }
+  if (!pl.pri) detail::atan2_poly_x2(yb, xb, mb);
+  for (int i = 0; i < ns; ++i) {
+    const Sol2d& o = s[i];
+    // elbow: columns of joints 1, 2, 3 at the tool point (F)
+    const Eigen::Vector3d t(o.tool[0], o.tool[1], o.tool[2]);
+    const Eigen::Vector3d k1 = pl.z1.cross(t - pl.o1);
+    const Eigen::Vector3d k2(-t.y(), t.x(), 0.0);
+    Eigen::Vector3d k3;
+    if (pl.pri) {
+      k3 = Eigen::Vector3d(o.ca * pl.w.x() - o.sa * pl.w.y(), o.sa * pl.w.x() + o.ca * pl.w.y(), pl.w.z());
+    } else {
+      const double ox = o.ca * pl.sa.x() - o.sa * pl.sa.y(), oy = o.sa * pl.sa.x() + o.ca * pl.sa.y();
+      k3 = Eigen::Vector3d(-(t.y() - oy), t.x() - ox, 0.0);
+    }
+    const double det = k1.dot(k2.cross(k3));
+    const double prod = k1.squaredNorm() * k2.squaredNorm() * k3.squaredNorm();
+    const std::uint8_t sing = (prod > 0 && det * det / prod < kNearSingular * kNearSingular) ? kSingularElbow : 0;
+    const double mot[4] = {ang[0], ang[1 + 2 * i], mb[i], ang[2 + 2 * i]};
+    Branch br;
+    br.elbow = o.elbow;
+    emit(m, q_ref, mot, br, sing, o.ep, o.er, res);
+  }
+  return true;
+}
+
+// spatial_3 (TRR) with the cheap check on the point only: solve_position's
+// pairs, J1 by one turn, the tool point Rz(m1) f against the target (no
+// rotation products: the arm places a point), the angles in pairs.
+bool solve_spatial_3_2d(const IkModel& model, const Pose& target, const double* mref, const JointVector* q_ref,
+                        IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  const Eigen::Vector3d p0 = C(m, 0).linear().transpose() * (target.translation() - C(m, 0).translation());
+  PosCand pc[8];
+  const int np = solve_position(m, p0, &mref[1], pc, false);
+  if (np > 4) return false;
+  const double sc2 = m.scale * m.scale;
+  double y[12], x[12], ang[12];
+  double ep[4];
+  Branch br[4];
+  std::uint8_t sing[4];
+  for (int i = 0; i < np; ++i) {
+    Eigen::Vector3d w = m.w3;
+    if (prism(m, 2)) w.z() += pc[i].c3;
+    else w = Eigen::Vector3d(pc[i].c3 * m.w3.x() - pc[i].s3 * m.w3.y(), pc[i].s3 * m.w3.x() + pc[i].c3 * m.w3.y(), m.w3.z());
+    w = C(m, 2) * w;
+    if (prism(m, 1)) w.z() += pc[i].c2;
+    else w = Eigen::Vector3d(pc[i].c2 * w.x() - pc[i].s2 * w.y(), pc[i].s2 * w.x() + pc[i].c2 * w.y(), w.z());
+    const Eigen::Vector3d f = C(m, 1) * w;
+    const double cr = f.x() * p0.y() - f.y() * p0.x(), dt = f.x() * p0.x() + f.y() * p0.y();
+    const double rr = cr * cr + dt * dt;
+    if (!(f.x() * f.x() + f.y() * f.y() >= 1e-18 * sc2) || !(rr > 1e-36 * sc2 * sc2)) return false;
+    const double ir = 1.0 / std::sqrt(rr);
+    const double c1 = dt * ir, s1 = cr * ir;
+    const double ex = c1 * f.x() - s1 * f.y() - p0.x(), ey = s1 * f.x() + c1 * f.y() - p0.y(), ez = f.z() - p0.z();
+    ep[i] = std::sqrt(ex * ex + ey * ey + ez * ez);
+    if (!(ep[i] <= kVerifyPos)) return false;
+    sing[i] = 0;
+    const double sh = f.dot(m.shoulder_dir);
+    br[i].shoulder = sh >= 0 ? 1 : -1;
+    if (std::abs(sh) < kNearSingular * m.scale) sing[i] |= kSingularShoulder;
+    br[i].elbow = pc[i].elbow;
+    y[3 * i] = s1;
+    x[3 * i] = c1;
+    y[3 * i + 1] = pc[i].s2;
+    x[3 * i + 1] = pc[i].c2;
+    y[3 * i + 2] = pc[i].s3;
+    x[3 * i + 2] = pc[i].c3;
+  }
+  const int na = 3 * np;
+  for (int k = na; k < 12; ++k) {
+    y[k] = 0;
+    x[k] = 1;
+  }
+  for (int k = 0; k < na; k += 2) detail::atan2_poly_x2(y + k, x + k, ang + k);
+  for (int i = 0; i < np; ++i) {
+    const double mot[3] = {ang[3 * i], prism(m, 1) ? pc[i].c2 : ang[3 * i + 1], prism(m, 2) ? pc[i].c3 : ang[3 * i + 2]};
+    emit(m, q_ref, mot, br[i], sing[i], ep[i], 0.0, res);
+  }
+  return true;
+}
+
+// Which 2-D form answers (false: not set up, or handed over).
+inline bool reduced_2d(const IkModel& model, const Pose& target, const double* mref, const JointVector* q_ref,
+                       IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  switch (model.method) {
+    case IkMethod::planar_2r:
+    case IkMethod::planar_3: return m.pl.on && solve_planar_2d(model, target, q_ref, res);
+    case IkMethod::pitch_4: return m.pl.on && solve_pitch_4_2d(model, target, q_ref, res);
+    case IkMethod::spatial_3: return solve_spatial_3_2d(model, target, mref, q_ref, res);
+    default: return false;
+  }
+}
+
 }  // namespace
+
+[[gnu::flatten]] bool solve_reduced_2d(const IkModel& model, const Pose& target, const JointVector* q_ref,
+                                       IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
+  if (q_ref)
+    for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
+  return m.red_fast && reduced_2d(model, target, mref, q_ref, res);
+}
 
 // Flattened (the Eigen products and decompositions of the elbow test and
 // fit_basis inlined): split out of the one IK file GCC stopped inlining them
@@ -425,13 +811,26 @@ void solve_spatial_3_fast(const IkModel& model, const Pose& target, const double
   double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
   if (q_ref)
     for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
-  if (model.method == IkMethod::planar_2r && m.red_fast) {
-    solve_planar_2r(model, target, q_ref, res);
-    return;
-  }
-  if (model.method == IkMethod::planar_3 && m.red_fast) return solve_planar_3_fast(model, target, mref, q_ref, res);
-  if (model.method == IkMethod::pitch_4 && m.red_fast) return solve_pitch_4_fast(model, target, q_ref, res);
-  if (model.method == IkMethod::spatial_3 && m.red_fast) return solve_spatial_3_fast(model, target, mref, q_ref, res);
+  if (!m.red_fast) return solve_reduced_slow(model, target, q_ref, res);
+  const int count0 = res.count;
+  if (reduced_2d(model, target, mref, q_ref, res)) return;
+  res.count = count0;  // handed over: the 3-D cheap paths
+  solve_reduced_3d(model, target, q_ref, res);
+}
+
+// The 3-D cheap paths alone (the 2-D forms' fallback; what ik_solve_all ran
+// before them: the benchmark's same-run comparison).
+[[gnu::flatten]] void solve_reduced_3d(const IkModel& model, const Pose& target, const JointVector* q_ref,
+                                       IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
+  if (q_ref)
+    for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
+  if (!m.red_fast) return solve_reduced_slow(model, target, q_ref, res);
+  if (model.method == IkMethod::planar_2r) return solve_planar_2r(model, target, q_ref, res);
+  if (model.method == IkMethod::planar_3) return solve_planar_3_fast(model, target, mref, q_ref, res);
+  if (model.method == IkMethod::pitch_4) return solve_pitch_4_fast(model, target, q_ref, res);
+  if (model.method == IkMethod::spatial_3) return solve_spatial_3_fast(model, target, mref, q_ref, res);
   solve_reduced_slow(model, target, q_ref, res);
 }
 
