@@ -383,9 +383,12 @@ void ModelControl::describe(char* buf, std::size_t size) const {
     return;
   }
   std::size_t used = 0;
-  auto put = [&](const char* fmt, auto... a) {
+  auto put = [&](const char* fmt, ...) __attribute__((format(printf, 2, 3))) {
     if (used >= size) return;
-    const int w = std::snprintf(buf + used, size - used, fmt, a...);
+    std::va_list ap;
+    va_start(ap, fmt);
+    const int w = std::vsnprintf(buf + used, size - used, fmt, ap);
+    va_end(ap);
     if (w > 0) used = std::min(size - 1, used + static_cast<std::size_t>(w));
   };
   if (cfg_.feed_forward == FeedForwardKind::off) put("feed-forward off");
