@@ -10,6 +10,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "../program/tmp_dir.hpp"
 #include "target_exec.hpp"
 
 namespace servoarm::test {
@@ -38,6 +39,21 @@ inline CommandResult run_command(const std::string& cmdline) {
   std::remove((base + ".out").c_str());
   std::remove((base + ".err").c_str());
   return r;
+}
+
+/// `armctl program check FILE EXTRA` (armctl: the binary, ARMCTL_PATH), with `text`
+/// written to FILE first: the program-file tests' one way to run a program through armctl.
+inline CommandResult program_check(const std::string& armctl, const std::string& file, const std::string& text,
+                                   const std::string& extra) {
+  write_file(file, text);
+  return run_command(armctl + " program check " + file + " " + extra);
+}
+
+/// The seconds `armctl program check` answers as "planned cycle time T s", or -1 without it.
+inline double cycle_time(const std::string& out) {
+  const std::size_t k = out.find("planned cycle time ");
+  if (k == std::string::npos) return -1;
+  return std::atof(out.c_str() + k + 19);
 }
 
 /// Numbers of a JSON array that follows `"key": ` (flat arrays only, or the

@@ -13,20 +13,15 @@
 // CppUTest last: its leak detector redefines new.
 #include <CppUTest/TestHarness.h>
 
+using servoarm::test::cycle_time;
 using servoarm::test::make_tmp_dir;
+using servoarm::test::program_check;
 using servoarm::test::remove_tree;
-using servoarm::test::run_command;
 using servoarm::test::write_file;
 
 namespace {
 
 const std::string kArmctl = ARMCTL_PATH;
-
-double cycle_time(const std::string& out) {
-  const std::size_t k = out.find("planned cycle time ");
-  if (k == std::string::npos) return -1;
-  return std::atof(out.c_str() + k + 19);
-}
 
 // puma560, joints 1-3 and 5 home (19, hard_stop, 21, 35), 4 and 6 are absolute; the order of
 // the wrist first; park pose and joint speed from [motion].
@@ -58,8 +53,7 @@ TEST_GROUP(ProgramHoming) {
     MemoryLeakWarningPlugin::restoreNewDeleteOverloads();
   }
   servoarm::test::CommandResult check(const std::string& name, const std::string& text, const std::string& extra) {
-    write_file(dir + "/" + name, text);
-    return run_command(kArmctl + " program check " + dir + "/" + name + " " + extra);
+    return program_check(kArmctl, dir + "/" + name, text, extra);
   }
   std::string cfg() const { return "--config " + dir + "/armfw.toml --stream"; }
   double good(const std::string& name, const std::string& text, const std::string& extra) {

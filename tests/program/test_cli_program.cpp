@@ -14,7 +14,9 @@
 // CppUTest last: its leak detector redefines new.
 #include <CppUTest/TestHarness.h>
 
+using servoarm::test::cycle_time;
 using servoarm::test::make_tmp_dir;
+using servoarm::test::program_check;
 using servoarm::test::remove_tree;
 using servoarm::test::run_command;
 using servoarm::test::write_file;
@@ -22,12 +24,6 @@ using servoarm::test::write_file;
 namespace {
 
 const std::string kArmctl = ARMCTL_PATH;
-
-double cycle_time(const std::string& out) {
-  const std::size_t k = out.find("planned cycle time ");
-  if (k == std::string::npos) return -1;
-  return std::atof(out.c_str() + k + 19);
-}
 
 }  // namespace
 
@@ -43,8 +39,7 @@ TEST_GROUP(CliProgram) {
     MemoryLeakWarningPlugin::restoreNewDeleteOverloads();
   }
   servoarm::test::CommandResult check(const std::string& name, const std::string& text, const std::string& extra = "") {
-    write_file(dir + "/" + name, text);
-    return run_command(kArmctl + " program check " + dir + "/" + name + " --robot puma560 " + extra);
+    return program_check(kArmctl, dir + "/" + name, text, "--robot puma560 " + extra);
   }
   void bad(const std::string& name, const std::string& text, const std::string& where, const std::string& what,
            const std::string& extra = "") {

@@ -35,6 +35,18 @@ wait_until() {
   fail "timed out after ${_w_limit}s waiting for $_w_what"
 }
 
+# retry MAX TRY RECOVER: run the function TRY (retry_n = its attempt, from 1) until it returns
+# 0 (done) or 2 (give up at once), at most MAX times; after a 1 (try again) with attempts
+# left, the function RECOVER runs first. Returns TRY's last status. The attempt count lives in
+# the positional parameters, so RECOVER may itself use retry.
+retry() {
+  retry_n=${4:-1}
+  "$2"; _r_rc=$?
+  if [ "$_r_rc" -ne 1 ] || [ "$retry_n" -ge "$1" ]; then return "$_r_rc"; fi
+  "$3"
+  retry "$1" "$2" "$3" $((${4:-1} + 1))
+}
+
 # Number of receive filters (raw, isotp, bcm... sockets) registered on $CAN_IF,
 # from /proc/net/can/rcvlist_*: a socket is listening once its count went up.
 can_receivers() {

@@ -85,13 +85,16 @@ start_armfw "$OUT_DIR/armfw.toml"
 # enable_arm: `enable`, reset and again (at most 3 attempts) when a drive did not come up in
 # time: armfw's CiA 402 state timeout (500 ms) and the heartbeat consumer time are fixed, and
 # the TCG guest on a busy host is now and then starved longer than that.
+_enable_try() {
+  _e_a=$(isotp_ask enable 60)
+  case $_e_a in ok*) pass "enable (attempt $retry_n): $_e_a"; return 0 ;; esac
+  log "enable attempt $retry_n: $_e_a"
+  return 1
+}
+_enable_reset() { isotp_ask reset 30 >/dev/null; }
 enable_arm() {
-  for _e in 1 2 3; do
-    _e_a=$(isotp_ask enable 60)
-    case $_e_a in ok*) pass "enable (attempt $_e): $_e_a"; return 0 ;; esac
-    log "enable attempt $_e: $_e_a"
-    isotp_ask reset 30 >/dev/null
-  done
+  retry 3 _enable_try _enable_reset && return 0
+  _enable_reset  # (after the last failed attempt too)
   dump_console_state
   fail "enable: 3 attempts failed, the last: $_e_a"
 }
@@ -111,23 +114,23 @@ case $a in "error: not_homed"*"joints 1, 2, 3, 4, 5, 6 not homed"*) pass "unhome
 # attempt is reset and homing run again, at most 4 attempts (the count and each cause printed;
 # a fault that is not starvation repeats every time and fails the scenario). Everything below
 # is judged on the frames of the last attempt.
-attempt=0
-while [ "$attempt" -lt 4 ]; do
-  attempt=$((attempt + 1))
+_home_try() {
   a=$(isotp_ask home)
-  case $a in "ok homing: group 1 of 4 (joint 3)"*) pass "home (attempt $attempt): $a" ;; *) check_fail "home: '$a'" ;; esac
+  case $a in "ok homing: group 1 of 4 (joint 3)"*) pass "home (attempt $retry_n): $a" ;; *) check_fail "home: '$a'" ;; esac
   a=$(isotp_ask wait 300)
   case $a in
-    ok*) break ;;
-    *"error: fault"*)
-      log "homing attempt $attempt failed (a late answer in the starved VM?): $a"
-      [ "$attempt" -lt 4 ] || break
-      expect_ok "reset" "$(isotp_ask reset 30)"
-      enable_arm
-      wait_state idle 60 ;;
-    *) break ;;
+    ok*) return 0 ;;
+    *"error: fault"*) log "homing attempt $retry_n failed (a late answer in the starved VM?): $a"; return 1 ;;
+    *) return 2 ;;
   esac
-done
+}
+_home_recover() {
+  expect_ok "reset" "$(isotp_ask reset 30)"
+  enable_arm
+  wait_state idle 60
+}
+retry 4 _home_try _home_recover
+attempt=$retry_n
 expect_ok "wait (the homing cycle, attempt $attempt of at most 4)" "$a"
 isotp_text | awk '/^ok homing: group 1 of 4/ { n = 0 } /^homing:/ { l[++n] = $0 } END { for (i = 1; i <= n; i++) print l[i] }' \
   >"$OUT_DIR/progress.txt" || true
