@@ -812,6 +812,10 @@ inline bool reduced_2d(const IkModel& model, const Pose& target, const double* m
   if (q_ref)
     for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
   if (!m.red_fast) return solve_reduced_slow(model, target, q_ref, res);
+  // rr_planar: solve_planar_2r (atan2_poly_x2, its own 2-D check) is already
+  // the short form; the generic 2-D planar form was slower for it (issue 19:
+  // 156-158 -> 166-170 ns), so it keeps its own path.
+  if (model.method == IkMethod::planar_2r) return solve_planar_2r(model, target, q_ref, res);
   const int count0 = res.count;
   if (reduced_2d(model, target, mref, q_ref, res)) return;
   res.count = count0;  // handed over: the 3-D cheap paths
