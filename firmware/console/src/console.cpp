@@ -580,10 +580,6 @@ void Console::queue(Session& s, const MoveJoints& req) {
 // (kPathLead: how far ahead of the run's newest sample a typed move is placed), else from
 // rest where the one before ends.
 
-namespace {
-constexpr double kPathLead = 0.15;  // s: console line handling + telemetry age, with margin
-}  // namespace
-
 double Console::blend_of(double given, bool line) const {
   if (given >= 0) return given;
   if (step_blend_ >= 0) return step_blend_;

@@ -12,6 +12,9 @@
 
 namespace servoarm::fw {
 
+using prog::kind_of;
+using prog::StepKind;
+
 namespace {
 
 std::string fmt(const char* f, ...) __attribute__((format(printf, 1, 2)));
@@ -34,70 +37,6 @@ std::string error_of(const std::string& out) {
   return sp == std::string::npos ? e : e.substr(0, sp) + ": " + e.substr(sp + 1);
 }
 
-enum class StepKind { motion, needs_idle, wait, other, refused };
-
-StepKind kind_of(Cmd c);
-StepKind kind_of(const Command& c) {
-  if (c.cmd == Cmd::out && c.out_sync) return StepKind::other;
-  return kind_of(c.cmd);
-}
-StepKind kind_of(Cmd c) {
-  switch (c) {
-    case Cmd::movej:
-    case Cmd::movel:
-    case Cmd::gmove:
-    case Cmd::park:
-    case Cmd::dwell: return StepKind::motion;
-    case Cmd::tool:
-    case Cmd::frame: return StepKind::needs_idle;
-    case Cmd::out: return StepKind::needs_idle;  // refined by the caller: M62 / M63 ride with the next move
-    case Cmd::wait: return StepKind::wait;
-    case Cmd::enable:
-    case Cmd::disable:
-    case Cmd::home:
-    case Cmd::home_zero:
-    case Cmd::stop:
-    case Cmd::estop:
-    case Cmd::reset:
-    case Cmd::hold:
-    case Cmd::resume:
-    case Cmd::jog:
-    case Cmd::grbl_jog:
-    case Cmd::grbl_unlock:
-    case Cmd::grbl_home:
-    case Cmd::grbl_check:
-    case Cmd::teach:
-    case Cmd::point_delete:
-    case Cmd::run:
-    case Cmd::pause:
-    case Cmd::step:
-    case Cmd::abort:
-    case Cmd::record:
-    case Cmd::freedrive_on:
-    case Cmd::freedrive_off:
-    case Cmd::collision_on:
-    case Cmd::collision_off: return StepKind::refused;
-    case Cmd::none:
-    case Cmd::help:
-    case Cmd::status:
-    case Cmd::fk:
-    case Cmd::ik:
-    case Cmd::limits:
-    case Cmd::stats:
-    case Cmd::config:
-    case Cmd::position:
-    case Cmd::temperature:
-    case Cmd::grbl_settings:
-    case Cmd::grbl_params:
-    case Cmd::grbl_state:
-    case Cmd::grbl_info:
-    case Cmd::grbl_help:
-    case Cmd::points:
-    case Cmd::programs:
-    case Cmd::freedrive: return StepKind::other;
-  }
-  return StepKind::refused;
-}
 
 /// Douglas-Peucker on joint vectors (Euclidean in SI joint space): indices kept, first and last included.
 std::vector<std::size_t> decimate(const std::vector<kin::JointVector>& q, double tol) {
@@ -310,14 +249,8 @@ void Console::exec_step(Session& ps, const prog::Program& p, const prog::Program
                 : gcode      ? st.blend * 1e-3  // G-code: mm
                 : st.cmd.cmd == Cmd::movej ? cfg_.units.angle_in(st.blend)
                                            : cfg_.units.length_in(st.blend);
-  step_next_line_ = false;
-  if (&st >= p.steps.data() && &st < p.steps.data() + p.steps.size()) {
-    for (std::size_t i = static_cast<std::size_t>(&st - p.steps.data()) + 1; i < p.steps.size(); ++i) {
-      const Cmd c = p.steps[i].cmd.cmd;
-      if (c == Cmd::movel || c == Cmd::gmove) step_next_line_ = true;
-      if (kind_of(p.steps[i].cmd) == StepKind::motion || kind_of(p.steps[i].cmd) == StepKind::needs_idle) break;
-    }
-  }
+  step_next_line_ = &st >= p.steps.data() && &st < p.steps.data() + p.steps.size() &&
+                    prog::next_motion_is_line(p, static_cast<std::size_t>(&st - p.steps.data()));
   if (st.point >= 0 && st.cmd.cmd == Cmd::movel && static_cast<std::size_t>(st.point) < points_.points.size()) {
     MoveLine m;
     m.target = tcp(points_.points[static_cast<std::size_t>(st.point)].q);

@@ -457,4 +457,81 @@ std::string list_programs(const std::string& dir, std::vector<std::string>& name
   return "";
 }
 
+// ---------------------------------------------------------------------------
+// What a step is to the program runner (console_program.cpp) and the offline check (armctl)
+// ---------------------------------------------------------------------------
+
+StepKind kind_of(const fw::Command& c) {
+  if (c.cmd == fw::Cmd::out && c.out_sync) return StepKind::other;
+  return kind_of(c.cmd);
+}
+
+StepKind kind_of(fw::Cmd c) {
+  switch (c) {
+    case fw::Cmd::movej:
+    case fw::Cmd::movel:
+    case fw::Cmd::gmove:
+    case fw::Cmd::park:
+    case fw::Cmd::dwell: return StepKind::motion;
+    case fw::Cmd::tool:
+    case fw::Cmd::frame: return StepKind::needs_idle;
+    case fw::Cmd::out: return StepKind::needs_idle;  // refined by the caller: M62 / M63 ride with the next move
+    case fw::Cmd::wait: return StepKind::wait;
+    case fw::Cmd::enable:
+    case fw::Cmd::disable:
+    case fw::Cmd::home:
+    case fw::Cmd::home_zero:
+    case fw::Cmd::stop:
+    case fw::Cmd::estop:
+    case fw::Cmd::reset:
+    case fw::Cmd::hold:
+    case fw::Cmd::resume:
+    case fw::Cmd::jog:
+    case fw::Cmd::grbl_jog:
+    case fw::Cmd::grbl_unlock:
+    case fw::Cmd::grbl_home:
+    case fw::Cmd::grbl_check:
+    case fw::Cmd::teach:
+    case fw::Cmd::point_delete:
+    case fw::Cmd::run:
+    case fw::Cmd::pause:
+    case fw::Cmd::step:
+    case fw::Cmd::abort:
+    case fw::Cmd::record:
+    case fw::Cmd::freedrive_on:
+    case fw::Cmd::freedrive_off:
+    case fw::Cmd::collision_on:
+    case fw::Cmd::collision_off: return StepKind::refused;
+    case fw::Cmd::none:
+    case fw::Cmd::help:
+    case fw::Cmd::status:
+    case fw::Cmd::fk:
+    case fw::Cmd::ik:
+    case fw::Cmd::limits:
+    case fw::Cmd::stats:
+    case fw::Cmd::config:
+    case fw::Cmd::position:
+    case fw::Cmd::temperature:
+    case fw::Cmd::grbl_settings:
+    case fw::Cmd::grbl_params:
+    case fw::Cmd::grbl_state:
+    case fw::Cmd::grbl_info:
+    case fw::Cmd::grbl_help:
+    case fw::Cmd::points:
+    case fw::Cmd::programs:
+    case fw::Cmd::freedrive: return StepKind::other;
+  }
+  return StepKind::refused;
+}
+
+bool next_motion_is_line(const Program& p, std::size_t i) {
+  for (std::size_t k = i + 1; k < p.steps.size(); ++k) {
+    const fw::Cmd c = p.steps[k].cmd.cmd;
+    if (c == fw::Cmd::movel || c == fw::Cmd::gmove) return true;
+    const StepKind kind = kind_of(p.steps[k].cmd);
+    if (kind == StepKind::motion || kind == StepKind::needs_idle) return false;
+  }
+  return false;
+}
+
 }  // namespace servoarm::prog

@@ -24,4 +24,9 @@ struct MoveJoints {
   double blend = -1;      ///< blend tolerance at `goal` (rad, joint-space Euclidean; movej blend=); 0: exact stop, < 0: the default
 };
 
+/// How far ahead of a blended run's newest sample the console places the start of a segment
+/// it queues now (s): console line handling + telemetry age, with margin (console.cpp
+/// queue_path; armctl program check times programs with it).
+inline constexpr double kPathLead = 0.15;
+
 }  // namespace servoarm::fw

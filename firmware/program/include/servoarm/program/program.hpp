@@ -81,6 +81,19 @@ struct Program {
   std::string where(const ProgramStep& s) const;
 };
 
+/// What a step is to the program runner: a motion it queues (movej, movel, G0-G3, park,
+/// dwell), a step that needs the arm at rest first (tool, frame, out / M64 / M65), `wait`,
+/// something refused inside a program (enable, home, stop, run, ...), or other (queries,
+/// modal-only lines, M62 / M63: they ride with the next move).
+enum class StepKind { motion, needs_idle, wait, other, refused };
+StepKind kind_of(const fw::Command& c);
+StepKind kind_of(fw::Cmd c);  ///< (`out` as needs_idle: kind_of(Command) tells M62 / M63 apart)
+
+/// True when the first motion or needs_idle step after step i is a line (movel, G0-G3): the
+/// runner then sends a blended joint move at i as a path segment, so its corner with the
+/// line can blend (docs/motion.md#blending).
+bool next_motion_is_line(const Program& p, std::size_t i);
+
 /// True for the G-code extensions (.gcode .nc .ngc .gc, any case).
 bool is_gcode_file(std::string_view path);
 
