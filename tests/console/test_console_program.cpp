@@ -11,6 +11,8 @@
 
 #include "console_rig.hpp"
 #include "../program/tmp_dir.hpp"
+#include "servoarm/armctl/cli_program.hpp"
+#include "servoarm/program/program.hpp"
 #include "servoarm/program/points.hpp"
 #include "servoarm/sim/virtual_drive.hpp"
 
@@ -23,6 +25,28 @@ using test::answer_ok;
 namespace {
 constexpr double kDeg = M_PI / 180.0;
 bool has(const std::string& s, const std::string& p) { return s.find(p) != std::string::npos; }
+
+// `armctl program check`'s cycle time (fw::check_program, the offline planner) of program
+// `name` in the rig's folder, from rest at `from`, with the rig's configuration: what the
+// measured run is compared with.
+double offline_cycle(const App& app, const std::string& dir, const std::string& name, const kin::JointVector& from,
+                     int* blended = nullptr) {
+  kin::Chain chain = app.chain;
+  ProgramCheckOptions opt;
+  const std::string ce = apply_config(app.cfg, chain, opt);
+  CHECK_TEXT(ce.empty(), ce.c_str());
+  prog::ProgramContext ctx;
+  ctx.chain = &chain;
+  ctx.units = units_of(chain);
+  ctx.dir = dir;
+  prog::Program program;
+  const std::string e = prog::load_program(dir + "/" + name, ctx, program);
+  CHECK_TEXT(e.empty(), e.c_str());
+  const ProgramCheck ck = check_program(chain, program, nullptr, from, opt);
+  CHECK_TEXT(ck.ok, ck.error.c_str());
+  if (blended != nullptr) *blended = ck.blended_corners;
+  return ck.cycle_time;
+}
 
 FwConfig with_dir(const std::string& dir, FwConfig c = {}) {
   c.programs_dir = dir;
@@ -532,6 +556,14 @@ TEST(ConsoleProgram, FiguresTwentyPointPickAndPlace) {
       corner = std::fmax(corner, best);
     }
     cycle_s[blend ? 1 : 0] = static_cast<double>(q.size()) * dt;
+    // armctl program check plans the same blends: its cycle time within 1 ms a move + 0.1 %
+    // of the run's (the run's samples start with the program's first move)
+    int offline_blends = 0;
+    const double offline = offline_cycle(r.app, r.dir, "pp.arm", home, &offline_blends);
+    std::printf("\narmctl program check: %.3f s (%d blended corners), the run %.3f s\n", offline, offline_blends,
+                cycle_s[blend ? 1 : 0]);
+    CHECK(std::fabs(offline - cycle_s[blend ? 1 : 0]) <= 1e-3 * 20 + 1e-3 * cycle_s[blend ? 1 : 0]);
+    LONGS_EQUAL(blend ? 12 : 0, offline_blends);
     std::printf("\n20-point pick-and-place through the console, %s: cycle %.3f s, largest corner distance %.4f deg, "
                 "peak velocity %.6f, acceleration %.6f, jerk %.6f of the limits\n",
                 blend ? "blend=57.3 deg on the above-points" : "exact stops", static_cast<double>(q.size()) * dt,
@@ -601,6 +633,13 @@ TEST(ConsoleProgram, BlendedLinesAndMixedCornersInPrograms) {
     r.events.clear();
     o.cycle = static_cast<double>(o.q.size()) / r.app.ctl->config().rate_hz;
     o.blended = r.tel().blended_corners - b0;
+    // armctl program check plans the same: within 1 ms a move + 0.1 % of the run's, the same corners
+    int offline_blends = -1;
+    const double offline = offline_cycle(r.app, r.dir, name, home, &offline_blends);
+    std::printf("\n%s: the run %.3f s (%llu corners), armctl program check %.3f s (%d)\n", name.c_str(), o.cycle,
+                static_cast<unsigned long long>(o.blended), offline, offline_blends);
+    CHECK(std::fabs(offline - o.cycle) <= 1e-3 * 7 + 1e-3 * o.cycle);
+    LONGS_EQUAL(static_cast<long>(o.blended), offline_blends);
     return o;
   };
   auto mixed = [&](bool blend) {

@@ -13,7 +13,11 @@
 #include "servoarm/armctl/cli_plan.hpp"
 #include "servoarm/config/config.hpp"
 #include "servoarm/console/commands.hpp"
+#include "servoarm/console/ik_options.hpp"
+#include "servoarm/console/requests.hpp"
 #include "servoarm/console/units.hpp"
+#include "servoarm/kinematics/blend.hpp"
+#include "servoarm/kinematics/blend_path.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
@@ -67,8 +71,12 @@ const char* kProgramUsage =
     "                        motion.linear_speed_mm_s; at most 250 mm/s, motion.max_linear_speed_mm_s)\n"
     "Joints without limits in the description get 90 deg/s, 360 deg/s^2, 3600 deg/s^3\n"
     "(prismatic: 250 mm/s, 1000 mm/s^2, 10000 mm/s^3), as armctl plan.\n"
+    "The cycle time blends as armfw does (docs/programs.md, armctl program check): blend=,\n"
+    "G64 P / G61 and motion.default_blend_mm / _deg (--config) give the tolerances; runs of joint\n"
+    "moves blend as the controller's joint queue, lines and the joint moves beside them as the\n"
+    "console's path segments; the time with every move to rest is printed beside it.\n"
     "Not checked offline yet: tool and frame changes inside a program (refused: check those\n"
-    "with armfw's $C), blends (each move is planned to rest).\n";
+    "with armfw's $C).\n";
 
 bool is_option(const char* s) { return s[0] == '-' && s[1] == '-'; }
 
@@ -92,6 +100,8 @@ void default_limits(kin::Chain& c) {
 // this mirrors: drive.limits narrow the description's, drive.max_velocity lowers its velocity
 // limit; motion.* are the console's defaults; drive.homing.* say how each joint homes).
 // `cfg` passed validate_for_chain. Returns "" or why the configuration cannot apply.
+}  // namespace
+
 std::string apply_config(const FwConfig& cfg, kin::Chain& chain, ProgramCheckOptions& opt) {
   const int n = chain.n_joints;
   for (int j = 0; j < n && j < static_cast<int>(cfg.drives.size()); ++j) {
@@ -121,8 +131,13 @@ std::string apply_config(const FwConfig& cfg, kin::Chain& chain, ProgramCheckOpt
   opt.linear_speed = cfg.linear_speed_mm_s * 1e-3;
   opt.max_linear_speed = cfg.max_linear_speed_mm_s * 1e-3;
   opt.max_move_duration = cfg.max_move_duration_s;
+  opt.rate_hz = cfg.rate_hz;
+  opt.default_blend_rad = cfg.default_blend_deg * M_PI / 180.0;
+  opt.default_blend_m = cfg.default_blend_mm * 1e-3;
   return "";
 }
+
+namespace {
 
 struct Checker {
   const kin::Chain& chain;
@@ -138,6 +153,122 @@ struct Checker {
   std::uint32_t homed = ~0u;                   ///< bit j: joint j homed (established this power cycle)
   int queued = 0;                              ///< moves and dwells queued since the last `wait`
   const prog::ProgramStep* homing = nullptr;   ///< the `home` line whose cycle runs (until `wait`)
+
+  // Blending, as armfw runs the program. A move with a blend tolerance that is a line, or a
+  // joint move whose next motion is a line, or any move following a path segment that has a
+  // tolerance, is a path segment (console.cpp queue_path: kin::PathBlendQueue, blended joint
+  // segments at joint_share 0.5, sampled at the control rate); other joint moves with a
+  // tolerance run in the controller's joint queue (controller.cpp begin_blend / blend_more:
+  // kin::JointBlendQueue<4>, limits scaled by the run's speed override, which every move of
+  // the run shares). Anything else, a move that carries M62 / M63 outputs, and every step that
+  // waits for the arm at rest (wait, dwell, out, home) start the next move from rest.
+  // When the next move reaches the planner: armfw's `run` keeps one move queued behind the
+  // running one (console_program.cpp), so a move is queued when the one two back has ended;
+  // lines sent one by one (--stream) fill the 16-move queue at once and the controller's
+  // joint queue takes a move when one of its 4 segments has ended.
+  enum class Run { none, joint, path };
+  Run run = Run::none;
+  double run_base = 0;          ///< cycle time where the current run starts
+  double joint_override = 0;    ///< the joint run's speed override
+  bool joint_open = false;      ///< the joint run's last target has a tolerance: a joint move may join
+  bool outputs_next = false;    ///< M62 / M63 given: the next move carries them, from rest
+  double step_blend = -1;       ///< the step's G64 P / blend (SI), as the runner gives it; < 0 none
+  bool next_line = false;       ///< the step's next motion is a line (prog::next_motion_is_line)
+  std::unique_ptr<kin::IkModel> path_model = std::make_unique<kin::IkModel>();
+  kin::IkSolver path_ik{};
+  std::unique_ptr<kin::PathBlendQueue<4>> pq = std::make_unique<kin::PathBlendQueue<4>>();
+  std::unique_ptr<kin::JointBlendQueue<4>> jq = std::make_unique<kin::JointBlendQueue<4>>();
+
+  // The console's blend_of: blend= on the line, else the program's, else the configured default.
+  double blend_of(double given, bool line) const {
+    if (given >= 0) return given;
+    if (step_blend >= 0) return step_blend;
+    return line ? opt.default_blend_m : opt.default_blend_rad;
+  }
+  void end_run() { run = Run::none; }
+  double period() const { return 1.0 / opt.rate_hz; }
+
+  // The move as a path segment (console.cpp queue_path); false: not one (plain, or the joint queue).
+  bool path_segment(bool line, const kin::JointVector& goal, const kin::Pose& target, const kin::CartesianLimits& cl,
+                    double override, double tol) {
+    if (!std::isfinite(tol) || tol < 0) tol = 0;
+    const bool linked = run == Run::path && !outputs_next && pq->size() > 0 && pq->at(pq->size() - 1).tolerance > 0;
+    if (!linked && !(tol > 0 && (line || next_line))) return false;
+    double t_earliest = 0;
+    if (linked) {
+      if (!opt.stream)  // queued when the segment two back has ended, kPathLead ahead of the run
+        t_earliest = (pq->size() >= 2 ? pq->at(pq->size() - 2).end() : pq->at(pq->size() - 1).start) + period() + kPathLead;
+      if (pq->size() >= 2) pq->retire(pq->at(pq->size() - 1).start);  // the last two, as the console keeps
+    } else {
+      end_run();
+      kin::PathBlendConfig pc;
+      pc.limits = lim;
+      pc.rate = opt.rate_hz;
+      pc.chain = &chain;
+      pc.ik = path_ik;
+      pc.joint_share = 0.5;
+      pq->reset(pc, q);
+      run_base = out.cycle_time;
+    }
+    kin::PathBlendReport rep;
+    const kin::BlendStatus st = line ? pq->append_line(target, cl, kin::MovelOptions{}, tol, t_earliest, &rep)
+                                     : pq->append_joint(goal, override, tol, t_earliest, &rep);
+    if (!kin::is_ok(st) || st == kin::BlendStatus::zero_length) {  // the plain move instead
+      end_run();
+      return false;
+    }
+    run = Run::path;
+    if (rep.blend > 0) ++out.blended_corners;
+    out.cycle_time = run_base + pq->at(pq->size() - 1).end();
+    return true;
+  }
+
+  // A joint move that is no path segment: the controller's joint queue when it has a tolerance
+  // or joins the running joint run, else its own plan (`duration`).
+  void joint_queue(const kin::JointVector& goal, double override, double tol, double duration) {
+    if (!std::isfinite(tol) || tol < 0) tol = 0;
+    if (run == Run::joint && joint_open && override == joint_override && !outputs_next) {
+      // appended by the controller the cycle after the move was queued
+      const int older = opt.stream ? 4 : 2;
+      double t_earliest = 2 * period();
+      if (jq->size() >= older) {
+        const double t = jq->at(jq->size() - older).end();
+        jq->retire(t);
+        t_earliest = t + 2 * period();
+      } else if (!opt.stream) {
+        t_earliest = jq->at(jq->size() - 1).start + 2 * period();
+      }
+      kin::BlendReport rep;
+      const kin::BlendStatus st = jq->append(goal, tol, t_earliest, &rep);
+      if (kin::is_ok(st) && st != kin::BlendStatus::zero_length) {
+        joint_open = tol > 0;
+        if (rep.blend > 0) ++out.blended_corners;
+        out.cycle_time = run_base + jq->end_time();
+        return;
+      }
+    }
+    end_run();
+    if (tol > 0 && override >= 0.01 && override <= 1.0) {  // begin_blend: a run from rest
+      kin::JointLimits l = lim;
+      for (int j = 0; j < chain.n_joints; ++j) {
+        kin::JointDynamics& d = l.dyn[static_cast<std::size_t>(j)];
+        d.max_velocity *= override;
+        d.max_acceleration *= override * override;
+        d.max_jerk *= override * override * override;
+      }
+      jq->reset(l, q);
+      const kin::BlendStatus st = jq->append(goal, tol, 0.0);
+      if (kin::is_ok(st) && st != kin::BlendStatus::zero_length) {
+        run = Run::joint;
+        joint_open = true;
+        joint_override = override;
+        run_base = out.cycle_time;
+        out.cycle_time = run_base + jq->end_time();
+        return;
+      }
+    }
+    out.cycle_time += duration;
+  }
 
   bool fail(const prog::ProgramStep& s, const std::string& why) {
     out.ok = false;
@@ -170,7 +301,7 @@ struct Checker {
     return std::string(what) + " refused: not_homed: " + j + " not homed (armfw refuses every move of an unhomed arm: `home` first)";
   }
 
-  bool movej(const prog::ProgramStep& s, const kin::JointVector& goal, double pct) {
+  bool movej(const prog::ProgramStep& s, const kin::JointVector& goal, double pct, double given_blend) {
     if (const std::string r = refusal(to_string(s.cmd.cmd), true); !r.empty()) return fail(s, r);
     for (int j = 0; j < chain.n_joints; ++j) {
       const auto k = static_cast<std::size_t>(j);
@@ -184,7 +315,11 @@ struct Checker {
     if (!kin::is_ok(st)) return fail(s, std::string("movej refused: ") + kin::to_string(st));
     if (!(tr->duration <= opt.max_move_duration))
       return fail(s, "movej refused: it would take " + num(tr->duration) + " s, more than " + num(opt.max_move_duration) + " s");
-    out.cycle_time += tr->duration;
+    out.cycle_time_exact += tr->duration;
+    const double tol = blend_of(given_blend, false);
+    if (!path_segment(false, goal, kin::Pose::Identity(), kin::CartesianLimits{}, pct / 100.0, tol))
+      joint_queue(goal, pct / 100.0, tol, tr->duration);
+    outputs_next = false;
     ++out.moves;
     ++out.joint_moves;
     ++queued;
@@ -192,7 +327,7 @@ struct Checker {
     return true;
   }
 
-  bool movel(const prog::ProgramStep& s, const kin::Pose& target, double speed) {
+  bool movel(const prog::ProgramStep& s, const kin::Pose& target, double speed, double given_blend) {
     if (const std::string r = refusal(s.cmd.cmd == Cmd::gmove ? "G-code move" : "movel", true); !r.empty()) return fail(s, r);
     if (!(speed > 0) || speed > opt.max_linear_speed + 1e-12)
       return fail(s, "linear speed " + num(units.length_out(speed)) + " " + units.length_name() + "/s outside (0, " +
@@ -219,7 +354,12 @@ struct Checker {
     }
     if (!(path->duration <= opt.max_move_duration))
       return fail(s, "movel refused: it would take " + num(path->duration) + " s, more than " + num(opt.max_move_duration) + " s");
-    out.cycle_time += path->duration;
+    out.cycle_time_exact += path->duration;
+    if (!path_segment(true, path->goal, target, cl, 1.0, blend_of(given_blend, true))) {
+      end_run();
+      out.cycle_time += path->duration;
+    }
+    outputs_next = false;
     ++out.moves;
     ++out.line_moves;
     ++queued;
@@ -234,7 +374,7 @@ struct Checker {
       goal[j] = opt.park.size() == chain.n_joints
                     ? opt.park[j]
                     : std::clamp(0.0, lim.lower[static_cast<std::size_t>(j)], lim.upper[static_cast<std::size_t>(j)]);
-    return movej(s, goal, opt.joint_speed_pct);
+    return movej(s, goal, opt.joint_speed_pct, -1);
   }
 
   // home / home jN: the homing cycle, as the console and the controller run it. Refused with
@@ -270,15 +410,27 @@ struct Checker {
     return true;
   }
 
-  bool step(const prog::ProgramStep& s) {
+  bool step(const prog::ProgramStep& s, std::size_t index) {
     const Command& c = s.cmd;
+    // What the runner gives the move it queues (console_program.cpp exec_step); lines sent
+    // one by one (--stream) carry only their own blend=.
+    const bool gcode = static_cast<std::size_t>(s.file) < prog.files.size() &&
+                       prog::is_gcode_file(prog.files[static_cast<std::size_t>(s.file)]);
+    step_blend = opt.stream || s.blend < 0 ? -1.0
+                 : gcode                   ? s.blend * 1e-3  // G-code: mm
+                 : c.cmd == Cmd::movej     ? units.angle_in(s.blend)
+                                           : units.length_in(s.blend);
+    next_line = !opt.stream && prog::next_motion_is_line(prog, index);
+    const prog::StepKind kind = prog::kind_of(c);
+    if (kind == prog::StepKind::needs_idle || kind == prog::StepKind::wait || kind == prog::StepKind::refused) end_run();
+    if (c.cmd == Cmd::out && c.out_sync) outputs_next = true;
     switch (c.cmd) {
       case Cmd::movej: {
         kin::JointVector goal(chain.n_joints);
         if (s.point >= 0) goal = points->points[static_cast<std::size_t>(s.point)].q;
         else
           for (int j = 0; j < chain.n_joints; ++j) goal[j] = units.joint_in(chain, j, c.vals[static_cast<std::size_t>(j)]);
-        return movej(s, goal, c.has_speed ? c.speed : opt.joint_speed_pct);
+        return movej(s, goal, c.has_speed ? c.speed : opt.joint_speed_pct, c.has_blend ? units.angle_in(c.blend) : -1.0);
       }
       case Cmd::home:
         if (!opt.stream) return fail(s, std::string("home") + kNotInRunTail);
@@ -303,7 +455,9 @@ struct Checker {
           if (c.count == 6)
             target.linear() = kin::rotation_from_rpy(units.angle_in(c.vals[3]), units.angle_in(c.vals[4]), units.angle_in(c.vals[5]));
         }
-        return movel(s, target, c.has_speed ? units.length_in(c.speed) : opt.linear_speed);
+        // (a point's line takes the program's blend only, as the runner queues it)
+        return movel(s, target, c.has_speed ? units.length_in(c.speed) : opt.linear_speed,
+                     c.has_blend && s.point < 0 ? units.length_in(c.blend) : -1.0);
       }
       case Cmd::gmove: {  // as the console's line_request: G-code mm / deg, the base frame (offline)
         const ConsoleUnits& u = kGcodeUnits;
@@ -321,11 +475,14 @@ struct Checker {
         if (c.axis_mask == 0) return true;  // G1 F.. alone: modal only
         double speed = c.rapid ? opt.max_linear_speed : (c.has_speed ? u.length_in(c.speed) : opt.linear_speed);
         speed = std::min(speed, opt.max_linear_speed);  // senders' F is clamped, as GRBL does
-        return movel(s, target, speed);
+        return movel(s, target, speed, -1.0);
       }
       case Cmd::dwell:  // queued as a motion (the console refuses it while homing runs)
         if (const std::string r = refusal("dwell", false); !r.empty()) return fail(s, r);
+        end_run();
+        outputs_next = false;
         out.cycle_time += c.vals[0];
+        out.cycle_time_exact += c.vals[0];
         ++out.dwells;
         ++queued;
         return true;
@@ -361,8 +518,12 @@ ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, c
       return ck.out;
     }
   }
-  for (const prog::ProgramStep& s : prog.steps)
-    if (!ck.step(s)) break;
+  {
+    const bool prepared = kin::ik_prepare(chain, *ck.path_model) == kin::Status::ok;
+    ck.path_ik = firmware_ik_solver(prepared ? ck.path_model.get() : nullptr);
+  }
+  for (std::size_t i = 0; i < prog.steps.size(); ++i)
+    if (!ck.step(prog.steps[i], i)) break;
   ck.out.q_end = ck.q;
   return ck.out;
 }
@@ -472,10 +633,11 @@ int cli_program(int argc, char** argv) {
     homings = ", " + std::to_string(ck.homings) + " homing cycle" + (ck.homings == 1 ? "" : "s") + " (not timed" +
               (opt.homing.empty() ? ": no [[drive]] tables, every joint absolute, nothing moved" : "") + ")";
   std::printf("ok: %s on %s: %zu steps from %zu file%s, %d moves (%d joint, %d linear), %d dwells%s, planned cycle time %s s "
-              "(every move to rest)\n",
+              "(%d blended corner%s; %s s with every move to rest)\n",
               file.c_str(), chain.name.data(), program.steps.size(), program.files.size(),
               program.files.size() == 1 ? "" : "s", ck.moves, ck.joint_moves, ck.line_moves, ck.dwells, homings.c_str(),
-              num(ck.cycle_time).c_str());
+              num(ck.cycle_time).c_str(), ck.blended_corners, ck.blended_corners == 1 ? "" : "s",
+              num(ck.cycle_time_exact).c_str());
   return kExitOk;
 }
 

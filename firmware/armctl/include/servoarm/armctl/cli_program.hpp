@@ -26,13 +26,17 @@
 
 namespace servoarm::fw {
 
+struct FwConfig;  // servoarm/config/config.hpp
+
 /// What checking a loaded program found.
 struct ProgramCheck {
   bool ok = false;
   std::string error;        ///< "<file>:<line>: <reason>" when !ok
   int moves = 0, joint_moves = 0, line_moves = 0, dwells = 0;
   int homings = 0;          ///< `home` / `home jN` lines (homing cycles: not timed offline)
-  double cycle_time = 0;    ///< s: every move to rest, plus the dwells
+  double cycle_time = 0;    ///< s: the moves blended as armfw blends them, plus the dwells
+  double cycle_time_exact = 0;  ///< s: every move to rest, plus the dwells
+  int blended_corners = 0;  ///< corners the plan blends (each joins two moves without a stop)
   kin::JointVector q_end;   ///< where the program leaves the arm
 };
 
@@ -58,7 +62,15 @@ struct ProgramCheckOptions {
   /// program; an unhomed arm runs none); true (--stream): as lines sent one by one to the console
   /// (armctl console -c, a G-code sender), where `home` runs the homing cycle.
   bool stream = false;
+  double rate_hz = 1000;            ///< loop.rate_hz: the rate the path blends are checked at
+  double default_blend_rad = 0;     ///< motion.default_blend_deg (SI): movej without blend=
+  double default_blend_m = 0;       ///< motion.default_blend_mm (SI): movel / G1 without blend=
 };
+
+/// What armfw takes from its configuration for a program (App::build and console_config,
+/// which this mirrors): drive.limits and drive.max_velocity into `chain`, motion.* and the
+/// homing of each joint into `opt`. `cfg` passed validate_for_chain. "" or why it cannot apply.
+std::string apply_config(const FwConfig& cfg, kin::Chain& chain, ProgramCheckOptions& opt);
 
 /// Plan every step of `prog` on `chain` (SI limits set) from rest at `q0`.
 ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, const prog::PointsData* points,
