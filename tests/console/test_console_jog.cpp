@@ -184,12 +184,14 @@ TEST(ConsoleJog, ToolJogsAreStraightLinesInTheBaseAndToolFrames) {
     CHECK_TEXT((x1.linear() - R_want).norm() < 1e-7, c.line);
     // on the way: on the line (position) and, for a translation, the orientation kept
     double off = 0;
+    // the line's unit vector without a division: clang -O1 (tsan preset) computed
+    // dp_want.normalized() for the rotations too, 0/0 behind a select, and raised FE_INVALID
+    const Eigen::Vector3d u = c.axis < 3 ? Eigen::Vector3d(F.col(c.axis) * (c.amount < 0 ? -1.0 : 1.0)) : Eigen::Vector3d::Zero();
     for (const auto& qk : tr) {
       kin::Pose xk;
       kin::forward(r.app.chain, qk, xk);
       const Eigen::Vector3d d = xk.translation() - x0.translation();
       if (c.axis < 3) {
-        const Eigen::Vector3d u = dp_want.normalized();
         off = std::fmax(off, (d - u * u.dot(d)).norm());
         off = std::fmax(off, (xk.linear() - x0.linear()).norm());
       } else {
