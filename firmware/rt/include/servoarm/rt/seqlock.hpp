@@ -18,6 +18,8 @@ namespace servoarm::fw {
 template <typename T>
 class Seqlock {
   static_assert(std::is_trivially_copyable_v<T>, "a Seqlock publishes trivially copyable data");
+  static_assert(std::atomic<std::uint64_t>::is_always_lock_free,
+                "the RT thread never locks: 64-bit atomics must be lock-free (ARMv7: ldrexd/strexd)");
   static constexpr std::size_t kWords = (sizeof(T) + 7) / 8;
 
  public:
