@@ -293,6 +293,7 @@ TEST(IkReduced, TwoDimensionalFormsAnswerRandomPoses) {
     kin::IkModel m;
     kin::ik_prepare(model(k.name), m);
     if (std::string(k.method) != "spatial_3") CHECK_TEXT(kin::detail::solver_data(m).pl.on, k.name);
+    const bool is_2r = std::string(k.method) == "planar_2r";
     std::mt19937_64 rng(2020);
     int answered = 0;
     for (int s = 0; s < n; ++s) {
@@ -310,7 +311,9 @@ TEST(IkReduced, TwoDimensionalFormsAnswerRandomPoses) {
       bool in = false;
       for (int i = 0; i < r2.count; ++i) {
         const auto& a = r2.solutions[static_cast<std::size_t>(i)];
-        CHECK_TEXT(gap(m.chain, a.q, all.solutions[static_cast<std::size_t>(i)].q) == 0.0, what.c_str());
+        // the same code, the same bits; rr_planar: ik_solve_all takes planar_2r's own closed
+        // form (c291865), another sequence of operations: to rounding (aarch64 contracts FMAs)
+        CHECK_TEXT(gap(m.chain, a.q, all.solutions[static_cast<std::size_t>(i)].q) <= (is_2r ? 1e-12 : 0.0), what.c_str());
         const kin::Pose X = fk(m.chain, a.q);
         CHECK_TEXT((X.translation() - T.translation()).norm() <= 1e-9, what.c_str());
         if (k.full_pose) CHECK_TEXT(kin::rotation_error(X.linear(), T.linear()).norm() <= 1e-9, what.c_str());
