@@ -19,7 +19,7 @@
 #include "servoarm/kinematics/blend.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
-#include "target_exec.hpp"  // SERVOARM_TEST_EMULATED
+#include "sweep.hpp"  // sweep(): fewer cases under qemu and the sanitizers
 
 // CppUTest last: its leak detector redefines new.
 #include <CppUTest/TestHarness.h>
@@ -31,12 +31,7 @@ namespace {
 constexpr double kDt = 1e-3;  // 1 kHz control period
 constexpr double kVelSlack = 1e-9, kAccSlack = 1e-6, kJerkSlack = 1e-3, kRel = 1e-9;
 
-#if SERVOARM_TEST_EMULATED
-constexpr int kSweepDivisor = 20;
-#else
-constexpr int kSweepDivisor = 1;
-#endif
-constexpr int sweep(int host_count) { return host_count / kSweepDivisor; }
+using servoarm::test::sweep;  // sweep.hpp: 1/20 of the cases under qemu and the sanitizers
 
 using Queue = JointBlendQueue<64>;
 // Static storage: ~40 kB, and the fixture allocator of some targets has no aligned new.

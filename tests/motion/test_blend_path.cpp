@@ -18,6 +18,8 @@
 #include "servoarm/kinematics/orientation.hpp"
 #include "alloc_counter.hpp"
 
+#include "sweep.hpp"  // kSlowBuild: fewer sweeps under qemu and the sanitizers
+
 // CppUTest last: its leak detector redefines new.
 #include <CppUTest/TestHarness.h>
 
@@ -25,11 +27,7 @@ using namespace servoarm::kin;
 
 namespace {
 
-#if SERVOARM_TEST_EMULATED
-constexpr int kSweeps = 3;
-#else
-constexpr int kSweeps = 12;
-#endif
+constexpr int kSweeps = servoarm::test::kSlowBuild ? 3 : 12;  // sweep.hpp
 constexpr double kRate = 1000;
 
 const Chain& the_puma() {

@@ -8,7 +8,7 @@
 
 #include "alloc_counter.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
-#include "target_exec.hpp"  // SERVOARM_TEST_EMULATED
+#include "sweep.hpp"  // sweep(): fewer cases under qemu and the sanitizers
 
 // CppUTest last: its leak detector redefines new.
 #include <CppUTest/TestHarness.h>
@@ -20,15 +20,10 @@ namespace {
 constexpr double kDt = 1e-3;  // 1 kHz control period
 
 // Random-sweep sizes. The host runs the full counts written at each sweep. A cross
-// build runs this suite under qemu-user (SERVOARM_TEST_EMULATED=1, top
-// CMakeLists.txt), some 10x slower: the same sweeps, same seeds, with the first
+// build under qemu-user and the sanitizer/valgrind builds run this suite some 10-40x
+// slower (tests/support/sweep.hpp): the same sweeps, same seeds, with the first
 // 1/20 of the cases (500 instead of 10 000), so it finishes in CI time.
-#if SERVOARM_TEST_EMULATED
-constexpr int kSweepDivisor = 20;
-#else
-constexpr int kSweepDivisor = 1;
-#endif
-constexpr int sweep(int host_count) { return host_count / kSweepDivisor; }
+using servoarm::test::sweep;  // sweep.hpp: 1/20 of the cases under qemu and the sanitizers
 
 struct Rng {
   std::mt19937_64 g;

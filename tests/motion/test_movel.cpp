@@ -11,7 +11,7 @@
 #include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
-#include "target_exec.hpp"  // SERVOARM_TEST_EMULATED
+#include "sweep.hpp"  // sweep(): fewer cases under qemu and the sanitizers
 
 // CppUTest last: its leak detector redefines new.
 #include <CppUTest/TestHarness.h>
@@ -23,16 +23,11 @@ namespace {
 constexpr double kDt = 1e-3;
 
 // Random-sweep sizes. The host runs the full counts written at each sweep. A cross
-// build runs this suite under qemu-user (SERVOARM_TEST_EMULATED=1, top
-// CMakeLists.txt), some 10x slower: the same sweeps, same seeds, with the first
+// build under qemu-user and the sanitizer/valgrind builds run this suite some 10-40x
+// slower (tests/support/sweep.hpp): the same sweeps, same seeds, with the first
 // 1/20 of the cases (e.g. 500 fallback-IK lines instead of 10 000, 20 closed-form
 // instead of 400; the 100 stop/resume lines stay), so it finishes in CI time.
-#if SERVOARM_TEST_EMULATED
-constexpr int kSweepDivisor = 20;
-#else
-constexpr int kSweepDivisor = 1;
-#endif
-constexpr int sweep(int host_count) { return host_count / kSweepDivisor; }
+using servoarm::test::sweep;  // sweep.hpp: 1/20 of the cases under qemu and the sanitizers
 
 Chain puma() {
   LoadResult r = load_robot("puma560");
