@@ -120,7 +120,10 @@ _home_try() {
   a=$(isotp_ask wait 300)
   case $a in
     ok*) return 0 ;;
-    *"error: fault"*) log "homing attempt $retry_n failed (a late answer in the starved VM?): $a"; return 1 ;;
+    *"error: fault"*)
+      log "homing attempt $retry_n failed (a late answer in the starved VM?): $a"
+      case $a in *"timed out"* | *timeout*) ;; *) home_not_timeout=1 ;; esac
+      return 1 ;;
     *) return 2 ;;
   esac
 }
@@ -129,8 +132,30 @@ _home_recover() {
   enable_arm
   wait_state idle 60
 }
-retry 4 _home_try _home_recover
+home_not_timeout=0
+home_rc=0
+retry 4 _home_try _home_recover || home_rc=$?
 attempt=$retry_n
+# Four attempts lost to timeouts in a VM whose control loop missed more than 1 cycle in 10
+# (armfw's own count, printed at its exit): the VM was starved, not the firmware wrong.
+# Reported as a skip with the figures, not as a failure (seen with stress-ng --cpu 2 beside
+# the test command: 19 688 overruns in 26 218 cycles, loop latency p99 107 ms). Any check
+# failed before, or a homing fault that is not a timeout, still fails the scenario.
+if [ "$home_rc" -eq 1 ] && [ "$home_not_timeout" = 0 ] && [ "$FAILS" -eq 0 ]; then
+  stop_isotprecv
+  kill -TERM "$ARMFW_PID" 2>/dev/null || true
+  wait "$ARMFW_PID" 2>/dev/null || true
+  ex=$(grep 'exit: cycles=' "$OUT_DIR/armfw.log" || true)
+  starved=$(echo "$ex" | awk '{ c = 0; o = 0
+      if (match($0, /cycles=[0-9]+/)) c = substr($0, RSTART + 7, RLENGTH - 7) + 0
+      if (match($0, /overruns=[0-9]+/)) o = substr($0, RSTART + 9, RLENGTH - 9) + 0
+      print (c > 0 && 10 * o > c) ? 1 : 0 }')
+  if [ "$starved" = 1 ]; then
+    skip "the VM was starved: 4 homing attempts ended in SDO/state timeouts and armfw missed more than 1 cycle in 10 ($ex)"
+  fi
+  check_fail "4 homing attempts ended in timeouts though the VM was not starved ($ex)"
+  finish
+fi
 expect_ok "wait (the homing cycle, attempt $attempt of at most 4)" "$a"
 isotp_text | awk '/^ok homing: group 1 of 4/ { n = 0 } /^homing:/ { l[++n] = $0 } END { for (i = 1; i <= n; i++) print l[i] }' \
   >"$OUT_DIR/progress.txt" || true
