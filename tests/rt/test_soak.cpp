@@ -1,7 +1,15 @@
 // Soak: the firmware's own pieces as `armfw --sim` runs them (App, console, the real RT
 // thread on CLOCK_MONOTONIC at 1 kHz, the virtual drives stepped on the control thread
 // right before each cycle) running a looping program of joint moves, straight lines,
-// G-code, a dwell, a feed hold, a stop and jogs for SERVOARM_SOAK_S seconds (default 20).
+// G-code, a dwell, a feed hold, a stop and jogs for SERVOARM_SOAK_S seconds (default 20),
+// and in every pass seeded random moves (SERVOARM_SOAK_SEED, default 1): joint moves to
+// random in-limit targets at random speeds, relative straight lines of random length and
+// feed, a feed hold and a stop each at a random moment of a random joint move. A random
+// line may be refused for what its path meets (unreachable, singular, limits, branch):
+// that is an answer, counted and printed; any other error fails.
+// SERVOARM_SOAK_PRIORITY=N runs the control thread at SCHED_FIFO N with its memory locked,
+// as armfw runs on the robot (loop.priority, default 80 there; 0 here by default: tests
+// run without RT privileges everywhere).
 // At the end:
 //  - no fault: the arm is idle, no fault cause, no fault event seen;
 //  - late cycles: missed deadlines (Telemetry::overruns) at most 1 % of the cycles, judged
@@ -21,6 +29,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <random>
 #include <string>
 #include <thread>
 #include <vector>
@@ -74,6 +83,19 @@ double soak_seconds() {
   return v;
 }
 
+// SERVOARM_SOAK_PRIORITY / SERVOARM_SOAK_SEED: a whole number in [lo, hi], else def.
+long env_long(const char* name, long def, long lo, long hi) {
+  const char* s = std::getenv(name);
+  if (s == nullptr || *s == '\0') return def;
+  char* end = nullptr;
+  const long v = std::strtol(s, &end, 10);
+  if (end == s || *end != '\0' || v < lo || v > hi) {
+    std::fprintf(stderr, "%s=%s: not a whole number in [%ld, %ld]; using %ld\n", name, s, lo, hi, def);
+    return def;
+  }
+  return v;
+}
+
 // The final line of an answer: "ok..." or "error: ...".
 std::string last_line(const std::string& a) {
   if (a.empty() || a.back() != '\n') return "";
@@ -90,16 +112,18 @@ TEST(Soak, LoopingProgramRunsCleanWithFlatMemory) {
   test::SimApp app;
   FwConfig cfg;
   cfg.can = "sim";
-  cfg.priority = 0;  // tests run without RT privileges everywhere
-  cfg.lock_memory = false;
+  const long priority = env_long("SERVOARM_SOAK_PRIORITY", 0, 0, 99);
+  const long seed = env_long("SERVOARM_SOAK_SEED", 1, 0, 2147483647);
+  cfg.priority = static_cast<int>(priority);  // 0 by default: tests run without RT privileges everywhere
+  cfg.lock_memory = priority > 0;
   const std::string e = app.build(cfg);
   CHECK_TEXT(e.empty(), e.c_str());
   const std::string b = app.boot();
   CHECK_TEXT(b.empty(), b.c_str());
   app.plant->stop_thread();  // from here the drives are stepped on the control thread (armfw --sim)
   LoopConfig lc;
-  lc.priority = 0;
-  lc.lock_memory = false;
+  lc.priority = static_cast<int>(priority);
+  lc.lock_memory = priority > 0;
   RtLoop loop(*app.ctl, lc);
   loop.set_pre_cycle(&sim::SimPlant::step_hook, app.plant.get());
   std::size_t rt_allocs = 999;
@@ -108,9 +132,10 @@ TEST(Soak, LoopingProgramRunsCleanWithFlatMemory) {
   CHECK(loop.start());
 
   Session s;
-  long lines = 0, answered = 0, errors = 0;
-  std::string events, first_bad;
-  auto run = [&](const std::string& line) {
+  long lines = 0, answered = 0, errors = 0, refused = 0;
+  std::string events, first_bad, first_refusal;
+  // may_refuse: a random straight line, which the console may refuse for its path.
+  auto run = [&](const std::string& line, bool may_refuse = false) {
     s.out.clear();
     app.console->execute(s, line);
     for (int i = 0; i < 60000 && app.console->busy(s); ++i) {
@@ -123,6 +148,13 @@ TEST(Soak, LoopingProgramRunsCleanWithFlatMemory) {
       ++answered;
     } else if (last.rfind("error: ", 0) == 0) {
       ++answered;
+      const std::string code = last.substr(7, last.find(' ', 7) - 7);
+      if (may_refuse && (code == "unreachable" || code == "singular" || code == "limits" || code == "branch")) {
+        ++refused;
+        if (first_refusal.empty()) first_refusal = "'" + line + "' answered " + last;
+        events += app.console->drain_events();
+        return;
+      }
       ++errors;
       if (first_bad.empty()) first_bad = "'" + line + "' answered " + last;
     } else if (first_bad.empty()) {
@@ -135,7 +167,47 @@ TEST(Soak, LoopingProgramRunsCleanWithFlatMemory) {
 
   run("enable");
   for (int i = 0; i < 2000 && app.ctl->telemetry().state != ArmState::idle; ++i) sleep_ms(1);
-  // One pass of the program: about 6 s of motion.
+  // Seeded random moves, inside the joint limits with a margin (the middle 70 % of each
+  // range, joint 5 kept at least 15 deg from its wrist singularity).
+  std::mt19937 rng(static_cast<std::uint32_t>(seed));
+  auto uni = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  auto random_joints = [&] {
+    std::string l = "movej";
+    char v[32];
+    for (int j = 0; j < app.chain.n_joints; ++j) {
+      const double lo = app.chain.joint(j).lower * 180 / M_PI, hi = app.chain.joint(j).upper * 180 / M_PI;
+      const double c = 0.5 * (lo + hi), h = 0.35 * (hi - lo);
+      double q = uni(c - h, c + h);
+      if (j == 4 && std::fabs(q) < 15) q = q < 0 ? -15 - uni(0, 30) : 15 + uni(0, 30);
+      std::snprintf(v, sizeof v, " %.2f", q);
+      l += v;
+    }
+    std::snprintf(v, sizeof v, " speed=%.0f", uni(30, 100));
+    return l + v;
+  };
+  auto random_moves = [&] {
+    char l[160];
+    for (int i = 0; i < 3; ++i) {
+      run(random_joints());
+      run("G91");  // a relative straight line of random length and feed from wherever the joint move ends
+      std::snprintf(l, sizeof l, "G1 X%.1f Y%.1f Z%.1f F%.0f", uni(-60, 60), uni(-60, 60), uni(-60, 60), uni(300, 6000));
+      run(l, true);
+      run("G90");
+      run("wait");
+    }
+    run(random_joints());  // a feed hold at a random moment, then resume
+    sleep_ms(static_cast<int>(uni(20, 600)));
+    app.console->feed(s, "!");
+    for (int i = 0; i < 5000 && app.ctl->telemetry().mode != Mode::held && app.ctl->telemetry().state != ArmState::idle; ++i) sleep_ms(1);
+    app.console->feed(s, "~");
+    s.out.clear();
+    run("wait");
+    run(random_joints());  // a stop at a random moment
+    sleep_ms(static_cast<int>(uni(20, 600)));
+    run("stop");
+    run("wait");
+  };
+  // One pass of the program: about 6 s of motion, then the random moves.
   auto pass = [&](int k) {
     const int d = k % 3;  // a little variation between passes
     char l[160];
@@ -167,6 +239,7 @@ TEST(Soak, LoopingProgramRunsCleanWithFlatMemory) {
     run("park");
     run("wait");
     run("status");
+    random_moves();
   };
   const auto t0 = std::chrono::steady_clock::now();
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
@@ -182,7 +255,10 @@ TEST(Soak, LoopingProgramRunsCleanWithFlatMemory) {
   const long rss1 = rss_kib();
   const Telemetry t = app.ctl->telemetry();
   const double secs = elapsed();
-  std::printf("\n[soak] %.0f s, %d passes, %ld lines (%ld answered, %ld errors), %llu cycles, %llu overruns "
+  std::printf("\n[soak] seed %ld, SCHED_FIFO priority %ld%s; %ld random lines refused for their path%s%s\n", seed, priority,
+              priority > 0 ? " (memory locked)" : " (normal scheduling)", refused, refused ? ", first: " : "",
+              first_refusal.c_str());
+  std::printf("[soak] %.0f s, %d passes, %ld lines (%ld answered, %ld errors), %llu cycles, %llu overruns "
               "(%.4f %%), latency p99 %.1f us max %.1f us, RSS %ld -> %ld KiB (max %ld), RT allocations %zu, "
               "max following error %.4f deg\n",
               secs, passes, lines, answered, errors, static_cast<unsigned long long>(t.cycles),
