@@ -26,6 +26,36 @@ Eigen::Vector3d fit_basis(bool prismatic, G g) {
   return B.inverse() * v;
 }
 
+// solve_basis for a revolute joint with (h, phase) of (b, c) precomputed: the
+// same roots bit for bit (h, hc, hs computed as solve_basis computes them).
+inline Roots roots_rev(double a, const IkSolverData::Planar& pl) {
+  Roots r;
+  double k = -a / pl.h;
+  if (k > 1.0) {
+    if (k > 1.0 + 1e-9) return r;
+    k = 1.0;
+  } else if (k < -1.0) {
+    if (k < -1.0 - 1e-9) return r;
+    k = -1.0;
+  }
+  const double st = std::sqrt((1.0 - k) * (1.0 + k));
+  r.c[0] = pl.hc * k - pl.hs * st;
+  r.s[0] = pl.hs * k + pl.hc * st;
+  r.c[1] = pl.hc * k + pl.hs * st;
+  r.s[1] = pl.hs * k - pl.hc * st;
+  r.n = st > 0 ? 2 : 1;
+  return r;
+}
+
+// One joint value v = dir * motion (|v| <= pi) into the limits: what
+// wrap_into_limits gives, branch-free for a joint whose limits span less than
+// a turn (wrap_narrow; as the spherical-wrist and UR paths do).
+inline double wrap_joint(const IkJointWrap& jw, double v, double ref) {
+  if (jw.kind == 0) return v;
+  const double w = fast_wrap(v);
+  return narrow_applies(jw, ref) ? wrap_narrow(jw, w) : wrap_into_limits(w, jw.lo, jw.hi, ref);
+}
+
 // planar_2r (RR) in closed form with the cheap check (issue 19: reduced arms
 // <= 100 ns): the coefficients of |f(m2)_xy|^2 are fitted at set-up
 // (IkSolverData::red_co); each root's tool point is verified through the
@@ -37,7 +67,9 @@ void solve_planar_2r(const IkModel& model, const Pose& target, const JointVector
   const IkSolverData& m = solver_data(model);
   const Eigen::Vector3d p0 = C(m, 0).linear().transpose() * (target.translation() - C(m, 0).translation());
   const double tol = 1e-12 * m.scale * m.scale;
-  Roots r2 = solve_basis(m.red_co[0] - (p0.x() * p0.x() + p0.y() * p0.y()), m.red_co[1], m.red_co[2], false, tol, false);
+  // the 2-D form's (h, phase) when set up (IkSolverData::Planar): the same roots, no sqrt or division
+  const double a2 = m.red_co[0] - (p0.x() * p0.x() + p0.y() * p0.y());
+  Roots r2 = m.pl.on ? roots_rev(a2, m.pl) : solve_basis(a2, m.red_co[1], m.red_co[2], false, tol, false);
   if (r2.free || r2.n == 0) return;
   const bool merged = r2.n == 1 || merge_close_roots(r2);
   const Eigen::Matrix3d& R1 = C(m, 1).linear();
@@ -49,8 +81,14 @@ void solve_planar_2r(const IkModel& model, const Pose& target, const JointVector
   std::uint8_t sing[2];
   for (int i = 0; i < r2.n; ++i) {
     const double c2 = r2.c[i], s2 = r2.s[i];
-    const Eigen::Vector3d w(c2 * m.w3.x() - s2 * m.w3.y(), s2 * m.w3.x() + c2 * m.w3.y(), m.w3.z());
-    const Eigen::Vector3d f = R1 * w + t1;
+    Eigen::Vector3d f;
+    if (m.pl.on) {  // f = sa + Rz(m2) w in the plane (setup_planar checked it against C1 Rz(m2) w3)
+      f = Eigen::Vector3d(m.pl.sa.x() + (c2 * m.pl.w.x() - s2 * m.pl.w.y()),
+                          m.pl.sa.y() + (s2 * m.pl.w.x() + c2 * m.pl.w.y()), m.pl.sa.z() + m.pl.w.z());
+    } else {
+      const Eigen::Vector3d w(c2 * m.w3.x() - s2 * m.w3.y(), s2 * m.w3.x() + c2 * m.w3.y(), m.w3.z());
+      f = R1 * w + t1;
+    }
     const double cr = f.x() * p0.y() - f.y() * p0.x(), dt = f.x() * p0.x() + f.y() * p0.y();
     const double r = cr * cr + dt * dt;
     double c1 = 1, s1 = 0;
@@ -89,7 +127,7 @@ void solve_planar_2r(const IkModel& model, const Pose& target, const JointVector
     for (int j = 0; j < 2; ++j) {
       const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
       const double v = m.dir[static_cast<std::size_t>(j)] * mot[j];
-      q[j] = jw.kind == 0 ? v : detail::wrap_into_limits(fast_wrap(v), jw.lo, jw.hi, j == 0 ? ref0 : ref1);
+      q[j] = wrap_joint(jw, v, j == 0 ? ref0 : ref1);
       in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
     }
     bool dup = false;
@@ -214,7 +252,7 @@ void store_reduced(const IkModel& model, const Pose& target, const JointVector* 
   for (int j = 0; j < m.n; ++j) {
     const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
     const double v = m.dir[static_cast<std::size_t>(j)] * mc.v[j];
-    q[j] = jw.kind == 0 ? v : detail::wrap_into_limits(fast_wrap(v), jw.lo, jw.hi, q_ref ? (*q_ref)[j] : 0.0);
+    q[j] = wrap_joint(jw, v, q_ref ? (*q_ref)[j] : 0.0);
     in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
   }
   if (!std::isfinite(q[0] + q[1] + q[2] + q[3])) return;
@@ -431,27 +469,6 @@ void solve_spatial_3_fast(const IkModel& model, const Pose& target, const double
 // whole target to the 3-D cheap path (solve_*_fast above: their answers).
 // ---------------------------------------------------------------------------
 
-// solve_basis for a revolute joint with (h, phase) of (b, c) precomputed: the
-// same roots bit for bit (h, hc, hs computed as solve_basis computes them).
-inline Roots roots_rev(double a, const IkSolverData::Planar& pl) {
-  Roots r;
-  double k = -a / pl.h;
-  if (k > 1.0) {
-    if (k > 1.0 + 1e-9) return r;
-    k = 1.0;
-  } else if (k < -1.0) {
-    if (k < -1.0 - 1e-9) return r;
-    k = -1.0;
-  }
-  const double st = std::sqrt((1.0 - k) * (1.0 + k));
-  r.c[0] = pl.hc * k - pl.hs * st;
-  r.s[0] = pl.hs * k + pl.hc * st;
-  r.c[1] = pl.hc * k + pl.hs * st;
-  r.s[1] = pl.hs * k - pl.hc * st;
-  r.n = st > 0 ? 2 : 1;
-  return r;
-}
-
 // Wrap, limit flags, de-duplication and storage of one verified solution (as
 // store_reduced's tail; mot: the motion values).
 inline void emit(const IkSolverData& m, const JointVector* q_ref, const double* mot, Branch br, std::uint8_t sing,
@@ -462,7 +479,7 @@ inline void emit(const IkSolverData& m, const JointVector* q_ref, const double* 
   for (int j = 0; j < n; ++j) {
     const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
     const double v = m.dir[static_cast<std::size_t>(j)] * mot[j];
-    q[j] = jw.kind == 0 ? v : detail::wrap_into_limits(fast_wrap(v), jw.lo, jw.hi, q_ref ? (*q_ref)[j] : 0.0);
+    q[j] = wrap_joint(jw, v, q_ref ? (*q_ref)[j] : 0.0);
     in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
   }
   if (!std::isfinite(q[0] + q[1] + q[2] + q[3])) return;
