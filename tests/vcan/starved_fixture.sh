@@ -1,0 +1,17 @@
+# Fixture of the harness's own test (tests/vcan/starved-test, CTest vcan_starved): a
+# scenario that fails on purpose, after a faked stall or without one.
+#   starved_fixture.sh stall     stop the guest's starvation probe for 1 s (its next
+#                                wake-up is then ~1 s late, as in a starved VM), then fail
+#   starved_fixture.sh nostall   fail at once
+. "$SCENARIO_DIR/lib.sh"
+case ${1:-} in
+  stall)
+    [ -n "${SERVOARM_STALL_PROBE_PID:-}" ] || fail "SERVOARM_STALL_PROBE_PID not set: /init started no probe"
+    kill -STOP "$SERVOARM_STALL_PROBE_PID"
+    sleep 1
+    kill -CONT "$SERVOARM_STALL_PROBE_PID"
+    sleep 1   # the probe prints its stall line
+    fail "a deliberate failure after a faked stall" ;;
+  nostall) fail "a deliberate failure, no stall" ;;
+  *) fail "usage: starved_fixture.sh stall|nostall" ;;
+esac
