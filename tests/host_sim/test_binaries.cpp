@@ -141,9 +141,21 @@ TEST(Binaries, EmcyFromArmsimIsAFaultWithItsCode) {
 
 TEST(Binaries, StoppedHeartbeatAndNoisyEncoders) {
   // Heartbeat producer of node 1 stops while its PDOs keep flowing: still a heartbeat loss.
-  Run r = run_pair({"--nodes", "1-2", "--bringup", "--hold", "2", "--hb-ms", "100", "--hb-timeout-ms", "600",
-                    "--expect-hb-loss", "1"},
-                   {"--nodes", "1-2", "--stop-heartbeat", "1@0.8", "--duration", "5"});
+  const auto stopped_heartbeat = [] {
+    return run_pair({"--nodes", "1-2", "--bringup", "--hold", "2", "--hb-ms", "100", "--hb-timeout-ms", "600",
+                     "--expect-hb-loss", "1"},
+                    {"--nodes", "1-2", "--stop-heartbeat", "1@0.8", "--duration", "5"});
+  };
+  Run r = stopped_heartbeat();
+  // Node 2's heartbeat is never stopped: its loss too means armsim went 600 ms without
+  // running (seen once at load average 10 on 2 cores). Said, and run once more; a second
+  // such loss, or any other outcome, is judged.
+  if (r.master_rc != 0 && r.master_out.find("node=2 reason=heartbeat_lost") != std::string::npos) {
+    std::printf("\nstopped heartbeat: node 2's heartbeat lost as well (armsim starved 600 ms?); once more:\n%s\n",
+                r.master_out.c_str());
+    r = stopped_heartbeat();
+  }
+  if (r.master_rc != 0) std::printf("\n%s\n", r.master_out.c_str());
   STRCMP_CONTAINS("node=1 reason=heartbeat_lost", r.master_out.c_str());
   LONGS_EQUAL(0, r.master_rc);
   // +-1000 counts of position noise (48 mrad) on the reported position.
