@@ -34,6 +34,11 @@ struct IkSignedPerm {
 /// turn of the limits); 2: any other revolute joint (nearest to the reference).
 struct IkJointWrap {
   std::uint8_t kind = 0;
+  /// Revolute: an angle w in (-pi, pi] with |w| < in_abs is within the
+  /// limits and its only 2*pi equivalent there, so every rule keeps it (the
+  /// reduced paths' quick exit, issue 19): 1e-9 or more inside the exact
+  /// bounds (a float rounded down: it fills the padding after kind); 0: none.
+  float in_abs = 0;
   double lo = 0, hi = 0;    ///< limits widened by 1e-12 (wrapping)
   double lo9 = 0, hi9 = 0;  ///< limits widened by 1e-9 (within_limits)
 };
@@ -118,6 +123,7 @@ struct IkSolverData {
     double h = 0, hc = 1, hs = 0;                    ///< red_co's (b, c) = h (hc, hs), revolute middle joint
     Eigen::Vector3d sa = Eigen::Vector3d::Zero(), w = Eigen::Vector3d::Zero(), tn = Eigen::Vector3d::Zero();
     double gc = 1, gs = 0;                           ///< cos, sin gamma
+    double gamma = 0, phase = 0;                     ///< gamma; the phase atan2(hs, hc) (planar_3's angles)
     Eigen::Vector3d z1 = Eigen::Vector3d::UnitZ(), o1 = Eigen::Vector3d::Zero();  ///< pitch_4: axis 1 in F
   } pl;
 };
@@ -202,6 +208,14 @@ inline IkJointWrap make_joint_wrap(const DhRow& r) {
   j.hi9 = r.upper + 1e-9;
   if (r.type != JointType::revolute) return j;
   j.kind = (j.hi - j.lo < kTwoPi && j.lo > -3.0 * M_PI && j.hi < 3.0 * M_PI) ? 1 : 2;
+  // w >= lo, w <= hi, w + 2 pi > hi, w - 2 pi < lo (wrap_into_limits' first test), with margin
+  // (-in_abs, in_abs) within (a, b)
+  const double a = std::max(j.lo, j.hi - kTwoPi) + 1e-9, b = std::min(j.hi, j.lo + kTwoPi) - 1e-9;
+  const double half = std::min(-a, b);
+  if (half > 0) {
+    j.in_abs = static_cast<float>(std::min(half, 4.0));
+    if (!(j.in_abs <= half)) j.in_abs = std::nextafter(j.in_abs, 0.0f);
+  }
   return j;
 }
 

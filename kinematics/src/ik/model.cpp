@@ -411,12 +411,14 @@ void setup_planar(IkSolverData& m, int first, bool heading) {
     if (!(pl.h > 1e-12 * m.scale * m.scale)) return;  // the equation free of b (solve_basis's tolerance)
     pl.hc = hb / pl.h;
     pl.hs = hcoef / pl.h;
+    pl.phase = std::atan2(pl.hs, pl.hc);
   }
   if (heading) {
     const Eigen::Matrix3d G = Cb.linear() * C(m, b + 1).linear();
     const double g = std::atan2(G(1, 0), G(0, 0));
     pl.gc = std::cos(g);
     pl.gs = std::sin(g);
+    pl.gamma = g;
     pl.tn = C(m, last + 1).translation();
   }
   if (first == 1) {

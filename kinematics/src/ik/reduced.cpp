@@ -9,7 +9,13 @@
 #include "ik_detail.hpp"
 
 namespace servoarm::kin::detail {
-void solve_reduced_slow(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res);
+// Not inlined into the flattened solve_reduced (issue 19): the fallbacks are
+// rare, and inlined they made every call pay for a larger frame and for
+// Eigen's cache-size query of the slow path's dynamic-size product.
+[[gnu::noinline]] void solve_reduced_slow(const IkModel& model, const Pose& target, const JointVector* q_ref,
+                                          IkResult& res);
+[[gnu::noinline]] void solve_reduced_3d(const IkModel& model, const Pose& target, const JointVector* q_ref,
+                                        IkResult& res);
 namespace {
 
 // Coefficients (a, b, c) of g(m) = a + b x + c y in the basis of joint j,
@@ -28,7 +34,7 @@ Eigen::Vector3d fit_basis(bool prismatic, G g) {
 
 // solve_basis for a revolute joint with (h, phase) of (b, c) precomputed: the
 // same roots bit for bit (h, hc, hs computed as solve_basis computes them).
-inline Roots roots_rev(double a, const IkSolverData::Planar& pl) {
+inline Roots roots_rev(double a, const IkSolverData::Planar& pl, double* kst = nullptr) {
   Roots r;
   double k = -a / pl.h;
   if (k > 1.0) {
@@ -39,6 +45,10 @@ inline Roots roots_rev(double a, const IkSolverData::Planar& pl) {
     k = -1.0;
   }
   const double st = std::sqrt((1.0 - k) * (1.0 + k));
+  if (kst) {  // the roots are phase +- atan2(st, k)
+    kst[0] = k;
+    kst[1] = st;
+  }
   r.c[0] = pl.hc * k - pl.hs * st;
   r.s[0] = pl.hs * k + pl.hc * st;
   r.c[1] = pl.hc * k + pl.hs * st;
@@ -50,10 +60,20 @@ inline Roots roots_rev(double a, const IkSolverData::Planar& pl) {
 // One joint value v = dir * motion (|v| <= pi) into the limits: what
 // wrap_into_limits gives, branch-free for a joint whose limits span less than
 // a turn (wrap_narrow; as the spherical-wrist and UR paths do).
-inline double wrap_joint(const IkJointWrap& jw, double v, double ref) {
-  if (jw.kind == 0) return v;
-  const double w = fast_wrap(v);
-  return narrow_applies(jw, ref) ? wrap_narrow(jw, w) : wrap_into_limits(w, jw.lo, jw.hi, ref);
+// The quick exit first: |w| < in_abs is what both rules give (the seeds'
+// reduced arms have +-180 degree limits: all but the angles within ~1e-7 of
+// +-pi leave here).
+// `in` cleared when the result is outside the limits widened by 1e-9 (the
+// quick exit's w is inside them: in_abs <= hi - 1e-9, -in_abs >= lo + 1e-9).
+inline double wrap_joint(const IkJointWrap& jw, double v, double ref, bool& in) {
+  double q = v;
+  if (jw.kind != 0) {
+    const double w = fast_wrap(v);
+    if (std::abs(w) < jw.in_abs) return w;
+    q = narrow_applies(jw, ref) ? wrap_narrow(jw, w) : wrap_into_limits(w, jw.lo, jw.hi, ref);
+  }
+  in &= (q >= jw.lo9) & (q <= jw.hi9);
+  return q;
 }
 
 // planar_2r (RR) in closed form with the cheap check (issue 19: reduced arms
@@ -127,8 +147,7 @@ void solve_planar_2r(const IkModel& model, const Pose& target, const JointVector
     for (int j = 0; j < 2; ++j) {
       const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
       const double v = m.dir[static_cast<std::size_t>(j)] * mot[j];
-      q[j] = wrap_joint(jw, v, j == 0 ? ref0 : ref1);
-      in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
+      q[j] = wrap_joint(jw, v, j == 0 ? ref0 : ref1, in);
     }
     bool dup = false;
     for (int t = 0; t < res.count && !dup; ++t) {
@@ -252,8 +271,7 @@ void store_reduced(const IkModel& model, const Pose& target, const JointVector* 
   for (int j = 0; j < m.n; ++j) {
     const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
     const double v = m.dir[static_cast<std::size_t>(j)] * mc.v[j];
-    q[j] = wrap_joint(jw, v, q_ref ? (*q_ref)[j] : 0.0);
-    in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
+    q[j] = wrap_joint(jw, v, q_ref ? (*q_ref)[j] : 0.0, in);
   }
   if (!std::isfinite(q[0] + q[1] + q[2] + q[3])) return;
   for (int i = 0; i < res.count; ++i) {
@@ -479,8 +497,7 @@ inline void emit(const IkSolverData& m, const JointVector* q_ref, const double* 
   for (int j = 0; j < n; ++j) {
     const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
     const double v = m.dir[static_cast<std::size_t>(j)] * mot[j];
-    q[j] = wrap_joint(jw, v, q_ref ? (*q_ref)[j] : 0.0);
-    in &= (q[j] >= jw.lo9) & (q[j] <= jw.hi9);
+    q[j] = wrap_joint(jw, v, q_ref ? (*q_ref)[j] : 0.0, in);
   }
   if (!std::isfinite(q[0] + q[1] + q[2] + q[3])) return;
   for (int i = 0; i < res.count; ++i) {
@@ -522,7 +539,7 @@ struct Sol2d {             // every field set by core_2d (no initialisers: not z
 // The core: target point pt (F; the tool point) and heading (cp, sp) (with
 // heading) -> at most two verified solutions; false: hand over.
 inline bool core_2d(const IkSolverData& m, const Eigen::Vector3d& pt, bool heading, bool merge, double cp, double sp,
-                    const double* root_rhs, Sol2d* out, int& ns) {
+                    const double* root_rhs, Sol2d* out, int& ns, double* kst = nullptr, bool* two_roots = nullptr) {
   const IkSolverData::Planar& pl = m.pl;
   // the point that the first and middle joints place: joint 3's origin, or the tool point
   const double Px = heading ? pt.x() - (cp * pl.tn.x() - sp * pl.tn.y()) : pt.x();
@@ -537,9 +554,11 @@ inline bool core_2d(const IkSolverData& m, const Eigen::Vector3d& pt, bool headi
     r = solve_basis(m.red_co[0] - rhs, m.red_co[1], m.red_co[2], true, 1e-12 * sc2, false);
     if (r.free) return false;
   } else {
-    r = roots_rev(m.red_co[0] - rhs, pl);
+    r = roots_rev(m.red_co[0] - rhs, pl, kst);
     // stretched / folded: one configuration (as the 3-D paths); planar_2r flags it
     if (merge && r.n >= 1 && (merge_close_roots(r) || r.n == 1) && !heading) merged = kSingularElbow;
+    // the two roots phase +- t as roots_rev gave them (not merged into one)
+    if (two_roots) *two_roots = r.n == 2;
   }
   if (!(P2 > 1e-18 * sc2)) return false;  // point on the first axis: that joint is free
   ns = r.n;
@@ -638,7 +657,36 @@ bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector
   }
   Sol2d s[2];
   int ns = 0;
-  if (!core_2d(m, pt, heading, !m.pl.pri, cp, sp, nullptr, s, ns)) return false;
+  double kst[2] = {1, 0};
+  bool two = false;
+  if (!core_2d(m, pt, heading, !m.pl.pri, cp, sp, nullptr, s, ns, kst, &two)) return false;
+  if (heading && ns == 2) {
+    // planar_3, two solutions: four angles in two atan2_poly_x2 (issue 19),
+    // not six in three -- the first joint's two, then (revolute middle
+    // joint, RRR) t (its roots are phase +- t, roots_rev) and the target
+    // heading psi, the last joint psi - gamma - a - b (the heading left: its
+    // pair (cc, sc) is what the forward map verified, the same angle to
+    // rounding); prismatic middle joint (RLR): the last joint's two.
+    const bool rev2 = !m.pl.pri && two;
+    double y[4] = {s[0].sa, s[1].sa, rev2 ? kst[1] : s[0].sc, rev2 ? sp : s[1].sc};
+    double x[4] = {s[0].ca, s[1].ca, rev2 ? kst[0] : s[0].cc, rev2 ? cp : s[1].cc};
+    double ang[4];
+    detail::atan2_poly_x2(y, x, ang);
+    detail::atan2_poly_x2(y + 2, x + 2, ang + 2);
+    double b[2] = {s[0].cb, s[1].cb};
+    if (rev2) {
+      b[0] = m.pl.phase + ang[2];
+      b[1] = m.pl.phase - ang[2];
+    }
+    const double h0 = ang[3] - m.pl.gamma;
+    for (int i = 0; i < 2; ++i) {
+      const double mot[3] = {ang[i], b[i], rev2 ? h0 - ang[i] - b[i] : ang[2 + i]};
+      Branch br;
+      br.elbow = s[i].elbow;
+      emit(m, q_ref, mot, br, elbow_2(m.pl, s[i]) ? kSingularElbow : 0, s[i].ep, s[i].er, res);
+    }
+    return true;
+  }
   // the angles two at a time: (a, b) per solution, then the two c (planar_3)
   double y[6] = {0, 0, 0, 0, 0, 0}, x[6] = {1, 1, 1, 1, 1, 1}, ang[6];
   for (int i = 0; i < ns; ++i) {
@@ -825,14 +873,14 @@ inline bool reduced_2d(const IkModel& model, const Pose& target, const double* m
 // (rrr_planar 11 046 -> 11 089 instructions per solve); flattened 9 784.
 [[gnu::flatten]] void solve_reduced(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
   const IkSolverData& m = solver_data(model);
-  double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
-  if (q_ref)
-    for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
   if (!m.red_fast) return solve_reduced_slow(model, target, q_ref, res);
   // rr_planar: solve_planar_2r (atan2_poly_x2, its own 2-D check) is already
   // the short form; the generic 2-D planar form was slower for it (issue 19:
-  // 156-158 -> 166-170 ns), so it keeps its own path.
+  // 156-158 -> 166-170 ns), so it keeps its own path (before mref: it needs none).
   if (model.method == IkMethod::planar_2r) return solve_planar_2r(model, target, q_ref, res);
+  double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
+  if (q_ref)
+    for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
   const int count0 = res.count;
   if (reduced_2d(model, target, mref, q_ref, res)) return;
   res.count = count0;  // handed over: the 3-D cheap paths
@@ -841,7 +889,7 @@ inline bool reduced_2d(const IkModel& model, const Pose& target, const double* m
 
 // The 3-D cheap paths alone (the 2-D forms' fallback; what ik_solve_all ran
 // before them: the benchmark's same-run comparison).
-[[gnu::flatten]] void solve_reduced_3d(const IkModel& model, const Pose& target, const JointVector* q_ref,
+[[gnu::flatten, gnu::noinline]] void solve_reduced_3d(const IkModel& model, const Pose& target, const JointVector* q_ref,
                                        IkResult& res) {
   const IkSolverData& m = solver_data(model);
   double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
@@ -859,7 +907,7 @@ inline bool reduced_2d(const IkModel& model, const Pose& target, const double* m
 // add_candidate, the elbow flag from the chain's Jacobian): the fallback for
 // the degenerate targets the cheap paths hand over (heading undefined, an
 // equation free).
-[[gnu::flatten]] void solve_reduced_slow(const IkModel& model, const Pose& target, const JointVector* q_ref,
+[[gnu::flatten, gnu::noinline]] void solve_reduced_slow(const IkModel& model, const Pose& target, const JointVector* q_ref,
                                          IkResult& res) {
   const IkSolverData& m = solver_data(model);
   double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};
