@@ -678,3 +678,69 @@ TEST(IkFastPath, NarrowWrapMatchesTheRule) {
   }
   CHECK(n > 150000);
 }
+
+// The quick exit of the reduced arms' wrap (IkJointWrap::in_abs, issue 19): an
+// angle w in (-pi, pi] with |w| < in_abs is what the rule (wrap_into_limits)
+// and the narrow form give for any reference, and within the limits widened
+// by 1e-9; it exists for the usual limits around zero and is off where two
+// equivalents fit everywhere or the limits miss zero.
+TEST(IkFastPath, QuickWrapExitKeepsWhatTheRuleGives) {
+  using servoarm::kin::detail::kTwoPi;
+  auto row = [](double lo, double hi) {
+    kin::DhRow r;
+    r.type = kin::JointType::revolute;
+    r.lower = lo;
+    r.upper = hi;
+    return r;
+  };
+  int quick = 0;
+  auto check = [&](const kin::DhRow& r, double w, double ref) {
+    const kin::IkJointWrap j = servoarm::kin::detail::make_joint_wrap(r);
+    if (!(std::abs(w) < j.in_abs)) return;
+    ++quick;
+    const double rule = servoarm::kin::detail::wrap_into_limits(w, j.lo, j.hi, ref);
+    const bool narrow_ok =
+        !servoarm::kin::detail::narrow_applies(j, ref) || servoarm::kin::detail::wrap_narrow(j, w) == w;
+    if (!(rule == w && narrow_ok && w >= j.lo9 && w <= j.hi9))
+      FAIL(("limits [" + std::to_string(r.lower) + ", " + std::to_string(r.upper) + "] w=" + std::to_string(w) +
+            " ref=" + std::to_string(ref) + ": rule " + std::to_string(rule))
+               .c_str());
+  };
+  const double d = M_PI / 180;
+  const double lims[][2] = {{-M_PI, M_PI},         {-180 * d, 180 * d}, {-160 * d, 160 * d}, {-225 * d, 45 * d},
+                            {-45 * d, 225 * d},    {-110 * d, 170 * d}, {-266 * d, 266 * d}, {-350 * d, 350 * d},
+                            {100 * d, 350 * d},    {-M_PI, M_PI - 1e-9}, {-2 * M_PI, 2 * M_PI}, {0, kTwoPi - 1e-6}};
+  const double refs[] = {0.0, 1.0, -1.0, 3.0, -3.0, M_PI, -M_PI, 6.0, -6.0, 7.5, -20.0, 1e6};
+  for (const auto& l : lims) {
+    const kin::IkJointWrap j = servoarm::kin::detail::make_joint_wrap(row(l[0], l[1]));
+    // the boundary itself and just either side of it, then a grid
+    const double b = j.in_abs;
+    // (no nextafter from 0: a subnormal raises FE_UNDERFLOW, which the test plugin rejects)
+    const double ws[] = {b, -b, b - 1e-15, -(b - 1e-15), b + 1e-15, 0.0,
+                         M_PI, -M_PI + 1e-15, M_PI - 1e-9, -M_PI + 1e-9, M_PI - 1e-7, -M_PI + 1e-7};
+    for (double w : ws)
+      for (double ref : refs) check(row(l[0], l[1]), w, ref);
+    for (int k = -1000; k <= 1000; ++k)
+      for (double ref : refs) check(row(l[0], l[1]), M_PI * k / 1000.0, ref);
+  }
+  // where it exists: +-180 degrees up to 1e-7 rad from +-pi (a float rounded down), not
+  // for limits that miss zero, nor where every angle has two equivalents inside
+  CHECK(servoarm::kin::detail::make_joint_wrap(row(-M_PI, M_PI)).in_abs > M_PI - 1e-6);
+  CHECK(servoarm::kin::detail::make_joint_wrap(row(-160 * d, 160 * d)).in_abs > 160 * d - 1e-6);
+  DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(row(100 * d, 350 * d)).in_abs, 0);
+  DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(row(-2 * M_PI, 2 * M_PI)).in_abs, 0);
+  kin::DhRow inf = row(-std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
+  DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(inf).in_abs, 0);
+  kin::DhRow p = row(-1, 1);
+  p.type = kin::JointType::prismatic;
+  DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(p).in_abs, 0);
+  // random limits, angles and references
+  std::mt19937_64 rng(37);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int i = 0; i < 200000; ++i) {
+    const double lo = -2.9 * M_PI + 4.0 * M_PI * u(rng);
+    const double hi = lo + 2.5 * kTwoPi * u(rng);
+    check(row(lo, hi), -M_PI + kTwoPi * u(rng), -10.0 + 20.0 * u(rng));
+  }
+  CHECK(quick > 100000);
+}
