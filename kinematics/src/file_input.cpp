@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cfenv>
 #include <charconv>
@@ -88,9 +89,9 @@ std::string ascii_only(std::string_view t, std::string& where) {
     switch (in) {
       case In::text:
         if (c == '#') in = In::comment;
-        else if (starts("\"\"\"")) in = In::ml_basic, take = 3;
+        else if (c == '"' && starts("\"\"\"")) in = In::ml_basic, take = 3;
         else if (c == '"') in = In::basic;
-        else if (starts("'''")) in = In::ml_literal, take = 3;
+        else if (c == '\'' && starts("'''")) in = In::ml_literal, take = 3;
         else if (c == '\'') in = In::literal;
         break;
       case In::comment:
@@ -101,13 +102,13 @@ std::string ascii_only(std::string_view t, std::string& where) {
         if (escape) escape = false;
         else if (c == '\\') escape = true;
         else if (in == In::basic && (c == '"' || c == '\n')) in = In::text;
-        else if (in == In::ml_basic && starts("\"\"\"")) in = In::text, take = 3;
+        else if (in == In::ml_basic && c == '"' && starts("\"\"\"")) in = In::text, take = 3;
         break;
       case In::literal:
         if (c == '\'' || c == '\n') in = In::text;
         break;
       case In::ml_literal:
-        if (starts("'''")) in = In::text, take = 3;
+        if (c == '\'' && starts("'''")) in = In::text, take = 3;
         break;
     }
     for (std::size_t k = 0; k < take && i < t.size(); ++k, ++i) {
@@ -206,15 +207,24 @@ TomlDocument parse_toml(std::string_view text, const std::string& origin, std::s
   }
   // toml++ reads 1e400 with the C library, which raises FE_OVERFLOW (the number is then
   // refused as out of range): the floating-point flags are left as they were before.
-  std::string where;
-  const std::string ascii = ascii_only(text, where);
-  if (!where.empty()) {
-    doc.error = one_line(origin + ":" + where);
-    return doc;
+  // Plain ASCII text (most files) is what ascii_only() would return unchanged: it is parsed
+  // as it is, without the copy and the per-character pass (a quarter of the loaders' time
+  // under ASan; tests/bench/RESULTS.md, 2026-12-04 long runs).
+  const bool plain_ascii =
+      std::all_of(text.begin(), text.end(), [](char ch) { return static_cast<unsigned char>(ch) < 0x80; });
+  std::string escaped;
+  if (!plain_ascii) {
+    std::string where;
+    escaped = ascii_only(text, where);
+    if (!where.empty()) {
+      doc.error = one_line(origin + ":" + where);
+      return doc;
+    }
   }
+  const std::string_view ascii = plain_ascii ? text : std::string_view(escaped);
   std::fenv_t fenv;
   std::feholdexcept(&fenv);
-  toml::parse_result r = toml::parse(std::string_view(ascii), std::string_view(origin));
+  toml::parse_result r = toml::parse(ascii, std::string_view(origin));
   std::fesetenv(&fenv);
   if (!r) {
     const toml::parse_error& e = r.error();
