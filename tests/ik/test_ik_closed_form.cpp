@@ -620,15 +620,19 @@ TEST(IkFastPath, Atan2PolyX2IsTheScalarVersionBitForBit) {
 // references and limits.
 #include "../../kinematics/src/ik/ik_detail.hpp"
 
+namespace {
+// A revolute DH row with only its limits set (the wrap tests below).
+kin::DhRow revolute_row(double lo, double hi) {
+  kin::DhRow r;
+  r.type = kin::JointType::revolute;
+  r.lower = lo;
+  r.upper = hi;
+  return r;
+}
+}  // namespace
+
 TEST(IkFastPath, NarrowWrapMatchesTheRule) {
   using servoarm::kin::detail::kTwoPi;
-  auto row = [](double lo, double hi) {
-    kin::DhRow r;
-    r.type = kin::JointType::revolute;
-    r.lower = lo;
-    r.upper = hi;
-    return r;
-  };
   auto check = [&](const kin::DhRow& r, double w, double ref) {
     const kin::IkJointWrap j = servoarm::kin::detail::make_joint_wrap(r);
     const double rule = servoarm::kin::detail::wrap_into_limits(w, j.lo, j.hi, ref);
@@ -652,18 +656,18 @@ TEST(IkFastPath, NarrowWrapMatchesTheRule) {
   int used = 0;
   for (const auto& l : lims)
     for (double w : ws)
-      for (double ref : refs) used += check(row(l[0], l[1]), w, ref) ? 1 : 0;
+      for (double ref : refs) used += check(revolute_row(l[0], l[1]), w, ref) ? 1 : 0;
   CHECK(used > 1000);
   // Explicit expectations.
-  const kin::IkJointWrap j2 = servoarm::kin::detail::make_joint_wrap(row(-225 * d, 45 * d));
+  const kin::IkJointWrap j2 = servoarm::kin::detail::make_joint_wrap(revolute_row(-225 * d, 45 * d));
   LONGS_EQUAL(1, j2.kind);
   DOUBLES_EQUAL(135 * d - kTwoPi, servoarm::kin::detail::wrap_narrow(j2, 135 * d), 1e-15);  // -225 deg
   DOUBLES_EQUAL(90 * d, servoarm::kin::detail::wrap_narrow(j2, 90 * d), 0);                // nothing fits: unchanged
-  LONGS_EQUAL(2, servoarm::kin::detail::make_joint_wrap(row(-266 * d, 266 * d)).kind);     // wide: the rule
-  kin::DhRow p = row(-1, 1);
+  LONGS_EQUAL(2, servoarm::kin::detail::make_joint_wrap(revolute_row(-266 * d, 266 * d)).kind);     // wide: the rule
+  kin::DhRow p = revolute_row(-1, 1);
   p.type = kin::JointType::prismatic;
   LONGS_EQUAL(0, servoarm::kin::detail::make_joint_wrap(p).kind);
-  kin::DhRow inf = row(-std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
+  kin::DhRow inf = revolute_row(-std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
   LONGS_EQUAL(2, servoarm::kin::detail::make_joint_wrap(inf).kind);
   // Random limits (span < a turn), angles, references within a turn of the limits.
   std::mt19937_64 rng(31);
@@ -674,7 +678,7 @@ TEST(IkFastPath, NarrowWrapMatchesTheRule) {
     const double hi = std::min(lo + kTwoPi * u(rng), 2.95 * M_PI);
     const double w = -M_PI + kTwoPi * u(rng);
     const double ref = lo - kTwoPi + (hi - lo + 2 * kTwoPi) * u(rng);
-    n += check(row(lo, hi), w, ref) ? 1 : 0;
+    n += check(revolute_row(lo, hi), w, ref) ? 1 : 0;
   }
   CHECK(n > 150000);
 }
@@ -686,13 +690,6 @@ TEST(IkFastPath, NarrowWrapMatchesTheRule) {
 // equivalents fit everywhere or the limits miss zero.
 TEST(IkFastPath, QuickWrapExitKeepsWhatTheRuleGives) {
   using servoarm::kin::detail::kTwoPi;
-  auto row = [](double lo, double hi) {
-    kin::DhRow r;
-    r.type = kin::JointType::revolute;
-    r.lower = lo;
-    r.upper = hi;
-    return r;
-  };
   int quick = 0;
   auto check = [&](const kin::DhRow& r, double w, double ref) {
     const kin::IkJointWrap j = servoarm::kin::detail::make_joint_wrap(r);
@@ -712,26 +709,26 @@ TEST(IkFastPath, QuickWrapExitKeepsWhatTheRuleGives) {
                             {100 * d, 350 * d},    {-M_PI, M_PI - 1e-9}, {-2 * M_PI, 2 * M_PI}, {0, kTwoPi - 1e-6}};
   const double refs[] = {0.0, 1.0, -1.0, 3.0, -3.0, M_PI, -M_PI, 6.0, -6.0, 7.5, -20.0, 1e6};
   for (const auto& l : lims) {
-    const kin::IkJointWrap j = servoarm::kin::detail::make_joint_wrap(row(l[0], l[1]));
+    const kin::IkJointWrap j = servoarm::kin::detail::make_joint_wrap(revolute_row(l[0], l[1]));
     // the boundary itself and just either side of it, then a grid
     const double b = j.in_abs;
     // (no nextafter from 0: a subnormal raises FE_UNDERFLOW, which the test plugin rejects)
     const double ws[] = {b, -b, b - 1e-15, -(b - 1e-15), b + 1e-15, 0.0,
                          M_PI, -M_PI + 1e-15, M_PI - 1e-9, -M_PI + 1e-9, M_PI - 1e-7, -M_PI + 1e-7};
     for (double w : ws)
-      for (double ref : refs) check(row(l[0], l[1]), w, ref);
+      for (double ref : refs) check(revolute_row(l[0], l[1]), w, ref);
     for (int k = -1000; k <= 1000; ++k)
-      for (double ref : refs) check(row(l[0], l[1]), M_PI * k / 1000.0, ref);
+      for (double ref : refs) check(revolute_row(l[0], l[1]), M_PI * k / 1000.0, ref);
   }
   // where it exists: +-180 degrees up to 1e-7 rad from +-pi (a float rounded down), not
   // for limits that miss zero, nor where every angle has two equivalents inside
-  CHECK(servoarm::kin::detail::make_joint_wrap(row(-M_PI, M_PI)).in_abs > M_PI - 1e-6);
-  CHECK(servoarm::kin::detail::make_joint_wrap(row(-160 * d, 160 * d)).in_abs > 160 * d - 1e-6);
-  DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(row(100 * d, 350 * d)).in_abs, 0);
-  DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(row(-2 * M_PI, 2 * M_PI)).in_abs, 0);
-  kin::DhRow inf = row(-std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
+  CHECK(servoarm::kin::detail::make_joint_wrap(revolute_row(-M_PI, M_PI)).in_abs > M_PI - 1e-6);
+  CHECK(servoarm::kin::detail::make_joint_wrap(revolute_row(-160 * d, 160 * d)).in_abs > 160 * d - 1e-6);
+  DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(revolute_row(100 * d, 350 * d)).in_abs, 0);
+  DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(revolute_row(-2 * M_PI, 2 * M_PI)).in_abs, 0);
+  kin::DhRow inf = revolute_row(-std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
   DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(inf).in_abs, 0);
-  kin::DhRow p = row(-1, 1);
+  kin::DhRow p = revolute_row(-1, 1);
   p.type = kin::JointType::prismatic;
   DOUBLES_EQUAL(0.0, servoarm::kin::detail::make_joint_wrap(p).in_abs, 0);
   // random limits, angles and references
@@ -740,7 +737,7 @@ TEST(IkFastPath, QuickWrapExitKeepsWhatTheRuleGives) {
   for (int i = 0; i < 200000; ++i) {
     const double lo = -2.9 * M_PI + 4.0 * M_PI * u(rng);
     const double hi = lo + 2.5 * kTwoPi * u(rng);
-    check(row(lo, hi), -M_PI + kTwoPi * u(rng), -10.0 + 20.0 * u(rng));
+    check(revolute_row(lo, hi), -M_PI + kTwoPi * u(rng), -10.0 + 20.0 * u(rng));
   }
   CHECK(quick > 100000);
 }
