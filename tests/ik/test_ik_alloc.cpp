@@ -10,10 +10,12 @@ using namespace servoarm::test;
 TEST_GROUP(IkZeroHeap){};
 
 TEST(IkZeroHeap, EverySolverAllocatesNothing) {
-  {
+  if (alloc_counter_counts()) {
     AllocScope probe;
     probe_malloc_free();
     LONGS_EQUAL(1, probe.end());
+  } else {
+    UT_PRINT("allocation counter off in this build (memcheck): the zero counts below prove nothing here");
   }
   for (const auto& bm : kin::builtin_models()) {
     const kin::Chain c = model(bm.name);

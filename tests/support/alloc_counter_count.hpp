@@ -27,6 +27,7 @@ std::size_t alloc_count_end() {
   return t_count;
 }
 std::size_t alloc_count_now() { return t_count; }
+bool alloc_counter_counts() { return true; }
 void probe_malloc_free() {
   void* volatile p = std::malloc(16);
   std::free(p);
