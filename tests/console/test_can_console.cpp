@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "sim_app.hpp"
+#include "sweep.hpp"  // kSlowBuild
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/console/transport.hpp"
 
@@ -49,9 +50,12 @@ struct CanRig {
     cfg.lock_memory = false;
     cfg.console_stdin = false;
     cfg.console_can = "sim";
-    // a shared 2-core machine can stall the drive thread: generous timeouts
-    cfg.feedback_timeout_ms = 1000;
-    cfg.heartbeat_timeout_ms = 1000;
+    // a shared 2-core machine can stall the drive thread: generous timeouts; under valgrind
+    // (memcheck build: one thread runs at a time, 20-50x slower) a loaded machine stalled
+    // the drive thread's heartbeat past 1 s in one run of two, hence 10x there
+    const int slow = servoarm::test::kSlowBuild ? 10 : 1;
+    cfg.feedback_timeout_ms = 1000 * slow;
+    cfg.heartbeat_timeout_ms = 1000 * slow;
     cfg.following_error_deg = 30;
     std::string e = app.build(cfg);
     CHECK_TEXT(e.empty(), e.c_str());
