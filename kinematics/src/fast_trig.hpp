@@ -107,15 +107,14 @@ inline constexpr double morebits = 6.123233995736765886130e-17;  // pi/2 - pio2 
   return std::copysign(r, y);
 }
 
-/// atan2_poly on two argument pairs at once: the same operations on a
+/// atan2_poly on two argument pairs at once (lane i: atan2(vy[i], vx[i])): the same operations on a
 /// two-lane vector (GCC/Clang vector extensions; one SSE2 register on
 /// x86-64, NEON on aarch64, pairs of scalars elsewhere), so the same result
 /// bit for bit, at about half the instructions. The scalar version does not
 /// vectorise by itself (-ftrapping-math keeps its comparisons as branches).
-[[gnu::always_inline]] inline void atan2_poly_x2(const double* y, const double* x, double* out) {
+[[gnu::always_inline]] inline v2d atan2_poly_v2(v2d vy, v2d vx) {
   using namespace atan2_coef;
   auto splat = [](double c) { return bc<v2d>(c); };
-  const v2d vy = {y[0], y[1]}, vx = {x[0], x[1]};
   const v2d zero = splat(0.0), one = splat(1.0);
   const v2m sign = (v2m)splat(-0.0);
   auto sel = [](v2m m, v2d a, v2d b) { return select(m, a, b); };
@@ -141,7 +140,11 @@ inline constexpr double morebits = 6.123233995736765886130e-17;  // pi/2 - pio2 
   const v2m xs = (v2m)vx & sign;
   const v2m neg = (v2d)((v2m)one | xs) < zero;
   r = (when(neg, splat(pi_hi)) + (v2d)((v2m)r ^ xs)) + when(neg, splat(2.0 * morebits));
-  r = (v2d)(((v2m)r & ~sign) | ((v2m)vy & sign));  // copysign(r, y)
+  return (v2d)(((v2m)r & ~sign) | ((v2m)vy & sign));  // copysign(r, y)
+}
+/// The same on two pairs held in arrays.
+[[gnu::always_inline]] inline void atan2_poly_x2(const double* y, const double* x, double* out) {
+  const v2d r = atan2_poly_v2(v2d{y[0], y[1]}, v2d{x[0], x[1]});
   out[0] = r[0];
   out[1] = r[1];
 }

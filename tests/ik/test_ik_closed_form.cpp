@@ -693,6 +693,8 @@ TEST(IkFastPath, QuickWrapExitKeepsWhatTheRuleGives) {
   int quick = 0;
   auto check = [&](const kin::DhRow& r, double w, double ref) {
     const kin::IkJointWrap j = servoarm::kin::detail::make_joint_wrap(r);
+    // below pi: the reduced paths test |v| < in_abs before wrapping v at all
+    if (!(j.in_abs < M_PI)) FAIL(("in_abs " + std::to_string(j.in_abs) + " not below pi").c_str());
     if (!(std::abs(w) < j.in_abs)) return;
     ++quick;
     const double rule = servoarm::kin::detail::wrap_into_limits(w, j.lo, j.hi, ref);

@@ -38,6 +38,8 @@ struct IkJointWrap {
   /// limits and its only 2*pi equivalent there, so every rule keeps it (the
   /// reduced paths' quick exit, issue 19): 1e-9 or more inside the exact
   /// bounds (a float rounded down: it fills the padding after kind); 0: none.
+  /// Always below pi (make_joint_wrap), so any v with |v| < in_abs is already
+  /// in (-pi, pi): its own wrap, kept as it is.
   float in_abs = 0;
   double lo = 0, hi = 0;    ///< limits widened by 1e-12 (wrapping)
   double lo9 = 0, hi9 = 0;  ///< limits widened by 1e-9 (within_limits)
@@ -209,7 +211,7 @@ inline IkJointWrap make_joint_wrap(const DhRow& r) {
   if (r.type != JointType::revolute) return j;
   j.kind = (j.hi - j.lo < kTwoPi && j.lo > -3.0 * M_PI && j.hi < 3.0 * M_PI) ? 1 : 2;
   // w >= lo, w <= hi, w + 2 pi > hi, w - 2 pi < lo (wrap_into_limits' first test), with margin
-  // (-in_abs, in_abs) within (a, b)
+  // (-in_abs, in_abs) within (a, b); b - a <= 2 pi - 2e-9, so half < pi
   const double a = std::max(j.lo, j.hi - kTwoPi) + 1e-9, b = std::min(j.hi, j.lo + kTwoPi) - 1e-9;
   const double half = std::min(-a, b);
   if (half > 0) {
@@ -282,6 +284,20 @@ struct Roots {
   bool free = false;  ///< the equation holds for every value
 };
 
+/// k = cos t of a revolute root, clamped into [-1, 1] when it lies within
+/// 1e-9 outside (rounding at a stretched / folded arm); false: no root.
+/// solve_basis's and reduced.cpp's roots_rev's one rule.
+inline bool clamp_cos(double& k) {
+  if (k > 1.0) {
+    if (k > 1.0 + 1e-9) return false;
+    k = 1.0;
+  } else if (k < -1.0) {
+    if (k < -1.0 - 1e-9) return false;
+    k = -1.0;
+  }
+  return true;
+}
+
 // a + b*x + c*y = 0 in the basis of a revolute (cos, sin) or prismatic (m, m^2) joint.
 // Revolute: h cos(m - phi) = -a with (b, c) = h (cos phi, sin phi), so the
 // roots are phi +- t, cos t = k = -a/h; their cosines and sines follow
@@ -296,13 +312,7 @@ inline Roots solve_basis(double a, double b, double c, bool prismatic, double to
       return r;
     }
     double k = -a / h;
-    if (k > 1.0) {
-      if (k > 1.0 + 1e-9) return r;
-      k = 1.0;
-    } else if (k < -1.0) {
-      if (k < -1.0 - 1e-9) return r;
-      k = -1.0;
-    }
+    if (!clamp_cos(k)) return r;
     const double cp = b / h, sp = c / h;
     const double st = std::sqrt((1.0 - k) * (1.0 + k));
     r.c[0] = cp * k - sp * st;  // phi + t

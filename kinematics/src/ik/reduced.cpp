@@ -3,6 +3,7 @@
 // position machinery of position.cpp with W = the tool point) and pitch_4
 // (TRL:R, VVL:R: 4.5, 4.6). Real-time, heap-free.
 #include <cmath>
+#include <limits>
 
 #include <Eigen/LU>
 
@@ -37,13 +38,7 @@ Eigen::Vector3d fit_basis(bool prismatic, G g) {
 inline Roots roots_rev(double a, const IkSolverData::Planar& pl, double* kst = nullptr) {
   Roots r;
   double k = -a / pl.h;
-  if (k > 1.0) {
-    if (k > 1.0 + 1e-9) return r;
-    k = 1.0;
-  } else if (k < -1.0) {
-    if (k < -1.0 - 1e-9) return r;
-    k = -1.0;
-  }
+  if (!clamp_cos(k)) return r;
   const double st = std::sqrt((1.0 - k) * (1.0 + k));
   if (kst) {  // the roots are phase +- atan2(st, k)
     kst[0] = k;
@@ -57,6 +52,9 @@ inline Roots roots_rev(double a, const IkSolverData::Planar& pl, double* kst = n
   return r;
 }
 
+// Both lanes of a mask set (lanes.hpp).
+inline bool both(v2m m) { return (m[0] & m[1]) != 0; }
+
 // One joint value v = dir * motion (|v| <= pi) into the limits: what
 // wrap_into_limits gives, branch-free for a joint whose limits span less than
 // a turn (wrap_narrow; as the spherical-wrist and UR paths do).
@@ -65,7 +63,10 @@ inline Roots roots_rev(double a, const IkSolverData::Planar& pl, double* kst = n
 // +-pi leave here).
 // `in` cleared when the result is outside the limits widened by 1e-9 (the
 // quick exit's w is inside them: in_abs <= hi - 1e-9, -in_abs >= lo + 1e-9).
+// in_abs < pi (0 for a prismatic joint): |v| < in_abs is its own wrap, so
+// that test comes before fast_wrap.
 inline double wrap_joint(const IkJointWrap& jw, double v, double ref, bool& in) {
+  if (std::abs(v) < jw.in_abs) return v;
   double q = v;
   if (jw.kind != 0) {
     const double w = fast_wrap(v);
@@ -524,6 +525,67 @@ inline void emit(const IkSolverData& m, const JointVector* q_ref, const double* 
   sol.rotation_error = er;
 }
 
+// emit's de-duplication and storage for an N-joint solution q already
+// wrapped (in: within the limits).
+template <int N>
+inline void store_q(const IkSolverData& m, const double* q, bool in, Branch br, std::uint8_t sing, double ep,
+                    double er, IkResult& res) {
+  for (int i = 0; i < res.count; ++i) {
+    const JointVector& x = res.solutions[static_cast<std::size_t>(i)].q;
+    bool same = true;
+    for (int j = 0; j < N && same; ++j) {
+      const double d = q[j] - x[j];
+      same = (prism(m, j) ? std::abs(d) : std::abs(fast_wrap(d))) <= 1e-7;
+    }
+    if (same) return;
+  }
+  if (res.count >= kMaxIkSolutions) return;
+  IkSolution& sol = res.solutions[static_cast<std::size_t>(res.count++)];
+  sol.q.resize(N);
+  double* d = sol.q.data();
+  for (int j = 0; j < N; ++j) d[j] = q[j];
+  sol.branch = br;
+  sol.within_limits = in;
+  sol.singular = sing;
+  sol.position_error = ep;
+  sol.rotation_error = er;
+}
+
+// emit for the two lanes of a pair of N-joint solutions (motion values
+// mot[j], lane i: solution i, emitted in that order): when every joint of
+// both is a quick exit of wrap_joint (|dir * mot| < in_abs: its own wrap,
+// within the limits, finite) or a prismatic joint with a finite value (not
+// wrapped: its limit flag only), the wrap is one compare per joint and lane
+// and the solutions go straight to store_q; else each through emit, as before.
+template <int N>
+inline void emit_pair(const IkSolverData& m, const JointVector* q_ref, const v2d* mot, const std::int8_t* elbow,
+                      v2m el, v2d ep, v2d er, IkResult& res) {
+  v2d q[N];
+  v2m quick = bc<v2d>(0.0) == bc<v2d>(0.0), in = quick;
+  const v2m sign = (v2m)bc<v2d>(-0.0);
+  for (int j = 0; j < N; ++j) {
+    const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
+    q[j] = m.dir[static_cast<std::size_t>(j)] * mot[j];
+    const v2d aq = (v2d)((v2m)q[j] & ~sign);
+    if (jw.kind == 0) {  // not wrapped (wrap_joint): the limit flag, and finite
+      quick &= aq <= bc<v2d>(std::numeric_limits<double>::max());
+      in &= (q[j] >= bc<v2d>(jw.lo9)) & (q[j] <= bc<v2d>(jw.hi9));
+    } else {
+      quick &= aq < bc<v2d>(static_cast<double>(jw.in_abs));
+    }
+  }
+  const bool fast = both(quick);
+  for (int i = 0; i < 2; ++i) {
+    Branch br;
+    br.elbow = elbow[i];
+    const std::uint8_t sing = el[i] ? kSingularElbow : 0;
+    double qi[N];
+    for (int j = 0; j < N; ++j) qi[j] = fast ? q[j][i] : mot[j][i];
+    if (fast) store_q<N>(m, qi, in[i] != 0, br, sing, ep[i], er[i], res);
+    else emit(m, q_ref, qi, br, sing, ep[i], er[i], res);
+  }
+}
+
 // One 2-D solution: the pairs of the first and middle joint and, with a
 // heading, the last joint's pair from the target heading (cp, sp) left.
 struct Sol2d {             // every field set by core_2d (no initialisers: not zeroed per call)
@@ -536,10 +598,78 @@ struct Sol2d {             // every field set by core_2d (no initialisers: not z
   std::int8_t elbow;
 };
 
+// Two solutions with a heading, one in each lane of a v2d (lanes.hpp):
+// core_2d's forward map and checks on both roots at once, the same
+// operations in the same order as its loop (each lane is what the loop
+// gives, bit for bit; x86-64's baseline has no FMA to contract them).
+struct Pair2d {
+  v2d ca, sa;  // first joint
+  v2d cb, sb;  // middle joint (prismatic: the value in cb)
+  v2d cc, sc;  // last joint
+  v2d ep, er;
+  v2d tx, ty;  // the verified tool point (F)
+  double tz;
+  std::int8_t elbow[2];
+};
+
+inline bool pair_2d(const IkSolverData& m, const Eigen::Vector3d& pt, double Px, double Py, double cp, double sp,
+                    const Roots& r, Pair2d& o) {
+  const IkSolverData::Planar& pl = m.pl;
+  const double sc2 = m.scale * m.scale;
+  o.elbow[0] = r.label[0];
+  o.elbow[1] = r.label[1];
+  o.cb = v2d{r.c[0], r.c[1]};
+  v2d fx, fy;
+  double fz;
+  if (pl.pri) {
+    o.sb = bc<v2d>(0.0);
+    fx = pl.sa.x() + o.cb * pl.w.x();
+    fy = pl.sa.y() + o.cb * pl.w.y();
+    fz = pl.sa.z();
+  } else {
+    o.sb = v2d{r.s[0], r.s[1]};
+    fx = pl.sa.x() + (o.cb * pl.w.x() - o.sb * pl.w.y());
+    fy = pl.sa.y() + (o.sb * pl.w.x() + o.cb * pl.w.y());
+    fz = pl.sa.z() + pl.w.z();
+  }
+  const v2d cr = fx * Py - fy * Px, dt = fx * Px + fy * Py;
+  const v2d rr = cr * cr + dt * dt;
+  if (!both((rr > bc<v2d>(1e-36 * sc2 * sc2)) & (fx * fx + fy * fy > bc<v2d>(1e-18 * sc2)))) return false;
+  const v2d ir = 1.0 / lsqrt(rr);
+  o.ca = dt * ir;
+  o.sa = cr * ir;
+  v2d tx = o.ca * fx - o.sa * fy, ty = o.sa * fx + o.ca * fy;
+  double tz = fz;
+  v2d hc = o.ca * pl.gc - o.sa * pl.gs, hs = o.sa * pl.gc + o.ca * pl.gs;
+  if (!pl.pri) {
+    const v2d x = hc * o.cb - hs * o.sb;
+    hs = hs * o.cb + hc * o.sb;
+    hc = x;
+  }
+  o.cc = cp * hc + sp * hs;
+  o.sc = sp * hc - cp * hs;
+  const v2d gc = hc * o.cc - hs * o.sc, gs = hs * o.cc + hc * o.sc;  // heading'
+  tx += gc * pl.tn.x() - gs * pl.tn.y();
+  ty += gs * pl.tn.x() + gc * pl.tn.y();
+  tz += pl.tn.z();
+  o.er = lsqrt((gc - cp) * (gc - cp) + (gs - sp) * (gs - sp));
+  const v2d ex = tx - pt.x(), ey = ty - pt.y();
+  const double ez = tz - pt.z();
+  o.ep = lsqrt(ex * ex + ey * ey + ez * ez);
+  if (!both((o.ep <= bc<v2d>(kVerifyPos)) & (o.er <= bc<v2d>(kVerifyRot)))) return false;
+  o.tx = tx;
+  o.ty = ty;
+  o.tz = tz;
+  return true;
+}
+
 // The core: target point pt (F; the tool point) and heading (cp, sp) (with
-// heading) -> at most two verified solutions; false: hand over.
+// heading) -> at most two verified solutions; false: hand over. With
+// `pair`, two solutions with a heading go there (pair_2d), not to out, and
+// ns = -2.
 inline bool core_2d(const IkSolverData& m, const Eigen::Vector3d& pt, bool heading, bool merge, double cp, double sp,
-                    const double* root_rhs, Sol2d* out, int& ns, double* kst = nullptr, bool* two_roots = nullptr) {
+                    const double* root_rhs, Sol2d* out, int& ns, double* kst = nullptr, bool* two_roots = nullptr,
+                    Pair2d* pair = nullptr) {
   const IkSolverData::Planar& pl = m.pl;
   // the point that the first and middle joints place: joint 3's origin, or the tool point
   const double Px = heading ? pt.x() - (cp * pl.tn.x() - sp * pl.tn.y()) : pt.x();
@@ -562,6 +692,10 @@ inline bool core_2d(const IkSolverData& m, const Eigen::Vector3d& pt, bool headi
   }
   if (!(P2 > 1e-18 * sc2)) return false;  // point on the first axis: that joint is free
   ns = r.n;
+  if (pair && heading && r.n == 2) {
+    ns = -2;  // the pair's two (the callers read them from pair, not out)
+    return pair_2d(m, pt, Px, Py, cp, sp, r, *pair);
+  }
   for (int i = 0; i < r.n; ++i) {
     Sol2d& o = out[i];
     o.elbow = r.label[i];
@@ -638,7 +772,29 @@ inline bool elbow_2(const IkSolverData::Planar& pl, const Sol2d& o) {
   return prod > 0 && det / prod < kNearSingular * kNearSingular;
 }
 
+// elbow_2 on a Pair2d (the mask of the lanes flagged).
+inline v2m elbow_2_pair(const IkSolverData::Planar& pl, const Pair2d& o) {
+  const v2d ax = -o.ty, ay = o.tx;
+  v2d bx, by;
+  if (pl.pri) {
+    bx = o.ca * pl.w.x() - o.sa * pl.w.y();
+    by = o.sa * pl.w.x() + o.ca * pl.w.y();
+  } else {
+    const v2d ox = o.ca * pl.sa.x() - o.sa * pl.sa.y(), oy = o.sa * pl.sa.x() + o.ca * pl.sa.y();
+    bx = -(o.ty - oy);
+    by = o.tx - ox;
+  }
+  const v2d g00 = ax * ax + ay * ay, g11 = bx * bx + by * by, g01 = ax * bx + ay * by;
+  const v2d prod = g00 * g11, det = g00 * g11 - g01 * g01;
+  const v2m pos = prod > bc<v2d>(0.0);
+  return pos & (det / select(pos, prod, bc<v2d>(1.0)) < bc<v2d>(kNearSingular * kNearSingular));
+}
+
 // planar_2r and planar_3 in 2-D (F = the frame after C0).
+// GCC 12 takes s[0] for unset after core_2d's pair exit (ns = -2, s unread
+// then): a false positive of the flattened solve_reduced.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
   const IkSolverData& m = solver_data(model);
   const bool heading = model.method == IkMethod::planar_3;
@@ -659,32 +815,28 @@ bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector
   int ns = 0;
   double kst[2] = {1, 0};
   bool two = false;
-  if (!core_2d(m, pt, heading, !m.pl.pri, cp, sp, nullptr, s, ns, kst, &two)) return false;
-  if (heading && ns == 2) {
-    // planar_3, two solutions: four angles in two atan2_poly_x2 (issue 19),
-    // not six in three -- the first joint's two, then (revolute middle
-    // joint, RRR) t (its roots are phase +- t, roots_rev) and the target
-    // heading psi, the last joint psi - gamma - a - b (the heading left: its
-    // pair (cc, sc) is what the forward map verified, the same angle to
-    // rounding); prismatic middle joint (RLR): the last joint's two.
-    const bool rev2 = !m.pl.pri && two;
-    double y[4] = {s[0].sa, s[1].sa, rev2 ? kst[1] : s[0].sc, rev2 ? sp : s[1].sc};
-    double x[4] = {s[0].ca, s[1].ca, rev2 ? kst[0] : s[0].cc, rev2 ? cp : s[1].cc};
-    double ang[4];
-    detail::atan2_poly_x2(y, x, ang);
-    detail::atan2_poly_x2(y + 2, x + 2, ang + 2);
-    double b[2] = {s[0].cb, s[1].cb};
-    if (rev2) {
-      b[0] = m.pl.phase + ang[2];
-      b[1] = m.pl.phase - ang[2];
+  Pair2d pr;
+  if (!core_2d(m, pt, heading, !m.pl.pri, cp, sp, nullptr, s, ns, kst, &two, &pr)) return false;
+  if (ns == -2) {
+    // planar_3, two solutions (core_2d gave them in the lanes of pr): four
+    // angles in two atan2_poly_v2 (issue 19), not six in three -- the first
+    // joint's two, then (revolute middle joint, RRR) t (its roots are
+    // phase +- t, roots_rev) and the target heading psi, the last joint
+    // psi - gamma - a - b (the heading left: its pair (cc, sc) is what the
+    // forward map verified, the same angle to rounding); prismatic middle
+    // joint (RLR): the last joint's two.
+    const v2d a = detail::atan2_poly_v2(pr.sa, pr.ca);
+    v2d b = pr.cb, c;
+    if (!m.pl.pri) {  // two roots: phase +- t
+      const v2d tp = detail::atan2_poly_v2(v2d{kst[1], sp}, v2d{kst[0], cp});
+      b = v2d{m.pl.phase + tp[0], m.pl.phase - tp[0]};
+      const double h0 = tp[1] - m.pl.gamma;
+      c = h0 - a - b;
+    } else {
+      c = detail::atan2_poly_v2(pr.sc, pr.cc);
     }
-    const double h0 = ang[3] - m.pl.gamma;
-    for (int i = 0; i < 2; ++i) {
-      const double mot[3] = {ang[i], b[i], rev2 ? h0 - ang[i] - b[i] : ang[2 + i]};
-      Branch br;
-      br.elbow = s[i].elbow;
-      emit(m, q_ref, mot, br, elbow_2(m.pl, s[i]) ? kSingularElbow : 0, s[i].ep, s[i].er, res);
-    }
+    const v2d mot[3] = {a, b, c};
+    emit_pair<3>(m, q_ref, mot, pr.elbow, elbow_2_pair(m.pl, pr), pr.ep, pr.er, res);
     return true;
   }
   // the angles two at a time: (a, b) per solution, then the two c (planar_3)
@@ -709,6 +861,8 @@ bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector
   }
   return true;
 }
+
+#pragma GCC diagnostic pop
 
 // pitch_4 in 2-D: joint 1 and the pitch as solve_pitch_4_fast takes them,
 // then the core in joint 2's frame (F = C1 after the J1 motion); the elbow
@@ -745,7 +899,40 @@ bool solve_pitch_4_2d(const IkModel& model, const Pose& target, const JointVecto
   const double rhs = P.squaredNorm();
   Sol2d s[2];
   int ns = 0;
-  if (!core_2d(m, pt, true, false, cp, sp, &rhs, s, ns)) return false;
+  Pair2d pr;
+  if (!core_2d(m, pt, true, false, cp, sp, &rhs, s, ns, nullptr, nullptr, &pr)) return false;
+  if (ns == -2) {  // the two solutions in the lanes of pr: the angles and the elbow flags two at a time
+    const v2d a2 = detail::atan2_poly_v2(pr.sa, pr.ca), a4 = detail::atan2_poly_v2(pr.sc, pr.cc);
+    const v2d a3 = pl.pri ? pr.cb : detail::atan2_poly_v2(pr.sb, pr.cb);
+    const double a1 = detail::atan2_poly(s1, c1);
+    // elbow: columns of joints 1, 2, 3 at the tool point (F), as below
+    const v2d dx = pr.tx - pl.o1.x(), dy = pr.ty - pl.o1.y();
+    const double dz = pr.tz - pl.o1.z();
+    const v2d k1x = pl.z1.y() * dz - pl.z1.z() * dy, k1y = pl.z1.z() * dx - pl.z1.x() * dz,
+              k1z = pl.z1.x() * dy - pl.z1.y() * dx;
+    const v2d k2x = -pr.ty, k2y = pr.tx;  // k2z = 0
+    v2d k3x, k3y;
+    double k3z;
+    if (pl.pri) {
+      k3x = pr.ca * pl.w.x() - pr.sa * pl.w.y();
+      k3y = pr.sa * pl.w.x() + pr.ca * pl.w.y();
+      k3z = pl.w.z();
+    } else {
+      const v2d ox = pr.ca * pl.sa.x() - pr.sa * pl.sa.y(), oy = pr.sa * pl.sa.x() + pr.ca * pl.sa.y();
+      k3x = -(pr.ty - oy);
+      k3y = pr.tx - ox;
+      k3z = 0.0;
+    }
+    // k2 x k3 with k2z = 0 (the products with it are zeros: the same sums)
+    const v2d cx = k2y * k3z, cy = -(k2x * k3z), cz = k2x * k3y - k2y * k3x;
+    const v2d det = k1x * cx + k1y * cy + k1z * cz;
+    const v2d prod = (k1x * k1x + k1y * k1y + k1z * k1z) * (k2x * k2x + k2y * k2y) * (k3x * k3x + k3y * k3y + k3z * k3z);
+    const v2m pos = prod > bc<v2d>(0.0);
+    const v2m el = pos & (det * det / select(pos, prod, bc<v2d>(1.0)) < bc<v2d>(kNearSingular * kNearSingular));
+    const v2d mot[4] = {bc<v2d>(a1), a2, a3, a4};
+    emit_pair<4>(m, q_ref, mot, pr.elbow, el, pr.ep, pr.er, res);
+    return true;
+  }
   double y[6] = {0, 0, 0, 0, 0, 0}, x[6] = {1, 1, 1, 1, 1, 1}, ang[6];
   y[0] = s1;
   x[0] = c1;
