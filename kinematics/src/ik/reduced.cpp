@@ -792,9 +792,12 @@ inline v2m elbow_2_pair(const IkSolverData::Planar& pl, const Pair2d& o) {
 
 // planar_2r and planar_3 in 2-D (F = the frame after C0).
 // GCC 12 takes s[0] for unset after core_2d's pair exit (ns = -2, s unread
-// then): a false positive of the flattened solve_reduced.
+// then): a false positive of the flattened solve_reduced. (GCC only: clang has no such
+// warning group and -Werror refuses an unknown one.)
 #pragma GCC diagnostic push
+#if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector* q_ref, IkResult& res) {
   const IkSolverData& m = solver_data(model);
   const bool heading = model.method == IkMethod::planar_3;
