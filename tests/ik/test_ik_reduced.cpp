@@ -283,6 +283,98 @@ TEST(IkReduced, CheapPathGivesWhatTheChainPathGives) {
   }
 }
 
+TEST(IkReduced, SpatialLanesGiveWhatTheChainPathGives) {
+  // Issue 19: spatial_3's lanes (case A of the position subproblem: the four configurations
+  // two at a time, detail::solve_spatial_3_lanes) on the seed's TRR and on variants built
+  // here: offsets along the parallel axes, twist -90 with joint offsets, a reversed joint
+  // with narrow limits (values outside the limits take emit's wrap), and a shoulder offset
+  // a1 (not case A: the lanes stay off, the other paths answer). Each: what ik_solve_all
+  // gives equals the chain path's solutions (1e-9), order, branches, limit and singular
+  // flags; where the lanes answered, ik_solve_all gave their solutions bit for bit; and
+  // they answered all but a few random poses (the rest: handed over, the chain path's
+  // answer all the same).
+  struct Variant {
+    const char* what;
+    double d2, d3, a1, alpha1, th2, th3, dir3, lim;
+    bool lanes;
+  };
+  const Variant kV[] = {
+      {"seed TRR rows", 0, 0, 0, 90, 0, 0, 1, 180, true},
+      {"d2 = 50 mm", 0.05, 0, 0, 90, 0, 0, 1, 180, true},
+      {"d3 = -30 mm", 0, -0.03, 0, 90, 0, 0, 1, 180, true},
+      {"alpha1 = -90, theta2 = 30, theta3 = -45", 0, 0, 0, -90, 30, -45, 1, 180, true},
+      {"joint 3 reversed, limits +-100, d2 = 20 mm", 0.02, 0, 0, 90, 0, 0, -1, 100, true},
+      {"a1 = 40 mm (not case A)", 0, 0, 0.04, 90, 0, 0, 1, 180, false},
+  };
+  const int n = std::max(2000, samples() / 20);
+  for (const Variant& v : kV) {
+    kin::Chain c;
+    auto row = [&](double theta, double d, double a, double alpha, double dir) {
+      kin::DhRow r;
+      r.theta = deg(theta);
+      r.d = d;
+      r.a = a;
+      r.alpha = deg(alpha);
+      r.direction = dir;
+      r.lower = deg(-v.lim);
+      r.upper = deg(v.lim);
+      CHECK_TEXT(kin::add_row(c, r) == kin::Status::ok, v.what);
+    };
+    row(0, 0.3, v.a1, v.alpha1, 1);
+    row(v.th2, v.d2, 0.25, 0, 1);
+    row(v.th3, v.d3, 0.2, 0, v.dir3);
+    kin::IkModel m;
+    CHECK_TEXT(kin::ik_prepare(c, m) == kin::Status::ok, v.what);
+    STRCMP_EQUAL_TEXT("spatial_3", kin::to_string(m.method), v.what);
+    CHECK_TEXT(kin::detail::solver_data(m).s3.on == v.lanes, v.what);
+    std::mt19937_64 rng(1903);
+    int answered = 0, outside = 0;
+    for (int s = 0; s < n; ++s) {
+      const kin::JointVector q = random_q(m.chain, rng);
+      const kin::Pose T = fk(m.chain, q);
+      const kin::JointVector ref = random_q(m.chain, rng);
+      for (const kin::JointVector* r : {static_cast<const kin::JointVector*>(nullptr), &ref}) {
+        kin::IkResult fast, slow, lanes;
+        kin::ik_solve_all(m, T, r, fast);
+        solve_slow(m, T, r, slow);
+        lanes.count = 0;
+        const bool yes = kin::detail::solve_spatial_3_lanes(m, T, r, lanes);
+        const std::string what = std::string(v.what) + " " + describe(q) + (r ? " ref " + describe(*r) : "");
+        STRCMP_EQUAL_TEXT(kin::to_string(slow.status), kin::to_string(fast.status), what.c_str());
+        LONGS_EQUAL_TEXT(slow.singular_kinds, fast.singular_kinds, what.c_str());
+        LONGS_EQUAL_TEXT(slow.count, fast.count, what.c_str());
+        if (yes) {
+          ++answered;
+          LONGS_EQUAL_TEXT(4, lanes.count, what.c_str());
+        }
+        for (int i = 0; i < fast.count; ++i) {
+          const auto& a = fast.solutions[static_cast<std::size_t>(i)];
+          const auto& b = slow.solutions[static_cast<std::size_t>(i)];
+          const double tol = a.singular ? 1e-6 : 1e-9;
+          CHECK_TEXT(gap(m.chain, a.q, b.q) < tol, (what + " solution " + describe(a.q) + " vs " + describe(b.q)).c_str());
+          LONGS_EQUAL_TEXT(b.branch.shoulder, a.branch.shoulder, what.c_str());
+          LONGS_EQUAL_TEXT(b.branch.elbow, a.branch.elbow, what.c_str());
+          CHECK_TEXT(a.within_limits == b.within_limits, what.c_str());
+          LONGS_EQUAL_TEXT(b.singular, a.singular, what.c_str());
+          if (!a.within_limits) ++outside;
+          const kin::Pose X = fk(m.chain, a.q);
+          CHECK_TEXT((X.translation() - T.translation()).norm() <= 1e-9, what.c_str());
+          if (yes) {
+            const auto& l = lanes.solutions[static_cast<std::size_t>(i)];
+            CHECK_TEXT(gap(m.chain, a.q, l.q) == 0.0 && a.branch == l.branch && a.singular == l.singular &&
+                           a.within_limits == l.within_limits && a.position_error == l.position_error,
+                       what.c_str());
+          }
+        }
+      }
+    }
+    std::printf("\n  %-42s %d poses x 2: the lanes answered %d, %d solutions outside the limits", v.what, n,
+                answered, outside);
+    if (v.lanes) CHECK_TEXT(answered >= 2 * n * 99 / 100, v.what);
+    else LONGS_EQUAL_TEXT(0, answered, v.what);
+  }
+}
+
 TEST(IkReduced, TwoDimensionalFormsAnswerRandomPoses) {
   // Issue 19: the 2-D closed forms (detail::solve_reduced_2d: the forward map in the
   // reduced coordinates as the check) answer every random pose themselves, not by

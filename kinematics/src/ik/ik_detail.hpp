@@ -128,6 +128,19 @@ struct IkSolverData {
     double gamma = 0, phase = 0;                     ///< gamma; the phase atan2(hs, hc) (planar_3's angles)
     Eigen::Vector3d z1 = Eigen::Vector3d::UnitZ(), o1 = Eigen::Vector3d::Zero();  ///< pitch_4: axis 1 in F
   } pl;
+  /// spatial_3 with joints 1-3 revolute where solve_position takes its case A
+  /// (one equation free of m2; TRR): that case's constants, so that
+  /// reduced.cpp's solve_spatial_3_lanes solves the four configurations two
+  /// at a time (issue 19). The equation free of m2 is
+  /// a3 - rhs + h3 cos(m3 - phase3) = 0 with rhs = |p0 - lambda ez|^2 (E1) or
+  /// p0.z (E2); the other, (Mo b3) . (1, c2, s2) = 0 with Mo(0, 0) less its
+  /// rhs; tol2: solve_basis's tolerance for that one.
+  struct Spatial3 {
+    bool on = false;
+    bool q3_from_e1 = true;  ///< the equation free of m2 is E1 (else E2)
+    double a3 = 0, h3 = 0, hc3 = 1, hs3 = 0, tol2 = 0;
+    Eigen::Matrix3d Mo = Eigen::Matrix3d::Zero();
+  } s3;
 };
 static_assert(sizeof(IkSolverData) <= IkSolverStorage::kBytes, "raise IkSolverStorage::kBytes (ik.hpp)");
 static_assert(IkSolverStorage::kBytes - sizeof(IkSolverData) < 256, "lower IkSolverStorage::kBytes (ik.hpp)");
@@ -469,6 +482,9 @@ void solve_reduced(const IkModel& m, const Pose& target, const JointVector* q_re
 /// target over (not set up for this arm, degenerate, a solution missing
 /// 1e-9; res.count may have grown then). For the tests.
 bool solve_reduced_2d(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
+/// spatial_3's lanes alone (solve_spatial_3_lanes: case A, four configurations two at a
+/// time; tests): false when not set up (IkSolverData::Spatial3) or handed over.
+bool solve_spatial_3_lanes(const IkModel& m, const Pose& target, const JointVector* q_ref, IkResult& res);
 /// The 3-D cheap paths alone (every joint's (cos, sin) pair, each candidate
 /// verified through the decomposition's 3x3 products): the 2-D forms'
 /// fallback, and what solve_reduced was before them (benchmark).

@@ -452,6 +452,41 @@ void setup_planar(IkSolverData& m, int first, bool heading) {
   m.pl = pl;
 }
 
+// IkSolverData::Spatial3: solve_position's case A (the same test on the
+// same matrices, so the lanes take the case solve_position takes), joints
+// 1-3 revolute.
+void setup_spatial3(IkSolverData& m) {
+  IkSolverData::Spatial3 s;
+  if (prism(m, 0) || prism(m, 1) || prism(m, 2)) return;
+  auto dep2 = [](const Eigen::Matrix3d& M) { return M.bottomRows<2>().cwiseAbs().maxCoeff() > 0; };
+  auto dep3 = [](const Eigen::Matrix3d& M) { return M.rightCols<2>().cwiseAbs().maxCoeff() > 0; };
+  const double tol1 = 1e-12 * m.scale * m.scale, tol2 = 1e-12 * m.scale;
+  const Eigen::Matrix3d* Mq3 = nullptr;
+  double tq3 = 0;
+  if (!dep2(m.M1) && dep3(m.M1)) {
+    Mq3 = &m.M1;
+    s.Mo = m.M2;
+    s.q3_from_e1 = true;
+    tq3 = tol1;
+    s.tol2 = tol2;
+  } else if (!dep2(m.M2) && dep3(m.M2)) {
+    Mq3 = &m.M2;
+    s.Mo = m.M1;
+    s.q3_from_e1 = false;
+    tq3 = tol2;
+    s.tol2 = tol1;
+  } else {
+    return;
+  }
+  s.a3 = (*Mq3)(0, 0);
+  s.h3 = std::sqrt((*Mq3)(0, 1) * (*Mq3)(0, 1) + (*Mq3)(0, 2) * (*Mq3)(0, 2));
+  if (!(s.h3 > tq3)) return;  // free of m3 too: solve_position's answer (free or none)
+  s.hc3 = (*Mq3)(0, 1) / s.h3;
+  s.hs3 = (*Mq3)(0, 2) / s.h3;
+  s.on = std::isfinite(s.a3 + s.hc3 + s.hs3) && detail::all_finite(s.Mo);
+  m.s3 = s;
+}
+
 bool detect_reduced(IkModel& model) {
   IkSolverData& m = solver_data(model);
   if (m.n < 2 || m.n > 4 || prism(m, 0)) return false;
@@ -494,6 +529,7 @@ bool detect_reduced(IkModel& model) {
     m.w3 = C(m, 3).translation();  // tool point after the J3 motion
     setup_position(m);
     m.red_fast = true;  // reduced.cpp's cheap path (solve_position's pairs)
+    setup_spatial3(m);
     // Position only: needs one equation free of q2 or of q3, or the resultant.
     return true;
   }

@@ -1034,6 +1034,132 @@ bool solve_spatial_3_2d(const IkModel& model, const Pose& target, const double* 
   return true;
 }
 
+// spatial_3 (TRR) two configurations at a time (issue 19: four solutions
+// in <= 100 ns): solve_position's case A (IkSolverData::Spatial3) with the
+// two roots of m3 (the elbow) in the lanes of a v2d: for each, the two roots
+// of m2 (m2's equation with that m3), the point f = C1 Rz(m2) C2 Rz(m3) w3,
+// m1 by one turn of f onto the target (the shoulder branch from f, as
+// solve_spatial_3_fast), the tool point Rz(m1) f checked against it (1e-9).
+// The solutions in solve_position's order (m3 roots outer, m2 roots inner).
+// Hands over (false, nothing stored) unless all four exist and verify and
+// every root pair is at least 1e-6 apart in its sine: the forms before it
+// (solve_spatial_3_2d, the 3-D path) answer those targets. Roots that far
+// apart are four distinct configurations, so no de-duplication; the quick
+// wrap exit of every joint value, or emit for each.
+bool solve_spatial_3_lanes(const IkSolverData& m, const Eigen::Vector3d& p0, const JointVector* q_ref,
+                           IkResult& res) {
+  const IkSolverData::Spatial3& sp = m.s3;
+  const double e1 = (p0 - m.lambda * Eigen::Vector3d::UnitZ()).squaredNorm(), e2 = p0.z();
+  // m3: a3 - rhs + h3 cos(m3 - phase3) = 0 (solve_basis's roots, cp = hc3, sp = hs3)
+  double k = -(sp.a3 - (sp.q3_from_e1 ? e1 : e2)) / sp.h3;
+  if (!clamp_cos(k)) return false;
+  const double st = std::sqrt((1.0 - k) * (1.0 + k));
+  if (!(st > 1e-6)) return false;
+  const v2d pm = v2d{1.0, -1.0};
+  const v2d c3 = bc<v2d>(sp.hc3 * k) - pm * (sp.hs3 * st), s3 = bc<v2d>(sp.hs3 * k) + pm * (sp.hc3 * st);
+  // m2's equation per m3 root: u = Mo b3 (Mo(0, 0) less its rhs)
+  const Eigen::Matrix3d& Mo = sp.Mo;
+  const double mo00 = Mo(0, 0) - (sp.q3_from_e1 ? e2 : e1);
+  const v2d u0 = mo00 + Mo(0, 1) * c3 + Mo(0, 2) * s3;
+  const v2d u1 = Mo(1, 0) + Mo(1, 1) * c3 + Mo(1, 2) * s3;
+  const v2d u2 = Mo(2, 0) + Mo(2, 1) * c3 + Mo(2, 2) * s3;
+  const v2d h2 = lsqrt(u1 * u1 + u2 * u2);
+  if (!both(h2 > bc<v2d>(sp.tol2))) return false;
+  const v2d ih = 1.0 / h2;
+  v2d k2 = -u0 * ih;
+  const v2d ak = (v2d)((v2m)k2 & ~(v2m)bc<v2d>(-0.0));
+  if (!both(ak <= bc<v2d>(1.0 + 1e-9))) return false;
+  k2 = select(k2 > bc<v2d>(1.0), bc<v2d>(1.0), select(k2 < bc<v2d>(-1.0), bc<v2d>(-1.0), k2));
+  const v2d cp = u1 * ih, spp = u2 * ih;
+  const v2d st2 = lsqrt((1.0 - k2) * (1.0 + k2));
+  if (!both(st2 > bc<v2d>(1e-6))) return false;
+  // the two m2 roots of each lane: A = phase + t, B = phase - t (solve_basis's order)
+  const v2d c2[2] = {cp * k2 - spp * st2, cp * k2 + spp * st2};
+  const v2d s2[2] = {spp * k2 + cp * st2, spp * k2 - cp * st2};
+  // v = C2 Rz(m3) w3 per lane
+  const Eigen::Matrix3d& R2 = C(m, 2).linear();
+  const Eigen::Vector3d& t2 = C(m, 2).translation();
+  const v2d wx = c3 * m.w3.x() - s3 * m.w3.y(), wy = s3 * m.w3.x() + c3 * m.w3.y();
+  const double wz = m.w3.z();
+  const v2d vx = R2(0, 0) * wx + R2(0, 1) * wy + (R2(0, 2) * wz + t2.x());
+  const v2d vy = R2(1, 0) * wx + R2(1, 1) * wy + (R2(1, 2) * wz + t2.y());
+  const v2d vz = R2(2, 0) * wx + R2(2, 1) * wy + (R2(2, 2) * wz + t2.z());
+  const Eigen::Matrix3d& R1 = C(m, 1).linear();
+  const Eigen::Vector3d& t1 = C(m, 1).translation();
+  const double sc2 = m.scale * m.scale;
+  v2d c1[2], s1[2], ep[2];
+  v2m shp[2], shs[2];
+  for (int g = 0; g < 2; ++g) {
+    const v2d gx = c2[g] * vx - s2[g] * vy, gy = s2[g] * vx + c2[g] * vy;
+    const v2d fx = R1(0, 0) * gx + R1(0, 1) * gy + R1(0, 2) * vz + t1.x();
+    const v2d fy = R1(1, 0) * gx + R1(1, 1) * gy + R1(1, 2) * vz + t1.y();
+    const v2d fz = R1(2, 0) * gx + R1(2, 1) * gy + R1(2, 2) * vz + t1.z();
+    const v2d cr = fx * p0.y() - fy * p0.x(), dt = fx * p0.x() + fy * p0.y();
+    const v2d rr = cr * cr + dt * dt;
+    if (!both((fx * fx + fy * fy >= bc<v2d>(1e-18 * sc2)) & (rr > bc<v2d>(1e-36 * sc2 * sc2)))) return false;
+    const v2d ir = 1.0 / lsqrt(rr);
+    c1[g] = dt * ir;
+    s1[g] = cr * ir;
+    const v2d ex = c1[g] * fx - s1[g] * fy - p0.x(), ey = s1[g] * fx + c1[g] * fy - p0.y(), ez = fz - p0.z();
+    ep[g] = lsqrt(ex * ex + ey * ey + ez * ez);
+    if (!both(ep[g] <= bc<v2d>(kVerifyPos))) return false;
+    const v2d sh = fx * m.shoulder_dir.x() + fy * m.shoulder_dir.y() + fz * m.shoulder_dir.z();
+    shp[g] = sh >= bc<v2d>(0.0);
+    shs[g] = (v2d)((v2m)sh & ~(v2m)bc<v2d>(-0.0)) < bc<v2d>(kNearSingular * m.scale);
+  }
+  // the angles, two at a time: m1 and m2 of each m2 root (lanes: the m3 roots), m3
+  const v2d a1[2] = {detail::atan2_poly_v2(s1[0], c1[0]), detail::atan2_poly_v2(s1[1], c1[1])};
+  const v2d a2[2] = {detail::atan2_poly_v2(s2[0], c2[0]), detail::atan2_poly_v2(s2[1], c2[1])};
+  const v2d a3 = detail::atan2_poly_v2(s3, c3);
+  // the quick wrap exit (wrap_joint) of all twelve values
+  const IkJointWrap* jw = m.wrap.data();
+  v2d q[3][2];
+  v2m quick = bc<v2d>(0.0) == bc<v2d>(0.0);
+  const v2m sign = (v2m)bc<v2d>(-0.0);
+  const v2d lim[3] = {bc<v2d>(static_cast<double>(jw[0].in_abs)), bc<v2d>(static_cast<double>(jw[1].in_abs)),
+                      bc<v2d>(static_cast<double>(jw[2].in_abs))};
+  q[2][0] = q[2][1] = m.dir[2] * a3;
+  for (int g = 0; g < 2; ++g) {
+    q[0][g] = m.dir[0] * a1[g];
+    q[1][g] = m.dir[1] * a2[g];
+  }
+  for (int j = 0; j < 3; ++j) quick &= ((v2d)((v2m)q[j][0] & ~sign) < lim[j]) & ((v2d)((v2m)q[j][1] & ~sign) < lim[j]);
+  if (!both(quick) || res.count > kMaxIkSolutions - 4) {
+    for (int e = 0; e < 2; ++e)  // m3 root (lane e), then m2 root g
+      for (int g = 0; g < 2; ++g) {
+        Branch br;
+        br.shoulder = shp[g][e] ? 1 : -1;
+        br.elbow = static_cast<std::int8_t>(e == 0 ? 1 : -1);
+        const double mot[3] = {a1[g][e], a2[g][e], a3[e]};
+        emit(m, q_ref, mot, br, shs[g][e] ? kSingularShoulder : 0, ep[g][e], 0.0, res);
+      }
+    return true;
+  }
+  // every value its own wrap, within the limits, finite: stored as they are (unrolled:
+  // the lanes read at constant indices)
+  IkSolution* out = &res.solutions[static_cast<std::size_t>(res.count)];
+  res.count += 4;
+  auto put = [&](IkSolution& sol, int e, int g) {
+    sol.q.resize(3);
+    double* d = sol.q.data();
+    d[0] = q[0][g][e];
+    d[1] = q[1][g][e];
+    d[2] = q[2][g][e];
+    sol.branch.shoulder = shp[g][e] ? 1 : -1;
+    sol.branch.elbow = static_cast<std::int8_t>(e == 0 ? 1 : -1);
+    sol.branch.wrist = 0;
+    sol.within_limits = true;
+    sol.singular = shs[g][e] ? kSingularShoulder : 0;
+    sol.position_error = ep[g][e];
+    sol.rotation_error = 0;
+  };
+  put(out[0], 0, 0);
+  put(out[1], 0, 1);
+  put(out[2], 1, 0);
+  put(out[3], 1, 1);
+  return true;
+}
+
 // Which 2-D form answers (false: not set up, or handed over).
 inline bool reduced_2d(const IkModel& model, const Pose& target, const double* mref, const JointVector* q_ref,
                        IkResult& res) {
@@ -1042,7 +1168,12 @@ inline bool reduced_2d(const IkModel& model, const Pose& target, const double* m
     case IkMethod::planar_2r:
     case IkMethod::planar_3: return m.pl.on && solve_planar_2d(model, target, q_ref, res);
     case IkMethod::pitch_4: return m.pl.on && solve_pitch_4_2d(model, target, q_ref, res);
-    case IkMethod::spatial_3: return solve_spatial_3_2d(model, target, mref, q_ref, res);
+    case IkMethod::spatial_3:
+      if (m.s3.on) {
+        const Eigen::Vector3d p0 = C(m, 0).linear().transpose() * (target.translation() - C(m, 0).translation());
+        if (solve_spatial_3_lanes(m, p0, q_ref, res)) return true;
+      }
+      return solve_spatial_3_2d(model, target, mref, q_ref, res);
     default: return false;
   }
 }
@@ -1056,6 +1187,14 @@ inline bool reduced_2d(const IkModel& model, const Pose& target, const double* m
   if (q_ref)
     for (int j = 0; j < m.n; ++j) mref[j] = m.dir[static_cast<std::size_t>(j)] * (*q_ref)[j];
   return m.red_fast && reduced_2d(model, target, mref, q_ref, res);
+}
+
+[[gnu::flatten]] bool solve_spatial_3_lanes(const IkModel& model, const Pose& target, const JointVector* q_ref,
+                                            IkResult& res) {
+  const IkSolverData& m = solver_data(model);
+  if (model.method != IkMethod::spatial_3 || !m.red_fast || !m.s3.on) return false;
+  const Eigen::Vector3d p0 = C(m, 0).linear().transpose() * (target.translation() - C(m, 0).translation());
+  return solve_spatial_3_lanes(m, p0, q_ref, res);
 }
 
 // Flattened (the Eigen products and decompositions of the elbow test and
