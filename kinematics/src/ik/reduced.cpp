@@ -557,7 +557,11 @@ inline void store_q(const IkSolverData& m, const double* q, bool in, Branch br, 
 // within the limits, finite) or a prismatic joint with a finite value (not
 // wrapped: its limit flag only), the wrap is one compare per joint and lane
 // and the solutions go straight to store_q; else each through emit, as before.
-template <int N>
+// WrapLast: the last joint (a revolute one) first takes two steps of
+// fast_wrap in the lanes (the same subtractions: its value bit for bit where
+// two steps suffice; planar_3's psi - gamma - a - b lies outside (-pi, pi]
+// for most targets), so that it can pass the quick exit.
+template <int N, bool WrapLast = false>
 inline void emit_pair(const IkSolverData& m, const JointVector* q_ref, const v2d* mot, const std::int8_t* elbow,
                       v2m el, v2d ep, v2d er, IkResult& res) {
   v2d q[N];
@@ -566,6 +570,10 @@ inline void emit_pair(const IkSolverData& m, const JointVector* q_ref, const v2d
   for (int j = 0; j < N; ++j) {
     const IkJointWrap& jw = m.wrap[static_cast<std::size_t>(j)];
     q[j] = m.dir[static_cast<std::size_t>(j)] * mot[j];
+    if (WrapLast && j == N - 1)
+      for (int k = 0; k < 2; ++k)
+        q[j] = select(q[j] > bc<v2d>(kPi), q[j] - 2.0 * kPi,
+                      select(q[j] <= bc<v2d>(-kPi), q[j] + 2.0 * kPi, q[j]));
     const v2d aq = (v2d)((v2m)q[j] & ~sign);
     if (jw.kind == 0) {  // not wrapped (wrap_joint): the limit flag, and finite
       quick &= aq <= bc<v2d>(std::numeric_limits<double>::max());
@@ -839,7 +847,8 @@ bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector
       c = detail::atan2_poly_v2(pr.sc, pr.cc);
     }
     const v2d mot[3] = {a, b, c};
-    emit_pair<3>(m, q_ref, mot, pr.elbow, elbow_2_pair(m.pl, pr), pr.ep, pr.er, res);
+    if (!m.pl.pri) emit_pair<3, true>(m, q_ref, mot, pr.elbow, elbow_2_pair(m.pl, pr), pr.ep, pr.er, res);
+    else emit_pair<3>(m, q_ref, mot, pr.elbow, elbow_2_pair(m.pl, pr), pr.ep, pr.er, res);
     return true;
   }
   // the angles two at a time: (a, b) per solution, then the two c (planar_3)
