@@ -203,6 +203,28 @@ void solve_slow(const kin::IkModel& m, const kin::Pose& T, const kin::JointVecto
              : r.singular_kinds ? kin::Status::singular
                                 : kin::Status::ok;
 }
+
+// fast (ik_solve_all) against the chain path's slow, solution by solution: the same
+// configurations (1e-9; 1e-6 where flagged singular: a root clamped ~1e-8 rad off, polished
+// by the chain path), order, branches, limit and singular flags, and what each says it is:
+// the chain's FK reaches the (reachable part of the) target, its errors within 1e-9.
+void same_as_chain(const kin::IkModel& m, const kin::Pose& T, const kin::IkResult& fast, const kin::IkResult& slow,
+                   const std::string& what) {
+  LONGS_EQUAL_TEXT(slow.count, fast.count, what.c_str());
+  for (int i = 0; i < fast.count; ++i) {
+    const auto& a = fast.solutions[static_cast<std::size_t>(i)];
+    const auto& b = slow.solutions[static_cast<std::size_t>(i)];
+    const double tol = a.singular ? 1e-6 : 1e-9;
+    CHECK_TEXT(gap(m.chain, a.q, b.q) < tol, (what + " solution " + describe(a.q) + " vs " + describe(b.q)).c_str());
+    LONGS_EQUAL_TEXT(b.branch.shoulder, a.branch.shoulder, what.c_str());
+    LONGS_EQUAL_TEXT(b.branch.elbow, a.branch.elbow, what.c_str());
+    CHECK_TEXT(a.within_limits == b.within_limits, what.c_str());
+    LONGS_EQUAL_TEXT(b.singular, a.singular, what.c_str());
+    const kin::Pose X = fk(m.chain, a.q);
+    CHECK_TEXT((X.translation() - T.translation()).norm() <= 1e-9, what.c_str());
+    CHECK_TEXT(a.position_error <= 1e-9 && a.rotation_error <= 1e-9, what.c_str());
+  }
+}
 }  // namespace
 
 TEST(IkReduced, CheapPathGivesWhatTheChainPathGives) {
@@ -261,22 +283,7 @@ TEST(IkReduced, CheapPathGivesWhatTheChainPathGives) {
           }
           continue;
         }
-        LONGS_EQUAL_TEXT(slow.count, fast.count, what.c_str());
-        for (int i = 0; i < fast.count; ++i) {
-          const auto& a = fast.solutions[static_cast<std::size_t>(i)];
-          const auto& b = slow.solutions[static_cast<std::size_t>(i)];
-          // near-singular (flagged): a root clamped ~1e-8 rad off, polished by the chain path
-          const double tol = a.singular ? 1e-6 : 1e-9;
-          CHECK_TEXT(gap(m.chain, a.q, b.q) < tol, (what + " solution " + describe(a.q) + " vs " + describe(b.q)).c_str());
-          LONGS_EQUAL_TEXT(b.branch.shoulder, a.branch.shoulder, what.c_str());
-          LONGS_EQUAL_TEXT(b.branch.elbow, a.branch.elbow, what.c_str());
-          CHECK_TEXT(a.within_limits == b.within_limits, what.c_str());
-          LONGS_EQUAL_TEXT(b.singular, a.singular, what.c_str());
-          // and it is what it says: the chain's FK reaches the (reachable part of the) target
-          const kin::Pose X = fk(m.chain, a.q);
-          CHECK_TEXT((X.translation() - T.translation()).norm() <= 1e-9, what.c_str());
-          CHECK_TEXT(a.position_error <= 1e-9 && a.rotation_error <= 1e-9, what.c_str());
-        }
+        same_as_chain(m, T, fast, slow, what);
       }
     }
     std::printf("\n  %-12s %d poses: cheap path = chain path, %d results flagged singular", k.name, n, flagged);
@@ -342,23 +349,14 @@ TEST(IkReduced, SpatialLanesGiveWhatTheChainPathGives) {
         const std::string what = std::string(v.what) + " " + describe(q) + (r ? " ref " + describe(*r) : "");
         STRCMP_EQUAL_TEXT(kin::to_string(slow.status), kin::to_string(fast.status), what.c_str());
         LONGS_EQUAL_TEXT(slow.singular_kinds, fast.singular_kinds, what.c_str());
-        LONGS_EQUAL_TEXT(slow.count, fast.count, what.c_str());
+        same_as_chain(m, T, fast, slow, what);
         if (yes) {
           ++answered;
           LONGS_EQUAL_TEXT(4, lanes.count, what.c_str());
         }
         for (int i = 0; i < fast.count; ++i) {
           const auto& a = fast.solutions[static_cast<std::size_t>(i)];
-          const auto& b = slow.solutions[static_cast<std::size_t>(i)];
-          const double tol = a.singular ? 1e-6 : 1e-9;
-          CHECK_TEXT(gap(m.chain, a.q, b.q) < tol, (what + " solution " + describe(a.q) + " vs " + describe(b.q)).c_str());
-          LONGS_EQUAL_TEXT(b.branch.shoulder, a.branch.shoulder, what.c_str());
-          LONGS_EQUAL_TEXT(b.branch.elbow, a.branch.elbow, what.c_str());
-          CHECK_TEXT(a.within_limits == b.within_limits, what.c_str());
-          LONGS_EQUAL_TEXT(b.singular, a.singular, what.c_str());
           if (!a.within_limits) ++outside;
-          const kin::Pose X = fk(m.chain, a.q);
-          CHECK_TEXT((X.translation() - T.translation()).norm() <= 1e-9, what.c_str());
           if (yes) {
             const auto& l = lanes.solutions[static_cast<std::size_t>(i)];
             CHECK_TEXT(gap(m.chain, a.q, l.q) == 0.0 && a.branch == l.branch && a.singular == l.singular &&
