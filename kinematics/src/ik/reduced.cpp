@@ -583,6 +583,34 @@ inline void emit_pair(const IkSolverData& m, const JointVector* q_ref, const v2d
     }
   }
   const bool fast = both(quick);
+  if (fast && res.count == 0) {
+    // Two distinct configurations (a joint more than 1e-7 apart: store_q's rule, with
+    // margin; a revolute value lies in (-pi, pi), so also short of 2 pi - 1e-6): both
+    // stored as they are, without store_q's search (unrolled: constant lane indices).
+    bool distinct = false;
+    for (int j = 0; j < N; ++j) {
+      const double d = std::abs(q[j][0] - q[j][1]);
+      distinct |= (d > 1e-7) & (prism(m, j) | (d < kTwoPi - 1e-6));
+    }
+    if (distinct) {
+      IkSolution* out = res.solutions.data();
+      res.count = 2;
+      auto put = [&](IkSolution& sol, int i) {
+        sol.q.resize(N);
+        double* d = sol.q.data();
+        for (int j = 0; j < N; ++j) d[j] = q[j][i];
+        sol.branch = Branch{};
+        sol.branch.elbow = elbow[i];
+        sol.within_limits = in[i] != 0;
+        sol.singular = el[i] ? kSingularElbow : 0;
+        sol.position_error = ep[i];
+        sol.rotation_error = er[i];
+      };
+      put(out[0], 0);
+      put(out[1], 1);
+      return;
+    }
+  }
   for (int i = 0; i < 2; ++i) {
     Branch br;
     br.elbow = elbow[i];
