@@ -557,11 +557,12 @@ inline void store_q(const IkSolverData& m, const double* q, bool in, Branch br, 
 // within the limits, finite) or a prismatic joint with a finite value (not
 // wrapped: its limit flag only), the wrap is one compare per joint and lane
 // and the solutions go straight to store_q; else each through emit, as before.
-// WrapLast: the last joint (a revolute one) first takes two steps of
+// Mid: the middle joint, whose two roots the lanes hold (the other joints
+// follow from it). WrapLast: the last joint (a revolute one) first takes two steps of
 // fast_wrap in the lanes (the same subtractions: its value bit for bit where
 // two steps suffice; planar_3's psi - gamma - a - b lies outside (-pi, pi]
 // for most targets), so that it can pass the quick exit.
-template <int N, bool WrapLast = false>
+template <int N, int Mid, bool WrapLast = false>
 inline void emit_pair(const IkSolverData& m, const JointVector* q_ref, const v2d* mot, const std::int8_t* elbow,
                       v2m el, v2d ep, v2d er, IkResult& res) {
   v2d q[N];
@@ -584,15 +585,12 @@ inline void emit_pair(const IkSolverData& m, const JointVector* q_ref, const v2d
   }
   const bool fast = both(quick);
   if (fast && res.count == 0) {
-    // Two distinct configurations (a joint more than 1e-7 apart: store_q's rule, with
-    // margin; a revolute value lies in (-pi, pi), so also short of 2 pi - 1e-6): both
-    // stored as they are, without store_q's search (unrolled: constant lane indices).
-    bool distinct = false;
-    for (int j = 0; j < N; ++j) {
-      const double d = std::abs(q[j][0] - q[j][1]);
-      distinct |= (d > 1e-7) & (prism(m, j) | (d < kTwoPi - 1e-6));
-    }
-    if (distinct) {
+    // Two distinct configurations (the middle joint's roots more than 1e-7 apart:
+    // store_q's rule, with margin; a revolute value lies in (-pi, pi), so also short
+    // of 2 pi - 1e-6; else store_q decides): both stored as they are, without
+    // store_q's search (unrolled: constant lane indices).
+    const double d = std::abs(q[Mid][0] - q[Mid][1]);
+    if ((d > 1e-7) & (prism(m, Mid) | (d < kTwoPi - 1e-6))) {
       IkSolution* out = res.solutions.data();
       res.count = 2;
       auto put = [&](IkSolution& sol, int i) {
@@ -875,8 +873,8 @@ bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector
       c = detail::atan2_poly_v2(pr.sc, pr.cc);
     }
     const v2d mot[3] = {a, b, c};
-    if (!m.pl.pri) emit_pair<3, true>(m, q_ref, mot, pr.elbow, elbow_2_pair(m.pl, pr), pr.ep, pr.er, res);
-    else emit_pair<3>(m, q_ref, mot, pr.elbow, elbow_2_pair(m.pl, pr), pr.ep, pr.er, res);
+    if (!m.pl.pri) emit_pair<3, 1, true>(m, q_ref, mot, pr.elbow, elbow_2_pair(m.pl, pr), pr.ep, pr.er, res);
+    else emit_pair<3, 1>(m, q_ref, mot, pr.elbow, elbow_2_pair(m.pl, pr), pr.ep, pr.er, res);
     return true;
   }
   // the angles two at a time: (a, b) per solution, then the two c (planar_3)
@@ -970,7 +968,7 @@ bool solve_pitch_4_2d(const IkModel& model, const Pose& target, const JointVecto
     const v2m pos = prod > bc<v2d>(0.0);
     const v2m el = pos & (det * det / select(pos, prod, bc<v2d>(1.0)) < bc<v2d>(kNearSingular * kNearSingular));
     const v2d mot[4] = {bc<v2d>(a1), a2, a3, a4};
-    emit_pair<4>(m, q_ref, mot, pr.elbow, el, pr.ep, pr.er, res);
+    emit_pair<4, 2>(m, q_ref, mot, pr.elbow, el, pr.ep, pr.er, res);
     return true;
   }
   double y[6] = {0, 0, 0, 0, 0, 0}, x[6] = {1, 1, 1, 1, 1, 1}, ang[6];
