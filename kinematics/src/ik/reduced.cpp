@@ -525,6 +525,22 @@ inline void emit(const IkSolverData& m, const JointVector* q_ref, const double* 
   sol.rotation_error = er;
 }
 
+// One solution's fields (N joints, q wrapped): store_q's tail, and the
+// stores of the lanes' solutions (emit_pair, solve_spatial_3_lanes) that
+// need no search.
+template <int N>
+inline void set_solution(IkSolution& sol, const double* q, Branch br, bool in, std::uint8_t sing, double ep,
+                         double er) {
+  sol.q.resize(N);
+  double* d = sol.q.data();
+  for (int j = 0; j < N; ++j) d[j] = q[j];
+  sol.branch = br;
+  sol.within_limits = in;
+  sol.singular = sing;
+  sol.position_error = ep;
+  sol.rotation_error = er;
+}
+
 // emit's de-duplication and storage for an N-joint solution q already
 // wrapped (in: within the limits).
 template <int N>
@@ -540,15 +556,7 @@ inline void store_q(const IkSolverData& m, const double* q, bool in, Branch br, 
     if (same) return;
   }
   if (res.count >= kMaxIkSolutions) return;
-  IkSolution& sol = res.solutions[static_cast<std::size_t>(res.count++)];
-  sol.q.resize(N);
-  double* d = sol.q.data();
-  for (int j = 0; j < N; ++j) d[j] = q[j];
-  sol.branch = br;
-  sol.within_limits = in;
-  sol.singular = sing;
-  sol.position_error = ep;
-  sol.rotation_error = er;
+  set_solution<N>(res.solutions[static_cast<std::size_t>(res.count++)], q, br, in, sing, ep, er);
 }
 
 // emit for the two lanes of a pair of N-joint solutions (motion values
@@ -594,15 +602,11 @@ inline void emit_pair(const IkSolverData& m, const JointVector* q_ref, const v2d
       IkSolution* out = res.solutions.data();
       res.count = 2;
       auto put = [&](IkSolution& sol, int i) {
-        sol.q.resize(N);
-        double* d = sol.q.data();
-        for (int j = 0; j < N; ++j) d[j] = q[j][i];
-        sol.branch = Branch{};
-        sol.branch.elbow = elbow[i];
-        sol.within_limits = in[i] != 0;
-        sol.singular = el[i] ? kSingularElbow : 0;
-        sol.position_error = ep[i];
-        sol.rotation_error = er[i];
+        double qi[N];
+        for (int j = 0; j < N; ++j) qi[j] = q[j][i];
+        Branch br;
+        br.elbow = elbow[i];
+        set_solution<N>(sol, qi, br, in[i] != 0, el[i] ? kSingularElbow : 0, ep[i], er[i]);
       };
       put(out[0], 0);
       put(out[1], 1);
@@ -1175,18 +1179,11 @@ bool solve_spatial_3_lanes(const IkSolverData& m, const Eigen::Vector3d& p0, con
   IkSolution* out = &res.solutions[static_cast<std::size_t>(res.count)];
   res.count += 4;
   auto put = [&](IkSolution& sol, int e, int g) {
-    sol.q.resize(3);
-    double* d = sol.q.data();
-    d[0] = q[0][g][e];
-    d[1] = q[1][g][e];
-    d[2] = q[2][g][e];
-    sol.branch.shoulder = shp[g][e] ? 1 : -1;
-    sol.branch.elbow = static_cast<std::int8_t>(e == 0 ? 1 : -1);
-    sol.branch.wrist = 0;
-    sol.within_limits = true;
-    sol.singular = shs[g][e] ? kSingularShoulder : 0;
-    sol.position_error = ep[g][e];
-    sol.rotation_error = 0;
+    const double qs[3] = {q[0][g][e], q[1][g][e], q[2][g][e]};
+    Branch br;
+    br.shoulder = shp[g][e] ? 1 : -1;
+    br.elbow = static_cast<std::int8_t>(e == 0 ? 1 : -1);
+    set_solution<3>(sol, qs, br, true, shs[g][e] ? kSingularShoulder : 0, ep[g][e], 0.0);
   };
   put(out[0], 0, 0);
   put(out[1], 0, 1);
