@@ -568,7 +568,7 @@ inline void store_q(const IkSolverData& m, const double* q, bool in, Branch br, 
 // Mid: the middle joint, whose two roots the lanes hold (the other joints
 // follow from it). WrapLast: the last joint (a revolute one) first takes two steps of
 // fast_wrap in the lanes (the same subtractions: its value bit for bit where
-// two steps suffice; planar_3's psi - gamma - a - b lies outside (-pi, pi]
+// two steps suffice; planar_3's psi - gamma - a - b and pitch_4's s - a2 (- a3) lie outside (-pi, pi]
 // for most targets), so that it can pass the quick exit.
 template <int N, int Mid, bool WrapLast = false>
 inline void emit_pair(const IkSolverData& m, const JointVector* q_ref, const v2d* mot, const std::int8_t* elbow,
@@ -944,35 +944,37 @@ bool solve_pitch_4_2d(const IkModel& model, const Pose& target, const JointVecto
   Pair2d pr;
   if (!core_2d(m, pt, true, false, cp, sp, &rhs, s, ns, nullptr, nullptr, &pr)) return false;
   if (ns == -2) {  // the two solutions in the lanes of pr: the angles and the elbow flags two at a time
-    const v2d a2 = detail::atan2_poly_v2(pr.sa, pr.ca), a4 = detail::atan2_poly_v2(pr.sc, pr.cc);
+    // joint 1 and the pitch s (the target heading less gamma) in one atan2_poly_v2, then
+    // joint 2's two (and, revolute, joint 3's); joint 4 = s - a2 (- a3): the heading
+    // left, whose pair (cc, sc) the forward map verified (the same angle to rounding;
+    // the last joint wrapped in the lanes, as planar_3's)
+    const v2d a1s = detail::atan2_poly_v2(v2d{s1, ss}, v2d{c1, cs});
+    const v2d a2 = detail::atan2_poly_v2(pr.sa, pr.ca);
     const v2d a3 = pl.pri ? pr.cb : detail::atan2_poly_v2(pr.sb, pr.cb);
-    const double a1 = detail::atan2_poly(s1, c1);
-    // elbow: columns of joints 1, 2, 3 at the tool point (F), as below
+    const v2d a4 = pl.pri ? a1s[1] - a2 : (a1s[1] - a2) - a3;
+    // elbow: columns of joints 1, 2, 3 at the tool point (F), as below, with k2z = k3z
+    // = 0 (joint 3 revolute: its column lies in the plane; prismatic: the 2-D forward map
+    // takes w.z as 0, set-up checked |w.z| <= 1e-12), so k2 x k3 = (0, 0, cz)
     const v2d dx = pr.tx - pl.o1.x(), dy = pr.ty - pl.o1.y();
     const double dz = pr.tz - pl.o1.z();
     const v2d k1x = pl.z1.y() * dz - pl.z1.z() * dy, k1y = pl.z1.z() * dx - pl.z1.x() * dz,
               k1z = pl.z1.x() * dy - pl.z1.y() * dx;
-    const v2d k2x = -pr.ty, k2y = pr.tx;  // k2z = 0
+    const v2d k2x = -pr.ty, k2y = pr.tx;
     v2d k3x, k3y;
-    double k3z;
     if (pl.pri) {
       k3x = pr.ca * pl.w.x() - pr.sa * pl.w.y();
       k3y = pr.sa * pl.w.x() + pr.ca * pl.w.y();
-      k3z = pl.w.z();
     } else {
       const v2d ox = pr.ca * pl.sa.x() - pr.sa * pl.sa.y(), oy = pr.sa * pl.sa.x() + pr.ca * pl.sa.y();
       k3x = -(pr.ty - oy);
       k3y = pr.tx - ox;
-      k3z = 0.0;
     }
-    // k2 x k3 with k2z = 0 (the products with it are zeros: the same sums)
-    const v2d cx = k2y * k3z, cy = -(k2x * k3z), cz = k2x * k3y - k2y * k3x;
-    const v2d det = k1x * cx + k1y * cy + k1z * cz;
-    const v2d prod = (k1x * k1x + k1y * k1y + k1z * k1z) * (k2x * k2x + k2y * k2y) * (k3x * k3x + k3y * k3y + k3z * k3z);
+    const v2d det = k1z * (k2x * k3y - k2y * k3x);
+    const v2d prod = (k1x * k1x + k1y * k1y + k1z * k1z) * (k2x * k2x + k2y * k2y) * (k3x * k3x + k3y * k3y);
     const v2m pos = prod > bc<v2d>(0.0);
     const v2m el = pos & (det * det / select(pos, prod, bc<v2d>(1.0)) < bc<v2d>(kNearSingular * kNearSingular));
-    const v2d mot[4] = {bc<v2d>(a1), a2, a3, a4};
-    emit_pair<4, 2>(m, q_ref, mot, pr.elbow, el, pr.ep, pr.er, res);
+    const v2d mot[4] = {bc<v2d>(a1s[0]), a2, a3, a4};
+    emit_pair<4, 2, true>(m, q_ref, mot, pr.elbow, el, pr.ep, pr.er, res);
     return true;
   }
   double y[6] = {0, 0, 0, 0, 0, 0}, x[6] = {1, 1, 1, 1, 1, 1}, ang[6];
