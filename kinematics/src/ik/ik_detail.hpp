@@ -106,6 +106,12 @@ struct IkSolverData {
   Eigen::Matrix3d red_Rrest = Eigen::Matrix3d::Identity();
   Eigen::Vector3d red_n2 = Eigen::Vector3d::UnitZ();
   double red_u = 1, red_v = 0;
+  // pitch_4: joint 4's origin is p - R red_vtool for any target (red_vtool = C4^T t4, in
+  // the tool frame); its squared distance from joint 2's origin, the distance equation's
+  // right-hand side, is |R0^T (o4 - t0) - Rz(m1) t1|^2, with no pitch in it, and with C1's
+  // offset along axis 1 (red_rhs_direct: its xy within 1e-12 scale) no joint 1 either.
+  Eigen::Vector3d red_vtool = Eigen::Vector3d::Zero();
+  bool red_rhs_direct = false;
   bool ur_zrot = false;           ///< C2, C3 rotate about z: C1 Rz2 C2 Rz3 C3 = C1 Rz(m2 + m3 + gamma)
   double ur_gc = 1, ur_gs = 0;     ///< cos, sin gamma
   bool ur_tilt = false;  ///< u_z = cos(m5 - phi5) exactly (ur_u5 = (0, h = 1)): see ur.cpp wrist_roots
@@ -139,6 +145,7 @@ struct IkSolverData {
     bool on = false;
     bool q3_from_e1 = true;  ///< the equation free of m2 is E1 (else E2)
     double a3 = 0, h3 = 0, hc3 = 1, hs3 = 0, tol2 = 0;
+    double hc3i = 0, hs3i = 0;  ///< (hc3, hs3) / h3
     Eigen::Matrix3d Mo = Eigen::Matrix3d::Zero();
   } s3;
 };

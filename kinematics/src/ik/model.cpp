@@ -483,6 +483,8 @@ void setup_spatial3(IkSolverData& m) {
   if (!(s.h3 > tq3)) return;  // free of m3 too: solve_position's answer (free or none)
   s.hc3 = (*Mq3)(0, 1) / s.h3;
   s.hs3 = (*Mq3)(0, 2) / s.h3;
+  s.hc3i = s.hc3 / s.h3;
+  s.hs3i = s.hs3 / s.h3;
   s.on = std::isfinite(s.a3 + s.hc3 + s.hs3) && detail::all_finite(s.Mo);
   m.s3 = s;
 }
@@ -542,6 +544,8 @@ bool detect_reduced(IkModel& model) {
     });
     m.red_Rrest = C(m, 2).linear() * C(m, 3).linear() * C(m, 4).linear();
     m.red_n2 = m.red_Rrest.transpose().col(2);
+    m.red_vtool = C(m, m.n).linear().transpose() * C(m, m.n).translation();
+    m.red_rhs_direct = C(m, 1).translation().head<2>().norm() <= 1e-12 * m.scale;
     const Eigen::Vector3d n21 = C(m, 1).linear().col(2);
     const double h = std::hypot(n21.x(), n21.y());
     if (h > 1e-9) {

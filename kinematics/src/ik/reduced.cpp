@@ -638,8 +638,10 @@ struct Sol2d {             // every field set by core_2d (no initialisers: not z
 
 // Two solutions with a heading, one in each lane of a v2d (lanes.hpp):
 // core_2d's forward map and checks on both roots at once, the same
-// operations in the same order as its loop (each lane is what the loop
-// gives, bit for bit; x86-64's baseline has no FMA to contract them).
+// operations in the same order as its loop but the first joint's turn
+// (1 / |P_xy|^2 for 1 / sqrt(rr): the same pair to rounding, see pair_2d;
+// the rest of each lane is the loop's arithmetic, x86-64's baseline has no
+// FMA to contract it).
 struct Pair2d {
   v2d ca, sa;  // first joint
   v2d cb, sb;  // middle joint (prismatic: the value in cb)
@@ -673,7 +675,12 @@ inline bool pair_2d(const IkSolverData& m, const Eigen::Vector3d& pt, double Px,
   const v2d cr = fx * Py - fy * Px, dt = fx * Px + fy * Py;
   const v2d rr = cr * cr + dt * dt;
   if (!both((rr > bc<v2d>(1e-36 * sc2 * sc2)) & (fx * fx + fy * fy > bc<v2d>(1e-18 * sc2)))) return false;
-  const v2d ir = 1.0 / lsqrt(rr);
+  // the turn of f onto P: (dt, cr) / (|f_xy| |P_xy|), and |f_xy| = |P_xy| at a root (its
+  // equation; pitch_4's 3-D one with f_z = P_z where the target is in the arm's plane),
+  // so (dt, cr) / |P_xy|^2: 1 / P2 needs no root, so no square root and division wait
+  // for it (core_2d's loop divides by sqrt(rr); the same pair to rounding). A target
+  // where they differ is out of reach: the forward map below misses it and hands over.
+  const v2d ir = bc<v2d>(1.0 / (Px * Px + Py * Py));
   o.ca = dt * ir;
   o.sa = cr * ir;
   v2d tx = o.ca * fx - o.sa * fy, ty = o.sa * fx + o.ca * fy;
@@ -830,8 +837,8 @@ inline v2m elbow_2_pair(const IkSolverData::Planar& pl, const Pair2d& o) {
 
 // planar_2r and planar_3 in 2-D (F = the frame after C0).
 // GCC 12 takes s[0] for unset after core_2d's pair exit (ns = -2, s unread
-// then): a false positive of the flattened solve_reduced. (GCC only: clang has no such
-// warning group and -Werror refuses an unknown one.)
+// then): a false positive of the flattened solve_reduced, here and in solve_pitch_4_2d
+// below. (GCC only: clang has no such warning group and -Werror refuses an unknown one.)
 #pragma GCC diagnostic push
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
@@ -904,8 +911,6 @@ bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector
   return true;
 }
 
-#pragma GCC diagnostic pop
-
 // pitch_4 in 2-D: joint 1 and the pitch as solve_pitch_4_fast takes them,
 // then the core in joint 2's frame (F = C1 after the J1 motion); the elbow
 // flag from the first three joints' position columns (triple product).
@@ -917,15 +922,18 @@ bool solve_pitch_4_2d(const IkModel& model, const Pose& target, const JointVecto
   const double hn = n2.x() * n2.x() + n2.y() * n2.y();
   if (!(hn > 1e-24)) return false;
   const double in = 1.0 / std::sqrt(hn);
-  const double a = n2.x() * in, b = n2.y() * in;
-  const double c1 = a * m.red_u + b * m.red_v, s1 = b * m.red_u - a * m.red_v;
+  // joint 1's pair scaled by |n2_xy| (c1u, s1u) turns R1 for the pitch, a direction
+  // normalised below anyway: its square root need not wait for this one (the path's
+  // time is its chain of square roots and divisions, not its instruction count)
+  const double c1u = n2.x() * m.red_u + n2.y() * m.red_v, s1u = n2.y() * m.red_u - n2.x() * m.red_v;
+  const double c1 = c1u * in, s1 = s1u * in;
   Eigen::Matrix3d R1 = R0;
-  turn(R1, false, c1, s1);
+  turn(R1, false, c1u, s1u);
   R1 = mul_c(m, R1, 1);
   const Eigen::Vector3d xv = target.linear() * m.red_Rrest.row(0).transpose();
   double cs = R1.col(0).dot(xv), ss = R1.col(1).dot(xv);
-  const double hs = cs * cs + ss * ss;
-  if (!(hs > 1e-24)) return false;
+  const double hs = cs * cs + ss * ss;  // |n2_xy|^2 times the unscaled one
+  if (!(hs > 1e-24 * hn)) return false;
   const double is = 1.0 / std::sqrt(hs);
   cs *= is;
   ss *= is;
@@ -935,10 +943,22 @@ bool solve_pitch_4_2d(const IkModel& model, const Pose& target, const JointVecto
   const Eigen::Vector3d p0 = R0.transpose() * (target.translation() - C(m, 0).translation());
   const Eigen::Vector3d g(c1 * p0.x() + s1 * p0.y(), c1 * p0.y() - s1 * p0.x(), p0.z());
   const Eigen::Vector3d pt = C(m, 1).linear().transpose() * (g - C(m, 1).translation());
-  // the distance equation in 3-D, as the 3-D path (|joint 4's origin|^2 in F)
-  const Eigen::Vector3d P(pt.x() - (cp * pl.tn.x() - sp * pl.tn.y()), pt.y() - (sp * pl.tn.x() + cp * pl.tn.y()),
-                          pt.z() - pl.tn.z());
-  const double rhs = P.squaredNorm();
+  // the distance equation in 3-D, as the 3-D path: |joint 4's origin|^2 in F, that
+  // origin o4 = p - R red_vtool taken straight from the target, so that its roots need
+  // not wait for the pitch's square root and division (and, with C1's offset along axis
+  // 1, red_rhs_direct, not for joint 1's either). The same value where the target's
+  // rotation is one the arm reaches; where it is not, the 2-D map misses and hands over,
+  // as before.
+  const Eigen::Vector3d o4 = R0.transpose() * (target.translation() - target.linear() * m.red_vtool -
+                                               C(m, 0).translation());
+  const Eigen::Vector3d& t1 = C(m, 1).translation();
+  double ox = o4.x(), oy = o4.y();
+  if (!m.red_rhs_direct) {
+    ox -= c1 * t1.x() - s1 * t1.y();
+    oy -= s1 * t1.x() + c1 * t1.y();
+  }
+  const double oz = o4.z() - t1.z();
+  const double rhs = ox * ox + oy * oy + oz * oz;
   Sol2d s[2];
   int ns = 0;
   Pair2d pr;
@@ -1019,6 +1039,8 @@ bool solve_pitch_4_2d(const IkModel& model, const Pose& target, const JointVecto
   return true;
 }
 
+#pragma GCC diagnostic pop
+
 // spatial_3 (TRR) with the cheap check on the point only: solve_position's
 // pairs, J1 by one turn, the tool point Rz(m1) f against the target (no
 // rotation products: the arm places a point), the angles in pairs.
@@ -1091,32 +1113,37 @@ bool solve_spatial_3_lanes(const IkSolverData& m, const Eigen::Vector3d& p0, con
                            IkResult& res) {
   const IkSolverData::Spatial3& sp = m.s3;
   const double e1 = (p0 - m.lambda * Eigen::Vector3d::UnitZ()).squaredNorm(), e2 = p0.z();
-  // m3: a3 - rhs + h3 cos(m3 - phase3) = 0 (solve_basis's roots, cp = hc3, sp = hs3)
-  double k = -(sp.a3 - (sp.q3_from_e1 ? e1 : e2)) / sp.h3;
-  if (!clamp_cos(k)) return false;
-  const double st = std::sqrt((1.0 - k) * (1.0 + k));
-  if (!(st > 1e-6)) return false;
+  // m3: a3 - rhs + h3 cos(m3 - phase3) = 0 (solve_basis's roots, cp = hc3, sp = hs3):
+  // k = cos t = -A / h3 (A = a3 - rhs), h3 sin t = sqrt(h3^2 - A^2); sin t > 1e-6 on the
+  // squares (it also refuses |k| > 1), no division in the chain
+  const double A = sp.a3 - (sp.q3_from_e1 ? e1 : e2);
+  const double D3 = sp.h3 * sp.h3 - A * A;
+  if (!(D3 > 1e-12 * (sp.h3 * sp.h3))) return false;
+  const double sD3 = std::sqrt(D3);  // h3 sin t; hc3i, hs3i = (hc3, hs3) / h3
   const v2d pm = v2d{1.0, -1.0};
-  const v2d c3 = bc<v2d>(sp.hc3 * k) - pm * (sp.hs3 * st), s3 = bc<v2d>(sp.hs3 * k) + pm * (sp.hc3 * st);
+  const v2d c3 = bc<v2d>(-A * sp.hc3i) - pm * (sp.hs3i * sD3), s3 = bc<v2d>(-A * sp.hs3i) + pm * (sp.hc3i * sD3);
   // m2's equation per m3 root: u = Mo b3 (Mo(0, 0) less its rhs)
   const Eigen::Matrix3d& Mo = sp.Mo;
   const double mo00 = Mo(0, 0) - (sp.q3_from_e1 ? e2 : e1);
   const v2d u0 = mo00 + Mo(0, 1) * c3 + Mo(0, 2) * s3;
   const v2d u1 = Mo(1, 0) + Mo(1, 1) * c3 + Mo(1, 2) * s3;
   const v2d u2 = Mo(2, 0) + Mo(2, 1) * c3 + Mo(2, 2) * s3;
-  const v2d h2 = lsqrt(u1 * u1 + u2 * u2);
-  if (!both(h2 > bc<v2d>(sp.tol2))) return false;
-  const v2d ih = 1.0 / h2;
-  v2d k2 = -u0 * ih;
-  const v2d ak = (v2d)((v2m)k2 & ~(v2m)bc<v2d>(-0.0));
-  if (!both(ak <= bc<v2d>(1.0 + 1e-9))) return false;
-  k2 = select(k2 > bc<v2d>(1.0), bc<v2d>(1.0), select(k2 < bc<v2d>(-1.0), bc<v2d>(-1.0), k2));
-  const v2d cp = u1 * ih, spp = u2 * ih;
-  const v2d st2 = lsqrt((1.0 - k2) * (1.0 + k2));
-  if (!both(st2 > bc<v2d>(1e-6))) return false;
+  // its roots as solve_basis gives them, with H = u1^2 + u2^2 = h^2 and k = cos t =
+  // -u0 / h: (cos, sin) of phase -+ t = (-u1 u0 -+ u2 sD, -u2 u0 +- u1 sD) / H with
+  // sD = sqrt(H - u0^2) = h sin t. The same checks on the squares (h > tol2; sin t >
+  // 1e-6, which also refuses |k| > 1); no sqrt of H: the path's time is its chain of
+  // square roots and divisions, and the two left here (1 / H, sD) do not wait for
+  // each other.
+  const v2d H = u1 * u1 + u2 * u2;
+  if (!both(H > bc<v2d>(sp.tol2 * sp.tol2))) return false;
+  const v2d iH = 1.0 / H;
+  const v2d D = H - u0 * u0;  // H sin^2 t
+  if (!both(D > bc<v2d>(1e-12) * H)) return false;
+  const v2d sD = lsqrt(D);
+  const v2d nu0 = -u0;
   // the two m2 roots of each lane: A = phase + t, B = phase - t (solve_basis's order)
-  const v2d c2[2] = {cp * k2 - spp * st2, cp * k2 + spp * st2};
-  const v2d s2[2] = {spp * k2 + cp * st2, spp * k2 - cp * st2};
+  const v2d c2[2] = {(u1 * nu0 - u2 * sD) * iH, (u1 * nu0 + u2 * sD) * iH};
+  const v2d s2[2] = {(u2 * nu0 + u1 * sD) * iH, (u2 * nu0 - u1 * sD) * iH};
   // v = C2 Rz(m3) w3 per lane
   const Eigen::Matrix3d& R2 = C(m, 2).linear();
   const Eigen::Vector3d& t2 = C(m, 2).translation();
@@ -1138,6 +1165,9 @@ bool solve_spatial_3_lanes(const IkSolverData& m, const Eigen::Vector3d& p0, con
     const v2d cr = fx * p0.y() - fy * p0.x(), dt = fx * p0.x() + fy * p0.y();
     const v2d rr = cr * cr + dt * dt;
     if (!both((fx * fx + fy * fy >= bc<v2d>(1e-18 * sc2)) & (rr > bc<v2d>(1e-36 * sc2 * sc2)))) return false;
+    // (dt, cr) / sqrt(rr), not pair_2d's 1 / |p0_xy|^2: |f_xy| = |p0_xy| holds here only
+    // as well as both roots do, and near a folded elbow the error then reported missed
+    // the FK's by more than 1e-12 (ik_reduced with SERVOARM_IK_SAMPLES=200000)
     const v2d ir = 1.0 / lsqrt(rr);
     c1[g] = dt * ir;
     s1[g] = cr * ir;

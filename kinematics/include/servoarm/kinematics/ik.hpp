@@ -143,7 +143,7 @@ struct IkSolverAccess;  // idem
 /// sizeof(IkSolverData) where that is defined (static_assert).
 class IkSolverStorage {
  public:
-  static constexpr std::size_t kBytes = 2816;
+  static constexpr std::size_t kBytes = 2944;
   static constexpr std::size_t kAlign = EIGEN_MAX_STATIC_ALIGN_BYTES > 16 ? EIGEN_MAX_STATIC_ALIGN_BYTES : 16;
   IkSolverStorage();
   IkSolverStorage(const IkSolverStorage& other);
