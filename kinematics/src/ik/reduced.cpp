@@ -1155,7 +1155,7 @@ bool solve_spatial_3_lanes(const IkSolverData& m, const Eigen::Vector3d& p0, con
   const Eigen::Matrix3d& R1 = C(m, 1).linear();
   const Eigen::Vector3d& t1 = C(m, 1).translation();
   const double sc2 = m.scale * m.scale;
-  v2d c1[2], s1[2], ep[2];
+  v2d c1[2], s1[2], x1[2], y1[2], ep[2];
   v2m shp[2], shs[2];
   for (int g = 0; g < 2; ++g) {
     const v2d gx = c2[g] * vx - s2[g] * vy, gy = s2[g] * vx + c2[g] * vy;
@@ -1169,6 +1169,8 @@ bool solve_spatial_3_lanes(const IkSolverData& m, const Eigen::Vector3d& p0, con
     // as well as both roots do, and near a folded elbow the error then reported missed
     // the FK's by more than 1e-12 (ik_reduced with SERVOARM_IK_SAMPLES=200000)
     const v2d ir = 1.0 / lsqrt(rr);
+    x1[g] = dt;  // its angle from the unscaled pair: not after this square root and division
+    y1[g] = cr;
     c1[g] = dt * ir;
     s1[g] = cr * ir;
     const v2d ex = c1[g] * fx - s1[g] * fy - p0.x(), ey = s1[g] * fx + c1[g] * fy - p0.y(), ez = fz - p0.z();
@@ -1179,7 +1181,7 @@ bool solve_spatial_3_lanes(const IkSolverData& m, const Eigen::Vector3d& p0, con
     shs[g] = (v2d)((v2m)sh & ~(v2m)bc<v2d>(-0.0)) < bc<v2d>(kNearSingular * m.scale);
   }
   // the angles, two at a time: m1 and m2 of each m2 root (lanes: the m3 roots), m3
-  const v2d a1[2] = {detail::atan2_poly_v2(s1[0], c1[0]), detail::atan2_poly_v2(s1[1], c1[1])};
+  const v2d a1[2] = {detail::atan2_poly_v2(y1[0], x1[0]), detail::atan2_poly_v2(y1[1], x1[1])};
   const v2d a2[2] = {detail::atan2_poly_v2(s2[0], c2[0]), detail::atan2_poly_v2(s2[1], c2[1])};
   const v2d a3 = detail::atan2_poly_v2(s3, c3);
   // the quick wrap exit (wrap_joint) of all twelve values
