@@ -3,6 +3,8 @@
 #   starved_fixture.sh stall     stop the guest's starvation probe for 1 s (its next
 #                                wake-up is then ~1 s late, as in a starved VM), then fail
 #   starved_fixture.sh nostall   fail at once
+#   starved_fixture.sh stallskip the faked stall, then a skip (exit 77), as a scenario's
+#                                own starvation check reports one
 . "$SCENARIO_DIR/lib.sh"
 case ${1:-} in
   stall)
@@ -13,5 +15,12 @@ case ${1:-} in
     sleep 1   # the probe prints its stall line
     fail "a deliberate failure after a faked stall" ;;
   nostall) fail "a deliberate failure, no stall" ;;
-  *) fail "usage: starved_fixture.sh stall|nostall" ;;
+  stallskip)
+    [ -n "${SERVOARM_STALL_PROBE_PID:-}" ] || fail "SERVOARM_STALL_PROBE_PID not set: /init started no probe"
+    kill -STOP "$SERVOARM_STALL_PROBE_PID"
+    sleep 1
+    kill -CONT "$SERVOARM_STALL_PROBE_PID"
+    sleep 1
+    skip "a deliberate skip after a faked stall" ;;
+  *) fail "usage: starved_fixture.sh stall|nostall|stallskip" ;;
 esac
