@@ -144,8 +144,8 @@ struct IkSolverData {
   struct Spatial3 {
     bool on = false;
     bool q3_from_e1 = true;  ///< the equation free of m2 is E1 (else E2)
-    double a3 = 0, h3 = 0, hc3 = 1, hs3 = 0, tol2 = 0;
-    double hc3i = 0, hs3i = 0;  ///< (hc3, hs3) / h3
+    double a3 = 0, h3 = 0, tol2 = 0;
+    double hc3i = 0, hs3i = 0;  ///< (cos, sin) of phase3, over h3
     Eigen::Matrix3d Mo = Eigen::Matrix3d::Zero();
   } s3;
 };

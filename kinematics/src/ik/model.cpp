@@ -481,11 +481,10 @@ void setup_spatial3(IkSolverData& m) {
   s.a3 = (*Mq3)(0, 0);
   s.h3 = std::sqrt((*Mq3)(0, 1) * (*Mq3)(0, 1) + (*Mq3)(0, 2) * (*Mq3)(0, 2));
   if (!(s.h3 > tq3)) return;  // free of m3 too: solve_position's answer (free or none)
-  s.hc3 = (*Mq3)(0, 1) / s.h3;
-  s.hs3 = (*Mq3)(0, 2) / s.h3;
-  s.hc3i = s.hc3 / s.h3;
-  s.hs3i = s.hs3 / s.h3;
-  s.on = std::isfinite(s.a3 + s.hc3 + s.hs3) && detail::all_finite(s.Mo);
+  const double hc3 = (*Mq3)(0, 1) / s.h3, hs3 = (*Mq3)(0, 2) / s.h3;  // (cos, sin) of phase3
+  s.hc3i = hc3 / s.h3;
+  s.hs3i = hs3 / s.h3;
+  s.on = std::isfinite(s.a3 + hc3 + hs3) && detail::all_finite(s.Mo);
   m.s3 = s;
 }
 

@@ -1113,13 +1113,13 @@ bool solve_spatial_3_lanes(const IkSolverData& m, const Eigen::Vector3d& p0, con
                            IkResult& res) {
   const IkSolverData::Spatial3& sp = m.s3;
   const double e1 = (p0 - m.lambda * Eigen::Vector3d::UnitZ()).squaredNorm(), e2 = p0.z();
-  // m3: a3 - rhs + h3 cos(m3 - phase3) = 0 (solve_basis's roots, cp = hc3, sp = hs3):
+  // m3: a3 - rhs + h3 cos(m3 - phase3) = 0 (solve_basis's roots; (hc3i, hs3i) h3 = (cos, sin) phase3):
   // k = cos t = -A / h3 (A = a3 - rhs), h3 sin t = sqrt(h3^2 - A^2); sin t > 1e-6 on the
   // squares (it also refuses |k| > 1), no division in the chain
   const double A = sp.a3 - (sp.q3_from_e1 ? e1 : e2);
   const double D3 = sp.h3 * sp.h3 - A * A;
   if (!(D3 > 1e-12 * (sp.h3 * sp.h3))) return false;
-  const double sD3 = std::sqrt(D3);  // h3 sin t; hc3i, hs3i = (hc3, hs3) / h3
+  const double sD3 = std::sqrt(D3);  // h3 sin t
   const v2d pm = v2d{1.0, -1.0};
   const v2d c3 = bc<v2d>(-A * sp.hc3i) - pm * (sp.hs3i * sD3), s3 = bc<v2d>(-A * sp.hs3i) + pm * (sp.hc3i * sD3);
   // m2's equation per m3 root: u = Mo b3 (Mo(0, 0) less its rhs)
