@@ -67,6 +67,12 @@ inline constexpr double Q0 = 2.485846490142306297962e1, Q1 = 1.65027009831698854
 inline constexpr double pio4 = 7.85398163397448309616e-1, pio2 = 1.57079632679489661923,
                         pi_hi = 3.14159265358979311600;
 inline constexpr double morebits = 6.123233995736765886130e-17;  // pi/2 - pio2 (pi/4, pi: 1/2x, 2x)
+/// pi/4 = hi + lo: hi = pio4 to 26 bits (k hi exact for k <= 4), lo = (pio4 - hi, exact) + morebits/2
+namespace pio4_k {
+inline constexpr double hi = 0x1.921fb5p-1;
+inline constexpr double lo = (pio4 - hi) + 0.5 * morebits;
+inline constexpr double tiny = 4.9406564584124654e-324;  // the least subnormal: td > 0 when num = den = 0
+}  // namespace pio4_k
 }  // namespace atan2_coef
 
 /// atan2(y, x) for finite arguments, inlined and branch-light (the closed-form
@@ -74,37 +80,41 @@ inline constexpr double morebits = 6.123233995736765886130e-17;  // pi/2 - pio2 
 /// ~15-20 ns each here). Cephes atan: the ratio min/max in [0, 1] is reduced
 /// to |t| <= 0.66 by t = (a - 1)/(a + 1) above 0.66, then the degree 4/5
 /// rational minimax approximation x + x^3 P(x^2)/Q(x^2) (peak relative error
-/// 2.6e-18), and the octant restored with pi/4, pi/2, pi split in two parts.
-/// Measured against std::atan2 over 2e6 random and special arguments: max
-/// error 4.5e-16 rad (tests/ik/test_ik_fast_trig.cpp). atan2(0, 0) = 0; the
-/// signs of zeros follow std::atan2 (atan2(-0, -1) = -pi). No FP exceptions
-/// for finite arguments.
+/// 2.6e-18). The octant is restored in one step: the angle is s r + k pi/4
+/// with s = +-1 and k in 0..4 from the three choices (ratio swapped, reduced,
+/// x negative), k pi/4 added as k A (A: pi/4 to 26 bits, so k A is exact) after
+/// k (pi/4 - A) (the double's remainder and Cephes' MOREBITS): two roundings
+/// where Cephes' three nested steps take six. Measured against std::atan2 over
+/// 2e6 random and special arguments: max error 4.5e-16 rad
+/// (tests/ik/test_ik_closed_form.cpp). atan2(0, 0) = 0; the signs of zeros
+/// follow std::atan2 (atan2(-0, -1) = -pi). No FP exceptions for finite
+/// normal arguments.
 [[gnu::always_inline]] inline double atan2_poly(double y, double x) {
   using namespace atan2_coef;
   // Written as selects between values computed unconditionally (no branches,
-  // no floating-point operation under a condition), so that GCC if-converts
-  // and vectorises a loop over it.
+  // no floating-point operation under a condition), the same operations in
+  // the same order as atan2_poly_v2 (bit for bit, tested).
   const double ax = std::abs(x), ay = std::abs(y);
   const bool swap = ay > ax;
-  const double num = swap ? ax : ay;
-  const double den = swap ? ay : ax;
+  const double num = lmin(ax, ay), den = lmax(ax, ay);
   // t = a or (a - 1)/(a + 1) with a = num/den, in one division; when den = 0,
-  // num = 0 and t = 0/1 (no 0/0).
+  // num = 0 and t = 0/denorm_min = 0 (no 0/0)
   const bool big = num > 0.66 * den;
   const double tn = num - (big ? den : 0.0);
-  const double td = (big ? num : 0.0) + (den > 0 ? den : 1.0);
+  const double td = (big ? num : 0.0) + lmax(den, pio4_k::tiny);
   const double t = tn / td;
   const double z = t * t;
   const double p = (((P0 * z + P1) * z + P2) * z + P3) * z + P4;
   const double q = ((((z + Q0) * z + Q1) * z + Q2) * z + Q3) * z + Q4;
-  double r = t + t * (z * p / q);
-  r = (r + (big ? 0.5 * morebits : 0.0)) + (big ? pio4 : 0.0);
-  const double nr = -r;
-  r = ((swap ? pio2 : 0.0) + (swap ? nr : r)) + (swap ? morebits : 0.0);
-  const bool neg = std::signbit(x);
-  const double nr2 = -r;
-  r = ((neg ? pi_hi : 0.0) + (neg ? nr2 : r)) + (neg ? 2.0 * morebits : 0.0);
-  return std::copysign(r, y);
+  const double r = t + t * (z * p / q);
+  // k = 4 [x < 0] +- (2 [swap] -+ [big]) and the sign of r: the signs flip with swap and
+  // with x's sign bit (so -0 too: atan2(+-0, -0) = +-pi); 4 [x < 0] = 2 - copysign(2, x)
+  const double sx = std::copysign(1.0, x);
+  const double kb = big ? 1.0 : 0.0, ks = swap ? 2.0 : 0.0;
+  const double k = (2.0 - 2.0 * sx) + sx * (ks + (swap ? -kb : kb));
+  const double sr = sx * (swap ? -r : r);
+  const double a = (sr + k * pio4_k::lo) + k * pio4_k::hi;
+  return std::copysign(a, y);
 }
 
 /// atan2_poly on two argument pairs at once (lane i: atan2(vy[i], vx[i])): the same operations on a
@@ -115,32 +125,26 @@ inline constexpr double morebits = 6.123233995736765886130e-17;  // pi/2 - pio2 
 [[gnu::always_inline]] inline v2d atan2_poly_v2(v2d vy, v2d vx) {
   using namespace atan2_coef;
   auto splat = [](double c) { return bc<v2d>(c); };
-  const v2d zero = splat(0.0), one = splat(1.0);
   const v2m sign = (v2m)splat(-0.0);
-  auto sel = [](v2m m, v2d a, v2d b) { return select(m, a, b); };
   auto when = [](v2m m, v2d a) { return (v2d)(m & (v2m)a); };  // m ? a : 0
+  auto flip = [](v2d a, v2m s) { return (v2d)((v2m)a ^ s); };   // a with its sign bit xor s
   const v2d ax = (v2d)((v2m)vx & ~sign), ay = (v2d)((v2m)vy & ~sign);
   const v2m swap = ay > ax;
-  const v2d num = sel(swap, ax, ay);
-  const v2d den = sel(swap, ay, ax);
+  const v2d num = lmin(ax, ay), den = lmax(ax, ay);
   const v2m big = num > splat(0.66) * den;
   const v2d tn = num - when(big, den);
-  const v2d td = when(big, num) + sel(den > zero, den, one);
+  const v2d td = when(big, num) + lmax(den, splat(pio4_k::tiny));
   const v2d t = tn / td;
   const v2d z = t * t;
   const v2d p = (((splat(P0) * z + splat(P1)) * z + splat(P2)) * z + splat(P3)) * z + splat(P4);
   const v2d q = ((((z + splat(Q0)) * z + splat(Q1)) * z + splat(Q2)) * z + splat(Q3)) * z + splat(Q4);
-  v2d r = t + t * (z * p / q);
-  r = (r + when(big, splat(0.5 * morebits))) + when(big, splat(pio4));
-  // swap ? pio2 - r + morebits : r  (the sign flip of r as an XOR)
-  r = (when(swap, splat(pio2)) + (v2d)((v2m)r ^ (swap & sign))) + when(swap, splat(morebits));
-  // x negative (sign bit, so -0 too): pi - r + 2 morebits. The full-lane
-  // mask from a double compare of copysign(1, x) (SSE2 has no 64-bit
-  // integer compare).
-  const v2m xs = (v2m)vx & sign;
-  const v2m neg = (v2d)((v2m)one | xs) < zero;
-  r = (when(neg, splat(pi_hi)) + (v2d)((v2m)r ^ xs)) + when(neg, splat(2.0 * morebits));
-  return (v2d)(((v2m)r & ~sign) | ((v2m)vy & sign));  // copysign(r, y)
+  const v2d r = t + t * (z * p / q);
+  // as atan2_poly, its multiplications by sx = copysign(1, x) and by -1 as sign-bit xors
+  const v2m xs = (v2m)vx & sign, ss = swap & sign;
+  const v2d k = (splat(2.0) - (v2d)((v2m)splat(2.0) | xs)) + flip(when(swap, splat(2.0)) + flip(when(big, splat(1.0)), ss), xs);
+  const v2d sr = flip(r, ss ^ xs);
+  const v2d a = (sr + k * splat(pio4_k::lo)) + k * splat(pio4_k::hi);
+  return (v2d)((v2m)a | ((v2m)vy & sign));  // copysign(a, y): a >= 0
 }
 /// The same on two pairs held in arrays.
 [[gnu::always_inline]] inline void atan2_poly_x2(const double* y, const double* x, double* out) {
