@@ -75,5 +75,6 @@ inline v2d bc<v2d>(double x) { return v2d{x, x}; }
 [[gnu::always_inline]] inline bool lane(v2m m, int i) { return m[i] != 0; }
 [[gnu::always_inline]] inline bool any(bool m) { return m; }
 [[gnu::always_inline]] inline bool any(v2m m) { return (m[0] | m[1]) != 0; }
+[[gnu::always_inline]] inline bool both(v2m m) { return (m[0] & m[1]) != 0; }  ///< both lanes set
 
 }  // namespace servoarm::kin::detail

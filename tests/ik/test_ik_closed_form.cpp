@@ -487,6 +487,38 @@ TEST(IkSphericalWrist, BadInputGivesAClearStatusAndNoNaN) {
   CHECK(kin::rotation_from_quaternion(0, 0, 0, 0, R) == kin::Status::bad_input);
 }
 
+// The target's rotation check (a rotation to 1e-6: every entry of R^T R - I and det R - 1
+// within it) against that rule computed here with Eigen, on random rotations with random
+// perturbations of 0.1x to 10x the tolerance, on a PUMA and on a reduced arm (the check comes
+// before the solver). Cases within 1e-12 of the boundary are left out (rounding order).
+TEST(IkSphericalWrist, RotationCheckIsTheDocumentedRule) {
+  for (const char* name : {"puma560", "trr"}) {
+    const kin::IkModel m = prepared(name);
+    std::mt19937_64 rng(1906);
+    std::normal_distribution<double> g(0, 1);
+    std::uniform_real_distribution<double> lg(-7, -5);
+    int rejected = 0, accepted = 0;
+    kin::IkResult r;
+    for (int k = 0; k < 20000; ++k) {
+      const Eigen::Quaterniond qu = Eigen::Quaterniond(g(rng), g(rng), g(rng), g(rng)).normalized();
+      kin::Pose T = fk(m.chain, kin::JointVector::Zero(m.chain.n_joints));
+      Eigen::Matrix3d E;
+      for (int i = 0; i < 9; ++i) E.data()[i] = g(rng);
+      T.linear() = qu.toRotationMatrix() + std::pow(10.0, lg(rng)) * E / E.cwiseAbs().maxCoeff();
+      if (k % 4 == 0) T.linear().col(k % 3) *= -1;  // reflections among them
+      const Eigen::Matrix3d R = T.linear();
+      const double e = std::max((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff(),
+                                std::abs(R.determinant() - 1.0));
+      if (std::abs(e - 1e-6) < 1e-12) continue;
+      kin::ik_solve_all(m, T, nullptr, r);
+      const bool bad = r.status == kin::Status::bad_input;
+      if (bad != (e > 1e-6)) FAIL((std::string(name) + ": rule error " + std::to_string(e) + ", status " + kin::to_string(r.status)).c_str());
+      (bad ? rejected : accepted)++;
+    }
+    CHECK(rejected > 5000 && accepted > 5000);  // both sides of the boundary were reached
+  }
+}
+
 TEST(IkSphericalWrist, NearestFnAdapterForMovelAndNumericFallback) {
   // kin::IkSolver{ik_nearest_fn, &model}: what plan_movel calls at every knot.
   const kin::IkModel m = prepared("ist6");

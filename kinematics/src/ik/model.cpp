@@ -338,11 +338,22 @@ bool detect_spherical_wrist(IkModel& model) {
 // is_rotation() for a finite R (ik_solve_all checked that): R^T R - I by
 // its six distinct entries, det R by the triple product (half the
 // instructions of the general check; issue 19, the reduced arms' budget).
+// The six dot products two at a time, in lane pairs of columns (a.a, b.b),
+// (c.c, a.b), (a.c, b.c), each summed as Eigen's dot, (x0 y0 + x1 y1) + x2 y2:
+// a third of the instructions of six scalar dots and their abs and max.
 bool rotation_within(const Eigen::Matrix3d& R, double tol) {
-  const Eigen::Vector3d a = R.col(0), b = R.col(1), c = R.col(2);
-  const double e = std::max({std::abs(a.dot(a) - 1.0), std::abs(b.dot(b) - 1.0), std::abs(c.dot(c) - 1.0),
-                             std::abs(a.dot(b)), std::abs(a.dot(c)), std::abs(b.dot(c))});
-  if (!(e <= tol)) return false;
+  const double* m = R.data();  // column-major: column j at m + 3 j
+  const v2d A{m[0], m[1]}, B{m[3], m[4]}, C{m[6], m[7]};
+  const double a2 = m[2], b2 = m[5], c2 = m[8];
+  auto hsum = [](v2d x, v2d y) { return v2d{x[0], y[0]} + v2d{x[1], y[1]}; };  // (sum x, sum y)
+  const v2d d1 = hsum(A * A, B * B) + v2d{a2, b2} * v2d{a2, b2};
+  const v2d d2 = hsum(C * C, A * B) + v2d{c2, a2} * v2d{c2, b2};
+  const v2d d3 = hsum(A * C, B * C) + v2d{a2, b2} * bc<v2d>(c2);
+  const v2m sign = (v2m)bc<v2d>(-0.0);
+  auto vabs = [&](v2d x) { return (v2d)((v2m)x & ~sign); };
+  const v2d e = lmax(lmax(vabs(d1 - bc<v2d>(1.0)), vabs(d2 - v2d{1.0, 0.0})), vabs(d3));
+  if (!both(e <= bc<v2d>(tol))) return false;
+  const Eigen::Vector3d a(m[0], m[1], a2), b(m[3], m[4], b2), c(m[6], m[7], c2);
   return std::abs(a.dot(b.cross(c)) - 1.0) <= tol;
 }
 

@@ -52,9 +52,6 @@ inline Roots roots_rev(double a, const IkSolverData::Planar& pl, double* kst = n
   return r;
 }
 
-// Both lanes of a mask set (lanes.hpp).
-inline bool both(v2m m) { return (m[0] & m[1]) != 0; }
-
 // One joint value v = dir * motion (|v| <= pi) into the limits: what
 // wrap_into_limits gives, branch-free for a joint whose limits span less than
 // a turn (wrap_narrow; as the spherical-wrist and UR paths do).
