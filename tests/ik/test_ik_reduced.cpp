@@ -290,6 +290,34 @@ TEST(IkReduced, CheapPathGivesWhatTheChainPathGives) {
   }
 }
 
+TEST(IkReduced, MergeBandIsOneRuleOnBothPaths) {
+  // The planar arms' elbow near stretched / folded: the two roots (2 q_e apart) are one
+  // configuration when |sin 2 q_e| < 2e-6 (merge_close_roots), on the cheap path and on the
+  // chain path alike. Before the chain path took that rule it kept two solutions at
+  // q_e = 9.1e-7 (the pose 10^6 random samples found), the cheap path one. The count expected
+  // is the rule's, computed here from q_e; the values keep 1e-9 from its edge.
+  for (const char* name : {"rr_planar", "rrr_planar"}) {
+    kin::IkModel m;
+    kin::ik_prepare(model(name), m);
+    for (const double t : {5e-7, 9.1066506602288655e-7, 9.99e-7, 1.001e-6, 1.5e-6, 3e-6})
+      for (const double base : {0.0, M_PI})
+        for (const double sgn : {1.0, -1.0}) {
+          kin::JointVector q = kin::JointVector::Zero(m.chain.n_joints);
+          q[0] = 0.985520;
+          q[1] = base + sgn * t;
+          if (m.chain.n_joints > 2) q[2] = -3.111702;
+          const kin::Pose T = fk(m.chain, q);
+          kin::IkResult fast, slow;
+          kin::ik_solve_all(m, T, nullptr, fast);
+          solve_slow(m, T, nullptr, slow);
+          const int expected = std::abs(std::sin(2 * t)) < 2e-6 ? 1 : 2;
+          const std::string what = std::string(name) + " " + describe(q);
+          LONGS_EQUAL_TEXT(expected, fast.count, ("cheap path " + what).c_str());
+          LONGS_EQUAL_TEXT(expected, slow.count, ("chain path " + what).c_str());
+        }
+  }
+}
+
 TEST(IkReduced, SpatialLanesGiveWhatTheChainPathGives) {
   // Issue 19: spatial_3's lanes (case A of the position subproblem: the four configurations
   // two at a time, detail::solve_spatial_3_lanes) on the seed's TRR and on variants built

@@ -1383,7 +1383,11 @@ inline bool reduced_2d(const IkModel& model, const Pose& target, const double* m
       const Eigen::Vector3d f = C(m, 1) * (joint_motion(prism(m, 1), m2) * m.w3);
       return f.x() * f.x() + f.y() * f.y();
     });
-    const Roots r2 = solve_basis(co[0] - (p0.x() * p0.x() + p0.y() * p0.y()), co[1], co[2], prism(m, 1), tol);
+    Roots r2 = solve_basis(co[0] - (p0.x() * p0.x() + p0.y() * p0.y()), co[1], co[2], prism(m, 1), tol);
+    // stretched / folded: one configuration, by the rule the cheap paths take (solve_planar_2r,
+    // core_2d, solve_planar_3_fast); without it the two paths disagreed for roots ~1e-6
+    // apart, beyond add_candidate's 1e-7 (rrr_planar, q2 = 9.1e-7, 10^6 samples of ik_reduced)
+    if (!prism(m, 1)) merge_close_roots(r2);
     for (int i = 0; i < r2.n; ++i) {
       const Eigen::Vector3d f = C(m, 1) * (joint_motion(prism(m, 1), r2.v[i]) * m.w3);
       sols[ns][0] = std::hypot(f.x(), f.y()) < 1e-9 * m.scale ? mref[0]
