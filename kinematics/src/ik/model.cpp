@@ -339,8 +339,10 @@ bool detect_spherical_wrist(IkModel& model) {
 // its six distinct entries, det R by the triple product (half the
 // instructions of the general check; issue 19, the reduced arms' budget).
 // The six dot products two at a time, in lane pairs of columns (a.a, b.b),
-// (c.c, a.b), (a.c, b.c), each summed as Eigen's dot, (x0 y0 + x1 y1) + x2 y2:
-// a third of the instructions of six scalar dots and their abs and max.
+// (c.c, a.b), (a.c, b.c), each summed as Eigen's dot, (x0 y0 + x1 y1) + x2 y2,
+// and a branch-free max: about as many instructions as six scalar dots and
+// std::max over them, but without its branches on the data (2-5 ns per solve
+// of the reduced arms, RESULTS.md 2026-12-04 sixth session).
 bool rotation_within(const Eigen::Matrix3d& R, double tol) {
   const double* m = R.data();  // column-major: column j at m + 3 j
   const v2d A{m[0], m[1]}, B{m[3], m[4]}, C{m[6], m[7]};
