@@ -123,12 +123,15 @@ function and_op(s) { return s % 8 == 7 && int(s / 8) % 2 == 0 && int(s / 32) % 2
 # $OUT_DIR/NAME.log (started by the caller with start_candump NAME ...). Each
 # line waits until the log holds as many frames as lines played so far, so the
 # order of requests and answers is fixed. In "<" lines, x matches any hex digit.
+# "~ SECONDS" lines pause (a drive's move that must have ended before the next
+# frame: its time is wall time, and the answers alone can come faster than it).
 play_exchange() {
   _p_n=0
   while read -r _p_dir _p_frame _p_rest; do
     case $_p_dir in
       '>') _p_n=$((_p_n + 1)); cansend "$CAN_IF" "$_p_frame" || check_fail "cansend $_p_frame failed" ;;
       '<') _p_n=$((_p_n + 1)) ;;
+      '~') sleep "$_p_frame"; continue ;;
       *) continue ;;
     esac
     _p_t=60   # x 50 ms
