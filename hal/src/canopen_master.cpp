@@ -257,6 +257,7 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
       if (!jt.have_status || st != jt.state) jt.state_since = now;
       jt.state = st;
       jt.have_status = true;
+      if (st != cia402::State::operation_enabled) jt.leaving_op = false;
       jt.actual_counts = pos;
       if (jt.tpdos < 1000) ++jt.tpdos;
       if (jt.off_velocity < 0) {
@@ -695,6 +696,7 @@ Status CanopenServoBus::start(TimePoint deadline) {
     // processed this start command may still say pre-operational.
     joints_[j].nmt = NmtState::boot_up;
     joints_[j].have_status = false;
+    joints_[j].leaving_op = false;
     joints_[j].prev_pos_time = 0;
     fb_[j] = JointFeedback{};
     fb_[j].state = JointState::disabled;
@@ -779,7 +781,7 @@ Status CanopenServoBus::read(TimePoint now) {
     if (fb.state != JointState::fault) {
       switch (target_) {
         case cia402::Target::enabled:
-          if (jt.have_status && jt.state == cia402::State::operation_enabled && hb_fresh) {
+          if (jt.have_status && jt.state == cia402::State::operation_enabled && hb_fresh && !jt.leaving_op) {
             fb.state = JointState::enabled;
           } else {
             fb.state = JointState::enabling;
@@ -859,6 +861,11 @@ Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) 
     }
     Status s = bus_.send(f);
     if (!is_ok(s) && is_ok(result)) result = s;
+    // Every target but enabled ends operation enabled (next_controlword: disable operation
+    // or quick stop there): once that controlword is on the bus, an enable() before the
+    // drive has answered it must wait for the answer (a frame not sent changes nothing).
+    if (is_ok(s) && t != cia402::Target::enabled && jt.have_status && jt.state == cia402::State::operation_enabled)
+      jt.leaving_op = true;
     if (jt.rpdo2_len > 0) {
       // Offsets only while following setpoints in CSP (one-shot: cleared below); the target
       // torque while in (or entering, leaving) torque mode.

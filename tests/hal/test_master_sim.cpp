@@ -4,6 +4,7 @@
 #include <cstring>
 #include <atomic>
 #include <random>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -382,6 +383,40 @@ TEST(MasterSim, QuickStopRampsDownThenEnableResumes) {
   const double stopped_at = master->feedback(0).position;
   LONGS_EQUAL(int(Status::ok), int(master->enable_blocking(rig->clock.now() + kSecond, kPeriod)));
   DOUBLES_EQUAL(stopped_at, master->feedback(0).position, 1e-3);
+}
+
+// enable() right after disable(), before the drives have answered the disable's
+// controlword: their last statusword still says operation enabled, but they are about to
+// leave it. Reported as enabled then, a joint dropped back to enabling a cycle later, and
+// the controller, idle already, faulted the arm "left_enabled: drive now enabling" (seen
+// under ASan in fw_can_console's reset + enable after an e-stop).
+TEST(MasterSim, EnableRightAfterDisableWaitsForTheDrivesToAnswer) {
+  bring_up();
+  hold_cycles(5);
+  double sp[6];
+  for (std::size_t j = 0; j < 6; ++j) sp[j] = master->feedback(j).position;
+  master->disable();
+  const TimePoint now = rig->clock.now();
+  master->read(now);
+  master->write(std::span<const double>(sp, 6), now);  // disable operation goes out
+  master->enable();
+  master->read(now);  // no drive has run since: every statusword is the old one
+  for (std::size_t j = 0; j < 6; ++j) {
+    LONGS_EQUAL_TEXT(int(cia402::State::operation_enabled), int(rig->sim->node(std::uint8_t(j + 1))->state()),
+                     "the drive has not processed the disable yet");
+    LONGS_EQUAL_TEXT(int(JointState::enabling), int(master->feedback(j).state), "reported enabled on a stale statusword");
+  }
+  // Once reported enabled, a joint stays enabled.
+  bool seen[6] = {};
+  for (int k = 0; k < 200; ++k) {
+    cycle(sp);
+    for (std::size_t j = 0; j < 6; ++j) {
+      const JointState st = master->feedback(j).state;
+      if (st == JointState::enabled) seen[j] = true;
+      else if (seen[j]) FAIL(("joint " + std::to_string(j + 1) + " left enabled at cycle " + std::to_string(k)).c_str());
+    }
+  }
+  for (std::size_t j = 0; j < 6; ++j) CHECK_TEXT(seen[j], ("joint " + std::to_string(j + 1) + " never enabled").c_str());
 }
 
 // CanopenJointConfig::quick_stop_decel is written to 6085h at bring-up (only

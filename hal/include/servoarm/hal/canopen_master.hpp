@@ -237,6 +237,11 @@ class CanopenServoBus final : public ServoBus {
     bool reset_phase = false;
     bool need_nmt_start = false;
     bool resetting = false;  ///< enable() is walking this drive out of fault
+    /// A controlword that ends operation enabled (disable operation, quick stop, ...) went
+    /// to this drive while its last statusword said operation enabled, and no statusword
+    /// since has shown it leave. Until one does, "operation enabled" is the drive's state
+    /// from before that command, not an answer to enable(): not reported as enabled.
+    bool leaving_op = false;
     TimePoint state_since = 0;
     std::int32_t actual_counts = 0;
     std::int32_t target_counts = 0;
