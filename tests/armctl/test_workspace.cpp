@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <fstream>
 #include <functional>
+#include <random>
 #include <regex>
 #include <sstream>
 #include <string>
@@ -19,6 +20,7 @@
 
 #include "run_command.hpp"
 #include "servoarm/armctl/cli_workspace.hpp"
+#include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/description.hpp"
 
 // CppUTest last: its leak detector redefines new.
@@ -211,6 +213,107 @@ TEST(Workspace, TurningArmsMatchTheSphereAndTorusSectionsThroughTheBase) {
   // of radius sqrt(450^2 - 300^2)
   const double r0 = std::sqrt(450.0 * 450 - 300.0 * 300);
   check_envelope({"trr", "xy", "trr xy", ring(0, 0, -1, r0), M_PI * r0 * r0});
+}
+
+// An AR4-like desktop arm (Annin Robotics AR4's modified DH table and joint limits as
+// printed in the robotkinematicscatalogue Python package, class Annin_Robotics_AR4) with a
+// 60 mm gripper on the flange: joint 1 spans +-170 deg, the reach is about 690 mm. Behind
+// the base (x < 0) much of the xz section is reached only with joint 1 near +-170 deg and
+// the gripper turned sideways by joints 4 and 5 (joint 4 near +-90 deg).
+const char* kAr4 =
+    "name = \"ar4_like\"\nconvention = \"modified\"\nlength_unit = \"mm\"\nangle_unit = \"deg\"\n"
+    "[[joint]]\ntype = \"revolute\"\nd = 169.77\nlimits = [-170, 170]\n"
+    "[[joint]]\ntype = \"revolute\"\nalpha = -90\na = 64.2\ntheta = -90\nlimits = [-42, 90]\n"
+    "[[joint]]\ntype = \"revolute\"\na = 305\nlimits = [-89, 52]\n"
+    "[[joint]]\ntype = \"revolute\"\nalpha = -90\nd = 222.63\nlimits = [-165, 165]\n"
+    "[[joint]]\ntype = \"revolute\"\nalpha = 90\nlimits = [-105, 105]\n"
+    "[[joint]]\ntype = \"revolute\"\nalpha = -90\nd = 36.25\ntheta = 180\nlimits = [-155, 155]\n"
+    "[tool]\nxyz = [0, 0, 60]\n";
+
+// The printed extent "u from A to B mm, v from C to D mm" of `armctl kin workspace`.
+bool printed_extent(const std::string& out, double e[4]) {
+  std::smatch m;
+  const std::regex re("([xyz]) from ([-0-9.e+]+) to ([-0-9.e+]+) mm, ([xyz]) from ([-0-9.e+]+) to ([-0-9.e+]+) mm");
+  if (!std::regex_search(out, m, re)) return false;
+  for (int k = 0; k < 2; ++k) e[k] = std::stod(m[2 + k]), e[2 + k] = std::stod(m[5 + k]);
+  return true;
+}
+
+TEST(Workspace, TurningArmWithOffsetWristHoldsEveryPointDenseFkSamplingReaches) {
+  // Dense seeded sampling of the joint box (joints 2..6 uniform, a quarter of the values
+  // at a limit), each sample turned by joint 1 into the plane's two half-planes where
+  // joint 1's limits allow; FK of the turned joints gives a point of the section. The
+  // printed extent (cell centres) must hold every such point to within one cell, and
+  // every point must lie within two cells of a filled cell (no cut, no hole wider than
+  // about two cells: joints 4 and 5 are sampled in steps, the gripper's sideways offset
+  // between two steps is not drawn).
+  constexpr int kReachCells = 2;  // a sampled point's distance to a filled cell, at most (cells)
+  const std::string f = write_temp("ar4_like.toml", kAr4);
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot(f);
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  const servoarm::kin::Chain& c = lr.chain;
+  std::mt19937 rng(35);
+  std::uniform_real_distribution<double> unit(0, 1);
+  for (const char* plane : {"xz", "yz"}) {
+    const int iu = plane[0] == 'x' ? 0 : 1, iv = 2;
+    const double psi0 = iu == 0 ? 0 : M_PI / 2;  // azimuth of the +u half-plane
+    WorkspaceOptions o;
+    o.plane = plane;
+    const WorkspaceResult w = compute_workspace(c, o);
+    CHECK_TEXT(w.status == 0, w.error.c_str());
+    const double mm = 1000, cell = w.cell * mm;
+    const auto r = run_command(kArmctl + " kin workspace --robot " + f + " --plane " + plane);
+    double e[4];
+    CHECK_TEXT(r.status == 0 && printed_extent(r.out, e), (r.out + r.err).c_str());
+    double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
+    int points = 0, uncovered = 0;
+    std::string first;
+    for (int k = 0; k < 400000; ++k) {
+      servoarm::kin::JointVector q(c.n_joints);
+      q[0] = 0;
+      for (int j = 1; j < c.n_joints; ++j) {
+        const double a = c.joint(j).lower, b = c.joint(j).upper, t = unit(rng);
+        q[j] = t < 0.125 ? a : t < 0.25 ? b : a + (b - a) * unit(rng);
+      }
+      servoarm::kin::Pose T;
+      servoarm::kin::forward(c, q, T);
+      const double phi = std::atan2(T.translation().y(), T.translation().x());
+      for (const double psi : {psi0, psi0 + M_PI}) {
+        const double d = std::remainder(psi - phi, 2 * M_PI);
+        double q1 = NAN;
+        for (const double cand : {d, d - 2 * M_PI, d + 2 * M_PI})
+          if (cand >= c.joint(0).lower && cand <= c.joint(0).upper) q1 = cand;
+        if (std::isnan(q1)) continue;
+        servoarm::kin::JointVector q2 = q;
+        q2[0] = q1;
+        servoarm::kin::forward(c, q2, T);
+        const Eigen::Vector3d p = T.translation() * mm;
+        CHECK_TEXT(std::abs(p[1 - iu]) < 1e-6, "joint 1 of the AR4-like arm does not turn about the base z axis");
+        const double u = p[iu], v = p[iv];
+        ++points;
+        lo[0] = std::min(lo[0], u), hi[0] = std::max(hi[0], u), lo[1] = std::min(lo[1], v), hi[1] = std::max(hi[1], v);
+        const int i = static_cast<int>(std::floor((u / mm - w.u0) / w.cell)), j = static_cast<int>(std::floor((v / mm - w.v0) / w.cell));
+        bool near = false;
+        for (int a = i - kReachCells; a <= i + kReachCells && !near; ++a)
+          for (int b = j - kReachCells; b <= j + kReachCells && !near; ++b) near = a >= 0 && a < w.nu && b >= 0 && b < w.nv && w.at(a, b);
+        if (!near && uncovered++ == 0) {
+          char b[200];
+          std::snprintf(b, sizeof b, "(%s, %s) = (%.1f, %.1f) mm", plane == std::string("xz") ? "x" : "y",
+                        "z", u, v);
+          first = b;
+        }
+      }
+    }
+    char msg[400];
+    std::snprintf(msg, sizeof msg,
+                  "%s: printed %c %.1f..%.1f, z %.1f..%.1f mm; FK sampling %.1f..%.1f, z %.1f..%.1f mm (%d points, cell %.2f mm); "
+                  "%d points farther than %d cells from a filled cell, first %s",
+                  plane, plane[0], e[0], e[1], e[2], e[3], lo[0], hi[0], lo[1], hi[1], points, cell, uncovered, kReachCells, first.c_str());
+    CHECK_TEXT(points > 100000, msg);
+    CHECK_TEXT(e[0] <= lo[0] + cell && e[1] >= hi[0] - cell && e[2] <= lo[1] + cell && e[3] >= hi[1] - cell, msg);
+    CHECK_TEXT(uncovered == 0, msg);
+  }
+  std::remove(f.c_str());
 }
 
 TEST(Workspace, PlanesWithoutAreaAndBadOptionsAreRefused) {

@@ -238,7 +238,11 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
   const bool slice = kind.turning && plane == "xy";
   const double psi_plus = iu == 0 ? 0 : M_PI / 2;  // azimuth of the +u half-plane (xz: +x, yz: +y)
 
-  // Pass 1 (coarse) finds the extent, pass 2 fills the raster.
+  // Pass 0 (coarse) estimates the extent, the next pass fills the raster over it. The
+  // coarse pass can miss the far reach (e.g. an offset tool turned sideways by wrist joints
+  // at values between its few steps, brought into the plane by joint 1 near its limit): a
+  // fill pass whose points leave the raster is run again over their whole extent, so the
+  // raster holds every point the fill pass sampled.
   struct Node {
     double u[2], v[2];
     bool ok[2];
@@ -249,14 +253,18 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
   std::vector<std::uint8_t> polar;  // slice: [rho bin][azimuth bin]
   int n_rho = 0, n_az = 0;
   double umin = 1e300, umax = -1e300, vmin = 1e300, vmax = -1e300;
-  for (int pass = 0; pass < 2; ++pass) {
-    if (pass == 1) {
+  constexpr int kMaxPasses = 4;  // the coarse pass and at most three fill passes
+  bool regrow = true;
+  for (int pass = 0; pass < 2 || (regrow && pass < kMaxPasses); ++pass) {
+    const bool coarse = pass == 0;
+    double fu0 = 1e300, fu1 = -1e300, fv0 = 1e300, fv1 = -1e300;  // extent of this fill pass's points
+    if (!coarse) {
       // the coarse pass saw fewer points: widen its extent by 5 % on every side
       const double pu = 0.05 * (umax - umin), pv = 0.05 * (vmax - vmin), pm = std::max(pu, pv);
-      umin -= pm, umax += pm, vmin -= pm, vmax += pm;
-      const double su = umax - umin, sv = vmax - vmin;
+      const double u_lo = umin - pm, u_hi = umax + pm, v_lo = vmin - pm, v_hi = vmax + pm;
+      const double su = u_hi - u_lo, sv = v_hi - v_lo;
       if (slice) {
-        const double rmax = std::max({std::abs(umin), std::abs(umax), 1e-6});
+        const double rmax = std::max({std::abs(u_lo), std::abs(u_hi), 1e-6});
         ras.cell = 2 * rmax / opt.grid;
         n_rho = static_cast<int>(std::ceil(rmax / ras.cell)) + 3;
         n_az = std::clamp(static_cast<int>(std::ceil(kTwoPi * rmax / ras.cell)), 360, 8192);
@@ -264,23 +272,28 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
       } else {
         ras.cell = std::max(su, sv) / opt.grid;
         if (!(ras.cell > 0)) return fail(1, std::string(chain.name.data()) + ": the reachable set is a point");
-        ras.u0 = umin - 3 * ras.cell, ras.v0 = vmin - 3 * ras.cell;
+        ras.u0 = u_lo - 3 * ras.cell, ras.v0 = v_lo - 3 * ras.cell;
         ras.nu = static_cast<int>(std::ceil(su / ras.cell)) + 6;
         ras.nv = static_cast<int>(std::ceil(sv / ras.cell)) + 6;
         ras.on.assign(static_cast<std::size_t>(ras.nu) * ras.nv, 0);
       }
     }
-    const int m = pass == 0 ? 24 : 120;  // steps of the two quad joints
-    std::vector<int> steps;              // of the other moving joints
+    // The quadrilaterals interpolate between the two gridded joints' steps; nothing
+    // interpolates between the other joints' steps, and a small sideways move of the tool
+    // (a wrist joint) can move a point a long way in the plane when joint 1's limit decides
+    // where it lands. So the fill pass spends its FK evaluations on those joints: 61 x 61
+    // points per slice, up to 33 steps per other joint and about 1200 slices.
+    const int m = coarse ? 24 : 60;  // steps of the two quad joints
+    std::vector<int> steps;          // of the other moving joints
     long combos = 1;
     for (std::size_t k = 2; k < moving.size(); ++k) {
-      const double cell_est = pass == 0 ? 1e300 : ras.cell;
-      int s = pass == 0 ? 3 : static_cast<int>(std::ceil(sweep[static_cast<std::size_t>(moving[k])] / (3 * cell_est)));
-      s = std::clamp(s, 3, 17);
+      const double cell_est = coarse ? 1e300 : ras.cell;
+      int s = coarse ? 9 : static_cast<int>(std::ceil(sweep[static_cast<std::size_t>(moving[k])] / (3 * cell_est)));
+      s = std::clamp(s, 3, 33);
       steps.push_back(s);
       combos *= s;
     }
-    while (combos > 300) {  // budget: about 300 slices of (m + 1)^2 points
+    while (combos > (coarse ? 300 : 1200)) {  // budget: about 1200 slices of (m + 1)^2 points
       auto it = std::max_element(steps.begin(), steps.end());
       combos = combos / *it * (*it - 1);
       --*it;
@@ -308,12 +321,10 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
             nd.ok[0] = reaches(nd.phi, psi_plus, r0, q0ref, kind.sign);
             nd.ok[1] = reaches(nd.phi, psi_plus + M_PI, r0, q0ref, kind.sign);
           }
-          if (pass == 0) {
-            for (int s = 0; s < 2; ++s) {
-              if (!nd.ok[s] && !slice) continue;
-              umin = std::min(umin, nd.u[s]), umax = std::max(umax, nd.u[s]);
-              vmin = std::min(vmin, nd.v[s]), vmax = std::max(vmax, nd.v[s]);
-            }
+          for (int s = 0; s < 2; ++s) {
+            if (!nd.ok[s] && !slice) continue;
+            fu0 = std::min(fu0, nd.u[s]), fu1 = std::max(fu1, nd.u[s]);
+            fv0 = std::min(fv0, nd.v[s]), fv1 = std::max(fv1, nd.v[s]);
           }
         }
       // A quad whose corners lie on both sides of the z axis would fold over at rho = 0
@@ -332,7 +343,7 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
       const double phi_e = std::atan2(ey, ex);
       const bool e_plus = kind.turning && reaches(phi_e, psi_plus, r0, q0ref, kind.sign);
       const bool e_minus = kind.turning && reaches(phi_e, psi_plus + M_PI, r0, q0ref, kind.sign);
-      if (pass == 1) {
+      if (!coarse) {
         for (int a = 0; a < m; ++a)
           for (int b = 0; b < m; ++b) {
             const Node* c4[4] = {&grid[static_cast<std::size_t>(a * (m + 1) + b)], &grid[static_cast<std::size_t>((a + 1) * (m + 1) + b)],
@@ -410,6 +421,12 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
         idx[k] = 0;
       }
     }
+    // Does the raster hold every point of this pass? If not, the next pass covers their extent.
+    if (!coarse) {
+      regrow = slice ? std::max(std::abs(fu0), std::abs(fu1)) > (n_rho - 3) * ras.cell
+                     : fu0 < ras.u0 || fu1 > ras.u0 + ras.nu * ras.cell || fv0 < ras.v0 || fv1 > ras.v0 + ras.nv * ras.cell;
+    }
+    umin = std::min(umin, fu0), umax = std::max(umax, fu1), vmin = std::min(vmin, fv0), vmax = std::max(vmax, fv1);
   }
   if (slice) {  // the xy plane from the ring of radii reached at z = 0
     const double rmax = (n_rho - 3) * ras.cell;
