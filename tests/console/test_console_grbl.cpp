@@ -16,6 +16,7 @@
 
 #include "console_rig.hpp"
 #include "servoarm/console/transport.hpp"
+#include "servoarm/kinematics/orientation.hpp"
 
 #include <CppUTest/TestHarness.h>
 
@@ -213,4 +214,88 @@ TEST(ConsoleGrbl, OnAPtyTheBannerComesOnOpenAndAHangUpStopsTheJog) {
   }
   CHECK(r.app.ctl->telemetry().state == ArmState::idle);
   CHECK_TEXT(cycles < 1000, std::to_string(cycles).c_str());  // the stop, not the 5 s deadman
+}
+
+// A feed hold right after a move in the same write holds that move: the '!' applies to the
+// lines received before it (a move is held as soon as it is queued, until '~'), for every
+// kind of move, from rest, while a move runs and while one is held. A jog is cancelled.
+TEST(ConsoleGrbl, AFeedHoldRightAfterAMoveInTheSameWriteHoldsIt) {
+  const char* kinds[] = {"movej 60 -60 120 60 -60 60 speed=20", "movel", "jog j1 +30", "$J=G91 X20 F600",
+                         "G91 G1 Z-20 F600", "G91 G0 Z-20"};
+  const char* states[] = {"idle", "moving", "held"};
+  for (const char* kind : kinds) {
+    for (const char* state : states) {
+      test::ConsoleRig r;
+      r.enable();
+      CHECK(test::answer_ok(r.cmd("movej 20 -40 160 10 -50 30")));
+      CHECK(test::answer_ok(r.cmd("wait")));
+      std::string line = kind;
+      if (line == "movel") {  // 20 mm down from here, same orientation
+        const Telemetry t = r.app.ctl->telemetry();
+        kin::JointVector q(6);
+        for (int j = 0; j < 6; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+        const kin::Pose p = r.app.console->pose_in_frame(q);
+        const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear()) * 180.0 / M_PI;
+        char b[160];
+        std::snprintf(b, sizeof b, "movel %.3f %.3f %.3f %.4f %.4f %.4f speed=50", p.translation().x() * 1e3,
+                      p.translation().y() * 1e3, p.translation().z() * 1e3 - 20, rpy[0], rpy[1], rpy[2]);
+        line = b;
+      }
+      const std::string st = state;
+      if (st != "idle") {
+        CHECK(test::answer_ok(r.cmd("movej 25 -40 160 10 -50 30 speed=2")));
+        for (int i = 0; i < 300; ++i) r.cycle();
+        if (st == "held") {
+          r.app.console->feed(r.s, "!");
+          for (int i = 0; i < 2000; ++i) r.cycle();
+        }
+      }
+      const bool jog = line.rfind("jog", 0) == 0 || line.rfind("$J", 0) == 0;
+      auto joints = [&r] {
+        const Telemetry t = r.app.ctl->telemetry();
+        kin::JointVector q(6);
+        for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+        return q;
+      };
+      const kin::JointVector q0 = joints();
+      r.s.out.clear();
+      r.app.console->feed(r.s, line + "\n!");
+      const std::string what = line + " + ! while " + st + ": " + r.s.out;
+      for (int i = 0; i < 3000; ++i) r.cycle();
+      const kin::JointVector q1 = joints();
+      for (int i = 0; i < 500; ++i) r.cycle();
+      const kin::JointVector q2 = joints();
+      // at rest, held
+      CHECK_TEXT((q2 - q1).norm() < 1e-9, what.c_str());
+      const Telemetry t = r.app.ctl->telemetry();
+      CHECK_TEXT(t.state == ArmState::idle || t.holding, what.c_str());
+      // from rest: nothing moved (at most the cycle before the hold, at rest speed)
+      if (st == "idle") CHECK_TEXT((q2 - q0).norm() < 0.05 * M_PI / 180.0, what.c_str());
+      if (jog) continue;
+      // `~`: the held move runs (it was held, not dropped)
+      r.app.console->feed(r.s, "~");
+      for (int i = 0; i < 1000; ++i) r.cycle();
+      CHECK_TEXT((joints() - q2).norm() > 1e-4, what.c_str());
+    }
+  }
+}
+
+// Bytes 0x80-0xFF are realtime only where GRBL puts them: a UTF-8 `Ñ` (C3 91) in a refused
+// line holds the byte 0x91 (feed +10 %) and changes nothing; status and ? show the override.
+TEST(ConsoleGrbl, BytesInsideAUtf8CharacterAreNoRealtimeCommands) {
+  test::ConsoleRig r;
+  r.enable();
+  std::string line = "; ";
+  for (int i = 0; i < 10; ++i) line += "\xC3\x91";
+  r.s.out.clear();
+  r.app.console->feed(r.s, line + "\n");
+  CHECK_TEXT(has(r.s.out, "error: binary"), r.s.out.c_str());
+  LONGS_EQUAL(100, r.app.console->feed_override());
+  // the GRBL places still act: bare, and UTF-8 encoded as C2 91
+  r.app.console->feed(r.s, "\x91\xC2\x91");
+  LONGS_EQUAL(120, r.app.console->feed_override());
+  CHECK_TEXT(has(r.cmd("status"), " feed_override=120%"), r.s.out.c_str());
+  r.s.out.clear();
+  r.app.console->feed(r.s, "?");
+  CHECK_TEXT(has(r.s.out, "|Ov:120"), r.s.out.c_str());
 }

@@ -137,9 +137,10 @@ TEST(ConsoleJog, AtAJointLimitAJogStopsOnTheLimitWithoutAFault) {
   JogRig r;
   r.enable();
   const kin::JointLimits l = kin::limits_from(r.app.chain);
-  const std::string a = r.cmd("jog j2 +1000 speed=100");
-  CHECK_TEXT(a.rfind("error: limits jog: joint 2 stops at its limit", 0) == 0, a.c_str());
-  CHECK(r.state() == ArmState::jogging);  // it goes there all the same
+  // an increment past the limit (within the joint's range): the arm moves, so `ok`, saying where it stops
+  const std::string a = r.cmd("jog j2 +" + std::to_string((l.upper[1] - l.lower[1]) / kDeg - 1) + " speed=100");
+  CHECK_TEXT(a.rfind("ok ", 0) == 0 && has(a, "joint 2 stops at its limit"), a.c_str());
+  CHECK(r.state() == ArmState::jogging);
   r.run_to_idle(30000);
   DOUBLES_EQUAL(l.upper[1], r.q()[1], 1e-12);
   const std::string again = r.cmd("jog j2 +1");
@@ -367,4 +368,31 @@ TEST(ConsoleJog, AJogIsRefusedWhileAMoveRunsAndStopOrEstopAlwaysWin) {
   // and a jog is refused there
   const std::string j = r.cmd("jog j1 +5");
   CHECK_TEXT(j.rfind("error: fault", 0) == 0, j.c_str());
+}
+
+// A jog answers `ok` when the arm moves and `error` when it does not: an increment beyond the
+// joint's whole range, a tool rotation of half a turn or more (it would be taken the short
+// way, the wrong way round), and a jog that would outlast motion.max_move_duration_s are
+// refused and nothing moves; a rotation below half a turn turns by the amount and sign given.
+TEST(ConsoleJog, AbsurdJogsAreRefusedAndRotationsTurnTheWayAsked) {
+  JogRig r;
+  r.working_pose();
+  const kin::JointVector q0 = r.q();
+  const char* refused[] = {"jog j1 +1e300 speed=100", "jog j1 -400", "jog rz +350", "jog rz +190", "jog rz +360",
+                           "jog rz +1e300", "jog rx -180", "$J=G91 C200 F600", "$J=G91 X50 F0.6", "jog x +1e300"};
+  for (const char* j : refused) {
+    const std::string a = r.cmd(j);
+    CHECK_TEXT(a.rfind("error: ", 0) == 0, (std::string(j) + " -> " + a).c_str());
+    for (int i = 0; i < 50; ++i) r.cycle();
+    CHECK_TEXT(r.state() == ArmState::idle && (r.q() - q0).norm() == 0, j);
+  }
+  // +170 about the tool's z: the orientation turns by +170 deg (not -190)
+  const kin::Pose x0 = r.x();
+  const std::string a = r.cmd("jog rz +170 frame=tool speed=100");
+  CHECK_TEXT(answer_ok(a), a.c_str());
+  r.run_to_idle(60000);
+  const Eigen::Matrix3d d = x0.linear().transpose() * r.x().linear();  // in the tool frame
+  const Eigen::AngleAxisd aa(d);
+  DOUBLES_EQUAL(170.0, aa.angle() / kDeg, 0.01);
+  CHECK(aa.axis().z() > 0.999);
 }

@@ -5,6 +5,7 @@
 // an unhomed arm refused naming the joints, $C + run = check only, record -> replay
 // within the tolerance of the recorded path, and digital outputs on the virtual drives. Expected values come from the chain's FK and
 // the test's own samples, never from the console's code.
+#include <unistd.h>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -689,4 +690,84 @@ TEST(ConsoleProgram, BlendedLinesAndMixedCornersInPrograms) {
   LONGS_EQUAL(5, gb.blended);
   LONGS_EQUAL(0, gx.blended);
   CHECK(gb.cycle < gx.cycle);
+}
+
+// While a program runs, motion commands from any other console are refused `busy` (they
+// would run inside the checked program); stop, hold, resume and queries still work.
+TEST(ConsoleProgram, MotionFromAnotherConsoleIsRefusedWhileAProgramRuns) {
+  Tmp tmp;
+  ProgRig r(tmp.dir);
+  r.enable();
+  r.write("p.arm", "movej 20 -35 160 10 35 10 speed=10\nmovej 40 -45 170 0 45 0 speed=10\nmovej 20 -35 160 10 35 10 speed=10\n");
+  CHECK(answer_ok(r.cmd("run p")));
+  CHECK(r.until([&] { return r.tel().state == ArmState::moving; }, 2000));
+  const std::uint32_t last = r.app.console->last_motion_id();
+  Session other;
+  const char* moves[] = {"movej 0 -30 150 0 -30 0", "movel 500 100 300", "G91 G1 X10 F600", "park", "G4 P1",
+                         "jog j1 +5", "$J=G91 X5 F600", "M62 P0"};
+  for (const char* m : moves) {
+    other.out.clear();
+    r.app.console->execute(other, m);
+    CHECK_TEXT(has(other.out, "error: busy program p is running"), (std::string(m) + " -> " + other.out).c_str());
+  }
+  LONGS_EQUAL(last, r.app.console->last_motion_id());  // nothing queued from outside
+  other.out.clear();
+  r.app.console->execute(other, "status");
+  CHECK(answer_ok(other.out));
+  CHECK(r.program_ended(200000));
+  CHECK(!has(r.events, "aborted"));
+  CHECK(r.at_rest());
+  DOUBLES_EQUAL(20.0, r.q_act()[0] / kDeg, 0.1);  // where the program ends, nothing from outside
+  // no program: the same moves are accepted again
+  other.out.clear();
+  r.app.console->execute(other, "movej 0 -30 150 0 -30 0");
+  CHECK_TEXT(answer_ok(other.out), other.out.c_str());
+}
+
+// M62/M63 changes waiting for the next move are discarded by stop, e-stop, Ctrl-X, disable
+// and a refused move, and the answer says so: a later, unrelated move switches nothing.
+TEST(ConsoleProgram, PendingSynchronizedOutputsDieWithAStopOrARefusal) {
+  const char* stops[] = {"stop", "estop", "\x18", "disable", "movej 0 0 500 0 0 0"};
+  for (const char* how : stops) {
+    Tmp tmp;
+    ProgRig r(tmp.dir, with_outputs());
+    r.enable();
+    sim::VirtualDrive& d3 = r.app.plant->arm().at(2);
+    CHECK(answer_ok(r.cmd("M62 P0")));  // gripper on at the next move
+    r.s.out.clear();
+    if (how[0] == 0x18) r.app.console->accept(r.s, how);
+    else r.app.console->execute(r.s, how);
+    for (int i = 0; i < 50; ++i) r.step1();
+    CHECK_TEXT(has(r.s.out, "M62/M63 change waiting for the next move discarded") && has(r.s.out, "gripper on"),
+               (std::string(how) + " -> " + r.s.out).c_str());
+    if (r.tel().state != ArmState::idle) {
+      CHECK(answer_ok(r.cmd("reset")));
+      r.enable();
+    }
+    CHECK(answer_ok(r.cmd("movej 10 0 -10 0 0 0")));
+    CHECK(answer_ok(r.cmd("wait")));
+    LONGS_EQUAL(0, d3.digital_outputs());
+  }
+}
+
+// Check mode ($C) changes nothing: teach, point delete and record start / stop are checked
+// and answered, the points and the points file and the programs folder stay as they were.
+TEST(ConsoleProgram, CheckModeTeachesDeletesAndRecordsNothing) {
+  Tmp tmp;
+  ProgRig r(tmp.dir);
+  r.enable();
+  CHECK(answer_ok(r.cmd("teach keep")));
+  const std::string before = test::read_file(tmp.dir + "/points.toml");
+  CHECK(has(r.cmd("$C"), "ok"));
+  const char* lines[] = {"teach extra", "point delete keep", "record start", "record stop rec"};
+  for (const char* l : lines) {
+    const std::string a = r.cmd(l);
+    CHECK_TEXT(answer_ok(a), (std::string(l) + " -> " + a).c_str());
+  }
+  CHECK(has(r.cmd("point delete nothere"), "error: bad_option"));  // still checked
+  CHECK(has(r.cmd("$C"), "ok"));
+  STRCMP_EQUAL(before.c_str(), test::read_file(tmp.dir + "/points.toml").c_str());
+  LONGS_EQUAL(1, r.app.console->points().points.size());
+  CHECK(::access((tmp.dir + "/rec.arm").c_str(), F_OK) != 0);
+  CHECK(has(r.cmd("record stop rec"), "error: bad_state"));  // no recording was started
 }

@@ -131,3 +131,14 @@ TEST(ConsoleUnits, TheDefaultIsMillimetresAndDegrees) {
   const std::string st = r.cmd("status");
   CHECK_TEXT(has(st, "] deg pose=[x=") && has(st, "] mm,deg"), st.c_str());
 }
+
+// On an arm with a prismatic joint (the Stanford arm's joint 3) `status` names each joint's
+// unit: the joints are not all angles.
+TEST(ConsoleUnits, StatusNamesEachJointsUnitWhenOneIsPrismatic) {
+  FwConfig c;
+  c.robot = "stanford";
+  test::ConsoleRig r(c);
+  const std::string a = r.cmd("status");
+  CHECK_TEXT(!has(a, "] deg pose=") && !has(a, "] rad pose="), a.c_str());
+  CHECK_TEXT(has(a, "] deg,deg,m") || has(a, "] rad,rad,m"), a.c_str());
+}

@@ -111,6 +111,13 @@ TEST(Parser, MalformedCommands) {
       {bin3.c_str(), CmdError::binary},
       {"frobnicate", CmdError::unknown_command},
       {"move", CmdError::unknown_command},
+      // an orientation beyond a turn names no orientation; G53 only with a G0/G1 move
+      {"ik 0.4 0.1 0.3 1e300 0 0", CmdError::out_of_range},
+      {"movel 0.4 0.1 0.3 0 0 -1e300", CmdError::out_of_range},
+      {"movel 0.4 0.1 0.3 0 1e9 0 speed=0.1", CmdError::out_of_range},
+      {"G53", CmdError::arg_count},
+      {"G53 G4 P1", CmdError::arg_count},
+      {"G53 G0", CmdError::arg_count},
       {"help a b", CmdError::arg_count},
       {"status now", CmdError::arg_count},
       {"enable 1", CmdError::arg_count},

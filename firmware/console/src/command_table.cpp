@@ -70,14 +70,17 @@ constexpr CodeSpec kGcodes[] = {
 };
 constexpr CodeSpec kRealtime[] = {
     {"?", "status report `<Idle|MPos:x,y,z|J:j1,...|Q:n>` (MPos in mm, J in the joint units)"},
-    {"!", "feed hold (linear moves stop on the line; a running program is paused); aborts a homing cycle"},
+    {"!", "feed hold (linear moves stop on the line; a running program is paused; a jog stops); aborts a homing cycle. "
+          "Lines received before it and not run yet are held too: a move sent right before `!` is held as soon as it is "
+          "queued, until `~` (a `!` at rest with nothing before it holds nothing)"},
     {"~", "resume (a paused program goes on)"},
     {"Ctrl-X (0x18)",
      "e-stop; discards the partial line, answers every line not executed yet with `error: estop` (GRBL dialect: a "
      "soft reset, the banner again; an e-stop only while the arm moves)"},
     {"0x85", "jog cancel: the jog decelerates to rest; jog lines not executed yet are answered, not run"},
     {"other bytes >= 0x80", "GRBL dialect: dropped unanswered (senders send 0x85 and the overrides UTF-8 encoded); native: refused in the line"},
-    {"0x90 0x91 0x92 0x93 0x94", "feed override: 100 %, +10 %, -10 %, +1 %, -1 % (10-200 %); acts on jogs and moves"},
+    {"0x90 0x91 0x92 0x93 0x94", "feed override: 100 %, +10 %, -10 %, +1 %, -1 % (10-200 %); acts on jogs and moves; `status` (feed_override=) and `?` (Ov:) show it"},
+    {"bytes 0x80-0xBF in UTF-8 text", "realtime only bare or UTF-8 encoded as C2 xx (U+0085, U+0090..U+0094, as senders send them); inside any other multi-byte character (C3 91 is `Ñ`) they are text: no override, no jog cancel (native: the line answers error: binary)"},
 };
 
 

@@ -350,6 +350,9 @@ ParseResult parse_gcode(std::string_view line, GcodeModal& modal, Command& out, 
   if (l >= 0 && !(other_letter == 'G' && other == 10)) return fail(CmdError::arg_count, "G-code: L without G10");
   if (wcs >= 0 && (motion >= 0 || other >= 0))
     return fail(CmdError::unsupported, "G-code: G%d with a motion or action code: put G54..G59 on a line of its own", 53 + wcs);
+  // G53 (machine coordinates for this line) means something only for a G0/G1 move on its line
+  if (g53 && (motion < 0 || !any_axis))
+    return fail(CmdError::arg_count, "G-code: G53 needs a G0/G1 move with axis words on its line (G53 G0 X.. Y.. Z..)");
   if (other_letter == 'G' && other == 10) {
     // G10 L2 Pn: set work offset n (frame g5(3+n)); P0 = the active one. Absolute values
     // (mm / deg), axes not given keep theirs.
@@ -730,6 +733,13 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       if (c.at_point && c.count != 0) return fail(CmdError::arg_count, "%s @%s takes options only (speed=, blend=)", name, c.word.data());
       if (!c.at_point && c.count != 3 && c.count != 6)
         return fail(CmdError::arg_count, "%s needs x y z [rx ry rz] (or @point), got %d values", name, c.count);
+      // An orientation is an angle of at most a turn each way: 1e300 deg names no orientation
+      for (int k = 3; k < c.count; ++k) {
+        const double a = units.angle_in(c.vals[static_cast<std::size_t>(k)]);
+        if (!(std::fabs(a) <= 2 * M_PI + 1e-9))
+          return fail(CmdError::out_of_range, "%s: %s = %g %s outside [-%g, %g]", name, k == 3 ? "rx" : k == 4 ? "ry" : "rz",
+                      c.vals[static_cast<std::size_t>(k)], units.angle_name(), units.angle_out(2 * M_PI), units.angle_out(2 * M_PI));
+      }
       const double vmin = units.length == LengthUnit::mm ? kMinLinearSpeedMmS : kMinLinearSpeedMmS * 1e-3;
       if (c.has_speed && c.speed < vmin)
         return fail(CmdError::out_of_range, "%s: speed=%g %s/s is below the minimum %g %s/s", name, c.speed,

@@ -52,6 +52,68 @@ int grbl_error(CmdError e) {
 }
 constexpr double kDeg = M_PI / 180.0;
 
+/// Commands that move the arm or queue motion (refused from other consoles while a program runs).
+bool moves_arm(const Command& c) {
+  switch (c.cmd) {
+    case Cmd::home:
+    case Cmd::movej:
+    case Cmd::movel:
+    case Cmd::dwell:
+    case Cmd::gmove:
+    case Cmd::park:
+    case Cmd::grbl_jog:
+    case Cmd::grbl_home:
+    case Cmd::freedrive_on: return true;
+    case Cmd::jog: return c.jog_op == JogOp::increment || c.jog_op == JogOp::continuous;
+    case Cmd::out: return c.out_sync && c.out_index != -1;  // M62/M63 ride on the program's next move
+    case Cmd::none:
+    case Cmd::help:
+    case Cmd::status:
+    case Cmd::enable:
+    case Cmd::disable:
+    case Cmd::stop:
+    case Cmd::estop:
+    case Cmd::reset:
+    case Cmd::fk:
+    case Cmd::ik:
+    case Cmd::limits:
+    case Cmd::stats:
+    case Cmd::config:
+    case Cmd::wait:
+    case Cmd::hold:
+    case Cmd::resume:
+    case Cmd::position:
+    case Cmd::home_zero:
+    case Cmd::temperature:
+    case Cmd::tool:
+    case Cmd::frame:
+    case Cmd::grbl_settings:
+    case Cmd::grbl_params:
+    case Cmd::grbl_state:
+    case Cmd::grbl_info:
+    case Cmd::grbl_unlock:
+    case Cmd::grbl_check:
+    case Cmd::grbl_help:
+    case Cmd::teach:
+    case Cmd::points:
+    case Cmd::point_delete:
+    case Cmd::programs:
+    case Cmd::run:  // refused by itself while a program runs (one program at a time)
+    case Cmd::pause:
+    case Cmd::step:
+    case Cmd::abort:
+    case Cmd::record:
+    case Cmd::freedrive:
+    case Cmd::freedrive_off:
+    case Cmd::collision_on:
+    case Cmd::collision_off: return false;
+  }
+  return false;
+}
+
+/// Commands whose move takes the waiting M62/M63 changes (movej, movel, G0/G1, park / G28).
+bool carries_outputs(Cmd c) { return c == Cmd::movej || c == Cmd::movel || c == Cmd::gmove || c == Cmd::park; }
+
 std::string fmt(const char* f, ...) __attribute__((format(printf, 1, 2)));
 std::string fmt(const char* f, ...) {
   char buf[512];
@@ -184,6 +246,44 @@ void Console::answer_ok(Session& s, const std::string& data) {
   s.out += data.empty() ? "ok\n" : "ok " + data + "\n";
 }
 
+bool Console::last_answer_is_error(const Session& s, std::size_t from) const {
+  if (s.out.size() <= from || s.out.back() != '\n') return false;
+  const std::size_t nl = s.out.rfind('\n', s.out.size() - 2);
+  const std::size_t at = nl == std::string::npos || nl < from ? from : nl + 1;
+  return s.out.compare(at, 6, "error:") == 0;
+}
+
+void Console::note_line(Session& s, const std::string& text) {
+  if (text.empty()) return;
+  s.out += s.dialect == Dialect::grbl ? "[MSG:" + text + "]\n" : text + "\n";
+}
+
+void Console::note_before_answer(Session& s, std::size_t from, const std::string& text) {
+  if (text.empty() || s.out.size() <= from) return;
+  const std::size_t nl = s.out.rfind('\n', s.out.size() - 2);
+  const std::size_t at = nl == std::string::npos || nl < from ? from : nl + 1;
+  // GRBL: the answer's [MSG:] line stays right before its error:N
+  std::size_t ins = at;
+  if (s.dialect == Dialect::grbl && at > from) {
+    const std::size_t p = s.out.rfind('\n', at - 2);
+    const std::size_t msg = p == std::string::npos || p < from ? from : p + 1;
+    if (s.out.compare(msg, 5, "[MSG:") == 0) ins = msg;
+  }
+  s.out.insert(ins, s.dialect == Dialect::grbl ? "[MSG:" + text + "]\n" : text + "\n");
+}
+
+std::string Console::discard_sync_outputs(const char* why) {
+  if (n_sync_out_ == 0) return {};
+  std::string names;
+  for (std::size_t k = 0; k < n_sync_out_; ++k)
+    for (const ConsoleConfig::Output& o : cfg_.outputs)
+      if (o.joint == sync_out_[k].joint && ((sync_out_[k].mask >> o.bit) & 1u))
+        names += fmt("%s%s %s", names.empty() ? "" : ", ", o.name.c_str(), ((sync_out_[k].value >> o.bit) & 1u) ? "on" : "off");
+  n_sync_out_ = 0;
+  return fmt("outputs: M62/M63 change%s waiting for the next move discarded (%s): %s",
+             names.find(',') == std::string::npos ? "" : "s", why, names.c_str());
+}
+
 bool Console::request(const Request& rq, Reply& out) {
   Request r = rq;
   r.seq = ++seq_;
@@ -250,10 +350,19 @@ std::string Console::status_text() const {
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
   const ConsoleUnits& u = cfg_.units;
+  // the joints' units: the angle unit, or one per joint when a joint is prismatic (a length)
+  std::string ju = u.angle_name();
+  bool prismatic = false;
+  for (int j = 0; j < n_; ++j) prismatic = prismatic || std::string_view(u.joint_name(chain_, j)) != u.angle_name();
+  if (prismatic) {
+    ju.clear();
+    for (int j = 0; j < n_; ++j) ju += std::string(j ? "," : "") + u.joint_name(chain_, j);
+  }
   std::string s = fmt("state=%s%s queue=%u joints=[%s] %s pose=[%s] %s,%s %s", to_string(t.state), t.holding ? " hold=1" : "",
-                      unsigned(t.queued), joints_text(q).c_str(), u.angle_name(), pose_text(q).c_str(), u.length_name(),
+                      unsigned(t.queued), joints_text(q).c_str(), ju.c_str(), pose_text(q).c_str(), u.length_name(),
                       u.angle_name(), where_text().c_str());
   s += " homing=[" + homing_text(t) + "]";
+  s += fmt(" feed_override=%d%%", feed_pct_);
   if (run_) s += " " + program_text();
   if (rec_.active) s += fmt(" recording=%zu", rec_.samples.size());
   if (t.feed_forward != 0 || t.collision_on || t.freedrive != 0)  // (the dynamics parts, when one runs)
@@ -343,7 +452,7 @@ std::string Console::grbl_report() const {
   // MPos: G-code lengths (mm, as GRBL reports them); J: the console's joint units.
   const int d = cfg_.units.angle == AngleUnit::deg && cfg_.units.length == LengthUnit::mm ? 2 : 5;
   for (int j = 0; j < n_; ++j) s += fmt("%s%.*f", j ? "," : "", d, to_user(j, q[j]));
-  s += fmt("|Q:%u", unsigned(t.queued));
+  s += fmt("|Q:%u|Ov:%d", unsigned(t.queued), feed_pct_);
   if (run_) s += fmt("|Pgm:%s,%s,%s", run_->name.c_str(), to_string(run_->state), program_where().c_str());
   return s + ">";
 }
@@ -713,6 +822,13 @@ void Console::queue(Session& s, const MoveLine& req) {
                    blended.c_str()));
 }
 
+bool Console::jog_duration_ok(Session& s, double duration_s) {
+  if (std::isfinite(duration_s) && duration_s <= cfg_.max_move_duration_s) return true;
+  answer_error(s, CmdError::out_of_range, fmt("jog refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
+                                              "(raise the speed); nothing moved", duration_s, cfg_.max_move_duration_s));
+  return false;
+}
+
 bool Console::duration_ok(Session& s, const char* what, double duration_s) {
   if (std::isfinite(duration_s) && duration_s <= cfg_.max_move_duration_s) return true;
   answer_error(s, CmdError::out_of_range, fmt("%s refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
@@ -896,6 +1012,28 @@ void Console::execute(Session& s, std::string_view line) {
       case RtResult::not_homed: answer_error(s, CmdError::not_homed, r.message); return;
     }
   };
+  // While a program runs, motion comes from the program only: a move, jog, dwell, homing or
+  // M62/M63 from any console is refused (stop, hold, resume, abort and queries still work).
+  if (run_ && &s != &run_->ps && !s.check_mode && moves_arm(c)) {
+    answer_error(s, CmdError::busy, fmt("program %s is running (%s): stop, pause or abort it first; nothing queued",
+                                        run_->name.c_str(), program_where().c_str()));
+    return;
+  }
+  // A move refused: the M62/M63 changes waiting for it are dropped with it (and said so).
+  const std::uint8_t sync_before = n_sync_out_;
+  const std::size_t out_before = s.out.size();
+  struct DropSyncOnRefusal {
+    Console& con;
+    Session& s;
+    const Command& c;
+    std::uint8_t before;
+    std::size_t out0;
+    ~DropSyncOnRefusal() {
+      if (before == 0 || con.n_sync_out_ != before || s.check_mode || !carries_outputs(c.cmd)) return;
+      if (!con.last_answer_is_error(s, out0)) return;
+      con.note_before_answer(s, out0, con.discard_sync_outputs("the move was refused"));
+    }
+  } drop_sync{*this, s, c, sync_before, out_before};
   switch (c.cmd) {
     case Cmd::none: answer_ok(s); return;
     case Cmd::help: do_help(s, std::string_view(c.topic.data())); return;
@@ -918,14 +1056,17 @@ void Console::execute(Session& s, std::string_view line) {
       return;
     case Cmd::disable:
       end_program("aborted at " + program_where() + ": disable");
+      note_line(s, discard_sync_outputs("disable"));
       simple(RequestOp::disable);
       return;
     case Cmd::stop:
       end_program("aborted at " + program_where() + ": stop");
+      note_line(s, discard_sync_outputs("stop"));
       simple(RequestOp::stop);
       return;
     case Cmd::estop:
       end_program("aborted at " + program_where() + ": e-stop");
+      note_line(s, discard_sync_outputs("e-stop"));
       simple(RequestOp::estop);
       return;
     case Cmd::reset: simple(RequestOp::reset); return;
@@ -992,6 +1133,7 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::pause: do_pause(s); return;
     case Cmd::step: do_step(s); return;
     case Cmd::abort:
+      note_line(s, discard_sync_outputs("abort"));
       if (!run_) {
         simple(RequestOp::stop);
         return;
@@ -1053,6 +1195,13 @@ void Console::execute(Session& s, std::string_view line) {
 }
 
 bool Console::settle(Session& s) {
+  if (s.checking) {  // `run`: its program's check goes on a slice at a time
+    if (pcheck_ && pcheck_->owner == &s) {
+      if (continue_check()) return true;
+    } else {
+      s.checking = false;
+    }
+  }
   if (s.enabling) {
     const Telemetry t = ctl_.telemetry();
     switch (t.state) {
@@ -1132,7 +1281,14 @@ bool Console::run_one(Session& s) {
   const std::string line = std::move(s.lines.front());
   s.lines.pop_front();
   execute(s, line);
+  if (s.hold_after > 0 && --s.hold_after == 0) feed_hold(s);  // the '!' that came after this line
   return true;
+}
+
+void Console::feed_hold(Session& s) {
+  Reply r;
+  if (run_) run_->state = RunState::paused;  // the program pauses with the hold
+  if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n";
 }
 
 void Console::poll(Session& s) {
@@ -1167,10 +1323,13 @@ void Console::realtime(Session& s, char ch) {
   switch (ch) {
     case kRtStatus: s.out += grbl_report(s) + "\n"; break;
     case kRtHold:
-      if (run_) run_->state = RunState::paused;  // the program pauses with the hold
-      if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n";
+      feed_hold(s);
+      // Lines received before the '!' and not run yet: the hold applies to them too (a move
+      // sent right before a '!' is held as soon as it is queued, until '~').
+      s.hold_after = s.lines.size();
       break;
     case kRtResume:
+      s.hold_after = 0;  // a '!' still waiting for the lines before it is resumed too
       if (run_ && run_->state == RunState::paused) run_->state = RunState::running;
       if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n";
       break;
@@ -1190,6 +1349,7 @@ void Console::realtime(Session& s, char ch) {
         answer_error(s, CmdError::estop, fmt("'%.40s' not run: jog cancelled (0x85)", it->c_str()));
         it = s.lines.erase(it);
       }
+      if (s.hold_after > s.lines.size()) s.hold_after = s.lines.size();
       break;
     }
     case kRtReset: {
@@ -1200,6 +1360,7 @@ void Console::realtime(Session& s, char ch) {
                           t.state == ArmState::homing;  // Ctrl-X during homing: an e-stop (the joints stay unhomed)
       const RequestOp op = s.dialect == Dialect::grbl && !moving ? RequestOp::stop : RequestOp::estop;
       end_program("aborted at " + program_where() + (op == RequestOp::estop ? ": e-stop (Ctrl-X)" : ": soft reset (Ctrl-X)"));
+      note_line(s, discard_sync_outputs("Ctrl-X"));
       if (!request(op, r)) s.out += "error: timeout e-stop not acknowledged\n";
       s.partial.clear();
       s.discarding = false;
@@ -1211,6 +1372,7 @@ void Console::realtime(Session& s, char ch) {
         answer_error(s, CmdError::estop,
                      fmt("'%.40s%s' not executed: e-stop (Ctrl-X) before it ran", l.c_str(), l.size() > 40 ? "..." : ""));
       s.lines.clear();
+      s.hold_after = 0;
       s.check_mode = false;
       jog_tail_valid_ = false;
       greet(s);
@@ -1229,6 +1391,7 @@ void Console::greet(Session& s) {
 }
 
 void Console::client_gone(Session& s) {
+  if (pcheck_ && pcheck_->owner == &s) cancel_check("the client hanging up");
   Reply r;
   if (ctl_.telemetry().state == ArmState::jogging) request(RequestOp::jog_cancel, r);
   jog_tail_valid_ = false;
@@ -1238,7 +1401,19 @@ void Console::client_gone(Session& s) {
 
 void Console::accept(Session& s, std::string_view bytes) {
   for (char ch : bytes) {
-    if (is_realtime(ch)) {
+    // Bytes 0x80-0xFF are realtime only where GRBL's protocol puts them: bare, or UTF-8
+    // encoded as C2 xx (what cncjs sends: the code point U+0085, U+0090..). A continuation
+    // byte of any other multi-byte character (C3 91 is `Ñ`) is part of the text.
+    const auto u = static_cast<unsigned char>(ch);
+    bool in_char = false;
+    if (s.utf8_left > 0 && u >= 0x80 && u <= 0xBF) {
+      in_char = s.utf8_lead != 0xC2;
+      --s.utf8_left;
+    } else {
+      s.utf8_left = u >= 0xC2 && u <= 0xDF ? 1 : u >= 0xE0 && u <= 0xEF ? 2 : u >= 0xF0 && u <= 0xF4 ? 3 : 0;
+      s.utf8_lead = u;
+    }
+    if (!in_char && is_realtime(ch)) {
       realtime(s, ch);
       continue;
     }
@@ -1334,10 +1509,9 @@ void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double aske
     case RtResult::start_moved:
     case RtResult::plan_failed: answer_error(s, CmdError::bad_state, r.message); return;
   }
-  if (clamped >= 0) {
+  if (clamped >= 0) {  // it moves: ok, and where it stops
     const ConsoleUnits& u = cfg_.units;
-    answer_error(s, CmdError::limits,
-                 fmt("jog: joint %d stops at its limit %.3f %s (asked %.3f); jogging to the limit", clamped + 1,
+    answer_ok(s, fmt("%s; joint %d stops at its limit %.3f %s (asked %.3f)", r.message, clamped + 1,
                      to_user(clamped, limit), u.joint_name(chain_, clamped), to_user(clamped, asked)));
     return;
   }
@@ -1375,7 +1549,15 @@ void Console::do_jog(Session& s, const Command& c) {
     if (continuous) {
       goal[j] = c.jog_dir > 0 ? lim.upper[ju] : lim.lower[ju];
     } else {
-      asked = goal[j] + to_si(j, c.vals[0]);
+      // An increment larger than the joint's whole range is no jog: refused, nothing moves.
+      const double inc = to_si(j, c.vals[0]);
+      if (!(std::fabs(inc) <= lim.upper[ju] - lim.lower[ju])) {
+        answer_error(s, CmdError::out_of_range,
+                     fmt("jog: increment %g %s larger than joint %d's range [%.3f, %.3f]; nothing moved", c.vals[0],
+                         cfg_.units.joint_name(chain_, j), j + 1, to_user(j, lim.lower[ju]), to_user(j, lim.upper[ju])));
+        return;
+      }
+      asked = goal[j] + inc;
       const double to = std::fmin(std::fmax(asked, lim.lower[ju]), lim.upper[ju]);
       if (to != asked) clamped = j;
       if (to == goal[j]) {
@@ -1385,6 +1567,9 @@ void Console::do_jog(Session& s, const Command& c) {
       }
       goal[j] = to;
     }
+    if (!continuous && !jog_duration_ok(s, std::fabs(goal[j] - commanded_joints()[j]) /
+                                               (pct / 100.0 * lim.dyn[ju].max_velocity)))
+      return;
     JogSpec js;
     js.space = JogSpace::joint;
     js.continuous = continuous;
@@ -1417,9 +1602,21 @@ void Console::do_jog(Session& s, const Command& c) {
     if (k < 3) {
       target.translation() += js.frame.col(k) * cfg_.units.length_in(c.vals[0]);
     } else {
+      // A rotation is taken the short way round: beyond half a turn it would turn the other
+      // way (or not at all at a full turn), so |angle| >= 180 deg is refused.
+      const double a = cfg_.units.angle_in(c.vals[0]);
+      if (!(std::fabs(a) < M_PI)) {
+        answer_error(s, CmdError::out_of_range,
+                     fmt("jog: rotation %g %s: at most half a turn per jog (|angle| < %g); nothing moved", c.vals[0],
+                         cfg_.units.angle_name(), cfg_.units.angle_out(M_PI)));
+        return;
+      }
       const Eigen::Vector3d axis = js.frame.col(k - 3);
-      target.linear() = Eigen::AngleAxisd(cfg_.units.angle_in(c.vals[0]), axis).toRotationMatrix() * here.linear();
+      target.linear() = Eigen::AngleAxisd(a, axis).toRotationMatrix() * here.linear();
     }
+    const double dist = k < 3 ? std::fabs(cfg_.units.length_in(c.vals[0])) : 0.0;
+    const double ang = k < 3 ? 0.0 : std::fabs(cfg_.units.angle_in(c.vals[0]));
+    if (!jog_duration_ok(s, std::fmax(dist / js.linear_speed, ang / js.angular_speed))) return;
     kin::JointVector q(n_);
     if (ik_solver().fn(tool_slot().chain, target, commanded_joints(), q, ik_solver().ctx) < kin::Status::ok) {
       answer_error(s, CmdError::unreachable, "jog: the target has no IK solution within the joint limits; nothing moved");
@@ -1454,6 +1651,14 @@ void Console::do_grbl_jog(Session& s, const Command& c) {
   const kin::Pose here = F.inverse() * (jogging ? jog_x_tail_ : commanded_pose());
   kin::Pose target = here;
   Eigen::Vector3d rpy = kin::rpy_from_rotation(here.linear());
+  for (int k = 3; k < 6; ++k) {  // relative rotations: the short way round, so less than half a turn
+    if (!(c.axis_mask & (1u << k)) || !c.relative) continue;
+    if (!(std::fabs(c.vals[static_cast<std::size_t>(k)]) < 180.0)) {
+      answer_error(s, CmdError::out_of_range, fmt("$J: rotation %c%g deg: at most half a turn per jog; nothing moved",
+                                                  "ABC"[k - 3], c.vals[static_cast<std::size_t>(k)]));
+      return;
+    }
+  }
   for (int k = 0; k < 6; ++k) {
     if (!(c.axis_mask & (1u << k))) continue;
     const double v = c.vals[static_cast<std::size_t>(k)];  // mm / deg (the parser converted G20)
@@ -1472,6 +1677,18 @@ void Console::do_grbl_jog(Session& s, const Command& c) {
   js.linear_speed = std::fmin(c.speed * 1e-3 * feed_pct_ / 100.0, cfg_.max_linear_speed);
   js.frame = F.linear();
   js.target = target;
+  if (!(js.linear_speed >= kMinLinearSpeedMmS * 1e-3)) {
+    answer_error(s, CmdError::out_of_range, fmt("$J: feed %g mm/min (with the %d %% override) below %g mm/min; nothing moved",
+                                                js.linear_speed * 6e4, feed_pct_, kMinLinearSpeedMmS * 60));
+    return;
+  }
+  {
+    const kin::Pose from = F.inverse() * commanded_pose();
+    const kin::Pose to = F.inverse() * target;
+    const double dist = (to.translation() - from.translation()).norm();
+    const double ang = Eigen::AngleAxisd(to.linear() * from.linear().transpose()).angle();
+    if (!jog_duration_ok(s, std::fmax(dist / js.linear_speed, ang / js.angular_speed))) return;
+  }
   const std::size_t before = s.out.size();
   send_jog(s, js, -1, 0, 0);
   if (s.out.compare(before, 5, "error") == 0 || s.out.compare(before, 5, "[MSG:") == 0) {

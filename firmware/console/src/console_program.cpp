@@ -2,6 +2,7 @@
 // Console thread: allocates, does file I/O; talks to the control thread only through the
 // motion queue and requests, like every other command.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
@@ -148,6 +149,10 @@ void Console::do_teach(Session& s, const Command& c) {
     answer_error(s, CmdError::bad_option, "teach: " + e);
     return;
   }
+  if (s.check_mode) {  // checked: nothing stored, no file written
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked: teach %s (check mode: nothing stored)", name.c_str()));
+    return;
+  }
   if (!cfg_.points_file.empty()) {
     if (const std::string e = prog::save_points_file(cfg_.points_file, d); !e.empty()) {
       answer_error(s, CmdError::storage, "teach: " + e + "; point not taught, the file kept");
@@ -181,6 +186,10 @@ void Console::do_point_delete(Session& s, const Command& c) {
   prog::PointsData d = points_;
   if (!prog::delete_point(d, name)) {
     answer_error(s, CmdError::bad_option, fmt("point delete: no point '%s' (%zu points: see points)", name.c_str(), d.points.size()));
+    return;
+  }
+  if (s.check_mode) {  // checked: nothing deleted, no file written
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked: point delete %s (check mode: nothing deleted)", name.c_str()));
     return;
   }
   if (!cfg_.points_file.empty()) {
@@ -264,32 +273,6 @@ void Console::exec_step(Session& ps, const prog::Program& p, const prog::Program
   sel_ = prev;
 }
 
-std::string Console::check_program(const prog::Program& p) {
-  // The console's check mode (as `$C`): every move planned and path-checked from where the
-  // previous one ends, with the tool and frame the program selects; nothing is queued.
-  Session cs;
-  cs.name = "check";
-  cs.check_mode = true;
-  cs.check_tail = tail();
-  cs.check_tool = tool_;
-  cs.check_frame = frame_;
-  for (const prog::ProgramStep& st : p.steps) {
-    switch (kind_of(st.cmd)) {
-      case StepKind::refused:
-        return p.where(st) + ": " + to_string(st.cmd.cmd) +
-               " is not run inside a program (enable and home the arm before `run`; stop / abort from the console)";
-      case StepKind::wait:
-      case StepKind::other: continue;
-      case StepKind::motion:
-      case StepKind::needs_idle: break;
-    }
-    cs.out.clear();
-    exec_step(cs, p, st);
-    if (const std::string e = error_of(cs.out); !e.empty()) return p.where(st) + ": " + e;
-  }
-  return "";
-}
-
 void Console::do_run(Session& s, const Command& c) {
   const std::string name(c.word.data());
   if (cfg_.programs_dir.empty()) {
@@ -315,6 +298,10 @@ void Console::do_run(Session& s, const Command& c) {
     answer_error(s, CmdError::program, fmt("run: no program '%s' in %s (see programs)", name.c_str(), cfg_.programs_dir.c_str()));
     return;
   }
+  if (pcheck_) {
+    answer_error(s, CmdError::busy, fmt("run: program %s is being checked (one at a time)", pcheck_->run->name.c_str()));
+    return;
+  }
   auto r = std::make_unique<ProgramRun>();
   prog::ProgramContext ctx;
   ctx.chain = &chain_;
@@ -325,25 +312,98 @@ void Console::do_run(Session& s, const Command& c) {
     answer_error(s, CmdError::program, e + "; nothing moved");
     return;
   }
-  if (const std::string e = check_program(r->prog); !e.empty()) {
-    answer_error(s, CmdError::program, e + "; nothing moved");
-    return;
+  // The whole-program check runs in slices (continue_check, from settle()): the consoles'
+  // realtime characters and other lines are served between two slices; `run` is answered
+  // when the check has ended.
+  r->name = name;
+  auto pc = std::make_unique<PendingCheck>();
+  pc->owner = &s;
+  pc->run = std::move(r);
+  pc->cs.name = "check";
+  pc->cs.check_mode = true;
+  pc->from = tail();
+  pc->cs.check_tail = pc->from;
+  pc->tool = tool_;
+  pc->frame = frame_;
+  pc->cs.check_tool = tool_;
+  pc->cs.check_frame = frame_;
+  pc->shadow = std::make_unique<PathShadow>();
+  pc->check_only = s.check_mode;
+  pcheck_ = std::move(pc);
+  s.checking = true;
+  settle(s);
+}
+
+void Console::cancel_check(const std::string& why) {
+  if (!pcheck_) return;
+  Session& o = *pcheck_->owner;
+  const std::string name = pcheck_->run->name;
+  pcheck_.reset();
+  o.checking = false;
+  answer_error(o, CmdError::program, fmt("run: %s: check interrupted by %s; nothing moved", name.c_str(), why.c_str()));
+}
+
+bool Console::continue_check() {
+  if (!pcheck_) return false;
+  PendingCheck& pc = *pcheck_;
+  Session& o = *pc.owner;
+  const prog::Program& p = pc.run->prog;
+  std::string err;
+  {
+    std::swap(check_shadow_, pc.shadow);  // the check's own blend state, whatever other sessions check meanwhile
+    const auto t0 = std::chrono::steady_clock::now();
+    while (pc.next < p.steps.size() && err.empty()) {
+      const prog::ProgramStep& st = p.steps[pc.next++];
+      switch (kind_of(st.cmd)) {
+        case StepKind::refused:
+          err = p.where(st) + ": " + to_string(st.cmd.cmd) +
+                " is not run inside a program (enable and home the arm before `run`; stop / abort from the console)";
+          continue;
+        case StepKind::wait:
+        case StepKind::other: continue;
+        case StepKind::motion:
+        case StepKind::needs_idle: break;
+      }
+      pc.cs.out.clear();
+      exec_step(pc.cs, p, st);
+      if (const std::string e = error_of(pc.cs.out); !e.empty()) err = p.where(st) + ": " + e;
+      if (std::chrono::steady_clock::now() - t0 > std::chrono::milliseconds(2)) break;
+    }
+    std::swap(check_shadow_, pc.shadow);
   }
+  if (err.empty() && pc.next < p.steps.size()) return true;  // more slices to come
+  std::unique_ptr<PendingCheck> done = std::move(pcheck_);
+  o.checking = false;
+  if (!err.empty()) {
+    answer_error(o, CmdError::program, err + "; nothing moved");
+    return false;
+  }
+  std::unique_ptr<ProgramRun> r = std::move(done->run);
+  const std::string name = r->name;
   int moves = 0;
   for (const prog::ProgramStep& st : r->prog.steps) moves += kind_of(st.cmd) == StepKind::motion ? 1 : 0;
-  if (s.check_mode) {
-    answer_ok(s, fmt("checked %s: %zu steps, %d moves; nothing moved (check mode)", name.c_str(), r->prog.steps.size(), moves));
-    return;
+  if (done->check_only) {
+    answer_ok(o, fmt("checked %s: %zu steps, %d moves; nothing moved (check mode)", name.c_str(), r->prog.steps.size(), moves));
+    return false;
   }
+  // Checked from where the arm was when the check began: it must still be there, at rest,
+  // with the same tool and frame, and no other program may have started meanwhile.
   const Telemetry t = ctl_.telemetry();
-  r->name = name;
+  if (run_ || t.state != ArmState::idle || !ctl_.motions().empty() || (tail() - done->from).norm() > 1e-9 ||
+      tool_ != done->tool || frame_ != done->frame) {
+    answer_error(o, CmdError::bad_state,
+                 fmt("run: %s: the arm moved, or the tool / frame / program changed, while it was checked (it is %s); "
+                     "nothing moved: run it again", name.c_str(), to_string(t.state)));
+    return false;
+  }
   r->ps.name = "program " + name;
   r->generation = t.generation;
   r->started_cycle = t.cycles;
   r->state = RunState::running;
   run_ = std::move(r);
-  answer_ok(s, fmt("running %s: %zu steps, %d moves", name.c_str(), run_->prog.steps.size(), moves));
+  answer_ok(o, fmt("running %s: %zu steps, %d moves", name.c_str(), run_->prog.steps.size(), moves));
   tick();
+  return false;
 }
 
 void Console::do_pause(Session& s) {
@@ -404,6 +464,10 @@ std::string Console::program_text() const {
 }
 
 void Console::end_program(const std::string& how) {
+  if (pcheck_) {  // a stop, e-stop, disable or Ctrl-X ends a pending check as it ends a program
+    const std::size_t c = how.rfind(": ");
+    cancel_check(c == std::string::npos ? how : how.substr(c + 2));
+  }
   if (!run_) return;
   program_events_ += "program: " + run_->name + " " + how + "\n";
   run_.reset();
@@ -509,6 +573,10 @@ void Console::tick() {
 
 void Console::do_record(Session& s, const Command& c) {
   const Telemetry t = ctl_.telemetry();
+  if (s.check_mode) {  // a check changes nothing: no recording started or stopped, no file written
+    answer_ok(s, "check mode: not run");
+    return;
+  }
   if (!c.record_stop) {
     if (rec_.active) {
       answer_error(s, CmdError::bad_state, fmt("record: already recording (%zu samples): record stop NAME", rec_.samples.size()));

@@ -82,8 +82,9 @@ ConsoleServer::ConsoleServer(Console& console, const std::vector<FdTransport*>& 
   }
 }
 
-// Read what every transport has (bounded), so realtime characters act before
-// any line of any client runs and before any output is written.
+// Read what every transport has (one chunk each), so realtime characters act before
+// any line of any client runs and before any output is written. A client with
+// kMaxQueuedLines lines waiting is not read (its bytes stay in the kernel).
 void ConsoleServer::sweep(int timeout_ms) {
   for (std::size_t i = 0; i < ts_.size(); ++i) {
     FdTransport& t = *ts_[i];
@@ -95,7 +96,10 @@ void ConsoleServer::sweep(int timeout_ms) {
         console_.greet(sessions_[i]);  // what a GRBL sender waits for after opening the port
       }
     }
-    pfds_[2 * i] = pollfd{t.eof || t.no_peer ? -1 : t.rd, POLLIN, 0};
+    // Room for more: fewer than kMaxQueuedLines lines waiting, and output read (a client that
+    // sends '?' and reads nothing cannot grow its reports without bound).
+    const bool room = sessions_[i].lines.size() < kMaxQueuedLines && t.pending.size() < kMaxPendingEvents;
+    pfds_[2 * i] = pollfd{t.eof || t.no_peer || !room ? -1 : t.rd, POLLIN, 0};
     const bool want_out = !t.pending.empty() && t.wr >= 0 && !t.no_peer;
     pfds_[2 * i + 1] = pollfd{want_out ? t.wr : -1, POLLOUT, 0};
   }
@@ -103,20 +107,22 @@ void ConsoleServer::sweep(int timeout_ms) {
   for (std::size_t i = 0; i < ts_.size(); ++i) {
     FdTransport& t = *ts_[i];
     Session& s = sessions_[i];
-    if (t.eof || t.no_peer || !(pfds_[2 * i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
+    if (pfds_[2 * i].fd < 0 || t.eof || t.no_peer || !(pfds_[2 * i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
     if (t.name == "pty" && (pfds_[2 * i].revents & POLLHUP) && !(pfds_[2 * i].revents & POLLIN)) {
       // The client closed the pty: it is gone. Its jog stops now; what it sent and did not
       // run yet is dropped (nobody is there to read the answers).
       t.no_peer = true;
       t.pending.clear();
       s.lines.clear();
+      s.hold_after = 0;
       console_.client_gone(s);
       continue;
     }
-    char buf[4096];
+    char buf[kReadChunk];
     const ssize_t r = ::read(t.rd, buf, sizeof buf);
     if (r > 0) {
       console_.accept(s, std::string_view(buf, static_cast<std::size_t>(r)));
+      queue_output(i);  // realtime answers ('?', Ctrl-X's) in order, ahead of later lines
     } else if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR && errno != EIO)) {
       if (t.name == "stdin") {
         t.eof = true;
@@ -134,19 +140,29 @@ void ConsoleServer::queue_output(std::size_t i) {
   FdTransport& t = *ts_[i];
   Session& s = sessions_[i];
   if (s.out.empty()) return;
-  if (t.pending.size() + s.out.size() > kMaxPendingOutput) {
-    // The client is not reading: it loses its own output, counted and told (below), and
-    // nobody else waits for it.
-    std::uint64_t lines = 0;
-    for (char c : s.out) lines += c == '\n';
-    t.dropped_lines += lines;
-    t.dropped_bytes += s.out.size();
-    t.dropped_unreported += lines;
-    console_.add_output_dropped(lines, s.out.size());
-  } else {
-    t.pending += s.out;
-  }
+  t.pending += s.out;  // answers are never dropped: may_run() stops this client's lines instead
   s.out.clear();
+}
+
+// Asynchronous lines for client i: dropped (counted, told later) only when it has not
+// read kMaxPendingEvents of output.
+void ConsoleServer::queue_events(std::size_t i, const std::string& ev) {
+  FdTransport& t = *ts_[i];
+  if (ev.empty()) return;
+  if (t.pending.size() + ev.size() > kMaxPendingEvents) {
+    std::uint64_t lines = 0;
+    for (char c : ev) lines += c == '\n';
+    t.dropped_lines += lines;
+    t.dropped_bytes += ev.size();
+    t.dropped_unreported += lines;
+    console_.add_output_dropped(lines, ev.size());
+    return;
+  }
+  t.pending += ev;
+}
+
+bool ConsoleServer::may_run(std::size_t i) const {
+  return ts_[i]->pending.size() + sessions_[i].out.size() < kMaxPendingOutput;
 }
 
 void ConsoleServer::write_some(std::size_t i) {
@@ -157,7 +173,7 @@ void ConsoleServer::write_some(std::size_t i) {
   }
   if (t.pending.empty() && t.dropped_unreported > 0) {
     char b[160];
-    std::snprintf(b, sizeof b, "alarm: console output overflow: %llu lines dropped (this client did not read its answers)\n",
+    std::snprintf(b, sizeof b, "alarm: console output overflow: %llu event lines dropped (this client did not read its output)\n",
                   static_cast<unsigned long long>(t.dropped_unreported));
     t.pending = b;
     t.dropped_unreported = 0;
@@ -186,42 +202,52 @@ void ConsoleServer::write_some(std::size_t i) {
 }
 
 bool ConsoleServer::round(int timeout_ms, bool exit_on_eof) {
-  sweep(timeout_ms);
-  // Lines one at a time, round-robin over the clients; between two lines every
-  // transport is read again, so a realtime character waits at most for the line
-  // being executed (a movel path check: a few ms), never for another client.
-  for (int budget = 0; budget < 256; ++budget) {
+  sweep(more_ ? 0 : timeout_ms);
+  // Lines one at a time, round-robin over the clients, one line per client per turn;
+  // between two lines every transport is read again, so a realtime character waits at
+  // most for the line being executed (a movel path check: a few ms), never for another
+  // client's backlog. A client whose output is backed up runs nothing (back-pressure).
+  more_ = false;
+  for (int turn = 0; turn < kTurnsPerRound; ++turn) {
     bool any = false;
     for (std::size_t i = 0; i < ts_.size(); ++i) {
-      if (!console_.run_one(sessions_[i])) continue;
+      if (!may_run(i) || !console_.run_one(sessions_[i])) continue;
       any = true;
       queue_output(i);
+      write_some(i);
       sweep(0);
     }
     if (!any) break;
+    more_ = turn + 1 == kTurnsPerRound;
   }
+  console_.tick();  // the program runner: its next lines into the motion queue
   std::string ev, ev_grbl;
   console_.drain_events(ev, ev_grbl);
   bool all_eof_done = true;
   for (std::size_t i = 0; i < ts_.size(); ++i) {
     FdTransport& t = *ts_[i];
     Session& s = sessions_[i];
-    console_.poll(s);  // finish a wait that is done (lines were run above)
-    s.out += s.dialect == Dialect::grbl ? ev_grbl : ev;
+    if (may_run(i) && console_.run_one(s)) more_ = true;  // a wait that is done answers now
     queue_output(i);
+    queue_events(i, s.dialect == Dialect::grbl ? ev_grbl : ev);
     write_some(i);
     if (t.name == "stdin" && !(t.eof && !console_.busy(s))) all_eof_done = false;
     if (t.name != "stdin") all_eof_done = all_eof_done && exit_on_eof;
   }
   if (exit_on_eof && all_eof_done) {
-    // Last answers out before returning (bounded: a client that does not read loses them).
-    for (int k = 0; k < 200; ++k) {
+    // Last answers out before returning; a client that takes nothing for 2 s loses them.
+    int idle_ms = 0;
+    while (idle_ms < 2000) {
       bool left = false;
+      std::size_t before = 0, after = 0;
       for (std::size_t i = 0; i < ts_.size(); ++i) {
+        before += ts_[i]->pending.size();
         write_some(i);
+        after += ts_[i]->pending.size();
         left = left || !ts_[i]->pending.empty();
       }
       if (!left) break;
+      idle_ms = after < before ? 0 : idle_ms + 5;
       pollfd p{-1, 0, 0};
       ::poll(&p, 0, 5);
     }

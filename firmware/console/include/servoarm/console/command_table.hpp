@@ -169,7 +169,10 @@ inline constexpr CommandSpec kCommands[] = {
      "every line parsed, every move planned and checked from the pose the previous line leaves (the console's own "
      "check: the one `$C` check mode makes); the first bad line is answered `error: program FILE:LINE: reason` and "
      "nothing moves. Needs an enabled, homed arm at rest with nothing queued (`error: not_homed` naming the joints). "
-     "Answers `ok running NAME: N steps` at once; progress comes as `program: ...` lines (`program: NAME done`, "
+     "The check runs in slices of about 2 ms, every console served between two (a long program never holds up `?` or "
+     "Ctrl-X; `stop`, `estop`, `disable`, Ctrl-X end the check: `error: program run: NAME: check interrupted by stop`); "
+     "answers `ok running NAME: N steps` when the check has ended and the program starts (refused if the arm moved "
+     "meanwhile); progress comes as `program: ...` lines (`program: NAME done`, "
      "`program: NAME aborted at FILE:LINE: reason`). The program's moves are fed to the motion queue from the console "
      "thread, one ahead of the running one. `stop`, `abort`, `disable`, an e-stop or a fault end the program (the "
      "rest is dropped); nothing resumes by itself after a restart. In check mode (`$C`) `run` checks only",
@@ -244,7 +247,8 @@ inline constexpr GrblSpec kGrblCommands[] = {
     {"H", Cmd::grbl_home, "$H", "homing cycle (as `home`; answers ok when it has ended, state `Home` meanwhile; a "
      "failure raises ALARM:9)", false},
     {"C", Cmd::grbl_check, "$C", "check mode on/off: G-code is parsed and its moves planned and checked, nothing moves; "
-     "`run NAME` then checks the whole program only", false},
+     "`run NAME` then checks the whole program only; a check changes nothing: `teach`, `point delete`, `record` "
+     "are checked and answered, no point, points file or program file is written", false},
     {"J=", Cmd::grbl_jog, "$J=[G90 or G91] [G20 or G21] [G53] X.. Y.. Z.. [A B C] F..",
      "jog the tool point in the active user frame, G53: the base frame (G91 incremental, G90 absolute; F required, "
      "in G20/G21 units per minute); "

@@ -99,10 +99,17 @@ struct Session {
   bool discarding = false;
   bool after_cr = false;               ///< last byte was CR (CR LF is one line end)             ///< current line overflowed: drop until newline
   std::deque<std::string> lines;       ///< complete lines not executed yet (while waiting)
+  /// A feed hold ('!') arrived after this many complete lines not run yet: it holds at once,
+  /// and again right after the last of them has run (a move sent before the '!' is held).
+  std::size_t hold_after = 0;
+  /// UTF-8: continuation bytes still expected of the character begun by `utf8_lead` (a
+  /// realtime byte 0x80-0xFF inside a character other than C2 xx is text, not a command).
+  std::uint8_t utf8_left = 0, utf8_lead = 0;
   GcodeModal modal;
   bool waiting = false;                ///< `wait` / M400 in progress
   bool enabling = false;               ///< `enable` / M17 waits for operation enabled
   bool homing = false;                 ///< `$H` waits for the homing cycle to end
+  bool checking = false;               ///< `run` waits for its program's check (run in slices)
   std::string out;                     ///< text to send to the client
   std::uint64_t lines_done = 0;
   Dialect dialect = Dialect::native;
@@ -150,7 +157,7 @@ class Console {
   void drain_events(std::string& native, std::string& grbl);
 
   /// True while the session has work pending (queued lines or a wait).
-  bool busy(const Session& s) const { return s.waiting || s.enabling || s.homing || !s.lines.empty(); }
+  bool busy(const Session& s) const { return s.waiting || s.enabling || s.homing || s.checking || !s.lines.empty(); }
 
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
   /// Single-threaded tests set it to run a control cycle.
@@ -233,16 +240,29 @@ class Console {
   std::string homing_text(const Telemetry& t) const;
   std::string grbl_settings() const;
   void realtime(Session& s, char ch);
+  /// Feed hold: the arm (a move decelerates and stays held, a jog stops) and the program.
+  void feed_hold(Session& s);
   /// The tool pose of the commanded joints.
   kin::Pose commanded_pose() const;
   kin::JointVector commanded_joints() const;
   void answer_error(Session& s, CmdError e, const std::string& msg);
   void answer_ok(Session& s, const std::string& data = {});
+  /// The last line of s.out after `from` is an `error:` answer (native) or `error:N` (GRBL).
+  bool last_answer_is_error(const Session& s, std::size_t from) const;
+  /// A line of information (GRBL: [MSG:]) appended to s.out, before the answer that follows
+  /// (nothing when `text` is empty).
+  void note_line(Session& s, const std::string& text);
+  /// The same, inserted before the final answer line already in s.out after `from`.
+  void note_before_answer(Session& s, std::size_t from, const std::string& text);
+  /// Drop the M62/M63 changes waiting for the next move: "" when none, else the line that says so.
+  std::string discard_sync_outputs(const char* why);
   bool motion_state_ok(Session& s);
   /// Resolve a pending `enable` / `wait` whose outcome is known. True while still blocked.
   bool settle(Session& s);
   /// out_of_range answer when a planned move would take longer than max_move_duration_s.
   bool duration_ok(Session& s, const char* what, double duration_s);
+  /// The same for an increment jog (a lower bound of its duration: distance over its speed).
+  bool jog_duration_ok(Session& s, double duration_s);
   void queue_dwell(Session& s, double secs);
   void do_help(Session& s, std::string_view topic);
   /// `help`'s first line: the units in use.
@@ -349,6 +369,24 @@ class Console {
     bool step_fed = false;      ///< stepping: the one motion has been fed
   };
   std::unique_ptr<ProgramRun> run_;
+  /// A `run` whose program is being checked: a slice of its steps at a time (settle()), so
+  /// every transport is read between two slices. One at a time.
+  struct PendingCheck {
+    Session* owner = nullptr;
+    std::unique_ptr<ProgramRun> run;
+    Session cs;                           ///< the check's own check-mode session
+    std::unique_ptr<PathShadow> shadow;   ///< its own blend shadow (check_shadow_ swapped in per slice)
+    std::size_t next = 0;                 ///< next step to check
+    kin::JointVector from;                ///< tail() when the check began: the run needs it unchanged
+    std::size_t tool = 0, frame = 0;
+    bool check_only = false;              ///< `run` in check mode: answer, do not run
+  };
+  std::unique_ptr<PendingCheck> pcheck_;
+  /// Check the next slice of pcheck_'s steps (~2 ms); when done (or refused), answer its owner
+  /// and start the program. True while it is still being checked.
+  bool continue_check();
+  /// End a pending check with `error: program ... check interrupted: <why>` (stop, e-stop, ...).
+  void cancel_check(const std::string& why);
   bool ticking_ = false;        ///< tick() is feeding (no re-entry; the run may end inside it)
   std::string program_events_;  ///< `program: ...` lines for every session (drain_events)
   struct Recording {
@@ -374,8 +412,6 @@ class Console {
   void take_sync_outputs(MotionItem& m);
   /// movej / movel @NAME typed at the console (Command::at_point).
   void queue_at_point(Session& s, const Command& c);
-  /// Check every step of `p` from the queue's end with the console's check mode; "" or FILE:LINE: reason.
-  std::string check_program(const prog::Program& p);
   /// Run one step in `ps` (its answer in ps.out).
   void exec_step(Session& ps, const prog::Program& p, const prog::ProgramStep& st);
   /// End the program (if one runs) with `program: NAME <how>` (e.g. "aborted at f:3: stop").

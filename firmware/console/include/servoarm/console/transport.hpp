@@ -51,18 +51,34 @@ std::string open_serial(FdTransport& t, const std::string& path, int baud);
 bool write_all(int fd, const std::string& s);
 
 
-/// Most console output held for one client that is not reading (bytes). Beyond it
-/// the client's new answers are dropped, counted in its transport and in `stats`
-/// (output_dropped_lines), and it gets one `alarm: console output overflow` line
-/// once it reads again. Nobody else waits for it.
+/// Back-pressure: while more than this much output waits to be written to a client
+/// (bytes), none of its lines runs; its answers are never thrown away. One answer may be
+/// larger (`points`, `config`): it is queued whole.
 inline constexpr std::size_t kMaxPendingOutput = 64 * 1024;
+/// Asynchronous lines (`alarm:` / `program:` events) are dropped for a client whose
+/// unwritten output exceeds this (it does not read), counted in its transport and in
+/// `stats` (output_dropped_lines); it gets one `alarm: console output overflow` line once
+/// it reads again. Answers to its lines are never dropped (see kMaxPendingOutput).
+inline constexpr std::size_t kMaxPendingEvents = 1024 * 1024;
+/// The receive buffer per client: while this many complete lines of a client wait to run,
+/// the server reads nothing more from it (the rest stays in the kernel; the sender's
+/// writes block). Each read takes at most kReadChunk bytes, so a client holds at most
+/// kMaxQueuedLines + kReadChunk lines in the server.
+inline constexpr std::size_t kMaxQueuedLines = 256;
+inline constexpr std::size_t kReadChunk = 4096;
+/// Lines one round runs at most per client (one per client per turn, every transport
+/// read between two lines).
+inline constexpr int kTurnsPerRound = 16;
 
 /// The console thread's work over several transports. Each round: read every
-/// transport (realtime characters act at once, before any line runs or any
-/// output is written), run complete lines one at a time round-robin with a
-/// fresh read of every transport between two lines, then write to each client
-/// only what it takes without blocking. One stalled client never delays the
-/// others (nor an e-stop from them).
+/// transport (realtime characters act at once, before any line runs or any output is
+/// written), then run lines one at a time round-robin, one line per client per turn and
+/// at most kTurnsPerRound turns, with a fresh read of every transport between two lines,
+/// then write to each client only what it takes without blocking. One client's backlog
+/// never delays another client's realtime characters by more than the line being run.
+/// A client is read only while fewer than kMaxQueuedLines of its lines wait, and its lines
+/// run only while less than kMaxPendingOutput of its output waits (back-pressure): every
+/// line gets exactly one answer, and memory stays bounded whatever a client sends.
 class ConsoleServer {
  public:
   ConsoleServer(Console& console, const std::vector<FdTransport*>& ts);
@@ -74,11 +90,15 @@ class ConsoleServer {
  private:
   void sweep(int timeout_ms);
   void queue_output(std::size_t i);
+  void queue_events(std::size_t i, const std::string& ev);
   void write_some(std::size_t i);
+  /// Lines of session i may run now (its output is not backed up).
+  bool may_run(std::size_t i) const;
   Console& console_;
   std::vector<FdTransport*> ts_;
   std::vector<Session> sessions_;
   std::vector<pollfd> pfds_;
+  bool more_ = false;  ///< the last round stopped with lines left to run: the next does not wait for input
 };
 
 /// The console loop (console thread): ConsoleServer rounds until `quit` / `stop`
