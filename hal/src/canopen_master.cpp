@@ -273,6 +273,9 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
       fb.position = cfg_.joints[j].scaling.to_joint(pos);
       fb.valid = true;
       fb.last_feedback = now;
+      // A synchronous TPDO holds what the drive sampled at the SYNC it answers: the last one sent
+      // before it arrived (the drives' clock, as far as the master can know it).
+      fb.sampled = cfg_.produce_sync && last_sync_ != 0 && last_sync_ <= now ? last_sync_ : now;
       if (st == cia402::State::fault || st == cia402::State::fault_reaction_active) {
         // While enable() is resetting this drive, fault is the expected starting point.
         if (target_ == cia402::Target::enabled && !jt.resetting) set_fault(j, Status::drive_fault, now);
@@ -896,6 +899,9 @@ Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) 
   }
   if (cfg_.produce_sync) {
     const Status s = bus_.send(encode_sync());
+    // After the send: a send that waits (a busy controller queue, a bus shared with another
+    // thread) puts the SYNC, and so the drives' sampling, at its end.
+    if (is_ok(s)) last_sync_ = clock_.now();
     if (!is_ok(s) && is_ok(result)) result = s;
   }
   return result;

@@ -115,7 +115,7 @@ Status SimBusEndpoint::receive(CanFrame& out, TimePoint deadline) {
       Entry& e = ring_[head_];
       if (e.deliver_at <= now) {
         out = e.frame;
-        out.rx_time = now;
+        out.rx_time = e.deliver_at;  // when it arrived (as a kernel timestamp), not when it was read
         head_ = (head_ + 1) % ring_.size();
         --count_;
         ++stats_.rx_frames;

@@ -29,7 +29,14 @@ void SimPlant::apply_injections(hal::TimePoint now) {
 
 void SimPlant::step(hal::TimePoint now) {
   apply_injections(now);
-  arm_->step(now);
+  if (!at_arrival_) {
+    arm_->step(now);
+    return;
+  }
+  hal::CanFrame f;
+  for (int i = 0; i < 4096 && sim_ep_->receive(f, 0) == hal::Status::ok; ++i)
+    arm_->handle(f, f.rx_time != 0 && f.rx_time <= now ? f.rx_time : now);
+  arm_->tick(now);
 }
 
 void SimPlant::inject_silent(int joint) { silent_ = joint; }
@@ -47,10 +54,13 @@ void SimPlant::start_thread() {
       hal::CanFrame f;
       const hal::TimePoint now = clock_.now();
       apply_injections(now);
-      // Wait up to 100 us for a frame, then hand everything pending to the drives.
+      // Wait up to 100 us for a frame, then hand everything pending to the drives, each at the time
+      // it arrived: a drive samples at the SYNC, not when this thread gets round to it (after a
+      // stall of this thread, several SYNCs would otherwise be sampled at one instant).
       if (sim_ep_->receive(f, now + 100 * hal::kMicrosecond) == hal::Status::ok) {
-        arm_->handle(f, clock_.now());
-        for (int i = 0; i < 4096 && sim_ep_->receive(f, 0) == hal::Status::ok; ++i) arm_->handle(f, clock_.now());
+        arm_->handle(f, f.rx_time != 0 ? f.rx_time : clock_.now());
+        for (int i = 0; i < 4096 && sim_ep_->receive(f, 0) == hal::Status::ok; ++i)
+          arm_->handle(f, f.rx_time != 0 ? f.rx_time : clock_.now());
       }
       arm_->tick(clock_.now());
     }

@@ -99,17 +99,24 @@ Status CollisionObserver::update(const JointVector& q, const JointVector& qd, co
     integral_.setZero();
     r_.setZero();
     m_prev_ = M;
-    prev_ = tau - g - f;  // C^T qd unknown yet (usually qd = 0 here)
+    prev_ = (cfg_.torque_is_interval_mean ? JointVector::Zero(n_) : tau) - g - f;  // C^T qd unknown yet (usually qd = 0)
     started_ = true;
     return Status::ok;
   }
   // C^T qd = dM/dt qd - C qd (dM/dt = C + C^T).
   MassMatrix Md = (M - m_prev_) / dt;
   m_prev_ = M;
-  const JointVector beta = tau + (Md * qd - cqd) - g - f;
-  // Trapezoidal rule for the model part (the torques are samples of a continuous signal).
-  integral_ += (0.5 * (beta + prev_) + r_) * dt;
-  prev_ = beta;
+  // Trapezoidal rule for the model part (samples of a continuous signal at the sample times); the
+  // drives' torque likewise, or, when it is the mean over the interval, that mean times dt.
+  if (cfg_.torque_is_interval_mean) {
+    const JointVector beta = (Md * qd - cqd) - g - f;
+    integral_ += (tau + 0.5 * (beta + prev_) + r_) * dt;
+    prev_ = beta;
+  } else {
+    const JointVector beta = tau + (Md * qd - cqd) - g - f;
+    integral_ += (0.5 * (beta + prev_) + r_) * dt;
+    prev_ = beta;
+  }
   r_ = cfg_.gain * (p - p0_ - integral_);
   double worst = 1.0;
   for (int j = 0; j < n_; ++j) {

@@ -9,6 +9,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <string>
 #include <thread>
@@ -629,6 +630,12 @@ TEST(Controller, FollowingErrorFaults) {
   CHECK(t.state == ArmState::fault);
   CHECK(t.cause == FaultCause::following_error);
   CHECK_TEXT(std::string(t.fault_text).find("joint 2 following_error") != std::string::npos, t.fault_text);
+  // The error and the limit with their unit, the error visibly beyond the limit.
+  double e = 0, lim = 0;
+  const char* at = std::strstr(t.fault_text, "following_error: ");
+  CHECK_TEXT(at != nullptr && std::sscanf(at, "following_error: %lf rad > limit %lf rad", &e, &lim) == 2, t.fault_text);
+  CHECK_TEXT(e > lim, t.fault_text);
+  DOUBLES_EQUAL(2.0 * M_PI / 180.0, lim, 1e-4);
   LONGS_EQUAL(0, r.rt_allocs);
 }
 

@@ -432,6 +432,7 @@ int main(int argc, char** argv) {
     // --sim: the drive thread served the bring-up (SDO); from now on the control thread
     // steps the virtual drives right before each cycle (docs: firmware, "--sim").
     plant->stop_thread();
+    plant->set_frames_at_arrival(true);  // the drives sample at the SYNC, not at the next cycle
     loop.set_pre_cycle(&sim::SimPlant::step_hook, plant.get());
   }
 #endif

@@ -407,7 +407,17 @@ void Controller::supervise(TimePoint now) {
       const double e = std::fabs(q_prev_[j] - fb.position);
       if (e > max_follow_) max_follow_ = e;
       if (e > cfg_.following_error) {
-        std::snprintf(d, sizeof d, "%.4f > limit %.4f", e, cfg_.following_error);
+        // In the joint's SI unit, with as many digits as it takes for the excess to show
+        // (0.0009123 rad > limit 0.0009 rad, never "0.0009 > limit 0.0009").
+        const char* u = chain_.joint(j).type == kin::JointType::prismatic ? "m" : "rad";
+        int digits = 4;
+        char a[24], b[24];
+        for (;; ++digits) {
+          std::snprintf(a, sizeof a, "%.*g", digits, e);
+          std::snprintf(b, sizeof b, "%.*g", digits, cfg_.following_error);
+          if (std::strcmp(a, b) != 0 || digits >= 12) break;
+        }
+        std::snprintf(d, sizeof d, "%s %s > limit %s %s", a, u, b, u);
         raise_fault(FaultCause::following_error, j, d);
         return;
       }

@@ -102,6 +102,11 @@ bool ModelControl::configure(const kin::Chain& chain, hal::ServoBus& bus, const 
   kin::CollisionConfig oc;
   oc.gain = cfg.collision_gain;
   oc.sensitivity = cfg.collision_sensitivity;
+  // A drive's torque at a SYNC (6077h) is its current filtered over the cycle before it: the
+  // interval's torque, not a point value (the dynamic plant reports exactly the interval's mean).
+  // Integrated as such, a late or stalled cycle, in which the drives brake hard on their last
+  // setpoint, adds the torque they gave over that interval and not half the previous one.
+  oc.torque_is_interval_mean = true;
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
     const double given = cfg.collision_threshold[ju];
@@ -254,12 +259,31 @@ bool ModelControl::observe(bool watch, double dt, kin::CollisionVerdict& verdict
   if (!on) {
     if (watching_) observer_.reset();
     watching_ = false;
+    sampled_ = 0;
     stats_.last_ratio = 0;
     return false;
   }
+  // The observer integrates over the time between the two samples it compares. The cycle's period
+  // is that time only on average: a late cycle (its SYNC late) or a stall (no SYNC for several
+  // periods while the drives brake on their last setpoint, the largest torques of all) makes the
+  // true interval longer, and the momentum change over it would be set against the torque of one
+  // period. So: the interval between the drives' sample times (the SYNCs the feedback answers);
+  // the latest of the joints' (a late TPDO of one joint shifts its data by a cycle, not the time
+  // base); no new sample since the last update: nothing to add. `dt` only where the bus gives no
+  // sample times.
+  hal::TimePoint sampled = 0;
+  for (int j = 0; j < n_; ++j) sampled = std::max(sampled, bus_->feedback(static_cast<std::size_t>(j)).sampled);
+  double step = dt;
+  if (sampled != 0) {
+    if (watching_ && sampled_ != 0) {
+      if (sampled <= sampled_) return false;  // the same feedback again
+      step = static_cast<double>(sampled - sampled_) * 1e-9;
+    }
+    sampled_ = sampled;
+  }
   watching_ = true;
   measured(q_, qd_, &tau_);
-  if (observer_.update(q_, qd_, tau_, dt, verdict) != kin::Status::ok) {
+  if (observer_.update(q_, qd_, tau_, step, verdict) != kin::Status::ok) {
     verdict = kin::CollisionVerdict{};
     return false;
   }

@@ -324,6 +324,7 @@ class CanopenServoBus final : public ServoBus {
   cia402::Target target_ = cia402::Target::disabled;
   bool started_ = false;
   TimePoint boot_end_ = 0;  ///< start(): until when a silent node is asked again
+  TimePoint last_sync_ = 0;  ///< when write() last sent the SYNC (the drives sample at it)
   std::uint64_t ignored_ = 0;
   char error_[192] = {};
 };

@@ -40,6 +40,10 @@ struct JointFeedback {
   std::uint32_t emcy_count = 0; ///< EMCY frames received from this drive
   bool valid = false;           ///< position/velocity come from at least one feedback frame
   TimePoint last_feedback = 0;  ///< time of the last feedback frame (0 = none)
+  TimePoint sampled = 0;        ///< when the drive took position, velocity and torque: the SYNC the
+                                ///< feedback answers (CANopen: the last SYNC the master sent before the
+                                ///< TPDO arrived), else the frame's arrival; 0 = none. Successive values
+                                ///< give the true interval between samples when the cycle jitters
   TimePoint last_heartbeat = 0; ///< time of the last heartbeat (0 = none)
   TimePoint fault_since = 0;    ///< when the fault was detected
   Duration age = -1;            ///< now - last_feedback at the last read(), -1 = none yet

@@ -27,8 +27,15 @@ class SimPlant {
   /// Start the drive thread (real time). Tests with a ManualClock call step() instead.
   void start_thread();
   void stop_thread();
-  /// Single-threaded use: drain frames and tick the drives at `now`.
+  /// Single-threaded use: drain frames and tick the drives at `now`. Each frame is handled at
+  /// `now`, or, with set_frames_at_arrival(true), at the time it arrived (CanFrame::rx_time).
   void step(hal::TimePoint now);
+  /// Frames handled at their arrival rather than at the step's time: a drive then samples at
+  /// the SYNC, as on a bus, however late the next step comes (what `armfw --sim` runs: stepped
+  /// before each control cycle, a SYNC would otherwise be sampled at the next cycle's start,
+  /// and after a late cycle the feedback's sample would not be the SYNC's). Off by default (the
+  /// in-process tests' timing: the drives act at the step after the SYNC).
+  void set_frames_at_arrival(bool on) { at_arrival_ = on; }
   /// RtLoop::PreCycle that steps the plant `ctx` (a SimPlant*): what `armfw --sim` runs
   /// on the control thread once the drives are up (the drive thread is stopped then).
   static void step_hook(void* ctx, std::int64_t now_ns) { static_cast<SimPlant*>(ctx)->step(now_ns); }
@@ -55,6 +62,7 @@ class SimPlant {
   std::unique_ptr<ArmSim> arm_;
   std::thread th_;
   std::atomic<bool> stop_{false};
+  bool at_arrival_ = false;
   std::atomic<int> silent_{-1};
   std::atomic<int> hb_stop_{-1};
   std::atomic<int> emcy_joint_{-1};

@@ -17,7 +17,8 @@
 // report (CANopen 6077h), q and qd the measured positions and velocities. C^T qd is computed
 // as dM/dt qd - C qd, with C qd from Newton-Euler (kin::coriolis) and dM/dt the difference of
 // M between two updates, and the integral by the trapezoidal rule over the samples (the
-// approximations: O(dt)).
+// approximations: O(dt)); the drives' torque either so (point samples) or, when they report
+// their mean over the interval (CollisionConfig::torque_is_interval_mean), as that mean.
 //
 // Real-time: everything here except CollisionObserver::configure() is heap-free, lock-free,
 // throws nothing (fixed-size Eigen, bounded loops); configure() too, in fact, but it is
@@ -66,6 +67,13 @@ struct CollisionConfig {
   /// not checked.
   std::array<double, kMaxJoints> threshold{};
   double sensitivity = 1.0;  ///< > 0: 2 halves every threshold, 0.5 doubles them
+  /// What the torques given to update() are. false: samples of a continuous signal at the sample
+  /// time (integrated with the model terms by the trapezoidal rule). true: each is the mean torque
+  /// over the interval since the previous sample, as a drive reports its current averaged over
+  /// the SYNC period (the dynamic plant's 6077h): integrated as that mean times the interval,
+  /// which is exact however long the interval and however the torque changed within it (a
+  /// trapezoid would mix in the previous interval's torque).
+  bool torque_is_interval_mean = false;
 };
 
 struct CollisionVerdict {

@@ -116,7 +116,10 @@ class ModelControl {
   /// Feed-forward of the commanded state `cmd` (after the motion step, before bus.write()):
   /// per joint bus.set_feed_forward(). Nothing when off, not available, or in free-drive.
   void feed_forward(const kin::JointState& cmd);
-  /// One observer sample from the bus feedback (after bus.read()), `dt` s since the last cycle.
+  /// One observer sample from the bus feedback (after bus.read()). The time step is the interval
+  /// between the feedback's sample times (JointFeedback::sampled: the SYNCs it answers), so a late
+  /// cycle or a stall does not count as one period; feedback already used (no new sample) adds
+  /// nothing. `dt`, s, is the step only where the bus reports no sample times.
   /// `watch` false (modes where the controller does not watch: not powered, homing, stopping...)
   /// and a joint not enabled, homing or without torque feedback, free-drive, or detection off:
   /// the observer is reset (it starts again, residual 0, at the next watched sample).
@@ -174,6 +177,7 @@ class ModelControl {
   kin::CollisionObserver observer_;
   std::array<double, kin::kMaxJoints> thr_{};  ///< sensitivity applied
   bool watching_ = false;
+  hal::TimePoint sampled_ = 0;  ///< sample time of the feedback of the last update (0 = none)
   kin::FeedForward ff_;
   kin::JointVector q_, qd_, tau_, damping_vec_;
   std::array<double, kin::kMaxJoints> damping_{};
