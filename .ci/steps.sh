@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Sourced by the .ci scripts: step_done NAME START records how long a step of a CI run
 # took (seconds since START, a `date +%s` value) in $SERVOARM_CI_TIMES, which .ci/run
 # sets and prints as one table at the end. Outside .ci/run it records nothing.

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Cross toolchain: 64-bit ARM Linux (Raspberry Pi 4/5 with a 64-bit OS, most
 # current ARM SBCs), Debian's g++-aarch64-linux-gnu.
 #

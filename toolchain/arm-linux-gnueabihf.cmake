@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Cross toolchain: 32-bit ARM Linux, hard float (BeagleBone Black/AI, Raspberry
 # Pi OS 32-bit), Debian's g++-arm-linux-gnueabihf.
 #

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Shared part of toolchain/aarch64-linux-gnu.cmake and arm-linux-gnueabihf.cmake
 # (Debian cross compilers + multiarch). Expects SERVOARM_CROSS_TRIPLET,
 # SERVOARM_CROSS_PROCESSOR, SERVOARM_CROSS_QEMU and SERVOARM_DEB_ARCH.

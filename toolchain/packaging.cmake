@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Install rules and CPack (Debian package) for the robot controller.
 # Included at the end of the top-level CMakeLists.txt.
 #
@@ -15,6 +16,7 @@
 #   /lib/systemd/system/servoarm-can.service CAN interface bring-up (root oneshot)
 #   /usr/lib/servoarm/servoarm-can-up        its script
 #   /usr/share/doc/servoarm/README.md, docs/*.md   the manual (the units' Documentation=)
+#   /usr/share/doc/servoarm/copyright        the licence (Apache-2.0), Debian's machine-readable format
 set(_pkg ${CMAKE_CURRENT_LIST_DIR}/packaging)
 
 set(SERVOARM_SYSCONFDIR "/etc" CACHE PATH "Where the package's configuration files go (absolute)")
@@ -28,7 +30,7 @@ install(FILES ${_pkg}/servoarm.default DESTINATION ${SERVOARM_SYSCONFDIR}/defaul
 install(FILES ${_pkg}/servoarm.service ${_pkg}/servoarm-can.service DESTINATION ${SERVOARM_SYSTEMD_UNITDIR}
         COMPONENT servoarm)
 install(PROGRAMS ${_pkg}/servoarm-can-up DESTINATION lib/servoarm COMPONENT servoarm)
-install(FILES ${PROJECT_SOURCE_DIR}/README.md DESTINATION share/doc/servoarm COMPONENT servoarm)
+install(FILES ${PROJECT_SOURCE_DIR}/README.md ${_pkg}/copyright DESTINATION share/doc/servoarm COMPONENT servoarm)
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs/ DESTINATION share/doc/servoarm/docs COMPONENT servoarm
         FILES_MATCHING PATTERN "*.md")
 

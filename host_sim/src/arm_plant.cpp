@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include "servoarm/sim/arm_plant.hpp"
 
 #include <algorithm>

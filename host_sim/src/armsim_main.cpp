@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armsim: virtual CiA 402 servo drives on a SocketCAN interface (e.g. vcan0).
 #include <algorithm>
 #include <cmath>

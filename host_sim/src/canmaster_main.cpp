@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // canmaster: CANopen CiA 402 master for shell scenarios (bring-up, streaming, fault checks).
 #include <algorithm>
 #include <array>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include "servoarm/sim/sim_plant.hpp"
 
 namespace servoarm::sim {

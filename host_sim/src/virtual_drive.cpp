@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include "servoarm/sim/virtual_drive.hpp"
 
 #include "servoarm/sim/arm_plant.hpp"

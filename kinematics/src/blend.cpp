@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Blended joint motion (overlap of straight segments). See blend.hpp for the
 // method and the guarantees; the checks are written out below.
 #include "servoarm/kinematics/blend.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Blended line and joint segments (blend_path.hpp): superposition, window checks sampled
 // at the control rate, the largest overlap that passes.
 #include "servoarm/kinematics/blend_path.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Forward kinematics and the geometric Jacobian over DH rows.
 //
 // Real-time code: no heap, no exceptions. The product of the row transforms is

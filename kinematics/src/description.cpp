@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Robot description files (TOML, read with toml++ through file_input.hpp). Set-up code:
 // allocates; exception-free. Every error is one line that starts with the file and the
 // line:column of the offending value ("arm.toml:14:5: joint 2: key 'a': ..."), names the

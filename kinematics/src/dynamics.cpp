@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Rigid-body dynamics over DH rows: recursive Newton-Euler, composite rigid body,
 // forward dynamics by a fixed-size LDL^T. Real-time code: no heap, no exceptions.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Batched sine/cosine for the FK hot path (internal header).
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Two-lane doubles for code written once for a lane type T (internal header).
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The motion IK adapter (see motion_ik.hpp) and the damped Newton "IK
 // nearest to a seed", its IkFallback::newton:
 //   e = [p_target - p(q); log(R_target R(q)^T)]      (6-D pose error, base frame)

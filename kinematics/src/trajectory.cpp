@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Jerk-limited, time-synchronised joint trajectories. See trajectory.hpp for
 // the profile model; the derivations are in the comments below.
 #include "servoarm/kinematics/trajectory.hpp"

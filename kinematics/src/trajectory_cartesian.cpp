@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Cartesian straight-line moves: path check, singularity slowdown, sampling.
 // See trajectory_cartesian.hpp for the model.
 #include "servoarm/kinematics/trajectory_cartesian.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armfw and armctl as processes: a script on stdin (exits at EOF when done), the
 // pty console driven by `armctl console -c ...`, and a bad config refused naming the key.
 // In a cross build armfw and armctl run under the emulator (target_exec.hpp).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // A strict JSON reader for the tests (RFC 8259 grammar: objects, arrays, strings,
 // numbers, true/false/null), so a test can assert that armctl's --json output is one

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Run a command line, capture stdout and stderr separately and the exit status.
 // In a cross build a line that starts with a target binary (kArmctl) runs it

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl console as a process against a scripted firmware on a pty (issue 16): realtime
 // characters sent with -c expect no `ok` (`?` prints the status report that arrives and
 // returns; `!`, `~`, Ctrl-X, 0x85 are followed by a `?` whose report ends them), and in

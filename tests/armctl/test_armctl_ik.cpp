@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl kin ik / kin precision end to end: the JSON output is parsed and
 // every returned solution is checked with the library's forward kinematics
 // against the requested pose (targets are built here with Eigen, not with

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl kin ... end to end. Expected values come from the seed closed forms
 // (rr_planar, seed 002 §4.1) and from the orientation definitions, not from
 // armctl's own code path.

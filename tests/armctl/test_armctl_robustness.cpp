@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl probed as a user would (issue 15): tiny, huge, zero, negative and missing
 // option values, joint values that make the kinematics overflow, paths that are not
 // files. Each case: the exit status, a one-line error naming the option or the thing

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl plan movej | movel through cli_plan(): exit codes, CSV content, SVG written.
 #include <cstdio>
 #include <fstream>

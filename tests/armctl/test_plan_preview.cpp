@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl plan movel previews what armfw runs: the console (armfw's path: movel's plan and
 // the IkSolver the control thread samples with) and armctl's plan code plan the same
 // movel -- same robot, start, target, speed, limits -- and every sample at 1 kHz agrees

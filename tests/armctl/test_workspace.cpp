@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl kin workspace against the closed-form envelopes of the seeds' arms (seed 002
 // §3.8: the reach in a plane; §4.1-4.5 for the arms), cell by cell and by area; and the
 // SVG plots (kin workspace, plan movej, plan movel) rendered to PNG by rsvg-convert

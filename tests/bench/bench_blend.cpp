@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Blending (blend.hpp): the cost of appending one blended segment to a queue
 // that is executing, and of one sample.
 //   plan/blend_append6/servoarm   append one random 6-joint waypoint with a blend

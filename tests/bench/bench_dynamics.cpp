@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Dynamics: servoarm against Orocos KDL on the same states, same run.
 // Names: rnea/<model>/{servoarm,kdl} (ChainIdSolver_RNE), mass_matrix/<model>/...
 // (ChainDynParam::JntToMass), gravity/<model>/... (ChainDynParam::JntToGravity).

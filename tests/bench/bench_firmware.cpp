@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Cost of one control cycle (Controller::cycle: read feedback, supervisor,
 // motion sample, limit/NaN checks, 6 RPDOs + SYNC, telemetry) for the PUMA 560
 // on six virtual CiA 402 drives on the in-process bus, single thread, simulated

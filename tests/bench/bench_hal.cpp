@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // HAL / servo bus benchmarks: the per-cycle codec path and master -> virtual
 // drives -> master round trips on the in-process bus. Figures: tests/bench/RESULTS.md.
 #include <benchmark/benchmark.h>

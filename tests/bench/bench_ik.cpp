@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Inverse kinematics: closed form (all solutions) and the numerical solver,
 // against Orocos KDL's ChainIkSolverPos_NR_JL and ChainIkSolverPos_LMA on the
 // same targets and starts, same run.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // FK and Jacobian: servoarm against Orocos KDL on the same inputs, same run.
 // Names: fk/<model>/servoarm vs fk/<model>/kdl, jacobian/<model>/...
 #include <benchmark/benchmark.h>

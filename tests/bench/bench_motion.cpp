@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Motion: planning and sampling trajectories.
 //   plan/movej6/servoarm          6-joint synchronised jerk-limited plan from rest
 //   plan/movej6_moving/servoarm   same, replanning from a moving state (mid-move)

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Control-loop wake-up latency against cyclictest, as interleaved pairs in one run,
 # at the same period, priority and memory locking:
 #   A. armfw --sim --robot puma560 --bench-loop SEC --rate HZ --priority PRIO   (moves in progress)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armfw configuration: defaults valid, every key accepted, bad files refused naming the key,
 // the value and the range; to_toml round trips (awkward strings too); the shipped
 // armfw.toml and docs/configuration.md agree with the key tables.

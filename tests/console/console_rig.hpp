@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // A console on the puma560 with virtual drives on the sim bus, single-threaded on a
 // ManualClock (the console's idle hook runs a control cycle): for the console tests.

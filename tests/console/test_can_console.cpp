@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armfw's console over CAN (ISO-TP), in-process: the firmware (App: virtual
 // drives on the SimBus, the real-time loop thread, the console loop) with a
 // CanConsole on the same in-process bus, driven by a client IsoTpEndpoint on

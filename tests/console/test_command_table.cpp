@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The console's command table (command_table.hpp): every entry is reachable by the
 // parser and appears in `help`; docs/console.md holds exactly the reference the table
 // produces between its markers (a command added without regenerating the page fails

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Teach points and programs through the console (issue 18), on the puma560 with virtual
 // drives (console_rig.hpp: mm and degrees): teach / points / point delete / movej @NAME /
 // movel @NAME, run (whole-program check first: a bad line 7 answers line 7 and nothing

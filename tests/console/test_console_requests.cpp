@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The canonical requests (requests.hpp): movel and G0/G1 build one MoveLine, movej,
 // park and G28 one MoveJoints, and one function validates and queues each. The same
 // move typed either way queues the same motion (same knots, same duration).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // ConsoleServer over pipes, with the App's Console and Controller (console_rig.hpp): what
 // one client sends never delays another's realtime bytes, every line gets exactly one
 // answer however large or many the answers, and what a client sends ahead is left in the

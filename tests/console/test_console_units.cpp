@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The console's units (units.hpp): the command language follows ConsoleConfig::units
 // (the robot description's: mm or m, deg or rad); G-code keeps G20/G21 and degrees.
 // Here the puma560 console runs in metres and radians.

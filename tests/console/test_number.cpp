@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // parse_decimal (servoarm/console/number.hpp): the one decimal reader of the console,
 // G-code, armctl and armfw's flags. A case table of accepted and refused spellings; the
 // accepted values are compared with the literal the compiler reads.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The command parser, pure: case tables of good and malformed lines for every
 // command and G-code (overlong, binary garbage, wrong argument counts, NaN).
 #include <cmath>

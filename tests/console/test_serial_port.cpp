@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // hal::SerialPort and hal::open_pty (serial_port.hpp), as armfw's console transports and
 // armctl's console client open them: a pty pair carries bytes both ways (raw: no echo,
 // no CR/LF translation, Ctrl-X passes); bad paths and bad baud rates are refused naming them.

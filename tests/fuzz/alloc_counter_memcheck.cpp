@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // tests/support/alloc_counter.hpp for the memcheck build: counts nothing.
 // The ordinary counter interposes malloc and calls glibc's __libc_malloc, so valgrind
 // never sees those blocks and reports their free() as invalid. Under valgrind the heap

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // tests/support/alloc_counter.hpp for sanitizer builds (the `asan` and `tsan` presets).
 //
 // The ordinary counter (tests/support/alloc_counter.cpp) interposes malloc and calls

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: the CANopen frame decoders of hal (NMT, SYNC, heartbeat, EMCY, the
 // PDO codecs, SDO multiplexer and abort texts). Every frame a decoder accepts re-encodes
 // to the same frame (the decoders accept exactly what the encoders produce).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: the armfw configuration loader (firmware/config, load_config_text).
 // Beyond "no crash": a refused file leaves the configuration untouched and the error is
 // one line starting with the origin; an accepted one validates and round-trips through

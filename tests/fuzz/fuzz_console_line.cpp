@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: the console's line parser (command language, G-code, GRBL $ lines).
 // Input: one byte for the joint count (1..8), then the line. Checks beyond "no crash":
 // a refused line leaves the G-code modal state untouched and has a message; an accepted

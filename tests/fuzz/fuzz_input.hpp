@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Helpers shared by the libFuzzer targets (tests/fuzz): fuzz bytes -> CAN frames, a bus
 // that hands the fuzzer's frames to the code under test and swallows what it sends.

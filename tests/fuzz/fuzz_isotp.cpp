@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: ISO-TP (ISO 15765-2) reassembly and flow control in hal's
 // IsoTpEndpoint: single/first/consecutive/flow-control frames in any order, with time
 // passing and a message of our own being sent meanwhile. Beyond "no crash": a completed

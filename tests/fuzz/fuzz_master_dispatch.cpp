@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: the CANopen master's receive path (CanopenServoBus::dispatch: TPDO1/2
 // feedback, EMCY, heartbeats, SDO answers outside a transfer) for six joints, with read()
 // and write() cycles in between. Beyond "no crash": the feedback stays finite.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: the console's number reader (servoarm/console/number.hpp), checked
 // against strtod: every text parse_decimal accepts is a finite double strtod reads the
 // same way (the whole text), and `not_finite` only for what strtod reads as inf/nan.

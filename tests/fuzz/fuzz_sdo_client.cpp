@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: hal's SDO client (expedited and segmented upload/download) against a
 // server whose answers are the fuzz input. Beyond "no crash": an upload never reports
 // more bytes than the buffer holds, and a failed transfer carries a status.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: host_sim's virtual CiA 402 drive as a CANopen server: its SDO server
 // (expedited and segmented), NMT, SYNC, RPDOs, with the motor model ticking between
 // frames. What a master written elsewhere may send it, including garbage.

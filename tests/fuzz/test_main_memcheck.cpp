@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CppUTest main for the memcheck build (the `memcheck` preset, bash .ci/memcheck), in
 // place of tests/support/test_main.cpp: the same IEEE 754 plugin, but CppUTest's
 // new/delete leak detector switched off. That detector replaces operator new in the

@@ -1,4 +1,5 @@
 #!/usr/bin/env node
+// SPDX-License-Identifier: Apache-2.0
 // The real cncjs (a GRBL sender) against armfw's pty with virtual servos, driven through
 // cncjs's socket.io API as its web page would: open the port as a Grbl controller, read the
 // state, jog, run a 50-line program with cncjs's sender, feed hold and resume, then check the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Master + virtual drives on one in-process SimBus, single-threaded: the
 // ManualClock's idle hook steps the drives whenever time moves (the master's

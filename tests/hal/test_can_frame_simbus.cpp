@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CanFrame validity and the in-process SimBus (vcan semantics, fault injection).
 #include <cstdio>
 #include <thread>

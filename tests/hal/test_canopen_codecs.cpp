@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CANopen frame codecs against byte layouts written out by hand from CiA 301 / CiA 402.
 #include <cstdio>
 #include <cstring>

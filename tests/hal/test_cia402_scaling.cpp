@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CiA 402 state machine (statusword decoding, transitions) and joint scaling.
 #include <cmath>
 #include <cstdio>

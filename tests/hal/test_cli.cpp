@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Argument parsers of the armsim / canmaster binaries.
 #include <string>
 #include <vector>

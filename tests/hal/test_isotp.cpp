@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // ISO-TP (ISO 15765-2) endpoint over the in-process SimBus with a ManualClock.
 //
 // 1. Byte layouts written out by hand from ISO 15765-2 (single / first /

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CANopen master (CanopenServoBus) against six virtual CiA 402 drives on the in-process bus.
 #include <cmath>
 #include <cstdio>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SDO client against the virtual drive's SDO server (and a hand-rolled bad server).
 #include <cstring>
 #include <string>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SocketCAN backend without kernel CAN: the fd-taking constructor on one end of
 // a socketpair(AF_UNIX, SOCK_SEQPACKET) carrying struct can_frame bytes.
 #include <linux/can.h>

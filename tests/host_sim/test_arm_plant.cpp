@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The dynamic plant (issue 20): virtual drives on one rigid-body arm. Driven through the
 // CANopen master on the in-process bus with a ManualClock (deterministic), or directly.
 //  - a free swing with the drives disabled and the brakes off conserves energy;

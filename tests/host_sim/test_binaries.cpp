@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The armsim and canmaster binaries as separate processes, talking SocketCAN
 // frames (struct can_frame records) over a socketpair(AF_UNIX, SOCK_SEQPACKET)
 // passed with --fd: the shell scenarios of the vcan VM, without kernel CAN.

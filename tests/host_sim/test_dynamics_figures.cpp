@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Figures of issue 20 on the dynamic plant (docs/dynamics.md "Using the model in the firmware",
 // tests/bench/RESULTS.md), driven at the ServoBus level: the CANopen master over the in-process
 // bus to six virtual PUMA 560 drives on one rigid-body arm, a ManualClock, 1 kHz cycles (read,

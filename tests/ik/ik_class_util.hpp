@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Helpers of the IK class suites (test_ik_classes.cpp, test_ik_singular.cpp):
 // chains built from OPW / UR parameters in either DH convention, a row

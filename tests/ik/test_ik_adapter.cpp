@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The one motion IK adapter, make_ik_solver(model, options) (motion_ik.hpp):
 // with each option set it gives exactly (status and joints, bit for bit) what
 // the adapter it replaces gave, on seeded sweeps of poses -- near seeds (how

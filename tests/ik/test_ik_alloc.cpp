@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Zero heap in every IK solver (closed forms, choice, numerical), counted by
 // the malloc hook; this file and the library are built with EIGEN_NO_MALLOC.
 #include "servoarm/kinematics/ik.hpp"

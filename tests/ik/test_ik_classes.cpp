@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Closed-form IK of the OPW class (ortho-parallel base + spherical wrist:
 // abb_irb2400, kuka_kr6_r700, ist6, random arms with every OPW offset) and of
 // the UR class (ur5e, ur10e, random UR-type arms), recognised from the DH rows

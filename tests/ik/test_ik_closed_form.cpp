@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Closed-form IK of the six-joint spherical-wrist arms, solved from the DH
 // description alone: round trip FK(IK(FK(q))) = FK(q) on random
 // configurations (every solution checked), the original q among the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Numerical IK (DLS / Levenberg-Marquardt): success rate and iterations on
 // random reachable targets from random starts, joint limits never violated,
 // compared with Orocos KDL's ChainIkSolverPos_NR_JL and ChainIkSolverPos_LMA

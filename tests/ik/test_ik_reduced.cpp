@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Closed forms of seed 002 chapter 4 (RR, RRR, RLR, TRR, TRL:R, VVL:R),
 // recognised from the DH rows: round trip on random configurations, the
 // original among the solutions, the seed's formulas, unreachable targets.

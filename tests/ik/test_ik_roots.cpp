@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The general path's real-root finder (issue 19, polynomial.cpp): isolation
 // along the derivative chain, the companion matrix's eigenvalues as its
 // fallback.

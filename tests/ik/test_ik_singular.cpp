@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Near-singular sweeps of the OPW and UR closed forms, counted against a
 // slow reference written here: a dense numerical search (damped Newton on
 // the chain's FK and Jacobian from 1 500 random starts, 75 in slow builds, converged to 1e-12),

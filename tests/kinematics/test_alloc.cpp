@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Zero heap: FK, frames, Jacobian, manipulability, condition number,
 // precision and every orientation conversion, counted by the malloc hook.
 // This file is also compiled with EIGEN_NO_MALLOC.

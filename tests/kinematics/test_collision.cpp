@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Feed-forward, free-drive torque and the generalized-momentum collision observer (issue 20,
 // kinematics/include/servoarm/kinematics/collision.hpp).
 //  - feed_forward = M(q) qdd + c + g + friction assembled from the mass matrix (composite

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Description files: the keys of the issue, units, and every error path as a
 // case table (text -> expected words in the one-line error).
 #include <sys/stat.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Rigid-body dynamics against Orocos KDL (ChainIdSolver_RNE, ChainDynParam) on
 // 10 000 seeded random states per model; mass matrix symmetric positive definite;
 // forward dynamics inverts inverse dynamics; energy of a frictionless free swing

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The batched sincos used by FK against libm.
 #include <algorithm>
 #include <cmath>

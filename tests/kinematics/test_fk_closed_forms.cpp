@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // FK against the closed forms printed in the source documents.
 //   seed 000: eq. 3.7.1 (H_0^3 of the cylindrical arm), 3.8.1 (spherical wrist
 //             H_3^6), 3.9.1-3.9.2 (full orientation and position)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Jacobian against central finite differences of FK, manipulability and
 // condition number at known singular configurations, Cartesian precision
 // (seed 002 §3.14) against its closed form, and the two PUMA descriptions

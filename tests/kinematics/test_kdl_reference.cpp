@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Differential test against Orocos KDL: FK and Jacobian of every built-in
 // model, standard and modified DH, on 10 000 random configurations each.
 #include <kdl/chainfksolverpos_recursive.hpp>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // lanes.hpp: code written once for a lane type gives, in each lane of the
 // two-lane version, what the one-lane (double) version gives -- the contract
 // the spherical-wrist IK relies on when it computes two arm configurations at

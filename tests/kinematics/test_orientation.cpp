@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Orientation conversions: ZYZ (both branches and the s_beta = 0 cases of
 // seed 001 §2), RPY, quaternion, axis-angle; round trips over random
 // rotations and the edge cases.

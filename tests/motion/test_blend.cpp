@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Blended joint motion (blend.hpp): every queue is sampled at 1 kHz and checked
 // against the limits by finite differences of the sampled positions (an
 // independent check of the planner's own peak analysis), against the corner

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Blended line-to-line and mixed joint/line corners (kinematics/blend_path.hpp), sampled at
 // the control rate as the RT thread samples them: the LinuxCNC #3773 tight zigzag at high
 // feed (sampled joint acceleration never above its limit), every corner within its

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Joint moves: jerk-limited, time-synchronised profiles, replanning, stop, override.
 // Every trajectory is sampled at 1 kHz and checked against the limits,
 // continuity, endpoints and synchronisation (check_trajectory below).

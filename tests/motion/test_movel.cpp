@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Cartesian moves: tool on the line, path check refusals with reason and place,
 // singularity slowdown/refusal, stop/resume on the line, zero heap.
 #include <cmath>

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # cmake -DCPACK=... -DBUILD_DIR=... -DOUT=... -P build_package.cmake
 # Fresh Debian package of BUILD_DIR in OUT (the CTest fixture packaging_build).
 file(REMOVE_RECURSE ${OUT})

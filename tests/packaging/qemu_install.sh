@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The servoarm .deb installed the way a user installs it, on a Debian root of the
 # package's architecture run under qemu-user (CTest packaging_install_qemu of a
 # cross build; docs/building-and-testing.md "The package installed under qemu-user"):

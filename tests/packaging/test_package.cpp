@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The servoarm Debian package as CPack built it (fixture packaging_build):
 // control fields, file list, maintainer scripts, the systemd units, and the
 // package unpacked into a scratch root with dpkg-deb -x: files where the
@@ -210,6 +211,16 @@ TEST(Package, FileList) {
   }
   CHECK_EQUAL(N_MODELS, models);
   CHECK(lines > 10);
+}
+
+TEST(Package, CopyrightNamesTheLicence) {
+  // Debian's place for a package's licence: /usr/share/doc/<package>/copyright, in the
+  // machine-readable format, naming the licence the sources carry (LICENSE, SPDX lines).
+  extract();
+  const std::string c = slurp(root + "/usr/share/doc/servoarm/copyright");
+  CHECK_TEXT(has(c, "Format: https://www.debian.org/doc/packaging-manuals/copyright-format/1.0/"), c.c_str());
+  CHECK_TEXT(has(c, "License: Apache-2.0"), c.c_str());
+  CHECK_TEXT(has(c, "/usr/share/common-licenses/Apache-2.0"), c.c_str());
 }
 
 TEST(Package, MaintainerScripts) {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Teach points and the points file (firmware/program/points.hpp): round trip, atomic
 // replace, corrupt / foreign / wrong files refused with the line named and never overwritten.
 #include <unistd.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Program files (firmware/program/program.hpp): the flat list of (file, line, text) steps,
 // repeats and calls expanded, @points, blend=, G-code; the bad input refused with
 // file and line named, nothing half-loaded. Expected steps are written out by hand.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // A fresh temporary folder per test, and whole-file writes.
 #include <cstdio>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // ServoSpy: a hal::ServoBus that forwards to a real one (the CANopen master on the
 // in-process bus) and records what the controller asked for, cycle by cycle: every

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Controller + console in-process: puma560 on the sim bus with virtual CiA 402
 // drives, single-threaded on a ManualClock (deterministic: the clock's idle
 // hook steps the drives). Every control cycle runs inside an allocation

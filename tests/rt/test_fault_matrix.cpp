@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Fault matrix: every arm state crossed with every fault the rig can inject, each cell
 // asserted against a reaction written out by hand below (not read from the controller).
 // Rig: puma560 on the in-process bus with virtual CiA 402 drives, ManualClock, the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The controller's (mode x request) table, walked exhaustively: for every Mode and every
 // RequestOp a fresh puma560 on the in-process bus (virtual CiA 402 drives, ManualClock)
 // is driven into that mode through real cycles, the request is sent, and one cycle later

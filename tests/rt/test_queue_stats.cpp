@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SPSC queue: order, capacity, wrap-around, in-place use, two-thread stress.
 // Cycle statistics: exact min/mean/max, histogram percentile, overflow bin, no heap.
 #include <atomic>

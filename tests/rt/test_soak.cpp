@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Soak: the firmware's own pieces as `armfw --sim` runs them (App, console, the real RT
 // thread on CLOCK_MONOTONIC at 1 kHz, the virtual drives stepped on the control thread
 // right before each cycle) running a looping program of joint moves, straight lines,

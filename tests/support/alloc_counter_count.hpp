@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The per-thread count behind alloc_counter.hpp, shared by the implementations that
 // count: the ordinary one (alloc_counter.cpp, which interposes malloc) and the sanitizer

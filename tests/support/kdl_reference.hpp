@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Build an Orocos KDL chain from a servoarm chain: the independent reference
 // for FK, Jacobian and IK cross-checks (tests and armbench only).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // fw::App with virtual drives for the in-process tests and benchmarks: host_sim's
 // SimPlant made through App's SimFactory, started before boot() on a real clock

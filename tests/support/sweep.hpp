@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Random-sweep sizes in slow builds. The host runs the full counts written at each
 // sweep. A cross build runs the suites under qemu-user (SERVOARM_TEST_EMULATED=1) and

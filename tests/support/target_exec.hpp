@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Starting the project's own binaries (armctl, armfw, armsim, canmaster) from a
 // test, in a cross build too.

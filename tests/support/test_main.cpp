@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CppUTest main for every servoarm suite.
 // The IEEE754 exceptions plugin fails any test that raises an invalid,
 // overflow or divide-by-zero floating-point exception, so a NaN produced

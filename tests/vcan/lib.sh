@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Helpers for vcan scenarios. POSIX sh: runs under busybox ash in the VM and
 # under busybox sh / dash on a host with vcan. Source it: . "$SCENARIO_DIR/lib.sh"
 #

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 0: self-test of the vcan harness (no project binaries).
 # candump on $CAN_IF in the background, cansend known frames, check candump
 # captured exactly those (ids, lengths, payloads, order); a filtered candump

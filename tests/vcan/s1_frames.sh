@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 1: exact frames on a real vcan.
 #  A. frames typed by hand with cansend to armsim node 2 (SDO, PDO mapping,
 #     NMT, CiA 402 enable, setpoints, bad lengths) are decoded as CiA 301/402

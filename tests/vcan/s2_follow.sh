@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 2: canmaster + armsim, 6 nodes over vcan: every drive reaches
 # operation enabled, follows a streamed 3 s sine within 0.02 rad and settles
 # on the last setpoint during a 0.5 s hold.

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 3: a node goes silent. Node 3 runs in its own armsim process; once
 # canmaster has enabled all 6 drives, that process is frozen (SIGSTOP: no
 # heartbeat, no TPDO, no answer - an unplugged drive). canmaster must report

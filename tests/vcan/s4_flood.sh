@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 4: cangen floods the bus for 10 s while canmaster brings up 6
 # armsim drives and streams a sine: no crash, no false fault, no corrupted
 # setpoint. The flood (6 cangen, bursts of 5 frames every 10 ms each, about

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 5: the firmware over real SocketCAN. armfw (bus.can = vcan0, its
 # console on vcan0 too, ISO-TP 0x7E0 -> armfw, 0x7E8 <- armfw) and armsim (6
 # virtual CiA 402 drives) as separate processes.

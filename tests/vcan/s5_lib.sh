@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Helpers for the armfw scenarios (s5_*): armfw with bus.can = $CAN_IF and its
 # console over ISO-TP on the same interface (requests 0x7E0, answers 0x7E8),
 # armsim as the drives. Source after lib.sh.

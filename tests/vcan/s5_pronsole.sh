@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 5c: a real G-code sender over a pty, the arm over real SocketCAN.
 # armfw (bus.can = vcan0, console on a pty) and armsim (6 virtual CiA 402
 # drives on vcan0) as separate processes; Printrun's pronsole (the host's own

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 5b: a drive falls silent while the arm moves. armfw (bus.can = vcan0,
 # console over ISO-TP on vcan0) drives armsim nodes 1,2,4,5,6 (one process) and
 # node 3 (its own process, started with armsim's fault injection --silent 3@T:

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 6: round-trip latency master -> armsim -> master over vcan0, the
 # measure of BM_HalRoundTrip6_SimBus_TwoThreads on a real SocketCAN path:
 # canmaster --roundtrip N sends the 6 RPDOs + SYNC, then waits until every

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 7: the bus goes away under a streaming master, twice, and comes back.
 #   1. `ip link set vcan0 down`, 1 s, `up`: the kernel reports ENETDOWN to every
 #      socket bound to vcan0. canmaster must report the interface down, reopen

@@ -1,4 +1,5 @@
 #!/bin/sh
+# SPDX-License-Identifier: Apache-2.0
 # Scenario 8 (issue 17): canmaster homes six armsim drives with mixed CiA 402 homing
 # methods over vcan0, all at once:
 #   node 1 method 19 (positive home switch at 30000 counts)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Fixture of the harness's own test (tests/vcan/starved-test, CTest vcan_starved): a
 # scenario that fails on purpose, after a faked stall or without one.
 #   starved_fixture.sh stall     stop the guest's starvation probe for 1 s (its next

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armfw: the firmware binary. Control loop on its own thread, consoles on the
 // main thread (stdin/stdout, pty, serial, CAN ISO-TP through its bridge thread),
 // drives through the CANopen master.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl: the servoarm command-line tool (host side, non-real-time).
 //   armctl kin ...    offline kinematics on a built-in model or a description file
 //   armctl plan ...   offline trajectory planning (when built with the motion module)

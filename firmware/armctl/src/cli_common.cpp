@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include "servoarm/armctl/cli_common.hpp"
 
 #include "servoarm/console/number.hpp"

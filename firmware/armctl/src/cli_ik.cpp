@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl kin ik | precision
 #include "servoarm/armctl/cli_ik.hpp"
 

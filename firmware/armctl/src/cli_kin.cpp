@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl kin fk | jacobian | models
 #include "servoarm/armctl/cli_kin.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl plan movej | movel: plan offline, print duration and peaks, write the
 // sampled trajectory as CSV and as an SVG plot (position / velocity /
 // acceleration per joint, drawn by hand as SVG text).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl program check: whole-program validation offline (cli_program.hpp).
 #include "servoarm/armctl/cli_program.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SVG plot helpers (see cli_svg.hpp): round ticks, labels, panels, legends.
 #include "servoarm/armctl/cli_svg.hpp"
 

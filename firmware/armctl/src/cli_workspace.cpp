@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl kin workspace (see cli_workspace.hpp).
 #include "servoarm/armctl/cli_workspace.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What the command table (command_table.hpp) produces besides the parser's
 // dispatch: `help`, `help <topic>` and the command reference of docs/console.md.
 // Console thread / armctl: allocates.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Named tools and user frames, and the frames file (frames.hpp).
 #include "servoarm/console/frames.hpp"
 

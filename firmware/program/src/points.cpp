@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Teach points and the points file (points.hpp).
 #include "servoarm/program/points.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Program files: load, check structure, expand repeats and calls, parse every line with
 // the console's parser (program.hpp).
 #include "servoarm/program/program.hpp"

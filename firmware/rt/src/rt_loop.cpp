@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include "servoarm/rt/rt_loop.hpp"
 
 #include <pthread.h>

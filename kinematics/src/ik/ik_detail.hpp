@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // What the IK sources (kinematics/src/ik/*.cpp) share; not installed.
 //  * IkSolverData: what ik_prepare() precomputes, held in IkModel::solver,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Inverse kinematics, the model: ik_prepare() rewrites a chain as
 // C0 J1 C1 ... Jn Cn and recognises which closed form fits it (IkMethod; see
 // ik.hpp), ik_solve_all() checks its input and dispatches on that class

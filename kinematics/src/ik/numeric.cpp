@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Numerical IK: damped least squares with Levenberg-Marquardt damping.
 //
 // Each iteration: J (geometric Jacobian, weighted), e (weighted pose error),

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Inverse kinematics, the general position subproblem: when neither equation
 // of (E1, E2) is free of q2 or of q3 (e.g. ist6, whose axes 1 and 2 do not
 // meet), q2 is eliminated by the resultant, a polynomial of degree <= 8 in

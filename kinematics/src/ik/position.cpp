@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Inverse kinematics, the arm's position: the subproblem of joints 1-3
 // (E1, E2 of ik.hpp) in closed form where one equation involves only one of
 // q2, q3 (PUMA, Stanford, cylindrical arms: atan2/acos or a quadratic), the

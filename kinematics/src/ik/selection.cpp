@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Inverse kinematics, choosing one solution: the branch of a configuration,
 // the solution nearest to the current joints (weighted, within the limits
 // unless allowed, on the same branch if asked), and ik_solve_nearest (closed

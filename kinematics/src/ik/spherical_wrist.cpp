@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Inverse kinematics, the spherical-wrist arm (ik.hpp: Pieper's
 // decomposition): joint 1 from the wrist centre, (q2, q3) from position.cpp,
 // the wrist by atan2, two arm configurations per register (lanes.hpp), every

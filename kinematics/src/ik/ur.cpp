@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Inverse kinematics, the UR-type arm (IkMethod::ur): six revolute joints,
 // axes 2, 3, 4 parallel (direction n) and not parallel to axis 1, axis 5
 // normal to n, axes 5 and 6 meeting at a point Q fixed in the tool

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The CAN hardware boundary: one small virtual interface, backends side by side
 // (socketcan_bus.hpp: Linux SocketCAN; sim_bus.hpp: in-process bus with vcan semantics).

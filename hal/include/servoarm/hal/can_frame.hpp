@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // One CAN (or CAN FD) frame, independent of any backend.
 #include <array>

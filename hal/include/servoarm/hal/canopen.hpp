@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // CANopen (CiA 301) frame codecs: COB-ids, NMT, SYNC, heartbeat, EMCY, SDO
 // command bytes and abort codes. Pure functions over CanFrame: no I/O, no

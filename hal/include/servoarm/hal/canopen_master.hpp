@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // CANopen master for CiA 402 drives in cyclic synchronous position mode,
 // implementing ServoBus over any CanBus.

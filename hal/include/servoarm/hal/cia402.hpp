@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // CiA 402 (drives and motion control) power state machine: statusword
 // decoding, controlword commands, and the drive-side transition table used by

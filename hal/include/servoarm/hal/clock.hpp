@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Time source and sleeping behind a small interface so tests can drive time.
 // All times are absolute CLOCK_MONOTONIC nanoseconds (TimePoint).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // ISO-TP (ISO 15765-2) transport protocol over any CanBus: messages of 1..4095
 // bytes in classic CAN frames (8 bytes), normal addressing, 11-bit (or 29-bit)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Per-joint scaling between drive units (encoder counts, counts/s) and joint
 // units (radians / metres, SI). Real-time safe: no allocation, no throw.

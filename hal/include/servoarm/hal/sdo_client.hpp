@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // SDO client (CiA 301): expedited and segmented upload/download.
 //

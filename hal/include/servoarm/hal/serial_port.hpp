@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Serial TTYs and ptys, opened for a console: raw 8N1, no flow control, no echo,
 // non-blocking (callers wait with poll). Set-up code (opens, formats the error

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The joint-driver interface the firmware uses. One implementation per drive
 // protocol (canopen_master.hpp: CANopen CiA 402 over any CanBus); the firmware

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // In-process CAN bus with vcan semantics, for host builds and tests.
 //

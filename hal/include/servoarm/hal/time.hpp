@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Time in the firmware: nanoseconds on CLOCK_MONOTONIC, as plain integers (no
 // std::chrono on the real-time path: trivially copyable, usable in frames and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // ArmPlant: the virtual drives of one arm on a shared rigid-body plant (issue 20, "a
 // virtual arm with physics"). Each drive closes its own loops like a real CSP drive

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Small argument parsers shared by the armsim and canmaster binaries (set-up code).
 #include <cstdint>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // SimPlant: a set of virtual CiA 402 drives (ArmSim) on a fresh in-process bus,
 // for `armfw --sim` and the in-process tests. The firmware's App only sees the

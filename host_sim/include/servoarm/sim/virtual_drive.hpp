@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Virtual CiA 402 servo drives for tests and the `armsim` binary.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Blended joint motion: a queue of joint waypoints the arm passes without
 // stopping, each corner within its tolerance, every joint within its velocity,

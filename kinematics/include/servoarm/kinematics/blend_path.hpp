@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Blended paths of straight-line and joint moves: line-to-line corners and mixed
 // joint->line / line->joint transitions (issue 18; joint-to-joint alone: blend.hpp).

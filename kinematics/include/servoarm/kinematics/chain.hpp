@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Denavit-Hartenberg chains, forward kinematics and the geometric Jacobian.
 //

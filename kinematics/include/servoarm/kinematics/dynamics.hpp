@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Rigid-body dynamics of a DH chain: inverse dynamics (recursive Newton-Euler),
 // gravity and Coriolis/centrifugal torques, the joint-space mass matrix (composite

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Reading the files the firmware reads (robot descriptions, armfw's configuration, and
 // the points/frames/program files to come): one place for the size cap, the file-type

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Inverse kinematics: every solution in closed form where the chain allows it,
 // bounded damped-least-squares otherwise.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The motion IK adapter: the IkSolver (trajectory_cartesian.hpp) that
 // plan_movel, its path check and the Cartesian sampling call at every knot.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Jerk-limited, time-synchronised joint trajectories (movej), stop and resume,
 // speed override. Pure math: no I/O, no clock, no heap, no exceptions. The

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Cartesian straight-line moves (movel): the tool point follows the segment
 // from the start pose to the target pose, its orientation is interpolated by

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Fixed-capacity types of the kinematics core. Everything here lives on the
 // stack or inside a struct: Eigen matrices with a compile-time maximum size

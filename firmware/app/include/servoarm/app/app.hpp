@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Assembly of one firmware instance from a FwConfig (set-up code): robot
 // chain, CAN bus (SocketCAN, or for bus.can = "sim" the bus a SimFactory hands

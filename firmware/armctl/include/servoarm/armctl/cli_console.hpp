@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // armctl console: a client for armfw's console over a serial TTY, a pty, or CAN (ISO-TP).
 //   armctl console --serial PATH [--baud N] [--timeout SEC] -c "movej 0 45 -45 0 0 0" [-c ...]

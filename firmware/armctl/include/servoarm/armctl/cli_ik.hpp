@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // armctl kin ik | precision  (offline inverse kinematics and Cartesian precision,
 // non-real-time: allocates, prints).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // armctl kin fk | jacobian | models  (offline kinematics, non-real-time)
 namespace servoarm::fw {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // armctl plan movej | movel  (offline trajectory planning, non-real-time)
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // armctl program check FILE --robot NAME|FILE [--config FILE] [--points FILE] [--programs DIR]
 //                       [--from q1..qn] [--unhomed] [--joint-speed PCT] [--linear-speed V]

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // SVG plots for armctl (plan --svg, kin workspace --svg), written as text: panels with
 // axis ticks at round values (1-2-5 steps) labelled with as many digits as the step

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // armctl kin workspace: the region the tool point reaches in a plane through the base
 // (joint limits respected), its area, a CSV of the region and an SVG drawing of it with

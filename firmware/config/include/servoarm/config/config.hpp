@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // armfw configuration: defaults, TOML loading (toml11), validation, writing and
 // documentation, all produced from ONE key table per TOML shape:

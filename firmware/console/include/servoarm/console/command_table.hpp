@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The console's command table: every command of the line language declared once
 // (name, Cmd, argument shape, usage, help, query). parse_line() dispatches on it,

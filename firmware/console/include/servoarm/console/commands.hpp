@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The console command language: one line in, one Command out. Pure: no I/O, no
 // clock, no allocation; the only state is the G-code modal state passed in,

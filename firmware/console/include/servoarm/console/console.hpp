@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The console: turns text lines from any transport into actions and answers.
 // Runs on the console thread (non-real-time: may allocate and format text).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Named tools and user frames (work objects), and the frames file that keeps them.
 //

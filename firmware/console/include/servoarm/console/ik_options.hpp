@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The firmware's motion IK: one function, used by the console (movel / G0 / G1 path
 // check, and the control thread's Cartesian samples, which run the IkSolver the console

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The one decimal-number reader of every text front end that is not a TOML file: the
 // console's commands, G-code, armctl's options and armfw's flags. (TOML files — robot

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The canonical motion requests of the console. Every front end builds one of
 // these and hands it to one function that validates and queues it, the way

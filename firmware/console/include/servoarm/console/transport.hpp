@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Console transports (console thread, non-real-time): byte streams on file
 // descriptors. stdin/stdout, a pseudo-terminal whose slave path is printed

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The console's units: one conversion table for every front end. Inside
 // everything is SI (m, rad); the command language reads and writes the robot

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Teach points and the points file that keeps them (issue 18).
 //

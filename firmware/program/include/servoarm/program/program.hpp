@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Program files (issue 18): the native command language (the console's, one command per
 // line) and G-code (as senders write it), loaded into a flat, bounded list of steps.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The control cycle: state machine, safety supervisor and motion execution.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Jogging on the RT thread: a joint or a tool-space jog that can be started, retargeted,
 // refreshed and stopped from whatever state the arm is in, jerk-limited throughout.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // What the controller and the console threads exchange: requests and replies,
 // queued motions, events and the telemetry snapshot (controller.hpp has the queues).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The controller's mode (the one state value of the arm) and its request table.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The dynamic model in the control cycle (issue 20, docs/dynamics.md#using-the-model-in-the-firmware):
 // feed-forward of every setpoint (60B1h velocity / 60B2h torque offsets in CSP), hand guiding

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The real-time thread: runs Controller::cycle() at a fixed rate.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Seqlock: one writer (the RT thread), any number of readers that retry. The
 // telemetry snapshot is published through one; the writer never waits.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Lock-free single-producer / single-consumer ring of fixed capacity.
 //

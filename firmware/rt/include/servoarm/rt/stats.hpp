@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Cycle statistics without allocation: min / mean / p99 / max and a histogram
 // of one quantity measured every cycle (wake-up latency, compute time), in ns.
