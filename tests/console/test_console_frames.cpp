@@ -386,3 +386,46 @@ TEST(ConsoleFrames, ABadOrForeignFramesFileIsRefusedAtStartAndNeverOverwritten) 
   CHECK_TEXT(a.rfind("error: storage tool not defined: /nonexistent-dir-servoarm/frames.toml", 0) == 0, a.c_str());
   CHECK(!has(r.cmd("tool"), "grip"));
 }
+
+TEST(ConsoleFrames, AFramesFileReplacedWhileRunningOrMadeReadOnlyIsNeverOverwritten) {
+  const std::string path = temp_path("replaced");
+  std::remove(path.c_str());
+  FramesRig r(with_frames_file(path));
+  CHECK(answer_ok(r.cmd("tool grip 0 0 100 0 0 0")));
+  CHECK(has(read_all(path), "[tool.grip]"));
+  // Another program puts its own file in place (a new file renamed over ours).
+  const char* foreign = "# someone else's settings\nspeed = 3\n";
+  {
+    std::ofstream f(path + ".other");
+    f << foreign;
+  }
+  CHECK(std::rename((path + ".other").c_str(), path.c_str()) == 0);
+  std::string a = r.cmd("tool probe 0 0 50 0 0 0");
+  CHECK_TEXT(a.rfind("error: storage tool not defined: " + path, 0) == 0 && has(a, "not a servoarm frames file") &&
+                 a.find('\n') == a.size() - 1,
+             a.c_str());
+  CHECK_EQUAL(std::string(foreign), read_all(path));
+  CHECK(!has(r.cmd("tool"), "probe"));
+  a = r.cmd("frame table 400 0 0 0 0 0");
+  CHECK_TEXT(a.rfind("error: storage frame not set: " + path, 0) == 0, a.c_str());
+  CHECK_EQUAL(std::string(foreign), read_all(path));
+  // Our own file, made read-only by its owner: refused, the file and its mode stay.
+  {
+    std::ofstream f(path);
+    f << "format = \"servoarm-frames-1\"\n";
+  }
+  CHECK(::chmod(path.c_str(), 0444) == 0);
+  a = r.cmd("tool probe 0 0 50 0 0 0");
+  CHECK_TEXT(a.rfind("error: storage tool not defined: " + path, 0) == 0 && has(a, "read-only") &&
+                 a.find('\n') == a.size() - 1,
+             a.c_str());
+  CHECK_EQUAL(std::string("format = \"servoarm-frames-1\"\n"), read_all(path));
+  struct stat st{};
+  CHECK(::stat(path.c_str(), &st) == 0 && (st.st_mode & 0777) == 0444);
+  CHECK(!has(r.cmd("tool"), "probe"));
+  // Writable again: the definition is made.
+  CHECK(::chmod(path.c_str(), 0644) == 0);
+  CHECK(answer_ok(r.cmd("tool probe 0 0 50 0 0 0")));
+  CHECK(has(read_all(path), "[tool.probe]"));
+  std::remove(path.c_str());
+}

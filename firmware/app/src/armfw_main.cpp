@@ -11,6 +11,7 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -51,7 +52,7 @@ int usage(FILE* f, int code) {
                "                        --config; without --config none: points are not kept)\n"
                "  --config-keys         print every configuration key (default, range, unit, doc) and exit\n"
                "  --config-reference    print the generated reference section of docs/configuration.md and exit\n"
-               "  --demo                play the demo program through the console, print a summary, exit\n"
+               "  --demo                play a demo derived from the robot through the console, print a summary, exit\n"
                "  --interactive         after --demo, leave the console open on stdin\n"
                "  --bench-loop SEC      run the loop SEC seconds with moves in progress; print one JSON line\n"
                "  --rate HZ             control rate 250..4000 (default 1000)\n"
@@ -106,7 +107,7 @@ struct DemoRunner {
       if (!ev.empty()) std::printf("%s", ev.c_str());
       if (show_progress && now_s() - last > 0.25) {
         last = now_s();
-        std::printf("    %s\n", app.console->grbl_report().c_str());
+        std::printf("    progress: %s\n", app.console->status_text().c_str());
       }
     }
     const std::string ev = app.console->drain_events();
@@ -124,20 +125,184 @@ struct Reached {
   const char* unit;
 };
 
+// The demo's moves, derived from the robot: a joint pose at a fraction of each joint's
+// range from the park pose, away from singularities, and a rectangle in the tool's plane
+// there, every line checked by the console's own path check (check mode, $C) before it is
+// used. Arms with fewer than 6 joints, or where no line passes, get joint moves only.
+struct DemoPlan {
+  std::string movej;                 ///< the joint move to the work pose (console units)
+  kin::JointVector work;             ///< its joints as typed (SI)
+  std::string movej2;                ///< joint moves only: a second pose, and back
+  kin::JointVector work2;
+  std::vector<std::string> movel;    ///< the rectangle's corners (console units)
+  std::vector<Eigen::Vector3d> corner;  ///< the same, SI
+  std::vector<std::string> gcode;    ///< relative G-code moves after the rectangle
+  Eigen::Vector3d gcode_end = Eigen::Vector3d::Zero();
+  std::string why_joints_only;       ///< "" when the lines are used
+};
+
+double joint_to_user(const kin::Chain& ch, int j, double v) {
+  return ch.joint(j).type == kin::JointType::prismatic ? v * 1e3 : v * 180.0 / M_PI;
+}
+double joint_from_user(const kin::Chain& ch, int j, double v) {
+  return ch.joint(j).type == kin::JointType::prismatic ? v * 1e-3 : v * M_PI / 180.0;
+}
+
+/// "movej ..." for q (3 decimals of deg / mm); `typed` gets the joints the text says.
+std::string movej_text(const kin::Chain& ch, const kin::JointVector& q, kin::JointVector& typed) {
+  std::string l = "movej";
+  typed = q;
+  for (int j = 0; j < ch.n_joints; ++j) {
+    char b[40];
+    const double u = std::round(joint_to_user(ch, j, q[j]) * 1000.0) / 1000.0;
+    std::snprintf(b, sizeof b, " %.3f", u == 0.0 ? 0.0 : u);
+    l += b;
+    typed[j] = joint_from_user(ch, j, u);
+  }
+  return l + " speed=60";
+}
+
+/// "movel x y z speed=150" (0.1 mm); `typed` gets the point the text says (m).
+std::string movel_text(const Eigen::Vector3d& p, Eigen::Vector3d& typed) {
+  char b[128];
+  const Eigen::Vector3d mm = (p * 1e4).array().round() / 10.0;
+  std::snprintf(b, sizeof b, "movel %.1f %.1f %.1f speed=150", mm.x() + 0.0, mm.y() + 0.0, mm.z() + 0.0);
+  typed = mm * 1e-3;
+  return b;
+}
+
+std::string gmove_text(const Eigen::Vector3d& d, Eigen::Vector3d& typed, const char* feed) {
+  char b[128];
+  const Eigen::Vector3d mm = (d * 1e4).array().round() / 10.0;
+  std::snprintf(b, sizeof b, "G1 X%.1f Y%.1f Z%.1f%s", mm.x() + 0.0, mm.y() + 0.0, mm.z() + 0.0, feed);
+  typed = mm * 1e-3;
+  return b;
+}
+
+/// Every line answers ok in a check-mode session starting at `from`.
+bool passes_check(App& app, const kin::JointVector& from, const std::vector<std::string>& lines) {
+  Session cs;
+  app.console->execute(cs, "$C");
+  if (!cs.check_mode) return false;
+  cs.check_tail = from;
+  for (const std::string& l : lines) {
+    cs.out.clear();
+    app.console->execute(cs, l);
+    for (int i = 0; i < 2000 && app.console->busy(cs); ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      app.console->poll(cs);
+    }
+    if (cs.out.rfind("ok", 0) != 0) return false;
+  }
+  return true;
+}
+
+DemoPlan plan_demo(App& app, const kin::JointVector& park) {
+  const kin::Chain& ch = app.chain;
+  const int n = ch.n_joints;
+  DemoPlan plan;
+  // Candidate joint poses: park + f * (room to the limit on side sign_j), alternating sides.
+  auto candidate = [&](double f, int pattern) {
+    kin::JointVector q = park;
+    for (int j = 0; j < n; ++j) {
+      const kin::DhRow& r = ch.joint(j);
+      const bool prismatic = r.type == kin::JointType::prismatic;
+      const double span = prismatic ? 0.5 : M_PI;  // an unbounded joint: half a turn, or 0.5 m
+      const double lo = std::isfinite(r.lower) ? r.lower : park[j] - span;
+      const double hi = std::isfinite(r.upper) ? r.upper : park[j] + span;
+      const bool up = pattern == 0 ? (j % 2 == 0) : pattern == 1 ? (j % 2 == 1) : true;
+      q[j] = park[j] + f * (up ? hi - park[j] : lo - park[j]);
+    }
+    return q;
+  };
+  auto well_conditioned = [&](const kin::JointVector& q) {
+    if (n < 6) return true;
+    kin::Jacobian J;
+    if (kin::jacobian(ch, q, J) != kin::Status::ok) return false;
+    const double c = kin::condition_number(J);
+    return std::isfinite(c) && c < 200.0;
+  };
+  const double fractions[] = {0.3, 0.2, 0.4, 0.15, 0.5, 0.1};
+  std::vector<kin::JointVector> poses;  // in-limit, well-conditioned, movej checked
+  for (double f : fractions)
+    for (int pattern = 0; pattern < 3; ++pattern) {
+      const kin::JointVector q = candidate(f, pattern);
+      if (!kin::within_limits(ch, q) || !well_conditioned(q)) continue;
+      kin::JointVector typed;
+      const std::string mj = movej_text(ch, q, typed);
+      if (!passes_check(app, park, {mj})) continue;
+      poses.push_back(typed);
+    }
+  if (poses.empty()) {
+    plan.why_joints_only = "no joint pose passed";
+    return plan;
+  }
+  plan.movej = movej_text(ch, poses[0], plan.work);
+  if (n >= 6) {
+    for (const kin::JointVector& q : poses) {
+      kin::Pose p;
+      if (kin::forward(ch, q, p) != kin::Status::ok) continue;
+      const Eigen::Vector3d c = p.translation();
+      const Eigen::Vector3d x = p.linear().col(0), y = p.linear().col(1), z = p.linear().col(2);
+      // Start at 80 mm or a seventh of the tool's distance from the base, shrink until it passes.
+      for (double a = std::min(0.08, c.norm() / 7.0); a >= 0.005; a *= 0.7) {
+        DemoPlan t;
+        t.movej = movej_text(ch, q, t.work);
+        kin::Pose pw;
+        kin::forward(ch, t.work, pw);
+        const Eigen::Vector3d c0 = pw.translation();
+        const Eigen::Vector3d pts[] = {c0 + a * x, c0 + a * x + a * y, c0 + a * y, c0};
+        for (const Eigen::Vector3d& pt : pts) {
+          Eigen::Vector3d typed;
+          t.movel.push_back(movel_text(pt, typed));
+          t.corner.push_back(typed);
+        }
+        // As a sender would stream it: back off along the tool axis, then across, relative.
+        Eigen::Vector3d d1, d2;
+        t.gcode = {"G21 G91", gmove_text(-0.4 * a * z, d1, " F6000"), gmove_text(-0.5 * a * (x + y), d2, ""), "G90"};
+        t.gcode_end = t.corner.back() + d1 + d2;
+        std::vector<std::string> all = t.movel;
+        all.insert(all.end(), t.gcode.begin(), t.gcode.end());
+        if (passes_check(app, t.work, all)) return t;
+      }
+    }
+    plan.why_joints_only = "no rectangle in the tool's plane passed the path check";
+  } else {
+    plan.why_joints_only = "fewer than 6 joints";
+  }
+  // Joint moves only: to the first pose, to another, and back.
+  for (std::size_t i = 1; i < poses.size(); ++i) {
+    kin::JointVector typed;
+    const std::string mj = movej_text(ch, poses[i], typed);
+    if ((typed - plan.work).cwiseAbs().maxCoeff() > 1e-3 && passes_check(app, plan.work, {mj})) {
+      plan.movej2 = mj;
+      plan.work2 = typed;
+      break;
+    }
+  }
+  return plan;
+}
+
 int run_demo(App& app) {
   DemoRunner d{app, {}, 0, true};
   std::vector<Reached> reached;
   const kin::Chain& ch = app.chain;
   const int n = ch.n_joints;
+  bool prismatic = false;
+  for (int j = 0; j < n; ++j) prismatic = prismatic || ch.joint(j).type == kin::JointType::prismatic;
+  const char* joint_unit = prismatic ? "deg/mm" : "deg";
   auto q_act = [&] {
     const Telemetry t = app.ctl->telemetry();
     kin::JointVector q(n);
     for (int j = 0; j < n; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
     return q;
   };
-  auto joint_err_deg = [&](const kin::JointVector& goal) {
+  // Largest joint error in deg (mm for a prismatic joint).
+  auto joint_err = [&](const kin::JointVector& goal) {
     const kin::JointVector q = q_act();
-    return (q - goal).cwiseAbs().maxCoeff() * 180.0 / M_PI;
+    double e = 0;
+    for (int j = 0; j < n; ++j) e = std::max(e, std::fabs(joint_to_user(ch, j, q[j] - goal[j])));
+    return e;
   };
   auto pos_err_mm = [&](const Eigen::Vector3d& p) {
     kin::Pose x;
@@ -146,6 +311,7 @@ int run_demo(App& app) {
   };
   std::printf("== armfw demo: %s, %d joints, virtual CiA 402 servos on the in-process CAN bus, %.0f Hz loop\n",
               app.cfg.robot.c_str(), n, app.cfg.rate_hz);
+  std::printf("   (progress lines while a move runs are the `status` answer)\n");
   d.run("help movel", false);
   d.run("enable", false);
   // Wait for operation enabled.
@@ -154,60 +320,63 @@ int run_demo(App& app) {
   d.run("status", false);
   d.run("park");
   d.run("wait");
-  reached.push_back({"park", joint_err_deg(app.console->config().home), "deg"});
+  const kin::JointVector park = app.console->tail();
+  reached.push_back({"park", joint_err(park), joint_unit});
 
-  // A joint move to a working pose (degrees), then linear moves around it.
-  const bool puma = n == 6;
-  std::vector<double> work_deg = puma ? std::vector<double>{20, -40, 160, 10, -50, 30} : std::vector<double>(static_cast<std::size_t>(n), 10.0);
-  std::string mj = "movej";
-  kin::JointVector work(n);
-  for (int j = 0; j < n; ++j) {
-    char b[32];
-    std::snprintf(b, sizeof b, " %g", work_deg[static_cast<std::size_t>(j)]);
-    mj += b;
-    work[j] = work_deg[static_cast<std::size_t>(j)] * M_PI / 180.0;
-  }
-  d.run(mj + " speed=60");
-  d.run("wait");
-  reached.push_back({"movej work pose", joint_err_deg(work), "deg"});
-  d.run("fk", false);
-
-  kin::Pose p0;
-  kin::forward(ch, work, p0);
-  const Eigen::Vector3d c = p0.translation() * 1e3;
-  const double pts[][3] = {{80, 0, 0}, {80, 80, 0}, {0, 80, -60}, {0, 0, 0}};
-  int k = 0;
-  for (const auto& o : pts) {
-    char b[128];
-    std::snprintf(b, sizeof b, "movel %.1f %.1f %.1f speed=150", c.x() + o[0], c.y() + o[1], c.z() + o[2]);
-    const std::string ans = d.run(b);
+  const DemoPlan plan = plan_demo(app, park);
+  if (plan.movej.empty()) {
+    std::printf("== no work pose of %s passed the checks (%s)\n", app.cfg.robot.c_str(), plan.why_joints_only.c_str());
+    ++d.errors;
+  } else {
+    std::printf("== work pose: a fraction of each joint's range from the park pose, checked (limits, Jacobian, path)%s%s\n",
+                plan.why_joints_only.empty() ? "" : "; joint moves only: ", plan.why_joints_only.c_str());
+    d.run(plan.movej);
     d.run("wait");
-    char what[64];
-    std::snprintf(what, sizeof what, "movel corner %d", ++k);
-    reached.push_back({what, pos_err_mm(Eigen::Vector3d(c.x() + o[0], c.y() + o[1], c.z() + o[2]) * 1e-3), "mm"});
+    reached.push_back({"movej work pose", joint_err(plan.work), joint_unit});
+    d.run("fk", false);
   }
-  // The same as G-code (as a sender would stream it), relative moves.
-  d.run("G21 G91");
-  d.run("G1 Z30 F6000");
-  d.run("G1 X-40 Y-40");
-  d.run("G90");
-  d.run("M400");
-  reached.push_back({"G-code relative Z+30, X-40 Y-40", pos_err_mm(Eigen::Vector3d(c.x() - 40, c.y() - 40, c.z() + 30) * 1e-3), "mm"});
-  d.run("M114", false);
-  // A refused target: outside the workspace, nothing moves.
-  d.run("movel 5000 0 0");
-  --d.errors;  // expected
+  if (!plan.movel.empty()) {
+    for (std::size_t k = 0; k < plan.movel.size(); ++k) {
+      d.run(plan.movel[k]);
+      d.run("wait");
+      reached.push_back({"movel corner " + std::to_string(k + 1), pos_err_mm(plan.corner[k]), "mm"});
+    }
+    // The same as G-code (as a sender would stream it), relative moves.
+    for (const std::string& l : plan.gcode) d.run(l);
+    d.run("M400");
+    reached.push_back({"G-code relative moves", pos_err_mm(plan.gcode_end), "mm"});
+    d.run("M114", false);
+  } else if (!plan.movej2.empty()) {
+    d.run(plan.movej2);
+    d.run("wait");
+    reached.push_back({"movej second pose", joint_err(plan.work2), joint_unit});
+    d.run(plan.movej);
+    d.run("wait");
+    reached.push_back({"movej back to the work pose", joint_err(plan.work), joint_unit});
+  }
+  // A refused target: far outside the workspace, nothing moves.
+  double reach = 1.0;
+  for (int r = 0; r < ch.n_rows; ++r) reach += std::fabs(ch.rows[static_cast<std::size_t>(r)].a) + std::fabs(ch.rows[static_cast<std::size_t>(r)].d);
+  for (int j = 0; j < n; ++j)
+    if (ch.joint(j).type == kin::JointType::prismatic && std::isfinite(ch.joint(j).upper)) reach += std::fabs(ch.joint(j).upper);
+  char far[64];
+  std::snprintf(far, sizeof far, "movel %.0f 0 0", 10.0 * reach * 1e3);
+  std::printf("== a target outside the workspace (refused, nothing moves):\n");
+  const int before = d.errors;
+  d.run(far);
+  if (d.errors == before) ++d.errors;  // it had to be refused
+  else --d.errors;                     // expected
   // Feed hold during a move, then resume.
   d.run("park");
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   std::printf("> ! (feed hold)\n");
   app.console->feed(d.s, "!");
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
-  std::printf("    %s\n", app.console->grbl_report().c_str());
+  std::printf("    status: %s\n", app.console->status_text().c_str());
   std::printf("> ~ (resume)\n");
   app.console->feed(d.s, "~");
   d.run("wait");
-  reached.push_back({"park after feed hold", joint_err_deg(app.console->config().home), "deg"});
+  reached.push_back({"park after feed hold", joint_err(park), joint_unit});
   d.run("stats", false);
   d.run("disable", false);
 

@@ -2,11 +2,13 @@
 // Named tools and user frames, and the frames file (frames.hpp).
 #include "servoarm/console/frames.hpp"
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 
 #include "servoarm/console/number.hpp"
 #include "servoarm/kinematics/file_input.hpp"
@@ -237,7 +239,28 @@ std::string frames_to_toml(const FramesData& d) {
   return o;
 }
 
+std::string check_writable_file(const std::string& path) {
+  struct stat st{};
+  if (::stat(path.c_str(), &st) != 0) {
+    if (errno == ENOENT) return "";
+    return path + ": " + std::strerror(errno) + "; not overwritten";
+  }
+  if (!S_ISREG(st.st_mode)) return path + ": not a regular file; not overwritten";
+  // No write bit at all is read-only even for root (who passes access(W_OK) regardless).
+  if ((st.st_mode & (S_IWUSR | S_IWGRP | S_IWOTH)) == 0 || ::access(path.c_str(), W_OK) != 0)
+    return path + ": the file is read-only (no write permission); not overwritten";
+  return "";
+}
+
 std::string save_frames_file(const std::string& path, const FramesData& d) {
+  // What is there must be ours: a file that does not load as a frames file (another
+  // program's, put in its place while armfw runs) is kept, and so is a read-only one.
+  if (std::string why = check_writable_file(path); !why.empty()) return why;
+  if (::access(path.c_str(), F_OK) == 0) {
+    FramesData old;
+    if (const std::string err = load_frames_file(path, old); !err.empty())
+      return kin::one_line(err.find("overwrite") == std::string::npos ? err + " (not overwritten)" : err);
+  }
   return kin::write_text_file_atomic(path, frames_to_toml(d));
 }
 

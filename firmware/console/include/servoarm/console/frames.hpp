@@ -25,7 +25,9 @@
 //
 // Written atomically (write_text_file_atomic: a power cut leaves the old or the new
 // file). A file that is not valid TOML, lacks the format line (a foreign file), or has
-// a bad entry is refused with file:line:column and never overwritten.
+// a bad entry is refused with file:line:column and never overwritten: at start, and
+// again before each write (a file replaced while armfw runs). A read-only file is
+// never replaced either.
 //
 // Console-thread code (allocates, does I/O).
 #include <cstddef>
@@ -80,7 +82,16 @@ std::string load_frames_file(const std::string& path, FramesData& out, bool* mis
 /// The file's text for `d` (numbers round-trip exactly).
 std::string frames_to_toml(const FramesData& d);
 
-/// frames_to_toml + write_text_file_atomic. "" or the error (the old file is kept).
+/// "" when `path` is missing or a regular file that may be replaced; otherwise the one-line
+/// reason naming `path`: a file without any write permission bit (read-only, whoever runs
+/// armfw, root included) or one this process may not write is never replaced by a new,
+/// writable file.
+std::string check_writable_file(const std::string& path);
+
+/// frames_to_toml + write_text_file_atomic. "" or the error (the old file is kept). The
+/// file on disk is checked before each write: one that does not load as a frames file
+/// (another program's file put in its place while armfw runs) or is read-only
+/// (check_writable_file) is refused and kept as it is.
 std::string save_frames_file(const std::string& path, const FramesData& d);
 
 }  // namespace servoarm::fw
