@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // `armfw --sim --robot M --demo` for every robot model in kinematics/models (and a model
 // given as a file, as a user's own arm is): the demo derives its poses from the robot
 // and must end `result: PASS` with exit status 0 on each. The demos run as processes,
