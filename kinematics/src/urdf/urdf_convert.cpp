@@ -228,10 +228,11 @@ std::string row_text(const UrdfJoint& j, const Dh& p, bool modified_first, const
   if (j.has_limits) s += "limits = [" + ju(j.lower) + ", " + ju(j.upper) + "]\n";
   if (j.velocity > 0) s += "max_velocity = " + ju(j.velocity) + "\n";
   if (j.effort > 0) s += "max_effort = " + exact(j.effort) + "\n";
-  if (has_mass && b.m > 0) {
-    const Eigen::Vector3d c = b.mc / b.m;
+  if (has_mass && (b.m > 0 || !b.I.isZero(0))) {  // a massless body may still carry a rotor's inertia
+    const Eigen::Vector3d c = b.m > 0 ? Eigen::Vector3d(b.mc / b.m) : Eigen::Vector3d::Zero();
     const Eigen::Matrix3d Ic = b.I - b.m * (c.squaredNorm() * Eigen::Matrix3d::Identity() - c * c.transpose());
-    s += "mass = " + exact(b.m) + "\ncom = " + vec3(c, mm) + "\n";
+    s += "mass = " + exact(b.m) + "\n";
+    if (b.m > 0) s += "com = " + vec3(c, mm) + "\n";
     s += "inertia = [" + exact(Ic(0, 0)) + ", " + exact(Ic(1, 1)) + ", " + exact(Ic(2, 2)) + ", " + exact(Ic(0, 1)) + ", " +
          exact(Ic(0, 2)) + ", " + exact(Ic(1, 2)) + "]\n";
   }
@@ -299,7 +300,7 @@ UrdfConversion urdf_convert(const UrdfChain& u, const UrdfConvertOptions& opt) {
     if (row < n && static_cast<int>(k) == g.moving[row]) ++row;
     if (row == 0 || !u.joints[k].has_inertial) continue;
     add_link(bodies[row - 1], body_frame[row - 1], g.link[k], u.joints[k].inertial);
-    any_mass = any_mass || u.joints[k].inertial.mass > 0;
+    any_mass = true;
   }
   std::string name = opt.name.empty() ? u.robot : opt.name;
   if (name.empty()) name = "urdf_robot";

@@ -60,7 +60,7 @@ std::string visual(const Eigen::Vector3d& to) {
 }
 
 std::string inertial(const LinkInertial& L, const Pose& post_i) {
-  if (!(L.mass > 0)) return "";
+  if (!(L.mass > 0) && std::all_of(L.inertia.begin(), L.inertia.end(), [](double x) { return x == 0; })) return "";
   const Eigen::Matrix3d R = post_i.linear();
   const Eigen::Vector3d c = post_i * Eigen::Vector3d(L.com[0], L.com[1], L.com[2]);
   const auto& v = L.inertia;

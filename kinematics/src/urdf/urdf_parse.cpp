@@ -22,7 +22,8 @@ namespace {
 class Capture : public console_bridge::OutputHandler {
  public:
   void log(const std::string& text, console_bridge::LogLevel level, const char*, int) override {
-    if (level >= console_bridge::CONSOLE_BRIDGE_LOG_ERROR || last.empty()) last = text;
+    // Every error, in order: urdfdom says what is wrong first, then what it gave up on.
+    if (level >= console_bridge::CONSOLE_BRIDGE_LOG_ERROR && last.size() < 400) last += (last.empty() ? "" : "; ") + text;
   }
   std::string last;
 };
