@@ -9,6 +9,9 @@
 
 #include "servoarm/kinematics/dynamics.hpp"
 #include "servoarm/kinematics/file_input.hpp"
+#ifdef SERVOARM_WITH_URDF
+#include "servoarm/kinematics/urdf.hpp"
+#endif
 
 #include <cmath>
 #include <cstdio>
@@ -29,6 +32,7 @@ constexpr double kMaxMass = 1e4;                  // kg
 constexpr double kMaxInertia = 1e4;               // kg m^2 (inertia elements, rotor inertia)
 constexpr double kMaxGearRatio = 1e5;             // |motor turns per joint turn|
 constexpr double kMaxFriction = 1e5;              // N m s/rad, N m (N s/m, N)
+constexpr double kMaxEffort = 1e6;                // N m (N): a joint's torque (force) limit
 
 std::string shown(double v) {
   char b[32];
@@ -203,7 +207,7 @@ bool read_row(Reader& rd, const toml::node& node, std::size_t i, int& njoints, d
   if (!jt) return rd.fail(&node, where, "expected a table");
   const toml::table& j = *jt;
   SERVOARM_TRY(rd.only_keys(j, {"type", "theta", "d", "a", "alpha", "direction", "limits", "max_velocity", "max_acceleration",
-                                "max_jerk", "name", "mass", "com", "inertia", "rotor_inertia", "gear_ratio", "friction"},
+                                "max_jerk", "max_effort", "name", "mass", "com", "inertia", "rotor_inertia", "gear_ratio", "friction"},
                             where));
   const toml::node* tv = j.get("type");
   if (!tv) return rd.fail(&j, where, "key 'type' is missing (revolute, prismatic or fixed)");
@@ -246,7 +250,7 @@ bool read_row(Reader& rd, const toml::node& node, std::size_t i, int& njoints, d
     row.alpha = x * A;
   }
   const double ju = row.type == JointType::prismatic ? L : A;  // joint unit
-  for (const char* k : {"direction", "limits", "max_velocity", "max_acceleration", "max_jerk", "rotor_inertia", "gear_ratio",
+  for (const char* k : {"direction", "limits", "max_velocity", "max_acceleration", "max_jerk", "max_effort", "rotor_inertia", "gear_ratio",
                         "friction"})
     if (!joint && j.contains(k)) return rd.fail(j.get(k), where, std::string("key '") + k + "' does not apply to a fixed row");
   if (const toml::node* v = j.get("direction")) {
@@ -283,6 +287,11 @@ bool read_row(Reader& rd, const toml::node& node, std::size_t i, int& njoints, d
       SERVOARM_TRY(rd.bounded(*v, where, keys[k], ju, maxes[k], max_text[k], x));
       if (!(x > 0)) return rd.fail(v, where, std::string("key '") + keys[k] + "': must be positive");
       *dst[k] = x * ju;
+    }
+    if (const toml::node* v = j.get("max_effort")) {
+      SERVOARM_TRY(rd.bounded(*v, where, "max_effort", 1.0, kMaxEffort, "1e6 N m or N", x));
+      if (!(x > 0)) return rd.fail(v, where, "key 'max_effort': must be positive");
+      row.max_effort = x;
     }
   }
   if (add_row(chain, row) != Status::ok) return rd.fail(&j, where, "row rejected (capacity or bad value)");
@@ -384,7 +393,38 @@ LoadResult load_description_file(const std::string& path) {
   return load_description(text, path);
 }
 
+namespace {
+
+bool ends_with(const std::string& s, std::string_view tail) {
+  return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
+}
+
+/// A .urdf file: the chain from its root to its deepest leaf, converted (standard DH).
+LoadResult load_urdf(const std::string& path) {
+  LoadResult r;
+#ifdef SERVOARM_WITH_URDF
+  const UrdfParseResult p = urdf_parse_file(path);
+  if (!p.ok) {
+    r.error = p.error;
+    return r;
+  }
+  UrdfConversion c = urdf_convert(p.chain);
+  if (!c.ok) {
+    r.error = path + ": " + c.error;
+    return r;
+  }
+  r.ok = true;
+  r.chain = c.chain;
+#else
+  r.error = path + ": this build has no URDF support (urdfdom was not found: Debian liburdfdom-dev)";
+#endif
+  return r;
+}
+
+}  // namespace
+
 LoadResult load_robot(const std::string& name_or_path) {
+  if (ends_with(name_or_path, ".urdf")) return load_urdf(name_or_path);
   for (const auto& m : builtin_models())
     if (name_or_path == m.name) return load_description(m.toml, std::string("built-in model ") + m.name);
   const bool looks_like_path = name_or_path.find('/') != std::string::npos ||

@@ -13,6 +13,7 @@
 #include "servoarm/armctl/cli_ik.hpp"
 #define SERVOARM_HAVE_CLI_IK 1
 #endif
+#include "servoarm/armctl/cli_urdf.hpp"
 #include "servoarm/armctl/cli_workspace.hpp"
 #if __has_include("servoarm/armctl/cli_console.hpp")
 #include "servoarm/armctl/cli_console.hpp"
@@ -49,6 +50,11 @@ const char* kUsage =
     "  armctl kin precision --robot NAME|FILE --resolution d1..dn q1..qn\n"
     "                                                      worst-case tool position error\n"
 #endif
+    "URDF (plain URDF; expand xacro first):\n"
+    "  armctl urdf import FILE.urdf [--base LINK] [--tip LINK] [--convention standard|modified]\n"
+    "                    [--name NAME] [-o FILE.toml] [--time N]\n"
+    "                                                      the chain base -> tip as a description file\n"
+    "  armctl urdf export --robot NAME|FILE [-o FILE.urdf]  a description as URDF\n"
 #ifdef SERVOARM_HAVE_CLI_PLAN
     "Offline trajectory planning (prints duration and peaks; --csv and --svg write the samples):\n"
     "  armctl plan movej --robot NAME|FILE --from q1..qn --to q1..qn [--vmax V] [--amax A] [--jmax J]\n"
@@ -102,6 +108,7 @@ int main(int argc, char** argv) {
 #endif
     return usage_error("unknown kin command '" + sub + "' (see armctl --help)");
   }
+  if (cmd == "urdf") return cli_urdf(argc - 1, argv + 1);
 #ifdef SERVOARM_HAVE_CLI_PLAN
   if (cmd == "plan") return cli_plan(argc - 1, argv + 1);
 #endif

@@ -48,6 +48,7 @@ struct DhRow {
   double lower = -std::numeric_limits<double>::infinity();  ///< joint limit (rad or m)
   double upper = std::numeric_limits<double>::infinity();
   JointDynamics dynamics{};
+  double max_effort = 0;  ///< N m (N for a prismatic joint); 0: not given. Carried, not enforced here.
   // Precomputed by add_row(): cos/sin of alpha, and of theta for rows whose theta is constant;
   // alpha_kind: 0 general, 1 alpha = 0, 2 alpha = +90 deg, 3 alpha = -90 deg (exactly, to 1e-15),
   // so forward() can skip the multiplications by 0 and 1 of the common cases.
