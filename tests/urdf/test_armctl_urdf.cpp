@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl urdf import / export as a process: bad input is one line, exit 2, nothing
 // written (malformed XML, a loop, no path base -> tip, a zero axis, NaN, a 50 MB file,
 // mimic / floating joints on the chain, two tips); a good import writes a description

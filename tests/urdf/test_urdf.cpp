@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // URDF import and export against Orocos KDL: the KDL chain is built here from urdfdom's
 // model (as ROS's kdl_parser does: joint axes rotated into the parent, inertia rotated
 // from the inertial frame), independent of the converter; the converted description

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // armctl urdf import | export: a URDF's serial chain as a description file (DH rows with
 // comments naming the URDF joints), and a description as URDF. Converted by
 // kinematics/urdf.hpp; the result goes through the IK analyser like any description.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // URDF chain -> DH description: pure geometry over plain structs (no files, no parser).
 //
 // The joint axes are lines in the base link frame at q = 0. Standard DH frame i (Spong)

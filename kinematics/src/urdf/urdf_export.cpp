@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A DH chain as URDF. Each row is Pre Rz(theta + q) Tz(d + q) Post (standard: Pre = I,
 // Post = Tx(a) Rx(alpha); modified: Pre = Rx(alpha) Tx(a), Post = I). URDF moves the child
 // link after the joint's origin, so link_i sits at DH frame i times Post_i^-1 and the

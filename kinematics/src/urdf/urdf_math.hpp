@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Shared by the URDF converter and exporter (internal).
 #include <cmath>

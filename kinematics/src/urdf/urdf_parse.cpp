@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // URDF text -> the serial chain base -> tip (urdfdom 3.0, Debian liburdfdom-dev).
 // The edge of the converter: urdfdom parses; everything it accepts is checked again here
 // (a link with two parents, values that are not finite, a zero axis, mimic / floating /

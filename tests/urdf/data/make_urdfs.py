@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: Apache-2.0
 """Writes the test URDFs of tests/urdf (made up for the tests, no vendor files).
 
 Each arm is given as its joint axes at q = 0 in the base link frame (a point, a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // armctl urdf import | export (URDF <-> robot description, non-real-time)
 namespace servoarm::fw {
