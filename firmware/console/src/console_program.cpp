@@ -8,6 +8,7 @@
 #include <cstdio>
 
 #include "servoarm/console/console.hpp"
+#include "servoarm/console/text.hpp"
 #include "servoarm/kinematics/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
@@ -443,12 +444,12 @@ void Console::do_resume(Session& s) {
     return;
   }
   if (r.result != RtResult::ok && !run_) {
-    answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, r.message);
+    answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, bounded_text(r.message));
     return;
   }
   tick();
   if (run_) answer_ok(s, fmt("%s %s at %s", to_string(run_->state), run_->name.c_str(), program_where().c_str()));
-  else answer_ok(s, r.message);
+  else answer_ok(s, bounded_text(r.message));
 }
 
 std::string Console::program_where() const {
@@ -492,7 +493,7 @@ void Console::tick() {
     r.fed.pop_front();
   if (!r.fed.empty()) r.current = r.fed.front().second;
   switch (t.state) {
-    case ArmState::fault: end_program(fmt("aborted at %s: fault %s", program_where().c_str(), t.fault_text)); return;
+    case ArmState::fault: end_program(fmt("aborted at %s: fault %s", program_where().c_str(), bounded_text(t.fault_text).c_str())); return;
     case ArmState::estop: end_program("aborted at " + program_where() + ": e-stop"); return;
     case ArmState::boot:
     case ArmState::disabled: end_program("aborted at " + program_where() + ": the arm was disabled"); return;
