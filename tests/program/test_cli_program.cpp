@@ -68,7 +68,7 @@ TEST(CliProgram, GoodProgramCycleTimeIsTheClosedForm) {
   const double T = d / v + v / a + a / j;
   const auto r = check("one.arm", "movej 90 0 0 0 0 0\ndwell 1.25\nmovej 0 0 0 0 0 0 speed=50\n");
   LONGS_EQUAL_TEXT(0, r.status, r.err.c_str());
-  CHECK_TEXT(r.out.find("2 moves (2 joint, 0 linear), 1 dwells") != std::string::npos, r.out.c_str());
+  CHECK_TEXT(r.out.find(": 3 steps: 2 moves (2 joint, 0 linear), 1 dwell,") != std::string::npos, r.out.c_str());
   DOUBLES_EQUAL(T + 1.25 + T, cycle_time(r.out), 1e-6);
 }
 

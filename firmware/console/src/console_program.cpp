@@ -381,10 +381,9 @@ bool Console::continue_check() {
   }
   std::unique_ptr<ProgramRun> r = std::move(done->run);
   const std::string name = r->name;
-  int moves = 0;
-  for (const prog::ProgramStep& st : r->prog.steps) moves += kind_of(st.cmd) == StepKind::motion ? 1 : 0;
+  const std::string counts = prog::counts_text(prog::count_steps(r->prog));  // as armctl program check says
   if (done->check_only) {
-    answer_ok(o, fmt("checked %s: %zu steps, %d moves; nothing moved (check mode)", name.c_str(), r->prog.steps.size(), moves));
+    answer_ok(o, fmt("checked %s: %s; nothing moved (check mode)", name.c_str(), counts.c_str()));
     return false;
   }
   // Checked from where the arm was when the check began: it must still be there, at rest,
@@ -402,7 +401,7 @@ bool Console::continue_check() {
   r->started_cycle = t.cycles;
   r->state = RunState::running;
   run_ = std::move(r);
-  answer_ok(o, fmt("running %s: %zu steps, %d moves", name.c_str(), run_->prog.steps.size(), moves));
+  answer_ok(o, fmt("running %s: %s", name.c_str(), counts.c_str()));
   tick();
   return false;
 }

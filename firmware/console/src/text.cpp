@@ -41,4 +41,12 @@ std::string bounded_text(const char* buf, std::size_t cap) {
   return s + "...";
 }
 
+std::string count_text(long long n, std::string_view noun) {
+  std::string s = std::to_string(n);
+  s += ' ';
+  s += noun;
+  if (n != 1) s += 's';
+  return s;
+}
+
 }  // namespace servoarm::fw

@@ -5,6 +5,7 @@
 
 #include <cstddef>
 #include <string>
+#include <string_view>
 
 namespace servoarm::fw {
 
@@ -20,5 +21,9 @@ template <std::size_t N>
 std::string bounded_text(const char (&buf)[N]) {
   return bounded_text(buf, N);
 }
+
+/// "1 dwell", "0 dwells", "6 dwells": a count and its noun, plural unless the count is 1.
+/// The one plural rule of the console's and armctl's answers (nouns taking -s).
+std::string count_text(long long n, std::string_view noun);
 
 }  // namespace servoarm::fw
