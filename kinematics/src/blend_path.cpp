@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 namespace servoarm::kin {
 
@@ -338,25 +339,28 @@ BlendStatus path_append_joint(PathBlendCore& core, std::span<PathSegment> seg, c
   if (forward(*core.cfg.chain, goal, nb.x_end) != Status::ok) return BlendStatus::bad_input;
   nb.tolerance = tolerance;
   nb.blend_in = nb.blend = nb.corner = 0;
-  // A segment that blends (into its target, or out of the previous one) is planned with a
-  // share of the acceleration and jerk limits (PathBlendConfig::joint_share), so that its
-  // overlap with a neighbour can stay within them. The last one of a run (it blends in, not
-  // out) also tries the full acceleration with the shared jerk, and keeps what ends first.
+  // A segment that blends in (the one before it has a tolerance) tries its plan at the full
+  // limits, at full acceleration with a share of the jerk, and at a share of both
+  // (PathBlendConfig::joint_share: a slower segment whose overlap with its neighbour can stay
+  // within the limits), each blended as far as the checks pass, and keeps what ends first.
+  // The full-limit plan never ends later than the exact stop would (it starts at the latest
+  // where the previous segment ends), so neither does the one kept. A segment that does not
+  // blend in is planned at the full limits: a share would make it end later than its exact
+  // stop, for an overlap with a next segment not known yet.
   const bool blends_in = core.count > 0 && seg[slot(seg, core.head + core.count - 1)].tolerance > 0;
   const double sh = std::clamp(core.cfg.joint_share, 0.05, 1.0);
-  const bool shared = (blends_in || tolerance > 0) && sh < 1;
-  if (shared && blends_in && !(tolerance > 0)) {
-    double best_end = INFINITY, best_sa = sh;
-    for (const double sa : {sh, 1.0}) {
-      if (!plan_joint(L, override, sa, sh, nb)) continue;
+  double best_sa = 1.0, best_sj = 1.0;
+  if (blends_in && sh < 1) {
+    double best_end = INFINITY;
+    for (const auto& [sa, sj] : {std::pair{1.0, 1.0}, std::pair{1.0, sh}, std::pair{sh, sh}}) {
+      if (!plan_joint(L, override, sa, sj, nb)) continue;
       PathBlendReport r;
       if (!is_ok(blend_corner(core, seg, nb, t_earliest, &r))) continue;
-      if (nb.end() < best_end - 1e-9) best_end = nb.end(), best_sa = sa;
+      if (nb.end() < best_end - 1e-9) best_end = nb.end(), best_sa = sa, best_sj = sj;
     }
-    if (!plan_joint(L, override, best_sa, sh, nb)) return BlendStatus::no_solution;  // (the winner again: A's fields set by it)
-  } else if (!plan_joint(L, override, shared ? sh : 1.0, shared ? sh : 1.0, nb)) {
-    return BlendStatus::no_solution;
   }
+  // (the winner again: blend_corner sets the previous segment's fields for it)
+  if (!plan_joint(L, override, best_sa, best_sj, nb)) return BlendStatus::no_solution;
   const BlendStatus st = blend_corner(core, seg, nb, t_earliest, report);
   ++core.count;
   if (report) report->status = st;

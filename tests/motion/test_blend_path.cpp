@@ -433,3 +433,66 @@ TEST(BlendPath, AllocationFree) {
   CHECK(std::isfinite(sink));
   LONGS_EQUAL(0, n);
 }
+
+// A blended segment never ends later than it would with an exact stop at its corner (the
+// same moves, every tolerance 0: each planned alone at the full limits, from rest): joint
+// -> line, line -> joint, joint -> joint -> joint, with the firmware's joint_share 0.5 and
+// each segment queued once the one before it runs (it can no longer be planned again).
+TEST(BlendPath, NoSegmentEndsLaterThanItsExactStop) {
+  const Chain& c = the_puma();
+  struct Move {
+    bool line;
+    JointVector q;   // joint move: the target
+    Eigen::Vector3d dx;  // line: the tool's displacement
+    double tol;
+  };
+  JointVector q1 = q_start(), q2, q3;
+  q1[0] += 0.5;
+  q1[1] -= 0.3;
+  q2 = q1;
+  q2[2] += 0.4;
+  q3 = q2;
+  q3[0] -= 0.6;
+  const std::vector<std::vector<Move>> runs = {
+      {{false, q1, {}, 0.09}, {true, {}, {0, 0, -0.1}, 0.0}},
+      {{true, {}, {0, 0, -0.1}, 0.01}, {false, q_start(), {}, 0.0}},
+      {{false, q1, {}, 0.09}, {false, q2, {}, 0.09}, {false, q3, {}, 0.0}},
+      {{false, q1, {}, 0.09}, {true, {}, {0, 0, -0.1}, 0.01}, {true, {}, {0.05, 0, 0}, 0.01}, {false, q2, {}, 0.0}},
+  };
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    std::vector<double> ends[2];
+    for (int exact = 0; exact < 2; ++exact) {
+      auto Q = std::make_unique<Queue>();
+      PathBlendConfig cfg = config(c);
+      cfg.joint_share = 0.5;
+      Q->reset(cfg, q_start());
+      Pose x = fk(c, q_start());
+      JointVector q = q_start();
+      double t_earliest = 0;
+      for (const Move& m : runs[r]) {
+        const double tol = exact ? 0.0 : m.tol;
+        BlendStatus st;
+        if (m.line) {
+          x.translation() += m.dx;
+          st = Q->append_line(x, CartesianLimits{}, MovelOptions{}, tol, t_earliest);
+        } else {
+          st = Q->append_joint(m.q, 1.0, tol, t_earliest);
+          x = fk(c, m.q);
+        }
+        CHECK_TEXT(is_ok(st), to_string(st));
+        const PathSegment& g = Q->at(Q->size() - 1);
+        ends[exact].push_back(g.end());
+        t_earliest = g.start + 0.01;  // queued while this one runs
+        (void)q;
+      }
+    }
+    std::printf("\n  run %zu: blended ends at %.3f s, exact stops at %.3f s\n", r, ends[0].back(), ends[1].back());
+    for (std::size_t k = 0; k < ends[0].size(); ++k)
+      if (ends[0][k] > ends[1][k] + 1e-9) {
+        char m[160];
+        std::snprintf(m, sizeof m, "run %zu segment %zu ends at %.4f s blended, %.4f s with exact stops", r, k, ends[0][k],
+                      ends[1][k]);
+        FAIL(m);
+      }
+  }
+}

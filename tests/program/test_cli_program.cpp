@@ -6,10 +6,14 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <utility>
 #include <string>
 
 #include "../armctl/run_command.hpp"
 #include "servoarm/kinematics/description.hpp"
+#include "servoarm/kinematics/chain.hpp"
+#include "servoarm/program/points.hpp"
 #include "tmp_dir.hpp"
 
 // CppUTest last: its leak detector redefines new.
@@ -65,7 +69,7 @@ TEST(CliProgram, GoodProgramCycleTimeIsTheClosedForm) {
   const double T = d / v + v / a + a / j;
   const auto r = check("one.arm", "movej 90 0 0 0 0 0\ndwell 1.25\nmovej 0 0 0 0 0 0 speed=50\n");
   LONGS_EQUAL_TEXT(0, r.status, r.err.c_str());
-  CHECK_TEXT(r.out.find("2 moves (2 joint, 0 linear), 1 dwells") != std::string::npos, r.out.c_str());
+  CHECK_TEXT(r.out.find(": 3 steps: 2 moves (2 joint, 0 linear), 1 dwell,") != std::string::npos, r.out.c_str());
   DOUBLES_EQUAL(T + 1.25 + T, cycle_time(r.out), 1e-6);
 }
 
@@ -131,4 +135,41 @@ TEST(CliProgram, UsageErrors) {
   const auto h = run_command(kArmctl + " program --help");
   LONGS_EQUAL(0, h.status);
   CHECK(h.out.find("armctl program check FILE") != std::string::npos);
+}
+
+// The example program (firmware/program/examples): each `movel @pick` / `movel @place` goes
+// straight down along the tool (which points down) from its above-point, as its comments say;
+// with its blends it ends earlier than with every move to rest (both times printed).
+TEST(CliProgram, PickPlaceExampleGoesDownAndBlendingGains) {
+  const std::string ex = std::string(SERVOARM_SOURCE_DIR) + "/firmware/program/examples";
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK(lr.ok);
+  servoarm::prog::PointsData pts;
+  STRCMP_EQUAL("", servoarm::prog::load_points_file(ex + "/points.toml", 6, pts).c_str());
+  for (const auto& [above, at] : {std::pair{"above_pick", "pick"}, std::pair{"above_place", "place"}}) {
+    const servoarm::prog::TeachPoint* a = servoarm::prog::find_point(pts, above);
+    const servoarm::prog::TeachPoint* p = servoarm::prog::find_point(pts, at);
+    CHECK(a != nullptr && p != nullptr);
+    servoarm::kin::Pose xa, xp;
+    CHECK(servoarm::kin::forward(lr.chain, a->q, xa) == servoarm::kin::Status::ok);
+    CHECK(servoarm::kin::forward(lr.chain, p->q, xp) == servoarm::kin::Status::ok);
+    const Eigen::Vector3d tool_z = xa.linear().col(2), down = xp.translation() - xa.translation();
+    std::printf("\n%s -> %s: %.1f mm along the tool axis, %.2f mm off it; tool z = (%.3f %.3f %.3f)", above, at,
+                1e3 * down.dot(tool_z), 1e3 * (down - down.dot(tool_z) * tool_z).norm(), tool_z.x(), tool_z.y(), tool_z.z());
+    CHECK_TEXT(tool_z.z() < -0.99, above);                   // the tool points down
+    CHECK_TEXT(down.z() < -0.05, at);                        // the part is below its above-point
+    CHECK_TEXT(down.dot(tool_z) > 0.05, at);                 // along the tool's axis ...
+    CHECK_TEXT((down - down.dot(tool_z) * tool_z).norm() < 1e-3, at);  // ... straight
+    CHECK_TEXT((xp.translation() - p->pose.translation()).norm() < 1e-6, at);  // the file's xyz is the joints'
+    CHECK_TEXT((xa.translation() - a->pose.translation()).norm() < 1e-6, above);
+  }
+  const auto r = run_command(kArmctl + " program check " + ex + "/pick_place.arm --robot puma560 --points " + ex +
+                             "/points.toml");
+  LONGS_EQUAL_TEXT(0, r.status, (r.out + r.err).c_str());
+  const double blended = cycle_time(r.out);
+  const std::size_t k = r.out.find("; ");
+  CHECK_TEXT(k != std::string::npos, r.out.c_str());
+  const double exact = std::strtod(r.out.c_str() + k + 2, nullptr);
+  std::printf("\npick_place.arm: %.3f s blended, %.3f s with every move to rest\n", blended, exact);
+  CHECK_TEXT(blended > 0 && exact > 0 && blended < exact, r.out.c_str());
 }

@@ -17,6 +17,7 @@
 #include "servoarm/console/ik_options.hpp"
 #include "servoarm/console/requests.hpp"
 #include "servoarm/console/units.hpp"
+#include "servoarm/console/text.hpp"
 #include "servoarm/kinematics/blend.hpp"
 #include "servoarm/kinematics/blend_path.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -631,14 +632,13 @@ int cli_program(int argc, char** argv) {
   if (!ck.ok) return usage_error(ck.error);
   std::string homings;
   if (ck.homings > 0)
-    homings = ", " + std::to_string(ck.homings) + " homing cycle" + (ck.homings == 1 ? "" : "s") + " (not timed" +
+    homings = ", " + count_text(ck.homings, "homing cycle") + " (not timed" +
               (opt.homing.empty() ? ": no [[drive]] tables, every joint absolute, nothing moved" : "") + ")";
-  std::printf("ok: %s on %s: %zu steps from %zu file%s, %d moves (%d joint, %d linear), %d dwells%s, planned cycle time %s s "
-              "(%d blended corner%s; %s s with every move to rest)\n",
-              file.c_str(), chain.name.data(), program.steps.size(), program.files.size(),
-              program.files.size() == 1 ? "" : "s", ck.moves, ck.joint_moves, ck.line_moves, ck.dwells, homings.c_str(),
-              num(ck.cycle_time).c_str(), ck.blended_corners, ck.blended_corners == 1 ? "" : "s",
-              num(ck.cycle_time_exact).c_str());
+  // The counts in the words armfw's `run` answers with (prog::counts_text).
+  std::printf("ok: %s on %s (%s): %s%s, planned cycle time %s s (%s; %s s with every move to rest)\n", file.c_str(),
+              chain.name.data(), count_text(static_cast<long long>(program.files.size()), "file").c_str(),
+              prog::counts_text(prog::count_steps(program)).c_str(), homings.c_str(), num(ck.cycle_time).c_str(),
+              count_text(ck.blended_corners, "blended corner").c_str(), num(ck.cycle_time_exact).c_str());
   return kExitOk;
 }
 

@@ -3,6 +3,7 @@
 
 #include "servoarm/console/command_table.hpp"
 #include "servoarm/console/number.hpp"
+#include "servoarm/console/text.hpp"
 
 #include <cfenv>
 #include <cmath>
@@ -110,8 +111,9 @@ ParseResult fail(CmdError e, const char* fmt, ...) {
   r.error = e;
   va_list ap;
   va_start(ap, fmt);
-  std::vsnprintf(r.message.data(), r.message.size(), fmt, ap);
+  const int n = std::vsnprintf(r.message.data(), r.message.size(), fmt, ap);
   va_end(ap);
+  if (n >= static_cast<int>(r.message.size())) ellipsize(r.message.data(), r.message.size());
   return r;
 }
 

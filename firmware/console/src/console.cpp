@@ -13,6 +13,7 @@
 
 #include "servoarm/console/command_table.hpp"
 #include "servoarm/console/ik_options.hpp"
+#include "servoarm/console/text.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -116,14 +117,21 @@ bool moves_arm(const Command& c) {
 bool carries_outputs(Cmd c) { return c == Cmd::movej || c == Cmd::movel || c == Cmd::gmove || c == Cmd::park; }
 
 std::string fmt(const char* f, ...) __attribute__((format(printf, 1, 2)));
+/// printf into a string sized for the text: an answer is never cut.
 std::string fmt(const char* f, ...) {
-  char buf[512];
-  va_list ap;
+  va_list ap, again;
   va_start(ap, f);
-  std::vsnprintf(buf, sizeof buf, f, ap);
+  va_copy(again, ap);
+  const int n = std::vsnprintf(nullptr, 0, f, ap);
   va_end(ap);
-  return buf;
+  std::string out(n > 0 ? static_cast<std::size_t>(n) : 0, '\0');
+  if (n > 0) std::vsnprintf(out.data(), out.size() + 1, f, again);
+  va_end(again);
+  return out;
 }
+
+/// A model part's refusal (a fixed line of the model's): whole, or cut after a word with "...".
+std::string refusal_text(const ModelControl& m, ModelPart p) { return bounded_text(m.refusal(p), ModelControl::kLine); }
 
 CmdError motion_error(kin::MotionStatus m) {
   switch (m) {
@@ -369,7 +377,7 @@ std::string Console::status_text() const {
   if (t.feed_forward != 0 || t.collision_on || t.freedrive != 0)  // (the dynamics parts, when one runs)
     s += fmt(" feed_forward=%s collision=%s freedrive=%s", to_string(static_cast<FeedForwardKind>(t.feed_forward)),
              t.collision_on ? "on" : "off", to_string(static_cast<FreedrivePhase>(t.freedrive)));
-  if (t.fault_text[0]) s += fmt(" fault=\"%s\"", t.fault_text);
+  if (bounded_text(t.fault_text).c_str()[0]) s += fmt(" fault=\"%s\"", bounded_text(t.fault_text).c_str());
   return s;
 }
 
@@ -383,7 +391,7 @@ std::string Console::dynamics_text() const {
              static_cast<unsigned long long>(t.collisions));
   if (m == nullptr || !m->configured()) return s + " (no dynamic model)";
   for (const ModelPart p : {ModelPart::feed_forward, ModelPart::collision, ModelPart::freedrive})
-    if (!m->available(p)) s += fmt("\n%s unavailable: %s", to_string(p), m->refusal(p));
+    if (!m->available(p)) s += fmt("\n%s unavailable: %s", to_string(p), refusal_text(*m, p).c_str());
   return s;
 }
 
@@ -532,11 +540,11 @@ void Console::drain_events(std::string& native, std::string& grbl) {
   while (ctl_.events().pop(e)) {
     switch (e.kind) {
       case EventKind::fault:
-        native += fmt("alarm: fault %s\n", e.message);
+        native += fmt("alarm: fault %s\n", bounded_text(e.message).c_str());
         // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits),
         // 9 homing fail (GRBL: the switch not found)
         grbl += fmt("ALARM:%d\n[MSG:fault %s]\n",
-                    e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, e.message);
+                    e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, bounded_text(e.message).c_str());
         jog_tail_valid_ = false;
         break;
       case EventKind::estop:
@@ -545,21 +553,21 @@ void Console::drain_events(std::string& native, std::string& grbl) {
         jog_tail_valid_ = false;
         break;
       case EventKind::motion_refused:
-        native += fmt("alarm: %s\n", e.message);
-        grbl += fmt("[MSG:%s]\n", e.message);
+        native += fmt("alarm: %s\n", bounded_text(e.message).c_str());
+        grbl += fmt("[MSG:%s]\n", bounded_text(e.message).c_str());
         break;
       case EventKind::jog_stopped:
-        native += fmt("alarm: %s\n", e.message);
-        grbl += fmt("[MSG:%s]\n", e.message);
+        native += fmt("alarm: %s\n", bounded_text(e.message).c_str());
+        grbl += fmt("[MSG:%s]\n", bounded_text(e.message).c_str());
         jog_tail_valid_ = false;
         break;
       case EventKind::homing:
-        native += fmt("homing: %s\n", e.message);
-        grbl += fmt("[MSG:homing: %s]\n", e.message);
+        native += fmt("homing: %s\n", bounded_text(e.message).c_str());
+        grbl += fmt("[MSG:homing: %s]\n", bounded_text(e.message).c_str());
         break;
       case EventKind::freedrive:
-        native += fmt("freedrive: %s\n", e.message);
-        grbl += fmt("[MSG:freedrive: %s]\n", e.message);
+        native += fmt("freedrive: %s\n", bounded_text(e.message).c_str());
+        grbl += fmt("[MSG:freedrive: %s]\n", bounded_text(e.message).c_str());
         break;
       case EventKind::motion_done:
       case EventKind::state: break;
@@ -592,7 +600,7 @@ bool Console::motion_state_ok(Session& s) {
       answer_error(s, CmdError::bad_state, "arm is stopping; retry when idle");
       return false;
     case ArmState::fault:
-      answer_error(s, CmdError::fault, fmt("arm in fault (%s): send reset, then enable", t.fault_text));
+      answer_error(s, CmdError::fault, fmt("arm in fault (%s): send reset, then enable", bounded_text(t.fault_text).c_str()));
       return false;
     case ArmState::estop:
       answer_error(s, CmdError::fault, "arm in e-stop: send reset, then enable");
@@ -998,20 +1006,23 @@ void Console::execute(Session& s, std::string_view line) {
     return;
   }
   Reply r;
+  auto reply = [&](const std::string& text) {  // r answered with `text`
+    switch (r.result) {
+      case RtResult::ok: answer_ok(s, text); return;
+      case RtResult::bad_state: answer_error(s, CmdError::bad_state, text); return;
+      case RtResult::fault: answer_error(s, CmdError::fault, text); return;
+      case RtResult::busy: answer_error(s, CmdError::busy, text); return;
+      case RtResult::start_moved:
+      case RtResult::plan_failed: answer_error(s, CmdError::plan_failed, text); return;
+      case RtResult::not_homed: answer_error(s, CmdError::not_homed, text); return;
+    }
+  };
   auto simple = [&](RequestOp op) {
     if (!request(op, r)) {
       answer_error(s, CmdError::timeout, fmt("control thread did not answer %s", to_string(op)));
       return;
     }
-    switch (r.result) {
-      case RtResult::ok: answer_ok(s, r.message); return;
-      case RtResult::bad_state: answer_error(s, CmdError::bad_state, r.message); return;
-      case RtResult::fault: answer_error(s, CmdError::fault, r.message); return;
-      case RtResult::busy: answer_error(s, CmdError::busy, r.message); return;
-      case RtResult::start_moved:
-      case RtResult::plan_failed: answer_error(s, CmdError::plan_failed, r.message); return;
-      case RtResult::not_homed: answer_error(s, CmdError::not_homed, r.message); return;
-    }
+    reply(bounded_text(r.message));
   };
   // While a program runs, motion comes from the program only: a move, jog, dwell, homing or
   // M62/M63 from any console is refused (stop, hold, resume, abort and queries still work).
@@ -1049,7 +1060,7 @@ void Console::execute(Session& s, std::string_view line) {
         return;
       }
       if (r.result != RtResult::ok) {
-        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, r.message);
+        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, bounded_text(r.message));
         return;
       }
       s.enabling = true;
@@ -1166,7 +1177,23 @@ void Console::execute(Session& s, std::string_view line) {
         answer_ok(s, "check mode: not run");
         return;
       }
-      simple(RequestOp::freedrive_on);
+      if (!request(RequestOp::freedrive_on, r)) {
+        answer_error(s, CmdError::timeout, "control thread did not answer freedrive_on");
+        return;
+      }
+      if (const ModelControl* m = ctl_.model(); r.result != RtResult::ok && m != nullptr && m->configured() &&
+                                                !m->available(ModelPart::freedrive)) {
+        // The reply's fixed line may hold only the start of the model's refusal: the answer
+        // gives it whole, from the model.
+        const std::string why = refusal_text(*m, ModelPart::freedrive);
+        const std::string said = r.message;
+        const std::size_t at = said.find(why.substr(0, 40));
+        if (at != std::string::npos) {
+          reply(said.substr(0, at) + why);
+          return;
+        }
+      }
+      reply(bounded_text(r.message));
       return;
     case Cmd::collision_on:
     case Cmd::collision_off: {
@@ -1179,7 +1206,7 @@ void Console::execute(Session& s, std::string_view line) {
         const ModelControl* m = ctl_.model();
         answer_error(s, CmdError::bad_state,
                      fmt("collision detection unavailable: %s",
-                         m != nullptr && m->configured() ? m->refusal(ModelPart::collision) : "no dynamic model"));
+                         m != nullptr && m->configured() ? refusal_text(*m, ModelPart::collision).c_str() : "no dynamic model"));
         return;
       }
       answer_ok(s, on ? "collision detection on" : "collision detection off");
@@ -1217,7 +1244,7 @@ bool Console::settle(Session& s) {
         break;
       case ArmState::fault:
         s.enabling = false;
-        answer_error(s, CmdError::fault, fmt("enable failed: %s", t.fault_text));
+        answer_error(s, CmdError::fault, fmt("enable failed: %s", bounded_text(t.fault_text).c_str()));
         break;
       case ArmState::boot:
       case ArmState::disabled:
@@ -1232,7 +1259,7 @@ bool Console::settle(Session& s) {
     const Telemetry t = ctl_.telemetry();
     if (t.state == ArmState::homing || t.mode == Mode::homing_abort) return true;
     s.homing = false;
-    if (t.state == ArmState::fault) answer_error(s, CmdError::fault, fmt("homing failed: %s", t.fault_text));
+    if (t.state == ArmState::fault) answer_error(s, CmdError::fault, fmt("homing failed: %s", bounded_text(t.fault_text).c_str()));
     else if (t.state == ArmState::estop) answer_error(s, CmdError::fault, "homing aborted: e-stop");
     else if (!t.all_homed()) answer_error(s, CmdError::not_homed, "homing stopped: " + unhomed_refusal(t));
     else answer_ok(s, "homed");
@@ -1242,7 +1269,7 @@ bool Console::settle(Session& s) {
     switch (t.state) {
       case ArmState::fault:
         s.waiting = false;
-        answer_error(s, CmdError::fault, fmt("arm in fault while waiting: %s", t.fault_text));
+        answer_error(s, CmdError::fault, fmt("arm in fault while waiting: %s", bounded_text(t.fault_text).c_str()));
         break;
       case ArmState::estop:
         s.waiting = false;
@@ -1475,21 +1502,21 @@ void Console::do_home(Session& s, const Command& c) {
   }
   switch (r.result) {
     case RtResult::ok: break;
-    case RtResult::busy: answer_error(s, CmdError::busy, r.message); return;
-    case RtResult::fault: answer_error(s, CmdError::fault, r.message); return;
+    case RtResult::busy: answer_error(s, CmdError::busy, bounded_text(r.message)); return;
+    case RtResult::fault: answer_error(s, CmdError::fault, bounded_text(r.message)); return;
     case RtResult::not_homed:
     case RtResult::bad_state:
     case RtResult::start_moved:
-    case RtResult::plan_failed: answer_error(s, CmdError::bad_state, r.message); return;
+    case RtResult::plan_failed: answer_error(s, CmdError::bad_state, bounded_text(r.message)); return;
   }
   jog_tail_valid_ = false;
   if (c.cmd == Cmd::grbl_home) {  // GRBL: $H answers when the cycle has ended (state Home meanwhile)
     s.homing = true;
-    if (s.dialect == Dialect::grbl) s.out += fmt("[MSG:%s]\n", r.message);
+    if (s.dialect == Dialect::grbl) s.out += fmt("[MSG:%s]\n", bounded_text(r.message).c_str());
     settle(s);
     return;
   }
-  answer_ok(s, r.message);
+  answer_ok(s, bounded_text(r.message));
 }
 
 void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit) {
@@ -1503,20 +1530,20 @@ void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double aske
   }
   switch (r.result) {
     case RtResult::ok: break;
-    case RtResult::busy: answer_error(s, CmdError::busy, r.message); return;
-    case RtResult::fault: answer_error(s, CmdError::fault, r.message); return;
-    case RtResult::not_homed: answer_error(s, CmdError::not_homed, r.message); return;
+    case RtResult::busy: answer_error(s, CmdError::busy, bounded_text(r.message)); return;
+    case RtResult::fault: answer_error(s, CmdError::fault, bounded_text(r.message)); return;
+    case RtResult::not_homed: answer_error(s, CmdError::not_homed, bounded_text(r.message)); return;
     case RtResult::bad_state:
     case RtResult::start_moved:
-    case RtResult::plan_failed: answer_error(s, CmdError::bad_state, r.message); return;
+    case RtResult::plan_failed: answer_error(s, CmdError::bad_state, bounded_text(r.message)); return;
   }
   if (clamped >= 0) {  // it moves: ok, and where it stops
     const ConsoleUnits& u = cfg_.units;
-    answer_ok(s, fmt("%s; joint %d stops at its limit %.3f %s (asked %.3f)", r.message, clamped + 1,
+    answer_ok(s, fmt("%s; joint %d stops at its limit %.3f %s (asked %.3f)", bounded_text(r.message).c_str(), clamped + 1,
                      to_user(clamped, limit), u.joint_name(chain_, clamped), to_user(clamped, asked)));
     return;
   }
-  answer_ok(s, r.message);
+  answer_ok(s, bounded_text(r.message));
 }
 
 void Console::do_jog(Session& s, const Command& c) {
@@ -1528,7 +1555,7 @@ void Console::do_jog(Session& s, const Command& c) {
       return;
     }
     if (c.jog_op == JogOp::stop) jog_tail_valid_ = false;
-    answer_ok(s, r.message);
+    answer_ok(s, bounded_text(r.message));
     return;
   }
   if (s.check_mode) {
@@ -1768,7 +1795,7 @@ void Console::do_grbl(Session& s, const Command& c) {
       const ArmState st = ctl_.telemetry().state;
       if (st == ArmState::fault || st == ArmState::estop) {
         if (!request(RequestOp::reset, r) || r.result != RtResult::ok) {
-          answer_error(s, CmdError::bad_state, fmt("$X: reset refused: %s", r.message));
+          answer_error(s, CmdError::bad_state, fmt("$X: reset refused: %s", bounded_text(r.message).c_str()));
           return;
         }
       }
@@ -1782,7 +1809,7 @@ void Console::do_grbl(Session& s, const Command& c) {
         return;
       }
       if (r.result != RtResult::ok) {
-        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, r.message);
+        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, bounded_text(r.message));
         return;
       }
       s.enabling = true;

@@ -9,6 +9,7 @@
 #include <cstdio>
 
 #include "servoarm/console/console.hpp"
+#include "servoarm/console/text.hpp"
 #include "servoarm/kinematics/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
@@ -381,10 +382,9 @@ bool Console::continue_check() {
   }
   std::unique_ptr<ProgramRun> r = std::move(done->run);
   const std::string name = r->name;
-  int moves = 0;
-  for (const prog::ProgramStep& st : r->prog.steps) moves += kind_of(st.cmd) == StepKind::motion ? 1 : 0;
+  const std::string counts = prog::counts_text(prog::count_steps(r->prog));  // as armctl program check says
   if (done->check_only) {
-    answer_ok(o, fmt("checked %s: %zu steps, %d moves; nothing moved (check mode)", name.c_str(), r->prog.steps.size(), moves));
+    answer_ok(o, fmt("checked %s: %s; nothing moved (check mode)", name.c_str(), counts.c_str()));
     return false;
   }
   // Checked from where the arm was when the check began: it must still be there, at rest,
@@ -402,7 +402,7 @@ bool Console::continue_check() {
   r->started_cycle = t.cycles;
   r->state = RunState::running;
   run_ = std::move(r);
-  answer_ok(o, fmt("running %s: %zu steps, %d moves", name.c_str(), run_->prog.steps.size(), moves));
+  answer_ok(o, fmt("running %s: %s", name.c_str(), counts.c_str()));
   tick();
   return false;
 }
@@ -444,12 +444,12 @@ void Console::do_resume(Session& s) {
     return;
   }
   if (r.result != RtResult::ok && !run_) {
-    answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, r.message);
+    answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, bounded_text(r.message));
     return;
   }
   tick();
   if (run_) answer_ok(s, fmt("%s %s at %s", to_string(run_->state), run_->name.c_str(), program_where().c_str()));
-  else answer_ok(s, r.message);
+  else answer_ok(s, bounded_text(r.message));
 }
 
 std::string Console::program_where() const {
@@ -493,7 +493,7 @@ void Console::tick() {
     r.fed.pop_front();
   if (!r.fed.empty()) r.current = r.fed.front().second;
   switch (t.state) {
-    case ArmState::fault: end_program(fmt("aborted at %s: fault %s", program_where().c_str(), t.fault_text)); return;
+    case ArmState::fault: end_program(fmt("aborted at %s: fault %s", program_where().c_str(), bounded_text(t.fault_text).c_str())); return;
     case ArmState::estop: end_program("aborted at " + program_where() + ": e-stop"); return;
     case ArmState::boot:
     case ArmState::disabled: end_program("aborted at " + program_where() + ": the arm was disabled"); return;

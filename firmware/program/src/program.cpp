@@ -12,6 +12,7 @@
 #include <memory>
 
 #include "servoarm/console/number.hpp"
+#include "servoarm/console/text.hpp"
 #include "servoarm/kinematics/file_input.hpp"
 
 namespace servoarm::prog {
@@ -541,6 +542,29 @@ bool next_motion_is_line(const Program& p, std::size_t i) {
     if (kind == StepKind::motion || kind == StepKind::needs_idle) return false;
   }
   return false;
+}
+
+}  // namespace servoarm::prog
+
+namespace servoarm::prog {
+
+StepCounts count_steps(const Program& p) {
+  StepCounts c;
+  c.steps = p.steps.size();
+  for (const ProgramStep& st : p.steps) {
+    const fw::Cmd k = st.cmd.cmd;
+    if (k == fw::Cmd::movej || k == fw::Cmd::park) ++c.joint_moves;
+    else if (k == fw::Cmd::movel || k == fw::Cmd::gmove) ++c.line_moves;
+    else if (k == fw::Cmd::dwell) ++c.dwells;
+  }
+  c.moves = c.joint_moves + c.line_moves;
+  return c;
+}
+
+std::string counts_text(const StepCounts& c) {
+  return fw::count_text(static_cast<long long>(c.steps), "step") + ": " + fw::count_text(c.moves, "move") + " (" +
+         std::to_string(c.joint_moves) + " joint, " + std::to_string(c.line_moves) + " linear), " +
+         fw::count_text(c.dwells, "dwell");
 }
 
 }  // namespace servoarm::prog

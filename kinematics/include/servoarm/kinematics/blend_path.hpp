@@ -83,11 +83,13 @@ struct PathBlendConfig {
   double rate = 1000;        ///< Hz, the control rate the checks sample at
   double margin = 0.95;      ///< fraction of the velocity / acceleration limits a blend may use
   double max_joint_step = 0.25;  ///< rad (m) between samples: more is a branch change
-  /// Fraction of the acceleration and jerk limits a joint segment that blends (its target has
-  /// a tolerance, or the segment before it has one) is planned with; the last segment of a run
-  /// also tries the full acceleration with this jerk and keeps what ends first. 1: full
-  /// limits (the jerk phases of two overlapping segments, A's last and B's first, then add up
-  /// to twice the limit, so the checks leave small blends or none); 0.5: their sum stays within
+  /// Fraction of the acceleration and jerk limits a joint segment that blends in (the segment
+  /// before it has a tolerance) may be planned with: it tries the full limits, the full
+  /// acceleration with this share of the jerk, and this share of both, and keeps what ends
+  /// first (never later than its exact stop: the full-limit plan ends no later than that).
+  /// A segment that does not blend in is planned at the full limits. 1: full limits only
+  /// (the jerk phases of two overlapping segments, A's last and B's first, then add up to
+  /// twice the limit, so the checks leave small blends or none); 0.5: their sum stays within
   /// the limits (the firmware's choice).
   double joint_share = 1.0;
   const Chain* chain = nullptr;  ///< for FK (tool distances) and the lines' IK

@@ -169,7 +169,9 @@ struct Command {
 
 struct ParseResult {
   CmdError error = CmdError::ok;
-  std::array<char, 112> message{};
+  /// One line naming what is wrong. Sized for the longest refusal with a 63-character name
+  /// quoted; a longer one ends with "..." after a whole word (servoarm/console/text.hpp).
+  std::array<char, 192> message{};
   bool ok() const { return error == CmdError::ok; }
 };
 

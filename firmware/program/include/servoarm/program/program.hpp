@@ -75,6 +75,17 @@ struct ProgramStep {
                          ///< console's configured default)
 };
 
+/// What a program holds, counted one way for armfw's `run` and `armctl program check`:
+/// moves are movej / park / G28 (joint) and movel / G0 / G1 (linear); dwells are dwell / G4.
+struct StepCounts {
+  std::size_t steps = 0;
+  int moves = 0, joint_moves = 0, line_moves = 0, dwells = 0;
+};
+struct Program;
+StepCounts count_steps(const Program& p);
+/// "29 steps: 20 moves (8 joint, 12 linear), 6 dwells": the one wording of both.
+std::string counts_text(const StepCounts& c);
+
 struct Program {
   std::vector<std::string> files;   ///< paths of the files read (files[0] the program itself)
   std::vector<ProgramStep> steps;   ///< in execution order (repeats and calls expanded)

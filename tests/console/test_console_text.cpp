@@ -1,0 +1,171 @@
+// SPDX-License-Identifier: Apache-2.0
+// Answers are never cut inside a word: every message the parser, the console and the
+// control thread's texts (replies, events, fault texts) produce, rendered with the
+// longest names and values, is either whole or ends with "..." after a whole word.
+#include <cctype>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "console_rig.hpp"
+#include "servoarm/console/command_table.hpp"
+#include "servoarm/console/commands.hpp"
+#include "servoarm/console/text.hpp"
+#include "servoarm/rt/model_control.hpp"
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm;
+using namespace servoarm::fw;
+
+namespace {
+
+bool ends_with(const std::string& s, const std::string& e) {
+  return s.size() >= e.size() && s.compare(s.size() - e.size(), e.size(), e) == 0;
+}
+
+/// `shown` is `full` whole, or a prefix of it cut after a whole word followed by "...".
+bool whole_or_ellipsis(const std::string& shown, const std::string& full) {
+  if (shown == full) return true;
+  if (!ends_with(shown, "...")) return false;
+  const std::string head = shown.substr(0, shown.size() - 3);
+  if (head.empty() || full.compare(0, head.size(), head) != 0 || head.size() >= full.size()) return false;
+  const char next = full[head.size()];
+  const char last = head.back();
+  const auto word = [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.'; };
+  return !(word(last) && word(next));  // the cut is between words, never inside one
+}
+
+/// The lines of `text` that start with `prefix`, the prefix taken off.
+std::vector<std::string> lines_after(const std::string& text, const std::string& prefix) {
+  std::vector<std::string> out;
+  std::size_t a = 0;
+  while (a < text.size()) {
+    std::size_t b = text.find('\n', a);
+    if (b == std::string::npos) b = text.size();
+    const std::string l = text.substr(a, b - a);
+    if (l.rfind(prefix, 0) == 0) out.push_back(l.substr(prefix.size()));
+    a = b + 1;
+  }
+  return out;
+}
+
+/// The longest text the control thread formats for a homing fault (hal's homing messages,
+/// the largest joint and node numbers, the longest phase name) and other long event texts.
+std::vector<std::string> longest_rt_texts() {
+  return {
+      "joint 16 (node 127): homing timeout after 9223372036854775807 ms searching the home switch towards the "
+      "negative limit switch (statusword 0x0237)",
+      "joint 16 (node 127): homing error while moving off the home switch towards the index pulse of the motor "
+      "encoder (statusword 0x2637)",
+      "joint 16: the drive has no cyclic synchronous torque mode (CST with 6071h, 6060h/6061h in the PDOs; "
+      "dynamics.freedrive = true maps it where the drive has it): free-drive needs it",
+  };
+}
+
+}  // namespace
+
+TEST_GROUP(ConsoleText){};
+
+// `freedrive on` on drives without a torque mode: the refusal names the drive's missing
+// mode and the configuration key in full (the model's own refusal text).
+TEST(ConsoleText, FreedriveRefusalIsWhole) {
+  test::ConsoleRig rig;
+  rig.enable();
+  const ModelControl* m = rig.app.ctl->model();
+  if (m == nullptr || !m->configured() || m->available(ModelPart::freedrive))
+    FAIL("the puma560 sim is expected to refuse free-drive (no CST on its drives)");
+  const std::string refusal = m->refusal(ModelPart::freedrive);
+  const std::string a = rig.cmd("freedrive on");
+  std::printf("\nfreedrive on -> %s", a.c_str());
+  const auto err = lines_after(a, "error: ");
+  CHECK_EQUAL_TEXT(1u, err.size(), a.c_str());
+  CHECK_TEXT(err[0].find(refusal) != std::string::npos, a.c_str());
+}
+
+// Events from the control thread whose text fills its fixed buffer: every console line
+// (native and GRBL) is whole, or ends with "..." after a whole word.
+TEST(ConsoleText, LongestEventTextsAreWholeOrEndWithAnEllipsis) {
+  test::ConsoleRig rig;
+  for (const std::string& full : longest_rt_texts())
+    for (const EventKind k : {EventKind::fault, EventKind::motion_refused, EventKind::jog_stopped, EventKind::homing,
+                              EventKind::freedrive}) {
+      Event e;
+      e.kind = k;
+      e.cause = FaultCause::homing_failed;
+      std::snprintf(e.message, sizeof e.message, "%s", full.c_str());  // what the control thread sends
+      CHECK(rig.app.ctl->events().push(e));
+      std::string native, grbl;
+      rig.app.console->drain_events(native, grbl);
+      const char* prefix = k == EventKind::fault ? "alarm: fault " : k == EventKind::homing ? "homing: "
+                           : k == EventKind::freedrive                                   ? "freedrive: "
+                                                                                         : "alarm: ";
+      const auto n = lines_after(native, prefix);
+      CHECK_EQUAL_TEXT(1u, n.size(), native.c_str());
+      if (!whole_or_ellipsis(n[0], full)) FAIL(("cut inside a word: " + native).c_str());
+      std::string gp = k == EventKind::fault ? "[MSG:fault " : k == EventKind::homing ? "[MSG:homing: "
+                       : k == EventKind::freedrive                                   ? "[MSG:freedrive: "
+                                                                                     : "[MSG:";
+      const auto g = lines_after(grbl, gp);
+      CHECK_EQUAL_TEXT(1u, g.size(), grbl.c_str());
+      const std::string gt = ends_with(g[0], "]") ? g[0].substr(0, g[0].size() - 1) : g[0];
+      if (!whole_or_ellipsis(gt, full)) FAIL(("cut inside a word: " + grbl).c_str());
+    }
+}
+
+// Every command of the table and the G-code words with the longest arguments a line may
+// carry: every refusal is whole (shorter than its buffer) or ends with "..." after a word.
+TEST(ConsoleText, EveryParserRefusalWithLongArgumentsIsWholeOrEndsWithAnEllipsis) {
+  const std::string w(63, 'w');  // the longest point / program name the parser keeps is 63
+  const std::string num = "-123456789012345678901234567890.1234567";  // 40 characters
+  std::vector<std::string> lines;
+  for (const CommandSpec& e : kCommands) {
+    const std::string n = e.name;
+    for (const std::string& a : {w, num, w + " " + w, num + " " + w, "j" + num, num + " speed=" + num,
+                                 "j3 " + num + " speed=" + w, w + " " + num + " " + num + " " + num + " " + num,
+                                 "@" + w, w + "=" + num, "rate=" + w})
+      lines.push_back(n + " " + a);
+  }
+  for (const char* g : {"G0", "G1", "G4", "G10 L2 P1", "$J=G91", "M62", "M63", "G28", "G53 G0", "G54", "F", "T"})
+    for (const std::string& a : {" X" + num, " X" + w, " " + w, " P" + num + " Q" + w, " Y" + num + " Z" + num + " A" + num})
+      lines.push_back(g + a);
+  int refused = 0, long_ones = 0;
+  for (const std::string& line : lines) {
+    GcodeModal m;
+    Command c;
+    const ParseResult r = parse_line(line, 6, m, c);
+    if (r.ok()) continue;
+    ++refused;
+    const std::string msg = r.message.data();
+    if (msg.size() + 1 >= r.message.size()) {  // it filled the buffer: cut
+      ++long_ones;
+      if (!ends_with(msg, "...") || msg[msg.size() - 4] == ' ')
+        FAIL(("cut inside a word: '" + line + "' -> " + msg).c_str());
+    }
+  }
+  std::printf("\n%d of %zu lines refused, %d of them at the message's cap\n", refused, lines.size(), long_ones);
+  CHECK(refused > 100);
+}
+
+// The two cuts themselves: a buffer snprintf filled (a fault text, a reply) and a refusal
+// written into a buffer too small for it: whole words, then "...".
+TEST(ConsoleText, CutsFallBetweenWords) {
+  for (const std::string& full : longest_rt_texts())
+    for (std::size_t cap : {std::size_t(20), std::size_t(64), std::size_t(120), std::size_t(121), std::size_t(160)}) {
+      std::vector<char> buf(cap);
+      std::snprintf(buf.data(), cap, "%s", full.c_str());
+      const std::string shown = bounded_text(buf.data(), cap);
+      if (!whole_or_ellipsis(shown, full)) FAIL(("bounded_text cut inside a word: " + shown).c_str());
+      std::vector<char> b2(cap);
+      const int n = std::snprintf(b2.data(), cap, "%s", full.c_str());
+      if (n >= static_cast<int>(cap)) ellipsize(b2.data(), cap);
+      const std::string e = b2.data();
+      CHECK(e.size() < cap);
+      if (!whole_or_ellipsis(e, full)) FAIL(("ellipsize cut inside a word: " + e).c_str());
+    }
+  char fits[16] = "short and whole";  // 15 characters + NUL: full, so marked
+  CHECK_EQUAL(std::string("short and..."), bounded_text(fits));
+  char room[32] = "short and whole";
+  CHECK_EQUAL(std::string("short and whole"), bounded_text(room));
+}
