@@ -875,3 +875,42 @@ TEST(Config, DynamicsAndBlendKeysAreReadAndBadOnesRefusedNamingTheKey) {
     CHECK_TEXT(k == FwConfig{}, b.want);  // untouched
   }
 }
+
+// [[output]]: name, node and bit are required (a missing one is refused naming it), and the
+// bits CiA 402 reserves in 60FEh:01 (0 = set brake, 1..15 reserved by the profile) are refused:
+// an output may only be one of the manufacturer-specific bits 16..31.
+TEST(Config, OutputKeysAreRequiredAndProfileBitsRefused) {
+  const std::string head = "[[output]]\nname = \"gripper\"\nnode = 6\n";
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(head + "bit = 16\n", "o.toml", c).c_str());
+  LONGS_EQUAL(16, c.outputs.at(0).bit);
+  STRCMP_EQUAL("", load_config_text(head + "bit = 31\n", "o.toml", c).c_str());
+  LONGS_EQUAL(31, c.outputs.at(0).bit);
+  const struct {
+    std::string text;
+    const char* want;
+  } bad[] = {
+      {head, "output[1].bit: missing"},
+      {"[[output]]\nnode = 6\nbit = 16\n", "output[1].name: missing"},
+      {"[[output]]\nname = \"gripper\"\nbit = 16\n", "output[1].node: missing"},
+      {head + "bit = 0\n", "output[1].bit: must be within 16..31"},
+      {head + "bit = 1\n", "output[1].bit: must be within 16..31"},
+      {head + "bit = 15\n", "output[1].bit: must be within 16..31"},
+      {head + "bit = 32\n", "output[1].bit: must be within 16..31"},
+      {head + "bit = 16\n[[output]]\nname = \"lamp\"\nnode = 6\n", "output[2].bit: missing"},
+  };
+  for (const auto& b : bad) {
+    FwConfig k;
+    const std::string e = load_config_text(b.text, "bad.toml", k);
+    CHECK_TEXT(starts_with_position(e, "bad.toml") && e.find('\n') == std::string::npos, e.c_str());
+    CHECK_TEXT(has(e, b.want), ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
+    CHECK_TEXT(k == FwConfig{}, b.want);  // untouched
+  }
+  // the brake bit set in code (App::build validates the same way)
+  FwConfig s;
+  s.outputs = {{"lamp", 6, 0}};
+  STRCMP_EQUAL("output[1].bit: must be within 16..31 (got 0)", validate(s).c_str());
+  // the reference says why the low bits are refused
+  const std::string ref = config_reference_markdown();
+  CHECK_TEXT(has(ref, "\"set brake\"") && has(ref, "bits 1..15"), ref.c_str());
+}

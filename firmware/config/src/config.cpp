@@ -287,10 +287,14 @@ using OC = OutputConfig;
 using OK = OutputKey;
 const OutputKey kOutputTable[] = {
     OK{"name", &OC::name, "", "the output's name (`out NAME on|off`): letters, digits, _ and -, starting with a letter"}
-        .length(1, 31).rule_text("1..31 characters"),
+        .length(1, 31).rule_text("1..31 characters").needed(),
     OK{"node", &OC::node, "", "CANopen node of the drive whose 60FEh:01 physical outputs carry it (a drive of the arm)"}
-        .within(1, 127),
-    OK{"bit", &OC::bit, "", "bit of 60FEh:01 (CiA 402: 0 set brake, 16..31 the manufacturer's outputs)"}.within(0, 31),
+        .within(1, 127).needed(),
+    OK{"bit", &OC::bit, "",
+       "bit of 60FEh:01: one of the manufacturer-specific outputs 16..31. CiA 402 gives bit 0 to \"set brake\" (the "
+       "drive's brake control: switching it by hand would release the brake of a powered-down axis) and reserves "
+       "bits 1..15 for the profile, so those are refused"}
+        .within(16, 31).needed(),
 };
 
 
@@ -454,6 +458,7 @@ std::string range_of(const Key<S>& k) {
 
 template <class S>
 std::string default_of(const Key<S>& k) {
+  if (k.required) return "required";
   if (k.has_unset) return k.unset_text;
   return value_of(k, S{});
 }
@@ -940,8 +945,9 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
         if (!k) return at(value) + where + "." + std::string(name.str()) + ": unknown key (name, node, bit)";
         if (!r.read(*k, value, where + "." + k->name, o)) return r.err;
       }
-      if (o.name.empty()) return at(t) + where + ".name: missing (every [[output]] has a name, node and bit)";
-      if (o.node == 0) return at(t) + where + ".node: missing (every [[output]] has a name, node and bit)";
+      for (const OutputKey& k : kOutputTable)
+        if (k.required && !tab->get(k.name))
+          return at(t) + where + "." + k.name + ": missing (every [[output]] has a name, node and bit)";
       c.outputs.push_back(o);
     }
   }
@@ -1029,7 +1035,9 @@ std::string cell(const std::string& s) {
 
 template <class S>
 std::string table_row(const Key<S>& k, const std::string& name) {
-  const std::string def = k.has_unset ? std::string(k.unset_text) : "`" + value_of(k, S{}) + "`";
+  const std::string def = k.required    ? std::string("required")
+                          : k.has_unset ? std::string(k.unset_text)
+                                        : "`" + value_of(k, S{}) + "`";
   return "| `" + name + "` | " + cell(def) + " | " + cell(range_of(k)) + " | " + cell(k.unit) + " | " + cell(k.doc) + " |\n";
 }
 
@@ -1064,9 +1072,10 @@ std::string config_reference_markdown() {
   o += kHeader;
   for (const DriveKey& k : kDriveTable) o += table_row(k, std::string("drive.") + k.name);
   o += "\n### `[[output]]`\n\n"
-       "Named digital outputs (issue 18), in file order: `out NAME on|off` sets one at once, M64 / M65 P<index> "
+       "Named digital outputs, in file order: `out NAME on|off` sets one at once, M64 / M65 P<index> "
        "(0-based, the order here) too, M62 / M63 P<index> at the start of the next move. Every table has all three "
-       "keys; names and (node, bit) pairs are unique, the node one of the arm's drives.\n\n";
+       "keys (a missing one is refused naming it); names and (node, bit) pairs are unique, the node one of the arm's "
+       "drives.\n\n";
   o += kHeader;
   for (const OutputKey& k : kOutputTable) o += table_row(k, std::string("output.") + k.name);
   o += std::string("\n") + kEnd + "\n";

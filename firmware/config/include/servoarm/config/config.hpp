@@ -56,12 +56,13 @@ struct DriveConfig {
   bool operator==(const DriveConfig&) const = default;
 };
 
-/// One [[output]] table (issue 18): a named digital output, bit `bit` of the 60FEh:01 physical
+/// One [[output]] table: a named digital output, bit `bit` of the 60FEh:01 physical
 /// outputs of the drive at CANopen node `node` (`out NAME on|off`, M62..M65 P<index>).
+/// Every key is required; the zero values below are "not given" and fail validate().
 struct OutputConfig {
   std::string name;   ///< letters, digits, _ and -, starting with a letter
   int node = 0;       ///< a drive of the arm
-  int bit = 0;        ///< 0..31 (CiA 402: bit 0 "set brake", 16..31 the manufacturer's outputs)
+  int bit = 0;        ///< 16..31: CiA 402 gives bit 0 to "set brake" and reserves 1..15 for the profile
   bool operator==(const OutputConfig&) const = default;
 };
 
@@ -163,6 +164,7 @@ struct Key {
   bool hex = false;                            ///< integers written as 0x...
   bool or_integer = false;                     ///< strings: an integer is accepted too (kept as its decimal text,
                                                ///< written back unquoted): homing.method = 19 or "none"
+  bool required = false;                       ///< the table must write it (no default)
   bool has_unset = false;                      ///< a value meaning "not set: inherit" (lists: empty)
   double unset = 0;
   bool unset_writable = false;                 ///< may the file write the unset value itself?
@@ -179,6 +181,8 @@ struct Key {
   constexpr Key related(Relation f, const char* text) const { Key k = *this; k.relation = f; k.relation_text = text; return k; }
   constexpr Key in_hex() const { Key k = *this; k.hex = true; return k; }
   constexpr Key integer_too() const { Key k = *this; k.or_integer = true; return k; }
+  /// The key has no default: a table that leaves it out is refused naming it.
+  constexpr Key needed() const { Key k = *this; k.required = true; return k; }
   /// `value` (lists: empty) means "inherit `text`"; `writable`: a file may write it.
   constexpr Key unset_means(double value, const char* text, bool writable) const {
     Key k = *this; k.has_unset = true; k.unset = value; k.unset_text = text; k.unset_writable = writable; return k;
