@@ -914,3 +914,24 @@ TEST(Config, OutputKeysAreRequiredAndProfileBitsRefused) {
   const std::string ref = config_reference_markdown();
   CHECK_TEXT(has(ref, "\"set brake\"") && has(ref, "bits 1..15"), ref.c_str());
 }
+
+// homing.travel_margin_deg: how far beyond its range a homing joint may travel before the homing
+// fails (hal::HomingSpec::max_travel = range + margin). Found through the key table (the
+// firmware builds the homing from it), default, range and unit documented, bad values refused.
+TEST(Config, HomingTravelMarginKeyIsInTheTable) {
+  const ConfigKey* k = nullptr;
+  for (const ConfigKey& e : config_keys())
+    if (std::string(e.name) == "homing.travel_margin_deg") k = &e;
+  CHECK_TEXT(k != nullptr, "no homing.travel_margin_deg in the key table");
+  STRCMP_EQUAL("deg (mm)", k->unit);
+  STRCMP_EQUAL("10", default_text(*k).c_str());
+  STRCMP_EQUAL("(0, 1000]", range_text(*k).c_str());
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[homing]\ntravel_margin_deg = 25\n", "m.toml", c).c_str());
+  STRCMP_EQUAL("25", value_text(*k, c).c_str());
+  for (const char* bad : {"0", "-1", "1001", "\"10\"", "nan"}) {
+    FwConfig b;
+    const std::string e = load_config_text(std::string("[homing]\ntravel_margin_deg = ") + bad + "\n", "bad.toml", b);
+    CHECK_TEXT(starts_with_position(e, "bad.toml") && has(e, "homing.travel_margin_deg: "), e.c_str());
+  }
+}

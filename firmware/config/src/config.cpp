@@ -148,6 +148,13 @@ const ConfigKey kConfigTable[] = {
     K{"homing.unhomed_jog_pct", &F::homing_unhomed_jog_pct, "%",
       "while a joint is not homed, joint jogs run at this percent of the speed asked (Cartesian moves, tool jogs, "
       "movej, park and G-code moves are refused until every joint is homed)"}.within(1, 100),
+    K{"homing.travel_margin_deg", &F::homing_travel_margin_deg, "deg (mm)",
+      "supervision of homing travel: a joint's homing fails (homing_error, naming the joint and the distance) once "
+      "it stands farther from where its homing began than its range (drive.limits or the description's) plus this, "
+      "so a missing switch or hard stop ends there, not at homing.timeout_s. Cover how far the stop or switch lies "
+      "outside the limits and the back-off; the joint comes to rest beyond by its braking distance (the homing "
+      "acceleration). A joint without finite limits is not supervised"}
+        .above(0, 1000),
     K{"dynamics.feed_forward", &F::feed_forward, "",
       "feed-forward sent with every setpoint in CSP (docs/dynamics.md#using-the-model-in-the-firmware): `\"off\"`; "
       "`\"velocity\"` = the setpoint's velocity as velocity offset 60B1h (needs no model); `\"torque\"` = that and "

@@ -103,6 +103,7 @@ struct FwConfig {
   // [homing]
   std::vector<std::vector<int>> homing_order;  ///< groups of 1-based joints, run one after the other; [] = one group of all
   double homing_unhomed_jog_pct = 25.0;  ///< joint jogs of an unhomed arm run at this percent of the speed asked
+  double homing_travel_margin_deg = 10.0;  ///< deg (mm): homing fails beyond the joint's range + this from its start
   // [dynamics] (issue 20): the model in the control loop; every part off by default (the frames of before)
   std::string feed_forward = "off";    ///< "off", "velocity" (60B1h), "torque" (60B1h + model torque 60B2h)
   bool collision = false;              ///< momentum observer on the measured torque (6077h)
