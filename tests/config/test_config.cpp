@@ -935,3 +935,26 @@ TEST(Config, HomingTravelMarginKeyIsInTheTable) {
     CHECK_TEXT(starts_with_position(e, "bad.toml") && has(e, "homing.travel_margin_deg: "), e.c_str());
   }
 }
+
+// A number TOML cannot hold (1e400 overflows a double) is refused naming its file, line, column
+// and key, like any other bad value: in a section, at the top level, in a [[drive]] table and
+// in a list.
+TEST(Config, AnUnrepresentableNumberIsRefusedNamingItsKey) {
+  const struct {
+    const char* text;
+    const char* key;
+  } cases[] = {
+      {"[loop]\nrate_hz = 1e400\n", ": loop.rate_hz: "},
+      {"[motion]\n# park pose\nhome_deg = [0, -1e400, 0, 0, 0, 0]\n", ": motion.home_deg: "},
+      {"[[drive]]\n[[drive]]\ngear_ratio = 1e400\n", ": drive[2].gear_ratio: "},
+      {"[[drive]]\nhoming.speed_switch = 1e400\n", ": drive[1].homing.speed_switch: "},
+      {"[dynamics]\n  collision_gain=1e400 # big\n", ": dynamics.collision_gain: "},
+  };
+  for (const auto& k : cases) {
+    FwConfig c;
+    const std::string e = load_config_text(k.text, "bad.toml", c);
+    CHECK_TEXT(starts_with_position(e, "bad.toml") && has(e, k.key) && e.find('\n') == std::string::npos,
+               ("wanted '" + std::string(k.key) + "' in: " + e).c_str());
+    CHECK_TEXT(k.key[2] == 'd' || has(e, "1e400"), e.c_str());
+  }
+}

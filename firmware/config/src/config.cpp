@@ -889,9 +889,66 @@ std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
 }
 
 namespace {
+/// The key a syntax error at (line, column) of `text` is in, as the loader names it
+/// ("loop.rate_hz", "drive[2].gear_ratio", "robot"), or "" when the error is not in a
+/// `key = value` line's value (a header, a key, a value continued from an earlier line).
+std::string key_at(const std::string& text, std::size_t line, std::size_t column) {
+  auto trim = [](std::string_view v) {
+    while (!v.empty() && (v.front() == ' ' || v.front() == '\t')) v.remove_prefix(1);
+    while (!v.empty() && (v.back() == ' ' || v.back() == '\t' || v.back() == '\r')) v.remove_suffix(1);
+    return v;
+  };
+  std::string table;  // "loop", "drive[2]", "" = top level
+  std::vector<std::pair<std::string, int>> arrays;  // [[name]] counts
+  std::size_t at = 0;
+  for (std::size_t l = 1; at <= text.size(); ++l) {
+    std::size_t end = text.find('\n', at);
+    if (end == std::string::npos) end = text.size();
+    const std::string_view raw(text.data() + at, end - at);
+    const std::string_view t = trim(raw);
+    if (l == line) {
+      const std::size_t eq = raw.find('=');
+      if (eq == std::string_view::npos || column <= eq + 1) return "";
+      const std::string_view key = trim(raw.substr(0, eq));
+      if (key.empty() || key.find_first_of("[]#\"'") != std::string_view::npos) return "";
+      return (table.empty() ? "" : table + ".") + std::string(key);
+    }
+    if (t.rfind("[[", 0) == 0 && t.find("]]") != std::string_view::npos) {
+      const std::string name(trim(t.substr(2, t.find("]]") - 2)));
+      int n = 1;
+      for (auto& [a, count] : arrays)
+        if (a == name) n = ++count;
+      if (n == 1) arrays.emplace_back(name, 1);
+      table = name + "[" + std::to_string(n) + "]";
+    } else if (t.rfind("[", 0) == 0 && t.find(']') != std::string_view::npos) {
+      table = std::string(trim(t.substr(1, t.find(']') - 1)));
+    }
+    at = end + 1;
+  }
+  return "";
+}
+
+/// A syntax error ("<origin>:<line>:<column>: not valid TOML: ...") with the key it is in
+/// after the position: "<origin>:<line>:<column>: <key>: not valid TOML: ...".
+std::string with_key(const std::string& error, const std::string& text, const std::string& origin) {
+  const std::string head = origin + ":";
+  if (error.rfind(head, 0) != 0) return error;
+  std::size_t line = 0, column = 0;
+  const char* p = error.data() + head.size();
+  const char* e = error.data() + error.size();
+  auto r = std::from_chars(p, e, line);
+  if (r.ec != std::errc() || r.ptr == e || *r.ptr != ':') return error;
+  r = std::from_chars(r.ptr + 1, e, column);
+  if (r.ec != std::errc() || e - r.ptr < 2 || r.ptr[0] != ':' || r.ptr[1] != ' ') return error;
+  const std::string key = key_at(text, line, column);
+  if (key.empty()) return error;
+  const std::size_t rest = static_cast<std::size_t>(r.ptr + 2 - error.data());
+  return error.substr(0, rest) + key + ": " + error.substr(rest);
+}
+
 std::string load_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
   kin::TomlDocument doc = kin::parse_toml(text, origin, kMaxFileBytes);  // size, UTF-8, nesting, syntax
-  if (!doc.error.empty()) return doc.error;
+  if (!doc.error.empty()) return with_key(doc.error, text, origin);
   const toml::table& top = doc.table;
   Reader r{origin, {}};
   const std::vector<std::string> secs = sections();
