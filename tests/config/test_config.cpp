@@ -856,7 +856,11 @@ TEST(Config, DynamicsAndBlendKeysAreReadAndBadOnesRefusedNamingTheKey) {
       {"[dynamics]\ncollision_gain = 5000\n", "dynamics.collision_gain: must be within [1, 1000]"},
       {"[dynamics]\ncollision_sensitivity = 0\n", "dynamics.collision_sensitivity: must be within [0.1, 10] (got 0)"},
       {"[dynamics]\ncollision_sensitivity = nan\n", "dynamics.collision_sensitivity: must be a finite number"},
-      {"[dynamics]\ncollision_threshold_pct = 0\n", "dynamics.collision_threshold_pct: must be within (0, 300] %"},
+      {"[dynamics]\ncollision_threshold_pct = 0\n", "dynamics.collision_threshold_pct: must be within [1, 300] %"},
+      // a threshold every residual's noise passes: `enable` would fault at once
+      {"[dynamics]\ncollision_threshold_pct = 1e-9\n", "dynamics.collision_threshold_pct: must be within [1, 300] % (got 1e-09)"},
+      {"[dynamics]\ncollision_threshold_pct = 0.99\n", "dynamics.collision_threshold_pct: must be within [1, 300]"},
+      {drives("collision_threshold = 1e-9\n"), "drive[1].collision_threshold: must be within [0.01, 1000000] N m (N)"},
       {"[dynamics]\nfreedrive_damping = -1\n", "dynamics.freedrive_damping: must be within [0, 100] 1/s (got -1)"},
       {"[dynamics]\nfreedrive = \"yes\"\n", "dynamics.freedrive: expected true or false"},
       {"[dynamics]\nbogus = 1\n", "dynamics.bogus: unknown key"},
@@ -864,7 +868,7 @@ TEST(Config, DynamicsAndBlendKeysAreReadAndBadOnesRefusedNamingTheKey) {
       {"[motion]\ndefault_blend_mm = -0.5\n", "motion.default_blend_mm: must be within [0, 50]"},
       {"[motion]\ndefault_blend_deg = 31\n", "motion.default_blend_deg: must be within [0, 30] deg (got 31)"},
       {drives("rated_torque = -1\n"), "drive[1].rated_torque: must be within (0, 100000] N m (N) (got -1)"},
-      {drives("collision_threshold = -2\n"), "drive[1].collision_threshold: must be within (0, 1000000] N m (N)"},
+      {drives("collision_threshold = -2\n"), "drive[1].collision_threshold: must be within [0.01, 1000000] N m (N)"},
       {drives("collision_threshold = inf\n"), "drive[1].collision_threshold: must be a finite number"},
   };
   for (const auto& b : bad) {

@@ -173,7 +173,9 @@ const ConfigKey kConfigTable[] = {
       "every threshold is divided by it: 2 halves them (more sensitive), 0.5 doubles them"}.within(0.1, 10),
     K{"dynamics.collision_threshold_pct", &F::collision_threshold_pct, "%",
       "a joint's collision threshold without drive.collision_threshold: this percent of its rated torque (joint "
-      "side: 6076h or drive.rated_torque x gear ratio)"}.above(0, 300),
+      "side: 6076h or drive.rated_torque x gear ratio); at least 1 %: below it the measured torque's own noise and "
+      "quantisation (6077h counts per mille) pass the threshold, and the arm faults as soon as it is enabled"}
+        .within(1, 300),
     K{"dynamics.freedrive", &F::freedrive, "",
       "hand guiding (`freedrive on|off`): map cyclic synchronous torque (6060h/6061h in the PDOs, target torque 6071h "
       "in RPDO2) on the drives that have it; `freedrive on` then commands gravity and friction compensation only. A "
@@ -286,8 +288,9 @@ const DriveKey kDriveTable[] = {
         .above(0, 1e5).unset_means(0, "the drive's 6076h", true),
     DK{"collision_threshold", &D::collision_threshold, "N m (N)",
        "this joint's collision threshold (joint side, before dynamics.collision_sensitivity); 0 = "
-       "dynamics.collision_threshold_pct of its rated torque"}
-        .above(0, 1e6).unset_means(0, "dynamics.collision_threshold_pct of the rated torque", true),
+       "dynamics.collision_threshold_pct of its rated torque; at least 0.01 N m (N): below it the measured torque's "
+       "noise alone faults the arm"}
+        .within(0.01, 1e6).unset_means(0, "dynamics.collision_threshold_pct of the rated torque", true),
 };
 
 using OC = OutputConfig;
