@@ -110,7 +110,10 @@ TEST(Config, FullFileAccepted) {
       "stop = \"drive\"\ndrive_stop_timeout_s = 1.5\n"
       "[motion]\nhome_deg = [0, 10, 0, 0, 0, 0]\njoint_speed_pct = 30\nlinear_speed_mm_s = 50\nmax_linear_speed_mm_s = 200\n"
       "max_move_duration_s = 120\n"
-      "[console]\nstdin = false\npty = true\nserial = \"/dev/ttyS0\"\nbaud = 57600\n";
+      "[console]\nstdin = false\npty = true\nserial = \"/dev/ttyS0\"\nbaud = 57600\n"
+      "[[drive]]\nhoming.method = 19\n[[drive]]\nhoming.method = \"hard_stop\"\n[[drive]]\nhoming.method = 17\n"
+      "[[drive]]\nhoming.method = \"absolute\"\n[[drive]]\nhoming.method = \"absolute\"\n"
+      "[[drive]]\nhoming.method = \"absolute\"\n";  // a real bus: every joint's homing
   STRCMP_EQUAL("", load_config_text(text, "f.toml", c).c_str());
   STRCMP_EQUAL("stanford", c.robot.c_str());
   DOUBLES_EQUAL(2000, c.rate_hz, 0);
@@ -432,6 +435,7 @@ TEST(Config, ToTomlEscapesAwkwardStrings) {
   c.can = "a\"b\\c";
   c.console_serial = "/dev/tty\"S0\"\r\n";
   c.console_can = "c'a\\n";
+  c.drives.resize(6);  // a real bus: every joint's homing.method (here "absolute") written
   const std::string t = to_toml(c);
   // an independent reader of the text (toml11 directly, not our loader)
   std::istringstream is(t);
@@ -498,6 +502,7 @@ TEST(Config, RandomConfigsRoundTrip) {
       if (i(0, 1)) d.quick_stop_decel = u(1, 1e6);
       c.drives.push_back(d);
     }
+    if (c.drives.empty()) c.drives.resize(1);  // a real bus needs [[drive]] tables (their homing.method)
     STRCMP_EQUAL("", validate(c).c_str());
     FwConfig back;
     const std::string e = load_config_text(to_toml(c), "random", back);
@@ -760,7 +765,7 @@ TEST(Config, HomingKeysAreReadAndBadOnesRefusedNamingTheKey) {
     std::string text;
     const char* want;
   } bad[] = {
-      {drives("homing.method = 36\n"), "drive[1].homing.method: must be \"none\", \"hard_stop\" or a CiA 402 homing method"},
+      {drives("homing.method = 36\n"), "drive[1].homing.method: must be \"absolute\", \"hard_stop\" or a CiA 402 homing method"},
       {drives("homing.method = 0\n"), "drive[1].homing.method: must be"},
       {drives("homing.method = 40\n"), "(got 40)"},
       {drives("homing.method = -129\n"), "drive[1].homing.method"},
@@ -960,5 +965,45 @@ TEST(Config, AnUnrepresentableNumberIsRefusedNamingItsKey) {
     CHECK_TEXT(starts_with_position(e, "bad.toml") && has(e, k.key) && e.find('\n') == std::string::npos,
                ("wanted '" + std::string(k.key) + "' in: " + e).c_str());
     CHECK_TEXT(k.key[2] == 'd' || has(e, "1e400"), e.c_str());
+  }
+}
+
+// A real bus (bus.can not "sim"): every joint says how it finds its zero. Each [[drive]] needs
+// homing.method ("absolute" for an absolute encoder), and [[drive]] tables are needed at all:
+// without them an arm of incremental encoders would count as homed at power-up. "sim" keeps its
+// absolute virtual encoders without any.
+TEST(Config, ARealBusNeedsEveryDrivesHomingMethod) {
+  auto drives = [](const std::string& each, int n = 6) {
+    std::string t;
+    for (int i = 0; i < n; ++i) t += "[[drive]]\n" + each;
+    return t;
+  };
+  const std::string can0 = "[bus]\ncan = \"can0\"\n";
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(can0 + drives("homing.method = \"absolute\"\n"), "a.toml", c).c_str());
+  STRCMP_EQUAL("none", c.drives[0].homing_method.c_str());  // what the firmware reads as "no homing"
+  const std::string t = to_toml(c);
+  CHECK_TEXT(has(t, "homing.method = \"absolute\"\n"), t.c_str());
+  FwConfig back;
+  STRCMP_EQUAL("", load_config_text(t, "back.toml", back).c_str());
+  CHECK(back == c);
+  STRCMP_EQUAL("", load_config_text(can0 + drives("homing.method = 19\n"), "a.toml", c).c_str());
+  // sim: no [[drive]] tables, or tables without a method, are absolute virtual encoders
+  STRCMP_EQUAL("", load_config_text("[bus]\ncan = \"sim\"\n" + drives("gear_ratio = 2\n"), "s.toml", c).c_str());
+  STRCMP_EQUAL("", load_config_text("[bus]\ncan = \"sim\"\n", "s.toml", c).c_str());
+  const struct {
+    std::string text;
+    const char* want;
+  } bad[] = {
+      {can0 + drives("gear_ratio = 2\n"), "drive[1].homing.method: missing"},
+      {can0 + drives("homing.method = 19\n", 2) + drives("gear_ratio = 2\n", 4), "drive[3].homing.method: missing"},
+      {can0, "drive: bus.can = \"can0\" is a real bus"},
+      {"[bus]\ncan = \"vcan0\"\n", "homing.method"},
+  };
+  for (const auto& b : bad) {
+    FwConfig k;
+    const std::string e = load_config_text(b.text, "bad.toml", k);
+    CHECK_TEXT(starts_with_position(e, "bad.toml") && e.find('\n') == std::string::npos, e.c_str());
+    CHECK_TEXT(has(e, b.want), ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
   }
 }

@@ -72,7 +72,7 @@ std::string homing_order_once(const FwConfig& c, const FwConfig&) {
 }
 std::string homing_method_known(const DriveConfig& d, const FwConfig&) {
   if (d.homing_method == "none" || d.homing_method == "hard_stop" || homing_method_number(d.homing_method) != 0) return "";
-  return "must be \"none\", \"hard_stop\" or a CiA 402 homing method 1..35, 37 or -128..-1 (got " +
+  return "must be \"absolute\", \"hard_stop\" or a CiA 402 homing method 1..35, 37 or -128..-1 (got " +
          (d.homing_method.empty() ? std::string("\"\"") : d.homing_method) + ")";
 }
 
@@ -142,7 +142,7 @@ const ConfigKey kConfigTable[] = {
     K{"homing.order", &F::homing_order, "",
       "homing groups run one after the other, joints inside a group together (1-based joint numbers, e.g. "
       "`[[3], [2], [1], [4, 5, 6]]`: the wrist clear of the table first); `[]` = one group of every joint. Given, it "
-      "names every joint exactly once. Joints with homing.method = \"none\" count as homed at power-up"}
+      "names every joint exactly once. Joints with homing.method = \"absolute\" count as homed at power-up"}
         .within(1, kin::kMaxJoints).length(0, kin::kMaxJoints)
         .related(homing_order_once, "each joint once"),
     K{"homing.unhomed_jog_pct", &F::homing_unhomed_jog_pct, "%",
@@ -257,10 +257,13 @@ const DriveKey kDriveTable[] = {
        "on its own with safety.stop = \"drive\"); 0 = leave the drive's own"}
         .above(0, 1e7).unset_means(0, "the drive's own", true),
     DK{"homing.method", &D::homing_method, "",
-       "how the joint finds its zero at power-up: `\"none\"` = absolute encoder (homed at start), a CiA 402 homing "
-       "method number (6098h: 1..35, 37 or a negative manufacturer method; the drive's own Homing Mode), or "
-       "`\"hard_stop\"` (no switch: the master drives the joint slowly against its mechanical stop, backs off)"}
-        .integer_too().length(1, 16).rule_text("\"none\", \"hard_stop\" or a method 1..35, 37, -128..-1")
+       "how the joint finds its zero at power-up: `\"absolute\"` = absolute encoder (homed at start; `\"none\"` is "
+       "read as the same), a CiA 402 homing method number (6098h: 1..35, 37 or a negative manufacturer method; the "
+       "drive's own Homing Mode), or `\"hard_stop\"` (no switch: the master drives the joint slowly against its "
+       "mechanical stop, backs off). Required in every [[drive]] of a real bus (bus.can not \"sim\"), so that an "
+       "incremental encoder is never taken as homed; with \"sim\" (absolute virtual encoders) it may be left out"}
+        .integer_too().length(1, 16).rule_text("\"absolute\", \"hard_stop\" or a method 1..35, 37, -128..-1")
+        .spelled_as("absolute", "none")
         .related(homing_method_known, "a known method"),
     DK{"homing.speed_switch", &D::homing_speed_switch, "deg/s (mm/s)",
        "search for the switch (6099h:01); hard_stop: the approach speed"}.above(0, 1e6),
@@ -269,7 +272,7 @@ const DriveKey kDriveTable[] = {
        "homing acceleration (609Ah); hard_stop: of the approach and the back-off"}.above(0, 1e7),
     DK{"homing.offset", &D::homing_offset, "deg (mm)",
        "joint position at the home mark (written as 607Ch home offset) or, hard_stop, at the backed-off point; "
-       "within the joint's limits (drive.limits or the description's) unless the method is \"none\""}
+       "within the joint's limits (drive.limits or the description's) unless the method is \"absolute\""}
         .within(-kMaxLength, kMaxLength),
     DK{"homing.timeout_s", &D::homing_timeout_s, "s", "longest homing of this joint; longer fails it (arm disabled)"}
         .above(0, 3600),
@@ -404,7 +407,10 @@ std::string value_of(const Key<S>& k, const S& s) {
         if constexpr (std::is_same_v<T, bool>) return v ? "true" : "false";
         else if constexpr (std::is_same_v<T, int> || std::is_same_v<T, std::int64_t>) return int_text(v, k.hex);
         else if constexpr (std::is_same_v<T, double>) return num_text(v);
-        else if constexpr (std::is_same_v<T, std::string>) return k.or_integer && homing_method_number(v) != 0 ? v : toml_string(v);
+        else if constexpr (std::is_same_v<T, std::string>) {
+          if (k.or_integer && homing_method_number(v) != 0) return v;
+          return toml_string(k.stored && v == k.stored ? std::string(k.spelled) : v);
+        }
         else if constexpr (std::is_same_v<T, std::vector<double>>) {
           std::string o = "[";
           for (std::size_t i = 0; i < v.size(); ++i) o += (i ? ", " : "") + num_text(v[i]);
@@ -618,6 +624,7 @@ struct Reader {
             }
             if (!str) return fail(v, label, std::string(k.or_integer ? "expected a string or an integer" : "expected a string") + " (got " + shown(v) + ")");
             out = str->get();
+            if (k.spelled && out == k.spelled) out = k.stored;
           } else if constexpr (std::is_same_v<T, std::vector<std::vector<int>>>) {
             const auto* a = v.as_array();
             if (!a) return fail(v, label, "expected an array of arrays of integers (got " + shown(v) + ")");
@@ -686,7 +693,7 @@ std::vector<std::string> sorted_keys(const Map& m) {
   return out;
 }
 
-bool read_drive(Reader& r, const toml::node& t, std::size_t index, DriveConfig& d) {
+bool read_drive(Reader& r, const toml::node& t, std::size_t index, const std::string& bus, DriveConfig& d) {
   const std::string where = drive_label(index);
   const toml::table* tab = t.as_table();
   if (!tab) return r.fail(t, where, "expected a table");
@@ -711,6 +718,13 @@ bool read_drive(Reader& r, const toml::node& t, std::size_t index, DriveConfig& 
     }
     if (!r.read(*k, *value, where + "." + k->name, d)) return false;
   }
+  // A real bus: every joint says how it finds its zero (an incremental encoder left without a
+  // method would count as homed at power-up). "sim": absolute virtual encoders.
+  if (bus != "sim" && std::none_of(entries.begin(), entries.end(), [](const auto& e) { return e.first == "homing.method"; }))
+    return r.fail(t, where + ".homing.method",
+                  "missing: every [[drive]] of a real bus (bus.can = " + toml_string(bus) +
+                      ") says how its joint finds its zero: \"absolute\" (absolute encoder), \"hard_stop\" or a CiA 402 "
+                      "method (6098h)");
   return true;
 }
 
@@ -792,6 +806,11 @@ std::string validate(const FwConfig& c) {
         if (!why.empty()) return why;
       }
   }
+  // A real bus without [[drive]] tables would take every joint as an absolute encoder.
+  if (c.can != "sim" && c.drives.empty())
+    return "drive: bus.can = " + toml_string(c.can) +
+           " is a real bus: give one [[drive]] table per joint, each with homing.method (\"absolute\" for an absolute "
+           "encoder), so that no joint with an incremental encoder counts as homed";
   // [[output]]: names valid and unique, one output per (node, bit)
   for (std::size_t i = 0; i < c.outputs.size(); ++i) {
     const OutputConfig& o = c.outputs[i];
@@ -992,7 +1011,7 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
     c.drives.clear();
     for (const toml::node& t : *a) {
       DriveConfig d;
-      if (!read_drive(r, t, c.drives.size(), d)) return r.err;
+      if (!read_drive(r, t, c.drives.size(), c.can, d)) return r.err;
       c.drives.push_back(d);
     }
   }

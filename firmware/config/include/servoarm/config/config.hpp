@@ -39,7 +39,9 @@ struct DriveConfig {
   double heartbeat_timeout_ms = 0;       ///< 0 = bus.heartbeat_timeout_ms
   double quick_stop_decel = 0;           ///< deg/s^2 or mm/s^2 written to 6085h; 0 = leave the drive's
   // homing (docs/configuration.md#homing; hal::HomingSpec): joint units deg (mm)
-  std::string homing_method = "none";    ///< "none" (absolute encoder), "hard_stop", or a CiA 402 6098h method ("19")
+  /// "none" = absolute encoder (written "absolute" in the file), "hard_stop", or a CiA 402 6098h
+  /// method ("19"). Required in every [[drive]] of a real bus (bus.can not "sim").
+  std::string homing_method = "none";
   double homing_speed_switch = 10.0;     ///< deg/s: 6099h:01 search for switch; hard_stop: approach speed
   double homing_speed_zero = 1.0;        ///< deg/s: 6099h:02 search for zero
   double homing_acceleration = 100.0;    ///< deg/s^2: 609Ah; hard_stop: approach / back-off acceleration
@@ -166,6 +168,8 @@ struct Key {
   bool or_integer = false;                     ///< strings: an integer is accepted too (kept as its decimal text,
                                                ///< written back unquoted): homing.method = 19 or "none"
   bool required = false;                       ///< the table must write it (no default)
+  const char* spelled = nullptr;               ///< strings: the file's word for the member value `stored`
+  const char* stored = nullptr;                ///< ("absolute" in the file is "none" in DriveConfig)
   bool has_unset = false;                      ///< a value meaning "not set: inherit" (lists: empty)
   double unset = 0;
   bool unset_writable = false;                 ///< may the file write the unset value itself?
@@ -184,6 +188,10 @@ struct Key {
   constexpr Key integer_too() const { Key k = *this; k.or_integer = true; return k; }
   /// The key has no default: a table that leaves it out is refused naming it.
   constexpr Key needed() const { Key k = *this; k.required = true; return k; }
+  /// Strings: the file writes `file` for the member value `member` (both are read).
+  constexpr Key spelled_as(const char* file, const char* member) const {
+    Key k = *this; k.spelled = file; k.stored = member; return k;
+  }
   /// `value` (lists: empty) means "inherit `text`"; `writable`: a file may write it.
   constexpr Key unset_means(double value, const char* text, bool writable) const {
     Key k = *this; k.has_unset = true; k.unset = value; k.unset_text = text; k.unset_writable = writable; return k;
