@@ -210,6 +210,7 @@ Status CanopenServoBus::validate_homing(std::size_t j) {
       if (!finite(h.offset)) return bad("offset must be finite", h.offset);
       break;
   }
+  if (!finite(h.max_travel) || h.max_travel < 0) return bad("max_travel must be finite and >= 0", h.max_travel);
   if (h.timeout <= 0) return bad("timeout must be > 0 (ms)", double(h.timeout) / double(kMillisecond));
   return Status::ok;
 }
@@ -958,6 +959,10 @@ Status CanopenServoBus::start_homing(std::size_t j, TimePoint now) {
   jt.cw_extra = 0;
   jt.hstarted = now;
   jt.sdo = SdoTransfer{};  // a transfer left over from an earlier homing is abandoned
+  jt.htravel = 0;
+  jt.hlast = jt.actual_counts;
+  jt.hlast_t = now;
+  jt.hrebased = false;
   if (hs.kind == HomingKind::cia402) {
     homing_step(j, hs_w_method, now);
   } else {
@@ -1065,6 +1070,37 @@ void CanopenServoBus::hard_stop_write(std::size_t j, TimePoint now) {
   jt.target_counts = std::int32_t(std::lround(std::clamp(jt.hs_demand, -2147483648.0, 2147483647.0)));
 }
 
+bool CanopenServoBus::travel_exceeded(std::size_t j, TimePoint now) {
+  Joint& jt = joints_[j];
+  const HomingSpec& hs = cfg_.joints[j].homing;
+  const JointScaling& sc = cfg_.joints[j].scaling;
+  const double cps = sc.counts_per_si();
+  const double d = double(jt.actual_counts) - double(jt.hlast);
+  if (d != 0) {
+    // A drive sets its position to 607Ch when it latches the home mark (some before they show
+    // bit 12): one change beyond twice what the homing speed allows since the last change is
+    // that coordinate change, not motion. Every other change is motion.
+    const double vmax = std::max(std::fabs(hs.speed_switch), std::fabs(hs.speed_zero)) * cps;
+    const double dt = double(std::max<Duration>(now - jt.hlast_t, kMillisecond)) * 1e-9;
+    if (hs.kind == HomingKind::cia402 && !jt.hrebased && std::fabs(d) > 2.0 * vmax * dt + 16.0) jt.hrebased = true;
+    else jt.htravel += d;
+    jt.hlast = jt.actual_counts;
+    jt.hlast_t = now;
+  }
+  if (!(hs.max_travel > 0) || std::fabs(jt.htravel) <= hs.max_travel * cps) return false;
+  const bool mm = sc.kind == JointScaling::Kind::prismatic;
+  const char* unit = mm ? "mm" : "deg";
+  const double k = mm ? 1e3 : 180.0 / 3.14159265358979323846;  // deg or mm per SI unit
+  const double got = std::fabs(jt.htravel) / cps * k, limit = hs.max_travel * k;
+  int digits = 1;  // as many as show the excess
+  while (digits < 6 && std::nearbyint(got * std::pow(10.0, digits)) <= std::nearbyint(limit * std::pow(10.0, digits))) ++digits;
+  std::snprintf(jt.hmsg, sizeof jt.hmsg,
+                "joint %zu (node %u): homing travel %.*f %s from where it began, beyond the limit %.*f %s (the "
+                "joint's range + homing.travel_margin_deg)",
+                j, unsigned(jt.node), digits, got, unit, digits, limit, unit);
+  return true;
+}
+
 void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
   Joint& jt = joints_[j];
   if (jt.hphase != HomingPhase::running) return;
@@ -1079,6 +1115,7 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
     else if (fb.state != JointState::enabled) why = Status::bad_state;
     else if (jt.habort) why = Status::aborted;
     else if (now - jt.hstarted > hs.timeout) why = Status::timeout;
+    else if (travel_exceeded(j, now)) why = Status::homing_error;
     if (why != Status::ok) {
       homing_fail(j, why, now);
       if (jt.hphase != HomingPhase::running) return;

@@ -1057,6 +1057,25 @@ std::string ArmSim::use_dynamic_plant(const kin::Chain& chain, std::span<const h
   return "";
 }
 
+void VirtualDrive::place_at(double counts) {
+  pos_ = counts;
+  vel_ = 0.0;
+  shift_ = 0.0;
+  target_ = std::int32_t(std::lround(std::clamp(counts, -2147483648.0, 2147483647.0)));
+  set(c402::kPositionActual, std::uint32_t(std::int32_t(std::floor(pos_))));
+}
+
+void ArmSim::place_within_limits(const kin::Chain& chain, std::span<const hal::JointScaling> scaling) {
+  const std::size_t n = std::min({drives_.size(), scaling.size(), static_cast<std::size_t>(chain.n_joints)});
+  for (std::size_t i = 0; i < n; ++i) {
+    const kin::DhRow& row = chain.joint(static_cast<int>(i));
+    const double q = std::clamp(0.0, row.lower, row.upper);  // the in-limit value closest to 0
+    const hal::JointScaling& s = scaling[i];
+    drives_[i].place_at(double(s.zero_offset) + double(s.direction) * q * s.counts_per_si());
+    if (plant_) plant_->attach(static_cast<int>(i), &drives_[i]);  // the plant starts there too
+  }
+}
+
 void ArmSim::power_on(TimePoint now) {
   for (auto& d : drives_) d.power_on(now, bus_);
 }

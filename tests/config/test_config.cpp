@@ -111,7 +111,10 @@ TEST(Config, FullFileAccepted) {
       "stop = \"drive\"\ndrive_stop_timeout_s = 1.5\n"
       "[motion]\nhome_deg = [0, 10, 0, 0, 0, 0]\njoint_speed_pct = 30\nlinear_speed_mm_s = 50\nmax_linear_speed_mm_s = 200\n"
       "max_move_duration_s = 120\n"
-      "[console]\nstdin = false\npty = true\nserial = \"/dev/ttyS0\"\nbaud = 57600\n";
+      "[console]\nstdin = false\npty = true\nserial = \"/dev/ttyS0\"\nbaud = 57600\n"
+      "[[drive]]\nhoming.method = 19\n[[drive]]\nhoming.method = \"hard_stop\"\n[[drive]]\nhoming.method = 17\n"
+      "[[drive]]\nhoming.method = \"absolute\"\n[[drive]]\nhoming.method = \"absolute\"\n"
+      "[[drive]]\nhoming.method = \"absolute\"\n";  // a real bus: every joint's homing
   STRCMP_EQUAL("", load_config_text(text, "f.toml", c).c_str());
   STRCMP_EQUAL("stanford", c.robot.c_str());
   DOUBLES_EQUAL(2000, c.rate_hz, 0);
@@ -433,6 +436,7 @@ TEST(Config, ToTomlEscapesAwkwardStrings) {
   c.can = "a\"b\\c";
   c.console_serial = "/dev/tty\"S0\"\r\n";
   c.console_can = "c'a\\n";
+  c.drives.resize(6);  // a real bus: every joint's homing.method (here "absolute") written
   const std::string t = to_toml(c);
   // an independent reader of the text (toml11 directly, not our loader)
   std::istringstream is(t);
@@ -499,6 +503,7 @@ TEST(Config, RandomConfigsRoundTrip) {
       if (i(0, 1)) d.quick_stop_decel = u(1, 1e6);
       c.drives.push_back(d);
     }
+    if (c.drives.empty()) c.drives.resize(1);  // a real bus needs [[drive]] tables (their homing.method)
     STRCMP_EQUAL("", validate(c).c_str());
     FwConfig back;
     const std::string e = load_config_text(to_toml(c), "random", back);
@@ -761,7 +766,7 @@ TEST(Config, HomingKeysAreReadAndBadOnesRefusedNamingTheKey) {
     std::string text;
     const char* want;
   } bad[] = {
-      {drives("homing.method = 36\n"), "drive[1].homing.method: must be \"none\", \"hard_stop\" or a CiA 402 homing method"},
+      {drives("homing.method = 36\n"), "drive[1].homing.method: must be \"absolute\", \"hard_stop\" or a CiA 402 homing method"},
       {drives("homing.method = 0\n"), "drive[1].homing.method: must be"},
       {drives("homing.method = 40\n"), "(got 40)"},
       {drives("homing.method = -129\n"), "drive[1].homing.method"},
@@ -857,7 +862,11 @@ TEST(Config, DynamicsAndBlendKeysAreReadAndBadOnesRefusedNamingTheKey) {
       {"[dynamics]\ncollision_gain = 5000\n", "dynamics.collision_gain: must be within [1, 1000]"},
       {"[dynamics]\ncollision_sensitivity = 0\n", "dynamics.collision_sensitivity: must be within [0.1, 10] (got 0)"},
       {"[dynamics]\ncollision_sensitivity = nan\n", "dynamics.collision_sensitivity: must be a finite number"},
-      {"[dynamics]\ncollision_threshold_pct = 0\n", "dynamics.collision_threshold_pct: must be within (0, 300] %"},
+      {"[dynamics]\ncollision_threshold_pct = 0\n", "dynamics.collision_threshold_pct: must be within [1, 300] %"},
+      // a threshold every residual's noise passes: `enable` would fault at once
+      {"[dynamics]\ncollision_threshold_pct = 1e-9\n", "dynamics.collision_threshold_pct: must be within [1, 300] % (got 1e-09)"},
+      {"[dynamics]\ncollision_threshold_pct = 0.99\n", "dynamics.collision_threshold_pct: must be within [1, 300]"},
+      {drives("collision_threshold = 1e-9\n"), "drive[1].collision_threshold: must be within [0.01, 1000000] N m (N)"},
       {"[dynamics]\nfreedrive_damping = -1\n", "dynamics.freedrive_damping: must be within [0, 100] 1/s (got -1)"},
       {"[dynamics]\nfreedrive = \"yes\"\n", "dynamics.freedrive: expected true or false"},
       {"[dynamics]\nbogus = 1\n", "dynamics.bogus: unknown key"},
@@ -865,7 +874,7 @@ TEST(Config, DynamicsAndBlendKeysAreReadAndBadOnesRefusedNamingTheKey) {
       {"[motion]\ndefault_blend_mm = -0.5\n", "motion.default_blend_mm: must be within [0, 50]"},
       {"[motion]\ndefault_blend_deg = 31\n", "motion.default_blend_deg: must be within [0, 30] deg (got 31)"},
       {drives("rated_torque = -1\n"), "drive[1].rated_torque: must be within (0, 100000] N m (N) (got -1)"},
-      {drives("collision_threshold = -2\n"), "drive[1].collision_threshold: must be within (0, 1000000] N m (N)"},
+      {drives("collision_threshold = -2\n"), "drive[1].collision_threshold: must be within [0.01, 1000000] N m (N)"},
       {drives("collision_threshold = inf\n"), "drive[1].collision_threshold: must be a finite number"},
   };
   for (const auto& b : bad) {
@@ -874,5 +883,128 @@ TEST(Config, DynamicsAndBlendKeysAreReadAndBadOnesRefusedNamingTheKey) {
     CHECK_TEXT(starts_with_position(e, "bad.toml"), e.c_str());
     CHECK_TEXT(e.find(b.want) != std::string::npos, ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
     CHECK_TEXT(k == FwConfig{}, b.want);  // untouched
+  }
+}
+
+// [[output]]: name, node and bit are required (a missing one is refused naming it), and the
+// bits CiA 402 reserves in 60FEh:01 (0 = set brake, 1..15 reserved by the profile) are refused:
+// an output may only be one of the manufacturer-specific bits 16..31.
+TEST(Config, OutputKeysAreRequiredAndProfileBitsRefused) {
+  const std::string head = "[[output]]\nname = \"gripper\"\nnode = 6\n";
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(head + "bit = 16\n", "o.toml", c).c_str());
+  LONGS_EQUAL(16, c.outputs.at(0).bit);
+  STRCMP_EQUAL("", load_config_text(head + "bit = 31\n", "o.toml", c).c_str());
+  LONGS_EQUAL(31, c.outputs.at(0).bit);
+  const struct {
+    std::string text;
+    const char* want;
+  } bad[] = {
+      {head, "output[1].bit: missing"},
+      {"[[output]]\nnode = 6\nbit = 16\n", "output[1].name: missing"},
+      {"[[output]]\nname = \"gripper\"\nbit = 16\n", "output[1].node: missing"},
+      {head + "bit = 0\n", "output[1].bit: must be within 16..31"},
+      {head + "bit = 1\n", "output[1].bit: must be within 16..31"},
+      {head + "bit = 15\n", "output[1].bit: must be within 16..31"},
+      {head + "bit = 32\n", "output[1].bit: must be within 16..31"},
+      {head + "bit = 16\n[[output]]\nname = \"lamp\"\nnode = 6\n", "output[2].bit: missing"},
+  };
+  for (const auto& b : bad) {
+    FwConfig k;
+    const std::string e = load_config_text(b.text, "bad.toml", k);
+    CHECK_TEXT(starts_with_position(e, "bad.toml") && e.find('\n') == std::string::npos, e.c_str());
+    CHECK_TEXT(has(e, b.want), ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
+    CHECK_TEXT(k == FwConfig{}, b.want);  // untouched
+  }
+  // the brake bit set in code (App::build validates the same way)
+  FwConfig s;
+  s.outputs = {{"lamp", 6, 0}};
+  STRCMP_EQUAL("output[1].bit: must be within 16..31 (got 0)", validate(s).c_str());
+  // the reference says why the low bits are refused
+  const std::string ref = config_reference_markdown();
+  CHECK_TEXT(has(ref, "\"set brake\"") && has(ref, "bits 1..15"), ref.c_str());
+}
+
+// homing.travel_margin_deg: how far beyond its range a homing joint may travel before the homing
+// fails (hal::HomingSpec::max_travel = range + margin). Found through the key table (the
+// firmware builds the homing from it), default, range and unit documented, bad values refused.
+TEST(Config, HomingTravelMarginKeyIsInTheTable) {
+  const ConfigKey* k = nullptr;
+  for (const ConfigKey& e : config_keys())
+    if (std::string(e.name) == "homing.travel_margin_deg") k = &e;
+  CHECK_TEXT(k != nullptr, "no homing.travel_margin_deg in the key table");
+  STRCMP_EQUAL("deg (mm)", k->unit);
+  STRCMP_EQUAL("10", default_text(*k).c_str());
+  STRCMP_EQUAL("(0, 1000]", range_text(*k).c_str());
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[homing]\ntravel_margin_deg = 25\n", "m.toml", c).c_str());
+  STRCMP_EQUAL("25", value_text(*k, c).c_str());
+  for (const char* bad : {"0", "-1", "1001", "\"10\"", "nan"}) {
+    FwConfig b;
+    const std::string e = load_config_text(std::string("[homing]\ntravel_margin_deg = ") + bad + "\n", "bad.toml", b);
+    CHECK_TEXT(starts_with_position(e, "bad.toml") && has(e, "homing.travel_margin_deg: "), e.c_str());
+  }
+}
+
+// A number TOML cannot hold (1e400 overflows a double) is refused naming its file, line, column
+// and key, like any other bad value: in a section, at the top level, in a [[drive]] table and
+// in a list.
+TEST(Config, AnUnrepresentableNumberIsRefusedNamingItsKey) {
+  const struct {
+    const char* text;
+    const char* key;
+  } cases[] = {
+      {"[loop]\nrate_hz = 1e400\n", ": loop.rate_hz: "},
+      {"[motion]\n# park pose\nhome_deg = [0, -1e400, 0, 0, 0, 0]\n", ": motion.home_deg: "},
+      {"[[drive]]\n[[drive]]\ngear_ratio = 1e400\n", ": drive[2].gear_ratio: "},
+      {"[[drive]]\nhoming.speed_switch = 1e400\n", ": drive[1].homing.speed_switch: "},
+      {"[dynamics]\n  collision_gain=1e400 # big\n", ": dynamics.collision_gain: "},
+  };
+  for (const auto& k : cases) {
+    FwConfig c;
+    const std::string e = load_config_text(k.text, "bad.toml", c);
+    CHECK_TEXT(starts_with_position(e, "bad.toml") && has(e, k.key) && e.find('\n') == std::string::npos,
+               ("wanted '" + std::string(k.key) + "' in: " + e).c_str());
+    CHECK_TEXT(k.key[2] == 'd' || has(e, "1e400"), e.c_str());
+  }
+}
+
+// A real bus (bus.can not "sim"): every joint says how it finds its zero. Each [[drive]] needs
+// homing.method ("absolute" for an absolute encoder), and [[drive]] tables are needed at all:
+// without them an arm of incremental encoders would count as homed at power-up. "sim" keeps its
+// absolute virtual encoders without any.
+TEST(Config, ARealBusNeedsEveryDrivesHomingMethod) {
+  auto drives = [](const std::string& each, int n = 6) {
+    std::string t;
+    for (int i = 0; i < n; ++i) t += "[[drive]]\n" + each;
+    return t;
+  };
+  const std::string can0 = "[bus]\ncan = \"can0\"\n";
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(can0 + drives("homing.method = \"absolute\"\n"), "a.toml", c).c_str());
+  STRCMP_EQUAL("none", c.drives[0].homing_method.c_str());  // what the firmware reads as "no homing"
+  const std::string t = to_toml(c);
+  CHECK_TEXT(has(t, "homing.method = \"absolute\"\n"), t.c_str());
+  FwConfig back;
+  STRCMP_EQUAL("", load_config_text(t, "back.toml", back).c_str());
+  CHECK(back == c);
+  STRCMP_EQUAL("", load_config_text(can0 + drives("homing.method = 19\n"), "a.toml", c).c_str());
+  // sim: no [[drive]] tables, or tables without a method, are absolute virtual encoders
+  STRCMP_EQUAL("", load_config_text("[bus]\ncan = \"sim\"\n" + drives("gear_ratio = 2\n"), "s.toml", c).c_str());
+  STRCMP_EQUAL("", load_config_text("[bus]\ncan = \"sim\"\n", "s.toml", c).c_str());
+  const struct {
+    std::string text;
+    const char* want;
+  } bad[] = {
+      {can0 + drives("gear_ratio = 2\n"), "drive[1].homing.method: missing"},
+      {can0 + drives("homing.method = 19\n", 2) + drives("gear_ratio = 2\n", 4), "drive[3].homing.method: missing"},
+      {can0, "drive: bus.can = \"can0\" is a real bus"},
+      {"[bus]\ncan = \"vcan0\"\n", "homing.method"},
+  };
+  for (const auto& b : bad) {
+    FwConfig k;
+    const std::string e = load_config_text(b.text, "bad.toml", k);
+    CHECK_TEXT(starts_with_position(e, "bad.toml") && e.find('\n') == std::string::npos, e.c_str());
+    CHECK_TEXT(has(e, b.want), ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
   }
 }

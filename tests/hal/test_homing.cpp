@@ -629,3 +629,108 @@ TEST(Homing, AFaultOrHeartbeatLossDuringHomingFailsIt) {
     if (kind == 0) LONGS_EQUAL(cia402::kModeCsp, r.drive(1).mode_display());
   }
 }
+
+namespace {
+/// Runs joint 0's homing to its end; the largest |position - start| seen (rad, from the drive's
+/// physical position, independent of what the master reports) and the message.
+struct TravelRun {
+  double peak = 0;
+  HomingProgress p{};
+  char msg[192] = {};
+  Duration took = 0;
+};
+TravelRun run_supervised(Rig& r) {
+  TravelRun t;
+  const double start = r.drive(0).physical_position();
+  const TimePoint t0 = r.rig.clock.now();
+  LONGS_EQUAL(int(Status::ok), int(r.master->start_homing(0, t0)));
+  for (int k = 0; k < 60000 && r.master->homing(0).phase == HomingPhase::running; ++k) {
+    r.cycle();
+    t.peak = std::max(t.peak, std::fabs(r.drive(0).physical_position() - start) / kCps);
+  }
+  t.took = r.rig.clock.now() - t0;
+  for (int k = 0; k < 500; ++k) {  // it stays stopped
+    r.cycle();
+    t.peak = std::max(t.peak, std::fabs(r.drive(0).physical_position() - start) / kCps);
+  }
+  t.p = r.master->homing(0);
+  r.master->describe_homing(0, t.msg, sizeof t.msg);
+  return t;
+}
+}  // namespace
+
+// Homing travel is supervised: a switch method whose switch is missing, and a hard stop that is
+// missing, end once the joint is farther than HomingSpec::max_travel (the joint's range + the
+// margin) from where homing began, with one line naming the joint and the distance; the drive
+// stopped and back in CSP, long before the timeout.
+TEST(Homing, TravelBeyondRangePlusMarginAbortsNamingJointAndDistance) {
+  constexpr double kMaxTravel = 1.0;  // rad: e.g. a range of 50 deg + a margin of 7 deg
+  // Method 17 (negative limit switch) on a drive with no switch and no end stop.
+  {
+    Rig r(1, [&](CanopenMasterConfig& cfg) {
+      cfg.joints[0].homing = drive_homing(17);
+      cfg.joints[0].homing.max_travel = kMaxTravel;
+    });
+    r.bring_up();
+    const TravelRun t = run_supervised(r);
+    std::printf("\n  method 17 without its switch: stopped after %.3f s, peak travel %.4f rad (limit %.4f): %s",
+                double(t.took) * 1e-9, t.peak, kMaxTravel, t.msg);
+    LONGS_EQUAL(int(HomingPhase::failed), int(t.p.phase));
+    LONGS_EQUAL(int(Status::homing_error), int(t.p.status));
+    STRCMP_CONTAINS("joint 0 (node 1): homing travel 57.", t.msg);  // 1 rad = 57.30 deg, just past it
+    STRCMP_CONTAINS("from where it began, beyond the limit 57.", t.msg);
+    CHECK(std::strchr(t.msg, '\n') == nullptr);
+    // At rest within the PDO round trip's travel (5 cycles) plus the braking distance at the
+    // homing acceleration (609Ah: the drive's halt ramp) beyond the limit.
+    const double v = 1.0 * kRev, a = 20 * kRev;
+    CHECK_TEXT(t.peak <= kMaxTravel + v * 0.005 + v * v / (2 * a), t.msg);
+    CHECK(t.took < 5 * kSecond);  // the timeout is 20 s
+    LONGS_EQUAL(cia402::kModeCsp, r.drive(0).mode_display());
+    LONGS_EQUAL(int(JointState::enabled), int(r.master->feedback(0).state));
+    CHECK(std::fabs(r.drive(0).velocity()) < 50);
+  }
+  // Hard stop homing with the stop missing.
+  {
+    Rig r(1, [&](CanopenMasterConfig& cfg) {
+      HomingSpec& h = cfg.joints[0].homing;
+      h.kind = HomingKind::hard_stop;
+      h.speed_switch = -0.5;
+      h.acceleration = 5;
+      h.following_limit = 0.01;
+      h.backoff = 0.05;
+      h.offset = -1.0;
+      h.timeout = 30 * kSecond;
+      h.max_travel = kMaxTravel;
+    });
+    r.bring_up();
+    const TravelRun t = run_supervised(r);
+    std::printf("\n  hard stop missing: stopped after %.3f s, peak travel %.4f rad (limit %.4f): %s\n",
+                double(t.took) * 1e-9, t.peak, kMaxTravel, t.msg);
+    LONGS_EQUAL(int(HomingPhase::failed), int(t.p.phase));
+    LONGS_EQUAL(int(Status::homing_error), int(t.p.status));
+    STRCMP_CONTAINS("joint 0 (node 1): homing travel 57.", t.msg);
+    STRCMP_CONTAINS("from where it began, beyond the limit 57.", t.msg);
+    CHECK_TEXT(t.peak <= kMaxTravel + 0.5 * 0.005 + 0.5 * 0.5 / (2 * 5), t.msg);
+    CHECK(t.took < 5 * kSecond);
+    LONGS_EQUAL(int(JointState::enabled), int(r.master->feedback(0).state));
+    CHECK(std::fabs(r.drive(0).velocity()) < 50);
+  }
+}
+
+// The drive's position jumps to 607Ch when it latches the mark (before it reports bit 12 on
+// some drives): that is no travel. Home switch at 50000 counts (2.4 rad from the start),
+// offset -3 rad: the reported position jumps by 5.4 rad, the joint travelled 2.4 rad < 2.8.
+TEST(Homing, TheMarksCoordinateJumpIsNotTravel) {
+  Rig r(1, [](CanopenMasterConfig& cfg) {
+    cfg.joints[0].homing = drive_homing(19);
+    cfg.joints[0].homing.offset = -3.0;
+    cfg.joints[0].homing.max_travel = 2.8;
+  });
+  r.drive(0).switches().home_lo = 50000;
+  r.drive(0).switches().home_hi = kInf;
+  r.bring_up();
+  const TravelRun t = run_supervised(r);
+  STRCMP_EQUAL("", t.msg);
+  LONGS_EQUAL(int(HomingPhase::attained), int(t.p.phase));
+  DOUBLES_EQUAL(-3.0, r.master->feedback(0).position, 2.0 / kCps);
+}

@@ -9,6 +9,7 @@
 //  - a rigid stop stops the joint and the drive's torque rises to its limit;
 //  - the loops are stable at the drives' rates (steps of 100 and 250 us);
 //  - a model without inertial data is refused, saying why; no heap while stepping.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -378,4 +379,58 @@ TEST(ArmPlant, EveryBuiltInModelWithInertialDataHoldsAPose) {
     }
   }
   CHECK(models >= 9);  // puma560 and 8 estimates (stanford, rr_planar keep none: docs/dynamics.md)
+}
+
+// armfw --sim: the virtual drives start with every joint inside its limits, at the in-limit
+// value closest to 0 (the Stanford arm's prismatic joint 3, limits [0.2, 0.9] m, at 0.2 m;
+// the others at 0), read back through the CANopen master as the firmware reads them.
+TEST_GROUP(SimStart){};
+
+TEST(SimStart, EveryJointStartsInsideItsLimitsClosestToZero) {
+  for (const char* model : {"stanford", "puma560", "rr_planar"}) {
+    const kin::Chain chain = load(model);
+    const int n = chain.n_joints;
+    ManualClock clock;
+    std::vector<std::uint8_t> nodes;
+    for (int j = 0; j < n; ++j) nodes.push_back(std::uint8_t(1 + j));
+    sim::SimPlant plant(clock, nodes);
+    CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, std::size_t(n));
+    std::vector<JointScaling> sc;
+    for (int j = 0; j < n; ++j) {
+      JointScaling& s = cfg.joints[std::size_t(j)].scaling;
+      s.gear_ratio = 3;
+      s.direction = j % 2 ? -1 : 1;
+      s.zero_offset = 1000 * j;
+      if (chain.joint(j).type == kin::JointType::prismatic) {
+        s.kind = JointScaling::Kind::prismatic;
+        s.counts_per_unit = 1000;
+      }
+      sc.push_back(s);
+    }
+    plant.place_within_limits(chain, sc);
+    cfg.heartbeat_period = 20 * kMillisecond;
+    cfg.heartbeat_timeout = 60 * kMillisecond;
+    clock.set_idle_hook([&](TimePoint t) { plant.step(t); });
+    CanopenServoBus master(plant.master_bus(), clock, cfg);
+    LONGS_EQUAL(int(Status::ok), int(master.start(clock.now() + 2 * kSecond)));
+    STRCMP_EQUAL("", master.last_error());
+    std::vector<double> hold(std::size_t(n), 0.0);
+    for (int k = 0; k < 20; ++k) {  // SYNCs: the drives' TPDO1 (6064h)
+      master.read(clock.now());
+      for (int j = 0; j < n; ++j) hold[std::size_t(j)] = master.feedback(std::size_t(j)).position;
+      master.write(std::span<const double>(hold.data(), hold.size()), clock.now());
+      clock.advance(kPeriod);
+    }
+    master.read(clock.now());
+    for (int j = 0; j < n; ++j) {
+      const kin::DhRow& row = chain.joint(j);
+      const double want = std::clamp(0.0, row.lower, row.upper);
+      const double q = master.feedback(std::size_t(j)).position;
+      char what[128];
+      std::snprintf(what, sizeof what, "%s joint %d at %.6f, limits [%g, %g]", model, j + 1, q, row.lower, row.upper);
+      CHECK_TEXT(q >= row.lower && q <= row.upper, what);
+      DOUBLES_EQUAL_TEXT(want, q, 1.0 / sc[std::size_t(j)].counts_per_si(), what);
+    }
+    clock.set_idle_hook(nullptr);
+  }
 }

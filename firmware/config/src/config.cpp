@@ -73,7 +73,7 @@ std::string homing_order_once(const FwConfig& c, const FwConfig&) {
 }
 std::string homing_method_known(const DriveConfig& d, const FwConfig&) {
   if (d.homing_method == "none" || d.homing_method == "hard_stop" || homing_method_number(d.homing_method) != 0) return "";
-  return "must be \"none\", \"hard_stop\" or a CiA 402 homing method 1..35, 37 or -128..-1 (got " +
+  return "must be \"absolute\", \"hard_stop\" or a CiA 402 homing method 1..35, 37 or -128..-1 (got " +
          (d.homing_method.empty() ? std::string("\"\"") : d.homing_method) + ")";
 }
 
@@ -143,12 +143,19 @@ const ConfigKey kConfigTable[] = {
     K{"homing.order", &F::homing_order, "",
       "homing groups run one after the other, joints inside a group together (1-based joint numbers, e.g. "
       "`[[3], [2], [1], [4, 5, 6]]`: the wrist clear of the table first); `[]` = one group of every joint. Given, it "
-      "names every joint exactly once. Joints with homing.method = \"none\" count as homed at power-up"}
+      "names every joint exactly once. Joints with homing.method = \"absolute\" count as homed at power-up"}
         .within(1, kin::kMaxJoints).length(0, kin::kMaxJoints)
         .related(homing_order_once, "each joint once"),
     K{"homing.unhomed_jog_pct", &F::homing_unhomed_jog_pct, "%",
       "while a joint is not homed, joint jogs run at this percent of the speed asked (Cartesian moves, tool jogs, "
       "movej, park and G-code moves are refused until every joint is homed)"}.within(1, 100),
+    K{"homing.travel_margin_deg", &F::homing_travel_margin_deg, "deg (mm)",
+      "supervision of homing travel: a joint's homing fails (homing_error, naming the joint and the distance) once "
+      "it stands farther from where its homing began than its range (drive.limits or the description's) plus this, "
+      "so a missing switch or hard stop ends there, not at homing.timeout_s. Cover how far the stop or switch lies "
+      "outside the limits and the back-off; the joint comes to rest beyond by its braking distance (the homing "
+      "acceleration). A joint without finite limits is not supervised"}
+        .above(0, 1000),
     K{"dynamics.feed_forward", &F::feed_forward, "",
       "feed-forward sent with every setpoint in CSP (docs/dynamics.md#using-the-model-in-the-firmware): `\"off\"`; "
       "`\"velocity\"` = the setpoint's velocity as velocity offset 60B1h (needs no model); `\"torque\"` = that and "
@@ -167,7 +174,9 @@ const ConfigKey kConfigTable[] = {
       "every threshold is divided by it: 2 halves them (more sensitive), 0.5 doubles them"}.within(0.1, 10),
     K{"dynamics.collision_threshold_pct", &F::collision_threshold_pct, "%",
       "a joint's collision threshold without drive.collision_threshold: this percent of its rated torque (joint "
-      "side: 6076h or drive.rated_torque x gear ratio)"}.above(0, 300),
+      "side: 6076h or drive.rated_torque x gear ratio); at least 1 %: below it the measured torque's own noise and "
+      "quantisation (6077h counts per mille) pass the threshold, and the arm faults as soon as it is enabled"}
+        .within(1, 300),
     K{"dynamics.freedrive", &F::freedrive, "",
       "hand guiding (`freedrive on|off`): map cyclic synchronous torque (6060h/6061h in the PDOs, target torque 6071h "
       "in RPDO2) on the drives that have it; `freedrive on` then commands gravity and friction compensation only. A "
@@ -249,10 +258,13 @@ const DriveKey kDriveTable[] = {
        "on its own with safety.stop = \"drive\"); 0 = leave the drive's own"}
         .above(0, 1e7).unset_means(0, "the drive's own", true),
     DK{"homing.method", &D::homing_method, "",
-       "how the joint finds its zero at power-up: `\"none\"` = absolute encoder (homed at start), a CiA 402 homing "
-       "method number (6098h: 1..35, 37 or a negative manufacturer method; the drive's own Homing Mode), or "
-       "`\"hard_stop\"` (no switch: the master drives the joint slowly against its mechanical stop, backs off)"}
-        .integer_too().length(1, 16).rule_text("\"none\", \"hard_stop\" or a method 1..35, 37, -128..-1")
+       "how the joint finds its zero at power-up: `\"absolute\"` = absolute encoder (homed at start; `\"none\"` is "
+       "read as the same), a CiA 402 homing method number (6098h: 1..35, 37 or a negative manufacturer method; the "
+       "drive's own Homing Mode), or `\"hard_stop\"` (no switch: the master drives the joint slowly against its "
+       "mechanical stop, backs off). Required in every [[drive]] of a real bus (bus.can not \"sim\"), so that an "
+       "incremental encoder is never taken as homed; with \"sim\" (absolute virtual encoders) it may be left out"}
+        .integer_too().length(1, 16).rule_text("\"absolute\", \"hard_stop\" or a method 1..35, 37, -128..-1")
+        .spelled_as("absolute", "none")
         .related(homing_method_known, "a known method"),
     DK{"homing.speed_switch", &D::homing_speed_switch, "deg/s (mm/s)",
        "search for the switch (6099h:01); hard_stop: the approach speed"}.above(0, 1e6),
@@ -261,7 +273,7 @@ const DriveKey kDriveTable[] = {
        "homing acceleration (609Ah); hard_stop: of the approach and the back-off"}.above(0, 1e7),
     DK{"homing.offset", &D::homing_offset, "deg (mm)",
        "joint position at the home mark (written as 607Ch home offset) or, hard_stop, at the backed-off point; "
-       "within the joint's limits (drive.limits or the description's) unless the method is \"none\""}
+       "within the joint's limits (drive.limits or the description's) unless the method is \"absolute\""}
         .within(-kMaxLength, kMaxLength),
     DK{"homing.timeout_s", &D::homing_timeout_s, "s", "longest homing of this joint; longer fails it (arm disabled)"}
         .above(0, 3600),
@@ -280,18 +292,23 @@ const DriveKey kDriveTable[] = {
         .above(0, 1e5).unset_means(0, "the drive's 6076h", true),
     DK{"collision_threshold", &D::collision_threshold, "N m (N)",
        "this joint's collision threshold (joint side, before dynamics.collision_sensitivity); 0 = "
-       "dynamics.collision_threshold_pct of its rated torque"}
-        .above(0, 1e6).unset_means(0, "dynamics.collision_threshold_pct of the rated torque", true),
+       "dynamics.collision_threshold_pct of its rated torque; at least 0.01 N m (N): below it the measured torque's "
+       "noise alone faults the arm"}
+        .within(0.01, 1e6).unset_means(0, "dynamics.collision_threshold_pct of the rated torque", true),
 };
 
 using OC = OutputConfig;
 using OK = OutputKey;
 const OutputKey kOutputTable[] = {
     OK{"name", &OC::name, "", "the output's name (`out NAME on|off`): letters, digits, _ and -, starting with a letter"}
-        .length(1, 31).rule_text("1..31 characters"),
+        .length(1, 31).rule_text("1..31 characters").needed(),
     OK{"node", &OC::node, "", "CANopen node of the drive whose 60FEh:01 physical outputs carry it (a drive of the arm)"}
-        .within(1, 127),
-    OK{"bit", &OC::bit, "", "bit of 60FEh:01 (CiA 402: 0 set brake, 16..31 the manufacturer's outputs)"}.within(0, 31),
+        .within(1, 127).needed(),
+    OK{"bit", &OC::bit, "",
+       "bit of 60FEh:01: one of the manufacturer-specific outputs 16..31. CiA 402 gives bit 0 to \"set brake\" (the "
+       "drive's brake control: switching it by hand would release the brake of a powered-down axis) and reserves "
+       "bits 1..15 for the profile, so those are refused"}
+        .within(16, 31).needed(),
 };
 
 
@@ -391,7 +408,10 @@ std::string value_of(const Key<S>& k, const S& s) {
         if constexpr (std::is_same_v<T, bool>) return v ? "true" : "false";
         else if constexpr (std::is_same_v<T, int> || std::is_same_v<T, std::int64_t>) return int_text(v, k.hex);
         else if constexpr (std::is_same_v<T, double>) return num_text(v);
-        else if constexpr (std::is_same_v<T, std::string>) return k.or_integer && homing_method_number(v) != 0 ? v : toml_string(v);
+        else if constexpr (std::is_same_v<T, std::string>) {
+          if (k.or_integer && homing_method_number(v) != 0) return v;
+          return toml_string(k.stored && v == k.stored ? std::string(k.spelled) : v);
+        }
         else if constexpr (std::is_same_v<T, std::vector<double>>) {
           std::string o = "[";
           for (std::size_t i = 0; i < v.size(); ++i) o += (i ? ", " : "") + num_text(v[i]);
@@ -455,6 +475,7 @@ std::string range_of(const Key<S>& k) {
 
 template <class S>
 std::string default_of(const Key<S>& k) {
+  if (k.required) return "required";
   if (k.has_unset) return k.unset_text;
   return value_of(k, S{});
 }
@@ -604,6 +625,7 @@ struct Reader {
             }
             if (!str) return fail(v, label, std::string(k.or_integer ? "expected a string or an integer" : "expected a string") + " (got " + shown(v) + ")");
             out = str->get();
+            if (k.spelled && out == k.spelled) out = k.stored;
           } else if constexpr (std::is_same_v<T, std::vector<std::vector<int>>>) {
             const auto* a = v.as_array();
             if (!a) return fail(v, label, "expected an array of arrays of integers (got " + shown(v) + ")");
@@ -672,7 +694,7 @@ std::vector<std::string> sorted_keys(const Map& m) {
   return out;
 }
 
-bool read_drive(Reader& r, const toml::node& t, std::size_t index, DriveConfig& d) {
+bool read_drive(Reader& r, const toml::node& t, std::size_t index, const std::string& bus, DriveConfig& d) {
   const std::string where = drive_label(index);
   const toml::table* tab = t.as_table();
   if (!tab) return r.fail(t, where, "expected a table");
@@ -697,6 +719,13 @@ bool read_drive(Reader& r, const toml::node& t, std::size_t index, DriveConfig& 
     }
     if (!r.read(*k, *value, where + "." + k->name, d)) return false;
   }
+  // A real bus: every joint says how it finds its zero (an incremental encoder left without a
+  // method would count as homed at power-up). "sim": absolute virtual encoders.
+  if (bus != "sim" && std::none_of(entries.begin(), entries.end(), [](const auto& e) { return e.first == "homing.method"; }))
+    return r.fail(t, where + ".homing.method",
+                  "missing: every [[drive]] of a real bus (bus.can = " + toml_string(bus) +
+                      ") says how its joint finds its zero: \"absolute\" (absolute encoder), \"hard_stop\" or a CiA 402 "
+                      "method (6098h)");
   return true;
 }
 
@@ -778,6 +807,11 @@ std::string validate(const FwConfig& c) {
         if (!why.empty()) return why;
       }
   }
+  // A real bus without [[drive]] tables would take every joint as an absolute encoder.
+  if (c.can != "sim" && c.drives.empty())
+    return "drive: bus.can = " + toml_string(c.can) +
+           " is a real bus: give one [[drive]] table per joint, each with homing.method (\"absolute\" for an absolute "
+           "encoder), so that no joint with an incremental encoder counts as homed";
   // [[output]]: names valid and unique, one output per (node, bit)
   for (std::size_t i = 0; i < c.outputs.size(); ++i) {
     const OutputConfig& o = c.outputs[i];
@@ -878,9 +912,66 @@ std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
 }
 
 namespace {
+/// The key a syntax error at (line, column) of `text` is in, as the loader names it
+/// ("loop.rate_hz", "drive[2].gear_ratio", "robot"), or "" when the error is not in a
+/// `key = value` line's value (a header, a key, a value continued from an earlier line).
+std::string key_at(const std::string& text, std::size_t line, std::size_t column) {
+  auto trim = [](std::string_view v) {
+    while (!v.empty() && (v.front() == ' ' || v.front() == '\t')) v.remove_prefix(1);
+    while (!v.empty() && (v.back() == ' ' || v.back() == '\t' || v.back() == '\r')) v.remove_suffix(1);
+    return v;
+  };
+  std::string table;  // "loop", "drive[2]", "" = top level
+  std::vector<std::pair<std::string, int>> arrays;  // [[name]] counts
+  std::size_t at = 0;
+  for (std::size_t l = 1; at <= text.size(); ++l) {
+    std::size_t end = text.find('\n', at);
+    if (end == std::string::npos) end = text.size();
+    const std::string_view raw(text.data() + at, end - at);
+    const std::string_view t = trim(raw);
+    if (l == line) {
+      const std::size_t eq = raw.find('=');
+      if (eq == std::string_view::npos || column <= eq + 1) return "";
+      const std::string_view key = trim(raw.substr(0, eq));
+      if (key.empty() || key.find_first_of("[]#\"'") != std::string_view::npos) return "";
+      return (table.empty() ? "" : table + ".") + std::string(key);
+    }
+    if (t.rfind("[[", 0) == 0 && t.find("]]") != std::string_view::npos) {
+      const std::string name(trim(t.substr(2, t.find("]]") - 2)));
+      int n = 1;
+      for (auto& [a, count] : arrays)
+        if (a == name) n = ++count;
+      if (n == 1) arrays.emplace_back(name, 1);
+      table = name + "[" + std::to_string(n) + "]";
+    } else if (t.rfind("[", 0) == 0 && t.find(']') != std::string_view::npos) {
+      table = std::string(trim(t.substr(1, t.find(']') - 1)));
+    }
+    at = end + 1;
+  }
+  return "";
+}
+
+/// A syntax error ("<origin>:<line>:<column>: not valid TOML: ...") with the key it is in
+/// after the position: "<origin>:<line>:<column>: <key>: not valid TOML: ...".
+std::string with_key(const std::string& error, const std::string& text, const std::string& origin) {
+  const std::string head = origin + ":";
+  if (error.rfind(head, 0) != 0) return error;
+  std::size_t line = 0, column = 0;
+  const char* p = error.data() + head.size();
+  const char* e = error.data() + error.size();
+  auto r = std::from_chars(p, e, line);
+  if (r.ec != std::errc() || r.ptr == e || *r.ptr != ':') return error;
+  r = std::from_chars(r.ptr + 1, e, column);
+  if (r.ec != std::errc() || e - r.ptr < 2 || r.ptr[0] != ':' || r.ptr[1] != ' ') return error;
+  const std::string key = key_at(text, line, column);
+  if (key.empty()) return error;
+  const std::size_t rest = static_cast<std::size_t>(r.ptr + 2 - error.data());
+  return error.substr(0, rest) + key + ": " + error.substr(rest);
+}
+
 std::string load_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
   kin::TomlDocument doc = kin::parse_toml(text, origin, kMaxFileBytes);  // size, UTF-8, nesting, syntax
-  if (!doc.error.empty()) return doc.error;
+  if (!doc.error.empty()) return with_key(doc.error, text, origin);
   const toml::table& top = doc.table;
   Reader r{origin, {}};
   const std::vector<std::string> secs = sections();
@@ -921,7 +1012,7 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
     c.drives.clear();
     for (const toml::node& t : *a) {
       DriveConfig d;
-      if (!read_drive(r, t, c.drives.size(), d)) return r.err;
+      if (!read_drive(r, t, c.drives.size(), c.can, d)) return r.err;
       c.drives.push_back(d);
     }
   }
@@ -941,8 +1032,9 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
         if (!k) return at(value) + where + "." + std::string(name.str()) + ": unknown key (name, node, bit)";
         if (!r.read(*k, value, where + "." + k->name, o)) return r.err;
       }
-      if (o.name.empty()) return at(t) + where + ".name: missing (every [[output]] has a name, node and bit)";
-      if (o.node == 0) return at(t) + where + ".node: missing (every [[output]] has a name, node and bit)";
+      for (const OutputKey& k : kOutputTable)
+        if (k.required && !tab->get(k.name))
+          return at(t) + where + "." + k.name + ": missing (every [[output]] has a name, node and bit)";
       c.outputs.push_back(o);
     }
   }
@@ -1030,7 +1122,9 @@ std::string cell(const std::string& s) {
 
 template <class S>
 std::string table_row(const Key<S>& k, const std::string& name) {
-  const std::string def = k.has_unset ? std::string(k.unset_text) : "`" + value_of(k, S{}) + "`";
+  const std::string def = k.required    ? std::string("required")
+                          : k.has_unset ? std::string(k.unset_text)
+                                        : "`" + value_of(k, S{}) + "`";
   return "| `" + name + "` | " + cell(def) + " | " + cell(range_of(k)) + " | " + cell(k.unit) + " | " + cell(k.doc) + " |\n";
 }
 
@@ -1065,9 +1159,10 @@ std::string config_reference_markdown() {
   o += kHeader;
   for (const DriveKey& k : kDriveTable) o += table_row(k, std::string("drive.") + k.name);
   o += "\n### `[[output]]`\n\n"
-       "Named digital outputs (issue 18), in file order: `out NAME on|off` sets one at once, M64 / M65 P<index> "
+       "Named digital outputs, in file order: `out NAME on|off` sets one at once, M64 / M65 P<index> "
        "(0-based, the order here) too, M62 / M63 P<index> at the start of the next move. Every table has all three "
-       "keys; names and (node, bit) pairs are unique, the node one of the arm's drives.\n\n";
+       "keys (a missing one is refused naming it); names and (node, bit) pairs are unique, the node one of the arm's "
+       "drives.\n\n";
   o += kHeader;
   for (const OutputKey& k : kOutputTable) o += table_row(k, std::string("output.") + k.name);
   o += std::string("\n") + kEnd + "\n";

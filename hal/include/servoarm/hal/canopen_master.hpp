@@ -38,7 +38,12 @@
 //   hard_stop: the master moves the joint in CSP (acceleration-limited ramp to speed_switch)
 //             until |target - actual| > following_limit or |torque| > torque_limit (6077h mapped),
 //             backs off by `backoff` and moves zero_offset so that the joint reads `offset` there.
-//   Failures: timeout (HomingSpec::timeout), homing_error (bit 13, or no contact), aborted,
+//   travel:   both kinds: the master sums the actual position's changes from where homing began
+//             (one change larger than twice the homing speed allows is the drive's coordinate
+//             change at the mark, not motion) and fails the homing (homing_error) once the sum
+//             exceeds HomingSpec::max_travel: a missing switch or stop ends within the joint's
+//             range plus a margin, not at the timeout.
+//   Failures: timeout (HomingSpec::timeout), homing_error (bit 13, no contact, travel), aborted,
 //             drive_refused (mode not taken), the joint's fault (drive_fault, heartbeat_lost):
 //             the drive is halted (bit 8), taken back to CSP at its actual position, unhomed.
 #include <array>
@@ -285,6 +290,10 @@ class CanopenServoBus final : public ServoBus {
     int writes = 0;                ///< write() cycles since the step began
     int retries = 0;
     double hs_demand = 0, hs_v = 0, hs_goal = 0;  ///< hard_stop: counts, counts/s
+    double htravel = 0;            ///< counts moved since homing began (signed, the mark's jump excluded)
+    std::int32_t hlast = 0;        ///< actual position (counts) when htravel was last updated
+    TimePoint hlast_t = 0;         ///< ... and when it last changed
+    bool hrebased = false;         ///< the drive's one coordinate change at the mark was seen
     TimePoint hs_last = 0;
     char hmsg[192] = {};
   };
@@ -308,6 +317,9 @@ class CanopenServoBus final : public ServoBus {
   static void sink(void* ctx, const CanFrame& f);
   Status validate_homing(std::size_t j);
   void advance_homing(std::size_t j, TimePoint now);
+  /// Real-time: adds the actual position's change to the homing travel; true (message set)
+  /// once it is beyond HomingSpec::max_travel.
+  bool travel_exceeded(std::size_t j, TimePoint now);
   void homing_step(std::size_t j, std::uint8_t step, TimePoint now);
   void homing_fail(std::size_t j, Status why, TimePoint now);
   void homing_finish(std::size_t j, TimePoint now);

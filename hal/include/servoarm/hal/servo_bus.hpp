@@ -73,6 +73,10 @@ struct HomingSpec {
   double following_limit = 0.0;   ///< hard_stop: |demanded - actual| that means contact
   double torque_limit = 0.0;      ///< hard_stop: |torque| (N m / N) that means contact; 0 = unused
   double backoff = 0.0;           ///< hard_stop: distance moved back from the contact (> 0)
+  /// Supervision of both kinds: the homing fails (homing_error, the distance in the message)
+  /// once the joint stands farther than this from where its homing began (joint units; the
+  /// joint's range plus a margin); 0 = not supervised.
+  double max_travel = 0.0;
 };
 
 /// Where one joint's homing stands (ServoBus::homing()).

@@ -48,6 +48,13 @@ class SimPlant {
                                 const ArmPlantParams& params = {}) {
     return arm_->use_dynamic_plant(chain, scaling, params);
   }
+  /// Set-up, before the bring-up: put every joint inside its limits in `chain`, at the
+  /// in-limit value closest to 0 (a prismatic joint with limits [0.2, 0.9] m at 0.2 m), in
+  /// drive counts through `scaling[j]` (the master's JointScaling). The drives otherwise start
+  /// at count 0, which may lie outside a joint's limits: the arm could then never be enabled.
+  void place_within_limits(const kin::Chain& chain, std::span<const hal::JointScaling> scaling) {
+    arm_->place_within_limits(chain, scaling);
+  }
   ArmSim& arm() { return *arm_; }
   hal::SimBus& bus() { return *bus_; }
   /// Fault injection from another thread: applied by the drive thread at its next step.

@@ -146,6 +146,9 @@ class VirtualDrive {
   hal::cia402::State state() const { return state_; }
   hal::canopen::NmtState nmt() const { return nmt_; }
   double position() const { return pos_; }        ///< counts, unquantised
+  /// Set-up, not while enabled: the shaft stands at `counts` (physical and reported, no homing
+  /// shift), at rest, the target there too.
+  void place_at(double counts);
   double velocity() const { return vel_; }        ///< counts/s
   std::int32_t target() const { return target_; } ///< counts, last applied at SYNC
   std::uint64_t syncs_seen() const { return syncs_; }
@@ -299,6 +302,9 @@ class ArmSim {
   /// it each drive runs its own first-order motor (the default, for fast tests).
   std::string use_dynamic_plant(const kin::Chain& chain, std::span<const hal::JointScaling> scaling,
                                 const ArmPlantParams& params);
+  /// Set-up: every drive i to joint i's in-limit value closest to 0 in `chain` (counts through
+  /// `scaling[i]`), the dynamic plant's state too. Drives beyond the chain's joints are left.
+  void place_within_limits(const kin::Chain& chain, std::span<const hal::JointScaling> scaling);
   /// The shared plant, or nullptr (first-order motors).
   ArmPlant* plant() { return plant_.get(); }
   void power_on(TimePoint now);

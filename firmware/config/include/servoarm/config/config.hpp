@@ -40,7 +40,9 @@ struct DriveConfig {
   double heartbeat_timeout_ms = 0;       ///< 0 = bus.heartbeat_timeout_ms
   double quick_stop_decel = 0;           ///< deg/s^2 or mm/s^2 written to 6085h; 0 = leave the drive's
   // homing (docs/configuration.md#homing; hal::HomingSpec): joint units deg (mm)
-  std::string homing_method = "none";    ///< "none" (absolute encoder), "hard_stop", or a CiA 402 6098h method ("19")
+  /// "none" = absolute encoder (written "absolute" in the file), "hard_stop", or a CiA 402 6098h
+  /// method ("19"). Required in every [[drive]] of a real bus (bus.can not "sim").
+  std::string homing_method = "none";
   double homing_speed_switch = 10.0;     ///< deg/s: 6099h:01 search for switch; hard_stop: approach speed
   double homing_speed_zero = 1.0;        ///< deg/s: 6099h:02 search for zero
   double homing_acceleration = 100.0;    ///< deg/s^2: 609Ah; hard_stop: approach / back-off acceleration
@@ -57,12 +59,13 @@ struct DriveConfig {
   bool operator==(const DriveConfig&) const = default;
 };
 
-/// One [[output]] table (issue 18): a named digital output, bit `bit` of the 60FEh:01 physical
+/// One [[output]] table: a named digital output, bit `bit` of the 60FEh:01 physical
 /// outputs of the drive at CANopen node `node` (`out NAME on|off`, M62..M65 P<index>).
+/// Every key is required; the zero values below are "not given" and fail validate().
 struct OutputConfig {
   std::string name;   ///< letters, digits, _ and -, starting with a letter
   int node = 0;       ///< a drive of the arm
-  int bit = 0;        ///< 0..31 (CiA 402: bit 0 "set brake", 16..31 the manufacturer's outputs)
+  int bit = 0;        ///< 16..31: CiA 402 gives bit 0 to "set brake" and reserves 1..15 for the profile
   bool operator==(const OutputConfig&) const = default;
 };
 
@@ -103,6 +106,7 @@ struct FwConfig {
   // [homing]
   std::vector<std::vector<int>> homing_order;  ///< groups of 1-based joints, run one after the other; [] = one group of all
   double homing_unhomed_jog_pct = 25.0;  ///< joint jogs of an unhomed arm run at this percent of the speed asked
+  double homing_travel_margin_deg = 10.0;  ///< deg (mm): homing fails beyond the joint's range + this from its start
   // [dynamics] (issue 20): the model in the control loop; every part off by default (the frames of before)
   std::string feed_forward = "off";    ///< "off", "velocity" (60B1h), "torque" (60B1h + model torque 60B2h)
   bool collision = false;              ///< momentum observer on the measured torque (6077h)
@@ -164,6 +168,9 @@ struct Key {
   bool hex = false;                            ///< integers written as 0x...
   bool or_integer = false;                     ///< strings: an integer is accepted too (kept as its decimal text,
                                                ///< written back unquoted): homing.method = 19 or "none"
+  bool required = false;                       ///< the table must write it (no default)
+  const char* spelled = nullptr;               ///< strings: the file's word for the member value `stored`
+  const char* stored = nullptr;                ///< ("absolute" in the file is "none" in DriveConfig)
   bool has_unset = false;                      ///< a value meaning "not set: inherit" (lists: empty)
   double unset = 0;
   bool unset_writable = false;                 ///< may the file write the unset value itself?
@@ -180,6 +187,12 @@ struct Key {
   constexpr Key related(Relation f, const char* text) const { Key k = *this; k.relation = f; k.relation_text = text; return k; }
   constexpr Key in_hex() const { Key k = *this; k.hex = true; return k; }
   constexpr Key integer_too() const { Key k = *this; k.or_integer = true; return k; }
+  /// The key has no default: a table that leaves it out is refused naming it.
+  constexpr Key needed() const { Key k = *this; k.required = true; return k; }
+  /// Strings: the file writes `file` for the member value `member` (both are read).
+  constexpr Key spelled_as(const char* file, const char* member) const {
+    Key k = *this; k.spelled = file; k.stored = member; return k;
+  }
   /// `value` (lists: empty) means "inherit `text`"; `writable`: a file may write it.
   constexpr Key unset_means(double value, const char* text, bool writable) const {
     Key k = *this; k.has_unset = true; k.unset = value; k.unset_text = text; k.unset_writable = writable; return k;
