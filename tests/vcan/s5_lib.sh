@@ -9,7 +9,9 @@
 if [ "${SERVOARM_VM:-0}" = 1 ]; then rate_hz=250 hb_ms=100 hb_timeout_ms=300
 else rate_hz=1000 hb_ms=50 hb_timeout_ms=150; fi
 
-# write_armfw_config FILE [EXTRA TOML LINES for [safety]]
+# write_armfw_config FILE [--own-drives]: a real bus needs every joint's homing.method;
+# without --own-drives the six drives are absolute ([[drive]] homing.method = "absolute"),
+# with it the caller appends its own [[drive]] tables.
 write_armfw_config() {
   cat >"$1" <<EOF
 robot = "puma560"
@@ -30,6 +32,9 @@ feedback_timeout_ms = $((hb_timeout_ms * 3))
 stdin = false
 can = "$CAN_IF"
 EOF
+  if [ "${2:-}" != --own-drives ]; then
+    for _j in 1 2 3 4 5 6; do printf '[[drive]]\nhoming.method = "absolute"\n' >>"$1"; done
+  fi
 }
 
 # start_armfw CONFIG: armfw in the background (ARMFW_PID), returns once its

@@ -28,7 +28,7 @@ need candump isotpsend isotprecv isotpsniffer armsim armfw od mkfifo
 # Heartbeat consumer time 1 s in the VM (s5_lib's 300 ms): homing is not about heartbeat
 # loss, and the TCG guest on a busy host starves armsim longer than 300 ms now and then.
 if [ "${SERVOARM_VM:-0}" = 1 ]; then hb_timeout_ms=1000; fi
-write_armfw_config "$OUT_DIR/armfw.toml"
+write_armfw_config "$OUT_DIR/armfw.toml" --own-drives
 cat >>"$OUT_DIR/armfw.toml" <<EOF
 [homing]
 order = [[3], [2], [1], [4, 5, 6]]

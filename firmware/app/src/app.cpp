@@ -70,6 +70,11 @@ hal::HomingSpec App::homing_spec(int j) const {
   h.following_limit = d.homing_following_limit * unit;
   h.torque_limit = d.homing_torque_limit;
   h.backoff = d.homing_backoff * unit;
+  // Travel supervision: a missing switch or stop ends the homing once the joint has
+  // travelled its whole range plus homing.travel_margin_deg (mm) from where it began.
+  const kin::DhRow& row = chain.joint(j);
+  if (std::isfinite(row.lower) && std::isfinite(row.upper))
+    h.max_travel = (row.upper - row.lower) + cfg.homing_travel_margin_deg * unit;
   return h;
 }
 

@@ -570,6 +570,11 @@ int main(int argc, char** argv) {
     }
   }
   if (plant) {
+    // Virtual drives start at the in-limit value closest to 0 (a prismatic joint whose
+    // range excludes 0 could otherwise never be enabled).
+    std::vector<hal::JointScaling> sc;
+    for (std::size_t j = 0; j < app.servo->joint_count(); ++j) sc.push_back(app.servo->scaling(j));
+    plant->place_within_limits(app.chain, sc);
     plant->start_thread();  // the drives answer the bring-up's SDOs from their own thread
     sim_bus = &plant->bus();
   }

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Text from fixed buffers (snprintf into char arrays: the parser's refusals, the control
 // thread's replies, events and fault texts): a message that did not fit is cut after its
