@@ -40,18 +40,31 @@ std::string run_capture(const std::string& cmd, int& status) {
   return out;
 }
 
+// Under qemu or the sanitizers armfw runs 5-20x slower: a sample of the models (a 6-joint
+// arm, one with a prismatic joint, a planar one, a user's file), one at a time; the host
+// runs every model, four at a time.
+#if defined(SERVOARM_TEST_EMULATED) || defined(SERVOARM_TEST_INSTRUMENTED)
+constexpr bool kSample = true;
+constexpr int kWorkers = 1;
+const char* const kTimeout = "timeout 500 ";
+#else
+constexpr bool kSample = false;
+constexpr int kWorkers = 4;
+const char* const kTimeout = "timeout 150 ";
+#endif
+
 void run_all(std::vector<Run>& runs) {
   std::atomic<std::size_t> next{0};
   auto worker = [&] {
     for (std::size_t i = next++; i < runs.size(); i = next++) {
       Run& r = runs[i];
-      r.out = run_capture("timeout 150 " + servoarm::test::emulator_prefix() + ARMFW_PATH + " --sim --robot '" + r.robot +
+      r.out = run_capture(kTimeout + servoarm::test::emulator_prefix() + ARMFW_PATH + " --sim --robot '" + r.robot +
                               "' --demo --priority 0 2>&1 </dev/null",
                           r.status);
     }
   };
   std::vector<std::thread> pool;
-  for (int k = 0; k < 4; ++k) pool.emplace_back(worker);
+  for (int k = 0; k < kWorkers; ++k) pool.emplace_back(worker);
   for (std::thread& t : pool) t.join();
 }
 
@@ -71,7 +84,8 @@ TEST(Demo, PassesForEveryBuiltInModelAndForAModelFile) {
   for (const char* m : {"puma560", "abb_irb2400", "ur5e", "rr_planar"})
     CHECK_TEXT(std::find(models.begin(), models.end(), m) != models.end(), m);
   std::vector<Run> runs;
-  for (const std::string& m : models) runs.push_back({m, "", -1});  // prismatic arms too
+  for (const std::string& m : models)  // prismatic arms too
+    if (!kSample || m == "puma560" || m == "stanford" || m == "rr_planar") runs.push_back({m, "", -1});
   // A user's own arm: a description file outside the model folder.
   const std::string own = "/tmp/servoarm_demo_own_arm_" + std::to_string(::getpid()) + ".toml";
   std::filesystem::copy_file(std::string(SERVOARM_MODELS_DIR) + "/kuka_kr6_r700.toml", own,

@@ -122,6 +122,24 @@ TEST(Process, BadConfigRefusedNamingTheKey) {
   CHECK_TEXT(out.find("loop.rate_hz") != std::string::npos, out.c_str());
 }
 
+TEST(Process, MissingFoldersForProgramsFramesAndPointsRefusedAtStart) {
+  // A folder armfw would write into later must exist when it starts: one line naming the
+  // key and the folder, exit 2, before any drive is touched.
+  const struct {
+    const char* flags;
+    const char* key;
+  } cases[] = {{"--programs /nonexistent/servoarm/programs", "programs.dir: /nonexistent/servoarm/programs"},
+               {"--frames /nonexistent/servoarm/frames.toml", "console.frames_file: /nonexistent/servoarm"},
+               {"--points /nonexistent/servoarm/points.toml", "programs.points_file: /nonexistent/servoarm"}};
+  for (const auto& c : cases) {
+    int st = 0;
+    const std::string out = run_capture(emulator_prefix() + ARMFW_PATH + " --sim --priority 0 " + c.flags + " 2>&1 </dev/null", st);
+    CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 2, out.c_str());
+    CHECK_TEXT(out.find(std::string(c.key) + ": no such folder") != std::string::npos, out.c_str());
+    CHECK_EQUAL_TEXT(1, count(out, "\n"), out.c_str());
+  }
+}
+
 TEST(Process, HomePoseOutsideTheJointLimitsRefusedNamingTheKey) {
   // Checked against the robot at start (App::build -> validate_for_chain): PUMA 560
   // joint 3 is limited to [-52, 232] deg.

@@ -8,6 +8,7 @@
 //   armfw --sim --demo [--interactive]     play the demo program, print a summary
 //   armfw --sim --bench-loop SEC [--rate HZ]   loop statistics as one JSON line
 #include <poll.h>
+#include <sys/stat.h>
 #include <signal.h>
 #include <unistd.h>
 
@@ -527,6 +528,30 @@ int main(int argc, char** argv) {
   resolve(cfg.console_frames_file, frames_file);
   resolve(cfg.programs_dir, programs_dir);
   resolve(cfg.programs_points_file, points_file);
+  // Where armfw keeps files must exist at start (not first fail when a tool, point or
+  // program is saved): the programs folder, and the folders of the frames and points files.
+  {
+    const auto is_dir = [](const std::string& p) {
+      struct stat st {};
+      return ::stat(p.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
+    };
+    const auto folder = [](const std::string& p) { return p.substr(0, std::max<std::size_t>(p.rfind('/'), 1)); };
+    const struct {
+      const char* key;
+      std::string path;
+      bool is_folder;
+    } places[] = {{"programs.dir", cfg.programs_dir, true},
+                  {"console.frames_file", cfg.console_frames_file, false},
+                  {"programs.points_file", cfg.programs_points_file, false}};
+    for (const auto& w : places) {
+      if (w.path.empty()) continue;
+      const std::string f = w.is_folder ? w.path : folder(w.path);
+      if (!is_dir(f)) {
+        std::fprintf(stderr, "armfw: config refused: %s: %s: no such folder\n", w.key, f.c_str());
+        return 2;
+      }
+    }
+  }
   if (sim) cfg.can = "sim";
   if (!robot.empty()) cfg.robot = robot;
   if (rate > 0) cfg.rate_hz = rate;
