@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 // Teach points and the points file (firmware/program/points.hpp): round trip, atomic
 // replace, corrupt / foreign / wrong files refused with the line named and never overwritten.
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -172,6 +173,24 @@ TEST(Points, GoodFileLoadsAndAnUnwritableFolderKeepsTheOldFile) {
   // A path inside a missing folder: the same (nothing written, the error names it).
   const std::string e2 = prog::save_points_file(dir + "/no/such/points.toml", d);
   CHECK(e2.find("/no/such/points.toml") != std::string::npos);
+}
+
+TEST(Points, AReadOnlyPointsFileIsNeverReplaced) {
+  // The atomic write (temporary file, rename) would replace a 0444 file with a writable
+  // one, and root passes any access check: the file's mode bits are what decide.
+  const std::string path = dir + "/points.toml";
+  write_file(path, kGood);
+  ::chmod(path.c_str(), 0444);
+  prog::PointsData d;
+  STRCMP_EQUAL("", prog::load_points_file(path, 6, d).c_str());
+  prog::put_point(d, point("more", 0.1));
+  const std::string e = prog::save_points_file(path, d);
+  CHECK_TEXT(e.find(path) != std::string::npos && e.find("read-only") != std::string::npos, e.c_str());
+  STRCMP_EQUAL(kGood, read_file(path).c_str());
+  struct stat st {};
+  CHECK(::stat(path.c_str(), &st) == 0);
+  LONGS_EQUAL(0444, st.st_mode & 0777);
+  ::chmod(path.c_str(), 0644);
 }
 
 TEST(Points, PoseMismatchAgainstTheDescription) {

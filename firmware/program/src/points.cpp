@@ -243,7 +243,8 @@ std::string save_points_file(const std::string& path, const PointsData& d) {
     if (std::string why = check_values(p); !why.empty()) return path + ": " + why + "; nothing written";
     if (p.q.size() != n) return path + ": points with different joint counts; nothing written";
   }
-  if (::access(path.c_str(), F_OK) == 0) {  // what is there must be ours
+  if (::access(path.c_str(), F_OK) == 0) {  // what is there must be ours, and writable
+    if (std::string why = fw::check_writable_file(path); !why.empty()) return kin::one_line(why);
     PointsData old;
     const std::string err = load_points_file(path, n > 0 ? n : 1, old);
     // An empty new set: any joint count of the old file is fine, only its format matters.
