@@ -1065,6 +1065,15 @@ void VirtualDrive::place_at(double counts) {
   set(c402::kPositionActual, std::uint32_t(std::int32_t(std::floor(pos_))));
 }
 
+void VirtualDrive::fit_motion(double velocity, double acceleration) {
+  if (std::isfinite(velocity)) motor_.max_velocity = std::max(motor_.max_velocity, 1.5 * std::fabs(velocity));
+  if (std::isfinite(acceleration)) motor_.max_accel = std::max(motor_.max_accel, 1.5 * std::fabs(acceleration));
+  const double window = std::min(4.0 * motor_.max_velocity * motor_.lag, 4294967294.0);
+  if (window > double(get(c402::kFollowingErrorWindow))) set(c402::kFollowingErrorWindow, std::uint32_t(window));
+  if (double(get(c402::kQuickStopDecel)) < motor_.max_accel)
+    set(c402::kQuickStopDecel, std::uint32_t(std::clamp(std::round(motor_.max_accel), 1.0, 4294967295.0)));
+}
+
 void ArmSim::place_within_limits(const kin::Chain& chain, std::span<const hal::JointScaling> scaling) {
   const std::size_t n = std::min({drives_.size(), scaling.size(), static_cast<std::size_t>(chain.n_joints)});
   for (std::size_t i = 0; i < n; ++i) {
@@ -1072,6 +1081,8 @@ void ArmSim::place_within_limits(const kin::Chain& chain, std::span<const hal::J
     const double q = std::clamp(0.0, row.lower, row.upper);  // the in-limit value closest to 0
     const hal::JointScaling& s = scaling[i];
     drives_[i].place_at(double(s.zero_offset) + double(s.direction) * q * s.counts_per_si());
+    // and follows the joint's own limits (a prismatic joint's counts per metre are many)
+    drives_[i].fit_motion(row.dynamics.max_velocity * s.counts_per_si(), row.dynamics.max_acceleration * s.counts_per_si());
     if (plant_) plant_->attach(static_cast<int>(i), &drives_[i]);  // the plant starts there too
   }
 }

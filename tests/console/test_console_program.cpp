@@ -432,7 +432,7 @@ TEST(ConsoleProgram, RecordThenReplayStaysWithinTheTolerance) {
 namespace {
 FwConfig with_outputs() {
   FwConfig c;
-  c.outputs = {{"gripper", 3, 16}, {"vacuum", 3, 17}, {"lamp", 6, 0}};  // nodes 1..6 = joints 1..6
+  c.outputs = {{"gripper", 3, 16}, {"vacuum", 3, 17}, {"lamp", 6, 18}};  // nodes 1..6 = joints 1..6
   return c;
 }
 }  // namespace
@@ -449,18 +449,18 @@ TEST(ConsoleProgram, DigitalOutputsReachTheDriveAtTheRightTime) {
   // at once: within the PDO latency (sent with the next write, acted on at its SYNC)
   CHECK(answer_ok(r.cmd("out gripper on")));
   CHECK(r.until([&] { return d3.digital_outputs() == (1u << 16); }, 3));
-  CHECK(answer_ok(r.cmd("M64 P2")));  // lamp: joint 6 bit 0
-  CHECK(r.until([&] { return d6.digital_outputs() == 1u; }, 3));
+  CHECK(answer_ok(r.cmd("M64 P2")));  // lamp: joint 6 bit 18
+  CHECK(r.until([&] { return d6.digital_outputs() == (1u << 18); }, 3));
   CHECK(answer_ok(r.cmd("M65 P0")));
   CHECK(r.until([&] { return d3.digital_outputs() == 0u; }, 3));
   const std::string l = r.cmd("out");
-  CHECK_TEXT(has(l, "gripper joint=3 bit=16 off\nvacuum joint=3 bit=17 off\nlamp joint=6 bit=0 on\nok 3 outputs"), l.c_str());
+  CHECK_TEXT(has(l, "gripper joint=3 bit=16 off\nvacuum joint=3 bit=17 off\nlamp joint=6 bit=18 on\nok 3 outputs"), l.c_str());
   // M62 / M63: nothing until the next move starts, then in the cycle it starts
   CHECK(answer_ok(r.cmd("M62 P1")));
   CHECK(answer_ok(r.cmd("M63 P2")));
   for (int i = 0; i < 200; ++i) r.step1();
   LONGS_EQUAL(0, d3.digital_outputs());
-  LONGS_EQUAL(1, d6.digital_outputs());
+  LONGS_EQUAL(1u << 18, d6.digital_outputs());
   const std::uint32_t id = r.app.console->last_motion_id() + 1;
   r.s.out.clear();
   r.app.console->execute(r.s, "movej 10 0 -10 0 0 0");
@@ -489,13 +489,13 @@ TEST(ConsoleProgram, DigitalOutputsReachTheDriveAtTheRightTime) {
   for (int i = 0; i < 20000 && r.app.console->run_state() != RunState::idle; ++i) {
     const Telemetry t = r.tel();
     if (t.done_id < first && (t.outputs[2] & (1u << 16))) early = true;       // gripper before move 1 ended
-    if (t.running_id != first + 1 && t.done_id < first + 1 && (t.outputs[5] & 1u)) early = true;  // lamp before move 2
+    if (t.running_id != first + 1 && t.done_id < first + 1 && (t.outputs[5] & (1u << 18))) early = true;  // lamp before move 2
     r.step1();
   }
   CHECK(!early);
   CHECK(has(r.events, "program: g done"));
   LONGS_EQUAL((1u << 16), r.tel().outputs[2]);
-  LONGS_EQUAL(1u, r.tel().outputs[5]);
+  LONGS_EQUAL(1u << 18, r.tel().outputs[5]);
 }
 
 // Figures (docs/programs.md, /work/notes results): the documented 20-point pick-and-place

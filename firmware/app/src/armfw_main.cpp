@@ -528,8 +528,10 @@ int main(int argc, char** argv) {
   resolve(cfg.console_frames_file, frames_file);
   resolve(cfg.programs_dir, programs_dir);
   resolve(cfg.programs_points_file, points_file);
-  // Where armfw keeps files must exist at start (not first fail when a tool, point or
-  // program is saved): the programs folder, and the folders of the frames and points files.
+  // Where armfw keeps files must exist at start, not first fail when a tool, point or
+  // program is saved: the programs folder, and the folders of the frames and points files.
+  // Given on the command line, a missing one is refused; from the configuration (which may
+  // be checked on another machine than the robot's) it is named in a warning at start.
   {
     const auto is_dir = [](const std::string& p) {
       struct stat st {};
@@ -539,17 +541,20 @@ int main(int argc, char** argv) {
     const struct {
       const char* key;
       std::string path;
-      bool is_folder;
-    } places[] = {{"programs.dir", cfg.programs_dir, true},
-                  {"console.frames_file", cfg.console_frames_file, false},
-                  {"programs.points_file", cfg.programs_points_file, false}};
+      bool is_folder, flag;
+    } places[] = {{"programs.dir", cfg.programs_dir, true, !programs_dir.empty()},
+                  {"console.frames_file", cfg.console_frames_file, false, !frames_file.empty()},
+                  {"programs.points_file", cfg.programs_points_file, false, !points_file.empty()}};
     for (const auto& w : places) {
       if (w.path.empty()) continue;
       const std::string f = w.is_folder ? w.path : folder(w.path);
-      if (!is_dir(f)) {
+      if (is_dir(f)) continue;
+      if (w.flag) {
         std::fprintf(stderr, "armfw: config refused: %s: %s: no such folder\n", w.key, f.c_str());
         return 2;
       }
+      std::fprintf(stderr, "armfw: warning: %s: %s: no such folder (saving there fails until it exists)\n", w.key,
+                   f.c_str());
     }
   }
   if (sim) cfg.can = "sim";

@@ -149,6 +149,12 @@ class VirtualDrive {
   /// Set-up, not while enabled: the shaft stands at `counts` (physical and reported, no homing
   /// shift), at rest, the target there too.
   void place_at(double counts);
+  /// Set-up: a motor that can follow a joint moving at up to `velocity` counts/s with up to
+  /// `acceleration` counts/s^2: the speed and acceleration limits raised to 1.5x those (never
+  /// lowered), the following-error window (6065h) to at least 4x the lag at that speed.
+  /// The defaults fit a revolute joint (10 rev/s); a prismatic joint's counts per metre
+  /// need more.
+  void fit_motion(double velocity, double acceleration);
   double velocity() const { return vel_; }        ///< counts/s
   std::int32_t target() const { return target_; } ///< counts, last applied at SYNC
   std::uint64_t syncs_seen() const { return syncs_; }
