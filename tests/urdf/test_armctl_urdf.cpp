@@ -8,6 +8,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "../armctl/run_command.hpp"
@@ -34,6 +35,10 @@ int lines(const std::string& s) {
 }
 
 void write(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
+std::string read(const std::string& path) {
+  std::ifstream f(path);
+  return std::string(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+}
 
 const char* kTwoLinks =
     "<robot name=\"r\">\n"
@@ -67,6 +72,32 @@ struct Bad {
 
 TEST_GROUP(ArmctlUrdf){};
 
+TEST(ArmctlUrdf, TiedFingersEndTheChainAtTool0OrWhereTheyBranch) {
+  // Two gripper fingers tie as the ends of the longest chain: without --tip the arm ends at
+  // tool0 when there is one (the same description as --tip tool0), else where they branch.
+  const std::string a = tmp("tie_a.toml"), b = tmp("tie_b.toml");
+  const auto r1 = run_command(kArmctl + " urdf import " + kData + "/tool_beyond_flange.urdf -o " + a);
+  CHECK_TEXT(r1.status == 0, r1.err.c_str());
+  const auto r2 = run_command(kArmctl + " urdf import " + kData + "/tool_beyond_flange.urdf --tip tool0 -o " + b);
+  CHECK_TEXT(r2.status == 0, r2.err.c_str());
+  const auto fk1 = run_command(kArmctl + " kin fk --robot " + a + " 10 -20 30 40 50 60");
+  const auto fk2 = run_command(kArmctl + " kin fk --robot " + b + " 10 -20 30 40 50 60");
+  CHECK_TEXT(fk1.status == 0 && !fk1.out.empty(), fk1.err.c_str());
+  STRCMP_EQUAL(fk2.out.c_str(), fk1.out.c_str());
+  // Without tool0: the chain ends at gripper_base, where the fingers branch off.
+  std::string text = read(kData + "/tool_beyond_flange.urdf");
+  for (std::size_t p; (p = text.find("\"tool0\"")) != std::string::npos;) text.replace(p, 7, "\"tool9\"");
+  const std::string in = tmp("no_tool0.urdf");
+  write(in, text);
+  const auto r3 = run_command(kArmctl + " urdf import " + in + " -o " + a);
+  CHECK_TEXT(r3.status == 0, r3.err.c_str());
+  const std::string conv = read(a);
+  CHECK_TEXT(conv.find("gripper_base") != std::string::npos, conv.c_str());
+  std::remove(in.c_str());
+  std::remove(a.c_str());
+  std::remove(b.c_str());
+}
+
 TEST(ArmctlUrdf, BadInputIsOneLineExitTwoAndNothingWritten) {
   const std::string in = tmp("bad.urdf"), out = tmp("bad.toml");
   const Bad cases[] = {
@@ -82,7 +113,6 @@ TEST(ArmctlUrdf, BadInputIsOneLineExitTwoAndNothingWritten) {
       {two_links("0 0 1", "revolute", "0 0 0.2", "<mimic joint=\"j1\" multiplier=\"1\"/>"), in, "", "joint 'j2': mimics joint 'j1'"},
       {two_links("0 0 1", "floating", "0 0 0.2", ""), in, "", "joint 'j2': floating joints are not supported"},
       {two_links("0 0 1", "planar", "0 0 0.2", ""), in, "", "joint 'j2': planar joints are not supported"},
-      {"", kData + "/tool_beyond_flange.urdf", "", "--tip"},
       {"", kData + "/missing.urdf", "", "missing.urdf"},
   };
   for (const Bad& b : cases) {

@@ -117,6 +117,33 @@ std::string check_tree(const urdf::ModelInterface& m) {
   return "";
 }
 
+/// Two ends of the longest chain tie, as a gripper's two fingers do: the arm ends at the
+/// link named `tool0` below the base when there is one (the ROS-Industrial name of the tool
+/// frame), else at the link where the two branch off (the fingers are then branches off the
+/// chain, skipped). `a`, `b`: the tied leaves.
+std::string tied_tip(const urdf::Link& base, const std::string& a, const std::string& b, std::string& tip) {
+  std::vector<const urdf::Link*> todo{&base};
+  std::map<std::string, const urdf::Link*> below;
+  while (!todo.empty() && below.size() < 100000) {
+    const urdf::Link* l = todo.back();
+    todo.pop_back();
+    if (!below.emplace(l->name, l).second) continue;
+    for (const auto& c : l->child_links) todo.push_back(c.get());
+  }
+  if (below.count("tool0") != 0) {
+    tip = "tool0";
+    return "";
+  }
+  std::set<std::string> up;  // a's ancestors, a included, up to the base
+  for (const urdf::Link* l = below.at(a); l != nullptr; l = l == &base ? nullptr : l->getParent().get()) up.insert(l->name);
+  for (const urdf::Link* l = below.at(b); l != nullptr; l = l == &base ? nullptr : l->getParent().get())
+    if (up.count(l->name) != 0) {
+      tip = l->name;
+      return "";
+    }
+  return "links '" + a + "' and '" + b + "' are both ends of the longest chain: name the tip with --tip LINK";
+}
+
 std::string choose_tip(const urdf::Link& base, std::string& tip) {
   std::vector<std::tuple<int, int, std::string>> leaves;
   std::set<const urdf::Link*> seen;
@@ -124,10 +151,9 @@ std::string choose_tip(const urdf::Link& base, std::string& tip) {
   std::sort(leaves.begin(), leaves.end(), [](const auto& a, const auto& b) {
     return std::get<0>(a) != std::get<0>(b) ? std::get<0>(a) > std::get<0>(b) : std::get<1>(a) > std::get<1>(b);
   });
-  if (leaves.size() > 1 && std::get<0>(leaves[0]) == std::get<0>(leaves[1]) && std::get<1>(leaves[0]) == std::get<1>(leaves[1]))
-    return "links '" + std::get<2>(leaves[0]) + "' and '" + std::get<2>(leaves[1]) +
-           "' are both ends of the longest chain: name the tip with --tip LINK";
   tip = std::get<2>(leaves[0]);
+  if (leaves.size() > 1 && std::get<0>(leaves[0]) == std::get<0>(leaves[1]) && std::get<1>(leaves[0]) == std::get<1>(leaves[1]))
+    return tied_tip(base, std::get<2>(leaves[0]), std::get<2>(leaves[1]), tip);
   return "";
 }
 
