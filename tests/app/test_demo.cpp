@@ -91,6 +91,14 @@ TEST(Demo, PassesForEveryBuiltInModelAndForAModelFile) {
   std::filesystem::copy_file(std::string(SERVOARM_MODELS_DIR) + "/kuka_kr6_r700.toml", own,
                              std::filesystem::copy_options::overwrite_existing);
   runs.push_back({own, "", -1});
+#ifdef SERVOARM_URDF_DIR
+  // URDF test arms, converted at load (the host only: under qemu and the sanitizers the
+  // sample above stands)
+  std::size_t urdfs = 0;
+  for (const auto& e : std::filesystem::directory_iterator(SERVOARM_URDF_DIR))
+    if (e.path().extension() == ".urdf" && !kSample) runs.push_back({e.path().string(), "", -1}), ++urdfs;
+  CHECK_TEXT(kSample || urdfs >= 8, SERVOARM_URDF_DIR);
+#endif
   run_all(runs);
   std::filesystem::remove(own);
   for (const Run& r : runs) {
