@@ -532,7 +532,7 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
     }
   }
   // RPDO1 and TPDO1: required objects; TPDO2: what the configuration asks for and the drive has.
-  // Torque mode (issue 20): 6060h/6061h ride in RPDO1/TPDO1 (a mode change within one cycle).
+  // Torque mode: 6060h/6061h ride in RPDO1/TPDO1 (a mode change within one cycle).
   const PdoUse tq_use = cst_ok ? cfg_.rpdo2.torque_mode : PdoUse::off;
   const MapEntry rpdo1[] = {{cia402::kControlword, 16, PdoUse::required, "controlword"},
                             {cia402::kTargetPosition, 32, PdoUse::required, "target position"},
@@ -1294,7 +1294,7 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
   }
 }
 
-// --- feed-forward and torque mode (real time, issue 20) ---------------------------------
+// --- feed-forward and torque mode (real time) ----------------------------------------
 
 JointCapabilities CanopenServoBus::capabilities(std::size_t j) const {
   JointCapabilities c;

@@ -70,7 +70,7 @@ const char* kUsage =
     "  --status-every SEC      print one status line per node every SEC seconds\n"
     "  --verbose               print NMT/CiA 402 state changes\n"
     "\n"
-    "Switches and homing (issue 17; positions in encoder counts of the drive before homing, 'inf' /\n"
+    "Switches and homing (positions in encoder counts of the drive before homing, 'inf' /\n"
     "'-inf' for none; NODE is a node id or 'all'). 60FDh reports them; Homing Mode (6060h = 6)\n"
     "with methods 1-7, 11, 17-23, 27, 33, 34, 35, 37 (docs/servo-bus.md#homing):\n"
     "  --home-switch NODE:LO[,HI]   home switch active on [LO, HI] (default HI = inf: a positive home switch)\n"

@@ -17,7 +17,7 @@ using hal::get_u32;
 using hal::put_u32;
 
 namespace {
-constexpr int kRpdos = 3;  // RPDO3: 60FEh:01 digital outputs (issue 18)
+constexpr int kRpdos = 3;  // RPDO3: 60FEh:01 digital outputs
 constexpr std::uint16_t kRpdoComm[kRpdos] = {0x1400, 0x1401, 0x1402};
 constexpr std::uint16_t kRpdoMap[kRpdos] = {0x1600, 0x1601, 0x1602};
 constexpr std::uint16_t kTpdoComm[2] = {0x1800, 0x1801};
@@ -62,7 +62,7 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kFollowingErrorWindow, 0, 4, true, false, motor_.following_window);
   add(c402::kVelocityActual, 0, 4, false, true, 0);
   add(c402::kTargetPosition, 0, 4, true, true, 0);
-  add(c402::kDigitalOutputs, 0, 1, false, false, 1);  // 60FEh: physical outputs (:01), issue 18
+  add(c402::kDigitalOutputs, 0, 1, false, false, 1);  // 60FEh: physical outputs (:01)
   add(c402::kDigitalOutputs, 1, 4, true, true, 0);
   add(c402::kFollowingErrorActual, 0, 4, false, true, 0);
   // Torque: rated torque (mN m, motor side), torque actual (per mille of it; the
@@ -72,7 +72,7 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kTorqueActual, 0, 2, false, true, 0);
   add(c402::kVelocityOffset, 0, 4, true, true, 0);
   add(c402::kTorqueOffset, 0, 2, true, true, 0);
-  // Cyclic synchronous torque (issue 20): target torque, per mille of 6076h. Only a drive on
+  // Cyclic synchronous torque: target torque, per mille of 6076h. Only a drive on
   // the dynamic plant offers CST (6502h bit 9): the first-order motor has no torque.
   add(c402::kTargetTorque, 0, 2, true, true, 0);
   // Quick stop: option code (6: ramp down with 6085h, stay in quick stop
@@ -83,7 +83,7 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kQuickStopOption, 0, 2, true, false, 6);
   add(c402::kQuickStopDecel, 0, 4, true, false,
       std::uint32_t(std::clamp(std::round(motor_.max_accel), 1.0, 4294967295.0)));
-  // Homing (issue 17): switches, method, speeds (counts/s), acceleration (counts/s^2, 0 = the
+  // Homing: switches, method, speeds (counts/s), acceleration (counts/s^2, 0 = the
   // motor's limit), home offset, supported modes.
   add(c402::kDigitalInputs, 0, 4, false, true, 0);
   add(c402::kHomingMethod, 0, 1, true, false, 35);
@@ -477,7 +477,7 @@ void VirtualDrive::apply_rpdo(int p, const CanFrame& f) {
     for (std::size_t i = 0; i < bytes; ++i) v |= std::uint32_t(f.data[off + i]) << (8 * i);
     off += bytes;
     if (e->index == c402::kModesOfOperation) {
-      // 6060h by PDO (issue 20: the master switches CSP <-> CST within a cycle): a mode the
+      // 6060h by PDO (the master switches CSP <-> CST within a cycle): a mode the
       // drive lacks is ignored (6061h tells the master); a change acts as when written by SDO.
       const std::int8_t m = std::int8_t(v);
       if (!mode_allowed(m) || m == mode_display()) continue;

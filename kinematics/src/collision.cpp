@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Feed-forward, free-drive torque and the generalized-momentum collision observer (issue 20).
+// Feed-forward, free-drive torque and the generalized-momentum collision observer.
 // See collision.hpp for the method and why.
 #include "servoarm/kinematics/collision.hpp"
 

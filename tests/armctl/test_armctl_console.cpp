@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// armctl console as a process against a scripted firmware on a pty (issue 16): realtime
+// armctl console as a process against a scripted firmware on a pty: realtime
 // characters sent with -c expect no `ok` (`?` prints the status report that arrives and
 // returns; `!`, `~`, Ctrl-X, 0x85 are followed by a `?` whose report ends them), and in
 // the interactive console (libedit, on a second pty as armctl's terminal) a line from

@@ -120,6 +120,6 @@ TEST(ArmctlKin, MalformedDescriptionFileNamesFileJointAndKey) {
   }
   const auto r = run_command(kArmctl + " kin fk --robot " + path + " 0 0");
   LONGS_EQUAL(2, r.status);
-  // file:line:column (948889a, the file input of issue 15), the joint and the key
+  // file:line:column (the file input unit), the joint and the key
   CHECK_TEXT(r.err.find(path + ":9:9: joint 2: key 'alpah' is not known") != std::string::npos, r.err.c_str());
 }

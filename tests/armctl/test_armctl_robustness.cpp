@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// armctl probed as a user would (issue 15): tiny, huge, zero, negative and missing
+// armctl probed as a user would: tiny, huge, zero, negative and missing
 // option values, joint values that make the kinematics overflow, paths that are not
 // files. Each case: the exit status, a one-line error naming the option or the thing
 // that is wrong, nothing written, no long run; and every --json output is valid JSON

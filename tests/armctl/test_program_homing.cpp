@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// armctl program check and the homing cycle (issue 17), as a process: `home` leaves each joint
+// armctl program check and the homing cycle, as a process: `home` leaves each joint
 // at its drive.homing.offset (armfw's --config; "none" joints where they were), `park` / G28
 // go to motion.home_deg, and what the console would refuse is refused naming the line: `home`
 // with moves queued, a move while the homing cycle runs (no `wait`), a homed position outside

@@ -9,7 +9,7 @@
 //   ik_numeric/<model>/kdl_nr_jl   KDL Newton-Raphson with joint limits
 //   ik_numeric/<model>/kdl_lma     KDL Levenberg-Marquardt (no limits; success
 //                                  counts only results within the limits)
-//   ik/<opw|ur model>/servoarm     issue 19: every solution (verified) of 1 024 poses
+//   ik/<opw|ur model>/servoarm     every solution (verified) of 1 024 poses
 //   ik/<opw model>/general_path    the same arm forced onto the degree-8 path
 //                                  (what it took before the OPW closed form)
 //   ik/<ur model>/numeric_near     what a UR arm had before: one numerical
@@ -20,7 +20,7 @@
 //   ik/abb_irb2400_twist/eigen_roots  eigenvalues only (before the root isolation)
 //   ik_class/ist6/<class>/general_path[_eigen]  its worst cases: theta5 = 0, 1e-9,
 //                                  elbow stretched (double roots), unreachable
-//   ik_reduced/<model>/servoarm    issue 19: the reduced arms, 1 024 poses, all solutions
+//   ik_reduced/<model>/servoarm    the reduced arms, 1 024 poses, all solutions
 //   ik_reduced/<model>/path_3d     the 3-D cheap paths alone (what ik_solve_all ran
 //                                  before the 2-D closed forms; without its input checks)
 //   ik_reduced/<model>/chain_path  the same verified through the chain's FK (before that)

@@ -7,7 +7,7 @@
 # PAIRS pairs (default 5), the order alternating (AB, BA, AB, ...) so a drift of the
 # machine's load does not favour one side. Per pair: both p99 and max wake-up
 # latencies and the ratios armfw / cyclictest; then the median over the pairs of
-# every figure and of the ratios (goal: p99 ratio <= 1.2, issue 15).
+# every figure and of the ratios (goal: p99 ratio <= 1.2).
 #
 #   tests/bench/run_loop_bench.sh [SEC=10] [HZ=1000] [PRIO=80]
 #   PAIRS=N   number of pairs (default 5)

@@ -258,7 +258,7 @@ TEST(Config, BadFilesNameTheKeyAndLeaveConfigUntouched) {
 }
 
 // Each range edge: the value just inside loads, the value just outside is refused naming the
-// key, the value and the allowed range (issue 13 item 6, issue 15 configuration checks).
+// key, the value and the allowed range .
 TEST(Config, RangeEdgesNameKeyValueAndRange) {
   // speeds: a move at 1e-300 mm/s never ends
   expect_accepted("[motion]\nlinear_speed_mm_s = 0.01\n");
@@ -304,7 +304,7 @@ TEST(Config, RangeEdgesNameKeyValueAndRange) {
   expect_refused("[[drive]]\nmax_velocity = -1\n", {"drive[1].max_velocity", "-1"});
   expect_refused("[[drive]]\nzero_offset = 2147483648\n", {"drive[1].zero_offset", "2147483648"});
   expect_accepted("[[drive]]\nzero_offset = -2147483648\n");
-  // CANopen master timeouts (issue 17): positive and bounded, the boot wait within the bring-up's
+  // CANopen master timeouts: positive and bounded, the boot wait within the bring-up's
   expect_accepted("[bus]\nsdo_timeout_ms = 1\nboot_timeout_ms = 0\nboot_retry_ms = 10\nstate_timeout_ms = 10\n");
   expect_accepted("[bus]\nsdo_timeout_ms = 10000\nstart_timeout_s = 120\nboot_timeout_ms = 120000\n");
   expect_refused("[bus]\nsdo_timeout_ms = 0\n", {"bus.sdo_timeout_ms", "(got 0)", "[1, 10000]", "ms"});
@@ -726,7 +726,7 @@ TEST(Config, FileInputIsCheckedAndCapped) {
   CHECK_TEXT(t30k < 120.0, (std::to_string(t30k) + " s for 30000 elements").c_str());
 }
 
-// Homing keys (issue 17): per [[drive]] `homing.*` (a dotted key: the sub-table `homing`) and
+// Homing keys: per [[drive]] `homing.*` (a dotted key: the sub-table `homing`) and
 // [homing]; bad input is refused at start naming the key. The expected texts are written here.
 TEST(Config, HomingKeysAreReadAndBadOnesRefusedNamingTheKey) {
   const std::string six_drives_head = "[[drive]]\n";

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Named tools and user frames (issue 16): `tool`, `frame`, G54..G59, G10 L2, the frames
+// Named tools and user frames: `tool`, `frame`, G54..G59, G10 L2, the frames
 // file. Every expected pose is computed here from the chain's own FK and the offsets
 // typed (TCP = FK(q) * tool, pose in a frame = frame^-1 * pose in the base), never read
 // back from the console's code.

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// The GRBL dialect (issue 16): what a GRBL sender sees. Answers `ok` / `error:N` with a
+// The GRBL dialect: what a GRBL sender sees. Answers `ok` / `error:N` with a
 // [MSG:] line, the `<State|MPos|FS|Ov|Bf>` report, the $ commands, a motion line waiting
 // for room in a full queue (character-counting senders), bytes above 0x7F dropped, G4 P in
 // seconds, Ctrl-X as a soft reset; and on a real pty (ConsoleServer): the banner when a

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Jogging through the console (issue 16): `jog` and GRBL `$J=`, the deadman, jog cancel
+// Jogging through the console: `jog` and GRBL `$J=`, the deadman, jog cancel
 // (0x85), soft limits, tool jogs in the base and tool frames, and bad input. A puma560
 // with virtual drives on the sim bus, one control cycle per millisecond of ManualClock
 // (the rig runs the cycles); what is checked is what the controller commanded, cycle by

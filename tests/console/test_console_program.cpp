@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Teach points and programs through the console (issue 18), on the puma560 with virtual
+// Teach points and programs through the console, on the puma560 with virtual
 // drives (console_rig.hpp: mm and degrees): teach / points / point delete / movej @NAME /
 // movel @NAME, run (whole-program check first: a bad line 7 answers line 7 and nothing
 // moves), pause / step / resume / abort, stop and faults ending a program with its line,
@@ -502,7 +502,7 @@ TEST(ConsoleProgram, DigitalOutputsReachTheDriveAtTheRightTime) {
 // program (tests/motion/test_blend.cpp's points, on the puma560's own limits) run through the
 // console at speed=100, with blend= on the above-points and without: cycle time, the largest
 // distance from each programmed corner, peak sampled joint velocity / acceleration / jerk
-// against the limits. The controller blends the joint moves' corners (issue 18): the blended
+// against the limits. The controller blends the joint moves' corners: the blended
 // run must be at least 30 % shorter, each corner within its tolerance, every sampled peak
 // within the limits; the test asserts those and prints the figures.
 TEST(ConsoleProgram, FiguresTwentyPointPickAndPlace) {
@@ -592,11 +592,11 @@ TEST(ConsoleProgram, FiguresTwentyPointPickAndPlace) {
     CHECK(corner <= 1e-6 + (blend ? 1.0 : 0.0));  // the program's numbers: 10 digits of a degree
     r.events.clear();
   }
-  // the controller blends (issue 18): at least 30 % shorter than with exact stops
+  // the controller blends: at least 30 % shorter than with exact stops
   CHECK(cycle_s[1] <= 0.7 * cycle_s[0]);
 }
 
-// Blended lines and mixed corners in programs (issue 18): a movej with blend= before a movel
+// Blended lines and mixed corners in programs: a movej with blend= before a movel
 // goes as a path segment (the runner looks at the next motion), so joint->line and
 // line->joint corners blend; a G-code program's G64 P blends its G1 corners, G61 stops
 // exactly. Corners checked against FK of the samples and the program's own numbers.

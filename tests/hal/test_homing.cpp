@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Homing (issue 17): the CANopen master's homing state machine against virtual CiA 402 drives
+// Homing: the CANopen master's homing state machine against virtual CiA 402 drives
 // with simulated switches, index pulses and end stops, on the in-process bus; and the drive
 // behaviours real masters trip over (conformance quirks).
 #include <cmath>

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Interoperability (issue 15): what a CANopen master written elsewhere needs from our
+// Interoperability: what a CANopen master written elsewhere needs from our
 // virtual drives, and what our master needs to bring up drives that are not ours.
 //  - CiA 402 driven by SDO only: a controlword written by SDO acts when it is written,
 //    in PRE-OPERATIONAL as in OPERATIONAL, with no SYNC and no PDO.

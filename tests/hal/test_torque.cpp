@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Feed-forward and torque mode through the CANopen master (issue 20): RPDO2 with the CSP
+// Feed-forward and torque mode through the CANopen master: RPDO2 with the CSP
 // offsets 60B1h/60B2h and the target torque 6071h, 6060h/6061h in RPDO1/TPDO1, the switch
 // CSP <-> CST on virtual drives on the dynamic plant; what a default configuration sends is
 // unchanged. Expected values are computed here from the drive's own objects (6076h) and the

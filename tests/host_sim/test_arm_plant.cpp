@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// The dynamic plant (issue 20): virtual drives on one rigid-body arm. Driven through the
+// The dynamic plant: virtual drives on one rigid-body arm. Driven through the
 // CANopen master on the in-process bus with a ManualClock (deterministic), or directly.
 //  - a free swing with the drives disabled and the brakes off conserves energy;
 //  - a held pose under gravity shows the steady following error g / (kp kv) of the loops

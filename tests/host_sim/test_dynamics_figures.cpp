@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Figures of issue 20 on the dynamic plant (docs/dynamics.md "Using the model in the firmware",
+// Figures of the model-based control on the dynamic plant (docs/dynamics.md "Using the model in the firmware",
 // tests/bench/RESULTS.md), driven at the ServoBus level: the CANopen master over the in-process
 // bus to six virtual PUMA 560 drives on one rigid-body arm, a ManualClock, 1 kHz cycles (read,
 // setpoints, write + SYNC), setpoints from kin::plan_movej. What the controller will do, done here

@@ -716,7 +716,7 @@ TEST(IkFastPath, NarrowWrapMatchesTheRule) {
   CHECK(n > 150000);
 }
 
-// The quick exit of the reduced arms' wrap (IkJointWrap::in_abs, issue 19): an
+// The quick exit of the reduced arms' wrap (IkJointWrap::in_abs): an
 // angle w in (-pi, pi] with |w| < in_abs is what the rule (wrap_into_limits)
 // and the narrow form give for any reference, and within the limits widened
 // by 1e-9; it exists for the usual limits around zero and is off where two

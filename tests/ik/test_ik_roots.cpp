@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// The general path's real-root finder (issue 19, polynomial.cpp): isolation
+// The general path's real-root finder (polynomial.cpp): isolation
 // along the derivative chain, the companion matrix's eigenvalues as its
 // fallback.
 //  - Polynomials built from known roots (the reference: the roots they were

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Feed-forward, free-drive torque and the generalized-momentum collision observer (issue 20,
+// Feed-forward, free-drive torque and the generalized-momentum collision observer (
 // kinematics/include/servoarm/kinematics/collision.hpp).
 //  - feed_forward = M(q) qdd + c + g + friction assembled from the mass matrix (composite
 //    rigid body) and the Coriolis / gravity / friction terms, a different algorithm from the

@@ -222,7 +222,7 @@ TEST(Description, ErrorsGiveLineAndColumn) {
 }
 
 // Every file is read through kinematics/file_input.hpp: regular files only, capped,
-// UTF-8, bounded nesting, linear time; the toml11 faults of issue 15 are refused.
+// UTF-8, bounded nesting, linear time; the faults toml11 had are refused.
 TEST(Description, FileInputIsCheckedAndCapped) {
   auto err = [](const std::string& path) { return kin::load_robot(path).error; };
   CHECK_TEXT(err("/tmp/").find("/tmp/: is a directory") == 0, err("/tmp/").c_str());

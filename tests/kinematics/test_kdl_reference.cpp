@@ -15,7 +15,7 @@ TEST_GROUP(KdlReference){};
 TEST(KdlReference, ForwardKinematicsAndJacobianOfEveryBuiltinModel) {
   constexpr int kConfigs = 10000;
   int models = 0;
-  // The models of issue 19 must be among them (OPW and UR classes).
+  // The OPW and UR models must be among them (OPW and UR classes).
   int issue19 = 0;
   for (const auto& m : kin::builtin_models()) {
     for (const char* want : {"abb_irb2400", "kuka_kr6_r700", "ur5e", "ur10e"})

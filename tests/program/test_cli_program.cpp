@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// armctl program check as a process (issue 18): the issue's bad-input list refused with
+// armctl program check as a process: the issue's bad-input list refused with
 // file:line and exit 2, a good program answered with its moves and cycle time (checked
 // against the closed form of a jerk-limited rest-to-rest move), CRLF = LF.
 #include <unistd.h>

@@ -102,7 +102,7 @@ class ServoSpy final : public hal::ServoBus {
   hal::HomingKind homing_kind(std::size_t j) const override { return inner_.homing_kind(j); }
   const hal::JointFeedback& feedback(std::size_t j) const override { return inner_.feedback(j); }
   const char* last_error() const override { return inner_.last_error(); }
-  // Feed-forward and torque mode (issue 20): passed through.
+  // Feed-forward and torque mode: passed through.
   hal::JointCapabilities capabilities(std::size_t j) const override { return inner_.capabilities(j); }
   hal::Status set_feed_forward(std::size_t j, double v, double t) override { return inner_.set_feed_forward(j, v, t); }
   hal::Status set_target_torque(std::size_t j, double t) override { return inner_.set_target_torque(j, t); }

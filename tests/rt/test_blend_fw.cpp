@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Blended joint moves through the firmware (issue 18): console + controller in-process,
+// Blended joint moves through the firmware: console + controller in-process,
 // puma560 on the sim bus with virtual CiA 402 drives, single-threaded on a ManualClock,
 // the commanded joints sampled every control cycle and every cycle inside an allocation
 // counter. A 3-point movej sequence with blend= passes its intermediate corners within

@@ -826,7 +826,7 @@ TEST(Controller, AllocationFreeOverAFullRunWithEveryKindOfMove) {
 }
 
 // ---------------------------------------------------------------------------
-// Safety defects (issue 13): each test failed on the code before the fix.
+// Safety defects: each test failed on the code before the fix.
 // ---------------------------------------------------------------------------
 
 namespace {

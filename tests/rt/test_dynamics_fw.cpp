@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// The dynamic model through the firmware (issue 20, docs/dynamics.md#using-the-model-in-the-firmware):
+// The dynamic model through the firmware (docs/dynamics.md#using-the-model-in-the-firmware):
 // App + Controller + Console on six virtual PUMA 560 drives on the dynamic plant (host_sim ArmPlant),
 // a ManualClock, every control cycle counted for allocations, commands typed into the console:
 //  - feed-forward ([dynamics] feed_forward = "torque"): the largest following error (the drives'

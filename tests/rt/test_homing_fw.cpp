@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// The firmware's homing (issue 17) on the puma560 with virtual CiA 402 drives on the in-process
+// The firmware's homing on the puma560 with virtual CiA 402 drives on the in-process
 // bus (ManualClock, single-threaded; every control cycle counted for allocations): the homing
 // order's groups run one after another (seen from the drives' own 6061h mode display, not
 // from the controller), where each joint ends up against the simulated switch, a failing

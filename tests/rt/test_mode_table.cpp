@@ -319,7 +319,7 @@ Expect expected(Mode m, RequestOp op) {
   // The jog columns: outside the jogging mode a cancel / keep-alive only answers; a jog
   // starts from idle only.
   if (m != Mode::jogging && (op == RequestOp::jog_cancel || op == RequestOp::jog_keepalive)) return stays(ok, "not jogging");
-  // The freedrive columns outside the freedrive mode (issue 20). The table rigs other than the
+  // The freedrive columns outside the freedrive mode. The table rigs other than the
   // freedrive one have no model attached: an idle arm refuses saying so.
   if (op == RequestOp::freedrive_off && m != Mode::freedrive)
     return stays(ok, m == Mode::freedrive_end ? "free-drive ending" : "free-drive off");

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// fw::ModelControl (issue 20, docs/dynamics.md#using-the-model-in-the-firmware) at the ServoBus
+// fw::ModelControl (docs/dynamics.md#using-the-model-in-the-firmware) at the ServoBus
 // level: the CANopen master over the in-process bus to six virtual PUMA 560 drives on the
 // dynamic plant (host_sim ArmPlant), a ManualClock, 1 kHz cycles (read, ModelControl, setpoints,
 // write + SYNC), as tests/host_sim/test_dynamics_figures.cpp drives the kin:: calls by hand; here

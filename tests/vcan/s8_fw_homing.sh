@@ -1,6 +1,6 @@
 #!/bin/sh
 # SPDX-License-Identifier: Apache-2.0
-# Scenario 8, through the firmware (issue 17): armfw homes six armsim drives over real
+# Scenario 8, through the firmware: armfw homes six armsim drives over real
 # SocketCAN, driven by its console over ISO-TP (the kernel's isotpsend / isotpsniffer), with
 # mixed methods and homing.order = [[3], [2], [1], [4, 5, 6]]:
 #   joint 1 method 19 (positive home switch at +5 deg), joint 2 method 21 (negative home

@@ -1,6 +1,6 @@
 #!/bin/sh
 # SPDX-License-Identifier: Apache-2.0
-# Scenario 8 (issue 17): canmaster homes six armsim drives with mixed CiA 402 homing
+# Scenario 8: canmaster homes six armsim drives with mixed CiA 402 homing
 # methods over vcan0, all at once:
 #   node 1 method 19 (positive home switch at 30000 counts)
 #   node 2 method 21 (negative home switch, edge at -25000)

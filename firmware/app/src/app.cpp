@@ -196,7 +196,7 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   mc.boot_timeout = static_cast<hal::Duration>(cfg.boot_timeout_ms * 1e6);
   mc.boot_retry = static_cast<hal::Duration>(cfg.boot_retry_ms * 1e6);
   mc.state_timeout = static_cast<hal::Duration>(cfg.state_timeout_ms * 1e6);
-  // [dynamics] (issue 20): RPDO2 and TPDO2's torque only when a part asks for them (else the
+  // [dynamics]: RPDO2 and TPDO2's torque only when a part asks for them (else the
   // frames of before). Optional: a drive that lacks an object is brought up without it, and the
   // part that needs it is refused at boot() naming the joint (ModelControl::configure).
   if (cfg.feed_forward != "off") mc.rpdo2.velocity_offset = hal::PdoUse::optional;

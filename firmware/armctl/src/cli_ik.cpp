@@ -68,7 +68,7 @@ std::string branch_json(const kin::Branch& b) {
          ", \"wrist\": " + std::to_string(b.wrist) + "}";
 }
 
-// Which IK path solved it, said in the output (issue 19: a model that is
+// Which IK path solved it, said in the output (a model that is
 // almost but not exactly of a closed-form class must say it did not take it).
 const char* ik_path(kin::IkMethod m) {
   switch (m) {

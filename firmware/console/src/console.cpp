@@ -506,7 +506,7 @@ std::string Console::stats_text() const {
                       static_cast<unsigned long long>(t.cycles), static_cast<unsigned long long>(t.overruns),
                       ctl_.config().rate_hz, one(t.latency).c_str(), one(t.compute).c_str(), t.max_following_error / kDeg);
   if (t.estop_latency_ns >= 0) s += fmt(" estop_latency_us=%.1f", static_cast<double>(t.estop_latency_ns) / 1e3);
-  if (t.feed_forward != 0 || t.collision_on)  // issue 20: the model's figures, when a part runs
+  if (t.feed_forward != 0 || t.collision_on)  // the model's figures, when a part runs
     s += fmt(" feed_forward_cycles=%llu collision_peak=%.2f collision_peak_joint=%d collisions=%llu",
              static_cast<unsigned long long>(t.feed_forward_cycles), t.collision_peak, t.collision_peak_joint + 1,
              static_cast<unsigned long long>(t.collisions));

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// The console's teach points, program runner and recorder (issue 18; console.hpp, docs/programs.md).
+// The console's teach points, program runner and recorder (console.hpp, docs/programs.md).
 // Console thread: allocates, does file I/O; talks to the control thread only through the
 // motion queue and requests, like every other command.
 #include <algorithm>

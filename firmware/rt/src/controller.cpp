@@ -425,7 +425,7 @@ void Controller::supervise(TimePoint now) {
     }
   }
   if (model_ != nullptr) {
-    // Collision detection (issue 20): the momentum observer on this cycle's feedback, watched
+    // Collision detection: the momentum observer on this cycle's feedback, watched
     // while the drives follow our setpoints (not homing; ModelControl leaves out free-drive and
     // joints not enabled, and starts again afresh after any of them). On a verdict the arm stops
     // where it is (not along the ramp of the commanded motion, which would push on into what it
@@ -654,7 +654,7 @@ void Controller::run(Action a, const Request& r, TimePoint now) {
       emit(EventKind::homing, FaultCause::none, -1, 0, "homing aborted: disabled");
       reply(r.seq, RtResult::ok, "homing aborted; disabled");
       return;
-    // free-drive (issue 20)
+    // free-drive
     case Action::start_freedrive: start_freedrive(r); return;
     case Action::already_freedrive: reply(r.seq, RtResult::ok, "free-drive on"); return;
     case Action::refuse_freedrive_not_enabled:

@@ -37,7 +37,7 @@ struct IkJointWrap {
   std::uint8_t kind = 0;
   /// Revolute: an angle w in (-pi, pi] with |w| < in_abs is within the
   /// limits and its only 2*pi equivalent there, so every rule keeps it (the
-  /// reduced paths' quick exit, issue 19): 1e-9 or more inside the exact
+  /// reduced paths' quick exit): 1e-9 or more inside the exact
   /// bounds (a float rounded down: it fills the padding after kind); 0: none.
   /// Always below pi (make_joint_wrap), so any v with |v| < in_abs is already
   /// in (-pi, pi): its own wrap, kept as it is.
@@ -116,7 +116,7 @@ struct IkSolverData {
   bool ur_zrot = false;           ///< C2, C3 rotate about z: C1 Rz2 C2 Rz3 C3 = C1 Rz(m2 + m3 + gamma)
   double ur_gc = 1, ur_gs = 0;     ///< cos, sin gamma
   bool ur_tilt = false;  ///< u_z = cos(m5 - phi5) exactly (ur_u5 = (0, h = 1)): see ur.cpp wrist_roots
-  /// The reduced arms' 2-D closed forms (reduced.cpp, issue 19), set up by
+  /// The reduced arms' 2-D closed forms (reduced.cpp), set up by
   /// model.cpp's detect_reduced and checked there against the decomposition
   /// on sample joint values (off where the check fails: the 3-D cheap paths
   /// answer). In the frame F whose z is the parallel axes (planar_2r,
@@ -138,7 +138,7 @@ struct IkSolverData {
   /// spatial_3 with joints 1-3 revolute where solve_position takes its case A
   /// (one equation free of m2; TRR): that case's constants, so that
   /// reduced.cpp's solve_spatial_3_lanes solves the four configurations two
-  /// at a time (issue 19). The equation free of m2 is
+  /// at a time. The equation free of m2 is
   /// a3 - rhs + h3 cos(m3 - phase3) = 0 with rhs = |p0 - lambda ez|^2 (E1) or
   /// p0.z (E2); the other, (Mo b3) . (1, c2, s2) = 0 with Mo(0, 0) less its
   /// rhs; tol2: solve_basis's tolerance for that one.

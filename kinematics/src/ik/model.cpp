@@ -338,7 +338,7 @@ bool detect_spherical_wrist(IkModel& model) {
 
 // is_rotation() for a finite R (ik_solve_all checked that): R^T R - I by
 // its six distinct entries, det R by the triple product (half the
-// instructions of the general check; issue 19, the reduced arms' budget).
+// instructions of the general check; the reduced arms' time budget).
 // The six dot products two at a time, in lane pairs of columns (a.a, b.b),
 // (c.c, a.b), (a.c, b.c), each summed as Eigen's dot, (x0 y0 + x1 y1) + x2 y2,
 // and a branch-free max: about as many instructions as six scalar dots and

@@ -11,7 +11,7 @@
 #include "ik_detail.hpp"
 
 namespace servoarm::kin::detail {
-// Not inlined into the flattened solve_reduced (issue 19): the fallbacks are
+// Not inlined into the flattened solve_reduced: the fallbacks are
 // rare, and inlined they made every call pay for a larger frame and for
 // Eigen's cache-size query of the slow path's dynamic-size product.
 [[gnu::noinline]] void solve_reduced_slow(const IkModel& model, const Pose& target, const JointVector* q_ref,
@@ -75,7 +75,7 @@ inline double wrap_joint(const IkJointWrap& jw, double v, double ref, bool& in) 
   return q;
 }
 
-// planar_2r (RR) in closed form with the cheap check (issue 19: reduced arms
+// planar_2r (RR) in closed form with the cheap check (reduced arms
 // <= 100 ns): the coefficients of |f(m2)_xy|^2 are fitted at set-up
 // (IkSolverData::red_co); each root's tool point is verified through the
 // decomposition, |Rz(m1) C1 Rz(m2) w - p0| (exact to rounding, C0 rigid),
@@ -167,7 +167,7 @@ void solve_planar_2r(const IkModel& model, const Pose& target, const JointVector
 }
 
 // ---------------------------------------------------------------------------
-// The cheap path of planar_3, spatial_3 and pitch_4 (issue 19: reduced arms
+// The cheap path of planar_3, spatial_3 and pitch_4 (reduced arms
 // <= 100 ns for all their solutions). Each joint's motion as its (cos, sin)
 // pair (prismatic: the value in c), the angle by one atan2_poly; the
 // candidate verified through the decomposition C0 J1 C1 ... Jn Cn (exact to
@@ -471,7 +471,7 @@ void solve_spatial_3_fast(const IkModel& model, const Pose& target, const double
 }
 
 // ---------------------------------------------------------------------------
-// The 2-D closed forms (issue 19: reduced arms <= 100 ns for all their
+// The 2-D closed forms (reduced arms <= 100 ns for all their
 // solutions). In the frame F of the parallel axes (IkSolverData::Planar,
 // checked at set-up against the decomposition) the arm is a planar chain:
 // the distance of the point f = sa + Rz(b) w (or sa + b w) from the first
@@ -865,7 +865,7 @@ bool solve_planar_2d(const IkModel& model, const Pose& target, const JointVector
   if (!core_2d(m, pt, heading, !m.pl.pri, cp, sp, nullptr, s, ns, kst, &two, &pr)) return false;
   if (ns == -2) {
     // planar_3, two solutions (core_2d gave them in the lanes of pr): four
-    // angles in two atan2_poly_v2 (issue 19), not six in three -- the first
+    // angles in two atan2_poly_v2, not six in three -- the first
     // joint's two, then (revolute middle joint, RRR) t (its roots are
     // phase +- t, roots_rev) and the target heading psi, the last joint
     // psi - gamma - a - b (the heading left: its pair (cc, sc) is what the
@@ -1095,7 +1095,7 @@ bool solve_spatial_3_2d(const IkModel& model, const Pose& target, const double* 
   return true;
 }
 
-// spatial_3 (TRR) two configurations at a time (issue 19: four solutions
+// spatial_3 (TRR) two configurations at a time (four solutions
 // in <= 100 ns): solve_position's case A (IkSolverData::Spatial3) with the
 // two roots of m3 (the elbow) in the lanes of a v2d: for each, the two roots
 // of m2 (m2's equation with that m3), the point f = C1 Rz(m2) C2 Rz(m3) w3,
@@ -1268,7 +1268,7 @@ inline bool reduced_2d(const IkModel& model, const Pose& target, const double* m
   const IkSolverData& m = solver_data(model);
   if (!m.red_fast) return solve_reduced_slow(model, target, q_ref, res);
   // rr_planar: solve_planar_2r (atan2_poly_x2, its own 2-D check) is already
-  // the short form; the generic 2-D planar form was slower for it (issue 19:
+  // the short form; the generic 2-D planar form was slower for it (
   // 156-158 -> 166-170 ns), so it keeps its own path (before mref: it needs none).
   if (model.method == IkMethod::planar_2r) return solve_planar_2r(model, target, q_ref, res);
   double mref[kMaxJoints] = {0, 0, 0, 0, 0, 0, 0, 0};

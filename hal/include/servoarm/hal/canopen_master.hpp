@@ -11,7 +11,7 @@
 //                  0x6077 (i16); by default velocity + error code (6 bytes), each optional:
 //                  a drive without one is brought up without it; with none, TPDO2 stays off.
 // (statusword + position + velocity is 10 bytes, more than one classic frame holds.)
-//   RPDO2 0x300+n  what CanopenMasterConfig::rpdo2 asks for (off by default, issue 20): velocity
+//   RPDO2 0x300+n  what CanopenMasterConfig::rpdo2 asks for (off by default): velocity
 //                  offset 0x60B1 (i32), torque offset 0x60B2 (i16), target torque 0x6071 (i16);
 //                  torque mode adds 0x6060 (i8) to RPDO1 and 0x6061 (i8) to TPDO1 (7 bytes each).
 // RPDO1 and TPDO1's objects are required: a drive that lacks one is refused, naming it.
@@ -21,7 +21,7 @@
 // reported lost when nothing arrived for its `heartbeat_timeout`, checked at
 // every read() - so within timeout + one cycle.
 //
-// Homing (issue 17, docs/servo-bus.md#homing), per joint (CanopenJointConfig::homing):
+// Homing (docs/servo-bus.md#homing), per joint (CanopenJointConfig::homing):
 //   start():  6502h read (for HomingKind::cia402 joints, or every joint with
 //             check_supported_modes): a drive without CSP (bit 7), or without homing mode
 //             (bit 5) for a cia402 joint, is refused naming the joint; 6098h written (a
@@ -73,7 +73,7 @@ struct CanopenJointConfig {
   /// Motor rated torque in N m (motor side), the unit of 6071h/6077h/60B2h (per mille of it):
   /// 0 = read the drive's 6076h at bring-up (when a torque object is mapped).
   double rated_torque = 0;
-  /// Digital outputs (issue 18): map 60FEh:01 into RPDO3 (0x400 + node) and send
+  /// Digital outputs: map 60FEh:01 into RPDO3 (0x400 + node) and send
   /// ServoBus::set_digital_outputs' word with every write(); false = no RPDO3 (same frames).
   bool digital_outputs = false;
 };
@@ -95,7 +95,7 @@ struct FeedbackObjects {
   PdoUse torque = PdoUse::off;
 };
 
-/// The command objects bring-up maps beyond RPDO1's (issue 20). RPDO2 0x300+n carries, in this
+/// The command objects bring-up maps beyond RPDO1's. RPDO2 0x300+n carries, in this
 /// order, velocity offset 60B1h (INTEGER32, counts/s), torque offset 60B2h (INTEGER16, per mille
 /// of the rated torque) and target torque 6071h (INTEGER16, per mille): 8 bytes with all three.
 /// Torque mode also appends modes of operation 6060h (INTEGER8) to RPDO1 (7 bytes) and modes of
@@ -121,7 +121,7 @@ struct CanopenMasterConfig {
   Duration boot_retry = 200 * kMillisecond;
   /// Read 6502h (supported drive modes) at bring-up for every joint and refuse a drive without
   /// CSP (bit 7). Off by default: then only joints with HomingKind::cia402 read it (and need
-  /// bits 5 and 7), and a plain CSP bring-up sends the same frames as before issue 17.
+  /// bits 5 and 7), and a plain CSP bring-up sends the same frames as a master without homing.
   bool check_supported_modes = false;
   Duration state_timeout = 500 * kMillisecond;      ///< max time a drive may sit in one state while enabling
   bool produce_sync = true;

@@ -50,7 +50,7 @@ struct JointFeedback {
   Duration age = -1;            ///< now - last_feedback at the last read(), -1 = none yet
 };
 
-/// How a joint establishes its zero at power-up (issue 17, docs/servo-bus.md#homing).
+/// How a joint establishes its zero at power-up (docs/servo-bus.md#homing).
 enum class HomingKind : std::uint8_t {
   none,       ///< absolute encoder: the drive's position is valid at power-up, no homing
   cia402,     ///< the drive's own Homing Mode (6060h = 6) with method HomingSpec::method (6098h)
@@ -96,7 +96,7 @@ struct HomingProgress {
   std::uint8_t step = 0;        ///< protocol-specific step, for progress reports
 };
 
-/// Cyclic mode of one joint (issue 20, docs/servo-bus.md#feed-forward-and-torque-mode).
+/// Cyclic mode of one joint (docs/servo-bus.md#feed-forward-and-torque-mode).
 enum class CyclicMode : std::uint8_t {
   position,         ///< cyclic synchronous position (CiA 402 CSP, 6060h = 8): write()'s setpoints
   entering_torque,  ///< asked for torque mode (6060h = 10 sent), the drive does not show it yet
@@ -118,7 +118,7 @@ struct JointCapabilities {
   bool torque_offset = false;    ///< set_feed_forward's torque reaches the drive (60B2h mapped)
   bool torque_mode = false;      ///< set_torque_mode works (CST supported and 6060h/6061h/6071h mapped)
   bool measured_torque = false;  ///< JointFeedback::torque comes from the drive (6077h mapped)
-  bool digital_outputs = false;  ///< set_digital_outputs reaches the drive (CANopen: 60FEh:01 mapped, issue 18)
+  bool digital_outputs = false;  ///< set_digital_outputs reaches the drive (CANopen: 60FEh:01 mapped)
 };
 
 class ServoBus {
@@ -208,7 +208,7 @@ class ServoBus {
     return HomingKind::none;
   }
 
-  // --- Feed-forward and torque mode (issue 20). Defaults: not supported. -----------------
+  // --- Feed-forward and torque mode. Defaults: not supported. -----------------
 
   /// Joint `j`'s capabilities as brought up (after start()).
   virtual JointCapabilities capabilities(std::size_t j) const {

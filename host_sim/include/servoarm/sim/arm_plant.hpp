@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
-// ArmPlant: the virtual drives of one arm on a shared rigid-body plant (issue 20, "a
+// ArmPlant: the virtual drives of one arm on a shared rigid-body plant ("a
 // virtual arm with physics"). Each drive closes its own loops like a real CSP drive
 // (position loop P, velocity loop PI, torque limit, the CSP offsets 60B1h/60B2h) and
 // commands a joint torque; the arm's forward dynamics (kinematics' dynamics.hpp: mass

@@ -11,7 +11,7 @@
 // error monitoring (0x6065 window -> EMCY 0x8611 + fault). It behaves like a
 // drive, not an echo: the position it reports trails the setpoint.
 //
-// Homing (issue 17, docs/servo-bus.md#homing): simulated limit switches, a home switch,
+// Homing (docs/servo-bus.md#homing): simulated limit switches, a home switch,
 // an index pulse once per motor revolution and mechanical end stops (DriveSwitches, in the
 // drive's physical counts: the position before any homing); 60FDh reports the switches
 // (bit 0 negative limit, bit 1 positive limit, bit 2 home switch). Homing Mode (6060h = 6)
@@ -21,7 +21,7 @@
 // the mark. Methods 1-7, 11, 17-23, 27 (switches, with or without index), 33, 34 (index),
 // 35, 37 (current position); others are refused when written to 6098h (06090030h).
 //
-// Torque (issue 20): on the dynamic plant (ArmPlant) the drive also offers cyclic synchronous
+// Torque: on the dynamic plant (ArmPlant) the drive also offers cyclic synchronous
 // torque (6060h = 10, 6502h bit 9, target torque 6071h + 60B2h, saturated), and 6060h may be
 // mapped into an RPDO (a mode change at the SYNC); docs/servo-bus.md#feed-forward-and-torque-mode.
 //
@@ -89,7 +89,7 @@ struct DriveSwitches {
   double max_travel = 0;         ///< homing error after this much travel without the mark (0 = none)
 };
 
-/// Behaviours of real drives that masters trip over (issue 17). Set before power_on()
+/// Behaviours of real drives that masters trip over. Set before power_on()
 /// (boot_delay) or at any time (the others); set_quirks() keeps 6502h in step.
 struct DriveQuirks {
   bool no_homing = false;            ///< 6502h without homing mode (bit 5); 6060h = 6 aborts 06090030h
@@ -254,7 +254,7 @@ class VirtualDrive {
   std::uint64_t syncs_ = 0;
   std::uint64_t rng_;
   // Latched synchronous RPDO payloads (applied at the next SYNC).
-  std::array<CanFrame, 3> rpdo_latch_{};   // RPDO1..3 (RPDO3: digital outputs, issue 18)
+  std::array<CanFrame, 3> rpdo_latch_{};   // RPDO1..3 (RPDO3: digital outputs)
   std::array<bool, 3> rpdo_pending_{};
   // SDO server state.
   enum class SdoMode : std::uint8_t { idle, download, upload };

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Blended paths of straight-line and joint moves: line-to-line corners and mixed
-// joint->line / line->joint transitions (issue 18; joint-to-joint alone: blend.hpp).
+// joint->line / line->joint transitions (joint-to-joint alone: blend.hpp).
 // Pure math: no I/O, no clock, no heap, no exceptions; the caller owns time and capacity.
 //
 // Method: superposition, as blend.hpp, of rest-to-rest moves that overlap in time

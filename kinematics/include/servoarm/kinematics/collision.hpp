@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
-// Using the dynamic model in the control loop (issue 20): the feed-forward of a setpoint, the
+// Using the dynamic model in the control loop: the feed-forward of a setpoint, the
 // torque that compensates gravity and friction (hand guiding), and a collision observer.
 //
 // Collision observer: the generalized-momentum observer of De Luca and Mattone (ICRA 2003;

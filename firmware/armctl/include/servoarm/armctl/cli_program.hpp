@@ -3,14 +3,14 @@
 // armctl program check FILE --robot NAME|FILE [--config FILE] [--points FILE] [--programs DIR]
 //                       [--from q1..qn] [--unhomed] [--joint-speed PCT] [--linear-speed V]
 //
-// Whole-program validation offline (issue 18): the program is loaded as armfw loads it
+// Whole-program validation offline: the program is loaded as armfw loads it
 // (servoarm_program: the console's parser, repeats and calls expanded, @points resolved),
 // then every move is planned from the pose the previous line leaves, with the firmware's
 // own IK (firmware_ik_solver, as `armctl plan movel`): movej and park / G28 against the joint
 // limits, movel / G0 / G1 with movel's path check (IK at every knot, limits, branch,
 // singularity). By default as armfw's `run` runs a program: `home`, `enable`, `disable` are
 // refused inside it (home the arm before `run`) and an unhomed arm (--unhomed) runs nothing.
-// With --stream, as lines sent one by one to the console: `home` is the homing cycle (issue 17),
+// With --stream, as lines sent one by one to the console: `home` is the homing cycle,
 // as the console runs it: it leaves
 // each joint at its drive.homing.offset (method "none": where it was), refused when moves
 // are still queued (no `wait` before it), when the homed position is outside the joint's

@@ -52,7 +52,7 @@ struct DriveConfig {
   double homing_following_limit = 2.0;   ///< deg: hard_stop: |demanded - actual| that means contact
   double homing_torque_limit = 0.0;      ///< N m (N): hard_stop: |torque| that means contact; 0 = unused
   double homing_backoff = 2.0;           ///< deg: hard_stop: distance moved back from the contact
-  // dynamics (issue 20, docs/dynamics.md#using-the-model-in-the-firmware)
+  // dynamics (docs/dynamics.md#using-the-model-in-the-firmware)
   double rated_torque = 0;               ///< N m (N), motor side: the unit of 6071h/6077h/60B2h; 0 = the drive's 6076h
   double collision_threshold = 0;        ///< N m (N), joint side; 0 = dynamics.collision_threshold_pct of the rated torque
 
@@ -107,7 +107,7 @@ struct FwConfig {
   std::vector<std::vector<int>> homing_order;  ///< groups of 1-based joints, run one after the other; [] = one group of all
   double homing_unhomed_jog_pct = 25.0;  ///< joint jogs of an unhomed arm run at this percent of the speed asked
   double homing_travel_margin_deg = 10.0;  ///< deg (mm): homing fails beyond the joint's range + this from its start
-  // [dynamics] (issue 20): the model in the control loop; every part off by default (the frames of before)
+  // [dynamics]: the model in the control loop; every part off by default (the frames of before)
   std::string feed_forward = "off";    ///< "off", "velocity" (60B1h), "torque" (60B1h + model torque 60B2h)
   bool collision = false;              ///< momentum observer on the measured torque (6077h)
   double collision_gain = 100.0;       ///< 1/s: the observer's bandwidth

@@ -81,7 +81,7 @@ enum class Cmd : std::uint8_t {
   grbl_home,      ///< $H
   grbl_check,     ///< $C
   grbl_help,      ///< $
-  // Teach points and programs (issue 18; the console's program runner, console.hpp)
+  // Teach points and programs (the console's program runner, console.hpp)
   teach,          ///< `teach NAME`: store the current joints (and tool pose) as point NAME
   points,         ///< `points`: list the teach points
   point_delete,   ///< `point delete NAME`
@@ -92,7 +92,7 @@ enum class Cmd : std::uint8_t {
   abort,          ///< `abort`: stop the arm and end the program
   record,         ///< `record start [rate=Hz]` / `record stop NAME [tolerance=deg]`
   out,            ///< `out [NAME on|off]`; M62/M63 P<n> (at the next move's start), M64/M65 P<n> (at once)
-  // Hand guiding (issue 20, ModelControl)
+  // Hand guiding (ModelControl)
   freedrive,      ///< `freedrive`: free-drive, feed-forward and collision detection state (query)
   freedrive_on,   ///< `freedrive on`: the drives to torque mode, gravity compensated; the arm moves when pushed
   freedrive_off,  ///< `freedrive off`: back to position mode, holding where it stands

@@ -62,7 +62,7 @@ struct ConsoleConfig {
   /// Where the tools and user frames are kept (frames.hpp); "" = in memory only (they are
   /// lost at exit, and `tool` / `frame` say so). App resolves console.frames_file.
   std::string frames_file;
-  /// Teach points and programs (issue 18; App resolves programs.points_file and programs.dir):
+  /// Teach points and programs (App resolves programs.points_file and programs.dir):
   /// "" = points in memory only (lost at exit) / no programs folder (`run`, `programs` and
   /// `record stop` say so).
   std::string points_file;
@@ -172,7 +172,7 @@ class Console {
   std::string grbl_report(const Session& s) const;
   /// Human-readable statistics (the `stats` answer without "ok ").
   std::string stats_text() const;
-  /// `freedrive`: free-drive, feed-forward and collision detection (issue 20), and the refusals.
+  /// `freedrive`: free-drive, feed-forward and collision detection, and the refusals.
   std::string dynamics_text() const;
 
   /// Joint values of the end of the motion queue (or the commanded position).

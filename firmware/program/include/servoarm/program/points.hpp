@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
-// Teach points and the points file that keeps them (issue 18).
+// Teach points and the points file that keeps them.
 //
 // A teach point is a named joint vector, with the tool pose it gave when it was taught
 // and the names of the tool and user frame that were active then (`teach NAME` stores

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
-// Program files (issue 18): the native command language (the console's, one command per
+// Program files: the native command language (the console's, one command per
 // line) and G-code (as senders write it), loaded into a flat, bounded list of steps.
 //
 // Native language (files NAME.arm, or any name not ending in a G-code extension):

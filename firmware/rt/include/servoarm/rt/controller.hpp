@@ -84,7 +84,7 @@ class Controller {
   /// take the first feedback. Returns the bus status; on error bus.last_error() says why.
   hal::Status boot(TimePoint now, TimePoint deadline);
 
-  /// Set-up (before the control thread runs): the dynamic model the cycle uses (issue 20):
+  /// Set-up (before the control thread runs): the dynamic model the cycle uses:
   /// feed-forward of every setpoint, collision detection in the supervisor, the freedrive mode.
   /// Configured (ModelControl::configure) on this controller's bus; outlives the controller.
   /// nullptr (the default): none of them.
@@ -206,7 +206,7 @@ class Controller {
 
   hal::ServoBus& bus_;
   const kin::Chain& chain_;
-  ModelControl* model_ = nullptr;   ///< the dynamic model (issue 20), or none
+  ModelControl* model_ = nullptr;   ///< the dynamic model, or none
   ControllerConfig cfg_;
   kin::JointLimits limits_;
   int n_ = 0;

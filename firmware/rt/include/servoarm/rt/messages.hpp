@@ -32,7 +32,7 @@ enum class FaultCause : std::uint8_t {
   setpoint_velocity,  ///< setpoint step faster than the joint velocity limit
   feedback_invalid,   ///< no (or stale) position feedback from an enabled joint
   homing_failed,      ///< a joint's homing failed (timeout, homing error, refused): the arm is disabled
-  collision,          ///< the collision observer's residual on a joint above its threshold (issue 20)
+  collision,          ///< the collision observer's residual on a joint above its threshold
 };
 const char* to_string(FaultCause c);
 
@@ -109,7 +109,7 @@ struct PathMove {
   double override = 1.0;          ///< speed override it was planned with (a joint segment's; the move after a hold)
 };
 
-/// A digital output change (issue 18): joint `joint`'s drive outputs word (60FEh:01) becomes
+/// A digital output change: joint `joint`'s drive outputs word (60FEh:01) becomes
 /// (word & ~mask) | value.
 struct OutputChange {
   std::int8_t joint = -1;
@@ -139,7 +139,7 @@ struct MotionItem {
 /// jog_stopped: a jog ended on its own other than at its target (deadman, a joint limit,
 /// a singularity, no IK solution); the message says why and names the joint.
 /// homing: progress of the homing cycle (a joint started, homed, aborted; the cycle done), `joint` named.
-/// freedrive: free-drive on / off, or ended by a joint that left torque mode by itself (issue 20).
+/// freedrive: free-drive on / off, or ended by a joint that left torque mode by itself.
 enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state, jog_stopped, homing, freedrive };
 const char* to_string(EventKind k);
 
@@ -193,9 +193,9 @@ struct Telemetry {
   std::array<std::uint8_t, kin::kMaxJoints> homing_kind{};   ///< hal::HomingKind per joint
   std::uint8_t homing_group = 0;   ///< group running (1-based; 0 = none)
   std::uint8_t homing_groups = 0;  ///< groups of the running cycle
-  /// Digital outputs (issue 18): the 60FEh:01 word each joint's drive is sent.
+  /// Digital outputs: the 60FEh:01 word each joint's drive is sent.
   std::array<std::uint32_t, kin::kMaxJoints> outputs{};
-  // The dynamic model (issue 20, ModelControl): what runs, and the collision observer's figures.
+  // The dynamic model (ModelControl): what runs, and the collision observer's figures.
   std::uint8_t feed_forward = 0;   ///< FeedForwardKind sent now (0 = off: none, refused, or switched off)
   bool collision_on = false;       ///< the collision observer watches (detection on; it resets when not watched)
   std::uint8_t freedrive = 0;      ///< FreedrivePhase

@@ -39,7 +39,7 @@ const char* to_string(ArmState s);
 /// jog to rest (`jog stop`, GRBL 0x85); jog_keepalive: refresh a continuous jog's deadman.
 /// home: run the homing cycle (Request::joints: those joints as one group; 0 = every joint,
 /// group after group of ControllerConfig's homing order).
-/// freedrive_on / freedrive_off: hand guiding (issue 20; ModelControl, docs/dynamics.md).
+/// freedrive_on / freedrive_off: hand guiding (ModelControl, docs/dynamics.md).
 enum class RequestOp : std::uint8_t {
   enable, disable, stop, estop, reset, hold, resume, set_zero, jog, jog_cancel, jog_keepalive, home,
   freedrive_on, freedrive_off
@@ -203,7 +203,7 @@ enum class Action : std::uint8_t {
   abort_homing,           ///< abort the running joints (left unhomed) -> homing_abort, then idle
   abort_homing_disable,   ///< abort the running joints, power down -> disabled
   estop_abort_homing,     ///< abort the running joints, power down -> estop
-  // freedrive_on / freedrive_off (issue 20)
+  // freedrive_on / freedrive_off
   start_freedrive,        ///< idle, nothing queued: every drive to torque mode -> freedrive (refused naming the
                           ///< joint or the model when it cannot: bad_state)
   already_freedrive,      ///< ok "free-drive on"

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
-// The dynamic model in the control cycle (issue 20, docs/dynamics.md#using-the-model-in-the-firmware):
+// The dynamic model in the control cycle (docs/dynamics.md#using-the-model-in-the-firmware):
 // feed-forward of every setpoint (60B1h velocity / 60B2h torque offsets in CSP), hand guiding
 // (free-drive: CST with gravity + friction compensation and a virtual damping) and collision
 // detection (kin::CollisionObserver on the drives' measured torque 6077h).
