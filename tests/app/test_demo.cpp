@@ -40,9 +40,9 @@ std::string run_capture(const std::string& cmd, int& status) {
   return out;
 }
 
-// Under qemu or the sanitizers armfw runs 5-20x slower: a sample of the models (a 6-joint
+// Under the sanitizers armfw runs several times slower: a sample of the models (a 6-joint
 // arm, one with a prismatic joint, a planar one, a user's file), one at a time; the host
-// runs every model, four at a time.
+// runs every model, four at a time. (Not built for qemu: tests/app/CMakeLists.txt.)
 #if defined(SERVOARM_TEST_EMULATED) || defined(SERVOARM_TEST_INSTRUMENTED)
 constexpr bool kSample = true;
 constexpr int kWorkers = 1;
