@@ -29,16 +29,7 @@ struct Run {
   int status = -1;
 };
 
-std::string run_capture(const std::string& cmd, int& status) {
-  std::string out;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return out;
-  char buf[4096];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
-  status = pclose(p);
-  return out;
-}
+using servoarm::test::run_capture;
 
 // Under the sanitizers armfw runs several times slower: a sample of the models (a 6-joint
 // arm, one with a prismatic joint, a planar one, a user's file), one at a time; the host

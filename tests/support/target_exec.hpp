@@ -77,4 +77,17 @@ inline std::string with_emulator(const std::string& cmdline) {
   return emulator_prefix() + cmdline.substr(start);
 }
 
+/// Run `cmd` with the shell (popen), return what it printed on stdout; `status` gets
+/// pclose's wait status (WIFEXITED / WEXITSTATUS).
+inline std::string run_capture(const std::string& cmd, int& status) {
+  std::string out;
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return out;
+  char buf[4096];
+  std::size_t n;
+  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+  status = pclose(p);
+  return out;
+}
+
 }  // namespace servoarm::test
