@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "servoarm/sim/sim_plant.hpp"
 
+#include <algorithm>
+
 namespace servoarm::sim {
 
 SimPlant::SimPlant(hal::Clock& clock, const std::vector<std::uint8_t>& nodes, const MotorParams& motor) : clock_(clock) {
@@ -34,9 +36,22 @@ void SimPlant::step(hal::TimePoint now) {
     arm_->step(now);
     return;
   }
+  // Events in the order they happened (the frames at their arrival, then this step): a gap
+  // of more than pause_after_ between two of them is a pause.
+  auto reach = [this](hal::TimePoint at) {
+    if (pause_after_ > 0 && last_step_ != 0 && at - last_step_ > pause_after_) {
+      arm_->skip_to(at - pause_after_);
+      paused_ += at - pause_after_ - last_step_;
+    }
+    last_step_ = std::max(last_step_, at);
+  };
   hal::CanFrame f;
-  for (int i = 0; i < 4096 && sim_ep_->receive(f, 0) == hal::Status::ok; ++i)
-    arm_->handle(f, f.rx_time != 0 && f.rx_time <= now ? f.rx_time : now);
+  for (int i = 0; i < 4096 && sim_ep_->receive(f, 0) == hal::Status::ok; ++i) {
+    const hal::TimePoint at = f.rx_time != 0 && f.rx_time <= now ? f.rx_time : now;
+    reach(at);
+    arm_->handle(f, at);
+  }
+  reach(now);
   arm_->tick(now);
 }
 

@@ -1074,6 +1074,15 @@ void VirtualDrive::fit_motion(double velocity, double acceleration) {
     set(c402::kQuickStopDecel, std::uint32_t(std::clamp(std::round(motor_.max_accel), 1.0, 4294967295.0)));
 }
 
+void VirtualDrive::skip_to(TimePoint now) {
+  if (!plant_ && now > t_) t_ = now;
+}
+
+void ArmSim::skip_to(TimePoint now) {
+  for (auto& d : drives_) d.skip_to(now);
+  if (plant_) plant_->skip_to(now);
+}
+
 void ArmSim::place_within_limits(const kin::Chain& chain, std::span<const hal::JointScaling> scaling) {
   const std::size_t n = std::min({drives_.size(), scaling.size(), static_cast<std::size_t>(chain.n_joints)});
   for (std::size_t i = 0; i < n; ++i) {

@@ -14,6 +14,8 @@
 #include <thread>
 
 #include "console_rig.hpp"
+#include "sweep.hpp"
+#include "target_exec.hpp"
 #include "../program/tmp_dir.hpp"
 #include "servoarm/console/transport.hpp"
 #include "servoarm/kinematics/orientation.hpp"
@@ -25,7 +27,7 @@ using namespace servoarm::fw;
 
 // Wall-clock bounds: under qemu and the sanitizers every line takes several times longer
 // (the backlog's own length, which the checks also bound, is what tells the defect).
-#if defined(SERVOARM_TEST_EMULATED) || defined(SERVOARM_TEST_INSTRUMENTED)
+#if SERVOARM_TEST_EMULATED || SERVOARM_TEST_INSTRUMENTED  // (both 0 on the host: sweep.hpp, target_exec.hpp)
 constexpr double kSlow = 10.0;
 #else
 constexpr double kSlow = 1.0;

@@ -654,6 +654,8 @@ int main(int argc, char** argv) {
     // steps the virtual drives right before each cycle (docs: firmware, "--sim").
     plant->stop_thread();
     plant->set_frames_at_arrival(true);  // the drives sample at the SYNC, not at the next cycle
+    // a host that stalls the loop for more than two cycles pauses the virtual arm with it
+    plant->set_pause_after(2 * static_cast<hal::Duration>(1e9 / app.cfg.rate_hz + 0.5));
     loop.set_pre_cycle(&sim::SimPlant::step_hook, plant.get());
   }
 #endif
@@ -745,5 +747,10 @@ int main(int argc, char** argv) {
   if (plant) plant->stop_thread();
 #endif
   if (bench <= 0) std::fprintf(stderr, "armfw: exit: %s\n", app.console->stats_text().c_str());
+#ifdef SERVOARM_WITH_SIM
+  if (plant && plant->paused() > 0)
+    std::fprintf(stderr, "armfw: the virtual arm paused %.0f ms in all while the host did not run the loop\n",
+                 double(plant->paused()) * 1e-6);
+#endif
   return rc;
 }

@@ -94,6 +94,11 @@ class ArmPlant {
   /// Advance every attached drive's loop and the dynamics to `now` (whole steps). Called by
   /// any drive's tick/SYNC; re-entrant calls and times already reached return at once.
   void advance(hal::TimePoint now, hal::CanBus& bus);
+  /// The time up to `now` passes without motion (ArmSim::skip_to): the state stays, the
+  /// clock moves on.
+  void skip_to(hal::TimePoint now) {
+    if (now > t_) t_ = now;
+  }
 
   int joints() const { return n_; }
   const kin::JointVector& q() const { return q_; }

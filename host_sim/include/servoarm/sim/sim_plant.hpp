@@ -37,6 +37,15 @@ class SimPlant {
   /// and after a late cycle the feedback's sample would not be the SYNC's). Off by default (the
   /// in-process tests' timing: the drives act at the step after the SYNC).
   void set_frames_at_arrival(bool on) { at_arrival_ = on; }
+  /// With frames at arrival: when a step comes more than `gap` after the last frame or step
+  /// (the host did not run the loop: a loaded or instrumented build), the drives and the plant
+  /// pause for the rest of that time, as if the loop and the arm had stopped together, and
+  /// move on for `gap` only. A control loop that stalls on a real arm leaves the drives
+  /// holding the last setpoint and the joints braking against it, which on a busy host would
+  /// end the run in following-error faults that the firmware on its target never sees. 0
+  /// (the default): never pause. `paused()`: the time skipped so far.
+  void set_pause_after(hal::Duration gap) { pause_after_ = gap; }
+  hal::Duration paused() const { return paused_; }
   /// RtLoop::PreCycle that steps the plant `ctx` (a SimPlant*): what `armfw --sim` runs
   /// on the control thread once the drives are up (the drive thread is stopped then).
   static void step_hook(void* ctx, std::int64_t now_ns) { static_cast<SimPlant*>(ctx)->step(now_ns); }
@@ -71,6 +80,9 @@ class SimPlant {
   std::thread th_;
   std::atomic<bool> stop_{false};
   bool at_arrival_ = false;
+  hal::Duration pause_after_ = 0;
+  hal::Duration paused_ = 0;
+  hal::TimePoint last_step_ = 0;
   std::atomic<int> silent_{-1};
   std::atomic<int> hb_stop_{-1};
   std::atomic<int> emcy_joint_{-1};

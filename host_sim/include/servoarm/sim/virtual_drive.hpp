@@ -155,6 +155,9 @@ class VirtualDrive {
   /// The defaults fit a revolute joint (10 rev/s); a prismatic joint's counts per metre
   /// need more.
   void fit_motion(double velocity, double acceleration);
+  /// The time up to `now` passes without motion: the motor (first-order) stands where it is
+  /// and its clock moves on. ArmSim::skip_to for the plant.
+  void skip_to(TimePoint now);
   double velocity() const { return vel_; }        ///< counts/s
   std::int32_t target() const { return target_; } ///< counts, last applied at SYNC
   std::uint64_t syncs_seen() const { return syncs_; }
@@ -318,6 +321,9 @@ class ArmSim {
   void step(TimePoint now);
   void handle(const CanFrame& f, TimePoint now);
   void tick(TimePoint now);
+  /// The time up to `now` passes with the arm paused: every motor and the plant stand still
+  /// and their clocks move on (SimPlant's pause for a host that stalled the loop).
+  void skip_to(TimePoint now);
   std::size_t size() const { return drives_.size(); }
   VirtualDrive& at(std::size_t i) { return drives_[i]; }
   /// Drive with CANopen node id `node`, or nullptr.
