@@ -108,7 +108,8 @@ bool moves_arm(const Command& c) {
     case Cmd::freedrive:
     case Cmd::freedrive_off:
     case Cmd::collision_on:
-    case Cmd::collision_off: return false;
+    case Cmd::collision_off:
+    case Cmd::quit: return false;
   }
   return false;
 }
@@ -1049,6 +1050,16 @@ void Console::execute(Session& s, std::string_view line) {
   switch (c.cmd) {
     case Cmd::none: answer_ok(s); return;
     case Cmd::help: do_help(s, std::string_view(c.topic.data())); return;
+    case Cmd::quit:
+      // The session ends here (ConsoleServer ends it as its transport says); lines the client
+      // sent after it are not run, each answered so.
+      answer_ok(s, "bye");
+      for (const std::string& l : s.lines)
+        answer_error(s, CmdError::bad_state, fmt("'%s' not executed: the session ended (quit)", l.c_str()));
+      s.lines.clear();
+      s.hold_after = 0;
+      s.ended = true;
+      return;
     case Cmd::status: answer_ok(s, status_text()); return;
     case Cmd::enable:
       if (s.check_mode) {
