@@ -666,12 +666,12 @@ void Console::queue(Session& s, const MoveJoints& req) {
   const double dur = jm.plan.duration;  // (jm is replaced when the move goes as a blended segment)
   const PathResult pr = queue_path(s, m, false, goal, kin::Pose::Identity(), cfg_.cartesian, pct / 100.0,
                                    blend_of(req.blend, false));
-  const std::string blended = pr.used && pr.blend > 0 ? fmt(" blend=%.3fs", pr.blend) : std::string();
+  const std::string blended = pr.used && pr.blend > 0 ? " blend=" + fixed(pr.blend, kTimeDecimals) + "s" : std::string();
   if (!pr.used) jm.blend = blend_of(req.blend, false);  // the controller blends it into the next joint move
   if (s.check_mode) {  // checked, not queued
     s.check_tail = goal;
     if (!pr.used) s.check_time += dur, s.check_blends = false;
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs%s", dur, blended.c_str()));
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(dur, kTimeDecimals) + "s" + blended);
     return;
   }
   m->id = next_id_++;
@@ -681,7 +681,7 @@ void Console::queue(Session& s, const MoveJoints& req) {
   tail_id_ = m->id;
   shadow_tail_id_ = pr.used ? m->id : 0;
   tail_gen_ = ctl_.telemetry().generation;
-  answer_ok(s, fmt("queued id=%u duration=%.3fs%s", unsigned(tail_id_), dur, blended.c_str()));
+  answer_ok(s, fmt("queued id=%u duration=%ss%s", unsigned(tail_id_), fixed(dur, kTimeDecimals).c_str(), blended.c_str()));
 }
 
 // ---------------------------------------------------------------------------
@@ -809,11 +809,11 @@ void Console::queue(Session& s, const MoveLine& req) {
   const double slow = path.slowdown;
   const kin::JointVector goal = path.goal;
   const PathResult pr = queue_path(s, m, true, goal, target, cl, 1.0, blend_of(req.blend, true));
-  const std::string blended = pr.used && pr.blend > 0 ? fmt(" blend=%.3fs", pr.blend) : std::string();
+  const std::string blended = pr.used && pr.blend > 0 ? " blend=" + fixed(pr.blend, kTimeDecimals) + "s" : std::string();
   if (s.check_mode) {  // checked, not queued
     s.check_tail = goal;
     if (!pr.used) s.check_time += dur, s.check_blends = false;
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs%s", dur, blended.c_str()));
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(dur, kTimeDecimals) + "s" + blended);
     return;
   }
   feed_now_ = speed;
@@ -824,7 +824,7 @@ void Console::queue(Session& s, const MoveLine& req) {
   shadow_tail_id_ = pr.used ? m->id : 0;
   tail_gen_ = ctl_.telemetry().generation;
   ctl_.motions().commit();
-  answer_ok(s, fmt("queued id=%u duration=%.3fs%s%s", unsigned(tail_id_), dur,
+  answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(tail_id_), fixed(dur, kTimeDecimals).c_str(),
                    ms == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", slow).c_str() : "",
                    blended.c_str()));
 }
@@ -866,7 +866,7 @@ void Console::queue_dwell(Session& s, double secs) {
   tail_id_ = m->id;
   tail_gen_ = ctl_.telemetry().generation;
   ctl_.motions().commit();
-  answer_ok(s, fmt("queued id=%u dwell=%.3fs", unsigned(tail_id_), secs));
+  answer_ok(s, fmt("queued id=%u dwell=%ss", unsigned(tail_id_), fixed(secs, kTimeDecimals).c_str()));
 }
 
 // x y z [rx ry rz] in the active user frame (orientation kept when not given) -> the base frame.

@@ -556,7 +556,7 @@ void Console::tick() {
   const bool rest_now = ctl_.telemetry().state == ArmState::idle && ctl_.motions().empty();
   if (r.next >= r.prog.steps.size() && rest_now && at_rest && !r.ps.waiting) {
     const double secs = static_cast<double>(ctl_.telemetry().cycles - r.started_cycle) / ctl_.config().rate_hz;
-    end_program(fmt("done: %zu steps in %.3f s", r.prog.steps.size(), secs));
+    end_program("done: " + count_text(static_cast<long long>(r.prog.steps.size()), "step") + " in " + fixed(secs, kTimeDecimals) + " s");
     return;
   }
   if ((r.state == RunState::pausing || (r.state == RunState::stepping && r.step_fed)) && rest_now && at_rest)
