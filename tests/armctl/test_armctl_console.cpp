@@ -256,3 +256,31 @@ TEST(ArmctlConsole, AnswerWhileTypingRedrawsTheHalfTypedLine) {
   g_home.shrink_to_fit();
 }
 #endif
+
+// `quit` or `exit` typed at an interactive armctl console (a terminal: line editing when
+// built with libedit) goes to the firmware, whose answer is printed, and armctl ends (exit
+// status 0) without a Ctrl-D.
+TEST(ArmctlConsole, TypedQuitOrExitEndsTheInteractiveConsole) {
+  for (const char* word : {"quit", "exit"}) {
+    Pty fw, term;
+    char home[] = "/tmp/servoarm_armctl_home_XXXXXX";
+    CHECK(mkdtemp(home) != nullptr);
+    g_home = home;
+    Child c = start_armctl({"console", "--serial", fw.slave}, term.slave);
+    std::string screen;
+    CHECK_TEXT(term.read_until(screen, "arm> ", 10) || term.read_until(screen, "connected", 1), screen.c_str());
+    term.write_str(std::string(word) + "\r");
+    std::string got;
+    CHECK_TEXT(fw.read_until(got, std::string(word) + "\n", 10), got.c_str());
+    fw.write_str("ok bye\r\n");
+    std::string out;
+    const int rc = finish(c, out, 5);
+    term.read_until(screen, "ok bye", 1);
+    LONGS_EQUAL_TEXT(0, rc, (std::string(word) + ": armctl still running or failed:\n" + screen).c_str());
+    CHECK_TEXT(screen.find("ok bye") != std::string::npos, screen.c_str());
+    std::remove((g_home + "/.armctl_history").c_str());
+    rmdir(g_home.c_str());
+    g_home = std::string();
+    g_home.shrink_to_fit();
+  }
+}

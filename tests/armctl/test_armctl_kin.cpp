@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // armctl kin ... end to end. Expected values come from the seed closed forms
-// (rr_planar, seed 002 §4.1) and from the orientation definitions, not from
+// (rr_planar, V. Carrara, Apostila de Robótica, §4.1) and from the orientation definitions, not from
 // armctl's own code path.
 #include <cmath>
 #include <string>
@@ -122,4 +122,36 @@ TEST(ArmctlKin, MalformedDescriptionFileNamesFileJointAndKey) {
   LONGS_EQUAL(2, r.status);
   // file:line:column (the file input unit), the joint and the key
   CHECK_TEXT(r.err.find(path + ":9:9: joint 2: key 'alpah' is not known") != std::string::npos, r.err.c_str());
+}
+
+namespace {
+/// The number right after `key` in `text` (up to the next space), "" when absent.
+std::string number_after(const std::string& text, const std::string& key) {
+  const auto at = text.find(key);
+  if (at == std::string::npos) return "";
+  const auto b = at + key.size();
+  return text.substr(b, text.find_first_of(" ,)\n", b) - b);
+}
+/// "1.322": digits, a point, then exactly `decimals` digits.
+bool has_decimals(const std::string& v, std::size_t decimals) {
+  const auto dot = v.find('.');
+  if (v.empty() || dot == std::string::npos || v.size() - dot - 1 != decimals) return false;
+  for (std::size_t i = 0; i < v.size(); ++i)
+    if (i != dot && !(v[i] >= '0' && v[i] <= '9') && !(i == 0 && v[i] == '-')) return false;
+  return true;
+}
+}  // namespace
+
+// Times print to 1 ms and lengths and angles at the description units' resolution (0.001
+// mm, 0.001 deg), not to 10 significant digits: plan movej / movel and program check.
+TEST(ArmctlKin, TimesAndLengthsPrintAtTheirUnitsResolution) {
+  const auto j = run_command(kArmctl + " plan movej --robot puma560 --from 0 -45 180 0 45 0 --to 90 -90 150 45 -30 90");
+  LONGS_EQUAL(0, j.status);
+  const std::string dj = number_after(j.out, "duration ");
+  CHECK_TEXT(has_decimals(dj, 3), j.out.c_str());
+  const auto l = run_command(kArmctl + " plan movel --robot puma560 --from 10 -80 40 10 45 5 --to 20 -70 30 0 30 15");
+  LONGS_EQUAL(0, l.status);
+  CHECK_TEXT(has_decimals(number_after(l.out, "duration "), 3), l.out.c_str());
+  CHECK_TEXT(has_decimals(number_after(l.out, "line "), 3), l.out.c_str());
+  CHECK_TEXT(has_decimals(number_after(l.out, "rotation "), 3), l.out.c_str());
 }

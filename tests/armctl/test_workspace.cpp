@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// armctl kin workspace against the closed-form envelopes of the seeds' arms (seed 002
+// armctl kin workspace against the closed-form envelopes of the textbook arms (V. Carrara, Apostila de Robótica,
 // §3.8: the reach in a plane; §4.1-4.5 for the arms), cell by cell and by area; and the
 // SVG plots (kin workspace, plan movej, plan movel) rendered to PNG by rsvg-convert
 // (Debian librsvg2-bin) so a malformed file fails, with checks that a person can read
@@ -176,7 +176,7 @@ TEST_GROUP(Workspace) {
 };
 
 TEST(Workspace, PlanarArmsMatchTheirClosedFormEnvelopes) {
-  // rr_planar: the annulus between |a1 - a2| and a1 + a2 (seed 002 §4.1, joints +-180 deg)
+  // rr_planar: the annulus between |a1 - a2| and a1 + a2 (V. Carrara, Apostila de Robótica, §4.1, joints +-180 deg)
   check_envelope({"rr_planar", "", "rr_planar xy", ring(0, 0, 50, 550), M_PI * (550.0 * 550 - 50.0 * 50)});
   // rrr_planar: a1 - a2 - a3 < 0, so the full disk of radius a1 + a2 + a3 (§4.2)
   check_envelope({"rrr_planar", "xy", "rrr_planar xy", ring(0, 0, -1, 650), M_PI * 650.0 * 650});
@@ -188,7 +188,7 @@ TEST(Workspace, PlanarArmsMatchTheirClosedFormEnvelopes) {
                                    "name = \"rr_limited\"\nconvention = \"standard\"\nlength_unit = \"mm\"\nangle_unit = \"deg\"\n"
                                    "[[joint]]\ntype = \"revolute\"\na = 300\nlimits = [-90, 90]\n"
                                    "[[joint]]\ntype = \"revolute\"\na = 250\nlimits = [0, 135]\n");
-  // its edge: the image of the joint box's boundary (seed 002 §4.1: x = a1 c1 + a2 c12, y = a1 s1 + a2 s12)
+  // its edge: the image of the joint box's boundary (V. Carrara, Apostila de Robótica, §4.1: x = a1 c1 + a2 c12, y = a1 s1 + a2 s12)
   std::vector<std::array<double, 2>> edge;
   auto rr = [&](double q1, double q2) {
     edge.push_back({300 * std::cos(q1 * kDeg) + 250 * std::cos((q1 + q2) * kDeg),

@@ -83,7 +83,7 @@ TEST(CommandTable, EveryEntryIsReachableByTheParser) {
 TEST(CommandTable, EveryEntryAppearsInHelp) {
   std::string all;
   CHECK(help_text("", "units: test", all));
-  CHECK_TEXT(all.rfind("commands (one per line", 0) == 0, all.c_str());
+  CHECK_TEXT(all.find("\ncommands (one per line") != std::string::npos, all.c_str());  // after the overview
   CHECK_TEXT(has(all, "\nunits: test\n"), all.c_str());
   for (const CommandSpec& e : kCommands) {
     CHECK_TEXT(has(all, std::string("  ") + e.usage + " "), e.usage);
@@ -150,5 +150,55 @@ TEST(CommandTable, EveryGrblEntryIsReachableAndListed) {
     GcodeModal m;
     Command c;
     CHECK_TEXT(!parse_line(bad, kN, m, c).ok(), bad);
+  }
+}
+
+namespace {
+std::size_t line_count(const std::string& s) {
+  std::size_t n = 0;
+  for (char ch : s) n += ch == '\n';
+  return n;
+}
+}  // namespace
+
+// `help` opens with a short overview: what the console is, the commands to start with,
+// how to stop the arm and how to end the session (quit, exit, Ctrl-D), and `help CMD`
+// for the rest; then the one-line list of every command.
+TEST(CommandTable, HelpOpensWithAShortOverview) {
+  std::string all;
+  CHECK(help_text("", "units: test", all));
+  const std::size_t list = all.find("commands (one per line");
+  CHECK_TEXT(list != std::string::npos && list > 0, all.c_str());
+  const std::string overview = all.substr(0, list);
+  CHECK_TEXT(line_count(overview) <= 14, overview.c_str());  // short: a screen's top
+  for (const char* w : {"help CMD", "status", "enable", "home", "movej", "stop", "Ctrl-X", "quit", "exit", "Ctrl-D"})
+    CHECK_TEXT(has(overview, w), (std::string(w) + " missing from:\n" + overview).c_str());
+  // the details of a command are in `help CMD`, not in `help`
+  for (const CommandSpec& e : kCommands)
+    if (*e.details) CHECK_TEXT(!has(all, e.details), e.name);
+}
+
+// `quit` and `exit` are commands of the table (one entry, `exit` its other name): they
+// parse, take no argument, and `help quit` / `help exit` describe them per transport.
+TEST(CommandTable, QuitAndExitEndTheSession) {
+  const CommandSpec* quit = nullptr;
+  for (const CommandSpec& e : kCommands)
+    if (std::string(e.name) == "quit") quit = &e;
+  if (quit == nullptr) FAIL("no quit entry in the command table");
+  for (const char* line : {"quit", "exit", "QUIT", "Exit"}) {
+    GcodeModal m;
+    Command c;
+    const ParseResult r = parse_line(line, kN, m, c);
+    if (!r.ok()) FAIL((std::string(line) + " refused: " + r.message.data()).c_str());
+    CHECK_TEXT(c.cmd == quit->cmd, line);
+  }
+  GcodeModal m;
+  Command c;
+  const ParseResult r = parse_line("exit now", kN, m, c);
+  CHECK_TEXT(!r.ok() && r.error == CmdError::arg_count, r.message.data());
+  for (const char* topic : {"quit", "exit"}) {
+    std::string h;
+    CHECK_TEXT(help_text(topic, "", h), topic);
+    CHECK_TEXT(has(h, "quit") && has(h, "exit") && has(h, "stdin") && has(h, "Ctrl-D"), h.c_str());
   }
 }

@@ -328,3 +328,46 @@ TEST(ConsoleServer, CheckingALongProgramNeverBlocksTheConsoles) {
   }
   test::remove_tree(dir);
 }
+
+// `quit` on stdin: answered `ok bye`, the lines sent after it answered as not run, and the
+// server then ends as at end of input although stdin is still open (armfw exits).
+TEST(ConsoleServer, QuitOnStdinEndsTheServerAsEndOfInputDoes) {
+  test::ConsoleRig r;
+  PipeClient in("stdin");
+  ConsoleServer srv(*r.app.console, {&in.t});
+  in.send("status\nquit\nstatus\n");
+  bool ended = false;
+  for (int i = 0; i < 400 && !ended; ++i) {
+    ended = !srv.round(5, true);
+    in.read_some();
+  }
+  in.read_some();
+  std::printf("\n%s", in.got.c_str());
+  CHECK_TEXT(ended, ("the server did not end after quit:\n" + in.got).c_str());
+  CHECK_TEXT(count_lines_starting(in.got, "ok state=") == 1, in.got.c_str());
+  CHECK_TEXT(has(in.got, "ok bye\n"), in.got.c_str());
+  CHECK_TEXT(has(in.got, "error: bad_state 'status' not executed"), in.got.c_str());
+}
+
+// `exit` on a serial line (or a pty, the CAN console): that client's session ends (its
+// G-code modes start afresh), the client stays connected and its next line is answered;
+// the server goes on.
+TEST(ConsoleServer, ExitOnASerialLineEndsThatSessionOnly) {
+  test::ConsoleRig r;
+  PipeClient a("serial"), b("pty-less");
+  ConsoleServer srv(*r.app.console, {&a.t, &b.t});
+  a.send("G91\n");
+  b.send("G91\n");
+  for (int i = 0; i < 50; ++i) srv.round(2, false), a.read_some(), b.read_some();
+  CHECK(srv.session(0).modal.relative && srv.session(1).modal.relative);
+  a.send("exit\n");
+  bool going = true;
+  for (int i = 0; i < 50; ++i) going = srv.round(2, false) && going, a.read_some();
+  CHECK(going);
+  CHECK_TEXT(has(a.got, "ok bye\n"), a.got.c_str());
+  CHECK_TEXT(!srv.session(0).modal.relative, "the session's G91 outlived exit");
+  CHECK_TEXT(srv.session(1).modal.relative, "another client's session changed");
+  a.send("status\n");
+  for (int i = 0; i < 50; ++i) srv.round(2, false), a.read_some();
+  CHECK_TEXT(count_lines_starting(a.got, "ok state=") == 1, a.got.c_str());
+}

@@ -3,7 +3,9 @@
 // control thread's texts (replies, events, fault texts) produce, rendered with the
 // longest names and values, is either whole or ends with "..." after a whole word.
 #include <cctype>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -12,6 +14,7 @@
 #include "servoarm/console/command_table.hpp"
 #include "servoarm/console/commands.hpp"
 #include "servoarm/console/text.hpp"
+#include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/rt/model_control.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -168,4 +171,116 @@ TEST(ConsoleText, CutsFallBetweenWords) {
   CHECK_EQUAL(std::string("short and..."), bounded_text(fits));
   char room[32] = "short and whole";
   CHECK_EQUAL(std::string("short and whole"), bounded_text(room));
+}
+
+namespace {
+/// A signed zero as an answer prints it: '-' then only zeros (and a '.'), e.g. "-0.000",
+/// "-0.0", "-0" — a number that rounded to zero but kept its sign.
+std::string negative_zero_in(const std::string& text) {
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    if (text[i] != '-' || i + 1 >= text.size() || text[i + 1] != '0') continue;
+    if (i > 0 && (std::isalnum(static_cast<unsigned char>(text[i - 1])) || text[i - 1] == '_')) continue;
+    std::size_t k = i + 1;
+    while (k < text.size() && (text[k] == '0' || text[k] == '.')) ++k;
+    if (k == text.size() || !std::isdigit(static_cast<unsigned char>(text[k]))) {
+      const std::size_t a = text.rfind('\n', i), b = text.find('\n', i);
+      return text.substr(a == std::string::npos ? 0 : a + 1, b == std::string::npos ? std::string::npos : b - a - 1);
+    }
+  }
+  return "";
+}
+}  // namespace
+
+// Values that round to zero print as 0.000 in every answer, never -0.000: joints at
+// -0.0000001 and -0.0, a tool and a user frame whose values are -0.0000001 (so the pose in
+// the frame is a tiny negative), in status, fk, wait's `ok idle`, M114, the reports, points,
+// tool, frame, $# and limits, in both dialects.
+TEST(ConsoleText, NoNegativeZeroInAnyAnswer) {
+  test::ConsoleRig rig;
+  rig.enable();
+  std::string all, answers;  // the transcript (lines typed too), the answers alone
+  const auto run = [&](const std::string& line) {
+    const std::string a = rig.cmd(line);
+    all += "> " + line + "\n" + a;
+    answers += a;
+    return a;
+  };
+  const std::string z = "-0.0000001";
+  CHECK_TEXT(test::answer_ok(run("movej " + z + " -0.0 -0 " + z + " 30 " + z)), all.c_str());
+  run("wait");
+  run("status");
+  run("fk");
+  run("fk " + z + " -0.0 " + z + " -0 " + z + " " + z);
+  run("M114");
+  run("teach zero");
+  run("points");
+  run("tool tz " + z + " -0.0 " + z + " -0 " + z + " " + z);
+  run("tool");
+  run("fk");
+  run("frame fz " + z + " -0.0 " + z + " -0 " + z + " " + z);
+  run("frame");
+  run("status");
+  run("M114");
+  run("G10 L2 P1 X" + z + " Y-0.0 Z" + z);
+  run("$#");
+  run("limits");
+  answers += rig.app.console->grbl_report() + "\n" + rig.app.console->status_text() + "\n";
+  rig.s.dialect = Dialect::grbl;
+  answers += rig.app.console->grbl_report(rig.s) + "\n";
+  run("M114");
+  all += answers;
+  const std::string bad = negative_zero_in(answers);
+  if (!bad.empty()) {
+    std::printf("\n%s", all.c_str());
+    FAIL(("a signed zero in: " + bad).c_str());
+  }
+}
+
+namespace {
+/// The value of `key` ("rx=") in an answer, NAN when absent.
+double value_after(const std::string& text, const std::string& key) {
+  const auto at = text.find(" " + key);
+  if (at == std::string::npos) return NAN;
+  return std::strtod(text.c_str() + at + 1 + key.size(), nullptr);
+}
+}  // namespace
+
+// At a gimbal lock (ry = 90: rx and rz not unique) `status` (from the measured joints)
+// prints the same rx ry rz as `wait`'s answer `ok idle x=...` (from the move's goal) and
+// M114 the same A B C: one conversion for every answer. The tool is chosen so that a short
+// movel ends exactly at ry = 90; the virtual drives' encoders put the measured joints a
+// fraction of a count off the goal.
+TEST(ConsoleText, GimbalLockPrintsOneOrientationInStatusWaitAndM114) {
+  test::ConsoleRig rig;
+  rig.enable();
+  CHECK(test::answer_ok(rig.cmd("movej 20 -40 160 10 -50 30")));
+  CHECK(test::answer_ok(rig.cmd("wait")));
+  kin::JointVector q0(6);
+  q0 << 20, -40, 160, 10, -50, 30;
+  q0 *= M_PI / 180.0;
+  const kin::Pose f = rig.app.console->pose_in_frame(q0);  // the flange (tool0), base frame
+  const Eigen::Matrix3d want = kin::rotation_from_rpy(0, M_PI / 2, 0);
+  const Eigen::Vector3d t = kin::rpy_from_rotation(f.linear().transpose() * want) * 180.0 / M_PI;
+  char line[200];
+  std::snprintf(line, sizeof line, "tool lock 0 0 0 %.6f %.6f %.6f", t[0], t[1], t[2]);
+  CHECK_TEXT(test::answer_ok(rig.cmd(line)), line);
+  CHECK(test::answer_ok(rig.cmd("tool lock")));
+  std::snprintf(line, sizeof line, "movel %.3f %.3f %.3f 0 90 0 speed=10", f.translation().x() * 1e3,
+                f.translation().y() * 1e3, f.translation().z() * 1e3);
+  const std::string moved = rig.cmd(line);
+  CHECK_TEXT(test::answer_ok(moved), (std::string(line) + " -> " + moved).c_str());
+  const std::string idle = rig.cmd("wait");
+  for (int i = 0; i < 500; ++i) rig.cycle();  // the drives settle on the goal
+  const std::string status = rig.cmd("status");
+  const std::string m114 = rig.cmd("M114");
+  const std::string all = idle + status + m114;
+  std::printf("\n%s", all.c_str());
+  DOUBLES_EQUAL_TEXT(90.0, value_after(idle, "ry="), 1e-3, all.c_str());
+  for (const char* k : {"rx=", "ry=", "rz="})
+    DOUBLES_EQUAL_TEXT(value_after(idle, k), value_after(status, k), 0.01, (std::string(k) + "\n" + all).c_str());
+  const auto a = m114.find("A:"), b = m114.find("B:"), c = m114.find("C:");
+  CHECK_TEXT(a != std::string::npos && b != std::string::npos && c != std::string::npos, m114.c_str());
+  DOUBLES_EQUAL_TEXT(value_after(idle, "rx="), std::strtod(m114.c_str() + a + 2, nullptr), 0.01, all.c_str());
+  DOUBLES_EQUAL_TEXT(value_after(idle, "ry="), std::strtod(m114.c_str() + b + 2, nullptr), 0.01, all.c_str());
+  DOUBLES_EQUAL_TEXT(value_after(idle, "rz="), std::strtod(m114.c_str() + c + 2, nullptr), 0.01, all.c_str());
 }

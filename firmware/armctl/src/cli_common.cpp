@@ -2,6 +2,8 @@
 #include "servoarm/armctl/cli_common.hpp"
 
 #include "servoarm/console/number.hpp"
+#include "servoarm/console/text.hpp"
+#include "servoarm/console/units.hpp"
 
 #include <sys/stat.h>
 
@@ -29,6 +31,10 @@ std::string num(double v) {
   std::snprintf(buf, sizeof buf, "%.10g", v);
   return buf;
 }
+
+std::string seconds_text(double s) { return fixed(s, kTimeDecimals); }
+std::string length_text(const kin::Chain& chain, double user) { return fixed(user, units_of(chain).length_decimals()); }
+std::string angle_text(const kin::Chain& chain, double user) { return fixed(user, units_of(chain).angle_decimals()); }
 
 bool all_finite(const double* v, int n) {
   for (int i = 0; i < n; ++i)

@@ -19,6 +19,7 @@
 
 #include "servoarm/armctl/cli_common.hpp"
 #include "servoarm/console/command_table.hpp"
+#include "servoarm/console/number.hpp"
 
 #ifdef SERVOARM_CLI_CAN
 #include "servoarm/hal/serial_port.hpp"
@@ -69,7 +70,7 @@ const char* kConsoleUsage =
     "  -c LINE         send LINE, print the answer (up to its ok / error:); repeatable;\n"
     "                  without -c: interactive (line editing and history in ~/.armctl_history\n"
     "                  when built with libedit; answers that arrive while a line is half typed\n"
-    "                  are printed above it and the line is redrawn; Ctrl-D quits)\n"
+    "                  are printed above it and the line is redrawn; quit, exit or Ctrl-D ends it)\n"
     "  realtime characters, as a -c LINE or a typed line of their own: ?, !, ~, ^X (Ctrl-X,\n"
     "                  the e-stop), 0x85 (jog cancel; the bytes 0x18 and 0x85 themselves too).\n"
     "                  They have no ok: -c '?' prints the status report that comes back;\n"
@@ -297,11 +298,24 @@ int run_one(Link& link, std::string& buf, const std::string& l, double timeout_s
   return await_report(link, buf, timeout_s);
 }
 
+// A typed `quit` or `exit` (the command table's entry and its aliases): armctl sends it (armfw
+// ends this client's session and answers), prints the answer and ends.
+bool ends_session(const std::string& line) {
+  const std::size_t a = line.find_first_not_of(" \t"), b = line.find_last_not_of(" \t\r");
+  if (a == std::string::npos) return false;
+  const std::string_view w = std::string_view(line).substr(a, b + 1 - a);
+  if (ieq(w, "quit")) return true;
+  for (const CommandAlias& x : kCommandAliases)
+    if (ieq(w, x.alias) && std::string_view(x.name) == "quit") return true;
+  return false;
+}
+
 // Interactive without line editing (stdin not a terminal, or no libedit): stdin
 // lines to the device, everything from the device to stdout.
 int interactive_plain(Link& link) {
   std::string in, buf;
-  for (;;) {
+  bool quit = false;
+  while (!quit) {
     bool key = false;
     if (!wait_and_pump(link, buf, -1, 0, &key)) {
       std::fprintf(stderr, "armctl: %s\n", link.error.c_str());
@@ -318,13 +332,14 @@ int interactive_plain(Link& link) {
     if (r <= 0) break;
     in.append(tmp, static_cast<std::size_t>(r));
     std::size_t nl;
-    while ((nl = in.find('\n')) != std::string::npos) {
+    while (!quit && (nl = in.find('\n')) != std::string::npos) {
       const std::string line = in.substr(0, nl);
       in.erase(0, nl + 1);
       if (!link.send(device_bytes(line))) {
         std::fprintf(stderr, "armctl: %s\n", link.error.c_str());
         return kExitUsage;
       }
+      quit = ends_session(line);
     }
   }
   // Let answers to the last lines arrive (a script piped in).
@@ -442,6 +457,7 @@ int interactive_edit(Link& link, const std::string& prompt) {
       c.failed = true;
       break;
     }
+    if (ends_session(l)) break;
   }
   el_end(el);  // the terminal back as it was
   std::fputc('\n', stdout);
@@ -554,7 +570,7 @@ int console_main(int argc, char** argv) {
     }
     return rc;
   }
-  std::fprintf(stderr, "armctl: connected to %s (Ctrl-D quits; ?, !, ~ alone on a line are realtime; ^X e-stop)\n",
+  std::fprintf(stderr, "armctl: connected to %s (quit, exit or Ctrl-D ends; ?, !, ~ alone on a line are realtime; ^X e-stop)\n",
                where.c_str());
 #ifdef SERVOARM_CLI_LIBEDIT
   if (isatty(0) && isatty(1)) return interactive_edit(*link, "arm> ");

@@ -32,7 +32,7 @@ const char* kIkUsage =
     "  the limits, 2 bad usage or input.\n";
 const char* kPrecisionUsage =
     "usage: armctl kin precision --robot NAME|FILE --resolution d1..dn q1..qn [--json]\n"
-    "  Worst-case tool position error from per-joint resolutions (seed 002 3.14):\n"
+    "  Worst-case tool position error from per-joint resolutions (Carrara, Apostila de Robótica, 3.14):\n"
     "  dw = sum_i |dw/dq_i| dq_i at the configuration q, in the description's length\n"
     "  unit. Resolutions and joints in the joint units (built-ins: deg / mm).\n";
 

@@ -14,6 +14,7 @@
 
 #include "servoarm/armctl/cli_common.hpp"
 #include "servoarm/armctl/cli_svg.hpp"
+#include "servoarm/console/text.hpp"
 #include "servoarm/console/ik_options.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -168,7 +169,7 @@ int check_duration(const Args& a, double duration) {
   if (!(duration <= a.max_duration)) {
     std::string why;
     for (const std::string& l : a.lowered) why += (why.empty() ? "" : ", ") + l;
-    std::fprintf(stderr, "armctl: the move would take %s s, more than --max-duration %s s%s\n", num(duration).c_str(),
+    std::fprintf(stderr, "armctl: the move would take %s s, more than --max-duration %s s%s\n", seconds_text(duration).c_str(),
                  num(a.max_duration).c_str(),
                  why.empty() ? " (the description's limits are too low for it)"
                              : (": " + why + (a.lowered.size() > 1 ? " (one of them is too low)" : " is too low")).c_str());
@@ -177,7 +178,7 @@ int check_duration(const Args& a, double duration) {
   const double n = std::floor(duration * a.rate) + 2;
   if (n > static_cast<double>(kMaxSamples)) {
     std::fprintf(stderr, "armctl: --rate %s Hz over the %s s move gives %s samples, more than %ld: lower --rate\n",
-                 num(a.rate).c_str(), num(duration).c_str(), num(n).c_str(), kMaxSamples);
+                 num(a.rate).c_str(), seconds_text(duration).c_str(), num(n).c_str(), kMaxSamples);
     return kExitUsage;
   }
   return -1;
@@ -415,7 +416,7 @@ int cli_plan(int argc, char** argv) {
       return kExitFailed;
     }
     if (const int rc = check_duration(a, tr.duration); rc >= 0) return rc;
-    std::printf("movej on %s: duration %s s (override %s %%)\n", chain.name.data(), num(tr.duration).c_str(),
+    std::printf("movej on %s: duration %s s (override %s %%)\n", chain.name.data(), seconds_text(tr.duration).c_str(),
                 num(a.override_pct).c_str());
     const Samples s = sample_all(chain, tr.duration, a.rate, [&tr](double t, kin::JointVector& q, kin::JointVector& v,
                                                                   kin::JointVector& acc) { tr.sample(t, q, v, acc); });
@@ -470,8 +471,9 @@ int cli_plan(int argc, char** argv) {
   const double L = chain.length_unit;
   if (!kin::is_ok(st)) {
     std::fprintf(stderr, "armctl: movel refused: %s at %s %% of the line, tool at (%s, %s, %s) %s", kin::to_string(st),
-                 num(100 * rep.s).c_str(), num(rep.position.x() / L).c_str(), num(rep.position.y() / L).c_str(),
-                 num(rep.position.z() / L).c_str(), length_unit_name(chain));
+                 fixed(100 * rep.s, 1).c_str(), length_text(chain, rep.position.x() / L).c_str(),
+                 length_text(chain, rep.position.y() / L).c_str(), length_text(chain, rep.position.z() / L).c_str(),
+                 length_unit_name(chain));
     if (rep.joint >= 0) std::fprintf(stderr, ", joint %d", rep.joint + 1);
     if (rep.slowdown > 1) std::fprintf(stderr, ", would need %sx slower", num(rep.slowdown).c_str());
     std::fprintf(stderr, "\n");
@@ -479,11 +481,11 @@ int cli_plan(int argc, char** argv) {
   }
   if (const int rc = check_duration(a, tr->duration); rc >= 0) return rc;
   std::printf("movel on %s: duration %s s, line %s %s, rotation %s %s (override %s %%)\n", chain.name.data(),
-              num(tr->duration).c_str(), num(tr->length / L).c_str(), length_unit_name(chain),
-              num(tr->angle / chain.angle_unit).c_str(), angle_unit_name(chain), num(a.override_pct).c_str());
+              seconds_text(tr->duration).c_str(), length_text(chain, tr->length / L).c_str(), length_unit_name(chain),
+              angle_text(chain, tr->angle / chain.angle_unit).c_str(), angle_unit_name(chain), num(a.override_pct).c_str());
   if (st == kin::MotionStatus::slowed_near_singularity)
     std::printf("slowed %sx near a singularity at %s %% of the line (joint %d sets the pace)\n", num(rep.slowdown).c_str(),
-                num(100 * rep.s).c_str(), rep.joint + 1);
+                fixed(100 * rep.s, 1).c_str(), rep.joint + 1);
   std::printf("largest Jacobian condition number on the line: %s\n", num(rep.max_condition).c_str());
   Samples s = sample_all(chain, tr->duration, a.rate, [&tr](double t, kin::JointVector& q, kin::JointVector& v,
                                                            kin::JointVector& acc) { tr->sample_ik(t, q, v, acc); });

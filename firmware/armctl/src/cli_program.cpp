@@ -316,7 +316,7 @@ struct Checker {
     const kin::MotionStatus st = kin::plan_movej(lim, kin::JointState::rest(q), goal, kin::MovejOptions{pct / 100.0}, *tr);
     if (!kin::is_ok(st)) return fail(s, std::string("movej refused: ") + kin::to_string(st));
     if (!(tr->duration <= opt.max_move_duration))
-      return fail(s, "movej refused: it would take " + num(tr->duration) + " s, more than " + num(opt.max_move_duration) + " s");
+      return fail(s, "movej refused: it would take " + seconds_text(tr->duration) + " s, more than " + num(opt.max_move_duration) + " s");
     out.cycle_time_exact += tr->duration;
     const double tol = blend_of(given_blend, false);
     if (!path_segment(false, goal, kin::Pose::Identity(), kin::CartesianLimits{}, pct / 100.0, tol))
@@ -346,7 +346,7 @@ struct Checker {
     const kin::MotionStatus st = plan_movel_preview(chain, q, target, cl, kin::MovelOptions{}, *model, *path, &rep);
     if (!kin::is_ok(st)) {
       const Eigen::Vector3d& p = rep.position;
-      auto r3 = [&](double si) { return num(std::round(units.length_out(si) * 1000) / 1000); };
+      auto r3 = [&](double si) { return units.length_text(si); };
       std::string why = std::string("movel refused: ") + kin::to_string(st) + " at " + num(std::round(100 * rep.s)) +
                         " % of the line, tool at (" + r3(p.x()) + ", " + r3(p.y()) + ", " + r3(p.z()) + ") " +
                         units.length_name();
@@ -355,7 +355,7 @@ struct Checker {
       return fail(s, why);
     }
     if (!(path->duration <= opt.max_move_duration))
-      return fail(s, "movel refused: it would take " + num(path->duration) + " s, more than " + num(opt.max_move_duration) + " s");
+      return fail(s, "movel refused: it would take " + seconds_text(path->duration) + " s, more than " + num(opt.max_move_duration) + " s");
     out.cycle_time_exact += path->duration;
     if (!path_segment(true, path->goal, target, cl, 1.0, blend_of(given_blend, true))) {
       end_run();
@@ -637,8 +637,8 @@ int cli_program(int argc, char** argv) {
   // The counts in the words armfw's `run` answers with (prog::counts_text).
   std::printf("ok: %s on %s (%s): %s%s, planned cycle time %s s (%s; %s s with every move to rest)\n", file.c_str(),
               chain.name.data(), count_text(static_cast<long long>(program.files.size()), "file").c_str(),
-              prog::counts_text(prog::count_steps(program)).c_str(), homings.c_str(), num(ck.cycle_time).c_str(),
-              count_text(ck.blended_corners, "blended corner").c_str(), num(ck.cycle_time_exact).c_str());
+              prog::counts_text(prog::count_steps(program)).c_str(), homings.c_str(), seconds_text(ck.cycle_time).c_str(),
+              count_text(ck.blended_corners, "blended corner").c_str(), seconds_text(ck.cycle_time_exact).c_str());
   return kExitOk;
 }
 

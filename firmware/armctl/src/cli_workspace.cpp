@@ -20,7 +20,7 @@ const char* kWorkspaceUsage =
     "usage: armctl kin workspace --robot NAME|FILE [--plane xz|xy|yz] [--grid N] [--pose q1..qn]\n"
     "                            [--svg FILE] [--csv FILE]\n"
     "  The region the tool point reaches in a plane through the base, joint limits respected\n"
-    "  (seed 002 3.8), and its area. A planar arm (every tool point in one base plane, e.g.\n"
+    "  (Carrara, Apostila de Robótica, 3.8), and its area. A planar arm (every tool point in one base plane, e.g.\n"
     "  rr_planar) is drawn in its own plane; an arm whose joint 1 turns about the base z axis\n"
     "  in the plane given (default xz: the side view; xy: the top view at z = 0).\n"
     "  --grid N     raster cells along the longer side (100..2000, default 400)\n"

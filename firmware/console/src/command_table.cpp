@@ -89,8 +89,22 @@ std::string pad(std::string s, std::size_t w) { return s.size() < w ? s.append(w
 
 std::string entry_line(const CommandSpec& e) { return "  " + pad(e.usage, 32) + e.help + (e.query ? " [query]" : "") + "\n"; }
 
+/// What `help` opens with: what the console is, the commands to start with, how to stop the
+/// arm and how to end the session; `help CMD` has the rest.
+constexpr const char* kOverview =
+    "servoarm console: one command per line, each answered `ok [data]` or `error: <code> <message>`;\n"
+    "  events come as `alarm: ...` lines.\n"
+    "start:  status (state, joints, pose), enable (power the drives), home (when a joint is not homed),\n"
+    "        movej j1..jn | movel x y z [rx ry rz] (move), wait (until the moves are done)\n"
+    "stop:   stop (ramp down, queued moves dropped), ! (feed hold, ~ resumes),\n"
+    "        estop or Ctrl-X (emergency stop, then reset and enable)\n"
+    "quit:   quit or exit ends this session (on stdin armfw ends too), as Ctrl-D (end of input) does on\n"
+    "        stdin and in armctl console\n"
+    "more:   help CMD for one command in full (help movel), help G1 for a G-code\n";
+
 std::string full_help(std::string_view units_line) {
-  std::string o = "commands (one per line; answers: ok [data] | error: <code> <message>):\n";
+  std::string o = kOverview;
+  o += "commands (one per line; answers: ok [data] | error: <code> <message>):\n";
   if (!units_line.empty()) o += std::string(units_line) + "\n";
   for (const CommandSpec& e : kCommands) o += entry_line(e);
   o += "realtime characters (act at once, never part of a line):\n";
@@ -105,6 +119,8 @@ std::string full_help(std::string_view units_line) {
 }  // namespace
 
 bool help_text(std::string_view topic, std::string_view units_line, std::string& out) {
+  for (const CommandAlias& a : kCommandAliases)
+    if (ieq(topic, a.alias)) topic = a.name;  // `help exit` is `help quit`
   if (topic.empty()) {
     out += full_help(units_line);
     return true;

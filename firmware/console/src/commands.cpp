@@ -99,6 +99,7 @@ const char* to_string(Cmd c) {
     case Cmd::freedrive_off: return "freedrive off";
     case Cmd::collision_on: return "collision on";
     case Cmd::collision_off: return "collision off";
+    case Cmd::quit: return "quit";
   }
   return "?";
 }
@@ -681,6 +682,10 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       if (words > used) spec = &e, used = words;
     }
   }
+  for (const CommandAlias& a : kCommandAliases)
+    if (spec == nullptr && ieq(head, a.alias))
+      for (const CommandSpec& e : kCommands)
+        if (std::string_view(e.name) == a.name) spec = &e, used = 1;
   if (spec == nullptr) return fail(CmdError::unknown_command, "unknown command '%.*s' (try help)", int(head.size() > 24 ? 24 : head.size()), head.data());
   c.cmd = spec->cmd;
   const int nargs = ws.n - used;

@@ -108,7 +108,8 @@ bool moves_arm(const Command& c) {
     case Cmd::freedrive:
     case Cmd::freedrive_off:
     case Cmd::collision_on:
-    case Cmd::collision_off: return false;
+    case Cmd::collision_off:
+    case Cmd::quit: return false;
   }
   return false;
 }
@@ -128,6 +129,11 @@ std::string fmt(const char* f, ...) {
   if (n > 0) std::vsnprintf(out.data(), out.size() + 1, f, again);
   va_end(again);
   return out;
+}
+
+/// A position (m) as G-code and GRBL print it: "x,y,z" in mm to 0.001 mm.
+std::string mm_triple(const Eigen::Vector3d& p, const char* sep = ",") {
+  return fixed(p.x() * 1e3, 3) + sep + fixed(p.y() * 1e3, 3) + sep + fixed(p.z() * 1e3, 3);
 }
 
 /// A model part's refusal (a fixed line of the model's): whole, or cut after a word with "...".
@@ -214,10 +220,7 @@ kin::JointVector Console::tail() const {
 std::string Console::joints_text(const kin::JointVector& q) const {
   std::string s;
   const ConsoleUnits& u = cfg_.units;
-  for (int j = 0; j < q.size(); ++j) {
-    const int d = chain_.joint(j).type == kin::JointType::prismatic ? u.length_decimals() : u.angle_decimals();
-    s += fmt("%s%.*f", j ? " " : "", d, to_user(j, q[j]));
-  }
+  for (int j = 0; j < q.size(); ++j) s += (j ? " " : "") + u.joint_text(chain_, j, q[j]);
   return s;
 }
 
@@ -225,12 +228,7 @@ std::string Console::pose_text(const kin::JointVector& q) const {
   kin::Pose p;
   p = pose_in_frame(q);
   if (!p.translation().allFinite()) return "x=nan";
-  const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear());
-  const ConsoleUnits& u = cfg_.units;
-  const int L = u.length_decimals(), A = u.angle_decimals();
-  return fmt("x=%.*f y=%.*f z=%.*f rx=%.*f ry=%.*f rz=%.*f", L, u.length_out(p.translation().x()), L,
-             u.length_out(p.translation().y()), L, u.length_out(p.translation().z()), A, u.angle_out(rpy[0]), A,
-             u.angle_out(rpy[1]), A, u.angle_out(rpy[2]));
+  return cfg_.units.pose_text(p);
 }
 
 void Console::answer_error(Session& s, CmdError e, const std::string& msg) {
@@ -425,12 +423,10 @@ std::string Console::unhomed_refusal(const Telemetry& t) const {
 std::string Console::grbl_position(const kin::JointVector& q) const {
   if (frame_ == 0) {
     const kin::Pose p = tcp(q);
-    return fmt("MPos:%.3f,%.3f,%.3f", p.translation().x() * 1e3, p.translation().y() * 1e3, p.translation().z() * 1e3);
+    return "MPos:" + mm_triple(p.translation());
   }
   const kin::Pose w = pose_in_frame(q);
-  const Eigen::Vector3d o = frames_[frame_].pose.translation() * 1e3;
-  return fmt("WPos:%.3f,%.3f,%.3f|WCO:%.3f,%.3f,%.3f", w.translation().x() * 1e3, w.translation().y() * 1e3,
-             w.translation().z() * 1e3, o.x(), o.y(), o.z());
+  return "WPos:" + mm_triple(w.translation()) + "|WCO:" + mm_triple(frames_[frame_].pose.translation());
 }
 
 std::string Console::grbl_wcs() const {
@@ -460,7 +456,7 @@ std::string Console::grbl_report() const {
   std::string s = fmt("<%s|%s|J:", st, grbl_position(q).c_str());
   // MPos: G-code lengths (mm, as GRBL reports them); J: the console's joint units.
   const int d = cfg_.units.angle == AngleUnit::deg && cfg_.units.length == LengthUnit::mm ? 2 : 5;
-  for (int j = 0; j < n_; ++j) s += fmt("%s%.*f", j ? "," : "", d, to_user(j, q[j]));
+  for (int j = 0; j < n_; ++j) s += (j ? "," : "") + fixed(to_user(j, q[j]), d);
   s += fmt("|Q:%u|Ov:%d", unsigned(t.queued), feed_pct_);
   if (run_) s += fmt("|Pgm:%s,%s,%s", run_->name.c_str(), to_string(run_->state), program_where().c_str());
   return s + ">";
@@ -642,8 +638,10 @@ void Console::queue(Session& s, const MoveJoints& req) {
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
     if (goal[j] < lim.lower[ju] || goal[j] > lim.upper[ju]) {
-      answer_error(s, CmdError::limits, fmt("joint %d = %.3f outside [%.3f, %.3f]", j + 1, to_user(j, goal[j]),
-                                            to_user(j, lim.lower[ju]), to_user(j, lim.upper[ju])));
+      const ConsoleUnits& u = cfg_.units;
+      answer_error(s, CmdError::limits, fmt("joint %d = %s outside [%s, %s]", j + 1, u.joint_text(chain_, j, goal[j]).c_str(),
+                                            u.joint_text(chain_, j, lim.lower[ju]).c_str(),
+                                            u.joint_text(chain_, j, lim.upper[ju]).c_str()));
       return;
     }
   }
@@ -668,12 +666,12 @@ void Console::queue(Session& s, const MoveJoints& req) {
   const double dur = jm.plan.duration;  // (jm is replaced when the move goes as a blended segment)
   const PathResult pr = queue_path(s, m, false, goal, kin::Pose::Identity(), cfg_.cartesian, pct / 100.0,
                                    blend_of(req.blend, false));
-  const std::string blended = pr.used && pr.blend > 0 ? fmt(" blend=%.3fs", pr.blend) : std::string();
+  const std::string blended = pr.used && pr.blend > 0 ? " blend=" + fixed(pr.blend, kTimeDecimals) + "s" : std::string();
   if (!pr.used) jm.blend = blend_of(req.blend, false);  // the controller blends it into the next joint move
   if (s.check_mode) {  // checked, not queued
     s.check_tail = goal;
     if (!pr.used) s.check_time += dur, s.check_blends = false;
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs%s", dur, blended.c_str()));
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(dur, kTimeDecimals) + "s" + blended);
     return;
   }
   m->id = next_id_++;
@@ -683,7 +681,7 @@ void Console::queue(Session& s, const MoveJoints& req) {
   tail_id_ = m->id;
   shadow_tail_id_ = pr.used ? m->id : 0;
   tail_gen_ = ctl_.telemetry().generation;
-  answer_ok(s, fmt("queued id=%u duration=%.3fs%s", unsigned(tail_id_), dur, blended.c_str()));
+  answer_ok(s, fmt("queued id=%u duration=%ss%s", unsigned(tail_id_), fixed(dur, kTimeDecimals).c_str(), blended.c_str()));
 }
 
 // ---------------------------------------------------------------------------
@@ -799,8 +797,8 @@ void Console::queue(Session& s, const MoveLine& req) {
     const ConsoleUnits& u = cfg_.units;
     const int L = u.length == LengthUnit::mm ? 1 : 4;
     const Eigen::Vector3d at = user_frame().inverse() * rep.position;
-    std::string where = fmt("at s=%.2f (x=%.*f y=%.*f z=%.*f %s)", rep.s, L, u.length_out(at.x()), L,
-                            u.length_out(at.y()), L, u.length_out(at.z()), u.length_name());
+    std::string where = fmt("at s=%s (x=%s y=%s z=%s %s)", fixed(rep.s, 2).c_str(), fixed(u.length_out(at.x()), L).c_str(),
+                            fixed(u.length_out(at.y()), L).c_str(), fixed(u.length_out(at.z()), L).c_str(), u.length_name());
     if (rep.joint >= 0) where += fmt(" joint %d", rep.joint + 1);
     answer_error(s, motion_error(ms), fmt("movel refused: %s %s", kin::to_string(ms), where.c_str()));
     return;
@@ -811,11 +809,11 @@ void Console::queue(Session& s, const MoveLine& req) {
   const double slow = path.slowdown;
   const kin::JointVector goal = path.goal;
   const PathResult pr = queue_path(s, m, true, goal, target, cl, 1.0, blend_of(req.blend, true));
-  const std::string blended = pr.used && pr.blend > 0 ? fmt(" blend=%.3fs", pr.blend) : std::string();
+  const std::string blended = pr.used && pr.blend > 0 ? " blend=" + fixed(pr.blend, kTimeDecimals) + "s" : std::string();
   if (s.check_mode) {  // checked, not queued
     s.check_tail = goal;
     if (!pr.used) s.check_time += dur, s.check_blends = false;
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked duration=%.3fs%s", dur, blended.c_str()));
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(dur, kTimeDecimals) + "s" + blended);
     return;
   }
   feed_now_ = speed;
@@ -826,7 +824,7 @@ void Console::queue(Session& s, const MoveLine& req) {
   shadow_tail_id_ = pr.used ? m->id : 0;
   tail_gen_ = ctl_.telemetry().generation;
   ctl_.motions().commit();
-  answer_ok(s, fmt("queued id=%u duration=%.3fs%s%s", unsigned(tail_id_), dur,
+  answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(tail_id_), fixed(dur, kTimeDecimals).c_str(),
                    ms == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", slow).c_str() : "",
                    blended.c_str()));
 }
@@ -868,7 +866,7 @@ void Console::queue_dwell(Session& s, double secs) {
   tail_id_ = m->id;
   tail_gen_ = ctl_.telemetry().generation;
   ctl_.motions().commit();
-  answer_ok(s, fmt("queued id=%u dwell=%.3fs", unsigned(tail_id_), secs));
+  answer_ok(s, fmt("queued id=%u dwell=%ss", unsigned(tail_id_), fixed(secs, kTimeDecimals).c_str()));
 }
 
 // x y z [rx ry rz] in the active user frame (orientation kept when not given) -> the base frame.
@@ -968,15 +966,16 @@ void Console::do_limits(Session& s) {
     const auto ju = static_cast<std::size_t>(j);
     const bool pr = chain_.joint(j).type == kin::JointType::prismatic;
     const int d = pr ? u.length_decimals() : u.angle_decimals();
-    s.out += fmt("joint %d: %s [%.*f, %.*f] %s  vmax=%.*f amax=%.*f jmax=%.*f %s/s^k\n", j + 1, pr ? "prismatic" : "revolute", d,
-                 to_user(j, lim.lower[ju]), d, to_user(j, lim.upper[ju]), u.joint_name(chain_, j), d,
-                 to_user(j, lim.dyn[ju].max_velocity), d, to_user(j, lim.dyn[ju].max_acceleration), d,
-                 to_user(j, lim.dyn[ju].max_jerk), u.joint_name(chain_, j));
+    const auto f = [&](double si) { return fixed(to_user(j, si), d); };
+    s.out += fmt("joint %d: %s [%s, %s] %s  vmax=%s amax=%s jmax=%s %s/s^k\n", j + 1, pr ? "prismatic" : "revolute",
+                 f(lim.lower[ju]).c_str(), f(lim.upper[ju]).c_str(), u.joint_name(chain_, j), f(lim.dyn[ju].max_velocity).c_str(),
+                 f(lim.dyn[ju].max_acceleration).c_str(), f(lim.dyn[ju].max_jerk).c_str(), u.joint_name(chain_, j));
   }
   const int v = u.length == LengthUnit::mm ? 1 : 4;
-  s.out += fmt("linear speed: default %.*f %s/s, max %.*f %s/s; following error limit %.*f %s\n", v,
-               u.length_out(cfg_.default_linear_speed), u.length_name(), v, u.length_out(cfg_.max_linear_speed), u.length_name(),
-               u.angle_decimals(), u.angle_out(ctl_.config().following_error), u.angle_name());
+  s.out += fmt("linear speed: default %s %s/s, max %s %s/s; following error limit %s %s\n",
+               fixed(u.length_out(cfg_.default_linear_speed), v).c_str(), u.length_name(),
+               fixed(u.length_out(cfg_.max_linear_speed), v).c_str(), u.length_name(),
+               u.angle_text(ctl_.config().following_error).c_str(), u.angle_name());
   answer_ok(s);
 }
 
@@ -1049,6 +1048,16 @@ void Console::execute(Session& s, std::string_view line) {
   switch (c.cmd) {
     case Cmd::none: answer_ok(s); return;
     case Cmd::help: do_help(s, std::string_view(c.topic.data())); return;
+    case Cmd::quit:
+      // The session ends here (ConsoleServer ends it as its transport says); lines the client
+      // sent after it are not run, each answered so.
+      answer_ok(s, "bye");
+      for (const std::string& l : s.lines)
+        answer_error(s, CmdError::bad_state, fmt("'%s' not executed: the session ended (quit)", l.c_str()));
+      s.lines.clear();
+      s.hold_after = 0;
+      s.ended = true;
+      return;
     case Cmd::status: answer_ok(s, status_text()); return;
     case Cmd::enable:
       if (s.check_mode) {
@@ -1117,10 +1126,11 @@ void Console::execute(Session& s, std::string_view line) {
       kin::JointVector q(n_);
       for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
       const kin::Pose p = pose_in_frame(q);  // the active tool's point in the active user frame
-      const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear()) / kDeg;
+      const Eigen::Vector3d rpy = kGcodeUnits.rpy_of(p.linear()) / kDeg;
       const double u = s.modal.unit_mm;
-      s.out += fmt("X:%.3f Y:%.3f Z:%.3f A:%.3f B:%.3f C:%.3f\n", p.translation().x() * 1e3 / u, p.translation().y() * 1e3 / u,
-                   p.translation().z() * 1e3 / u, rpy[0], rpy[1], rpy[2]);
+      s.out += "X:" + fixed(p.translation().x() * 1e3 / u, 3) + " Y:" + fixed(p.translation().y() * 1e3 / u, 3) +
+               " Z:" + fixed(p.translation().z() * 1e3 / u, 3) + " A:" + fixed(rpy[0], 3) + " B:" + fixed(rpy[1], 3) +
+               " C:" + fixed(rpy[2], 3) + "\n";
       answer_ok(s);
       return;
     }
@@ -1539,8 +1549,9 @@ void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double aske
   }
   if (clamped >= 0) {  // it moves: ok, and where it stops
     const ConsoleUnits& u = cfg_.units;
-    answer_ok(s, fmt("%s; joint %d stops at its limit %.3f %s (asked %.3f)", bounded_text(r.message).c_str(), clamped + 1,
-                     to_user(clamped, limit), u.joint_name(chain_, clamped), to_user(clamped, asked)));
+    answer_ok(s, fmt("%s; joint %d stops at its limit %s %s (asked %s)", bounded_text(r.message).c_str(), clamped + 1,
+                     u.joint_text(chain_, clamped, limit).c_str(), u.joint_name(chain_, clamped),
+                     u.joint_text(chain_, clamped, asked).c_str()));
     return;
   }
   answer_ok(s, bounded_text(r.message));
@@ -1581,8 +1592,9 @@ void Console::do_jog(Session& s, const Command& c) {
       const double inc = to_si(j, c.vals[0]);
       if (!(std::fabs(inc) <= lim.upper[ju] - lim.lower[ju])) {
         answer_error(s, CmdError::out_of_range,
-                     fmt("jog: increment %g %s larger than joint %d's range [%.3f, %.3f]; nothing moved", c.vals[0],
-                         cfg_.units.joint_name(chain_, j), j + 1, to_user(j, lim.lower[ju]), to_user(j, lim.upper[ju])));
+                     fmt("jog: increment %g %s larger than joint %d's range [%s, %s]; nothing moved", c.vals[0],
+                         cfg_.units.joint_name(chain_, j), j + 1, cfg_.units.joint_text(chain_, j, lim.lower[ju]).c_str(),
+                         cfg_.units.joint_text(chain_, j, lim.upper[ju]).c_str()));
         return;
       }
       asked = goal[j] + inc;
@@ -1590,7 +1602,8 @@ void Console::do_jog(Session& s, const Command& c) {
       if (to != asked) clamped = j;
       if (to == goal[j]) {
         answer_error(s, CmdError::limits,
-                     fmt("jog: joint %d is at its limit %.3f %s; nothing moved", j + 1, to_user(j, to), cfg_.units.joint_name(chain_, j)));
+                     fmt("jog: joint %d is at its limit %s %s; nothing moved", j + 1, cfg_.units.joint_text(chain_, j, to).c_str(),
+                         cfg_.units.joint_name(chain_, j)));
         return;
       }
       goal[j] = to;
@@ -1771,13 +1784,13 @@ void Console::do_grbl(Session& s, const Command& c) {
       for (int g = 54; g <= 59; ++g) {
         Eigen::Vector3d o = Eigen::Vector3d::Zero();
         for (const NamedPose& f : frames_)
-          if (f.name == "g" + std::to_string(g)) o = f.pose.translation() * 1e3;
-        s.out += fmt("[G%d:%.3f,%.3f,%.3f]\n", g, o.x(), o.y(), o.z());
+          if (f.name == "g" + std::to_string(g)) o = f.pose.translation();
+        s.out += fmt("[G%d:%s]\n", g, mm_triple(o, ",").c_str());
       }
       const kin::Pose h = tcp(cfg_.home);
-      s.out += fmt("[G28:%.3f,%.3f,%.3f]\n[G30:0.000,0.000,0.000]\n[G92:0.000,0.000,0.000]\n[TLO:0.000]\n"
+      s.out += fmt("[G28:%s]\n[G30:0.000,0.000,0.000]\n[G92:0.000,0.000,0.000]\n[TLO:0.000]\n"
                    "[PRB:0.000,0.000,0.000:0]\n",
-                   h.translation().x() * 1e3, h.translation().y() * 1e3, h.translation().z() * 1e3);
+                   mm_triple(h.translation()).c_str());
       answer_ok(s);
       return;
     }
@@ -1917,13 +1930,7 @@ std::string Console::load_frames() {
 }
 
 namespace {
-std::string pose_values(const kin::Pose& p, const ConsoleUnits& u) {
-  const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear());
-  const int L = u.length_decimals(), A = u.angle_decimals();
-  return fmt("x=%.*f y=%.*f z=%.*f rx=%.*f ry=%.*f rz=%.*f", L, u.length_out(p.translation().x()), L,
-             u.length_out(p.translation().y()), L, u.length_out(p.translation().z()), A, u.angle_out(rpy[0]), A,
-             u.angle_out(rpy[1]), A, u.angle_out(rpy[2]));
-}
+std::string pose_values(const kin::Pose& p, const ConsoleUnits& u) { return u.pose_text(p); }
 template <class List, class Name>
 std::size_t find_named(const List& l, std::string_view n, Name name) {
   for (std::size_t i = 0; i < l.size(); ++i)

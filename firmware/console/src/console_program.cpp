@@ -168,13 +168,8 @@ void Console::do_teach(Session& s, const Command& c) {
 
 void Console::do_points(Session& s) {
   for (const prog::TeachPoint& p : points_.points) {
-    const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.pose.linear());
-    const ConsoleUnits& u = cfg_.units;
-    const int L = u.length_decimals(), A = u.angle_decimals();
-    s.out += fmt("%s joints=[%s] pose=[x=%.*f y=%.*f z=%.*f rx=%.*f ry=%.*f rz=%.*f] tool=%s frame=%s\n", p.name.c_str(),
-                 joints_text(p.q).c_str(), L, u.length_out(p.pose.translation().x()), L, u.length_out(p.pose.translation().y()),
-                 L, u.length_out(p.pose.translation().z()), A, u.angle_out(rpy[0]), A, u.angle_out(rpy[1]), A,
-                 u.angle_out(rpy[2]), p.tool.c_str(), p.frame.c_str());
+    s.out += fmt("%s joints=[%s] pose=[%s] tool=%s frame=%s\n", p.name.c_str(), joints_text(p.q).c_str(),
+                 cfg_.units.pose_text(p.pose).c_str(), p.tool.c_str(), p.frame.c_str());
   }
   answer_ok(s, fmt("%zu points%s", points_.points.size(), cfg_.points_file.empty() ? " (not kept: no points file)" : ""));
 }
@@ -561,7 +556,7 @@ void Console::tick() {
   const bool rest_now = ctl_.telemetry().state == ArmState::idle && ctl_.motions().empty();
   if (r.next >= r.prog.steps.size() && rest_now && at_rest && !r.ps.waiting) {
     const double secs = static_cast<double>(ctl_.telemetry().cycles - r.started_cycle) / ctl_.config().rate_hz;
-    end_program(fmt("done: %zu steps in %.3f s", r.prog.steps.size(), secs));
+    end_program("done: " + count_text(static_cast<long long>(r.prog.steps.size()), "step") + " in " + fixed(secs, kTimeDecimals) + " s");
     return;
   }
   if ((r.state == RunState::pausing || (r.state == RunState::stepping && r.step_fed)) && rest_now && at_rest)

@@ -2,6 +2,8 @@
 #include "servoarm/console/text.hpp"
 
 #include <cctype>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 
 namespace servoarm::fw {
@@ -48,6 +50,21 @@ std::string count_text(long long n, std::string_view noun) {
   s += noun;
   if (n != 1) s += 's';
   return s;
+}
+
+std::string fixed(double v, int decimals) {
+  if (std::isnan(v)) return "nan";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  if (decimals < 0) decimals = 0;
+  if (decimals > 17) decimals = 17;
+  char b[352];  // the largest double to 17 places
+  std::snprintf(b, sizeof b, "%.*f", decimals, v);
+  if (b[0] == '-') {  // "-0.000": the value rounds to zero
+    bool zero = true;
+    for (const char* c = b + 1; *c != '\0'; ++c) zero = zero && (*c == '0' || *c == '.');
+    if (zero) return std::string(b + 1);
+  }
+  return b;
 }
 
 }  // namespace servoarm::fw

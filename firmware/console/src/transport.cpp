@@ -162,6 +162,25 @@ void ConsoleServer::queue_events(std::size_t i, const std::string& ev) {
   t.pending += ev;
 }
 
+void ConsoleServer::end_session(std::size_t i) {
+  FdTransport& t = *ts_[i];
+  Session& s = sessions_[i];
+  queue_output(i);          // `ok bye` and the answers to the lines sent after it
+  console_.client_gone(s);  // a jog it ran stops now, a program check it started ends
+  if (t.name == "stdin") {  // nothing more is read: armfw ends as at end of input
+    t.eof = true;
+    s.ended = false;
+    return;
+  }
+  // A pty, serial line or CAN client stays connected: its next line starts a new session
+  // (G-code modes, check mode, a held queue's count as a new client's).
+  Session fresh;
+  fresh.name = s.name;
+  fresh.dialect = s.dialect;
+  fresh.modal.dwell_p_seconds = s.dialect == Dialect::grbl;  // GRBL's G4 P is seconds
+  s = std::move(fresh);
+}
+
 bool ConsoleServer::may_run(std::size_t i) const {
   return ts_[i]->pending.size() + sessions_[i].out.size() < kMaxPendingOutput;
 }
@@ -215,6 +234,7 @@ bool ConsoleServer::round(int timeout_ms, bool exit_on_eof) {
       if (!may_run(i) || !console_.run_one(sessions_[i])) continue;
       any = true;
       queue_output(i);
+      if (sessions_[i].ended) end_session(i);
       write_some(i);
       sweep(0);
     }
@@ -230,6 +250,7 @@ bool ConsoleServer::round(int timeout_ms, bool exit_on_eof) {
     Session& s = sessions_[i];
     if (may_run(i) && console_.run_one(s)) more_ = true;  // a wait that is done answers now
     queue_output(i);
+    if (s.ended) end_session(i);
     queue_events(i, s.dialect == Dialect::grbl ? ev_grbl : ev);
     write_some(i);
     if (t.name == "stdin" && !(t.eof && !console_.busy(s))) all_eof_done = false;

@@ -3,6 +3,9 @@
 
 #include <cmath>
 
+#include "servoarm/console/text.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+
 namespace servoarm::fw {
 
 namespace {
@@ -40,6 +43,34 @@ double ConsoleUnits::joint_out(const kin::Chain& chain, int j, double si) const 
 }
 const char* ConsoleUnits::joint_name(const kin::Chain& chain, int j) const {
   return chain.joint(j).type == kin::JointType::prismatic ? length_name() : angle_name();
+}
+
+int ConsoleUnits::joint_decimals(const kin::Chain& chain, int j) const {
+  return chain.joint(j).type == kin::JointType::prismatic ? length_decimals() : angle_decimals();
+}
+std::string ConsoleUnits::length_text(double si) const { return fixed(length_out(si), length_decimals()); }
+std::string ConsoleUnits::angle_text(double si) const { return fixed(angle_out(si), angle_decimals()); }
+std::string ConsoleUnits::joint_text(const kin::Chain& chain, int j, double si) const {
+  return fixed(joint_out(chain, j, si), joint_decimals(chain, j));
+}
+
+Eigen::Vector3d ConsoleUnits::rpy_of(const Eigen::Matrix3d& R) const {
+  Eigen::Vector3d rpy = kin::rpy_from_rotation(R);
+  // cos(pitch) is the pitch's distance to +-90 deg (rad, to first order). Within the band R
+  // is Rz(rz - rx) Ry(+-90) (or Rz(rz + rx) Ry(-90)) turned by at most that distance, so the
+  // triple printed is within it of the arm's orientation.
+  if (std::hypot(R(0, 0), R(1, 0)) < kGimbalLockBand) {
+    rpy[1] = std::copysign(M_PI / 2, -R(2, 0));
+    rpy[0] = 0.0;
+    rpy[2] = std::atan2(-R(0, 1), R(1, 1));  // yaw -+ roll, roll taken as 0
+  }
+  return rpy;
+}
+
+std::string ConsoleUnits::pose_text(const kin::Pose& p) const {
+  const Eigen::Vector3d t = p.translation(), r = rpy_of(p.linear());
+  return "x=" + length_text(t.x()) + " y=" + length_text(t.y()) + " z=" + length_text(t.z()) + " rx=" + angle_text(r[0]) +
+         " ry=" + angle_text(r[1]) + " rz=" + angle_text(r[2]);
 }
 
 const char* ConsoleUnits::help_line() const {

@@ -91,7 +91,7 @@ bool interactive_only(fw::Cmd c) {
   for (Cmd x : {Cmd::help, Cmd::jog, Cmd::grbl_jog, Cmd::grbl_settings, Cmd::grbl_params, Cmd::grbl_state, Cmd::grbl_info,
                 Cmd::grbl_unlock, Cmd::grbl_home, Cmd::grbl_check, Cmd::grbl_help, Cmd::home_zero, Cmd::reset, Cmd::estop,
                 Cmd::stop, Cmd::hold, Cmd::resume, Cmd::run, Cmd::pause, Cmd::step, Cmd::abort, Cmd::record, Cmd::teach,
-                Cmd::point_delete})
+                Cmd::point_delete, Cmd::quit})
     if (c == x) return true;
   return false;
 }
@@ -511,7 +511,8 @@ StepKind kind_of(fw::Cmd c) {
     case fw::Cmd::freedrive_on:
     case fw::Cmd::freedrive_off:
     case fw::Cmd::collision_on:
-    case fw::Cmd::collision_off: return StepKind::refused;
+    case fw::Cmd::collision_off:
+    case fw::Cmd::quit: return StepKind::refused;
     case fw::Cmd::none:
     case fw::Cmd::help:
     case fw::Cmd::status:

@@ -29,6 +29,12 @@ int usage_error(const std::string& message);
 /// A value that is not finite prints as `null`: armctl's JSON never holds nan or inf
 /// (and the commands refuse non-finite results before printing them, see all_finite).
 std::string num(double v);
+/// What armctl's text (not its JSON, which keeps num()) prints at each unit's resolution,
+/// as the console does (fw::fixed, ConsoleUnits): a time in seconds to 1 ms ("1.322"), a
+/// length and an angle in the description's units (0.001 mm or 1e-6 m, 0.001 deg or 1e-6 rad).
+std::string seconds_text(double s);
+std::string length_text(const kin::Chain& chain, double user);
+std::string angle_text(const kin::Chain& chain, double user);
 /// True when every one of the n values is finite.
 bool all_finite(const double* v, int n);
 /// JSON array of numbers.

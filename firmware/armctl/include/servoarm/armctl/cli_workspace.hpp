@@ -2,7 +2,7 @@
 #pragma once
 // armctl kin workspace: the region the tool point reaches in a plane through the base
 // (joint limits respected), its area, a CSV of the region and an SVG drawing of it with
-// the arm in a reference pose (seed 002 §3.8: manufacturers give the workspace as the
+// the arm in a reference pose (V. Carrara, Apostila de Robótica, §3.8: manufacturers give the workspace as the
 // reach in one or more planes). Non-real-time: allocates.
 //
 // How: the joints are gridded and the image of each small joint-space cell of the two

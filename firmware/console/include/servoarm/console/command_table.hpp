@@ -48,7 +48,15 @@ struct CommandSpec {
 };
 
 inline constexpr CommandSpec kCommands[] = {
-    {"help", Cmd::help, ArgShape::topic, "help [topic]", "this text, or the entries about one topic", "", true},
+    {"help", Cmd::help, ArgShape::topic, "help [topic]",
+     "an overview and every command in a line, or `help CMD`: one command (or G-code) in full", "", true},
+    {"quit", Cmd::quit, ArgShape::none, "quit (or exit)",
+     "end this console session (also `exit`; Ctrl-D, end of input, does the same on stdin and in `armctl console`)",
+     "answers `ok bye`; lines sent after it are not run (each answered `error: bad_state '...' not executed`). "
+     "On stdin armfw then ends as at end of input (every line before `quit` answered); on a pty, a serial line or the CAN console only that client's session ends: a jog it runs stops, its "
+     "G-code modes and check mode start afresh, and armfw goes on serving it and every other client. `armctl "
+     "console` sends it, prints the answer and ends. Queued moves are not stopped (`stop` does that)",
+     false},
     {"status", Cmd::status, ArgShape::none, "status", "state, queue, joints, tool pose (and the units they are in)",
      "answers `ok state=idle queue=0 joints=[...] <joint units> pose=[x= y= z= rx= ry= rz=] <length>,<angle> "
      "[fault=\"...\"]`",
@@ -227,6 +235,16 @@ inline constexpr CommandSpec kCommands[] = {
      "`NAME node=N bit=B on|off` then `ok N outputs`. In a program, `out` / M64 / M65 act once the moves before "
      "them have finished (the gripper never switches mid-move); M62 / M63 ride with the next move",
      false},
+};
+
+/// Other names of commands: the parser reads `alias` as the entry `name`; `help`, `help
+/// alias` and the reference page name both.
+struct CommandAlias {
+  const char* alias;
+  const char* name;
+};
+inline constexpr CommandAlias kCommandAliases[] = {
+    {"exit", "quit"},
 };
 
 /// GRBL '$' commands (both dialects; the GRBL dialect's `help` is `$`). `word` is what

@@ -98,6 +98,7 @@ enum class Cmd : std::uint8_t {
   freedrive_off,  ///< `freedrive off`: back to position mode, holding where it stands
   collision_on,   ///< `collision on`: collision detection on (when available)
   collision_off,  ///< `collision off`: collision detection off (to move clear of what the arm hit)
+  quit,           ///< `quit` / `exit`: end this console session (the transport decides what ends: ConsoleServer)
 };
 
 /// What a `jog` line asks for.

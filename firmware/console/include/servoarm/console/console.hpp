@@ -121,6 +121,7 @@ struct Session {
   bool check_blends = false;           ///< check mode: the last checked move is a blended segment with a tolerance
   double check_time = 0;               ///< check mode: end time of the checked moves (blended runs overlapped)
   double check_run_base = 0;           ///< check mode: check_time where the current blended run began
+  bool ended = false;                  ///< `quit` / `exit` ran: the transport ends the session (ConsoleServer)
 };
 
 class Console {

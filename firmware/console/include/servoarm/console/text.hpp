@@ -27,4 +27,9 @@ std::string bounded_text(const char (&buf)[N]) {
 /// The one plural rule of the console's and armctl's answers (nouns taking -s).
 std::string count_text(long long n, std::string_view noun);
 
+/// `v` to `decimals` places: how every answer of the console, the GRBL dialect and armctl
+/// prints a rounded number. A value that rounds to zero prints without a sign ("0.000" for
+/// -0.0 and -0.0000001, never "-0.000"); not finite: "nan", "inf", "-inf".
+std::string fixed(double v, int decimals);
+
 }  // namespace servoarm::fw

@@ -93,6 +93,9 @@ class ConsoleServer {
   void queue_output(std::size_t i);
   void queue_events(std::size_t i, const std::string& ev);
   void write_some(std::size_t i);
+  /// Session i ran `quit` / `exit`: on stdin as at end of input (armfw then ends); on any
+  /// other transport the client's session starts afresh (its jog stopped) and it stays connected.
+  void end_session(std::size_t i);
   /// Lines of session i may run now (its output is not backed up).
   bool may_run(std::size_t i) const;
   Console& console_;
