@@ -17,7 +17,7 @@ Eigen::Matrix3d rotation_from_zyz(const EulerZyz& e) {
   const double cb = std::cos(e.beta), sb = std::sin(e.beta);
   const double cg = std::cos(e.gamma), sg = std::sin(e.gamma);
   Eigen::Matrix3d R;
-  // seed 001 eq. (4)
+  // Custódio et al. (IST 2019), eq. (4)
   R << ca * cb * cg - sa * sg, -ca * cb * sg - sa * cg, ca * sb,
        sa * cb * cg + ca * sg, -sa * cb * sg + ca * cg, sa * sb,
        -sb * cg, sb * sg, cb;
@@ -30,7 +30,7 @@ ZyzSolutions zyz_from_rotation(const Eigen::Matrix3d& R, double alpha_if_singula
   const double r31 = R(2, 0), r32 = R(2, 1);
   const double sb = std::sqrt(r13 * r13 + r23 * r23);
   if (sb > tol) {
-    // seed 001 §2: s_beta > 0 and s_beta < 0 branches
+    // Custódio et al. (IST 2019), §2: s_beta > 0 and s_beta < 0 branches
     EulerZyz p{std::atan2(r23, r13), std::atan2(sb, r33), std::atan2(r32, -r31)};
     EulerZyz n{std::atan2(-r23, -r13), std::atan2(-sb, r33), std::atan2(-r32, r31)};
     out.branch[0] = p;

@@ -234,7 +234,7 @@ TEST(IkSphericalWrist, ReachLimitHasFewerSolutions) {
 }
 
 TEST(IkSphericalWrist, Ist6TargetOfSeed001HasFourSolutions) {
-  // seed 001 §5: a target with only 4 solutions -- here the same situation,
+  // Custódio et al. (IST 2019), §5: a target with only 4 solutions -- here the same situation,
   // the wrist centre at the elbow's reach limit; q3 so the arm is stretched.
   const kin::IkModel m = prepared("ist6");
   kin::JointVector q(6);

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Closed forms of seed 002 chapter 4 (RR, RRR, RLR, TRR, TRL:R, VVL:R),
+// Closed forms of Carrara, Apostila de Robótica, chapter 4 (RR, RRR, RLR, TRR, TRL:R, VVL:R),
 // recognised from the DH rows: round trip on random configurations, the
 // original among the solutions, the seed's formulas, unreachable targets.
 #include <cstdlib>
@@ -89,7 +89,7 @@ TEST(IkReduced, RoundTripAndOriginalAmongSolutions) {
 }
 
 TEST(IkReduced, MatchesTheSeedFormulas) {
-  // RR (seed 002 4.1): theta2 = +-acos((x^2 + y^2 - a1^2 - a2^2) / (2 a1 a2)).
+  // RR (Carrara, Apostila de Robótica, 4.1): theta2 = +-acos((x^2 + y^2 - a1^2 - a2^2) / (2 a1 a2)).
   {
     kin::IkModel m;
     kin::ik_prepare(model("rr_planar"), m);
@@ -109,7 +109,7 @@ TEST(IkReduced, MatchesTheSeedFormulas) {
     }
     CHECK(r.solutions[0].branch.elbow != r.solutions[1].branch.elbow);
   }
-  // TRR (seed 002 4.4): theta3 = +-acos((x^2+y^2+(z-a1)^2-a2^2-a3^2)/(2 a2 a3)), 4 solutions.
+  // TRR (Carrara, Apostila de Robótica, 4.4): theta3 = +-acos((x^2+y^2+(z-a1)^2-a2^2-a3^2)/(2 a2 a3)), 4 solutions.
   {
     kin::IkModel m;
     kin::ik_prepare(model("trr"), m);
@@ -129,7 +129,7 @@ TEST(IkReduced, MatchesTheSeedFormulas) {
     }
     LONGS_EQUAL(0, front);  // two shoulder front, two back
   }
-  // VVL:R (seed 002 4.6): a3 = sqrt((z - a1 - a4 s_phi)^2 + (sqrt(x^2+y^2-a2^2) - a4 c_phi)^2).
+  // VVL:R (Carrara, Apostila de Robótica, 4.6): a3 = sqrt((z - a1 - a4 s_phi)^2 + (sqrt(x^2+y^2-a2^2) - a4 c_phi)^2).
   {
     kin::IkModel m;
     kin::ik_prepare(model("vvl_r"), m);
@@ -448,7 +448,7 @@ TEST(IkReduced, TwoDimensionalFormsAnswerRandomPoses) {
 }
 
 TEST(IkReduced, PlanarCaseTablesFromTheSeedFormulas) {
-  // RRR (seed 002 4.2): the wrist point w = p - a3 (cos phi, sin phi), theta2 =
+  // RRR (Carrara, Apostila de Robótica, 4.2): the wrist point w = p - a3 (cos phi, sin phi), theta2 =
   // +-acos((|w|^2 - a1^2 - a2^2) / (2 a1 a2)), theta1 = atan2(w) - atan2(a2 s2, a1 + a2 c2),
   // theta3 = phi - theta1 - theta2. RLR (4.3): d2 = |w|, theta1 = atan2(w), theta3 = phi -
   // theta1, and d2 = -|w| (out of the telescope's limits). Both solutions, each one.

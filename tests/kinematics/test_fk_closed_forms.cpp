@@ -1,10 +1,10 @@
 // SPDX-License-Identifier: Apache-2.0
 // FK against the closed forms printed in the source documents.
-//   seed 000: eq. 3.7.1 (H_0^3 of the cylindrical arm), 3.8.1 (spherical wrist
+//   Cinemática direta de posição (ch. 3): eq. 3.7.1 (H_0^3 of the cylindrical arm), 3.8.1 (spherical wrist
 //             H_3^6), 3.9.1-3.9.2 (full orientation and position)
-//   seed 002: §4.1-4.6 forward formulas of the chapter-4 arms
-//   seed 004: the PUMA (Craig) identities its IK starts from
-//   seed 001: the wrist-centre equations (7)/(8) of the IST arm
+//   Carrara, Apostila de Robótica: §4.1-4.6 forward formulas of the chapter-4 arms
+//   Cinemática inversa robô PUMA 560 (after Craig): the PUMA (Craig) identities its IK starts from
+//   Custódio et al., Direct and Inverse Kinematics of Serial Manipulators (IST 2019): the wrist-centre equations (7)/(8) of the IST arm
 // Each formula is typed in from the document, not derived from our code.
 #include "kin_test_util.hpp"
 

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 // Jacobian against central finite differences of FK, manipulability and
 // condition number at known singular configurations, Cartesian precision
-// (seed 002 §3.14) against its closed form, and the two PUMA descriptions
+// (Carrara, Apostila de Robótica, §3.14) against its closed form, and the two PUMA descriptions
 // against each other.
 #include "kin_test_util.hpp"
 
@@ -62,7 +62,7 @@ TEST(Jacobian, WrongSizeAndNonFiniteJointsAreRefused) {
   CHECK(kin::jacobian(c, q, J) == kin::Status::bad_input);
 }
 
-// Singular configurations (seed 001 §4): wrist (theta5 = 0) and elbow
+// Singular configurations (Custódio et al. (IST 2019), §4): wrist (theta5 = 0) and elbow
 // stretched make the Jacobian rank-deficient; a generic pose does not.
 TEST(Jacobian, ManipulabilityAndConditionAtSingularities) {
   const kin::Chain c = model("puma560");
@@ -109,7 +109,7 @@ TEST(Jacobian, ManipulabilityAndConditionAtSingularities) {
   CHECK(kin::condition_number(J) > 1e4);
 }
 
-// seed 002 §4.1: dx = |a1 s1 + a2 s12| dq1 + |a2 s12| dq2 (and dy likewise).
+// Carrara, Apostila de Robótica, §4.1: dx = |a1 s1 + a2 s12| dq1 + |a2 s12| dq2 (and dy likewise).
 TEST(Jacobian, CartesianPrecisionMatchesSeed002ClosedForm) {
   const kin::Chain c = model("rr_planar");
   const double a1 = 0.3, a2 = 0.25;
@@ -131,7 +131,7 @@ TEST(Jacobian, CartesianPrecisionMatchesSeed002ClosedForm) {
   CHECK(kin::cartesian_precision(c, kin::JointVector::Zero(2), bad, dw) == kin::Status::bad_input);
 }
 
-// The two PUMA 560 descriptions (seed 000 standard DH, seed 004 Craig) place
+// The two PUMA 560 descriptions (Cinemática direta de posição, standard DH, Cinemática inversa robô PUMA 560 (after Craig) Craig) place
 // their frames differently: with q_std = (q1, q2, q3 + 180, q4, q5, q6 + 180)
 // they describe the same arm. Where they should agree they do: the wrist centre
 // (Craig's tool point; the standard tool point minus d6 along z6), the tool

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // Orientation conversions: ZYZ (both branches and the s_beta = 0 cases of
-// seed 001 §2), RPY, quaternion, axis-angle; round trips over random
+// Custódio et al. (IST 2019), §2), RPY, quaternion, axis-angle; round trips over random
 // rotations and the edge cases.
 #include "kin_test_util.hpp"
 

@@ -374,7 +374,7 @@ void finish_status(IkResult& res) {
   else res.status = Status::ok;
 }
 
-// Reduced arms (seed 002 chapter 4, reduced.cpp): which one the chain is.
+// Reduced arms (Carrara, Apostila de Robótica, chapter 4, reduced.cpp): which one the chain is.
 bool parallel(const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return a.cross(b).norm() < 1e-9; }
 
 // Joint axes (directions, in the frame after C0) at q = 0.

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Inverse kinematics, the reduced arms of seed 002 chapter 4 (ik.hpp):
+// Inverse kinematics, the reduced arms of Carrara, Apostila de Robótica, chapter 4 (ik.hpp):
 // planar_2r (4.1), planar_3 (RRR, RLR: 4.2, 4.3), spatial_3 (TRR: 4.4, the
 // position machinery of position.cpp with W = the tool point) and pitch_4
 // (TRL:R, VVL:R: 4.5, 4.6). Real-time, heap-free.

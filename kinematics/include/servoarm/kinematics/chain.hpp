@@ -3,8 +3,8 @@
 // Denavit-Hartenberg chains, forward kinematics and the geometric Jacobian.
 //
 // Both conventions are first-class (DESIGN.md):
-//   standard (distal, Spong / seed 000):  A_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)
-//   modified (proximal, Craig / seed 004): A_i = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i)
+//   standard (distal, Spong / Cinemática direta de posição):  A_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)
+//   modified (proximal, Craig): A_i = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i)
 // For the modified convention a row stores (alpha_{i-1}, a_{i-1}, theta_i, d_i)
 // in its alpha, a, theta, d fields.
 //
@@ -134,7 +134,7 @@ double manipulability(const Jacobian& J);
 /// +inf at a singularity.
 double condition_number(const Jacobian& J);
 
-/// Worst-case tool position error from per-joint resolutions (seed 002 §3.14):
+/// Worst-case tool position error from per-joint resolutions (Carrara, Apostila de Robótica, §3.14):
 /// dw_k = sum_i |dw_k/dq_i| * dq_i, at configuration q. dq in SI units.
 Status cartesian_precision(const Chain& chain, const JointVector& q, const JointVector& dq,
                            Eigen::Vector3d& dw);

@@ -42,12 +42,12 @@
 //    component along axis 2 is constant), q5 from axis 6's component along
 //    axis 2, q6 from the direction of axis 4 in the tool, then q3, q2, q4 in
 //    the plane of the parallel axes (ur.cpp). Up to 8 solutions.
-//  * planar_2r (RR; chapter 4.1 of seed 002): two parallel revolute axes.
-//  * planar_3 (RRR and RLR with tool angle phi; seed 002 4.2, 4.3):
+//  * planar_2r (RR; chapter 4.1 of Carrara's Apostila de Robótica): two parallel revolute axes.
+//  * planar_3 (RRR and RLR with tool angle phi; Carrara, Apostila de Robótica, 4.2, 4.3):
 //    three joints whose rotation axes are all parallel.
-//  * spatial_3 (TRR; seed 002 4.4): three joints, position only, solved with
+//  * spatial_3 (TRR; Carrara, Apostila de Robótica, 4.4): three joints, position only, solved with
 //    the same (E1, E2) machinery as the spherical-wrist arm (W = tool point).
-//  * pitch_4 (TRL:R, VVL:R with wrist pitch phi; seed 002 4.5, 4.6): four
+//  * pitch_4 (TRL:R, VVL:R with wrist pitch phi; Carrara, Apostila de Robótica, 4.5, 4.6): four
 //    joints, joint 1 about the base z axis, joints 2 and 4 revolute about
 //    parallel axes perpendicular to it: the point before the last link is
 //    found from the target and phi, then the spatial_3 machinery.

@@ -2,7 +2,7 @@
 #pragma once
 // Orientation conversions. Heap-free, no exceptions.
 //
-//   ZYZ Euler (alpha, beta, gamma): R = Rz(alpha) Ry(beta) Rz(gamma)   (seed 001 eq. 4)
+//   ZYZ Euler (alpha, beta, gamma): R = Rz(alpha) Ry(beta) Rz(gamma)   (Custódio et al. (IST 2019), eq. 4)
 //   RPY (roll, pitch, yaw), ZYX:    R = Rz(yaw) Ry(pitch) Rx(roll)
 //   quaternion (w, x, y, z), unit
 //   axis-angle (unit axis, angle in [0, pi])
@@ -15,7 +15,7 @@ struct EulerZyz {
   double alpha = 0, beta = 0, gamma = 0;
 };
 
-/// Both ZYZ branches of a rotation (seed 001 §2).
+/// Both ZYZ branches of a rotation (Custódio et al. (IST 2019), §2).
 /// Regular case: count = 2, branch[0] has sin(beta) > 0, branch[1] sin(beta) < 0.
 /// sin(beta) = 0 (|sin beta| < tol): count = 1, singular = true; only alpha+gamma
 /// (cos beta = 1) or alpha-gamma (cos beta = -1) is defined, and alpha is set
