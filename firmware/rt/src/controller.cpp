@@ -1322,7 +1322,7 @@ void Controller::blend_more() {
   const auto* lj = std::get_if<JointMove>(&last->payload);
   const auto* nj = std::get_if<JointMove>(&next->payload);
   if (lj == nullptr || !(lj->blend > 0.0) || nj == nullptr || nj->override != blend_override_ || next->n_outputs != 0) {
-    blend_closed_ = true;  // the run ends at rest at `last`; `next` starts as before
+    blend_closed_ = true;  // the run ends at rest at `last`; `next` starts from rest as an unblended move
     return;
   }
   kin::BlendReport rep;

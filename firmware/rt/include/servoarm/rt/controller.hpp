@@ -146,7 +146,7 @@ class Controller {
   bool starts_here(const kin::JointTrajectory& plan) const;
   void step_motion();
   /// Blended joint moves (JointMove::blend > 0): start a blend run with `jm` from rest at
-  /// cmd_ (false: not blendable, run its plan as before).
+  /// cmd_ (false: not blendable, run its own plan, unblended).
   bool begin_blend(const JointMove& jm);
   /// Append the next queued joint move to the blend run when the last one appended blends
   /// into it (bounded: one kin::blend_append, heap-free), at most one per cycle.
