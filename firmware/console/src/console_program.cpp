@@ -10,7 +10,7 @@
 
 #include "servoarm/console/console.hpp"
 #include "servoarm/console/text.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 namespace servoarm::fw {

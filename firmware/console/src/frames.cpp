@@ -11,7 +11,7 @@
 #include <cstring>
 
 #include "servoarm/console/number.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 namespace servoarm::fw {

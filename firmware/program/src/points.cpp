@@ -10,7 +10,7 @@
 
 #include "servoarm/console/frames.hpp"
 #include "servoarm/console/number.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 namespace servoarm::prog {

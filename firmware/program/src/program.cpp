@@ -13,7 +13,7 @@
 
 #include "servoarm/console/number.hpp"
 #include "servoarm/console/text.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 
 namespace servoarm::prog {
 
