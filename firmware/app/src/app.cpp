@@ -4,7 +4,7 @@
 #include <cmath>
 #include <vector>
 
-#include "servoarm/console/units.hpp"
+#include "servoarm/lang/units.hpp"
 #include "servoarm/kinematics/description.hpp"
 
 namespace servoarm::fw {

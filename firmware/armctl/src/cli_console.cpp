@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "servoarm/armctl/cli_common.hpp"
-#include "servoarm/console/command_table.hpp"
+#include "servoarm/lang/command_table.hpp"
 
 #ifdef SERVOARM_CLI_CAN
 #include "servoarm/hal/serial_port.hpp"

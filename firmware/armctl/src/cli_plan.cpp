@@ -14,7 +14,7 @@
 
 #include "servoarm/armctl/cli_common.hpp"
 #include "servoarm/armctl/cli_svg.hpp"
-#include "servoarm/console/ik_options.hpp"
+#include "servoarm/lang/ik_options.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"

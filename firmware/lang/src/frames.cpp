@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // Named tools and user frames, and the frames file (frames.hpp).
-#include "servoarm/console/frames.hpp"
+#include "servoarm/lang/frames.hpp"
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -10,7 +10,7 @@
 #include <cstdio>
 #include <cstring>
 
-#include "servoarm/console/number.hpp"
+#include "servoarm/lang/number.hpp"
 #include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "servoarm/console/units.hpp"
+#include "servoarm/lang/units.hpp"
 
 #include <cmath>
 

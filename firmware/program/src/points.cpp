@@ -8,8 +8,8 @@
 #include <cmath>
 #include <cstdio>
 
-#include "servoarm/console/frames.hpp"
-#include "servoarm/console/number.hpp"
+#include "servoarm/lang/frames.hpp"
+#include "servoarm/lang/number.hpp"
 #include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
