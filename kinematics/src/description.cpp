@@ -8,7 +8,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "servoarm/kinematics/dynamics.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 #ifdef SERVOARM_WITH_URDF
 #include "servoarm/kinematics/urdf.hpp"
 #endif

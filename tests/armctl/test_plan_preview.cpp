@@ -14,7 +14,7 @@
 
 #include "../console/console_rig.hpp"
 #include "servoarm/armctl/cli_plan.hpp"
-#include "servoarm/console/ik_options.hpp"
+#include "servoarm/lang/ik_options.hpp"
 #include "servoarm/kinematics/description.hpp"
 
 #include <CppUTest/TestHarness.h>

@@ -8,7 +8,7 @@
 #include <sstream>
 #include <string>
 
-#include "servoarm/console/command_table.hpp"
+#include "servoarm/lang/command_table.hpp"
 
 #include <CppUTest/TestHarness.h>
 

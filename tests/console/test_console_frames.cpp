@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "console_rig.hpp"
-#include "servoarm/console/frames.hpp"
+#include "servoarm/lang/frames.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 #include <CppUTest/TestHarness.h>

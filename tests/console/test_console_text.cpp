@@ -11,10 +11,10 @@
 #include <vector>
 
 #include "console_rig.hpp"
-#include "servoarm/console/command_table.hpp"
-#include "servoarm/console/commands.hpp"
-#include "servoarm/console/text.hpp"
 #include "servoarm/kinematics/orientation.hpp"
+#include "servoarm/lang/command_table.hpp"
+#include "servoarm/lang/commands.hpp"
+#include "servoarm/lang/text.hpp"
 #include "servoarm/rt/model_control.hpp"
 
 #include <CppUTest/TestHarness.h>

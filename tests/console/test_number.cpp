@@ -1,11 +1,11 @@
 // SPDX-License-Identifier: Apache-2.0
-// parse_decimal (servoarm/console/number.hpp): the one decimal reader of the console,
+// parse_decimal (servoarm/lang/number.hpp): the one decimal reader of the console,
 // G-code, armctl and armfw's flags. A case table of accepted and refused spellings; the
 // accepted values are compared with the literal the compiler reads.
 #include <cmath>
 #include <string>
 
-#include "servoarm/console/number.hpp"
+#include "servoarm/lang/number.hpp"
 
 #include <CppUTest/TestHarness.h>
 

@@ -5,7 +5,7 @@
 #include <cstring>
 #include <string>
 
-#include "servoarm/console/commands.hpp"
+#include "servoarm/lang/commands.hpp"
 
 #include <CppUTest/TestHarness.h>
 

@@ -8,7 +8,7 @@
 #include <cstring>
 #include <string_view>
 
-#include "servoarm/console/commands.hpp"
+#include "servoarm/lang/commands.hpp"
 
 using namespace servoarm::fw;
 

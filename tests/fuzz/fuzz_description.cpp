@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: the robot description loader (kinematics/src/description.cpp, toml++
-// through kinematics/file_input.hpp). Beyond "no crash": a refusal is one line starting
+// through kinematics/io/file_input.hpp). Beyond "no crash": a refusal is one line starting
 // with the origin; an accepted chain has finite rows within the plausible ranges.
 #include <cmath>
 #include <cstdint>

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// libFuzzer target: the console's number reader (servoarm/console/number.hpp), checked
+// libFuzzer target: the console's number reader (servoarm/lang/number.hpp), checked
 // against strtod: every text parse_decimal accepts is a finite double strtod reads the
 // same way (the whole text), and `not_finite` only for what strtod reads as inf/nan.
 #include <cmath>
@@ -7,7 +7,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "servoarm/console/number.hpp"
+#include "servoarm/lang/number.hpp"
 
 using namespace servoarm::fw;
 

@@ -221,7 +221,7 @@ TEST(Description, ErrorsGiveLineAndColumn) {
   STRCMP_EQUAL("arm.toml:2:14: key 'convention': expected \"standard\" or \"modified\", got \"sta\"", u.error.c_str());
 }
 
-// Every file is read through kinematics/file_input.hpp: regular files only, capped,
+// Every file is read through kinematics/io/file_input.hpp: regular files only, capped,
 // UTF-8, bounded nesting, linear time; the faults toml11 had are refused.
 TEST(Description, FileInputIsCheckedAndCapped) {
   auto err = [](const std::string& path) { return kin::load_robot(path).error; };

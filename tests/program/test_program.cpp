@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "servoarm/console/units.hpp"
+#include "servoarm/lang/units.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/program/program.hpp"
 #include "tmp_dir.hpp"

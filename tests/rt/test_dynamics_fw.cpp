@@ -463,3 +463,45 @@ TEST(FwDynamics, DefaultBlendKeysReachTheConsoleInSi) {
   DOUBLES_EQUAL(0, d.default_blend_rad, 0);
   DOUBLES_EQUAL(0, d.default_blend_m, 0);
 }
+
+// The configuration's joint values are deg for a revolute joint and mm for a prismatic one
+// (stanford's joint 3): home pose, drive limits and speeds, homing, following error reach
+// the controller, the console and the master in rad and m.
+TEST(FwDynamics, ConfigJointValuesReachSiByJointType) {
+  test::SimApp app;
+  hal::ManualClock clock;
+  FwConfig c;
+  c.robot = "stanford";
+  c.following_error_deg = 2;
+  c.home_deg = {10, -20, 500, 0, 30, 0};  // joint 3: mm
+  c.drives.resize(6);
+  c.drives[0].limits = {-90, 90};
+  c.drives[2].limits = {300, 800};
+  c.drives[2].max_velocity = 100;
+  c.drives[2].zero_offset = -65536000;  // 0.5 m at drive position 0
+  for (const int j : {1, 2}) {
+    DriveConfig& d = c.drives[static_cast<std::size_t>(j)];
+    d.homing_method = "hard_stop";
+    d.homing_speed_switch = 20;
+    d.homing_offset = j == 2 ? 400 : 5;  // within the joint's limits
+  }
+  const std::string e = app.build(c, &clock);
+  if (!e.empty()) FAIL(e.c_str());
+  DOUBLES_EQUAL(2 * kDeg, app.controller_config().following_error, 1e-15);
+  const ConsoleConfig cc = app.console_config();
+  DOUBLES_EQUAL(10 * kDeg, cc.home[0], 1e-15);
+  DOUBLES_EQUAL(-20 * kDeg, cc.home[1], 1e-15);
+  DOUBLES_EQUAL(0.5, cc.home[2], 1e-15);
+  DOUBLES_EQUAL(-90 * kDeg, app.chain.joint(0).lower, 1e-15);
+  DOUBLES_EQUAL(90 * kDeg, app.chain.joint(0).upper, 1e-15);
+  DOUBLES_EQUAL(0.3, app.chain.joint(2).lower, 1e-15);
+  DOUBLES_EQUAL(0.8, app.chain.joint(2).upper, 1e-15);
+  DOUBLES_EQUAL(0.1, app.chain.joint(2).dynamics.max_velocity, 1e-15);
+  const hal::HomingSpec rev = app.homing_spec(1), pri = app.homing_spec(2);
+  DOUBLES_EQUAL(-20 * kDeg, rev.speed_switch, 1e-15);  // hard_stop: the sign is the direction (-1)
+  DOUBLES_EQUAL(5 * kDeg, rev.offset, 1e-15);
+  DOUBLES_EQUAL(-0.02, pri.speed_switch, 1e-15);
+  DOUBLES_EQUAL(0.4, pri.offset, 1e-15);
+  DOUBLES_EQUAL(0.002, pri.backoff, 1e-15);  // the default 2 mm
+  DOUBLES_EQUAL(0.5 + c.homing_travel_margin_deg * 1e-3, pri.max_travel, 1e-15);
+}

@@ -4,15 +4,22 @@
 #include <cmath>
 #include <vector>
 
-#include "servoarm/console/units.hpp"
+#include "servoarm/lang/units.hpp"
 #include "servoarm/kinematics/description.hpp"
 
 namespace servoarm::fw {
 
+namespace {
+/// armfw.toml's lengths and angles are in mm and degrees (the keys say so: _mm, _deg;
+/// a joint's value in mm when it is prismatic, in degrees when revolute), whatever units
+/// the robot description uses: they reach SI through the units table.
+constexpr ConsoleUnits kConfigUnits{LengthUnit::mm, AngleUnit::deg};
+}  // namespace
+
 ControllerConfig App::controller_config() const {
   ControllerConfig c;
   c.rate_hz = cfg.rate_hz;
-  c.following_error = cfg.following_error_deg * M_PI / 180.0;
+  c.following_error = kConfigUnits.angle_in(cfg.following_error_deg);
   c.enable_timeout = cfg.enable_timeout_s;
   c.feedback_timeout = cfg.feedback_timeout_ms * 1e-3;
   c.drive_quick_stop = cfg.stop == "drive";
@@ -57,7 +64,7 @@ hal::HomingSpec App::homing_spec(int j) const {
   hal::HomingSpec h;
   if (cfg.drives.empty()) return h;  // no [[drive]] tables: every joint absolute (kind none)
   const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
-  const double unit = chain.joint(j).type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;  // SI per deg / mm
+  const double unit = kConfigUnits.joint_in(chain, j, 1.0);  // SI per deg (revolute) or mm (prismatic)
   if (d.homing_method == "none") return h;
   h.kind = d.homing_method == "hard_stop" ? hal::HomingKind::hard_stop : hal::HomingKind::cia402;
   h.method = static_cast<std::int8_t>(homing_method_number(d.homing_method));
@@ -81,18 +88,16 @@ hal::HomingSpec App::homing_spec(int j) const {
 ConsoleConfig App::console_config() const {
   ConsoleConfig c;
   c.default_joint_speed_pct = cfg.joint_speed_pct;
-  c.default_linear_speed = cfg.linear_speed_mm_s * 1e-3;
-  c.max_linear_speed = cfg.max_linear_speed_mm_s * 1e-3;
+  c.default_linear_speed = kConfigUnits.length_in(cfg.linear_speed_mm_s);
+  c.max_linear_speed = kConfigUnits.length_in(cfg.max_linear_speed_mm_s);
   c.cartesian.linear_velocity = c.max_linear_speed;
   c.max_move_duration_s = cfg.max_move_duration_s;
-  c.default_blend_rad = cfg.default_blend_deg * M_PI / 180.0;  // motion.default_blend_deg: movej
-  c.default_blend_m = cfg.default_blend_mm * 1e-3;             // motion.default_blend_mm: movel, G0/G1
+  c.default_blend_rad = kConfigUnits.angle_in(cfg.default_blend_deg);  // motion.default_blend_deg: movej
+  c.default_blend_m = kConfigUnits.length_in(cfg.default_blend_mm);    // motion.default_blend_mm: movel, G0/G1
   if (!cfg.home_deg.empty()) {
     c.home = kin::JointVector::Zero(chain.n_joints);
-    for (int j = 0; j < chain.n_joints; ++j) {
-      const double v = cfg.home_deg[static_cast<std::size_t>(j)];
-      c.home[j] = chain.joint(j).type == kin::JointType::prismatic ? v * 1e-3 : v * M_PI / 180.0;
-    }
+    for (int j = 0; j < chain.n_joints; ++j)
+      c.home[j] = kConfigUnits.joint_in(chain, j, cfg.home_deg[static_cast<std::size_t>(j)]);
   }
   c.units = units_of(chain);  // the console speaks the description's units (mm or m, deg or rad)
   c.robot_name = cfg.robot;
@@ -132,7 +137,7 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   for (int j = 0; j < static_cast<int>(cfg.drives.size()); ++j) {
     const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
     kin::DhRow& row = chain.joint(j);
-    const double unit = row.type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;
+    const double unit = kConfigUnits.joint_in(chain, j, 1.0);  // SI per deg (revolute) or mm (prismatic)
     const std::string w = "config: drive[" + std::to_string(j + 1) + "].";
     if (!d.limits.empty()) {
       const double lo = d.limits[0] * unit, hi = d.limits[1] * unit;
@@ -221,8 +226,8 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
                                                                        : hal::JointScaling::Kind::revolute;
     if (!cfg.drives.empty() && cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel > 0) {
       // joint deg/s^2 (mm/s^2) -> motor counts/s^2
-      const double unit = chain.joint(j).type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;
-      jc.quick_stop_decel = cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel * unit * jc.scaling.counts_per_si();
+      jc.quick_stop_decel =
+          kConfigUnits.joint_in(chain, j, cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel) * jc.scaling.counts_per_si();
     }
     if (!cfg.drives.empty()) jc.homing = homing_spec(j);
     // hard_stop with homing.torque_limit: the drives' torque actual (6077h) into TPDO2 where

@@ -27,7 +27,7 @@
 #include "servoarm/sim/sim_plant.hpp"  // --sim: the only firmware file that uses host_sim
 #endif
 #include "servoarm/rt/rt_loop.hpp"
-#include "servoarm/console/number.hpp"
+#include "servoarm/lang/number.hpp"
 #include "servoarm/console/transport.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 

@@ -1,9 +1,9 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "servoarm/armctl/cli_common.hpp"
 
-#include "servoarm/console/number.hpp"
-#include "servoarm/console/text.hpp"
-#include "servoarm/console/units.hpp"
+#include "servoarm/lang/number.hpp"
+#include "servoarm/lang/text.hpp"
+#include "servoarm/lang/units.hpp"
 
 #include <sys/stat.h>
 
@@ -14,7 +14,7 @@
 namespace servoarm::fw {
 
 bool parse_number(const char* s, double& out) {
-  // The console's decimal reader (servoarm/console/number.hpp): one grammar for every
+  // The console's decimal reader (servoarm/lang/number.hpp): one grammar for every
   // number typed at armctl, armfw or the console.
   return s && parse_decimal(s, out) == Num::ok;
 }

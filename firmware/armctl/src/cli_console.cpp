@@ -18,8 +18,8 @@
 #include <vector>
 
 #include "servoarm/armctl/cli_common.hpp"
-#include "servoarm/console/command_table.hpp"
-#include "servoarm/console/number.hpp"
+#include "servoarm/lang/command_table.hpp"
+#include "servoarm/lang/number.hpp"
 
 #ifdef SERVOARM_CLI_CAN
 #include "servoarm/hal/serial_port.hpp"

@@ -14,8 +14,8 @@
 
 #include "servoarm/armctl/cli_common.hpp"
 #include "servoarm/armctl/cli_svg.hpp"
-#include "servoarm/console/text.hpp"
-#include "servoarm/console/ik_options.hpp"
+#include "servoarm/lang/ik_options.hpp"
+#include "servoarm/lang/text.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"

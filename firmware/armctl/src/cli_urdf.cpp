@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "servoarm/armctl/cli_common.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #ifdef SERVOARM_WITH_URDF
 #include "servoarm/kinematics/urdf.hpp"

@@ -8,7 +8,7 @@
 #include <cstdio>
 #include <cstring>
 #include "servoarm/kinematics/chain.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 
 namespace servoarm::fw {
 

@@ -11,9 +11,9 @@
 #include <memory>
 #include <thread>
 
-#include "servoarm/console/command_table.hpp"
-#include "servoarm/console/ik_options.hpp"
-#include "servoarm/console/text.hpp"
+#include "servoarm/lang/command_table.hpp"
+#include "servoarm/lang/ik_options.hpp"
+#include "servoarm/lang/text.hpp"
 #include "servoarm/kinematics/motion_ik.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/ik.hpp"

@@ -9,8 +9,8 @@
 #include <cstdio>
 
 #include "servoarm/console/console.hpp"
-#include "servoarm/console/text.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/lang/text.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 namespace servoarm::fw {

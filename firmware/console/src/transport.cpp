@@ -11,7 +11,7 @@
 #include <cstdlib>
 #include <cstring>
 
-#include "servoarm/console/commands.hpp"
+#include "servoarm/lang/commands.hpp"
 #include "servoarm/console/console.hpp"
 #include "servoarm/hal/serial_port.hpp"
 

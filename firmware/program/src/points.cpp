@@ -8,9 +8,9 @@
 #include <cmath>
 #include <cstdio>
 
-#include "servoarm/console/frames.hpp"
-#include "servoarm/console/number.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/lang/frames.hpp"
+#include "servoarm/lang/number.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 namespace servoarm::prog {

@@ -11,9 +11,9 @@
 #include <cstdlib>
 #include <memory>
 
-#include "servoarm/console/number.hpp"
-#include "servoarm/console/text.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/lang/number.hpp"
+#include "servoarm/lang/text.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 
 namespace servoarm::prog {
 

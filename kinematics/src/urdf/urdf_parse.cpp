@@ -14,7 +14,7 @@
 #include <console_bridge/console.h>
 #include <urdf_parser/urdf_parser.h>
 
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/urdf.hpp"
 
 namespace servoarm::kin {

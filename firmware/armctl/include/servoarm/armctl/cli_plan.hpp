@@ -13,7 +13,7 @@
 // Units are the robot description's (built-in models: mm and degrees).
 //
 // movel is planned as armfw plans it: plan_movel with the firmware's IK adapter
-// (firmware_ik_solver, firmware/console/ik_options.hpp): the nearest solution within the
+// (firmware_ik_solver, firmware/lang/ik_options.hpp): the nearest solution within the
 // joint limits, closed form where the chain has one, damped Newton where not.
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"

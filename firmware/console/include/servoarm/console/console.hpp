@@ -25,9 +25,9 @@
 #include <string_view>
 #include <vector>
 
-#include "servoarm/console/commands.hpp"
-#include "servoarm/console/frames.hpp"
-#include "servoarm/console/requests.hpp"
+#include "servoarm/lang/commands.hpp"
+#include "servoarm/lang/frames.hpp"
+#include "servoarm/lang/requests.hpp"
 #include "servoarm/program/points.hpp"
 #include "servoarm/program/program.hpp"
 #include "servoarm/rt/controller.hpp"

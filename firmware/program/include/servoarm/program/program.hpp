@@ -36,8 +36,8 @@
 #include <string_view>
 #include <vector>
 
-#include "servoarm/console/commands.hpp"
-#include "servoarm/console/units.hpp"
+#include "servoarm/lang/commands.hpp"
+#include "servoarm/lang/units.hpp"
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/program/points.hpp"
 

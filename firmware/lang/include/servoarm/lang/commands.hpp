@@ -15,7 +15,7 @@
 #include <cstdint>
 #include <string_view>
 
-#include "servoarm/console/units.hpp"
+#include "servoarm/lang/units.hpp"
 #include "servoarm/kinematics/types.hpp"
 
 namespace servoarm::fw {
@@ -171,7 +171,7 @@ struct Command {
 struct ParseResult {
   CmdError error = CmdError::ok;
   /// One line naming what is wrong. Sized for the longest refusal with a 63-character name
-  /// quoted; a longer one ends with "..." after a whole word (servoarm/console/text.hpp).
+  /// quoted; a longer one ends with "..." after a whole word (servoarm/lang/text.hpp).
   std::array<char, 192> message{};
   bool ok() const { return error == CmdError::ok; }
 };

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "servoarm/console/ik_options.hpp"
+#include "servoarm/lang/ik_options.hpp"
 
 namespace servoarm::fw {
 

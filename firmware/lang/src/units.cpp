@@ -1,9 +1,9 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "servoarm/console/units.hpp"
+#include "servoarm/lang/units.hpp"
 
 #include <cmath>
 
-#include "servoarm/console/text.hpp"
+#include "servoarm/lang/text.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 namespace servoarm::fw {

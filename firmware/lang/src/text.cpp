@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "servoarm/console/text.hpp"
+#include "servoarm/lang/text.hpp"
 
 #include <cctype>
 #include <cmath>

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 // Reading the files the firmware reads: size cap, file-type checks, TOML (toml++).
 // See file_input.hpp. Set-up code (allocates, does I/O), exception-free.
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // Named tools and user frames, and the frames file (frames.hpp).
-#include "servoarm/console/frames.hpp"
+#include "servoarm/lang/frames.hpp"
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -10,8 +10,8 @@
 #include <cstdio>
 #include <cstring>
 
-#include "servoarm/console/number.hpp"
-#include "servoarm/kinematics/file_input.hpp"
+#include "servoarm/lang/number.hpp"
+#include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 namespace servoarm::fw {

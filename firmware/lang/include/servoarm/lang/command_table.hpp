@@ -14,7 +14,7 @@
 #include <string>
 #include <string_view>
 
-#include "servoarm/console/commands.hpp"
+#include "servoarm/lang/commands.hpp"
 
 namespace servoarm::fw {
 

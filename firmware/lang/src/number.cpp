@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "servoarm/console/number.hpp"
+#include "servoarm/lang/number.hpp"
 
 #include <cfenv>
 #include <cmath>

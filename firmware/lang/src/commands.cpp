@@ -1,9 +1,9 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "servoarm/console/commands.hpp"
+#include "servoarm/lang/commands.hpp"
 
-#include "servoarm/console/command_table.hpp"
-#include "servoarm/console/number.hpp"
-#include "servoarm/console/text.hpp"
+#include "servoarm/lang/command_table.hpp"
+#include "servoarm/lang/number.hpp"
+#include "servoarm/lang/text.hpp"
 
 #include <cfenv>
 #include <cmath>
