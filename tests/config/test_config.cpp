@@ -1008,3 +1008,82 @@ TEST(Config, ARealBusNeedsEveryDrivesHomingMethod) {
     CHECK_TEXT(has(e, b.want), ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
   }
 }
+
+// Bus load (docs/deployment.md#bus-load). Hand count, worst-case stuffing (hal/bus_load.hpp):
+// SYNC 55 bits, a 6-byte PDO 115, a heartbeat 65. Six drives at 1 Mbit/s: per cycle
+// 55 + 12 x 115 = 1435 bits; heartbeats 6 x 20/s x 65 = 7800 bit/s.
+namespace {
+std::string real_bus(int drives, const std::string& extra_bus = "", const std::string& loop = "") {
+  std::string t = (loop.empty() ? "" : "[loop]\n" + loop) + "[bus]\ncan = \"can0\"\n" + extra_bus;
+  for (int i = 0; i < drives; ++i) t += "[[drive]]\nhoming.method = \"absolute\"\n";
+  return t;
+}
+}  // namespace
+
+TEST(Config, BusLoadAboveTheLimitIsRefusedNamingRateFramesAndLoad) {
+  FwConfig c;
+  // 1000 Hz: 1.435 + 0.0078 = 144.3 %; at most (0.85 - 0.0078) / 0.001435 = 586.9 Hz fits.
+  const std::string e = load_config_text(real_bus(6, "", "rate_hz = 1000\n"), "b.toml", c);
+  CHECK_TEXT(e.find('\n') == std::string::npos, e.c_str());
+  for (const char* part : {"b.toml:", "loop.rate_hz", "144.3 %", "bus.bitrate 1000000 bit/s", "loop.rate_hz 1000",
+                           "6 drives", "13 frames per cycle: SYNC, 6 RPDO1, 6 TPDO1", "above 85 %", "at most 586 Hz"})
+    CHECK_TEXT(has(e, part), ("wanted '" + std::string(part) + "' in: " + e).c_str());
+  // TPDO2 asked for at 400 Hz: (55 + 18 x 115) x 400 + 7800 = 857800 bit/s: 85.8 %.
+  const std::string e2 = load_config_text(real_bus(6, "tpdo2 = true\n", "rate_hz = 400\n"), "b.toml", c);
+  CHECK_TEXT(has(e2, "85.8 %") && has(e2, "19 frames per cycle: SYNC, 6 RPDO1, 6 TPDO1, 6 TPDO2"), e2.c_str());
+  // 500 kbit/s halves the room: 400 Hz is 2 x (0.574 + 0.0078) = 116.4 %.
+  const std::string e3 = load_config_text(real_bus(6, "bitrate = 500000\n", "rate_hz = 400\n"), "b.toml", c);
+  CHECK_TEXT(has(e3, "116.4 %") && has(e3, "bus.bitrate 500000 bit/s"), e3.c_str());
+  // not checked: the in-process bus and a vcan carry no bits on a wire
+  FwConfig s;
+  STRCMP_EQUAL("", load_config_text("[loop]\nrate_hz = 4000\n[bus]\ncan = \"sim\"\n[[drive]]\n[[drive]]\n[[drive]]\n"
+                                    "[[drive]]\n[[drive]]\n[[drive]]\n", "s.toml", s).c_str());
+  std::string vt = real_bus(6, "", "rate_hz = 1000\n");
+  vt.replace(vt.find("\"can0\""), 6, "\"vcan0\"");
+  FwConfig v;
+  STRCMP_EQUAL("", load_config_text(vt, "v.toml", v).c_str());
+  STRCMP_EQUAL("vcan0", v.can.c_str());
+  CHECK_FALSE(bus_load_checked(v));
+}
+
+TEST(Config, BusLoadAboveSixtyPercentIsWarned) {
+  FwConfig c;
+  // 500 Hz: 0.7175 + 0.0078 = 72.5 %: accepted, with a warning; (0.6 - 0.0078) / 0.001435 = 412.7 Hz.
+  STRCMP_EQUAL("", load_config_text(real_bus(6, "", "rate_hz = 500\n"), "w.toml", c).c_str());
+  const std::string w = bus_load_warning(c, 6);
+  CHECK_TEXT(has(w, "72.5 %") && has(w, "above 60 %") && has(w, "412 Hz") && w.find('\n') == std::string::npos,
+             w.c_str());
+  STRCMP_EQUAL("", bus_load_problem(c, 6).c_str());
+  c.rate_hz = 400;  // 57.4 + 0.78 = 58.2 %
+  STRCMP_EQUAL("", bus_load_warning(c, 6).c_str());
+}
+
+TEST(Config, ARealBusWithoutARateGetsOneTheBusCarries) {
+  FwConfig c;
+  // 6 drives: 1000 (144 %), 800 (115 %), 500 (72.5 %) are above 60 %; 400 Hz: 58.2 %.
+  STRCMP_EQUAL("", load_config_text(real_bus(6), "r.toml", c).c_str());
+  DOUBLES_EQUAL(400, c.rate_hz, 0);
+  FwConfig back;
+  STRCMP_EQUAL("", load_config_text(to_toml(c), "back.toml", back).c_str());
+  CHECK(back == c);
+  // 3 drives: 55 + 6 x 115 = 745 bits per cycle + 3900 bit/s: 800 Hz is 59.99 %.
+  STRCMP_EQUAL("", load_config_text(real_bus(3), "r.toml", c).c_str());
+  DOUBLES_EQUAL(800, c.rate_hz, 0);
+  // the simulated bus keeps the 1 kHz of the key table
+  FwConfig s;
+  STRCMP_EQUAL("", load_config_text("[bus]\ncan = \"sim\"\n", "s.toml", s).c_str());
+  DOUBLES_EQUAL(1000, s.rate_hz, 0);
+  // the default frames: no TPDO2
+  CHECK_FALSE(FwConfig{}.tpdo2);
+  LONGS_EQUAL(0, bus_traffic(FwConfig{}, 6).tpdo2_len);
+}
+
+// docs/deployment.md's table of load by rate and joint count is the calculation's own output.
+TEST(Config, DeploymentPageBusLoadTableIsTheCalculation) {
+  const std::string page = read_file(source_root() + "docs/deployment.md");
+  const std::string why = bus_load_reference_mismatch(page);
+  STRCMP_EQUAL("", why.c_str());
+  // and the table says what the hand count says: 6 drives at 1000 Hz on 1 Mbit/s, 144.3 %
+  CHECK_TEXT(has(bus_load_reference_markdown(), "| 58.2 % | 72.5 % warned | 115.6 % refused | 144.3 % refused | 287.8 % refused |"),
+             bus_load_reference_markdown().c_str());
+}
