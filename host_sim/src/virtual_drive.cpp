@@ -93,6 +93,20 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kHomingAccel, 0, 4, true, false, 0);
   add(c402::kHomeOffset, 0, 4, true, false, 0);
   add(c402::kSupportedModes, 0, 4, false, false, c402::kSupportsCsp | c402::kSupportsHoming);
+  // Set-up objects a master writes at bring-up (drive.sdo): kept and read back, not acted on
+  // (the motor model's limits are MotorParams'): interpolation time period (1 x 10^-3 s),
+  // position window, following error time out, software position limits, max torque and
+  // max current (per mille of the rated values).
+  add(c402::kInterpolationPeriod, 0, 1, false, false, 2);
+  add(c402::kInterpolationPeriod, 1, 1, true, false, 1);
+  add(c402::kInterpolationPeriod, 2, 1, true, false, 0xFD);
+  add(0x6067, 0, 4, true, false, 1000);
+  add(0x607D, 0, 1, false, false, 2);
+  add(0x607D, 1, 4, true, false, 0x80000000u);
+  add(0x607D, 2, 4, true, false, 0x7FFFFFFFu);
+  add(0x6066, 0, 2, true, false, 10);
+  add(0x6072, 0, 2, true, true, 1000);
+  add(0x6073, 0, 2, true, false, 1000);
   Entry* name = find(0x1008, 0);
   char buf[48];
   const int n = std::snprintf(buf, sizeof buf, "servoarm virtual drive %u", unsigned(node));
