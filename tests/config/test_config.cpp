@@ -397,6 +397,7 @@ TEST(Config, EveryDocumentedKeyIsAccepted) {
   d.homing_method = "19";  // a joint that homes: its homing.* keys are written too
   d.rated_torque = 0.64;
   d.collision_threshold = 12.5;
+  d.sdo = {{0x6065, 0, "u32", 20000}, {0x607D, 1, "i32", -400000}};
   c.drives = {d, d};
   c.drives[1].node = 8;
   const std::string toml = to_toml(c);
@@ -437,6 +438,7 @@ TEST(Config, ToTomlEscapesAwkwardStrings) {
   c.console_serial = "/dev/tty\"S0\"\r\n";
   c.console_can = "c'a\\n";
   c.drives.resize(6);  // a real bus: every joint's homing.method (here "absolute") written
+  c.rate_hz = 400;     // six drives on a real bus at 1 Mbit/s: 1000 Hz would be refused (bus load)
   const std::string t = to_toml(c);
   // an independent reader of the text (toml11 directly, not our loader)
   std::istringstream is(t);
