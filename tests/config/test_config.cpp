@@ -1089,3 +1089,20 @@ TEST(Config, DeploymentPageBusLoadTableIsTheCalculation) {
   CHECK_TEXT(has(bus_load_reference_markdown(), "| 58.2 % | 72.5 % warned | 115.6 % refused | 144.3 % refused | 287.8 % refused |"),
              bus_load_reference_markdown().c_str());
 }
+
+// The shipped file switched to a real bus, as its comments tell a user to (bus.can = "can0"
+// and one [[drive]] table per joint of the PUMA 560), loads at a rate the bus carries:
+// 6 drives at 1 Mbit/s, (55 + 12 x 115) x 400 + 7800 bit/s = 58.2 % at 400 Hz.
+TEST(Config, ShippedConfigOnARealBusFits) {
+  std::string text = read_file(SERVOARM_SHIPPED_CONFIG);
+  const std::string sim = "\ncan = \"sim\"";  // [bus]'s own line, not a comment naming it
+  const std::size_t at = text.find(sim);
+  CHECK(at != std::string::npos);
+  text.replace(at, sim.size(), "\ncan = \"can0\"");
+  for (int i = 0; i < 6; ++i) text += "[[drive]]\nhoming.method = \"absolute\"\n";
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(text, "armfw.toml", c).c_str());
+  STRCMP_EQUAL("can0", c.can.c_str());
+  DOUBLES_EQUAL(400, c.rate_hz, 0);
+  STRCMP_EQUAL("", bus_load_warning(c, 6).c_str());
+}
