@@ -661,3 +661,36 @@ TEST(MasterSim, ADriveThatRefusesAnSdoListEntryFailsTheBringUpNamingIt) {
   STRCMP_CONTAINS("node 3: drive.sdo 6065h:0 = 7 refused", master->last_error());
   STRCMP_CONTAINS("abort 0x06070013", master->last_error());
 }
+
+// A drive that acknowledges a write but keeps another value (a limit saturated at its own
+// ceiling): the read-back catches it and the bring-up fails naming the node, the object
+// and both values. The virtual drive keeps 6073h (max current) at most 3000 per mille.
+TEST(MasterSim, ADriveThatReadsBackAnotherValueFailsTheBringUpNamingBoth) {
+  CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 6);
+  cfg.joints[3].sdo_writes[0] = SdoWrite{0x6072, 0, 2, false, 1500};  // within the drive's range: kept
+  cfg.joints[3].sdo_writes[1] = SdoWrite{0x6073, 0, 2, false, 5000};  // above its ceiling: kept as 3000
+  cfg.joints[3].sdo_writes[2] = SdoWrite{0x6066, 0, 2, false, 20};    // after the mismatch: not written
+  cfg.joints[3].sdo_write_count = 3;
+  delete master;
+  master = new CanopenServoBus(*rig->master_ep, rig->clock, cfg);
+  const Status s = master->start(rig->clock.now() + 2 * kSecond);
+  LONGS_EQUAL(int(Status::protocol_error), int(s));
+  STRCMP_CONTAINS("node 4: drive.sdo 6073h:0 reads back 3000 (2 bytes) after writing 5000", master->last_error());
+  CHECK(std::strchr(master->last_error(), '\n') == nullptr);
+  std::uint32_t v = 0;
+  sim::VirtualDrive* d = rig->sim->node(4);
+  CHECK(d->od_read(0x6072, 0, v));
+  LONGS_EQUAL(1500, v);  // the entry before was written
+  CHECK(d->od_read(0x6073, 0, v));
+  LONGS_EQUAL(3000, v);  // what the drive kept, the figure the message names
+  CHECK(d->od_read(0x6066, 0, v));
+  LONGS_EQUAL(10, v);    // the bring-up stopped at the mismatch
+  // a negative value the drive keeps as written passes the read-back (compared as the
+  // bytes written, two's complement)
+  cfg.joints[3].sdo_writes[0] = SdoWrite{0x607D, 1, 4, true, std::uint32_t(-400000)};
+  cfg.joints[3].sdo_write_count = 1;
+  delete master;
+  master = new CanopenServoBus(*rig->master_ep, rig->clock, cfg);
+  LONGS_EQUAL(int(Status::ok), int(master->start(rig->clock.now() + 2 * kSecond)));
+  STRCMP_EQUAL("", master->last_error());
+}
