@@ -17,6 +17,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <vector>
 #include <toml.hpp>
 
 #include "servoarm/config/config.hpp"
@@ -1105,4 +1106,29 @@ TEST(Config, ShippedConfigOnARealBusFits) {
   STRCMP_EQUAL("can0", c.can.c_str());
   DOUBLES_EQUAL(400, c.rate_hz, 0);
   STRCMP_EQUAL("", bus_load_warning(c, 6).c_str());
+}
+
+// armfw --bus-load's table: one column layout for the frames and the sums (the longest
+// label, "from drives", included), whatever the traffic.
+TEST(Config, BusLoadTableColumnsLineUp) {
+  FwConfig c;
+  c.can = "can0";
+  c.tpdo2 = true;
+  c.collision = true;
+  c.feed_forward = "torque";
+  c.outputs.resize(1);
+  c.outputs[0].node = 1;
+  const std::string t = bus_load_table(c, 6);
+  std::vector<std::string> lines;
+  for (std::size_t a = 0; a < t.size();) {
+    const std::size_t n = t.find('\n', a);
+    lines.push_back(t.substr(a, n - a));
+    a = n + 1;
+  }
+  // a title line, the column heads, the frames, three sums, the verdict
+  CHECK_TEXT(lines.size() >= 10, t.c_str());
+  const std::size_t width = lines[1].size();
+  for (std::size_t i = 1; i + 1 < lines.size(); ++i)
+    CHECK_TEXT(lines[i].size() == width, ("line " + std::to_string(i + 1) + " '" + lines[i] + "' in:\n" + t).c_str());
+  CHECK_TEXT(has(t, "\nfrom drives "), t.c_str());
 }

@@ -1065,19 +1065,19 @@ std::string bus_load_table(const FwConfig& c, std::size_t joints) {
   std::snprintf(b, sizeof b, "bus load: %zu drives, loop.rate_hz %s, bus.bitrate %s bit/s, classical CAN, worst-case bit stuffing\n",
                 joints, num_text(c.rate_hz).c_str(), num_text(c.bitrate).c_str());
   o += b;
-  std::snprintf(b, sizeof b, "%-10s %-12s %6s %10s %6s %10s %8s\n", "frame", "direction", "bytes", "per cycle", "bits",
+  std::snprintf(b, sizeof b, "%-11s %-12s %6s %10s %6s %10s %8s\n", "frame", "direction", "bytes", "per cycle", "bits",
                 "bit/s", "load");
   o += b;
   for (std::size_t k = 0; k < l.count; ++k) {
     const double per_cycle = l.kinds[k].per_second / c.rate_hz;
     const bool hb = std::strcmp(l.kinds[k].name, "heartbeat") == 0;
-    std::snprintf(b, sizeof b, "%-10s %-12s %6u %10s %6d %10.0f %8s\n", l.kinds[k].name, hal::to_string(l.kinds[k].direction),
+    std::snprintf(b, sizeof b, "%-11s %-12s %6u %10s %6d %10.0f %8s\n", l.kinds[k].name, hal::to_string(l.kinds[k].direction),
                   unsigned(l.kinds[k].data_len), hb ? "-" : num_text(per_cycle).c_str(), l.bits[k].total(),
                   l.kinds[k].per_second * l.bits[k].total(), pct_text(l.seconds[k]).c_str());
     o += b;
   }
   const auto line = [&](const char* what, double share) {
-    std::snprintf(b, sizeof b, "%-10s %-12s %6s %10s %6s %10.0f %8s\n", what, "", "", "", "", share * c.bitrate,
+    std::snprintf(b, sizeof b, "%-11s %-12s %6s %10s %6s %10.0f %8s\n", what, "", "", "", "", share * c.bitrate,
                   pct_text(share).c_str());
     o += b;
   };
