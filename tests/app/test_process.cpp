@@ -378,3 +378,30 @@ TEST(Process, BusLoadOfAnOverloadedConfigurationIsRefused) {
                            "at most 586 Hz fits"})
     CHECK_TEXT(out.find(part) != std::string::npos, ("wanted '" + std::string(part) + "' in: " + out).c_str());
 }
+
+// drive.sdo from the file to the drive (docs/servo-bus.md#drive-set-up): the virtual drives of
+// bus.can = "sim" keep what they are sent; joint 1's drive keeps 6073h (max current) at most
+// 3000 per mille, so 5000 reads back as 3000 and the bring-up stops naming it.
+TEST(Process, DriveSdoListIsWrittenAtBringUpAndAValueTheDriveDoesNotKeepStopsIt) {
+  const auto file = [](const char* max_current) {
+    std::string t = "bus.can = \"sim\"\n[[drive]]\nsdo = [[\"6072h\", 0, \"u16\", 1500], [\"6073h\", 0, \"u16\", " +
+                    std::string(max_current) + "]]\n";
+    for (int i = 2; i <= 6; ++i) t += "[[drive]]\n";
+    return temp_config(t);
+  };
+  const std::string bad = file("5000");
+  int st = 0;
+  const std::string out = run_capture(emulator_prefix() + ARMFW_PATH + " --config " + bad + " --priority 0 2>&1 </dev/null", st);
+  unlink(bad.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) != 0, out.c_str());
+  CHECK_TEXT(out.find("node 1: drive.sdo 6073h:0 reads back 3000 (2 bytes) after writing 5000") != std::string::npos,
+             out.c_str());
+  const std::string good = file("2000");
+  const std::string ok = run_capture("printf 'enable\\n' | " + emulator_prefix() + ARMFW_PATH + " --config " + good +
+                                         " --priority 0 2>&1",
+                                     st);
+  unlink(good.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, ok.c_str());
+  CHECK_TEXT(ok.find("\nok") != std::string::npos || ok.rfind("ok", 0) == 0, ok.c_str());
+  CHECK_TEXT(ok.find("drive.sdo") == std::string::npos, ok.c_str());
+}
