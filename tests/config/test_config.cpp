@@ -1132,3 +1132,26 @@ TEST(Config, BusLoadTableColumnsLineUp) {
     CHECK_TEXT(lines[i].size() == width, ("line " + std::to_string(i + 1) + " '" + lines[i] + "' in:\n" + t).c_str());
   CHECK_TEXT(has(t, "\nfrom drives "), t.c_str());
 }
+
+// The frames bus_traffic() counts are the ones App::build maps: TPDO2 only with bus.tpdo2
+// (velocity 4 + error code 2 bytes) or with the torque (then all three: 8 bytes, 135 bits).
+TEST(Config, BusTrafficCountsTpdo2AsTheMasterMapsIt) {
+  FwConfig c;
+  c.can = "can0";
+  LONGS_EQUAL(0, bus_traffic(c, 6).tpdo2_len);
+  c.tpdo2 = true;
+  LONGS_EQUAL(6, bus_traffic(c, 6).tpdo2_len);
+  c.tpdo2 = false;
+  c.collision = true;
+  LONGS_EQUAL(8, bus_traffic(c, 6).tpdo2_len);
+  c.tpdo2 = true;
+  LONGS_EQUAL(8, bus_traffic(c, 6).tpdo2_len);
+  c.collision = false;
+  c.drives.resize(6);
+  c.drives[2].homing_method = "hard_stop";
+  c.drives[2].homing_torque_limit = 50;
+  c.tpdo2 = false;
+  LONGS_EQUAL(8, bus_traffic(c, 6).tpdo2_len);
+  c.rate_hz = 250;  // (55 + 12 x 115 + 6 x 135) x 250 + 7800 = 2245 x 250 + 7800 = 569050 bit/s
+  DOUBLES_EQUAL(0.56905, servoarm::hal::bus_load(bus_traffic(c, 6), c.bitrate).total(), 1e-9);
+}

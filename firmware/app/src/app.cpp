@@ -204,8 +204,6 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   if (cfg.feed_forward == "torque") mc.rpdo2.torque_offset = hal::PdoUse::optional;
   if (cfg.freedrive) mc.rpdo2.torque_mode = hal::PdoUse::optional;
   if (cfg.collision) mc.tpdo2.torque = hal::PdoUse::optional;
-  // bus.tpdo2: velocity and error code cost one frame per drive and cycle (docs/deployment.md#bus-load).
-  mc.tpdo2.velocity = mc.tpdo2.error_code = cfg.tpdo2 ? hal::PdoUse::optional : hal::PdoUse::off;
   mc.interpolation_period = static_cast<hal::Duration>(std::llround(1e9 / cfg.rate_hz));  // 60C2h
   for (int j = 0; j < n; ++j) {
     auto& jc = mc.joints[static_cast<std::size_t>(j)];
@@ -246,6 +244,11 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
       }
     }
   }
+  // Velocity actual and error code: in TPDO2 when bus.tpdo2 asks for it, or when TPDO2 is sent
+  // for the torque anyway (the collision observer needs the drive's velocity; the three fit in
+  // 8 bytes). Else no TPDO2: one frame per drive and cycle less (docs/deployment.md#bus-load).
+  const bool tpdo2_sent = cfg.tpdo2 || mc.tpdo2.torque != hal::PdoUse::off;
+  mc.tpdo2.velocity = mc.tpdo2.error_code = tpdo2_sent ? hal::PdoUse::optional : hal::PdoUse::off;
   servo = std::make_unique<hal::CanopenServoBus>(*canbus, *clock, mc);
   if (servo->config_status() != hal::Status::ok)
     return std::string("bus: ") + hal::to_string(servo->config_status()) + (servo->last_error()[0] ? ": " : "") + servo->last_error();

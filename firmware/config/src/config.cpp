@@ -178,8 +178,8 @@ const ConfigKey kConfigTable[] = {
     K{"bus.tpdo2", &F::tpdo2, "",
       "map velocity actual 606Ch and error code 603Fh into TPDO2: one more 6-byte frame per drive and cycle. Off: "
       "the velocity is the change of the position between cycles, the error code comes with the drive's EMCY "
-      "(dynamics.collision and hard_stop homing with homing.torque_limit map torque actual 6077h into TPDO2 either "
-      "way)"},
+      "(dynamics.collision and hard_stop homing with homing.torque_limit send TPDO2 either way, with torque "
+      "actual 6077h: velocity and error code then come in it too, 8 bytes)"},
     K{"safety.following_error_deg", &F::following_error_deg, "deg (mm)",
       "largest |commanded - actual| per joint (mm for prismatic joints)"}.above(0, 180),
     K{"safety.enable_timeout_s", &F::enable_timeout_s, "s", "time for every drive to reach operation enabled"}.above(0, 60),
@@ -993,7 +993,9 @@ hal::BusTraffic bus_traffic(const FwConfig& c, std::size_t joints) {
   t.rpdo3_joints = nodes.size();
   bool torque = c.collision;
   for (const DriveConfig& d : c.drives) torque = torque || (d.homing_method == "hard_stop" && d.homing_torque_limit > 0);
-  t.tpdo2_len = static_cast<std::uint8_t>((c.tpdo2 ? 6 : 0) + (torque ? 2 : 0));
+  // velocity 4 + error code 2 (+ torque 2): velocity and error code ride along when the
+  // torque sends TPDO2 anyway (App::build)
+  t.tpdo2_len = static_cast<std::uint8_t>(torque ? 8 : c.tpdo2 ? 6 : 0);
   t.heartbeat_period_s = c.heartbeat_period_ms * 1e-3;
   return t;
 }
