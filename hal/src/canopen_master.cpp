@@ -105,6 +105,24 @@ CanopenServoBus::CanopenServoBus(CanBus& bus, Clock& clock, const CanopenMasterC
       joint_of_node_.fill(-1);
       return;
     }
+    if (jc.sdo_write_count > kMaxSdoWrites) {
+      config_status_ = Status::capacity;
+      std::snprintf(error_, sizeof error_, "joint %zu: more than %zu SDO writes", j, kMaxSdoWrites);
+      cfg_.joint_count = 0;
+      joint_of_node_.fill(-1);
+      return;
+    }
+    for (std::size_t k = 0; k < jc.sdo_write_count; ++k) {
+      const std::uint8_t sz = jc.sdo_writes[k].size;
+      if (sz != 1 && sz != 2 && sz != 4) {
+        config_status_ = Status::invalid_argument;
+        std::snprintf(error_, sizeof error_, "joint %zu: SDO write %04Xh:%u: size %u is not 1, 2 or 4 bytes", j,
+                      unsigned(jc.sdo_writes[k].index), unsigned(jc.sdo_writes[k].sub), unsigned(sz));
+        cfg_.joint_count = 0;
+        joint_of_node_.fill(-1);
+        return;
+      }
+    }
     joint_of_node_[jc.node_id] = std::int8_t(j);
     joints_[j].node = jc.node_id;
     joints_[j].hb_timeout = jc.heartbeat_timeout > 0 ? jc.heartbeat_timeout : cfg_.heartbeat_timeout;
@@ -344,6 +362,88 @@ Status CanopenServoBus::sdo_write(std::uint8_t n, std::uint16_t index, std::uint
                   unsigned(r.abort_code), r.abort_code ? sdo::abort_text(r.abort_code) : "-");
   }
   return r.status;
+}
+
+namespace {
+/// Interpolation time period (60C2h) of `period` ns: value x 10^index s with value <= 255.
+void interpolation_period_of(Duration period, std::uint8_t& value, std::int8_t& index) {
+  long long v = period > 0 ? static_cast<long long>(period) : 1;
+  int e = -9;
+  while (v % 10 == 0 && e < 0) v /= 10, ++e;
+  while (v > 255) v = (v + 5) / 10, ++e;  // not exact in three digits: rounded
+  value = std::uint8_t(v);
+  index = std::int8_t(e);
+}
+
+/// "20000" / "-4000": `raw` as the type of `w` shows it.
+void value_text(const SdoWrite& w, std::uint32_t raw, char* buf, std::size_t size) {
+  if (!w.is_signed) {
+    std::snprintf(buf, size, "%lu", static_cast<unsigned long>(raw));
+    return;
+  }
+  const int bits = 8 * w.size;
+  long long v = static_cast<long long>(raw);
+  if (bits < 32 && (raw & (1u << (bits - 1)))) v -= 1LL << bits;
+  else if (bits == 32) v = static_cast<std::int32_t>(raw);
+  std::snprintf(buf, size, "%lld", v);
+}
+}  // namespace
+
+Status CanopenServoBus::write_drive_objects(std::size_t j) {
+  const std::uint8_t n = joints_[j].node;
+  if (cfg_.interpolation_period > 0) {
+    std::uint8_t value = 0;
+    std::int8_t index = 0;
+    interpolation_period_of(cfg_.interpolation_period, value, index);
+    std::uint8_t b = value;
+    SdoResult r = sdo_.download(n, cia402::kInterpolationPeriod, 1, &b, 1);
+    if (r.status == Status::ok) {
+      b = std::uint8_t(index);
+      r = sdo_.download(n, cia402::kInterpolationPeriod, 2, &b, 1);
+    }
+    const bool absent = r.status == Status::sdo_abort &&
+                        (r.abort_code == sdo::kAbortNoObject || r.abort_code == sdo::kAbortNoSub);
+    if (r.status != Status::ok && !absent) {
+      std::snprintf(error_, sizeof error_,
+                    "node %u: SDO write interpolation period 60C2h = %u x 10^%d s failed: %s (abort 0x%08X: %s)",
+                    unsigned(n), unsigned(value), int(index), to_string(r.status), unsigned(r.abort_code),
+                    r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+      return r.status;
+    }
+  }
+  const CanopenJointConfig& jc = cfg_.joints[j];
+  for (std::size_t k = 0; k < jc.sdo_write_count; ++k) {
+    const SdoWrite& w = jc.sdo_writes[k];
+    char shown[24];
+    value_text(w, w.value, shown, sizeof shown);
+    std::uint8_t b[4];
+    put_u32(b, w.value);
+    SdoResult r = sdo_.download(n, w.index, w.sub, b, w.size);
+    if (r.status != Status::ok) {
+      std::snprintf(error_, sizeof error_, "node %u: drive.sdo %04Xh:%u = %s refused: %s (abort 0x%08X: %s)", unsigned(n),
+                    unsigned(w.index), unsigned(w.sub), shown, to_string(r.status), unsigned(r.abort_code),
+                    r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+      return r.status;
+    }
+    std::uint8_t back[4] = {};
+    r = sdo_.upload(n, w.index, w.sub, back, sizeof back);
+    if (r.status != Status::ok) {
+      std::snprintf(error_, sizeof error_, "node %u: drive.sdo %04Xh:%u: reading it back failed: %s (abort 0x%08X: %s)",
+                    unsigned(n), unsigned(w.index), unsigned(w.sub), to_string(r.status), unsigned(r.abort_code),
+                    r.abort_code ? sdo::abort_text(r.abort_code) : "-");
+      return r.status;
+    }
+    const std::uint32_t mask = w.size == 4 ? 0xFFFFFFFFu : (1u << (8 * w.size)) - 1;
+    const std::uint32_t got = get_u32(back) & mask;
+    if (r.size != w.size || got != (w.value & mask)) {
+      char read[24];
+      value_text(w, got, read, sizeof read);
+      std::snprintf(error_, sizeof error_, "node %u: drive.sdo %04Xh:%u reads back %s (%zu bytes) after writing %s",
+                    unsigned(n), unsigned(w.index), unsigned(w.sub), read, r.size, shown);
+      return Status::protocol_error;
+    }
+  }
+  return Status::ok;
 }
 
 Status CanopenServoBus::map_pdo(std::size_t j, std::uint16_t comm, std::uint16_t map, std::uint32_t cob,
@@ -638,7 +738,7 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
       return r.status;
     }
   }
-  return Status::ok;
+  return write_drive_objects(j);
 }
 
 bool CanopenServoBus::maps(std::size_t j, std::uint16_t object) const {

@@ -25,6 +25,8 @@ constexpr std::uint16_t kTpdoMap[2] = {0x1A00, 0x1A01};
 constexpr std::uint32_t kRpdoBase[kRpdos] = {kRpdo1, kRpdo2, hal::canopen::kRpdo3};
 constexpr std::uint32_t kTpdoBase[2] = {kTpdo1, kTpdo2};
 constexpr std::uint32_t kCobInvalid = 0x80000000u;
+constexpr std::uint16_t kMaxCurrent = 0x6073;              // UNSIGNED16, per mille of the rated current
+constexpr std::uint32_t kPeakCurrentPerMille = 3000;       // the model's power stage: 3x rated
 }  // namespace
 
 VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uint64_t seed)
@@ -93,6 +95,20 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
   add(c402::kHomingAccel, 0, 4, true, false, 0);
   add(c402::kHomeOffset, 0, 4, true, false, 0);
   add(c402::kSupportedModes, 0, 4, false, false, c402::kSupportsCsp | c402::kSupportsHoming);
+  // Set-up objects a master writes at bring-up (drive.sdo): kept and read back, not acted on
+  // (the motor model's limits are MotorParams'): interpolation time period (1 x 10^-3 s),
+  // position window, following error time out, software position limits, max torque and
+  // max current (per mille of the rated values).
+  add(c402::kInterpolationPeriod, 0, 1, false, false, 2);
+  add(c402::kInterpolationPeriod, 1, 1, true, false, 1);
+  add(c402::kInterpolationPeriod, 2, 1, true, false, 0xFD);
+  add(0x6067, 0, 4, true, false, 1000);
+  add(0x607D, 0, 1, false, false, 2);
+  add(0x607D, 1, 4, true, false, 0x80000000u);
+  add(0x607D, 2, 4, true, false, 0x7FFFFFFFu);
+  add(0x6066, 0, 2, true, false, 10);
+  add(0x6072, 0, 2, true, true, 1000);
+  add(kMaxCurrent, 0, 2, true, false, 1000);
   Entry* name = find(0x1008, 0);
   char buf[48];
   const int n = std::snprintf(buf, sizeof buf, "servoarm virtual drive %u", unsigned(node));
@@ -336,6 +352,10 @@ std::uint32_t VirtualDrive::sdo_write(Entry& e, const std::uint8_t* data, std::s
     if (!(o == 0 || o == 1 || o == 2 || o == 5 || o == 6)) return sdo::kAbortValueRange;
   }
   if (e.index == c402::kQuickStopDecel && v == 0) return sdo::kAbortValueRange;
+  // Max current 6073h: the power stage's peak is 3x the rated current. A higher value is
+  // accepted and kept at that ceiling, as drives that saturate a limit without an abort
+  // do: only reading it back shows it.
+  if (e.index == kMaxCurrent && v > kPeakCurrentPerMille) v = kPeakCurrentPerMille;
   e.value = v;
   if (e.index == c402::kModesOfOperation) {
     if (quirks_.halt_blocks_mode_change && (get(c402::kControlword) & c402::kCwHalt)) {

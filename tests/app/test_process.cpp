@@ -326,3 +326,82 @@ TEST(Process, PronsoleDrivesThePty) {
   DOUBLES_EQUAL(fy, y, 0.05);
   DOUBLES_EQUAL(fz + 20.0, z, 0.05);
 }
+
+// armfw --config FILE --bus-load: the table of the configured traffic (docs/deployment.md#bus-load).
+// Hand count (worst-case bit stuffing): SYNC 55 bits, a 6-byte PDO 115, a heartbeat 65; six
+// drives send 20 heartbeats/s each.
+namespace {
+std::string temp_config(const std::string& text) {
+  char path[] = "/tmp/armfw_cfg_XXXXXX";
+  const int fd = mkstemp(path);
+  CHECK(fd >= 0);
+  CHECK(write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size()));
+  close(fd);
+  return path;
+}
+std::string six_real_drives(const std::string& loop) {
+  std::string t = loop + "[bus]\ncan = \"can0\"\n";
+  for (int i = 0; i < 6; ++i) t += "[[drive]]\nhoming.method = \"absolute\"\n";
+  return t;
+}
+}  // namespace
+
+TEST(Process, BusLoadPrintsTheTableOfAConfigurationThatFits) {
+  // No loop.rate_hz on a real bus: 400 Hz, (55 + 12 x 115) x 400 + 6 x 20 x 65 = 581800 bit/s, 58.2 %.
+  const std::string path = temp_config(six_real_drives(""));
+  int st = 0;
+  const std::string out = run_capture(emulator_prefix() + ARMFW_PATH + " --config " + path + " --bus-load 2>&1 </dev/null", st);
+  unlink(path.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
+  for (const char* part : {"6 drives", "loop.rate_hz 400", "SYNC", "RPDO1", "TPDO1", "heartbeat", "581800", "58.2 %",
+                           "fits"})
+    CHECK_TEXT(out.find(part) != std::string::npos, ("wanted '" + std::string(part) + "' in:\n" + out).c_str());
+  CHECK_TEXT(out.find("TPDO2") == std::string::npos, out.c_str());  // bus.tpdo2 is off by default
+  CHECK_TEXT(out.find("refused") == std::string::npos, out.c_str());
+}
+
+TEST(Process, BusLoadOfAnOverloadedConfigurationIsRefused) {
+  // 1000 Hz: 1435 x 1000 + 7800 = 1442800 bit/s, 144.3 %; (0.85 - 0.0078) / 0.001435 = 586.9 Hz fits.
+  const std::string path = temp_config(six_real_drives("[loop]\nrate_hz = 1000\n"));
+  int st = 0;
+  const std::string table = run_capture(emulator_prefix() + ARMFW_PATH + " --config " + path + " --bus-load 2>&1 </dev/null", st);
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 1, table.c_str());
+  CHECK_TEXT(table.find("144.3 %") != std::string::npos && table.find("refused") != std::string::npos &&
+                 table.find("586 Hz") != std::string::npos,
+             table.c_str());
+  // started with it: refused before any drive is touched, in one line naming the key
+  const std::string out = run_capture(emulator_prefix() + ARMFW_PATH + " --config " + path + " --priority 0 2>&1 </dev/null", st);
+  unlink(path.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 2, out.c_str());
+  CHECK_EQUAL_TEXT(1, count(out, "\n"), out.c_str());
+  for (const char* part : {"config refused", path.c_str(), "loop.rate_hz", "144.3 %", "13 frames per cycle", "above 85 %",
+                           "at most 586 Hz fits"})
+    CHECK_TEXT(out.find(part) != std::string::npos, ("wanted '" + std::string(part) + "' in: " + out).c_str());
+}
+
+// drive.sdo from the file to the drive (docs/servo-bus.md#drive-set-up): the virtual drives of
+// bus.can = "sim" keep what they are sent; joint 1's drive keeps 6073h (max current) at most
+// 3000 per mille, so 5000 reads back as 3000 and the bring-up stops naming it.
+TEST(Process, DriveSdoListIsWrittenAtBringUpAndAValueTheDriveDoesNotKeepStopsIt) {
+  const auto file = [](const char* max_current) {
+    std::string t = "bus.can = \"sim\"\n[[drive]]\nsdo = [[\"6072h\", 0, \"u16\", 1500], [\"6073h\", 0, \"u16\", " +
+                    std::string(max_current) + "]]\n";
+    for (int i = 2; i <= 6; ++i) t += "[[drive]]\n";
+    return temp_config(t);
+  };
+  const std::string bad = file("5000");
+  int st = 0;
+  const std::string out = run_capture(emulator_prefix() + ARMFW_PATH + " --config " + bad + " --priority 0 2>&1 </dev/null", st);
+  unlink(bad.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) != 0, out.c_str());
+  CHECK_TEXT(out.find("node 1: drive.sdo 6073h:0 reads back 3000 (2 bytes) after writing 5000") != std::string::npos,
+             out.c_str());
+  const std::string good = file("2000");
+  const std::string ok = run_capture("printf 'enable\\n' | " + emulator_prefix() + ARMFW_PATH + " --config " + good +
+                                         " --priority 0 2>&1",
+                                     st);
+  unlink(good.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, ok.c_str());
+  CHECK_TEXT(ok.find("\nok") != std::string::npos || ok.rfind("ok", 0) == 0, ok.c_str());
+  CHECK_TEXT(ok.find("drive.sdo") == std::string::npos, ok.c_str());
+}

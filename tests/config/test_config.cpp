@@ -17,6 +17,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <vector>
 #include <toml.hpp>
 
 #include "servoarm/config/config.hpp"
@@ -397,6 +398,7 @@ TEST(Config, EveryDocumentedKeyIsAccepted) {
   d.homing_method = "19";  // a joint that homes: its homing.* keys are written too
   d.rated_torque = 0.64;
   d.collision_threshold = 12.5;
+  d.sdo = {{0x6065, 0, "u32", 20000}, {0x607D, 1, "i32", -400000}};
   c.drives = {d, d};
   c.drives[1].node = 8;
   const std::string toml = to_toml(c);
@@ -437,6 +439,7 @@ TEST(Config, ToTomlEscapesAwkwardStrings) {
   c.console_serial = "/dev/tty\"S0\"\r\n";
   c.console_can = "c'a\\n";
   c.drives.resize(6);  // a real bus: every joint's homing.method (here "absolute") written
+  c.rate_hz = 400;     // six drives on a real bus at 1 Mbit/s: 1000 Hz would be refused (bus load)
   const std::string t = to_toml(c);
   // an independent reader of the text (toml11 directly, not our loader)
   std::istringstream is(t);
@@ -1007,4 +1010,148 @@ TEST(Config, ARealBusNeedsEveryDrivesHomingMethod) {
     CHECK_TEXT(starts_with_position(e, "bad.toml") && e.find('\n') == std::string::npos, e.c_str());
     CHECK_TEXT(has(e, b.want), ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
   }
+}
+
+// Bus load (docs/deployment.md#bus-load). Hand count, worst-case stuffing (hal/bus_load.hpp):
+// SYNC 55 bits, a 6-byte PDO 115, a heartbeat 65. Six drives at 1 Mbit/s: per cycle
+// 55 + 12 x 115 = 1435 bits; heartbeats 6 x 20/s x 65 = 7800 bit/s.
+namespace {
+std::string real_bus(int drives, const std::string& extra_bus = "", const std::string& loop = "") {
+  std::string t = (loop.empty() ? "" : "[loop]\n" + loop) + "[bus]\ncan = \"can0\"\n" + extra_bus;
+  for (int i = 0; i < drives; ++i) t += "[[drive]]\nhoming.method = \"absolute\"\n";
+  return t;
+}
+}  // namespace
+
+TEST(Config, BusLoadAboveTheLimitIsRefusedNamingRateFramesAndLoad) {
+  FwConfig c;
+  // 1000 Hz: 1.435 + 0.0078 = 144.3 %; at most (0.85 - 0.0078) / 0.001435 = 586.9 Hz fits.
+  const std::string e = load_config_text(real_bus(6, "", "rate_hz = 1000\n"), "b.toml", c);
+  CHECK_TEXT(e.find('\n') == std::string::npos, e.c_str());
+  for (const char* part : {"b.toml:", "loop.rate_hz", "144.3 %", "bus.bitrate 1000000 bit/s", "loop.rate_hz 1000",
+                           "6 drives", "13 frames per cycle: SYNC, 6 RPDO1, 6 TPDO1", "above 85 %", "at most 586 Hz"})
+    CHECK_TEXT(has(e, part), ("wanted '" + std::string(part) + "' in: " + e).c_str());
+  // TPDO2 asked for at 400 Hz: (55 + 18 x 115) x 400 + 7800 = 857800 bit/s: 85.8 %.
+  const std::string e2 = load_config_text(real_bus(6, "tpdo2 = true\n", "rate_hz = 400\n"), "b.toml", c);
+  CHECK_TEXT(has(e2, "85.8 %") && has(e2, "19 frames per cycle: SYNC, 6 RPDO1, 6 TPDO1, 6 TPDO2"), e2.c_str());
+  // 500 kbit/s halves the room: 400 Hz is 2 x (0.574 + 0.0078) = 116.4 %.
+  const std::string e3 = load_config_text(real_bus(6, "bitrate = 500000\n", "rate_hz = 400\n"), "b.toml", c);
+  CHECK_TEXT(has(e3, "116.4 %") && has(e3, "bus.bitrate 500000 bit/s"), e3.c_str());
+  // not checked: the in-process bus and a vcan carry no bits on a wire
+  FwConfig s;
+  STRCMP_EQUAL("", load_config_text("[loop]\nrate_hz = 4000\n[bus]\ncan = \"sim\"\n[[drive]]\n[[drive]]\n[[drive]]\n"
+                                    "[[drive]]\n[[drive]]\n[[drive]]\n", "s.toml", s).c_str());
+  std::string vt = real_bus(6, "", "rate_hz = 1000\n");
+  vt.replace(vt.find("\"can0\""), 6, "\"vcan0\"");
+  FwConfig v;
+  STRCMP_EQUAL("", load_config_text(vt, "v.toml", v).c_str());
+  STRCMP_EQUAL("vcan0", v.can.c_str());
+  CHECK_FALSE(bus_load_checked(v));
+}
+
+TEST(Config, BusLoadAboveSixtyPercentIsWarned) {
+  FwConfig c;
+  // 500 Hz: 0.7175 + 0.0078 = 72.5 %: accepted, with a warning; (0.6 - 0.0078) / 0.001435 = 412.7 Hz.
+  STRCMP_EQUAL("", load_config_text(real_bus(6, "", "rate_hz = 500\n"), "w.toml", c).c_str());
+  const std::string w = bus_load_warning(c, 6);
+  CHECK_TEXT(has(w, "72.5 %") && has(w, "above 60 %") && has(w, "412 Hz") && w.find('\n') == std::string::npos,
+             w.c_str());
+  STRCMP_EQUAL("", bus_load_problem(c, 6).c_str());
+  c.rate_hz = 400;  // 57.4 + 0.78 = 58.2 %
+  STRCMP_EQUAL("", bus_load_warning(c, 6).c_str());
+}
+
+TEST(Config, ARealBusWithoutARateGetsOneTheBusCarries) {
+  FwConfig c;
+  // 6 drives: 1000 (144 %), 800 (115 %), 500 (72.5 %) are above 60 %; 400 Hz: 58.2 %.
+  STRCMP_EQUAL("", load_config_text(real_bus(6), "r.toml", c).c_str());
+  DOUBLES_EQUAL(400, c.rate_hz, 0);
+  FwConfig back;
+  STRCMP_EQUAL("", load_config_text(to_toml(c), "back.toml", back).c_str());
+  CHECK(back == c);
+  // 3 drives: 55 + 6 x 115 = 745 bits per cycle + 3900 bit/s: 800 Hz is 59.99 %.
+  STRCMP_EQUAL("", load_config_text(real_bus(3), "r.toml", c).c_str());
+  DOUBLES_EQUAL(800, c.rate_hz, 0);
+  // the simulated bus keeps the 1 kHz of the key table
+  FwConfig s;
+  STRCMP_EQUAL("", load_config_text("[bus]\ncan = \"sim\"\n", "s.toml", s).c_str());
+  DOUBLES_EQUAL(1000, s.rate_hz, 0);
+  // the default frames: no TPDO2
+  CHECK_FALSE(FwConfig{}.tpdo2);
+  LONGS_EQUAL(0, bus_traffic(FwConfig{}, 6).tpdo2_len);
+}
+
+// docs/deployment.md's table of load by rate and joint count is the calculation's own output.
+TEST(Config, DeploymentPageBusLoadTableIsTheCalculation) {
+  const std::string page = read_file(source_root() + "docs/deployment.md");
+  const std::string why = bus_load_reference_mismatch(page);
+  STRCMP_EQUAL("", why.c_str());
+  // and the table says what the hand count says: 6 drives at 1000 Hz on 1 Mbit/s, 144.3 %
+  CHECK_TEXT(has(bus_load_reference_markdown(), "| 58.2 % | 72.5 % warned | 115.6 % refused | 144.3 % refused | 287.8 % refused |"),
+             bus_load_reference_markdown().c_str());
+}
+
+// The shipped file switched to a real bus, as its comments tell a user to (bus.can = "can0"
+// and one [[drive]] table per joint of the PUMA 560), loads at a rate the bus carries:
+// 6 drives at 1 Mbit/s, (55 + 12 x 115) x 400 + 7800 bit/s = 58.2 % at 400 Hz.
+TEST(Config, ShippedConfigOnARealBusFits) {
+  std::string text = read_file(SERVOARM_SHIPPED_CONFIG);
+  const std::string sim = "\ncan = \"sim\"";  // [bus]'s own line, not a comment naming it
+  const std::size_t at = text.find(sim);
+  CHECK(at != std::string::npos);
+  text.replace(at, sim.size(), "\ncan = \"can0\"");
+  for (int i = 0; i < 6; ++i) text += "[[drive]]\nhoming.method = \"absolute\"\n";
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(text, "armfw.toml", c).c_str());
+  STRCMP_EQUAL("can0", c.can.c_str());
+  DOUBLES_EQUAL(400, c.rate_hz, 0);
+  STRCMP_EQUAL("", bus_load_warning(c, 6).c_str());
+}
+
+// armfw --bus-load's table: one column layout for the frames and the sums (the longest
+// label, "from drives", included), whatever the traffic.
+TEST(Config, BusLoadTableColumnsLineUp) {
+  FwConfig c;
+  c.can = "can0";
+  c.tpdo2 = true;
+  c.collision = true;
+  c.feed_forward = "torque";
+  c.outputs.resize(1);
+  c.outputs[0].node = 1;
+  const std::string t = bus_load_table(c, 6);
+  std::vector<std::string> lines;
+  for (std::size_t a = 0; a < t.size();) {
+    const std::size_t n = t.find('\n', a);
+    lines.push_back(t.substr(a, n - a));
+    a = n + 1;
+  }
+  // a title line, the column heads, the frames, three sums, the verdict
+  CHECK_TEXT(lines.size() >= 10, t.c_str());
+  const std::size_t width = lines[1].size();
+  for (std::size_t i = 1; i + 1 < lines.size(); ++i)
+    CHECK_TEXT(lines[i].size() == width, ("line " + std::to_string(i + 1) + " '" + lines[i] + "' in:\n" + t).c_str());
+  CHECK_TEXT(has(t, "\nfrom drives "), t.c_str());
+}
+
+// The frames bus_traffic() counts are the ones App::build maps: TPDO2 only with bus.tpdo2
+// (velocity 4 + error code 2 bytes) or with the torque (then all three: 8 bytes, 135 bits).
+TEST(Config, BusTrafficCountsTpdo2AsTheMasterMapsIt) {
+  FwConfig c;
+  c.can = "can0";
+  LONGS_EQUAL(0, bus_traffic(c, 6).tpdo2_len);
+  c.tpdo2 = true;
+  LONGS_EQUAL(6, bus_traffic(c, 6).tpdo2_len);
+  c.tpdo2 = false;
+  c.collision = true;
+  LONGS_EQUAL(8, bus_traffic(c, 6).tpdo2_len);
+  c.tpdo2 = true;
+  LONGS_EQUAL(8, bus_traffic(c, 6).tpdo2_len);
+  c.collision = false;
+  c.drives.resize(6);
+  c.drives[2].homing_method = "hard_stop";
+  c.drives[2].homing_torque_limit = 50;
+  c.tpdo2 = false;
+  LONGS_EQUAL(8, bus_traffic(c, 6).tpdo2_len);
+  c.rate_hz = 250;  // (55 + 12 x 115 + 6 x 135) x 250 + 7800 = 2245 x 250 + 7800 = 569050 bit/s
+  DOUBLES_EQUAL(0.56905, servoarm::hal::bus_load(bus_traffic(c, 6), c.bitrate).total(), 1e-9);
 }

@@ -606,3 +606,91 @@ TEST(MasterRealTime, DrivesOnTheirOwnThreadWithTheRealClock) {
   }
   CHECK(max_err < 0.02);  // followed (not following at all would be up to 0.2)
 }
+
+// Drive set-up: 60C2h from the SYNC period and a per-drive list of SDO writes, written at
+// bring-up and read back; a drive that lacks an object fails the bring-up naming it.
+TEST(MasterSim, BringUpWritesTheInterpolationPeriodAndTheDrivesSdoList) {
+  CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 6);
+  cfg.interpolation_period = 2500 * kMicrosecond;  // 400 Hz: 25 x 10^-4 s
+  CanopenJointConfig& j2 = cfg.joints[1];
+  j2.sdo_writes[0] = SdoWrite{0x6065, 0, 4, false, 20000};             // following error window
+  j2.sdo_writes[1] = SdoWrite{0x607D, 1, 4, true, std::uint32_t(-400000)};  // software limit min
+  j2.sdo_writes[2] = SdoWrite{0x607D, 2, 4, true, 400000};               // software limit max
+  j2.sdo_writes[3] = SdoWrite{0x6072, 0, 2, false, 1500};                // max torque, per mille
+  j2.sdo_write_count = 4;
+  delete master;
+  master = new CanopenServoBus(*rig->master_ep, rig->clock, cfg);
+  bring_up();
+  std::uint32_t v = 0;
+  for (std::uint8_t n = 1; n <= 6; ++n) {
+    CHECK(rig->sim->node(n)->od_read(0x60C2, 1, v));
+    LONGS_EQUAL(25, v);
+    CHECK(rig->sim->node(n)->od_read(0x60C2, 2, v));
+    LONGS_EQUAL(-4, std::int8_t(v));
+  }
+  sim::VirtualDrive* d = rig->sim->node(2);
+  CHECK(d->od_read(0x6065, 0, v));
+  LONGS_EQUAL(20000, v);
+  CHECK(d->od_read(0x607D, 1, v));
+  LONGS_EQUAL(-400000, std::int32_t(v));
+  CHECK(d->od_read(0x607D, 2, v));
+  LONGS_EQUAL(400000, v);
+  CHECK(d->od_read(0x6072, 0, v));
+  LONGS_EQUAL(1500, v);
+  CHECK(rig->sim->node(1)->od_read(0x6065, 0, v));
+  CHECK(v != 20000);  // only joint 2's list went to node 2
+}
+
+TEST(MasterSim, ADriveThatRefusesAnSdoListEntryFailsTheBringUpNamingIt) {
+  CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 6);
+  cfg.joints[2].sdo_writes[0] = SdoWrite{0x6065, 0, 4, false, 20000};
+  cfg.joints[2].sdo_writes[1] = SdoWrite{0x2345, 0, 2, false, 2000};  // an object the virtual drive does not have
+  cfg.joints[2].sdo_write_count = 2;
+  delete master;
+  master = new CanopenServoBus(*rig->master_ep, rig->clock, cfg);
+  const Status s = master->start(rig->clock.now() + 2 * kSecond);
+  LONGS_EQUAL(int(Status::sdo_abort), int(s));
+  STRCMP_CONTAINS("node 3: drive.sdo 2345h:0 = 2000 refused", master->last_error());
+  STRCMP_CONTAINS("abort 0x06020000", master->last_error());
+  CHECK(std::strchr(master->last_error(), '\n') == nullptr);
+  // a value of the wrong size for the object: the drive's own abort, named the same way
+  cfg.joints[2].sdo_writes[1] = SdoWrite{0x6065, 0, 2, false, 7};
+  delete master;
+  master = new CanopenServoBus(*rig->master_ep, rig->clock, cfg);
+  LONGS_EQUAL(int(Status::sdo_abort), int(master->start(rig->clock.now() + 2 * kSecond)));
+  STRCMP_CONTAINS("node 3: drive.sdo 6065h:0 = 7 refused", master->last_error());
+  STRCMP_CONTAINS("abort 0x06070013", master->last_error());
+}
+
+// A drive that acknowledges a write but keeps another value (a limit saturated at its own
+// ceiling): the read-back catches it and the bring-up fails naming the node, the object
+// and both values. The virtual drive keeps 6073h (max current) at most 3000 per mille.
+TEST(MasterSim, ADriveThatReadsBackAnotherValueFailsTheBringUpNamingBoth) {
+  CanopenMasterConfig cfg = CanopenMasterConfig::consecutive(1, 6);
+  cfg.joints[3].sdo_writes[0] = SdoWrite{0x6072, 0, 2, false, 1500};  // within the drive's range: kept
+  cfg.joints[3].sdo_writes[1] = SdoWrite{0x6073, 0, 2, false, 5000};  // above its ceiling: kept as 3000
+  cfg.joints[3].sdo_writes[2] = SdoWrite{0x6066, 0, 2, false, 20};    // after the mismatch: not written
+  cfg.joints[3].sdo_write_count = 3;
+  delete master;
+  master = new CanopenServoBus(*rig->master_ep, rig->clock, cfg);
+  const Status s = master->start(rig->clock.now() + 2 * kSecond);
+  LONGS_EQUAL(int(Status::protocol_error), int(s));
+  STRCMP_CONTAINS("node 4: drive.sdo 6073h:0 reads back 3000 (2 bytes) after writing 5000", master->last_error());
+  CHECK(std::strchr(master->last_error(), '\n') == nullptr);
+  std::uint32_t v = 0;
+  sim::VirtualDrive* d = rig->sim->node(4);
+  CHECK(d->od_read(0x6072, 0, v));
+  LONGS_EQUAL(1500, v);  // the entry before was written
+  CHECK(d->od_read(0x6073, 0, v));
+  LONGS_EQUAL(3000, v);  // what the drive kept, the figure the message names
+  CHECK(d->od_read(0x6066, 0, v));
+  LONGS_EQUAL(10, v);    // the bring-up stopped at the mismatch
+  // a negative value the drive keeps as written passes the read-back (compared as the
+  // bytes written, two's complement)
+  cfg.joints[3].sdo_writes[0] = SdoWrite{0x607D, 1, 4, true, std::uint32_t(-400000)};
+  cfg.joints[3].sdo_write_count = 1;
+  delete master;
+  master = new CanopenServoBus(*rig->master_ep, rig->clock, cfg);
+  LONGS_EQUAL(int(Status::ok), int(master->start(rig->clock.now() + 2 * kSecond)));
+  STRCMP_EQUAL("", master->last_error());
+}

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "servoarm/app/app.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -208,6 +209,7 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   if (cfg.feed_forward == "torque") mc.rpdo2.torque_offset = hal::PdoUse::optional;
   if (cfg.freedrive) mc.rpdo2.torque_mode = hal::PdoUse::optional;
   if (cfg.collision) mc.tpdo2.torque = hal::PdoUse::optional;
+  mc.interpolation_period = static_cast<hal::Duration>(std::llround(1e9 / cfg.rate_hz));  // 60C2h
   for (int j = 0; j < n; ++j) {
     auto& jc = mc.joints[static_cast<std::size_t>(j)];
     jc.node_id = nodes[static_cast<std::size_t>(j)];
@@ -234,7 +236,24 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
     // they can map it (else the following error alone detects the stop, as documented)
     if (jc.homing.kind == hal::HomingKind::hard_stop && jc.homing.torque_limit > 0) mc.tpdo2.torque = hal::PdoUse::optional;
     for (int jo : output_joint) jc.digital_outputs = jc.digital_outputs || jo == j;
+    if (!cfg.drives.empty()) {  // drive.sdo, validated by the key table
+      const std::vector<SdoEntry>& sdo = cfg.drives[static_cast<std::size_t>(j)].sdo;
+      jc.sdo_write_count = std::min(sdo.size(), hal::kMaxSdoWrites);
+      for (std::size_t k = 0; k < jc.sdo_write_count; ++k) {
+        hal::SdoWrite& w = jc.sdo_writes[k];
+        w.index = static_cast<std::uint16_t>(sdo[k].index);
+        w.sub = static_cast<std::uint8_t>(sdo[k].sub);
+        w.size = static_cast<std::uint8_t>(sdo_type_size(sdo[k].type));
+        w.is_signed = sdo_type_signed(sdo[k].type);
+        w.value = static_cast<std::uint32_t>(sdo[k].value);  // two's complement for a negative value
+      }
+    }
   }
+  // Velocity actual and error code: in TPDO2 when bus.tpdo2 asks for it, or when TPDO2 is sent
+  // for the torque anyway (the collision observer needs the drive's velocity; the three fit in
+  // 8 bytes). Else no TPDO2: one frame per drive and cycle less (docs/deployment.md#bus-load).
+  const bool tpdo2_sent = cfg.tpdo2 || mc.tpdo2.torque != hal::PdoUse::off;
+  mc.tpdo2.velocity = mc.tpdo2.error_code = tpdo2_sent ? hal::PdoUse::optional : hal::PdoUse::off;
   servo = std::make_unique<hal::CanopenServoBus>(*canbus, *clock, mc);
   if (servo->config_status() != hal::Status::ok)
     return std::string("bus: ") + hal::to_string(servo->config_status()) + (servo->last_error()[0] ? ": " : "") + servo->last_error();

@@ -29,6 +29,7 @@
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/lang/number.hpp"
 #include "servoarm/console/transport.hpp"
+#include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 using namespace servoarm;
@@ -53,6 +54,9 @@ int usage(FILE* f, int code) {
                "                        --config; without --config none: points are not kept)\n"
                "  --config-keys         print every configuration key (default, range, unit, doc) and exit\n"
                "  --config-reference    print the generated reference section of docs/configuration.md and exit\n"
+               "  --bus-load            with --config (or --sim): print the drive bus load of the configured\n"
+               "                        traffic (frames, bits, load per direction and in all) and exit\n"
+               "  --bus-load-reference  print the bus-load table of docs/deployment.md and exit\n"
                "  --demo                play a demo derived from the robot through the console, print a summary, exit\n"
                "  --interactive         after --demo, leave the console open on stdin\n"
                "  --bench-loop SEC      run the loop SEC seconds with moves in progress; print one JSON line\n"
@@ -443,7 +447,7 @@ int run_bench(App& app, double seconds) {
 
 int main(int argc, char** argv) {
   FwConfig cfg;
-  bool sim = false, demo = false, interactive = false, pty = false, no_stdin = false;
+  bool sim = false, demo = false, interactive = false, pty = false, no_stdin = false, bus_load = false;
   std::string dialect;
   std::string plant_kind = "first-order";
   std::string config_file, frames_file, programs_dir, points_file, robot, serial, can_console;
@@ -498,6 +502,11 @@ int main(int argc, char** argv) {
     else if (a == "--can-console") can_console = value("--can-console");
     else if (a == "--baud") baud = static_cast<int>(number("--baud", 1, 4000000));
     else if (a == "--no-stdin") no_stdin = true;
+    else if (a == "--bus-load") bus_load = true;
+    else if (a == "--bus-load-reference") {
+      std::fputs(bus_load_reference_markdown().c_str(), stdout);
+      return 0;
+    }
     else if (a == "--config-keys") {
       std::fputs(config_keys_text().c_str(), stdout);
       return 0;
@@ -519,11 +528,32 @@ int main(int argc, char** argv) {
     return usage(stderr, 2);
   }
   if (!config_file.empty()) {
-    const std::string e = load_config_file(config_file, cfg);
+    // --bus-load shows a load the check refuses: everything else is checked as at start.
+    const std::string e = load_config_file(config_file, cfg, !bus_load);
     if (!e.empty()) {
       std::fprintf(stderr, "armfw: config refused: %s\n", e.c_str());
       return 2;
     }
+  }
+  if (bus_load) {
+    if (sim) cfg.can = "sim";
+    if (!robot.empty()) cfg.robot = robot;
+    if (rate > 0) cfg.rate_hz = rate;
+    std::size_t joints = cfg.drives.size();
+    if (joints == 0) {
+      const kin::LoadResult lr = kin::load_robot(cfg.robot);
+      if (!lr.ok) {
+        std::fprintf(stderr, "armfw: robot: %s\n", lr.error.c_str());
+        return 2;
+      }
+      joints = static_cast<std::size_t>(lr.chain.n_joints);
+    }
+    std::fputs(bus_load_table(cfg, joints).c_str(), stdout);
+    return bus_load_problem(cfg, joints).empty() ? 0 : 1;
+  }
+  if (!config_file.empty()) {
+    const std::string w = bus_load_warning(cfg, cfg.drives.size());
+    if (!w.empty()) std::fprintf(stderr, "armfw: warning: %s\n", w.c_str());
   }
   // The frames file: next to the configuration file (a relative console.frames_file), or
   // --frames; armfw --sim without --config keeps none unless told.

@@ -29,6 +29,7 @@ constexpr double kTwo31 = 2147483648.0;  // counts_per_rev below 2^31: a revolut
 constexpr double kMaxLength = 1e5;       // deg or mm: |limits| and |home| (277 turns, 100 m)
 
 std::string num_text(double v);
+std::string toml_string(const std::string& s);
 
 // Relations between keys. validate() runs them only once every key is within its own
 // range, so the values here are finite (no ordered compare with NaN) and a bad value
@@ -61,6 +62,58 @@ std::string drive_limits_ordered(const DriveConfig& d, const FwConfig&) {
   return d.limits.size() == 2 && !(d.limits[0] < d.limits[1]) ? "lower must be below upper" : "";
 }
 
+/// "6065h", "6065H", "0x6065" -> 0x6065; false when it is none of those.
+bool sdo_index_of(const std::string& t, int& out) {
+  std::string h = t;
+  if (h.size() > 2 && h[0] == '0' && (h[1] == 'x' || h[1] == 'X')) h = h.substr(2);
+  else if (!h.empty() && (h.back() == 'h' || h.back() == 'H')) h.pop_back();
+  else return false;
+  if (h.empty() || h.size() > 4) return false;
+  unsigned v = 0;
+  const auto r = std::from_chars(h.data(), h.data() + h.size(), v, 16);
+  if (r.ec != std::errc() || r.ptr != h.data() + h.size()) return false;
+  out = static_cast<int>(v);
+  return true;
+}
+
+/// Why the object `index` may not be in drive.sdo, or null.
+const char* sdo_index_problem(int index) {
+  if (index < 0x2000 || index > 0x9FFF)
+    return "is outside the manufacturer-specific and device profile areas 2000h..9FFFh (the master sets the "
+           "communication objects itself)";
+  switch (index) {
+    case 0x6040: case 0x6060: case 0x607A: case 0x6071: case 0x60B1: case 0x60B2: case 0x60FE:
+      return "is written by the master in every cycle or at bring-up (process data / mode)";
+    case 0x60C2: return "is written by the master from loop.rate_hz (interpolation period)";
+    case 0x6085: return "is drive.quick_stop_decel's";
+    case 0x6098: case 0x6099: case 0x609A: case 0x607C: return "is written by the master from drive.homing.*";
+    default: return nullptr;
+  }
+}
+
+std::string sdo_entries_valid(const DriveConfig& d, const FwConfig&) {
+  for (std::size_t i = 0; i < d.sdo.size(); ++i) {
+    const SdoEntry& e = d.sdo[i];
+    char ix[16];
+    std::snprintf(ix, sizeof ix, "%04Xh:%d", unsigned(e.index), e.sub);
+    const std::string at = "entry " + std::to_string(i + 1) + " (" + ix + "): ";
+    if (const char* why = sdo_index_problem(e.index)) return at + "index " + why;
+    if (e.sub < 0 || e.sub > 255) return at + "sub-index must be 0..255";
+    const int size = sdo_type_size(e.type);
+    if (size == 0) return at + "type must be u8, u16, u32, i8, i16 or i32 (got " + toml_string(e.type) + ")";
+    const bool sign = sdo_type_signed(e.type);
+    const std::int64_t lo = sign ? -(std::int64_t(1) << (8 * size - 1)) : 0;
+    const std::int64_t hi = sign ? (std::int64_t(1) << (8 * size - 1)) - 1 : (std::int64_t(1) << (8 * size)) - 1;
+    if (e.value < lo || e.value > hi)
+      return at + "value " + std::to_string(e.value) + " is outside " + e.type + " (" + std::to_string(lo) + ".." +
+             std::to_string(hi) + ")";
+    for (std::size_t k = 0; k < i; ++k)
+      if (d.sdo[k].index == e.index && d.sdo[k].sub == e.sub)
+        return at + "the object is also entry " + std::to_string(k + 1);
+  }
+  return "";
+}
+
 std::string homing_order_once(const FwConfig& c, const FwConfig&) {
   std::vector<int> seen;
   for (const auto& g : c.homing_order)
@@ -82,7 +135,11 @@ using F = FwConfig;
 const ConfigKey kConfigTable[] = {
     K{"robot", &F::robot, "", "built-in model name (`armctl kin models`) or the path of a robot description `.toml`"}
         .length(1, 4095).rule_text("a model name or a path, not empty"),
-    K{"loop.rate_hz", &F::rate_hz, "Hz", "control rate"}.within(250, 4000),
+    K{"loop.rate_hz", &F::rate_hz, "Hz",
+      "control rate, and the SYNC rate of the drive bus (written to each drive's 60C2h interpolation period). Left "
+      "out on a real bus with [[drive]] tables: the highest of 1000, 800, 500, 400 and 250 Hz whose bus load "
+      "(bus.bitrate) stays at most 60 % (400 Hz for 6 drives at 1 Mbit/s)"}
+        .within(250, 4000),
     K{"loop.priority", &F::priority, "", "SCHED_FIFO priority of the control thread; 0 = normal scheduling"}.within(0, 99),
     K{"loop.cpu", &F::cpu, "", "pin the control thread to this CPU (e.g. an isolcpus= one); -1 = no affinity"}.within(-1, 1023),
     K{"loop.lock_memory", &F::lock_memory, "", "`mlockall()` all memory at start"},
@@ -112,6 +169,17 @@ const ConfigKey kConfigTable[] = {
     K{"bus.state_timeout_ms", &F::state_timeout_ms, "ms",
       "longest a drive may sit in one CiA 402 state while being enabled, or show the old mode (6061h) after a mode "
       "change; longer fails it naming the node"}.within(10, 60000),
+    K{"bus.bitrate", &F::bitrate, "bit/s",
+      "bit rate of the drive bus, as its interface is set up (`ip link set can0 type can bitrate 1000000`; "
+      "SERVOARM_CAN_BITRATE of the .deb). The cyclic traffic's load at it (`armfw --config FILE --bus-load`, "
+      "docs/deployment.md#bus-load) is checked on a real bus (not \"sim\" or a vcan): above 85 % the configuration "
+      "is refused, above 60 % armfw warns at start"}
+        .within(10000, 1000000),
+    K{"bus.tpdo2", &F::tpdo2, "",
+      "map velocity actual 606Ch and error code 603Fh into TPDO2: one more 6-byte frame per drive and cycle. Off: "
+      "the velocity is the change of the position between cycles, the error code comes with the drive's EMCY "
+      "(dynamics.collision and hard_stop homing with homing.torque_limit send TPDO2 either way, with torque "
+      "actual 6077h: velocity and error code then come in it too, 8 bytes)"},
     K{"safety.following_error_deg", &F::following_error_deg, "deg (mm)",
       "largest |commanded - actual| per joint (mm for prismatic joints)"}.above(0, 180),
     K{"safety.enable_timeout_s", &F::enable_timeout_s, "s", "time for every drive to reach operation enabled"}.above(0, 60),
@@ -295,6 +363,15 @@ const DriveKey kDriveTable[] = {
        "dynamics.collision_threshold_pct of its rated torque; at least 0.01 N m (N): below it the measured torque's "
        "noise alone faults the arm"}
         .within(0.01, 1e6).unset_means(0, "dynamics.collision_threshold_pct of the rated torque", true),
+    DK{"sdo", &D::sdo, "",
+       "objects written to the drive at bring-up, in order, each read back: `[[\"6065h\", 0, \"u32\", 20000], ...]` "
+       "= index (\"6065h\" or \"0x6065\", 2000h..9FFFh), sub-index 0..255, type (u8, u16, u32, i8, i16, i32) "
+       "and a value within the type, in the drive's own units (docs/servo-bus.md#drive-profiles). A drive that "
+       "refuses one, or reads back another value, fails the bring-up naming the node, the object and the abort "
+       "code. Objects the master writes itself (6040h, 6060h, 607Ah, 6071h, 60B1h, 60B2h, 60C2h, 60FEh, 6085h, "
+       "6098h, 6099h, 609Ah, 607Ch) are refused"}
+        .length(0, 16).rule_text("0..16 entries [index, sub, type, value]").related(sdo_entries_valid, "")
+        .unset_means(0, "none", true),
 };
 
 using OC = OutputConfig;
@@ -416,6 +493,15 @@ std::string value_of(const Key<S>& k, const S& s) {
           std::string o = "[";
           for (std::size_t i = 0; i < v.size(); ++i) o += (i ? ", " : "") + num_text(v[i]);
           return o + "]";
+        } else if constexpr (std::is_same_v<T, std::vector<SdoEntry>>) {
+          std::string o = "[";
+          for (std::size_t i = 0; i < v.size(); ++i) {
+            char b[24];
+            std::snprintf(b, sizeof b, "\"%04Xh\", ", unsigned(v[i].index));
+            o += std::string(i ? ", [" : "[") + b + std::to_string(v[i].sub) + ", " + toml_string(v[i].type) + ", " +
+                 std::to_string(v[i].value) + "]";
+          }
+          return o + "]";
         } else {
           std::string o = "[";
           for (std::size_t i = 0; i < v.size(); ++i) {
@@ -468,8 +554,9 @@ std::string range_of(const Key<S>& k) {
       break;
     default: r = k.rule ? k.rule : numeric_range(k);
   }
-  if (k.relation_text) r += (r.empty() ? "" : ", ") + std::string(k.relation_text);
-  if (k.has_unset && k.unset_writable && k.member.index() != 5) r += " or " + num_text(k.unset) + " (unset)";
+  if (k.relation_text && *k.relation_text) r += (r.empty() ? "" : ", ") + std::string(k.relation_text);
+  if (k.has_unset && k.unset_writable && k.member.index() != 5 && k.member.index() != 7)
+    r += " or " + num_text(k.unset) + " (unset)";
   return r;
 }
 
@@ -505,7 +592,8 @@ bool is_unset(const Key<S>& k, const S& s) {
   return std::visit(
       [&](auto m) -> bool {
         using T = std::decay_t<decltype(s.*m)>;
-        if constexpr (std::is_same_v<T, std::vector<double>> || std::is_same_v<T, std::vector<std::vector<int>>>)
+        if constexpr (std::is_same_v<T, std::vector<double>> || std::is_same_v<T, std::vector<std::vector<int>>> ||
+                      std::is_same_v<T, std::vector<SdoEntry>>)
           return (s.*m).empty();
         else if constexpr (std::is_same_v<T, std::string> || std::is_same_v<T, bool>) return false;
         else return static_cast<double>(s.*m) == k.unset;
@@ -545,6 +633,9 @@ std::string key_problem(const Key<S>& k, const S& s, const FwConfig& whole, cons
             const std::string p = number_problem(k, v[i]);
             if (!p.empty()) why = "\x01" + std::to_string(i) + "\x02" + p;  // element index, rewritten below
           }
+        } else if constexpr (std::is_same_v<T, std::vector<SdoEntry>>) {
+          if (v.size() > k.max_len)
+            why = "must hold at most " + std::to_string(k.max_len) + " entries (got " + std::to_string(v.size()) + ")";
         } else if constexpr (std::is_same_v<T, std::vector<std::vector<int>>>) {
           if (v.size() > k.max_len) {
             why = "must hold at most " + std::to_string(k.max_len) + " groups (got " + std::to_string(v.size()) + ")";
@@ -626,6 +717,47 @@ struct Reader {
             if (!str) return fail(v, label, std::string(k.or_integer ? "expected a string or an integer" : "expected a string") + " (got " + shown(v) + ")");
             out = str->get();
             if (k.spelled && out == k.spelled) out = k.stored;
+          } else if constexpr (std::is_same_v<T, std::vector<SdoEntry>>) {
+            const auto* a = v.as_array();
+            if (!a) return fail(v, label, "expected an array of [index, sub, type, value] entries (got " + shown(v) + ")");
+            if (a->size() > k.max_len)
+              return fail(v, label, "at most " + std::to_string(k.max_len) + " entries (got " + std::to_string(a->size()) + ")");
+            std::vector<SdoEntry> tmp;
+            for (std::size_t i = 0; i < a->size(); ++i) {
+              const std::string li = label + "[" + std::to_string(i + 1) + "]";
+              const toml::node& en = *a->get(i);
+              const auto* e = en.as_array();
+              if (!e || e->size() != 4)
+                return fail(en, li, "expected [index, sub, type, value], e.g. [\"6065h\", 0, \"u32\", 20000] (got " +
+                                        shown(en) + ")");
+              SdoEntry out_e;
+              const toml::node& ix = *e->get(0);
+              if (const auto* is = ix.as_string()) {
+                if (!sdo_index_of(is->get(), out_e.index))
+                  return fail(ix, li, "index: expected a hexadecimal object index as \"6065h\" or \"0x6065\" (got " +
+                                          shown(ix) + ")");
+              } else if (const auto* ii = ix.as_integer()) {
+                if (ii->get() < 0 || ii->get() > 0xFFFF)
+                  return fail(ix, li, "index: expected 0x0000..0xFFFF (got " + shown(ix) + ")");
+                out_e.index = static_cast<int>(ii->get());
+              } else {
+                return fail(ix, li, "index: expected \"6065h\" or \"0x6065\" (got " + shown(ix) + ")");
+              }
+              const auto* sub = e->get(1)->as_integer();
+              if (!sub || sub->get() < 0 || sub->get() > 255)
+                return fail(*e->get(1), li, "sub-index: expected an integer 0..255 (got " + shown(*e->get(1)) + ")");
+              out_e.sub = static_cast<int>(sub->get());
+              const auto* ty = e->get(2)->as_string();
+              if (!ty || sdo_type_size(ty->get()) == 0)
+                return fail(*e->get(2), li, "type: expected \"u8\", \"u16\", \"u32\", \"i8\", \"i16\" or \"i32\" (got " +
+                                                shown(*e->get(2)) + ")");
+              out_e.type = ty->get();
+              const auto* val = e->get(3)->as_integer();
+              if (!val) return fail(*e->get(3), li, "value: expected an integer (got " + shown(*e->get(3)) + ")");
+              out_e.value = val->get();
+              tmp.push_back(out_e);
+            }
+            out = std::move(tmp);
           } else if constexpr (std::is_same_v<T, std::vector<std::vector<int>>>) {
             const auto* a = v.as_array();
             if (!a) return fail(v, label, "expected an array of arrays of integers (got " + shown(v) + ")");
@@ -768,6 +900,14 @@ std::string range_text(const DriveKey& k) { return range_of(k); }
 std::string default_text(const ConfigKey& k) { return default_of(k); }
 std::string default_text(const DriveKey& k) { return default_of(k); }
 
+int sdo_type_size(const std::string& t) {
+  if (t == "u8" || t == "i8") return 1;
+  if (t == "u16" || t == "i16") return 2;
+  if (t == "u32" || t == "i32") return 4;
+  return 0;
+}
+bool sdo_type_signed(const std::string& t) { return !t.empty() && t[0] == 'i'; }
+
 int homing_method_number(const std::string& m) {
   if (m.empty() || m.size() > 4) return 0;
   int v = 0;
@@ -790,7 +930,7 @@ const char* can_console_id_problem(int id) {
   return nullptr;
 }
 
-std::string validate(const FwConfig& c) {
+std::string validate(const FwConfig& c, bool check_bus_load) {
   for (const bool relations : {false, true}) {
     for (const ConfigKey& k : kConfigTable) {
       const std::string why = key_problem(k, c, c, k.name, relations);
@@ -829,7 +969,198 @@ std::string validate(const FwConfig& c) {
                std::to_string(k + 1) + "] (" + c.outputs[k].name + ")";
     }
   }
+  // A real bus has one [[drive]] table per joint (above; validate_for_chain checks the count).
+  if (check_bus_load && !c.drives.empty())
+    if (std::string why = bus_load_problem(c, c.drives.size()); !why.empty()) return "loop.rate_hz: " + why;
   return "";
+}
+
+// ---------------------------------------------------------------------------
+// Bus load
+// ---------------------------------------------------------------------------
+
+hal::BusTraffic bus_traffic(const FwConfig& c, std::size_t joints) {
+  hal::BusTraffic t;
+  t.rate_hz = c.rate_hz;
+  t.joints = joints;
+  t.rpdo1_len = t.tpdo1_len = c.freedrive ? 7 : 6;  // + 6060h / 6061h for torque mode
+  t.rpdo2_len = static_cast<std::uint8_t>((c.feed_forward != "off" ? 4 : 0) + (c.feed_forward == "torque" ? 2 : 0) +
+                                          (c.freedrive ? 2 : 0));
+  std::vector<int> nodes;
+  for (const OutputConfig& o : c.outputs)
+    if (std::find(nodes.begin(), nodes.end(), o.node) == nodes.end()) nodes.push_back(o.node);
+  t.rpdo3_len = nodes.empty() ? 0 : 4;
+  t.rpdo3_joints = nodes.size();
+  bool torque = c.collision;
+  for (const DriveConfig& d : c.drives) torque = torque || (d.homing_method == "hard_stop" && d.homing_torque_limit > 0);
+  // velocity 4 + error code 2 (+ torque 2): velocity and error code ride along when the
+  // torque sends TPDO2 anyway (App::build)
+  t.tpdo2_len = static_cast<std::uint8_t>(torque ? 8 : c.tpdo2 ? 6 : 0);
+  t.heartbeat_period_s = c.heartbeat_period_ms * 1e-3;
+  return t;
+}
+
+bool bus_load_checked(const FwConfig& c) { return c.can != "sim" && c.can.rfind("vcan", 0) != 0; }
+
+namespace {
+std::string pct_text(double share) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.1f %%", share * 100.0);
+  return b;
+}
+
+/// "13 frames per cycle: SYNC, 6 RPDO1, 6 TPDO1"
+std::string frames_text(const hal::BusLoad& l, double rate) {
+  std::string o = num_text(l.frames_per_cycle) + " frames per cycle:";
+  bool first = true;
+  for (std::size_t k = 0; k < l.count; ++k) {
+    if (std::strcmp(l.kinds[k].name, "heartbeat") == 0) continue;
+    const double n = l.kinds[k].per_second / rate;
+    o += std::string(first ? " " : ", ") + (n == 1 ? "" : num_text(n) + " ") + l.kinds[k].name;
+    first = false;
+  }
+  return o;
+}
+
+/// Highest rate (Hz) at which the load of `c` with `joints` drives stays at most `share`.
+double rate_for(const FwConfig& c, std::size_t joints, double share) {
+  hal::BusTraffic t = bus_traffic(c, joints);
+  t.rate_hz = 1;
+  const hal::BusLoad one = hal::bus_load(t, c.bitrate);
+  t.rate_hz = 2;
+  const hal::BusLoad two = hal::bus_load(t, c.bitrate);
+  const double per_hz = two.total() - one.total();  // the cyclic part; heartbeats do not scale
+  const double fixed = one.total() - per_hz;
+  return per_hz > 0 ? std::max(0.0, (share - fixed) / per_hz) : 1e9;
+}
+
+std::string load_line(const FwConfig& c, std::size_t joints, const hal::BusLoad& l) {
+  return "bus load " + pct_text(l.total()) + " of bus.bitrate " + num_text(c.bitrate) + " bit/s at loop.rate_hz " +
+         num_text(c.rate_hz) + " with " + std::to_string(joints) + " drives (" + frames_text(l, c.rate_hz) +
+         ", worst-case bit stuffing)";
+}
+}  // namespace
+
+std::string bus_load_problem(const FwConfig& c, std::size_t joints) {
+  if (!bus_load_checked(c) || joints == 0) return "";
+  const hal::BusLoad l = hal::bus_load(bus_traffic(c, joints), c.bitrate);
+  if (l.total() <= kBusLoadLimit) return "";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, joints, kBusLoadLimit)));
+  return load_line(c, joints, l) + " is above 85 %: at most " + b + " Hz fits (armfw --config FILE --bus-load)";
+}
+
+std::string bus_load_warning(const FwConfig& c, std::size_t joints) {
+  if (!bus_load_checked(c) || joints == 0) return "";
+  const hal::BusLoad l = hal::bus_load(bus_traffic(c, joints), c.bitrate);
+  if (l.total() <= kBusLoadWarn || l.total() > kBusLoadLimit) return "";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, joints, kBusLoadWarn)));
+  return load_line(c, joints, l) + " is above 60 %: little room for SDO, EMCY and retransmitted frames (" + b +
+         " Hz or less stays under 60 %)";
+}
+
+std::string bus_load_table(const FwConfig& c, std::size_t joints) {
+  const hal::BusLoad l = hal::bus_load(bus_traffic(c, joints), c.bitrate);
+  std::string o;
+  char b[200];
+  std::snprintf(b, sizeof b, "bus load: %zu drives, loop.rate_hz %s, bus.bitrate %s bit/s, classical CAN, worst-case bit stuffing\n",
+                joints, num_text(c.rate_hz).c_str(), num_text(c.bitrate).c_str());
+  o += b;
+  std::snprintf(b, sizeof b, "%-11s %-12s %6s %10s %6s %10s %8s\n", "frame", "direction", "bytes", "per cycle", "bits",
+                "bit/s", "load");
+  o += b;
+  for (std::size_t k = 0; k < l.count; ++k) {
+    const double per_cycle = l.kinds[k].per_second / c.rate_hz;
+    const bool hb = std::strcmp(l.kinds[k].name, "heartbeat") == 0;
+    std::snprintf(b, sizeof b, "%-11s %-12s %6u %10s %6d %10.0f %8s\n", l.kinds[k].name, hal::to_string(l.kinds[k].direction),
+                  unsigned(l.kinds[k].data_len), hb ? "-" : num_text(per_cycle).c_str(), l.bits[k].total(),
+                  l.kinds[k].per_second * l.bits[k].total(), pct_text(l.seconds[k]).c_str());
+    o += b;
+  }
+  const auto line = [&](const char* what, double share) {
+    std::snprintf(b, sizeof b, "%-11s %-12s %6s %10s %6s %10.0f %8s\n", what, "", "", "", "", share * c.bitrate,
+                  pct_text(share).c_str());
+    o += b;
+  };
+  line("to drives", l.to_drives);
+  line("from drives", l.from_drives);
+  line("total", l.total());
+  if (!bus_load_checked(c))
+    o += "not checked: bus.can = " + toml_string(c.can) + " has no wire (the figures are what a real bus would carry)\n";
+  else if (l.total() > kBusLoadLimit)
+    o += "refused: above 85 %: at most " + num_text(std::floor(rate_for(c, joints, kBusLoadLimit))) + " Hz fits\n";
+  else if (l.total() > kBusLoadWarn)
+    o += "warning: above 60 %: " + num_text(std::floor(rate_for(c, joints, kBusLoadWarn))) + " Hz or less stays under 60 %\n";
+  else
+    o += "fits: at most 60 %\n";
+  return o;
+}
+
+namespace {
+constexpr const char* kLoadBegin =
+    "<!-- BEGIN bus-load: generated by `armfw --bus-load-reference` from the bus-load calculation in "
+    "firmware/config and hal/bus_load. Do not edit by hand: regenerate. -->";
+constexpr const char* kLoadEnd = "<!-- END bus-load -->";
+}  // namespace
+
+std::string bus_load_reference_markdown() {
+  std::string o = std::string(kLoadBegin) + "\n";
+  const double rates[] = {250, 400, 500, 800, 1000, 2000};
+  const std::size_t joints[] = {1, 2, 3, 4, 5, 6, 7};
+  for (const double bitrate : {1e6, 5e5}) {
+    for (const bool tpdo2 : {false, true}) {
+      FwConfig c;
+      c.can = "can0";
+      c.bitrate = bitrate;
+      c.tpdo2 = tpdo2;
+      o += "\n" + std::string(bitrate == 1e6 ? "1 Mbit/s" : "500 kbit/s") +
+           (tpdo2 ? ", with bus.tpdo2 = true (one more 6-byte frame per drive)" : ", the default frames (SYNC, RPDO1 and TPDO1 per drive, heartbeats every 50 ms)") +
+           ":\n\n| drives |";
+      for (const double r : rates) o += " " + num_text(r) + " Hz |";
+      o += "\n| --- |";
+      for (std::size_t i = 0; i < std::size(rates); ++i) o += " --- |";
+      o += "\n";
+      for (const std::size_t n : joints) {
+        o += "| " + std::to_string(n) + " |";
+        for (const double r : rates) {
+          c.rate_hz = r;
+          const double share = hal::bus_load(bus_traffic(c, n), bitrate).total();
+          o += " " + pct_text(share) + (share > kBusLoadLimit ? " refused" : share > kBusLoadWarn ? " warned" : "") + " |";
+        }
+        o += "\n";
+      }
+    }
+  }
+  return o + "\n" + kLoadEnd + "\n";
+}
+
+std::string bus_load_reference_mismatch(const std::string& page) {
+  const std::size_t b = page.find("<!-- BEGIN bus-load");
+  const std::size_t e = page.find(kLoadEnd);
+  const char* how = "regenerate it: armfw --bus-load-reference, pasted between the markers in docs/deployment.md";
+  if (b == std::string::npos || e == std::string::npos || e < b)
+    return std::string("docs/deployment.md: no BEGIN/END bus-load markers; ") + how;
+  const std::string have = page.substr(b, e + std::strlen(kLoadEnd) + 1 - b);
+  const std::string want = bus_load_reference_markdown();
+  if (have == want) return "";
+  const auto split = [](const std::string& t) {
+    std::vector<std::string> out;
+    std::size_t a = 0;
+    while (a < t.size()) {
+      const std::size_t n = std::min(t.find('\n', a), t.size());
+      out.push_back(t.substr(a, n - a));
+      a = n + 1;
+    }
+    return out;
+  };
+  const std::vector<std::string> hl = split(have), wl = split(want);
+  for (std::size_t i = 0; i < std::max(hl.size(), wl.size()); ++i) {
+    const std::string h = i < hl.size() ? hl[i] : "(none)", w = i < wl.size() ? wl[i] : "(none)";
+    if (h != w) return "docs/deployment.md's bus-load table differs at its line " + std::to_string(i + 1) + ": page '" + h +
+                       "', calculated '" + w + "'; " + how;
+  }
+  return std::string("docs/deployment.md's bus-load table differs; ") + how;
 }
 
 std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
@@ -969,7 +1300,7 @@ std::string with_key(const std::string& error, const std::string& text, const st
   return error.substr(0, rest) + key + ": " + error.substr(rest);
 }
 
-std::string load_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
+std::string load_text(const std::string& text, const std::string& origin, FwConfig& cfg, bool check_bus_load) {
   kin::TomlDocument doc = kin::parse_toml(text, origin, kMaxFileBytes);  // size, UTF-8, nesting, syntax
   if (!doc.error.empty()) return with_key(doc.error, text, origin);
   const toml::table& top = doc.table;
@@ -1038,7 +1369,20 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
       c.outputs.push_back(o);
     }
   }
-  const std::string bad = validate(c);
+  // No loop.rate_hz on a wire: the highest standard rate the drives' traffic leaves room at.
+  const toml::table* loop = top.get_as<toml::table>("loop");
+  if (!(loop && loop->get("rate_hz")) && bus_load_checked(c) && !c.drives.empty() && validate(c, false).empty()) {
+    const double rates[] = {1000, 800, 500, 400, 250};
+    double pick = 0;
+    for (const double limit : {kBusLoadWarn, kBusLoadLimit})
+      for (const double r : rates) {
+        if (pick > 0) break;
+        c.rate_hz = r;
+        if (hal::bus_load(bus_traffic(c, c.drives.size()), c.bitrate).total() <= limit) pick = r;
+      }
+    c.rate_hz = pick > 0 ? pick : 250;
+  }
+  const std::string bad = validate(c, check_bus_load);
   if (!bad.empty()) {
     const toml::node* n = node_of_label(top, bad);
     return (n ? at(*n) : origin + ": ") + bad;
@@ -1048,14 +1392,14 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
 }
 }  // namespace
 
-std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg) {
-  return kin::one_line(load_text(text, origin, cfg));  // a key or string from the file may hold a newline
+std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg, bool check_bus_load) {
+  return kin::one_line(load_text(text, origin, cfg, check_bus_load));  // a key or string from the file may hold a newline
 }
 
-std::string load_config_file(const std::string& path, FwConfig& cfg) {
+std::string load_config_file(const std::string& path, FwConfig& cfg, bool check_bus_load) {
   std::string text;
   if (std::string e = kin::read_text_file(path, text, kMaxFileBytes); !e.empty()) return e;
-  return load_config_text(text, path, cfg);
+  return load_config_text(text, path, cfg, check_bus_load);
 }
 
 std::string to_toml(const FwConfig& c) {

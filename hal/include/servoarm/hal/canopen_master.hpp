@@ -59,6 +59,17 @@
 
 namespace servoarm::hal {
 
+/// One object written at bring-up and read back (CanopenJointConfig::sdo_writes): `size`
+/// bytes (1, 2, 4) of `value` (two's complement for a signed type), little-endian.
+struct SdoWrite {
+  std::uint16_t index = 0;
+  std::uint8_t sub = 0;
+  std::uint8_t size = 4;
+  bool is_signed = false;  ///< for messages: the value shown as a signed number
+  std::uint32_t value = 0;
+};
+inline constexpr std::size_t kMaxSdoWrites = 16;
+
 struct CanopenJointConfig {
   std::uint8_t node_id = 0;
   JointScaling scaling{};
@@ -76,6 +87,11 @@ struct CanopenJointConfig {
   /// Digital outputs: map 60FEh:01 into RPDO3 (0x400 + node) and send
   /// ServoBus::set_digital_outputs' word with every write(); false = no RPDO3 (same frames).
   bool digital_outputs = false;
+  /// Objects written in this order at the end of the drive's bring-up (after the PDO maps and
+  /// 6085h), each read back: a drive that refuses one (SDO abort) or reads back another value
+  /// fails start() naming the node, the object and the abort code or both values.
+  std::array<SdoWrite, kMaxSdoWrites> sdo_writes{};
+  std::size_t sdo_write_count = 0;
 };
 
 /// How bring-up treats one feedback object of TPDO2.
@@ -124,6 +140,11 @@ struct CanopenMasterConfig {
   /// bits 5 and 7), and a plain CSP bring-up sends the same frames as a master without homing.
   bool check_supported_modes = false;
   Duration state_timeout = 500 * kMillisecond;      ///< max time a drive may sit in one state while enabling
+  /// Written to each drive's 60C2h interpolation time period at bring-up (sub 1 = value, sub 2 =
+  /// index: value x 10^index s, e.g. 1 and -3 for 1 ms), so that its interpolator spans the SYNC
+  /// period; 0 = not written. A drive without 60C2h (abort 06020000h / 06090011h) is brought up
+  /// without it (it times the SYNC itself); any other refusal fails start() naming the node.
+  Duration interpolation_period = 0;
   bool produce_sync = true;
   /// start() installs receive filters on the bus that pass only frames whose node part
   /// (id & 0x7F) is one of the configured nodes (EMCY, TPDOs, SDO answers, heartbeats):
@@ -310,6 +331,8 @@ class CanopenServoBus final : public ServoBus {
   Status setup_node(std::size_t j, TimePoint deadline);
   Status sdo_write(std::uint8_t node, std::uint16_t index, std::uint8_t sub, std::uint8_t size, std::uint32_t value,
                    const char* what);
+  /// 60C2h from cfg_.interpolation_period, then joint j's sdo_writes with their read-back.
+  Status write_drive_objects(std::size_t j);
   /// Map `entries` into one PDO (comm 0x14xx/0x18xx, map 0x16xx/0x1Axx) and enable it with
   /// `cob` (left disabled when nothing was mapped); `mapped[k]` says which entries made it.
   Status map_pdo(std::size_t j, std::uint16_t comm, std::uint16_t map, std::uint32_t cob, const MapEntry* entries,

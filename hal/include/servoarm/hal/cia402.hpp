@@ -30,6 +30,7 @@ inline constexpr std::uint16_t kHomingSpeeds = 0x6099;    ///< :01 search for sw
 inline constexpr std::uint16_t kHomingAccel = 0x609A;     ///< UNSIGNED32 homing acceleration
 inline constexpr std::uint16_t kDigitalOutputs = 0x60FE;  ///< :01 UNSIGNED32 physical outputs (bits 16..31 manufacturer's)
 inline constexpr std::uint16_t kDigitalInputs = 0x60FD;   ///< UNSIGNED32: bit 0 neg. limit, 1 pos. limit, 2 home
+inline constexpr std::uint16_t kInterpolationPeriod = 0x60C2;  ///< :01 UNSIGNED8 value, :02 INTEGER8 index (value x 10^index s)
 inline constexpr std::uint16_t kSupportedModes = 0x6502;  ///< UNSIGNED32 supported drive modes
 inline constexpr std::uint16_t kTargetTorque = 0x6071;   ///< INTEGER16 CST target torque, per mille of 6076h
 inline constexpr std::int8_t kModeCsp = 8;  ///< cyclic synchronous position

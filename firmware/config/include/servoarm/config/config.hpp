@@ -21,11 +21,27 @@
 #include <variant>
 #include <vector>
 
+#include "servoarm/hal/bus_load.hpp"
+
 namespace servoarm::kin {
 struct Chain;
 }
 
 namespace servoarm::fw {
+
+/// One entry of drive.sdo: an object the master writes at bring-up and reads back
+/// (`["6065h", 0, "u32", 20000]` in the file).
+struct SdoEntry {
+  int index = 0;        ///< 0x2000..0x9FFF (manufacturer-specific and device profile areas)
+  int sub = 0;          ///< 0..255
+  std::string type;     ///< "u8", "u16", "u32", "i8", "i16", "i32"
+  std::int64_t value = 0;
+  bool operator==(const SdoEntry&) const = default;
+};
+/// Bytes of an SdoEntry type (1, 2, 4), 0 when the type is not one of them.
+int sdo_type_size(const std::string& type);
+/// True for the signed types (i8, i16, i32).
+bool sdo_type_signed(const std::string& type);
 
 /// One `[[drive]]` table: the drive of one joint (chain order). Unset fields
 /// (0 / empty) take the [bus] defaults and the robot description's limits.
@@ -55,6 +71,7 @@ struct DriveConfig {
   // dynamics (docs/dynamics.md#using-the-model-in-the-firmware)
   double rated_torque = 0;               ///< N m (N), motor side: the unit of 6071h/6077h/60B2h; 0 = the drive's 6076h
   double collision_threshold = 0;        ///< N m (N), joint side; 0 = dynamics.collision_threshold_pct of the rated torque
+  std::vector<SdoEntry> sdo;             ///< objects written at bring-up and read back, in order
 
   bool operator==(const DriveConfig&) const = default;
 };
@@ -88,6 +105,8 @@ struct FwConfig {
   double boot_timeout_ms = 0.0;        ///< a node still booting is asked again until then; 0 = one attempt
   double boot_retry_ms = 200.0;        ///< time between the boot-up attempts
   double state_timeout_ms = 500.0;     ///< longest a drive may sit in one CiA 402 state while enabling / changing mode
+  double bitrate = 1000000.0;          ///< bit/s of the drive bus: the bus-load check (bus_load_problem)
+  bool tpdo2 = false;                  ///< velocity actual 606Ch + error code 603Fh in TPDO2
   std::vector<DriveConfig> drives;     ///< [[drive]] tables; empty = defaults for every joint
   // [safety]
   double following_error_deg = 5.0;
@@ -148,7 +167,7 @@ template <class S>
 struct Key {
   using Member =
       std::variant<bool S::*, int S::*, std::int64_t S::*, double S::*, std::string S::*, std::vector<double> S::*,
-                   std::vector<std::vector<int>> S::*>;
+                   std::vector<std::vector<int>> S::*, std::vector<SdoEntry> S::*>;
   /// Returns "" or why the value is refused ("must be above bus.heartbeat_period_ms (50)").
   using Relation = std::string (*)(const S& s, const FwConfig& whole);
 
@@ -223,12 +242,41 @@ std::string default_text(const DriveKey& k);
 /// line naming the file and the key (unknown key, wrong type, out of range, syntax).
 /// A read error, a directory, a FIFO, a device or a file over 64 KiB is refused naming the path;
 /// text that is not UTF-8 or nests brackets deeper than 32 levels is refused before toml11 parses it.
-std::string load_config_file(const std::string& path, FwConfig& cfg);
+/// A file that does not write loop.rate_hz on a checked bus (bus_load_checked()) with [[drive]]
+/// tables gets the highest of 1000, 800, 500, 400, 250 Hz whose bus load is at most
+/// kBusLoadWarn (else at most kBusLoadLimit; else 250 Hz, refused by the load check).
+std::string load_config_file(const std::string& path, FwConfig& cfg, bool check_bus_load = true);
 /// Same from text (tests). `cfg` is untouched when the text is refused.
-std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg);
-/// Range checks of every key (table order, first problem). "" when valid, else
-/// "key: reason (got value)".
-std::string validate(const FwConfig& cfg);
+std::string load_config_text(const std::string& text, const std::string& origin, FwConfig& cfg,
+                             bool check_bus_load = true);
+/// Range checks of every key (table order, first problem), then the bus load (below) with the
+/// [[drive]] tables' count as the joint count. "" when valid, else "key: reason (got value)".
+/// `check_bus_load` false: the load is left out (armfw --bus-load shows a refused one).
+std::string validate(const FwConfig& cfg, bool check_bus_load = true);
+
+// --- Bus load (docs/deployment.md#bus-load) ----------------------------------------
+/// Refused above this share of bus.bitrate, warned above kBusLoadWarn.
+inline constexpr double kBusLoadLimit = 0.85;
+inline constexpr double kBusLoadWarn = 0.60;
+/// The cyclic traffic `cfg` sets up with `joints` drives (what CanopenServoBus maps for it:
+/// RPDO1/TPDO1, RPDO2 for dynamics.feed_forward / freedrive, RPDO3 for [[output]]s, TPDO2
+/// for bus.tpdo2 / dynamics.collision / hard_stop torque, SYNC, heartbeats).
+hal::BusTraffic bus_traffic(const FwConfig& cfg, std::size_t joints);
+/// True when the load is checked: bus.can is a wire (not "sim", not a virtual "vcan*").
+bool bus_load_checked(const FwConfig& cfg);
+/// "" or why `cfg` with `joints` drives is refused: the load above kBusLoadLimit, naming
+/// bus.bitrate, loop.rate_hz, the frames per cycle, the load and the highest rate that fits.
+std::string bus_load_problem(const FwConfig& cfg, std::size_t joints);
+/// "" or the warning for a load above kBusLoadWarn (and at most kBusLoadLimit).
+std::string bus_load_warning(const FwConfig& cfg, std::size_t joints);
+/// What `armfw --config FILE --bus-load` prints: one line per frame kind (direction, frames
+/// per cycle, bits per frame with worst-case stuffing, load), the two directions, the total.
+std::string bus_load_table(const FwConfig& cfg, std::size_t joints);
+/// The table of docs/deployment.md (`armfw --bus-load-reference`): the load of the default
+/// traffic by loop rate and joint count at 1 Mbit/s and 500 kbit/s, between its markers.
+std::string bus_load_reference_markdown();
+/// "" when `page` holds exactly bus_load_reference_markdown() between its markers, else why not.
+std::string bus_load_reference_mismatch(const std::string& page);
 /// Checks that need the robot: homing.order names every joint exactly once (when given),
 /// motion.home_deg has one value per joint within the
 /// joint's limits (the description's, narrowed by drive.limits), drive.limits lie
