@@ -347,6 +347,7 @@ class CanopenServoBus final : public ServoBus {
   void homing_fail(std::size_t j, Status why, TimePoint now);
   void homing_finish(std::size_t j, TimePoint now);
   void hard_stop_write(std::size_t j, TimePoint now);
+  void advance_hard_stop(std::size_t j, TimePoint now);
   std::int32_t home_offset_counts(std::size_t j) const;
 
   CanBus& bus_;
