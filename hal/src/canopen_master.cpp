@@ -6,8 +6,6 @@
 #include <cstdio>
 #include <cstring>
 
-#include "homing_steps.hpp"
-
 namespace servoarm::hal {
 
 using namespace canopen;
@@ -140,6 +138,24 @@ CanopenServoBus::CanopenServoBus(CanBus& bus, Clock& clock, const CanopenMasterC
 }
 
 namespace {
+enum HStep : std::uint8_t {
+  hs_idle = 0,
+  hs_w_method,
+  hs_w_speed1,
+  hs_w_speed2,
+  hs_w_accel,
+  hs_w_offset,
+  hs_r_mode,
+  hs_w_mode,
+  hs_r_mode_check,
+  hs_start_low,
+  hs_running,
+  hs_halting,
+  hs_unhalt,
+  hs_w_csp,
+  hs_r_csp,
+  hs_done,
+};
 bool finite(double x) { return std::isfinite(x); }
 }  // namespace
 
@@ -161,9 +177,6 @@ const char* CanopenServoBus::homing_step_name(std::uint8_t step) {
     case hs_w_csp: return "writing cyclic synchronous position 6060h = 8";
     case hs_r_csp: return "waiting for cyclic synchronous position in 6061h";
     case hs_done: return "done";
-    case hs_approach: return "approaching the hard stop";
-    case hs_backoff: return "backing off the hard stop";
-    case hs_settle: return "settling at the backed-off point";
     default: return "unknown";
   }
 }
@@ -733,7 +746,7 @@ bool CanopenServoBus::maps(std::size_t j, std::uint16_t object) const {
   }
 }
 
-Status CanopenServoBus::start(TimePoint deadline) {
+Status CanopenServoBus::family_start(TimePoint deadline) {
   if (config_status_ != Status::ok) return config_status_;
   if (cfg_.joint_count == 0) {
     std::snprintf(error_, sizeof error_, "%s", "no joints configured");
@@ -837,7 +850,7 @@ Status CanopenServoBus::set_position_zero(std::size_t j) {
 
 void CanopenServoBus::quick_stop() { target_ = cia402::Target::quick_stop; }
 
-Status CanopenServoBus::read(TimePoint now) {
+Status CanopenServoBus::family_read(TimePoint now) {
   if (!started_) return Status::not_configured;
   CanFrame f;
   Status bus_status = Status::ok;
@@ -898,7 +911,7 @@ Status CanopenServoBus::read(TimePoint now) {
   return worst != Status::ok ? worst : bus_status;
 }
 
-Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) {
+Status CanopenServoBus::family_write(std::span<const double> setpoints, TimePoint) {
   if (!started_) return Status::not_configured;
   Status result = setpoints.size() == cfg_.joint_count ? Status::ok : Status::invalid_argument;
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
@@ -927,7 +940,6 @@ Status CanopenServoBus::write(std::span<const double> setpoints, TimePoint now) 
       // target follows the actual position (unused in homing mode, right when CSP resumes).
       if (jt.writes < 1000) ++jt.writes;
       if (!faulted) cw = std::uint16_t(cw | jt.cw_extra);
-      if (cfg_.joints[j].homing.kind == HomingKind::hard_stop && following) hard_stop_write(j, now), target = jt.target_counts;
     } else if (jt.cmode == CyclicMode::leaving_torque) {
       target = jt.target_counts;  // back to CSP where the joint stood when it left torque mode
     } else if (jt.cmode != CyclicMode::position) {
@@ -1021,7 +1033,7 @@ Status CanopenServoBus::enable_blocking(TimePoint deadline, Duration period) {
 
 // --- homing (real time) ---------------------------------------------------------------
 
-Status CanopenServoBus::start_homing(std::size_t j, TimePoint now) {
+Status CanopenServoBus::family_start_homing(std::size_t j, TimePoint now) {
   if (j >= cfg_.joint_count) return Status::invalid_argument;
   if (!started_) return Status::not_configured;
   Joint& jt = joints_[j];
@@ -1044,29 +1056,22 @@ Status CanopenServoBus::start_homing(std::size_t j, TimePoint now) {
   jt.hlast = jt.actual_counts;
   jt.hlast_t = now;
   jt.hrebased = false;
-  if (hs.kind == HomingKind::cia402) {
-    homing_step(j, hs_w_method, now);
-  } else {
-    jt.hs_demand = double(jt.target_counts);
-    jt.hs_v = 0;
-    jt.hs_last = now;
-    homing_step(j, hs_approach, now);
-  }
+  homing_step(j, hs_w_method, now);
   return Status::ok;
 }
 
-void CanopenServoBus::abort_homing(std::size_t j) {
+void CanopenServoBus::family_abort_homing(std::size_t j) {
   if (j < cfg_.joint_count && joints_[j].hphase == HomingPhase::running) joints_[j].habort = true;
 }
 
-HomingProgress CanopenServoBus::homing(std::size_t j) const {
+HomingProgress CanopenServoBus::family_homing(std::size_t j) const {
   if (j >= cfg_.joint_count) return {HomingPhase::idle, Status::invalid_argument, 0};
   if (cfg_.joints[j].homing.kind == HomingKind::none) return {HomingPhase::attained, Status::ok, 0};
   const Joint& jt = joints_[j];
   return {jt.hphase, jt.hstatus, jt.hstep};
 }
 
-void CanopenServoBus::describe_homing(std::size_t j, char* buf, std::size_t size) const {
+void CanopenServoBus::family_describe_homing(std::size_t j, char* buf, std::size_t size) const {
   if (size == 0) return;
   buf[0] = '\0';
   if (j >= cfg_.joint_count) return;
@@ -1110,8 +1115,6 @@ void CanopenServoBus::homing_finish(std::size_t j, TimePoint now) {
   Joint& jt = joints_[j];
   jt.cw_extra = 0;
   jt.target_counts = jt.actual_counts;  // holds where it stands
-  jt.hs_demand = double(jt.actual_counts);
-  jt.hs_v = 0;
   jt.hphase = jt.hstatus == Status::ok ? HomingPhase::attained : HomingPhase::failed;
   jt.hold_once = true;
   homing_step(j, hs_done, now);
@@ -1302,15 +1305,29 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
         }
       }
       break;
-    case hs_approach:
-    case hs_backoff:
-    case hs_settle:
-      advance_hard_stop(j, now);
-      break;
     default:
       break;
   }
 }
+
+// --- what the group base asks of the family -------------------------------------------
+
+void CanopenServoBus::joint_name(std::size_t j, char* buf, std::size_t size) const {
+  if (size > 0) std::snprintf(buf, size, "joint %zu (node %u)", j, unsigned(j < cfg_.joint_count ? joints_[j].node : 0));
+}
+
+double CanopenServoBus::shift_zero(std::size_t j, double at, double reads) {
+  JointScaling& s = cfg_.joints[j].scaling;
+  const double cps = s.counts_per_si();
+  const double goal = std::clamp(std::nearbyint(double(s.zero_offset) + double(s.direction) * at * cps), -2147483648.0,
+                                 2147483647.0);  // the drive's counts at `at`
+  s.zero_offset = std::int32_t(std::clamp(goal - std::nearbyint(double(s.direction) * reads * cps), -2147483648.0,
+                                          2147483647.0));
+  fb_[j].position = s.to_joint(joints_[j].actual_counts);
+  return s.to_joint(std::int32_t(goal));
+}
+
+void CanopenServoBus::note_error(const char* text) { std::snprintf(error_, sizeof error_, "%s", text); }
 
 // --- feed-forward and torque mode (real time) ----------------------------------------
 
@@ -1349,7 +1366,7 @@ bool torque_units(double torque, double unit, std::int16_t& out) {
 }
 }  // namespace
 
-Status CanopenServoBus::set_feed_forward(std::size_t j, double velocity, double torque) {
+Status CanopenServoBus::family_set_feed_forward(std::size_t j, double velocity, double torque) {
   if (j >= cfg_.joint_count) return Status::invalid_argument;
   Joint& jt = joints_[j];
   const JointCapabilities c = capabilities(j);
@@ -1384,7 +1401,7 @@ Status CanopenServoBus::set_target_torque(std::size_t j, double torque) {
   return Status::ok;
 }
 
-Status CanopenServoBus::set_torque_mode(std::size_t j, bool on) {
+Status CanopenServoBus::family_set_torque_mode(std::size_t j, bool on) {
   if (j >= cfg_.joint_count) return Status::invalid_argument;
   Joint& jt = joints_[j];
   if (!on) {

@@ -35,10 +35,9 @@
 //             jumps when CSP resumes. 607Ch = zero_offset + round(direction x offset x counts
 //             per unit): the drive's 6064h at the mark is 607Ch, so the joint reads `offset`
 //             there with the configured JointScaling::zero_offset unchanged.
-//   hard_stop: the master moves the joint in CSP (acceleration-limited ramp to speed_switch)
-//             until |target - actual| > following_limit or |torque| > torque_limit (6077h mapped),
-//             backs off by `backoff` and moves zero_offset so that the joint reads `offset` there.
-//   travel:   both kinds: the master sums the actual position's changes from where homing began
+//   hard_stop: drive-neutral, run by the group base (DriveGroup, hard_stop_homing.hpp) with
+//             position setpoints in CSP; the master only moves zero_offset (shift_zero) at the end.
+//   travel:   cia402 (hard_stop: the same in hard_stop_homing.hpp): the master sums the actual position's changes from where homing began
 //             (one change larger than twice the homing speed allows is the drive's coordinate
 //             change at the mark, not motion) and fails the homing (homing_error) once the sum
 //             exceeds HomingSpec::max_travel: a missing switch or stop ends within the joint's
@@ -47,12 +46,14 @@
 //             drive_refused (mode not taken), the joint's fault (drive_fault, heartbeat_lost):
 //             the drive is halted (bit 8), taken back to CSP at its actual position, unhomed.
 #include <array>
+#include <cmath>
 #include <cstdint>
 
 #include "servoarm/hal/can_bus.hpp"
 #include "servoarm/hal/canopen.hpp"
 #include "servoarm/hal/cia402.hpp"
 #include "servoarm/hal/clock.hpp"
+#include "servoarm/hal/drive_group.hpp"
 #include "servoarm/hal/scaling.hpp"
 #include "servoarm/hal/sdo_client.hpp"
 #include "servoarm/hal/servo_bus.hpp"
@@ -170,23 +171,25 @@ CanFrame encode_tpdo2(std::uint8_t node, std::int32_t velocity, std::uint16_t er
 bool decode_tpdo2(const CanFrame& f, std::int32_t& velocity, std::uint16_t& error_code);
 }  // namespace pdo
 
-class CanopenServoBus final : public ServoBus {
+class CanopenServoBus final : public DriveGroup {
  public:
   /// Set-up: validates the config (see config_status()); no I/O.
   CanopenServoBus(CanBus& bus, Clock& clock, const CanopenMasterConfig& cfg);
 
   /// invalid_argument (bad node id / scaling / duplicate node) or capacity; ok otherwise.
-  Status config_status() const { return config_status_; }
+  Status config_status() const override { return config_status_; }
+  const char* family() const override { return "cia402"; }
+  /// Joint-side N m (N) of the rated torque (1000 x torque_unit(j)); 0 when no torque object is mapped.
+  double rated_torque(std::size_t j) const override { return std::fabs(torque_unit(j)) * 1000.0; }
+  /// "joint 1 (node 2)".
+  void joint_name(std::size_t j, char* buf, std::size_t size) const override;
   /// The configuration as given (armfw maps its bus.* keys into it).
   const CanopenMasterConfig& config() const { return cfg_; }
 
   std::size_t joint_count() const override { return cfg_.joint_count; }
-  Status start(TimePoint deadline) override;
   void enable() override;
   void disable() override;
   void quick_stop() override;
-  Status read(TimePoint now) override;
-  Status write(std::span<const double> setpoints, TimePoint now) override;
   Status set_position_zero(std::size_t j) override;
   std::int64_t zero_offset(std::size_t j) const override {
     return j < cfg_.joint_count ? cfg_.joints[j].scaling.zero_offset : 0;
@@ -195,11 +198,9 @@ class CanopenServoBus final : public ServoBus {
   const char* last_error() const override { return error_; }
 
   JointCapabilities capabilities(std::size_t j) const override;
-  Status set_feed_forward(std::size_t j, double velocity, double torque) override;
   Status set_digital_outputs(std::size_t j, std::uint32_t value) override;
   std::uint32_t digital_outputs(std::size_t j) const override;
   Status set_target_torque(std::size_t j, double torque) override;
-  Status set_torque_mode(std::size_t j, bool on) override;
   CyclicModeState cyclic_mode(std::size_t j) const override {
     return j < cfg_.joint_count ? CyclicModeState{joints_[j].cmode, joints_[j].cstatus} : CyclicModeState{};
   }
@@ -211,15 +212,6 @@ class CanopenServoBus final : public ServoBus {
   /// Joint-side N m (N) per unit of 6071h/6077h/60B2h (0 when no torque object is mapped).
   double torque_unit(std::size_t j) const { return j < cfg_.joint_count ? joints_[j].torque_per_mille : 0; }
 
-  Status start_homing(std::size_t j, TimePoint now) override;
-  void abort_homing(std::size_t j) override;
-  HomingProgress homing(std::size_t j) const override;
-  HomingKind homing_kind(std::size_t j) const override {
-    return j < cfg_.joint_count ? cfg_.joints[j].homing.kind : HomingKind::none;
-  }
-  /// Real-time: describe joint j's homing outcome in `buf` ("joint 3 (node 3): homing timeout
-  /// after 2000 ms waiting for homing attained (statusword 0x0637)"; "" when not failed).
-  void describe_homing(std::size_t j, char* buf, std::size_t size) const override;
   /// Set-up/diagnostics: 6502h as read by start() (0 when the drive has none).
   std::uint32_t supported_modes(std::size_t j) const { return j < cfg_.joint_count ? joints_[j].modes : 0; }
   /// Name of a homing step (HomingProgress::step) for progress reports.
@@ -242,7 +234,7 @@ class CanopenServoBus final : public ServoBus {
   std::uint64_t ignored_frames() const { return ignored_; }
   /// Joint j's scaling as the master uses it (zero offset included): what a simulator needs
   /// to turn the drive's counts into the joint (armfw --sim --plant dynamic).
-  const JointScaling& scaling(std::size_t j) const { return cfg_.joints[j < cfg_.joint_count ? j : 0].scaling; }
+  JointScaling scaling(std::size_t j) const override { return cfg_.joints[j < cfg_.joint_count ? j : 0].scaling; }
   /// Set-up/diagnostics: true when start() mapped `object` (0x606C, 0x603F, 0x6077) into
   /// joint j's TPDO2.
   bool maps(std::size_t j, std::uint16_t object) const;
@@ -253,6 +245,25 @@ class CanopenServoBus final : public ServoBus {
 
   /// Real-time: handle one received frame (read() calls this; exposed for SDO waits and tests).
   void dispatch(const CanFrame& f, TimePoint now);
+
+ protected:
+  const HomingSpec& homing_spec(std::size_t j) const override { return cfg_.joints[j < kMaxServoJoints ? j : 0].homing; }
+  Status family_start(TimePoint deadline) override;
+  Status family_read(TimePoint now) override;
+  Status family_write(std::span<const double> setpoints, TimePoint now) override;
+  /// CiA 402 homing (6060h = 6) with the drive's method.
+  Status family_start_homing(std::size_t j, TimePoint now) override;
+  void family_abort_homing(std::size_t j) override;
+  HomingProgress family_homing(std::size_t j) const override;
+  /// "joint 3 (node 3): homing timeout after 2000 ms waiting for homing attained (statusword
+  /// 0x0637)"; "" when not failed.
+  void family_describe_homing(std::size_t j, char* buf, std::size_t size) const override;
+  Status family_set_feed_forward(std::size_t j, double velocity, double torque) override;
+  Status family_set_torque_mode(std::size_t j, bool on) override;
+  /// Moves JointScaling::zero_offset (nothing is written to the drive).
+  double shift_zero(std::size_t j, double at, double reads) override;
+  double resolution(std::size_t j) const override { return 1.0 / cfg_.joints[j < kMaxServoJoints ? j : 0].scaling.counts_per_si(); }
+  void note_error(const char* text) override;
 
  private:
   struct Joint {
@@ -310,12 +321,10 @@ class CanopenServoBus final : public ServoBus {
     int tpdos = 0;                 ///< TPDO1 frames seen since the step began
     int writes = 0;                ///< write() cycles since the step began
     int retries = 0;
-    double hs_demand = 0, hs_v = 0, hs_goal = 0;  ///< hard_stop: counts, counts/s
     double htravel = 0;            ///< counts moved since homing began (signed, the mark's jump excluded)
     std::int32_t hlast = 0;        ///< actual position (counts) when htravel was last updated
     TimePoint hlast_t = 0;         ///< ... and when it last changed
     bool hrebased = false;         ///< the drive's one coordinate change at the mark was seen
-    TimePoint hs_last = 0;
     char hmsg[192] = {};
   };
   struct MapEntry {
@@ -346,8 +355,6 @@ class CanopenServoBus final : public ServoBus {
   void homing_step(std::size_t j, std::uint8_t step, TimePoint now);
   void homing_fail(std::size_t j, Status why, TimePoint now);
   void homing_finish(std::size_t j, TimePoint now);
-  void hard_stop_write(std::size_t j, TimePoint now);
-  void advance_hard_stop(std::size_t j, TimePoint now);
   std::int32_t home_offset_counts(std::size_t j) const;
 
   CanBus& bus_;
