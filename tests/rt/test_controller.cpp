@@ -711,7 +711,7 @@ TEST(Controller, HomeZeroMakesTheCurrentPositionJointZeroOnlyWhenDisabled) {
   kin::JointVector goal = kin::JointVector::Zero(6);
   goal[0] = 5 * kDeg;
   CHECK(max_abs_diff(r.q_act(), goal) < 0.02 * kDeg);
-  DOUBLES_EQUAL(offs[0] + 5 * kDeg * 131072.0 / (2 * M_PI), static_cast<double>(r.app.servo->last_target_counts(0)), 1.0);
+  DOUBLES_EQUAL(offs[0] + 5 * kDeg * 131072.0 / (2 * M_PI), static_cast<double>(r.app.canopen().last_target_counts(0)), 1.0);
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
@@ -769,8 +769,8 @@ TEST(Controller, DriveTablesSetNodesScalingAndNarrowLimits) {
   goal[1] = 10 * kDeg;
   CHECK(max_abs_diff(r.q_act(), goal) < 0.02 * kDeg);
   const double cpr = 131072.0 / (2 * M_PI);
-  DOUBLES_EQUAL(5000 + 20 * kDeg * cpr, static_cast<double>(r.app.servo->last_target_counts(0)), 1.0);
-  DOUBLES_EQUAL(-2 * 10 * kDeg * cpr, static_cast<double>(r.app.servo->last_target_counts(1)), 1.0);
+  DOUBLES_EQUAL(5000 + 20 * kDeg * cpr, static_cast<double>(r.app.canopen().last_target_counts(0)), 1.0);
+  DOUBLES_EQUAL(-2 * 10 * kDeg * cpr, static_cast<double>(r.app.canopen().last_target_counts(1)), 1.0);
   LONGS_EQUAL(0, r.rt_allocs);
 }
 

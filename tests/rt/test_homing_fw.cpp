@@ -594,7 +594,7 @@ TEST(FwHoming, BusTimeoutKeysReachTheMaster) {
     test::SimApp app;
     const std::string e = app.build(c, &clock);
     CHECK_TEXT(e.empty(), e.c_str());
-    const hal::CanopenMasterConfig& mc = app.servo->config();
+    const hal::CanopenMasterConfig& mc = app.canopen().config();
     LONGS_EQUAL(static_cast<long>(sdo_ms) * hal::kMillisecond, mc.sdo_timeout);
     LONGS_EQUAL(1500 * hal::kMillisecond, mc.boot_timeout);
     LONGS_EQUAL(250 * hal::kMillisecond, mc.boot_retry);

@@ -583,7 +583,7 @@ TEST(ModelControl, AppMapsTheDynamicsKeysAndConfiguresTheModelAtBoot) {
     }
     const std::string e = app.build(cfg, &clock);
     if (!e.empty()) FAIL(e.c_str());
-    const CanopenMasterConfig& mc = app.servo->config();
+    const CanopenMasterConfig& mc = app.canopen().config();
     const PdoUse want = which == 0 ? PdoUse::off : PdoUse::optional;
     LONGS_EQUAL(int(want), int(mc.rpdo2.velocity_offset));
     LONGS_EQUAL(int(want), int(mc.rpdo2.torque_offset));
@@ -610,8 +610,8 @@ TEST(ModelControl, AppMapsTheDynamicsKeysAndConfiguresTheModelAtBoot) {
       CHECK(app.model->available(ModelPart::freedrive));
       LONGS_EQUAL(int(FeedForwardKind::torque), int(app.model->feed_forward_kind()));
       DOUBLES_EQUAL(9, app.model->threshold(2), 1e-12);
-      DOUBLES_EQUAL(0.20 * 2.5 * 1000 * std::fabs(app.servo->torque_unit(1)) / 2.5, app.model->threshold(1), 1e-9);
-      DOUBLES_EQUAL(2.5 * app.servo->scaling(1).gear_ratio, std::fabs(app.servo->torque_unit(1)) * 1000, 1e-9);
+      DOUBLES_EQUAL(0.20 * 2.5 * 1000 * std::fabs(app.canopen().torque_unit(1)) / 2.5, app.model->threshold(1), 1e-9);
+      DOUBLES_EQUAL(2.5 * app.servo->scaling(1).gear_ratio, std::fabs(app.canopen().torque_unit(1)) * 1000, 1e-9);
     } else {
       const std::string n = app.dynamics_notes();
       CHECK_TEXT(n.find("feed-forward and collision detection off: robot 'stanford' has no inertial data") == 0, n.c_str());

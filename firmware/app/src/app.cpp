@@ -5,17 +5,11 @@
 #include <cmath>
 #include <vector>
 
+#include "servoarm/app/drive_factory.hpp"
 #include "servoarm/lang/units.hpp"
 #include "servoarm/kinematics/description.hpp"
 
 namespace servoarm::fw {
-
-namespace {
-/// armfw.toml's lengths and angles are in mm and degrees (the keys say so: _mm, _deg;
-/// a joint's value in mm when it is prismatic, in degrees when revolute), whatever units
-/// the robot description uses: they reach SI through the units table.
-constexpr ConsoleUnits kConfigUnits{LengthUnit::mm, AngleUnit::deg};
-}  // namespace
 
 ControllerConfig App::controller_config() const {
   ControllerConfig c;
@@ -55,36 +49,12 @@ ModelControlConfig App::model_config() const {
   for (int j = 0; j < chain.n_joints; ++j) {
     const auto ju = static_cast<std::size_t>(j);
     if (!cfg.drives.empty()) m.collision_threshold[ju] = cfg.drives[ju].collision_threshold;
-    // 6071h/6077h/60B2h are per mille of the rated torque: the master's unit x 1000, joint side
-    if (servo) m.rated_torque[ju] = std::fabs(servo->torque_unit(ju)) * 1000.0;
+    if (servo) m.rated_torque[ju] = servo->rated_torque(ju);  // joint side, as the drives came up
   }
   return m;
 }
 
-hal::HomingSpec App::homing_spec(int j) const {
-  hal::HomingSpec h;
-  if (cfg.drives.empty()) return h;  // no [[drive]] tables: every joint absolute (kind none)
-  const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
-  const double unit = kConfigUnits.joint_in(chain, j, 1.0);  // SI per deg (revolute) or mm (prismatic)
-  if (d.homing_method == "none") return h;
-  h.kind = d.homing_method == "hard_stop" ? hal::HomingKind::hard_stop : hal::HomingKind::cia402;
-  h.method = static_cast<std::int8_t>(homing_method_number(d.homing_method));
-  h.speed_switch = d.homing_speed_switch * unit;
-  if (h.kind == hal::HomingKind::hard_stop) h.speed_switch *= d.homing_direction;  // the sign is the direction
-  h.speed_zero = d.homing_speed_zero * unit;
-  h.acceleration = d.homing_acceleration * unit;
-  h.offset = d.homing_offset * unit;
-  h.timeout = static_cast<hal::Duration>(d.homing_timeout_s * 1e9);
-  h.following_limit = d.homing_following_limit * unit;
-  h.torque_limit = d.homing_torque_limit;
-  h.backoff = d.homing_backoff * unit;
-  // Travel supervision: a missing switch or stop ends the homing once the joint has
-  // travelled its whole range plus homing.travel_margin_deg (mm) from where it began.
-  const kin::DhRow& row = chain.joint(j);
-  if (std::isfinite(row.lower) && std::isfinite(row.upper))
-    h.max_travel = (row.upper - row.lower) + cfg.homing_travel_margin_deg * unit;
-  return h;
-}
+hal::HomingSpec App::homing_spec(int j) const { return fw::homing_spec(cfg, chain, j); }
 
 ConsoleConfig App::console_config() const {
   ConsoleConfig c;
@@ -157,106 +127,38 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
       row.dynamics.max_velocity = v;
     }
   }
-  std::vector<std::uint8_t> nodes;
-  for (int j = 0; j < n; ++j) {
-    const int id = cfg.drives.empty() || cfg.drives[static_cast<std::size_t>(j)].node == 0
-                       ? cfg.first_node + j
-                       : cfg.drives[static_cast<std::size_t>(j)].node;
-    if (id > 127) return "config: bus.first_node: node id of joint " + std::to_string(j + 1) + " would exceed 127";
-    for (int k = 0; k < j; ++k)
-      if (nodes[static_cast<std::size_t>(k)] == id)
-        return "config: drive[" + std::to_string(j + 1) + "].node: node " + std::to_string(id) + " is joint " +
-               std::to_string(k + 1) + "'s too";
-    nodes.push_back(static_cast<std::uint8_t>(id));
-  }
+  std::vector<DriveGroupPlan> plans;  // joints by (drive.family, interface)
+  if (const std::string e = plan_drive_groups(cfg, n, plans); !e.empty()) return e;
   // [[output]]: each on a drive of the arm (its 60FEh:01 mapped in RPDO3 at bring-up)
   output_joint.clear();
   for (std::size_t i = 0; i < cfg.outputs.size(); ++i) {
     int jo = -1;
-    for (int j = 0; j < n; ++j)
-      if (nodes[static_cast<std::size_t>(j)] == cfg.outputs[i].node) jo = j;
+    for (const DriveGroupPlan& p : plans)
+      for (std::size_t k = 0; k < p.joints.size(); ++k)
+        if (p.ids[k] == cfg.outputs[i].node && (jo < 0 || p.can == cfg.can)) jo = p.joints[k];
     if (jo < 0)
       return "config: output[" + std::to_string(i + 1) + "].node: node " + std::to_string(cfg.outputs[i].node) +
-             " is no drive of the arm (nodes " + std::to_string(nodes.front()) + ".." + std::to_string(nodes.back()) + ")";
+             " is no drive of the arm (nodes " + std::to_string(plans.front().ids.front()) + ".." +
+             std::to_string(plans.back().ids.back()) + ")";
     output_joint.push_back(jo);
   }
-  canbus = nullptr;
-  if (cfg.can == "sim") {
-    if (sim) canbus = sim(*clock, nodes);
-    if (canbus == nullptr)
-      return "bus.can: \"sim\" needs virtual drives (armfw --sim; this armfw was built without host_sim, or none were given)";
-  } else {
-    socketcan = std::make_unique<hal::SocketCanBus>();
-    const hal::Status st = socketcan->open(cfg.can.c_str());
-    if (st != hal::Status::ok) {
-      const std::string m = socketcan->message();  // starts with the interface name
-      return "bus.can: cannot open " + (m.rfind(cfg.can + ":", 0) == 0 ? m : cfg.can + ": " + m);
+  // One bus per interface named; one group per (family, interface); the arm's ServoBus over them.
+  servo = std::make_unique<hal::ArmServoBus>();
+  buses.clear();
+  for (const DriveGroupPlan& p : plans) {
+    hal::CanBus* bus = nullptr;
+    for (const auto& [name, b] : buses)
+      if (name == p.can) bus = b;
+    if (bus == nullptr) {
+      if (const std::string e = open_bus(p, sim, bus); !e.empty()) return e;
+      buses.emplace_back(p.can, bus);
     }
-    canbus = socketcan.get();
+    std::unique_ptr<hal::DriveGroup> group;
+    if (const std::string e = make_drive_group({cfg, chain, p, output_joint, *bus, *clock}, group); !e.empty()) return e;
+    const std::vector<std::size_t> joints(p.joints.begin(), p.joints.end());
+    if (servo->add_group(std::move(group), joints) != hal::Status::ok) return std::string("bus: ") + servo->last_error();
   }
-  hal::CanopenMasterConfig mc;
-  mc.joint_count = static_cast<std::size_t>(n);
-  mc.heartbeat_period = static_cast<hal::Duration>(cfg.heartbeat_period_ms * 1e6);
-  mc.heartbeat_timeout = static_cast<hal::Duration>(cfg.heartbeat_timeout_ms * 1e6);
-  mc.sdo_timeout = static_cast<hal::Duration>(cfg.sdo_timeout_ms * 1e6);
-  mc.boot_timeout = static_cast<hal::Duration>(cfg.boot_timeout_ms * 1e6);
-  mc.boot_retry = static_cast<hal::Duration>(cfg.boot_retry_ms * 1e6);
-  mc.state_timeout = static_cast<hal::Duration>(cfg.state_timeout_ms * 1e6);
-  // [dynamics]: RPDO2 and TPDO2's torque only when a part asks for them (else the
-  // frames of before). Optional: a drive that lacks an object is brought up without it, and the
-  // part that needs it is refused at boot() naming the joint (ModelControl::configure).
-  if (cfg.feed_forward != "off") mc.rpdo2.velocity_offset = hal::PdoUse::optional;
-  if (cfg.feed_forward == "torque") mc.rpdo2.torque_offset = hal::PdoUse::optional;
-  if (cfg.freedrive) mc.rpdo2.torque_mode = hal::PdoUse::optional;
-  if (cfg.collision) mc.tpdo2.torque = hal::PdoUse::optional;
-  mc.interpolation_period = static_cast<hal::Duration>(std::llround(1e9 / cfg.rate_hz));  // 60C2h
-  for (int j = 0; j < n; ++j) {
-    auto& jc = mc.joints[static_cast<std::size_t>(j)];
-    jc.node_id = nodes[static_cast<std::size_t>(j)];
-    if (!cfg.drives.empty()) jc.rated_torque = cfg.drives[static_cast<std::size_t>(j)].rated_torque;
-    jc.scaling.counts_per_unit = cfg.counts_per_rev;
-    jc.scaling.gear_ratio = cfg.gear_ratio;
-    if (!cfg.drives.empty()) {
-      const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
-      if (d.counts_per_rev > 0) jc.scaling.counts_per_unit = d.counts_per_rev;
-      if (d.gear_ratio != 0) jc.scaling.gear_ratio = d.gear_ratio;
-      jc.scaling.direction = d.direction;
-      jc.scaling.zero_offset = static_cast<std::int32_t>(d.zero_offset);
-      if (d.heartbeat_timeout_ms > 0) jc.heartbeat_timeout = static_cast<hal::Duration>(d.heartbeat_timeout_ms * 1e6);
-    }
-    jc.scaling.kind = chain.joint(j).type == kin::JointType::prismatic ? hal::JointScaling::Kind::prismatic
-                                                                       : hal::JointScaling::Kind::revolute;
-    if (!cfg.drives.empty() && cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel > 0) {
-      // joint deg/s^2 (mm/s^2) -> motor counts/s^2
-      jc.quick_stop_decel =
-          kConfigUnits.joint_in(chain, j, cfg.drives[static_cast<std::size_t>(j)].quick_stop_decel) * jc.scaling.counts_per_si();
-    }
-    if (!cfg.drives.empty()) jc.homing = homing_spec(j);
-    // hard_stop with homing.torque_limit: the drives' torque actual (6077h) into TPDO2 where
-    // they can map it (else the following error alone detects the stop, as documented)
-    if (jc.homing.kind == hal::HomingKind::hard_stop && jc.homing.torque_limit > 0) mc.tpdo2.torque = hal::PdoUse::optional;
-    for (int jo : output_joint) jc.digital_outputs = jc.digital_outputs || jo == j;
-    if (!cfg.drives.empty()) {  // drive.sdo, validated by the key table
-      const std::vector<SdoEntry>& sdo = cfg.drives[static_cast<std::size_t>(j)].sdo;
-      jc.sdo_write_count = std::min(sdo.size(), hal::kMaxSdoWrites);
-      for (std::size_t k = 0; k < jc.sdo_write_count; ++k) {
-        hal::SdoWrite& w = jc.sdo_writes[k];
-        w.index = static_cast<std::uint16_t>(sdo[k].index);
-        w.sub = static_cast<std::uint8_t>(sdo[k].sub);
-        w.size = static_cast<std::uint8_t>(sdo_type_size(sdo[k].type));
-        w.is_signed = sdo_type_signed(sdo[k].type);
-        w.value = static_cast<std::uint32_t>(sdo[k].value);  // two's complement for a negative value
-      }
-    }
-  }
-  // Velocity actual and error code: in TPDO2 when bus.tpdo2 asks for it, or when TPDO2 is sent
-  // for the torque anyway (the collision observer needs the drive's velocity; the three fit in
-  // 8 bytes). Else no TPDO2: one frame per drive and cycle less (docs/deployment.md#bus-load).
-  const bool tpdo2_sent = cfg.tpdo2 || mc.tpdo2.torque != hal::PdoUse::off;
-  mc.tpdo2.velocity = mc.tpdo2.error_code = tpdo2_sent ? hal::PdoUse::optional : hal::PdoUse::off;
-  servo = std::make_unique<hal::CanopenServoBus>(*canbus, *clock, mc);
-  if (servo->config_status() != hal::Status::ok)
-    return std::string("bus: ") + hal::to_string(servo->config_status()) + (servo->last_error()[0] ? ": " : "") + servo->last_error();
+  if (servo->config_status() != hal::Status::ok) return std::string("bus: ") + servo->last_error();
   ik = std::make_unique<kin::IkModel>();
   ik_ready = kin::ik_prepare(chain, *ik) == kin::Status::ok && ik->method != kin::IkMethod::none;
   ctl = std::make_unique<Controller>(*servo, chain, controller_config());
@@ -264,6 +166,27 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   console = std::make_unique<Console>(*ctl, console_config(), ik_ready ? ik.get() : nullptr);
   if (const std::string e = console->load_frames(); !e.empty()) return "frames file refused: " + e;
   if (const std::string e = console->load_points(); !e.empty()) return "points file refused: " + e;
+  return "";
+}
+
+std::string App::open_bus(const DriveGroupPlan& p, const SimFactory& sim, hal::CanBus*& bus) {
+  bus = nullptr;
+  if (cfg.can == "sim") {  // every interface named is an in-process bus of virtual drives
+    if (sim) bus = sim(*clock, p.ids);
+    if (bus == nullptr && p.can != cfg.can)
+      return "drive.can: \"" + p.can + "\": no virtual drives for a second in-process bus (armfw --sim runs one)";
+    if (bus == nullptr)
+      return "bus.can: \"sim\" needs virtual drives (armfw --sim; this armfw was built without host_sim, or none were given)";
+    return "";
+  }
+  auto sc = std::make_unique<hal::SocketCanBus>();
+  const hal::Status st = sc->open(p.can.c_str());
+  if (st != hal::Status::ok) {
+    const std::string m = sc->message();  // starts with the interface name
+    return "bus.can: cannot open " + (m.rfind(p.can + ":", 0) == 0 ? m : p.can + ": " + m);
+  }
+  bus = sc.get();
+  socketcan.push_back(std::move(sc));
   return "";
 }
 

@@ -620,6 +620,7 @@ int main(int argc, char** argv) {
 #ifdef SERVOARM_WITH_SIM
   std::unique_ptr<sim::SimPlant> plant;
   make_sim = [&plant](hal::Clock& clock, const std::vector<std::uint8_t>& nodes) -> hal::CanBus* {
+    if (plant) return nullptr;  // --sim runs one in-process bus: a second interface (drive.can) is refused
     plant = std::make_unique<sim::SimPlant>(clock, nodes);
     return &plant->master_bus();
   };

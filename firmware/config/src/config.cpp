@@ -22,6 +22,7 @@ namespace {
 constexpr double kBauds[] = {9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600};
 constexpr double kDirections[] = {1, -1};
 constexpr const char* kStops[] = {"ramp", "drive"};
+constexpr const char* kDriveFamilies[] = {"cia402"};
 constexpr const char* kDialects[] = {"native", "grbl"};
 constexpr const char* kTransportDialects[] = {"", "native", "grbl"};
 constexpr const char* kFeedForward[] = {"off", "velocity", "torque"};
@@ -301,6 +302,14 @@ const ConfigKey kConfigTable[] = {
 using D = DriveConfig;
 using DK = DriveKey;
 const DriveKey kDriveTable[] = {
+    DK{"family", &D::family, "",
+       "the joint's drive family (docs/servo-bus.md#drive-families-groups-and-the-arm): `\"cia402\"` = a CiA 402 "
+       "servo drive over CANopen; the joints of one family on one interface form one group"}
+        .among(std::span<const char* const>(kDriveFamilies)),
+    DK{"can", &D::can, "",
+       "the CAN interface of this joint's drive (`can1`); `\"\"` = bus.can. With bus.can = `\"sim\"` every name "
+       "is an in-process bus of its own with virtual drives"}
+        .length(0, 15).rule_text("\"\" or an interface name (up to 15 chars)"),
     DK{"node", &D::node, "", "CANopen node id of this joint's drive (unique on the bus)"}
         .within(1, 127).unset_means(0, "bus.first_node + k - 1", false),
     DK{"counts_per_rev", &D::counts_per_rev, "counts/rev",

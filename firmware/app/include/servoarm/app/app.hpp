@@ -1,22 +1,24 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Assembly of one firmware instance from a FwConfig (set-up code): robot
-// chain, CAN bus (SocketCAN, or for bus.can = "sim" the bus a SimFactory hands
-// over: armfw --sim and the tests build virtual drives, host_sim's SimPlant),
-// CANopen master, the IK model the control thread samples with, Controller,
-// Console. App depends on no simulator: the robot-controller build of armfw can
+// chain, CAN buses (SocketCAN, or for bus.can = "sim" the buses a SimFactory hands
+// over: armfw --sim and the tests build virtual drives, host_sim's SimPlant), the
+// drive groups from the drive-family factory (drive_factory.hpp) in one ArmServoBus,
+// the IK model the control thread samples with, Controller, Console. App depends on no simulator: the robot-controller build of armfw can
 // leave host_sim out. Shared by armfw_main.cpp and the in-process tests.
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "servoarm/app/drive_factory.hpp"
 #include "servoarm/config/config.hpp"
 #include "servoarm/console/console.hpp"
 #include "servoarm/rt/controller.hpp"
 #include "servoarm/rt/model_control.hpp"
-#include "servoarm/hal/canopen_master.hpp"
+#include "servoarm/hal/arm_servo_bus.hpp"
 #include "servoarm/hal/clock.hpp"
 #include "servoarm/hal/socketcan_bus.hpp"
 #include "servoarm/kinematics/chain.hpp"
@@ -25,18 +27,21 @@
 namespace servoarm::fw {
 
 struct App {
-  /// Makes the CAN bus for bus.can = "sim": virtual drives with these node ids (one per
-  /// joint, chain order) on an in-process bus driven by `clock`. Returns the bus the
-  /// CANopen master talks on (owned by the caller), or nullptr.
+  /// Makes a CAN bus for bus.can = "sim": virtual drives with these node ids (one per joint of
+  /// the bus, chain order) on an in-process bus driven by `clock`; called once per interface
+  /// the configuration names (bus.can, drive.can). Returns the bus the drives' group talks on
+  /// (owned by the caller), or nullptr.
   using SimFactory = std::function<hal::CanBus*(hal::Clock& clock, const std::vector<std::uint8_t>& nodes)>;
 
   FwConfig cfg;
   kin::Chain chain;
   hal::MonotonicClock mono;
   hal::Clock* clock = &mono;
-  std::unique_ptr<hal::SocketCanBus> socketcan;
-  hal::CanBus* canbus = nullptr;  ///< what the master runs on: socketcan, or the SimFactory's bus
-  std::unique_ptr<hal::CanopenServoBus> servo;
+  std::vector<std::unique_ptr<hal::SocketCanBus>> socketcan;
+  /// Each interface the configuration names and its bus (a socketcan one, or the SimFactory's).
+  std::vector<std::pair<std::string, hal::CanBus*>> buses;
+  /// The arm's drives: one group per (drive.family, interface), what the controller drives.
+  std::unique_ptr<hal::ArmServoBus> servo;
   /// IK model of `chain` (closed form or numeric), used by the console's path checks
   /// and by the control thread's Cartesian sampling; lives as long as the App.
   std::unique_ptr<kin::IkModel> ik;
@@ -63,9 +68,13 @@ struct App {
   /// What boot() found about the [dynamics] parts asked for: one line per part refused ("" when
   /// every part asked for runs); armfw prints it at start. The parts refused stay off.
   std::string dynamics_notes() const { return model && model->configured() ? model->start_notes() : ""; }
-  /// Joint j's homing (drive.homing.*, deg / mm -> SI) as the CANopen master takes it.
+  /// Joint j's homing (drive.homing.*, deg / mm -> SI) as the drive groups take it.
   hal::HomingSpec homing_spec(int j) const;
   ConsoleConfig console_config() const;
+
+ private:
+  /// The bus of plan `p`'s interface: SocketCAN, or the SimFactory's for bus.can = "sim".
+  std::string open_bus(const DriveGroupPlan& p, const SimFactory& sim, hal::CanBus*& bus);
 };
 
 }  // namespace servoarm::fw

@@ -46,6 +46,8 @@ bool sdo_type_signed(const std::string& type);
 /// One `[[drive]]` table: the drive of one joint (chain order). Unset fields
 /// (0 / empty) take the [bus] defaults and the robot description's limits.
 struct DriveConfig {
+  std::string family = "cia402";         ///< the drive family (docs/servo-bus.md): "cia402"
+  std::string can;                       ///< the CAN interface of this joint's drive; "" = bus.can
   int node = 0;                          ///< CANopen node id; 0 = bus.first_node + joint index
   double counts_per_rev = 0;             ///< 0 = bus.counts_per_rev (counts per mm for prismatic joints)
   double gear_ratio = 0;                 ///< 0 = bus.gear_ratio
