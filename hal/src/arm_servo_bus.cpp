@@ -36,6 +36,7 @@ Status ArmServoBus::add_group(std::unique_ptr<DriveGroup> group, std::span<const
     slot_[j] = Slot{std::uint8_t(groups_n_), std::uint8_t(k)};
     if (j + 1 > joints_n_) joints_n_ = j + 1;
   }
+  group->number_joints(arm_joints);  // its messages name the arm's joints
   groups_[groups_n_++] = std::move(group);
   return Status::ok;
 }

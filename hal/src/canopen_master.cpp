@@ -571,7 +571,7 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
     jt.modes = modes;
     if (!(modes & cia402::kSupportsCsp)) {
       std::snprintf(error_, sizeof error_,
-                    "joint %zu (node %u): the drive does not support cyclic synchronous position mode (6502h = 0x%08X)", j,
+                    "joint %zu (node %u): the drive does not support cyclic synchronous position mode (6502h = 0x%08X)", arm_joint(j),
                     unsigned(n), unsigned(modes));
       return Status::not_supported;
     }
@@ -579,7 +579,7 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
       std::snprintf(error_, sizeof error_,
                     "joint %zu (node %u): homing method %d configured but the drive does not support homing mode "
                     "(6502h = 0x%08X)",
-                    j, unsigned(n), int(hs.method), unsigned(modes));
+                    arm_joint(j), unsigned(n), int(hs.method), unsigned(modes));
       return Status::not_supported;
     }
     if (want_cst && !(modes & cia402::kSupportsCst)) {
@@ -588,7 +588,7 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
         std::snprintf(error_, sizeof error_,
                       "joint %zu (node %u): torque mode required but the drive does not support cyclic synchronous "
                       "torque mode (6502h = 0x%08X)",
-                      j, unsigned(n), unsigned(modes));
+                      arm_joint(j), unsigned(n), unsigned(modes));
         return Status::not_supported;
       }
     }
@@ -603,7 +603,7 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
     r = sdo_.download(n, cia402::kHomingMethod, 0, &b, 1);
     if (r.status != Status::ok) {
       std::snprintf(error_, sizeof error_, "joint %zu (node %u): homing method %d refused by the drive (6098h): %s (abort 0x%08X: %s)",
-                    j, unsigned(n), int(hs.method), to_string(r.status), unsigned(r.abort_code),
+                    arm_joint(j), unsigned(n), int(hs.method), to_string(r.status), unsigned(r.abort_code),
                     r.abort_code ? sdo::abort_text(r.abort_code) : "-");
       return r.status;
     }
@@ -1093,11 +1093,11 @@ void CanopenServoBus::homing_fail(std::size_t j, Status why, TimePoint now) {
   if (jt.hstatus == Status::ok) jt.hstatus = why;
   if (jt.hmsg[0] == '\0') {
     if (why == Status::timeout)
-      std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing timeout after %lld ms %s (statusword 0x%04X)", j,
+      std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing timeout after %lld ms %s (statusword 0x%04X)", arm_joint(j),
                     unsigned(jt.node), static_cast<long long>(hs.timeout / kMillisecond), homing_step_name(jt.hstep),
                     unsigned(fb_[j].statusword));
     else
-      std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing %s while %s (statusword 0x%04X)", j,
+      std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing %s while %s (statusword 0x%04X)", arm_joint(j),
                     unsigned(jt.node), to_string(why), homing_step_name(jt.hstep), unsigned(fb_[j].statusword));
   }
   std::snprintf(error_, sizeof error_, "%s", jt.hmsg);
@@ -1147,7 +1147,7 @@ bool CanopenServoBus::travel_exceeded(std::size_t j, TimePoint now) {
   std::snprintf(jt.hmsg, sizeof jt.hmsg,
                 "joint %zu (node %u): homing travel %.*f %s from where it began, beyond the limit %.*f %s (the "
                 "joint's range + homing.travel_margin_deg)",
-                j, unsigned(jt.node), digits, got, unit, digits, limit, unit);
+                arm_joint(j), unsigned(jt.node), digits, got, unit, digits, limit, unit);
   return true;
 }
 
@@ -1173,7 +1173,7 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
   } else if (now - jt.hstep_since > 2 * kSecond + 4 * cfg_.sdo_timeout) {
     // The drive does not come back to CSP: it cannot follow setpoints, so it faults.
     std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: the drive did not return to cyclic "
-                  "synchronous position (%s)", j, unsigned(jt.node), homing_step_name(jt.hstep));
+                  "synchronous position (%s)", arm_joint(j), unsigned(jt.node), homing_step_name(jt.hstep));
     std::snprintf(error_, sizeof error_, "%s", jt.hmsg);
     if (jt.hstatus == Status::ok) jt.hstatus = Status::drive_refused;
     set_fault(j, Status::drive_refused, now);
@@ -1204,7 +1204,7 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
                     write ? "write" : "read", unsigned(index), to_string(jt.sdo.result()));
     } else {
       std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: SDO %s 0x%04X:%u failed: %s (abort 0x%08X: %s)",
-                    j, unsigned(jt.node), write ? "write" : "read", unsigned(index), unsigned(sub),
+                    arm_joint(j), unsigned(jt.node), write ? "write" : "read", unsigned(index), unsigned(sub),
                     to_string(jt.sdo.result()), unsigned(jt.sdo.abort_code()),
                     jt.sdo.abort_code() ? sdo::abort_text(jt.sdo.abort_code()) : "-");
     }
@@ -1253,7 +1253,7 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
           homing_step(j, hs_start_low, now);
         } else if (++jt.retries > 50) {
           std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: 6060h = 6 written but 6061h shows %d",
-                        j, unsigned(jt.node), int(std::int8_t(jt.sdo.value())));
+                        arm_joint(j), unsigned(jt.node), int(std::int8_t(jt.sdo.value())));
           homing_fail(j, Status::drive_refused, now);
         }
       }
@@ -1297,7 +1297,7 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
           homing_finish(j, now);
         } else if (++jt.retries > 50) {
           std::snprintf(jt.hmsg, sizeof jt.hmsg, "joint %zu (node %u): homing: 6060h = 8 written but 6061h shows %d",
-                        j, unsigned(jt.node), int(std::int8_t(jt.sdo.value())));
+                        arm_joint(j), unsigned(jt.node), int(std::int8_t(jt.sdo.value())));
           std::snprintf(error_, sizeof error_, "%s", jt.hmsg);
           if (jt.hstatus == Status::ok) jt.hstatus = Status::drive_refused;
           set_fault(j, Status::drive_refused, now);
@@ -1313,7 +1313,7 @@ void CanopenServoBus::advance_homing(std::size_t j, TimePoint now) {
 // --- what the group base asks of the family -------------------------------------------
 
 void CanopenServoBus::joint_name(std::size_t j, char* buf, std::size_t size) const {
-  if (size > 0) std::snprintf(buf, size, "joint %zu (node %u)", j, unsigned(j < cfg_.joint_count ? joints_[j].node : 0));
+  if (size > 0) std::snprintf(buf, size, "joint %zu (node %u)", arm_joint(j), unsigned(j < cfg_.joint_count ? joints_[j].node : 0));
 }
 
 double CanopenServoBus::shift_zero(std::size_t j, double at, double reads) {
@@ -1452,7 +1452,7 @@ void CanopenServoBus::advance_cyclic_mode(std::size_t j, TimePoint now) {
         jt.cmode = CyclicMode::torque;
       } else if (now - jt.cmode_since > cfg_.state_timeout) {
         std::snprintf(error_, sizeof error_,
-                      "joint %zu (node %u): torque mode: 6060h = 10 sent but 6061h shows %d after %lld ms", j,
+                      "joint %zu (node %u): torque mode: 6060h = 10 sent but 6061h shows %d after %lld ms", arm_joint(j),
                       unsigned(jt.node), int(jt.mode_shown), static_cast<long long>(cfg_.state_timeout / kMillisecond));
         jt.cstatus = Status::drive_refused;
         jt.cmode = CyclicMode::leaving_torque;
@@ -1468,7 +1468,7 @@ void CanopenServoBus::advance_cyclic_mode(std::size_t j, TimePoint now) {
       } else if (now - jt.cmode_since > cfg_.state_timeout) {
         // The drive stays in torque mode: it cannot hold a position, so it faults.
         std::snprintf(error_, sizeof error_,
-                      "joint %zu (node %u): torque mode: 6060h = 8 sent but 6061h shows %d after %lld ms", j,
+                      "joint %zu (node %u): torque mode: 6060h = 8 sent but 6061h shows %d after %lld ms", arm_joint(j),
                       unsigned(jt.node), int(jt.mode_shown), static_cast<long long>(cfg_.state_timeout / kMillisecond));
         if (jt.cstatus == Status::ok) jt.cstatus = Status::drive_refused;
         set_fault(j, Status::drive_refused, now);

@@ -7,7 +7,7 @@
 namespace servoarm::hal {
 
 void DriveGroup::joint_name(std::size_t j, char* buf, std::size_t size) const {
-  if (size > 0) std::snprintf(buf, size, "joint %zu", j);
+  if (size > 0) std::snprintf(buf, size, "joint %zu", arm_joint(j));
 }
 
 Status DriveGroup::start(TimePoint deadline) {

@@ -177,3 +177,24 @@ TEST(FwDriveGroups, AFaultOnTheSecondBusReachesTheControllerAsOnOneBus) {
     for (std::size_t j = 0; j < 6; ++j) CHECK(a.app.servo->feedback(j).state != hal::JointState::enabled);
   }
 }
+
+// A group's messages name the arm's joints: joint 4 (node 4) is the first joint of the second
+// bus's group; its drive lacks homing mode, so the bring-up fails naming "joint 3 (node 4)"
+// (the master numbers joints from 0, as on one bus), not the group's local "joint 0".
+TEST(FwDriveGroups, ABringUpFailureOnTheSecondBusNamesTheArmsJoint) {
+  FwConfig c = arm_config(true);
+  c.can = "sim";
+  c.drives[3].homing_method = "19";
+  hal::ManualClock clock;
+  test::SimApp app;
+  const std::string e = app.build(c, &clock);
+  CHECK_TEXT(e.empty(), e.c_str());
+  clock.set_idle_hook([&](hal::TimePoint t) { app.step_plants(t); });
+  sim::DriveQuirks q;
+  q.no_homing = true;
+  app.more_plants.at(0)->arm().at(0).set_quirks(q);
+  const std::string b = app.boot();
+  clock.set_idle_hook(nullptr);
+  CHECK_TEXT(has(b, "drive bring-up failed") && has(b, "joint 3 (node 4)"), b.c_str());
+  CHECK_TEXT(has(b, "homing method 19") && has(b, "does not support homing mode"), b.c_str());
+}

@@ -8,7 +8,9 @@
 #include <cstring>
 
 #include "alloc_counter.hpp"
+#include "servoarm/hal/arm_servo_bus.hpp"
 #include "servoarm/hal/drive_group.hpp"
+#include "sim_fixture.hpp"
 
 // CppUTest last: its leak detector redefines `new`.
 #include <CppUTest/TestHarness.h>
@@ -166,4 +168,55 @@ TEST(DriveGroup, HardStopTimeoutOnAFamilyThatIsNotCanopenNamesTheJoint) {
   const double p = g.physical[0];
   for (int k = 0; k < 100; ++k) now += kPeriod, cycle(g, now);
   DOUBLES_EQUAL(p, g.physical[0], 2 * kQuantum);
+}
+
+// One arm of two families: joints 0-1 CiA 402 virtual drives on the in-process bus, joint 2 the
+// fake family, hard stop, as arm joint 2. The composite drives all three; the hard stop runs in
+// the fake group's base; the CANopen joints hold; a failure names the arm's joint.
+TEST(DriveGroup, AnArmOfTwoFamiliesHomesTheNonCanopenJointByHardStop) {
+  for (const bool reachable : {true, false}) {
+    test::SimRig rig({1, 2});
+    auto can = std::make_unique<CanopenServoBus>(*rig.master_ep, rig.clock, CanopenMasterConfig::consecutive(1, 2));
+    auto fake = std::make_unique<FakeGroup>(1);
+    FakeGroup& f = *fake;
+    f.spec[0] = hard_stop_spec();
+    if (reachable) f.stop = -0.3;
+    else f.spec[0].timeout = 300 * kMillisecond;
+    ArmServoBus arm;
+    const std::size_t can_joints[] = {0, 1}, fake_joints[] = {2};
+    LONGS_EQUAL(int(Status::ok), int(arm.add_group(std::move(can), can_joints)));
+    LONGS_EQUAL(int(Status::ok), int(arm.add_group(std::move(fake), fake_joints)));
+    LONGS_EQUAL(int(Status::ok), int(arm.config_status()));
+    LONGS_EQUAL(3, long(arm.joint_count()));
+    STRCMP_EQUAL("fake", arm.group(arm.slot(2).group).family());
+    LONGS_EQUAL(int(Status::ok), int(arm.start(rig.clock.now() + 5 * kSecond)));
+    arm.enable();
+    for (int k = 0; k < 300; ++k) cycle(arm, rig.clock.now()), rig.clock.advance(kPeriod);
+    for (std::size_t j = 0; j < 3; ++j) LONGS_EQUAL(int(JointState::enabled), int(arm.feedback(j).state));
+    LONGS_EQUAL(int(HomingKind::hard_stop), int(arm.homing_kind(2)));
+    LONGS_EQUAL(int(Status::ok), int(arm.start_homing(2, rig.clock.now())));
+    const double p0 = rig.sim->at(0).physical_position(), p1 = rig.sim->at(1).physical_position();
+    std::size_t allocs = 0;
+    for (int k = 0; k < 5000 && arm.homing(2).phase == HomingPhase::running; ++k) {
+      test::AllocScope scope;
+      cycle(arm, rig.clock.now());
+      allocs += scope.end();
+      rig.clock.advance(kPeriod);
+    }
+    LONGS_EQUAL(0, allocs);
+    char msg[192];
+    arm.describe_homing(2, msg, sizeof msg);
+    if (reachable) {
+      STRCMP_EQUAL("", msg);
+      LONGS_EQUAL(int(HomingPhase::attained), int(arm.homing(2).phase));
+      for (int k = 0; k < 100; ++k) cycle(arm, rig.clock.now()), rig.clock.advance(kPeriod);
+      DOUBLES_EQUAL(-0.3 + 0.05, f.physical[0], 3 * kQuantum);
+      DOUBLES_EQUAL(-1.0, arm.feedback(2).position, 3 * kQuantum);
+    } else {
+      LONGS_EQUAL(int(HomingPhase::failed), int(arm.homing(2).phase));
+      STRCMP_CONTAINS("joint 2: homing timeout after 300 ms approaching the hard stop", msg);
+    }
+    DOUBLES_EQUAL(p0, rig.sim->at(0).physical_position(), 1.0);  // the CiA 402 joints held
+    DOUBLES_EQUAL(p1, rig.sim->at(1).physical_position(), 1.0);
+  }
 }

@@ -19,6 +19,18 @@ namespace servoarm::hal {
 
 class DriveGroup : public ServoBus {
  public:
+  DriveGroup() {
+    for (std::size_t j = 0; j < kMaxServoJoints; ++j) arm_number_[j] = j;
+  }
+  /// Set-up: the arm's number of each local joint, for messages ("joint 3 (node 4)" for the
+  /// first joint of a group that drives arm joints 3..5). ArmServoBus::add_group sets it;
+  /// until then a joint is named by its local index.
+  void number_joints(std::span<const std::size_t> arm_joints) {
+    for (std::size_t k = 0; k < arm_joints.size() && k < kMaxServoJoints; ++k) arm_number_[k] = arm_joints[k];
+  }
+  /// The arm's number of local joint j.
+  std::size_t arm_joint(std::size_t j) const { return j < kMaxServoJoints ? arm_number_[j] : j; }
+
   // --- ServoBus calls the group base takes part in (hard-stop homing) ------------------
   Status start(TimePoint deadline) final;
   Status read(TimePoint now) final;
@@ -47,7 +59,7 @@ class DriveGroup : public ServoBus {
     (void)j;
     return 0;
   }
-  /// One name for joint j in messages ("joint 1 (node 2)").
+  /// One name for joint j in messages, with its arm number ("joint 1 (node 2)"; default "joint 1").
   virtual void joint_name(std::size_t j, char* buf, std::size_t size) const;
 
  protected:
@@ -91,6 +103,7 @@ class DriveGroup : public ServoBus {
   virtual void note_error(const char* text) = 0;
 
  private:
+  std::array<std::size_t, kMaxServoJoints> arm_number_{};
   std::array<HardStopHoming, kMaxServoJoints> hard_stop_{};
   std::array<double, kMaxServoJoints> last_setpoint_{};
   std::array<double, kMaxServoJoints> sp_{};
