@@ -34,8 +34,12 @@ Status ArmServoBus::add_group(std::unique_ptr<DriveGroup> group, std::span<const
     const std::size_t j = arm_joints[k];
     mapped_[j] = true;
     slot_[j] = Slot{std::uint8_t(groups_n_), std::uint8_t(k)};
+    grp_[j] = group.get();
+    fb_[j] = &group->feedback(k);
     if (j + 1 > joints_n_) joints_n_ = j + 1;
   }
+  identity_ = groups_n_ == 0;
+  for (std::size_t k = 0; identity_ && k < arm_joints.size(); ++k) identity_ = arm_joints[k] == k;
   group->number_joints(arm_joints);  // its messages name the arm's joints
   groups_[groups_n_++] = std::move(group);
   return Status::ok;
@@ -82,6 +86,7 @@ Status ArmServoBus::read(TimePoint now) {
 }
 
 Status ArmServoBus::write(std::span<const double> setpoints, TimePoint now) {
+  if (identity_ && groups_n_ == 1) return groups_[0]->write(setpoints, now);  // one group: the arm's own order
   Status result = setpoints.size() == joints_n_ ? Status::ok : Status::invalid_argument;
   for (std::size_t j = 0; j < joints_n_; ++j)  // a joint without a setpoint gets NaN: its drive holds
     sp_[slot_[j].group][slot_[j].local] = j < setpoints.size() ? setpoints[j] : std::numeric_limits<double>::quiet_NaN();
@@ -135,7 +140,7 @@ std::uint32_t ArmServoBus::digital_outputs(std::size_t j) const {
   return ours(j) ? sub(j).digital_outputs(slot(j).local) : 0;
 }
 const JointFeedback& ArmServoBus::feedback(std::size_t j) const {
-  return ours(j) ? sub(j).feedback(slot(j).local) : none_;
+  return ours(j) ? *fb_[j] : none_;
 }
 
 const char* ArmServoBus::last_error() const {

@@ -68,12 +68,17 @@ class ArmServoBus final : public ServoBus {
 
  private:
   bool ours(std::size_t j) const { return j < joints_n_; }
-  DriveGroup& sub(std::size_t j) { return *groups_[slot(j).group]; }
-  const DriveGroup& sub(std::size_t j) const { return *groups_[slot(j).group]; }
+  DriveGroup& sub(std::size_t j) { return *grp_[j]; }
+  const DriveGroup& sub(std::size_t j) const { return *grp_[j]; }
 
   std::array<std::unique_ptr<DriveGroup>, kMaxServoJoints> groups_{};
   std::size_t groups_n_ = 0;
   std::array<Slot, kMaxServoJoints> slot_{};
+  // Per arm joint, so that a call costs one lookup: its group, its feedback (a group's feedback
+  // stays at one address), and whether the arm is one group with joint j = local joint j.
+  std::array<DriveGroup*, kMaxServoJoints> grp_{};
+  std::array<const JointFeedback*, kMaxServoJoints> fb_{};
+  bool identity_ = false;
   std::array<bool, kMaxServoJoints> mapped_{};
   std::size_t joints_n_ = 0;
   std::array<std::array<double, kMaxServoJoints>, kMaxServoJoints> sp_{};  ///< per group, per local joint

@@ -37,14 +37,21 @@ class DriveGroup : public ServoBus {
   Status write(std::span<const double> setpoints, TimePoint now) final;
   Status start_homing(std::size_t j, TimePoint now) final;
   void abort_homing(std::size_t j) final;
-  HomingProgress homing(std::size_t j) const final;
+  HomingProgress homing(std::size_t j) const final {
+    if (!started_) return homing_before_start(j);
+    if (j >= n_) return {HomingPhase::idle, Status::invalid_argument, 0};
+    return kind_[j] == HomingKind::hard_stop ? hard_stop_[j].progress() : family_homing(j);
+  }
   void describe_homing(std::size_t j, char* buf, std::size_t size) const final;
   HomingKind homing_kind(std::size_t j) const final {
-    return j < joint_count() ? homing_spec(j).kind : HomingKind::none;
+    if (!started_) return kind_before_start(j);
+    return j < n_ ? kind_[j] : HomingKind::none;
   }
   /// Dropped (ok) while joint j homes by hard stop: the homing, not the caller, moves it.
   Status set_feed_forward(std::size_t j, double velocity, double torque) final;
   /// On: bad_state while joint j homes by hard stop.
+  /// (feedback(j) must return a reference that stays at one address for the group's lifetime:
+  /// ArmServoBus keeps it.)
   Status set_torque_mode(std::size_t j, bool on) final;
 
   // --- Set-up queries every family answers ---------------------------------------------
@@ -103,7 +110,17 @@ class DriveGroup : public ServoBus {
   virtual void note_error(const char* text) = 0;
 
  private:
+  HomingKind kind_before_start(std::size_t j) const;
+  HomingProgress homing_before_start(std::size_t j) const;
+  /// Real time: true while a joint homes by hard stop or holds after it (write() substitutes).
+  bool hard_stop_active() const;
+
   std::array<std::size_t, kMaxServoJoints> arm_number_{};
+  // Set by start() (what the cycle asks every time, without a virtual call): joint count and kinds.
+  bool started_ = false;
+  std::size_t n_ = 0;
+  std::array<HomingKind, kMaxServoJoints> kind_{};
+  bool active_ = false;  ///< a hard-stop homing runs or holds (write()/read() have work to do)
   std::array<HardStopHoming, kMaxServoJoints> hard_stop_{};
   std::array<double, kMaxServoJoints> last_setpoint_{};
   std::array<double, kMaxServoJoints> sp_{};

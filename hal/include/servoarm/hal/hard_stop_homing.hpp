@@ -48,6 +48,8 @@ class HardStopHoming {
   double setpoint(const HomingSpec& spec, bool following, double fallback, TimePoint now);
 
   bool running() const { return phase_ == HomingPhase::running; }
+  /// The next write() holds where the homing ended (take_hold() not called yet).
+  bool holding() const { return hold_once_; }
   /// The write() after the homing ended holds the position it ended at (the caller's setpoint of
   /// that cycle was computed in the old coordinates); true once, then false.
   bool take_hold(double& hold) {
