@@ -14,6 +14,8 @@
 
 #include "alloc_counter.hpp"
 #include "sim_app.hpp"
+#include "servoarm/app/drive_factory.hpp"
+#include "servoarm/config/config.hpp"
 #include "servoarm/rt/controller.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -197,4 +199,23 @@ TEST(FwDriveGroups, ABringUpFailureOnTheSecondBusNamesTheArmsJoint) {
   clock.set_idle_hook(nullptr);
   CHECK_TEXT(has(b, "drive bring-up failed") && has(b, "joint 3 (node 4)"), b.c_str());
   CHECK_TEXT(has(b, "homing method 19") && has(b, "does not support homing mode"), b.c_str());
+}
+
+// drive.family's values (the key table, firmware/config) and the factory's families
+// (firmware/app) are one list: a family the configuration accepts has a builder, and the other
+// way round; an unknown family is refused when the configuration loads, naming the key.
+TEST(FwDriveGroups, TheConfigurationsFamiliesAreTheFactorysFamilies) {
+  const DriveKey* family = nullptr;
+  for (const DriveKey& k : drive_keys())
+    if (std::string(k.name) == "family") family = &k;
+  CHECK(family != nullptr);
+  LONGS_EQUAL(long(drive_families().size()), long(family->one_of_text.size()));
+  for (const DriveFamily& f : drive_families()) {
+    bool listed = false;
+    for (const char* n : family->one_of_text) listed = listed || std::string(n) == f.name;
+    CHECK_TEXT(listed, f.name);
+  }
+  FwConfig c;
+  const std::string e = load_config_text("[[drive]]\nfamily = \"damiao\"\n", "f.toml", c);
+  CHECK_TEXT(has(e, "drive[1].family") && has(e, "cia402"), e.c_str());
 }
