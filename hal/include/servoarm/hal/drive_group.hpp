@@ -40,7 +40,12 @@ class DriveGroup : public ServoBus {
   HomingProgress homing(std::size_t j) const final {
     if (!started_) return homing_before_start(j);
     if (j >= n_) return {HomingPhase::idle, Status::invalid_argument, 0};
-    return kind_[j] == HomingKind::hard_stop ? hard_stop_[j].progress() : family_homing(j);
+    switch (kind_[j]) {
+      case HomingKind::none: return {HomingPhase::attained, Status::ok, 0};  // absolute: homed at once
+      case HomingKind::hard_stop: return hard_stop_[j].progress();
+      case HomingKind::cia402: break;
+    }
+    return family_homing(j);
   }
   void describe_homing(std::size_t j, char* buf, std::size_t size) const final;
   HomingKind homing_kind(std::size_t j) const final {
