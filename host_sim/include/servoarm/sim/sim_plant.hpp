@@ -50,9 +50,9 @@ class SimPlant {
   /// on the control thread once the drives are up (the drive thread is stopped then).
   static void step_hook(void* ctx, std::int64_t now_ns) { static_cast<SimPlant*>(ctx)->step(now_ns); }
   /// Set-up, before start_thread(): run the drives on the dynamic arm plant (ArmPlant) of
-  /// `chain`; `scaling[j]` is joint j's drive scaling as the master uses it (armfw: the
-  /// CanopenServoBus's, `scaling(j)`). "" or the reason (a model without inertial data is
-  /// refused, saying so). Without it: first-order motors.
+  /// `chain`; `scaling[j]` is joint j's drive scaling as the master uses it (armfw:
+  /// `hal::ArmServoBus::scaling(j)`, the drive group's). "" or the reason (a model without
+  /// inertial data is refused, saying so). Without it: first-order motors.
   std::string use_dynamic_plant(const kin::Chain& chain, std::span<const hal::JointScaling> scaling,
                                 const ArmPlantParams& params = {}) {
     return arm_->use_dynamic_plant(chain, scaling, params);
