@@ -639,12 +639,6 @@ void Console::do_record(Session& s, const Command& c) {
 // Digital outputs
 // ---------------------------------------------------------------------------
 
-void Console::take_sync_outputs(MotionItem& m) {
-  m.n_outputs = n_sync_out_;
-  for (std::size_t k = 0; k < n_sync_out_; ++k) m.outputs[k] = sync_out_[k];
-  n_sync_out_ = 0;
-}
-
 void Console::do_out(Session& s, const Command& c) {
   const auto& outs = cfg_.outputs;
   if (c.out_index == -1) {  // list
