@@ -30,7 +30,7 @@ ALLOWED = {
     "firmware/console": ["firmware/service", "firmware/program", "firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
     "firmware/app": ["firmware/console", "firmware/service", "firmware/program", "firmware/lang", "firmware/rt", "firmware/config",
                      "kinematics", "kinematics/io", "hal", "host_sim"],
-    "firmware/armctl": ["firmware/program", "firmware/lang", "firmware/config", "kinematics", "kinematics/io", "hal"],
+    "firmware/armctl": ["firmware/service", "firmware/program", "firmware/lang", "firmware/config", "kinematics", "kinematics/io", "hal"],
 }
 # (folder, included folder) -> the only files of the folder that may include it.
 ONLY_FROM = {
