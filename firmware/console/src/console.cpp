@@ -563,6 +563,12 @@ MoveJoints Console::joint_request(const Command& c) const {
   return m;
 }
 
+MoveJoints Console::step_joint_request(const Command& c, const StepParams* step) const {
+  MoveJoints m = joint_request(c);
+  if (step != nullptr && step->point != nullptr && c.cmd == Cmd::movej) m.goal = *step->point;  // exactly as taught (SI)
+  return m;
+}
+
 bool Console::homed_ok(Session& s) {
   if (s.check_mode) return true;  // nothing moves
   const std::string why = unhomed_refusal(ctl_.telemetry());
@@ -576,15 +582,17 @@ bool Console::homed_ok(Session& s) {
 // the console builds the request and renders the result.
 // ---------------------------------------------------------------------------
 
-MoveContext Console::move_context(DryRun* dry) const {
+MoveContext Console::move_context(DryRun* dry, const StepParams* step) const {
   MoveContext cx;
   cx.dry = dry;
   cx.chain = &tool_slot().chain;
   cx.ik = ik_solver();
   cx.feed_pct = feed_pct_;
   cx.outputs = std::span<const OutputChange>(sync_out_.data(), n_sync_out_);
-  cx.step_blend = step_blend_;
-  cx.next_line = step_next_line_;
+  if (step != nullptr) {
+    cx.step_blend = step->blend;
+    cx.next_line = step->next_line;
+  }
   return cx;
 }
 
@@ -647,10 +655,10 @@ void Console::answer_refusal(Session& s, const char* what, const MoveResult& r) 
   }
 }
 
-void Console::queue(Session& s, const MoveJoints& req) {
+void Console::queue(Session& s, const MoveJoints& req, const StepParams* step) {
   DryRun dry;
   if (s.check_mode) dry = dry_run(s);
-  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr));
+  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step));
   if (!r.ok()) {
     answer_refusal(s, "movej", r);
     return;
@@ -664,10 +672,10 @@ void Console::queue(Session& s, const MoveJoints& req) {
   answer_ok(s, fmt("queued id=%u duration=%ss%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(), blend_text(r).c_str()));
 }
 
-void Console::queue(Session& s, const MoveLine& req) {
+void Console::queue(Session& s, const MoveLine& req, const StepParams* step) {
   DryRun dry;
   if (s.check_mode) dry = dry_run(s);
-  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr));
+  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step));
   if (!r.ok()) {
     answer_refusal(s, "movel", r);
     return;
@@ -694,7 +702,7 @@ bool Console::jog_duration_ok(Session& s, double duration_s) {
 void Console::queue_dwell(Session& s, double secs) {
   DryRun dry;
   if (s.check_mode) dry = dry_run(s);
-  const MoveResult r = svc_->dwell(secs, move_context(s.check_mode ? &dry : nullptr));
+  const MoveResult r = svc_->dwell(secs, move_context(s.check_mode ? &dry : nullptr, nullptr));
   if (!r.ok()) {
     answer_refusal(s, "dwell", r);
     return;
@@ -842,6 +850,10 @@ void Console::execute(Session& s, std::string_view line) {
     answer_error(s, pr.error, pr.message.data());
     return;
   }
+  dispatch(s, c, nullptr);
+}
+
+void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
   Reply r;
   auto reply = [&](const std::string& text) {  // r answered with `text`
     switch (r.result) {
@@ -939,15 +951,22 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::park:
     case Cmd::movej:
       if (c.at_point) queue_at_point(s, c);
-      else queue(s, joint_request(c));
+      else queue(s, step_joint_request(c, step), step);
       return;
     case Cmd::movel:
       if (c.at_point) {
         queue_at_point(s, c);
         return;
       }
+      if (step != nullptr && step->point != nullptr) {  // a program's movel @NAME: the point's joints
+        MoveLine m;
+        m.target = tcp(*step->point);  // where they put the active tool, on a straight line
+        m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
+        queue(s, m, step);
+        return;
+      }
       [[fallthrough]];
-    case Cmd::gmove: queue(s, line_request(c, s.check_mode ? &s.check_tail : nullptr)); return;
+    case Cmd::gmove: queue(s, line_request(c, s.check_mode ? &s.check_tail : nullptr), step); return;
     case Cmd::dwell: queue_dwell(s, c.vals[0]); return;
     case Cmd::fk: do_fk(s, c); return;
     case Cmd::ik: do_ik(s, c); return;

@@ -186,8 +186,8 @@ class Console {
   /// The canonical request of a movej, park or G28 command (Cmd::movej, Cmd::park).
   MoveJoints joint_request(const Command& c) const;
   /// Validate and queue a request; the answer (ok queued ... | error: ...) goes to s.out.
-  void queue(Session& s, const MoveLine& m);
-  void queue(Session& s, const MoveJoints& m);
+  void queue(Session& s, const MoveLine& m) { queue(s, m, nullptr); }
+  void queue(Session& s, const MoveJoints& m) { queue(s, m, nullptr); }
 
   /// GRBL dialect: the start-up / reset banner into s.out (native: nothing).
   void greet(Session& s);
@@ -287,14 +287,23 @@ class Console {
   std::unique_ptr<ArmService> svc_;
   // A dry run's blend state (check mode); a pending program check swaps its own in per slice.
   std::unique_ptr<PathShadow> check_shadow_;
-  /// The blend tolerance of the program step being queued (SI; < 0: none given), set by exec_step.
-  double step_blend_ = -1;
-  /// The program's next motion after the step being queued is a line (movel, G0/G1): a blended
-  /// movej goes as a PathMove so that the joint->line corner can blend (set by exec_step).
-  bool step_next_line_ = false;
+  /// What a program step gives the move it queues (exec_step; nullptr: a line typed at a console).
+  struct StepParams {
+    double blend = -1;                        ///< the step's blend tolerance (SI; < 0: none given)
+    /// The program's next motion after this step is a line (movel, G0/G1): a blended movej
+    /// goes as a PathMove so that the joint->line corner can blend.
+    bool next_line = false;
+    const kin::JointVector* point = nullptr;  ///< movej / movel @NAME: the point's joints (SI)
+  };
+  /// Run a parsed command (execute() after parsing; a program step as the loader parsed it).
+  void dispatch(Session& s, const Command& c, const StepParams* step);
+  void queue(Session& s, const MoveLine& m, const StepParams* step);
+  void queue(Session& s, const MoveJoints& m, const StepParams* step);
+  /// joint_request(c), with a program step's point joints as the goal (movej @NAME).
+  MoveJoints step_joint_request(const Command& c, const StepParams* step) const;
   /// What a move runs with: the mode (check mode: a dry run into `dry`), the executing session's
   /// selected tool, the feed override, the M62 / M63 changes and the program step's blend.
-  MoveContext move_context(DryRun* dry) const;
+  MoveContext move_context(DryRun* dry, const StepParams* step) const;
   /// A check-mode session's dry-run state, and back after the move.
   DryRun dry_run(Session& s);
   static void keep_dry_run(Session& s, const DryRun& d);
