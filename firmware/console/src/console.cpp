@@ -158,7 +158,7 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
   ms.default_blend_rad = cfg_.default_blend_rad;
   ms.default_blend_m = cfg_.default_blend_m;
   svc_ = std::make_unique<ArmService>(ctl_, ms);
-  idle_ = [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); };
+  svc_->set_reply_timeout(cfg_.reply_timeout_s);
   auto t0 = std::make_unique<ToolSlot>();
   t0->def.name = "tool0";
   t0->chain = chain_;
@@ -270,48 +270,12 @@ std::string Console::discard_sync_outputs(const char* why) {
              names.find(',') == std::string::npos ? "" : "s", why, names.c_str());
 }
 
-bool Console::request(const Request& rq, Reply& out) {
-  Request r = rq;
-  r.seq = ++seq_;
-  if (!ctl_.requests().push(r)) {
-    out.result = RtResult::busy;
-    std::snprintf(out.message, sizeof out.message, "request queue full");
-    return true;
-  }
-  const auto t0 = std::chrono::steady_clock::now();
-  for (;;) {
-    Reply p;
-    while (ctl_.replies().pop(p))
-      if (p.seq == r.seq) {
-        out = p;
-        return true;
-      }
-    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(cfg_.reply_timeout_s)) return false;
-    idle_();
-  }
-}
+bool Console::request(const Request& rq, Reply& out) { return svc_->request(rq, out); }
+bool Console::request(RequestOp op, Reply& out) { return svc_->request(op, out); }
 
-bool Console::request(RequestOp op, Reply& out) {
-  const std::uint32_t seq = ++seq_;
-  Request rq;
-  rq.op = op;
-  rq.seq = seq;
-  if (!ctl_.requests().push(rq)) {
-    out.result = RtResult::busy;
-    std::snprintf(out.message, sizeof out.message, "request queue full");
-    return true;
-  }
-  const auto t0 = std::chrono::steady_clock::now();
-  for (;;) {
-    Reply r;
-    while (ctl_.replies().pop(r))
-      if (r.seq == seq) {
-        out = r;
-        return true;
-      }
-    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(cfg_.reply_timeout_s)) return false;
-    idle_();
-  }
+void Console::answer_control(Session& s, const ControlResult& c) {
+  if (c.ok()) answer_ok(s, c.reason);
+  else answer_error(s, c.error, c.reason);
 }
 
 const char* to_string(Dialect d) {
@@ -856,23 +820,10 @@ void Console::execute(Session& s, std::string_view line) {
 void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
   Reply r;
   auto reply = [&](const std::string& text) {  // r answered with `text`
-    switch (r.result) {
-      case RtResult::ok: answer_ok(s, text); return;
-      case RtResult::bad_state: answer_error(s, CmdError::bad_state, text); return;
-      case RtResult::fault: answer_error(s, CmdError::fault, text); return;
-      case RtResult::busy: answer_error(s, CmdError::busy, text); return;
-      case RtResult::start_moved:
-      case RtResult::plan_failed: answer_error(s, CmdError::plan_failed, text); return;
-      case RtResult::not_homed: answer_error(s, CmdError::not_homed, text); return;
-    }
+    if (r.result == RtResult::ok) answer_ok(s, text);
+    else answer_error(s, control_error(r.result), text);
   };
-  auto simple = [&](RequestOp op) {
-    if (!request(op, r)) {
-      answer_error(s, CmdError::timeout, fmt("control thread did not answer %s", to_string(op)));
-      return;
-    }
-    reply(bounded_text(r.message));
-  };
+  auto simple = [&](RequestOp op) { answer_control(s, svc_->control(op)); };
   // While a program runs, motion comes from the program only: a move, jog, dwell, homing or
   // M62/M63 from any console is refused (stop, hold, resume, abort and queries still work).
   if (run_ && &s != &run_->ps && !s.check_mode && moves_arm(c)) {
@@ -914,12 +865,8 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
         answer_ok(s, "check mode: not run");
         return;
       }
-      if (!request(RequestOp::enable, r)) {
-        answer_error(s, CmdError::timeout, "control thread did not answer enable");
-        return;
-      }
-      if (r.result != RtResult::ok) {
-        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, bounded_text(r.message));
+      if (const ControlResult e = svc_->enable(); !e.ok()) {
+        answer_control(s, e);
         return;
       }
       s.enabling = true;
@@ -1674,12 +1621,8 @@ void Console::do_grbl(Session& s, const Command& c) {
         answer_ok(s, "already unlocked");
         return;
       }
-      if (!request(RequestOp::enable, r)) {
-        answer_error(s, CmdError::timeout, "control thread did not answer enable");
-        return;
-      }
-      if (r.result != RtResult::ok) {
-        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, bounded_text(r.message));
+      if (const ControlResult e = svc_->enable(); !e.ok()) {
+        answer_control(s, e);
         return;
       }
       s.enabling = true;

@@ -2,7 +2,9 @@
 // The arm service's motion path (arm_service.hpp).
 #include "servoarm/service/arm_service.hpp"
 
+#include <chrono>
 #include <cmath>
+#include <thread>
 #include <cstdio>
 
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
@@ -42,11 +44,25 @@ CmdError motion_error(kin::MotionStatus m) {
   return CmdError::plan_failed;
 }
 
+CmdError control_error(RtResult r) {
+  switch (r) {
+    case RtResult::ok: return CmdError::ok;
+    case RtResult::bad_state: return CmdError::bad_state;
+    case RtResult::fault: return CmdError::fault;
+    case RtResult::busy: return CmdError::busy;
+    case RtResult::start_moved:
+    case RtResult::plan_failed: return CmdError::plan_failed;
+    case RtResult::not_homed: return CmdError::not_homed;
+  }
+  return CmdError::plan_failed;
+}
+
 ArmService::ArmService(Controller& ctl, const MotionSettings& cfg)
     : ctl_(&ctl), chain_(ctl.chain()), lim_(ctl.limits()), rate_hz_(1.0 / ctl.period_s()), cfg_(cfg), n_(ctl.chain().n_joints) {
   tail_ = kin::JointVector::Zero(n_);
   shadow_ = std::make_unique<PathShadow>();
   scratch_ = std::make_unique<MotionItem>();
+  idle_ = [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); };
 }
 
 ArmService::ArmService(const kin::Chain& chain, const kin::JointLimits& limits, double rate_hz, const MotionSettings& cfg)
@@ -69,6 +85,52 @@ kin::JointVector ArmService::tail() const {
   kin::JointVector q(n_);
   for (int j = 0; j < n_; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
   return q;
+}
+
+bool ArmService::request(const Request& rq, Reply& out) {
+  Request r = rq;
+  r.seq = ++seq_;
+  if (ctl_ == nullptr || !ctl_->requests().push(r)) {
+    out.result = RtResult::busy;
+    std::snprintf(out.message, sizeof out.message, "request queue full");
+    return true;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  for (;;) {
+    Reply p;
+    while (ctl_->replies().pop(p))
+      if (p.seq == r.seq) {
+        out = p;
+        return true;
+      }
+    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(reply_timeout_s_)) return false;
+    idle_();
+  }
+}
+
+bool ArmService::request(RequestOp op, Reply& out) {
+  Request rq;
+  rq.op = op;
+  return request(rq, out);
+}
+
+ControlResult ArmService::control(RequestOp op) {
+  ControlResult c;
+  if (!request(op, c.reply)) {
+    c.error = CmdError::timeout;
+    c.reason = std::string("control thread did not answer ") + to_string(op);
+    return c;
+  }
+  c.error = control_error(c.reply.result);
+  c.reason = bounded_text(c.reply.message);
+  return c;
+}
+
+ControlResult ArmService::enable() {
+  ControlResult c = control(RequestOp::enable);
+  if (c.error != CmdError::ok && c.error != CmdError::timeout)
+    c.error = c.reply.result == RtResult::fault ? CmdError::fault : CmdError::bad_state;
+  return c;
 }
 
 MoveResult ArmService::refuse(MoveRefusal what, CmdError e) const {

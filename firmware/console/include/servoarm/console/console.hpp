@@ -164,7 +164,7 @@ class Console {
 
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
   /// Single-threaded tests set it to run a control cycle.
-  void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
+  void set_idle(std::function<void()> idle) { svc_->set_idle(std::move(idle)); }
 
   /// Status line as printed by `status` (without "ok ").
   std::string status_text() const;
@@ -226,8 +226,11 @@ class Console {
   ArmService& service() { return *svc_; }
 
  private:
+  /// A request to the control thread and its reply (the arm service's; false: no reply in time).
   bool request(RequestOp op, Reply& out);
   bool request(const Request& rq, Reply& out);
+  /// An arm-control result answered: `ok <line>` or `error: <code> <line>`.
+  void answer_control(Session& s, const ControlResult& c);
   void do_jog(Session& s, const Command& c);
   void do_grbl_jog(Session& s, const Command& c);
   /// Send a jog request; answer ok / the error. `clamped` >= 0: the target was cut at that
@@ -283,7 +286,6 @@ class Console {
   ConsoleConfig cfg_;
   const kin::Chain& chain_;
   int n_;
-  std::uint32_t seq_ = 0;
   std::unique_ptr<ArmService> svc_;
   // A dry run's blend state (check mode); a pending program check swaps its own in per slice.
   std::unique_ptr<PathShadow> check_shadow_;
@@ -311,7 +313,6 @@ class Console {
   void answer_refusal(Session& s, const char* what, const MoveResult& r);
   /// " blend=X.XXXs" of a blended segment, else "".
   static std::string blend_text(const MoveResult& r);
-  std::function<void()> idle_;
   std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
   kin::IkSolver ik_solver() const;
   const kin::IkModel* ik_ = nullptr;  ///< the App's (outlives the console); nullptr: numeric fallback

@@ -17,6 +17,7 @@
 // Console thread (non-real-time: may allocate). Talks to the control thread only through the
 // Controller's SPSC motion queue and telemetry.
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -92,6 +93,18 @@ struct MoveContext {
   bool next_line = false;           ///< a program step whose next motion is a line
 };
 
+/// The answer to an arm-control request (enable, disable, stop, e-stop, reset, hold, set zero)
+/// or any other request the control thread answers.
+struct ControlResult {
+  CmdError error = CmdError::ok;  ///< timeout: the control thread did not answer in time
+  std::string reason;             ///< the control thread's one line (or why it did not answer)
+  Reply reply{};                  ///< the control thread's reply (when it answered)
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// The error code of a control-thread result.
+CmdError control_error(RtResult r);
+
 /// The service's motion settings (SI): the console's configuration of them.
 struct MotionSettings {
   double default_joint_speed_pct = 50.0;
@@ -117,6 +130,20 @@ class ArmService {
   MoveResult move(const MoveJoints& req, const MoveContext& cx);
   MoveResult move(const MoveLine& req, const MoveContext& cx);
   MoveResult dwell(double seconds, const MoveContext& cx);
+
+  /// Send a request to the control thread and wait for its reply (at most `reply_timeout_s`,
+  /// passing time with the idle hook). False: no reply in time. A full request queue is
+  /// answered busy at once.
+  bool request(const Request& rq, Reply& out);
+  bool request(RequestOp op, Reply& out);
+  /// Arm control: one request (disable, stop, estop, reset, hold, set_zero, ...), its reply
+  /// as a result (`control thread did not answer <op>` on a timeout).
+  ControlResult control(RequestOp op);
+  /// `enable`: accepted (the drives are enabling), or why not (fault, else bad_state).
+  ControlResult enable();
+  /// How to pass time while waiting for the control thread (default: sleep 200 us).
+  void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
+  void set_reply_timeout(double s) { reply_timeout_s_ = s; }
 
   /// The result of the last move or dwell asked (either mode).
   const MoveResult& last() const { return last_; }
@@ -160,6 +187,9 @@ class ArmService {
   std::uint32_t shadow_tail_id_ = 0;    ///< the motion the newest segment was queued as (0: none)
   std::unique_ptr<MotionItem> scratch_;  ///< a dry run's motion (planned, never queued)
   MoveResult last_;
+  std::uint32_t seq_ = 0;  ///< request sequence numbers (replies are matched by them)
+  std::function<void()> idle_;
+  double reply_timeout_s_ = 1.0;
 };
 
 }  // namespace servoarm::fw
