@@ -407,14 +407,11 @@ struct Checker {
     return true;
   }
 
-  // park / G28: the joint move to motion.home_deg (armfw's default: joint zero clamped into the limits).
+  // park / G28: the joint move to motion.home_deg (armfw's default: joint zero clamped into the
+  // limits), as the arm service makes it.
   bool step_park(const prog::ProgramStep& s) {
-    kin::JointVector goal(chain.n_joints);
-    for (int j = 0; j < chain.n_joints; ++j)
-      goal[j] = opt.park.size() == chain.n_joints
-                    ? opt.park[j]
-                    : std::clamp(0.0, lim.lower[static_cast<std::size_t>(j)], lim.upper[static_cast<std::size_t>(j)]);
-    return movej(s, goal, opt.joint_speed_pct, -1);
+    const MoveJoints m = svc->park_request();
+    return movej(s, m.goal, m.speed_pct, m.blend);
   }
 
   // home / home jN: the homing cycle, as the console and the controller run it. Refused with
@@ -569,6 +566,7 @@ ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, c
   ms.cartesian.linear_velocity = options.max_linear_speed;
   ms.default_blend_rad = options.default_blend_rad;
   ms.default_blend_m = options.default_blend_m;
+  ms.park = options.park;
   ck.svc = std::make_unique<ArmService>(chain, ck.lim, options.rate_hz, ms);
   ck.q = q0;
   ck.out.ok = true;

@@ -143,12 +143,6 @@ std::string refusal_text(const ModelControl& m, ModelPart p) { return bounded_te
 
 Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* ik)
     : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints), ik_(ik) {
-  if (cfg_.home.size() != n_) {
-    cfg_.home = kin::JointVector::Zero(n_);
-    const auto& lim = ctl_.limits();
-    for (int j = 0; j < n_; ++j)
-      cfg_.home[j] = std::fmin(std::fmax(0.0, lim.lower[static_cast<std::size_t>(j)]), lim.upper[static_cast<std::size_t>(j)]);
-  }
   MotionSettings ms;
   ms.default_joint_speed_pct = cfg_.default_joint_speed_pct;
   ms.default_linear_speed = cfg_.default_linear_speed;
@@ -157,7 +151,9 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
   ms.cartesian = cfg_.cartesian;
   ms.default_blend_rad = cfg_.default_blend_rad;
   ms.default_blend_m = cfg_.default_blend_m;
+  ms.park = cfg_.home;
   svc_ = std::make_unique<ArmService>(ctl_, ms);
+  cfg_.home = svc_->settings().park;  // config() shows the park pose the service uses
   svc_->set_reply_timeout(cfg_.reply_timeout_s);
   auto t0 = std::make_unique<ToolSlot>();
   t0->def.name = "tool0";
@@ -515,11 +511,7 @@ bool Console::motion_state_ok(Session& s) {
 
 MoveJoints Console::joint_request(const Command& c) const {
   MoveJoints m;
-  if (c.cmd == Cmd::park) {
-    m.goal = cfg_.home;
-    m.speed_pct = cfg_.default_joint_speed_pct;
-    return m;
-  }
+  if (c.cmd == Cmd::park) return svc_->park_request();
   m.goal = kin::JointVector(n_);
   for (int j = 0; j < n_; ++j) m.goal[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
   m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
@@ -1307,30 +1299,19 @@ void Console::do_home(Session& s, const Command& c) {
     answer_ok(s, "check mode: not run");
     return;
   }
-  Request rq(RequestOp::home, 0);
-  rq.joints = c.home_joint >= 0 ? static_cast<std::uint16_t>(1u << c.home_joint) : 0;
-  Reply r;
-  if (!request(rq, r)) {
-    answer_error(s, CmdError::timeout, "control thread did not answer home");
+  const ControlResult h = svc_->home(c.home_joint);
+  if (!h.ok()) {
+    answer_control(s, h);
     return;
-  }
-  switch (r.result) {
-    case RtResult::ok: break;
-    case RtResult::busy: answer_error(s, CmdError::busy, bounded_text(r.message)); return;
-    case RtResult::fault: answer_error(s, CmdError::fault, bounded_text(r.message)); return;
-    case RtResult::not_homed:
-    case RtResult::bad_state:
-    case RtResult::start_moved:
-    case RtResult::plan_failed: answer_error(s, CmdError::bad_state, bounded_text(r.message)); return;
   }
   jog_tail_valid_ = false;
   if (c.cmd == Cmd::grbl_home) {  // GRBL: $H answers when the cycle has ended (state Home meanwhile)
     s.homing = true;
-    if (s.dialect == Dialect::grbl) s.out += fmt("[MSG:%s]\n", bounded_text(r.message).c_str());
+    if (s.dialect == Dialect::grbl) s.out += fmt("[MSG:%s]\n", h.reason.c_str());
     settle(s);
     return;
   }
-  answer_ok(s, bounded_text(r.message));
+  answer_ok(s, h.reason);
 }
 
 void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit) {

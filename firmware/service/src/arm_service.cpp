@@ -59,17 +59,24 @@ CmdError control_error(RtResult r) {
 
 ArmService::ArmService(Controller& ctl, const MotionSettings& cfg)
     : ctl_(&ctl), chain_(ctl.chain()), lim_(ctl.limits()), rate_hz_(1.0 / ctl.period_s()), cfg_(cfg), n_(ctl.chain().n_joints) {
-  tail_ = kin::JointVector::Zero(n_);
-  shadow_ = std::make_unique<PathShadow>();
-  scratch_ = std::make_unique<MotionItem>();
+  init();
   idle_ = [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); };
 }
 
 ArmService::ArmService(const kin::Chain& chain, const kin::JointLimits& limits, double rate_hz, const MotionSettings& cfg)
     : chain_(chain), lim_(limits), rate_hz_(rate_hz), cfg_(cfg), n_(chain.n_joints) {
+  init();
+}
+
+void ArmService::init() {
   tail_ = kin::JointVector::Zero(n_);
   shadow_ = std::make_unique<PathShadow>();
   scratch_ = std::make_unique<MotionItem>();
+  if (cfg_.park.size() != n_) {  // joint zero clamped into the limits
+    cfg_.park = kin::JointVector::Zero(n_);
+    for (int j = 0; j < n_; ++j)
+      cfg_.park[j] = std::fmin(std::fmax(0.0, lim_.lower[static_cast<std::size_t>(j)]), lim_.upper[static_cast<std::size_t>(j)]);
+  }
 }
 
 ArmService::~ArmService() = default;
@@ -131,6 +138,35 @@ ControlResult ArmService::enable() {
   if (c.error != CmdError::ok && c.error != CmdError::timeout)
     c.error = c.reply.result == RtResult::fault ? CmdError::fault : CmdError::bad_state;
   return c;
+}
+
+ControlResult ArmService::home(int joint) {
+  ControlResult c;
+  Request rq(RequestOp::home, 0);
+  rq.joints = joint >= 0 ? static_cast<std::uint16_t>(1u << joint) : 0;
+  if (!request(rq, c.reply)) {
+    c.error = CmdError::timeout;
+    c.reason = "control thread did not answer home";
+    return c;
+  }
+  c.reason = bounded_text(c.reply.message);
+  switch (c.reply.result) {
+    case RtResult::ok: c.error = CmdError::ok; break;
+    case RtResult::busy: c.error = CmdError::busy; break;
+    case RtResult::fault: c.error = CmdError::fault; break;
+    case RtResult::not_homed:
+    case RtResult::bad_state:
+    case RtResult::start_moved:
+    case RtResult::plan_failed: c.error = CmdError::bad_state; break;
+  }
+  return c;
+}
+
+MoveJoints ArmService::park_request() const {
+  MoveJoints m;
+  m.goal = cfg_.park;
+  m.speed_pct = cfg_.default_joint_speed_pct;
+  return m;
 }
 
 MoveResult ArmService::refuse(MoveRefusal what, CmdError e) const {

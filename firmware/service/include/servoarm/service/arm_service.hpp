@@ -114,6 +114,7 @@ struct MotionSettings {
   kin::CartesianLimits cartesian{};    ///< linear_velocity is replaced per move
   double default_blend_rad = 0.0;      ///< movej without blend=
   double default_blend_m = 0.0;        ///< movel, G0/G1 without blend=
+  kin::JointVector park;               ///< the park pose (SI); empty: every joint's zero clamped into its limits
 };
 
 class ArmService {
@@ -141,6 +142,11 @@ class ArmService {
   ControlResult control(RequestOp op);
   /// `enable`: accepted (the drives are enabling), or why not (fault, else bad_state).
   ControlResult enable();
+  /// The homing cycle of joint `joint` (0-based; -1: every joint): started, or why not (busy,
+  /// fault, else bad_state). Progress comes as homing events.
+  ControlResult home(int joint);
+  /// The park move (`park`, G28): to the park pose at the default joint speed.
+  MoveJoints park_request() const;
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
   void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
   void set_reply_timeout(double s) { reply_timeout_s_ = s; }
@@ -161,6 +167,7 @@ class ArmService {
   const kin::JointLimits& limits() const { return lim_; }
 
  private:
+  void init();
   MoveResult plan(const MoveJoints& req, const MoveContext& cx);
   MoveResult plan(const MoveLine& req, const MoveContext& cx);
   MoveResult plan_dwell(double seconds, const MoveContext& cx);
