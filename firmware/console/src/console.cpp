@@ -811,10 +811,6 @@ void Console::execute(Session& s, std::string_view line) {
 
 void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
   Reply r;
-  auto reply = [&](const std::string& text) {  // r answered with `text`
-    if (r.result == RtResult::ok) answer_ok(s, text);
-    else answer_error(s, control_error(r.result), text);
-  };
   auto simple = [&](RequestOp op) { answer_control(s, svc_->control(op)); };
   // While a program runs, motion comes from the program only: a move, jog, dwell, homing or
   // M62/M63 from any console is refused (stop, hold, resume, abort and queries still work).
@@ -979,51 +975,20 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
       return;
     }
     case Cmd::freedrive_on:
-      if (s.check_mode) {
-        answer_ok(s, "check mode: not run");
-        return;
-      }
-      if (!request(RequestOp::freedrive_on, r)) {
-        answer_error(s, CmdError::timeout, "control thread did not answer freedrive_on");
-        return;
-      }
-      if (const ModelControl* m = ctl_.model(); r.result != RtResult::ok && m != nullptr && m->configured() &&
-                                                !m->available(ModelPart::freedrive)) {
-        // The reply's fixed line may hold only the start of the model's refusal: the answer
-        // gives it whole, from the model.
-        const std::string why = refusal_text(*m, ModelPart::freedrive);
-        const std::string said = r.message;
-        const std::size_t at = said.find(why.substr(0, 40));
-        if (at != std::string::npos) {
-          reply(said.substr(0, at) + why);
-          return;
-        }
-      }
-      reply(bounded_text(r.message));
-      return;
-    case Cmd::collision_on:
-    case Cmd::collision_off: {
-      const bool on = c.cmd == Cmd::collision_on;
-      if (s.check_mode) {
-        answer_ok(s, "check mode: not run");
-        return;
-      }
-      if (!ctl_.set_collision_detection(on)) {
-        const ModelControl* m = ctl_.model();
-        answer_error(s, CmdError::bad_state,
-                     fmt("collision detection unavailable: %s",
-                         m != nullptr && m->configured() ? refusal_text(*m, ModelPart::collision).c_str() : "no dynamic model"));
-        return;
-      }
-      answer_ok(s, on ? "collision detection on" : "collision detection off");
-      return;
-    }
     case Cmd::freedrive_off:
       if (s.check_mode) {
         answer_ok(s, "check mode: not run");
         return;
       }
-      simple(RequestOp::freedrive_off);
+      answer_control(s, svc_->freedrive(c.cmd == Cmd::freedrive_on));
+      return;
+    case Cmd::collision_on:
+    case Cmd::collision_off:
+      if (s.check_mode) {
+        answer_ok(s, "check mode: not run");
+        return;
+      }
+      answer_control(s, svc_->collision_detection(c.cmd == Cmd::collision_on));
       return;
   }
 }

@@ -162,6 +162,36 @@ ControlResult ArmService::home(int joint) {
   return c;
 }
 
+// A model part's refusal (a fixed line of the model's): whole, or cut after a word with "...".
+static std::string model_refusal(const ModelControl& m, ModelPart p) { return bounded_text(m.refusal(p), ModelControl::kLine); }
+
+ControlResult ArmService::freedrive(bool on) {
+  ControlResult c = control(on ? RequestOp::freedrive_on : RequestOp::freedrive_off);
+  if (!on || c.error == CmdError::timeout || c.reply.result == RtResult::ok) return c;
+  if (const ModelControl* m = ctl_->model(); m != nullptr && m->configured() && !m->available(ModelPart::freedrive)) {
+    // The reply's fixed line may hold only the start of the model's refusal: the result
+    // gives it whole, from the model.
+    const std::string why = model_refusal(*m, ModelPart::freedrive);
+    const std::string said = c.reply.message;
+    const std::size_t at = said.find(why.substr(0, 40));
+    if (at != std::string::npos) c.reason = said.substr(0, at) + why;
+  }
+  return c;
+}
+
+ControlResult ArmService::collision_detection(bool on) {
+  ControlResult c;
+  if (ctl_ == nullptr || !ctl_->set_collision_detection(on)) {
+    const ModelControl* m = ctl_ != nullptr ? ctl_->model() : nullptr;
+    c.error = CmdError::bad_state;
+    c.reason = "collision detection unavailable: " +
+               (m != nullptr && m->configured() ? model_refusal(*m, ModelPart::collision) : std::string("no dynamic model"));
+    return c;
+  }
+  c.reason = on ? "collision detection on" : "collision detection off";
+  return c;
+}
+
 MoveJoints ArmService::park_request() const {
   MoveJoints m;
   m.goal = cfg_.park;

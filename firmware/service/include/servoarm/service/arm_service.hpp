@@ -145,6 +145,10 @@ class ArmService {
   /// The homing cycle of joint `joint` (0-based; -1: every joint): started, or why not (busy,
   /// fault, else bad_state). Progress comes as homing events.
   ControlResult home(int joint);
+  /// Free-drive (hand guiding) on or off: done, or why not (the dynamic model's refusal whole).
+  ControlResult freedrive(bool on);
+  /// Collision detection on or off: done (reason "collision detection on|off"), or why not.
+  ControlResult collision_detection(bool on);
   /// The park move (`park`, G28): to the park pose at the default joint speed.
   MoveJoints park_request() const;
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
