@@ -16,6 +16,7 @@
 #include "servoarm/armctl/cli_program.hpp"
 #include "servoarm/program/program.hpp"
 #include "servoarm/program/points.hpp"
+#include "servoarm/lang/text.hpp"
 #include "servoarm/sim/virtual_drive.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -786,4 +787,32 @@ TEST(ConsoleProgram, CheckModeTeachesDeletesAndRecordsNothing) {
   LONGS_EQUAL(1, r.app.console->points().points.size());
   CHECK(::access((tmp.dir + "/rec.arm").c_str(), F_OK) != 0);
   CHECK(has(r.cmd("record stop rec"), "error: bad_state"));  // no recording was started
+}
+
+// A program's steps run as the loader parsed them (typed), not as text parsed again: a
+// `movej @NAME` step goes to the point's joints exactly as taught (SI, bit for bit), as the
+// same line typed at the console does; the text form of the step (the joints written in
+// degrees) would round each joint on its way through the units.
+TEST(ConsoleProgram, AProgramsMovejAtNameGoesToTheTaughtJointsExactly) {
+  Tmp tmp;
+  // joints chosen so that each one's degrees (to 17 digits) and back is not the joint itself
+  const double q[6] = {-0.04528848651449163, -0.5892868885942255, 3.1878544227602923,
+                       -0.07656147436456126, 0.8936381473065198, 0.0984913232848047};
+  std::string pts = "format = \"servoarm-points-1\"\n\n[point.pick]\njoints = [";
+  for (int j = 0; j < 6; ++j) pts += (j ? ", " : "") + std::string(fw::fixed(q[j], 17));
+  test::write_file(tmp.dir + "/points.toml", pts + "]\nxyz = [0.5, 0.1, 0.4]\nrpy = [0, 0, 0]\ntool = \"tool0\"\nframe = \"base\"\n");
+  ProgRig r(tmp.dir);
+  r.enable();
+  const kin::JointVector taught = r.app.console->points().points.at(0).q;
+  for (int j = 0; j < 6; ++j) CHECK(taught[j] == q[j]);
+  r.write("at.arm", "movej @pick speed=80\n");
+  const std::string a = r.cmd("run at");
+  CHECK_TEXT(answer_ok(a), a.c_str());
+  CHECK(r.program_ended());
+  const MoveResult& last = r.app.console->service().last();
+  CHECK_TEXT(last.ok(), to_string(last.refusal));
+  std::string diff;
+  for (int j = 0; j < 6; ++j)
+    if (last.goal[j] != taught[j]) diff += " joint " + std::to_string(j + 1) + " off by " + std::to_string((last.goal[j] - taught[j]) * 1e18) + "e-18";
+  CHECK_TEXT(diff.empty(), ("goal differs from the taught point:" + diff).c_str());
 }

@@ -26,10 +26,11 @@ ALLOWED = {
     "firmware/config": ["kinematics", "kinematics/io", "hal"],
     "firmware/lang": ["kinematics", "kinematics/io"],
     "firmware/program": ["firmware/lang", "kinematics", "kinematics/io"],
-    "firmware/console": ["firmware/program", "firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
-    "firmware/app": ["firmware/console", "firmware/program", "firmware/lang", "firmware/rt", "firmware/config",
+    "firmware/service": ["firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
+    "firmware/console": ["firmware/service", "firmware/program", "firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
+    "firmware/app": ["firmware/console", "firmware/service", "firmware/program", "firmware/lang", "firmware/rt", "firmware/config",
                      "kinematics", "kinematics/io", "hal", "host_sim"],
-    "firmware/armctl": ["firmware/program", "firmware/lang", "firmware/config", "kinematics", "kinematics/io", "hal"],
+    "firmware/armctl": ["firmware/service", "firmware/program", "firmware/lang", "firmware/config", "kinematics", "kinematics/io", "hal"],
 }
 # (folder, included folder) -> the only files of the folder that may include it.
 ONLY_FROM = {

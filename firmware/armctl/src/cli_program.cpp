@@ -26,6 +26,7 @@
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 #include "servoarm/program/points.hpp"
 #include "servoarm/program/program.hpp"
+#include "servoarm/service/arm_service.hpp"
 
 namespace servoarm::fw {
 
@@ -77,8 +78,9 @@ const char* kProgramUsage =
     "G64 P / G61 and motion.default_blend_mm / _deg (--config) give the tolerances; runs of joint\n"
     "moves blend as the controller's joint queue, lines and the joint moves beside them as the\n"
     "console's path segments; the time with every move to rest is printed beside it.\n"
-    "Not checked offline yet: tool and frame changes inside a program (refused: check those\n"
-    "with armfw's $C).\n";
+    "Every move is planned and checked by the arm service's dry run, the code armfw queues moves\n"
+    "with. `tool tool0` and `frame base` are accepted (the only ones offline); other tool and\n"
+    "frame changes are not checked offline yet (refused: check those with armfw's $C).\n";
 
 bool is_option(const char* s) { return s[0] == '-' && s[1] == '-'; }
 
@@ -148,8 +150,6 @@ struct Checker {
   const ProgramCheckOptions& opt;
   ConsoleUnits units;
   kin::JointLimits lim;
-  std::unique_ptr<kin::IkModel> model = std::make_unique<kin::IkModel>();
-  std::unique_ptr<kin::CartesianTrajectory> path = std::make_unique<kin::CartesianTrajectory>();
   ProgramCheck out;
   kin::JointVector q;
   std::uint32_t homed = ~0u;                   ///< bit j: joint j homed (established this power cycle)
@@ -158,7 +158,7 @@ struct Checker {
 
   // Blending, as armfw runs the program. A move with a blend tolerance that is a line, or a
   // joint move whose next motion is a line, or any move following a path segment that has a
-  // tolerance, is a path segment (console.cpp queue_path: kin::PathBlendQueue, blended joint
+  // tolerance, is a path segment (ArmService's blended runs: kin::PathBlendQueue, blended joint
   // segments at joint_share 0.5, sampled at the control rate); other joint moves with a
   // tolerance run in the controller's joint queue (controller.cpp begin_blend / blend_more:
   // kin::JointBlendQueue<4>, limits scaled by the run's speed override, which every move of
@@ -180,6 +180,38 @@ struct Checker {
   kin::IkSolver path_ik{};
   std::unique_ptr<kin::PathBlendQueue<4>> pq = std::make_unique<kin::PathBlendQueue<4>>();
   std::unique_ptr<kin::JointBlendQueue<4>> jq = std::make_unique<kin::JointBlendQueue<4>>();
+  // The firmware's planning and checks: the arm service in a dry run (its own tail and blend
+  // state), so a move is accepted, refused and planned exactly as armfw's console does it.
+  std::unique_ptr<ArmService> svc{};
+  std::unique_ptr<PathShadow> dry_shadow = std::make_unique<PathShadow>();
+  DryRun dry{};
+
+  // The dry run of a move from where the program is (`q`), as armfw's console runs it.
+  MoveContext dry_context() {
+    dry.tail = q;
+    dry.shadow = dry_shadow.get();
+    MoveContext cx;
+    cx.dry = &dry;
+    cx.chain = &chain;
+    cx.ik = path_ik;
+    cx.step_blend = step_blend;
+    cx.next_line = next_line;
+    return cx;
+  }
+  template <class Request>
+  MoveResult dry_run(const Request& req) {
+    return svc->move(req, dry_context());
+  }
+  void keep(const prog::ProgramStep& s, const MoveResult& r) {
+    ProgramKnot k;
+    k.line = s.line;
+    k.goal = r.goal;
+    k.duration = r.duration;
+    k.blended = r.blended;
+    k.blend = r.blend;
+    k.segment_end = r.segment_end;
+    out.knots.push_back(k);
+  }
 
   // The console's blend_of: blend= on the line, else the program's, else the configured default.
   double blend_of(double given, bool line) const {
@@ -190,7 +222,7 @@ struct Checker {
   void end_run() { run = Run::none; }
   double period() const { return 1.0 / opt.rate_hz; }
 
-  // The move as a path segment (console.cpp queue_path); false: not one (plain, or the joint queue).
+  // The move as a path segment timed as the runner feeds it (ArmService's blended runs); false: not one.
   bool path_segment(bool line, const kin::JointVector& goal, const kin::Pose& target, const kin::CartesianLimits& cl,
                     double override, double tol) {
     if (!std::isfinite(tol) || tol < 0) tol = 0;
@@ -305,78 +337,81 @@ struct Checker {
 
   bool movej(const prog::ProgramStep& s, const kin::JointVector& goal, double pct, double given_blend) {
     if (const std::string r = refusal(to_string(s.cmd.cmd), true); !r.empty()) return fail(s, r);
-    for (int j = 0; j < chain.n_joints; ++j) {
-      const auto k = static_cast<std::size_t>(j);
-      if (!(goal[j] >= lim.lower[k] - 1e-9 && goal[j] <= lim.upper[k] + 1e-9))
-        return fail(s, "movej refused: joint " + std::to_string(j + 1) + " = " + num(units.joint_out(chain, j, goal[j])) +
-                           " outside [" + num(units.joint_out(chain, j, lim.lower[k])) + ", " +
-                           num(units.joint_out(chain, j, lim.upper[k])) + "] " + units.joint_name(chain, j));
-    }
-    auto tr = std::make_unique<kin::JointTrajectory>();
-    const kin::MotionStatus st = kin::plan_movej(lim, kin::JointState::rest(q), goal, kin::MovejOptions{pct / 100.0}, *tr);
-    if (!kin::is_ok(st)) return fail(s, std::string("movej refused: ") + kin::to_string(st));
-    if (!(tr->duration <= opt.max_move_duration))
-      return fail(s, "movej refused: it would take " + seconds_text(tr->duration) + " s, more than " + num(opt.max_move_duration) + " s");
-    out.cycle_time_exact += tr->duration;
+    MoveJoints req;
+    req.goal = goal;
+    req.speed_pct = pct;
+    req.blend = given_blend;
+    const MoveResult r = dry_run(req);
+    if (!r.ok()) return fail(s, refusal_text("movej", r));
+    keep(s, r);
+    out.cycle_time_exact += r.duration;
     const double tol = blend_of(given_blend, false);
     if (!path_segment(false, goal, kin::Pose::Identity(), kin::CartesianLimits{}, pct / 100.0, tol))
-      joint_queue(goal, pct / 100.0, tol, tr->duration);
+      joint_queue(goal, pct / 100.0, tol, r.duration);
     outputs_next = false;
     ++out.moves;
     ++out.joint_moves;
     ++queued;
-    q = goal;
+    q = r.goal;
     return true;
   }
 
-  bool movel(const prog::ProgramStep& s, const kin::Pose& target, double speed, double given_blend) {
-    if (const std::string r = refusal(s.cmd.cmd == Cmd::gmove ? "G-code move" : "movel", true); !r.empty()) return fail(s, r);
-    if (!(speed > 0) || speed > opt.max_linear_speed + 1e-12)
-      return fail(s, "linear speed " + num(units.length_out(speed)) + " " + units.length_name() + "/s outside (0, " +
-                         num(units.length_out(opt.max_linear_speed)) + "]");
-    kin::CartesianLimits cl;
-    cl.linear_velocity = speed;
-    kin::PathReport rep;
-    // A lower bound of the duration first (absurd targets are refused before planning).
-    kin::Pose x0;
-    kin::forward(chain, q, x0);
-    const double len = (target.translation() - x0.translation()).norm();
-    if (!(len / speed <= opt.max_move_duration))
-      return fail(s, "movel refused: it would take more than " + num(opt.max_move_duration) + " s");
-    const kin::MotionStatus st = plan_movel_preview(chain, q, target, cl, kin::MovelOptions{}, *model, *path, &rep);
-    if (!kin::is_ok(st)) {
-      const Eigen::Vector3d& p = rep.position;
-      auto r3 = [&](double si) { return units.length_text(si); };
-      std::string why = std::string("movel refused: ") + kin::to_string(st) + " at " + num(std::round(100 * rep.s)) +
-                        " % of the line, tool at (" + r3(p.x()) + ", " + r3(p.y()) + ", " + r3(p.z()) + ") " +
-                        units.length_name();
-      if (rep.joint >= 0) why += ", joint " + std::to_string(rep.joint + 1);
-      if (st == kin::MotionStatus::no_ik_solution && rep.s >= 1 - 1e-9) why += " (the target is out of reach)";
-      return fail(s, why);
+  // A refusal of the service, in armctl's words and the description's units.
+  std::string refusal_text(const char* what, const MoveResult& r) const {
+    switch (r.refusal) {
+      case MoveRefusal::none:
+      case MoveRefusal::arm_state:
+      case MoveRefusal::not_homed:
+      case MoveRefusal::queue_full: return std::string(what) + " refused: " + r.reason;
+      case MoveRefusal::joint_limit:
+        return std::string(what) + " refused: joint " + std::to_string(r.joint + 1) + " = " + num(units.joint_out(chain, r.joint, r.value)) +
+               " outside [" + num(units.joint_out(chain, r.joint, r.lower)) + ", " + num(units.joint_out(chain, r.joint, r.upper)) + "] " +
+               units.joint_name(chain, r.joint);
+      case MoveRefusal::linear_speed:
+        return "linear speed " + num(units.length_out(r.speed)) + " " + units.length_name() + "/s outside [" +
+               num(units.length_out(kMinLinearSpeedMmS * 1e-3)) + ", " + num(units.length_out(opt.max_linear_speed)) + "]";
+      case MoveRefusal::plan: {
+        if (std::string(what) != "movel") return std::string(what) + " refused: " + kin::to_string(r.status);
+        const Eigen::Vector3d& p = r.position;
+        auto r3 = [&](double si) { return units.length_text(si); };
+        std::string why = std::string("movel refused: ") + kin::to_string(r.status) + " at " + num(std::round(100 * r.s)) +
+                          " % of the line, tool at (" + r3(p.x()) + ", " + r3(p.y()) + ", " + r3(p.z()) + ") " + units.length_name();
+        if (r.joint >= 0) why += ", joint " + std::to_string(r.joint + 1);
+        if (r.status == kin::MotionStatus::no_ik_solution && r.s >= 1 - 1e-9) why += " (the target is out of reach)";
+        return why;
+      }
+      case MoveRefusal::duration:
+        return std::string(what) + " refused: it would take " + seconds_text(r.duration) + " s, more than " + num(opt.max_move_duration) + " s";
     }
-    if (!(path->duration <= opt.max_move_duration))
-      return fail(s, "movel refused: it would take " + seconds_text(path->duration) + " s, more than " + num(opt.max_move_duration) + " s");
-    out.cycle_time_exact += path->duration;
-    if (!path_segment(true, path->goal, target, cl, 1.0, blend_of(given_blend, true))) {
+    return std::string(what) + " refused";
+  }
+
+  // A line (movel, G0/G1): `req.speed` 0 is the configured default.
+  bool movel(const prog::ProgramStep& s, const MoveLine& req) {
+    if (const std::string r = refusal(s.cmd.cmd == Cmd::gmove ? "G-code move" : "movel", true); !r.empty()) return fail(s, r);
+    const MoveResult r = dry_run(req);
+    if (!r.ok()) return fail(s, refusal_text("movel", r));
+    keep(s, r);
+    out.cycle_time_exact += r.duration;
+    kin::CartesianLimits cl;
+    cl.linear_velocity = r.speed;
+    if (!path_segment(true, r.goal, req.target, cl, 1.0, blend_of(req.blend, true))) {
       end_run();
-      out.cycle_time += path->duration;
+      out.cycle_time += r.duration;
     }
     outputs_next = false;
     ++out.moves;
     ++out.line_moves;
     ++queued;
-    q = path->goal;
+    q = r.goal;
     return true;
   }
 
-  // park / G28: the joint move to motion.home_deg (armfw's default: joint zero clamped into the limits).
+  // park / G28: the joint move to motion.home_deg (armfw's default: joint zero clamped into the
+  // limits), as the arm service makes it.
   bool step_park(const prog::ProgramStep& s) {
-    kin::JointVector goal(chain.n_joints);
-    for (int j = 0; j < chain.n_joints; ++j)
-      goal[j] = opt.park.size() == chain.n_joints
-                    ? opt.park[j]
-                    : std::clamp(0.0, lim.lower[static_cast<std::size_t>(j)], lim.upper[static_cast<std::size_t>(j)]);
-    return movej(s, goal, opt.joint_speed_pct, -1);
+    const MoveJoints m = svc->park_request();
+    return movej(s, m.goal, m.speed_pct, m.blend);
   }
 
   // home / home jN: the homing cycle, as the console and the controller run it. Refused with
@@ -415,7 +450,7 @@ struct Checker {
   bool step(const prog::ProgramStep& s, std::size_t index) {
     const Command& c = s.cmd;
     // What the runner gives the move it queues (console_program.cpp exec_step); lines sent
-    // one by one (--stream) carry only their own blend=.
+    // one by one (--stream) carry only their own blend= (own_blend).
     const bool gcode = static_cast<std::size_t>(s.file) < prog.files.size() &&
                        prog::is_gcode_file(prog.files[static_cast<std::size_t>(s.file)]);
     step_blend = opt.stream || s.blend < 0 ? -1.0
@@ -423,6 +458,10 @@ struct Checker {
                  : c.cmd == Cmd::movej     ? units.angle_in(s.blend)
                                            : units.length_in(s.blend);
     next_line = !opt.stream && prog::next_motion_is_line(prog, index);
+    // A line sent one by one (--stream) carries its blend= as its own, as the console reads it.
+    const double own_blend = !opt.stream || s.blend < 0 || gcode ? -1.0
+                             : c.cmd == Cmd::movej           ? units.angle_in(s.blend)
+                                                             : units.length_in(s.blend);
     const prog::StepKind kind = prog::kind_of(c);
     if (kind == prog::StepKind::needs_idle || kind == prog::StepKind::wait || kind == prog::StepKind::refused) end_run();
     if (c.cmd == Cmd::out && c.out_sync) outputs_next = true;
@@ -432,7 +471,7 @@ struct Checker {
         if (s.point >= 0) goal = points->points[static_cast<std::size_t>(s.point)].q;
         else
           for (int j = 0; j < chain.n_joints; ++j) goal[j] = units.joint_in(chain, j, c.vals[static_cast<std::size_t>(j)]);
-        return movej(s, goal, c.has_speed ? c.speed : opt.joint_speed_pct, c.has_blend ? units.angle_in(c.blend) : -1.0);
+        return movej(s, goal, c.has_speed ? c.speed : opt.joint_speed_pct, c.has_blend ? units.angle_in(c.blend) : own_blend);
       }
       case Cmd::home:
         if (!opt.stream) return fail(s, std::string("home") + kNotInRunTail);
@@ -458,8 +497,11 @@ struct Checker {
             target.linear() = kin::rotation_from_rpy(units.angle_in(c.vals[3]), units.angle_in(c.vals[4]), units.angle_in(c.vals[5]));
         }
         // (a point's line takes the program's blend only, as the runner queues it)
-        return movel(s, target, c.has_speed ? units.length_in(c.speed) : opt.linear_speed,
-                     c.has_blend && s.point < 0 ? units.length_in(c.blend) : -1.0);
+        MoveLine req;
+        req.target = target;
+        req.speed = c.has_speed ? units.length_in(c.speed) : 0.0;
+        req.blend = c.has_blend && s.point < 0 ? units.length_in(c.blend) : own_blend;
+        return movel(s, req);
       }
       case Cmd::gmove: {  // as the console's line_request: G-code mm / deg, the base frame (offline)
         const ConsoleUnits& u = kGcodeUnits;
@@ -475,12 +517,16 @@ struct Checker {
         }
         if (c.axis_mask & 0x38) target.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
         if (c.axis_mask == 0) return true;  // G1 F.. alone: modal only
-        double speed = c.rapid ? opt.max_linear_speed : (c.has_speed ? u.length_in(c.speed) : opt.linear_speed);
-        speed = std::min(speed, opt.max_linear_speed);  // senders' F is clamped, as GRBL does
-        return movel(s, target, speed, -1.0);
+        MoveLine req;
+        req.target = target;
+        req.rapid = c.rapid;
+        req.speed = c.has_speed ? u.length_in(c.speed) : 0.0;
+        req.clamp_speed = true;  // senders' F is clamped, as GRBL does
+        return movel(s, req);
       }
       case Cmd::dwell:  // queued as a motion (the console refuses it while homing runs)
         if (const std::string r = refusal("dwell", false); !r.empty()) return fail(s, r);
+        svc->dwell(c.vals[0], dry_context());
         end_run();
         outputs_next = false;
         out.cycle_time += c.vals[0];
@@ -491,6 +537,15 @@ struct Checker {
       case Cmd::tool:
       case Cmd::frame:
         if (c.frame_op == FrameOp::list) return true;
+        // Offline the arm has the flange and the base frame only: selecting them changes nothing.
+        // The console refuses a change while moves are queued; armfw's `run` waits for them first.
+        if (c.frame_op == FrameOp::select && std::string(c.name.data()) == (c.cmd == Cmd::tool ? "tool0" : "base")) {
+          if (opt.stream && queued > 0)
+            return fail(s, std::string(to_string(c.cmd)) + " refused: " + std::to_string(queued) + " move" +
+                               (queued == 1 ? " is" : "s are") + " still queued (armfw changes tools and frames at rest only: put `wait` before it)");
+          if (!opt.stream) queued = 0;
+          return true;
+        }
         return fail(s, "tool and frame changes are not checked offline yet (check this program with armfw's $C)");
       default:
         return true;  // no motion: enable, status, queries, modal-only G-code
@@ -502,8 +557,17 @@ struct Checker {
 
 ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, const prog::PointsData* points,
                            const kin::JointVector& q0, const ProgramCheckOptions& options) {
-  Checker ck{chain, prog, points, options, units_of(chain), kin::limits_from(chain), std::make_unique<kin::IkModel>(),
-             std::make_unique<kin::CartesianTrajectory>(), ProgramCheck{}, q0};
+  Checker ck{chain, prog, points, options, units_of(chain), kin::limits_from(chain), ProgramCheck{}, q0};
+  MotionSettings ms;  // armfw's console settings (App::console_config), from the options
+  ms.default_joint_speed_pct = options.joint_speed_pct;
+  ms.default_linear_speed = options.linear_speed;
+  ms.max_linear_speed = options.max_linear_speed;
+  ms.max_move_duration_s = options.max_move_duration;
+  ms.cartesian.linear_velocity = options.max_linear_speed;
+  ms.default_blend_rad = options.default_blend_rad;
+  ms.default_blend_m = options.default_blend_m;
+  ms.park = options.park;
+  ck.svc = std::make_unique<ArmService>(chain, ck.lim, options.rate_hz, ms);
   ck.q = q0;
   ck.out.ok = true;
   if (options.start_unhomed && options.homing.size() == static_cast<std::size_t>(chain.n_joints))

@@ -139,35 +139,22 @@ std::string mm_triple(const Eigen::Vector3d& p, const char* sep = ",") {
 /// A model part's refusal (a fixed line of the model's): whole, or cut after a word with "...".
 std::string refusal_text(const ModelControl& m, ModelPart p) { return bounded_text(m.refusal(p), ModelControl::kLine); }
 
-CmdError motion_error(kin::MotionStatus m) {
-  switch (m) {
-    case kin::MotionStatus::ok:
-    case kin::MotionStatus::slowed_near_singularity: return CmdError::ok;
-    case kin::MotionStatus::no_ik_solution: return CmdError::unreachable;
-    case kin::MotionStatus::goal_out_of_limits:
-    case kin::MotionStatus::path_out_of_limits: return CmdError::limits;
-    case kin::MotionStatus::branch_change: return CmdError::branch;
-    case kin::MotionStatus::singularity:
-    case kin::MotionStatus::joint_velocity: return CmdError::singular;
-    case kin::MotionStatus::bad_input:
-    case kin::MotionStatus::wrong_size:
-    case kin::MotionStatus::bad_limits:
-    case kin::MotionStatus::no_solution: return CmdError::plan_failed;
-  }
-  return CmdError::plan_failed;
-}
 }  // namespace
 
 Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* ik)
     : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints), ik_(ik) {
-  if (cfg_.home.size() != n_) {
-    cfg_.home = kin::JointVector::Zero(n_);
-    const auto& lim = ctl_.limits();
-    for (int j = 0; j < n_; ++j)
-      cfg_.home[j] = std::fmin(std::fmax(0.0, lim.lower[static_cast<std::size_t>(j)]), lim.upper[static_cast<std::size_t>(j)]);
-  }
-  tail_ = kin::JointVector::Zero(n_);
-  idle_ = [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); };
+  MotionSettings ms;
+  ms.default_joint_speed_pct = cfg_.default_joint_speed_pct;
+  ms.default_linear_speed = cfg_.default_linear_speed;
+  ms.max_linear_speed = cfg_.max_linear_speed;
+  ms.max_move_duration_s = cfg_.max_move_duration_s;
+  ms.cartesian = cfg_.cartesian;
+  ms.default_blend_rad = cfg_.default_blend_rad;
+  ms.default_blend_m = cfg_.default_blend_m;
+  ms.park = cfg_.home;
+  svc_ = std::make_unique<ArmService>(ctl_, ms);
+  cfg_.home = svc_->settings().park;  // config() shows the park pose the service uses
+  svc_->set_reply_timeout(cfg_.reply_timeout_s);
   auto t0 = std::make_unique<ToolSlot>();
   t0->def.name = "tool0";
   t0->chain = chain_;
@@ -176,7 +163,6 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
   NamedPose base;
   base.name = "base";
   frames_.push_back(base);
-  shadow_ = std::make_unique<PathShadow>();
   check_shadow_ = std::make_unique<PathShadow>();
 }
 
@@ -204,18 +190,7 @@ double Console::to_user(int j, double si) const {
   return cfg_.units.joint_out(chain_, j, si);
 }
 
-kin::JointVector Console::tail() const {
-  // Queue not empty: its end. Empty and nothing re-took the setpoint since the
-  // last move was queued (no flush, no enable): that move's goal, exactly.
-  // Otherwise the commanded position (the arm is at rest: moves are refused
-  // while it is stopping or enabling).
-  if (!ctl_.motions().empty()) return tail_;
-  const Telemetry t = ctl_.telemetry();
-  if (tail_id_ != 0 && t.generation == tail_gen_) return tail_;
-  kin::JointVector q(n_);
-  for (int j = 0; j < n_; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
-  return q;
-}
+kin::JointVector Console::tail() const { return svc_->tail(); }
 
 std::string Console::joints_text(const kin::JointVector& q) const {
   std::string s;
@@ -291,48 +266,12 @@ std::string Console::discard_sync_outputs(const char* why) {
              names.find(',') == std::string::npos ? "" : "s", why, names.c_str());
 }
 
-bool Console::request(const Request& rq, Reply& out) {
-  Request r = rq;
-  r.seq = ++seq_;
-  if (!ctl_.requests().push(r)) {
-    out.result = RtResult::busy;
-    std::snprintf(out.message, sizeof out.message, "request queue full");
-    return true;
-  }
-  const auto t0 = std::chrono::steady_clock::now();
-  for (;;) {
-    Reply p;
-    while (ctl_.replies().pop(p))
-      if (p.seq == r.seq) {
-        out = p;
-        return true;
-      }
-    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(cfg_.reply_timeout_s)) return false;
-    idle_();
-  }
-}
+bool Console::request(const Request& rq, Reply& out) { return svc_->request(rq, out); }
+bool Console::request(RequestOp op, Reply& out) { return svc_->request(op, out); }
 
-bool Console::request(RequestOp op, Reply& out) {
-  const std::uint32_t seq = ++seq_;
-  Request rq;
-  rq.op = op;
-  rq.seq = seq;
-  if (!ctl_.requests().push(rq)) {
-    out.result = RtResult::busy;
-    std::snprintf(out.message, sizeof out.message, "request queue full");
-    return true;
-  }
-  const auto t0 = std::chrono::steady_clock::now();
-  for (;;) {
-    Reply r;
-    while (ctl_.replies().pop(r))
-      if (r.seq == seq) {
-        out = r;
-        return true;
-      }
-    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(cfg_.reply_timeout_s)) return false;
-    idle_();
-  }
+void Console::answer_control(Session& s, const ControlResult& c) {
+  if (c.ok()) answer_ok(s, c.reason);
+  else answer_error(s, c.error, c.reason);
 }
 
 const char* to_string(Dialect d) {
@@ -407,15 +346,7 @@ std::string Console::homing_text(const Telemetry& t) const {
   return o;
 }
 
-std::string Console::unhomed_refusal(const Telemetry& t) const {
-  if (t.all_homed()) return "";
-  std::string j;
-  int count = 0;
-  for (int k = 0; k < n_; ++k)
-    if (!((t.homed >> k) & 1u)) j += fmt("%s%d", count++ ? ", " : " ", k + 1);
-  return fmt("joint%s%s not homed: run `home` (or `home jN`); until then only joint jogs move, at %.0f %%", count == 1 ? "" : "s",
-             j.c_str(), 100.0 * ctl_.config().unhomed_jog_scale);
-}
+std::string Console::unhomed_refusal(const Telemetry& t) const { return svc_->unhomed_reason(t); }
 
 // The position field of a GRBL report, in mm, of the active tool's point: `MPos:` (the base
 // frame) with no user frame active; with one, `WPos:` in it and `WCO:` its origin in the
@@ -572,50 +503,25 @@ void Console::drain_events(std::string& native, std::string& grbl) {
 }
 
 bool Console::motion_state_ok(Session& s) {
-  const Telemetry t = ctl_.telemetry();
-  switch (t.state) {
-    case ArmState::idle:
-    case ArmState::moving: return true;
-    case ArmState::jogging:
-      answer_error(s, CmdError::bad_state, "a jog is running: jog stop (or 0x85) first");
-      return false;
-    case ArmState::homing:
-      answer_error(s, CmdError::bad_state, "homing runs: `wait` for it (or stop it)");
-      return false;
-    case ArmState::freedrive:
-      answer_error(s, CmdError::bad_state, "free-drive is on: freedrive off first");
-      return false;
-    case ArmState::enabling:
-      answer_error(s, CmdError::bad_state, "drives still enabling; retry (or wait)");
-      return false;
-    case ArmState::boot:
-    case ArmState::disabled:
-      answer_error(s, CmdError::bad_state, fmt("arm is %s: send enable first", to_string(t.state)));
-      return false;
-    case ArmState::stopping:
-      answer_error(s, CmdError::bad_state, "arm is stopping; retry when idle");
-      return false;
-    case ArmState::fault:
-      answer_error(s, CmdError::fault, fmt("arm in fault (%s): send reset, then enable", bounded_text(t.fault_text).c_str()));
-      return false;
-    case ArmState::estop:
-      answer_error(s, CmdError::fault, "arm in e-stop: send reset, then enable");
-      return false;
-  }
+  const MoveResult r = svc_->state_check();
+  if (r.ok()) return true;
+  answer_error(s, r.error, r.reason);
   return false;
 }
 
 MoveJoints Console::joint_request(const Command& c) const {
   MoveJoints m;
-  if (c.cmd == Cmd::park) {
-    m.goal = cfg_.home;
-    m.speed_pct = cfg_.default_joint_speed_pct;
-    return m;
-  }
+  if (c.cmd == Cmd::park) return svc_->park_request();
   m.goal = kin::JointVector(n_);
   for (int j = 0; j < n_; ++j) m.goal[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
   m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
   m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : -1.0;
+  return m;
+}
+
+MoveJoints Console::step_joint_request(const Command& c, const StepParams* step) const {
+  MoveJoints m = joint_request(c);
+  if (step != nullptr && step->point != nullptr && c.cmd == Cmd::movej) m.goal = *step->point;  // exactly as taught (SI)
   return m;
 }
 
@@ -627,206 +533,119 @@ bool Console::homed_ok(Session& s) {
   return false;
 }
 
-void Console::queue(Session& s, const MoveJoints& req) {
-  if (!s.check_mode && !motion_state_ok(s)) return;
-  if (!homed_ok(s)) return;  // an absolute joint target means nothing in coordinates not established
-  const kin::JointVector& goal = req.goal;
-  // the feed override (GRBL 0x90..0x94) scales moves queued from now on
-  const double pct = std::fmin(100.0, std::fmax(kMinJointSpeedPct, (req.speed_pct > 0 ? req.speed_pct : cfg_.default_joint_speed_pct) *
-                                                                       feed_pct_ / 100.0));
-  const auto& lim = ctl_.limits();
-  for (int j = 0; j < n_; ++j) {
-    const auto ju = static_cast<std::size_t>(j);
-    if (goal[j] < lim.lower[ju] || goal[j] > lim.upper[ju]) {
-      const ConsoleUnits& u = cfg_.units;
-      answer_error(s, CmdError::limits, fmt("joint %d = %s outside [%s, %s]", j + 1, u.joint_text(chain_, j, goal[j]).c_str(),
-                                            u.joint_text(chain_, j, lim.lower[ju]).c_str(),
-                                            u.joint_text(chain_, j, lim.upper[ju]).c_str()));
+// ---------------------------------------------------------------------------
+// Moves and dwells: planned, checked and queued by the arm service (arm_service.hpp);
+// the console builds the request and renders the result.
+// ---------------------------------------------------------------------------
+
+MoveContext Console::move_context(DryRun* dry, const StepParams* step) const {
+  MoveContext cx;
+  cx.dry = dry;
+  cx.chain = &tool_slot().chain;
+  cx.ik = ik_solver();
+  cx.feed_pct = feed_pct_;
+  cx.outputs = std::span<const OutputChange>(sync_out_.data(), n_sync_out_);
+  if (step != nullptr) {
+    cx.step_blend = step->blend;
+    cx.next_line = step->next_line;
+  }
+  return cx;
+}
+
+DryRun Console::dry_run(Session& s) {
+  DryRun d;
+  d.tail = s.check_tail;
+  d.time = s.check_time;
+  d.run_base = s.check_run_base;
+  d.blends = s.check_blends;
+  d.shadow = check_shadow_.get();
+  return d;
+}
+
+void Console::keep_dry_run(Session& s, const DryRun& d) {
+  s.check_tail = d.tail;
+  s.check_time = d.time;
+  s.check_run_base = d.run_base;
+  s.check_blends = d.blends;
+}
+
+std::string Console::blend_text(const MoveResult& r) {
+  return r.blended && r.blend > 0 ? " blend=" + fixed(r.blend, kTimeDecimals) + "s" : std::string();
+}
+
+void Console::answer_refusal(Session& s, const char* what, const MoveResult& r) {
+  const ConsoleUnits& u = cfg_.units;
+  switch (r.refusal) {
+    case MoveRefusal::none: return;
+    case MoveRefusal::arm_state:
+    case MoveRefusal::not_homed: answer_error(s, r.error, r.reason); return;
+    case MoveRefusal::joint_limit:
+      answer_error(s, r.error, fmt("joint %d = %s outside [%s, %s]", r.joint + 1, u.joint_text(chain_, r.joint, r.value).c_str(),
+                                   u.joint_text(chain_, r.joint, r.lower).c_str(), u.joint_text(chain_, r.joint, r.upper).c_str()));
+      return;
+    case MoveRefusal::linear_speed:
+      answer_error(s, r.error, fmt("linear speed %g %s/s outside [%g, %g]", u.length_out(r.speed), u.length_name(),
+                                   u.length == LengthUnit::mm ? kMinLinearSpeedMmS : kMinLinearSpeedMmS * 1e-3,
+                                   u.length_out(cfg_.max_linear_speed)));
+      return;
+    case MoveRefusal::plan: {
+      if (std::string_view(what) != "movel") {
+        answer_error(s, r.error, fmt("%s refused: %s", what, kin::to_string(r.status)));
+        return;
+      }
+      const int L = u.length == LengthUnit::mm ? 1 : 4;
+      const Eigen::Vector3d at = user_frame().inverse() * r.position;
+      std::string where = fmt("at s=%s (x=%s y=%s z=%s %s)", fixed(r.s, 2).c_str(), fixed(u.length_out(at.x()), L).c_str(),
+                              fixed(u.length_out(at.y()), L).c_str(), fixed(u.length_out(at.z()), L).c_str(), u.length_name());
+      if (r.joint >= 0) where += fmt(" joint %d", r.joint + 1);
+      answer_error(s, r.error, fmt("movel refused: %s %s", kin::to_string(r.status), where.c_str()));
       return;
     }
+    case MoveRefusal::duration:
+      answer_error(s, r.error, fmt("%s refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
+                                   "(raise the speed); nothing queued", what, r.duration, cfg_.max_move_duration_s));
+      return;
+    case MoveRefusal::queue_full:
+      answer_error(s, r.error, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
+      return;
   }
-  MotionItem* m = ctl_.motions().back();
-  if (m == nullptr) {
-    answer_error(s, CmdError::busy, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
+}
+
+void Console::queue(Session& s, const MoveJoints& req, const StepParams* step) {
+  DryRun dry;
+  if (s.check_mode) dry = dry_run(s);
+  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step));
+  if (!r.ok()) {
+    answer_refusal(s, "movej", r);
     return;
   }
-  // The one plan of the move, from the queue's end: the RT thread runs it as it is when
-  // the arm is there at start (it plans again only when it is not: Telemetry::joint_replans).
-  JointMove& jm = m->payload.emplace<JointMove>();
-  jm.goal = goal;
-  jm.override = pct / 100.0;
-  kin::MovejOptions o;
-  o.override = jm.override;
-  const kin::MotionStatus ms = kin::plan_movej(lim, kin::JointState::rest(s.check_mode ? s.check_tail : tail()), goal, o, jm.plan);
-  if (!kin::is_ok(ms)) {
-    answer_error(s, motion_error(ms), fmt("movej refused: %s", kin::to_string(ms)));
-    return;
-  }
-  if (!duration_ok(s, "movej", jm.plan.duration)) return;
-  const double dur = jm.plan.duration;  // (jm is replaced when the move goes as a blended segment)
-  const PathResult pr = queue_path(s, m, false, goal, kin::Pose::Identity(), cfg_.cartesian, pct / 100.0,
-                                   blend_of(req.blend, false));
-  const std::string blended = pr.used && pr.blend > 0 ? " blend=" + fixed(pr.blend, kTimeDecimals) + "s" : std::string();
-  if (!pr.used) jm.blend = blend_of(req.blend, false);  // the controller blends it into the next joint move
   if (s.check_mode) {  // checked, not queued
-    s.check_tail = goal;
-    if (!pr.used) s.check_time += dur, s.check_blends = false;
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(dur, kTimeDecimals) + "s" + blended);
+    keep_dry_run(s, dry);
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(r.duration, kTimeDecimals) + "s" + blend_text(r));
     return;
   }
-  m->id = next_id_++;
-  take_sync_outputs(*m);
-  ctl_.motions().commit();
-  tail_ = goal;
-  tail_id_ = m->id;
-  shadow_tail_id_ = pr.used ? m->id : 0;
-  tail_gen_ = ctl_.telemetry().generation;
-  answer_ok(s, fmt("queued id=%u duration=%ss%s", unsigned(tail_id_), fixed(dur, kTimeDecimals).c_str(), blended.c_str()));
+  n_sync_out_ = 0;
+  answer_ok(s, fmt("queued id=%u duration=%ss%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(), blend_text(r).c_str()));
 }
 
-// ---------------------------------------------------------------------------
-// Blended runs (docs/motion.md#blending)
-// ---------------------------------------------------------------------------
-// A move with a blend tolerance, and a move following one still queued, goes to the
-// controller as a PathMove: its segment planned alone from rest at the previous target and
-// its overlap with the segment before it chosen here by kin::PathBlendQueue (every joint's
-// velocity, acceleration and jerk, the tool speed of lines, IK at every sample of a
-// line-line overlap and the corner's tolerance, checked at the control rate on the run's
-// time base). The controller starts the segment at that time if it still can
-// (kPathLead: how far ahead of the run's newest sample a typed move is placed), else from
-// rest where the one before ends.
-
-double Console::blend_of(double given, bool line) const {
-  if (given >= 0) return given;
-  if (step_blend_ >= 0) return step_blend_;
-  return line ? cfg_.default_blend_m : cfg_.default_blend_rad;
-}
-
-Console::PathResult Console::queue_path(Session& s, MotionItem* m, bool line, const kin::JointVector& goal,
-                                        const kin::Pose& target, const kin::CartesianLimits& cl, double override,
-                                        double tol) {
-  PathResult r;
-  if (!std::isfinite(tol) || tol < 0) tol = 0;
-  PathShadow& q = s.check_mode ? *check_shadow_ : *shadow_;
-  const kin::Chain* chain = &tool_slot().chain;
-  bool linked = false;
-  double t_earliest = 0;
-  if (s.check_mode) {
-    linked = s.check_blends && q.size() > 0 && q.core.cfg.chain == chain;
-  } else {
-    const Telemetry t = ctl_.telemetry();
-    linked = shadow_tail_id_ != 0 && shadow_tail_id_ == tail_id_ && t.generation == tail_gen_ && t.done_id < tail_id_ &&
-             !ctl_.motions().empty() && q.size() > 0 && q.core.cfg.chain == chain && q.at(q.size() - 1).tolerance > 0;
-    if (linked && t.path_time >= 0) t_earliest = t.path_time + kPathLead;
-  }
-  // A plain move: no tolerance and nothing to blend out of; a joint move with a tolerance
-  // that no line follows (as far as the console knows: a program's next motion) blends in the
-  // controller's joint queue (JointMove::blend).
-  if (!linked && !(tol > 0 && (line || step_next_line_))) return r;
-  if (linked) {
-    if (q.size() >= 2) q.retire(q.at(q.size() - 1).start);  // keep the last two: the checks' window may reach both
-  } else {
-    kin::PathBlendConfig pc;
-    pc.limits = ctl_.limits();
-    pc.rate = 1.0 / ctl_.period_s();
-    pc.chain = chain;
-    pc.ik = ik_solver();
-    pc.joint_share = 0.5;  // blended joint segments share acceleration and jerk with their neighbour
-    q.reset(pc, s.check_mode ? s.check_tail : tail());
-    if (s.check_mode) s.check_run_base = s.check_time;
-  }
-  kin::PathBlendReport rep;
-  kin::BlendStatus st;
-  if (line) {
-    const kin::MovelOptions mo;
-    st = q.append_line(target, cl, mo, tol, t_earliest, &rep);
-  } else {
-    st = q.append_joint(goal, override, tol, t_earliest, &rep);
-  }
-  if (!kin::is_ok(st) || st == kin::BlendStatus::zero_length) {  // the plain move (checked already) instead
-    if (s.check_mode) s.check_blends = false;
-    else shadow_tail_id_ = 0;
-    return r;
-  }
-  const kin::PathSegment& g = q.at(q.size() - 1);
-  r.used = true;
-  r.blend = rep.blend;
-  r.corner = rep.corner;
-  r.limited_by = rep.limited_by;
-  r.end = g.end();
-  if (s.check_mode) {
-    s.check_blends = tol > 0;
-    s.check_time = s.check_run_base + g.end();
-    return r;
-  }
-  PathMove& pm = m->payload.emplace<PathMove>();
-  pm.seg = g;
-  pm.after = linked ? tail_id_ : 0;
-  pm.override = override;
-  return r;
-}
-
-void Console::queue(Session& s, const MoveLine& req) {
-  if (!s.check_mode && !motion_state_ok(s)) return;
-  if (!homed_ok(s)) return;
-  double speed = req.rapid ? cfg_.max_linear_speed : (req.speed > 0 ? req.speed : cfg_.default_linear_speed);
-  if (req.clamp_speed && speed > cfg_.max_linear_speed) speed = cfg_.max_linear_speed;
-  if (feed_pct_ != 100) speed = std::fmin(speed * feed_pct_ / 100.0, cfg_.max_linear_speed);  // feed override
-  const kin::Pose& target = req.target;
-  if (!(speed >= kMinLinearSpeedMmS * 1e-3) || speed > cfg_.max_linear_speed + 1e-12) {
-    const ConsoleUnits& u = cfg_.units;
-    answer_error(s, CmdError::out_of_range,
-                 fmt("linear speed %g %s/s outside [%g, %g]", u.length_out(speed), u.length_name(),
-                     u.length == LengthUnit::mm ? kMinLinearSpeedMmS : kMinLinearSpeedMmS * 1e-3,
-                     u.length_out(cfg_.max_linear_speed)));
+void Console::queue(Session& s, const MoveLine& req, const StepParams* step) {
+  DryRun dry;
+  if (s.check_mode) dry = dry_run(s);
+  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step));
+  if (!r.ok()) {
+    answer_refusal(s, "movel", r);
     return;
   }
-  MotionItem* m = ctl_.motions().back();
-  if (m == nullptr) {
-    answer_error(s, CmdError::busy, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
-    return;
-  }
-  kin::CartesianLimits cl = cfg_.cartesian;
-  cl.linear_velocity = speed;
-  kin::MovelOptions mo;
-  kin::PathReport rep;
-  const kin::JointVector q0 = s.check_mode ? s.check_tail : tail();
-  kin::CartesianTrajectory& path = m->payload.emplace<CartesianMove>().path;
-  const kin::MotionStatus ms = kin::plan_movel(tool_slot().chain, q0, target, cl, mo, ik_solver(), path, &rep);
-  if (!kin::is_ok(ms)) {
-    const ConsoleUnits& u = cfg_.units;
-    const int L = u.length == LengthUnit::mm ? 1 : 4;
-    const Eigen::Vector3d at = user_frame().inverse() * rep.position;
-    std::string where = fmt("at s=%s (x=%s y=%s z=%s %s)", fixed(rep.s, 2).c_str(), fixed(u.length_out(at.x()), L).c_str(),
-                            fixed(u.length_out(at.y()), L).c_str(), fixed(u.length_out(at.z()), L).c_str(), u.length_name());
-    if (rep.joint >= 0) where += fmt(" joint %d", rep.joint + 1);
-    answer_error(s, motion_error(ms), fmt("movel refused: %s %s", kin::to_string(ms), where.c_str()));
-    return;
-  }
-  if (!duration_ok(s, "movel", path.duration)) return;
-  path.ik = ik_solver();
-  const double dur = path.duration;  // (path is replaced when the move goes as a blended segment)
-  const double slow = path.slowdown;
-  const kin::JointVector goal = path.goal;
-  const PathResult pr = queue_path(s, m, true, goal, target, cl, 1.0, blend_of(req.blend, true));
-  const std::string blended = pr.used && pr.blend > 0 ? " blend=" + fixed(pr.blend, kTimeDecimals) + "s" : std::string();
   if (s.check_mode) {  // checked, not queued
-    s.check_tail = goal;
-    if (!pr.used) s.check_time += dur, s.check_blends = false;
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(dur, kTimeDecimals) + "s" + blended);
+    keep_dry_run(s, dry);
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(r.duration, kTimeDecimals) + "s" + blend_text(r));
     return;
   }
-  feed_now_ = speed;
-  m->id = next_id_++;
-  take_sync_outputs(*m);
-  tail_ = goal;
-  tail_id_ = m->id;
-  shadow_tail_id_ = pr.used ? m->id : 0;
-  tail_gen_ = ctl_.telemetry().generation;
-  ctl_.motions().commit();
-  answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(tail_id_), fixed(dur, kTimeDecimals).c_str(),
-                   ms == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", slow).c_str() : "",
-                   blended.c_str()));
+  feed_now_ = r.speed;
+  n_sync_out_ = 0;
+  answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(),
+                   r.status == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", r.slowdown).c_str() : "",
+                   blend_text(r).c_str()));
 }
 
 bool Console::jog_duration_ok(Session& s, double duration_s) {
@@ -836,37 +655,20 @@ bool Console::jog_duration_ok(Session& s, double duration_s) {
   return false;
 }
 
-bool Console::duration_ok(Session& s, const char* what, double duration_s) {
-  if (std::isfinite(duration_s) && duration_s <= cfg_.max_move_duration_s) return true;
-  answer_error(s, CmdError::out_of_range, fmt("%s refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
-                                              "(raise the speed); nothing queued", what, duration_s, cfg_.max_move_duration_s));
-  return false;
-}
-
 void Console::queue_dwell(Session& s, double secs) {
+  DryRun dry;
+  if (s.check_mode) dry = dry_run(s);
+  const MoveResult r = svc_->dwell(secs, move_context(s.check_mode ? &dry : nullptr, nullptr));
+  if (!r.ok()) {
+    answer_refusal(s, "dwell", r);
+    return;
+  }
   if (s.check_mode) {
-    s.check_time += secs;
-    s.check_blends = false;
+    keep_dry_run(s, dry);
     answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked");
     return;
   }
-  if (!motion_state_ok(s)) return;
-  MotionItem* m = ctl_.motions().back();
-  if (m == nullptr) {
-    answer_error(s, CmdError::busy, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
-    return;
-  }
-  const kin::JointVector q = tail();
-  DwellMove& d = m->payload.emplace<DwellMove>();
-  d.at = q;
-  d.seconds = secs;
-  m->id = next_id_++;
-  m->n_outputs = 0;  // M62 / M63 wait for a move
-  tail_ = q;
-  tail_id_ = m->id;
-  tail_gen_ = ctl_.telemetry().generation;
-  ctl_.motions().commit();
-  answer_ok(s, fmt("queued id=%u dwell=%ss", unsigned(tail_id_), fixed(secs, kTimeDecimals).c_str()));
+  answer_ok(s, fmt("queued id=%u dwell=%ss", unsigned(r.id), fixed(secs, kTimeDecimals).c_str()));
 }
 
 // x y z [rx ry rz] in the active user frame (orientation kept when not given) -> the base frame.
@@ -1004,25 +806,12 @@ void Console::execute(Session& s, std::string_view line) {
     answer_error(s, pr.error, pr.message.data());
     return;
   }
+  dispatch(s, c, nullptr);
+}
+
+void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
   Reply r;
-  auto reply = [&](const std::string& text) {  // r answered with `text`
-    switch (r.result) {
-      case RtResult::ok: answer_ok(s, text); return;
-      case RtResult::bad_state: answer_error(s, CmdError::bad_state, text); return;
-      case RtResult::fault: answer_error(s, CmdError::fault, text); return;
-      case RtResult::busy: answer_error(s, CmdError::busy, text); return;
-      case RtResult::start_moved:
-      case RtResult::plan_failed: answer_error(s, CmdError::plan_failed, text); return;
-      case RtResult::not_homed: answer_error(s, CmdError::not_homed, text); return;
-    }
-  };
-  auto simple = [&](RequestOp op) {
-    if (!request(op, r)) {
-      answer_error(s, CmdError::timeout, fmt("control thread did not answer %s", to_string(op)));
-      return;
-    }
-    reply(bounded_text(r.message));
-  };
+  auto simple = [&](RequestOp op) { answer_control(s, svc_->control(op)); };
   // While a program runs, motion comes from the program only: a move, jog, dwell, homing or
   // M62/M63 from any console is refused (stop, hold, resume, abort and queries still work).
   if (run_ && &s != &run_->ps && !s.check_mode && moves_arm(c)) {
@@ -1064,12 +853,8 @@ void Console::execute(Session& s, std::string_view line) {
         answer_ok(s, "check mode: not run");
         return;
       }
-      if (!request(RequestOp::enable, r)) {
-        answer_error(s, CmdError::timeout, "control thread did not answer enable");
-        return;
-      }
-      if (r.result != RtResult::ok) {
-        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, bounded_text(r.message));
+      if (const ControlResult e = svc_->enable(); !e.ok()) {
+        answer_control(s, e);
         return;
       }
       s.enabling = true;
@@ -1101,15 +886,22 @@ void Console::execute(Session& s, std::string_view line) {
     case Cmd::park:
     case Cmd::movej:
       if (c.at_point) queue_at_point(s, c);
-      else queue(s, joint_request(c));
+      else queue(s, step_joint_request(c, step), step);
       return;
     case Cmd::movel:
       if (c.at_point) {
         queue_at_point(s, c);
         return;
       }
+      if (step != nullptr && step->point != nullptr) {  // a program's movel @NAME: the point's joints
+        MoveLine m;
+        m.target = tcp(*step->point);  // where they put the active tool, on a straight line
+        m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
+        queue(s, m, step);
+        return;
+      }
       [[fallthrough]];
-    case Cmd::gmove: queue(s, line_request(c, s.check_mode ? &s.check_tail : nullptr)); return;
+    case Cmd::gmove: queue(s, line_request(c, s.check_mode ? &s.check_tail : nullptr), step); return;
     case Cmd::dwell: queue_dwell(s, c.vals[0]); return;
     case Cmd::fk: do_fk(s, c); return;
     case Cmd::ik: do_ik(s, c); return;
@@ -1183,51 +975,20 @@ void Console::execute(Session& s, std::string_view line) {
       return;
     }
     case Cmd::freedrive_on:
-      if (s.check_mode) {
-        answer_ok(s, "check mode: not run");
-        return;
-      }
-      if (!request(RequestOp::freedrive_on, r)) {
-        answer_error(s, CmdError::timeout, "control thread did not answer freedrive_on");
-        return;
-      }
-      if (const ModelControl* m = ctl_.model(); r.result != RtResult::ok && m != nullptr && m->configured() &&
-                                                !m->available(ModelPart::freedrive)) {
-        // The reply's fixed line may hold only the start of the model's refusal: the answer
-        // gives it whole, from the model.
-        const std::string why = refusal_text(*m, ModelPart::freedrive);
-        const std::string said = r.message;
-        const std::size_t at = said.find(why.substr(0, 40));
-        if (at != std::string::npos) {
-          reply(said.substr(0, at) + why);
-          return;
-        }
-      }
-      reply(bounded_text(r.message));
-      return;
-    case Cmd::collision_on:
-    case Cmd::collision_off: {
-      const bool on = c.cmd == Cmd::collision_on;
-      if (s.check_mode) {
-        answer_ok(s, "check mode: not run");
-        return;
-      }
-      if (!ctl_.set_collision_detection(on)) {
-        const ModelControl* m = ctl_.model();
-        answer_error(s, CmdError::bad_state,
-                     fmt("collision detection unavailable: %s",
-                         m != nullptr && m->configured() ? refusal_text(*m, ModelPart::collision).c_str() : "no dynamic model"));
-        return;
-      }
-      answer_ok(s, on ? "collision detection on" : "collision detection off");
-      return;
-    }
     case Cmd::freedrive_off:
       if (s.check_mode) {
         answer_ok(s, "check mode: not run");
         return;
       }
-      simple(RequestOp::freedrive_off);
+      answer_control(s, svc_->freedrive(c.cmd == Cmd::freedrive_on));
+      return;
+    case Cmd::collision_on:
+    case Cmd::collision_off:
+      if (s.check_mode) {
+        answer_ok(s, "check mode: not run");
+        return;
+      }
+      answer_control(s, svc_->collision_detection(c.cmd == Cmd::collision_on));
       return;
   }
 }
@@ -1503,30 +1264,19 @@ void Console::do_home(Session& s, const Command& c) {
     answer_ok(s, "check mode: not run");
     return;
   }
-  Request rq(RequestOp::home, 0);
-  rq.joints = c.home_joint >= 0 ? static_cast<std::uint16_t>(1u << c.home_joint) : 0;
-  Reply r;
-  if (!request(rq, r)) {
-    answer_error(s, CmdError::timeout, "control thread did not answer home");
+  const ControlResult h = svc_->home(c.home_joint);
+  if (!h.ok()) {
+    answer_control(s, h);
     return;
-  }
-  switch (r.result) {
-    case RtResult::ok: break;
-    case RtResult::busy: answer_error(s, CmdError::busy, bounded_text(r.message)); return;
-    case RtResult::fault: answer_error(s, CmdError::fault, bounded_text(r.message)); return;
-    case RtResult::not_homed:
-    case RtResult::bad_state:
-    case RtResult::start_moved:
-    case RtResult::plan_failed: answer_error(s, CmdError::bad_state, bounded_text(r.message)); return;
   }
   jog_tail_valid_ = false;
   if (c.cmd == Cmd::grbl_home) {  // GRBL: $H answers when the cycle has ended (state Home meanwhile)
     s.homing = true;
-    if (s.dialect == Dialect::grbl) s.out += fmt("[MSG:%s]\n", bounded_text(r.message).c_str());
+    if (s.dialect == Dialect::grbl) s.out += fmt("[MSG:%s]\n", h.reason.c_str());
     settle(s);
     return;
   }
-  answer_ok(s, bounded_text(r.message));
+  answer_ok(s, h.reason);
 }
 
 void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit) {
@@ -1817,12 +1567,8 @@ void Console::do_grbl(Session& s, const Command& c) {
         answer_ok(s, "already unlocked");
         return;
       }
-      if (!request(RequestOp::enable, r)) {
-        answer_error(s, CmdError::timeout, "control thread did not answer enable");
-        return;
-      }
-      if (r.result != RtResult::ok) {
-        answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, bounded_text(r.message));
+      if (const ControlResult e = svc_->enable(); !e.ok()) {
+        answer_control(s, e);
         return;
       }
       s.enabling = true;

@@ -248,25 +248,23 @@ void Console::do_programs(Session& s) {
 void Console::exec_step(Session& ps, const prog::Program& p, const prog::ProgramStep& st) {
   const Session* prev = sel_;
   sel_ = &ps;
-  // The step's blend tolerance (blend=, or the G-code program's G64 P / G61) for the move it
-  // queues, in SI; none given (< 0): the configured default (blend_of).
+  // The step as the loader parsed it, with its parameters: the blend tolerance (blend=, or
+  // the G-code program's G64 P / G61) in SI, none given (< 0): the configured default; whether
+  // the next motion is a line; a point's joints.
   const bool gcode = static_cast<std::size_t>(st.file) < p.files.size() && prog::is_gcode_file(p.files[static_cast<std::size_t>(st.file)]);
-  step_blend_ = st.blend < 0 ? -1.0
-                : gcode      ? st.blend * 1e-3  // G-code: mm
-                : st.cmd.cmd == Cmd::movej ? cfg_.units.angle_in(st.blend)
-                                           : cfg_.units.length_in(st.blend);
-  step_next_line_ = &st >= p.steps.data() && &st < p.steps.data() + p.steps.size() &&
-                    prog::next_motion_is_line(p, static_cast<std::size_t>(&st - p.steps.data()));
-  if (st.point >= 0 && st.cmd.cmd == Cmd::movel && static_cast<std::size_t>(st.point) < points_.points.size()) {
-    MoveLine m;
-    m.target = tcp(points_.points[static_cast<std::size_t>(st.point)].q);
-    m.speed = st.cmd.has_speed ? cfg_.units.length_in(st.cmd.speed) : 0.0;
-    queue(ps, m);
-  } else {
-    execute(ps, st.text);
-  }
-  step_blend_ = -1;
-  step_next_line_ = false;
+  StepParams sp;
+  sp.blend = st.blend < 0 ? -1.0
+             : gcode      ? st.blend * 1e-3  // G-code: mm
+             : st.cmd.cmd == Cmd::movej ? cfg_.units.angle_in(st.blend)
+                                        : cfg_.units.length_in(st.blend);
+  sp.next_line = &st >= p.steps.data() && &st < p.steps.data() + p.steps.size() &&
+                 prog::next_motion_is_line(p, static_cast<std::size_t>(&st - p.steps.data()));
+  if (st.point >= 0 && static_cast<std::size_t>(st.point) < points_.points.size() &&
+      points_.points[static_cast<std::size_t>(st.point)].q.size() == n_)
+    sp.point = &points_.points[static_cast<std::size_t>(st.point)].q;
+  ++ps.lines_done;
+  ps.modal = st.modal;  // the G-code modal state after the line, as parsing it would leave it
+  dispatch(ps, st.cmd, &sp);
   sel_ = prev;
 }
 
@@ -638,12 +636,6 @@ void Console::do_record(Session& s, const Command& c) {
 // ---------------------------------------------------------------------------
 // Digital outputs
 // ---------------------------------------------------------------------------
-
-void Console::take_sync_outputs(MotionItem& m) {
-  m.n_outputs = n_sync_out_;
-  for (std::size_t k = 0; k < n_sync_out_; ++k) m.outputs[k] = sync_out_[k];
-  n_sync_out_ = 0;
-}
 
 void Console::do_out(Session& s, const Command& c) {
   const auto& outs = cfg_.outputs;

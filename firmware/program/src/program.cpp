@@ -361,6 +361,7 @@ struct Loader {
       return fail(file, it.line, std::string(fw::to_string(st.cmd.cmd)) + " is not allowed in a program (interactive only)");
     if (st.cmd.cmd == fw::Cmd::none && text.empty()) return true;
     if (st.point >= 0 && st.cmd.cmd == fw::Cmd::movel) st.cmd.count = 0;  // the point's target, not numbers
+    st.modal = modal;
     st.text = std::move(text);
     if (prog.steps.size() >= ctx.limits.max_steps)
       return fail(file, it.line, "the program expands to more than " + std::to_string(ctx.limits.max_steps) + " steps");

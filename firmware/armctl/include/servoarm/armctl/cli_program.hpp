@@ -5,10 +5,11 @@
 //
 // Whole-program validation offline: the program is loaded as armfw loads it
 // (servoarm_program: the console's parser, repeats and calls expanded, @points resolved),
-// then every move is planned from the pose the previous line leaves, with the firmware's
-// own IK (firmware_ik_solver, as `armctl plan movel`): movej and park / G28 against the joint
-// limits, movel / G0 / G1 with movel's path check (IK at every knot, limits, branch,
-// singularity). By default as armfw's `run` runs a program: `home`, `enable`, `disable` are
+// then every move is planned from the pose the previous line leaves by the arm service's dry
+// run (ArmService: the code armfw's console queues moves with), with the firmware's own IK
+// (firmware_ik_solver): movej and park / G28 against the joint limits, movel / G0 / G1 with
+// movel's path check (IK at every knot, limits, branch, singularity); the knots of every
+// accepted move are in ProgramCheck::knots. By default as armfw's `run` runs a program: `home`, `enable`, `disable` are
 // refused inside it (home the arm before `run`) and an unhomed arm (--unhomed) runs nothing.
 // With --stream, as lines sent one by one to the console: `home` is the homing cycle,
 // as the console runs it: it leaves
@@ -29,6 +30,16 @@ namespace servoarm::fw {
 
 struct FwConfig;  // servoarm/config/config.hpp
 
+/// One accepted move as the firmware plans it (the arm service's dry run): its knots.
+struct ProgramKnot {
+  int line = 0;             ///< the step's line in its file
+  kin::JointVector goal;    ///< where the move ends
+  double duration = 0;      ///< s: the move planned alone, rest to rest
+  bool blended = false;     ///< a blended path segment
+  double blend = 0;         ///< s: its overlap with the segment before it
+  double segment_end = 0;   ///< s: its end on its blended run's time base
+};
+
 /// What checking a loaded program found.
 struct ProgramCheck {
   bool ok = false;
@@ -39,6 +50,7 @@ struct ProgramCheck {
   double cycle_time_exact = 0;  ///< s: every move to rest, plus the dwells
   int blended_corners = 0;  ///< corners the plan blends (each joins two moves without a stop)
   kin::JointVector q_end;   ///< where the program leaves the arm
+  std::vector<ProgramKnot> knots;  ///< every accepted move, in order
 };
 
 /// How one joint homes, as armfw's configuration says (drive.homing.method, .offset).

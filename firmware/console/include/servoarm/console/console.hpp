@@ -31,6 +31,7 @@
 #include "servoarm/program/points.hpp"
 #include "servoarm/program/program.hpp"
 #include "servoarm/rt/controller.hpp"
+#include "servoarm/service/arm_service.hpp"
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 
@@ -163,7 +164,7 @@ class Console {
 
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
   /// Single-threaded tests set it to run a control cycle.
-  void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
+  void set_idle(std::function<void()> idle) { svc_->set_idle(std::move(idle)); }
 
   /// Status line as printed by `status` (without "ok ").
   std::string status_text() const;
@@ -185,8 +186,8 @@ class Console {
   /// The canonical request of a movej, park or G28 command (Cmd::movej, Cmd::park).
   MoveJoints joint_request(const Command& c) const;
   /// Validate and queue a request; the answer (ok queued ... | error: ...) goes to s.out.
-  void queue(Session& s, const MoveLine& m);
-  void queue(Session& s, const MoveJoints& m);
+  void queue(Session& s, const MoveLine& m) { queue(s, m, nullptr); }
+  void queue(Session& s, const MoveJoints& m) { queue(s, m, nullptr); }
 
   /// GRBL dialect: the start-up / reset banner into s.out (native: nothing).
   void greet(Session& s);
@@ -220,11 +221,16 @@ class Console {
   std::string program_text() const;
 
   /// Motions queued by this console so far (ids 1..n).
-  std::uint32_t last_motion_id() const { return next_id_ - 1; }
+  std::uint32_t last_motion_id() const { return svc_->last_motion_id(); }
+  /// The arm service the console renders (moves, dwells: planned, checked and queued there).
+  ArmService& service() { return *svc_; }
 
  private:
+  /// A request to the control thread and its reply (the arm service's; false: no reply in time).
   bool request(RequestOp op, Reply& out);
   bool request(const Request& rq, Reply& out);
+  /// An arm-control result answered: `ok <line>` or `error: <code> <line>`.
+  void answer_control(Session& s, const ControlResult& c);
   void do_jog(Session& s, const Command& c);
   void do_grbl_jog(Session& s, const Command& c);
   /// Send a jog request; answer ok / the error. `clamped` >= 0: the target was cut at that
@@ -261,8 +267,6 @@ class Console {
   bool motion_state_ok(Session& s);
   /// Resolve a pending `enable` / `wait` whose outcome is known. True while still blocked.
   bool settle(Session& s);
-  /// out_of_range answer when a planned move would take longer than max_move_duration_s.
-  bool duration_ok(Session& s, const char* what, double duration_s);
   /// The same for an increment jog (a lower bound of its duration: distance over its speed).
   bool jog_duration_ok(Session& s, double duration_s);
   void queue_dwell(Session& s, double secs);
@@ -282,37 +286,33 @@ class Console {
   ConsoleConfig cfg_;
   const kin::Chain& chain_;
   int n_;
-  std::uint32_t seq_ = 0;
-  std::uint32_t next_id_ = 1;
-  kin::JointVector tail_;
-  std::uint32_t tail_id_ = 0;  ///< id of the motion whose goal tail_ holds (0: none)
-  std::uint64_t tail_gen_ = 0; ///< controller generation when tail_ was set
-  // Blended runs (docs/motion.md#blending): the segments of the moves queued last, planned
-  // and blended here; the controller runs copies of them (PathMove). shadow_tail_id_: the
-  // motion the newest segment was queued as (0: none). check_shadow_: the same for check mode.
-  using PathShadow = kin::PathBlendQueue<4>;
-  std::unique_ptr<PathShadow> shadow_, check_shadow_;
-  std::uint32_t shadow_tail_id_ = 0;
-  /// The blend tolerance of the program step being queued (SI; < 0: none given), set by exec_step.
-  double step_blend_ = -1;
-  /// The program's next motion after the step being queued is a line (movel, G0/G1): a blended
-  /// movej goes as a PathMove so that the joint->line corner can blend (set by exec_step).
-  bool step_next_line_ = false;
-  struct PathResult {
-    bool used = false;         ///< the move went as a PathMove
-    double blend = 0;          ///< overlap with the move before it (s)
-    double corner = 0;         ///< the previous corner's distance bound (m or rad)
-    double end = 0;            ///< the segment's end on the run's time base (s)
-    const char* limited_by = "";
+  std::unique_ptr<ArmService> svc_;
+  // A dry run's blend state (check mode); a pending program check swaps its own in per slice.
+  std::unique_ptr<PathShadow> check_shadow_;
+  /// What a program step gives the move it queues (exec_step; nullptr: a line typed at a console).
+  struct StepParams {
+    double blend = -1;                        ///< the step's blend tolerance (SI; < 0: none given)
+    /// The program's next motion after this step is a line (movel, G0/G1): a blended movej
+    /// goes as a PathMove so that the joint->line corner can blend.
+    bool next_line = false;
+    const kin::JointVector* point = nullptr;  ///< movej / movel @NAME: the point's joints (SI)
   };
-  /// A move with blend tolerance `tol` (its kind's unit) or following a queued segment with a
-  /// tolerance: its segment planned and blended against the one before it, into m's payload
-  /// (PathMove; check mode: only checked). used == false: it goes as the plain move.
-  PathResult queue_path(Session& s, MotionItem* m, bool line, const kin::JointVector& goal, const kin::Pose& target,
-                        const kin::CartesianLimits& cl, double override, double tol);
-  /// The tolerance of a move: given (>= 0), else the program step's, else the configured default.
-  double blend_of(double given, bool line) const;
-  std::function<void()> idle_;
+  /// Run a parsed command (execute() after parsing; a program step as the loader parsed it).
+  void dispatch(Session& s, const Command& c, const StepParams* step);
+  void queue(Session& s, const MoveLine& m, const StepParams* step);
+  void queue(Session& s, const MoveJoints& m, const StepParams* step);
+  /// joint_request(c), with a program step's point joints as the goal (movej @NAME).
+  MoveJoints step_joint_request(const Command& c, const StepParams* step) const;
+  /// What a move runs with: the mode (check mode: a dry run into `dry`), the executing session's
+  /// selected tool, the feed override, the M62 / M63 changes and the program step's blend.
+  MoveContext move_context(DryRun* dry, const StepParams* step) const;
+  /// A check-mode session's dry-run state, and back after the move.
+  DryRun dry_run(Session& s);
+  static void keep_dry_run(Session& s, const DryRun& d);
+  /// Render a refused move (`what`: movej, movel, dwell) as its error answer.
+  void answer_refusal(Session& s, const char* what, const MoveResult& r);
+  /// " blend=X.XXXs" of a blended segment, else "".
+  static std::string blend_text(const MoveResult& r);
   std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
   kin::IkSolver ik_solver() const;
   const kin::IkModel* ik_ = nullptr;  ///< the App's (outlives the console); nullptr: numeric fallback
@@ -410,8 +410,6 @@ class Console {
   /// M62 / M63 changes waiting for the next move (one per joint, merged).
   std::array<OutputChange, kMotionOutputs> sync_out_{};
   std::uint8_t n_sync_out_ = 0;
-  /// Attach the waiting M62 / M63 changes to `m` (a move about to be committed) and clear them.
-  void take_sync_outputs(MotionItem& m);
   /// movej / movel @NAME typed at the console (Command::at_point).
   void queue_at_point(Session& s, const Command& c);
   /// Run one step in `ps` (its answer in ps.out).

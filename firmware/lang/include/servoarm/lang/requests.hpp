@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
 // The canonical motion requests of the console. Every front end builds one of
-// these and hands it to one function that validates and queues it, the way
+// these and hands it to the arm service (ArmService::move), which validates and queues it, the way
 // LinuxCNC's interpreter turns any G-code into canon.hh calls (STRAIGHT_FEED,
 // STRAIGHT_TRAVERSE): `movel` and G0/G1 build a MoveLine; `movej`, `home` and
 // G28 a MoveJoints. Units: SI (the front ends convert what the user typed).
@@ -26,8 +26,8 @@ struct MoveJoints {
 };
 
 /// How far ahead of a blended run's newest sample the console places the start of a segment
-/// it queues now (s): console line handling + telemetry age, with margin (console.cpp
-/// queue_path; armctl program check times programs with it).
+/// it queues now (s): console line handling + telemetry age, with margin (the arm
+/// service's blended segments; armctl program check times programs with it).
 inline constexpr double kPathLead = 0.15;
 
 }  // namespace servoarm::fw

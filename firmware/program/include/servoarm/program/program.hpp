@@ -67,12 +67,13 @@ struct ProgramStep {
   int file = 0;          ///< index into Program::files
   int line = 0;          ///< 1-based line number in that file
   std::string text;      ///< the line as given to the parser (comment stripped, @NAME replaced)
-  fw::Command cmd;       ///< what the parser made of it
+  fw::Command cmd;       ///< what the parser made of it: what the runner runs (the text is not parsed again)
   int point = -1;        ///< index into the points for movej / movel @NAME, else -1. movel @NAME:
                          ///< the target is FK(point's joints) with the active tool (cmd.vals unused)
   double blend = -1;     ///< blend tolerance of this move's target (console units: mm/m, deg/rad;
                          ///< G-code: mm, from G64 P / G61), 0 = exact stop, < 0 = none given (the
                          ///< console's configured default)
+  fw::GcodeModal modal;  ///< the G-code modal state after this line (the runner's, as it runs the step)
 };
 
 /// What a program holds, counted one way for armfw's `run` and `armctl program check`:

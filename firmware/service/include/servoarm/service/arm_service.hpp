@@ -1,0 +1,206 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+// The arm service: the one place a canonical move (MoveJoints, MoveLine, a dwell) is planned,
+// checked and queued. Typed requests in, typed results out (MoveResult: a CmdError, what was
+// refused with its figures, or the planned knots); no text and no units of its own beyond a
+// one-line reason: SI inside, every front end (the console, the GRBL dialect, the program
+// runner, `armctl program check`) converts and renders.
+//
+// Two modes, one code path:
+// - real run (MoveContext::dry == nullptr): the move is planned from the end of the motion
+//   queue and committed to the Controller's queue;
+// - dry run (MoveContext::dry set): the same planning and checks from the DryRun's own tail
+//   and blend state, nothing queued; the result reports the same knots and times. The
+//   console's `check` and GRBL's $C run it, and so does `armctl program check` (which has no
+//   Controller: the service is built from the chain, limits and rate alone).
+//
+// Console thread (non-real-time: may allocate). Talks to the control thread only through the
+// Controller's SPSC motion queue and telemetry.
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "servoarm/kinematics/blend_path.hpp"
+#include "servoarm/kinematics/ik.hpp"
+#include "servoarm/kinematics/trajectory.hpp"
+#include "servoarm/lang/commands.hpp"
+#include "servoarm/lang/requests.hpp"
+#include "servoarm/rt/controller.hpp"
+
+namespace servoarm::fw {
+
+/// What a move request refused (MoveResult::refusal); none: accepted.
+enum class MoveRefusal : std::uint8_t {
+  none,
+  arm_state,     ///< the arm takes no moves now (bad_state / fault; `reason` says why)
+  not_homed,     ///< a joint is not homed (`reason` names them)
+  joint_limit,   ///< the goal's joint `joint` = `value` is outside [`lower`, `upper`]
+  linear_speed,  ///< the line's speed `speed` is outside [kMinLinearSpeedMmS, max_linear_speed]
+  plan,          ///< the planner refused (`status`; lines: at fraction `s`, tool point `position`, `joint`)
+  duration,      ///< the plan takes `duration` s, more than max_move_duration_s
+  queue_full,    ///< the motion queue is full (real run)
+};
+const char* to_string(MoveRefusal r);
+
+/// The error code of a planner status.
+CmdError motion_error(kin::MotionStatus m);
+
+/// The answer to a move or a dwell: accepted with its knots, or refused with what and why.
+struct MoveResult {
+  CmdError error = CmdError::ok;
+  MoveRefusal refusal = MoveRefusal::none;
+  std::string reason;              ///< arm_state / not_homed: one line (no units in it)
+  std::uint32_t id = 0;            ///< the motion's id (real run; 0 in a dry run)
+  kin::MotionStatus status = kin::MotionStatus::ok;  ///< the planner's (slowed_near_singularity is ok)
+  double duration = 0;             ///< s: the move planned alone, from rest to rest; a dwell's seconds
+  kin::JointVector goal;           ///< where the move (or dwell) ends
+  double speed = 0;                ///< lines: the tool speed planned (m/s: default, override and clamp applied)
+  double slowdown = 1;             ///< lines slowed near a singularity: the factor
+  bool blended = false;            ///< went as a blended path segment (PathMove)
+  double blend = 0;                ///< s: its overlap with the segment before it
+  double segment_start = 0;        ///< s: the segment's start and end on its blended run's time base
+  double segment_end = 0;
+  // what a refusal found
+  int joint = -1;                  ///< joint_limit, plan (lines): the joint (0-based), -1 none
+  double value = 0, lower = 0, upper = 0;  ///< joint_limit: SI
+  double s = 0;                    ///< plan (lines): where along the line (0..1)
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  ///< plan (lines): the tool point there (base frame, m)
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// The segments of a blended run (docs/motion.md#blending), planned and blended by the service.
+using PathShadow = kin::PathBlendQueue<4>;
+
+/// A dry run's own state: where the checked moves end and when.
+struct DryRun {
+  kin::JointVector tail;     ///< where the checked moves end
+  double time = 0;           ///< end time of the checked moves (blended runs overlapped)
+  double run_base = 0;       ///< `time` where the current blended run began
+  bool blends = false;       ///< the last checked move is a blended segment with a tolerance
+  PathShadow* shadow = nullptr;  ///< its blend state (the owner keeps it; required)
+};
+
+/// What a request runs with: the mode, and what the front end has selected.
+struct MoveContext {
+  DryRun* dry = nullptr;            ///< set: a dry run (planned and checked, nothing queued)
+  const kin::Chain* chain = nullptr;  ///< the active tool's chain; nullptr: the arm's
+  kin::IkSolver ik{};               ///< its IK (movel's path check and the controller's sampling)
+  int feed_pct = 100;               ///< feed override (10..200): scales the speed of the move
+  std::span<const OutputChange> outputs{};  ///< M62 / M63 changes the move carries (real run)
+  double step_blend = -1;           ///< a program step's blend tolerance (SI; < 0 none)
+  bool next_line = false;           ///< a program step whose next motion is a line
+};
+
+/// The answer to an arm-control request (enable, disable, stop, e-stop, reset, hold, set zero)
+/// or any other request the control thread answers.
+struct ControlResult {
+  CmdError error = CmdError::ok;  ///< timeout: the control thread did not answer in time
+  std::string reason;             ///< the control thread's one line (or why it did not answer)
+  Reply reply{};                  ///< the control thread's reply (when it answered)
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// The error code of a control-thread result.
+CmdError control_error(RtResult r);
+
+/// The service's motion settings (SI): the console's configuration of them.
+struct MotionSettings {
+  double default_joint_speed_pct = 50.0;
+  double default_linear_speed = 0.1;   ///< m/s
+  double max_linear_speed = 0.25;      ///< m/s
+  double max_move_duration_s = 600.0;
+  kin::CartesianLimits cartesian{};    ///< linear_velocity is replaced per move
+  double default_blend_rad = 0.0;      ///< movej without blend=
+  double default_blend_m = 0.0;        ///< movel, G0/G1 without blend=
+  kin::JointVector park;               ///< the park pose (SI); empty: every joint's zero clamped into its limits
+};
+
+class ArmService {
+ public:
+  /// Real runs and dry runs on the controller's arm.
+  ArmService(Controller& ctl, const MotionSettings& cfg);
+  /// Dry runs only (no controller: `armctl program check`): the arm's chain, limits and rate.
+  ArmService(const kin::Chain& chain, const kin::JointLimits& limits, double rate_hz, const MotionSettings& cfg);
+  ~ArmService();
+  ArmService(const ArmService&) = delete;
+  ArmService& operator=(const ArmService&) = delete;
+
+  /// Plan, check and (real run) queue a move or a dwell.
+  MoveResult move(const MoveJoints& req, const MoveContext& cx);
+  MoveResult move(const MoveLine& req, const MoveContext& cx);
+  MoveResult dwell(double seconds, const MoveContext& cx);
+
+  /// Send a request to the control thread and wait for its reply (at most `reply_timeout_s`,
+  /// passing time with the idle hook). False: no reply in time. A full request queue is
+  /// answered busy at once.
+  bool request(const Request& rq, Reply& out);
+  bool request(RequestOp op, Reply& out);
+  /// Arm control: one request (disable, stop, estop, reset, hold, set_zero, ...), its reply
+  /// as a result (`control thread did not answer <op>` on a timeout).
+  ControlResult control(RequestOp op);
+  /// `enable`: accepted (the drives are enabling), or why not (fault, else bad_state).
+  ControlResult enable();
+  /// The homing cycle of joint `joint` (0-based; -1: every joint): started, or why not (busy,
+  /// fault, else bad_state). Progress comes as homing events.
+  ControlResult home(int joint);
+  /// Free-drive (hand guiding) on or off: done, or why not (the dynamic model's refusal whole).
+  ControlResult freedrive(bool on);
+  /// Collision detection on or off: done (reason "collision detection on|off"), or why not.
+  ControlResult collision_detection(bool on);
+  /// The park move (`park`, G28): to the park pose at the default joint speed.
+  MoveJoints park_request() const;
+  /// How to pass time while waiting for the control thread (default: sleep 200 us).
+  void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
+  void set_reply_timeout(double s) { reply_timeout_s_ = s; }
+
+  /// The result of the last move or dwell asked (either mode).
+  const MoveResult& last() const { return last_; }
+  /// Real run: arm_state when the arm takes no moves now (reason set), else ok.
+  MoveResult state_check() const;
+  /// Real run: "" when every joint is homed, else which are not (one line).
+  std::string unhomed_reason() const;
+  /// The same, of telemetry `t`.
+  std::string unhomed_reason(const Telemetry& t) const;
+  /// Joint values of the end of the motion queue (or the commanded position).
+  kin::JointVector tail() const;
+  /// Motions queued so far (ids 1..n).
+  std::uint32_t last_motion_id() const { return next_id_ - 1; }
+  const MotionSettings& settings() const { return cfg_; }
+  const kin::JointLimits& limits() const { return lim_; }
+
+ private:
+  void init();
+  MoveResult plan(const MoveJoints& req, const MoveContext& cx);
+  MoveResult plan(const MoveLine& req, const MoveContext& cx);
+  MoveResult plan_dwell(double seconds, const MoveContext& cx);
+  MotionItem* slot(bool dry, MoveResult& r);
+  bool duration_ok(double duration, MoveResult& r) const;
+  MoveResult refuse(MoveRefusal what, CmdError e) const;
+  /// The move as a blended path segment into m's payload (dry run: only checked); false: the plain move.
+  bool path_segment(MotionItem& m, bool line, const kin::JointVector& goal, const kin::Pose& target,
+                    const kin::CartesianLimits& cl, double override, double tol, const MoveContext& cx, MoveResult& r);
+  double blend_of(double given, bool line, const MoveContext& cx) const;
+  void commit(MotionItem& m, const kin::JointVector& goal, const MoveContext& cx, MoveResult& r, bool path);
+
+  Controller* ctl_ = nullptr;
+  const kin::Chain& chain_;
+  kin::JointLimits lim_;
+  double rate_hz_;
+  MotionSettings cfg_;
+  int n_;
+  std::uint32_t next_id_ = 1;
+  kin::JointVector tail_;
+  std::uint32_t tail_id_ = 0;   ///< id of the motion whose goal tail_ holds (0: none)
+  std::uint64_t tail_gen_ = 0;  ///< controller generation when tail_ was set
+  std::unique_ptr<PathShadow> shadow_;  ///< the real run's blended segments (the controller runs copies)
+  std::uint32_t shadow_tail_id_ = 0;    ///< the motion the newest segment was queued as (0: none)
+  std::unique_ptr<MotionItem> scratch_;  ///< a dry run's motion (planned, never queued)
+  MoveResult last_;
+  std::uint32_t seq_ = 0;  ///< request sequence numbers (replies are matched by them)
+  std::function<void()> idle_;
+  double reply_timeout_s_ = 1.0;
+};
+
+}  // namespace servoarm::fw

@@ -1,0 +1,480 @@
+// SPDX-License-Identifier: Apache-2.0
+// The arm service's motion path (arm_service.hpp).
+#include "servoarm/service/arm_service.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <thread>
+#include <cstdio>
+
+#include "servoarm/kinematics/trajectory_cartesian.hpp"
+#include "servoarm/lang/text.hpp"
+
+namespace servoarm::fw {
+
+const char* to_string(MoveRefusal r) {
+  switch (r) {
+    case MoveRefusal::none: return "none";
+    case MoveRefusal::arm_state: return "arm_state";
+    case MoveRefusal::not_homed: return "not_homed";
+    case MoveRefusal::joint_limit: return "joint_limit";
+    case MoveRefusal::linear_speed: return "linear_speed";
+    case MoveRefusal::plan: return "plan";
+    case MoveRefusal::duration: return "duration";
+    case MoveRefusal::queue_full: return "queue_full";
+  }
+  return "?";
+}
+
+CmdError motion_error(kin::MotionStatus m) {
+  switch (m) {
+    case kin::MotionStatus::ok:
+    case kin::MotionStatus::slowed_near_singularity: return CmdError::ok;
+    case kin::MotionStatus::no_ik_solution: return CmdError::unreachable;
+    case kin::MotionStatus::goal_out_of_limits:
+    case kin::MotionStatus::path_out_of_limits: return CmdError::limits;
+    case kin::MotionStatus::branch_change: return CmdError::branch;
+    case kin::MotionStatus::singularity:
+    case kin::MotionStatus::joint_velocity: return CmdError::singular;
+    case kin::MotionStatus::bad_input:
+    case kin::MotionStatus::wrong_size:
+    case kin::MotionStatus::bad_limits:
+    case kin::MotionStatus::no_solution: return CmdError::plan_failed;
+  }
+  return CmdError::plan_failed;
+}
+
+CmdError control_error(RtResult r) {
+  switch (r) {
+    case RtResult::ok: return CmdError::ok;
+    case RtResult::bad_state: return CmdError::bad_state;
+    case RtResult::fault: return CmdError::fault;
+    case RtResult::busy: return CmdError::busy;
+    case RtResult::start_moved:
+    case RtResult::plan_failed: return CmdError::plan_failed;
+    case RtResult::not_homed: return CmdError::not_homed;
+  }
+  return CmdError::plan_failed;
+}
+
+ArmService::ArmService(Controller& ctl, const MotionSettings& cfg)
+    : ctl_(&ctl), chain_(ctl.chain()), lim_(ctl.limits()), rate_hz_(1.0 / ctl.period_s()), cfg_(cfg), n_(ctl.chain().n_joints) {
+  init();
+  idle_ = [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); };
+}
+
+ArmService::ArmService(const kin::Chain& chain, const kin::JointLimits& limits, double rate_hz, const MotionSettings& cfg)
+    : chain_(chain), lim_(limits), rate_hz_(rate_hz), cfg_(cfg), n_(chain.n_joints) {
+  init();
+}
+
+void ArmService::init() {
+  tail_ = kin::JointVector::Zero(n_);
+  shadow_ = std::make_unique<PathShadow>();
+  scratch_ = std::make_unique<MotionItem>();
+  if (cfg_.park.size() != n_) {  // joint zero clamped into the limits
+    cfg_.park = kin::JointVector::Zero(n_);
+    for (int j = 0; j < n_; ++j)
+      cfg_.park[j] = std::fmin(std::fmax(0.0, lim_.lower[static_cast<std::size_t>(j)]), lim_.upper[static_cast<std::size_t>(j)]);
+  }
+}
+
+ArmService::~ArmService() = default;
+
+kin::JointVector ArmService::tail() const {
+  // Queue not empty: its end. Empty and nothing re-took the setpoint since the
+  // last move was queued (no flush, no enable): that move's goal, exactly.
+  // Otherwise the commanded position (the arm is at rest: moves are refused
+  // while it is stopping or enabling).
+  if (ctl_ == nullptr || !ctl_->motions().empty()) return tail_;
+  const Telemetry t = ctl_->telemetry();
+  if (tail_id_ != 0 && t.generation == tail_gen_) return tail_;
+  kin::JointVector q(n_);
+  for (int j = 0; j < n_; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+  return q;
+}
+
+bool ArmService::request(const Request& rq, Reply& out) {
+  Request r = rq;
+  r.seq = ++seq_;
+  if (ctl_ == nullptr || !ctl_->requests().push(r)) {
+    out.result = RtResult::busy;
+    std::snprintf(out.message, sizeof out.message, "request queue full");
+    return true;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  for (;;) {
+    Reply p;
+    while (ctl_->replies().pop(p))
+      if (p.seq == r.seq) {
+        out = p;
+        return true;
+      }
+    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(reply_timeout_s_)) return false;
+    idle_();
+  }
+}
+
+bool ArmService::request(RequestOp op, Reply& out) {
+  Request rq;
+  rq.op = op;
+  return request(rq, out);
+}
+
+ControlResult ArmService::control(RequestOp op) {
+  ControlResult c;
+  if (!request(op, c.reply)) {
+    c.error = CmdError::timeout;
+    c.reason = std::string("control thread did not answer ") + to_string(op);
+    return c;
+  }
+  c.error = control_error(c.reply.result);
+  c.reason = bounded_text(c.reply.message);
+  return c;
+}
+
+ControlResult ArmService::enable() {
+  ControlResult c = control(RequestOp::enable);
+  if (c.error != CmdError::ok && c.error != CmdError::timeout)
+    c.error = c.reply.result == RtResult::fault ? CmdError::fault : CmdError::bad_state;
+  return c;
+}
+
+ControlResult ArmService::home(int joint) {
+  ControlResult c;
+  Request rq(RequestOp::home, 0);
+  rq.joints = joint >= 0 ? static_cast<std::uint16_t>(1u << joint) : 0;
+  if (!request(rq, c.reply)) {
+    c.error = CmdError::timeout;
+    c.reason = "control thread did not answer home";
+    return c;
+  }
+  c.reason = bounded_text(c.reply.message);
+  switch (c.reply.result) {
+    case RtResult::ok: c.error = CmdError::ok; break;
+    case RtResult::busy: c.error = CmdError::busy; break;
+    case RtResult::fault: c.error = CmdError::fault; break;
+    case RtResult::not_homed:
+    case RtResult::bad_state:
+    case RtResult::start_moved:
+    case RtResult::plan_failed: c.error = CmdError::bad_state; break;
+  }
+  return c;
+}
+
+// A model part's refusal (a fixed line of the model's): whole, or cut after a word with "...".
+static std::string model_refusal(const ModelControl& m, ModelPart p) { return bounded_text(m.refusal(p), ModelControl::kLine); }
+
+ControlResult ArmService::freedrive(bool on) {
+  ControlResult c = control(on ? RequestOp::freedrive_on : RequestOp::freedrive_off);
+  if (!on || c.error == CmdError::timeout || c.reply.result == RtResult::ok) return c;
+  if (const ModelControl* m = ctl_->model(); m != nullptr && m->configured() && !m->available(ModelPart::freedrive)) {
+    // The reply's fixed line may hold only the start of the model's refusal: the result
+    // gives it whole, from the model.
+    const std::string why = model_refusal(*m, ModelPart::freedrive);
+    const std::string said = c.reply.message;
+    const std::size_t at = said.find(why.substr(0, 40));
+    if (at != std::string::npos) c.reason = said.substr(0, at) + why;
+  }
+  return c;
+}
+
+ControlResult ArmService::collision_detection(bool on) {
+  ControlResult c;
+  if (ctl_ == nullptr || !ctl_->set_collision_detection(on)) {
+    const ModelControl* m = ctl_ != nullptr ? ctl_->model() : nullptr;
+    c.error = CmdError::bad_state;
+    c.reason = "collision detection unavailable: " +
+               (m != nullptr && m->configured() ? model_refusal(*m, ModelPart::collision) : std::string("no dynamic model"));
+    return c;
+  }
+  c.reason = on ? "collision detection on" : "collision detection off";
+  return c;
+}
+
+MoveJoints ArmService::park_request() const {
+  MoveJoints m;
+  m.goal = cfg_.park;
+  m.speed_pct = cfg_.default_joint_speed_pct;
+  return m;
+}
+
+MoveResult ArmService::refuse(MoveRefusal what, CmdError e) const {
+  MoveResult r;
+  r.refusal = what;
+  r.error = e;
+  return r;
+}
+
+MoveResult ArmService::state_check() const {
+  MoveResult r;
+  if (ctl_ == nullptr) return r;
+  const Telemetry t = ctl_->telemetry();
+  const auto bad = [&](CmdError e, std::string why) {
+    r = refuse(MoveRefusal::arm_state, e);
+    r.reason = std::move(why);
+  };
+  switch (t.state) {
+    case ArmState::idle:
+    case ArmState::moving: break;
+    case ArmState::jogging: bad(CmdError::bad_state, "a jog is running: jog stop (or 0x85) first"); break;
+    case ArmState::homing: bad(CmdError::bad_state, "homing runs: `wait` for it (or stop it)"); break;
+    case ArmState::freedrive: bad(CmdError::bad_state, "free-drive is on: freedrive off first"); break;
+    case ArmState::enabling: bad(CmdError::bad_state, "drives still enabling; retry (or wait)"); break;
+    case ArmState::boot:
+    case ArmState::disabled: bad(CmdError::bad_state, std::string("arm is ") + to_string(t.state) + ": send enable first"); break;
+    case ArmState::stopping: bad(CmdError::bad_state, "arm is stopping; retry when idle"); break;
+    case ArmState::fault:
+      bad(CmdError::fault, "arm in fault (" + bounded_text(t.fault_text) + "): send reset, then enable");
+      break;
+    case ArmState::estop: bad(CmdError::fault, "arm in e-stop: send reset, then enable"); break;
+  }
+  return r;
+}
+
+std::string ArmService::unhomed_reason() const {
+  if (ctl_ == nullptr) return "";
+  return unhomed_reason(ctl_->telemetry());
+}
+
+std::string ArmService::unhomed_reason(const Telemetry& t) const {
+  if (ctl_ == nullptr || t.all_homed()) return "";
+  std::string j;
+  int count = 0;
+  for (int k = 0; k < n_; ++k)
+    if (!((t.homed >> k) & 1u)) j += (count++ ? ", " : " ") + std::to_string(k + 1);
+  char pct[32];
+  std::snprintf(pct, sizeof pct, "%.0f", 100.0 * ctl_->config().unhomed_jog_scale);
+  return std::string("joint") + (count == 1 ? "" : "s") + j +
+         " not homed: run `home` (or `home jN`); until then only joint jogs move, at " + pct + " %";
+}
+
+MotionItem* ArmService::slot(bool dry, MoveResult& r) {
+  if (dry) return scratch_.get();
+  MotionItem* m = ctl_->motions().back();
+  if (m == nullptr) r = refuse(MoveRefusal::queue_full, CmdError::busy);
+  return m;
+}
+
+bool ArmService::duration_ok(double duration, MoveResult& r) const {
+  if (std::isfinite(duration) && duration <= cfg_.max_move_duration_s) return true;
+  r = refuse(MoveRefusal::duration, CmdError::out_of_range);
+  r.duration = duration;
+  return false;
+}
+
+double ArmService::blend_of(double given, bool line, const MoveContext& cx) const {
+  if (given >= 0) return given;
+  if (cx.step_blend >= 0) return cx.step_blend;
+  return line ? cfg_.default_blend_m : cfg_.default_blend_rad;
+}
+
+// The checks a real move passes before it is planned: the arm takes moves, and every joint
+// is homed (a target means nothing in coordinates not established). A dry run moves nothing.
+static bool admitted(const ArmService& svc, const MoveContext& cx, MoveResult& r) {
+  if (cx.dry != nullptr) return true;
+  r = svc.state_check();
+  if (!r.ok()) return false;
+  if (std::string why = svc.unhomed_reason(); !why.empty()) {
+    r.error = CmdError::not_homed;
+    r.refusal = MoveRefusal::not_homed;
+    r.reason = std::move(why);
+    return false;
+  }
+  return true;
+}
+
+void ArmService::commit(MotionItem& m, const kin::JointVector& goal, const MoveContext& cx, MoveResult& r, bool path) {
+  r.goal = goal;
+  if (cx.dry != nullptr) {  // checked, not queued
+    cx.dry->tail = goal;
+    if (!path) cx.dry->time += r.duration, cx.dry->blends = false;
+    return;
+  }
+  m.id = next_id_++;
+  m.n_outputs = static_cast<std::uint8_t>(cx.outputs.size());
+  for (std::size_t k = 0; k < cx.outputs.size() && k < m.outputs.size(); ++k) m.outputs[k] = cx.outputs[k];
+  tail_ = goal;
+  tail_id_ = m.id;
+  shadow_tail_id_ = path ? m.id : 0;
+  tail_gen_ = ctl_->telemetry().generation;
+  ctl_->motions().commit();
+  r.id = m.id;
+}
+
+MoveResult ArmService::move(const MoveJoints& req, const MoveContext& cx) { return last_ = plan(req, cx); }
+MoveResult ArmService::move(const MoveLine& req, const MoveContext& cx) { return last_ = plan(req, cx); }
+MoveResult ArmService::dwell(double seconds, const MoveContext& cx) { return last_ = plan_dwell(seconds, cx); }
+
+MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
+  MoveResult r;
+  if (!admitted(*this, cx, r)) return r;
+  const kin::JointVector& goal = req.goal;
+  // the feed override (GRBL 0x90..0x94) scales moves queued from now on
+  const double pct = std::fmin(100.0, std::fmax(kMinJointSpeedPct, (req.speed_pct > 0 ? req.speed_pct : cfg_.default_joint_speed_pct) *
+                                                                       cx.feed_pct / 100.0));
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    if (goal[j] < lim_.lower[ju] || goal[j] > lim_.upper[ju]) {
+      r = refuse(MoveRefusal::joint_limit, CmdError::limits);
+      r.joint = j, r.value = goal[j], r.lower = lim_.lower[ju], r.upper = lim_.upper[ju];
+      return r;
+    }
+  }
+  MotionItem* m = slot(cx.dry != nullptr, r);
+  if (m == nullptr) return r;
+  // The one plan of the move, from the queue's end: the RT thread runs it as it is when
+  // the arm is there at start (it plans again only when it is not: Telemetry::joint_replans).
+  JointMove& jm = m->payload.emplace<JointMove>();
+  jm.goal = goal;
+  jm.override = pct / 100.0;
+  kin::MovejOptions o;
+  o.override = jm.override;
+  r.status = kin::plan_movej(lim_, kin::JointState::rest(cx.dry != nullptr ? cx.dry->tail : tail()), goal, o, jm.plan);
+  if (!kin::is_ok(r.status)) {
+    const kin::MotionStatus st = r.status;
+    r = refuse(MoveRefusal::plan, motion_error(st));
+    r.status = st;
+    return r;
+  }
+  if (!duration_ok(jm.plan.duration, r)) return r;
+  r.duration = jm.plan.duration;  // (jm is replaced when the move goes as a blended segment)
+  const double tol = blend_of(req.blend, false, cx);
+  const bool path = path_segment(*m, false, goal, kin::Pose::Identity(), cfg_.cartesian, pct / 100.0, tol, cx, r);
+  if (!path) jm.blend = tol;  // the controller blends it into the next joint move
+  commit(*m, goal, cx, r, path);
+  return r;
+}
+
+MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
+  MoveResult r;
+  if (!admitted(*this, cx, r)) return r;
+  double speed = req.rapid ? cfg_.max_linear_speed : (req.speed > 0 ? req.speed : cfg_.default_linear_speed);
+  if (req.clamp_speed && speed > cfg_.max_linear_speed) speed = cfg_.max_linear_speed;
+  if (cx.feed_pct != 100) speed = std::fmin(speed * cx.feed_pct / 100.0, cfg_.max_linear_speed);  // feed override
+  if (!(speed >= kMinLinearSpeedMmS * 1e-3) || speed > cfg_.max_linear_speed + 1e-12) {
+    r = refuse(MoveRefusal::linear_speed, CmdError::out_of_range);
+    r.speed = speed;
+    return r;
+  }
+  MotionItem* m = slot(cx.dry != nullptr, r);
+  if (m == nullptr) return r;
+  kin::CartesianLimits cl = cfg_.cartesian;
+  cl.linear_velocity = speed;
+  const kin::MovelOptions mo;
+  kin::PathReport rep;
+  const kin::JointVector q0 = cx.dry != nullptr ? cx.dry->tail : tail();
+  kin::CartesianTrajectory& traj = m->payload.emplace<CartesianMove>().path;
+  const kin::Chain& chain = cx.chain != nullptr ? *cx.chain : chain_;
+  const kin::MotionStatus ms = kin::plan_movel(chain, q0, req.target, cl, mo, cx.ik, traj, &rep);
+  if (!kin::is_ok(ms)) {
+    r = refuse(MoveRefusal::plan, motion_error(ms));
+    r.status = ms, r.s = rep.s, r.position = rep.position, r.joint = rep.joint;
+    return r;
+  }
+  if (!duration_ok(traj.duration, r)) return r;
+  traj.ik = cx.ik;
+  r.status = ms;
+  r.speed = speed;
+  r.duration = traj.duration;  // (traj is replaced when the move goes as a blended segment)
+  r.slowdown = traj.slowdown;
+  const kin::JointVector goal = traj.goal;
+  const bool path = path_segment(*m, true, goal, req.target, cl, 1.0, blend_of(req.blend, true, cx), cx, r);
+  commit(*m, goal, cx, r, path);
+  return r;
+}
+
+MoveResult ArmService::plan_dwell(double seconds, const MoveContext& cx) {
+  MoveResult r;
+  if (cx.dry != nullptr) {
+    cx.dry->time += seconds;
+    cx.dry->blends = false;
+    r.duration = seconds;
+    r.goal = cx.dry->tail;
+    return r;
+  }
+  r = state_check();
+  if (!r.ok()) return r;
+  MotionItem* m = slot(false, r);
+  if (m == nullptr) return r;
+  const kin::JointVector q = tail();
+  DwellMove& d = m->payload.emplace<DwellMove>();
+  d.at = q;
+  d.seconds = seconds;
+  r.duration = seconds;
+  MoveContext plain = cx;
+  plain.outputs = {};  // M62 / M63 wait for a move
+  commit(*m, q, plain, r, false);
+  return r;
+}
+
+// ---------------------------------------------------------------------------
+// Blended runs (docs/motion.md#blending)
+// ---------------------------------------------------------------------------
+// A move with a blend tolerance, and a move following one still queued, goes to the
+// controller as a PathMove: its segment planned alone from rest at the previous target and
+// its overlap with the segment before it chosen here by kin::PathBlendQueue (every joint's
+// velocity, acceleration and jerk, the tool speed of lines, IK at every sample of a
+// line-line overlap and the corner's tolerance, checked at the control rate on the run's
+// time base). The controller starts the segment at that time if it still can
+// (kPathLead: how far ahead of the run's newest sample a typed move is placed), else from
+// rest where the one before ends.
+bool ArmService::path_segment(MotionItem& m, bool line, const kin::JointVector& goal, const kin::Pose& target,
+                              const kin::CartesianLimits& cl, double override, double tol, const MoveContext& cx,
+                              MoveResult& r) {
+  if (!std::isfinite(tol) || tol < 0) tol = 0;
+  DryRun* dry = cx.dry;
+  PathShadow& q = dry != nullptr ? *dry->shadow : *shadow_;
+  const kin::Chain* chain = cx.chain != nullptr ? cx.chain : &chain_;
+  bool linked = false;
+  double t_earliest = 0;
+  if (dry != nullptr) {
+    linked = dry->blends && q.size() > 0 && q.core.cfg.chain == chain;
+  } else {
+    const Telemetry t = ctl_->telemetry();
+    linked = shadow_tail_id_ != 0 && shadow_tail_id_ == tail_id_ && t.generation == tail_gen_ && t.done_id < tail_id_ &&
+             !ctl_->motions().empty() && q.size() > 0 && q.core.cfg.chain == chain && q.at(q.size() - 1).tolerance > 0;
+    if (linked && t.path_time >= 0) t_earliest = t.path_time + kPathLead;
+  }
+  // A plain move: no tolerance and nothing to blend out of; a joint move with a tolerance
+  // that no line follows (as far as the front end knows: a program's next motion) blends in
+  // the controller's joint queue (JointMove::blend).
+  if (!linked && !(tol > 0 && (line || cx.next_line))) return false;
+  if (linked) {
+    if (q.size() >= 2) q.retire(q.at(q.size() - 1).start);  // keep the last two: the checks' window may reach both
+  } else {
+    kin::PathBlendConfig pc;
+    pc.limits = lim_;
+    pc.rate = rate_hz_;
+    pc.chain = chain;
+    pc.ik = cx.ik;
+    pc.joint_share = 0.5;  // blended joint segments share acceleration and jerk with their neighbour
+    q.reset(pc, dry != nullptr ? dry->tail : tail());
+    if (dry != nullptr) dry->run_base = dry->time;
+  }
+  kin::PathBlendReport rep;
+  const kin::BlendStatus st = line ? q.append_line(target, cl, kin::MovelOptions{}, tol, t_earliest, &rep)
+                                   : q.append_joint(goal, override, tol, t_earliest, &rep);
+  if (!kin::is_ok(st) || st == kin::BlendStatus::zero_length) {  // the plain move (checked already) instead
+    if (dry != nullptr) dry->blends = false;
+    else shadow_tail_id_ = 0;
+    return false;
+  }
+  const kin::PathSegment& g = q.at(q.size() - 1);
+  r.blended = true;
+  r.blend = rep.blend;
+  r.segment_start = g.start;
+  r.segment_end = g.end();
+  if (dry != nullptr) {
+    dry->blends = tol > 0;
+    dry->time = dry->run_base + g.end();
+    return true;
+  }
+  PathMove& pm = m.payload.emplace<PathMove>();
+  pm.seg = g;
+  pm.after = linked ? tail_id_ : 0;
+  pm.override = override;
+  return true;
+}
+
+}  // namespace servoarm::fw
