@@ -23,7 +23,7 @@ ALLOWED = {
     "hal": ["kinematics"],
     "host_sim": ["hal", "kinematics", "kinematics/io"],
     "firmware/rt": ["kinematics", "hal"],
-    "firmware/config": ["kinematics", "kinematics/io", "hal"],
+    "firmware/config": ["firmware/lang", "kinematics", "kinematics/io", "hal"],
     "firmware/lang": ["kinematics", "kinematics/io"],
     "firmware/program": ["firmware/lang", "kinematics", "kinematics/io"],
     "firmware/service": ["firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],

@@ -146,12 +146,8 @@ struct DemoPlan {
   std::string why_joints_only;       ///< "" when the lines are used
 };
 
-double joint_to_user(const kin::Chain& ch, int j, double v) {
-  return ch.joint(j).type == kin::JointType::prismatic ? v * 1e3 : v * 180.0 / M_PI;
-}
-double joint_from_user(const kin::Chain& ch, int j, double v) {
-  return ch.joint(j).type == kin::JointType::prismatic ? v * 1e-3 : v * M_PI / 180.0;
-}
+double joint_to_user(const kin::Chain& ch, int j, double v) { return kConfigUnits.joint_out(ch, j, v); }
+double joint_from_user(const kin::Chain& ch, int j, double v) { return kConfigUnits.joint_in(ch, j, v); }
 
 /// "movej ..." for q (3 decimals of deg / mm); `typed` gets the joints the text says.
 std::string movej_text(const kin::Chain& ch, const kin::JointVector& q, kin::JointVector& typed) {

@@ -12,6 +12,7 @@
 
 #include "servoarm/armctl/cli_common.hpp"
 #include "servoarm/armctl/cli_plan.hpp"
+#include "servoarm/lang/units.hpp"
 #include "servoarm/config/config.hpp"
 #include "servoarm/lang/commands.hpp"
 #include "servoarm/lang/ik_options.hpp"
@@ -111,7 +112,7 @@ std::string apply_config(const FwConfig& cfg, kin::Chain& chain, ProgramCheckOpt
   for (int j = 0; j < n && j < static_cast<int>(cfg.drives.size()); ++j) {
     const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
     kin::DhRow& row = chain.joint(j);
-    const double unit = row.type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0;
+    const double unit = kConfigUnits.joint_in(chain, j, 1.0);  // SI per deg / mm
     if (!d.limits.empty()) row.lower = d.limits[0] * unit, row.upper = d.limits[1] * unit;
     if (d.max_velocity > 0) {
       const double v = d.max_velocity * unit;
@@ -129,15 +130,15 @@ std::string apply_config(const FwConfig& cfg, kin::Chain& chain, ProgramCheckOpt
   if (!cfg.home_deg.empty()) {
     opt.park.resize(n);  // (resize, not a moved temporary: gcc 12 -O2 warns on Eigen's copy)
     for (int j = 0; j < n; ++j)
-      opt.park[j] = cfg.home_deg[static_cast<std::size_t>(j)] * (chain.joint(j).type == kin::JointType::prismatic ? 1e-3 : M_PI / 180.0);
+      opt.park[j] = kConfigUnits.joint_in(chain, j, cfg.home_deg[static_cast<std::size_t>(j)]);
   }
   opt.joint_speed_pct = cfg.joint_speed_pct;
-  opt.linear_speed = cfg.linear_speed_mm_s * 1e-3;
-  opt.max_linear_speed = cfg.max_linear_speed_mm_s * 1e-3;
+  opt.linear_speed = kConfigUnits.length_in(cfg.linear_speed_mm_s);
+  opt.max_linear_speed = kConfigUnits.length_in(cfg.max_linear_speed_mm_s);
   opt.max_move_duration = cfg.max_move_duration_s;
   opt.rate_hz = cfg.rate_hz;
-  opt.default_blend_rad = cfg.default_blend_deg * M_PI / 180.0;
-  opt.default_blend_m = cfg.default_blend_mm * 1e-3;
+  opt.default_blend_rad = kConfigUnits.angle_in(cfg.default_blend_deg);
+  opt.default_blend_m = kConfigUnits.length_in(cfg.default_blend_mm);
   return "";
 }
 

@@ -9,6 +9,8 @@
 #include <cstring>
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/io/file_input.hpp"
+#include "servoarm/lang/markdown.hpp"
+#include "servoarm/lang/units.hpp"
 
 namespace servoarm::fw {
 
@@ -1198,7 +1200,7 @@ std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
   for (int j = 0; j < n; ++j) {
     const kin::DhRow& row = chain.joint(j);
     const bool prismatic = row.type == kin::JointType::prismatic;
-    const double unit = prismatic ? 1e-3 : M_PI / 180.0;  // SI per deg / mm
+    const double unit = kConfigUnits.joint_in(chain, j, 1.0);  // SI per deg / mm
     const char* u = prismatic ? " mm" : " deg";
     const std::string w = drive_label(static_cast<std::size_t>(j)) + ".";
     const DriveConfig* d = c.drives.empty() ? nullptr : &c.drives[static_cast<std::size_t>(j)];
@@ -1464,36 +1466,16 @@ constexpr const char* kBegin =
     "firmware/config/src/config.cpp. Do not edit by hand: change the table, then regenerate (see above). -->";
 constexpr const char* kEnd = "<!-- END config-reference -->";
 
-std::string cell(const std::string& s) {
-  std::string o;
-  for (std::size_t i = 0; i < s.size(); ++i) {
-    if (s[i] == '|' && (i == 0 || s[i - 1] != '\\')) o += '\\';
-    o += s[i];
-  }
-  return o;
-}
 
 template <class S>
 std::string table_row(const Key<S>& k, const std::string& name) {
   const std::string def = k.required    ? std::string("required")
                           : k.has_unset ? std::string(k.unset_text)
                                         : "`" + value_of(k, S{}) + "`";
-  return "| `" + name + "` | " + cell(def) + " | " + cell(range_of(k)) + " | " + cell(k.unit) + " | " + cell(k.doc) + " |\n";
+  return "| `" + name + "` | " + md_cell(def) + " | " + md_cell(range_of(k)) + " | " + md_cell(k.unit) + " | " + md_cell(k.doc) + " |\n";
 }
 
 constexpr const char* kHeader = "| key | default | allowed | unit | meaning |\n| --- | --- | --- | --- | --- |\n";
-
-std::vector<std::string> lines_of(const std::string& s) {
-  std::vector<std::string> out;
-  std::size_t a = 0;
-  while (a < s.size()) {
-    std::size_t b = s.find('\n', a);
-    if (b == std::string::npos) b = s.size();
-    out.push_back(s.substr(a, b - a));
-    a = b + 1;
-  }
-  return out;
-}
 
 }  // namespace
 
@@ -1523,44 +1505,11 @@ std::string config_reference_markdown() {
 }
 
 std::string config_reference_mismatch(const std::string& page) {
-  const std::vector<std::string> pl = lines_of(page);
-  std::size_t b = pl.size(), e = pl.size();
-  for (std::size_t i = 0; i < pl.size(); ++i) {
-    if (b == pl.size() && pl[i].rfind("<!-- BEGIN config-reference", 0) == 0) b = i;
-    else if (b != pl.size() && pl[i] == kEnd) {
-      e = i;
-      break;
-    }
-  }
-  const char* how =
-      "regenerate the section: see \"Regenerating the reference\" in docs/configuration.md "
-      "(armfw --config-reference)";
-  if (b == pl.size() || e == pl.size()) return std::string("no BEGIN/END config-reference markers; ") + how;
-  const std::vector<std::string> have(pl.begin() + static_cast<long>(b), pl.begin() + static_cast<long>(e) + 1);
-  const std::vector<std::string> want = lines_of(config_reference_markdown());
-  if (have == want) return "";
-  // Line diff (longest common subsequence; the section is ~60 lines).
-  const std::size_t n = have.size(), m = want.size();
-  std::vector<std::vector<int>> L(n + 1, std::vector<int>(m + 1, 0));
-  for (std::size_t i = n; i-- > 0;)
-    for (std::size_t j = m; j-- > 0;)
-      L[i][j] = have[i] == want[j] ? L[i + 1][j + 1] + 1 : std::max(L[i + 1][j], L[i][j + 1]);
-  std::string o = "docs/configuration.md differs from armfw --config-reference (- page, + generated):\n";
-  int shown = 0;
-  std::size_t i = 0, j = 0;
-  while ((i < n || j < m) && shown < 40) {
-    if (i < n && j < m && have[i] == want[j]) {
-      ++i, ++j;
-    } else if (j < m && (i == n || L[i][j + 1] >= L[i + 1][j])) {
-      o += "+ " + want[j++] + "\n";
-      ++shown;
-    } else {
-      o += "- line " + std::to_string(b + i + 1) + ": " + have[i] + "\n";
-      ++i;
-      ++shown;
-    }
-  }
-  return o + how;
+  return generated_section_mismatch(page, config_reference_markdown(),
+                                    {"<!-- BEGIN config-reference", kEnd,
+                                     "docs/configuration.md differs from armfw --config-reference",
+                                     "regenerate the section: see \"Regenerating the reference\" in "
+                                     "docs/configuration.md (armfw --config-reference)"});
 }
 
 }  // namespace servoarm::fw

@@ -3,6 +3,7 @@
 // dispatch: `help`, `help <topic>` and the command reference of docs/console.md.
 // Console thread / armctl: allocates.
 #include "servoarm/lang/command_table.hpp"
+#include "servoarm/lang/markdown.hpp"
 #include "servoarm/lang/number.hpp"
 
 #include <algorithm>
@@ -163,26 +164,6 @@ constexpr const char* kBegin =
     "regenerate (see above). -->";
 constexpr const char* kEnd = "<!-- END console-reference -->";
 
-std::string cell(std::string_view s) {
-  std::string o;
-  for (std::size_t i = 0; i < s.size(); ++i) {
-    if (s[i] == '|' && (i == 0 || s[i - 1] != '\\')) o += '\\';  // GFM: \| is a pipe, in code spans too
-    o += s[i];
-  }
-  return o;
-}
-
-std::vector<std::string> lines_of(const std::string& s) {
-  std::vector<std::string> out;
-  std::size_t a = 0;
-  while (a < s.size()) {
-    std::size_t b = s.find('\n', a);
-    if (b == std::string::npos) b = s.size();
-    out.push_back(s.substr(a, b - a));
-    a = b + 1;
-  }
-  return out;
-}
 
 }  // namespace
 
@@ -195,58 +176,25 @@ std::string console_reference_markdown() {
   for (const CommandSpec& e : kCommands) {
     std::string what = e.help;
     if (*e.details) what += "; " + std::string(e.details);
-    o += "| `" + cell(e.usage) + "` | " + cell(what) + " | " + (e.query ? "yes" : "") + " |\n";
+    o += "| `" + md_cell(e.usage) + "` | " + md_cell(what) + " | " + (e.query ? "yes" : "") + " |\n";
   }
   o += "\n### Realtime characters\n\nThey act at once and are never part of a line.\n\n"
        "| character | effect |\n| --- | --- |\n";
-  for (const CodeSpec& r : kRealtime) o += "| `" + cell(r.code) + "` | " + cell(r.help) + " |\n";
+  for (const CodeSpec& r : kRealtime) o += "| `" + md_cell(r.code) + "` | " + md_cell(r.help) + " |\n";
   o += "\n### G-code\n\n| code | effect |\n| --- | --- |\n";
-  for (const CodeSpec& g : kGcodes) o += "| `" + cell(g.code) + "` | " + cell(g.help) + " |\n";
+  for (const CodeSpec& g : kGcodes) o += "| `" + md_cell(g.code) + "` | " + md_cell(g.help) + " |\n";
   o += "\n### GRBL $ commands\n\n| command | what it does | query |\n| --- | --- | --- |\n";
   for (const GrblSpec& g : kGrblCommands)
-    o += "| `" + cell(g.usage) + "` | " + cell(g.help) + " | " + (g.query ? "yes" : "") + " |\n";
+    o += "| `" + md_cell(g.usage) + "` | " + md_cell(g.help) + " | " + (g.query ? "yes" : "") + " |\n";
   o += std::string("\n") + kEnd + "\n";
   return o;
 }
 
 std::string console_reference_mismatch(const std::string& page) {
-  const std::vector<std::string> pl = lines_of(page);
-  std::size_t b = pl.size(), e = pl.size();
-  for (std::size_t i = 0; i < pl.size(); ++i) {
-    if (b == pl.size() && pl[i].rfind("<!-- BEGIN console-reference", 0) == 0) b = i;
-    else if (b != pl.size() && pl[i] == kEnd) {
-      e = i;
-      break;
-    }
-  }
-  const char* how =
-      "regenerate the section: see \"Regenerating the reference\" in docs/console.md (armctl console --reference)";
-  if (b == pl.size() || e == pl.size()) return std::string("no BEGIN/END console-reference markers; ") + how;
-  const std::vector<std::string> have(pl.begin() + static_cast<long>(b), pl.begin() + static_cast<long>(e) + 1);
-  const std::vector<std::string> want = lines_of(console_reference_markdown());
-  if (have == want) return "";
-  // Line diff (longest common subsequence; the section is ~50 lines).
-  const std::size_t n = have.size(), m = want.size();
-  std::vector<std::vector<int>> L(n + 1, std::vector<int>(m + 1, 0));
-  for (std::size_t i = n; i-- > 0;)
-    for (std::size_t j = m; j-- > 0;)
-      L[i][j] = have[i] == want[j] ? L[i + 1][j + 1] + 1 : std::max(L[i + 1][j], L[i][j + 1]);
-  std::string o = "docs/console.md differs from armctl console --reference (- page, + generated):\n";
-  int shown = 0;
-  std::size_t i = 0, j = 0;
-  while ((i < n || j < m) && shown < 40) {
-    if (i < n && j < m && have[i] == want[j]) {
-      ++i, ++j;
-    } else if (j < m && (i == n || L[i][j + 1] >= L[i + 1][j])) {
-      o += "+ " + want[j++] + "\n";
-      ++shown;
-    } else {
-      o += "- line " + std::to_string(b + i + 1) + ": " + have[i] + "\n";
-      ++i;
-      ++shown;
-    }
-  }
-  return o + how;
+  return generated_section_mismatch(
+      page, console_reference_markdown(),
+      {"<!-- BEGIN console-reference", kEnd, "docs/console.md differs from armctl console --reference",
+       "regenerate the section: see \"Regenerating the reference\" in docs/console.md (armctl console --reference)"});
 }
 
 }  // namespace servoarm::fw

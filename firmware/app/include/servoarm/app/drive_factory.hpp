@@ -21,11 +21,6 @@
 
 namespace servoarm::fw {
 
-/// armfw.toml's lengths and angles are in mm and degrees (the keys say so: _mm, _deg; a joint's
-/// value in mm when it is prismatic, in degrees when revolute), whatever units the robot
-/// description uses: they reach SI through the units table.
-inline constexpr ConsoleUnits kConfigUnits{LengthUnit::mm, AngleUnit::deg};
-
 /// One group to build: the joints (arm indices, ascending) of one family on one interface.
 struct DriveGroupPlan {
   std::string family;             ///< drive.family

@@ -56,6 +56,11 @@ struct ConsoleUnits {
   const char* help_line() const;
 };
 
+/// armfw.toml's lengths and angles are in mm and degrees (the keys say so: _mm, _deg; a joint's
+/// value in mm when it is prismatic, in degrees when revolute), whatever units the robot
+/// description uses: they reach SI through the units table.
+inline constexpr ConsoleUnits kConfigUnits{LengthUnit::mm, AngleUnit::deg};
+
 /// The gimbal-lock band of ConsoleUnits::rpy_of: |pitch -+ 90 deg| below 1e-3 rad (0.057
 /// deg), well above a settled arm's following error, prints as the lock.
 inline constexpr double kGimbalLockBand = 1e-3;
