@@ -86,6 +86,7 @@ Controller::Controller(hal::ServoBus& bus, const kin::Chain& chain, const Contro
   q_act_ = kin::JointVector::Zero(n_);
   q_prev_ = kin::JointVector::Zero(n_);
   jog_.configure(chain_, limits_, period_s_);
+  exec_.configure(limits_, n_, period_s_, *this);
 }
 
 hal::Status Controller::boot(TimePoint now, TimePoint deadline) {
@@ -111,14 +112,11 @@ void Controller::hold_measured() {
   cmd_ = kin::JointState::rest(q_act_);
   have_prev_ = false;
   ++generation_;
-  end_path();
 }
 
 std::size_t Controller::flush_motions() {
-  const std::size_t n = motions_.clear();
+  const std::size_t n = exec_.flush();
   ++generation_;
-  running_ = nullptr;
-  end_path();
   return n;
 }
 
@@ -212,7 +210,8 @@ void Controller::end_of_ramp(Mode ramp) {
 }
 
 void Controller::begin_ramp(Mode ramp) {
-  end_path();  // a stop always wins: the ramp starts from the blended state, the run is over
+  // A stop always wins: the ramp starts from the commanded (blended) state; the queue was
+  // flushed before (stop, disable, fault, e-stop) or the hold kept the segment (hold_rule).
   // Ramp every joint to rest from the commanded state with the full limits.
   kin::MovejOptions o;
   if (kin::plan_stop(limits_, cmd_, o, stop_traj_) == kin::MotionStatus::ok) {
@@ -224,7 +223,6 @@ void Controller::begin_ramp(Mode ramp) {
 }
 
 void Controller::begin_emergency_stop(Mode ramp, Mode quick_stop) {
-  end_path();
   if (!cfg_.drive_quick_stop) {
     begin_ramp(ramp);
     return;
@@ -556,7 +554,7 @@ void Controller::run(Action a, const Request& r, TimePoint now) {
     case Action::hold_queue:
       // Moves queued but not started (GRBL Hold with a planned queue): hold the queue;
       // `resume` / '~' starts it, `stop` drops it.
-      if (motions_.empty()) {
+      if (exec_.queue().empty()) {
         reply(r.seq, RtResult::ok, "not moving");
         return;
       }
@@ -577,7 +575,7 @@ void Controller::run(Action a, const Request& r, TimePoint now) {
       return;
     // jog
     case Action::start_jog:
-      if (!motions_.empty()) {  // queued in this same cycle: the move goes first, the jog is refused
+      if (!exec_.queue().empty()) {  // queued in this same cycle: the move goes first, the jog is refused
         reply(r.seq, RtResult::busy, "moves are queued: jog refused");
         return;
       }
@@ -846,7 +844,7 @@ void Controller::homing_failed(int j, const char* why) {
 
 void Controller::start_homing(const Request& r) {
   char m[sizeof(Reply::message)];
-  if (!motions_.empty()) {
+  if (!exec_.queue().empty()) {
     reply(r.seq, RtResult::busy, "moves are queued: home refused");
     return;
   }
@@ -963,7 +961,7 @@ void Controller::step_homing() {
 
 // Not powered (or the reaction is over): follow the measured position so enabling never jumps.
 void Controller::follow_measured() {
-  if (!motions_.empty()) {
+  if (!exec_.queue().empty()) {
     // A move the console committed on a state it read before a fault / e-stop / disable:
     // it never starts, and the console hears about it.
     char d[sizeof(Event::message)];
@@ -983,7 +981,7 @@ void Controller::follow_measured() {
 
 void Controller::start_freedrive(const Request& r) {
   char m[sizeof(Reply::message)];
-  if (!motions_.empty()) {  // queued in this same cycle: the move goes first
+  if (!exec_.queue().empty()) {  // queued in this same cycle: the move goes first
     reply(r.seq, RtResult::busy, "moves are queued: freedrive refused");
     return;
   }
@@ -1129,8 +1127,8 @@ void Controller::publish() {
     t.q_act[ju] = fb.position;
     t.joint_state[ju] = static_cast<std::uint8_t>(fb.state);
   }
-  t.queued = static_cast<std::uint32_t>(motions_.size());
-  t.running_id = running_ != nullptr ? running_->id : 0;
+  t.queued = static_cast<std::uint32_t>(exec_.queue().size());
+  t.running_id = exec_.running_id();
   t.done_id = done_id_;
   t.cause = cause_;
   t.fault_joint = static_cast<std::int8_t>(fault_joint_);
@@ -1143,11 +1141,11 @@ void Controller::publish() {
   t.compute = compute_sum_;
   t.max_following_error = max_follow_;
   t.estop_latency_ns = estop_latency_;
-  t.ik_fallbacks = ik_fallbacks_;
-  t.joint_replans = joint_replans_;
-  t.blended_corners = blends_;
-  t.path_time = path_phase_ == PathPhase::run ? path_time() : -1.0;
-  t.path_id = path_phase_ == PathPhase::run && running_ != nullptr ? (path_next_ ? path_next_->id : running_->id) : 0u;
+  t.ik_fallbacks = exec_.ik_fallbacks();
+  t.joint_replans = exec_.joint_replans();
+  t.blended_corners = exec_.blended_corners();
+  t.path_time = exec_.path_time();
+  t.path_id = exec_.path_id();
   t.homed = homed_mask();
   t.homing_now = hrunning_;
   t.homing_failed = 0;
