@@ -51,15 +51,17 @@ RtResult MotionExecutor::open(MotionItem& m, kin::JointState& cmd) {
       JointMove& jm = *std::get_if<JointMove>(&m.payload);
       if (jm.blend > 0.0 && begin_blend(jm, cmd)) return RtResult::ok;  // the run's first segment (replaces the plan)
       phase_ = SegPhase::plan;
+      plan_ = &jm.plan;
       if (starts_here(jm.plan, cmd, n_)) return RtResult::ok;  // the console's plan, as it is
       ++joint_replans_;
       return replan(cmd.pos, jm.goal, jm.override, jm.plan) ? RtResult::ok : RtResult::plan_failed;
     }
     case MotionKind::cartesian: {
-      const kin::CartesianTrajectory& path = std::get_if<CartesianMove>(&m.payload)->path;
+      kin::CartesianTrajectory& path = std::get_if<CartesianMove>(&m.payload)->path;
       double dev = 0;
       for (int j = 0; j < n_; ++j) dev = std::fmax(dev, std::fabs(path.q_knot[0][static_cast<std::size_t>(j)] - cmd.pos[j]));
       phase_ = SegPhase::line;
+      line_ = &path;
       return dev > 1e-6 ? RtResult::start_moved : RtResult::ok;
     }
     case MotionKind::dwell: phase_ = SegPhase::dwell; return RtResult::ok;
@@ -112,60 +114,27 @@ std::size_t MotionExecutor::flush() {
 }
 
 // ---------------------------------------------------------------------------
-// The sample: one function, one case per kind of phase
+// The samplers (MotionExecutor::step in executor.hpp dispatches on the phase)
 // ---------------------------------------------------------------------------
 
-MotionExecutor::Step MotionExecutor::step(Mode mode, kin::JointState& cmd) {
-  t_ += period_s_;
-  switch (phase_) {
-    case SegPhase::none: return Step::idle;  // (not called without a segment)
-    case SegPhase::plan:
-    case SegPhase::path_to_end:
-    case SegPhase::path_to_start: return step_plan(mode, cmd);
-    case SegPhase::line:
-    case SegPhase::path_line: return step_line(mode, cmd);
-    case SegPhase::blend_open:
-    case SegPhase::blend_closed: return step_blend(cmd);
-    case SegPhase::path_open:
-    case SegPhase::path_closed:
-    case SegPhase::path_overlap: return step_path(cmd);
-    case SegPhase::dwell:
-      return t_ >= std::get_if<DwellMove>(&running_->payload)->seconds ? finish(cmd, false) : Step::running;
-  }
-  return Step::running;
+MotionExecutor::Step MotionExecutor::step_dwell(kin::JointState& cmd) {
+  return t_ >= std::get_if<DwellMove>(&running_->payload)->seconds ? finish(cmd, false) : Step::running;
 }
 
-const kin::JointTrajectory& MotionExecutor::plan_of() const {
-  return phase_ == SegPhase::plan ? std::get_if<JointMove>(&running_->payload)->plan : resume_plan_;
-}
-
-kin::CartesianTrajectory& MotionExecutor::line_of() {
-  return phase_ == SegPhase::line ? std::get_if<CartesianMove>(&running_->payload)->path : seg_of(*running_).line;
-}
-
-// A joint plan: the move's own, or after a hold of a path move the joint move to the
-// segment's end (then done) or to its start (then it runs from rest as planned).
-MotionExecutor::Step MotionExecutor::step_plan(Mode mode, kin::JointState& cmd) {
-  (void)mode;
-  const kin::JointTrajectory& plan = plan_of();
-  plan.sample(t_, cmd);
-  if (t_ < plan.duration) return Step::running;
+// The end of a joint plan (plan_): the move's own, or after a hold of a path move the joint
+// move to the segment's end (then done) or to its start (then it runs from rest as planned).
+MotionExecutor::Step MotionExecutor::end_of_plan(kin::JointState& cmd) {
   if (phase_ != SegPhase::path_to_start) return finish(cmd, true);
   cmd = kin::JointState::rest(resume_plan_.goal);
   if (begin_path(*running_, cmd)) return Step::running;  // at its start: the segment runs from rest
   return refuse(RtResult::start_moved, cmd);
 }
 
-// A line (or a path move's line after a hold): IK at the exact pose; when it fails the
-// precomputed joint value of the path is kept (the console checked the whole path with IK,
-// and validate_and_write checks the setpoint as every other one), and the sample is counted
-// (Telemetry::ik_fallbacks). In hold_line it slows to rest on its line, then held.
-MotionExecutor::Step MotionExecutor::step_line(Mode mode, kin::JointState& cmd) {
-  kin::CartesianTrajectory& line = line_of();
-  if (line.sample_ik(t_, cmd.pos, cmd.vel, cmd.acc) < kin::Status::ok) ++ik_fallbacks_;
-  if (t_ < line.duration) return Step::running;
+// The end of a line (line_: a line, or a path move's line after a hold). In hold_line it has
+// slowed to rest on its line: held.
+MotionExecutor::Step MotionExecutor::end_of_line(Mode mode, kin::JointState& cmd) {
   if (mode == Mode::hold_line) {  // at rest on the line
-    t_ = line.duration;
+    t_ = line_->duration;
     return Step::held;
   }
   return finish(cmd, true);
@@ -281,6 +250,7 @@ void MotionExecutor::path_look_ahead(const kin::PathSegment& g, double t, double
     if (!(np->seg.start > t)) phase_ = SegPhase::path_closed;  // queued after its start time went by
     else if (np->seg.start <= tn) {
       phase_ = SegPhase::path_overlap;
+      next_ = nx;
       ++blends_;
     }
   } else if (nx != nullptr) {
@@ -297,7 +267,7 @@ MotionExecutor::Step MotionExecutor::step_path(kin::JointState& cmd) {
   const double t = run_time(), tn = t + period_s_;
   if (!path_have_ahead_) {  // the run's first cycle
     const bool both = phase_ == SegPhase::path_overlap;
-    if (kin::path_sample_pair(both ? &g : nullptr, both ? seg_of(*queue_.peek(1)) : g, t, cmd.pos, path_ahead_) <
+    if (kin::path_sample_pair(both ? &g : nullptr, both ? seg_of(*next_) : g, t, cmd.pos, path_ahead_) <
         kin::Status::ok)
       ++ik_fallbacks_;
     path_have_ahead_ = true;
@@ -305,7 +275,7 @@ MotionExecutor::Step MotionExecutor::step_path(kin::JointState& cmd) {
   if (phase_ == SegPhase::path_open) path_look_ahead(g, t, tn);  // computed so far: up to t
   const bool both = phase_ == SegPhase::path_overlap;
   kin::JointVector qn(n_);
-  if (kin::path_sample_pair(both ? &g : nullptr, both ? seg_of(*queue_.peek(1)) : g, tn, path_ahead_, qn) < kin::Status::ok)
+  if (kin::path_sample_pair(both ? &g : nullptr, both ? seg_of(*next_) : g, tn, path_ahead_, qn) < kin::Status::ok)
     ++ik_fallbacks_;
   for (int j = 0; j < n_; ++j) {
     const double q0 = cmd.pos[j], q1 = path_ahead_[j], q2 = qn[j];
@@ -321,30 +291,6 @@ MotionExecutor::Step MotionExecutor::step_path(kin::JointState& cmd) {
   phase_ = SegPhase::path_open;
   t_ = 0;
   return Step::running;
-}
-
-double MotionExecutor::path_time() const {
-  const bool run = phase_ == SegPhase::path_open || phase_ == SegPhase::path_closed || phase_ == SegPhase::path_overlap;
-  return run ? run_time() : -1.0;
-}
-
-std::uint32_t MotionExecutor::path_id() const {
-  if (running_ == nullptr) return 0;
-  switch (phase_) {
-    case SegPhase::path_open:
-    case SegPhase::path_closed: return running_->id;
-    case SegPhase::path_overlap: return queue_.peek(1)->id;
-    case SegPhase::none:
-    case SegPhase::plan:
-    case SegPhase::blend_open:
-    case SegPhase::blend_closed:
-    case SegPhase::line:
-    case SegPhase::dwell:
-    case SegPhase::path_line:
-    case SegPhase::path_to_end:
-    case SegPhase::path_to_start: return 0;
-  }
-  return 0;
 }
 
 // ---------------------------------------------------------------------------
@@ -364,7 +310,8 @@ HoldRule MotionExecutor::hold() {
     retire(false, RtResult::ok);
     running_ = queue_.front();
   }
-  if (h.mode == Mode::hold_line) kin::stop_movel(h.after == SegPhase::line ? line_of() : seg_of(*running_).line, t_);
+  if (h.after == SegPhase::path_line) line_ = &seg_of(*running_).line;
+  if (h.mode == Mode::hold_line) kin::stop_movel(*line_, t_);
   if (h.after != SegPhase::dwell) t_ = 0;  // (a dwell's clock stops, and goes on at resume)
   phase_ = h.after;
   return h;
@@ -373,13 +320,14 @@ HoldRule MotionExecutor::hold() {
 bool MotionExecutor::resume(const kin::JointState& cmd) {
   switch (resume_rule(phase_)) {
     case ResumeRule::nothing: return true;
-    case ResumeRule::on_line: kin::resume_movel(line_of(), t_, 1.0); break;
+    case ResumeRule::on_line: kin::resume_movel(*line_, t_, 1.0); break;
     case ResumeRule::replan_goal: {
       JointMove& jm = *std::get_if<JointMove>(&running_->payload);
       if (!replan(cmd.pos, jm.goal, jm.override, jm.plan)) {
         retire(true, RtResult::plan_failed);
         return false;
       }
+      plan_ = &jm.plan;
       break;
     }
     case ResumeRule::replan_end:
@@ -393,6 +341,7 @@ bool MotionExecutor::resume(const kin::JointState& cmd) {
         retire(true, RtResult::plan_failed);
         return false;
       }
+      plan_ = &resume_plan_;
       break;
     }
   }

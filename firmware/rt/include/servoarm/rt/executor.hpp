@@ -30,6 +30,9 @@
 namespace servoarm::fw {
 
 inline constexpr std::size_t kMotionQueue = 16;
+static_assert(static_cast<int>(SegPhase::path_closed) == static_cast<int>(SegPhase::path_open) + 1 &&
+                  static_cast<int>(SegPhase::path_overlap) == static_cast<int>(SegPhase::path_open) + 2,
+              "MotionExecutor::path_run: the path run's phases are consecutive");
 
 /// What the executor needs from its controller: whether the arm may start a move, the output
 /// changes of a move that starts, and the end of every segment (done or refused: the events).
@@ -64,8 +67,33 @@ class MotionExecutor {
   /// cannot start are refused (segment_ended) in turn. False: nothing is queued.
   bool start(kin::JointState& cmd);
   /// One period of the running segment (moving, or hold_line slowing on its line): the new
-  /// setpoint into `cmd`; a segment that ends is done and the next one starts.
-  Step step(Mode mode, kin::JointState& cmd);
+  /// setpoint into `cmd`; a segment that ends is done and the next one starts. The one sample
+  /// function: one case per kind of phase (inline: a joint plan's sample is the common cycle).
+  Step step(Mode mode, kin::JointState& cmd) {
+    t_ += period_s_;
+    switch (phase_) {
+      case SegPhase::none: return Step::idle;  // (not called without a segment)
+      case SegPhase::plan:
+      case SegPhase::path_to_end:
+      case SegPhase::path_to_start:
+        plan_->sample(t_, cmd);
+        return t_ < plan_->duration ? Step::running : end_of_plan(cmd);
+      case SegPhase::line:
+      case SegPhase::path_line:
+        // IK at the exact pose; when it fails the precomputed joint value of the path is kept
+        // (the console checked the whole path with IK, and the controller checks the setpoint
+        // as every other one), and the sample is counted (Telemetry::ik_fallbacks).
+        if (line_->sample_ik(t_, cmd.pos, cmd.vel, cmd.acc) < kin::Status::ok) ++ik_fallbacks_;
+        return t_ < line_->duration ? Step::running : end_of_line(mode, cmd);
+      case SegPhase::blend_open:
+      case SegPhase::blend_closed: return step_blend(cmd);
+      case SegPhase::path_open:
+      case SegPhase::path_closed:
+      case SegPhase::path_overlap: return step_path(cmd);
+      case SegPhase::dwell: return step_dwell(cmd);
+    }
+    return Step::running;
+  }
   /// Feed hold of the running segment: its part (a line stops on its line, an overlapped
   /// path segment is done); the controller enters rule.mode (a ramp for hold_ramp).
   HoldRule hold();
@@ -78,9 +106,12 @@ class MotionExecutor {
   // Telemetry
   std::uint32_t running_id() const { return running_ != nullptr ? running_->id : 0u; }
   /// The path run's time of the last sample (s), -1 when no path run is sampled.
-  double path_time() const;
+  double path_time() const { return path_run() ? run_time() : -1.0; }
   /// The motion the newest sample of a path run belongs to (0: none).
-  std::uint32_t path_id() const;
+  std::uint32_t path_id() const {
+    if (!path_run()) return 0;
+    return phase_ == SegPhase::path_overlap ? next_->id : running_->id;
+  }
   std::uint64_t ik_fallbacks() const { return ik_fallbacks_; }
   std::uint64_t joint_replans() const { return joint_replans_; }
   std::uint64_t blended_corners() const { return blends_; }
@@ -99,13 +130,13 @@ class MotionExecutor {
   /// Pop the running segment and report it (phase none, nothing running).
   void retire(bool refused, RtResult why);
 
-  // The samplers, one per kind of phase.
-  Step step_plan(Mode mode, kin::JointState& cmd);
-  Step step_line(Mode mode, kin::JointState& cmd);
-  Step step_blend(kin::JointState& cmd);
-  Step step_path(kin::JointState& cmd);
-  const kin::JointTrajectory& plan_of() const;
-  kin::CartesianTrajectory& line_of();
+  // The samplers, one per kind of phase (out of line: step() stays small enough to be inlined
+  // into the controller's cycle, the joint plan's sample in it).
+  [[gnu::noinline]] Step end_of_plan(kin::JointState& cmd);
+  [[gnu::noinline]] Step end_of_line(Mode mode, kin::JointState& cmd);
+  [[gnu::noinline]] Step step_blend(kin::JointState& cmd);
+  [[gnu::noinline]] Step step_path(kin::JointState& cmd);
+  [[gnu::noinline]] Step step_dwell(kin::JointState& cmd);
 
   // Blended joint runs (docs/motion.md#blending)
   bool begin_blend(const JointMove& jm, const kin::JointState& cmd);
@@ -115,6 +146,10 @@ class MotionExecutor {
   /// Open the next path move when it blends out of the running one (phase path_open only).
   void path_look_ahead(const kin::PathSegment& g, double t, double tn);
   double run_time() const { return path_t0_ + static_cast<double>(path_k_) * period_s_; }
+  /// Phases path_open, path_closed, path_overlap (consecutive): sampled on the run's time base.
+  bool path_run() const {
+    return static_cast<unsigned>(phase_) - static_cast<unsigned>(SegPhase::path_open) <= 2u;
+  }
 
   SpscQueue<MotionItem, kMotionQueue> queue_;
   const kin::JointLimits* limits_ = nullptr;
@@ -124,7 +159,10 @@ class MotionExecutor {
 
   SegPhase phase_ = SegPhase::none;  ///< the executor's state: nothing beside it
   MotionItem* running_ = nullptr;    ///< front of the queue while a segment runs (phase != none)
+  MotionItem* next_ = nullptr;       ///< phase path_overlap: the path move superposed (second in the queue)
   double t_ = 0;                     ///< time into the running segment (plan, line, dwell, resume plan)
+  const kin::JointTrajectory* plan_ = nullptr;  ///< what the plan / path_to_* phases sample
+  kin::CartesianTrajectory* line_ = nullptr;    ///< what the line / path_line phases sample
   // Blended joint run (phases blend_*): the first blend_items_ motions of the queue (running_
   // the first) are the segments of blend_.
   static constexpr int kBlendSegments = 4;
