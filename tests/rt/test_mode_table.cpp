@@ -1001,3 +1001,279 @@ TEST(ModeTable, DisableReportsStoppingThenDisabled) {
   for (std::size_t j = 0; j < 6; ++j) LONGS_EQUAL(int(hal::JointState::disabled), int(r.spy->feedback(j).state));
   STRCMP_EQUAL("stopping", hal::to_string(hal::JointState::stopping));
 }
+
+// ---------------------------------------------------------------------------
+// The motion executor's segment phases (SegPhase, mode_table.hpp): every phase reached
+// through the console on the real controller, then hold, resume and stop in it. The
+// expected phases and modes are written out by hand (not read from the table); every
+// cycle's (mode, phase) pair is checked against the cells that may exist.
+// ---------------------------------------------------------------------------
+
+namespace {
+
+struct QueueRig {
+  hal::ManualClock clock;
+  test::SimApp app;
+  Session s;
+  std::vector<std::pair<Mode, SegPhase>> bad_cells;  ///< (mode, phase) pairs no cell allows
+  std::vector<bool> seen = std::vector<bool>(kSegPhases, false);
+
+  QueueRig() {
+    FwConfig cfg;
+    cfg.can = "sim";
+    const std::string e = app.build(cfg, &clock);
+    if (!e.empty()) FAIL(e.c_str());
+    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
+    const std::string b = app.boot();
+    if (!b.empty()) FAIL(b.c_str());
+    app.console->set_idle([this] { cycle(); });
+  }
+  ~QueueRig() { clock.set_idle_hook(nullptr); }
+  static bool allowed(Mode m, SegPhase p);
+  void cycle() {
+    app.ctl->cycle(clock.now());
+    clock.advance(hal::kMillisecond);
+    const Mode m = app.ctl->mode();
+    const SegPhase p = app.ctl->segment_phase();
+    seen[static_cast<std::size_t>(p)] = true;
+    if (!allowed(m, p)) bad_cells.emplace_back(m, p);
+  }
+  void step() {
+    cycle();
+    app.console->poll(s);
+  }
+  std::string cmd(const std::string& line) {
+    s.out.clear();
+    app.console->execute(s, line);
+    for (int i = 0; i < 60000 && app.console->busy(s); ++i) step();
+    if (s.out.rfind("ok", 0) != 0 && s.out.find("\nok") == std::string::npos) FAIL((line + ": " + s.out).c_str());
+    return s.out;
+  }
+  Mode mode() const { return app.ctl->mode(); }
+  SegPhase phase() const { return app.ctl->segment_phase(); }
+  bool idle() const { return mode() == Mode::idle && app.ctl->motions().empty(); }
+  void settle() {
+    for (int i = 0; i < 60000 && !idle(); ++i) step();
+    if (!idle()) FAIL((std::string("not idle: mode ") + to_string(mode())).c_str());
+  }
+  kin::JointVector q_cmd() const {
+    const Telemetry t = app.ctl->telemetry();
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+    return q;
+  }
+  Eigen::Vector3d flange(const kin::JointVector& q) const {
+    kin::Pose x;
+    CHECK(kin::forward(app.ctl->chain(), q, x) == kin::Status::ok);
+    return x.translation();
+  }
+  /// The running motion is a path move's joint segment.
+  bool joint_path_segment() {
+    const MotionItem* m = app.ctl->motions().front();
+    const auto* p = m != nullptr ? std::get_if<PathMove>(&m->payload) : nullptr;
+    return p != nullptr && p->seg.kind == kin::PathKind::joint;
+  }
+};
+
+// The cells: which segment phase each mode may run (at the end of a cycle).
+bool QueueRig::allowed(Mode m, SegPhase p) {
+  if (m == Mode::moving) return p != SegPhase::none;
+  if (m == Mode::hold_ramp) return p == SegPhase::plan || p == SegPhase::path_to_end || p == SegPhase::path_to_start;
+  if (m == Mode::hold_line) return p == SegPhase::line || p == SegPhase::path_line;
+  if (m == Mode::held)
+    return p == SegPhase::none || p == SegPhase::plan || p == SegPhase::line || p == SegPhase::dwell ||
+           p == SegPhase::path_line || p == SegPhase::path_to_end || p == SegPhase::path_to_start;
+  return p == SegPhase::none;
+}
+
+std::string joints_cmd(const kin::JointVector& q, double blend_deg) {
+  std::string t = "movej";
+  char b[48];
+  for (int j = 0; j < 6; ++j) {
+    std::snprintf(b, sizeof b, " %.12g", q[j] / kDeg);
+    t += b;
+  }
+  t += " speed=100";
+  if (blend_deg >= 0) {
+    std::snprintf(b, sizeof b, " blend=%g", blend_deg);
+    t += b;
+  }
+  return t;
+}
+
+std::string line_cmd(const Eigen::Vector3d& p, double blend_mm) {
+  char b[160];
+  std::snprintf(b, sizeof b, "movel %.9g %.9g %.9g speed=100", p.x() * 1e3, p.y() * 1e3, p.z() * 1e3);
+  std::string t = b;
+  if (blend_mm >= 0) {
+    std::snprintf(b, sizeof b, " blend=%g", blend_mm);
+    t += b;
+  }
+  return t;
+}
+
+kin::JointVector deg(std::initializer_list<double> l) {
+  kin::JointVector v(6);
+  int k = 0;
+  for (double x : l) v[k++] = x * kDeg;
+  return v;
+}
+
+const kin::JointVector kStart = deg({0, -30, 60, 0, 40, 0});
+
+/// One phase's case: the moves queued from rest at kStart, the phase to run into (and, for
+/// a path run, whether the running segment must be the joint one), what a hold leaves
+/// (mode right after it, phase kept) and the phase a resume goes on in. `pre`: a hold
+/// and a resume first (the phases only a resume enters).
+struct PhaseCase {
+  SegPhase phase;
+  bool joint_segment;
+  bool pre;
+  Mode hold_mode;
+  SegPhase hold_phase;
+};
+
+std::vector<std::string> moves_for(QueueRig& r, SegPhase p) {
+  const Eigen::Vector3d p0 = r.flange(kStart);
+  const Eigen::Vector3d A = p0 + Eigen::Vector3d(-0.10, 0, 0), B = A + Eigen::Vector3d(0, 0.10, 0),
+                        C = B + Eigen::Vector3d(0, 0, -0.08);
+  const kin::JointVector kA = deg({30, -20, 40, 0, 20, 0}), kB = deg({70, -30, 60, 20, 30, 30});
+  const kin::JointVector kJ = deg({25, -35, 70, 10, 35, 10});
+  switch (p) {
+    case SegPhase::none: return {};
+    case SegPhase::plan: return {joints_cmd(kA, -1)};
+    case SegPhase::blend_open: return {joints_cmd(kA, 20), joints_cmd(kB, 20)};
+    case SegPhase::blend_closed: return {joints_cmd(kA, 20), joints_cmd(kB, 0), joints_cmd(kA, -1)};
+    case SegPhase::line: return {line_cmd(A, -1)};
+    case SegPhase::dwell: return {"G4 S1"};
+    case SegPhase::path_open: return {line_cmd(A, 10)};
+    case SegPhase::path_closed: return {line_cmd(A, 10), "G4 S1"};
+    case SegPhase::path_overlap:
+    case SegPhase::path_line:
+    case SegPhase::path_to_start: return {line_cmd(A, 10), line_cmd(B, 10), line_cmd(C, -1)};
+    case SegPhase::path_to_end: {
+      const Eigen::Vector3d L0 = p0 + Eigen::Vector3d(0, 0, -0.08), L = r.flange(kJ) + Eigen::Vector3d(0, 0, -0.12);
+      return {line_cmd(L0, 25), joints_cmd(kJ, 20), line_cmd(L, -1)};
+    }
+  }
+  return {};
+}
+
+/// Queue the case's moves from rest at kStart and run into its phase (after a hold and
+/// resume for the phases only a resume enters).
+void enter_phase(QueueRig& r, const PhaseCase& c) {
+  r.cmd("enable");
+  for (int i = 0; i < 3000 && r.mode() != Mode::idle; ++i) r.step();
+  r.cmd(joints_cmd(kStart, -1));
+  r.settle();
+  for (const std::string& m : moves_for(r, c.phase)) r.cmd(m);
+  const SegPhase first = c.phase == SegPhase::path_line       ? SegPhase::path_open
+                         : c.phase == SegPhase::path_to_start ? SegPhase::path_overlap
+                         : c.phase == SegPhase::path_to_end   ? SegPhase::path_open
+                                                              : c.phase;
+  const auto there = [&] {
+    if (r.phase() != first && !(c.joint_segment && r.phase() == SegPhase::path_closed)) return false;
+    return !c.joint_segment || r.joint_path_segment();
+  };
+  for (int i = 0; i < 20000 && !there(); ++i) r.step();
+  for (int i = 0; i < 50 && first != SegPhase::path_overlap; ++i) r.step();  // well into it (at speed)
+  if (!there()) FAIL((std::string("never ran in phase ") + to_string(first) + ", now " + to_string(r.phase())).c_str());
+  if (!c.pre) return;
+  r.cmd("hold");
+  for (int i = 0; i < 5000 && r.mode() != Mode::held; ++i) r.step();
+  r.cmd("resume");
+  for (int i = 0; i < 100; ++i) r.step();
+  if (r.phase() != c.phase) FAIL((std::string("resumed in ") + to_string(r.phase()) + ", wanted " + to_string(c.phase)).c_str());
+}
+
+// What a hold does in each phase, written out by hand: a joint plan or blended joint run ramps
+// down (resume plans again from where it stopped), a line stops on its line, a dwell's clock
+// stops, a path segment alone stops as a line or ramps down (then a joint move to its end),
+// in an overlap it ramps down and resume goes back to the next segment's start.
+const std::vector<PhaseCase> kPhaseCases = {
+    {SegPhase::plan, false, false, Mode::hold_ramp, SegPhase::plan},
+    {SegPhase::blend_open, false, false, Mode::hold_ramp, SegPhase::plan},
+    {SegPhase::blend_closed, false, false, Mode::hold_ramp, SegPhase::plan},
+    {SegPhase::line, false, false, Mode::hold_line, SegPhase::line},
+    {SegPhase::dwell, false, false, Mode::held, SegPhase::dwell},
+    {SegPhase::path_open, false, false, Mode::hold_line, SegPhase::path_line},
+    {SegPhase::path_closed, false, false, Mode::hold_line, SegPhase::path_line},
+    {SegPhase::path_overlap, false, false, Mode::hold_ramp, SegPhase::path_to_start},
+    {SegPhase::path_line, false, true, Mode::hold_line, SegPhase::path_line},
+    {SegPhase::path_to_end, true, true, Mode::hold_ramp, SegPhase::path_to_end},
+    {SegPhase::path_to_start, false, true, Mode::hold_ramp, SegPhase::path_to_start},
+};
+
+/// The final setpoint of the case's moves run without a hold.
+kin::JointVector reference_end(SegPhase p) {
+  QueueRig r;
+  r.cmd("enable");
+  for (int i = 0; i < 3000 && r.mode() != Mode::idle; ++i) r.step();
+  r.cmd(joints_cmd(kStart, -1));
+  r.settle();
+  for (const std::string& m : moves_for(r, p)) r.cmd(m);
+  r.settle();
+  return r.q_cmd();
+}
+
+void walk_phase(const PhaseCase& c) {
+  const kin::JointVector end = reference_end(c.phase);
+  // hold, then resume: the rest of the queue runs to the same end
+  {
+    QueueRig r;
+    enter_phase(r, c);
+    LONGS_EQUAL(static_cast<int>(c.phase), static_cast<int>(r.phase()));
+    const std::uint32_t done0 = r.app.ctl->telemetry().done_id;
+    r.cmd("hold");
+    if (r.mode() != c.hold_mode)
+      FAIL((std::string(to_string(c.phase)) + ": hold entered " + to_string(r.mode()) + ", wanted " + to_string(c.hold_mode)).c_str());
+    if (r.phase() != c.hold_phase)
+      FAIL((std::string(to_string(c.phase)) + ": hold left " + to_string(r.phase()) + ", wanted " + to_string(c.hold_phase)).c_str());
+    for (int i = 0; i < 5000 && r.mode() != Mode::held; ++i) r.step();
+    if (r.mode() != Mode::held) FAIL((std::string(to_string(c.phase)) + ": never held").c_str());
+    LONGS_EQUAL(static_cast<int>(c.hold_phase), static_cast<int>(r.phase()));
+    r.cmd("resume");
+    LONGS_EQUAL(static_cast<int>(Mode::moving), static_cast<int>(r.mode()));
+    LONGS_EQUAL(static_cast<int>(c.hold_phase), static_cast<int>(r.phase()));  // resumed in the phase the hold kept
+    r.settle();
+    CHECK(r.app.ctl->telemetry().done_id > done0);
+    CHECK_TEXT((r.q_cmd() - end).norm() < 1e-6, to_string(c.phase));
+  }
+  // stop: the run ends, nothing is left of it
+  {
+    QueueRig r;
+    enter_phase(r, c);
+    r.cmd("stop");
+    LONGS_EQUAL(static_cast<int>(SegPhase::none), static_cast<int>(r.phase()));
+    CHECK(r.app.ctl->motions().empty());
+    for (int i = 0; i < 5000 && r.mode() != Mode::idle; ++i) r.step();
+    LONGS_EQUAL(static_cast<int>(Mode::idle), static_cast<int>(r.mode()));
+    for (int i = 0; i < 50; ++i) r.step();
+    CHECK_TEXT(r.bad_cells.empty(), to_string(c.phase));
+  }
+}
+
+}  // namespace
+
+TEST_GROUP(SegmentPhases){};
+
+TEST(SegmentPhases, EveryPhaseHasANameAndEveryCaseIsWalked) {
+  std::vector<bool> walked(kSegPhases, false);
+  walked[static_cast<std::size_t>(SegPhase::none)] = true;  // the modes without a segment: every walk above
+  for (const PhaseCase& c : kPhaseCases) walked[static_cast<std::size_t>(c.phase)] = true;
+  for (std::size_t p = 0; p < kSegPhases; ++p) {
+    CHECK(std::string(to_string(static_cast<SegPhase>(p))) != "?");
+    CHECK_TEXT(walked[p], to_string(static_cast<SegPhase>(p)));
+  }
+}
+TEST(SegmentPhases, Plan) { walk_phase(kPhaseCases[0]); }
+TEST(SegmentPhases, BlendOpen) { walk_phase(kPhaseCases[1]); }
+TEST(SegmentPhases, BlendClosed) { walk_phase(kPhaseCases[2]); }
+TEST(SegmentPhases, Line) { walk_phase(kPhaseCases[3]); }
+TEST(SegmentPhases, Dwell) { walk_phase(kPhaseCases[4]); }
+TEST(SegmentPhases, PathOpen) { walk_phase(kPhaseCases[5]); }
+TEST(SegmentPhases, PathClosed) { walk_phase(kPhaseCases[6]); }
+TEST(SegmentPhases, PathOverlap) { walk_phase(kPhaseCases[7]); }
+TEST(SegmentPhases, PathLine) { walk_phase(kPhaseCases[8]); }
+TEST(SegmentPhases, PathToEnd) { walk_phase(kPhaseCases[9]); }
+TEST(SegmentPhases, PathToStart) { walk_phase(kPhaseCases[10]); }

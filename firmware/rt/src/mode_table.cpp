@@ -67,6 +67,24 @@ const char* to_string(Mode m) {
   return "?";
 }
 
+const char* to_string(SegPhase p) {
+  switch (p) {
+    case SegPhase::none: return "none";
+    case SegPhase::plan: return "plan";
+    case SegPhase::blend_open: return "blend_open";
+    case SegPhase::blend_closed: return "blend_closed";
+    case SegPhase::line: return "line";
+    case SegPhase::dwell: return "dwell";
+    case SegPhase::path_open: return "path_open";
+    case SegPhase::path_closed: return "path_closed";
+    case SegPhase::path_overlap: return "path_overlap";
+    case SegPhase::path_line: return "path_line";
+    case SegPhase::path_to_end: return "path_to_end";
+    case SegPhase::path_to_start: return "path_to_start";
+  }
+  return "?";
+}
+
 const char* to_string(Action a) {
   switch (a) {
     case Action::power_up: return "power_up";

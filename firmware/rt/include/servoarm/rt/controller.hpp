@@ -25,6 +25,7 @@
 #include <atomic>
 #include <cstdint>
 
+#include "servoarm/rt/executor.hpp"
 #include "servoarm/rt/jog.hpp"
 #include "servoarm/rt/messages.hpp"
 #include "servoarm/rt/mode_table.hpp"
@@ -70,12 +71,11 @@ struct ControllerConfig {
   double unhomed_jog_scale = 0.25;
 };
 
-inline constexpr std::size_t kMotionQueue = 16;
 inline constexpr std::size_t kRequestQueue = 16;
 inline constexpr std::size_t kEventQueue = 64;
 inline constexpr std::size_t kOutputQueue = 16;
 
-class Controller {
+class Controller final : private SegmentHost {
  public:
   /// Set-up: `chain` must outlive the controller.
   Controller(hal::ServoBus& bus, const kin::Chain& chain, const ControllerConfig& cfg);
@@ -104,7 +104,7 @@ class Controller {
   // Queues (the console side is the producer of requests/motions and the consumer of replies/events).
   SpscQueue<Request, kRequestQueue>& requests() { return requests_; }
   SpscQueue<Reply, kRequestQueue>& replies() { return replies_; }
-  SpscQueue<MotionItem, kMotionQueue>& motions() { return motions_; }
+  SpscQueue<MotionItem, kMotionQueue>& motions() { return exec_.queue(); }
   SpscQueue<Event, kEventQueue>& events() { return events_; }
   SpscQueue<OutputChange, kOutputQueue>& outputs() { return outputs_; }
   Telemetry telemetry() const { return telemetry_.read(); }
@@ -119,6 +119,8 @@ class Controller {
 
  /// Real-time / tests: the mode right now (the RT thread's view; others read Telemetry::mode).
   Mode mode() const { return mode_; }
+  /// Real-time / tests: the running segment's phase (the motion executor's state, mode_table.hpp).
+  SegPhase segment_phase() const { return exec_.phase(); }
 
  private:
   void handle_request(const Request& r, TimePoint now);
@@ -141,32 +143,12 @@ class Controller {
   void step_ramp();
   void step_drive_stop();
   void follow_measured();
-  bool start_next_motion();
-  /// The arm is at rest exactly where `plan` starts (so it runs as it is).
-  bool starts_here(const kin::JointTrajectory& plan) const;
-  void step_motion();
-  /// Blended joint moves (JointMove::blend > 0): start a blend run with `jm` from rest at
-  /// cmd_ (false: not blendable, run its own plan, unblended).
-  bool begin_blend(const JointMove& jm);
-  /// Append the next queued joint move to the blend run when the last one appended blends
-  /// into it (bounded: one kin::blend_append, heap-free), at most one per cycle.
-  void blend_more();
-  /// One cycle of a blend run: sample, finish the motions whose segment has come to rest.
-  void step_blend();
-  /// Leave the blend run (a stop, hold, flush): the running move continues as a plain joint move.
-  void end_blend();
-  /// Blended runs (PathMove, docs/motion.md#blending): start the PathMove `m` from rest at
-  /// cmd_ (false: it does not start where the arm is).
-  bool begin_path(MotionItem& m);
-  /// One cycle of a running PathMove: open the next segment at its start when it blends out of
-  /// this one, sample (kin::path_sample_pair), finish the segment that has ended.
-  void step_path();
-  /// A feed hold while a PathMove runs: see hold_motion.
-  void hold_path();
-  /// Leave the run (a stop, fault, flush): nothing of it is sampled any more.
-  void end_path();
   void step_jog();
-  void finish_motion(bool refused, RtResult why);
+  void step_motion();
+  // SegmentHost: the executor's calls
+  bool may_move() const override;
+  void segment_started(const MotionItem& m) override;
+  void segment_ended(std::uint32_t id, bool refused, RtResult why) override;
   void validate_and_write(TimePoint now);
   void publish();
   void hold_measured();
@@ -214,7 +196,7 @@ class Controller {
 
   SpscQueue<Request, kRequestQueue> requests_;
   SpscQueue<Reply, kRequestQueue> replies_;
-  SpscQueue<MotionItem, kMotionQueue> motions_;
+  MotionExecutor exec_;             ///< the motion queue and the running segment (its phase)
   SpscQueue<Event, kEventQueue> events_;
   SpscQueue<OutputChange, kOutputQueue> outputs_;
   std::array<std::uint32_t, kin::kMaxJoints> out_words_{};  ///< digital outputs sent (60FEh:01 per joint)
@@ -232,38 +214,6 @@ class Controller {
   Jogger jog_;                      ///< data of the jogging mode
   kin::JointTrajectory stop_traj_;  ///< data of the ramping modes (ramping(mode_))
   double stop_t_ = 0;               ///< time into stop_traj_, or into the drives' quick stop
-  MotionItem* running_ = nullptr;   ///< front of motions_ while executing (moving, hold_*, held)
-  // Blend run (data of moving while consecutive joint moves blend; docs/motion.md#blending):
-  // the first blend_items_ motions of the queue (running_ the first) are the segments of blend_.
-  static constexpr int kBlendSegments = 4;
-  kin::JointBlendQueue<kBlendSegments> blend_;
-  bool blending_ = false;
-  bool blend_closed_ = false;       ///< no more appends to this run (it ends at rest)
-  int blend_items_ = 0;
-  double blend_t_ = 0;              ///< time on blend_'s time base (s)
-  double blend_override_ = 1.0;
-  // Blended run (data of moving while PathMoves run; docs/motion.md#blending). The run's time
-  // is path_t0_ + path_k_ / rate on the console's time base (integer steps: no drift).
-  enum class PathPhase : std::uint8_t {
-    none,      ///< no PathMove running
-    run,       ///< sampled on the run's time base
-    line,      ///< held on its line and resumed (stop_movel / resume_movel on seg.line, motion_t_)
-    to_end,    ///< after a hold: a joint move (resume_plan_) to the segment's target, then done
-    to_start,  ///< after a hold in an overlap: a joint move to the segment's start, then it runs from rest
-  };
-  PathPhase path_phase_ = PathPhase::none;
-  double path_t0_ = 0;
-  std::int64_t path_k_ = 0;
-  MotionItem* path_next_ = nullptr; ///< the next PathMove, opened: moving since its start (overlap with running_)
-  bool path_late_ = false;          ///< the next one came too late to overlap: it starts from rest
-  kin::JointTrajectory resume_plan_;  ///< phases to_end / to_start
-  kin::JointVector path_ahead_;     ///< phase run: the sample one period ahead of the setpoint
-  bool path_have_ahead_ = false;
-  double path_time() const { return path_t0_ + static_cast<double>(path_k_) * period_s_; }
-  std::uint64_t blends_ = 0;        ///< corners blended (a segment opened while the one before moved), since boot
-  double motion_t_ = 0;
-  std::uint64_t ik_fallbacks_ = 0;
-  std::uint64_t joint_replans_ = 0;
   std::array<std::uint16_t, kin::kMaxJoints> hgroups_{};
   int hgroup_n_ = 0, hgroup_i_ = 0;
   std::uint16_t hrunning_ = 0;      ///< joints the master moves now (homing / homing_abort): their setpoints follow

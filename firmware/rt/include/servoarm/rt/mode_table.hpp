@@ -3,8 +3,9 @@
 // The controller's mode (the one state value of the arm) and its request table.
 //
 // Mode says everything the controller needs to know about where the arm is: no flag
-// sits beside it. The running motion and the stop trajectory are data the mode
-// refers to, not state. Console-facing code sees the coarse ArmState (arm_state())
+// sits beside it. The running motion's own state is its SegPhase, also defined here
+// (with what a hold and a resume do in each); the motions and the stop trajectory are
+// data the mode and the phase refer to, not state. Console-facing code sees the coarse ArmState (arm_state())
 // plus Telemetry::holding (holding()); tests and diagnostics read the mode itself
 // (Telemetry::mode).
 //
@@ -145,6 +146,79 @@ constexpr bool powered(Mode m) {
 constexpr bool ramping(Mode m) {
   return m == Mode::hold_ramp || m == Mode::stopping_to_idle || m == Mode::stopping_to_disabled ||
          m == Mode::fault_ramp || m == Mode::estop_ramp;
+}
+
+/// The running segment's phase: the motion executor's state (executor.hpp) while the mode
+/// runs the motion queue (moving, hold_ramp, hold_line, held; none in every other mode). The
+/// mode says what the arm does (moves, ramps down, slows on a line, holds), the phase which
+/// kind of segment runs and where its run stands. The (mode x phase) cells that exist:
+///   moving: every phase but none; hold_ramp: plan, path_to_end, path_to_start;
+///   hold_line: line, path_line; held: none, plan, line, dwell, path_line, path_to_end, path_to_start.
+/// A feed hold (hold_rule) and `resume` (resume_rule) are decided by the phase; a stop, fault,
+/// e-stop or disable drops the queue: phase none.
+enum class SegPhase : std::uint8_t {
+  none,           ///< no segment runs (the queue is empty, or held before its first move started)
+  plan,           ///< a joint plan sampled (the console's, or planned here at start / after a hold)
+  blend_open,     ///< a blended joint run (kin::JointBlendQueue) the next queued joint move may join
+  blend_closed,   ///< a blended joint run that takes no more moves: it ends at rest at its last one
+  line,           ///< a straight tool line sampled with IK (also while it slows on / is held on its line)
+  dwell,          ///< standing still for its time (its clock stops while held)
+  path_open,      ///< a path move sampled on the run's time base; the next one may still overlap it
+  path_closed,    ///< a path move the next motion does not blend out of (or came too late for): rest at its end
+  path_overlap,   ///< the next path move has started: the sample is both superposed (the next is queued second)
+  path_line,      ///< a path move's line held on its line, and resumed along it
+  path_to_end,    ///< after a hold: a joint plan to the segment's target, then it is done
+  path_to_start,  ///< after a hold in an overlap: a joint plan to the segment's start, then it runs from rest
+};
+inline constexpr std::size_t kSegPhases = 12;
+const char* to_string(SegPhase p);
+
+/// What a feed hold does to the running segment: the mode it enters and the phase kept for
+/// `resume`. `line_alone`: a path move's line moving alone (path_open / path_closed) stops on
+/// its line as a plain line does; a path move's joint segment ramps down.
+struct HoldRule {
+  Mode mode;
+  SegPhase after;
+};
+constexpr HoldRule hold_rule(SegPhase p, bool line_alone) {
+  switch (p) {
+    case SegPhase::none: return {Mode::held, SegPhase::none};  // between two moves: the queue is held
+    case SegPhase::plan:
+    case SegPhase::blend_open:
+    case SegPhase::blend_closed: return {Mode::hold_ramp, SegPhase::plan};  // off its plan: re-planned at resume
+    case SegPhase::line: return {Mode::hold_line, SegPhase::line};
+    case SegPhase::dwell: return {Mode::held, SegPhase::dwell};
+    case SegPhase::path_open:
+    case SegPhase::path_closed:
+      return line_alone ? HoldRule{Mode::hold_line, SegPhase::path_line} : HoldRule{Mode::hold_ramp, SegPhase::path_to_end};
+    case SegPhase::path_overlap: return {Mode::hold_ramp, SegPhase::path_to_start};  // the one overlapped is done
+    case SegPhase::path_line: return {Mode::hold_line, SegPhase::path_line};
+    case SegPhase::path_to_end: return {Mode::hold_ramp, SegPhase::path_to_end};
+    case SegPhase::path_to_start: return {Mode::hold_ramp, SegPhase::path_to_start};
+  }
+  return {Mode::hold_ramp, SegPhase::plan};
+}
+
+/// What `resume` does to the held segment (its phase unchanged): nothing (a dwell's clock goes
+/// on; a held queue starts), plan again from where it stopped (to the move's goal, the path
+/// segment's end or its start: the one re-plan rule), or go on along its line.
+enum class ResumeRule : std::uint8_t { nothing, replan_goal, replan_end, replan_start, on_line };
+constexpr ResumeRule resume_rule(SegPhase p) {
+  switch (p) {
+    case SegPhase::none:
+    case SegPhase::dwell: return ResumeRule::nothing;
+    case SegPhase::plan: return ResumeRule::replan_goal;
+    case SegPhase::line:
+    case SegPhase::path_line: return ResumeRule::on_line;
+    case SegPhase::path_to_end: return ResumeRule::replan_end;
+    case SegPhase::path_to_start: return ResumeRule::replan_start;
+    case SegPhase::blend_open:    // (never held: a hold leaves these phases)
+    case SegPhase::blend_closed:
+    case SegPhase::path_open:
+    case SegPhase::path_closed:
+    case SegPhase::path_overlap: return ResumeRule::nothing;
+  }
+  return ResumeRule::nothing;
 }
 
 /// What a request does in a mode. Named after what happens; the controller runs one per request.

@@ -67,6 +67,7 @@ class SpscQueue {
     if (tail_.load(std::memory_order_acquire) - h <= i) return nullptr;
     return &buf_[(h + i) & (Capacity - 1)];
   }
+  const T* peek(std::size_t i) const { return const_cast<SpscQueue*>(this)->peek(i); }
   /// Drop the oldest item (no-op when empty).
   void pop() {
     const std::uint64_t h = head_.load(std::memory_order_relaxed);
