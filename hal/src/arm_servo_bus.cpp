@@ -35,6 +35,7 @@ Status ArmServoBus::add_group(std::unique_ptr<DriveGroup> group, std::span<const
     mapped_[j] = true;
     slot_[j] = Slot{std::uint8_t(groups_n_), std::uint8_t(k)};
     grp_[j] = group.get();
+    kind_[j] = group->homing_kind(k);  // a group's homing is configured when it is made
     fb_[j] = &group->feedback(k);
     if (j + 1 > joints_n_) joints_n_ = j + 1;
   }
@@ -115,9 +116,7 @@ void ArmServoBus::describe_homing(std::size_t j, char* buf, std::size_t size) co
   if (ours(j)) sub(j).describe_homing(slot(j).local, buf, size);
   else if (size > 0) buf[0] = '\0';
 }
-HomingKind ArmServoBus::homing_kind(std::size_t j) const {
-  return ours(j) ? sub(j).homing_kind(slot(j).local) : HomingKind::none;
-}
+HomingKind ArmServoBus::homing_kind(std::size_t j) const { return ours(j) ? kind_[j] : HomingKind::none; }
 JointCapabilities ArmServoBus::capabilities(std::size_t j) const {
   return ours(j) ? sub(j).capabilities(slot(j).local) : JointCapabilities{};
 }

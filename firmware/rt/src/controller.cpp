@@ -1146,17 +1146,20 @@ void Controller::publish() {
   t.blended_corners = exec_.blended_corners();
   t.path_time = exec_.path_time();
   t.path_id = exec_.path_id();
-  t.homed = homed_mask();
   t.homing_now = hrunning_;
   t.homing_failed = 0;
+  std::uint16_t attained = 0;  // homed_mask() from the progress read here: one homing() a joint
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
     const hal::HomingProgress hp = bus_.homing(ju);
+    if (hp.phase == hal::HomingPhase::attained) attained = static_cast<std::uint16_t>(attained | (1u << j));
     t.homing_phase[ju] = static_cast<std::uint8_t>(hp.phase);
     if (hp.phase == hal::HomingPhase::failed && hp.status != hal::Status::aborted)
       t.homing_failed = static_cast<std::uint16_t>(t.homing_failed | (1u << j));
     t.homing_kind[ju] = static_cast<std::uint8_t>(bus_.homing_kind(ju));
   }
+  t.homed = static_cast<std::uint16_t>((zeroed_ | attained) & ~hrunning_);
+
   const bool homing_mode = mode_ == Mode::homing || mode_ == Mode::homing_abort;
   t.homing_group = static_cast<std::uint8_t>(homing_mode ? hgroup_i_ + 1 : 0);
   t.homing_groups = static_cast<std::uint8_t>(homing_mode ? hgroup_n_ : 0);

@@ -78,6 +78,7 @@ class ArmServoBus final : public ServoBus {
   // stays at one address), and whether the arm is one group with joint j = local joint j.
   std::array<DriveGroup*, kMaxServoJoints> grp_{};
   std::array<const JointFeedback*, kMaxServoJoints> fb_{};
+  std::array<HomingKind, kMaxServoJoints> kind_{};  ///< each joint's homing kind, fixed by its group
   bool identity_ = false;
   std::array<bool, kMaxServoJoints> mapped_{};
   std::size_t joints_n_ = 0;
