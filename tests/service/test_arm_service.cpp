@@ -4,6 +4,10 @@
 // as the real run and queues nothing, arm control answers typed results. Expected values
 // come from the joint limits and the request, never from the service's code.
 #include <cmath>
+#include <cstdio>
+#include <string>
+#include <type_traits>
+#include <vector>
 
 #include "../console/console_rig.hpp"
 #include "servoarm/service/arm_service.hpp"
@@ -15,6 +19,22 @@ using namespace servoarm::fw;
 
 namespace {
 constexpr double kDeg = M_PI / 180.0;
+
+/// Push `n` events into the controller's event queue (as the control thread would), the
+/// service taking them into its stream whenever the queue is full.
+void emit_events(test::ConsoleRig& r, int n, std::int8_t first_joint = 0) {
+  for (int i = 0; i < n; ++i) {
+    Event e;
+    e.kind = EventKind::homing;
+    e.joint = static_cast<std::int8_t>((first_joint + i) % 6);
+    std::snprintf(e.message, sizeof e.message, "joint %d homed", e.joint + 1);
+    if (!r.app.ctl->events().push(e)) {
+      r.app.console->service().poll_events();
+      CHECK(r.app.ctl->events().push(e));
+    }
+  }
+  r.app.console->service().poll_events();
+}
 
 kin::JointVector joints(std::initializer_list<double> deg) {
   kin::JointVector q(static_cast<int>(deg.size()));
@@ -94,4 +114,83 @@ TEST(ArmService, ArmControlAnswersTypedResults) {
   CHECK(!res.reason.empty() && res.reason.find('\n') == std::string::npos);
   const ControlResult on = svc.enable();
   CHECK_TEXT(on.ok(), on.reason.c_str());
+}
+
+// The event stream: the service numbers every event it takes from the control thread, one
+// more than the one before, and stamps it with the control cycle it saw it at (RT time).
+TEST(ArmService, EventSequenceNumbersIncreaseByOne) {
+  test::ConsoleRig r;
+  for (int i = 0; i < 5; ++i) r.cycle();
+  ArmService& svc = r.app.console->service();
+  const std::uint64_t cycles_before = r.app.ctl->telemetry().cycles;
+  const EventBatch start = svc.events_since(0);
+  const std::uint64_t after = start.events.empty() ? 0 : start.events.back().seq;
+  emit_events(r, 10, 2);
+  const EventBatch b = svc.events_since(after);
+  LONGS_EQUAL(0, b.missed);
+  LONGS_EQUAL(10, b.events.size());
+  for (std::size_t i = 0; i < b.events.size(); ++i) {
+    const ArmEvent& e = b.events[i];
+    CHECK(e.seq == after + 1 + i);
+    CHECK(e.kind == EventKind::homing);
+    LONGS_EQUAL((2 + i) % 6, e.joint);
+    CHECK(e.cycle >= cycles_before && e.cycle <= r.app.ctl->telemetry().cycles);
+    DOUBLES_EQUAL(static_cast<double>(e.cycle) * r.app.ctl->period_s(), e.t, 1e-12);
+    STRCMP_EQUAL(("joint " + std::to_string(e.joint + 1) + " homed").c_str(), std::string(svc.event_detail(e)).c_str());
+  }
+  CHECK(svc.events_since(b.events.back().seq).events.empty());
+}
+
+// A reader slower than the ring: it gets the oldest events still kept and a count of the
+// ones it missed (the oldest seq it gets is larger than the one it asked after).
+TEST(ArmService, ASlowReaderSeesHowManyEventsItMissed) {
+  test::ConsoleRig r;
+  ArmService& svc = r.app.console->service();
+  const EventBatch start = svc.events_since(0);
+  const std::uint64_t after = start.events.empty() ? 0 : start.events.back().seq;
+  const int extra = 17;
+  emit_events(r, static_cast<int>(kEventRing) + extra);
+  const EventBatch b = svc.events_since(after);
+  LONGS_EQUAL(extra, b.missed);
+  LONGS_EQUAL(kEventRing, b.events.size());
+  CHECK(b.events.front().seq == after + 1 + extra);
+  CHECK(b.events.back().seq == after + kEventRing + extra);
+  CHECK(svc.event_detail(b.events.front()).size() > 0);
+}
+
+// Two readers at their own pace each get every event once, in order.
+TEST(ArmService, TwoReadersEachGetEveryEvent) {
+  test::ConsoleRig r;
+  ArmService& svc = r.app.console->service();
+  const EventBatch start = svc.events_since(0);
+  const std::uint64_t first = start.events.empty() ? 1 : start.events.back().seq + 1;
+  std::uint64_t a = first - 1, b = first - 1;
+  std::vector<std::uint64_t> got_a, got_b;
+  for (int round = 0; round < 6; ++round) {
+    emit_events(r, 7 + round);
+    const EventBatch ea = svc.events_since(a);  // reader a reads every round
+    LONGS_EQUAL(0, ea.missed);
+    for (const ArmEvent& e : ea.events) got_a.push_back(e.seq);
+    if (!ea.events.empty()) a = ea.events.back().seq;
+    if (round % 3 == 2) {  // reader b every third round
+      const EventBatch eb = svc.events_since(b);
+      LONGS_EQUAL(0, eb.missed);
+      for (const ArmEvent& e : eb.events) got_b.push_back(e.seq);
+      if (!eb.events.empty()) b = eb.events.back().seq;
+    }
+  }
+  const std::size_t total = 7 + 8 + 9 + 10 + 11 + 12;
+  LONGS_EQUAL(total, got_a.size());
+  LONGS_EQUAL(total, got_b.size());
+  for (std::size_t i = 0; i < total; ++i) {
+    CHECK(got_a[i] == first + i);
+    CHECK(got_b[i] == first + i);
+  }
+}
+
+// No text in an event: a fixed-size, trivially copyable record of figures (the control
+// thread's own line, 120 characters, would not fit in it); front ends render it.
+TEST(ArmService, AnEventIsTypedWithoutText) {
+  static_assert(std::is_trivially_copyable_v<ArmEvent>);
+  CHECK(sizeof(ArmEvent) < sizeof(Event::message));
 }

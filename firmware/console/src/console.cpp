@@ -463,42 +463,52 @@ void Console::drain_events(std::string& native, std::string& grbl) {
     }
     program_events_.clear();
   }
-  Event e;
-  while (ctl_.events().pop(e)) {
-    switch (e.kind) {
-      case EventKind::fault:
-        native += fmt("alarm: fault %s\n", bounded_text(e.message).c_str());
-        // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits),
-        // 9 homing fail (GRBL: the switch not found)
-        grbl += fmt("ALARM:%d\n[MSG:fault %s]\n",
-                    e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, bounded_text(e.message).c_str());
-        jog_tail_valid_ = false;
-        break;
-      case EventKind::estop:
-        native += "alarm: estop (send reset, then enable)\n";
-        grbl += "ALARM:10\n[MSG:e-stop: $X to reset and enable]\n";  // grblHAL: 10 = e-stop
-        jog_tail_valid_ = false;
-        break;
-      case EventKind::motion_refused:
-        native += fmt("alarm: %s\n", bounded_text(e.message).c_str());
-        grbl += fmt("[MSG:%s]\n", bounded_text(e.message).c_str());
-        break;
-      case EventKind::jog_stopped:
-        native += fmt("alarm: %s\n", bounded_text(e.message).c_str());
-        grbl += fmt("[MSG:%s]\n", bounded_text(e.message).c_str());
-        jog_tail_valid_ = false;
-        break;
-      case EventKind::homing:
-        native += fmt("homing: %s\n", bounded_text(e.message).c_str());
-        grbl += fmt("[MSG:homing: %s]\n", bounded_text(e.message).c_str());
-        break;
-      case EventKind::freedrive:
-        native += fmt("freedrive: %s\n", bounded_text(e.message).c_str());
-        grbl += fmt("[MSG:freedrive: %s]\n", bounded_text(e.message).c_str());
-        break;
-      case EventKind::motion_done:
-      case EventKind::state: break;
-    }
+  svc_->poll_events();
+  const EventBatch b = svc_->events_since(events_seen_);
+  if (b.missed > 0) {  // another reader polled the stream faster than this console read it
+    native += fmt("alarm: %llu events missed\n", static_cast<unsigned long long>(b.missed));
+    grbl += fmt("[MSG:%llu events missed]\n", static_cast<unsigned long long>(b.missed));
+  }
+  for (const ArmEvent& e : b.events) render_event(e, native, grbl);
+  if (!b.events.empty()) events_seen_ = b.events.back().seq;
+}
+
+void Console::render_event(const ArmEvent& e, std::string& native, std::string& grbl) {
+  // the control thread's line, from its fixed buffer: whole, or cut after a word with "..."
+  const std::string detail = bounded_text(std::string(svc_->event_detail(e)).c_str(), sizeof(Event::message));
+  switch (e.kind) {
+    case EventKind::fault:
+      native += fmt("alarm: fault %s\n", detail.c_str());
+      // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits),
+      // 9 homing fail (GRBL: the switch not found)
+      grbl += fmt("ALARM:%d\n[MSG:fault %s]\n",
+                  e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, detail.c_str());
+      jog_tail_valid_ = false;
+      break;
+    case EventKind::estop:
+      native += "alarm: estop (send reset, then enable)\n";
+      grbl += "ALARM:10\n[MSG:e-stop: $X to reset and enable]\n";  // grblHAL: 10 = e-stop
+      jog_tail_valid_ = false;
+      break;
+    case EventKind::motion_refused:
+      native += fmt("alarm: %s\n", detail.c_str());
+      grbl += fmt("[MSG:%s]\n", detail.c_str());
+      break;
+    case EventKind::jog_stopped:
+      native += fmt("alarm: %s\n", detail.c_str());
+      grbl += fmt("[MSG:%s]\n", detail.c_str());
+      jog_tail_valid_ = false;
+      break;
+    case EventKind::homing:
+      native += fmt("homing: %s\n", detail.c_str());
+      grbl += fmt("[MSG:homing: %s]\n", detail.c_str());
+      break;
+    case EventKind::freedrive:
+      native += fmt("freedrive: %s\n", detail.c_str());
+      grbl += fmt("[MSG:freedrive: %s]\n", detail.c_str());
+      break;
+    case EventKind::motion_done:
+    case EventKind::state: break;
   }
 }
 

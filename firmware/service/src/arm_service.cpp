@@ -6,6 +6,7 @@
 #include <cmath>
 #include <thread>
 #include <cstdio>
+#include <cstring>
 
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 #include "servoarm/lang/text.hpp"
@@ -69,6 +70,7 @@ ArmService::ArmService(const kin::Chain& chain, const kin::JointLimits& limits, 
 }
 
 void ArmService::init() {
+  ring_ = std::make_unique<std::array<EventSlot, kEventRing>>();
   tail_ = kin::JointVector::Zero(n_);
   shadow_ = std::make_unique<PathShadow>();
   scratch_ = std::make_unique<MotionItem>();
@@ -475,6 +477,56 @@ bool ArmService::path_segment(MotionItem& m, bool line, const kin::JointVector& 
   pm.after = linked ? tail_id_ : 0;
   pm.override = override;
   return true;
+}
+
+}  // namespace servoarm::fw
+
+namespace servoarm::fw {
+
+// ---------------------------------------------------------------------------
+// The event stream
+// ---------------------------------------------------------------------------
+
+std::size_t ArmService::poll_events() {
+  if (ctl_ == nullptr) return 0;
+  const std::uint64_t cycle = ctl_->telemetry().cycles;
+  std::size_t n = 0;
+  Event e;
+  while (ctl_->events().pop(e)) {
+    EventSlot& s = (*ring_)[next_seq_ % kEventRing];
+    s.ev = ArmEvent{};
+    s.ev.seq = next_seq_++;
+    s.ev.cycle = cycle;
+    s.ev.t = static_cast<double>(cycle) * ctl_->period_s();
+    s.ev.kind = e.kind;
+    s.ev.state = e.state;
+    s.ev.cause = e.cause;
+    s.ev.joint = e.joint;
+    s.ev.motion_id = e.motion_id;
+    std::memcpy(s.detail, e.message, sizeof s.detail);
+    s.detail[sizeof s.detail - 1] = '\0';
+    ++n;
+  }
+  return n;
+}
+
+EventBatch ArmService::events_since(std::uint64_t seq) const {
+  EventBatch b;
+  const std::uint64_t kept_from = next_seq_ > kEventRing ? next_seq_ - kEventRing : 1;  // oldest kept
+  std::uint64_t from = seq + 1;
+  if (from < kept_from) {
+    b.missed = kept_from - from;
+    from = kept_from;
+  }
+  if (from < next_seq_) b.events.reserve(static_cast<std::size_t>(next_seq_ - from));
+  for (std::uint64_t s = from; s < next_seq_; ++s) b.events.push_back((*ring_)[s % kEventRing].ev);
+  return b;
+}
+
+std::string_view ArmService::event_detail(const ArmEvent& e) const {
+  const EventSlot& s = (*ring_)[e.seq % kEventRing];
+  if (e.seq == 0 || s.ev.seq != e.seq) return {};
+  return std::string_view(s.detail);
 }
 
 }  // namespace servoarm::fw

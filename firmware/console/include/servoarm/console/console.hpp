@@ -154,7 +154,9 @@ class Console {
   }
   /// Execute one complete line now (no realtime characters). Used by feed().
   void execute(Session& s, std::string_view line);
-  /// Drain control-thread events into text lines ("alarm: ..."), for every session.
+  /// Render the events of the arm service's stream (ArmService::events_since) not rendered yet
+  /// as text lines ("alarm: ...", "homing: ..."), for every session; the service takes the
+  /// control thread's events into the stream first.
   std::string drain_events();
   /// The same, in both dialects at once (each session takes its own).
   void drain_events(std::string& native, std::string& grbl);
@@ -391,6 +393,9 @@ class Console {
   void cancel_check(const std::string& why);
   bool ticking_ = false;        ///< tick() is feeding (no re-entry; the run may end inside it)
   std::string program_events_;  ///< `program: ...` lines for every session (drain_events)
+  std::uint64_t events_seen_ = 0;  ///< the last event of the service's stream rendered (drain_events)
+  /// An event of the service's stream as its native line and its GRBL lines.
+  void render_event(const ArmEvent& e, std::string& native, std::string& grbl);
   struct Recording {
     bool active = false;
     double rate_hz = 50;

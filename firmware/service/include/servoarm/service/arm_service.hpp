@@ -14,13 +14,22 @@
 //   console's `check` and GRBL's $C run it, and so does `armctl program check` (which has no
 //   Controller: the service is built from the chain, limits and rate alone).
 //
+// Events: the service is the one consumer of the Controller's event queue. poll_events() takes
+// every event into a bounded ring of typed records (ArmEvent: a sequence number one more than the
+// one before, the control cycle, what happened, the joint, the motion); each reader (the
+// console, a network client) keeps its own place and asks events_since(seq). A reader slower
+// than the ring gets the oldest events still kept and how many it missed.
+//
 // Console thread (non-real-time: may allocate). Talks to the control thread only through the
-// Controller's SPSC motion queue and telemetry.
+// Controller's SPSC queues and telemetry.
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include "servoarm/kinematics/blend_path.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -117,6 +126,28 @@ struct MotionSettings {
   kin::JointVector park;               ///< the park pose (SI); empty: every joint's zero clamped into its limits
 };
 
+/// One event of the arm's event stream: figures only, no text (the control thread's own line
+/// for it, when it sent one, is ArmService::event_detail).
+struct ArmEvent {
+  std::uint64_t seq = 0;        ///< 1, 2, 3, ...: one more than the event before it
+  std::uint64_t cycle = 0;      ///< RT time stamp: the control cycle (Telemetry::cycles) the service took it at
+  double t = 0;                 ///< the same in s (cycle times the control period)
+  EventKind kind = EventKind::state;
+  ArmState state = ArmState::boot;  ///< the arm's state when the control thread sent it
+  FaultCause cause = FaultCause::none;  ///< fault: the cause
+  std::int8_t joint = -1;       ///< the joint concerned (0-based), -1 none or every joint
+  std::uint32_t motion_id = 0;  ///< motion_done / motion_refused: the motion (0 none)
+};
+
+/// Events the service keeps for its readers (the oldest is overwritten first).
+inline constexpr std::size_t kEventRing = 256;
+
+/// The answer to events_since(seq): the events after it still kept, oldest first.
+struct EventBatch {
+  std::vector<ArmEvent> events;
+  std::uint64_t missed = 0;  ///< events after `seq` no longer kept (overwritten before this read)
+};
+
 class ArmService {
  public:
   /// Real runs and dry runs on the controller's arm.
@@ -154,6 +185,18 @@ class ArmService {
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
   void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
   void set_reply_timeout(double s) { reply_timeout_s_ = s; }
+
+  /// Take every event the control thread has sent into the event ring (numbered and stamped).
+  /// Returns how many. The service is the queue's one consumer: nothing else pops it.
+  std::size_t poll_events();
+  /// The events with a sequence number above `seq` (0: from the first kept), oldest first,
+  /// and how many of those are no longer kept. A reader passes the last seq it got.
+  EventBatch events_since(std::uint64_t seq) const;
+  /// The control thread's one line for event `e` (fault text, homing progress, why a jog
+  /// stopped; no units of the service's); empty when the event is no longer kept.
+  std::string_view event_detail(const ArmEvent& e) const;
+  /// The sequence number the next event gets.
+  std::uint64_t next_event_seq() const { return next_seq_; }
 
   /// The result of the last move or dwell asked (either mode).
   const MoveResult& last() const { return last_; }
@@ -199,6 +242,12 @@ class ArmService {
   std::unique_ptr<MotionItem> scratch_;  ///< a dry run's motion (planned, never queued)
   MoveResult last_;
   std::uint32_t seq_ = 0;  ///< request sequence numbers (replies are matched by them)
+  struct EventSlot {
+    ArmEvent ev;
+    char detail[sizeof(Event::message)] = {};
+  };
+  std::unique_ptr<std::array<EventSlot, kEventRing>> ring_;  ///< slot seq % kEventRing
+  std::uint64_t next_seq_ = 1;
   std::function<void()> idle_;
   double reply_timeout_s_ = 1.0;
 };
