@@ -194,3 +194,68 @@ TEST(ArmService, AnEventIsTypedWithoutText) {
   static_assert(std::is_trivially_copyable_v<ArmEvent>);
   CHECK(sizeof(ArmEvent) < sizeof(Event::message));
 }
+
+// Jog: typed requests in SI, typed results. An increment larger than the joint's range is
+// refused as `range` with the joint's limits; at a limit as `at_limit` with where it stands;
+// nothing moves either way.
+TEST(ArmService, AJointJogRefusalCarriesItsFigures) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const kin::JointLimits lim = r.app.ctl->limits();
+  JointJog jj;
+  jj.joint = 1;
+  jj.increment = (lim.upper[1] - lim.lower[1]) * 1.01;
+  const JogResult big = svc.jog(jj, JogContext{});
+  CHECK(big.error == CmdError::out_of_range);
+  CHECK(big.refusal == JogRefusal::range);
+  LONGS_EQUAL(1, big.joint);
+  DOUBLES_EQUAL(lim.lower[1], big.lower, 0);
+  DOUBLES_EQUAL(lim.upper[1], big.upper, 0);
+  CHECK(r.app.ctl->telemetry().state != ArmState::jogging);
+}
+
+// A joint jog past the limit stops on it: accepted, clamped, with the value asked and the
+// limit it stops at (SI); a second one from there is refused as at_limit.
+TEST(ArmService, AJointJogPastTheLimitIsClampedThenRefusedAtIt) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const kin::JointLimits lim = r.app.ctl->limits();
+  const double q0 = r.app.ctl->telemetry().q_cmd[5];
+  JointJog jj;
+  jj.joint = 5;
+  jj.increment = (lim.upper[5] - q0) + 0.01;  // 0.01 rad past the limit (within the range)
+  jj.speed_pct = 100;
+  const JogResult a = svc.jog(jj, JogContext{});
+  CHECK_TEXT(a.ok(), a.reason.c_str());
+  CHECK(a.clamped);
+  LONGS_EQUAL(5, a.joint);
+  DOUBLES_EQUAL(q0 + jj.increment, a.asked, 1e-12);
+  DOUBLES_EQUAL(lim.upper[5], a.value, 0);
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state == ArmState::jogging; ++i) r.cycle();
+  svc.poll_events();
+  const JogResult b = svc.jog(jj, JogContext{});
+  CHECK(b.error == CmdError::limits);
+  CHECK(b.refusal == JogRefusal::at_limit);
+  DOUBLES_EQUAL(lim.upper[5], b.value, 1e-9);
+}
+
+// A tool jog to a pose out of reach: refused as unreachable, nothing moves; keep-alive and
+// cancel answer typed results.
+TEST(ArmService, AToolJogOutOfReachIsRefusedAndCancelAnswers) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  ToolJog tj;
+  tj.axis = 0;
+  tj.increment = 10.0;  // m: far beyond the arm's reach
+  const JogResult far = svc.jog(tj, r.app.console->jog_context());
+  CHECK(far.error == CmdError::unreachable);
+  CHECK(far.refusal == JogRefusal::unreachable);
+  CHECK(r.app.ctl->telemetry().state != ArmState::jogging);
+  const ControlResult c = svc.jog_cancel();
+  CHECK_TEXT(c.ok(), c.reason.c_str());
+  const ControlResult k = svc.jog_keepalive();
+  CHECK(k.error != CmdError::timeout);
+}

@@ -226,6 +226,8 @@ class Console {
   std::uint32_t last_motion_id() const { return svc_->last_motion_id(); }
   /// The arm service the console renders (moves, dwells: planned, checked and queued there).
   ArmService& service() { return *svc_; }
+  /// What a jog runs with now: the active tool, its IK, the feed override, the user frame.
+  JogContext jog_context() const;
 
  private:
   /// A request to the control thread and its reply (the arm service's; false: no reply in time).
@@ -237,8 +239,9 @@ class Console {
   void do_grbl_jog(Session& s, const Command& c);
   /// Send a jog request; answer ok / the error. `clamped` >= 0: the target was cut at that
   /// joint's limit (answered as an error naming it, though the jog runs).
-  void send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit);
-  JogSpec tool_jog_spec(double pct) const;
+  /// A jog's result as the answer line; `what` names the request ("jog", "$J"), `given` the
+  /// number the line gave (range and rotation refusals quote it).
+  void answer_jog(Session& s, const JogResult& r, const char* what, double given);
   void do_grbl(Session& s, const Command& c);
   /// `home [jN]` (answered at once, progress as `homing:` lines) and `$H` (answered when it has ended).
   void do_home(Session& s, const Command& c);
@@ -269,8 +272,6 @@ class Console {
   bool motion_state_ok(Session& s);
   /// Resolve a pending `enable` / `wait` whose outcome is known. True while still blocked.
   bool settle(Session& s);
-  /// The same for an increment jog (a lower bound of its duration: distance over its speed).
-  bool jog_duration_ok(Session& s, double duration_s);
   void queue_dwell(Session& s, double secs);
   void do_help(Session& s, std::string_view topic);
   /// `help`'s first line: the units in use.
@@ -424,12 +425,6 @@ class Console {
   std::string program_where() const;  ///< FILE:LINE of the current step
   std::string points_refusal() const;  ///< "" when points may change now
   // Jogging: where the running jog is going (GRBL jog lines are relative to it).
-  bool jog_tail_valid_ = false;
-  bool jog_tail_tool_ = false;
-  kin::JointVector jog_q_tail_;
-  kin::Pose jog_x_tail_ = kin::Pose::Identity();
-  Eigen::Matrix3d jog_frame_ = Eigen::Matrix3d::Identity();  ///< the running tool jog's frame
-  JogFrame jog_frame_kind_ = JogFrame::base;
   int feed_pct_ = 100;
   double feed_now_ = 0;  ///< m/s of the last jog or linear move queued (FS:)
 };

@@ -124,6 +124,75 @@ struct MotionSettings {
   double default_blend_rad = 0.0;      ///< movej without blend=
   double default_blend_m = 0.0;        ///< movel, G0/G1 without blend=
   kin::JointVector park;               ///< the park pose (SI); empty: every joint's zero clamped into its limits
+  double jog_speed_pct = 10.0;         ///< jog speed without one given: percent of the joint / tool limits
+  double jog_deadman_s = 0.25;         ///< a continuous jog not refreshed this long stops
+};
+
+/// What a jog request refused (JogResult::refusal); none: accepted.
+enum class JogRefusal : std::uint8_t {
+  none,
+  range,        ///< joint jog: the increment is larger than joint `joint`'s range [`lower`, `upper`]
+  at_limit,     ///< joint jog: joint `joint` stands at its limit `value` already
+  rotation,     ///< tool jog: the rotation `value` (rad) is half a turn or more
+  duration,     ///< it would take `duration` s, more than max_move_duration_s
+  unreachable,  ///< tool jog: the target has no IK solution within the joint limits
+  feed,         ///< pose jog: the speed `speed` (m/s, override applied) is below kMinLinearSpeedMmS
+  control,      ///< the control thread refused it (`reason` is its line)
+};
+const char* to_string(JogRefusal r);
+
+/// A joint jog: joint `joint` (0-based) by `increment` (rad or m), or continuously towards
+/// its limit in `direction` (+1 / -1), at `speed_pct` percent of the joint limits (< 0: the
+/// default jog speed); the feed override scales it.
+struct JointJog {
+  int joint = 0;
+  bool continuous = false;
+  int direction = 1;
+  double increment = 0;
+  double speed_pct = -1;
+};
+
+/// A tool jog: along (axis 0..2, m) or about (3..5, rad) an axis of `frame` by `increment`,
+/// or continuously in `direction`; at `speed_pct` percent of the linear and angular limits.
+struct ToolJog {
+  int axis = 0;
+  bool continuous = false;
+  int direction = 1;
+  double increment = 0;
+  double speed_pct = -1;
+  JogFrame frame = JogFrame::base;
+};
+
+/// A jog of the tool to a pose (GRBL $J): `target` in the base frame, at `speed` m/s along
+/// the path (before the feed override); `frame`/`axes`: the frame it is given in.
+struct PoseJog {
+  kin::Pose target = kin::Pose::Identity();
+  double speed = 0;
+  JogFrame frame = JogFrame::base;
+  Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
+};
+
+/// What a jog runs with: the active tool's chain and IK, the feed override, the user frame.
+struct JogContext {
+  const kin::Chain* chain = nullptr;  ///< nullptr: the arm's
+  kin::IkSolver ik{};  ///< tool and pose jogs check their target with it (none: refused as unreachable)
+  int feed_pct = 100;
+  Eigen::Matrix3d user_axes = Eigen::Matrix3d::Identity();  ///< the active user frame's orientation
+};
+
+/// The answer to a jog: accepted (the control thread's line in `reason`), or what was refused.
+struct JogResult {
+  CmdError error = CmdError::ok;
+  JogRefusal refusal = JogRefusal::none;
+  std::string reason;           ///< the control thread's one line (accepted, or its refusal)
+  int joint = -1;               ///< range, at_limit, clamped: the joint (0-based)
+  bool clamped = false;         ///< accepted, stopping at joint `joint`'s limit `value` (asked `asked`)
+  double asked = 0;             ///< clamped: where the increment would have taken the joint (SI)
+  double value = 0;             ///< at_limit / clamped: the limit; rotation: the angle (rad)
+  double lower = 0, upper = 0;  ///< range: the joint's limits (SI)
+  double duration = 0;          ///< duration: s
+  double speed = 0;             ///< tool and pose jogs: the path speed (m/s)
+  bool ok() const { return error == CmdError::ok; }
 };
 
 /// One event of the arm's event stream: figures only, no text (the control thread's own line
@@ -180,6 +249,18 @@ class ArmService {
   ControlResult freedrive(bool on);
   /// Collision detection on or off: done (reason "collision detection on|off"), or why not.
   ControlResult collision_detection(bool on);
+  /// Jogs (jog.hpp runs them on the control thread; the service computes the targets from
+  /// where the running jog ends, or the commanded position).
+  JogResult jog(const JointJog& rq, const JogContext& cx);
+  JogResult jog(const ToolJog& rq, const JogContext& cx);
+  JogResult jog(const PoseJog& rq, const JogContext& cx);
+  /// Where a pose jog given in `frame` starts: the running jog's target, else the commanded pose.
+  kin::Pose jog_from(JogFrame frame, const JogContext& cx) const;
+  /// Keep a continuous jog alive; end the running jog.
+  ControlResult jog_keepalive() { return control(RequestOp::jog_keepalive); }
+  ControlResult jog_cancel();
+  /// Forget where the running jog ends (the next jog starts from the commanded position).
+  void jog_forget() { jog_.valid = false; }
   /// The park move (`park`, G28): to the park pose at the default joint speed.
   MoveJoints park_request() const;
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
@@ -242,6 +323,21 @@ class ArmService {
   std::unique_ptr<MotionItem> scratch_;  ///< a dry run's motion (planned, never queued)
   MoveResult last_;
   std::uint32_t seq_ = 0;  ///< request sequence numbers (replies are matched by them)
+  /// Where the running jog ends (its target), to add the next increment to.
+  struct JogTail {
+    bool valid = false;
+    bool tool = false;
+    kin::JointVector q;
+    kin::Pose pose = kin::Pose::Identity();
+    Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
+    JogFrame frame = JogFrame::base;
+  } jog_;
+  JogSpec tool_spec(double pct, const JogContext& cx) const;
+  double jog_pct(double speed_pct, int feed_pct) const;
+  kin::JointVector commanded() const;
+  kin::Pose commanded_pose(const JogContext& cx) const;
+  bool jog_duration_ok(double duration, JogResult& r) const;
+  JogResult send_jog(const JogSpec& js);
   struct EventSlot {
     ArmEvent ev;
     char detail[sizeof(Event::message)] = {};
