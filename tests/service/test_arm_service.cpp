@@ -259,3 +259,41 @@ TEST(ArmService, AToolJogOutOfReachIsRefusedAndCancelAnswers) {
   const ControlResult k = svc.jog_keepalive();
   CHECK(k.error != CmdError::timeout);
 }
+
+// Digital outputs by index ([[output]] order): a typed result; an index beyond the table is
+// refused with the table's size; on / off at once reach the drive's word; M62 / M63 wait
+// for the next move (pending, not sent); a dry run checks and changes nothing.
+TEST(ArmService, OutputsAreSetByIndexWithTypedResults) {
+  FwConfig cfg;
+  cfg.outputs = {{"gripper", 3, 16}, {"lamp", 6, 18}};  // nodes 1..6 = joints 1..6
+  test::ConsoleRig r(cfg);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  LONGS_EQUAL(2, svc.output_count());
+  OutputRequest rq;
+  rq.index = 2;
+  rq.on = true;
+  const OutputResult none = svc.set_output(rq);
+  CHECK(none.error == CmdError::out_of_range);
+  CHECK(none.refusal == OutputRefusal::no_output);
+  rq.index = 1;
+  rq.dry = true;
+  CHECK(svc.set_output(rq).ok());
+  for (int i = 0; i < 20; ++i) r.cycle();
+  CHECK(!svc.output_on(1));
+  rq.dry = false;
+  CHECK(svc.set_output(rq).ok());
+  for (int i = 0; i < 20; ++i) r.cycle();
+  CHECK(svc.output_on(1));
+  CHECK((r.app.ctl->telemetry().outputs[5] >> 18) & 1u);
+  OutputRequest sync;
+  sync.index = 0;
+  sync.on = true;
+  sync.sync = true;
+  CHECK(svc.set_output(sync).ok());
+  LONGS_EQUAL(1, svc.pending_outputs().size());
+  LONGS_EQUAL(2, svc.pending_outputs()[0].joint);
+  LONGS_EQUAL(1u << 16, svc.pending_outputs()[0].value);
+  for (int i = 0; i < 20; ++i) r.cycle();
+  CHECK(!svc.output_on(0));
+}

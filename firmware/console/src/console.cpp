@@ -154,6 +154,7 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
   ms.park = cfg_.home;
   ms.jog_speed_pct = cfg_.jog_speed_pct;
   ms.jog_deadman_s = cfg_.jog_deadman_s;
+  for (const ConsoleConfig::Output& o : cfg_.outputs) ms.outputs.push_back(OutputBit{o.joint, o.bit});
   svc_ = std::make_unique<ArmService>(ctl_, ms);
   cfg_.home = svc_->settings().park;  // config() shows the park pose the service uses
   svc_->set_reply_timeout(cfg_.reply_timeout_s);
@@ -257,13 +258,14 @@ void Console::note_before_answer(Session& s, std::size_t from, const std::string
 }
 
 std::string Console::discard_sync_outputs(const char* why) {
-  if (n_sync_out_ == 0) return {};
+  const std::span<const OutputChange> pending = svc_->pending_outputs();
+  if (pending.empty()) return {};
   std::string names;
-  for (std::size_t k = 0; k < n_sync_out_; ++k)
+  for (const OutputChange& ch : pending)
     for (const ConsoleConfig::Output& o : cfg_.outputs)
-      if (o.joint == sync_out_[k].joint && ((sync_out_[k].mask >> o.bit) & 1u))
-        names += fmt("%s%s %s", names.empty() ? "" : ", ", o.name.c_str(), ((sync_out_[k].value >> o.bit) & 1u) ? "on" : "off");
-  n_sync_out_ = 0;
+      if (o.joint == ch.joint && ((ch.mask >> o.bit) & 1u))
+        names += fmt("%s%s %s", names.empty() ? "" : ", ", o.name.c_str(), ((ch.value >> o.bit) & 1u) ? "on" : "off");
+  svc_->clear_pending_outputs();
   return fmt("outputs: M62/M63 change%s waiting for the next move discarded (%s): %s",
              names.find(',') == std::string::npos ? "" : "s", why, names.c_str());
 }
@@ -553,7 +555,7 @@ MoveContext Console::move_context(DryRun* dry, const StepParams* step) const {
   cx.chain = &tool_slot().chain;
   cx.ik = ik_solver();
   cx.feed_pct = feed_pct_;
-  cx.outputs = std::span<const OutputChange>(sync_out_.data(), n_sync_out_);
+  cx.outputs = svc_->pending_outputs();
   if (step != nullptr) {
     cx.step_blend = step->blend;
     cx.next_line = step->next_line;
@@ -633,7 +635,7 @@ void Console::queue(Session& s, const MoveJoints& req, const StepParams* step) {
     answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(r.duration, kTimeDecimals) + "s" + blend_text(r));
     return;
   }
-  n_sync_out_ = 0;
+  svc_->clear_pending_outputs();
   answer_ok(s, fmt("queued id=%u duration=%ss%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(), blend_text(r).c_str()));
 }
 
@@ -651,7 +653,7 @@ void Console::queue(Session& s, const MoveLine& req, const StepParams* step) {
     return;
   }
   feed_now_ = r.speed;
-  n_sync_out_ = 0;
+  svc_->clear_pending_outputs();
   answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(),
                    r.status == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", r.slowdown).c_str() : "",
                    blend_text(r).c_str()));
@@ -822,16 +824,16 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
     return;
   }
   // A move refused: the M62/M63 changes waiting for it are dropped with it (and said so).
-  const std::uint8_t sync_before = n_sync_out_;
+  const std::size_t sync_before = svc_->pending_outputs().size();
   const std::size_t out_before = s.out.size();
   struct DropSyncOnRefusal {
     Console& con;
     Session& s;
     const Command& c;
-    std::uint8_t before;
+    std::size_t before;
     std::size_t out0;
     ~DropSyncOnRefusal() {
-      if (before == 0 || con.n_sync_out_ != before || s.check_mode || !carries_outputs(c.cmd)) return;
+      if (before == 0 || con.svc_->pending_outputs().size() != before || s.check_mode || !carries_outputs(c.cmd)) return;
       if (!con.last_answer_is_error(s, out0)) return;
       con.note_before_answer(s, out0, con.discard_sync_outputs("the move was refused"));
     }

@@ -41,6 +41,16 @@ const char* to_string(JogRefusal r) {
   return "?";
 }
 
+const char* to_string(OutputRefusal r) {
+  switch (r) {
+    case OutputRefusal::none: return "none";
+    case OutputRefusal::no_output: return "no_output";
+    case OutputRefusal::sync_full: return "sync_full";
+    case OutputRefusal::queue_full: return "queue_full";
+  }
+  return "?";
+}
+
 CmdError motion_error(kin::MotionStatus m) {
   switch (m) {
     case kin::MotionStatus::ok:
@@ -774,6 +784,56 @@ ControlResult ArmService::jog_cancel() {
   ControlResult c = control(RequestOp::jog_cancel);
   jog_.valid = false;
   return c;
+}
+
+}  // namespace servoarm::fw
+
+namespace servoarm::fw {
+
+// ---------------------------------------------------------------------------
+// Digital outputs
+// ---------------------------------------------------------------------------
+
+OutputResult ArmService::set_output(const OutputRequest& rq) {
+  OutputResult r;
+  r.count = cfg_.outputs.size();
+  if (rq.index >= cfg_.outputs.size()) {
+    r.error = CmdError::out_of_range;
+    r.refusal = OutputRefusal::no_output;
+    return r;
+  }
+  const OutputBit& o = cfg_.outputs[rq.index];
+  OutputChange ch;
+  ch.joint = static_cast<std::int8_t>(o.joint);
+  ch.mask = 1u << o.bit;
+  ch.value = rq.on ? ch.mask : 0u;
+  if (rq.dry) return r;
+  if (rq.sync) {  // merged into the changes the next move carries
+    std::size_t k = 0;
+    while (k < n_sync_out_ && sync_out_[k].joint != ch.joint) ++k;
+    if (k == n_sync_out_) {
+      if (n_sync_out_ >= kMotionOutputs) {
+        r.error = CmdError::busy;
+        r.refusal = OutputRefusal::sync_full;
+        return r;
+      }
+      sync_out_[n_sync_out_++] = OutputChange{ch.joint, 0, 0};
+    }
+    sync_out_[k].mask |= ch.mask;
+    sync_out_[k].value = (sync_out_[k].value & ~ch.mask) | ch.value;
+    return r;
+  }
+  if (ctl_ == nullptr || !ctl_->outputs().push(ch)) {
+    r.error = CmdError::busy;
+    r.refusal = OutputRefusal::queue_full;
+  }
+  return r;
+}
+
+bool ArmService::output_on(std::size_t index) const {
+  if (ctl_ == nullptr || index >= cfg_.outputs.size()) return false;
+  const OutputBit& o = cfg_.outputs[index];
+  return (ctl_->telemetry().outputs[static_cast<std::size_t>(o.joint)] >> o.bit) & 1u;
 }
 
 }  // namespace servoarm::fw

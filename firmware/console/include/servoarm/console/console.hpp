@@ -413,9 +413,6 @@ class Console {
   void do_resume(Session& s);
   void do_record(Session& s, const Command& c);
   void do_out(Session& s, const Command& c);
-  /// M62 / M63 changes waiting for the next move (one per joint, merged).
-  std::array<OutputChange, kMotionOutputs> sync_out_{};
-  std::uint8_t n_sync_out_ = 0;
   /// movej / movel @NAME typed at the console (Command::at_point).
   void queue_at_point(Session& s, const Command& c);
   /// Run one step in `ps` (its answer in ps.out).

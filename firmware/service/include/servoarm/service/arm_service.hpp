@@ -114,6 +114,37 @@ struct ControlResult {
 /// The error code of a control-thread result.
 CmdError control_error(RtResult r);
 
+/// A digital output ([[output]]): bit `bit` of joint `joint`'s drive outputs word.
+struct OutputBit {
+  int joint = 0;
+  int bit = 0;
+};
+
+/// Set digital output `index` (the [[output]] order) on or off: at once (M64 / M65, `out`),
+/// or with the next move (`sync`: M62 / M63); `dry`: checked only.
+struct OutputRequest {
+  std::size_t index = 0;
+  bool on = false;
+  bool sync = false;
+  bool dry = false;
+};
+
+/// What an output request refused (OutputResult::refusal); none: accepted.
+enum class OutputRefusal : std::uint8_t {
+  none,
+  no_output,   ///< no output `index` (`count` outputs)
+  sync_full,   ///< sync: outputs of more than kMotionOutputs drives already wait for the next move
+  queue_full,  ///< at once: the control thread's output queue is full; not set
+};
+const char* to_string(OutputRefusal r);
+
+struct OutputResult {
+  CmdError error = CmdError::ok;
+  OutputRefusal refusal = OutputRefusal::none;
+  std::size_t count = 0;  ///< the outputs configured
+  bool ok() const { return error == CmdError::ok; }
+};
+
 /// The service's motion settings (SI): the console's configuration of them.
 struct MotionSettings {
   double default_joint_speed_pct = 50.0;
@@ -126,6 +157,7 @@ struct MotionSettings {
   kin::JointVector park;               ///< the park pose (SI); empty: every joint's zero clamped into its limits
   double jog_speed_pct = 10.0;         ///< jog speed without one given: percent of the joint / tool limits
   double jog_deadman_s = 0.25;         ///< a continuous jog not refreshed this long stops
+  std::vector<OutputBit> outputs;      ///< the digital outputs, in [[output]] order
 };
 
 /// What a jog request refused (JogResult::refusal); none: accepted.
@@ -261,6 +293,13 @@ class ArmService {
   ControlResult jog_cancel();
   /// Forget where the running jog ends (the next jog starts from the commanded position).
   void jog_forget() { jog_.valid = false; }
+  /// Digital outputs: set one (typed result), read one (as the drive is sent it), and the
+  /// M62 / M63 changes waiting for the next move (a queued move carries and clears them).
+  OutputResult set_output(const OutputRequest& rq);
+  std::size_t output_count() const { return cfg_.outputs.size(); }
+  bool output_on(std::size_t index) const;
+  std::span<const OutputChange> pending_outputs() const { return {sync_out_.data(), n_sync_out_}; }
+  void clear_pending_outputs() { n_sync_out_ = 0; }
   /// The park move (`park`, G28): to the park pose at the default joint speed.
   MoveJoints park_request() const;
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
@@ -323,6 +362,8 @@ class ArmService {
   std::unique_ptr<MotionItem> scratch_;  ///< a dry run's motion (planned, never queued)
   MoveResult last_;
   std::uint32_t seq_ = 0;  ///< request sequence numbers (replies are matched by them)
+  std::array<OutputChange, kMotionOutputs> sync_out_{};  ///< M62 / M63 changes for the next move (one per joint, merged)
+  std::uint8_t n_sync_out_ = 0;
   /// Where the running jog ends (its target), to add the next increment to.
   struct JogTail {
     bool valid = false;
