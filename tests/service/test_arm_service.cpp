@@ -4,6 +4,10 @@
 // as the real run and queues nothing, arm control answers typed results. Expected values
 // come from the joint limits and the request, never from the service's code.
 #include <cmath>
+#include <cstdio>
+#include <string>
+#include <type_traits>
+#include <vector>
 
 #include "../console/console_rig.hpp"
 #include "servoarm/service/arm_service.hpp"
@@ -15,6 +19,22 @@ using namespace servoarm::fw;
 
 namespace {
 constexpr double kDeg = M_PI / 180.0;
+
+/// Push `n` events into the controller's event queue (as the control thread would), the
+/// service taking them into its stream whenever the queue is full.
+void emit_events(test::ConsoleRig& r, int n, std::int8_t first_joint = 0) {
+  for (int i = 0; i < n; ++i) {
+    Event e;
+    e.kind = EventKind::homing;
+    e.joint = static_cast<std::int8_t>((first_joint + i) % 6);
+    std::snprintf(e.message, sizeof e.message, "joint %d homed", e.joint + 1);
+    if (!r.app.ctl->events().push(e)) {
+      r.app.console->service().poll_events();
+      CHECK(r.app.ctl->events().push(e));
+    }
+  }
+  r.app.console->service().poll_events();
+}
 
 kin::JointVector joints(std::initializer_list<double> deg) {
   kin::JointVector q(static_cast<int>(deg.size()));
@@ -94,4 +114,186 @@ TEST(ArmService, ArmControlAnswersTypedResults) {
   CHECK(!res.reason.empty() && res.reason.find('\n') == std::string::npos);
   const ControlResult on = svc.enable();
   CHECK_TEXT(on.ok(), on.reason.c_str());
+}
+
+// The event stream: the service numbers every event it takes from the control thread, one
+// more than the one before, and stamps it with the control cycle it saw it at (RT time).
+TEST(ArmService, EventSequenceNumbersIncreaseByOne) {
+  test::ConsoleRig r;
+  for (int i = 0; i < 5; ++i) r.cycle();
+  ArmService& svc = r.app.console->service();
+  const std::uint64_t cycles_before = r.app.ctl->telemetry().cycles;
+  const EventBatch start = svc.events_since(0);
+  const std::uint64_t after = start.events.empty() ? 0 : start.events.back().seq;
+  emit_events(r, 10, 2);
+  const EventBatch b = svc.events_since(after);
+  LONGS_EQUAL(0, b.missed);
+  LONGS_EQUAL(10, b.events.size());
+  for (std::size_t i = 0; i < b.events.size(); ++i) {
+    const ArmEvent& e = b.events[i];
+    CHECK(e.seq == after + 1 + i);
+    CHECK(e.kind == EventKind::homing);
+    LONGS_EQUAL((2 + i) % 6, e.joint);
+    CHECK(e.cycle >= cycles_before && e.cycle <= r.app.ctl->telemetry().cycles);
+    DOUBLES_EQUAL(static_cast<double>(e.cycle) * r.app.ctl->period_s(), e.t, 1e-12);
+    STRCMP_EQUAL(("joint " + std::to_string(e.joint + 1) + " homed").c_str(), std::string(svc.event_detail(e)).c_str());
+  }
+  CHECK(svc.events_since(b.events.back().seq).events.empty());
+}
+
+// A reader slower than the ring: it gets the oldest events still kept and a count of the
+// ones it missed (the oldest seq it gets is larger than the one it asked after).
+TEST(ArmService, ASlowReaderSeesHowManyEventsItMissed) {
+  test::ConsoleRig r;
+  ArmService& svc = r.app.console->service();
+  const EventBatch start = svc.events_since(0);
+  const std::uint64_t after = start.events.empty() ? 0 : start.events.back().seq;
+  const int extra = 17;
+  emit_events(r, static_cast<int>(kEventRing) + extra);
+  const EventBatch b = svc.events_since(after);
+  LONGS_EQUAL(extra, b.missed);
+  LONGS_EQUAL(kEventRing, b.events.size());
+  CHECK(b.events.front().seq == after + 1 + extra);
+  CHECK(b.events.back().seq == after + kEventRing + extra);
+  CHECK(svc.event_detail(b.events.front()).size() > 0);
+}
+
+// Two readers at their own pace each get every event once, in order.
+TEST(ArmService, TwoReadersEachGetEveryEvent) {
+  test::ConsoleRig r;
+  ArmService& svc = r.app.console->service();
+  const EventBatch start = svc.events_since(0);
+  const std::uint64_t first = start.events.empty() ? 1 : start.events.back().seq + 1;
+  std::uint64_t a = first - 1, b = first - 1;
+  std::vector<std::uint64_t> got_a, got_b;
+  for (int round = 0; round < 6; ++round) {
+    emit_events(r, 7 + round);
+    const EventBatch ea = svc.events_since(a);  // reader a reads every round
+    LONGS_EQUAL(0, ea.missed);
+    for (const ArmEvent& e : ea.events) got_a.push_back(e.seq);
+    if (!ea.events.empty()) a = ea.events.back().seq;
+    if (round % 3 == 2) {  // reader b every third round
+      const EventBatch eb = svc.events_since(b);
+      LONGS_EQUAL(0, eb.missed);
+      for (const ArmEvent& e : eb.events) got_b.push_back(e.seq);
+      if (!eb.events.empty()) b = eb.events.back().seq;
+    }
+  }
+  const std::size_t total = 7 + 8 + 9 + 10 + 11 + 12;
+  LONGS_EQUAL(total, got_a.size());
+  LONGS_EQUAL(total, got_b.size());
+  for (std::size_t i = 0; i < total; ++i) {
+    CHECK(got_a[i] == first + i);
+    CHECK(got_b[i] == first + i);
+  }
+}
+
+// No text in an event: a fixed-size, trivially copyable record of figures (the control
+// thread's own line, 120 characters, would not fit in it); front ends render it.
+TEST(ArmService, AnEventIsTypedWithoutText) {
+  static_assert(std::is_trivially_copyable_v<ArmEvent>);
+  CHECK(sizeof(ArmEvent) < sizeof(Event::message));
+}
+
+// Jog: typed requests in SI, typed results. An increment larger than the joint's range is
+// refused as `range` with the joint's limits; at a limit as `at_limit` with where it stands;
+// nothing moves either way.
+TEST(ArmService, AJointJogRefusalCarriesItsFigures) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const kin::JointLimits lim = r.app.ctl->limits();
+  JointJog jj;
+  jj.joint = 1;
+  jj.increment = (lim.upper[1] - lim.lower[1]) * 1.01;
+  const JogResult big = svc.jog(jj, JogContext{});
+  CHECK(big.error == CmdError::out_of_range);
+  CHECK(big.refusal == JogRefusal::range);
+  LONGS_EQUAL(1, big.joint);
+  DOUBLES_EQUAL(lim.lower[1], big.lower, 0);
+  DOUBLES_EQUAL(lim.upper[1], big.upper, 0);
+  CHECK(r.app.ctl->telemetry().state != ArmState::jogging);
+}
+
+// A joint jog past the limit stops on it: accepted, clamped, with the value asked and the
+// limit it stops at (SI); a second one from there is refused as at_limit.
+TEST(ArmService, AJointJogPastTheLimitIsClampedThenRefusedAtIt) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const kin::JointLimits lim = r.app.ctl->limits();
+  const double q0 = r.app.ctl->telemetry().q_cmd[5];
+  JointJog jj;
+  jj.joint = 5;
+  jj.increment = (lim.upper[5] - q0) + 0.01;  // 0.01 rad past the limit (within the range)
+  jj.speed_pct = 100;
+  const JogResult a = svc.jog(jj, JogContext{});
+  CHECK_TEXT(a.ok(), a.reason.c_str());
+  CHECK(a.clamped);
+  LONGS_EQUAL(5, a.joint);
+  DOUBLES_EQUAL(q0 + jj.increment, a.asked, 1e-12);
+  DOUBLES_EQUAL(lim.upper[5], a.value, 0);
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state == ArmState::jogging; ++i) r.cycle();
+  svc.poll_events();
+  const JogResult b = svc.jog(jj, JogContext{});
+  CHECK(b.error == CmdError::limits);
+  CHECK(b.refusal == JogRefusal::at_limit);
+  DOUBLES_EQUAL(lim.upper[5], b.value, 1e-9);
+}
+
+// A tool jog to a pose out of reach: refused as unreachable, nothing moves; keep-alive and
+// cancel answer typed results.
+TEST(ArmService, AToolJogOutOfReachIsRefusedAndCancelAnswers) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  ToolJog tj;
+  tj.axis = 0;
+  tj.increment = 10.0;  // m: far beyond the arm's reach
+  const JogResult far = svc.jog(tj, r.app.console->jog_context());
+  CHECK(far.error == CmdError::unreachable);
+  CHECK(far.refusal == JogRefusal::unreachable);
+  CHECK(r.app.ctl->telemetry().state != ArmState::jogging);
+  const ControlResult c = svc.jog_cancel();
+  CHECK_TEXT(c.ok(), c.reason.c_str());
+  const ControlResult k = svc.jog_keepalive();
+  CHECK(k.error != CmdError::timeout);
+}
+
+// Digital outputs by index ([[output]] order): a typed result; an index beyond the table is
+// refused with the table's size; on / off at once reach the drive's word; M62 / M63 wait
+// for the next move (pending, not sent); a dry run checks and changes nothing.
+TEST(ArmService, OutputsAreSetByIndexWithTypedResults) {
+  FwConfig cfg;
+  cfg.outputs = {{"gripper", 3, 16}, {"lamp", 6, 18}};  // nodes 1..6 = joints 1..6
+  test::ConsoleRig r(cfg);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  LONGS_EQUAL(2, svc.output_count());
+  OutputRequest rq;
+  rq.index = 2;
+  rq.on = true;
+  const OutputResult none = svc.set_output(rq);
+  CHECK(none.error == CmdError::out_of_range);
+  CHECK(none.refusal == OutputRefusal::no_output);
+  rq.index = 1;
+  rq.dry = true;
+  CHECK(svc.set_output(rq).ok());
+  for (int i = 0; i < 20; ++i) r.cycle();
+  CHECK(!svc.output_on(1));
+  rq.dry = false;
+  CHECK(svc.set_output(rq).ok());
+  for (int i = 0; i < 20; ++i) r.cycle();
+  CHECK(svc.output_on(1));
+  CHECK((r.app.ctl->telemetry().outputs[5] >> 18) & 1u);
+  OutputRequest sync;
+  sync.index = 0;
+  sync.on = true;
+  sync.sync = true;
+  CHECK(svc.set_output(sync).ok());
+  LONGS_EQUAL(1, svc.pending_outputs().size());
+  LONGS_EQUAL(2, svc.pending_outputs()[0].joint);
+  LONGS_EQUAL(1u << 16, svc.pending_outputs()[0].value);
+  for (int i = 0; i < 20; ++i) r.cycle();
+  CHECK(!svc.output_on(0));
 }

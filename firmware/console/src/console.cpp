@@ -152,6 +152,9 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
   ms.default_blend_rad = cfg_.default_blend_rad;
   ms.default_blend_m = cfg_.default_blend_m;
   ms.park = cfg_.home;
+  ms.jog_speed_pct = cfg_.jog_speed_pct;
+  ms.jog_deadman_s = cfg_.jog_deadman_s;
+  for (const ConsoleConfig::Output& o : cfg_.outputs) ms.outputs.push_back(OutputBit{o.joint, o.bit});
   svc_ = std::make_unique<ArmService>(ctl_, ms);
   cfg_.home = svc_->settings().park;  // config() shows the park pose the service uses
   svc_->set_reply_timeout(cfg_.reply_timeout_s);
@@ -255,13 +258,14 @@ void Console::note_before_answer(Session& s, std::size_t from, const std::string
 }
 
 std::string Console::discard_sync_outputs(const char* why) {
-  if (n_sync_out_ == 0) return {};
+  const std::span<const OutputChange> pending = svc_->pending_outputs();
+  if (pending.empty()) return {};
   std::string names;
-  for (std::size_t k = 0; k < n_sync_out_; ++k)
+  for (const OutputChange& ch : pending)
     for (const ConsoleConfig::Output& o : cfg_.outputs)
-      if (o.joint == sync_out_[k].joint && ((sync_out_[k].mask >> o.bit) & 1u))
-        names += fmt("%s%s %s", names.empty() ? "" : ", ", o.name.c_str(), ((sync_out_[k].value >> o.bit) & 1u) ? "on" : "off");
-  n_sync_out_ = 0;
+      if (o.joint == ch.joint && ((ch.mask >> o.bit) & 1u))
+        names += fmt("%s%s %s", names.empty() ? "" : ", ", o.name.c_str(), ((ch.value >> o.bit) & 1u) ? "on" : "off");
+  svc_->clear_pending_outputs();
   return fmt("outputs: M62/M63 change%s waiting for the next move discarded (%s): %s",
              names.find(',') == std::string::npos ? "" : "s", why, names.c_str());
 }
@@ -463,42 +467,49 @@ void Console::drain_events(std::string& native, std::string& grbl) {
     }
     program_events_.clear();
   }
-  Event e;
-  while (ctl_.events().pop(e)) {
-    switch (e.kind) {
-      case EventKind::fault:
-        native += fmt("alarm: fault %s\n", bounded_text(e.message).c_str());
-        // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits),
-        // 9 homing fail (GRBL: the switch not found)
-        grbl += fmt("ALARM:%d\n[MSG:fault %s]\n",
-                    e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, bounded_text(e.message).c_str());
-        jog_tail_valid_ = false;
-        break;
-      case EventKind::estop:
-        native += "alarm: estop (send reset, then enable)\n";
-        grbl += "ALARM:10\n[MSG:e-stop: $X to reset and enable]\n";  // grblHAL: 10 = e-stop
-        jog_tail_valid_ = false;
-        break;
-      case EventKind::motion_refused:
-        native += fmt("alarm: %s\n", bounded_text(e.message).c_str());
-        grbl += fmt("[MSG:%s]\n", bounded_text(e.message).c_str());
-        break;
-      case EventKind::jog_stopped:
-        native += fmt("alarm: %s\n", bounded_text(e.message).c_str());
-        grbl += fmt("[MSG:%s]\n", bounded_text(e.message).c_str());
-        jog_tail_valid_ = false;
-        break;
-      case EventKind::homing:
-        native += fmt("homing: %s\n", bounded_text(e.message).c_str());
-        grbl += fmt("[MSG:homing: %s]\n", bounded_text(e.message).c_str());
-        break;
-      case EventKind::freedrive:
-        native += fmt("freedrive: %s\n", bounded_text(e.message).c_str());
-        grbl += fmt("[MSG:freedrive: %s]\n", bounded_text(e.message).c_str());
-        break;
-      case EventKind::motion_done:
-      case EventKind::state: break;
-    }
+  svc_->poll_events();
+  const EventBatch b = svc_->events_since(events_seen_);
+  if (b.missed > 0) {  // another reader polled the stream faster than this console read it
+    native += fmt("alarm: %llu events missed\n", static_cast<unsigned long long>(b.missed));
+    grbl += fmt("[MSG:%llu events missed]\n", static_cast<unsigned long long>(b.missed));
+  }
+  for (const ArmEvent& e : b.events) render_event(e, native, grbl);
+  if (!b.events.empty()) events_seen_ = b.events.back().seq;
+}
+
+void Console::render_event(const ArmEvent& e, std::string& native, std::string& grbl) {
+  // the control thread's line, from its fixed buffer: whole, or cut after a word with "..."
+  const std::string detail = bounded_text(std::string(svc_->event_detail(e)).c_str(), sizeof(Event::message));
+  switch (e.kind) {
+    case EventKind::fault:
+      native += fmt("alarm: fault %s\n", detail.c_str());
+      // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits),
+      // 9 homing fail (GRBL: the switch not found)
+      grbl += fmt("ALARM:%d\n[MSG:fault %s]\n",
+                  e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, detail.c_str());
+            break;
+    case EventKind::estop:
+      native += "alarm: estop (send reset, then enable)\n";
+      grbl += "ALARM:10\n[MSG:e-stop: $X to reset and enable]\n";  // grblHAL: 10 = e-stop
+            break;
+    case EventKind::motion_refused:
+      native += fmt("alarm: %s\n", detail.c_str());
+      grbl += fmt("[MSG:%s]\n", detail.c_str());
+      break;
+    case EventKind::jog_stopped:
+      native += fmt("alarm: %s\n", detail.c_str());
+      grbl += fmt("[MSG:%s]\n", detail.c_str());
+            break;
+    case EventKind::homing:
+      native += fmt("homing: %s\n", detail.c_str());
+      grbl += fmt("[MSG:homing: %s]\n", detail.c_str());
+      break;
+    case EventKind::freedrive:
+      native += fmt("freedrive: %s\n", detail.c_str());
+      grbl += fmt("[MSG:freedrive: %s]\n", detail.c_str());
+      break;
+    case EventKind::motion_done:
+    case EventKind::state: break;
   }
 }
 
@@ -544,7 +555,7 @@ MoveContext Console::move_context(DryRun* dry, const StepParams* step) const {
   cx.chain = &tool_slot().chain;
   cx.ik = ik_solver();
   cx.feed_pct = feed_pct_;
-  cx.outputs = std::span<const OutputChange>(sync_out_.data(), n_sync_out_);
+  cx.outputs = svc_->pending_outputs();
   if (step != nullptr) {
     cx.step_blend = step->blend;
     cx.next_line = step->next_line;
@@ -624,7 +635,7 @@ void Console::queue(Session& s, const MoveJoints& req, const StepParams* step) {
     answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(r.duration, kTimeDecimals) + "s" + blend_text(r));
     return;
   }
-  n_sync_out_ = 0;
+  svc_->clear_pending_outputs();
   answer_ok(s, fmt("queued id=%u duration=%ss%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(), blend_text(r).c_str()));
 }
 
@@ -642,17 +653,10 @@ void Console::queue(Session& s, const MoveLine& req, const StepParams* step) {
     return;
   }
   feed_now_ = r.speed;
-  n_sync_out_ = 0;
+  svc_->clear_pending_outputs();
   answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(),
                    r.status == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", r.slowdown).c_str() : "",
                    blend_text(r).c_str()));
-}
-
-bool Console::jog_duration_ok(Session& s, double duration_s) {
-  if (std::isfinite(duration_s) && duration_s <= cfg_.max_move_duration_s) return true;
-  answer_error(s, CmdError::out_of_range, fmt("jog refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
-                                              "(raise the speed); nothing moved", duration_s, cfg_.max_move_duration_s));
-  return false;
 }
 
 void Console::queue_dwell(Session& s, double secs) {
@@ -820,16 +824,16 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
     return;
   }
   // A move refused: the M62/M63 changes waiting for it are dropped with it (and said so).
-  const std::uint8_t sync_before = n_sync_out_;
+  const std::size_t sync_before = svc_->pending_outputs().size();
   const std::size_t out_before = s.out.size();
   struct DropSyncOnRefusal {
     Console& con;
     Session& s;
     const Command& c;
-    std::uint8_t before;
+    std::size_t before;
     std::size_t out0;
     ~DropSyncOnRefusal() {
-      if (before == 0 || con.n_sync_out_ != before || s.check_mode || !carries_outputs(c.cmd)) return;
+      if (before == 0 || con.svc_->pending_outputs().size() != before || s.check_mode || !carries_outputs(c.cmd)) return;
       if (!con.last_answer_is_error(s, out0)) return;
       con.note_before_answer(s, out0, con.discard_sync_outputs("the move was refused"));
     }
@@ -1133,8 +1137,7 @@ void Console::realtime(Session& s, char ch) {
       if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n";
       break;
     case kRtJogCancel: {
-      if (!request(RequestOp::jog_cancel, r)) s.out += "error: timeout jog cancel not acknowledged\n";
-      jog_tail_valid_ = false;
+      if (svc_->jog_cancel().error == CmdError::timeout) s.out += "error: timeout jog cancel not acknowledged\n";
       // Jog lines received but not run yet are answered, not run: a cancel always wins.
       for (auto it = s.lines.begin(); it != s.lines.end();) {
         const std::string_view l(*it);
@@ -1173,7 +1176,7 @@ void Console::realtime(Session& s, char ch) {
       s.lines.clear();
       s.hold_after = 0;
       s.check_mode = false;
-      jog_tail_valid_ = false;
+      svc_->jog_forget();
       greet(s);
       break;
     }
@@ -1191,9 +1194,8 @@ void Console::greet(Session& s) {
 
 void Console::client_gone(Session& s) {
   if (pcheck_ && pcheck_->owner == &s) cancel_check("the client hanging up");
-  Reply r;
-  if (ctl_.telemetry().state == ArmState::jogging) request(RequestOp::jog_cancel, r);
-  jog_tail_valid_ = false;
+  if (ctl_.telemetry().state == ArmState::jogging) svc_->jog_cancel();
+  svc_->jog_forget();
   s.partial.clear();
   s.check_mode = false;
 }
@@ -1247,18 +1249,6 @@ void Console::accept(Session& s, std::string_view bytes) {
 // Jogging (jog.hpp runs it on the control thread; here the targets are computed)
 // ---------------------------------------------------------------------------
 
-JogSpec Console::tool_jog_spec(double pct) const {
-  JogSpec js;
-  js.space = JogSpace::tool;
-  js.linear_speed = pct / 100.0 * cfg_.max_linear_speed;
-  js.angular_speed = pct / 100.0 * cfg_.cartesian.angular_velocity;
-  js.limits = cfg_.cartesian;
-  js.ik = ik_solver();
-  js.chain = &tool_slot().chain;
-  js.deadman_s = cfg_.jog_deadman_s;
-  return js;
-}
-
 void Console::do_home(Session& s, const Command& c) {
   if (s.check_mode) {
     answer_ok(s, "check mode: not run");
@@ -1269,7 +1259,7 @@ void Console::do_home(Session& s, const Command& c) {
     answer_control(s, h);
     return;
   }
-  jog_tail_valid_ = false;
+  svc_->jog_forget();
   if (c.cmd == Cmd::grbl_home) {  // GRBL: $H answers when the cycle has ended (state Home meanwhile)
     s.homing = true;
     if (s.dialect == Dialect::grbl) s.out += fmt("[MSG:%s]\n", h.reason.c_str());
@@ -1279,154 +1269,86 @@ void Console::do_home(Session& s, const Command& c) {
   answer_ok(s, h.reason);
 }
 
-void Console::send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit) {
-  Request rq;
-  rq.op = RequestOp::jog;
-  rq.jog = spec;
-  Reply r;
-  if (!request(rq, r)) {
-    answer_error(s, CmdError::timeout, "control thread did not answer the jog");
-    return;
+JogContext Console::jog_context() const {
+  JogContext cx;
+  cx.chain = &tool_slot().chain;
+  cx.ik = ik_solver();
+  cx.feed_pct = feed_pct_;
+  cx.user_axes = user_frame().linear();
+  return cx;
+}
+
+void Console::answer_jog(Session& s, const JogResult& r, const char* what, double given) {
+  const ConsoleUnits& u = cfg_.units;
+  const int j = r.joint;
+  switch (r.refusal) {
+    case JogRefusal::none: break;
+    case JogRefusal::range:
+      answer_error(s, r.error, fmt("%s: increment %g %s larger than joint %d's range [%s, %s]; nothing moved", what, given,
+                                   u.joint_name(chain_, j), j + 1, u.joint_text(chain_, j, r.lower).c_str(),
+                                   u.joint_text(chain_, j, r.upper).c_str()));
+      return;
+    case JogRefusal::at_limit:
+      answer_error(s, r.error, fmt("%s: joint %d is at its limit %s %s; nothing moved", what, j + 1,
+                                   u.joint_text(chain_, j, r.value).c_str(), u.joint_name(chain_, j)));
+      return;
+    case JogRefusal::rotation:
+      answer_error(s, r.error, fmt("%s: rotation %g %s: at most half a turn per jog (|angle| < %g); nothing moved", what, given,
+                                   u.angle_name(), u.angle_out(M_PI)));
+      return;
+    case JogRefusal::duration:
+      answer_error(s, r.error, fmt("jog refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
+                                   "(raise the speed); nothing moved", r.duration, cfg_.max_move_duration_s));
+      return;
+    case JogRefusal::unreachable:
+      answer_error(s, r.error, fmt("%s: the target has no IK solution within the joint limits; nothing moved", what));
+      return;
+    case JogRefusal::feed:
+      answer_error(s, r.error, fmt("%s: feed %g mm/min (with the %d %% override) below %g mm/min; nothing moved", what,
+                                   r.speed * 6e4, feed_pct_, kMinLinearSpeedMmS * 60));
+      return;
+    case JogRefusal::control: answer_error(s, r.error, r.reason); return;
   }
-  switch (r.result) {
-    case RtResult::ok: break;
-    case RtResult::busy: answer_error(s, CmdError::busy, bounded_text(r.message)); return;
-    case RtResult::fault: answer_error(s, CmdError::fault, bounded_text(r.message)); return;
-    case RtResult::not_homed: answer_error(s, CmdError::not_homed, bounded_text(r.message)); return;
-    case RtResult::bad_state:
-    case RtResult::start_moved:
-    case RtResult::plan_failed: answer_error(s, CmdError::bad_state, bounded_text(r.message)); return;
-  }
-  if (clamped >= 0) {  // it moves: ok, and where it stops
-    const ConsoleUnits& u = cfg_.units;
-    answer_ok(s, fmt("%s; joint %d stops at its limit %s %s (asked %s)", bounded_text(r.message).c_str(), clamped + 1,
-                     u.joint_text(chain_, clamped, limit).c_str(), u.joint_name(chain_, clamped),
-                     u.joint_text(chain_, clamped, asked).c_str()));
-    return;
-  }
-  answer_ok(s, bounded_text(r.message));
+  if (r.clamped)  // it moves: ok, and where it stops
+    answer_ok(s, fmt("%s; joint %d stops at its limit %s %s (asked %s)", r.reason.c_str(), j + 1,
+                     u.joint_text(chain_, j, r.value).c_str(), u.joint_name(chain_, j), u.joint_text(chain_, j, r.asked).c_str()));
+  else answer_ok(s, r.reason);
 }
 
 void Console::do_jog(Session& s, const Command& c) {
-  Reply r;
   if (c.jog_op == JogOp::keepalive || c.jog_op == JogOp::stop) {
-    const RequestOp op = c.jog_op == JogOp::stop ? RequestOp::jog_cancel : RequestOp::jog_keepalive;
-    if (!request(op, r)) {
-      answer_error(s, CmdError::timeout, fmt("control thread did not answer %s", to_string(op)));
-      return;
-    }
-    if (c.jog_op == JogOp::stop) jog_tail_valid_ = false;
-    answer_ok(s, bounded_text(r.message));
+    const ControlResult r = c.jog_op == JogOp::stop ? svc_->jog_cancel() : svc_->jog_keepalive();
+    if (r.error == CmdError::timeout) answer_error(s, r.error, r.reason);
+    else answer_ok(s, r.reason);
     return;
   }
   if (s.check_mode) {
     answer_ok(s, "check mode: jog not run");
     return;
   }
-  const Telemetry t = ctl_.telemetry();
-  const bool jogging = t.state == ArmState::jogging && jog_tail_valid_;
-  double pct = (c.has_speed ? c.speed : cfg_.jog_speed_pct) * feed_pct_ / 100.0;
-  pct = std::fmin(100.0, std::fmax(kMinJointSpeedPct, pct));
   const bool continuous = c.jog_op == JogOp::continuous;
+  const double speed = c.has_speed ? c.speed : -1.0;
   if (!c.jog_tool) {
-    const int j = c.jog_axis;
-    const auto ju = static_cast<std::size_t>(j);
-    const auto& lim = ctl_.limits();
-    kin::JointVector goal = jogging && !jog_tail_tool_ ? jog_q_tail_ : commanded_joints();
-    int clamped = -1;
-    double asked = 0;
-    if (continuous) {
-      goal[j] = c.jog_dir > 0 ? lim.upper[ju] : lim.lower[ju];
-    } else {
-      // An increment larger than the joint's whole range is no jog: refused, nothing moves.
-      const double inc = to_si(j, c.vals[0]);
-      if (!(std::fabs(inc) <= lim.upper[ju] - lim.lower[ju])) {
-        answer_error(s, CmdError::out_of_range,
-                     fmt("jog: increment %g %s larger than joint %d's range [%s, %s]; nothing moved", c.vals[0],
-                         cfg_.units.joint_name(chain_, j), j + 1, cfg_.units.joint_text(chain_, j, lim.lower[ju]).c_str(),
-                         cfg_.units.joint_text(chain_, j, lim.upper[ju]).c_str()));
-        return;
-      }
-      asked = goal[j] + inc;
-      const double to = std::fmin(std::fmax(asked, lim.lower[ju]), lim.upper[ju]);
-      if (to != asked) clamped = j;
-      if (to == goal[j]) {
-        answer_error(s, CmdError::limits,
-                     fmt("jog: joint %d is at its limit %s %s; nothing moved", j + 1, cfg_.units.joint_text(chain_, j, to).c_str(),
-                         cfg_.units.joint_name(chain_, j)));
-        return;
-      }
-      goal[j] = to;
-    }
-    if (!continuous && !jog_duration_ok(s, std::fabs(goal[j] - commanded_joints()[j]) /
-                                               (pct / 100.0 * lim.dyn[ju].max_velocity)))
-      return;
-    JogSpec js;
-    js.space = JogSpace::joint;
-    js.continuous = continuous;
-    js.deadman_s = cfg_.jog_deadman_s;
-    js.q_goal = goal;
-    js.axis = j;
-    js.override = pct / 100.0;
-    const std::size_t before = s.out.size();
-    send_jog(s, js, clamped, asked, goal[j]);
-    if (s.out.compare(before, 5, "error") == 0 && clamped < 0) return;
-    jog_q_tail_ = goal;
-    jog_tail_tool_ = false;
-    jog_tail_valid_ = !continuous;
+    JointJog jj;
+    jj.joint = c.jog_axis;
+    jj.continuous = continuous;
+    jj.direction = c.jog_dir;
+    jj.increment = continuous ? 0.0 : to_si(c.jog_axis, c.vals[0]);
+    jj.speed_pct = speed;
+    answer_jog(s, svc_->jog(jj, jog_context()), "jog", c.vals[0]);
     return;
   }
-  // Tool jog: along / about an axis of the base or of the tool (as it is at the jog's start).
-  JogSpec js = tool_jog_spec(pct);
-  js.continuous = continuous;
-  const kin::Pose here = jogging && jog_tail_tool_ ? jog_x_tail_ : commanded_pose();
-  if (jogging && jog_tail_tool_ && c.jog_frame == jog_frame_kind_) js.frame = jog_frame_;
-  else if (c.jog_frame == JogFrame::tool) js.frame = commanded_pose().linear();
-  else if (c.jog_frame == JogFrame::user) js.frame = user_frame().linear();
-  else js.frame = Eigen::Matrix3d::Identity();
-  if (continuous) {
-    js.axis = c.jog_axis;
-    js.direction = c.jog_dir;
-  } else {
-    kin::Pose target = here;
-    const int k = c.jog_axis;
-    if (k < 3) {
-      target.translation() += js.frame.col(k) * cfg_.units.length_in(c.vals[0]);
-    } else {
-      // A rotation is taken the short way round: beyond half a turn it would turn the other
-      // way (or not at all at a full turn), so |angle| >= 180 deg is refused.
-      const double a = cfg_.units.angle_in(c.vals[0]);
-      if (!(std::fabs(a) < M_PI)) {
-        answer_error(s, CmdError::out_of_range,
-                     fmt("jog: rotation %g %s: at most half a turn per jog (|angle| < %g); nothing moved", c.vals[0],
-                         cfg_.units.angle_name(), cfg_.units.angle_out(M_PI)));
-        return;
-      }
-      const Eigen::Vector3d axis = js.frame.col(k - 3);
-      target.linear() = Eigen::AngleAxisd(a, axis).toRotationMatrix() * here.linear();
-    }
-    const double dist = k < 3 ? std::fabs(cfg_.units.length_in(c.vals[0])) : 0.0;
-    const double ang = k < 3 ? 0.0 : std::fabs(cfg_.units.angle_in(c.vals[0]));
-    if (!jog_duration_ok(s, std::fmax(dist / js.linear_speed, ang / js.angular_speed))) return;
-    kin::JointVector q(n_);
-    if (ik_solver().fn(tool_slot().chain, target, commanded_joints(), q, ik_solver().ctx) < kin::Status::ok) {
-      answer_error(s, CmdError::unreachable, "jog: the target has no IK solution within the joint limits; nothing moved");
-      return;
-    }
-    js.target = target;
-    jog_x_tail_ = target;
-  }
-  const std::size_t before = s.out.size();
-  send_jog(s, js, -1, 0, 0);
-  if (s.out.compare(before, 5, "error") == 0 || s.out.compare(before, 5, "[MSG:") == 0) {
-    jog_tail_valid_ = false;
-    return;
-  }
-  jog_tail_tool_ = true;
-  jog_tail_valid_ = !continuous;
-  jog_frame_ = js.frame;
-  jog_frame_kind_ = c.jog_frame;
-  feed_now_ = js.linear_speed;
+  // Tool jog: along / about an axis of the base, the tool (as it is at the jog's start) or the user frame.
+  ToolJog tj;
+  tj.axis = c.jog_axis;
+  tj.continuous = continuous;
+  tj.direction = c.jog_dir;
+  tj.increment = continuous ? 0.0 : c.jog_axis < 3 ? cfg_.units.length_in(c.vals[0]) : cfg_.units.angle_in(c.vals[0]);
+  tj.speed_pct = speed;
+  tj.frame = c.jog_frame;
+  const JogResult r = svc_->jog(tj, jog_context());
+  if (r.ok()) feed_now_ = r.speed;
+  answer_jog(s, r, "jog", c.vals[0]);
 }
 
 void Console::do_grbl_jog(Session& s, const Command& c) {
@@ -1434,12 +1356,11 @@ void Console::do_grbl_jog(Session& s, const Command& c) {
     answer_ok(s);
     return;
   }
-  const Telemetry t = ctl_.telemetry();
   // In the active user frame (G54..G59), or the base with G53 (machine coordinates).
   const kin::Pose F = c.g53 ? kin::Pose::Identity() : user_frame();
   const JogFrame kind = c.g53 || frame_ == 0 ? JogFrame::base : JogFrame::user;
-  const bool jogging = t.state == ArmState::jogging && jog_tail_valid_ && jog_tail_tool_ && jog_frame_kind_ == kind;
-  const kin::Pose here = F.inverse() * (jogging ? jog_x_tail_ : commanded_pose());
+  const JogContext cx = jog_context();
+  const kin::Pose here = F.inverse() * svc_->jog_from(kind, cx);
   kin::Pose target = here;
   Eigen::Vector3d rpy = kin::rpy_from_rotation(here.linear());
   for (int k = 3; k < 6; ++k) {  // relative rotations: the short way round, so less than half a turn
@@ -1457,41 +1378,14 @@ void Console::do_grbl_jog(Session& s, const Command& c) {
     else rpy[k - 3] = c.relative ? rpy[k - 3] + v * kDeg : v * kDeg;
   }
   if (c.axis_mask & 0x38) target.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
-  target = F * target;
-  kin::JointVector q(n_);
-  if (ik_solver().fn(tool_slot().chain, target, commanded_joints(), q, ik_solver().ctx) < kin::Status::ok) {
-    answer_error(s, CmdError::unreachable, "$J: the target has no IK solution within the joint limits; nothing moved");
-    return;
-  }
-  JogSpec js = tool_jog_spec(100.0 * feed_pct_ / 100.0 > 100 ? 100 : feed_pct_);
-  // F is the path speed (GRBL clamps a jog's feed to the maximum rate); the override scales it.
-  js.linear_speed = std::fmin(c.speed * 1e-3 * feed_pct_ / 100.0, cfg_.max_linear_speed);
-  js.frame = F.linear();
-  js.target = target;
-  if (!(js.linear_speed >= kMinLinearSpeedMmS * 1e-3)) {
-    answer_error(s, CmdError::out_of_range, fmt("$J: feed %g mm/min (with the %d %% override) below %g mm/min; nothing moved",
-                                                js.linear_speed * 6e4, feed_pct_, kMinLinearSpeedMmS * 60));
-    return;
-  }
-  {
-    const kin::Pose from = F.inverse() * commanded_pose();
-    const kin::Pose to = F.inverse() * target;
-    const double dist = (to.translation() - from.translation()).norm();
-    const double ang = Eigen::AngleAxisd(to.linear() * from.linear().transpose()).angle();
-    if (!jog_duration_ok(s, std::fmax(dist / js.linear_speed, ang / js.angular_speed))) return;
-  }
-  const std::size_t before = s.out.size();
-  send_jog(s, js, -1, 0, 0);
-  if (s.out.compare(before, 5, "error") == 0 || s.out.compare(before, 5, "[MSG:") == 0) {
-    jog_tail_valid_ = false;
-    return;
-  }
-  jog_x_tail_ = target;
-  jog_tail_tool_ = true;
-  jog_tail_valid_ = true;
-  jog_frame_ = js.frame;
-  jog_frame_kind_ = kind;
-  feed_now_ = js.linear_speed;
+  PoseJog pj;
+  pj.target = F * target;
+  pj.speed = c.speed * 1e-3;  // the parser's mm/s
+  pj.frame = kind;
+  pj.axes = F.linear();
+  const JogResult r = svc_->jog(pj, cx);
+  if (r.ok()) feed_now_ = r.speed;
+  answer_jog(s, r, "$J", 0);
 }
 
 // ---------------------------------------------------------------------------

@@ -640,58 +640,44 @@ void Console::do_record(Session& s, const Command& c) {
 void Console::do_out(Session& s, const Command& c) {
   const auto& outs = cfg_.outputs;
   if (c.out_index == -1) {  // list
-    const Telemetry t = ctl_.telemetry();
-    for (const ConsoleConfig::Output& o : outs) {
-      const bool on = (t.outputs[static_cast<std::size_t>(o.joint)] >> o.bit) & 1u;
-      s.out += fmt("%s joint=%d bit=%d %s\n", o.name.c_str(), o.joint + 1, o.bit, on ? "on" : "off");
+    for (std::size_t k = 0; k < outs.size(); ++k) {
+      const ConsoleConfig::Output& o = outs[k];
+      s.out += fmt("%s joint=%d bit=%d %s\n", o.name.c_str(), o.joint + 1, o.bit, svc_->output_on(k) ? "on" : "off");
     }
     answer_ok(s, fmt("%zu outputs", outs.size()));
     return;
   }
-  std::size_t i = outs.size();
-  if (c.out_index == -2) {
+  OutputRequest rq;
+  rq.on = c.out_on;
+  rq.sync = c.out_sync;
+  rq.dry = s.check_mode;
+  rq.index = outs.size();
+  if (c.out_index == -2) {  // by name
     for (std::size_t k = 0; k < outs.size(); ++k)
-      if (outs[k].name == c.word.data()) i = k;
-    if (i == outs.size()) {
+      if (outs[k].name == c.word.data()) rq.index = k;
+    if (rq.index == outs.size()) {
       answer_error(s, CmdError::bad_option, fmt("out: no output '%s' (%zu outputs: [[output]] in the configuration)", c.word.data(), outs.size()));
       return;
     }
-  } else if (static_cast<std::size_t>(c.out_index) < outs.size()) {
-    i = static_cast<std::size_t>(c.out_index);
   } else {
-    answer_error(s, CmdError::out_of_range, fmt("M6%d P%d: no output %d (%zu outputs: [[output]], 0-based)", c.out_sync ? (c.out_on ? 2 : 3) : (c.out_on ? 4 : 5),
-                                                c.out_index, c.out_index, outs.size()));
-    return;
+    rq.index = static_cast<std::size_t>(c.out_index);
   }
-  const ConsoleConfig::Output& o = outs[i];
-  OutputChange ch;
-  ch.joint = static_cast<std::int8_t>(o.joint);
-  ch.mask = 1u << o.bit;
-  ch.value = c.out_on ? ch.mask : 0u;
-  if (s.check_mode) {
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked");
-    return;
+  const OutputResult r = svc_->set_output(rq);
+  switch (r.refusal) {
+    case OutputRefusal::none: break;
+    case OutputRefusal::no_output:
+      answer_error(s, r.error, fmt("M6%d P%d: no output %d (%zu outputs: [[output]], 0-based)", c.out_sync ? (c.out_on ? 2 : 3) : (c.out_on ? 4 : 5),
+                                   c.out_index, c.out_index, r.count));
+      return;
+    case OutputRefusal::sync_full:
+      answer_error(s, r.error, fmt("M62/M63: outputs of more than %zu drives wait for the next move", kMotionOutputs));
+      return;
+    case OutputRefusal::queue_full: answer_error(s, r.error, "out: output queue full; not set"); return;
   }
-  if (c.out_sync) {  // M62 / M63: merged into the changes the next move carries
-    std::size_t k = 0;
-    while (k < n_sync_out_ && sync_out_[k].joint != ch.joint) ++k;
-    if (k == n_sync_out_) {
-      if (n_sync_out_ >= kMotionOutputs) {
-        answer_error(s, CmdError::busy, fmt("M62/M63: outputs of more than %zu drives wait for the next move", kMotionOutputs));
-        return;
-      }
-      sync_out_[n_sync_out_++] = OutputChange{ch.joint, 0, 0};
-    }
-    sync_out_[k].mask |= ch.mask;
-    sync_out_[k].value = (sync_out_[k].value & ~ch.mask) | ch.value;
-    answer_ok(s, fmt("%s %s at the start of the next move", o.name.c_str(), c.out_on ? "on" : "off"));
-    return;
-  }
-  if (!ctl_.outputs().push(ch)) {
-    answer_error(s, CmdError::busy, "out: output queue full; not set");
-    return;
-  }
-  answer_ok(s, fmt("%s %s", o.name.c_str(), c.out_on ? "on" : "off"));
+  const ConsoleConfig::Output& o = outs[rq.index];
+  if (s.check_mode) answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked");
+  else if (c.out_sync) answer_ok(s, fmt("%s %s at the start of the next move", o.name.c_str(), c.out_on ? "on" : "off"));
+  else answer_ok(s, fmt("%s %s", o.name.c_str(), c.out_on ? "on" : "off"));
 }
 
 }  // namespace servoarm::fw

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <thread>
 #include <cstdio>
+#include <cstring>
 
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 #include "servoarm/lang/text.hpp"
@@ -22,6 +23,30 @@ const char* to_string(MoveRefusal r) {
     case MoveRefusal::plan: return "plan";
     case MoveRefusal::duration: return "duration";
     case MoveRefusal::queue_full: return "queue_full";
+  }
+  return "?";
+}
+
+const char* to_string(JogRefusal r) {
+  switch (r) {
+    case JogRefusal::none: return "none";
+    case JogRefusal::range: return "range";
+    case JogRefusal::at_limit: return "at_limit";
+    case JogRefusal::rotation: return "rotation";
+    case JogRefusal::duration: return "duration";
+    case JogRefusal::unreachable: return "unreachable";
+    case JogRefusal::feed: return "feed";
+    case JogRefusal::control: return "control";
+  }
+  return "?";
+}
+
+const char* to_string(OutputRefusal r) {
+  switch (r) {
+    case OutputRefusal::none: return "none";
+    case OutputRefusal::no_output: return "no_output";
+    case OutputRefusal::sync_full: return "sync_full";
+    case OutputRefusal::queue_full: return "queue_full";
   }
   return "?";
 }
@@ -69,6 +94,7 @@ ArmService::ArmService(const kin::Chain& chain, const kin::JointLimits& limits, 
 }
 
 void ArmService::init() {
+  ring_ = std::make_unique<std::array<EventSlot, kEventRing>>();
   tail_ = kin::JointVector::Zero(n_);
   shadow_ = std::make_unique<PathShadow>();
   scratch_ = std::make_unique<MotionItem>();
@@ -475,6 +501,339 @@ bool ArmService::path_segment(MotionItem& m, bool line, const kin::JointVector& 
   pm.after = linked ? tail_id_ : 0;
   pm.override = override;
   return true;
+}
+
+}  // namespace servoarm::fw
+
+namespace servoarm::fw {
+
+// ---------------------------------------------------------------------------
+// The event stream
+// ---------------------------------------------------------------------------
+
+std::size_t ArmService::poll_events() {
+  if (ctl_ == nullptr) return 0;
+  const std::uint64_t cycle = ctl_->telemetry().cycles;
+  std::size_t n = 0;
+  Event e;
+  while (ctl_->events().pop(e)) {
+    EventSlot& s = (*ring_)[next_seq_ % kEventRing];
+    s.ev = ArmEvent{};
+    s.ev.seq = next_seq_++;
+    s.ev.cycle = cycle;
+    s.ev.t = static_cast<double>(cycle) * ctl_->period_s();
+    s.ev.kind = e.kind;
+    s.ev.state = e.state;
+    s.ev.cause = e.cause;
+    s.ev.joint = e.joint;
+    s.ev.motion_id = e.motion_id;
+    std::memcpy(s.detail, e.message, sizeof s.detail);
+    if (e.kind == EventKind::fault || e.kind == EventKind::estop || e.kind == EventKind::jog_stopped)
+      jog_.valid = false;  // the running jog ended: the next one starts from the commanded position
+    s.detail[sizeof s.detail - 1] = '\0';
+    ++n;
+  }
+  return n;
+}
+
+EventBatch ArmService::events_since(std::uint64_t seq) const {
+  EventBatch b;
+  const std::uint64_t kept_from = next_seq_ > kEventRing ? next_seq_ - kEventRing : 1;  // oldest kept
+  std::uint64_t from = seq + 1;
+  if (from < kept_from) {
+    b.missed = kept_from - from;
+    from = kept_from;
+  }
+  if (from < next_seq_) b.events.reserve(static_cast<std::size_t>(next_seq_ - from));
+  for (std::uint64_t s = from; s < next_seq_; ++s) b.events.push_back((*ring_)[s % kEventRing].ev);
+  return b;
+}
+
+std::string_view ArmService::event_detail(const ArmEvent& e) const {
+  const EventSlot& s = (*ring_)[e.seq % kEventRing];
+  if (e.seq == 0 || s.ev.seq != e.seq) return {};
+  return std::string_view(s.detail);
+}
+
+}  // namespace servoarm::fw
+
+namespace servoarm::fw {
+
+// ---------------------------------------------------------------------------
+// Jogging (jog.hpp runs it on the control thread; here the targets are computed)
+// ---------------------------------------------------------------------------
+
+namespace {
+JogResult jog_refusal(JogRefusal what, CmdError e) {
+  JogResult r;
+  r.error = e;
+  r.refusal = what;
+  return r;
+}
+}  // namespace
+
+kin::JointVector ArmService::commanded() const {
+  const Telemetry t = ctl_->telemetry();
+  kin::JointVector q(n_);
+  for (int j = 0; j < n_; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+  return q;
+}
+
+kin::Pose ArmService::commanded_pose(const JogContext& cx) const {
+  kin::Pose p = kin::Pose::Identity();
+  if (kin::forward(cx.chain != nullptr ? *cx.chain : chain_, commanded(), p) != kin::Status::ok)
+    p.translation().setConstant(std::nan(""));
+  return p;
+}
+
+double ArmService::jog_pct(double speed_pct, int feed_pct) const {
+  const double pct = (speed_pct >= 0 ? speed_pct : cfg_.jog_speed_pct) * feed_pct / 100.0;
+  return std::fmin(100.0, std::fmax(kMinJointSpeedPct, pct));
+}
+
+JogSpec ArmService::tool_spec(double pct, const JogContext& cx) const {
+  JogSpec js;
+  js.space = JogSpace::tool;
+  js.linear_speed = pct / 100.0 * cfg_.max_linear_speed;
+  js.angular_speed = pct / 100.0 * cfg_.cartesian.angular_velocity;
+  js.limits = cfg_.cartesian;
+  js.ik = cx.ik;
+  js.chain = cx.chain != nullptr ? cx.chain : &chain_;
+  js.deadman_s = cfg_.jog_deadman_s;
+  return js;
+}
+
+bool ArmService::jog_duration_ok(double duration, JogResult& r) const {
+  if (std::isfinite(duration) && duration <= cfg_.max_move_duration_s) return true;
+  r = jog_refusal(JogRefusal::duration, CmdError::out_of_range);
+  r.duration = duration;
+  return false;
+}
+
+JogResult ArmService::send_jog(const JogSpec& js) {
+  Request rq;
+  rq.op = RequestOp::jog;
+  rq.jog = js;
+  Reply rep;
+  if (!request(rq, rep)) {
+    JogResult r = jog_refusal(JogRefusal::control, CmdError::timeout);
+    r.reason = "control thread did not answer the jog";
+    return r;
+  }
+  JogResult r;
+  r.reason = bounded_text(rep.message);
+  switch (rep.result) {
+    case RtResult::ok: return r;
+    case RtResult::busy: r.error = CmdError::busy; break;
+    case RtResult::fault: r.error = CmdError::fault; break;
+    case RtResult::not_homed: r.error = CmdError::not_homed; break;
+    case RtResult::bad_state:
+    case RtResult::start_moved:
+    case RtResult::plan_failed: r.error = CmdError::bad_state; break;
+  }
+  r.refusal = JogRefusal::control;
+  return r;
+}
+
+JogResult ArmService::jog(const JointJog& rq, const JogContext& cx) {
+  const bool jogging = ctl_->telemetry().state == ArmState::jogging && jog_.valid;
+  const double pct = jog_pct(rq.speed_pct, cx.feed_pct);
+  const int j = rq.joint;
+  const auto ju = static_cast<std::size_t>(j);
+  const kin::JointVector from = commanded();
+  kin::JointVector goal = jogging && !jog_.tool ? jog_.q : from;
+  JogResult pre;
+  if (rq.continuous) {
+    goal[j] = rq.direction > 0 ? lim_.upper[ju] : lim_.lower[ju];
+  } else {
+    // An increment larger than the joint's whole range is no jog: refused, nothing moves.
+    if (!(std::fabs(rq.increment) <= lim_.upper[ju] - lim_.lower[ju])) {
+      JogResult r = jog_refusal(JogRefusal::range, CmdError::out_of_range);
+      r.joint = j;
+      r.lower = lim_.lower[ju];
+      r.upper = lim_.upper[ju];
+      return r;
+    }
+    const double asked = goal[j] + rq.increment;
+    const double to = std::fmin(std::fmax(asked, lim_.lower[ju]), lim_.upper[ju]);
+    if (to == goal[j]) {
+      JogResult r = jog_refusal(JogRefusal::at_limit, CmdError::limits);
+      r.joint = j;
+      r.value = to;
+      return r;
+    }
+    if (to != asked) {
+      pre.clamped = true;
+      pre.joint = j;
+      pre.asked = asked;
+      pre.value = to;
+    }
+    goal[j] = to;
+    if (!jog_duration_ok(std::fabs(goal[j] - from[j]) / (pct / 100.0 * lim_.dyn[ju].max_velocity), pre)) return pre;
+  }
+  JogSpec js;
+  js.space = JogSpace::joint;
+  js.continuous = rq.continuous;
+  js.deadman_s = cfg_.jog_deadman_s;
+  js.q_goal = goal;
+  js.axis = j;
+  js.override = pct / 100.0;
+  JogResult r = send_jog(js);
+  r.clamped = pre.clamped;
+  r.joint = pre.joint;
+  r.asked = pre.asked;
+  r.value = pre.value;
+  if (!r.ok() && !r.clamped) return r;
+  jog_.q = goal;
+  jog_.tool = false;
+  jog_.valid = !rq.continuous;
+  return r;
+}
+
+JogResult ArmService::jog(const ToolJog& rq, const JogContext& cx) {
+  const bool jogging = ctl_->telemetry().state == ArmState::jogging && jog_.valid;
+  JogSpec js = tool_spec(jog_pct(rq.speed_pct, cx.feed_pct), cx);
+  js.continuous = rq.continuous;
+  const kin::Pose now = commanded_pose(cx);
+  const kin::Pose here = jogging && jog_.tool ? jog_.pose : now;
+  if (jogging && jog_.tool && rq.frame == jog_.frame) js.frame = jog_.axes;
+  else if (rq.frame == JogFrame::tool) js.frame = now.linear();
+  else if (rq.frame == JogFrame::user) js.frame = cx.user_axes;
+  else js.frame = Eigen::Matrix3d::Identity();
+  JogResult r;
+  if (rq.continuous) {
+    js.axis = rq.axis;
+    js.direction = rq.direction;
+  } else {
+    kin::Pose target = here;
+    const int k = rq.axis;
+    if (k < 3) {
+      target.translation() += js.frame.col(k) * rq.increment;
+    } else {
+      // A rotation is taken the short way round: beyond half a turn it would turn the other
+      // way (or not at all at a full turn), so |angle| >= 180 deg is refused.
+      if (!(std::fabs(rq.increment) < M_PI)) {
+        r = jog_refusal(JogRefusal::rotation, CmdError::out_of_range);
+        r.value = rq.increment;
+        return r;
+      }
+      target.linear() = Eigen::AngleAxisd(rq.increment, js.frame.col(k - 3)).toRotationMatrix() * here.linear();
+    }
+    const double dist = k < 3 ? std::fabs(rq.increment) : 0.0;
+    const double ang = k < 3 ? 0.0 : std::fabs(rq.increment);
+    if (!jog_duration_ok(std::fmax(dist / js.linear_speed, ang / js.angular_speed), r)) return r;
+    kin::JointVector q(n_);
+    if (cx.ik.fn == nullptr || cx.ik.fn(*js.chain, target, commanded(), q, cx.ik.ctx) < kin::Status::ok)
+      return jog_refusal(JogRefusal::unreachable, CmdError::unreachable);
+    js.target = target;
+    jog_.pose = target;
+  }
+  r = send_jog(js);
+  r.speed = js.linear_speed;
+  if (!r.ok()) {
+    jog_.valid = false;
+    return r;
+  }
+  jog_.tool = true;
+  jog_.valid = !rq.continuous;
+  jog_.axes = js.frame;
+  jog_.frame = rq.frame;
+  return r;
+}
+
+kin::Pose ArmService::jog_from(JogFrame frame, const JogContext& cx) const {
+  const bool jogging = ctl_->telemetry().state == ArmState::jogging && jog_.valid && jog_.tool && jog_.frame == frame;
+  return jogging ? jog_.pose : commanded_pose(cx);
+}
+
+JogResult ArmService::jog(const PoseJog& rq, const JogContext& cx) {
+  kin::JointVector q(n_);
+  const kin::Chain& chain = cx.chain != nullptr ? *cx.chain : chain_;
+  if (cx.ik.fn == nullptr || cx.ik.fn(chain, rq.target, commanded(), q, cx.ik.ctx) < kin::Status::ok)
+    return jog_refusal(JogRefusal::unreachable, CmdError::unreachable);
+  JogSpec js = tool_spec(cx.feed_pct > 100 ? 100 : cx.feed_pct, cx);
+  // the path speed (GRBL clamps a jog's feed to the maximum rate); the override scales it
+  js.linear_speed = std::fmin(rq.speed * cx.feed_pct / 100.0, cfg_.max_linear_speed);
+  js.frame = rq.axes;
+  js.target = rq.target;
+  JogResult r;
+  if (!(js.linear_speed >= kMinLinearSpeedMmS * 1e-3)) {
+    r = jog_refusal(JogRefusal::feed, CmdError::out_of_range);
+    r.speed = js.linear_speed;
+    return r;
+  }
+  const kin::Pose from = commanded_pose(cx);  // distances and angles are the same in every frame
+  const double dist = (rq.target.translation() - from.translation()).norm();
+  const double ang = Eigen::AngleAxisd(rq.target.linear() * from.linear().transpose()).angle();
+  if (!jog_duration_ok(std::fmax(dist / js.linear_speed, ang / js.angular_speed), r)) return r;
+  r = send_jog(js);
+  r.speed = js.linear_speed;
+  if (!r.ok()) {
+    jog_.valid = false;
+    return r;
+  }
+  jog_.pose = rq.target;
+  jog_.tool = true;
+  jog_.valid = true;
+  jog_.axes = js.frame;
+  jog_.frame = rq.frame;
+  return r;
+}
+
+ControlResult ArmService::jog_cancel() {
+  ControlResult c = control(RequestOp::jog_cancel);
+  jog_.valid = false;
+  return c;
+}
+
+}  // namespace servoarm::fw
+
+namespace servoarm::fw {
+
+// ---------------------------------------------------------------------------
+// Digital outputs
+// ---------------------------------------------------------------------------
+
+OutputResult ArmService::set_output(const OutputRequest& rq) {
+  OutputResult r;
+  r.count = cfg_.outputs.size();
+  if (rq.index >= cfg_.outputs.size()) {
+    r.error = CmdError::out_of_range;
+    r.refusal = OutputRefusal::no_output;
+    return r;
+  }
+  const OutputBit& o = cfg_.outputs[rq.index];
+  OutputChange ch;
+  ch.joint = static_cast<std::int8_t>(o.joint);
+  ch.mask = 1u << o.bit;
+  ch.value = rq.on ? ch.mask : 0u;
+  if (rq.dry) return r;
+  if (rq.sync) {  // merged into the changes the next move carries
+    std::size_t k = 0;
+    while (k < n_sync_out_ && sync_out_[k].joint != ch.joint) ++k;
+    if (k == n_sync_out_) {
+      if (n_sync_out_ >= kMotionOutputs) {
+        r.error = CmdError::busy;
+        r.refusal = OutputRefusal::sync_full;
+        return r;
+      }
+      sync_out_[n_sync_out_++] = OutputChange{ch.joint, 0, 0};
+    }
+    sync_out_[k].mask |= ch.mask;
+    sync_out_[k].value = (sync_out_[k].value & ~ch.mask) | ch.value;
+    return r;
+  }
+  if (ctl_ == nullptr || !ctl_->outputs().push(ch)) {
+    r.error = CmdError::busy;
+    r.refusal = OutputRefusal::queue_full;
+  }
+  return r;
+}
+
+bool ArmService::output_on(std::size_t index) const {
+  if (ctl_ == nullptr || index >= cfg_.outputs.size()) return false;
+  const OutputBit& o = cfg_.outputs[index];
+  return (ctl_->telemetry().outputs[static_cast<std::size_t>(o.joint)] >> o.bit) & 1u;
 }
 
 }  // namespace servoarm::fw

@@ -154,7 +154,9 @@ class Console {
   }
   /// Execute one complete line now (no realtime characters). Used by feed().
   void execute(Session& s, std::string_view line);
-  /// Drain control-thread events into text lines ("alarm: ..."), for every session.
+  /// Render the events of the arm service's stream (ArmService::events_since) not rendered yet
+  /// as text lines ("alarm: ...", "homing: ..."), for every session; the service takes the
+  /// control thread's events into the stream first.
   std::string drain_events();
   /// The same, in both dialects at once (each session takes its own).
   void drain_events(std::string& native, std::string& grbl);
@@ -224,6 +226,8 @@ class Console {
   std::uint32_t last_motion_id() const { return svc_->last_motion_id(); }
   /// The arm service the console renders (moves, dwells: planned, checked and queued there).
   ArmService& service() { return *svc_; }
+  /// What a jog runs with now: the active tool, its IK, the feed override, the user frame.
+  JogContext jog_context() const;
 
  private:
   /// A request to the control thread and its reply (the arm service's; false: no reply in time).
@@ -235,8 +239,9 @@ class Console {
   void do_grbl_jog(Session& s, const Command& c);
   /// Send a jog request; answer ok / the error. `clamped` >= 0: the target was cut at that
   /// joint's limit (answered as an error naming it, though the jog runs).
-  void send_jog(Session& s, const JogSpec& spec, int clamped, double asked, double limit);
-  JogSpec tool_jog_spec(double pct) const;
+  /// A jog's result as the answer line; `what` names the request ("jog", "$J"), `given` the
+  /// number the line gave (range and rotation refusals quote it).
+  void answer_jog(Session& s, const JogResult& r, const char* what, double given);
   void do_grbl(Session& s, const Command& c);
   /// `home [jN]` (answered at once, progress as `homing:` lines) and `$H` (answered when it has ended).
   void do_home(Session& s, const Command& c);
@@ -267,8 +272,6 @@ class Console {
   bool motion_state_ok(Session& s);
   /// Resolve a pending `enable` / `wait` whose outcome is known. True while still blocked.
   bool settle(Session& s);
-  /// The same for an increment jog (a lower bound of its duration: distance over its speed).
-  bool jog_duration_ok(Session& s, double duration_s);
   void queue_dwell(Session& s, double secs);
   void do_help(Session& s, std::string_view topic);
   /// `help`'s first line: the units in use.
@@ -391,6 +394,9 @@ class Console {
   void cancel_check(const std::string& why);
   bool ticking_ = false;        ///< tick() is feeding (no re-entry; the run may end inside it)
   std::string program_events_;  ///< `program: ...` lines for every session (drain_events)
+  std::uint64_t events_seen_ = 0;  ///< the last event of the service's stream rendered (drain_events)
+  /// An event of the service's stream as its native line and its GRBL lines.
+  void render_event(const ArmEvent& e, std::string& native, std::string& grbl);
   struct Recording {
     bool active = false;
     double rate_hz = 50;
@@ -407,9 +413,6 @@ class Console {
   void do_resume(Session& s);
   void do_record(Session& s, const Command& c);
   void do_out(Session& s, const Command& c);
-  /// M62 / M63 changes waiting for the next move (one per joint, merged).
-  std::array<OutputChange, kMotionOutputs> sync_out_{};
-  std::uint8_t n_sync_out_ = 0;
   /// movej / movel @NAME typed at the console (Command::at_point).
   void queue_at_point(Session& s, const Command& c);
   /// Run one step in `ps` (its answer in ps.out).
@@ -419,12 +422,6 @@ class Console {
   std::string program_where() const;  ///< FILE:LINE of the current step
   std::string points_refusal() const;  ///< "" when points may change now
   // Jogging: where the running jog is going (GRBL jog lines are relative to it).
-  bool jog_tail_valid_ = false;
-  bool jog_tail_tool_ = false;
-  kin::JointVector jog_q_tail_;
-  kin::Pose jog_x_tail_ = kin::Pose::Identity();
-  Eigen::Matrix3d jog_frame_ = Eigen::Matrix3d::Identity();  ///< the running tool jog's frame
-  JogFrame jog_frame_kind_ = JogFrame::base;
   int feed_pct_ = 100;
   double feed_now_ = 0;  ///< m/s of the last jog or linear move queued (FS:)
 };
