@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <utility>
 
 namespace servoarm::sim {
 
@@ -119,18 +120,22 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
 
 void VirtualDrive::add(std::uint16_t index, std::uint8_t sub, std::uint8_t size, bool writable, bool mappable,
                        std::uint32_t value) {
-  od_.push_back(Entry{index, sub, size, writable, mappable, value, value, {}, 0});
+  // Kept sorted by (index, sub): find() runs several times per plant sub-step and per
+  // frame, and a linear search over the dictionary was most of a simulated test's time.
+  const auto key = od_key(index, sub);
+  const auto at = std::upper_bound(od_.begin(), od_.end(), key,
+                                   [](std::uint32_t k, const Entry& e) { return k < od_key(e.index, e.sub); });
+  od_.insert(at, Entry{index, sub, size, writable, mappable, value, value, {}, 0});
 }
 
 VirtualDrive::Entry* VirtualDrive::find(std::uint16_t index, std::uint8_t sub) {
-  for (Entry& e : od_)
-    if (e.index == index && e.sub == sub) return &e;
-  return nullptr;
+  return const_cast<Entry*>(std::as_const(*this).find(index, sub));
 }
 const VirtualDrive::Entry* VirtualDrive::find(std::uint16_t index, std::uint8_t sub) const {
-  for (const Entry& e : od_)
-    if (e.index == index && e.sub == sub) return &e;
-  return nullptr;
+  const auto key = od_key(index, sub);
+  const auto it = std::lower_bound(od_.begin(), od_.end(), key,
+                                   [](const Entry& e, std::uint32_t k) { return od_key(e.index, e.sub) < k; });
+  return it != od_.end() && it->index == index && it->sub == sub ? &*it : nullptr;
 }
 
 bool VirtualDrive::od_read(std::uint16_t index, std::uint8_t sub, std::uint32_t& value) const {

@@ -187,6 +187,7 @@ class VirtualDrive {
     std::vector<std::uint8_t> domain;
     std::size_t domain_cap = 0;
   };
+  static constexpr std::uint32_t od_key(std::uint16_t index, std::uint8_t sub) { return std::uint32_t(index) << 8 | sub; }
   Entry* find(std::uint16_t index, std::uint8_t sub);
   const Entry* find(std::uint16_t index, std::uint8_t sub) const;
   void add(std::uint16_t index, std::uint8_t sub, std::uint8_t size, bool writable, bool mappable, std::uint32_t value);
