@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include "servoarm/hal/mit.hpp"
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/lang/markdown.hpp"
@@ -24,7 +25,7 @@ namespace {
 constexpr double kBauds[] = {9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600};
 constexpr double kDirections[] = {1, -1};
 constexpr const char* kStops[] = {"ramp", "drive"};
-constexpr const char* kDriveFamilies[] = {"cia402"};
+constexpr const char* kDriveFamilies[] = {"cia402", "damiao", "cubemars_mit", "robstride_mit"};
 constexpr const char* kDialects[] = {"native", "grbl"};
 constexpr const char* kTransportDialects[] = {"", "native", "grbl"};
 constexpr const char* kFeedForward[] = {"off", "velocity", "torque"};
@@ -114,6 +115,60 @@ std::string sdo_entries_valid(const DriveConfig& d, const FwConfig&) {
       if (d.sdo[k].index == e.index && d.sdo[k].sub == e.sub)
         return at + "the object is also entry " + std::to_string(k + 1);
   }
+  return "";
+}
+
+bool mit_family(const std::string& family) { return family != "cia402"; }
+
+/// "DM-J4310-2EC, DM-J4340, DM-J8006 (damiao), AK80-9 (cubemars_mit), RS00 (robstride_mit)"
+std::string known_motors() {
+  std::string o;
+  for (const hal::mit::MotorProfile& p : hal::mit::motor_profiles())
+    o += (o.empty() ? "" : ", ") + std::string(p.name) + " (" + hal::mit::to_string(p.vendor) + ")";
+  return o;
+}
+std::string drive_motor_known(const DriveConfig& d, const FwConfig&) {
+  if (!mit_family(d.family)) return d.motor.empty() ? "" : "is for the MIT families only (drive.family is \"cia402\")";
+  if (d.motor.empty()) return "is required with drive.family = \"" + d.family + "\"; known: " + known_motors();
+  const hal::mit::MotorProfile* p = hal::mit::find_profile(d.motor);
+  if (p == nullptr) return "unknown motor model \"" + d.motor + "\"; known: " + known_motors();
+  if (d.family != hal::mit::to_string(p->vendor))
+    return std::string(p->name) + " is a " + hal::mit::to_string(p->vendor) + " motor, not " + d.family;
+  return "";
+}
+std::string drive_mit_kp_in_range(const DriveConfig& d, const FwConfig&) {
+  const hal::mit::MotorProfile* p = mit_family(d.family) ? hal::mit::find_profile(d.motor) : nullptr;
+  if (p == nullptr || d.mit_kp <= p->kp_max) return "";
+  return "must be at most " + num_text(p->kp_max) + ", the " + p->name + "'s KP range";
+}
+std::string drive_mit_kd_in_range(const DriveConfig& d, const FwConfig&) {
+  const hal::mit::MotorProfile* p = mit_family(d.family) ? hal::mit::find_profile(d.motor) : nullptr;
+  if (p == nullptr || d.mit_kd <= p->kd_max) return "";
+  return "must be at most " + num_text(p->kd_max) + ", the " + p->name + "'s KD range";
+}
+}  // namespace
+
+const char* mit_id_problem(int id) {
+  if (id == 0x000) return "is CANopen's NMT id (0x000)";
+  if (id == 0x080) return "is CANopen's SYNC id (0x080)";
+  if (id > 0x080 && id <= 0x0FF) return "is a CANopen EMCY id (0x081..0x0FF)";
+  if (id == 0x7FF) return "is the Damiao register id (0x7FF)";
+  return nullptr;
+}
+
+int mit_master_id(const DriveConfig& d, int node) {
+  if (d.master_id != 0) return d.master_id;
+  if (d.family == "damiao") return node + 0x10;
+  if (d.family == "robstride_mit") return 0x0FD;
+  return 0x000;  // cubemars_mit
+}
+
+namespace {
+std::string drive_master_id_free(const DriveConfig& d, const FwConfig&) {
+  if (!mit_family(d.family)) return d.master_id == 0 ? "" : "is for the MIT families only (drive.family is \"cia402\")";
+  if (d.master_id == 0) return "";
+  if (const char* why = mit_id_problem(d.master_id)) return why;
+  if (d.node != 0 && d.master_id == d.node) return "must differ from drive.node (the motor's command id)";
   return "";
 }
 
@@ -306,21 +361,42 @@ using DK = DriveKey;
 const DriveKey kDriveTable[] = {
     DK{"family", &D::family, "",
        "the joint's drive family (docs/servo-bus.md#drive-families-groups-and-the-arm): `\"cia402\"` = a CiA 402 "
-       "servo drive over CANopen; the joints of one family on one interface form one group"}
+       "servo drive over CANopen; `\"damiao\"`, `\"cubemars_mit\"`, `\"robstride_mit\"` = an MIT-mode actuator "
+       "(docs/mit-motors.md; drive.motor names the model); the joints of one family on one interface form one group"}
         .among(std::span<const char* const>(kDriveFamilies)),
     DK{"can", &D::can, "",
        "the CAN interface of this joint's drive (`can1`); `\"\"` = bus.can. With bus.can = `\"sim\"` every name "
        "is an in-process bus of its own with virtual drives"}
         .length(0, 15).rule_text("\"\" or an interface name (up to 15 chars)"),
-    DK{"node", &D::node, "", "CANopen node id of this joint's drive (unique on the bus)"}
+    DK{"node", &D::node, "",
+       "CANopen node id of this joint's drive, or the MIT motor's CAN id (Damiao ESC_ID); unique on the bus"}
         .within(1, 127).unset_means(0, "bus.first_node + k - 1", false),
+    DK{"motor", &D::motor, "",
+       "MIT families: the motor model, whose ranges (P_MAX, V_MAX, T_MAX, KP, KD) the frames are packed with "
+       "(docs/mit-motors.md#motor-models): DM-J4310-2EC, DM-J4340, DM-J8006 (damiao), AK80-9 (cubemars_mit), RS00 "
+       "(robstride_mit). Required there; an unknown model is refused listing the known ones"}
+        .length(0, 31).related(drive_motor_known, "a model of drive.family").rule_text("a model name or \"\""),
+    DK{"mit_kp", &D::mit_kp, "N m/rad",
+       "MIT families: position gain kp sent in every frame (actuator side); the motor computes "
+       "kp (p - q) + kd (v - qd) + torque"}
+        .within(0, 5000).related(drive_mit_kp_in_range, "at most the motor's KP range"),
+    DK{"mit_kd", &D::mit_kd, "N m s/rad", "MIT families: velocity gain kd sent in every frame (actuator side)"}
+        .within(0, 100).related(drive_mit_kd_in_range, "at most the motor's KD range"),
+    DK{"master_id", &D::master_id, "",
+       "MIT families: the 11-bit id the motor answers on (Damiao MST_ID); 0 = the vendor's default (Damiao: "
+       "drive.node + 0x10, Robstride 0x0FD, CubeMars 0x000). Unique on its interface; CANopen's NMT (0x000), SYNC "
+       "(0x080) and EMCY (0x081..0x0FF) ids and 0x7FF are refused"}
+        .in_hex().within(0, 0x7FF).related(drive_master_id_free, "not an NMT, SYNC or EMCY id, not drive.node"),
     DK{"counts_per_rev", &D::counts_per_rev, "counts/rev",
        "encoder counts per motor revolution (per motor mm for prismatic joints)"}
         .below(1, kTwo31).unset_means(0, "bus.counts_per_rev", false),
-    DK{"gear_ratio", &D::gear_ratio, "", "motor revolutions (mm) per joint revolution (mm); positive"}
+    DK{"gear_ratio", &D::gear_ratio, "",
+       "motor revolutions (mm) per joint revolution (mm); positive. MIT families: actuator output turns per joint "
+       "turn (a transmission after the actuator, whose own gearbox the motor model covers); unset = 1"}
         .within(1e-3, 1e5).unset_means(0, "bus.gear_ratio", false),
     DK{"direction", &D::direction, "", "sign between the joint and the drive"}.among(std::span<const double>(kDirections)),
-    DK{"zero_offset", &D::zero_offset, "counts", "drive position at joint zero (what `home zero` answers)"}
+    DK{"zero_offset", &D::zero_offset, "counts",
+       "drive position at joint zero (what `home zero` answers); MIT families: actuator microradians"}
         .within(-kTwo31, kTwo31 - 1),
     DK{"limits", &D::limits, "deg (mm)",
        "`[lower, upper]`; must lie within the robot description's limits, narrows them for planning, IK and the "
