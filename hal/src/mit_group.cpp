@@ -38,7 +38,7 @@ MitGroup::MitGroup(CanBus& bus, Clock& clock, const MitGroupConfig& cfg) : bus_(
     for (std::size_t i = 0; i < j && st == Status::ok; ++i) {
       if (cfg_.joints[i].motor_id == c.motor_id)
         st = refuse(j, bad, "motor id 0x%02X is joint %zu's too", unsigned(c.motor_id), arm_joint(i));
-      else if (master(i) == master(j))
+      else if (cfg_.vendor == mit::Vendor::damiao && master(i) == master(j))  // the others tell by byte 0
         st = refuse(j, bad, "master id 0x%03X is joint %zu's too: their feedback could not be told apart",
                     unsigned(master(j)), arm_joint(i));
       else if (master(j) == cfg_.joints[i].motor_id || master(i) == c.motor_id)

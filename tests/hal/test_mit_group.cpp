@@ -335,3 +335,28 @@ TEST(MitGroup, TorqueModeIsKpZeroAndTheTargetTorque) {
   LONGS_EQUAL(int(CyclicMode::position), int(rig.group->cyclic_mode(0).mode));
   DOUBLES_EQUAL(30, rig.group->last_command(0).kp, 0);
 }
+
+// CubeMars and Robstride motors all answer on one master id and are told apart by byte 0:
+// a shared master id is their normal set-up, not a clash; the group brings them up and drives them.
+TEST(MitGroup, RobstrideMotorsShareTheirMasterId) {
+  const mit::MotorProfile& rs = *mit::find_profile("RS00");
+  std::vector<sim::MitMotorSpec> m(2);
+  MitGroupConfig c;
+  c.vendor = mit::Vendor::robstride;
+  c.joint_count = 2;
+  for (std::size_t i = 0; i < 2; ++i) {
+    m[i].profile = &rs;
+    m[i].id = static_cast<std::uint16_t>(i + 1);
+    m[i].master = 0xFD;
+    c.joints[i].motor_id = static_cast<std::uint16_t>(i + 1);
+    c.joints[i].profile = &rs;
+  }
+  Rig rig(m, c);
+  STRCMP_EQUAL("", rig.group->last_error());
+  LONGS_EQUAL(int(Status::ok), int(rig.start()));
+  CHECK(rig.enable());
+  for (int i = 0; i < 1000; ++i) rig.cycle({0.3, -0.2});
+  DOUBLES_EQUAL(0.3, rig.plant->at(0).position(), 2e-3);
+  DOUBLES_EQUAL(-0.2, rig.plant->at(1).position(), 2e-3);
+  STRCMP_EQUAL("robstride_mit", rig.group->family());
+}
