@@ -38,27 +38,22 @@ struct MitApp : App {
   std::vector<std::unique_ptr<sim::SimPlant>> cia;
 
   std::string build(const FwConfig& c, hal::Clock* clk) {
-    return App::build(c, clk, [this, c](hal::Clock& clock, const std::vector<std::uint8_t>& ids) -> hal::CanBus* {
-      const DriveConfig* first = nullptr;
-      for (std::size_t j = 0; j < c.drives.size(); ++j)
-        if (c.drives[j].node == ids.front()) first = &c.drives[j];
-      if (first == nullptr || first->family == "cia402") {
-        cia.push_back(std::make_unique<sim::SimPlant>(clock, ids));
-        return &cia.back()->master_bus();
-      }
+    sim_group = [this, c](hal::Clock& clock, const DriveGroupPlan& p) -> hal::CanBus* {
       std::vector<sim::MitMotorSpec> specs;
-      for (std::uint8_t id : ids) {
-        const DriveConfig* d = nullptr;
-        for (const DriveConfig& x : c.drives)
-          if (x.node == id) d = &x;
+      for (std::size_t k = 0; k < p.joints.size(); ++k) {
+        const DriveConfig& d = c.drives[static_cast<std::size_t>(p.joints[k])];
         sim::MitMotorSpec s;
-        s.profile = hal::mit::find_profile(d->motor);
-        s.id = id;
-        s.master = static_cast<std::uint16_t>(mit_master_id(*d, id));
+        s.profile = hal::mit::find_profile(d.motor);
+        s.id = p.ids[k];
+        s.master = static_cast<std::uint16_t>(mit_master_id(d, p.ids[k]));
         specs.push_back(s);
       }
       mit.push_back(std::make_unique<sim::MitPlant>(clock, specs));
       return &mit.back()->master_bus();
+    };
+    return App::build(c, clk, [this](hal::Clock& clock, const std::vector<std::uint8_t>& ids) -> hal::CanBus* {
+      cia.push_back(std::make_unique<sim::SimPlant>(clock, ids));
+      return &cia.back()->master_bus();
     });
   }
   void step(hal::TimePoint t) {
@@ -362,4 +357,10 @@ TEST(FwMitArm, BadMitConfigurationsAreRefusedAtLoad) {
   MitApp app3;
   e = app3.build(c3, &clock);
   CHECK_TEXT(has(e, "drive[4].homing.method: 19 is a CiA 402 drive's own homing"), e.c_str());
+  // bus.can = "sim" with only CiA 402 virtual drives at hand (what armfw --sim gives today)
+  App plain;
+  e = plain.build(damiao_arm(), &clock, [](hal::Clock&, const std::vector<std::uint8_t>&) -> hal::CanBus* { return nullptr; });
+  STRCMP_EQUAL("drive.family: \"damiao\" with bus.can = \"sim\": no virtual damiao motors here (the virtual drives of "
+               "armfw --sim are CiA 402)",
+               e.c_str());
 }

@@ -171,6 +171,13 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
 
 std::string App::open_bus(const DriveGroupPlan& p, const SimFactory& sim, hal::CanBus*& bus) {
   bus = nullptr;
+  if (cfg.can == "sim" && p.family != "cia402") {  // virtual drives of that family
+    if (sim_group) bus = sim_group(*clock, p);
+    if (bus == nullptr)
+      return "drive.family: \"" + p.family + "\" with bus.can = \"sim\": no virtual " + p.family +
+             " motors here (the virtual drives of armfw --sim are CiA 402)";
+    return "";
+  }
   if (cfg.can == "sim") {  // every interface named is an in-process bus of virtual drives
     if (sim) bus = sim(*clock, p.ids);
     if (bus == nullptr && p.can != cfg.can)

@@ -119,6 +119,9 @@ class MitPlant {
   void step(hal::TimePoint now);
   void start_thread();
   void stop_thread();
+  /// RtLoop::PreCycle that steps the plant `ctx` (a MitPlant*) before each control cycle, as
+  /// SimPlant::step_hook does for the CiA 402 drives.
+  static void step_hook(void* ctx, std::int64_t now_ns) { static_cast<MitPlant*>(ctx)->step(now_ns); }
 
  private:
   hal::Clock& clock_;
