@@ -95,7 +95,12 @@ Status MitGroup::refuse(std::size_t j, Status why, const char* fmt, ...) {
   return why;
 }
 
-Status MitGroup::send(const CanFrame& f) { return bus_.send(f); }
+Status MitGroup::send(const CanFrame& f) {
+  if (!cfg_.fd) return bus_.send(f);
+  CanFrame x = f;
+  x.fd = x.brs = true;
+  return bus_.send(x);
+}
 
 bool MitGroup::is_feedback_of(std::size_t j, const CanFrame& f) const {
   if (f.error || f.rtr || f.extended || f.id != master(j) || f.len < 6) return false;

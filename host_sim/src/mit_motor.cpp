@@ -10,7 +10,8 @@ namespace servoarm::sim {
 
 namespace mit = hal::mit;
 
-VirtualMitMotor::VirtualMitMotor(const MitMotorSpec& s) : profile_(s.profile), vendor_(s.profile->vendor), p_(s.params) {
+VirtualMitMotor::VirtualMitMotor(const MitMotorSpec& s)
+    : profile_(s.profile), vendor_(s.profile->vendor), fd_(s.fd), p_(s.params) {
   temp_ = p_.ambient;
   set_reg_f(mit::Reg::uv_value, 15.0f);
   set_reg_f(mit::Reg::kt_value, static_cast<float>(profile_->torque_constant));
@@ -97,19 +98,19 @@ void VirtualMitMotor::send_feedback(hal::TimePoint now, hal::CanBus& out) {
     case mit::Vendor::cubemars:
     case mit::Vendor::robstride: fb.error = error_; break;
   }
-  const hal::CanFrame f = mit::encode_feedback(vendor_, ranges(), reg(mit::Reg::mst_id), fb);
-  if (quirks_.late > 0 && late_n_ < late_.size()) late_[late_n_++] = {f, now + quirks_.late};
-  else if (quirks_.late <= 0) out.send(f);
+  answer(mit::encode_feedback(vendor_, ranges(), reg(mit::Reg::mst_id), fb), now, out);
 }
 
-void VirtualMitMotor::answer(const hal::CanFrame& f, hal::TimePoint now, hal::CanBus& out) {
+void VirtualMitMotor::answer(const hal::CanFrame& reply, hal::TimePoint now, hal::CanBus& out) {
+  hal::CanFrame f = reply;
+  f.fd = f.brs = fd_;
   if (quirks_.late > 0 && late_n_ < late_.size()) late_[late_n_++] = {f, now + quirks_.late};
   else if (quirks_.late <= 0) out.send(f);
 }
 
 void VirtualMitMotor::handle(const hal::CanFrame& f, hal::TimePoint now, hal::CanBus& out) {
   integrate_to(now);
-  if (quirks_.silent || f.error || f.rtr || f.extended || f.len != 8) return;
+  if (quirks_.silent || f.error || f.rtr || f.extended || f.len != 8 || f.fd != fd_) return;
   const auto id = static_cast<std::uint16_t>(reg(mit::Reg::esc_id));
   if (f.id == mit::kRegisterId) {
     mit::RegMessage m;

@@ -360,3 +360,31 @@ TEST(MitGroup, RobstrideMotorsShareTheirMasterId) {
   DOUBLES_EQUAL(-0.2, rig.plant->at(1).position(), 2e-3);
   STRCMP_EQUAL("robstride_mit", rig.group->family());
 }
+
+// CAN FD: motors set to CAN FD take and send FD frames only. A group sending FD (with bit-rate
+// switch) brings them up and drives them; a classic group gets no answer, said in one line, and
+// so does an FD group on classic motors.
+TEST(MitGroup, CanFdMotorsNeedFdFramesAndAMismatchIsOneLine) {
+  auto fd = motors(2);
+  for (auto& m : fd) m.fd = true;
+  MitGroupConfig c = group_config(2);
+  c.fd = true;
+  {
+    Rig rig(fd, c);
+    LONGS_EQUAL(int(Status::ok), int(rig.start()));
+    CHECK(rig.enable());
+    for (int i = 0; i < 800; ++i) rig.cycle({0.25, -0.25});
+    DOUBLES_EQUAL(0.25, rig.plant->at(0).position(), 2e-3);
+  }
+  const char* expect =
+      "joint 0 (damiao id 0x01): no answer to a register read (CTRL_MODE) on 0x7FF in 60 ms: the motor is not on this "
+      "bus at this bitrate and frame format (classic CAN / CAN FD), not powered, or has another id";
+  {
+    Rig rig(fd, group_config(2));  // classic frames to FD motors
+    LONGS_EQUAL(int(Status::timeout), int(rig.start()));
+    STRCMP_EQUAL(expect, rig.group->last_error());
+  }
+  Rig rig(motors(2), c);  // FD frames to classic motors
+  LONGS_EQUAL(int(Status::timeout), int(rig.start()));
+  STRCMP_EQUAL(expect, rig.group->last_error());
+}

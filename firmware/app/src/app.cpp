@@ -187,7 +187,9 @@ std::string App::open_bus(const DriveGroupPlan& p, const SimFactory& sim, hal::C
     return "";
   }
   auto sc = std::make_unique<hal::SocketCanBus>();
-  const hal::Status st = sc->open(p.can.c_str());
+  hal::SocketCanOptions opt;
+  opt.enable_fd = !cfg.drives.empty() && cfg.drives[static_cast<std::size_t>(p.joints.front())].can_fd;
+  const hal::Status st = sc->open(p.can.c_str(), opt);
   if (st != hal::Status::ok) {
     const std::string m = sc->message();  // starts with the interface name
     return "bus.can: cannot open " + (m.rfind(p.can + ":", 0) == 0 ? m : p.can + ": " + m);

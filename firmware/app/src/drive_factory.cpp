@@ -49,6 +49,10 @@ std::string plan_drive_groups(const FwConfig& cfg, int n_joints, std::vector<Dri
     if (id > 127) return "config: bus.first_node: node id of joint " + std::to_string(j + 1) + " would exceed 127";
     for (const DriveGroupPlan& p : out) {
       if (p.can != can) continue;
+      if (d != nullptr && cfg.drives[static_cast<std::size_t>(p.joints.front())].can_fd != d->can_fd)
+        return "config: drive[" + std::to_string(j + 1) + "].can_fd: " + (d->can_fd ? "true" : "false") + ", but joint " +
+               std::to_string(p.joints.front() + 1) + " on the same interface (" + can + ") says " +
+               (d->can_fd ? "false" : "true");
       for (std::size_t k = 0; k < p.joints.size(); ++k)
         if (p.ids[k] == id)
           return "config: drive[" + std::to_string(j + 1) + "].node: node " + std::to_string(id) + " is joint " +
@@ -171,6 +175,7 @@ std::string make_mit(const DriveGroupInput& in, hal::mit::Vendor vendor, std::un
   mc.feedback_timeout = static_cast<hal::Duration>(cfg.heartbeat_timeout_ms * 1e6);
   mc.motor_timeout = static_cast<hal::Duration>(cfg.heartbeat_timeout_ms * 1e6);  // the motor stops as late as armfw sees it
   mc.state_timeout = static_cast<hal::Duration>(cfg.state_timeout_ms * 1e6);
+  mc.fd = cfg.drives[static_cast<std::size_t>(in.plan.joints.front())].can_fd;  // one value per interface (plan)
   for (std::size_t k = 0; k < mc.joint_count && k < hal::kMaxServoJoints; ++k) {
     const int j = in.plan.joints[k];
     const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];

@@ -387,6 +387,11 @@ const DriveKey kDriveTable[] = {
        "drive.node + 0x10, Robstride 0x0FD, CubeMars 0x000). Unique on its interface; CANopen's NMT (0x000), SYNC "
        "(0x080) and EMCY (0x081..0x0FF) ids and 0x7FF are refused"}
         .in_hex().within(0, 0x7FF).related(drive_master_id_free, "not an NMT, SYNC or EMCY id, not drive.node"),
+    DK{"can_fd", &D::can_fd, "",
+       "this drive's interface carries CAN FD: armfw opens it for CAN FD (refused, naming the interface, when its "
+       "MTU says it cannot) and the MIT families send their frames as FD with bit-rate switch (Damiao motors set to "
+       "CAN FD answer only those; set the bitrates with `ip link set can0 type can bitrate 1000000 dbitrate 5000000 "
+       "fd on`). Every drive on one interface says the same"},
     DK{"counts_per_rev", &D::counts_per_rev, "counts/rev",
        "encoder counts per motor revolution (per motor mm for prismatic joints)"}
         .below(1, kTwo31).unset_means(0, "bus.counts_per_rev", false),

@@ -65,6 +65,9 @@ struct MitGroupConfig {
   Duration motor_timeout = 100 * kMillisecond;     ///< the motor's own CAN timeout (Damiao TIMEOUT)
   Duration state_timeout = 500 * kMillisecond;     ///< enable frame not taken this long: drive_refused
   bool set_mode = true;                            ///< write CTRL_MODE = MIT when the motor is in another
+  /// Send every frame as CAN FD with bit-rate switch (Damiao motors set to CAN FD answer only
+  /// those); the interface must be opened for FD (SocketCanOptions::enable_fd).
+  bool fd = false;
 };
 
 class MitGroup final : public DriveGroup {

@@ -10,7 +10,8 @@
 // 0xD when nothing arrived for its CAN timeout (TIMEOUT x 50 us), and faults on its own
 // over-temperature (OT_Value). Quirks users meet: in a control mode other than MIT it answers no
 // MIT frame; a CTRL_MODE it will not change; silent (another bitrate or frame format); answers
-// late. MitPlant puts motors on a fresh in-process bus, stepped by a thread or by the caller.
+// late; set to CAN FD on a classic bus (or the other way round): nothing seen, no answer.
+// MitPlant puts motors on a fresh in-process bus, stepped by a thread or by the caller.
 #include <array>
 #include <atomic>
 #include <cstdint>
@@ -44,6 +45,7 @@ struct MitMotorSpec {
   std::uint16_t id = 1;
   std::uint16_t master = 0x11;  ///< the id it answers on
   std::uint32_t ctrl_mode = 1;  ///< Damiao CTRL_MODE at power-up
+  bool fd = false;              ///< set to CAN FD: takes (and sends) FD frames only, classic ones are not seen
   MitMotorParams params{};
 };
 
@@ -89,6 +91,7 @@ class VirtualMitMotor {
 
   const hal::mit::MotorProfile* profile_;
   hal::mit::Vendor vendor_;
+  bool fd_ = false;
   MitMotorParams p_;
   MitQuirks quirks_{};
   std::array<std::uint32_t, hal::mit::kLastReg + 1> regs_{};

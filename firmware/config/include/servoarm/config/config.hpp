@@ -55,6 +55,7 @@ struct DriveConfig {
   double mit_kp = 30;                    ///< N m/rad, actuator side, sent in every MIT frame
   double mit_kd = 1;                     ///< N m s/rad
   int master_id = 0;                     ///< the id the motor answers on; 0 = the vendor's default
+  bool can_fd = false;                   ///< this drive's interface carries CAN FD (all its drives agree)
   double counts_per_rev = 0;             ///< 0 = bus.counts_per_rev (counts per mm for prismatic joints)
   double gear_ratio = 0;                 ///< 0 = bus.gear_ratio
   int direction = 1;                     ///< +1 / -1 between joint and drive
