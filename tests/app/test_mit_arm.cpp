@@ -395,3 +395,36 @@ TEST(FwMitArm, CanFdArm) {
   const std::string e = app.build(m, &clock);
   STRCMP_EQUAL("config: drive[4].can_fd: true, but joint 1 on the same interface (sim) says false", e.c_str());
 }
+
+// The bus-load check runs per interface: each drive counts on its own drive.can, CiA 402 drives
+// with their PDOs, SYNC and heartbeat, MIT motors with one command and one feedback frame each.
+TEST(FwMitArm, BusLoadIsCheckedPerInterface) {
+  FwConfig c;
+  c.can = "can0";
+  c.rate_hz = 1000;
+  c.drives.resize(6);
+  for (std::size_t j = 0; j < 6; ++j) c.drives[j].node = static_cast<int>(j + 1);
+  for (std::size_t j = 3; j < 6; ++j) c.drives[j].can = "can1";
+  // 3 CiA 402 drives per 1 Mbit/s bus at 1 kHz: (55 + 6 x 115) bits a cycle + heartbeats
+  STRCMP_EQUAL("", validate(c).c_str());
+  std::printf("\n  3 CiA 402 drives per bus: %s\n", bus_load_warning(c, 6).c_str());
+  CHECK_TEXT(has(bus_load_warning(c, 6), "with 3 drives (7 frames per cycle: SYNC, 3 RPDO1, 3 TPDO1"),
+             bus_load_warning(c, 6).c_str());
+  // six DM-J4340: 12 frames of 135 bits a cycle on one bus is 162 %
+  FwConfig m = damiao_arm();
+  m.can = "can0";
+  m.rate_hz = 1000;
+  std::string e = validate(m);
+  CHECK_TEXT(has(e, "loop.rate_hz: bus load 162.0 % of bus.bitrate 1000000 bit/s at loop.rate_hz 1000 with 6 drives "
+                    "(12 frames per cycle: 6 MIT command, 6 MIT feedback, worst-case bit stuffing) is above 85 %: at "
+                    "most 524 Hz fits"),
+             e.c_str());
+  // three of them on can1: 81 % each, within 85 % (warned)
+  for (std::size_t j = 3; j < 6; ++j) m.drives[j].can = "can1";
+  STRCMP_EQUAL("", validate(m).c_str());
+  CHECK_TEXT(has(bus_load_warning(m, 6), "bus load 81.0 %"), bus_load_warning(m, 6).c_str());
+  // five on can1: that bus is named
+  m.drives[1].can = m.drives[2].can = "can1";
+  e = validate(m);
+  CHECK_TEXT(has(e, "loop.rate_hz: drive.can \"can1\": bus load 135.0 %"), e.c_str());
+}

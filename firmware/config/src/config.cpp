@@ -1114,9 +1114,8 @@ std::string frames_text(const hal::BusLoad& l, double rate) {
   return o;
 }
 
-/// Highest rate (Hz) at which the load of `c` with `joints` drives stays at most `share`.
-double rate_for(const FwConfig& c, std::size_t joints, double share) {
-  hal::BusTraffic t = bus_traffic(c, joints);
+/// Highest rate (Hz) at which the load of `c`'s traffic `t` stays at most `share`.
+double rate_for(const FwConfig& c, hal::BusTraffic t, double share) {
   t.rate_hz = 1;
   const hal::BusLoad one = hal::bus_load(t, c.bitrate);
   t.rate_hz = 2;
@@ -1126,30 +1125,79 @@ double rate_for(const FwConfig& c, std::size_t joints, double share) {
   return per_hz > 0 ? std::max(0.0, (share - fixed) / per_hz) : 1e9;
 }
 
-std::string load_line(const FwConfig& c, std::size_t joints, const hal::BusLoad& l) {
+std::string load_line(const FwConfig& c, const hal::BusTraffic& t, const hal::BusLoad& l) {
   return "bus load " + pct_text(l.total()) + " of bus.bitrate " + num_text(c.bitrate) + " bit/s at loop.rate_hz " +
-         num_text(c.rate_hz) + " with " + std::to_string(joints) + " drives (" + frames_text(l, c.rate_hz) +
-         ", worst-case bit stuffing)";
+         num_text(c.rate_hz) + " with " + std::to_string(t.joints + t.mit_joints) + " drives (" +
+         frames_text(l, c.rate_hz) + ", worst-case bit stuffing)";
+}
+
+/// The interfaces the [[drive]] tables use (drive.can, or bus.can for ""), bus.can first.
+std::vector<std::string> drive_interfaces(const FwConfig& c) {
+  std::vector<std::string> out{c.can};
+  for (const DriveConfig& d : c.drives) {
+    const std::string& i = d.can.empty() ? c.can : d.can;
+    if (std::find(out.begin(), out.end(), i) == out.end()) out.push_back(i);
+  }
+  return out;
+}
+
+/// The traffic on interface `iface`: its CiA 402 drives' PDOs, SYNC and heartbeats and its MIT
+/// motors' frames.
+hal::BusTraffic interface_traffic(const FwConfig& c, const std::string& iface) {
+  std::size_t cia = 0, mit = 0;
+  for (const DriveConfig& d : c.drives)
+    if ((d.can.empty() ? c.can : d.can) == iface) ++(d.family == "cia402" ? cia : mit);
+  hal::BusTraffic t = bus_traffic(c, cia);
+  t.mit_joints = mit;
+  return t;
+}
+
+/// `what` (problem or warning) of each interface the drives use, "" when none has one; an
+/// interface other than bus.can is named first ("drive.can \"can1\": ...").
+template <class Check>
+std::string per_interface(const FwConfig& c, Check&& check) {
+  for (const std::string& iface : drive_interfaces(c)) {
+    FwConfig ci = c;
+    ci.can = iface;
+    if (!bus_load_checked(ci)) continue;
+    const hal::BusTraffic t = interface_traffic(c, iface);
+    if (t.joints + t.mit_joints == 0) continue;
+    if (std::string why = check(ci, t); !why.empty())
+      return iface == c.can ? why : "drive.can " + toml_string(iface) + ": " + why;
+  }
+  return "";
+}
+
+std::string problem_for(const FwConfig& c, const hal::BusTraffic& t) {
+  const hal::BusLoad l = hal::bus_load(t, c.bitrate);
+  if (l.total() <= kBusLoadLimit) return "";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, t, kBusLoadLimit)));
+  return load_line(c, t, l) + " is above 85 %: at most " + b + " Hz fits (armfw --config FILE --bus-load)";
+}
+
+std::string warning_for(const FwConfig& c, const hal::BusTraffic& t) {
+  const hal::BusLoad l = hal::bus_load(t, c.bitrate);
+  if (l.total() <= kBusLoadWarn || l.total() > kBusLoadLimit) return "";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, t, kBusLoadWarn)));
+  return load_line(c, t, l) + " is above 60 %: little room for SDO, EMCY and retransmitted frames (" + b +
+         " Hz or less stays under 60 %)";
 }
 }  // namespace
 
+// With [[drive]] tables the load is checked per interface (each drive on its drive.can, CiA 402
+// and MIT frames counted as they are); without, `joints` CiA 402 drives on bus.can.
 std::string bus_load_problem(const FwConfig& c, std::size_t joints) {
+  if (!c.drives.empty()) return per_interface(c, problem_for);
   if (!bus_load_checked(c) || joints == 0) return "";
-  const hal::BusLoad l = hal::bus_load(bus_traffic(c, joints), c.bitrate);
-  if (l.total() <= kBusLoadLimit) return "";
-  char b[32];
-  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, joints, kBusLoadLimit)));
-  return load_line(c, joints, l) + " is above 85 %: at most " + b + " Hz fits (armfw --config FILE --bus-load)";
+  return problem_for(c, bus_traffic(c, joints));
 }
 
 std::string bus_load_warning(const FwConfig& c, std::size_t joints) {
+  if (!c.drives.empty()) return per_interface(c, warning_for);
   if (!bus_load_checked(c) || joints == 0) return "";
-  const hal::BusLoad l = hal::bus_load(bus_traffic(c, joints), c.bitrate);
-  if (l.total() <= kBusLoadWarn || l.total() > kBusLoadLimit) return "";
-  char b[32];
-  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, joints, kBusLoadWarn)));
-  return load_line(c, joints, l) + " is above 60 %: little room for SDO, EMCY and retransmitted frames (" + b +
-         " Hz or less stays under 60 %)";
+  return warning_for(c, bus_traffic(c, joints));
 }
 
 std::string bus_load_table(const FwConfig& c, std::size_t joints) {
@@ -1181,9 +1229,9 @@ std::string bus_load_table(const FwConfig& c, std::size_t joints) {
   if (!bus_load_checked(c))
     o += "not checked: bus.can = " + toml_string(c.can) + " has no wire (the figures are what a real bus would carry)\n";
   else if (l.total() > kBusLoadLimit)
-    o += "refused: above 85 %: at most " + num_text(std::floor(rate_for(c, joints, kBusLoadLimit))) + " Hz fits\n";
+    o += "refused: above 85 %: at most " + num_text(std::floor(rate_for(c, bus_traffic(c, joints), kBusLoadLimit))) + " Hz fits\n";
   else if (l.total() > kBusLoadWarn)
-    o += "warning: above 60 %: " + num_text(std::floor(rate_for(c, joints, kBusLoadWarn))) + " Hz or less stays under 60 %\n";
+    o += "warning: above 60 %: " + num_text(std::floor(rate_for(c, bus_traffic(c, joints), kBusLoadWarn))) + " Hz or less stays under 60 %\n";
   else
     o += "fits: at most 60 %\n";
   return o;
