@@ -510,6 +510,12 @@ double MitGroup::shift_zero(std::size_t j, double at, double reads) {
   return reads;
 }
 
+Status MitGroup::family_start_homing(std::size_t j, TimePoint now) {
+  (void)now;
+  if (j >= cfg_.joint_count) return Status::invalid_argument;
+  return cfg_.joints[j].homing.kind == HomingKind::none ? Status::ok : Status::not_supported;
+}
+
 JointCapabilities MitGroup::capabilities(std::size_t j) const {
   JointCapabilities c;
   if (j >= cfg_.joint_count) return c;

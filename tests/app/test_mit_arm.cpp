@@ -428,3 +428,60 @@ TEST(FwMitArm, BusLoadIsCheckedPerInterface) {
   e = validate(m);
   CHECK_TEXT(has(e, "loop.rate_hz: drive.can \"can1\": bus load 135.0 %"), e.c_str());
 }
+
+// Homing by hard stop on an MIT joint: the drive-neutral homing of the group base drives joint 5
+// against its stop (8 deg below zero), backs off 3 deg and takes homing.offset there.
+TEST(FwMitArm, HardStopHomingOnADamiaoJoint) {
+  FwConfig c = damiao_arm();
+  DriveConfig& h = c.drives[4];
+  h.homing_method = "hard_stop";
+  h.homing_direction = -1;
+  h.homing_speed_switch = 5;
+  h.homing_acceleration = 50;
+  h.homing_following_limit = 0.5;
+  h.homing_backoff = 3;
+  h.homing_offset = -60;
+  Arm a(c, [](MitApp& m) { m.mit[0]->at(4).stop_lo = -8 * kDeg; });
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("home")), (a.s.out + a.events).c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  CHECK(a.tel().all_homed());
+  DOUBLES_EQUAL(-5 * kDeg, a.motor(4).position(), 0.2 * kDeg);  // the stop + the back-off
+  DOUBLES_EQUAL(-60 * kDeg, a.tel().q_act[4], 0.2 * kDeg);
+  CHECK_TEXT(ok(a.cmd("movej 0 0 0 0 -50 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  DOUBLES_EQUAL(5 * kDeg, a.motor(4).position(), 0.1 * kDeg);  // -50 in the homed coordinates
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}
+
+// Collision detection on the motors' measured torque: a movej under gravity raises no alarm; a
+// push on joint 2 while it holds stops the arm with fault collision naming the joint.
+TEST(FwMitArm, CollisionDetectionOnMeasuredTorque) {
+  FwConfig c = damiao_arm("torque");
+  c.collision = true;
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  kin::JointVector q = kin::JointVector::Zero(6);
+  a.arm_inertia(q);
+  a.gravity = true;
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 10 -20 30 10 -10 10")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  a.run(0.5);
+  Telemetry t = a.tel();
+  CHECK_TEXT(t.collision_on, a.app.dynamics_notes().c_str());
+  LONGS_EQUAL(0, long(t.collisions));
+  std::printf("\n  collision observer on six virtual DM-J4340 after a movej under gravity: peak |r|/threshold %.2f\n",
+              t.collision_peak);
+  a.gravity = false;
+  for (int i = 0; i < 300 && a.tel().state != ArmState::fault; ++i) {
+    a.load_gravity();
+    a.motor(1).load_torque += 10.0;  // 40 N m at joint 2 through its 4:1 transmission
+    a.cycle();
+  }
+  t = a.tel();
+  CHECK_TEXT(t.state == ArmState::fault, a.events.c_str());
+  CHECK_TEXT(t.cause == FaultCause::collision, t.fault_text);
+  LONGS_EQUAL(1, t.fault_joint);
+}

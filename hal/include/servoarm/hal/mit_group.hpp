@@ -114,6 +114,9 @@ class MitGroup final : public DriveGroup {
   Status family_start(TimePoint deadline) override;
   Status family_read(TimePoint now) override;
   Status family_write(std::span<const double> setpoints, TimePoint now) override;
+  /// Kind none (an absolute joint): homed at once (ok), as ServoBus::start_homing says; the MIT
+  /// family has no homing of its own (hard_stop runs in the group base).
+  Status family_start_homing(std::size_t j, TimePoint now) override;
   Status family_set_feed_forward(std::size_t j, double velocity, double torque) override;
   Status family_set_torque_mode(std::size_t j, bool on) override;
   double shift_zero(std::size_t j, double at, double reads) override;
