@@ -438,6 +438,15 @@ Status MitGroup::family_write(std::span<const double> setpoints, TimePoint now) 
           cmd.v = J.ff_v;
           cmd.t = J.ff_t;
         }
+        // Near the wrap (+-P_MAX) the motor may cross it before this frame arrives: its
+        // kp (p - q) would then see an error of 2 P_MAX. There the same law goes out as
+        // kp = 0, v = v_ff + kp / kd x (p - q) (computed on the unwrapped position), which
+        // does not depend on where the motor wraps.
+        const double edge = J.r.p_max - std::max(0.05, 4e-3 * std::fabs(fb.velocity * J.k));
+        if (c.kd > 0 && (std::fabs(J.p_act - wrap) > edge || std::fabs(cmd.p) > edge)) {
+          cmd.v += c.kp / c.kd * (J.zero + J.k * setpoints[j] - J.p_act);
+          cmd.kp = 0;
+        }
       } else {
         result = Status::invalid_argument;  // holds where it stands
       }

@@ -388,3 +388,24 @@ TEST(MitGroup, CanFdMotorsNeedFdFramesAndAMismatchIsOneLine) {
   LONGS_EQUAL(int(Status::timeout), int(rig.start()));
   STRCMP_EQUAL(expect, rig.group->last_error());
 }
+
+// Enabled, a joint commanded past +P_MAX: the frame's position goes out in the motor's wrapped
+// range (true target - turns x 2 P_MAX); near the wrap the law goes out as kp = 0 and a velocity
+// (no error of 2 P_MAX if the motor crosses first); it crosses smoothly and holds at the target.
+TEST(MitGroup, AnEnabledJointMovesPastPmaxAndHolds) {
+  Rig rig(motors(1), group_config(1));
+  rig.plant->at(0).set_position(12.0);
+  LONGS_EQUAL(int(Status::ok), int(rig.start()));
+  CHECK(rig.enable());
+  double worst = 0;
+  for (int i = 0; i <= 2000; ++i) {
+    const double sp = 12.0 + 1.0 * std::fmin(1.0, i / 1000.0);  // 1 rad in 1 s, then hold at 13
+    rig.cycle({sp});
+    if (i > 5) worst = std::fmax(worst, std::fabs(rig.group->feedback(0).position - sp));
+  }
+  std::printf("\n  past P_MAX enabled: largest |position - setpoint| %.4f rad\n", worst);
+  DOUBLES_EQUAL(13.0, rig.plant->at(0).position(), 2e-3);
+  DOUBLES_EQUAL(13.0, rig.group->feedback(0).position, 2e-3);
+  CHECK(worst < 0.04);  // the ramp's own lag, kd v / kp = 0.033 rad: nothing more at the crossing
+  CHECK(rig.group->last_command(0).p > -12.1 && rig.group->last_command(0).p < -11.9);  // 13 - 25: the wrapped range
+}
