@@ -110,6 +110,58 @@ bool unpack_command(const Ranges& r, const CanFrame& f, Command& out) {
   return true;
 }
 
+namespace {
+void put_f32(std::uint8_t* p, double v) {
+  const float f = static_cast<float>(v);
+  std::uint32_t raw;
+  std::memcpy(&raw, &f, sizeof raw);
+  put_u32(p, raw);
+}
+double get_f32(const std::uint8_t* p) {
+  const std::uint32_t raw = get_u32(p);
+  float f;
+  std::memcpy(&f, &raw, sizeof f);
+  return f;
+}
+bool plain(const CanFrame& f) { return !f.error && !f.rtr && !f.extended; }
+}  // namespace
+
+bool pack_pos_vel(std::uint16_t motor_id, double p, double v, CanFrame& out) {
+  if (!std::isfinite(p) || !std::isfinite(v) || motor_id > 0xFF) return false;
+  CanFrame f;
+  f.id = 0x100u + motor_id;
+  f.len = 8;
+  put_f32(&f.data[0], p);
+  put_f32(&f.data[4], v);
+  out = f;
+  return true;
+}
+
+bool pack_vel(std::uint16_t motor_id, double v, CanFrame& out) {
+  if (!std::isfinite(v) || motor_id > 0xFF) return false;
+  CanFrame f;
+  f.id = 0x200u + motor_id;
+  f.len = 4;
+  put_f32(&f.data[0], v);
+  out = f;
+  return true;
+}
+
+bool unpack_pos_vel(const CanFrame& f, std::uint16_t& motor_id, double& p, double& v) {
+  if (!plain(f) || f.len != 8 || f.id < 0x100 || f.id > 0x1FF) return false;
+  motor_id = static_cast<std::uint16_t>(f.id - 0x100);
+  p = get_f32(&f.data[0]);
+  v = get_f32(&f.data[4]);
+  return true;
+}
+
+bool unpack_vel(const CanFrame& f, std::uint16_t& motor_id, double& v) {
+  if (!plain(f) || f.len != 4 || f.id < 0x200 || f.id > 0x2FF) return false;
+  motor_id = static_cast<std::uint16_t>(f.id - 0x200);
+  v = get_f32(&f.data[0]);
+  return true;
+}
+
 const char* to_string(Special s) {
   switch (s) {
     case Special::enable: return "enable";

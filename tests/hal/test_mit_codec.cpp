@@ -267,3 +267,24 @@ TEST(MitCodec, Profiles) {
   DOUBLES_EQUAL(18, find_profile("AK80-9")->t_max, 0);
   LONGS_EQUAL(int(Vendor::robstride), int(find_profile("RS00")->vendor));
 }
+
+TEST(MitCodec, DamiaoPositionVelocityAndVelocityFrames) {
+  CanFrame f;
+  // 1.0f = 0x3F800000, 2.0f = 0x40000000, -0.5f = 0xBF000000, little-endian
+  CHECK(pack_pos_vel(0x01, 1.0, 2.0, f));
+  expect_bytes(f, 0x101, {0x00, 0x00, 0x80, 0x3F, 0x00, 0x00, 0x00, 0x40}, "position-velocity");
+  CHECK(pack_vel(0x03, -0.5, f));
+  expect_bytes(f, 0x203, {0x00, 0x00, 0x00, 0xBF}, "velocity");
+  std::uint16_t id = 0;
+  double p = 0, v = 0;
+  CHECK(unpack_pos_vel(CanFrame::make(0x105, {0x00, 0x00, 0x80, 0x3F, 0x00, 0x00, 0x00, 0x40}), id, p, v));
+  LONGS_EQUAL(5, id);
+  DOUBLES_EQUAL(1.0, p, 0);
+  DOUBLES_EQUAL(2.0, v, 0);
+  CHECK(unpack_vel(CanFrame::make(0x207, {0x00, 0x00, 0x00, 0xBF}), id, v));
+  LONGS_EQUAL(7, id);
+  DOUBLES_EQUAL(-0.5, v, 0);
+  CHECK_FALSE(unpack_vel(CanFrame::make(0x107, {0x00, 0x00, 0x00, 0xBF}), id, v));
+  CHECK_FALSE(pack_vel(1, NAN, f));
+  CHECK_FALSE(pack_pos_vel(0x100, 0, 0, f));  // the id does not fit the 0x100 + id scheme
+}

@@ -18,6 +18,8 @@
 //   CubeMars:  byte 0 = motor id; p 16 | v 12 | current as torque 12; byte 6 temperature (deg C),
 //              byte 7 error code.
 //   Robstride: id = master id; byte 0 = motor id; p 16 | v 12 | t 12; bytes 6-7 temperature x 10.
+// Damiao's other modes: position-velocity on 0x100 + id (position, velocity limit: float32 LE),
+// velocity on 0x200 + id (float32 LE).
 // Damiao registers through id 0x7FF: [id lo, id hi, 0x33 read | 0x55 write | 0xAA save, RID,
 // value (4 bytes little-endian: uint32 or float32 by register)]; the reply comes on MST_ID with
 // the same first four bytes and the value. Refresh (a feedback frame, nothing changes):
@@ -95,6 +97,17 @@ bool pack_command(const Ranges& r, std::uint32_t can_id, const Command& c, CanFr
 /// The command a frame carries (what a drive decodes). False unless it is an 8-byte data frame
 /// that is not a special frame.
 bool unpack_command(const Ranges& r, const CanFrame& f, Command& out);
+
+/// Damiao position-velocity mode (CTRL_MODE 2): id 0x100 + motor id, 8 bytes: position (rad) and
+/// the velocity limit of the move (rad/s), each float32 little-endian. False for a value that is
+/// not finite.
+bool pack_pos_vel(std::uint16_t motor_id, double p, double v, CanFrame& out);
+/// Damiao velocity mode (CTRL_MODE 3): id 0x200 + motor id, 4 bytes: velocity (rad/s), float32
+/// little-endian.
+bool pack_vel(std::uint16_t motor_id, double v, CanFrame& out);
+/// What a position-velocity / velocity frame carries (`motor_id` from its id). False otherwise.
+bool unpack_pos_vel(const CanFrame& f, std::uint16_t& motor_id, double& p, double& v);
+bool unpack_vel(const CanFrame& f, std::uint16_t& motor_id, double& v);
 
 enum class Special : std::uint8_t { enable = 0xFC, disable = 0xFD, save_zero = 0xFE, clear_error = 0xFB };
 const char* to_string(Special s);
