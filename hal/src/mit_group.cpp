@@ -381,9 +381,16 @@ Status MitGroup::family_read(TimePoint now) {
     }
   }
   Status first = io;
+  // A bus-off controller reaches no motor: every joint faults with that reason.
+  const bool bus_off = bus_.stats().state == ErrorState::bus_off;
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
     JointFeedback& fb = fb_[j];
     fb.age = fb.last_feedback != 0 ? now - fb.last_feedback : -1;
+    if (bus_off && fb.state != JointState::fault) {
+      fault(j, Status::bus_off, 0, now);
+      std::snprintf(error_, sizeof error_, "joint %zu (%s id 0x%02X): the CAN controller is bus-off", arm_joint(j),
+                    family(), unsigned(cfg_.joints[j].motor_id));
+    }
     if (fb.state != JointState::fault && fb.last_feedback != 0 && now - fb.last_feedback > cfg_.feedback_timeout) {
       fault(j, Status::heartbeat_lost, 0, now);
       std::snprintf(error_, sizeof error_, "joint %zu (%s id 0x%02X): no feedback for %lld ms (lost communication)",

@@ -409,3 +409,17 @@ TEST(MitGroup, AnEnabledJointMovesPastPmaxAndHolds) {
   CHECK(worst < 0.04);  // the ramp's own lag, kd v / kp = 0.033 rad: nothing more at the crossing
   CHECK(rig.group->last_command(0).p > -12.1 && rig.group->last_command(0).p < -11.9);  // 13 - 25: the wrapped range
 }
+
+// A bus-off controller reaches no motor: every joint faults with bus_off at the next read.
+TEST(MitGroup, BusOffFaultsEveryJoint) {
+  Rig rig(motors(2), group_config(2));
+  LONGS_EQUAL(int(Status::ok), int(rig.start()));
+  CHECK(rig.enable());
+  rig.plant->bus().set_error_state(ErrorState::bus_off);
+  LONGS_EQUAL(int(Status::bus_off), int(rig.group->read(rig.clock.now())));
+  for (std::size_t j = 0; j < 2; ++j) {
+    LONGS_EQUAL(int(JointState::fault), int(rig.group->feedback(j).state));
+    LONGS_EQUAL(int(Status::bus_off), int(rig.group->feedback(j).fault));
+  }
+  STRCMP_CONTAINS("the CAN controller is bus-off", rig.group->last_error());
+}
