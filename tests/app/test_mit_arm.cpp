@@ -325,10 +325,11 @@ TEST(FwMitArm, BadMitConfigurationsAreRefusedAtLoad) {
        "(damiao), AK80-9 (cubemars_mit), RS00 (robstride_mit)"},
       {"[[drive]]\nfamily = \"damiao\"\n", "drive[1].motor: is required with drive.family = \"damiao\"; known: "},
       {"[[drive]]\nfamily = \"damiao\"\nmotor = \"AK80-9\"\n", "drive[1].motor: AK80-9 is a cubemars_mit motor, not damiao"},
-      {"[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmaster_id = 0x080\n",
-       "drive[1].master_id: is CANopen's SYNC id (0x080)"},
-      {"[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmaster_id = 0x085\n",
-       "drive[1].master_id: is a CANopen EMCY id (0x081..0x0FF)"},
+      {"[[drive]]\n[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmaster_id = 0x080\n",
+       "drive[2].master_id: is CANopen's SYNC id (0x080), and a CiA 402 drive is on the same interface"},
+      {"[[drive]]\n[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmaster_id = 0x085\n",
+       "drive[2].master_id: is a CANopen EMCY id (0x081..0x0FF), and a CiA 402 drive is on the same interface"},
+      {"[[drive]]\n[[drive]]\nfamily = \"cubemars_mit\"\nmotor = \"AK80-9\"\nmaster_id = 0x000\n", ""},
       {"[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmaster_id = 0x7FF\n",
        "drive[1].master_id: is the Damiao register id (0x7FF)"},
       {"[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmit_kp = 600\n",
@@ -340,14 +341,24 @@ TEST(FwMitArm, BadMitConfigurationsAreRefusedAtLoad) {
     const std::string e = load_config_text(k.toml, "mit.toml", c);
     CHECK_TEXT(has(e, k.expect), (std::string(k.toml) + " -> " + e).c_str());
   }
-  // ids clash at App::build (they need the whole arm): a default master id that is SYNC, and a
-  // master id that is another drive's id
+  {
+    // without CANopen drives on the interface the same ids are free: a Damiao master 0x085 loads
+    FwConfig c;
+    STRCMP_EQUAL("", load_config_text("[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmaster_id = 0x085\n",
+                                      "mit.toml", c).c_str());
+  }
+  // ids clash at App::build (they need the whole arm): a default master id that is SYNC on an
+  // interface with CiA 402 drives, and a master id that is another drive's id
   FwConfig c = damiao_arm();
   c.drives[5].node = 0x70;  // default master 0x80
+  c.drives[0] = DriveConfig{};  // a CiA 402 drive on the same interface
+  c.drives[0].node = 1;
   hal::ManualClock clock;
   MitApp app;
   std::string e = app.build(c, &clock);
-  CHECK_TEXT(has(e, "config: drive[6].master_id: 0x080 (the damiao default) is CANopen's SYNC id (0x080)"), e.c_str());
+  CHECK_TEXT(has(e, "config: drive[6].master_id: 0x080 (the damiao default) is CANopen's SYNC id (0x080), and a CiA 402 "
+                    "drive is on sim"),
+             e.c_str());
   FwConfig c2 = damiao_arm();
   c2.drives[2].master_id = 0x02;
   MitApp app2;
@@ -484,4 +495,24 @@ TEST(FwMitArm, CollisionDetectionOnMeasuredTorque) {
   CHECK_TEXT(t.state == ArmState::fault, a.events.c_str());
   CHECK_TEXT(t.cause == FaultCause::collision, t.fault_text);
   LONGS_EQUAL(1, t.fault_joint);
+}
+
+// The other MIT vendors through the same factory entry point: six Robstride RS00 answering on
+// one master id (0x0FD), told apart by the motor id in the frame.
+TEST(FwMitArm, RobstrideArmMoves) {
+  FwConfig c = damiao_arm();
+  for (DriveConfig& d : c.drives) {
+    d.family = "robstride_mit";
+    d.motor = "RS00";
+  }
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  STRCMP_EQUAL("robstride_mit", a.app.servo->group(0).family());
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 10 -10 10 10 -10 10")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  a.run(0.3);
+  const double goal[6] = {10, -10, 10, 10, -10, 10};
+  for (std::size_t j = 0; j < 6; ++j) DOUBLES_EQUAL(goal[j] * kDeg, a.tel().q_act[j], 0.05 * kDeg);
+  LONGS_EQUAL(0, long(a.rt_allocs));
 }

@@ -65,16 +65,15 @@ std::string plan_drive_groups(const FwConfig& cfg, int n_joints, std::vector<Dri
       const std::string which = d->master_id != 0 ? "" : " (the " + family + " default)";
       char hex[8];
       std::snprintf(hex, sizeof hex, "0x%03X", unsigned(master));
-      if (const char* why = mit_id_problem(master); why != nullptr && !(family == "cubemars_mit" && master == 0))
-        return at + hex + which + " " + why;
+      if (master == 0x7FF) return at + hex + which + " is the Damiao register id (0x7FF)";
+      if (const char* why = mit_id_problem(master); why != nullptr && canopen_shares_interface(cfg, *d))
+        return at + hex + which + " " + why + ", and a CiA 402 drive is on " + can;
       for (const DriveGroupPlan& p : out) {
         if (p.can != can) continue;
         for (std::size_t k = 0; k < p.joints.size(); ++k) {
           const DriveConfig& o = cfg.drives[static_cast<std::size_t>(p.joints[k])];
           const std::string other = "joint " + std::to_string(p.joints[k] + 1);
           if (p.ids[k] == master) return at + hex + which + " is " + other + "'s drive id";
-          if (p.family == "cia402" && master == 0)
-            return at + hex + which + " is CANopen's NMT id, and " + other + " is a CiA 402 drive on " + can;
           if (p.family == "damiao" && family == "damiao" && mit_master_id(o, p.ids[k]) == master)
             return at + hex + which + " is " + other + "'s master id too";
           if (p.family != "cia402" && mit_master_id(o, p.ids[k]) == id)

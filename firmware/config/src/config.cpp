@@ -156,6 +156,13 @@ const char* mit_id_problem(int id) {
   return nullptr;
 }
 
+bool canopen_shares_interface(const FwConfig& c, const DriveConfig& d) {
+  const std::string& mine = d.can.empty() ? c.can : d.can;
+  for (const DriveConfig& o : c.drives)
+    if (o.family == "cia402" && (o.can.empty() ? c.can : o.can) == mine) return true;
+  return false;
+}
+
 int mit_master_id(const DriveConfig& d, int node) {
   if (d.master_id != 0) return d.master_id;
   if (d.family == "damiao") return node + 0x10;
@@ -164,10 +171,12 @@ int mit_master_id(const DriveConfig& d, int node) {
 }
 
 namespace {
-std::string drive_master_id_free(const DriveConfig& d, const FwConfig&) {
+std::string drive_master_id_free(const DriveConfig& d, const FwConfig& c) {
   if (!mit_family(d.family)) return d.master_id == 0 ? "" : "is for the MIT families only (drive.family is \"cia402\")";
   if (d.master_id == 0) return "";
-  if (const char* why = mit_id_problem(d.master_id)) return why;
+  if (d.master_id == 0x7FF) return "is the Damiao register id (0x7FF)";
+  if (const char* why = mit_id_problem(d.master_id); why != nullptr && canopen_shares_interface(c, d))
+    return std::string(why) + ", and a CiA 402 drive is on the same interface";
   if (d.node != 0 && d.master_id == d.node) return "must differ from drive.node (the motor's command id)";
   return "";
 }
@@ -384,9 +393,11 @@ const DriveKey kDriveTable[] = {
         .within(0, 100).related(drive_mit_kd_in_range, "at most the motor's KD range"),
     DK{"master_id", &D::master_id, "",
        "MIT families: the 11-bit id the motor answers on (Damiao MST_ID); 0 = the vendor's default (Damiao: "
-       "drive.node + 0x10, Robstride 0x0FD, CubeMars 0x000). Unique on its interface; CANopen's NMT (0x000), SYNC "
-       "(0x080) and EMCY (0x081..0x0FF) ids and 0x7FF are refused"}
-        .in_hex().within(0, 0x7FF).related(drive_master_id_free, "not an NMT, SYNC or EMCY id, not drive.node"),
+       "drive.node + 0x10, Robstride 0x0FD, CubeMars 0x000). Unique on its interface (Damiao); 0x7FF is refused, "
+       "and on an interface that also carries CiA 402 drives CANopen's NMT (0x000), SYNC (0x080) and EMCY "
+       "(0x081..0x0FF) ids"}
+        .in_hex().within(0, 0x7FF)
+        .related(drive_master_id_free, "not 0x7FF, not drive.node; beside CiA 402 drives not an NMT, SYNC or EMCY id"),
     DK{"can_fd", &D::can_fd, "",
        "this drive's interface carries CAN FD: armfw opens it for CAN FD (refused, naming the interface, when its "
        "MTU says it cannot) and the MIT families send their frames as FD with bit-rate switch (Damiao motors set to "

@@ -85,10 +85,13 @@ struct DriveConfig {
   bool operator==(const DriveConfig&) const = default;
 };
 
-/// Why an 11-bit id may not be an MIT motor's answer id (drive.master_id), or null: CANopen's NMT
-/// (0x000), SYNC (0x080) or an EMCY id (0x081..0x0FF), which a mixed bus and every CANopen tool
-/// read, or the Damiao register id 0x7FF.
+/// Why an 11-bit id may not be an MIT motor's answer id (drive.master_id) on an interface that
+/// also carries CiA 402 drives, or null: CANopen's NMT (0x000), SYNC (0x080) or an EMCY id
+/// (0x081..0x0FF), which the CANopen drives read, or the Damiao register id 0x7FF.
 const char* mit_id_problem(int id);
+struct FwConfig;
+/// A CiA 402 drive is on `d`'s interface (drive.can, or bus.can for "").
+bool canopen_shares_interface(const FwConfig& c, const DriveConfig& d);
 /// The id an MIT motor with drive id `node` answers on: drive.master_id, else the family's
 /// default (damiao node + 0x10, robstride_mit 0x0FD, cubemars_mit 0x000).
 int mit_master_id(const DriveConfig& d, int node);
