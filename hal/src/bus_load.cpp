@@ -63,12 +63,14 @@ BusLoad bus_load(const BusTraffic& t, double bitrate, double data_bitrate) {
     l.seconds[k] = l.kinds[k].per_second * (l.bits[k].nominal / bitrate + (fd ? l.bits[k].data / data_bitrate : 0.0));
     l.frames_per_cycle += per_cycle;
   };
-  add("SYNC", BusDirection::to_drives, 0, 1);
+  add("SYNC", BusDirection::to_drives, 0, t.joints > 0 || t.mit_joints == 0 ? 1 : 0);
   add("RPDO1", BusDirection::to_drives, t.rpdo1_len, t.rpdo1_len ? j : 0);
   add("RPDO2", BusDirection::to_drives, t.rpdo2_len, t.rpdo2_len ? j : 0);
   add("RPDO3", BusDirection::to_drives, t.rpdo3_len, t.rpdo3_len ? double(t.rpdo3_joints) : 0);
   add("TPDO1", BusDirection::from_drives, t.tpdo1_len, t.tpdo1_len ? j : 0);
   add("TPDO2", BusDirection::from_drives, t.tpdo2_len, t.tpdo2_len ? j : 0);
+  add("MIT command", BusDirection::to_drives, 8, double(t.mit_joints));
+  add("MIT feedback", BusDirection::from_drives, 8, double(t.mit_joints));
   if (t.heartbeat_period_s > 0 && r > 0 && l.count < kMaxBusFrameKinds) {
     // Not cyclic: every drive's heartbeat, as frames per second.
     const std::size_t k = l.count++;

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// armsim: virtual CiA 402 servo drives on a SocketCAN interface (e.g. vcan0).
+// armsim: virtual CiA 402 servo drives and MIT-mode motors on a SocketCAN interface (e.g. vcan0).
 #include <algorithm>
 #include <cmath>
 #include <csignal>
@@ -14,6 +14,7 @@
 #include "servoarm/sim/cli.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/sim/arm_plant.hpp"
+#include "servoarm/sim/mit_motor.hpp"
 #include "servoarm/sim/virtual_drive.hpp"
 
 using namespace servoarm;
@@ -36,7 +37,7 @@ const char* kUsage =
     "  --iface NAME            SocketCAN interface, e.g. vcan0 (this or --fd is required)\n"
     "  --fd N                  testing: use inherited fd N (a CAN_RAW socket or a SOCK_SEQPACKET\n"
     "                          socketpair end carrying struct can_frame records) instead of --iface\n"
-    "  --nodes LIST            node ids: 1-6, 1,3,5 or 2-4,7 (default 1-6)\n"
+    "  --nodes LIST            node ids: 1-6, 1,3,5 or 2-4,7 (default 1-6); none: no CiA 402 drive\n"
     "  --duration SEC          exit after SEC seconds (default: until SIGINT/SIGTERM)\n"
     "  --heartbeat-ms N        heartbeat producer time before the master sets 0x1017 (default 0 = off)\n"
     "  --lag-ms X              position-loop time constant (default 2)\n"
@@ -69,6 +70,13 @@ const char* kUsage =
     "                          written (default: when the count, sub 0, is written)\n"
     "  --status-every SEC      print one status line per node every SEC seconds\n"
     "  --verbose               print NMT/CiA 402 state changes\n"
+    "\n"
+    "MIT-mode motors (docs/servo-bus.md#virtual-mit-motors), beside or instead of the CiA 402 drives:\n"
+    "  --mit MODEL:ID[:MASTER]  a virtual motor (DM-J4310-2EC, DM-J4340, DM-J8006, AK80-9, RS00) with command id\n"
+    "                          ID, answering on MASTER (default: Damiao ID + 0x10, Robstride 0xFD, CubeMars 0)\n"
+    "  --mit-mode ID:MODE      Damiao CTRL_MODE at power-up (1 MIT, 2 position-velocity, ...; default 1)\n"
+    "  --mit-locked ID         its CTRL_MODE cannot be written (answered, not taken)\n"
+    "  --mit-fd                the MIT motors are set to CAN FD (they take and send FD frames only)\n"
     "\n"
     "Switches and homing (positions in encoder counts of the drive before homing, 'inf' /\n"
     "'-inf' for none; NODE is a node id or 'all'). 60FDh reports them; Homing Mode (6060h = 6)\n"
@@ -138,6 +146,9 @@ int main(int argc, char** argv) {
     std::vector<double> xs;
   };
   std::vector<HomingArg> homing_args;
+  std::vector<sim::MitMotorSpec> mit_specs;
+  std::vector<std::uint16_t> mit_locked;
+  bool mit_fd = false;
 
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -154,6 +165,8 @@ int main(int argc, char** argv) {
       verbose = true;
     } else if (a == "--check-map-entries") {
       check_entries = true;
+    } else if (a == "--mit-fd") {
+      mit_fd = true;
     } else if (a == "--no-brakes") {
       pp.brakes = false;
     } else if (a == "--no-gravity") {
@@ -170,6 +183,41 @@ int main(int argc, char** argv) {
     } else if (a == "--fd") {
       if (!cli::parse_uint(v, 1 << 20, fd)) return usage_error("bad --fd");
       have_fd = true;
+    } else if (a == "--nodes" && v == "none") {
+      nodes.clear();
+    } else if (a == "--mit") {
+      const std::size_t c1 = v.find(':');
+      const hal::mit::MotorProfile* p = c1 == std::string::npos ? nullptr : hal::mit::find_profile(v.substr(0, c1));
+      if (p == nullptr) return usage_error("bad --mit '" + v + "' (MODEL:ID[:MASTER], MODEL one of DM-J4310-2EC, DM-J4340, DM-J8006, AK80-9, RS00)");
+      const std::string rest = v.substr(c1 + 1);
+      const std::size_t c2 = rest.find(':');
+      std::uint32_t id = 0, master = 0;
+      if (!cli::parse_uint(rest.substr(0, c2), 0x7FE, id) || id == 0) return usage_error("bad --mit '" + v + "': id 1..0x7FE");
+      if (c2 != std::string::npos) {
+        if (!cli::parse_uint(rest.substr(c2 + 1), 0x7FF, master)) return usage_error("bad --mit '" + v + "': master 0..0x7FF");
+      } else {
+        master = p->vendor == hal::mit::Vendor::damiao ? id + 0x10 : p->vendor == hal::mit::Vendor::robstride ? 0xFD : 0;
+      }
+      sim::MitMotorSpec spec;
+      spec.profile = p;
+      spec.id = static_cast<std::uint16_t>(id);
+      spec.master = static_cast<std::uint16_t>(master);
+      mit_specs.push_back(spec);
+    } else if (a == "--mit-mode" || a == "--mit-locked") {
+      std::uint32_t id = 0, mode = 0;
+      const std::size_t c1 = v.find(':');
+      const bool mode_opt = a == "--mit-mode";
+      if (!cli::parse_uint(v.substr(0, mode_opt ? c1 : std::string::npos), 0x7FE, id) ||
+          (mode_opt && (c1 == std::string::npos || !cli::parse_uint(v.substr(c1 + 1), 7, mode))))
+        return usage_error("bad " + a + " '" + v + "' (" + (mode_opt ? "ID:MODE" : "ID") + ")");
+      bool found = false;
+      for (auto& m : mit_specs)
+        if (m.id == id) {
+          found = true;
+          if (mode_opt) m.ctrl_mode = mode;
+        }
+      if (!found) return usage_error(a + ": no --mit motor with id " + std::to_string(id) + " (give --mit first)");
+      if (!mode_opt) mit_locked.push_back(static_cast<std::uint16_t>(id));
     } else if (a == "--nodes") {
       if (!cli::parse_nodes(v, nodes)) return usage_error("bad --nodes '" + v + "' (use e.g. 1-6 or 1,3,5; ids 1..127)");
     } else if (a == "--duration") {
@@ -340,7 +388,9 @@ int main(int argc, char** argv) {
     iface = "fd:" + std::to_string(fd);
   } else {
     bus_ptr = std::make_unique<SocketCanBus>();
-    if (const Status st = bus_ptr->open(iface.c_str()); st != Status::ok) {
+    SocketCanOptions opt;
+    opt.enable_fd = mit_fd;  // the MIT motors set to CAN FD (the MTU check refuses a classic interface)
+    if (const Status st = bus_ptr->open(iface.c_str(), opt); st != Status::ok) {
       std::fprintf(stderr, "armsim: cannot open %s: %s (%s)\n", iface.c_str(), bus_ptr->message(), to_string(st));
       return 3;
     }
@@ -356,6 +406,12 @@ int main(int argc, char** argv) {
   motor.following_window = window;
   motor.check_map_entries = check_entries;
   sim::ArmSim arm(bus, nodes, motor, seed);
+  std::vector<std::unique_ptr<sim::VirtualMitMotor>> mit;
+  for (sim::MitMotorSpec m : mit_specs) {
+    m.fd = mit_fd;
+    mit.push_back(std::make_unique<sim::VirtualMitMotor>(m));
+    if (std::find(mit_locked.begin(), mit_locked.end(), m.id) != mit_locked.end()) mit.back()->quirks().mode_locked = true;
+  }
   for (std::size_t i = 0; i < arm.size(); ++i)
     for (std::uint16_t idx : without) arm.at(i).od_remove(idx);
   for (auto& h : homing_args) {
@@ -440,6 +496,14 @@ int main(int argc, char** argv) {
   }
   std::printf("armsim ready iface=%s nodes=", iface.c_str());
   for (std::size_t i = 0; i < nodes.size(); ++i) std::printf("%s%u", i ? "," : "", unsigned(nodes[i]));
+  if (nodes.empty()) std::printf("none");
+  if (!mit.empty()) {
+    std::printf(" mit=");
+    for (std::size_t i = 0; i < mit_specs.size(); ++i)
+      std::printf("%s%s:0x%02X:0x%03X", i ? "," : "", mit_specs[i].profile->name, unsigned(mit_specs[i].id),
+                  unsigned(mit_specs[i].master));
+    if (mit_fd) std::printf(" mit_fd=1");
+  }
   std::printf("\n");
   std::fflush(stdout);
 
@@ -480,6 +544,7 @@ int main(int argc, char** argv) {
     }
     if (now >= next_tick) {
       arm.tick(now);
+      for (auto& m : mit) m->tick(now, bus);
       next_tick += kMillisecond;
       if (next_tick <= now) next_tick = now + kMillisecond;
     }
@@ -487,6 +552,7 @@ int main(int argc, char** argv) {
     const Status st = bus.receive(f, next_tick);
     if (st == Status::ok) {
       arm.handle(f, clock.now());
+      for (auto& m : mit) m->handle(f, clock.now(), bus);
       last_err = Status::ok;
     } else if (st != Status::timeout) {
       if (have_fd && st == Status::interface_down) {
@@ -537,6 +603,13 @@ int main(int argc, char** argv) {
         if (d.on_plant()) std::printf(" torque=%.3f", d.torque());
         std::printf("\n");
       }
+      for (const auto& m : mit)
+        std::printf("armsim mit t=%.3f id=0x%02X enabled=%d error=0x%X mode=%u timeout=%u position=%.4f torque=%.3f "
+                    "frames=%llu\n",
+                    double(clock.now() - t0) * 1e-9, unsigned(m->reg(hal::mit::Reg::esc_id)), int(m->enabled()),
+                    unsigned(m->error()), unsigned(m->reg(hal::mit::Reg::ctrl_mode)),
+                    unsigned(m->reg(hal::mit::Reg::timeout)), m->position(), m->torque(),
+                    static_cast<unsigned long long>(m->mit_frames()));
       std::fflush(stdout);
     }
   }

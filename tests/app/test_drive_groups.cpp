@@ -216,6 +216,6 @@ TEST(FwDriveGroups, TheConfigurationsFamiliesAreTheFactorysFamilies) {
     CHECK_TEXT(listed, f.name);
   }
   FwConfig c;
-  const std::string e = load_config_text("[[drive]]\nfamily = \"damiao\"\n", "f.toml", c);
+  const std::string e = load_config_text("[[drive]]\nfamily = \"ethercat\"\n", "f.toml", c);
   CHECK_TEXT(has(e, "drive[1].family") && has(e, "cia402"), e.c_str());
 }

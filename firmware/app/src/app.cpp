@@ -171,6 +171,13 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
 
 std::string App::open_bus(const DriveGroupPlan& p, const SimFactory& sim, hal::CanBus*& bus) {
   bus = nullptr;
+  if (cfg.can == "sim" && p.family != "cia402") {  // virtual drives of that family
+    if (sim_group) bus = sim_group(*clock, p);
+    if (bus == nullptr)
+      return "drive.family: \"" + p.family + "\" with bus.can = \"sim\": no virtual " + p.family +
+             " motors here (the virtual drives of armfw --sim are CiA 402)";
+    return "";
+  }
   if (cfg.can == "sim") {  // every interface named is an in-process bus of virtual drives
     if (sim) bus = sim(*clock, p.ids);
     if (bus == nullptr && p.can != cfg.can)
@@ -180,7 +187,9 @@ std::string App::open_bus(const DriveGroupPlan& p, const SimFactory& sim, hal::C
     return "";
   }
   auto sc = std::make_unique<hal::SocketCanBus>();
-  const hal::Status st = sc->open(p.can.c_str());
+  hal::SocketCanOptions opt;
+  opt.enable_fd = !cfg.drives.empty() && cfg.drives[static_cast<std::size_t>(p.joints.front())].can_fd;
+  const hal::Status st = sc->open(p.can.c_str(), opt);
   if (st != hal::Status::ok) {
     const std::string m = sc->message();  // starts with the interface name
     return "bus.can: cannot open " + (m.rfind(p.can + ":", 0) == 0 ? m : p.can + ": " + m);

@@ -1,13 +1,16 @@
 // SPDX-License-Identifier: Apache-2.0
 // The drive-family factory (drive_factory.hpp): the plan of groups from the configuration and
 // one builder per family. CiA 402: the CANopen master's configuration from the bus.*, drive.*
-// and [dynamics] keys.
+// and [dynamics] keys. MIT families (damiao, cubemars_mit, robstride_mit): hal::MitGroup from
+// drive.motor, drive.mit_kp / mit_kd, drive.master_id and the joint mapping keys.
 #include "servoarm/app/drive_factory.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "servoarm/hal/canopen_master.hpp"
+#include "servoarm/hal/mit_group.hpp"
 
 namespace servoarm::fw {
 
@@ -46,10 +49,38 @@ std::string plan_drive_groups(const FwConfig& cfg, int n_joints, std::vector<Dri
     if (id > 127) return "config: bus.first_node: node id of joint " + std::to_string(j + 1) + " would exceed 127";
     for (const DriveGroupPlan& p : out) {
       if (p.can != can) continue;
+      if (d != nullptr && cfg.drives[static_cast<std::size_t>(p.joints.front())].can_fd != d->can_fd)
+        return "config: drive[" + std::to_string(j + 1) + "].can_fd: " + (d->can_fd ? "true" : "false") + ", but joint " +
+               std::to_string(p.joints.front() + 1) + " on the same interface (" + can + ") says " +
+               (d->can_fd ? "false" : "true");
       for (std::size_t k = 0; k < p.joints.size(); ++k)
         if (p.ids[k] == id)
           return "config: drive[" + std::to_string(j + 1) + "].node: node " + std::to_string(id) + " is joint " +
                  std::to_string(p.joints[k] + 1) + "'s too" + (can != cfg.can ? " (on " + can + ")" : "");
+    }
+    if (d != nullptr && family != "cia402") {
+      // the id the motor answers on: unique on the interface, never a CANopen NMT / SYNC / EMCY id
+      const int master = mit_master_id(*d, id);
+      const std::string at = "config: drive[" + std::to_string(j + 1) + "].master_id: ";
+      const std::string which = d->master_id != 0 ? "" : " (the " + family + " default)";
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "0x%03X", unsigned(master));
+      if (master == 0x7FF) return at + hex + which + " is the Damiao register id (0x7FF)";
+      if (const char* why = mit_id_problem(master); why != nullptr && canopen_shares_interface(cfg, *d))
+        return at + hex + which + " " + why + ", and a CiA 402 drive is on " + can;
+      for (const DriveGroupPlan& p : out) {
+        if (p.can != can) continue;
+        for (std::size_t k = 0; k < p.joints.size(); ++k) {
+          const DriveConfig& o = cfg.drives[static_cast<std::size_t>(p.joints[k])];
+          const std::string other = "joint " + std::to_string(p.joints[k] + 1);
+          if (p.ids[k] == master) return at + hex + which + " is " + other + "'s drive id";
+          if (p.family == "damiao" && family == "damiao" && mit_master_id(o, p.ids[k]) == master)
+            return at + hex + which + " is " + other + "'s master id too";
+          if (p.family != "cia402" && mit_master_id(o, p.ids[k]) == id)
+            return "config: drive[" + std::to_string(j + 1) + "].node: " + std::to_string(id) + " is " + other +
+                   "'s master id";
+        }
+      }
     }
     auto g = std::find_if(out.begin(), out.end(), [&](const DriveGroupPlan& p) { return p.family == family && p.can == can; });
     if (g == out.end()) g = out.insert(out.end(), DriveGroupPlan{family, can, {}, {}});
@@ -133,8 +164,58 @@ std::string make_cia402(const DriveGroupInput& in, std::unique_ptr<hal::DriveGro
   return "";
 }
 
+/// MIT-mode actuators of one vendor: one hal::MitGroup for the group's joints.
+std::string make_mit(const DriveGroupInput& in, hal::mit::Vendor vendor, std::unique_ptr<hal::DriveGroup>& out) {
+  const FwConfig& cfg = in.cfg;
+  hal::MitGroupConfig mc;
+  mc.vendor = vendor;
+  mc.joint_count = in.plan.joints.size();
+  mc.reply_timeout = static_cast<hal::Duration>(cfg.sdo_timeout_ms * 1e6);
+  mc.feedback_timeout = static_cast<hal::Duration>(cfg.heartbeat_timeout_ms * 1e6);
+  mc.motor_timeout = static_cast<hal::Duration>(cfg.heartbeat_timeout_ms * 1e6);  // the motor stops as late as armfw sees it
+  mc.state_timeout = static_cast<hal::Duration>(cfg.state_timeout_ms * 1e6);
+  mc.fd = cfg.drives[static_cast<std::size_t>(in.plan.joints.front())].can_fd;  // one value per interface (plan)
+  for (std::size_t k = 0; k < mc.joint_count && k < hal::kMaxServoJoints; ++k) {
+    const int j = in.plan.joints[k];
+    const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
+    hal::MitJointConfig& jc = mc.joints[k];
+    jc.motor_id = in.plan.ids[k];
+    jc.master_id = static_cast<std::uint16_t>(mit_master_id(d, in.plan.ids[k]));
+    jc.profile = hal::mit::find_profile(d.motor);
+    jc.kp = d.mit_kp;
+    jc.kd = d.mit_kd;
+    jc.scaling.gear_ratio = d.gear_ratio != 0 ? d.gear_ratio : 1.0;  // after the actuator (its own gearbox is inside)
+    jc.scaling.direction = d.direction;
+    jc.scaling.zero_offset = static_cast<std::int32_t>(d.zero_offset);
+    jc.scaling.kind = in.chain.joint(j).type == kin::JointType::prismatic ? hal::JointScaling::Kind::prismatic
+                                                                          : hal::JointScaling::Kind::revolute;
+    if (d.heartbeat_timeout_ms > 0) mc.feedback_timeout = std::max(mc.feedback_timeout, static_cast<hal::Duration>(d.heartbeat_timeout_ms * 1e6));
+    jc.homing = homing_spec(cfg, in.chain, j);
+    if (jc.homing.kind == hal::HomingKind::cia402)
+      return "config: drive[" + std::to_string(j + 1) + "].homing.method: " + d.homing_method +
+             " is a CiA 402 drive's own homing; a " + d.family + " motor homes \"absolute\" or \"hard_stop\"";
+  }
+  auto g = std::make_unique<hal::MitGroup>(in.bus, in.clock, mc);
+  if (g->config_status() != hal::Status::ok)
+    return std::string("bus: ") + hal::to_string(g->config_status()) + ": " + g->last_error();
+  out = std::move(g);
+  return "";
+}
+std::string make_damiao(const DriveGroupInput& in, std::unique_ptr<hal::DriveGroup>& out) {
+  return make_mit(in, hal::mit::Vendor::damiao, out);
+}
+std::string make_cubemars(const DriveGroupInput& in, std::unique_ptr<hal::DriveGroup>& out) {
+  return make_mit(in, hal::mit::Vendor::cubemars, out);
+}
+std::string make_robstride(const DriveGroupInput& in, std::unique_ptr<hal::DriveGroup>& out) {
+  return make_mit(in, hal::mit::Vendor::robstride, out);
+}
+
 constexpr DriveFamily kFamilies[] = {
     {"cia402", &make_cia402},
+    {"damiao", &make_damiao},
+    {"cubemars_mit", &make_cubemars},
+    {"robstride_mit", &make_robstride},
 };
 
 }  // namespace

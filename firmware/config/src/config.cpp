@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include "servoarm/hal/mit.hpp"
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/lang/markdown.hpp"
@@ -24,7 +25,7 @@ namespace {
 constexpr double kBauds[] = {9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600};
 constexpr double kDirections[] = {1, -1};
 constexpr const char* kStops[] = {"ramp", "drive"};
-constexpr const char* kDriveFamilies[] = {"cia402"};
+constexpr const char* kDriveFamilies[] = {"cia402", "damiao", "cubemars_mit", "robstride_mit"};
 constexpr const char* kDialects[] = {"native", "grbl"};
 constexpr const char* kTransportDialects[] = {"", "native", "grbl"};
 constexpr const char* kFeedForward[] = {"off", "velocity", "torque"};
@@ -114,6 +115,69 @@ std::string sdo_entries_valid(const DriveConfig& d, const FwConfig&) {
       if (d.sdo[k].index == e.index && d.sdo[k].sub == e.sub)
         return at + "the object is also entry " + std::to_string(k + 1);
   }
+  return "";
+}
+
+bool mit_family(const std::string& family) { return family != "cia402"; }
+
+/// "DM-J4310-2EC, DM-J4340, DM-J8006 (damiao), AK80-9 (cubemars_mit), RS00 (robstride_mit)"
+std::string known_motors() {
+  std::string o;
+  for (const hal::mit::MotorProfile& p : hal::mit::motor_profiles())
+    o += (o.empty() ? "" : ", ") + std::string(p.name) + " (" + hal::mit::to_string(p.vendor) + ")";
+  return o;
+}
+std::string drive_motor_known(const DriveConfig& d, const FwConfig&) {
+  if (!mit_family(d.family)) return d.motor.empty() ? "" : "is for the MIT families only (drive.family is \"cia402\")";
+  if (d.motor.empty()) return "is required with drive.family = \"" + d.family + "\"; known: " + known_motors();
+  const hal::mit::MotorProfile* p = hal::mit::find_profile(d.motor);
+  if (p == nullptr) return "unknown motor model \"" + d.motor + "\"; known: " + known_motors();
+  if (d.family != hal::mit::to_string(p->vendor))
+    return std::string(p->name) + " is a " + hal::mit::to_string(p->vendor) + " motor, not " + d.family;
+  return "";
+}
+std::string drive_mit_kp_in_range(const DriveConfig& d, const FwConfig&) {
+  const hal::mit::MotorProfile* p = mit_family(d.family) ? hal::mit::find_profile(d.motor) : nullptr;
+  if (p == nullptr || d.mit_kp <= p->kp_max) return "";
+  return "must be at most " + num_text(p->kp_max) + ", the " + p->name + "'s KP range";
+}
+std::string drive_mit_kd_in_range(const DriveConfig& d, const FwConfig&) {
+  const hal::mit::MotorProfile* p = mit_family(d.family) ? hal::mit::find_profile(d.motor) : nullptr;
+  if (p == nullptr || d.mit_kd <= p->kd_max) return "";
+  return "must be at most " + num_text(p->kd_max) + ", the " + p->name + "'s KD range";
+}
+}  // namespace
+
+const char* mit_id_problem(int id) {
+  if (id == 0x000) return "is CANopen's NMT id (0x000)";
+  if (id == 0x080) return "is CANopen's SYNC id (0x080)";
+  if (id > 0x080 && id <= 0x0FF) return "is a CANopen EMCY id (0x081..0x0FF)";
+  if (id == 0x7FF) return "is the Damiao register id (0x7FF)";
+  return nullptr;
+}
+
+bool canopen_shares_interface(const FwConfig& c, const DriveConfig& d) {
+  const std::string& mine = d.can.empty() ? c.can : d.can;
+  for (const DriveConfig& o : c.drives)
+    if (o.family == "cia402" && (o.can.empty() ? c.can : o.can) == mine) return true;
+  return false;
+}
+
+int mit_master_id(const DriveConfig& d, int node) {
+  if (d.master_id != 0) return d.master_id;
+  if (d.family == "damiao") return node + 0x10;
+  if (d.family == "robstride_mit") return 0x0FD;
+  return 0x000;  // cubemars_mit
+}
+
+namespace {
+std::string drive_master_id_free(const DriveConfig& d, const FwConfig& c) {
+  if (!mit_family(d.family)) return d.master_id == 0 ? "" : "is for the MIT families only (drive.family is \"cia402\")";
+  if (d.master_id == 0) return "";
+  if (d.master_id == 0x7FF) return "is the Damiao register id (0x7FF)";
+  if (const char* why = mit_id_problem(d.master_id); why != nullptr && canopen_shares_interface(c, d))
+    return std::string(why) + ", and a CiA 402 drive is on the same interface";
+  if (d.node != 0 && d.master_id == d.node) return "must differ from drive.node (the motor's command id)";
   return "";
 }
 
@@ -306,21 +370,49 @@ using DK = DriveKey;
 const DriveKey kDriveTable[] = {
     DK{"family", &D::family, "",
        "the joint's drive family (docs/servo-bus.md#drive-families-groups-and-the-arm): `\"cia402\"` = a CiA 402 "
-       "servo drive over CANopen; the joints of one family on one interface form one group"}
+       "servo drive over CANopen; `\"damiao\"`, `\"cubemars_mit\"`, `\"robstride_mit\"` = an MIT-mode actuator "
+       "(docs/mit-motors.md; drive.motor names the model); the joints of one family on one interface form one group"}
         .among(std::span<const char* const>(kDriveFamilies)),
     DK{"can", &D::can, "",
        "the CAN interface of this joint's drive (`can1`); `\"\"` = bus.can. With bus.can = `\"sim\"` every name "
        "is an in-process bus of its own with virtual drives"}
         .length(0, 15).rule_text("\"\" or an interface name (up to 15 chars)"),
-    DK{"node", &D::node, "", "CANopen node id of this joint's drive (unique on the bus)"}
+    DK{"node", &D::node, "",
+       "CANopen node id of this joint's drive, or the MIT motor's CAN id (Damiao ESC_ID); unique on the bus"}
         .within(1, 127).unset_means(0, "bus.first_node + k - 1", false),
+    DK{"motor", &D::motor, "",
+       "MIT families: the motor model, whose ranges (P_MAX, V_MAX, T_MAX, KP, KD) the frames are packed with "
+       "(docs/mit-motors.md#motor-models): DM-J4310-2EC, DM-J4340, DM-J8006 (damiao), AK80-9 (cubemars_mit), RS00 "
+       "(robstride_mit). Required there; an unknown model is refused listing the known ones"}
+        .length(0, 31).related(drive_motor_known, "a model of drive.family").rule_text("a model name or \"\""),
+    DK{"mit_kp", &D::mit_kp, "N m/rad",
+       "MIT families: position gain kp sent in every frame (actuator side); the motor computes "
+       "kp (p - q) + kd (v - qd) + torque"}
+        .within(0, 5000).related(drive_mit_kp_in_range, "at most the motor's KP range"),
+    DK{"mit_kd", &D::mit_kd, "N m s/rad", "MIT families: velocity gain kd sent in every frame (actuator side)"}
+        .within(0, 100).related(drive_mit_kd_in_range, "at most the motor's KD range"),
+    DK{"master_id", &D::master_id, "",
+       "MIT families: the 11-bit id the motor answers on (Damiao MST_ID); 0 = the vendor's default (Damiao: "
+       "drive.node + 0x10, Robstride 0x0FD, CubeMars 0x000). Unique on its interface (Damiao); 0x7FF is refused, "
+       "and on an interface that also carries CiA 402 drives CANopen's NMT (0x000), SYNC (0x080) and EMCY "
+       "(0x081..0x0FF) ids"}
+        .in_hex().within(0, 0x7FF)
+        .related(drive_master_id_free, "not 0x7FF, not drive.node; beside CiA 402 drives not an NMT, SYNC or EMCY id"),
+    DK{"can_fd", &D::can_fd, "",
+       "this drive's interface carries CAN FD: armfw opens it for CAN FD (refused, naming the interface, when its "
+       "MTU says it cannot) and the MIT families send their frames as FD with bit-rate switch (Damiao motors set to "
+       "CAN FD answer only those; set the bitrates with `ip link set can0 type can bitrate 1000000 dbitrate 5000000 "
+       "fd on`). Every drive on one interface says the same"},
     DK{"counts_per_rev", &D::counts_per_rev, "counts/rev",
        "encoder counts per motor revolution (per motor mm for prismatic joints)"}
         .below(1, kTwo31).unset_means(0, "bus.counts_per_rev", false),
-    DK{"gear_ratio", &D::gear_ratio, "", "motor revolutions (mm) per joint revolution (mm); positive"}
+    DK{"gear_ratio", &D::gear_ratio, "",
+       "motor revolutions (mm) per joint revolution (mm); positive. MIT families: actuator output turns per joint "
+       "turn (a transmission after the actuator, whose own gearbox the motor model covers); unset = 1"}
         .within(1e-3, 1e5).unset_means(0, "bus.gear_ratio", false),
     DK{"direction", &D::direction, "", "sign between the joint and the drive"}.among(std::span<const double>(kDirections)),
-    DK{"zero_offset", &D::zero_offset, "counts", "drive position at joint zero (what `home zero` answers)"}
+    DK{"zero_offset", &D::zero_offset, "counts",
+       "drive position at joint zero (what `home zero` answers); MIT families: actuator microradians"}
         .within(-kTwo31, kTwo31 - 1),
     DK{"limits", &D::limits, "deg (mm)",
        "`[lower, upper]`; must lie within the robot description's limits, narrows them for planning, IK and the "
@@ -1033,9 +1125,8 @@ std::string frames_text(const hal::BusLoad& l, double rate) {
   return o;
 }
 
-/// Highest rate (Hz) at which the load of `c` with `joints` drives stays at most `share`.
-double rate_for(const FwConfig& c, std::size_t joints, double share) {
-  hal::BusTraffic t = bus_traffic(c, joints);
+/// Highest rate (Hz) at which the load of `c`'s traffic `t` stays at most `share`.
+double rate_for(const FwConfig& c, hal::BusTraffic t, double share) {
   t.rate_hz = 1;
   const hal::BusLoad one = hal::bus_load(t, c.bitrate);
   t.rate_hz = 2;
@@ -1045,30 +1136,79 @@ double rate_for(const FwConfig& c, std::size_t joints, double share) {
   return per_hz > 0 ? std::max(0.0, (share - fixed) / per_hz) : 1e9;
 }
 
-std::string load_line(const FwConfig& c, std::size_t joints, const hal::BusLoad& l) {
+std::string load_line(const FwConfig& c, const hal::BusTraffic& t, const hal::BusLoad& l) {
   return "bus load " + pct_text(l.total()) + " of bus.bitrate " + num_text(c.bitrate) + " bit/s at loop.rate_hz " +
-         num_text(c.rate_hz) + " with " + std::to_string(joints) + " drives (" + frames_text(l, c.rate_hz) +
-         ", worst-case bit stuffing)";
+         num_text(c.rate_hz) + " with " + std::to_string(t.joints + t.mit_joints) + " drives (" +
+         frames_text(l, c.rate_hz) + ", worst-case bit stuffing)";
+}
+
+/// The interfaces the [[drive]] tables use (drive.can, or bus.can for ""), bus.can first.
+std::vector<std::string> drive_interfaces(const FwConfig& c) {
+  std::vector<std::string> out{c.can};
+  for (const DriveConfig& d : c.drives) {
+    const std::string& i = d.can.empty() ? c.can : d.can;
+    if (std::find(out.begin(), out.end(), i) == out.end()) out.push_back(i);
+  }
+  return out;
+}
+
+/// The traffic on interface `iface`: its CiA 402 drives' PDOs, SYNC and heartbeats and its MIT
+/// motors' frames.
+hal::BusTraffic interface_traffic(const FwConfig& c, const std::string& iface) {
+  std::size_t cia = 0, mit = 0;
+  for (const DriveConfig& d : c.drives)
+    if ((d.can.empty() ? c.can : d.can) == iface) ++(d.family == "cia402" ? cia : mit);
+  hal::BusTraffic t = bus_traffic(c, cia);
+  t.mit_joints = mit;
+  return t;
+}
+
+/// `what` (problem or warning) of each interface the drives use, "" when none has one; an
+/// interface other than bus.can is named first ("drive.can \"can1\": ...").
+template <class Check>
+std::string per_interface(const FwConfig& c, Check&& check) {
+  for (const std::string& iface : drive_interfaces(c)) {
+    FwConfig ci = c;
+    ci.can = iface;
+    if (!bus_load_checked(ci)) continue;
+    const hal::BusTraffic t = interface_traffic(c, iface);
+    if (t.joints + t.mit_joints == 0) continue;
+    if (std::string why = check(ci, t); !why.empty())
+      return iface == c.can ? why : "drive.can " + toml_string(iface) + ": " + why;
+  }
+  return "";
+}
+
+std::string problem_for(const FwConfig& c, const hal::BusTraffic& t) {
+  const hal::BusLoad l = hal::bus_load(t, c.bitrate);
+  if (l.total() <= kBusLoadLimit) return "";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, t, kBusLoadLimit)));
+  return load_line(c, t, l) + " is above 85 %: at most " + b + " Hz fits (armfw --config FILE --bus-load)";
+}
+
+std::string warning_for(const FwConfig& c, const hal::BusTraffic& t) {
+  const hal::BusLoad l = hal::bus_load(t, c.bitrate);
+  if (l.total() <= kBusLoadWarn || l.total() > kBusLoadLimit) return "";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, t, kBusLoadWarn)));
+  return load_line(c, t, l) + " is above 60 %: little room for SDO, EMCY and retransmitted frames (" + b +
+         " Hz or less stays under 60 %)";
 }
 }  // namespace
 
+// With [[drive]] tables the load is checked per interface (each drive on its drive.can, CiA 402
+// and MIT frames counted as they are); without, `joints` CiA 402 drives on bus.can.
 std::string bus_load_problem(const FwConfig& c, std::size_t joints) {
+  if (!c.drives.empty()) return per_interface(c, problem_for);
   if (!bus_load_checked(c) || joints == 0) return "";
-  const hal::BusLoad l = hal::bus_load(bus_traffic(c, joints), c.bitrate);
-  if (l.total() <= kBusLoadLimit) return "";
-  char b[32];
-  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, joints, kBusLoadLimit)));
-  return load_line(c, joints, l) + " is above 85 %: at most " + b + " Hz fits (armfw --config FILE --bus-load)";
+  return problem_for(c, bus_traffic(c, joints));
 }
 
 std::string bus_load_warning(const FwConfig& c, std::size_t joints) {
+  if (!c.drives.empty()) return per_interface(c, warning_for);
   if (!bus_load_checked(c) || joints == 0) return "";
-  const hal::BusLoad l = hal::bus_load(bus_traffic(c, joints), c.bitrate);
-  if (l.total() <= kBusLoadWarn || l.total() > kBusLoadLimit) return "";
-  char b[32];
-  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, joints, kBusLoadWarn)));
-  return load_line(c, joints, l) + " is above 60 %: little room for SDO, EMCY and retransmitted frames (" + b +
-         " Hz or less stays under 60 %)";
+  return warning_for(c, bus_traffic(c, joints));
 }
 
 std::string bus_load_table(const FwConfig& c, std::size_t joints) {
@@ -1100,9 +1240,9 @@ std::string bus_load_table(const FwConfig& c, std::size_t joints) {
   if (!bus_load_checked(c))
     o += "not checked: bus.can = " + toml_string(c.can) + " has no wire (the figures are what a real bus would carry)\n";
   else if (l.total() > kBusLoadLimit)
-    o += "refused: above 85 %: at most " + num_text(std::floor(rate_for(c, joints, kBusLoadLimit))) + " Hz fits\n";
+    o += "refused: above 85 %: at most " + num_text(std::floor(rate_for(c, bus_traffic(c, joints), kBusLoadLimit))) + " Hz fits\n";
   else if (l.total() > kBusLoadWarn)
-    o += "warning: above 60 %: " + num_text(std::floor(rate_for(c, joints, kBusLoadWarn))) + " Hz or less stays under 60 %\n";
+    o += "warning: above 60 %: " + num_text(std::floor(rate_for(c, bus_traffic(c, joints), kBusLoadWarn))) + " Hz or less stays under 60 %\n";
   else
     o += "fits: at most 60 %\n";
   return o;

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
 // CAN bus load: bits of one frame on the wire and the share of the bus the cyclic
-// CiA 402 traffic of one control cycle takes. Pure functions, no I/O, no allocation.
+// CiA 402 (and MIT-mode) traffic of one control cycle takes. Pure functions, no I/O, no allocation.
 //
 // Frame lengths follow ISO 11898-1 with worst-case bit stuffing, as Linux's
 // include/linux/can/length.h (can_frame_bits(), v6.5) counts them:
@@ -64,9 +64,13 @@ struct BusTraffic {
   std::uint8_t tpdo1_len = 6;     ///< statusword + position actual (+ 6061h: 7)
   std::uint8_t tpdo2_len = 0;     ///< 606Ch / 603Fh / 6077h
   double heartbeat_period_s = 0.05;  ///< each drive's heartbeat; 0 = none
+  /// MIT-mode motors on the same bus (mit.hpp): per motor and cycle one 8-byte command and one
+  /// 8-byte feedback frame, no SYNC and no heartbeat of theirs. `joints` counts the CiA 402
+  /// drives only; with none, no SYNC either.
+  std::size_t mit_joints = 0;
 };
 
-inline constexpr std::size_t kMaxBusFrameKinds = 7;
+inline constexpr std::size_t kMaxBusFrameKinds = 9;
 
 /// The load of a BusTraffic at a bit rate.
 struct BusLoad {

@@ -32,6 +32,12 @@ struct App {
   /// the configuration names (bus.can, drive.can). Returns the bus the drives' group talks on
   /// (owned by the caller), or nullptr.
   using SimFactory = std::function<hal::CanBus*(hal::Clock& clock, const std::vector<std::uint8_t>& nodes)>;
+  /// Makes the bus of a group whose family is not CiA 402 for bus.can = "sim" (virtual MIT-mode
+  /// motors: host_sim's MitPlant, one per interface, from the plan's joints and their [[drive]]
+  /// tables in `cfg`); set before build(). Unset: such a group is refused at build() naming its
+  /// family, since SimFactory's virtual drives are CiA 402.
+  using SimGroupFactory = std::function<hal::CanBus*(hal::Clock& clock, const DriveGroupPlan& plan)>;
+  SimGroupFactory sim_group;
 
   FwConfig cfg;
   kin::Chain chain;

@@ -46,9 +46,16 @@ bool sdo_type_signed(const std::string& type);
 /// One `[[drive]]` table: the drive of one joint (chain order). Unset fields
 /// (0 / empty) take the [bus] defaults and the robot description's limits.
 struct DriveConfig {
-  std::string family = "cia402";         ///< the drive family (docs/servo-bus.md): "cia402"
+  std::string family = "cia402";         ///< the drive family (docs/servo-bus.md): "cia402", "damiao",
+                                         ///< "cubemars_mit", "robstride_mit"
   std::string can;                       ///< the CAN interface of this joint's drive; "" = bus.can
-  int node = 0;                          ///< CANopen node id; 0 = bus.first_node + joint index
+  int node = 0;                          ///< CANopen node id / MIT motor id; 0 = bus.first_node + joint index
+  // MIT-mode families (docs/mit-motors.md)
+  std::string motor;                     ///< motor model ("DM-J4340"); required by the MIT families
+  double mit_kp = 30;                    ///< N m/rad, actuator side, sent in every MIT frame
+  double mit_kd = 1;                     ///< N m s/rad
+  int master_id = 0;                     ///< the id the motor answers on; 0 = the vendor's default
+  bool can_fd = false;                   ///< this drive's interface carries CAN FD (all its drives agree)
   double counts_per_rev = 0;             ///< 0 = bus.counts_per_rev (counts per mm for prismatic joints)
   double gear_ratio = 0;                 ///< 0 = bus.gear_ratio
   int direction = 1;                     ///< +1 / -1 between joint and drive
@@ -77,6 +84,17 @@ struct DriveConfig {
 
   bool operator==(const DriveConfig&) const = default;
 };
+
+/// Why an 11-bit id may not be an MIT motor's answer id (drive.master_id) on an interface that
+/// also carries CiA 402 drives, or null: CANopen's NMT (0x000), SYNC (0x080) or an EMCY id
+/// (0x081..0x0FF), which the CANopen drives read, or the Damiao register id 0x7FF.
+const char* mit_id_problem(int id);
+struct FwConfig;
+/// A CiA 402 drive is on `d`'s interface (drive.can, or bus.can for "").
+bool canopen_shares_interface(const FwConfig& c, const DriveConfig& d);
+/// The id an MIT motor with drive id `node` answers on: drive.master_id, else the family's
+/// default (damiao node + 0x10, robstride_mit 0x0FD, cubemars_mit 0x000).
+int mit_master_id(const DriveConfig& d, int node);
 
 /// One [[output]] table: a named digital output, bit `bit` of the 60FEh:01 physical
 /// outputs of the drive at CANopen node `node` (`out NAME on|off`, M62..M65 P<index>).
