@@ -28,6 +28,7 @@
 #include "servoarm/api/server.hpp"
 #include "servoarm/lang/ik_options.hpp"
 #include "servoarm/rt/rt_loop.hpp"
+#include "servoarm/service/stream.hpp"
 #include "sim_app.hpp"
 #include "sweep.hpp"
 
@@ -119,6 +120,7 @@ struct Rig {
   std::unique_ptr<RtLoop> loop;
   std::unique_ptr<api::ApiServer> server;
   api::ServiceContext cx;
+  std::unique_ptr<StreamService> stream;
   std::thread pump_th;
   std::atomic<bool> stop{false};
 
@@ -151,6 +153,10 @@ struct Rig {
     cx.ctl = app.ctl.get();
     cx.chain = &app.chain;
     cx.ik = firmware_ik_solver(app.ik_ready ? app.ik.get() : nullptr);
+    StreamSettings ss;
+    ss.max_step.assign(6, 0.5);
+    stream = std::make_unique<StreamService>(app.console->service(), *app.ctl, ss);
+    cx.stream = stream.get();
     pump_th = std::thread([this] {
       while (!stop) {
         pollfd p{server->wake_fd(), POLLIN, 0};
@@ -427,6 +433,40 @@ TEST(FwApi, StartRefusals) {
   const std::string e3 = s3.start();
   CHECK_TEXT(has(e3, ":1: a token has at least 16 characters"), e3.c_str());
   ::unlink(ac.tokens_file.c_str());
+}
+
+// Streaming over the API: a client in control streams targets (the first says start), the arm
+// tracks them; a stop from another client ends the stream, and the targets that keep coming are
+// refused (bad_state) and do not move the arm; the subscriber sees the stream's end as an event.
+TEST(FwApi, StreamAndAStopFromAnotherClient) {
+  Rig rig;
+  Client a(rig.port()), b(rig.port());
+  rig.enable(a);
+  CHECK(is_ok(b.ask(1, "\"cmd\":\"subscribe\",\"topic\":\"events\"")));
+  STRCMP_EQUAL("controlled", error_of(b.ask(2, "\"cmd\":\"stream\",\"q\":[0,0,0,0,0,0],\"start\":true")).c_str());
+  STRCMP_EQUAL("bad_state", error_of(a.ask(3, "\"cmd\":\"stream\",\"q\":[0.01,0,0,0,0,0]")).c_str());
+  double q0 = 0;
+  for (int i = 0; i < 30; ++i) {
+    q0 += 0.01;
+    char m[128];
+    std::snprintf(m, sizeof m, "\"cmd\":\"stream\",\"q\":[%.3f,0,0,0,0,0]%s", q0, i == 0 ? ",\"start\":true" : "");
+    const std::string r = a.ask(10 + i, m);
+    CHECK_TEXT(is_ok(r), r.c_str());
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  CHECK(rig.tel().streaming);
+  CHECK(rig.tel().q_cmd[0] > 0.1);
+  CHECK(is_ok(b.ask(100, "\"cmd\":\"stop\"")));
+  for (int i = 0; i < 400 && rig.tel().state != ArmState::idle; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const double rest = rig.tel().q_cmd[0];
+  for (int i = 0; i < 10; ++i) {
+    q0 += 0.01;
+    char m[96];
+    std::snprintf(m, sizeof m, "\"cmd\":\"stream\",\"q\":[%.3f,0,0,0,0,0]", q0);
+    STRCMP_EQUAL("bad_state", error_of(a.ask(200 + i, m)).c_str());
+  }
+  DOUBLES_EQUAL(rest, rig.tel().q_cmd[0], 1e-12);
+  CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(rig.tel().state));
 }
 
 // docs/api.md holds exactly what the message table produces between its markers.

@@ -12,6 +12,7 @@
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/lang/markdown.hpp"
+#include "servoarm/service/stream.hpp"
 
 namespace servoarm::api {
 
@@ -181,6 +182,10 @@ constexpr ArgSpec kOn[] = {{"on", ArgType::boolean, true, 0, 1, "on (true) or of
 constexpr ArgSpec kOutput[] = {{"index", ArgType::integer, true, 0, 1023, "the [[output]] index (0-based)"},
                                {"on", ArgType::boolean, true, 0, 1, "on (true) or off"}};
 constexpr ArgSpec kEvents[] = {{"since", ArgType::integer, false, 0, 9e15, "the last sequence number the client has (default 0: every event kept)"}};
+constexpr ArgSpec kStream[] = {
+    {"q", ArgType::numbers, true, -1e6, 1e6, "the newest joint target, one value per joint (rad / m)"},
+    {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"}};
+
 using C = ServiceCall;
 using R = ResultFields;
 
@@ -288,6 +293,18 @@ constexpr MessageSpec kMessages[] = {
        o.on = c.rq.arg("on")->num != 0;
        const fw::OutputResult r = c.cx.svc->set_output(o);
        if (!r.ok()) return out.fail(r.error, std::string(fw::to_string(r.refusal)) + " (" + std::to_string(r.count) + " outputs)");
+     }},
+    {"stream", kStream, Gate::control, Where::service, "StreamService::target",
+     "streaming (servo) mode: the newest joint target, latest wins; the arm tracks it jerk-limited within its limits "
+     "and brakes to rest, ending the stream with an event, when no target comes within api.stream_deadman_ms; a stop "
+     "ends it (the next target must say start)",
+     +[](C& c, R& out) {
+       if (c.cx.stream == nullptr) return out.fail(CmdError::unsupported, "streaming targets are not available here");
+       kin::JointVector q;
+       if (!joints_of(c, "q", q, out)) return;
+       const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0);
+       if (!r.ok()) return out.fail(r.error, r.reason);
+       if (r.clamped) out.j["clamped"] = true;
      }},
 };
 
@@ -471,8 +488,12 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
     fe.push_back(t.q_cmd[u] - t.q_act[u]);
     qa[i] = t.q_act[u];
   }
+  json qd = json::array();
+  for (int i = 0; i < t.n && i < chain.n_joints; ++i) qd.push_back(t.qd_cmd[static_cast<std::size_t>(i)]);
   j["q"] = std::move(q);
   j["q_cmd"] = std::move(qc);
+  j["qd_cmd"] = std::move(qd);
+  j["streaming"] = t.streaming;
   j["following_error"] = std::move(fe);
   kin::Pose p = kin::Pose::Identity();
   if (t.n == chain.n_joints && kin::forward(chain, qa, p) == kin::Status::ok) {

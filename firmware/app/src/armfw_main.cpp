@@ -26,6 +26,7 @@
 #include "servoarm/api/server.hpp"
 #include "servoarm/app/app.hpp"
 #include "servoarm/lang/ik_options.hpp"
+#include "servoarm/service/stream.hpp"
 #ifdef SERVOARM_WITH_SIM
 #include "servoarm/sim/sim_plant.hpp"  // --sim: the only firmware file that uses host_sim
 #endif
@@ -713,6 +714,7 @@ int main(int argc, char** argv) {
   // console) thread, in pump(), as the console's do: the service has one caller.
   std::unique_ptr<api::ApiServer> api_server;
   api::ServiceContext api_cx;
+  std::unique_ptr<StreamService> stream;
   if (app.cfg.api_enabled || api_ws >= 0 || api_tcp >= 0) {
     api::ApiConfig ac;
     ac.bind = app.cfg.api_bind;
@@ -737,6 +739,12 @@ int main(int argc, char** argv) {
     api_cx.ctl = app.ctl.get();
     api_cx.chain = &app.chain;
     api_cx.ik = firmware_ik_solver(app.ik_ready ? app.ik.get() : nullptr);
+    StreamSettings ss;
+    ss.deadman_s = app.cfg.api_stream_deadman_ms * 1e-3;
+    ss.clamp_step = app.cfg.api_stream_step == "clamp";
+    for (int j = 0; j < app.chain.n_joints; ++j) ss.max_step.push_back(kConfigUnits.joint_in(app.chain, j, app.cfg.api_stream_max_step_deg));
+    stream = std::make_unique<StreamService>(app.console->service(), *app.ctl, ss);
+    api_cx.stream = stream.get();
     std::fprintf(stderr, "armfw: api: WebSocket port %d, TCP port %d on %s\n", api_server->ws_port(), api_server->tcp_port(),
                  ac.bind.c_str());
   }

@@ -133,6 +133,8 @@ std::string homing_method_known(const DriveConfig& d, const FwConfig&) {
          (d.homing_method.empty() ? std::string("\"\"") : d.homing_method) + ")";
 }
 
+constexpr const char* kStreamSteps[] = {"clamp", "refuse"};
+
 using K = ConfigKey;
 using F = FwConfig;
 const ConfigKey kConfigTable[] = {
@@ -322,6 +324,18 @@ const ConfigKey kConfigTable[] = {
       "unsent API output per client: beyond it the client's state and event messages are dropped (counted, `dropped`) "
       "and its requests wait until it reads"}
         .within(16, 65536),
+    K{"api.stream_deadman_ms", &F::api_stream_deadman_ms, "ms",
+      "streaming targets (`stream`): no target within this time and the arm brakes to rest on its limits, the stream "
+      "ends with an event"}
+        .within(10, 2000),
+    K{"api.stream_max_step_deg", &F::api_stream_max_step_deg, "deg",
+      "streaming targets: the largest change of a joint from one target to the next (mm for a prismatic joint); "
+      "larger steps are clamped or refused (api.stream_step); 0 = no limit (the tracking stays within the joint "
+      "limits either way)"}
+        .within(0, 360),
+    K{"api.stream_step", &F::api_stream_step, "",
+      "streaming targets: a step larger than api.stream_max_step_deg is `\"clamp\"`ed to it or `\"refuse\"`d"}
+        .among(std::span<const char* const>(kStreamSteps)),
 };
 
 using D = DriveConfig;

@@ -164,6 +164,9 @@ struct FwConfig {
   double api_max_rate_hz = 2000.0;       ///< messages per second per client
   int api_max_clients = 64;              ///< connections at once
   int api_client_buffer_kb = 1024;       ///< unsent output per client before its streams drop
+  double api_stream_deadman_ms = 100.0;  ///< streaming targets: none this long, the arm brakes to rest
+  double api_stream_max_step_deg = 30.0; ///< largest change of a joint between two targets (deg / mm); 0 = none
+  std::string api_stream_step = "clamp"; ///< a larger step: "clamp" or "refuse"
 
   bool operator==(const FwConfig&) const = default;
 };
