@@ -23,10 +23,12 @@
 #include <thread>
 #include <vector>
 
-#include "servoarm/api/server.hpp"
 #include "servoarm/app/app.hpp"
+#ifdef SERVOARM_WITH_API
+#include "servoarm/api/server.hpp"  // the network API (optional: libwebsockets)
 #include "servoarm/lang/ik_options.hpp"
 #include "servoarm/service/stream.hpp"
+#endif
 #ifdef SERVOARM_WITH_SIM
 #include "servoarm/sim/sim_plant.hpp"  // --sim: the only firmware file that uses host_sim
 #endif
@@ -513,8 +515,13 @@ int main(int argc, char** argv) {
     else if (a == "--api-tcp") api_tcp = static_cast<int>(number("--api-tcp", 0, 65535));
     else if (a == "--api-tokens") api_tokens = value("--api-tokens");
     else if (a == "--api-reference") {
+#ifdef SERVOARM_WITH_API
       std::fputs(api::api_reference_markdown().c_str(), stdout);
       return 0;
+#else
+      std::fprintf(stderr, "armfw: built without the network API (libwebsockets-dev, nlohmann-json3-dev)\n");
+      return 2;
+#endif
     }
     else if (a == "--bus-load") bus_load = true;
     else if (a == "--bus-load-reference") {
@@ -712,10 +719,25 @@ int main(int argc, char** argv) {
   if (!loop.warnings().empty()) std::fprintf(stderr, "armfw: %s", loop.warnings().c_str());
   // The network API: its own thread for the sockets; its service calls run on this (the
   // console) thread, in pump(), as the console's do: the service has one caller.
+#ifdef SERVOARM_WITH_API
   std::unique_ptr<api::ApiServer> api_server;
   api::ServiceContext api_cx;
   std::unique_ptr<StreamService> stream;
+#else
+  struct NoApi {
+    int wake_fd() const { return -1; }
+    void pump(int) {}
+    void stop() {}
+  };
+  std::unique_ptr<NoApi> api_server;
+  const int api_cx = 0;
+#endif
   if (app.cfg.api_enabled || api_ws >= 0 || api_tcp >= 0) {
+#ifndef SERVOARM_WITH_API
+    std::fprintf(stderr, "armfw: built without the network API (libwebsockets-dev, nlohmann-json3-dev)\n");
+    loop.stop();
+    return 2;
+#else
     api::ApiConfig ac;
     ac.bind = app.cfg.api_bind;
     const bool flags = api_ws >= 0 || api_tcp >= 0;  // the flags name the ports: only those listen
@@ -747,6 +769,7 @@ int main(int argc, char** argv) {
     api_cx.stream = stream.get();
     std::fprintf(stderr, "armfw: api: WebSocket port %d, TCP port %d on %s\n", api_server->ws_port(), api_server->tcp_port(),
                  ac.bind.c_str());
+#endif
   }
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
