@@ -8,6 +8,7 @@
 #include <sys/socket.h>
 #include <sys/eventfd.h>
 #include <sys/stat.h>
+#include <sys/timerfd.h>
 #include <unistd.h>
 
 #include <libwebsockets.h>
@@ -90,11 +91,6 @@ struct Job {
   ApiRequest rq;
 };
 
-struct Sul {
-  lws_sorted_usec_list_t sul;  // first member: the callback gets its address
-  ApiServer::Impl* self;
-};
-
 struct ApiServer::Impl {
   ApiConfig cfg;
   fw::Controller& ctl;
@@ -110,7 +106,8 @@ struct ApiServer::Impl {
   std::uint64_t next_client = 1;
   std::map<std::uint64_t, std::unique_ptr<Client>> clients;  // network thread only
   std::uint64_t controller = 0;                              // network thread only
-  Sul timer{};
+  int tfd = -1;             ///< timerfd of the state streams (µs resolution; poll's ms would halve 1 kHz)
+  bool timer_armed = false;
   // network thread -> service thread
   std::mutex in_mu;
   std::deque<Job> inbox;
@@ -417,29 +414,37 @@ struct ApiServer::Impl {
           for (const std::string& e : evs) send(*c, e, false);
   }
 
-  /// The state streams: every client whose sample is due gets one; the timer then waits for the
-  /// next one due.
+  /// The state streams (the timer's tick): every client whose sample is due gets one.
   void tick() {
     const std::int64_t t = now_ns();
     bool any = false;
-    std::int64_t next = t + 1'000'000'000;
     fw::Telemetry tel;
     bool have = false;
     for (auto& [id, c] : clients) {
       if (c->state_period == 0) continue;
       any = true;
-      if (c->state_due <= t) {
+      if (c->state_due - c->state_period / 2 <= t) {  // due within half a period: this tick
         if (!have) tel = ctl.telemetry(), have = true;
         send(*c, state_line(tel, cfg.rate_hz, chain, c->dropped), false);
         c->state_due += c->state_period;
         if (c->state_due <= t) c->state_due = t + c->state_period;  // behind: skip, do not burst
       }
-      next = std::min(next, c->state_due);
     }
-    if (any) lws_sul_schedule(ctx, 0, &timer.sul, on_timer, std::max<std::int64_t>((next - t) / 1000, 50));
+    if (!any) arm_timer(false);
   }
-  void schedule() { lws_sul_schedule(ctx, 0, &timer.sul, on_timer, 50); }
-  static void on_timer(lws_sorted_usec_list_t* s) { reinterpret_cast<Sul*>(s)->self->tick(); }
+  /// The state streams' tick: every control period while a client subscribes.
+  void arm_timer(bool on) {
+    if (on == timer_armed || tfd < 0) return;
+    itimerspec its{};
+    if (on) {
+      const long ns = static_cast<long>(1e9 / cfg.rate_hz);
+      its.it_interval.tv_nsec = ns;
+      its.it_value.tv_nsec = ns;
+    }
+    ::timerfd_settime(tfd, 0, &its, nullptr);
+    timer_armed = on;
+  }
+  void schedule() { arm_timer(true); }
 
   void run() {
     while (!quit.load()) lws_service(ctx, 0);
@@ -455,6 +460,15 @@ int callback(lws* wsi, lws_callback_reasons reason, void* user, void* in, size_t
   switch (reason) {
     case LWS_CALLBACK_EVENT_WAIT_CANCELLED:
       self->collect();
+      return 0;
+    case LWS_CALLBACK_RAW_RX_FILE: {  // the state streams' timerfd
+      std::uint64_t n = 0;
+      [[maybe_unused]] const ssize_t r = ::read(self->tfd, &n, sizeof n);
+      self->tick();
+      return 0;
+    }
+    case LWS_CALLBACK_RAW_ADOPT_FILE:
+    case LWS_CALLBACK_RAW_CLOSE_FILE:
       return 0;
     case LWS_CALLBACK_ESTABLISHED:
     case LWS_CALLBACK_RAW_ADOPT:
@@ -543,7 +557,6 @@ std::string ApiServer::start() {
   info.port = CONTEXT_PORT_NO_LISTEN;
   s.ctx = lws_create_context(&info);
   if (s.ctx == nullptr) return "api: cannot create the server (libwebsockets)";
-  s.timer.self = &s;
   const std::string iface = s.cfg.bind == "localhost" ? "127.0.0.1" : s.cfg.bind;
   auto vhost = [&](const char* name, int port, const lws_protocols* protos, bool raw) -> lws_vhost* {
     lws_context_creation_info v;
@@ -569,10 +582,21 @@ std::string ApiServer::start() {
     s.efd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
     if (s.efd < 0) err = std::string("api: eventfd: ") + std::strerror(errno);
   }
+  if (err.empty()) {
+    s.tfd = ::timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
+    lws_sock_file_fd_type fd;
+    fd.filefd = s.tfd;
+    if (s.tfd < 0 || lws_adopt_descriptor_vhost(s.ws_vh ? s.ws_vh : s.raw_vh, LWS_ADOPT_RAW_FILE_DESC, fd,
+                                                 s.ws_vh ? "servoarm" : "servoarm-raw", nullptr) == nullptr)
+      err = "api: cannot start the state streams' timer";
+  }
   if (!err.empty()) {
     lws_context_destroy(s.ctx);
     s.ctx = nullptr;
     s.ws_vh = s.raw_vh = nullptr;
+    if (s.efd >= 0) ::close(s.efd);
+    if (s.tfd >= 0) ::close(s.tfd);
+    s.efd = s.tfd = -1;
     return err;
   }
   s.quit = false;
@@ -592,6 +616,9 @@ void ApiServer::stop() {
   s.clients.clear();
   if (s.efd >= 0) ::close(s.efd);
   s.efd = -1;
+  if (s.tfd >= 0) ::close(s.tfd);
+  s.tfd = -1;
+  s.timer_armed = false;
 }
 
 int ApiServer::ws_port() const { return impl_->ws_vh ? lws_get_vhost_listen_port(impl_->ws_vh) : -1; }
