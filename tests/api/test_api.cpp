@@ -410,6 +410,38 @@ TEST(FwApi, ConnectionAndRateLimits) {
   CHECK(is_ok(c.ask(2000, "\"cmd\":\"stop\"")));
 }
 
+// A client that begins a message and never ends it (slow loris) is closed after
+// api's partial timeout; 500 connections at once are served by the one thread, and a client's
+// round trip stays fast among them.
+TEST(FwApi, SlowLorisAndFiveHundredConnections) {
+  api::ApiConfig ac;
+  ac.partial_timeout_s = 1;
+  ac.max_clients = 600;
+  Rig rig(ac);
+  Client loris(rig.port());
+  loris.send_raw("{\"id\":1,\"cmd\":\"sta");
+  bool closed = false;
+  const double t0 = now_s();
+  const std::string l = loris.line(5, &closed);
+  CHECK_TEXT(closed && l.empty(), l.c_str());
+  CHECK(now_s() - t0 > 0.5);
+  std::vector<std::unique_ptr<Client>> many;
+  for (int i = 0; i < 500; ++i) many.push_back(std::make_unique<Client>(rig.port()));
+  for (auto& c : many) c->send("{\"id\":7,\"cmd\":\"hello\"}");
+  int answered = 0;
+  for (auto& c : many) answered += is_ok(c->answer(7)) ? 1 : 0;
+  CHECK_EQUAL(500, answered);
+  CHECK_EQUAL(500, rig.server->stats().clients);  // the slow-loris client is gone
+  Client c(rig.port());
+  double worst = 0;
+  for (int i = 0; i < 50; ++i) {
+    const double t = now_s();
+    CHECK(is_ok(c.ask(100 + i, "\"cmd\":\"state\"")));
+    worst = std::max(worst, now_s() - t);
+  }
+  CHECK_TEXT(worst < 0.1, std::to_string(worst).c_str());
+}
+
 // Beyond loopback only with a token file; a token file others may read is refused.
 TEST(FwApi, StartRefusals) {
   api::ApiConfig ac;

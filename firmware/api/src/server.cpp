@@ -305,7 +305,19 @@ struct ApiServer::Impl {
     answer_error(c, rq, fw::to_string(fw::CmdError::internal), "no session handler");
   }
 
+  /// A message begun and not ended (a slow-loris client holds a connection so): closed after
+  /// cfg.partial_timeout_s unless it ends.
+  void partial_timer(Client& c) {
+    const bool partial = !c.rx.empty() || c.skipping;
+    lws_set_timeout(c.wsi, partial ? PENDING_TIMEOUT_USER_OK : NO_PENDING_TIMEOUT, partial ? cfg.partial_timeout_s : 0);
+  }
+
   void receive(Client& c, const char* data, std::size_t n, bool final_fragment) {
+    receive_bytes(c, data, n, final_fragment);
+    if (clients.count(c.id) != 0) partial_timer(c);
+  }
+
+  void receive_bytes(Client& c, const char* data, std::size_t n, bool final_fragment) {
     if (c.ws) {
       if (!c.skipping) {
         if (c.rx.size() + n > cfg.max_message) {

@@ -748,6 +748,7 @@ int main(int argc, char** argv) {
     ac.max_rate_hz = app.cfg.api_max_rate_hz;
     ac.max_clients = app.cfg.api_max_clients;
     ac.client_buffer = static_cast<std::size_t>(app.cfg.api_client_buffer_kb) * 1024;
+    ac.partial_timeout_s = app.cfg.api_partial_timeout_s;
     ac.rate_hz = app.cfg.rate_hz;
     ac.robot = app.cfg.robot;
     api_server = std::make_unique<api::ApiServer>(ac, *app.ctl, app.chain, app.ctl->limits());

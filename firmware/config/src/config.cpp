@@ -336,6 +336,10 @@ const ConfigKey kConfigTable[] = {
     K{"api.stream_step", &F::api_stream_step, "",
       "streaming targets: a step larger than api.stream_max_step_deg is `\"clamp\"`ed to it or `\"refuse\"`d"}
         .among(std::span<const char* const>(kStreamSteps)),
+    K{"api.partial_timeout_s", &F::api_partial_timeout_s, "s",
+      "an API client that begins a message and does not end it within this time is disconnected (a slow-loris "
+      "client holds no connection)"}
+        .within(1, 600),
 };
 
 using D = DriveConfig;

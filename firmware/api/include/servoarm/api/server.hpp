@@ -39,6 +39,7 @@ struct ApiConfig {
   double max_rate_hz = 2000;       ///< messages per second per client (stop, hold, estop exempt)
   int max_clients = 64;            ///< connections at once (more are closed at once)
   std::size_t client_buffer = 1024 * 1024;  ///< bytes of unsent output per client before its stream drops
+  int partial_timeout_s = 10;      ///< a message begun and not ended within this: the connection is closed (slow loris)
   double rate_hz = 1000;           ///< the control rate (state streams at most this)
   std::string robot;               ///< hello's robot name
 };

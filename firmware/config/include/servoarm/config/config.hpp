@@ -167,6 +167,7 @@ struct FwConfig {
   double api_stream_deadman_ms = 100.0;  ///< streaming targets: none this long, the arm brakes to rest
   double api_stream_max_step_deg = 30.0; ///< largest change of a joint between two targets (deg / mm); 0 = none
   std::string api_stream_step = "clamp"; ///< a larger step: "clamp" or "refuse"
+  int api_partial_timeout_s = 10;        ///< a message begun and not ended this long: the connection is closed
 
   bool operator==(const FwConfig&) const = default;
 };
