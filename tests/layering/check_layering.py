@@ -27,8 +27,9 @@ ALLOWED = {
     "firmware/lang": ["kinematics", "kinematics/io"],
     "firmware/program": ["firmware/lang", "kinematics", "kinematics/io"],
     "firmware/service": ["firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
+    "firmware/api": ["firmware/service", "firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
     "firmware/console": ["firmware/service", "firmware/program", "firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
-    "firmware/app": ["firmware/console", "firmware/service", "firmware/program", "firmware/lang", "firmware/rt", "firmware/config",
+    "firmware/app": ["firmware/api", "firmware/console", "firmware/service", "firmware/program", "firmware/lang", "firmware/rt", "firmware/config",
                      "kinematics", "kinematics/io", "hal", "host_sim"],
     "firmware/armctl": ["firmware/service", "firmware/program", "firmware/lang", "firmware/config", "kinematics", "kinematics/io", "hal"],
 }

@@ -160,7 +160,8 @@ TEST(Package, DependsCoversEveryNeededLibrary) {
   const Lib known[] = {{"libc.so.", "libc6"},          {"libm.so.", "libc6"},       {"libpthread.so.", "libc6"},
                        {"libdl.so.", "libc6"},         {"librt.so.", "libc6"},      {"ld-linux", "libc6"},
                        {"libstdc++.so.", "libstdc++6"}, {"libgcc_s.so.", "libgcc-s1"}, {"libedit.so.", "libedit2"},
-                       {"liburdfdom_model.so.", "liburdfdom-model3.0"}, {"libconsole_bridge.so.", "libconsole-bridge1.0"}};
+                       {"liburdfdom_model.so.", "liburdfdom-model3.0"}, {"libconsole_bridge.so.", "libconsole-bridge1.0"},
+                       {"libwebsockets.so.", "libwebsockets17"}};
   int binaries = 0;
   for (const char* bin : {"/usr/bin/armfw", "/usr/bin/armctl"}) {
     const std::string path = root + bin;

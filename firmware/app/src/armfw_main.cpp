@@ -7,6 +7,7 @@
 //   armfw --config FILE                    everything from a TOML file
 //   armfw --sim --demo [--interactive]     play the demo program, print a summary
 //   armfw --sim --bench-loop SEC [--rate HZ]   loop statistics as one JSON line
+//   armfw --sim --api-tcp 0 --no-stdin       the network API (docs/api.md) on a free port
 #include <poll.h>
 #include <sys/stat.h>
 #include <signal.h>
@@ -23,6 +24,11 @@
 #include <vector>
 
 #include "servoarm/app/app.hpp"
+#ifdef SERVOARM_WITH_API
+#include "servoarm/api/server.hpp"  // the network API (optional: libwebsockets)
+#include "servoarm/lang/ik_options.hpp"
+#include "servoarm/service/stream.hpp"
+#endif
 #ifdef SERVOARM_WITH_SIM
 #include "servoarm/sim/sim_plant.hpp"  // --sim: the only firmware file that uses host_sim
 #endif
@@ -72,6 +78,11 @@ int usage(FILE* f, int code) {
                "  --can-console IFACE   also run a console over CAN (ISO-TP) on IFACE (vcan0, can0, or sim);\n"
                "                        ids from console.can_rx_id / can_tx_id (default 0x7E0 in, 0x7E8 out)\n"
                "  --no-stdin            no console on stdin/stdout\n"
+               "  --api-ws PORT         serve the network API's WebSocket on PORT (0: a free port, printed); turns\n"
+               "                        api.enabled on (docs/api.md)\n"
+               "  --api-tcp PORT        serve the network API's newline-delimited JSON on PORT (0: a free port)\n"
+               "  --api-tokens FILE     the API's tokens file (api.tokens_file)\n"
+               "  --api-reference       print the generated reference section of docs/api.md and exit\n"
                "  -h, --help            this text\n");
   return code;
 }
@@ -449,6 +460,8 @@ int main(int argc, char** argv) {
   std::string config_file, frames_file, programs_dir, points_file, robot, serial, can_console;
   double bench = -1, rate = -1;
   int priority = -1, cpu = -2, baud = -1;
+  int api_ws = -2, api_tcp = -2;  // -2: not given
+  std::string api_tokens;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&](const char* what) -> const char* {
@@ -498,6 +511,18 @@ int main(int argc, char** argv) {
     else if (a == "--can-console") can_console = value("--can-console");
     else if (a == "--baud") baud = static_cast<int>(number("--baud", 1, 4000000));
     else if (a == "--no-stdin") no_stdin = true;
+    else if (a == "--api-ws") api_ws = static_cast<int>(number("--api-ws", 0, 65535));
+    else if (a == "--api-tcp") api_tcp = static_cast<int>(number("--api-tcp", 0, 65535));
+    else if (a == "--api-tokens") api_tokens = value("--api-tokens");
+    else if (a == "--api-reference") {
+#ifdef SERVOARM_WITH_API
+      std::fputs(api::api_reference_markdown().c_str(), stdout);
+      return 0;
+#else
+      std::fprintf(stderr, "armfw: built without the network API (libwebsockets-dev, nlohmann-json3-dev)\n");
+      return 2;
+#endif
+    }
     else if (a == "--bus-load") bus_load = true;
     else if (a == "--bus-load-reference") {
       std::fputs(bus_load_reference_markdown().c_str(), stdout);
@@ -570,6 +595,7 @@ int main(int argc, char** argv) {
   resolve(cfg.console_frames_file, frames_file);
   resolve(cfg.programs_dir, programs_dir);
   resolve(cfg.programs_points_file, points_file);
+  resolve(cfg.api_tokens_file, api_tokens);
   // Where armfw keeps files must exist at start, not first fail when a tool, point or
   // program is saved: the programs folder, and the folders of the frames and points files.
   // Given on the command line, a missing one is refused; from the configuration (which may
@@ -691,6 +717,61 @@ int main(int argc, char** argv) {
     return 1;
   }
   if (!loop.warnings().empty()) std::fprintf(stderr, "armfw: %s", loop.warnings().c_str());
+  // The network API: its own thread for the sockets; its service calls run on this (the
+  // console) thread, in pump(), as the console's do: the service has one caller.
+#ifdef SERVOARM_WITH_API
+  std::unique_ptr<api::ApiServer> api_server;
+  api::ServiceContext api_cx;
+  std::unique_ptr<StreamService> stream;
+#else
+  struct NoApi {
+    int wake_fd() const { return -1; }
+    void pump(int) {}
+    void stop() {}
+  };
+  std::unique_ptr<NoApi> api_server;
+  const int api_cx = 0;
+#endif
+  if (app.cfg.api_enabled || api_ws >= 0 || api_tcp >= 0) {
+#ifndef SERVOARM_WITH_API
+    std::fprintf(stderr, "armfw: built without the network API (libwebsockets-dev, nlohmann-json3-dev)\n");
+    loop.stop();
+    return 2;
+#else
+    api::ApiConfig ac;
+    ac.bind = app.cfg.api_bind;
+    const bool flags = api_ws >= 0 || api_tcp >= 0;  // the flags name the ports: only those listen
+    ac.ws_port = flags ? (api_ws >= 0 ? api_ws : -1) : (app.cfg.api_ws_port > 0 ? app.cfg.api_ws_port : -1);
+    ac.tcp_port = flags ? (api_tcp >= 0 ? api_tcp : -1) : (app.cfg.api_tcp_port > 0 ? app.cfg.api_tcp_port : -1);
+    ac.tokens_file = app.cfg.api_tokens_file;
+    ac.max_message = static_cast<std::size_t>(app.cfg.api_max_message_kb) * 1024;
+    ac.max_rate_hz = app.cfg.api_max_rate_hz;
+    ac.max_clients = app.cfg.api_max_clients;
+    ac.client_buffer = static_cast<std::size_t>(app.cfg.api_client_buffer_kb) * 1024;
+    ac.partial_timeout_s = app.cfg.api_partial_timeout_s;
+    ac.rate_hz = app.cfg.rate_hz;
+    ac.robot = app.cfg.robot;
+    api_server = std::make_unique<api::ApiServer>(ac, *app.ctl, app.chain, app.ctl->limits());
+    const std::string e = api_server->start();
+    if (!e.empty()) {
+      std::fprintf(stderr, "armfw: %s\n", e.c_str());
+      loop.stop();
+      return 2;
+    }
+    api_cx.svc = &app.console->service();
+    api_cx.ctl = app.ctl.get();
+    api_cx.chain = &app.chain;
+    api_cx.ik = firmware_ik_solver(app.ik_ready ? app.ik.get() : nullptr);
+    StreamSettings ss;
+    ss.deadman_s = app.cfg.api_stream_deadman_ms * 1e-3;
+    ss.clamp_step = app.cfg.api_stream_step == "clamp";
+    for (int j = 0; j < app.chain.n_joints; ++j) ss.max_step.push_back(kConfigUnits.joint_in(app.chain, j, app.cfg.api_stream_max_step_deg));
+    stream = std::make_unique<StreamService>(app.console->service(), *app.ctl, ss);
+    api_cx.stream = stream.get();
+    std::fprintf(stderr, "armfw: api: WebSocket port %d, TCP port %d on %s\n", api_server->ws_port(), api_server->tcp_port(),
+                 ac.bind.c_str());
+#endif
+  }
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
   signal(SIGPIPE, SIG_IGN);
@@ -755,12 +836,38 @@ int main(int argc, char** argv) {
       if (rc == 0 && !ts.empty()) {
         std::fprintf(stderr, "armfw: %s ready (%d joints, %.0f Hz); type help\n", app.cfg.robot.c_str(), app.chain.n_joints,
                      app.cfg.rate_hz);
-        serve_consoles(*app.console, ts, app.cfg.console_stdin, &g_quit);
+        if (!api_server) {
+          serve_consoles(*app.console, ts, app.cfg.console_stdin, &g_quit);
+        } else {
+          // Consoles and the API on one thread: wait for console input or API requests (at most
+          // 10 ms, the console's own round), then run the API's requests and one console round.
+          ConsoleServer srv(*app.console, ts);
+          for (;;) {
+            if (g_quit) break;
+            std::vector<pollfd> pf{{api_server->wake_fd(), POLLIN, 0}};
+            for (const FdTransport* t : ts) {
+              if (t->rd >= 0 && !t->eof && !t->no_peer) pf.push_back({t->rd, POLLIN, 0});
+              if (t->wr >= 0 && !t->pending.empty()) pf.push_back({t->wr, POLLOUT, 0});
+            }
+            ::poll(pf.data(), pf.size(), 10);
+            api_server->pump(api_cx);
+            if (!srv.round(0, app.cfg.console_stdin)) break;
+          }
+        }
+      } else if (rc == 0 && api_server) {
+        std::fprintf(stderr, "armfw: %s ready (%d joints, %.0f Hz); API only\n", app.cfg.robot.c_str(), app.chain.n_joints,
+                     app.cfg.rate_hz);
+        while (!g_quit) {
+          pollfd pf{api_server->wake_fd(), POLLIN, 0};
+          ::poll(&pf, 1, 10);
+          api_server->pump(api_cx);
+        }
       }
       can.stop();
     }
   }
   // Shut down: stop motion, power down, stop the loop, statistics at exit.
+  if (api_server) api_server->stop();
   {
     Session s;
     app.console->execute(s, "stop");

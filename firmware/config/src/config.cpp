@@ -197,6 +197,8 @@ std::string homing_method_known(const DriveConfig& d, const FwConfig&) {
          (d.homing_method.empty() ? std::string("\"\"") : d.homing_method) + ")";
 }
 
+constexpr const char* kStreamSteps[] = {"clamp", "refuse"};
+
 using K = ConfigKey;
 using F = FwConfig;
 const ConfigKey kConfigTable[] = {
@@ -363,6 +365,45 @@ const ConfigKey kConfigTable[] = {
       "configuration file's folder; `\"\"` = not kept (the default of `armfw --sim` without --config; "
       "`armfw --points FILE` sets it)"}
         .length(0, 4095),
+    K{"api.enabled", &F::api_enabled, "",
+      "serve the network API (docs/api.md): WebSocket and newline-delimited JSON over TCP; `armfw --api-ws PORT` / "
+      "`--api-tcp PORT` turn it on too"},
+    K{"api.bind", &F::api_bind, "",
+      "the address the API listens on; anything but loopback (`127.0.0.1`, `::1`, `localhost`) needs api.tokens_file"}
+        .length(1, 255),
+    K{"api.ws_port", &F::api_ws_port, "", "WebSocket port of the API; 0 = off"}.within(0, 65535),
+    K{"api.tcp_port", &F::api_tcp_port, "", "TCP port of the API's newline-delimited JSON; 0 = off"}.within(0, 65535),
+    K{"api.tokens_file", &F::api_tokens_file, "",
+      "the API's tokens: one `<role> <token>` line each (role `observer` or `operator`, a token of at least 16 "
+      "characters), the file not readable by others; a client sends its token in `hello`; `\"\"` = none: loopback "
+      "only, and every client is an operator; a relative path is relative to the configuration file's folder"}
+        .length(0, 4095),
+    K{"api.max_message_kb", &F::api_max_message_kb, "KiB", "longest API message; a longer one is refused (overlong)"}
+        .within(1, 16384),
+    K{"api.max_rate_hz", &F::api_max_rate_hz, "Hz",
+      "API messages per second per client; more are refused (rate_limited); stop, hold and estop always run"}
+        .within(1, 100000),
+    K{"api.max_clients", &F::api_max_clients, "", "API connections at once; more are closed at once"}.within(1, 1000),
+    K{"api.client_buffer_kb", &F::api_client_buffer_kb, "KiB",
+      "unsent API output per client: beyond it the client's state and event messages are dropped (counted, `dropped`) "
+      "and its requests wait until it reads"}
+        .within(16, 65536),
+    K{"api.stream_deadman_ms", &F::api_stream_deadman_ms, "ms",
+      "streaming targets (`stream`): no target within this time and the arm brakes to rest on its limits, the stream "
+      "ends with an event"}
+        .within(10, 2000),
+    K{"api.stream_max_step_deg", &F::api_stream_max_step_deg, "deg",
+      "streaming targets: the largest change of a joint from one target to the next (mm for a prismatic joint); "
+      "larger steps are clamped or refused (api.stream_step); 0 = no limit (the tracking stays within the joint "
+      "limits either way)"}
+        .within(0, 360),
+    K{"api.stream_step", &F::api_stream_step, "",
+      "streaming targets: a step larger than api.stream_max_step_deg is `\"clamp\"`ed to it or `\"refuse\"`d"}
+        .among(std::span<const char* const>(kStreamSteps)),
+    K{"api.partial_timeout_s", &F::api_partial_timeout_s, "s",
+      "an API client that begins a message and does not end it within this time is disconnected (a slow-loris "
+      "client holds no connection)"}
+        .within(1, 600),
 };
 
 using D = DriveConfig;

@@ -1033,7 +1033,10 @@ void Controller::step_jog() {
     const int j = jog_.joint();
     switch (e) {
       case JogEnd::deadman:
-        std::snprintf(d, sizeof d, "jog stopped: not refreshed within its deadman time (%.0f ms)", 1e3 * jog_.deadman_s());
+        if (jog_.stream_jog())
+          std::snprintf(d, sizeof d, "stream stopped: no target within its deadman time (%.0f ms)", 1e3 * jog_.deadman_s());
+        else
+          std::snprintf(d, sizeof d, "jog stopped: not refreshed within its deadman time (%.0f ms)", 1e3 * jog_.deadman_s());
         break;
       case JogEnd::limit: std::snprintf(d, sizeof d, "jog stopped: joint %d at its limit", j + 1); break;
       case JogEnd::singular:
@@ -1123,11 +1126,13 @@ void Controller::publish() {
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
     t.q_cmd[ju] = cmd_.pos[j];
+    t.qd_cmd[ju] = cmd_.vel[j];
     const auto& fb = bus_.feedback(ju);
     t.q_act[ju] = fb.position;
     t.joint_state[ju] = static_cast<std::uint8_t>(fb.state);
   }
   t.queued = static_cast<std::uint32_t>(exec_.queue().size());
+  t.streaming = mode_ == Mode::jogging && jog_.streaming();
   t.running_id = exec_.running_id();
   t.done_id = done_id_;
   t.cause = cause_;

@@ -194,7 +194,7 @@ void Jogger::stop(const kin::JointState& cmd) {
 
 JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
   if (!active_) return JogEnd::done;
-  const bool expired = spec_.continuous && !stopping_ &&
+  const bool expired = (spec_.continuous || spec_.stream) && !stopping_ &&
                        static_cast<double>(now - last_refresh_) * 1e-9 > spec_.deadman_s;
   if (expired) {
     stop(cmd);
@@ -207,6 +207,10 @@ JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
     t_ += dt_;
     plan_.sample(t_, cmd);
     if (t_ < plan_.duration) return JogEnd::running;
+    if (spec_.stream && !stopping_) {  // at the target: held there until the next one (or the deadman)
+      t_ = plan_.duration;
+      return JogEnd::running;
+    }
     // A continuous joint jog that ran to its target has reached the joint's limit.
     if (spec_.continuous && !stopping_) return end(JogEnd::limit, spec_.axis, false);
     return end(at_end, -1, false);

@@ -172,6 +172,20 @@ struct FwConfig {
   // [programs]
   std::string programs_dir = "programs";              ///< program files (`run`, `programs`, `record stop`); relative: to the config file's folder; "" = none
   std::string programs_points_file = "points.toml";   ///< teach points; relative: to the config file's folder; "" = not kept
+  // [api] (the network API, docs/api.md)
+  bool api_enabled = false;              ///< serve the API (armfw --api-ws / --api-tcp turn it on too)
+  std::string api_bind = "127.0.0.1";    ///< listen address; beyond loopback only with api_tokens_file
+  int api_ws_port = 8765;                ///< WebSocket port; 0 = off
+  int api_tcp_port = 8766;               ///< newline-delimited JSON port; 0 = off
+  std::string api_tokens_file;           ///< "<role> <token>" lines; "" = none (loopback only, every client an operator)
+  int api_max_message_kb = 64;           ///< longest message
+  double api_max_rate_hz = 2000.0;       ///< messages per second per client
+  int api_max_clients = 64;              ///< connections at once
+  int api_client_buffer_kb = 1024;       ///< unsent output per client before its streams drop
+  double api_stream_deadman_ms = 100.0;  ///< streaming targets: none this long, the arm brakes to rest
+  double api_stream_max_step_deg = 30.0; ///< largest change of a joint between two targets (deg / mm); 0 = none
+  std::string api_stream_step = "clamp"; ///< a larger step: "clamp" or "refuse"
+  int api_partial_timeout_s = 10;        ///< a message begun and not ended this long: the connection is closed
 
   bool operator==(const FwConfig&) const = default;
 };

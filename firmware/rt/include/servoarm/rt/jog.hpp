@@ -38,6 +38,11 @@ struct JogSpec {
   JogSpace space = JogSpace::joint;
   /// Continuous: runs until stopped, at a limit, or when not refreshed within deadman_s.
   bool continuous = false;
+  /// A streamed target (joint space, servo mode): q_goal is the newest target, latest wins;
+  /// each one retargets the trajectory from where the arm is, jerk-limited. Reaching it is no
+  /// end: the arm holds there for the next target. No target within deadman_s: it brakes to rest
+  /// on its limits and ends (JogEnd::deadman).
+  bool stream = false;
   double deadman_s = 0.25;
   // joint jog
   kin::JointVector q_goal;       ///< absolute joint target (continuous: the limit in the jog's direction)
@@ -91,6 +96,9 @@ class Jogger {
   bool stopping() const { return stopping_; }
   JogSpace space() const { return spec_.space; }
   double deadman_s() const { return spec_.deadman_s; }
+  /// The running jog is a stream of targets (JogSpec::stream) and not braking.
+  bool streaming() const { return active_ && spec_.stream && !stopping_; }
+  bool stream_jog() const { return spec_.stream; }
 
   /// One control period: the next commanded state into `cmd`. Returns running until the
   /// jog is over; then why (joint(): the joint concerned, or -1). After an end other than

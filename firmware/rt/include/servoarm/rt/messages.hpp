@@ -159,6 +159,8 @@ struct Telemetry {
   int n = 0;
   std::array<double, kin::kMaxJoints> q_cmd{};  ///< last commanded (SI)
   std::array<double, kin::kMaxJoints> q_act{};  ///< last measured (SI)
+  std::array<double, kin::kMaxJoints> qd_cmd{}; ///< last commanded velocity (SI per s)
+  bool streaming = false;          ///< a stream of targets runs (JogSpec::stream) and is not braking
   std::array<std::uint8_t, kin::kMaxJoints> joint_state{};  ///< hal::JointState
   std::uint32_t queued = 0;        ///< motions in the queue (including the running one)
   std::uint32_t running_id = 0;    ///< id of the running motion (0 = none)

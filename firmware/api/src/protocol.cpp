@@ -1,0 +1,588 @@
+// SPDX-License-Identifier: Apache-2.0
+// The API's message table, parser, service dispatch and JSON rendering: the one translation
+// unit that includes nlohmann-json (Debian nlohmann-json3-dev 3.11; header-only and slow to
+// compile, so no header of the project includes it). Non-real-time threads only.
+#include "servoarm/api/protocol.hpp"
+
+#include <cmath>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/orientation.hpp"
+#include "servoarm/lang/markdown.hpp"
+#include "servoarm/service/stream.hpp"
+
+namespace servoarm::api {
+
+using nlohmann::json;
+using fw::CmdError;
+
+struct ResultFields {
+  json j = json::object();
+  std::string error;    ///< "" ok, else the code's name
+  std::string message;  ///< one line with the error
+  void fail(CmdError e, std::string m) {
+    error = fw::to_string(e);
+    message = std::move(m);
+  }
+  void fail(std::string code, std::string m) {
+    error = std::move(code);
+    message = std::move(m);
+  }
+};
+
+const char* to_string(ApiError e) {
+  switch (e) {
+    case ApiError::bad_json: return "bad_json";
+    case ApiError::unauthenticated: return "unauthenticated";
+    case ApiError::forbidden: return "forbidden";
+    case ApiError::not_in_control: return "not_in_control";
+    case ApiError::controlled: return "controlled";
+    case ApiError::rate_limited: return "rate_limited";
+  }
+  return "?";
+}
+
+const char* to_string(Gate g) {
+  switch (g) {
+    case Gate::open: return "anyone";
+    case Gate::observer: return "observer";
+    case Gate::stop: return "any client (wins over control)";
+    case Gate::operator_: return "operator";
+    case Gate::control: return "operator in control";
+  }
+  return "?";
+}
+
+const char* to_string(ArgType t) {
+  switch (t) {
+    case ArgType::number: return "number";
+    case ArgType::integer: return "integer";
+    case ArgType::boolean: return "boolean";
+    case ArgType::text: return "string";
+    case ArgType::numbers: return "number[]";
+  }
+  return "?";
+}
+
+namespace {
+
+
+// ---------------------------------------------------------------------------------------------
+// Rendering of the service's typed results
+// ---------------------------------------------------------------------------------------------
+
+json vec(const kin::JointVector& q) {
+  json a = json::array();
+  for (int i = 0; i < q.size(); ++i) a.push_back(q[i]);
+  return a;
+}
+
+void control_result(const fw::ControlResult& r, ResultFields& out) {
+  if (!r.ok()) return out.fail(r.error, r.reason);
+  out.j["reason"] = r.reason;
+}
+
+void move_result(const fw::MoveResult& r, ResultFields& out) {
+  if (!r.ok()) {
+    std::string m = fw::to_string(r.refusal);
+    char b[200] = {};
+    switch (r.refusal) {
+      case fw::MoveRefusal::joint_limit:
+        std::snprintf(b, sizeof b, ": joint %d = %.6g outside [%.6g, %.6g]", r.joint, r.value, r.lower, r.upper);
+        break;
+      case fw::MoveRefusal::duration: std::snprintf(b, sizeof b, ": %.3f s", r.duration); break;
+      case fw::MoveRefusal::plan:
+        std::snprintf(b, sizeof b, ": %s at s = %.3f joint %d", kin::to_string(r.status), r.s, r.joint);
+        break;
+      case fw::MoveRefusal::linear_speed: std::snprintf(b, sizeof b, ": %.6g m/s", r.speed); break;
+      case fw::MoveRefusal::none:
+      case fw::MoveRefusal::arm_state:
+      case fw::MoveRefusal::not_homed:
+      case fw::MoveRefusal::queue_full: break;
+    }
+    m += b;
+    if (!r.reason.empty()) m += ": " + r.reason;
+    return out.fail(r.error, m);
+  }
+  out.j["motion"] = r.id;
+  out.j["duration"] = r.duration;
+  out.j["goal"] = vec(r.goal);
+  if (r.speed > 0) out.j["speed"] = r.speed;
+}
+
+void jog_result(const fw::JogResult& r, ResultFields& out) {
+  if (!r.ok()) {
+    std::string m = fw::to_string(r.refusal);
+    if (r.joint >= 0) m += ": joint " + std::to_string(r.joint);
+    if (!r.reason.empty()) m += ": " + r.reason;
+    return out.fail(r.error, m);
+  }
+  out.j["reason"] = r.reason;
+  if (r.clamped) out.j["clamped_at"] = r.value;
+}
+
+/// The joints given (rad / m): exactly the arm's count, each finite.
+bool joints_of(ServiceCall& c, const char* name, kin::JointVector& q, ResultFields& out) {
+  const ArgValue* a = c.rq.arg(name);
+  const int n = c.cx.chain->n_joints;
+  if (a == nullptr || static_cast<int>(a->list.size()) != n) {
+    out.fail(CmdError::arg_count, std::string(name) + ": expected " + std::to_string(n) + " joint values, got " +
+                                      std::to_string(a ? a->list.size() : 0));
+    return false;
+  }
+  q.resize(n);
+  for (int j = 0; j < n; ++j) q[j] = a->list[static_cast<std::size_t>(j)];
+  return true;
+}
+
+double num_or(const ServiceCall& c, const char* name, double dflt) {
+  const ArgValue* a = c.rq.arg(name);
+  return a != nullptr && a->present ? a->num : dflt;
+}
+
+fw::MoveContext move_cx(ServiceCall& c) {
+  fw::MoveContext m;
+  m.chain = c.cx.chain;
+  m.ik = c.cx.ik;
+  return m;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The message table
+// ---------------------------------------------------------------------------------------------
+
+constexpr ArgSpec kNone[] = {{"", ArgType::number, false, 0, 0, ""}};
+constexpr std::span<const ArgSpec> none() { return {kNone, 0}; }
+
+constexpr ArgSpec kHello[] = {
+    {"token", ArgType::text, false, 1, 256, "the client's token (required when api.tokens_file is set)"}};
+constexpr ArgSpec kSubscribe[] = {
+    {"topic", ArgType::text, true, 1, 16, "`state` or `events`"},
+    {"rate_hz", ArgType::number, false, 1, 4000, "state: samples per second (at most the loop rate; default 50)"}};
+constexpr ArgSpec kTopic[] = {{"topic", ArgType::text, true, 1, 16, "`state` or `events`"}};
+constexpr ArgSpec kHome[] = {{"joint", ArgType::integer, false, -1, kin::kMaxJoints - 1, "0-based; -1 or left out: every joint"}};
+constexpr ArgSpec kMovej[] = {
+    {"q", ArgType::numbers, true, -1e6, 1e6, "the goal, one value per joint (rad / m)"},
+    {"speed_pct", ArgType::number, false, 1, 100, "percent of the joint limits (default motion.joint_speed_pct)"},
+    {"blend", ArgType::number, false, 0, 1e3, "blend tolerance at the goal (rad); 0: exact stop"}};
+constexpr ArgSpec kMovel[] = {
+    {"position", ArgType::numbers, true, -1e3, 1e3, "the tool point [x, y, z] in the base frame (m)"},
+    {"rpy", ArgType::numbers, false, -10, 10, "the tool orientation [roll, pitch, yaw] (rad); left out: the orientation the queue ends with"},
+    {"speed", ArgType::number, false, 1e-6, 1e3, "tool speed (m/s; default motion.linear_speed_mm_s)"},
+    {"blend", ArgType::number, false, 0, 1e3, "blend tolerance at the target (m)"}};
+constexpr ArgSpec kJog[] = {
+    {"joint", ArgType::integer, true, 0, kin::kMaxJoints - 1, "0-based"},
+    {"increment", ArgType::number, false, -1e3, 1e3, "by this much (rad / m); left out: continuous towards `direction`"},
+    {"direction", ArgType::integer, false, -1, 1, "continuous jog: +1 or -1 (kept alive by repeating it within console.jog_deadman_ms)"},
+    {"speed_pct", ArgType::number, false, 1, 100, "percent of the joint limits (default console.jog_speed_pct)"}};
+constexpr ArgSpec kOn[] = {{"on", ArgType::boolean, true, 0, 1, "on (true) or off"}};
+constexpr ArgSpec kOutput[] = {{"index", ArgType::integer, true, 0, 1023, "the [[output]] index (0-based)"},
+                               {"on", ArgType::boolean, true, 0, 1, "on (true) or off"}};
+constexpr ArgSpec kEvents[] = {{"since", ArgType::integer, false, 0, 9e15, "the last sequence number the client has (default 0: every event kept)"}};
+constexpr ArgSpec kStream[] = {
+    {"q", ArgType::numbers, true, -1e6, 1e6, "the newest joint target, one value per joint (rad / m)"},
+    {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"}};
+
+using C = ServiceCall;
+using R = ResultFields;
+
+constexpr MessageSpec kMessages[] = {
+    {"hello", kHello, Gate::open, Where::session, "-",
+     "authenticates (with a token when the server has a token file) and answers protocol, robot, joints with their "
+     "limits, units, rate, the client's role and id, and who holds control",
+     nullptr},
+    {"subscribe", kSubscribe, Gate::observer, Where::session, "Controller::telemetry / ArmService::events_since",
+     "starts a stream: `state` samples at `rate_hz`, or every `event` with its sequence number", nullptr},
+    {"unsubscribe", kTopic, Gate::observer, Where::session, "-", "ends a stream", nullptr},
+    {"state", none(), Gate::observer, Where::session, "Controller::telemetry", "one state sample as the result", nullptr},
+    {"take_control", none(), Gate::operator_, Where::session, "-",
+     "makes this client the one in control (refused as `controlled` while another holds it); every client is told",
+     nullptr},
+    {"release_control", none(), Gate::operator_, Where::session, "-", "gives control up; every client is told", nullptr},
+    {"events", kEvents, Gate::observer, Where::service, "ArmService::events_since",
+     "the events after `since` still kept, and how many of them are no longer kept (`missed`)",
+     +[](C& c, R& out) {
+       c.cx.svc->poll_events();
+       const fw::EventBatch b = c.cx.svc->events_since(static_cast<std::uint64_t>(num_or(c, "since", 0)));
+       json a = json::array();
+       for (const fw::ArmEvent& e : b.events) a.push_back(json::parse(event_line(e, c.cx.svc->event_detail(e), 0)));
+       out.j["events"] = std::move(a);
+       out.j["missed"] = b.missed;
+     }},
+    {"stop", none(), Gate::stop, Where::service, "ArmService::control(stop)", "stops on the limits and drops the queue",
+     +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::stop), out); }},
+    {"hold", none(), Gate::stop, Where::service, "ArmService::control(hold)", "feed hold: ramps down, keeps the queue",
+     +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::hold), out); }},
+    {"estop", none(), Gate::stop, Where::service, "ArmService::control(estop)", "emergency stop (needs `reset`)",
+     +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::estop), out); }},
+    {"resume", none(), Gate::control, Where::service, "ArmService::control(resume)", "resumes after a hold",
+     +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::resume), out); }},
+    {"enable", none(), Gate::control, Where::service, "ArmService::enable", "powers the drives",
+     +[](C& c, R& out) { control_result(c.cx.svc->enable(), out); }},
+    {"disable", none(), Gate::control, Where::service, "ArmService::control(disable)", "powers the drives down",
+     +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::disable), out); }},
+    {"reset", none(), Gate::control, Where::service, "ArmService::control(reset)", "clears a fault or an e-stop",
+     +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::reset), out); }},
+    {"home", kHome, Gate::control, Where::service, "ArmService::home", "starts the homing cycle (progress as events)",
+     +[](C& c, R& out) {
+       const int j = static_cast<int>(num_or(c, "joint", -1));
+       if (j >= c.cx.chain->n_joints)
+         return out.fail(CmdError::out_of_range, "joint: " + std::to_string(j) + " is not a joint of the arm");
+       control_result(c.cx.svc->home(j), out);
+     }},
+    {"park", none(), Gate::control, Where::service, "ArmService::move(park_request)", "joint move to the park pose",
+     +[](C& c, R& out) { move_result(c.cx.svc->move(c.cx.svc->park_request(), move_cx(c)), out); }},
+    {"movej", kMovej, Gate::control, Where::service, "ArmService::move(MoveJoints)",
+     "jerk-limited joint move, queued; the result has the motion's id and duration",
+     +[](C& c, R& out) {
+       fw::MoveJoints m;
+       if (!joints_of(c, "q", m.goal, out)) return;
+       m.speed_pct = num_or(c, "speed_pct", 0);
+       m.blend = num_or(c, "blend", -1);
+       move_result(c.cx.svc->move(m, move_cx(c)), out);
+     }},
+    {"movel", kMovel, Gate::control, Where::service, "ArmService::move(MoveLine)",
+     "straight tool line, path-checked and queued",
+     +[](C& c, R& out) {
+       const ArgValue* p = c.rq.arg("position");
+       const ArgValue* r = c.rq.arg("rpy");
+       if (p->list.size() != 3) return out.fail(CmdError::arg_count, "position: expected [x, y, z]");
+       if (r->present && r->list.size() != 3) return out.fail(CmdError::arg_count, "rpy: expected [roll, pitch, yaw]");
+       fw::MoveLine m;
+       kin::Pose from = kin::Pose::Identity();
+       kin::forward(*c.cx.chain, c.cx.svc->tail(), from);
+       m.target.linear() = r->present ? kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]) : from.linear();
+       m.target.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
+       m.speed = num_or(c, "speed", 0);
+       m.blend = num_or(c, "blend", -1);
+       move_result(c.cx.svc->move(m, move_cx(c)), out);
+     }},
+    {"jog", kJog, Gate::control, Where::service, "ArmService::jog(JointJog)",
+     "joint jog by an increment, or continuous (stops unless repeated within the deadman time)",
+     +[](C& c, R& out) {
+       fw::JointJog j;
+       j.joint = static_cast<int>(num_or(c, "joint", 0));
+       if (j.joint >= c.cx.chain->n_joints)
+         return out.fail(CmdError::out_of_range, "joint: " + std::to_string(j.joint) + " is not a joint of the arm");
+       const ArgValue* inc = c.rq.arg("increment");
+       const ArgValue* dir = c.rq.arg("direction");
+       if (inc->present == dir->present) return out.fail(CmdError::arg_count, "give one of increment and direction");
+       j.continuous = dir->present;
+       j.direction = dir->num < 0 ? -1 : 1;
+       if (j.continuous && dir->num == 0) return out.fail(CmdError::out_of_range, "direction: +1 or -1");
+       j.increment = inc->num;
+       j.speed_pct = num_or(c, "speed_pct", -1);
+       fw::JogContext jx;
+       jx.chain = c.cx.chain;
+       jx.ik = c.cx.ik;
+       jog_result(c.cx.svc->jog(j, jx), out);
+     }},
+    {"jog_cancel", none(), Gate::control, Where::service, "ArmService::jog_cancel", "ends the running jog",
+     +[](C& c, R& out) { control_result(c.cx.svc->jog_cancel(), out); }},
+    {"freedrive", kOn, Gate::control, Where::service, "ArmService::freedrive", "hand guiding on or off",
+     +[](C& c, R& out) { control_result(c.cx.svc->freedrive(c.rq.arg("on")->num != 0), out); }},
+    {"collision", kOn, Gate::control, Where::service, "ArmService::collision_detection", "collision detection on or off",
+     +[](C& c, R& out) { control_result(c.cx.svc->collision_detection(c.rq.arg("on")->num != 0), out); }},
+    {"output", kOutput, Gate::control, Where::service, "ArmService::set_output", "sets a digital output at once",
+     +[](C& c, R& out) {
+       fw::OutputRequest o;
+       o.index = static_cast<std::size_t>(num_or(c, "index", 0));
+       o.on = c.rq.arg("on")->num != 0;
+       const fw::OutputResult r = c.cx.svc->set_output(o);
+       if (!r.ok()) return out.fail(r.error, std::string(fw::to_string(r.refusal)) + " (" + std::to_string(r.count) + " outputs)");
+     }},
+    {"stream", kStream, Gate::control, Where::service, "StreamService::target",
+     "streaming (servo) mode: the newest joint target, latest wins; the arm tracks it jerk-limited within its limits "
+     "and brakes to rest, ending the stream with an event, when no target comes within api.stream_deadman_ms; a stop "
+     "ends it (the next target must say start)",
+     +[](C& c, R& out) {
+       if (c.cx.stream == nullptr) return out.fail(CmdError::unsupported, "streaming targets are not available here");
+       kin::JointVector q;
+       if (!joints_of(c, "q", q, out)) return;
+       const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0);
+       if (!r.ok()) return out.fail(r.error, r.reason);
+       if (r.clamped) out.j["clamped"] = true;
+     }},
+};
+
+bool is_loopish(double v) { return std::isfinite(v); }
+
+}  // namespace
+
+std::span<const MessageSpec> messages() { return kMessages; }
+
+const MessageSpec* find_message(std::string_view name) {
+  for (const MessageSpec& m : kMessages)
+    if (name == m.name) return &m;
+  return nullptr;
+}
+
+const ArgValue* ApiRequest::arg(std::string_view name) const {
+  if (spec == nullptr) return nullptr;
+  for (std::size_t i = 0; i < spec->args.size() && i < args.size(); ++i)
+    if (name == spec->args[i].name) return &args[i];
+  return nullptr;
+}
+
+ParseError parse_request(std::string_view text, ApiRequest& out) {
+  out = ApiRequest{};
+  const json j = json::parse(text.begin(), text.end(), nullptr, false);
+  if (j.is_discarded()) return {to_string(ApiError::bad_json), "not JSON (NaN and Infinity are not JSON either)"};
+  if (!j.is_object()) return {to_string(ApiError::bad_json), "a message is a JSON object"};
+  if (const auto id = j.find("id"); id != j.end()) {
+    if (!id->is_number_integer()) return {to_string(CmdError::bad_number), "id: expected an integer"};
+    out.id = id->get<std::int64_t>();
+    out.has_id = true;
+  }
+  const auto cmd = j.find("cmd");
+  if (cmd == j.end() || !cmd->is_string()) return {to_string(CmdError::arg_count), "cmd: expected the command's name"};
+  const std::string name = cmd->get<std::string>();
+  out.spec = find_message(name);
+  if (out.spec == nullptr) {
+    std::string shown = name.substr(0, 40);
+    for (char& ch : shown)
+      if (static_cast<unsigned char>(ch) < 0x20 || static_cast<unsigned char>(ch) >= 0x7f) ch = '?';
+    return {to_string(CmdError::unknown_command), "cmd: no command '" + shown + "'"};
+  }
+  const auto& args = out.spec->args;
+  out.args.resize(args.size());
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    if (it.key() == "id" || it.key() == "cmd") continue;
+    bool known = false;
+    for (const ArgSpec& a : args) known = known || it.key() == a.name;
+    if (!known) {
+      std::string k = it.key().substr(0, 40);
+      for (char& ch : k)
+        if (static_cast<unsigned char>(ch) < 0x20 || static_cast<unsigned char>(ch) >= 0x7f) ch = '?';
+      return {to_string(CmdError::bad_option), name + ": no argument '" + k + "'"};
+    }
+  }
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    const ArgSpec& a = args[i];
+    ArgValue& v = out.args[i];
+    const auto f = j.find(a.name);
+    if (f == j.end()) {
+      if (a.required) return {to_string(CmdError::arg_count), std::string(a.name) + ": missing"};
+      continue;
+    }
+    v.present = true;
+    const std::string at = std::string(a.name) + ": ";
+    auto number = [&](const json& e, double& d, bool integer) -> ParseError {
+      if (!e.is_number() || (integer && !e.is_number_integer()))
+        return {to_string(CmdError::bad_number), at + "expected " + (integer ? "an integer" : "a number")};
+      d = e.get<double>();
+      if (!is_loopish(d)) return {to_string(CmdError::not_finite), at + "not finite"};
+      if (d < a.lo || d > a.hi) {
+        char b[120];
+        std::snprintf(b, sizeof b, "%.9g is outside [%.9g, %.9g]", d, a.lo, a.hi);
+        return {to_string(CmdError::out_of_range), at + b};
+      }
+      return {};
+    };
+    switch (a.type) {
+      case ArgType::number:
+      case ArgType::integer: {
+        ParseError e = number(*f, v.num, a.type == ArgType::integer);
+        if (!e.code.empty()) return e;
+        break;
+      }
+      case ArgType::boolean:
+        if (!f->is_boolean()) return {to_string(CmdError::bad_option), at + "expected true or false"};
+        v.num = f->get<bool>() ? 1 : 0;
+        break;
+      case ArgType::text:
+        if (!f->is_string()) return {to_string(CmdError::bad_option), at + "expected a string"};
+        v.text = f->get<std::string>();
+        if (v.text.size() < a.lo || v.text.size() > a.hi)
+          return {to_string(CmdError::out_of_range), at + "length outside " + std::to_string(int(a.lo)) + ".." +
+                                                         std::to_string(int(a.hi))};
+        break;
+      case ArgType::numbers:
+        if (!f->is_array() || f->size() > kin::kMaxJoints)
+          return {to_string(CmdError::bad_number), at + "expected an array of at most " + std::to_string(kin::kMaxJoints) + " numbers"};
+        v.list.resize(f->size());
+        for (std::size_t k = 0; k < f->size(); ++k) {
+          ParseError e = number((*f)[k], v.list[k], false);
+          if (!e.code.empty()) return e;
+        }
+        break;
+    }
+  }
+  return {};
+}
+
+std::string ok_line(const ApiRequest& rq, std::string_view fields_json) {
+  json j = json::object();
+  if (rq.has_id) j["id"] = rq.id;
+  j["ok"] = true;
+  std::string s = j.dump();
+  if (fields_json.size() > 2) {  // "{...}": merge its members
+    s.pop_back();
+    s += ',';
+    s.append(fields_json.substr(1));
+  }
+  return s;
+}
+
+std::string error_line(bool has_id, std::int64_t id, std::string_view code, std::string_view message) {
+  json j = json::object();
+  if (has_id) j["id"] = id;
+  j["error"] = code;
+  j["message"] = message;
+  return j.dump(-1, ' ', false, json::error_handler_t::replace);
+}
+
+std::string execute(ServiceContext& cx, const ApiRequest& rq) {
+  if (rq.spec == nullptr || rq.spec->handler == nullptr)
+    return error_line(rq.has_id, rq.id, fw::to_string(CmdError::internal), "not a service message");
+  ServiceCall call{cx, rq};
+  ResultFields out;
+  rq.spec->handler(call, out);
+  if (!out.error.empty()) return error_line(rq.has_id, rq.id, out.error, out.message);
+  return ok_line(rq, out.j.dump(-1, ' ', false, json::error_handler_t::replace));
+}
+
+std::string hello_line(const ApiRequest& rq, const HelloInfo& h, const kin::Chain& chain, const kin::JointLimits& lim) {
+  json f = json::object();
+  f["protocol"] = kProtocolVersion;
+  f["robot"] = h.robot;
+  f["rate_hz"] = h.rate_hz;
+  f["units"] = {{"length", "m"}, {"angle", "rad"}, {"time", "s"}};
+  json joints = json::array();
+  for (int j = 0; j < chain.n_joints; ++j) {
+    const kin::DhRow& r = chain.joint(j);
+    const auto u = static_cast<std::size_t>(j);
+    json o = {{"type", kin::to_string(r.type)},
+              {"max_velocity", lim.dyn[u].max_velocity},
+              {"max_acceleration", lim.dyn[u].max_acceleration},
+              {"max_jerk", lim.dyn[u].max_jerk}};
+    // an unbounded joint has no limit to say (JSON has no infinity)
+    o["lower"] = std::isfinite(lim.lower[u]) ? json(lim.lower[u]) : json(nullptr);
+    o["upper"] = std::isfinite(lim.upper[u]) ? json(lim.upper[u]) : json(nullptr);
+    joints.push_back(std::move(o));
+  }
+  f["joints"] = std::move(joints);
+  f["role"] = h.role;
+  f["client"] = h.client;
+  f["controller"] = h.controller;
+  return ok_line(rq, f.dump(-1, ' ', false, json::error_handler_t::replace));
+}
+
+std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain& chain, std::uint64_t dropped) {
+  json j = json::object();
+  j["topic"] = "state";
+  j["cycle"] = t.cycles;
+  j["t"] = rate_hz > 0 ? static_cast<double>(t.cycles) / rate_hz : 0.0;
+  j["state"] = fw::to_string(t.state);
+  j["mode"] = fw::to_string(t.mode);
+  j["holding"] = t.holding;
+  json q = json::array(), qc = json::array(), fe = json::array();
+  kin::JointVector qa(chain.n_joints);
+  for (int i = 0; i < t.n && i < chain.n_joints; ++i) {
+    const auto u = static_cast<std::size_t>(i);
+    q.push_back(t.q_act[u]);
+    qc.push_back(t.q_cmd[u]);
+    fe.push_back(t.q_cmd[u] - t.q_act[u]);
+    qa[i] = t.q_act[u];
+  }
+  json qd = json::array();
+  for (int i = 0; i < t.n && i < chain.n_joints; ++i) qd.push_back(t.qd_cmd[static_cast<std::size_t>(i)]);
+  j["q"] = std::move(q);
+  j["q_cmd"] = std::move(qc);
+  j["qd_cmd"] = std::move(qd);
+  j["streaming"] = t.streaming;
+  j["following_error"] = std::move(fe);
+  kin::Pose p = kin::Pose::Identity();
+  if (t.n == chain.n_joints && kin::forward(chain, qa, p) == kin::Status::ok) {
+    const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear());
+    j["tool"] = {{"position", {p.translation().x(), p.translation().y(), p.translation().z()}},
+                 {"rpy", {rpy.x(), rpy.y(), rpy.z()}}};
+  }
+  j["queued"] = t.queued;
+  j["running"] = t.running_id;
+  j["done"] = t.done_id;
+  j["homed"] = t.homed;
+  j["homing"] = t.homing_now;
+  j["fault"] = {{"cause", fw::to_string(t.cause)}, {"joint", t.fault_joint}, {"text", std::string(t.fault_text)}};
+  j["freedrive"] = t.freedrive != 0;
+  j["collision_detection"] = t.collision_on;
+  j["dropped"] = dropped;
+  return j.dump(-1, ' ', false, json::error_handler_t::replace);
+}
+
+std::string event_line(const fw::ArmEvent& e, std::string_view detail, std::uint64_t missed) {
+  json j = json::object();
+  j["topic"] = "event";
+  j["seq"] = e.seq;
+  j["cycle"] = e.cycle;
+  j["t"] = e.t;
+  j["kind"] = fw::to_string(e.kind);
+  j["state"] = fw::to_string(e.state);
+  if (e.kind == fw::EventKind::fault) j["cause"] = fw::to_string(e.cause);
+  j["joint"] = e.joint;
+  j["motion"] = e.motion_id;
+  j["detail"] = std::string(detail);
+  j["missed"] = missed;
+  return j.dump(-1, ' ', false, json::error_handler_t::replace);
+}
+
+std::string control_line(std::uint64_t holder) {
+  json j = {{"topic", "control"}, {"holder", holder}};
+  return j.dump();
+}
+
+namespace {
+constexpr const char* kBegin = "<!-- BEGIN api-reference (generated by armfw --api-reference; do not edit) -->";
+constexpr const char* kEnd = "<!-- END api-reference -->";
+
+std::string range_text(const ArgSpec& a) {
+  char b[96];
+  switch (a.type) {
+    case ArgType::boolean: return "true / false";
+    case ArgType::text: std::snprintf(b, sizeof b, "%g..%g chars", a.lo, a.hi); return b;
+    case ArgType::number:
+    case ArgType::integer:
+    case ArgType::numbers: std::snprintf(b, sizeof b, "[%g, %g]", a.lo, a.hi); return b;
+  }
+  return "";
+}
+}  // namespace
+
+std::string api_reference_markdown() {
+  std::string o = std::string(kBegin) + "\n\n";
+  o += "Protocol version " + std::to_string(kProtocolVersion) + ".\n\n";
+  o += "| message | who may send it | runs | calls | what it does |\n| --- | --- | --- | --- | --- |\n";
+  for (const MessageSpec& m : kMessages)
+    o += std::string("| `") + m.name + "` | " + to_string(m.gate) + " | " +
+         (m.where == Where::session ? "network thread" : "service thread") + " | `" + fw::md_cell(m.call) + "` | " +
+         fw::md_cell(m.doc) + " |\n";
+  o += "\n### Arguments\n\n| message | argument | type | required | range | meaning |\n| --- | --- | --- | --- | --- | --- |\n";
+  for (const MessageSpec& m : kMessages)
+    for (const ArgSpec& a : m.args)
+      o += std::string("| `") + m.name + "` | `" + a.name + "` | " + to_string(a.type) + " | " + (a.required ? "yes" : "no") +
+           " | " + range_text(a) + " | " + fw::md_cell(a.doc) + " |\n";
+  o += "\n### Error codes\n\nThe service calls answer with the console's codes (`CmdError`):";
+  for (int e = 1; e <= static_cast<int>(CmdError::internal); ++e) o += std::string(" `") + fw::to_string(static_cast<CmdError>(e)) + "`";
+  o += ". The API adds:\n\n| code | meaning |\n| --- | --- |\n";
+  const char* api_doc[] = {"the message is not a JSON object (NaN and Infinity are not JSON)",
+                           "no `hello` with a valid token yet (the server has a token file)",
+                           "the client's role may not send it (an observer's command)",
+                           "the command moves or changes the arm: `take_control` first",
+                           "another client holds control (the message names it)",
+                           "more than api.max_rate_hz messages per second: this one did not run"};
+  for (int e = 0; e <= static_cast<int>(ApiError::rate_limited); ++e)
+    o += std::string("| `") + to_string(static_cast<ApiError>(e)) + "` | " + api_doc[e] + " |\n";
+  o += std::string("\n") + kEnd + "\n";
+  return o;
+}
+
+std::string api_reference_mismatch(const std::string& page) {
+  return fw::generated_section_mismatch(page, api_reference_markdown(),
+                                        {"<!-- BEGIN api-reference", kEnd, "docs/api.md differs from armfw --api-reference",
+                                         "regenerate the section: armfw --api-reference, pasted between the markers of docs/api.md"});
+}
+
+}  // namespace servoarm::api

@@ -1,0 +1,139 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The Python client against `armfw --sim` (the real firmware with virtual drives), one armfw
+per test class, on a free port. ARMFW names the armfw binary (CTest sets it)."""
+import math
+import os
+import re
+import subprocess
+import threading
+import time
+import unittest
+
+from servoarm import Arm, ArmError, ArmStopped
+
+
+class ArmfwSim:
+    def __init__(self):
+        exe = os.environ.get("ARMFW", "build/bin/armfw")
+        self.p = subprocess.Popen([exe, "--sim", "--no-stdin", "--api-tcp", "0"], stderr=subprocess.PIPE,
+                                  stdout=subprocess.DEVNULL, text=True)
+        self.port = None
+        self.lines = []
+        end = time.monotonic() + 30
+        while self.port is None and time.monotonic() < end:
+            line = self.p.stderr.readline()
+            if not line:
+                break
+            self.lines.append(line)
+            m = re.search(r"TCP port (\d+)", line)
+            if m:
+                self.port = int(m.group(1))
+        if self.port is None:
+            self.stop()
+            raise RuntimeError("armfw did not start its API: " + "".join(self.lines))
+        threading.Thread(target=self._drain, daemon=True).start()
+
+    def _drain(self):
+        for line in self.p.stderr:
+            self.lines.append(line)
+
+    def stop(self):
+        self.p.terminate()
+        try:
+            self.p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.p.kill()
+
+
+def recover(arm, timeout=10.0):
+    """Reset an arm in e-stop or fault once its drives are at rest (reset is refused before)."""
+    end = time.monotonic() + timeout
+    while arm.state()["state"] in ("estop", "fault", "stopping") and time.monotonic() < end:
+        try:
+            arm.reset()
+        except ArmError:
+            time.sleep(0.05)
+
+
+class ClientTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.fw = ArmfwSim()
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.fw.stop()
+
+    def arm(self, **kw):
+        return Arm("127.0.0.1", port=self.fw.port, **kw)
+
+    def test_hello_enable_movej_movel(self):
+        with self.arm() as arm:
+            self.assertEqual(arm.info["protocol"], 1)
+            self.assertEqual(arm.joints, 6)
+            arm.enable()
+            r = arm.movej([0.2, -0.3, 0.4, 0, 0.3, 0], speed_pct=80)
+            self.assertGreater(r["motion"], 0)
+            s = arm.state()
+            self.assertAlmostEqual(s["q_cmd"][0], 0.2, places=6)
+            p = s["tool"]["position"]
+            arm.movel([p[0], p[1], p[2] - 0.02], speed=0.1)
+            self.assertAlmostEqual(arm.state()["tool"]["position"][2], p[2] - 0.02, delta=2e-3)
+            with self.assertRaises(ArmError) as e:
+                arm.movej([0.1] * 5)
+            self.assertEqual(e.exception.code, "arg_count")
+            with self.assertRaises(ValueError):  # NaN never leaves the client (JSON has none)
+                arm.movej([float("nan")] * 6)
+            arm.movej([0] * 6)
+        with self.arm(take_control=False) as obs:  # the context manager disabled the arm
+            self.assertEqual(obs.state()["state"], "disabled")
+
+    def test_subscribe(self):
+        with self.arm(take_control=False) as arm:
+            sub = arm.subscribe(100)
+            first = sub.get(timeout=2)
+            t0 = time.monotonic()
+            n = 0
+            while time.monotonic() - t0 < 1.0:
+                s = sub.get(timeout=2)
+                n += 1
+            self.assertGreater(s["cycle"], first["cycle"])
+            self.assertGreater(n, 50)
+            self.assertLess(n, 150)
+            sub.close()
+
+    def test_stream_and_deadman(self):
+        with self.arm() as arm:
+            arm.enable()
+            q0 = arm.state()["q_cmd"]
+            with arm.stream() as st:
+                t0 = time.monotonic()
+                while time.monotonic() - t0 < 1.0:
+                    t = time.monotonic() - t0
+                    q = list(q0)
+                    q[0] = q0[0] + 0.2 * math.sin(2 * math.pi * 0.5 * t)
+                    st.send(q)
+                    time.sleep(0.02)
+                self.assertTrue(arm.state()["streaming"])
+            seq = max([e["seq"] for e in arm.events()] or [0])
+            time.sleep(0.6)  # no target: the deadman brakes the arm to rest
+            s = arm.state()
+            self.assertFalse(s["streaming"])
+            self.assertEqual(s["state"], "idle")
+            self.assertTrue(any(e["kind"] == "jog_stopped" and "stream stopped" in e["detail"]
+                                for e in arm.events(seq)))
+
+    def test_estop_from_another_client_ends_the_wait(self):
+        with self.arm() as arm:
+            arm.enable()
+            other = self.arm(take_control=False)
+            threading.Timer(0.3, other.estop).start()
+            with self.assertRaises(ArmStopped) as e:
+                arm.movej([1.5, 0, 0, 0, 0, 0], speed_pct=10)
+            self.assertEqual(e.exception.code, "estop")
+            other.close()
+            recover(arm)
+
+
+if __name__ == "__main__":
+    unittest.main()

@@ -1,0 +1,57 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+// Streaming targets (servo mode) through the arm service: a client sends joint targets at any
+// rate (10 to 1 000 Hz, irregularly spaced), latest wins, and the control thread tracks the
+// newest one with a jerk-limited trajectory replanned from where the arm is (jog.hpp,
+// JogSpec::stream): never above the joints' velocity, acceleration and jerk limits, a jump is a
+// smooth move. No target within the deadman time: the arm brakes to rest on its limits and the
+// stream ends with an event (jog_stopped, "stream stopped: ..."). A stop, hold, e-stop or fault
+// from anywhere ends it too, and a stream once ended stays ended: the next target must say
+// `start` (a client that keeps sending after someone stopped the arm does not move it again).
+//
+// Each target is checked here first: one value per joint, finite, within the joint limits
+// (refused: limits), and at most its `max_step` from the target before it on every joint
+// (clamped or refused, StreamSettings::clamp_step).
+//
+// Service thread (non-real-time); talks to the control thread through ArmService::request.
+#include <string>
+#include <vector>
+
+#include "servoarm/service/arm_service.hpp"
+
+namespace servoarm::fw {
+
+struct StreamSettings {
+  double deadman_s = 0.1;   ///< no target this long: brake to rest, the stream ends
+  /// Per joint (rad / m): the largest change from one target to the next; empty or <= 0: none.
+  std::vector<double> max_step;
+  bool clamp_step = true;   ///< a larger step: clamped to max_step (true) or refused (false)
+  double speed_pct = 100;   ///< percent of the joints' velocity limits the tracking may use
+};
+
+struct StreamResult {
+  CmdError error = CmdError::ok;
+  std::string reason;      ///< one line: why refused
+  bool clamped = false;    ///< the step was clamped to max_step
+  bool ok() const { return error == CmdError::ok; }
+};
+
+class StreamService {
+ public:
+  StreamService(ArmService& svc, Controller& ctl, const StreamSettings& cfg) : svc_(svc), ctl_(ctl), cfg_(cfg) {}
+  /// The newest target (SI). `start`: begins a stream (from idle, or retargets the running one);
+  /// without it the target continues the running stream and is refused (bad_state) when none
+  /// runs (it was never started, or it ended: deadman, stop, fault).
+  StreamResult target(const kin::JointVector& q, bool start);
+  const StreamSettings& settings() const { return cfg_; }
+
+ private:
+  ArmService& svc_;
+  Controller& ctl_;
+  StreamSettings cfg_;
+  kin::JointVector last_;        ///< the last target sent
+  std::uint64_t sent_cycle_ = 0; ///< the control cycle the last target was accepted in
+  bool sent_ = false;
+};
+
+}  // namespace servoarm::fw

@@ -1,0 +1,92 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "servoarm/service/stream.hpp"
+
+#include <cmath>
+#include <cstdio>
+
+namespace servoarm::fw {
+
+StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
+  StreamResult r;
+  const kin::JointLimits& lim = svc_.limits();
+  const int n = lim.n;
+  if (q_in.size() != n) {
+    r.error = CmdError::arg_count;
+    r.reason = "expected " + std::to_string(n) + " joint values, got " + std::to_string(q_in.size());
+    return r;
+  }
+  for (int j = 0; j < n; ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    if (!std::isfinite(q_in[j])) {
+      r.error = CmdError::not_finite;
+      r.reason = "joint " + std::to_string(j) + ": not finite";
+      return r;
+    }
+    if (q_in[j] < lim.lower[u] || q_in[j] > lim.upper[u]) {
+      char b[160];
+      std::snprintf(b, sizeof b, "joint %d = %.6g outside [%.6g, %.6g]", j, q_in[j], lim.lower[u], lim.upper[u]);
+      r.error = CmdError::limits;
+      r.reason = b;
+      return r;
+    }
+  }
+  const Telemetry t = ctl_.telemetry();
+  // The stream runs while the control thread says so, or the target before this one was taken
+  // in the cycle the telemetry shows (its own publication may not have come yet).
+  const bool running = sent_ && (t.streaming || t.cycles <= sent_cycle_ + 1);
+  if (!start && !running) {
+    r.error = CmdError::bad_state;
+    r.reason = sent_ ? std::string("the stream ended (the arm is ") + to_string(t.state) + "): start a new one"
+                     : "no stream runs: the first target starts it (start)";
+    return r;
+  }
+  kin::JointVector q = q_in;
+  kin::JointVector from(n);
+  for (int j = 0; j < n; ++j) from[j] = running ? last_[j] : t.q_cmd[static_cast<std::size_t>(j)];
+  for (int j = 0; j < n && static_cast<std::size_t>(j) < cfg_.max_step.size(); ++j) {
+    const double step = cfg_.max_step[static_cast<std::size_t>(j)];
+    const double d = q[j] - from[j];
+    if (!(step > 0) || std::fabs(d) <= step) continue;
+    if (!cfg_.clamp_step) {
+      char b[160];
+      std::snprintf(b, sizeof b, "joint %d: a step of %.6g from the last target, more than %.6g", j, d, step);
+      r.error = CmdError::out_of_range;
+      r.reason = b;
+      return r;
+    }
+    q[j] = from[j] + std::copysign(step, d);
+    r.clamped = true;
+  }
+  Request rq;
+  rq.op = RequestOp::jog;
+  rq.jog.space = JogSpace::joint;
+  rq.jog.stream = true;
+  rq.jog.deadman_s = cfg_.deadman_s;
+  rq.jog.q_goal = q;
+  rq.jog.override = std::fmin(1.0, std::fmax(0.01, cfg_.speed_pct / 100.0));
+  rq.jog.axis = -1;
+  Reply rep;
+  if (!svc_.request(rq, rep)) {
+    r.error = CmdError::timeout;
+    r.reason = "control thread did not answer the stream target";
+    return r;
+  }
+  switch (rep.result) {
+    case RtResult::ok:
+      last_ = q;
+      sent_ = true;
+      sent_cycle_ = ctl_.telemetry().cycles;
+      svc_.jog_forget();  // the next jog starts from the commanded position, not a jog's tail
+      return r;
+    case RtResult::busy: r.error = CmdError::busy; break;
+    case RtResult::fault: r.error = CmdError::fault; break;
+    case RtResult::not_homed: r.error = CmdError::not_homed; break;
+    case RtResult::bad_state:
+    case RtResult::start_moved:
+    case RtResult::plan_failed: r.error = CmdError::bad_state; break;
+  }
+  r.reason = rep.message;
+  return r;
+}
+
+}  // namespace servoarm::fw

@@ -1,0 +1,519 @@
+// SPDX-License-Identifier: Apache-2.0
+// The network API (firmware/api) against the real server on loopback sockets: an App with
+// virtual drives and its control loop, the ApiServer on free ports, and a thread that pumps the
+// service as armfw's console thread does. Clients are plain sockets: newline-delimited JSON on
+// the TCP port, and a hand-written WebSocket handshake and frames on the WebSocket port.
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "servoarm/api/server.hpp"
+#include "servoarm/lang/ik_options.hpp"
+#include "servoarm/rt/rt_loop.hpp"
+#include "servoarm/service/stream.hpp"
+#include "sim_app.hpp"
+#include "sweep.hpp"
+
+// CppUTest last: its leak detector redefines new
+#include "CppUTest/TestHarness.h"
+#include "CppUTest/MemoryLeakWarningPlugin.h"
+
+using namespace servoarm;
+using namespace servoarm::fw;
+
+namespace {
+
+double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+
+/// A newline-delimited JSON client on the TCP port.
+struct Client {
+  int fd = -1;
+  std::string buf;
+  explicit Client(int port) {
+    fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(static_cast<std::uint16_t>(port));
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    CHECK(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+    int one = 1;
+    ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  }
+  ~Client() { if (fd >= 0) ::close(fd); }
+  void send_raw(const std::string& s) const {
+    std::size_t off = 0;
+    while (off < s.size()) {
+      const ssize_t w = ::write(fd, s.data() + off, s.size() - off);
+      if (w <= 0) return;
+      off += static_cast<std::size_t>(w);
+    }
+  }
+  void send(const std::string& line) const { send_raw(line + "\n"); }
+  /// The next line, "" after `timeout_s` or when the server closed (`closed` set).
+  std::string line(double timeout_s = 5, bool* closed = nullptr) {
+    const double end = now_s() + timeout_s;
+    for (;;) {
+      const auto nl = buf.find('\n');
+      if (nl != std::string::npos) {
+        std::string l = buf.substr(0, nl);
+        buf.erase(0, nl + 1);
+        return l;
+      }
+      const double left = end - now_s();
+      if (left <= 0) return "";
+      pollfd p{fd, POLLIN, 0};
+      if (::poll(&p, 1, static_cast<int>(left * 1000) + 1) <= 0) continue;
+      char b[65536];
+      const ssize_t r = ::read(fd, b, sizeof b);
+      if (r <= 0) {
+        if (closed) *closed = true;
+        return "";
+      }
+      buf.append(b, static_cast<std::size_t>(r));
+    }
+  }
+  /// The answer to request `id` (lines of the streams in between are skipped).
+  std::string answer(int id, double timeout_s = 10) {
+    const std::string key = "\"id\":" + std::to_string(id) + ",";
+    const std::string key_end = "\"id\":" + std::to_string(id) + "}";
+    const double end = now_s() + timeout_s;
+    while (now_s() < end) {
+      const std::string l = line(end - now_s());
+      if (l.find(key) != std::string::npos || l.find(key_end) != std::string::npos) return l;
+    }
+    return "";
+  }
+  std::string ask(int id, const std::string& body) {
+    send("{\"id\":" + std::to_string(id) + "," + body + "}");
+    return answer(id);
+  }
+};
+
+bool has(const std::string& s, const std::string& what) { return s.find(what) != std::string::npos; }
+bool is_ok(const std::string& s) { return has(s, "\"ok\":true"); }
+std::string error_of(const std::string& s) {
+  const std::regex e("\"error\":\"([a-z_]+)\"");
+  std::smatch m;
+  return std::regex_search(s, m, e) ? m[1].str() : "";
+}
+
+struct Rig {
+  test::SimApp app;
+  std::unique_ptr<RtLoop> loop;
+  std::unique_ptr<api::ApiServer> server;
+  api::ServiceContext cx;
+  std::unique_ptr<StreamService> stream;
+  std::thread pump_th;
+  std::atomic<bool> stop{false};
+
+  explicit Rig(api::ApiConfig ac = {}) {
+    FwConfig cfg;
+    cfg.can = "sim";
+    cfg.priority = 0;
+    cfg.lock_memory = false;
+    cfg.console_stdin = false;
+    const int slow = servoarm::test::kSlowBuild ? 10 : 1;
+    cfg.feedback_timeout_ms = 1000 * slow;
+    cfg.heartbeat_timeout_ms = 1000 * slow;
+    cfg.following_error_deg = 30;
+    std::string e = app.build(cfg);
+    CHECK_TEXT(e.empty(), e.c_str());
+    e = app.boot();
+    CHECK_TEXT(e.empty(), e.c_str());
+    LoopConfig lc;
+    lc.priority = 0;
+    lc.lock_memory = false;
+    loop = std::make_unique<RtLoop>(*app.ctl, lc);
+    CHECK(loop->start());
+    if (ac.tcp_port < 0 && ac.ws_port < 0) ac.tcp_port = 0, ac.ws_port = 0;
+    ac.rate_hz = app.cfg.rate_hz;
+    ac.robot = app.cfg.robot;
+    server = std::make_unique<api::ApiServer>(ac, *app.ctl, app.chain, app.ctl->limits());
+    e = server->start();
+    CHECK_TEXT(e.empty(), e.c_str());
+    cx.svc = &app.console->service();
+    cx.ctl = app.ctl.get();
+    cx.chain = &app.chain;
+    cx.ik = firmware_ik_solver(app.ik_ready ? app.ik.get() : nullptr);
+    StreamSettings ss;
+    ss.max_step.assign(6, 0.5);
+    stream = std::make_unique<StreamService>(app.console->service(), *app.ctl, ss);
+    cx.stream = stream.get();
+    pump_th = std::thread([this] {
+      while (!stop) {
+        pollfd p{server->wake_fd(), POLLIN, 0};
+        ::poll(&p, 1, 10);
+        server->pump(cx);
+      }
+    });
+  }
+  ~Rig() {
+    stop = true;
+    if (pump_th.joinable()) pump_th.join();
+    server->stop();
+    loop->stop();
+    app.plant->stop_thread();
+  }
+  int port() const { return server->tcp_port(); }
+  Telemetry tel() const { return app.ctl->telemetry(); }
+  /// Take control, enable and wait until idle; the client holds control after.
+  void enable(Client& c) {
+    CHECK(is_ok(c.ask(900, "\"cmd\":\"take_control\"")));
+    const std::string r = c.ask(901, "\"cmd\":\"enable\"");
+    CHECK_TEXT(is_ok(r), r.c_str());
+    for (int i = 0; i < 400 && tel().state != ArmState::idle; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(tel().state));
+  }
+};
+
+std::string tmp_file(const std::string& name, const std::string& text, mode_t mode) {
+  const std::string p = "/tmp/servoarm_fw_api_" + std::to_string(::getpid()) + "_" + name;
+  std::ofstream(p) << text;
+  ::chmod(p.c_str(), mode);
+  return p;
+}
+
+}  // namespace
+
+// CppUTest's leak detector is not thread-safe: the server's and the pump's threads allocate
+// while a test runs, so it is off in this group (each Rig joins its threads before it ends).
+TEST_GROUP(FwApi) {
+  void setup() override { MemoryLeakWarningPlugin::saveAndDisableNewDeleteOverloads(); }
+  void teardown() override { MemoryLeakWarningPlugin::restoreNewDeleteOverloads(); }
+};
+
+// hello answers the protocol, the robot and its joints; a movej goes from request to queued
+// motion and back with its id; the state sample carries the RT clock's cycle and the joints.
+TEST(FwApi, RequestAndResultRoundTrip) {
+  Rig rig;
+  Client c(rig.port());
+  const std::string h = c.ask(1, "\"cmd\":\"hello\"");
+  CHECK_TEXT(is_ok(h), h.c_str());
+  CHECK_TEXT(has(h, "\"protocol\":1"), h.c_str());
+  CHECK_TEXT(has(h, "\"robot\":\"puma560\""), h.c_str());
+  CHECK_TEXT(has(h, "\"role\":\"operator\""), h.c_str());
+  CHECK_EQUAL(6, static_cast<int>(std::count(h.begin(), h.end(), '{')) - 2);  // the answer, units, 6 joints
+  rig.enable(c);
+  const std::string m = c.ask(2, "\"cmd\":\"movej\",\"q\":[0.2,0,0,0,0,0],\"speed_pct\":50");
+  CHECK_TEXT(is_ok(m), m.c_str());
+  CHECK_TEXT(has(m, "\"motion\":1"), m.c_str());
+  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  CHECK_EQUAL(1u, rig.tel().done_id);
+  const std::string s = c.ask(3, "\"cmd\":\"state\"");
+  CHECK_TEXT(is_ok(s) && has(s, "\"cycle\":") && has(s, "\"q_cmd\":[0.2") && has(s, "\"tool\":"), s.c_str());
+}
+
+// Bad input: every message gets one error naming what is wrong, and nothing moves.
+TEST(FwApi, BadInputIsRefusedAndNothingMoves) {
+  api::ApiConfig ac;
+  ac.max_message = 4096;
+  Rig rig(ac);
+  Client c(rig.port());
+  rig.enable(c);
+  const Telemetry before = rig.tel();
+  struct Case {
+    const char* line;
+    const char* error;
+  } cases[] = {
+      {"{\"id\":10,\"cmd\":\"movej\",\"q\":[0.1,0,0", "bad_json"},
+      {"[1,2,3]", "bad_json"},
+      {"{\"id\":11,\"cmd\":\"movej\",\"q\":[NaN,0,0,0,0,0]}", "bad_json"},
+      {"{\"id\":12,\"cmd\":\"movej\",\"q\":[Infinity,0,0,0,0,0]}", "bad_json"},
+      {"{\"id\":13,\"cmd\":\"movej\",\"q\":[1e999,0,0,0,0,0]}", "bad_json"},
+      {"{\"id\":14,\"cmd\":\"movej\",\"q\":\"0.1 0 0 0 0 0\"}", "bad_number"},
+      {"{\"id\":15,\"cmd\":\"movej\",\"q\":[0.1,0,0,0,0]}", "arg_count"},
+      {"{\"id\":16,\"cmd\":\"movej\",\"q\":[0.1,0,0,0,0,0],\"speed_pct\":500}", "out_of_range"},
+      {"{\"id\":17,\"cmd\":\"movej\",\"q\":[0.1,0,0,0,0,0],\"speed\":5}", "bad_option"},
+      {"{\"id\":18,\"cmd\":\"movej\"}", "arg_count"},
+      {"{\"id\":19,\"cmd\":\"teleport\"}", "unknown_command"},
+      {"{\"id\":20,\"cmd\":7}", "arg_count"},
+      {"{\"id\":\"x\",\"cmd\":\"stop\"}", "bad_number"},
+      {"{\"id\":21,\"cmd\":\"movej\",\"q\":[9,0,0,0,0,0]}", "limits"},
+      {"{\"id\":22,\"cmd\":\"home\",\"joint\":1.5}", "bad_number"},
+      {"{\"id\":23,\"cmd\":\"freedrive\",\"on\":1}", "bad_option"},
+  };
+  for (const Case& k : cases) {
+    c.send(k.line);
+    const std::string a = c.line();
+    STRCMP_EQUAL_TEXT(k.error, error_of(a).c_str(), (std::string(k.line) + " -> " + a).c_str());
+    CHECK_TEXT(has(a, "\"message\":\""), a.c_str());
+  }
+  // 10 MB in one line: one overlong error, then the next line is served
+  c.send(std::string(10 * 1024 * 1024, 'x'));
+  const std::string big = c.line(20);
+  STRCMP_EQUAL_TEXT("overlong", error_of(big).c_str(), big.c_str());
+  CHECK(is_ok(c.ask(30, "\"cmd\":\"state\"")));
+  const Telemetry after = rig.tel();
+  CHECK_EQUAL(0u, after.running_id);
+  CHECK_EQUAL(0u, after.queued);
+  for (int j = 0; j < 6; ++j) DOUBLES_EQUAL(before.q_cmd[static_cast<std::size_t>(j)], after.q_cmd[static_cast<std::size_t>(j)], 1e-12);
+}
+
+// With a token file: nothing but hello before a valid token; an observer sees the state but may
+// not command or take control, and its stop runs; a wrong token is refused.
+TEST(FwApi, TokensAndRoles) {
+  api::ApiConfig ac;
+  ac.tokens_file = tmp_file("tokens", "# role token\noperator op-0123456789abcdef\nobserver ob-0123456789abcdef\n", 0640);
+  Rig rig(ac);
+  Client op(rig.port()), ob(rig.port()), anon(rig.port());
+  STRCMP_EQUAL("unauthenticated", error_of(anon.ask(1, "\"cmd\":\"state\"")).c_str());
+  STRCMP_EQUAL("unauthenticated", error_of(anon.ask(2, "\"cmd\":\"take_control\"")).c_str());
+  STRCMP_EQUAL("unauthenticated", error_of(anon.ask(3, "\"cmd\":\"stop\"")).c_str());
+  STRCMP_EQUAL("unauthenticated", error_of(anon.ask(4, "\"cmd\":\"hello\",\"token\":\"op-0123456789abcdeX\"")).c_str());
+  STRCMP_EQUAL("unauthenticated", error_of(anon.ask(5, "\"cmd\":\"hello\"")).c_str());
+  CHECK(has(op.ask(6, "\"cmd\":\"hello\",\"token\":\"op-0123456789abcdef\""), "\"role\":\"operator\""));
+  CHECK(has(ob.ask(7, "\"cmd\":\"hello\",\"token\":\"ob-0123456789abcdef\""), "\"role\":\"observer\""));
+  CHECK(is_ok(ob.ask(8, "\"cmd\":\"state\"")));
+  STRCMP_EQUAL("forbidden", error_of(ob.ask(9, "\"cmd\":\"take_control\"")).c_str());
+  STRCMP_EQUAL("forbidden", error_of(ob.ask(10, "\"cmd\":\"enable\"")).c_str());
+  STRCMP_EQUAL("not_in_control", error_of(op.ask(11, "\"cmd\":\"enable\"")).c_str());
+  rig.enable(op);
+  // the observer was told who holds control
+  bool told = false;
+  for (std::string l = ob.line(2); !l.empty() && !told; l = ob.line(0.5)) told = has(l, "\"topic\":\"control\"") && !has(l, "\"holder\":0");
+  CHECK(told);
+  STRCMP_EQUAL("forbidden", error_of(ob.ask(12, "\"cmd\":\"movej\",\"q\":[0.1,0,0,0,0,0]")).c_str());
+  CHECK(is_ok(ob.ask(13, "\"cmd\":\"stop\"")));
+  CHECK_EQUAL(0u, rig.tel().queued);
+  ::unlink(ac.tokens_file.c_str());
+}
+
+// One client holds control and moves the arm; a second client's stop wins at once: the arm
+// ramps to rest and the queue is dropped, and the holder is still the holder.
+TEST(FwApi, AnotherClientsStopWins) {
+  Rig rig;
+  Client a(rig.port()), b(rig.port());
+  rig.enable(a);
+  STRCMP_EQUAL("controlled", error_of(b.ask(1, "\"cmd\":\"take_control\"")).c_str());
+  STRCMP_EQUAL("controlled", error_of(b.ask(2, "\"cmd\":\"movej\",\"q\":[0.1,0,0,0,0,0]")).c_str());
+  CHECK(is_ok(a.ask(3, "\"cmd\":\"movej\",\"q\":[1.5,0,0,0,0,0],\"speed_pct\":20")));
+  CHECK(is_ok(a.ask(4, "\"cmd\":\"movej\",\"q\":[-1.5,0,0,0,0,0],\"speed_pct\":20")));
+  for (int i = 0; i < 400 && rig.tel().running_id != 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const std::string s = b.ask(5, "\"cmd\":\"stop\"");
+  CHECK_TEXT(is_ok(s), s.c_str());
+  for (int i = 0; i < 400 && rig.tel().state != ArmState::idle; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const Telemetry t = rig.tel();
+  CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(t.state));
+  CHECK_EQUAL(0u, t.queued);
+  CHECK(t.q_cmd[0] < 1.0);  // stopped on the way, long before the first goal
+  CHECK(is_ok(a.ask(6, "\"cmd\":\"movej\",\"q\":[0,0,0,0,0,0]")));  // still in control
+}
+
+// A subscriber that never reads loses its own samples (counted) and delays nobody: another
+// client's round trips stay fast while the first one's outbox is full.
+TEST(FwApi, ANonReadingSubscriberDelaysNobody) {
+  api::ApiConfig ac;
+  ac.client_buffer = 16 * 1024;
+  ac.max_rate_hz = 1e6;  // the other client asks as fast as it can
+  Rig rig(ac);
+  Client slow(rig.port()), fast(rig.port());
+  CHECK(is_ok(slow.ask(1, "\"cmd\":\"subscribe\",\"topic\":\"state\",\"rate_hz\":1000")));
+  // round trips of the other client until the first one's socket buffers and outbox are full
+  // and it has lost samples (at least 200, at most 20 s)
+  double worst = 0;
+  int n = 0;
+  const double until = now_s() + 20;
+  for (; (n < 200 || rig.server->stats().dropped == 0) && now_s() < until; ++n) {
+    const double t0 = now_s();
+    const std::string a = fast.ask(100 + n, "\"cmd\":\"state\"");
+    CHECK_TEXT(is_ok(a), a.c_str());
+    worst = std::max(worst, now_s() - t0);
+  }
+  CHECK_TEXT(worst < 0.1, std::to_string(worst).c_str());
+  CHECK_TEXT(rig.server->stats().dropped > 0, std::to_string(n).c_str());
+  // once it reads, its samples say how many it lost
+  std::uint64_t dropped = 0;
+  int lines = 0;
+  const double end = now_s() + 10;
+  const std::regex d("\"dropped\":([0-9]+)");
+  while (dropped == 0 && now_s() < end) {
+    const std::string l = slow.line(1);
+    ++lines;
+    std::smatch m;
+    if (std::regex_search(l, m, d)) dropped = std::stoull(m[1].str());
+  }
+  CHECK_TEXT(dropped > 0, std::to_string(lines).c_str());
+}
+
+// The WebSocket port: an RFC 6455 handshake, a masked text frame, an unmasked answer.
+TEST(FwApi, WebSocketRoundTrip) {
+  Rig rig;
+  Client c(rig.server->ws_port());
+  c.send_raw("GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+             "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n");
+  std::string head;
+  for (std::string l = c.line(); !l.empty() && l != "\r"; l = c.line()) head += l + "\n";
+  CHECK_TEXT(has(head, "101") && has(head, "s3pPLMBiTxaQ9kYGzzhZRbK+xOo="), head.c_str());
+  const std::string msg = "{\"id\":1,\"cmd\":\"hello\"}";
+  std::string f;
+  f += static_cast<char>(0x81);
+  f += static_cast<char>(0x80 | msg.size());
+  const unsigned char mask[4] = {1, 2, 3, 4};
+  for (unsigned char m : mask) f += static_cast<char>(m);
+  for (std::size_t i = 0; i < msg.size(); ++i) f += static_cast<char>(msg[i] ^ mask[i % 4]);
+  c.send_raw(f);
+  const double end = now_s() + 5;
+  while (c.buf.size() < 4 && now_s() < end) c.line(0.1);
+  CHECK(c.buf.size() >= 4);
+  CHECK_EQUAL(0x81, static_cast<unsigned char>(c.buf[0]));
+  CHECK(has(c.buf, "\"protocol\":1"));
+}
+
+// Connections beyond api.max_clients are closed at once; messages beyond api.max_rate_hz are
+// refused (rate_limited), a stop is not.
+TEST(FwApi, ConnectionAndRateLimits) {
+  api::ApiConfig ac;
+  ac.max_clients = 3;
+  ac.max_rate_hz = 50;
+  Rig rig(ac);
+  std::vector<std::unique_ptr<Client>> cs;
+  for (int i = 0; i < 3; ++i) {
+    cs.push_back(std::make_unique<Client>(rig.port()));
+    CHECK(is_ok(cs.back()->ask(1, "\"cmd\":\"state\"")));
+  }
+  Client extra(rig.port());
+  bool closed = false;
+  extra.send("{\"id\":1,\"cmd\":\"state\"}");
+  const std::string l = extra.line(3, &closed);
+  CHECK_TEXT(closed && l.empty(), l.c_str());
+  CHECK(rig.server->stats().refused_connections >= 1);
+  Client& c = *cs[0];
+  std::string burst;
+  for (int i = 0; i < 200; ++i) burst += "{\"id\":" + std::to_string(1000 + i) + ",\"cmd\":\"state\"}\n";
+  c.send_raw(burst);
+  int limited = 0, ok = 0;
+  for (int i = 0; i < 200; ++i) {
+    const std::string a = c.line();
+    if (error_of(a) == "rate_limited") ++limited;
+    else if (is_ok(a)) ++ok;
+  }
+  CHECK_TEXT(limited >= 100 && ok >= 10 && ok + limited == 200, (std::to_string(ok) + " ok, " + std::to_string(limited)).c_str());
+  CHECK(is_ok(c.ask(2000, "\"cmd\":\"stop\"")));
+}
+
+// A client that begins a message and never ends it (slow loris) is closed after
+// api's partial timeout; 500 connections at once are served by the one thread, and a client's
+// round trip stays fast among them.
+TEST(FwApi, SlowLorisAndFiveHundredConnections) {
+  api::ApiConfig ac;
+  ac.partial_timeout_s = 1;
+  ac.max_clients = 600;
+  Rig rig(ac);
+  Client loris(rig.port());
+  loris.send_raw("{\"id\":1,\"cmd\":\"sta");
+  bool closed = false;
+  const double t0 = now_s();
+  const std::string l = loris.line(5, &closed);
+  CHECK_TEXT(closed && l.empty(), l.c_str());
+  CHECK(now_s() - t0 > 0.5);
+  std::vector<std::unique_ptr<Client>> many;
+  for (int i = 0; i < 500; ++i) many.push_back(std::make_unique<Client>(rig.port()));
+  for (auto& c : many) c->send("{\"id\":7,\"cmd\":\"hello\"}");
+  int answered = 0;
+  for (auto& c : many) answered += is_ok(c->answer(7)) ? 1 : 0;
+  CHECK_EQUAL(500, answered);
+  CHECK_EQUAL(500, rig.server->stats().clients);  // the slow-loris client is gone
+  Client c(rig.port());
+  double worst = 0;
+  for (int i = 0; i < 50; ++i) {
+    const double t = now_s();
+    CHECK(is_ok(c.ask(100 + i, "\"cmd\":\"state\"")));
+    worst = std::max(worst, now_s() - t);
+  }
+  CHECK_TEXT(worst < 0.1, std::to_string(worst).c_str());
+}
+
+// Beyond loopback only with a token file; a token file others may read is refused.
+TEST(FwApi, StartRefusals) {
+  api::ApiConfig ac;
+  ac.tcp_port = 0;
+  ac.bind = "0.0.0.0";
+  // no controller is needed to refuse: the server checks before it listens
+  test::SimApp app;
+  FwConfig fc;
+  fc.can = "sim";
+  CHECK(app.build(fc).empty());
+  api::ApiServer s1(ac, *app.ctl, app.chain, app.ctl->limits());
+  const std::string e1 = s1.start();
+  CHECK_TEXT(has(e1, "beyond loopback only with api.tokens_file"), e1.c_str());
+  ac.tokens_file = tmp_file("open_tokens", "operator op-0123456789abcdef\n", 0644);
+  api::ApiServer s2(ac, *app.ctl, app.chain, app.ctl->limits());
+  const std::string e2 = s2.start();
+  CHECK_TEXT(has(e2, "readable or writable by others"), e2.c_str());
+  ::unlink(ac.tokens_file.c_str());
+  ac.tokens_file = tmp_file("short_tokens", "operator short\n", 0600);
+  api::ApiServer s3(ac, *app.ctl, app.chain, app.ctl->limits());
+  const std::string e3 = s3.start();
+  CHECK_TEXT(has(e3, ":1: a token has at least 16 characters"), e3.c_str());
+  ::unlink(ac.tokens_file.c_str());
+}
+
+// Streaming over the API: a client in control streams targets (the first says start), the arm
+// tracks them; a stop from another client ends the stream, and the targets that keep coming are
+// refused (bad_state) and do not move the arm; the subscriber sees the stream's end as an event.
+TEST(FwApi, StreamAndAStopFromAnotherClient) {
+  Rig rig;
+  Client a(rig.port()), b(rig.port());
+  rig.enable(a);
+  CHECK(is_ok(b.ask(1, "\"cmd\":\"subscribe\",\"topic\":\"events\"")));
+  STRCMP_EQUAL("controlled", error_of(b.ask(2, "\"cmd\":\"stream\",\"q\":[0,0,0,0,0,0],\"start\":true")).c_str());
+  STRCMP_EQUAL("bad_state", error_of(a.ask(3, "\"cmd\":\"stream\",\"q\":[0.01,0,0,0,0,0]")).c_str());
+  double q0 = 0;
+  for (int i = 0; i < 30; ++i) {
+    q0 += 0.01;
+    char m[128];
+    std::snprintf(m, sizeof m, "\"cmd\":\"stream\",\"q\":[%.3f,0,0,0,0,0]%s", q0, i == 0 ? ",\"start\":true" : "");
+    const std::string r = a.ask(10 + i, m);
+    CHECK_TEXT(is_ok(r), r.c_str());
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  CHECK(rig.tel().streaming);
+  CHECK(rig.tel().q_cmd[0] > 0.1);
+  CHECK(is_ok(b.ask(100, "\"cmd\":\"stop\"")));
+  for (int i = 0; i < 400 && rig.tel().state != ArmState::idle; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const double rest = rig.tel().q_cmd[0];
+  for (int i = 0; i < 10; ++i) {
+    q0 += 0.01;
+    char m[96];
+    std::snprintf(m, sizeof m, "\"cmd\":\"stream\",\"q\":[%.3f,0,0,0,0,0]", q0);
+    STRCMP_EQUAL("bad_state", error_of(a.ask(200 + i, m)).c_str());
+  }
+  DOUBLES_EQUAL(rest, rig.tel().q_cmd[0], 1e-12);
+  CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(rig.tel().state));
+}
+
+// docs/api.md holds exactly what the message table produces between its markers.
+TEST(FwApi, ReferencePageIsGeneratedFromTheTable) {
+  std::ifstream f(std::string(SERVOARM_SOURCE_DIR) + "/docs/api.md");
+  std::stringstream ss;
+  ss << f.rdbuf();
+  const std::string page = ss.str();
+  const std::string why = api::api_reference_mismatch(page);
+  if (!why.empty()) FAIL(why.c_str());
+  for (const api::MessageSpec& m : api::messages()) CHECK_TEXT(has(page, std::string("| `") + m.name + "` |"), m.name);
+  // the check itself: a row the table does not have
+  std::string extra = page;
+  const auto at = extra.find("| `stop` |");
+  CHECK(at != std::string::npos);
+  extra.insert(at, "| `fly` | anyone | network thread | `-` | flies |\n");
+  CHECK(!api::api_reference_mismatch(extra).empty());
+}

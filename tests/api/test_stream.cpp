@@ -1,0 +1,220 @@
+// SPDX-License-Identifier: Apache-2.0
+// Streaming targets (StreamService, service/stream.hpp, over the control thread's jog with
+// JogSpec::stream) on the controller stepped cycle by cycle (a ManualClock, the virtual drives
+// stepped with it): a 30 Hz stream with ±5 ms jitter stays within the joints' velocity,
+// acceleration and jerk limits; without targets the deadman brakes the arm to rest with an
+// event; a stop ends the stream and later targets do not move the arm; bad targets are refused.
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "servoarm/service/stream.hpp"
+#include "sim_app.hpp"
+
+#include "CppUTest/TestHarness.h"
+
+using namespace servoarm;
+using namespace servoarm::fw;
+
+namespace {
+
+struct Rig {
+  hal::ManualClock clock;
+  test::SimApp app;
+  hal::Duration period = hal::kMillisecond;
+  std::vector<kin::JointVector> trace;  ///< q_cmd after every cycle
+  bool record = false;
+
+  Rig() {
+    FwConfig cfg;
+    cfg.can = "sim";
+    const std::string e = app.build(cfg, &clock);
+    if (!e.empty()) FAIL(e.c_str());
+    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
+    const std::string b = app.boot();
+    if (!b.empty()) FAIL(b.c_str());
+    app.console->set_idle([this] { cycle(); });
+  }
+  ~Rig() { clock.set_idle_hook(nullptr); }
+  ArmService& svc() { return app.console->service(); }
+  void cycle() {
+    app.ctl->cycle(clock.now());
+    clock.advance(period);
+    if (record) trace.push_back(q_cmd());
+  }
+  void run(double s) {
+    for (int i = 0; i < static_cast<int>(s * 1000); ++i) cycle();
+  }
+  Telemetry tel() const { return app.ctl->telemetry(); }
+  kin::JointVector q_cmd() const {
+    const Telemetry t = tel();
+    kin::JointVector q(t.n);
+    for (int j = 0; j < t.n; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+    return q;
+  }
+  void enable() {
+    CHECK(svc().enable().ok());
+    for (int i = 0; i < 2000 && tel().state != ArmState::idle; ++i) cycle();
+    CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(tel().state));
+  }
+  StreamSettings settings() const {
+    StreamSettings s;
+    s.max_step.assign(6, 0.5);
+    return s;
+  }
+};
+
+/// The sine the stream follows: every joint, 0.4 rad at 0.4 Hz around its start.
+kin::JointVector sine(const kin::JointVector& q0, double t) {
+  kin::JointVector q = q0;
+  for (int j = 0; j < q.size(); ++j) q[j] += 0.4 * std::sin(2 * M_PI * 0.4 * t + 0.5 * j);
+  return q;
+}
+
+}  // namespace
+
+TEST_GROUP(FwStream){};
+
+// 30 Hz with ±5 ms jitter for 4 s: the setpoints' velocity, acceleration and jerk (finite
+// differences of q_cmd, cycle by cycle) never exceed the joints' limits, and the arm tracks.
+TEST(FwStream, A30HzStreamWithJitterStaysWithinTheLimits) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  const kin::JointVector q0 = rig.q_cmd();
+  std::mt19937 rng(38);
+  std::uniform_real_distribution<double> jitter(-0.005, 0.005);
+  rig.record = true;
+  double t = 0;
+  bool first = true;
+  double worst_track = 0;
+  while (t < 4.0) {
+    const StreamResult r = st.target(sine(q0, t), first);
+    CHECK_TEXT(r.ok(), r.reason.c_str());
+    first = false;
+    const double gap = 1.0 / 30 + jitter(rng);
+    const auto before = rig.trace.size();
+    while (static_cast<double>(rig.trace.size() - before) * 1e-3 < gap) rig.cycle();
+    t += static_cast<double>(rig.trace.size() - before) * 1e-3;
+    CHECK(rig.tel().streaming);
+    if (t > 1.0) worst_track = std::max(worst_track, (rig.q_cmd() - sine(q0, t)).cwiseAbs().maxCoeff());
+  }
+  const kin::JointLimits& L = rig.svc().limits();
+  const double dt = 1e-3;
+  double rv = 0, ra = 0, rj = 0;  // peak / limit
+  const auto& tr = rig.trace;
+  for (std::size_t k = 3; k < tr.size(); ++k)
+    for (int j = 0; j < 6; ++j) {
+      const auto u = static_cast<std::size_t>(j);
+      const double v = (tr[k][j] - tr[k - 1][j]) / dt;
+      const double a = (tr[k][j] - 2 * tr[k - 1][j] + tr[k - 2][j]) / (dt * dt);
+      const double jk = (tr[k][j] - 3 * tr[k - 1][j] + 3 * tr[k - 2][j] - tr[k - 3][j]) / (dt * dt * dt);
+      rv = std::max(rv, std::fabs(v) / L.dyn[u].max_velocity);
+      ra = std::max(ra, std::fabs(a) / L.dyn[u].max_acceleration);
+      rj = std::max(rj, std::fabs(jk) / L.dyn[u].max_jerk);
+    }
+  const std::string fig = "peak/limit v " + std::to_string(rv) + " a " + std::to_string(ra) + " j " + std::to_string(rj) +
+                          ", tracking error " + std::to_string(worst_track) + " rad";
+  CHECK_TEXT(rv <= 1.0 + 1e-6 && ra <= 1.0 + 1e-3 && rj <= 1.0 + 1e-2, fig.c_str());
+  CHECK_TEXT(rv > 0.05, fig.c_str());  // it did move
+  CHECK_TEXT(worst_track < 0.2, fig.c_str());
+  CHECK_EQUAL(static_cast<int>(ArmState::jogging), static_cast<int>(rig.tel().state));
+}
+
+// No target for the deadman time (100 ms): the arm brakes to rest on its limits, the stream
+// ends with an event, and a target without `start` is refused and does not move it.
+TEST(FwStream, TheDeadmanBrakesToRestWithAnEvent) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  kin::JointVector q = rig.q_cmd();
+  const std::uint64_t seq0 = rig.svc().next_event_seq();
+  for (int i = 0; i < 30; ++i) {  // joint 0 at a steady pace, 100 Hz
+    q[0] += 0.02;
+    CHECK(st.target(q, i == 0).ok());
+    rig.run(0.01);
+  }
+  CHECK(std::fabs(rig.tel().qd_cmd[0]) > 0.5);
+  rig.run(0.09);
+  CHECK(rig.tel().streaming);  // within the deadman time still tracking
+  rig.run(1.0);
+  const Telemetry t = rig.tel();
+  CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(t.state));
+  CHECK(!t.streaming);
+  DOUBLES_EQUAL(0.0, t.qd_cmd[0], 1e-9);
+  rig.svc().poll_events();
+  const EventBatch b = rig.svc().events_since(seq0 - 1);
+  bool said = false;
+  for (const ArmEvent& e : b.events)
+    said = said || (e.kind == EventKind::jog_stopped && rig.svc().event_detail(e).find("stream stopped: no target within its deadman time (100 ms)") != std::string_view::npos);
+  CHECK(said);
+  const kin::JointVector rest = rig.q_cmd();
+  q[0] += 0.02;
+  const StreamResult r = st.target(q, false);
+  CHECK_EQUAL(static_cast<int>(CmdError::bad_state), static_cast<int>(r.error));
+  CHECK_TEXT(r.reason.find("the stream ended") != std::string::npos, r.reason.c_str());
+  rig.run(0.2);
+  CHECK((rig.q_cmd() - rest).cwiseAbs().maxCoeff() < 1e-12);
+  CHECK(st.target(q, true).ok());  // a new stream starts when asked
+}
+
+// A stop ends the stream at once: the arm ramps to rest and targets that keep coming do not
+// move it again.
+TEST(FwStream, AStopWins) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  kin::JointVector q = rig.q_cmd();
+  for (int i = 0; i < 20; ++i) {
+    q[0] += 0.01;
+    CHECK(st.target(q, i == 0).ok());
+    rig.run(0.01);
+  }
+  CHECK(rig.svc().control(RequestOp::stop).ok());
+  for (int i = 0; i < 40; ++i) {  // the client keeps streaming
+    q[0] += 0.01;
+    const StreamResult r = st.target(q, false);
+    CHECK_EQUAL(static_cast<int>(CmdError::bad_state), static_cast<int>(r.error));
+    rig.run(0.01);
+  }
+  const Telemetry t = rig.tel();
+  CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(t.state));
+  CHECK(t.q_cmd[0] < q[0] - 0.3);  // stopped, long before the targets sent after the stop
+}
+
+// Targets outside the joint limits are refused; a step beyond max_step is clamped, or refused
+// when so configured; a wrong joint count or NaN is refused; nothing moves on a refusal.
+TEST(FwStream, BadTargetsAreRefused) {
+  Rig rig;
+  rig.enable();
+  StreamSettings s = rig.settings();
+  StreamService st(rig.svc(), *rig.app.ctl, s);
+  kin::JointVector q = rig.q_cmd();
+  kin::JointVector far = q;
+  far[0] = 100;
+  CHECK_EQUAL(static_cast<int>(CmdError::limits), static_cast<int>(st.target(far, true).error));
+  CHECK_EQUAL(static_cast<int>(CmdError::arg_count), static_cast<int>(st.target(kin::JointVector::Zero(5), true).error));
+  kin::JointVector nan = q;
+  nan[2] = std::nan("");
+  CHECK_EQUAL(static_cast<int>(CmdError::not_finite), static_cast<int>(st.target(nan, true).error));
+  rig.run(0.1);
+  CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(rig.tel().state));
+  kin::JointVector jump = q;
+  jump[0] += 1.5;
+  const StreamResult c = st.target(jump, true);
+  CHECK(c.ok() && c.clamped);
+  kin::JointVector held = q;
+  held[0] += 0.5;
+  for (int i = 0; i < 100; ++i) {  // the clamped target, kept: the arm gets there and holds
+    CHECK(st.target(held, false).ok());
+    rig.run(0.02);
+  }
+  DOUBLES_EQUAL(q[0] + 0.5, rig.q_cmd()[0], 1e-6);
+  CHECK(rig.tel().streaming);
+  s.clamp_step = false;
+  StreamService strict(rig.svc(), *rig.app.ctl, s);
+  const StreamResult r = strict.target(jump + kin::JointVector::Constant(6, 0.0), true);
+  CHECK_EQUAL(static_cast<int>(CmdError::out_of_range), static_cast<int>(r.error));
+}
