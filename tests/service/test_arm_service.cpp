@@ -297,3 +297,135 @@ TEST(ArmService, OutputsAreSetByIndexWithTypedResults) {
   for (int i = 0; i < 20; ++i) r.cycle();
   CHECK(!svc.output_on(0));
 }
+
+// status(): one telemetry snapshot as typed figures (SI): the state, the measured and
+// commanded joints, each joint's homing (joints 2 and 5 home by method 19 and are not
+// homed yet; the others are absolute), the queue. A query changes nothing: asking it twice
+// leaves the motion queue, the event stream and the controller's generation as they were.
+TEST(ArmService, StatusIsATypedSnapshotAndChangesNothing) {
+  FwConfig c;
+  c.drives.resize(6);
+  c.drives[1].homing_method = "19";
+  c.drives[4].homing_method = "19";
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const Telemetry t = r.app.ctl->telemetry();
+  const std::uint64_t seq = svc.next_event_seq();
+  const ArmStatus st = svc.status();
+  const ArmStatus again = svc.status();
+  CHECK(st.state == ArmState::idle);
+  CHECK(again.state == ArmState::idle);
+  LONGS_EQUAL(0, st.queued);
+  LONGS_EQUAL(6, st.q.size());
+  LONGS_EQUAL(6, st.homing.size());
+  for (int j = 0; j < 6; ++j) {
+    DOUBLES_EQUAL(t.q_act[static_cast<std::size_t>(j)], st.q[j], 1e-9);
+    DOUBLES_EQUAL(t.q_cmd[static_cast<std::size_t>(j)], st.q_cmd[j], 1e-9);
+    const bool by_method = j == 1 || j == 4;
+    CHECK_TEXT(st.homing[static_cast<std::size_t>(j)] == (by_method ? JointHoming::unhomed : JointHoming::absolute),
+               to_string(st.homing[static_cast<std::size_t>(j)]));
+  }
+  CHECK(!st.all_homed);
+  CHECK(st.fault_text.empty());
+  LONGS_EQUAL(100, st.feed_pct);
+  CHECK(r.app.ctl->motions().empty());
+  LONGS_EQUAL(seq, svc.next_event_seq());
+  CHECK(r.app.ctl->telemetry().generation == t.generation);
+}
+
+// arm_limits(): the chain's joint limits and kinds and the linear speeds, in SI.
+TEST(ArmService, LimitsAreTheChainsInSi) {
+  test::ConsoleRig r;
+  const ArmLimits a = r.app.console->service().arm_limits();
+  LONGS_EQUAL(6, a.prismatic.size());
+  for (int j = 0; j < 6; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    DOUBLES_EQUAL(r.app.chain.joint(j).lower, a.joints.lower[ju], 0);
+    DOUBLES_EQUAL(r.app.chain.joint(j).upper, a.joints.upper[ju], 0);
+    CHECK(!a.prismatic[ju]);  // the puma560: six revolute joints
+  }
+  DOUBLES_EQUAL(FwConfig{}.max_linear_speed_mm_s * 1e-3, a.max_linear_speed, 1e-12);
+  DOUBLES_EQUAL(FwConfig{}.linear_speed_mm_s * 1e-3, a.default_linear_speed, 1e-12);
+}
+
+// set_settings(): checked whole. A default line speed above the maximum is refused naming
+// the setting and its range, and nothing changes; accepted settings are the ones every front
+// end then uses (the console's `limits` prints the new default speed, the park move goes at
+// the new joint speed).
+TEST(ArmService, SettingsAreCheckedWholeAndUsedByEveryFrontEnd) {
+  test::ConsoleRig r;
+  ArmService& svc = r.app.console->service();
+  const MotionSettings before = svc.settings();
+  MotionSettings s = before;
+  s.default_linear_speed = s.max_linear_speed * 2;
+  s.default_joint_speed_pct = 20;
+  const SettingsResult bad = svc.set_settings(s);
+  CHECK(bad.error == CmdError::out_of_range);
+  CHECK(bad.setting == Setting::default_linear_speed);
+  DOUBLES_EQUAL(s.default_linear_speed, bad.value, 0);
+  DOUBLES_EQUAL(s.max_linear_speed, bad.upper, 0);
+  DOUBLES_EQUAL(before.default_joint_speed_pct, svc.settings().default_joint_speed_pct, 0);
+  s.home = kin::JointVector::Zero(6);
+  s.home[2] = r.app.ctl->limits().upper[2] + 0.1;
+  s.default_linear_speed = 0.05;
+  const SettingsResult home = svc.set_settings(s);
+  CHECK(home.setting == Setting::home);
+  LONGS_EQUAL(2, home.joint);
+  s.home = before.home;
+  const SettingsResult ok = svc.set_settings(s);
+  CHECK(ok.ok());
+  DOUBLES_EQUAL(0.05, svc.settings().default_linear_speed, 0);
+  DOUBLES_EQUAL(20, svc.park_request().speed_pct, 0);
+  const std::string lim = r.cmd("limits");
+  CHECK_TEXT(lim.find("linear speed: default 50.0 mm/s") != std::string::npos, lim.c_str());
+}
+
+// The feed override lives in the service: out of 10..200 % refused with the range; set, it
+// scales the moves planned from then on (a joint move at 50 % takes longer) and the console's
+// status reports it.
+TEST(ArmService, TheFeedOverrideIsTheServicesAndScalesMoves) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const SettingsResult big = svc.set_feed_override(250);
+  CHECK(big.error == CmdError::out_of_range);
+  CHECK(big.setting == Setting::feed_override);
+  DOUBLES_EQUAL(200, big.upper, 0);
+  LONGS_EQUAL(100, svc.feed_override());
+  PathShadow shadow;
+  DryRun dry;
+  dry.tail = svc.tail();
+  dry.shadow = &shadow;
+  MoveContext cx;
+  cx.dry = &dry;
+  MoveJoints m;
+  m.goal = joints({10, -40, 170, 5, 40, -5});
+  m.speed_pct = 40;
+  const double full = svc.move(m, cx).duration;
+  dry.tail = svc.tail();
+  CHECK(svc.set_feed_override(50).ok());
+  LONGS_EQUAL(50, svc.feed_override());
+  const double half = svc.move(m, cx).duration;
+  CHECK(half > full * 1.2);
+  const std::string st = r.cmd("status");
+  CHECK_TEXT(st.find("feed_override=50%") != std::string::npos, st.c_str());
+}
+
+// The request table: every op once, in the enum's order, each name unique and found again by
+// its name; the queries are the ops that only read.
+TEST(ArmService, EveryRequestHasOneNameInTheTable) {
+  const std::size_t n = sizeof kServiceOps / sizeof kServiceOps[0];
+  for (std::size_t i = 0; i < n; ++i) {
+    LONGS_EQUAL(i, static_cast<std::size_t>(kServiceOps[i].op));
+    ServiceOp back{};
+    CHECK_TEXT(service_op_from(kServiceOps[i].name, back), kServiceOps[i].name);
+    CHECK(back == kServiceOps[i].op);
+    STRCMP_EQUAL(kServiceOps[i].name, to_string(kServiceOps[i].op));
+    for (std::size_t k = 0; k < i; ++k) CHECK(std::string(kServiceOps[k].name) != kServiceOps[i].name);
+  }
+  ServiceOp none{};
+  CHECK(!service_op_from("no_such_request", none));
+  CHECK(kServiceOps[static_cast<std::size_t>(ServiceOp::status)].query);
+  CHECK(!kServiceOps[static_cast<std::size_t>(ServiceOp::set_settings)].query);
+}

@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <cstdarg>
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstdio>
@@ -143,21 +144,8 @@ std::string refusal_text(const ModelControl& m, ModelPart p) { return bounded_te
 
 Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* ik)
     : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints), ik_(ik) {
-  MotionSettings ms;
-  ms.default_joint_speed_pct = cfg_.default_joint_speed_pct;
-  ms.default_linear_speed = cfg_.default_linear_speed;
-  ms.max_linear_speed = cfg_.max_linear_speed;
-  ms.max_move_duration_s = cfg_.max_move_duration_s;
-  ms.cartesian = cfg_.cartesian;
-  ms.default_blend_rad = cfg_.default_blend_rad;
-  ms.default_blend_m = cfg_.default_blend_m;
-  ms.park = cfg_.home;
-  ms.jog_speed_pct = cfg_.jog_speed_pct;
-  ms.jog_deadman_s = cfg_.jog_deadman_s;
-  for (const ConsoleConfig::Output& o : cfg_.outputs) ms.outputs.push_back(OutputBit{o.joint, o.bit});
-  svc_ = std::make_unique<ArmService>(ctl_, ms);
-  cfg_.home = svc_->settings().park;  // config() shows the park pose the service uses
-  svc_->set_reply_timeout(cfg_.reply_timeout_s);
+  svc_ = std::make_unique<ArmService>(ctl_, cfg_);
+  cfg_.home = svc_->settings().home;  // config() shows the park pose the service uses
   auto t0 = std::make_unique<ToolSlot>();
   t0->def.name = "tool0";
   t0->chain = chain_;
@@ -262,7 +250,7 @@ std::string Console::discard_sync_outputs(const char* why) {
   if (pending.empty()) return {};
   std::string names;
   for (const OutputChange& ch : pending)
-    for (const ConsoleConfig::Output& o : cfg_.outputs)
+    for (const ConsoleConfig::Output& o : motion().outputs)
       if (o.joint == ch.joint && ((ch.mask >> o.bit) & 1u))
         names += fmt("%s%s %s", names.empty() ? "" : ", ", o.name.c_str(), ((ch.value >> o.bit) & 1u) ? "on" : "off");
   svc_->clear_pending_outputs();
@@ -296,9 +284,7 @@ kin::JointVector Console::commanded_joints() const {
 kin::Pose Console::commanded_pose() const { return tcp(commanded_joints()); }
 
 std::string Console::status_text() const {
-  const Telemetry t = ctl_.telemetry();
-  kin::JointVector q(n_);
-  for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+  const ArmStatus st = svc_->status();
   const ConsoleUnits& u = cfg_.units;
   // the joints' units: the angle unit, or one per joint when a joint is prismatic (a length)
   std::string ju = u.angle_name();
@@ -308,17 +294,19 @@ std::string Console::status_text() const {
     ju.clear();
     for (int j = 0; j < n_; ++j) ju += std::string(j ? "," : "") + u.joint_name(chain_, j);
   }
-  std::string s = fmt("state=%s%s queue=%u joints=[%s] %s pose=[%s] %s,%s %s", to_string(t.state), t.holding ? " hold=1" : "",
-                      unsigned(t.queued), joints_text(q).c_str(), ju.c_str(), pose_text(q).c_str(), u.length_name(),
+  std::string s = fmt("state=%s%s queue=%u joints=[%s] %s pose=[%s] %s,%s %s", to_string(st.state), st.holding ? " hold=1" : "",
+                      unsigned(st.queued), joints_text(st.q).c_str(), ju.c_str(), pose_text(st.q).c_str(), u.length_name(),
                       u.angle_name(), where_text().c_str());
-  s += " homing=[" + homing_text(t) + "]";
-  s += fmt(" feed_override=%d%%", feed_pct_);
+  s += " homing=[";
+  for (std::size_t j = 0; j < st.homing.size(); ++j) s += std::string(j ? " " : "") + to_string(st.homing[j]);
+  s += "]";
+  s += fmt(" feed_override=%d%%", st.feed_pct);
   if (run_) s += " " + program_text();
   if (rec_.active) s += fmt(" recording=%zu", rec_.samples.size());
-  if (t.feed_forward != 0 || t.collision_on || t.freedrive != 0)  // (the dynamics parts, when one runs)
-    s += fmt(" feed_forward=%s collision=%s freedrive=%s", to_string(static_cast<FeedForwardKind>(t.feed_forward)),
-             t.collision_on ? "on" : "off", to_string(static_cast<FreedrivePhase>(t.freedrive)));
-  if (bounded_text(t.fault_text).c_str()[0]) s += fmt(" fault=\"%s\"", bounded_text(t.fault_text).c_str());
+  if (st.feed_forward != FeedForwardKind::off || st.collision_on || st.freedrive != FreedrivePhase::off)  // (the dynamics parts, when one runs)
+    s += fmt(" feed_forward=%s collision=%s freedrive=%s", to_string(st.feed_forward), st.collision_on ? "on" : "off",
+             to_string(st.freedrive));
+  if (!st.fault_text.empty()) s += fmt(" fault=\"%s\"", st.fault_text.c_str());
   return s;
 }
 
@@ -334,20 +322,6 @@ std::string Console::dynamics_text() const {
   for (const ModelPart p : {ModelPart::feed_forward, ModelPart::collision, ModelPart::freedrive})
     if (!m->available(p)) s += fmt("\n%s unavailable: %s", to_string(p), refusal_text(*m, p).c_str());
   return s;
-}
-
-std::string Console::homing_text(const Telemetry& t) const {
-  std::string o;
-  for (int j = 0; j < n_; ++j) {
-    const auto ju = static_cast<std::size_t>(j);
-    const char* w = "unhomed";
-    if ((t.homing_now >> j) & 1u) w = "homing";
-    else if (static_cast<hal::HomingKind>(t.homing_kind[ju]) == hal::HomingKind::none) w = "absolute";
-    else if ((t.homed >> j) & 1u) w = "homed";
-    else if ((t.homing_failed >> j) & 1u) w = "failed";
-    o += (j ? " " : "") + std::string(w);
-  }
-  return o;
 }
 
 std::string Console::unhomed_refusal(const Telemetry& t) const { return svc_->unhomed_reason(t); }
@@ -392,7 +366,7 @@ std::string Console::grbl_report() const {
   // MPos: G-code lengths (mm, as GRBL reports them); J: the console's joint units.
   const int d = cfg_.units.angle == AngleUnit::deg && cfg_.units.length == LengthUnit::mm ? 2 : 5;
   for (int j = 0; j < n_; ++j) s += (j ? "," : "") + fixed(to_user(j, q[j]), d);
-  s += fmt("|Q:%u|Ov:%d", unsigned(t.queued), feed_pct_);
+  s += fmt("|Q:%u|Ov:%d", unsigned(t.queued), svc_->feed_override());
   if (run_) s += fmt("|Pgm:%s,%s,%s", run_->name.c_str(), to_string(run_->state), program_where().c_str());
   return s + ">";
 }
@@ -424,7 +398,7 @@ std::string Console::grbl_report(const Session& s) const {
   std::string pgm;  // GRBL 1.1's Ln: (the line), and the program and its state
   if (run_ && run_->current < run_->prog.steps.size())
     pgm = fmt("|Ln:%d|Pgm:%s,%s", run_->prog.steps[run_->current].line, run_->name.c_str(), to_string(run_->state));
-  return fmt("<%s|%s|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld%s>", st, grbl_position(q).c_str(), feed_now_ * 60e3, feed_pct_,
+  return fmt("<%s|%s|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld%s>", st, grbl_position(q).c_str(), feed_now_ * 60e3, svc_->feed_override(),
              blocks_free < 0 ? 0 : blocks_free, rx_free < 0 ? 0 : rx_free, pgm.c_str());
 }
 
@@ -525,7 +499,7 @@ MoveJoints Console::joint_request(const Command& c) const {
   if (c.cmd == Cmd::park) return svc_->park_request();
   m.goal = kin::JointVector(n_);
   for (int j = 0; j < n_; ++j) m.goal[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
-  m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
+  m.speed_pct = c.has_speed ? c.speed : motion().default_joint_speed_pct;
   m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : -1.0;
   return m;
 }
@@ -554,7 +528,6 @@ MoveContext Console::move_context(DryRun* dry, const StepParams* step) const {
   cx.dry = dry;
   cx.chain = &tool_slot().chain;
   cx.ik = ik_solver();
-  cx.feed_pct = feed_pct_;
   cx.outputs = svc_->pending_outputs();
   if (step != nullptr) {
     cx.step_blend = step->blend;
@@ -597,7 +570,7 @@ void Console::answer_refusal(Session& s, const char* what, const MoveResult& r) 
     case MoveRefusal::linear_speed:
       answer_error(s, r.error, fmt("linear speed %g %s/s outside [%g, %g]", u.length_out(r.speed), u.length_name(),
                                    u.length == LengthUnit::mm ? kMinLinearSpeedMmS : kMinLinearSpeedMmS * 1e-3,
-                                   u.length_out(cfg_.max_linear_speed)));
+                                   u.length_out(motion().max_linear_speed)));
       return;
     case MoveRefusal::plan: {
       if (std::string_view(what) != "movel") {
@@ -614,7 +587,7 @@ void Console::answer_refusal(Session& s, const char* what, const MoveResult& r) 
     }
     case MoveRefusal::duration:
       answer_error(s, r.error, fmt("%s refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
-                                   "(raise the speed); nothing queued", what, r.duration, cfg_.max_move_duration_s));
+                                   "(raise the speed); nothing queued", what, r.duration, motion().max_move_duration_s));
       return;
     case MoveRefusal::queue_full:
       answer_error(s, r.error, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
@@ -766,11 +739,12 @@ void Console::do_ik(Session& s, const Command& c) {
 }
 
 void Console::do_limits(Session& s) {
-  const auto& lim = ctl_.limits();
+  const ArmLimits a = svc_->arm_limits();
+  const auto& lim = a.joints;
   const ConsoleUnits& u = cfg_.units;
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
-    const bool pr = chain_.joint(j).type == kin::JointType::prismatic;
+    const bool pr = a.prismatic[ju];
     const int d = pr ? u.length_decimals() : u.angle_decimals();
     const auto f = [&](double si) { return fixed(to_user(j, si), d); };
     s.out += fmt("joint %d: %s [%s, %s] %s  vmax=%s amax=%s jmax=%s %s/s^k\n", j + 1, pr ? "prismatic" : "revolute",
@@ -779,9 +753,9 @@ void Console::do_limits(Session& s) {
   }
   const int v = u.length == LengthUnit::mm ? 1 : 4;
   s.out += fmt("linear speed: default %s %s/s, max %s %s/s; following error limit %s %s\n",
-               fixed(u.length_out(cfg_.default_linear_speed), v).c_str(), u.length_name(),
-               fixed(u.length_out(cfg_.max_linear_speed), v).c_str(), u.length_name(),
-               u.angle_text(ctl_.config().following_error).c_str(), u.angle_name());
+               fixed(u.length_out(a.default_linear_speed), v).c_str(), u.length_name(),
+               fixed(u.length_out(a.max_linear_speed), v).c_str(), u.length_name(), u.angle_text(a.following_error).c_str(),
+               u.angle_name());
   answer_ok(s);
 }
 
@@ -1114,13 +1088,13 @@ void Console::realtime(Session& s, char ch) {
   if (is_feed_override(ch)) {
     // GRBL feed override, 10..200 %: the speed of jogs and of moves queued from now on.
     const auto u = static_cast<unsigned char>(ch);
-    int v = feed_pct_;
+    int v = svc_->feed_override();
     if (u == kRtFeed100) v = 100;
     else if (u == kRtFeedPlus10) v += 10;
     else if (u == kRtFeedMinus10) v -= 10;
     else if (u == kRtFeedPlus1) v += 1;
     else if (u == kRtFeedMinus1) v -= 1;
-    feed_pct_ = v < 10 ? 10 : v > 200 ? 200 : v;
+    svc_->set_feed_override(std::clamp(v, kMinFeedOverride, kMaxFeedOverride));
     return;
   }
   switch (ch) {
@@ -1273,7 +1247,6 @@ JogContext Console::jog_context() const {
   JogContext cx;
   cx.chain = &tool_slot().chain;
   cx.ik = ik_solver();
-  cx.feed_pct = feed_pct_;
   cx.user_axes = user_frame().linear();
   return cx;
 }
@@ -1298,14 +1271,14 @@ void Console::answer_jog(Session& s, const JogResult& r, const char* what, doubl
       return;
     case JogRefusal::duration:
       answer_error(s, r.error, fmt("jog refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
-                                   "(raise the speed); nothing moved", r.duration, cfg_.max_move_duration_s));
+                                   "(raise the speed); nothing moved", r.duration, motion().max_move_duration_s));
       return;
     case JogRefusal::unreachable:
       answer_error(s, r.error, fmt("%s: the target has no IK solution within the joint limits; nothing moved", what));
       return;
     case JogRefusal::feed:
       answer_error(s, r.error, fmt("%s: feed %g mm/min (with the %d %% override) below %g mm/min; nothing moved", what,
-                                   r.speed * 6e4, feed_pct_, kMinLinearSpeedMmS * 60));
+                                   r.speed * 6e4, svc_->feed_override(), kMinLinearSpeedMmS * 60));
       return;
     case JogRefusal::control: answer_error(s, r.error, r.reason); return;
   }
@@ -1396,8 +1369,8 @@ std::string Console::grbl_settings() const {
   // Only the GRBL settings that mean something on an arm; the configuration file sets them.
   double reach = 0;
   for (int j = 0; j < n_; ++j) reach += std::hypot(chain_.joint(j).a, chain_.joint(j).d);
-  const double vmax = cfg_.max_linear_speed * 60e3;       // mm/min
-  const double amax = cfg_.cartesian.linear_acceleration * 1e3;  // mm/s^2
+  const double vmax = motion().max_linear_speed * 60e3;       // mm/min
+  const double amax = motion().cartesian.linear_acceleration * 1e3;  // mm/s^2
   std::string o;
   o += "$10=3\n";   // status report: MPos and buffer data
   o += "$13=0\n";   // report in mm
@@ -1431,7 +1404,7 @@ void Console::do_grbl(Session& s, const Command& c) {
           if (f.name == "g" + std::to_string(g)) o = f.pose.translation();
         s.out += fmt("[G%d:%s]\n", g, mm_triple(o, ",").c_str());
       }
-      const kin::Pose h = tcp(cfg_.home);
+      const kin::Pose h = tcp(motion().home);
       s.out += fmt("[G28:%s]\n[G30:0.000,0.000,0.000]\n[G92:0.000,0.000,0.000]\n[TLO:0.000]\n"
                    "[PRB:0.000,0.000,0.000:0]\n",
                    mm_triple(h.translation()).c_str());

@@ -215,7 +215,7 @@ void Console::queue_at_point(Session& s, const Command& c) {
   if (c.cmd == Cmd::movej) {
     MoveJoints m;
     m.goal = p->q;
-    m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
+    m.speed_pct = c.has_speed ? c.speed : motion().default_joint_speed_pct;
     m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : -1.0;
     queue(s, m);
     return;
@@ -616,7 +616,7 @@ void Console::do_record(Session& s, const Command& c) {
     const kin::JointVector& q = rec_.samples[keep[k]];
     std::string line = "movej";
     for (int j = 0; j < n_; ++j) line += fmt(" %.10g", to_user(j, q[j]));
-    line += fmt(" speed=%g", cfg_.default_joint_speed_pct);
+    line += fmt(" speed=%g", motion().default_joint_speed_pct);
     if (k > 0 && k + 1 < keep.size()) line += fmt(" blend=%.6g", u.angle_out(0.5 * tol));
     text += line + "\n";
     ++moves;
@@ -638,7 +638,7 @@ void Console::do_record(Session& s, const Command& c) {
 // ---------------------------------------------------------------------------
 
 void Console::do_out(Session& s, const Command& c) {
-  const auto& outs = cfg_.outputs;
+  const auto& outs = motion().outputs;
   if (c.out_index == -1) {  // list
     for (std::size_t k = 0; k < outs.size(); ++k) {
       const ConsoleConfig::Output& o = outs[k];

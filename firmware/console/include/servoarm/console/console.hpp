@@ -44,20 +44,15 @@ namespace servoarm::fw {
 enum class Dialect : std::uint8_t { native, grbl };
 const char* to_string(Dialect d);
 
-struct ConsoleConfig {
-  double default_joint_speed_pct = 50.0;     ///< movej / park without speed=
-  double default_linear_speed = 0.1;         ///< m/s: movel / G1 without speed/F
-  double max_linear_speed = 0.25;            ///< m/s: upper bound of speed= / F, and G0
-  kin::JointVector home;                     ///< SI; empty = all zeros clamped into the limits
-  kin::CartesianLimits cartesian{};          ///< linear_velocity is replaced per move
-  double reply_timeout_s = 1.0;              ///< wait for the control thread to answer a request
-  double max_move_duration_s = 600.0;        ///< longest move accepted (movej, movel, G0/G1, park): out_of_range beyond
+/// The console's configuration: the service's settings (MotionSettings: speeds, blend,
+/// home, jog, outputs; handed to the arm service, which keeps them: the console reads them
+/// there) and what only the console uses.
+struct ConsoleConfig : MotionSettings {
+  using Output = OutputBit;
   std::string config_text;                   ///< what `config` prints (the effective configuration)
   /// What the command language reads and writes (help and status name them); the robot
   /// description's: App sets units_of(chain). G-code keeps G20/G21 mm/inch and degrees.
   ConsoleUnits units{};
-  double jog_deadman_s = 0.25;               ///< a continuous jog not refreshed this long stops
-  double jog_speed_pct = 10.0;               ///< jog speed without speed=: percent of the joint / tool limits
   Dialect dialect = Dialect::native;         ///< of sessions that do not choose their own
   std::string robot_name;                    ///< for $I
   /// Where the tools and user frames are kept (frames.hpp); "" = in memory only (they are
@@ -70,18 +65,6 @@ struct ConsoleConfig {
   std::string programs_dir;
   double record_rate_hz = 50.0;              ///< record start without rate=
   double record_tolerance = 0.5 * M_PI / 180.0;  ///< rad: record stop without tolerance=
-  /// Named digital outputs ([[output]], in order: M62..M65 P = the index): bit `bit` of the
-  /// 60FEh:01 word of joint `joint`'s drive (App maps the node to the joint).
-  struct Output {
-    std::string name;
-    int joint = 0;
-    int bit = 0;
-  };
-  std::vector<Output> outputs;
-  /// Blend tolerance of a move that gives none (movej / movel without blend=, G0/G1 outside a
-  /// program's G64 P / G61): 0 = exact stop (App: motion.default_blend_deg / _mm).
-  double default_blend_rad = 0.0;            ///< movej: joint-space distance (rad)
-  double default_blend_m = 0.0;              ///< movel, G0/G1: tool-point distance (m)
 };
 
 /// A program run by the console (`run NAME`): idle = none.
@@ -198,7 +181,7 @@ class Console {
   void client_gone(Session& s);
   /// Feed override in percent (10..200; GRBL 0x90..0x94): scales the speed of jogs and
   /// of moves queued from now on.
-  int feed_override() const { return feed_pct_; }
+  int feed_override() const { return svc_->feed_override(); }
 
   /// Load the tools and user frames of cfg.frames_file (a missing file: none yet). Call once,
   /// before any line. "" or the one-line error (file:line:column); on error nothing is loaded
@@ -249,8 +232,6 @@ class Console {
   std::string unhomed_refusal(const Telemetry& t) const;
   /// False (and the not_homed answer) when a joint is not homed.
   bool homed_ok(Session& s);
-  /// status's homing=[...]: absolute, homed, homing, failed or unhomed per joint.
-  std::string homing_text(const Telemetry& t) const;
   std::string grbl_settings() const;
   void realtime(Session& s, char ch);
   /// Feed hold: the arm (a move decelerates and stays held, a jog stops) and the program.
@@ -421,8 +402,8 @@ class Console {
   void end_program(const std::string& how);
   std::string program_where() const;  ///< FILE:LINE of the current step
   std::string points_refusal() const;  ///< "" when points may change now
-  // Jogging: where the running jog is going (GRBL jog lines are relative to it).
-  int feed_pct_ = 100;
+  /// The service's settings (speeds, blend, home, outputs: one place).
+  const MotionSettings& motion() const { return svc_->settings(); }
   double feed_now_ = 0;  ///< m/s of the last jog or linear move queued (FS:)
 };
 

@@ -96,7 +96,7 @@ struct MoveContext {
   DryRun* dry = nullptr;            ///< set: a dry run (planned and checked, nothing queued)
   const kin::Chain* chain = nullptr;  ///< the active tool's chain; nullptr: the arm's
   kin::IkSolver ik{};               ///< its IK (movel's path check and the controller's sampling)
-  int feed_pct = 100;               ///< feed override (10..200): scales the speed of the move
+  int feed_pct = -1;                ///< feed override (10..200) scaling the move's speed; < 0: the service's
   std::span<const OutputChange> outputs{};  ///< M62 / M63 changes the move carries (real run)
   double step_blend = -1;           ///< a program step's blend tolerance (SI; < 0 none)
   bool next_line = false;           ///< a program step whose next motion is a line
@@ -114,8 +114,10 @@ struct ControlResult {
 /// The error code of a control-thread result.
 CmdError control_error(RtResult r);
 
-/// A digital output ([[output]]): bit `bit` of joint `joint`'s drive outputs word.
+/// A digital output ([[output]]): bit `bit` of joint `joint`'s drive outputs word, and the
+/// name it is asked by.
 struct OutputBit {
+  std::string name;
   int joint = 0;
   int bit = 0;
 };
@@ -145,19 +147,96 @@ struct OutputResult {
   bool ok() const { return error == CmdError::ok; }
 };
 
-/// The service's motion settings (SI): the console's configuration of them.
+/// The service's settings (SI), in one place: the configuration gives them at start
+/// (App::console_config), set_settings() changes them; every front end reads them here.
 struct MotionSettings {
-  double default_joint_speed_pct = 50.0;
-  double default_linear_speed = 0.1;   ///< m/s
-  double max_linear_speed = 0.25;      ///< m/s
-  double max_move_duration_s = 600.0;
+  double default_joint_speed_pct = 50.0;  ///< movej / park without a speed: percent of the joint limits
+  double default_linear_speed = 0.1;   ///< m/s: movel / G1 without a speed
+  double max_linear_speed = 0.25;      ///< m/s: upper bound of a line's speed, and G0
+  double max_move_duration_s = 600.0;  ///< longest move or jog accepted: out_of_range beyond
   kin::CartesianLimits cartesian{};    ///< linear_velocity is replaced per move
-  double default_blend_rad = 0.0;      ///< movej without blend=
-  double default_blend_m = 0.0;        ///< movel, G0/G1 without blend=
-  kin::JointVector park;               ///< the park pose (SI); empty: every joint's zero clamped into its limits
+  double default_blend_rad = 0.0;      ///< blend tolerance of a movej that gives none (0: exact stop)
+  double default_blend_m = 0.0;        ///< the same of movel, G0/G1 (tool-point distance)
+  kin::JointVector home;               ///< the park pose (`park`, G28; SI); empty: every joint's zero clamped into its limits
   double jog_speed_pct = 10.0;         ///< jog speed without one given: percent of the joint / tool limits
   double jog_deadman_s = 0.25;         ///< a continuous jog not refreshed this long stops
-  std::vector<OutputBit> outputs;      ///< the digital outputs, in [[output]] order
+  double reply_timeout_s = 1.0;        ///< wait for the control thread to answer a request
+  std::vector<OutputBit> outputs;      ///< the digital outputs, in [[output]] order (fixed at start)
+};
+
+/// A setting set_settings() checks (SettingsResult::setting).
+enum class Setting : std::uint8_t {
+  none,
+  default_joint_speed_pct,
+  default_linear_speed,
+  max_linear_speed,
+  max_move_duration_s,
+  default_blend_rad,
+  default_blend_m,
+  home,
+  jog_speed_pct,
+  jog_deadman_s,
+  reply_timeout_s,
+  outputs,
+  feed_override,
+};
+const char* to_string(Setting s);
+
+/// The answer to set_settings() / set_feed_override(): done, or the setting refused with its
+/// value and range (SI; home: joint `joint`'s value against its limits).
+struct SettingsResult {
+  CmdError error = CmdError::ok;
+  Setting setting = Setting::none;
+  double value = 0, lower = 0, upper = 0;
+  int joint = -1;
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// The feed override's range (percent; GRBL 0x90..0x94 step it within it).
+inline constexpr int kMinFeedOverride = 10;
+inline constexpr int kMaxFeedOverride = 200;
+
+/// A joint's homing as the status reports it.
+enum class JointHoming : std::uint8_t {
+  unhomed,   ///< its zero is not established (not homed since power-on)
+  homing,    ///< it homes now
+  homed,     ///< homed this power cycle
+  failed,    ///< its last homing failed
+  absolute,  ///< an absolute encoder: needs no homing
+};
+const char* to_string(JointHoming h);
+
+/// The answer to status(): what the arm does and where it is (SI), read from one telemetry
+/// snapshot. A query: it changes nothing.
+struct ArmStatus {
+  ArmState state = ArmState::boot;
+  Mode mode = Mode::boot;
+  bool holding = false;            ///< a feed hold is active
+  std::uint32_t queued = 0;        ///< motions in the queue (the running one included)
+  std::uint32_t running_id = 0;    ///< the running motion (0 none)
+  std::uint32_t done_id = 0;       ///< the last motion finished
+  std::uint64_t cycles = 0;        ///< control cycles since start (RT time)
+  double t = 0;                    ///< the same in s
+  kin::JointVector q;              ///< measured joint positions
+  kin::JointVector q_cmd;          ///< commanded joint positions
+  std::vector<JointHoming> homing; ///< per joint
+  bool all_homed = false;
+  FaultCause fault = FaultCause::none;  ///< the fault's cause (state fault)
+  int fault_joint = -1;            ///< the joint concerned (0-based), -1 none
+  std::string fault_text;          ///< the control thread's line for it ("" none)
+  int feed_pct = 100;              ///< the feed override
+  FeedForwardKind feed_forward = FeedForwardKind::off;
+  bool collision_on = false;
+  FreedrivePhase freedrive = FreedrivePhase::off;
+};
+
+/// The answer to arm_limits(): the joint limits, the joints' kinds and the Cartesian limits (SI).
+struct ArmLimits {
+  kin::JointLimits joints;              ///< lower, upper, max velocity / acceleration / jerk per joint
+  std::vector<bool> prismatic;          ///< per joint: a length (m), else an angle (rad)
+  double following_error = 0;           ///< the supervisor's following-error limit (rad)
+  double default_linear_speed = 0, max_linear_speed = 0;  ///< m/s
+  kin::CartesianLimits cartesian{};
 };
 
 /// What a jog request refused (JogResult::refusal); none: accepted.
@@ -208,7 +287,7 @@ struct PoseJog {
 struct JogContext {
   const kin::Chain* chain = nullptr;  ///< nullptr: the arm's
   kin::IkSolver ik{};  ///< tool and pose jogs check their target with it (none: refused as unreachable)
-  int feed_pct = 100;
+  int feed_pct = -1;   ///< < 0: the service's feed override
   Eigen::Matrix3d user_axes = Eigen::Matrix3d::Identity();  ///< the active user frame's orientation
 };
 
@@ -248,6 +327,77 @@ struct EventBatch {
   std::vector<ArmEvent> events;
   std::uint64_t missed = 0;  ///< events after `seq` no longer kept (overwritten before this read)
 };
+
+/// Every request the service takes, by one name each: a front end that speaks in messages
+/// (a network API) maps one message to one of these; `query` ones read and change nothing.
+/// kServiceOps lists each once, in this order (a test checks): the names live there only.
+enum class ServiceOp : std::uint8_t {
+  move_joints,          ///< move(MoveJoints) -> MoveResult
+  move_line,            ///< move(MoveLine) -> MoveResult
+  dwell,                ///< dwell(s) -> MoveResult
+  park,                 ///< move(park_request()) -> MoveResult
+  enable,               ///< enable() -> ControlResult
+  disable,              ///< control(disable)
+  stop,                 ///< control(stop)
+  estop,                ///< control(estop)
+  reset,                ///< control(reset)
+  hold,                 ///< control(hold)
+  resume,               ///< control(resume)
+  set_zero,             ///< control(set_zero)
+  home,                 ///< home(joint) -> ControlResult
+  freedrive,            ///< freedrive(on) -> ControlResult
+  collision_detection,  ///< collision_detection(on) -> ControlResult
+  jog_joint,            ///< jog(JointJog) -> JogResult
+  jog_tool,             ///< jog(ToolJog) -> JogResult
+  jog_pose,             ///< jog(PoseJog) -> JogResult
+  jog_keepalive,        ///< jog_keepalive() -> ControlResult
+  jog_cancel,           ///< jog_cancel() -> ControlResult
+  set_output,           ///< set_output(OutputRequest) -> OutputResult
+  events,               ///< events_since(seq) -> EventBatch
+  status,               ///< status() -> ArmStatus
+  limits,               ///< arm_limits() -> ArmLimits
+  settings,             ///< settings() -> MotionSettings
+  set_settings,         ///< set_settings(MotionSettings) -> SettingsResult
+  set_feed_override,    ///< set_feed_override(pct) -> SettingsResult
+};
+
+struct ServiceOpInfo {
+  ServiceOp op;
+  const char* name;
+  bool query;  ///< reads only: never changes the arm, the queue or the service
+};
+inline constexpr ServiceOpInfo kServiceOps[] = {
+    {ServiceOp::move_joints, "move_joints", false},
+    {ServiceOp::move_line, "move_line", false},
+    {ServiceOp::dwell, "dwell", false},
+    {ServiceOp::park, "park", false},
+    {ServiceOp::enable, "enable", false},
+    {ServiceOp::disable, "disable", false},
+    {ServiceOp::stop, "stop", false},
+    {ServiceOp::estop, "estop", false},
+    {ServiceOp::reset, "reset", false},
+    {ServiceOp::hold, "hold", false},
+    {ServiceOp::resume, "resume", false},
+    {ServiceOp::set_zero, "set_zero", false},
+    {ServiceOp::home, "home", false},
+    {ServiceOp::freedrive, "freedrive", false},
+    {ServiceOp::collision_detection, "collision_detection", false},
+    {ServiceOp::jog_joint, "jog_joint", false},
+    {ServiceOp::jog_tool, "jog_tool", false},
+    {ServiceOp::jog_pose, "jog_pose", false},
+    {ServiceOp::jog_keepalive, "jog_keepalive", false},
+    {ServiceOp::jog_cancel, "jog_cancel", false},
+    {ServiceOp::set_output, "set_output", false},
+    {ServiceOp::events, "events", true},
+    {ServiceOp::status, "status", true},
+    {ServiceOp::limits, "limits", true},
+    {ServiceOp::settings, "settings", true},
+    {ServiceOp::set_settings, "set_settings", false},
+    {ServiceOp::set_feed_override, "set_feed_override", false},
+};
+const char* to_string(ServiceOp op);
+/// The op named `name` (kServiceOps); false: none is.
+bool service_op_from(std::string_view name, ServiceOp& op);
 
 class ArmService {
  public:
@@ -302,9 +452,19 @@ class ArmService {
   void clear_pending_outputs() { n_sync_out_ = 0; }
   /// The park move (`park`, G28): to the park pose at the default joint speed.
   MoveJoints park_request() const;
+
+  /// Queries: they read and change nothing.
+  ArmStatus status() const;
+  ArmLimits arm_limits() const;
+  const MotionSettings& settings() const { return cfg_; }
+  int feed_override() const { return feed_pct_; }
+  /// Settings: all of them at once (checked whole: nothing changes when one is refused; the
+  /// outputs are fixed at start), and the feed override (percent, kMinFeedOverride..
+  /// kMaxFeedOverride): scales jogs and the moves queued from now on.
+  SettingsResult set_settings(const MotionSettings& s);
+  SettingsResult set_feed_override(int pct);
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
   void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
-  void set_reply_timeout(double s) { reply_timeout_s_ = s; }
 
   /// Take every event the control thread has sent into the event ring (numbered and stamped).
   /// Returns how many. The service is the queue's one consumer: nothing else pops it.
@@ -330,7 +490,6 @@ class ArmService {
   kin::JointVector tail() const;
   /// Motions queued so far (ids 1..n).
   std::uint32_t last_motion_id() const { return next_id_ - 1; }
-  const MotionSettings& settings() const { return cfg_; }
   const kin::JointLimits& limits() const { return lim_; }
 
  private:
@@ -386,7 +545,8 @@ class ArmService {
   std::unique_ptr<std::array<EventSlot, kEventRing>> ring_;  ///< slot seq % kEventRing
   std::uint64_t next_seq_ = 1;
   std::function<void()> idle_;
-  double reply_timeout_s_ = 1.0;
+  int feed_pct_ = 100;
+  int feed_of(int given) const { return given < 0 ? feed_pct_ : given; }
 };
 
 }  // namespace servoarm::fw
