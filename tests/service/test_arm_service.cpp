@@ -132,7 +132,7 @@ TEST(ArmService, EventSequenceNumbersIncreaseByOne) {
   for (std::size_t i = 0; i < b.events.size(); ++i) {
     const ArmEvent& e = b.events[i];
     CHECK(e.seq == after + 1 + i);
-    CHECK(e.kind == EventKind::homing);
+    CHECK(e.kind == ArmEventKind::homing);
     LONGS_EQUAL((2 + i) % 6, e.joint);
     CHECK(e.cycle >= cycles_before && e.cycle <= r.app.ctl->telemetry().cycles);
     DOUBLES_EQUAL(static_cast<double>(e.cycle) * r.app.ctl->period_s(), e.t, 1e-12);

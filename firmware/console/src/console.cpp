@@ -301,7 +301,7 @@ std::string Console::status_text() const {
   for (std::size_t j = 0; j < st.homing.size(); ++j) s += std::string(j ? " " : "") + to_string(st.homing[j]);
   s += "]";
   s += fmt(" feed_override=%d%%", st.feed_pct);
-  if (run_) s += " " + program_text();
+  if (running()) s += " " + program_text();
   if (rec_.active) s += fmt(" recording=%zu", rec_.samples.size());
   if (st.feed_forward != FeedForwardKind::off || st.collision_on || st.freedrive != FreedrivePhase::off)  // (the dynamics parts, when one runs)
     s += fmt(" feed_forward=%s collision=%s freedrive=%s", to_string(st.feed_forward), st.collision_on ? "on" : "off",
@@ -367,7 +367,10 @@ std::string Console::grbl_report() const {
   const int d = cfg_.units.angle == AngleUnit::deg && cfg_.units.length == LengthUnit::mm ? 2 : 5;
   for (int j = 0; j < n_; ++j) s += (j ? "," : "") + fixed(to_user(j, q[j]), d);
   s += fmt("|Q:%u|Ov:%d", unsigned(t.queued), svc_->feed_override());
-  if (run_) s += fmt("|Pgm:%s,%s,%s", run_->name.c_str(), to_string(run_->state), program_where().c_str());
+  if (running()) {
+    const ProgramStatus p = svc_->program_status();
+    s += fmt("|Pgm:%s,%s,%s", p.name.c_str(), to_string(p.state), program_where().c_str());
+  }
   return s + ">";
 }
 
@@ -396,8 +399,8 @@ std::string Console::grbl_report(const Session& s) const {
   const long rx_free = static_cast<long>(kGrblRxBuffer) - static_cast<long>(pending);
   const long blocks_free = static_cast<long>(kMotionQueue) - static_cast<long>(t.queued);
   std::string pgm;  // GRBL 1.1's Ln: (the line), and the program and its state
-  if (run_ && run_->current < run_->prog.steps.size())
-    pgm = fmt("|Ln:%d|Pgm:%s,%s", run_->prog.steps[run_->current].line, run_->name.c_str(), to_string(run_->state));
+  if (const ProgramStatus p = svc_->program_status(); p.state != RunState::idle && p.running < p.steps)
+    pgm = fmt("|Ln:%d|Pgm:%s,%s", p.running_line, p.name.c_str(), to_string(p.state));
   return fmt("<%s|%s|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld%s>", st, grbl_position(q).c_str(), feed_now_ * 60e3, svc_->feed_override(),
              blocks_free < 0 ? 0 : blocks_free, rx_free < 0 ? 0 : rx_free, pgm.c_str());
 }
@@ -431,16 +434,6 @@ std::string Console::drain_events() {
 
 void Console::drain_events(std::string& native, std::string& grbl) {
   tick();
-  if (!program_events_.empty()) {
-    native += program_events_;
-    std::size_t a = 0;  // GRBL: as [MSG:] lines
-    while (a < program_events_.size()) {
-      const std::size_t b = program_events_.find('\n', a);
-      grbl += "[MSG:" + program_events_.substr(a, b - a) + "]\n";
-      a = b + 1;
-    }
-    program_events_.clear();
-  }
   svc_->poll_events();
   const EventBatch b = svc_->events_since(events_seen_);
   if (b.missed > 0) {  // another reader polled the stream faster than this console read it
@@ -455,35 +448,41 @@ void Console::render_event(const ArmEvent& e, std::string& native, std::string& 
   // the control thread's line, from its fixed buffer: whole, or cut after a word with "..."
   const std::string detail = bounded_text(std::string(svc_->event_detail(e)).c_str(), sizeof(Event::message));
   switch (e.kind) {
-    case EventKind::fault:
+    case ArmEventKind::fault:
       native += fmt("alarm: fault %s\n", detail.c_str());
       // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits),
       // 9 homing fail (GRBL: the switch not found)
       grbl += fmt("ALARM:%d\n[MSG:fault %s]\n",
                   e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, detail.c_str());
             break;
-    case EventKind::estop:
+    case ArmEventKind::estop:
       native += "alarm: estop (send reset, then enable)\n";
       grbl += "ALARM:10\n[MSG:e-stop: $X to reset and enable]\n";  // grblHAL: 10 = e-stop
             break;
-    case EventKind::motion_refused:
+    case ArmEventKind::motion_refused:
       native += fmt("alarm: %s\n", detail.c_str());
       grbl += fmt("[MSG:%s]\n", detail.c_str());
       break;
-    case EventKind::jog_stopped:
+    case ArmEventKind::jog_stopped:
       native += fmt("alarm: %s\n", detail.c_str());
       grbl += fmt("[MSG:%s]\n", detail.c_str());
             break;
-    case EventKind::homing:
+    case ArmEventKind::homing:
       native += fmt("homing: %s\n", detail.c_str());
       grbl += fmt("[MSG:homing: %s]\n", detail.c_str());
       break;
-    case EventKind::freedrive:
+    case ArmEventKind::freedrive:
       native += fmt("freedrive: %s\n", detail.c_str());
       grbl += fmt("[MSG:freedrive: %s]\n", detail.c_str());
       break;
-    case EventKind::motion_done:
-    case EventKind::state: break;
+    case ArmEventKind::program:
+      if (const std::string l = program_line(e); !l.empty()) {
+        native += l + "\n";
+        grbl += "[MSG:" + l + "]\n";  // GRBL: as a [MSG:] line
+      }
+      break;
+    case ArmEventKind::motion_done:
+    case ArmEventKind::state: break;
   }
 }
 
@@ -792,9 +791,9 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
   auto simple = [&](RequestOp op) { answer_control(s, svc_->control(op)); };
   // While a program runs, motion comes from the program only: a move, jog, dwell, homing or
   // M62/M63 from any console is refused (stop, hold, resume, abort and queries still work).
-  if (run_ && &s != &run_->ps && !s.check_mode && moves_arm(c)) {
+  if (running() && (!run_ || &s != &run_->ps) && !s.check_mode && moves_arm(c)) {
     answer_error(s, CmdError::busy, fmt("program %s is running (%s): stop, pause or abort it first; nothing queued",
-                                        run_->name.c_str(), program_where().c_str()));
+                                        svc_->program_status().name.c_str(), program_where().c_str()));
     return;
   }
   // A move refused: the M62/M63 changes waiting for it are dropped with it (and said so).
@@ -839,25 +838,22 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
       settle(s);
       return;
     case Cmd::disable:
-      end_program("aborted at " + program_where() + ": disable");
+      end_program(ProgramEnd::disable);
       note_line(s, discard_sync_outputs("disable"));
       simple(RequestOp::disable);
       return;
     case Cmd::stop:
-      end_program("aborted at " + program_where() + ": stop");
+      end_program(ProgramEnd::stop);
       note_line(s, discard_sync_outputs("stop"));
       simple(RequestOp::stop);
       return;
     case Cmd::estop:
-      end_program("aborted at " + program_where() + ": e-stop");
+      end_program(ProgramEnd::estop);
       note_line(s, discard_sync_outputs("e-stop"));
       simple(RequestOp::estop);
       return;
     case Cmd::reset: simple(RequestOp::reset); return;
-    case Cmd::hold:
-      if (run_ && run_->state != RunState::paused) run_->state = RunState::paused;
-      simple(RequestOp::hold);
-      return;
+    case Cmd::hold: answer_control(s, svc_->hold()); return;
     case Cmd::resume: do_resume(s); return;
     case Cmd::home_zero: simple(RequestOp::set_zero); return;
     case Cmd::home: do_home(s, c); return;
@@ -926,14 +922,13 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
     case Cmd::step: do_step(s); return;
     case Cmd::abort:
       note_line(s, discard_sync_outputs("abort"));
-      if (!run_) {
+      if (!running()) {
         simple(RequestOp::stop);
         return;
       }
       {
-        const std::string at = program_where(), name = run_->name;
-        end_program("aborted at " + at + ": abort");
-        if (!request(RequestOp::stop, r)) {
+        const std::string at = program_where(), name = svc_->program_status().name;
+        if (svc_->program_abort().error == CmdError::timeout) {
           answer_error(s, CmdError::timeout, "control thread did not answer stop");
           return;
         }
@@ -1035,7 +1030,7 @@ bool Console::settle(Session& s) {
       case ArmState::freedrive:
         if (!ctl_.motions().empty()) return true;  // producer-side view: exact, never stale
         // a running program has more to come (its own `wait` lines wait for the queue only)
-        if (run_ && &s != &run_->ps && run_->state != RunState::paused) return true;
+        if (running() && (!run_ || &s != &run_->ps) && svc_->run_state() != RunState::paused) return true;
         s.waiting = false;
         answer_ok(s, fmt("idle %s", pose_text(tail()).c_str()));
         break;
@@ -1063,9 +1058,7 @@ bool Console::run_one(Session& s) {
 }
 
 void Console::feed_hold(Session& s) {
-  Reply r;
-  if (run_) run_->state = RunState::paused;  // the program pauses with the hold
-  if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n";
+  if (svc_->hold().error == CmdError::timeout) s.out += "error: timeout feed hold not acknowledged\n";
 }
 
 void Console::poll(Session& s) {
@@ -1107,8 +1100,7 @@ void Console::realtime(Session& s, char ch) {
       break;
     case kRtResume:
       s.hold_after = 0;  // a '!' still waiting for the lines before it is resumed too
-      if (run_ && run_->state == RunState::paused) run_->state = RunState::running;
-      if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n";
+      if (svc_->resume(false).error == CmdError::timeout) s.out += "error: timeout resume not acknowledged\n";
       break;
     case kRtJogCancel: {
       if (svc_->jog_cancel().error == CmdError::timeout) s.out += "error: timeout jog cancel not acknowledged\n";
@@ -1135,7 +1127,7 @@ void Console::realtime(Session& s, char ch) {
       const bool moving = t.state == ArmState::moving || t.state == ArmState::jogging || t.state == ArmState::stopping ||
                           t.state == ArmState::homing;  // Ctrl-X during homing: an e-stop (the joints stay unhomed)
       const RequestOp op = s.dialect == Dialect::grbl && !moving ? RequestOp::stop : RequestOp::estop;
-      end_program("aborted at " + program_where() + (op == RequestOp::estop ? ": e-stop (Ctrl-X)" : ": soft reset (Ctrl-X)"));
+      end_program(op == RequestOp::estop ? ProgramEnd::estop : ProgramEnd::soft_reset, true);
       note_line(s, discard_sync_outputs("Ctrl-X"));
       if (!request(op, r)) s.out += "error: timeout e-stop not acknowledged\n";
       s.partial.clear();

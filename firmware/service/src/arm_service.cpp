@@ -512,18 +512,58 @@ namespace servoarm::fw {
 // The event stream
 // ---------------------------------------------------------------------------
 
+namespace {
+ArmEventKind kind_of(EventKind k) {
+  switch (k) {
+    case EventKind::fault: return ArmEventKind::fault;
+    case EventKind::estop: return ArmEventKind::estop;
+    case EventKind::motion_done: return ArmEventKind::motion_done;
+    case EventKind::motion_refused: return ArmEventKind::motion_refused;
+    case EventKind::state: return ArmEventKind::state;
+    case EventKind::jog_stopped: return ArmEventKind::jog_stopped;
+    case EventKind::homing: return ArmEventKind::homing;
+    case EventKind::freedrive: return ArmEventKind::freedrive;
+  }
+  return ArmEventKind::state;
+}
+}  // namespace
+
+const char* to_string(ArmEventKind k) {
+  switch (k) {
+    case ArmEventKind::fault: return "fault";
+    case ArmEventKind::estop: return "estop";
+    case ArmEventKind::motion_done: return "motion_done";
+    case ArmEventKind::motion_refused: return "motion_refused";
+    case ArmEventKind::state: return "state";
+    case ArmEventKind::jog_stopped: return "jog_stopped";
+    case ArmEventKind::homing: return "homing";
+    case ArmEventKind::freedrive: return "freedrive";
+    case ArmEventKind::program: return "program";
+  }
+  return "?";
+}
+
+ArmService::EventSlot& ArmService::push_event() {
+  EventSlot& s = (*ring_)[next_seq_ % kEventRing];
+  s.ev = ArmEvent{};
+  s.ev.seq = next_seq_++;
+  s.detail[0] = '\0';
+  s.program.clear();
+  s.file.clear();
+  if (ctl_ != nullptr) {
+    s.ev.cycle = ctl_->telemetry().cycles;
+    s.ev.t = static_cast<double>(s.ev.cycle) * ctl_->period_s();
+  }
+  return s;
+}
+
 std::size_t ArmService::poll_events() {
   if (ctl_ == nullptr) return 0;
-  const std::uint64_t cycle = ctl_->telemetry().cycles;
   std::size_t n = 0;
   Event e;
   while (ctl_->events().pop(e)) {
-    EventSlot& s = (*ring_)[next_seq_ % kEventRing];
-    s.ev = ArmEvent{};
-    s.ev.seq = next_seq_++;
-    s.ev.cycle = cycle;
-    s.ev.t = static_cast<double>(cycle) * ctl_->period_s();
-    s.ev.kind = e.kind;
+    EventSlot& s = push_event();
+    s.ev.kind = kind_of(e.kind);
     s.ev.state = e.state;
     s.ev.cause = e.cause;
     s.ev.joint = e.joint;
@@ -554,6 +594,12 @@ std::string_view ArmService::event_detail(const ArmEvent& e) const {
   const EventSlot& s = (*ring_)[e.seq % kEventRing];
   if (e.seq == 0 || s.ev.seq != e.seq) return {};
   return std::string_view(s.detail);
+}
+
+ProgramNames ArmService::event_program(const ArmEvent& e) const {
+  const EventSlot& s = (*ring_)[e.seq % kEventRing];
+  if (e.seq == 0 || s.ev.seq != e.seq || e.kind != ArmEventKind::program) return {};
+  return {s.program, s.file};
 }
 
 }  // namespace servoarm::fw

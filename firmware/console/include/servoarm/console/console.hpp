@@ -67,15 +67,6 @@ struct ConsoleConfig : MotionSettings {
   double record_tolerance = 0.5 * M_PI / 180.0;  ///< rad: record stop without tolerance=
 };
 
-/// A program run by the console (`run NAME`): idle = none.
-enum class RunState : std::uint8_t {
-  idle,       ///< no program
-  running,    ///< lines are fed to the motion queue
-  pausing,    ///< `pause`: nothing more is fed; paused once the queued moves are done
-  paused,     ///< stopped between two lines (or held by `!` mid-move)
-  stepping,   ///< `step`: one motion fed, paused when it is done
-};
-const char* to_string(RunState r);
 
 /// One connected client: its partial line, queued lines, G-code modal state.
 struct Session {
@@ -201,7 +192,7 @@ class Console {
   /// motion queue (one ahead of the running move), notice its end, a hold, a fault; take a
   /// record sample. Console thread; poll() and drain_events() call it. Never blocks.
   void tick();
-  RunState run_state() const { return run_ ? run_->state : RunState::idle; }
+  RunState run_state() const { return svc_->run_state(); }
   /// `program=NAME state=... line=FILE:LINE` of the running program ("" when none).
   std::string program_text() const;
 
@@ -341,20 +332,21 @@ class Console {
   std::string grbl_wcs() const;  ///< "G54".."G59" for $G
   // Teach points and programs (console_program.cpp)
   prog::PointsData points_;
+  /// A loaded program: its steps (the service's runner runs them through exec_step) and the
+  /// session they run in (modal state, answers).
   struct ProgramRun {
     std::string name;
     prog::Program prog;
-    std::size_t next = 0;       ///< next step to feed
-    std::size_t current = 0;    ///< step of the running motion (or the last fed)
-    RunState state = RunState::running;
-    Session ps;                 ///< the runner's own session (modal state, wait)
-    std::deque<std::pair<std::uint32_t, std::size_t>> fed;  ///< motion id -> step, not finished yet
-    std::uint64_t generation = 0;
-    double started_s = 0;
-    std::uint64_t started_cycle = 0;
-    bool step_fed = false;      ///< stepping: the one motion has been fed
+    Session ps;                 ///< the runner's own session
   };
+  /// The program the service runs (kept while it runs: its StepExecutor runs these steps).
   std::unique_ptr<ProgramRun> run_;
+  /// True while the service runs a program (run_ holds it).
+  bool running() const { return svc_->run_state() != RunState::idle; }
+  /// The service's program as the service describes it (names and places of its steps).
+  static ProgramSpec spec_of(const ProgramRun& r);
+  /// The service's StepExecutor: step i of run_ in its session; its error answer as the outcome.
+  StepOutcome run_step(std::size_t i);
   /// A `run` whose program is being checked: a slice of its steps at a time (settle()), so
   /// every transport is read between two slices. One at a time.
   struct PendingCheck {
@@ -373,8 +365,6 @@ class Console {
   bool continue_check();
   /// End a pending check with `error: program ... check interrupted: <why>` (stop, e-stop, ...).
   void cancel_check(const std::string& why);
-  bool ticking_ = false;        ///< tick() is feeding (no re-entry; the run may end inside it)
-  std::string program_events_;  ///< `program: ...` lines for every session (drain_events)
   std::uint64_t events_seen_ = 0;  ///< the last event of the service's stream rendered (drain_events)
   /// An event of the service's stream as its native line and its GRBL lines.
   void render_event(const ArmEvent& e, std::string& native, std::string& grbl);
@@ -399,8 +389,12 @@ class Console {
   /// Run one step in `ps` (its answer in ps.out).
   void exec_step(Session& ps, const prog::Program& p, const prog::ProgramStep& st);
   /// End the program (if one runs) with `program: NAME <how>` (e.g. "aborted at f:3: stop").
-  void end_program(const std::string& how);
+  /// End the running program (if one runs; a pending check too) as `how` (stop, e-stop,
+  /// disable, soft reset: the caller asks the arm), said by a program event.
+  void end_program(ProgramEnd how, bool realtime = false);
   std::string program_where() const;  ///< FILE:LINE of the current step
+  /// A program event as its `program: ...` line ("" for the events not rendered).
+  std::string program_line(const ArmEvent& e) const;
   std::string points_refusal() const;  ///< "" when points may change now
   /// The service's settings (speeds, blend, home, outputs: one place).
   const MotionSettings& motion() const { return svc_->settings(); }

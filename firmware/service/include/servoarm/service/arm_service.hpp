@@ -24,6 +24,7 @@
 // Controller's SPSC queues and telemetry.
 #include <array>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <span>
@@ -306,17 +307,82 @@ struct JogResult {
   bool ok() const { return error == CmdError::ok; }
 };
 
+/// What an event of the stream is: the control thread's kinds (EventKind, same order), and
+/// the program runner's.
+enum class ArmEventKind : std::uint8_t {
+  fault,
+  estop,
+  motion_done,
+  motion_refused,
+  state,
+  jog_stopped,
+  homing,
+  freedrive,
+  program,  ///< the program runner: ArmEvent::program says what (started, a step, ended)
+};
+const char* to_string(ArmEventKind k);
+
+/// A program run by the service (run_program): idle = none.
+enum class RunState : std::uint8_t {
+  idle,       ///< no program
+  running,    ///< steps are fed to the motion queue
+  pausing,    ///< paused: nothing more is fed; paused once the queued moves are done
+  paused,     ///< stopped between two steps (or held mid-move)
+  stepping,   ///< one motion fed, paused when it is done
+};
+const char* to_string(RunState r);
+
+/// A program event (ArmEventKind::program): what happened.
+enum class ProgramPhase : std::uint8_t {
+  started,  ///< the program runs (`steps` steps)
+  step,     ///< the running motion is now step `step` (`file`, `line`)
+  ended,    ///< it ended: `end` says how
+};
+const char* to_string(ProgramPhase p);
+
+/// How a program ended.
+enum class ProgramEnd : std::uint8_t {
+  none,
+  done,           ///< every step ran (`steps` steps in `seconds`)
+  stop,           ///< a stop request
+  estop,          ///< an e-stop request (`realtime`: asked by a realtime byte), or the arm went into e-stop
+  soft_reset,     ///< a soft reset (a stop asked by a realtime byte)
+  disable,        ///< a disable request
+  abort,          ///< program_abort()
+  fault,          ///< the arm went into fault (event_detail: the fault's line)
+  arm_state,      ///< the arm was disabled, or began jogging, homing or free-drive (`state`)
+  queue_dropped,  ///< the motion queue was dropped (a stop from elsewhere, a refused move)
+  step_refused,   ///< step `step` was refused (`error`; event_detail: the front end's line)
+};
+const char* to_string(ProgramEnd e);
+
 /// One event of the arm's event stream: figures only, no text (the control thread's own line
-/// for it, when it sent one, is ArmService::event_detail).
+/// for it, when it sent one, is ArmService::event_detail; a program event's names are
+/// ArmService::event_program).
 struct ArmEvent {
   std::uint64_t seq = 0;        ///< 1, 2, 3, ...: one more than the event before it
   std::uint64_t cycle = 0;      ///< RT time stamp: the control cycle (Telemetry::cycles) the service took it at
   double t = 0;                 ///< the same in s (cycle times the control period)
-  EventKind kind = EventKind::state;
+  ArmEventKind kind = ArmEventKind::state;
   ArmState state = ArmState::boot;  ///< the arm's state when the control thread sent it
   FaultCause cause = FaultCause::none;  ///< fault: the cause
   std::int8_t joint = -1;       ///< the joint concerned (0-based), -1 none or every joint
   std::uint32_t motion_id = 0;  ///< motion_done / motion_refused: the motion (0 none)
+  // program events
+  ProgramPhase program = ProgramPhase::started;
+  ProgramEnd end = ProgramEnd::none;  ///< ended: how
+  bool realtime = false;        ///< ended by estop / soft_reset: asked by a realtime byte (Ctrl-X)
+  CmdError error = CmdError::ok;  ///< step_refused: the step's error
+  std::uint32_t step = 0;       ///< the step concerned (0-based; ended: where it ended)
+  std::uint32_t steps = 0;      ///< the program's steps
+  std::int32_t line = 0;        ///< the step's line in its file (1-based; 0: none)
+  double seconds = 0;           ///< done: how long it ran (s)
+};
+
+/// A program event's names (event_program): the program and the file of its step.
+struct ProgramNames {
+  std::string_view program;
+  std::string_view file;
 };
 
 /// Events the service keeps for its readers (the oldest is overwritten first).
@@ -326,6 +392,70 @@ inline constexpr std::size_t kEventRing = 256;
 struct EventBatch {
   std::vector<ArmEvent> events;
   std::uint64_t missed = 0;  ///< events after `seq` no longer kept (overwritten before this read)
+};
+
+/// What a program step is to the runner (the front end that loaded the program says).
+enum class StepClass : std::uint8_t {
+  motion,      ///< queues one motion (a move, a dwell): fed one ahead of the running motion
+  needs_idle,  ///< runs with the arm at rest and nothing queued (tool, frame, an output at once)
+  wait,        ///< waits until the queued motions have run (the runner does it)
+  other,       ///< runs at once (a query, a modal line, an output with the next move)
+};
+
+/// A loaded program as the runner sees it: its name, its files (as a step's place names
+/// them) and each step's kind and place.
+struct ProgramSpec {
+  struct Step {
+    StepClass kind = StepClass::other;
+    int file = 0;  ///< index into files
+    int line = 0;  ///< 1-based
+  };
+  std::string name;
+  std::vector<std::string> files;
+  std::vector<Step> steps;
+};
+
+/// One step's outcome, from the front end that runs it (StepExecutor): ok, or refused with
+/// the error and the front end's one line for it.
+struct StepOutcome {
+  CmdError error = CmdError::ok;
+  std::string reason;
+  bool ok() const { return error == CmdError::ok; }
+};
+/// Runs step `i` of the running program (a motion step queues its motion through move() /
+/// dwell(): the runner takes its id from the service).
+using StepExecutor = std::function<StepOutcome(std::size_t i)>;
+
+/// The answer to program_status(): the running program and where it is. A query.
+struct ProgramStatus {
+  RunState state = RunState::idle;
+  std::string name;
+  std::size_t steps = 0;
+  std::size_t step = 0;       ///< the step of the running motion (or the next to run): its place
+  std::string file;           ///< that step's file ("" when no program or no steps)
+  int line = 0;               ///< and line (0: none)
+  std::size_t running = 0;    ///< the step of the running motion (or the last fed)
+  int running_line = 0;       ///< its line (0: none)
+  std::uint64_t started_cycle = 0;  ///< the control cycle it started at
+};
+
+/// What a program request refused (ProgramResult::refusal); none: accepted.
+enum class ProgramRefusal : std::uint8_t {
+  none,
+  no_program,     ///< no program runs (pause, step, abort)
+  running,        ///< run: a program runs already (`status` is it)
+  program_state,  ///< step: the program is not paused (`status.state`)
+  arm_not_ready,  ///< run: the arm is not at rest with nothing queued, or a joint is not homed (`arm`)
+};
+const char* to_string(ProgramRefusal r);
+
+struct ProgramResult {
+  CmdError error = CmdError::ok;
+  ProgramRefusal refusal = ProgramRefusal::none;
+  ProgramStatus status;       ///< the program after the request (ended: state idle)
+  ArmState arm = ArmState::idle;  ///< arm_not_ready: the arm's state
+  std::uint32_t queued = 0;   ///< arm_not_ready: motions queued
+  bool ok() const { return error == CmdError::ok; }
 };
 
 /// Every request the service takes, by one name each: a front end that speaks in messages
@@ -341,8 +471,8 @@ enum class ServiceOp : std::uint8_t {
   stop,                 ///< control(stop)
   estop,                ///< control(estop)
   reset,                ///< control(reset)
-  hold,                 ///< control(hold)
-  resume,               ///< control(resume)
+  hold,                 ///< hold() -> ControlResult (a running program pauses with it)
+  resume,               ///< resume() -> ControlResult (a paused program runs on)
   set_zero,             ///< control(set_zero)
   home,                 ///< home(joint) -> ControlResult
   freedrive,            ///< freedrive(on) -> ControlResult
@@ -359,6 +489,11 @@ enum class ServiceOp : std::uint8_t {
   settings,             ///< settings() -> MotionSettings
   set_settings,         ///< set_settings(MotionSettings) -> SettingsResult
   set_feed_override,    ///< set_feed_override(pct) -> SettingsResult
+  program_run,          ///< run_program(ProgramSpec, StepExecutor) -> ProgramResult
+  program_pause,        ///< program_pause() -> ProgramResult
+  program_step,         ///< program_step() -> ProgramResult
+  program_abort,        ///< program_abort() -> ProgramResult
+  program_status,       ///< program_status() -> ProgramStatus
 };
 
 struct ServiceOpInfo {
@@ -394,6 +529,11 @@ inline constexpr ServiceOpInfo kServiceOps[] = {
     {ServiceOp::settings, "settings", true},
     {ServiceOp::set_settings, "set_settings", false},
     {ServiceOp::set_feed_override, "set_feed_override", false},
+    {ServiceOp::program_run, "program_run", false},
+    {ServiceOp::program_pause, "program_pause", false},
+    {ServiceOp::program_step, "program_step", false},
+    {ServiceOp::program_abort, "program_abort", false},
+    {ServiceOp::program_status, "program_status", true},
 };
 const char* to_string(ServiceOp op);
 /// The op named `name` (kServiceOps); false: none is.
@@ -452,6 +592,32 @@ class ArmService {
   void clear_pending_outputs() { n_sync_out_ = 0; }
   /// The park move (`park`, G28): to the park pose at the default joint speed.
   MoveJoints park_request() const;
+
+  /// Hold: the arm holds (a move decelerates and stays held, a jog stops) and a running
+  /// program pauses. Resume: the arm resumes and a paused program runs on (one still
+  /// pausing too, unless `end_pause` is false: GRBL's cycle start resumes a hold only).
+  ControlResult hold();
+  ControlResult resume(bool end_pause = true);
+
+  /// Programs (the runner): run a loaded program whose steps the front end runs (`exec`),
+  /// fed one motion ahead of the running one. The arm must be at rest, nothing queued,
+  /// every joint homed. A step refused, a fault, an e-stop, the arm disabled, jogging,
+  /// homing or in free-drive, or the queue dropped ends it (a program event says how).
+  ProgramResult run_program(ProgramSpec spec, StepExecutor exec);
+  /// Pause (nothing more is fed; paused once the queued motions are done), step (a paused
+  /// program runs one motion, a held move is resumed first), abort (ended now and the arm
+  /// stopped; `why` says how it ends: abort, or a front end's stop / e-stop / disable /
+  /// soft reset already asked).
+  ProgramResult program_pause();
+  ProgramResult program_step();
+  ProgramResult program_abort(ProgramEnd why = ProgramEnd::abort, bool realtime = false);
+  ProgramStatus program_status() const;
+  RunState run_state() const;
+  /// Feed the running program's next steps; notice its end, a hold, a fault. The front end
+  /// calls it regularly (the console from its poll). Never blocks.
+  void program_tick();
+  /// A program event's names (empty when the event is no longer kept or is no program event).
+  ProgramNames event_program(const ArmEvent& e) const;
 
   /// Queries: they read and change nothing.
   ArmStatus status() const;
@@ -541,7 +707,30 @@ class ArmService {
   struct EventSlot {
     ArmEvent ev;
     char detail[sizeof(Event::message)] = {};
+    std::string program, file;  ///< program events: the names
   };
+  EventSlot& push_event();
+  struct ProgramRun {
+    ProgramSpec spec;
+    StepExecutor exec;
+    std::size_t next = 0;       ///< next step to feed
+    std::size_t current = 0;    ///< step of the running motion (or the last fed)
+    RunState state = RunState::running;
+    bool waiting = false;       ///< a `wait` step waits for the queue to run empty
+    bool step_fed = false;      ///< stepping: the one motion has been fed
+    std::deque<std::pair<std::uint32_t, std::size_t>> fed;  ///< motion id -> step, not finished yet
+    std::size_t reported = static_cast<std::size_t>(-1);    ///< the step the last step event named
+    std::uint64_t generation = 0;
+    std::uint64_t started_cycle = 0;
+  };
+  std::unique_ptr<ProgramRun> run_;
+  bool ticking_ = false;  ///< program_tick() runs (no re-entry: the run may end inside it)
+  std::size_t where_step() const;
+  void post_program(ProgramPhase phase, std::size_t step, ProgramEnd end = ProgramEnd::none);
+  void end_program(ProgramEnd how, std::size_t step, bool realtime = false, CmdError error = CmdError::ok,
+                   std::string_view detail = {});
+  bool program_ended_by_arm(const Telemetry& t);
+  bool feed_program();
   std::unique_ptr<std::array<EventSlot, kEventRing>> ring_;  ///< slot seq % kEventRing
   std::uint64_t next_seq_ = 1;
   std::function<void()> idle_;
