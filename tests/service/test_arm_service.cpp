@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "../console/console_rig.hpp"
+#include "../program/tmp_dir.hpp"
 #include "servoarm/service/arm_service.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -428,4 +429,91 @@ TEST(ArmService, EveryRequestHasOneNameInTheTable) {
   CHECK(!service_op_from("no_such_request", none));
   CHECK(kServiceOps[static_cast<std::size_t>(ServiceOp::status)].query);
   CHECK(!kServiceOps[static_cast<std::size_t>(ServiceOp::set_settings)].query);
+}
+
+// Tools through the service: defined, selected and deleted by name with typed results; the
+// active tool is the status's, and its pose is the flange's FK times the tool's (SI); a bad
+// name, an unknown tool and deleting the active one are refused with what was wrong.
+TEST(ArmService, ToolsAreDefinedSelectedAndDeletedByName) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  LONGS_EQUAL(1, svc.tool_count());
+  STRCMP_EQUAL("tool0", svc.tool(0).name.c_str());
+  NamedPose g;
+  g.name = "gripper";
+  g.pose.translation() = Eigen::Vector3d(0, 0, 0.12);
+  const FrameResult d = svc.define_tool(g);
+  CHECK(d.ok());
+  CHECK(!d.redefined);
+  LONGS_EQUAL(2, svc.tool_count());
+  NamedPose bad = g;
+  bad.name = "tool0";
+  CHECK(svc.define_tool(bad).refusal == FrameRefusal::bad_name);
+  CHECK(svc.select_tool("nothing").refusal == FrameRefusal::not_defined);
+  const FrameResult sel = svc.select_tool("gripper");
+  CHECK(sel.ok());
+  CHECK(sel.active);
+  const ArmStatus st = svc.status();
+  STRCMP_EQUAL("gripper", st.tool.c_str());
+  kin::Pose flange;
+  CHECK(kin::forward(r.app.chain, st.q, flange) == kin::Status::ok);
+  CHECK(((flange * g.pose).translation() - st.pose.translation()).norm() < 1e-12);
+  CHECK(svc.delete_tool("gripper").refusal == FrameRefusal::active);
+  CHECK(svc.select_tool("tool0").ok());
+  CHECK(svc.delete_tool("gripper").ok());
+  LONGS_EQUAL(1, svc.tool_count());
+}
+
+// Tools and frames change only while nothing moves or is queued: with a move queued a
+// select is refused as arm_busy (with the arm's state and the queue) and nothing changes.
+TEST(ArmService, ToolsAndFramesDoNotChangeWhileMotionsAreQueued) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  NamedPose f;
+  f.name = "table";
+  f.pose.translation() = Eigen::Vector3d(0.3, 0, 0);
+  CHECK(svc.define_frame(f).ok());
+  MoveJoints m;
+  m.goal = joints({10, -40, 170, 5, 40, -5});
+  CHECK(svc.move(m, MoveContext{}).ok());
+  const FrameResult busy = svc.select_frame("table");
+  CHECK(busy.refusal == FrameRefusal::arm_busy);
+  CHECK(busy.error == CmdError::bad_state);
+  CHECK(busy.queued > 0 || busy.arm == ArmState::moving);
+  LONGS_EQUAL(0, svc.active_frame());
+  for (int i = 0; i < 20000 && (r.app.ctl->telemetry().state != ArmState::idle || !r.app.ctl->motions().empty()); ++i) r.cycle();
+  const FrameResult ok = svc.select_frame("table");
+  CHECK(ok.ok());
+  const ArmStatus st = svc.status();
+  STRCMP_EQUAL("table", st.frame.c_str());
+  CHECK(((f.pose.inverse() * st.pose).translation() - st.pose_in_frame.translation()).norm() < 1e-12);
+}
+
+// A G54..G59 frame selected before it is set is added as the identity; each change goes to
+// the frames file, which a service started later loads with the same tools, frames and
+// selection.
+TEST(ArmService, FramesAreKeptInTheFramesFile) {
+  const std::string dir = test::make_tmp_dir();
+  const std::string path = dir + "/frames.toml";
+  {
+    test::ConsoleRig r;
+    ArmService& svc = r.app.console->service();
+    CHECK(svc.load_frames(path).empty());
+    const FrameResult g55 = svc.select_frame("g55", true);
+    CHECK(g55.ok());
+    CHECK(g55.added);
+    NamedPose t;
+    t.name = "pen";
+    t.pose.translation() = Eigen::Vector3d(0, 0, 0.05);
+    CHECK(svc.define_tool(t).ok());
+    CHECK(svc.select_tool("pen").ok());
+  }
+  test::ConsoleRig r2;
+  ArmService& svc = r2.app.console->service();
+  CHECK(svc.load_frames(path).empty());
+  STRCMP_EQUAL("pen", svc.tool(svc.active_tool()).name.c_str());
+  STRCMP_EQUAL("g55", svc.frame(svc.active_frame()).name.c_str());
+  DOUBLES_EQUAL(0.05, svc.tool(svc.active_tool()).pose.translation().z(), 1e-15);
 }

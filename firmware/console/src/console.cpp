@@ -146,32 +146,25 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
     : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints), ik_(ik) {
   svc_ = std::make_unique<ArmService>(ctl_, cfg_);
   cfg_.home = svc_->settings().home;  // config() shows the park pose the service uses
-  auto t0 = std::make_unique<ToolSlot>();
-  t0->def.name = "tool0";
-  t0->chain = chain_;
-  t0->model = ik_;
-  tools_.push_back(std::move(t0));
-  NamedPose base;
-  base.name = "base";
-  frames_.push_back(base);
+  svc_->set_ik_model(ik_);
   check_shadow_ = std::make_unique<PathShadow>();
 }
 
 // IK of movel's path check and of the control thread's Cartesian sampling: the App's
 // model (closed form or numeric) when the chain has one, else the damped-Newton fallback.
 // The firmware's options (ik_options.hpp), the same armctl plan previews with.
-kin::IkSolver Console::ik_solver() const { return firmware_ik_solver(tool_slot().model); }
+kin::IkSolver Console::ik_solver() const { return svc_->tool_ik(sel_tool()); }
 
 kin::Pose Console::tcp(const kin::JointVector& q) const {
   kin::Pose p = kin::Pose::Identity();
-  if (kin::forward(tool_slot().chain, q, p) != kin::Status::ok) p.translation().setConstant(std::nan(""));
+  if (kin::forward(tool_chain(), q, p) != kin::Status::ok) p.translation().setConstant(std::nan(""));
   return p;
 }
 
 kin::Pose Console::pose_in_frame(const kin::JointVector& q) const { return user_frame().inverse() * tcp(q); }
 
 std::string Console::where_text() const {
-  return "tool=" + tools_[sel_tool()]->def.name + " frame=" + frames_[sel_frame()].name;
+  return "tool=" + svc_->tool(sel_tool()).name + " frame=" + svc_->frame(sel_frame()).name;
 }
 
 double Console::to_si(int j, double user) const {
@@ -330,16 +323,16 @@ std::string Console::unhomed_refusal(const Telemetry& t) const { return svc_->un
 // frame) with no user frame active; with one, `WPos:` in it and `WCO:` its origin in the
 // base (what GRBL reports for a work offset; a sender shows WPos either way).
 std::string Console::grbl_position(const kin::JointVector& q) const {
-  if (frame_ == 0) {
+  if (svc_->active_frame() == 0) {
     const kin::Pose p = tcp(q);
     return "MPos:" + mm_triple(p.translation());
   }
   const kin::Pose w = pose_in_frame(q);
-  return "WPos:" + mm_triple(w.translation()) + "|WCO:" + mm_triple(frames_[frame_].pose.translation());
+  return "WPos:" + mm_triple(w.translation()) + "|WCO:" + mm_triple(svc_->frame(svc_->active_frame()).pose.translation());
 }
 
 std::string Console::grbl_wcs() const {
-  const std::string& n = frames_[sel_frame()].name;
+  const std::string& n = svc_->frame(sel_frame()).name;
   if (n.size() == 3 && n[0] == 'g' && n[1] == '5' && n[2] >= '4' && n[2] <= '9') return "G" + n.substr(1);
   return "G54";  // base or a named frame: GRBL has no word for it (`frame` says which)
 }
@@ -525,7 +518,7 @@ bool Console::homed_ok(Session& s) {
 MoveContext Console::move_context(DryRun* dry, const StepParams* step) const {
   MoveContext cx;
   cx.dry = dry;
-  cx.chain = &tool_slot().chain;
+  cx.chain = &tool_chain();
   cx.ik = ik_solver();
   cx.outputs = svc_->pending_outputs();
   if (step != nullptr) {
@@ -712,14 +705,13 @@ void Console::do_ik(Session& s, const Command& c) {
   kin::JointVector q(n_);
   kin::Status st = kin::Status::unreachable;
   int solutions = -1;
-  const ToolSlot& tool = tool_slot();
-  if (tool.model != nullptr) {
+  if (const kin::IkModel* model = svc_->tool_model(sel_tool()); model != nullptr) {
     auto res = std::make_unique<kin::IkResult>();
-    kin::ik_solve_all(*tool.model, target, &qc, *res);
+    kin::ik_solve_all(*model, target, &qc, *res);
     solutions = res->count;
-    st = kin::ik_solve_nearest(*tool.model, target, qc, q);
+    st = kin::ik_solve_nearest(*model, target, qc, q);
   } else {
-    st = kin::ik_nearest_newton(tool.chain, target, qc, q, nullptr);
+    st = kin::ik_nearest_newton(tool_chain(), target, qc, q, nullptr);
   }
   if (!kin::is_ok(st)) {
     answer_error(s, st == kin::Status::out_of_limits ? CmdError::limits : CmdError::unreachable,
@@ -1237,7 +1229,7 @@ void Console::do_home(Session& s, const Command& c) {
 
 JogContext Console::jog_context() const {
   JogContext cx;
-  cx.chain = &tool_slot().chain;
+  cx.chain = &tool_chain();
   cx.ik = ik_solver();
   cx.user_axes = user_frame().linear();
   return cx;
@@ -1323,7 +1315,7 @@ void Console::do_grbl_jog(Session& s, const Command& c) {
   }
   // In the active user frame (G54..G59), or the base with G53 (machine coordinates).
   const kin::Pose F = c.g53 ? kin::Pose::Identity() : user_frame();
-  const JogFrame kind = c.g53 || frame_ == 0 ? JogFrame::base : JogFrame::user;
+  const JogFrame kind = c.g53 || svc_->active_frame() == 0 ? JogFrame::base : JogFrame::user;
   const JogContext cx = jog_context();
   const kin::Pose here = F.inverse() * svc_->jog_from(kind, cx);
   kin::Pose target = here;
@@ -1392,8 +1384,8 @@ void Console::do_grbl(Session& s, const Command& c) {
       // orientations are in the frames file and `frame`).
       for (int g = 54; g <= 59; ++g) {
         Eigen::Vector3d o = Eigen::Vector3d::Zero();
-        for (const NamedPose& f : frames_)
-          if (f.name == "g" + std::to_string(g)) o = f.pose.translation();
+        if (const std::size_t k = svc_->find_frame("g" + std::to_string(g)); k < svc_->frame_count())
+          o = svc_->frame(k).pose.translation();
         s.out += fmt("[G%d:%s]\n", g, mm_triple(o, ",").c_str());
       }
       const kin::Pose h = tcp(motion().home);
@@ -1444,8 +1436,8 @@ void Console::do_grbl(Session& s, const Command& c) {
         }
         s.check_mode = true;
         s.check_tail = tail();
-        s.check_tool = tool_;
-        s.check_frame = frame_;
+        s.check_tool = svc_->active_tool();
+        s.check_frame = svc_->active_frame();
         s.out += s.dialect == Dialect::grbl ? "[MSG:Enabled]\n" : "";
         answer_ok(s, s.dialect == Dialect::grbl ? "" : "check mode on: G-code is parsed and checked, nothing moves");
       } else {
@@ -1466,30 +1458,15 @@ void Console::do_grbl(Session& s, const Command& c) {
 
 namespace servoarm::fw {
 
-std::unique_ptr<Console::ToolSlot> Console::make_tool(const NamedPose& def) const {
-  auto t = std::make_unique<ToolSlot>();
-  t->def = def;
-  t->chain = chain_;
-  kin::set_tool(t->chain, chain_.tool * def.pose);
-  // The tool's own IK model: the closed form of the arm still holds with any TCP (it is
-  // a fixed transform after the last joint); without one, the numeric fallback.
-  if (ik_ != nullptr) {
-    t->own = std::make_unique<kin::IkModel>();
-    if (kin::ik_prepare(t->chain, *t->own) == kin::Status::ok && t->own->method != kin::IkMethod::none) t->model = t->own.get();
-    else t->own.reset();
-  }
-  return t;
-}
-
 std::string Console::frames_refusal() const {
-  const Telemetry t = ctl_.telemetry();
-  switch (t.state) {
+  const FrameResult r = svc_->frames_check();
+  if (r.ok()) return "";
+  switch (r.arm) {
     case ArmState::moving:
     case ArmState::jogging:
     case ArmState::stopping:
     case ArmState::homing:
-    case ArmState::freedrive:
-      return fmt("refused while the arm is %s", to_string(t.state));
+    case ArmState::freedrive: return fmt("refused while the arm is %s", to_string(r.arm));
     case ArmState::boot:
     case ArmState::disabled:
     case ArmState::enabling:
@@ -1497,41 +1474,13 @@ std::string Console::frames_refusal() const {
     case ArmState::fault:
     case ArmState::estop: break;
   }
-  if (!ctl_.motions().empty() || t.queued > 0) return fmt("refused while %u moves are queued (wait, or stop)", unsigned(t.queued));
-  return "";
+  return fmt("refused while %u moves are queued (wait, or stop)", unsigned(r.queued));
 }
 
-FramesData Console::frames_data() const {
-  FramesData d;
-  for (std::size_t i = 1; i < tools_.size(); ++i) d.tools.push_back(tools_[i]->def);
-  for (std::size_t i = 1; i < frames_.size(); ++i) d.frames.push_back(frames_[i]);
-  d.active_tool = tools_[tool_]->def.name;
-  d.active_frame = frames_[frame_].name;
-  return d;
-}
+std::string Console::load_frames() { return svc_->load_frames(cfg_.frames_file); }
 
-std::string Console::save_frames() const {
-  if (cfg_.frames_file.empty()) return "";
-  return save_frames_file(cfg_.frames_file, frames_data());
-}
-
-std::string Console::load_frames() {
-  if (cfg_.frames_file.empty()) return "";
-  FramesData d;
-  const std::string err = load_frames_file(cfg_.frames_file, d);
-  if (!err.empty()) return err;
-  tools_.resize(1);
-  frames_.resize(1);
-  tool_ = frame_ = 0;
-  for (const NamedPose& t : d.tools) {
-    tools_.push_back(make_tool(t));
-    if (t.name == d.active_tool) tool_ = tools_.size() - 1;
-  }
-  for (const NamedPose& f : d.frames) {
-    frames_.push_back(f);
-    if (f.name == d.active_frame) frame_ = frames_.size() - 1;
-  }
-  return "";
+std::string Console::unsaved_text() const {
+  return cfg_.frames_file.empty() ? " (not kept: no frames file, console.frames_file)" : "";
 }
 
 namespace {
@@ -1544,133 +1493,117 @@ std::size_t find_named(const List& l, std::string_view n, Name name) {
 }
 }  // namespace
 
+// A refused tool / frame change whose answer is the same for each request: the name or the
+// arm's state ("<what>: <why>"), a full list.
+void Console::answer_frame_refusal(Session& s, const FrameResult& r, const std::string& what, std::string_view name) {
+  switch (r.refusal) {
+    case FrameRefusal::bad_name: answer_error(s, r.error, what + ": " + r.reason); return;
+    case FrameRefusal::arm_busy: answer_error(s, r.error, what + ": " + frames_refusal()); return;
+    case FrameRefusal::full:
+      answer_error(s, r.error, fmt("%s: %zu %s already (%s delete NAME first)", what.c_str(), what == "tool" ? kMaxTools : kMaxFrames,
+                                   what == "tool" ? "tools" : "frames", what.c_str()));
+      return;
+    case FrameRefusal::bad_values: answer_error(s, r.error, what + " " + std::string(name) + ": " + r.reason); return;
+    case FrameRefusal::none:
+    case FrameRefusal::not_defined:
+    case FrameRefusal::active:
+    case FrameRefusal::storage: answer_error(s, r.error, what + ": " + to_string(r.refusal)); return;
+  }
+}
+
 void Console::do_tool(Session& s, const Command& c) {
   const ConsoleUnits& u = cfg_.units;
   const std::string_view name(c.name.data());
-  auto slot_name = [](const std::unique_ptr<ToolSlot>& t) -> const std::string& { return t->def.name; };
-  const std::size_t at = find_named(tools_, name, slot_name);
-  const std::string unsaved = cfg_.frames_file.empty() ? " (not kept: no frames file, console.frames_file)" : "";
+  const std::string nm(name);
+  const std::string unsaved = unsaved_text();
   if (c.frame_op == FrameOp::list) {
-    for (std::size_t i = 0; i < tools_.size(); ++i) {
-      const ToolSlot& t = *tools_[i];
-      s.out += fmt("%s %s %s", i == sel_tool() ? "*" : " ", t.def.name.c_str(),
-                   i == 0 ? "(the flange)" : pose_values(t.def.pose, u).c_str());
-      if (t.def.has_payload)
-        s.out += fmt(" mass=%g com=%g,%g,%g", t.def.mass, u.length_out(t.def.com.x()), u.length_out(t.def.com.y()),
-                     u.length_out(t.def.com.z()));
+    for (std::size_t i = 0; i < svc_->tool_count(); ++i) {
+      const NamedPose& t = svc_->tool(i);
+      s.out += fmt("%s %s %s", i == sel_tool() ? "*" : " ", t.name.c_str(), i == 0 ? "(the flange)" : pose_values(t.pose, u).c_str());
+      if (t.has_payload)
+        s.out += fmt(" mass=%g com=%g,%g,%g", t.mass, u.length_out(t.com.x()), u.length_out(t.com.y()), u.length_out(t.com.z()));
       s.out += '\n';
     }
-    answer_ok(s, fmt("%zu tools, active %s%s", tools_.size(), tools_[sel_tool()]->def.name.c_str(), unsaved.c_str()));
+    answer_ok(s, fmt("%zu tools, active %s%s", svc_->tool_count(), svc_->tool(sel_tool()).name.c_str(), unsaved.c_str()));
     return;
   }
   if (c.frame_op == FrameOp::select) {
-    if (at == tools_.size()) {
-      answer_error(s, CmdError::bad_option, fmt("tool %.*s is not defined (tool lists them)", int(name.size()), name.data()));
+    const std::size_t at = svc_->find_tool(name);
+    if (at == svc_->tool_count()) {
+      answer_error(s, CmdError::bad_option, "tool " + nm + " is not defined (tool lists them)");
       return;
     }
     if (s.check_mode) {
       s.check_tool = at;
-      answer_ok(s, fmt("check mode: tool=%s for the check", tools_[at]->def.name.c_str()));
+      answer_ok(s, "check mode: tool=" + nm + " for the check");
       return;
     }
-    const std::string no = frames_refusal();
-    if (!no.empty()) {
-      answer_error(s, CmdError::bad_state, "tool: " + no);
-      return;
-    }
-    const std::size_t old = tool_;
-    tool_ = at;
-    const std::string err = save_frames();
-    if (!err.empty()) {
-      tool_ = old;
-      answer_error(s, CmdError::storage, "tool not changed: " + err);
-      return;
-    }
-    answer_ok(s, "tool=" + tools_[at]->def.name + unsaved);
+    const FrameResult r = svc_->select_tool(name);
+    if (r.refusal == FrameRefusal::storage) answer_error(s, r.error, "tool not changed: " + r.reason);
+    else if (!r.ok()) answer_frame_refusal(s, r, "tool", name);
+    else answer_ok(s, "tool=" + r.def.name + unsaved);
     return;
   }
   if (s.check_mode) {  // as GRBL's $C: definitions are not made in check mode
     answer_ok(s, "check mode: not run");
     return;
   }
-  std::string why = check_frame_name(name, true);
-  if (why.empty()) why = frames_refusal();
-  if (!why.empty()) {
-    answer_error(s, why.rfind("refused", 0) == 0 ? CmdError::bad_state : CmdError::bad_option, "tool: " + why);
-    return;
-  }
   if (c.frame_op == FrameOp::remove) {
-    if (at == tools_.size()) {
-      answer_error(s, CmdError::bad_option, fmt("tool %.*s is not defined", int(name.size()), name.data()));
-      return;
+    const FrameResult r = svc_->delete_tool(name);
+    switch (r.refusal) {
+      case FrameRefusal::none: answer_ok(s, "tool " + nm + " deleted"); return;
+      case FrameRefusal::not_defined: answer_error(s, r.error, "tool " + nm + " is not defined"); return;
+      case FrameRefusal::active: answer_error(s, r.error, "tool " + nm + " is active: select another first"); return;
+      case FrameRefusal::storage: answer_error(s, r.error, "tool not deleted: " + r.reason); return;
+      case FrameRefusal::bad_name:
+      case FrameRefusal::bad_values:
+      case FrameRefusal::arm_busy:
+      case FrameRefusal::full: answer_frame_refusal(s, r, "tool", name); return;
     }
-    if (at == tool_) {
-      answer_error(s, CmdError::bad_state, fmt("tool %.*s is active: select another first", int(name.size()), name.data()));
-      return;
-    }
-    std::unique_ptr<ToolSlot> keep = std::move(tools_[at]);
-    tools_.erase(tools_.begin() + static_cast<std::ptrdiff_t>(at));
-    if (tool_ > at) --tool_;
-    const std::string err = save_frames();
-    if (!err.empty()) {
-      tools_.insert(tools_.begin() + static_cast<std::ptrdiff_t>(at), std::move(keep));
-      if (tool_ >= at) ++tool_;
-      answer_error(s, CmdError::storage, "tool not deleted: " + err);
-      return;
-    }
-    answer_ok(s, fmt("tool %.*s deleted", int(name.size()), name.data()));
     return;
   }
-  // define
+  // define: the name and the arm first, then the values as given (console units -> SI)
+  if (FrameResult no = svc_->frames_check(); check_frame_name(name, true).empty() && !no.ok()) {
+    answer_frame_refusal(s, no, "tool", name);
+    return;
+  }
   const double xyz[3] = {u.length_in(c.vals[0]), u.length_in(c.vals[1]), u.length_in(c.vals[2])};
   const double rpy[3] = {u.angle_in(c.vals[3]), u.angle_in(c.vals[4]), u.angle_in(c.vals[5])};
   const double com[3] = {u.length_in(c.com[0]), u.length_in(c.com[1]), u.length_in(c.com[2])};
-  why = check_frame_values(xyz, rpy, c.has_mass, c.mass, com);
-  if (!why.empty()) {
-    answer_error(s, CmdError::out_of_range, fmt("tool %.*s: ", int(name.size()), name.data()) + why);
-    return;
-  }
-  if (at == tools_.size() && tools_.size() >= kMaxTools) {
-    answer_error(s, CmdError::busy, fmt("tool: %zu tools already (tool delete NAME first)", kMaxTools));
+  if (const std::string why = check_frame_values(xyz, rpy, c.has_mass, c.mass, com); !why.empty() && check_frame_name(name, true).empty()) {
+    answer_error(s, CmdError::out_of_range, "tool " + nm + ": " + why);
     return;
   }
   NamedPose def;
-  def.name = std::string(name);
+  def.name = nm;
   def.pose.translation() = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
   def.pose.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
   def.has_payload = c.has_mass;
   def.mass = c.mass;
   def.com = Eigen::Vector3d(com[0], com[1], com[2]);
-  std::unique_ptr<ToolSlot> fresh = make_tool(def);
-  std::unique_ptr<ToolSlot> old;
-  if (at == tools_.size()) tools_.push_back(std::move(fresh));
-  else old = std::exchange(tools_[at], std::move(fresh));
-  const std::string err = save_frames();
-  if (!err.empty()) {
-    if (old) tools_[at] = std::move(old);
-    else tools_.pop_back();
-    answer_error(s, CmdError::storage, "tool not defined: " + err);
-    return;
-  }
-  answer_ok(s, fmt("tool %s %s %s%s", def.name.c_str(), old ? "redefined" : "defined", pose_values(def.pose, u).c_str(),
-                   ((at == tool_ ? " (active)" : "") + unsaved).c_str()));
+  const FrameResult r = svc_->define_tool(def);
+  if (r.refusal == FrameRefusal::storage) answer_error(s, r.error, "tool not defined: " + r.reason);
+  else if (!r.ok()) answer_frame_refusal(s, r, "tool", name);
+  else
+    answer_ok(s, fmt("tool %s %s %s%s", def.name.c_str(), r.redefined ? "redefined" : "defined", pose_values(def.pose, u).c_str(),
+                     ((r.active ? " (active)" : "") + unsaved).c_str()));
 }
 
 void Console::do_frame(Session& s, const Command& c) {
   const ConsoleUnits& u = cfg_.units;
   std::string name(c.name.data());
-  auto frame_name = [](const NamedPose& f) -> const std::string& { return f.name; };
-  const std::string unsaved = cfg_.frames_file.empty() ? " (not kept: no frames file, console.frames_file)" : "";
+  const std::string unsaved = unsaved_text();
+  const std::string full = fmt("frame: %zu frames already (frame delete NAME first)", kMaxFrames);
   if (c.frame_op == FrameOp::list) {
-    for (std::size_t i = 0; i < frames_.size(); ++i)
-      s.out += fmt("%s %s %s\n", i == sel_frame() ? "*" : " ", frames_[i].name.c_str(),
-                   i == 0 ? "(the base frame)" : pose_values(frames_[i].pose, u).c_str());
-    answer_ok(s, fmt("%zu frames, active %s%s", frames_.size(), frames_[sel_frame()].name.c_str(), unsaved.c_str()));
+    for (std::size_t i = 0; i < svc_->frame_count(); ++i)
+      s.out += fmt("%s %s %s\n", i == sel_frame() ? "*" : " ", svc_->frame(i).name.c_str(),
+                   i == 0 ? "(the base frame)" : pose_values(svc_->frame(i).pose, u).c_str());
+    answer_ok(s, fmt("%zu frames, active %s%s", svc_->frame_count(), svc_->frame(sel_frame()).name.c_str(), unsaved.c_str()));
     return;
   }
   if (c.frame_op == FrameOp::set_axes) {  // G10 L2 Pn
     if (c.g10_p == 0) {
-      name = frames_[sel_frame()].name;
+      name = svc_->frame(sel_frame()).name;
       if (sel_frame() == 0) {
         answer_error(s, CmdError::bad_state, "G10 L2 P0: the active frame is base, which cannot be set (select G54..G59 first)");
         return;
@@ -1679,90 +1612,84 @@ void Console::do_frame(Session& s, const Command& c) {
       name = "g5" + std::to_string(3 + c.g10_p);
     }
   }
-  std::size_t at = find_named(frames_, name, frame_name);
+  const std::size_t at = svc_->find_frame(name);
+  const bool defined = at < svc_->frame_count();
   const bool g5x = name.size() == 3 && name[0] == 'g' && name[1] == '5' && name[2] >= '4' && name[2] <= '9';
+  const bool quiet = s.dialect == Dialect::grbl && c.gcode;  // GRBL: G-code answers a bare ok
   if (c.frame_op == FrameOp::select) {
-    if (at == frames_.size() && !g5x) {
+    if (!defined && !g5x) {
       answer_error(s, CmdError::bad_option, "frame " + name + " is not defined (frame lists them)");
       return;
     }
-    if (s.check_mode) {
-      if (at == frames_.size()) {  // g54..g59 not set yet: the identity, as the active one would be
-        answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "check mode: frame=" + name + " (not set: the base frame)");
-        s.check_frame = 0;
-        return;
-      }
-      s.check_frame = at;
-      answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "check mode: frame=" + name + " for the check");
+    if (s.check_mode) {  // g54..g59 not set yet: the identity, as the active one would be
+      s.check_frame = defined ? at : 0;
+      answer_ok(s, quiet ? "" : "check mode: frame=" + name + (defined ? " for the check" : " (not set: the base frame)"));
       return;
     }
-    const std::string no = frames_refusal();
-    if (!no.empty()) {
-      answer_error(s, CmdError::bad_state, (c.gcode ? fmt("G%s: ", name.c_str() + 1) : std::string("frame: ")) + no);
-      return;
-    }
-    bool added = false;
-    if (at == frames_.size()) {  // G54..G59 before G10 L2 set it: an identity frame of that name
-      if (frames_.size() >= kMaxFrames) {
-        answer_error(s, CmdError::busy, fmt("frame: %zu frames already (frame delete NAME first)", kMaxFrames));
-        return;
-      }
-      NamedPose f;
-      f.name = name;
-      frames_.push_back(f);
-      added = true;
-    }
-    const std::size_t old = frame_;
-    frame_ = at;
-    const std::string err = save_frames();
-    if (!err.empty()) {
-      frame_ = old;
-      if (added) frames_.pop_back();
-      answer_error(s, CmdError::storage, "frame not changed: " + err);
-      return;
-    }
-    answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "frame=" + name + unsaved);
+    const FrameResult r = svc_->select_frame(name, g5x);
+    if (r.refusal == FrameRefusal::arm_busy)
+      answer_error(s, r.error, (c.gcode ? fmt("G%s: ", name.c_str() + 1) : std::string("frame: ")) + frames_refusal());
+    else if (r.refusal == FrameRefusal::full) answer_error(s, r.error, full);
+    else if (!r.ok()) answer_error(s, r.error, "frame not changed: " + r.reason);
+    else answer_ok(s, quiet ? "" : "frame=" + name + unsaved);
     return;
   }
   if (s.check_mode) {
-    answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "check mode: not run");
+    answer_ok(s, quiet ? "" : "check mode: not run");
     return;
   }
-  std::string why = check_frame_name(name, false);
-  if (why.empty()) why = frames_refusal();
-  if (!why.empty()) {
-    answer_error(s, why.rfind("refused", 0) == 0 ? CmdError::bad_state : CmdError::bad_option,
-                 (c.gcode ? std::string("G10: ") : std::string("frame: ")) + why);
-    return;
-  }
+  const std::string prefix = c.gcode ? "G10" : "frame";
   if (c.frame_op == FrameOp::remove) {
-    if (at == frames_.size()) {
-      answer_error(s, CmdError::bad_option, "frame " + name + " is not defined");
-      return;
+    const FrameResult r = svc_->delete_frame(name);
+    switch (r.refusal) {
+      case FrameRefusal::none: answer_ok(s, "frame " + name + " deleted"); return;
+      case FrameRefusal::not_defined: answer_error(s, r.error, "frame " + name + " is not defined"); return;
+      case FrameRefusal::active: answer_error(s, r.error, "frame " + name + " is active: select another first"); return;
+      case FrameRefusal::storage: answer_error(s, r.error, "frame not deleted: " + r.reason); return;
+      case FrameRefusal::bad_name:
+      case FrameRefusal::bad_values:
+      case FrameRefusal::arm_busy:
+      case FrameRefusal::full: answer_frame_refusal(s, r, prefix, name); return;
     }
-    if (at == frame_) {
-      answer_error(s, CmdError::bad_state, "frame " + name + " is active: select another first");
-      return;
-    }
-    const NamedPose keep = frames_[at];
-    frames_.erase(frames_.begin() + static_cast<std::ptrdiff_t>(at));
-    if (frame_ > at) --frame_;
-    const std::string err = save_frames();
-    if (!err.empty()) {
-      frames_.insert(frames_.begin() + static_cast<std::ptrdiff_t>(at), keep);
-      if (frame_ >= at) ++frame_;
-      answer_error(s, CmdError::storage, "frame not deleted: " + err);
-      return;
-    }
-    answer_ok(s, "frame " + name + " deleted");
     return;
   }
-  // define (frame NAME x y z rx ry rz: console units) or G10 L2 (mm / deg, axes not given kept)
+  // define (frame NAME x y z rx ry rz: console units) or G10 L2 / L20 (mm / deg, axes not given kept)
+  if (const std::string why = check_frame_name(name, false); !why.empty()) {
+    answer_error(s, CmdError::bad_option, prefix + ": " + why);
+    return;
+  }
+  if (const FrameResult no = svc_->frames_check(); !no.ok()) {
+    answer_frame_refusal(s, no, prefix, name);
+    return;
+  }
   double xyz[3], rpy[3];
+  frame_values(c, defined ? svc_->frame(at).pose : kin::Pose::Identity(), xyz, rpy);
+  const double none[3] = {0, 0, 0};
+  if (const std::string why = check_frame_values(xyz, rpy, false, 0, none); !why.empty()) {
+    answer_error(s, CmdError::out_of_range, (c.gcode ? std::string("G10: frame ") : std::string("frame ")) + name + ": " + why);
+    return;
+  }
+  NamedPose def;
+  def.name = name;
+  def.pose.translation() = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
+  def.pose.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+  const FrameResult r = svc_->define_frame(def);
+  if (r.refusal == FrameRefusal::full) answer_error(s, r.error, full);
+  else if (r.refusal == FrameRefusal::storage) answer_error(s, r.error, "frame not set: " + r.reason);
+  else if (!r.ok()) answer_frame_refusal(s, r, prefix, name);
+  else
+    answer_ok(s, quiet ? ""
+                       : fmt("frame %s %s %s%s", name.c_str(), r.redefined ? "redefined" : "defined", pose_values(def.pose, u).c_str(),
+                             ((r.active ? " (active)" : "") + unsaved).c_str()));
+}
+
+// A frame definition's values in SI: `frame NAME x y z rx ry rz` in the console's units;
+// G10 L2 in mm / deg, the axes not given kept from `cur`; G10 L20 moves the origin (its axes
+// kept) so that the tool point, where it is now, has the given coordinates in it:
+// w = R^T (p - t), w_k := v_k, t = p - R w.
+void Console::frame_values(const Command& c, const kin::Pose& cur, double xyz[3], double rpy[3]) const {
+  const ConsoleUnits& u = cfg_.units;
   if (c.frame_op == FrameOp::set_axes && c.g10_l20) {
-    // G10 L20: move the frame's origin (its axes kept) so that the tool point, where it is
-    // now, has the given coordinates in it: w = R^T (p - t), w_k := v_k, t = p - R w.
-    const kin::Pose cur = at < frames_.size() ? frames_[at].pose : kin::Pose::Identity();
     const Eigen::Vector3d p = tcp(tail()).translation();
     Eigen::Vector3d w = cur.linear().transpose() * (p - cur.translation());
     for (int k = 0; k < 3; ++k)
@@ -1771,7 +1698,6 @@ void Console::do_frame(Session& s, const Command& c) {
     const Eigen::Vector3d r = kin::rpy_from_rotation(cur.linear());
     for (int k = 0; k < 3; ++k) xyz[k] = t[k], rpy[k] = r[k];
   } else if (c.frame_op == FrameOp::set_axes) {
-    const kin::Pose cur = at < frames_.size() ? frames_[at].pose : kin::Pose::Identity();
     const Eigen::Vector3d r = kin::rpy_from_rotation(cur.linear());
     for (int k = 0; k < 3; ++k) {
       xyz[k] = c.axis_mask & (1u << k) ? c.vals[static_cast<std::size_t>(k)] * 1e-3 : cur.translation()[k];
@@ -1783,35 +1709,6 @@ void Console::do_frame(Session& s, const Command& c) {
       rpy[k] = u.angle_in(c.vals[static_cast<std::size_t>(k + 3)]);
     }
   }
-  const double none[3] = {0, 0, 0};
-  why = check_frame_values(xyz, rpy, false, 0, none);
-  if (!why.empty()) {
-    answer_error(s, CmdError::out_of_range, (c.gcode ? std::string("G10: frame ") : std::string("frame ")) + name + ": " + why);
-    return;
-  }
-  if (at == frames_.size() && frames_.size() >= kMaxFrames) {
-    answer_error(s, CmdError::busy, fmt("frame: %zu frames already (frame delete NAME first)", kMaxFrames));
-    return;
-  }
-  NamedPose def;
-  def.name = name;
-  def.pose.translation() = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
-  def.pose.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
-  const bool fresh = at == frames_.size();
-  NamedPose old;
-  if (fresh) frames_.push_back(def);
-  else old = std::exchange(frames_[at], def);
-  const std::string err = save_frames();
-  if (!err.empty()) {
-    if (fresh) frames_.pop_back();
-    else frames_[at] = old;
-    answer_error(s, CmdError::storage, "frame not set: " + err);
-    return;
-  }
-  answer_ok(s, s.dialect == Dialect::grbl && c.gcode
-                   ? ""
-                   : fmt("frame %s %s %s%s", name.c_str(), fresh ? "defined" : "redefined", pose_values(def.pose, u).c_str(),
-                         ((at == frame_ ? " (active)" : "") + unsaved).c_str()));
 }
 
 }  // namespace servoarm::fw

@@ -136,8 +136,8 @@ void Console::do_teach(Session& s, const Command& c) {
   p.q = kin::JointVector(n_);
   for (int j = 0; j < n_; ++j) p.q[j] = t.q_act[static_cast<std::size_t>(j)];
   p.pose = tcp(p.q);
-  p.tool = tools_[sel_tool()]->def.name;
-  p.frame = frames_[sel_frame()].name;
+  p.tool = svc_->tool(sel_tool()).name;
+  p.frame = svc_->frame(sel_frame()).name;
   prog::PointsData d = points_;
   if (const std::string e = prog::put_point(d, p); !e.empty()) {
     answer_error(s, CmdError::bad_option, "teach: " + e);
@@ -311,10 +311,10 @@ void Console::do_run(Session& s, const Command& c) {
   pc->cs.check_mode = true;
   pc->from = tail();
   pc->cs.check_tail = pc->from;
-  pc->tool = tool_;
-  pc->frame = frame_;
-  pc->cs.check_tool = tool_;
-  pc->cs.check_frame = frame_;
+  pc->tool = svc_->active_tool();
+  pc->frame = svc_->active_frame();
+  pc->cs.check_tool = pc->tool;
+  pc->cs.check_frame = pc->frame;
   pc->shadow = std::make_unique<PathShadow>();
   pc->check_only = s.check_mode;
   pcheck_ = std::move(pc);
@@ -377,7 +377,7 @@ bool Console::continue_check() {
   // with the same tool and frame, and no other program may have started meanwhile.
   const Telemetry t = ctl_.telemetry();
   if (running() || t.state != ArmState::idle || !ctl_.motions().empty() || (tail() - done->from).norm() > 1e-9 ||
-      tool_ != done->tool || frame_ != done->frame) {
+      svc_->active_tool() != done->tool || svc_->active_frame() != done->frame) {
     answer_error(o, CmdError::bad_state,
                  fmt("run: %s: the arm moved, or the tool / frame / program changed, while it was checked (it is %s); "
                      "nothing moved: run it again", name.c_str(), to_string(t.state)));

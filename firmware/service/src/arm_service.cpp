@@ -99,6 +99,14 @@ void ArmService::init() {
   tail_ = kin::JointVector::Zero(n_);
   shadow_ = std::make_unique<PathShadow>();
   scratch_ = std::make_unique<MotionItem>();
+  auto t0 = std::make_unique<ToolSlot>();  // tool0: the flange
+  t0->def.name = "tool0";
+  t0->chain = chain_;
+  t0->model = ik_;
+  tools_.push_back(std::move(t0));
+  NamedPose base;
+  base.name = "base";
+  frames_.push_back(base);
   if (cfg_.home.size() != n_) {  // joint zero clamped into the limits
     cfg_.home = kin::JointVector::Zero(n_);
     for (int j = 0; j < n_; ++j)
@@ -953,6 +961,10 @@ ArmStatus ArmService::status() const {
   s.fault = t.cause;
   s.fault_joint = t.fault_joint;
   s.fault_text = bounded_text(t.fault_text);
+  s.tool = tools_[tool_]->def.name;
+  s.frame = frames_[frame_].name;
+  if (kin::forward(tools_[tool_]->chain, s.q, s.pose) != kin::Status::ok) s.pose.translation().setConstant(std::nan(""));
+  s.pose_in_frame = frames_[frame_].pose.inverse() * s.pose;
   s.feed_forward = static_cast<FeedForwardKind>(t.feed_forward);
   s.collision_on = t.collision_on;
   s.freedrive = static_cast<FreedrivePhase>(t.freedrive);

@@ -179,8 +179,8 @@ class Console {
   /// and armfw does not start (the file is never overwritten).
   std::string load_frames();
   /// Names of the active tool ("tool0" = the flange) and user frame ("base").
-  const std::string& active_tool() const { return tools_[tool_]->def.name; }
-  const std::string& active_frame() const { return frames_[frame_].name; }
+  const std::string& active_tool() const { return svc_->tool(svc_->active_tool()).name; }
+  const std::string& active_frame() const { return svc_->frame(svc_->active_frame()).name; }
   /// The tool point's pose of joints `q` in the active user frame (SI), with the active tool.
   kin::Pose pose_in_frame(const kin::JointVector& q) const;
 
@@ -291,42 +291,31 @@ class Console {
   std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
   kin::IkSolver ik_solver() const;
   const kin::IkModel* ik_ = nullptr;  ///< the App's (outlives the console); nullptr: numeric fallback
-  // Tools and user frames (frames.hpp). A tool's chain is the controller's with the tool's
-  // TCP appended (its own IK model prepared from it); queued Cartesian moves and jogs point
-  // at it, so a slot is changed only while nothing moves, jogs or is queued. unique_ptr:
-  // stable addresses. [0] = tool0 (the flange: ik_), frames_[0] = base.
-  struct ToolSlot {
-    NamedPose def;
-    kin::Chain chain;
-    std::unique_ptr<kin::IkModel> own;
-    const kin::IkModel* model = nullptr;  ///< own.get(), ik_ for tool0, nullptr: numeric fallback
-  };
-  std::vector<std::unique_ptr<ToolSlot>> tools_;
-  std::vector<NamedPose> frames_;
-  std::size_t tool_ = 0, frame_ = 0;
+  // Tools and user frames: the service's (ArmService::tool, frame). A session in check mode
+  // keeps its own selection (indices into the service's lists); another session may delete a
+  // tool or frame meanwhile, so an index past the end falls back to tool0 / base.
   const Session* sel_ = nullptr;   ///< the session executing a line (check mode has its own selection)
-  // A session in check mode keeps its own selection; another session may delete a tool or
-  // frame meanwhile, so an index past the end falls back to tool0 / base.
   std::size_t sel_tool() const {
-    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_tool : tool_;
-    return i < tools_.size() ? i : 0;
+    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_tool : svc_->active_tool();
+    return i < svc_->tool_count() ? i : 0;
   }
   std::size_t sel_frame() const {
-    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_frame : frame_;
-    return i < frames_.size() ? i : 0;
+    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_frame : svc_->active_frame();
+    return i < svc_->frame_count() ? i : 0;
   }
-  const ToolSlot& tool_slot() const { return *tools_[sel_tool()]; }
-  const kin::Pose& user_frame() const { return frames_[sel_frame()].pose; }
+  const kin::Chain& tool_chain() const { return svc_->tool_chain(sel_tool()); }
+  const kin::Pose& user_frame() const { return svc_->frame(sel_frame()).pose; }
   /// The active tool point's pose in the base frame.
   kin::Pose tcp(const kin::JointVector& q) const;
-  std::unique_ptr<ToolSlot> make_tool(const NamedPose& def) const;
-  /// "" when tools and frames may change now, else why not.
+  /// "" when tools and frames may change now, else why not (ArmService::frames_check rendered).
   std::string frames_refusal() const;
-  FramesData frames_data() const;
-  /// Save the frames file ("" ok, or the error); nothing to do without a file.
-  std::string save_frames() const;
+  /// A refused tool or frame request (`what`: "tool", "frame", "G10") as its error answer.
+  void answer_frame_refusal(Session& s, const FrameResult& r, const std::string& what, std::string_view name);
+  std::string unsaved_text() const;  ///< " (not kept: ...)" without a frames file
   void do_tool(Session& s, const Command& c);
   void do_frame(Session& s, const Command& c);
+  /// A frame definition's position and roll-pitch-yaw (SI) from `frame NAME ...` or G10 L2 / L20.
+  void frame_values(const Command& c, const kin::Pose& cur, double xyz[3], double rpy[3]) const;
   std::string where_text() const;  ///< "tool=NAME frame=NAME"
   std::string grbl_position(const kin::JointVector& q) const;
   std::string grbl_wcs() const;  ///< "G54".."G59" for $G

@@ -36,6 +36,7 @@
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
 #include "servoarm/lang/commands.hpp"
+#include "servoarm/lang/frames.hpp"
 #include "servoarm/lang/requests.hpp"
 #include "servoarm/rt/controller.hpp"
 
@@ -226,6 +227,10 @@ struct ArmStatus {
   int fault_joint = -1;            ///< the joint concerned (0-based), -1 none
   std::string fault_text;          ///< the control thread's line for it ("" none)
   int feed_pct = 100;              ///< the feed override
+  std::string tool = "tool0";      ///< the active tool
+  std::string frame = "base";      ///< the active user frame
+  kin::Pose pose = kin::Pose::Identity();  ///< the active tool point at q, in the base frame (m)
+  kin::Pose pose_in_frame = kin::Pose::Identity();  ///< the same in the active user frame
   FeedForwardKind feed_forward = FeedForwardKind::off;
   bool collision_on = false;
   FreedrivePhase freedrive = FreedrivePhase::off;
@@ -458,6 +463,34 @@ struct ProgramResult {
   bool ok() const { return error == CmdError::ok; }
 };
 
+/// What a tool or user-frame request refused (FrameResult::refusal); none: done.
+enum class FrameRefusal : std::uint8_t {
+  none,
+  not_defined,  ///< no tool / frame of that name
+  bad_name,     ///< the name may not name one (`reason`: check_frame_name's line)
+  bad_values,   ///< the pose or payload is out of range (`reason`: check_frame_values's line)
+  arm_busy,     ///< the arm moves, jogs, homes or is in free-drive (`arm`), or motions are queued (`queued`)
+  active,       ///< delete: it is the active one
+  full,         ///< define: kMaxTools / kMaxFrames already
+  storage,      ///< the frames file could not be written (`reason`); nothing changed
+};
+const char* to_string(FrameRefusal r);
+
+/// The answer to a tool or frame request: done (the definition concerned, whether it
+/// replaced one, whether it is the active one), or what was refused.
+struct FrameResult {
+  CmdError error = CmdError::ok;
+  FrameRefusal refusal = FrameRefusal::none;
+  std::string reason;
+  ArmState arm = ArmState::idle;  ///< arm_busy: the arm's state
+  std::uint32_t queued = 0;       ///< arm_busy: motions queued
+  NamedPose def;                  ///< the tool / frame concerned
+  bool redefined = false;         ///< define: it replaced one of that name
+  bool active = false;            ///< it is the active one
+  bool added = false;             ///< select_frame: a G54..G59 frame not set yet was added (identity)
+  bool ok() const { return error == CmdError::ok; }
+};
+
 /// Every request the service takes, by one name each: a front end that speaks in messages
 /// (a network API) maps one message to one of these; `query` ones read and change nothing.
 /// kServiceOps lists each once, in this order (a test checks): the names live there only.
@@ -494,6 +527,14 @@ enum class ServiceOp : std::uint8_t {
   program_step,         ///< program_step() -> ProgramResult
   program_abort,        ///< program_abort() -> ProgramResult
   program_status,       ///< program_status() -> ProgramStatus
+  tools,                ///< tool_count() / tool(i) / active_tool()
+  tool_select,          ///< select_tool(name) -> FrameResult
+  tool_define,          ///< define_tool(NamedPose) -> FrameResult
+  tool_delete,          ///< delete_tool(name) -> FrameResult
+  frames,               ///< frame_count() / frame(i) / active_frame()
+  frame_select,         ///< select_frame(name) -> FrameResult
+  frame_define,         ///< define_frame(NamedPose) -> FrameResult
+  frame_delete,         ///< delete_frame(name) -> FrameResult
 };
 
 struct ServiceOpInfo {
@@ -534,6 +575,14 @@ inline constexpr ServiceOpInfo kServiceOps[] = {
     {ServiceOp::program_step, "program_step", false},
     {ServiceOp::program_abort, "program_abort", false},
     {ServiceOp::program_status, "program_status", true},
+    {ServiceOp::tools, "tools", true},
+    {ServiceOp::tool_select, "tool_select", false},
+    {ServiceOp::tool_define, "tool_define", false},
+    {ServiceOp::tool_delete, "tool_delete", false},
+    {ServiceOp::frames, "frames", true},
+    {ServiceOp::frame_select, "frame_select", false},
+    {ServiceOp::frame_define, "frame_define", false},
+    {ServiceOp::frame_delete, "frame_delete", false},
 };
 const char* to_string(ServiceOp op);
 /// The op named `name` (kServiceOps); false: none is.
@@ -618,6 +667,39 @@ class ArmService {
   void program_tick();
   /// A program event's names (empty when the event is no longer kept or is no program event).
   ProgramNames event_program(const ArmEvent& e) const;
+
+  /// Tools and user frames (frames.hpp). [0] is tool0 (the flange) / base and is always
+  /// there. A tool's chain is the arm's with its TCP appended (with its own IK model when
+  /// the arm has one); queued Cartesian moves and jogs point at it, so tools and frames
+  /// change only while nothing moves, jogs or is queued. Each change is saved to the frames
+  /// file (set_frames_file; "" keeps them in memory only) before it is answered.
+  /// `ik`: the arm's IK model (the caller's, outliving the service; nullptr: numeric fallback).
+  void set_ik_model(const kin::IkModel* ik);
+  /// Load the tools and frames of `path` ("": none, in memory only). "" or the one-line
+  /// error (file:line:column); on error nothing is loaded.
+  std::string load_frames(const std::string& path);
+  const std::string& frames_file() const { return frames_file_; }
+  std::size_t tool_count() const { return tools_.size(); }
+  const NamedPose& tool(std::size_t i) const { return tools_[i]->def; }
+  const kin::Chain& tool_chain(std::size_t i) const { return tools_[i]->chain; }
+  kin::IkSolver tool_ik(std::size_t i) const;
+  const kin::IkModel* tool_model(std::size_t i) const { return tools_[i]->model; }  ///< nullptr: numeric fallback
+  std::size_t active_tool() const { return tool_; }
+  std::size_t frame_count() const { return frames_.size(); }
+  const NamedPose& frame(std::size_t i) const { return frames_[i]; }
+  std::size_t active_frame() const { return frame_; }
+  /// The index of the tool / frame called `name`; the count when there is none.
+  std::size_t find_tool(std::string_view name) const;
+  std::size_t find_frame(std::string_view name) const;
+  FrameResult select_tool(std::string_view name);
+  FrameResult define_tool(const NamedPose& def);
+  FrameResult delete_tool(std::string_view name);
+  /// `add_identity`: a frame not defined yet is added as the identity (G54..G59 before G10 set it).
+  FrameResult select_frame(std::string_view name, bool add_identity = false);
+  FrameResult define_frame(const NamedPose& def);
+  FrameResult delete_frame(std::string_view name);
+  /// arm_busy when tools and frames may not change now, else ok.
+  FrameResult frames_check() const;
 
   /// Queries: they read and change nothing.
   ArmStatus status() const;
@@ -735,6 +817,21 @@ class ArmService {
   std::uint64_t next_seq_ = 1;
   std::function<void()> idle_;
   int feed_pct_ = 100;
+  // Tools and user frames (tools_frames.cpp). unique_ptr: stable chain addresses.
+  struct ToolSlot {
+    NamedPose def;
+    kin::Chain chain;
+    std::unique_ptr<kin::IkModel> own;
+    const kin::IkModel* model = nullptr;  ///< own.get(), ik_ for tool0, nullptr: numeric fallback
+  };
+  std::vector<std::unique_ptr<ToolSlot>> tools_;
+  std::vector<NamedPose> frames_;
+  std::size_t tool_ = 0, frame_ = 0;
+  std::string frames_file_;
+  const kin::IkModel* ik_ = nullptr;
+  std::unique_ptr<ToolSlot> make_tool(const NamedPose& def) const;
+  std::string save_frames() const;
+  FrameResult named(bool tool, std::string_view name) const;
   int feed_of(int given) const { return given < 0 ? feed_pct_ : given; }
 };
 
