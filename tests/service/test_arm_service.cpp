@@ -517,3 +517,53 @@ TEST(ArmService, FramesAreKeptInTheFramesFile) {
   STRCMP_EQUAL("g55", svc.frame(svc.active_frame()).name.c_str());
   DOUBLES_EQUAL(0.05, svc.tool(svc.active_tool()).pose.translation().z(), 1e-15);
 }
+
+// Record through the service: started at a rate, the arm jogged along one joint, the path is
+// its samples thinned to the two ends (a straight line in joint space) with the blend half the
+// tolerance; a second start is refused as recording, a path after stop as not_recording.
+TEST(ArmService, ARecordingIsTheJointPathThinnedWithinTheTolerance) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const kin::JointVector q0 = svc.status().q;
+  const RecordResult start = svc.record_start(100);
+  CHECK(start.ok());
+  LONGS_EQUAL(1, start.samples);  // where the arm is now
+  CHECK(svc.record_start(100).refusal == RecordRefusal::recording);
+  JointJog jj;
+  jj.joint = 0;
+  jj.increment = 0.2;
+  jj.speed_pct = 50;
+  CHECK(svc.jog(jj, JogContext{}).ok());
+  for (int i = 0; i < 20000 && (i < 10 || r.app.ctl->telemetry().state == ArmState::jogging); ++i) {
+    r.cycle();
+    svc.tick();
+  }
+  const kin::JointVector q1 = svc.status().q;
+  CHECK(svc.record_samples() > 10);
+  const RecordResult path = svc.record_path(0.01);
+  CHECK(path.ok());
+  DOUBLES_EQUAL(0.005, path.blend, 0);
+  LONGS_EQUAL(2, path.waypoints.size());
+  CHECK((path.waypoints.front() - q0).norm() < 1e-9);
+  CHECK((path.waypoints.back() - q1).norm() < 1e-9);
+  CHECK(svc.recording());
+  CHECK(svc.record_stop().ok());
+  CHECK(!svc.recording());
+  CHECK(svc.record_path(0.01).refusal == RecordRefusal::not_recording);
+}
+
+// Douglas-Peucker keeps a corner farther than the tolerance from the chord, drops one nearer.
+TEST(ArmService, DecimateKeepsCornersBeyondTheTolerance) {
+  std::vector<kin::JointVector> q;
+  for (double y : {0.0, 0.004, 0.02, 0.004, 0.0}) {
+    kin::JointVector v(2);
+    v << static_cast<double>(q.size()), y;
+    q.push_back(v);
+  }
+  const std::vector<std::size_t> keep = decimate(q, 0.01);
+  LONGS_EQUAL(3, keep.size());
+  LONGS_EQUAL(0, keep[0]);
+  LONGS_EQUAL(2, keep[1]);
+  LONGS_EQUAL(4, keep[2]);
+}

@@ -295,7 +295,7 @@ std::string Console::status_text() const {
   s += "]";
   s += fmt(" feed_override=%d%%", st.feed_pct);
   if (running()) s += " " + program_text();
-  if (rec_.active) s += fmt(" recording=%zu", rec_.samples.size());
+  if (svc_->recording()) s += fmt(" recording=%zu", svc_->record_samples());
   if (st.feed_forward != FeedForwardKind::off || st.collision_on || st.freedrive != FreedrivePhase::off)  // (the dynamics parts, when one runs)
     s += fmt(" feed_forward=%s collision=%s freedrive=%s", to_string(st.feed_forward), st.collision_on ? "on" : "off",
              to_string(st.freedrive));

@@ -41,49 +41,6 @@ std::string error_of(const std::string& out) {
 }
 
 
-/// Douglas-Peucker on joint vectors (Euclidean in SI joint space): indices kept, first and last included.
-std::vector<std::size_t> decimate(const std::vector<kin::JointVector>& q, double tol) {
-  const std::size_t n = q.size();
-  std::vector<char> keep(n, 0);
-  if (n == 0) return {};
-  keep[0] = keep[n - 1] = 1;
-  std::vector<std::pair<std::size_t, std::size_t>> stack{{0, n - 1}};
-  while (!stack.empty()) {
-    const auto [a, b] = stack.back();
-    stack.pop_back();
-    if (b <= a + 1) continue;
-    // Plain loops over the joints, not Eigen temporaries: gcc 12 for armhf at -O2
-    // takes those for maybe-uninitialized (-Werror in the cross build).
-    const Eigen::Index m = q[a].size();
-    double dd = 0;
-    for (Eigen::Index j = 0; j < m; ++j) dd += (q[b][j] - q[a][j]) * (q[b][j] - q[a][j]);
-    double worst = -1;
-    std::size_t at = a;
-    for (std::size_t i = a + 1; i < b; ++i) {
-      double vd = 0;
-      for (Eigen::Index j = 0; j < m; ++j) vd += (q[i][j] - q[a][j]) * (q[b][j] - q[a][j]);
-      const double s = dd > 0 ? std::clamp(vd / dd, 0.0, 1.0) : 0.0;
-      double dist2 = 0;
-      for (Eigen::Index j = 0; j < m; ++j) {
-        const double e = (q[i][j] - q[a][j]) - s * (q[b][j] - q[a][j]);
-        dist2 += e * e;
-      }
-      const double dist = std::sqrt(dist2);
-      if (dist > worst) worst = dist, at = i;
-    }
-    if (worst > tol) {
-      keep[at] = 1;
-      stack.push_back({a, at});
-      stack.push_back({at, b});
-    }
-  }
-  std::vector<std::size_t> out;
-  for (std::size_t i = 0; i < n; ++i)
-    if (keep[i]) out.push_back(i);
-  return out;
-}
-
-constexpr std::size_t kMaxRecordSamples = 100000;
 
 }  // namespace
 
@@ -538,18 +495,7 @@ std::string Console::program_line(const ArmEvent& e) const {
 }
 
 void Console::tick() {
-  const Telemetry t = ctl_.telemetry();
-  // The recorder: one sample every rate interval of control cycles.
-  if (rec_.active && rec_.samples.size() < kMaxRecordSamples) {
-    const double every = std::max(1.0, std::round(ctl_.config().rate_hz / rec_.rate_hz));
-    if (static_cast<double>(t.cycles - rec_.last_cycle) >= every) {
-      kin::JointVector q(n_);
-      for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
-      rec_.samples.push_back(q);
-      rec_.last_cycle = t.cycles;
-    }
-  }
-  svc_->program_tick();
+  svc_->tick();  // a record sample, the running program's next steps
   if (!running()) run_.reset();  // the service's run ended: its steps are no longer run
 }
 
@@ -558,27 +504,24 @@ void Console::tick() {
 // ---------------------------------------------------------------------------
 
 void Console::do_record(Session& s, const Command& c) {
-  const Telemetry t = ctl_.telemetry();
   if (s.check_mode) {  // a check changes nothing: no recording started or stopped, no file written
     answer_ok(s, "check mode: not run");
     return;
   }
   if (!c.record_stop) {
-    if (rec_.active) {
-      answer_error(s, CmdError::bad_state, fmt("record: already recording (%zu samples): record stop NAME", rec_.samples.size()));
-      return;
+    const RecordResult r = svc_->record_start(c.rate > 0 ? c.rate : cfg_.record_rate_hz);
+    switch (r.refusal) {
+      case RecordRefusal::none: answer_ok(s, fmt("recording at %g Hz: jog, then record stop NAME", r.rate_hz)); return;
+      case RecordRefusal::recording:
+        answer_error(s, r.error, fmt("record: already recording (%zu samples): record stop NAME", r.samples));
+        return;
+      case RecordRefusal::not_homed: answer_error(s, r.error, r.reason); return;
+      case RecordRefusal::not_recording:
+      case RecordRefusal::bad_value: answer_error(s, r.error, std::string("record: ") + to_string(r.refusal)); return;
     }
-    if (!homed_ok(s)) return;
-    rec_.active = true;
-    rec_.rate_hz = c.rate > 0 ? c.rate : cfg_.record_rate_hz;
-    rec_.samples.clear();
-    rec_.samples.reserve(kMaxRecordSamples);
-    rec_.last_cycle = t.cycles - static_cast<std::uint64_t>(std::max(1.0, ctl_.config().rate_hz / rec_.rate_hz)) - 1;
-    tick();  // the first sample: where the arm is now
-    answer_ok(s, fmt("recording at %g Hz: jog, then record stop NAME", rec_.rate_hz));
     return;
   }
-  if (!rec_.active) {
+  if (!svc_->recording()) {
     answer_error(s, CmdError::bad_state, "record stop: nothing is recorded (record start first)");
     return;
   }
@@ -587,29 +530,21 @@ void Console::do_record(Session& s, const Command& c) {
     answer_error(s, CmdError::storage, "record stop: no programs folder (programs.dir, armfw --programs DIR); still recording");
     return;
   }
-  {  // the last sample: where the arm is now
-    kin::JointVector q = kin::JointVector::Zero(n_);
-    bool moved = rec_.samples.empty();
-    for (int j = 0; j < n_; ++j) {
-      q[j] = t.q_act[static_cast<std::size_t>(j)];
-      if (!moved && rec_.samples.back()[j] != q[j]) moved = true;
-    }
-    if (moved) rec_.samples.push_back(q);
-  }
   const double tol = c.tolerance > 0 ? cfg_.units.angle_in(c.tolerance) : cfg_.record_tolerance;
-  // The moves follow the decimated polyline (within tol/2 of the samples) and each blend
-  // stays within blend = tol/2 of its corner, a sample: within tol of the recorded path.
-  const std::vector<std::size_t> keep = decimate(rec_.samples, 0.5 * tol);
+  const RecordResult r = svc_->record_path(tol);
+  if (!r.ok()) {
+    answer_error(s, r.error, std::string("record stop: ") + to_string(r.refusal) + "; still recording");
+    return;
+  }
   const ConsoleUnits& u = cfg_.units;
   std::string text = fmt("# recorded by armfw: record stop %s (%zu samples at %g Hz; within %g %s of the recorded path)\n",
-                         name.c_str(), rec_.samples.size(), rec_.rate_hz, u.angle_out(tol), u.angle_name());
+                         name.c_str(), r.samples, r.rate_hz, u.angle_out(tol), u.angle_name());
   int moves = 0;
-  for (std::size_t k = 0; k < keep.size(); ++k) {
-    const kin::JointVector& q = rec_.samples[keep[k]];
+  for (std::size_t k = 0; k < r.waypoints.size(); ++k) {
     std::string line = "movej";
-    for (int j = 0; j < n_; ++j) line += fmt(" %.10g", to_user(j, q[j]));
+    for (int j = 0; j < n_; ++j) line += fmt(" %.10g", to_user(j, r.waypoints[k][j]));
     line += fmt(" speed=%g", motion().default_joint_speed_pct);
-    if (k > 0 && k + 1 < keep.size()) line += fmt(" blend=%.6g", u.angle_out(0.5 * tol));
+    if (k > 0 && k + 1 < r.waypoints.size()) line += fmt(" blend=%.6g", u.angle_out(r.blend));
     text += line + "\n";
     ++moves;
   }
@@ -619,10 +554,8 @@ void Console::do_record(Session& s, const Command& c) {
     answer_error(s, CmdError::storage, "record stop: " + e + "; still recording");
     return;
   }
-  const std::size_t n = rec_.samples.size();
-  rec_.active = false;
-  rec_.samples.clear();
-  answer_ok(s, fmt("recorded %s: %d moves from %zu samples", name.c_str(), moves, n));
+  svc_->record_stop();
+  answer_ok(s, fmt("recorded %s: %d moves from %zu samples", name.c_str(), moves, r.samples));
 }
 
 // ---------------------------------------------------------------------------

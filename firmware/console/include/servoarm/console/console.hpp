@@ -357,12 +357,6 @@ class Console {
   std::uint64_t events_seen_ = 0;  ///< the last event of the service's stream rendered (drain_events)
   /// An event of the service's stream as its native line and its GRBL lines.
   void render_event(const ArmEvent& e, std::string& native, std::string& grbl);
-  struct Recording {
-    bool active = false;
-    double rate_hz = 50;
-    std::uint64_t last_cycle = 0;
-    std::vector<kin::JointVector> samples;
-  } rec_;
   void do_teach(Session& s, const Command& c);
   void do_points(Session& s);
   void do_point_delete(Session& s, const Command& c);

@@ -491,6 +491,37 @@ struct FrameResult {
   bool ok() const { return error == CmdError::ok; }
 };
 
+/// What a record request refused (RecordResult::refusal); none: done.
+enum class RecordRefusal : std::uint8_t {
+  none,
+  recording,      ///< start: already recording (`samples` so far)
+  not_recording,  ///< path / stop: nothing is recorded
+  not_homed,      ///< start: a joint is not homed (`reason` names them)
+  bad_value,      ///< start: the rate, path: the tolerance is not a positive finite number
+};
+const char* to_string(RecordRefusal r);
+
+/// Samples a recording keeps at most (later ones are not taken).
+inline constexpr std::size_t kMaxRecordSamples = 100000;
+
+/// The answer to a record request: the rate and samples, and for record_path() the recorded
+/// path thinned to the waypoints within `tolerance` of it (SI joints; the first and last
+/// sample included), each corner to be blended by `blend` (= tolerance / 2).
+struct RecordResult {
+  CmdError error = CmdError::ok;
+  RecordRefusal refusal = RecordRefusal::none;
+  std::string reason;
+  double rate_hz = 0;
+  std::size_t samples = 0;
+  double tolerance = 0, blend = 0;  ///< rad (joint-space distance)
+  std::vector<kin::JointVector> waypoints;
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// Douglas-Peucker on joint vectors (Euclidean in SI joint space): the indices of the samples
+/// kept within `tol` of the polyline, first and last included.
+std::vector<std::size_t> decimate(const std::vector<kin::JointVector>& q, double tol);
+
 /// Every request the service takes, by one name each: a front end that speaks in messages
 /// (a network API) maps one message to one of these; `query` ones read and change nothing.
 /// kServiceOps lists each once, in this order (a test checks): the names live there only.
@@ -535,6 +566,8 @@ enum class ServiceOp : std::uint8_t {
   frame_select,         ///< select_frame(name) -> FrameResult
   frame_define,         ///< define_frame(NamedPose) -> FrameResult
   frame_delete,         ///< delete_frame(name) -> FrameResult
+  record_start,         ///< record_start(rate) -> RecordResult
+  record_stop,          ///< record_path(tolerance), then record_stop() -> RecordResult
 };
 
 struct ServiceOpInfo {
@@ -583,6 +616,8 @@ inline constexpr ServiceOpInfo kServiceOps[] = {
     {ServiceOp::frame_select, "frame_select", false},
     {ServiceOp::frame_define, "frame_define", false},
     {ServiceOp::frame_delete, "frame_delete", false},
+    {ServiceOp::record_start, "record_start", false},
+    {ServiceOp::record_stop, "record_stop", false},
 };
 const char* to_string(ServiceOp op);
 /// The op named `name` (kServiceOps); false: none is.
@@ -701,6 +736,19 @@ class ArmService {
   /// arm_busy when tools and frames may not change now, else ok.
   FrameResult frames_check() const;
 
+  /// Record: sample the measured joints at `rate_hz` (the arm moved by jogs or by hand)
+  /// from now on; record_path(): the path so far (the arm's position now its last sample)
+  /// thinned within `tolerance`, still recording; record_stop(): end it (the samples are
+  /// dropped). The front end keeps the path (as a program) between the two.
+  RecordResult record_start(double rate_hz);
+  RecordResult record_path(double tolerance);
+  RecordResult record_stop();
+  bool recording() const { return rec_.active; }
+  std::size_t record_samples() const { return rec_.samples.size(); }
+  /// The service's periodic work on the console thread: a record sample when one is due,
+  /// then program_tick(). Never blocks.
+  void tick();
+
   /// Queries: they read and change nothing.
   ArmStatus status() const;
   ArmLimits arm_limits() const;
@@ -817,6 +865,13 @@ class ArmService {
   std::uint64_t next_seq_ = 1;
   std::function<void()> idle_;
   int feed_pct_ = 100;
+  struct Recording {
+    bool active = false;
+    double rate_hz = 50;
+    std::uint64_t last_cycle = 0;
+    std::vector<kin::JointVector> samples;
+  } rec_;
+  void record_sample();
   // Tools and user frames (tools_frames.cpp). unique_ptr: stable chain addresses.
   struct ToolSlot {
     NamedPose def;
