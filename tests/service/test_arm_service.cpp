@@ -567,3 +567,47 @@ TEST(ArmService, DecimateKeepsCornersBeyondTheTolerance) {
   LONGS_EQUAL(2, keep[1]);
   LONGS_EQUAL(4, keep[2]);
 }
+
+// teach_here(): at rest it gives the measured joints, the active tool's pose (FK of them) and
+// the tool and frame; with a move queued it is refused as queued, the arm moving as
+// arm_state; it changes nothing (the queue keeps its move).
+TEST(ArmService, TeachHereGivesTheArmsPlaceOrWhyNot) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const TeachResult here = svc.teach_here();
+  CHECK(here.ok());
+  const Telemetry t = r.app.ctl->telemetry();
+  for (int j = 0; j < 6; ++j) DOUBLES_EQUAL(t.q_act[static_cast<std::size_t>(j)], here.q[j], 1e-12);
+  kin::Pose fk;
+  CHECK(kin::forward(r.app.chain, here.q, fk) == kin::Status::ok);
+  CHECK((fk.translation() - here.pose.translation()).norm() < 1e-12);
+  STRCMP_EQUAL("tool0", here.tool.c_str());
+  STRCMP_EQUAL("base", here.frame.c_str());
+  MoveJoints m;
+  m.goal = joints({10, -40, 170, 5, 40, -5});
+  CHECK(svc.move(m, MoveContext{}).ok());
+  const TeachResult queued = svc.teach_here();
+  CHECK(queued.refusal == TeachRefusal::queued);
+  CHECK(queued.error == CmdError::bad_state);
+  LONGS_EQUAL(1, queued.queued);
+  LONGS_EQUAL(1, r.app.ctl->motions().size());
+  for (int i = 0; i < 20; ++i) r.cycle();
+  const TeachResult moving = svc.teach_here();
+  CHECK(moving.refusal == TeachRefusal::arm_state);
+  CHECK(moving.arm == ArmState::moving);
+}
+
+// An unhomed arm: refused as not_homed naming the joints, the joints still given.
+TEST(ArmService, TeachHereOnAnUnhomedArmNamesTheJoints) {
+  FwConfig c;
+  c.drives.resize(6);
+  c.drives[4].homing_method = "19";
+  test::ConsoleRig r(c);
+  r.enable();
+  const TeachResult here = r.app.console->service().teach_here();
+  CHECK(here.refusal == TeachRefusal::not_homed);
+  CHECK(here.error == CmdError::not_homed);
+  CHECK_TEXT(here.reason.find("joint 5 not homed") != std::string::npos, here.reason.c_str());
+  LONGS_EQUAL(6, here.q.size());
+}

@@ -57,42 +57,33 @@ std::string Console::load_points() {
   return "";
 }
 
-std::string Console::points_refusal() const {
-  if (running()) {
-    const ProgramStatus p = svc_->program_status();
-    return fmt("refused while program %s is %s (abort it first)", p.name.c_str(), to_string(p.state));
+std::string Console::points_refusal(const TeachResult& r) const {
+  switch (r.refusal) {
+    case TeachRefusal::program:
+      return fmt("refused while program %s is %s (abort it first)", r.program.name.c_str(), to_string(r.program.state));
+    case TeachRefusal::arm_state: return fmt("refused while the arm is %s (teach at rest)", to_string(r.arm));
+    case TeachRefusal::queued: return "refused while moves are queued";
+    case TeachRefusal::none:
+    case TeachRefusal::not_homed: break;
   }
-  const Telemetry t = ctl_.telemetry();
-  switch (t.state) {
-    case ArmState::idle:
-    case ArmState::disabled:
-    case ArmState::freedrive: break;  // teach where the hand put it
-    case ArmState::boot:
-    case ArmState::enabling:
-    case ArmState::moving:
-    case ArmState::stopping:
-    case ArmState::fault:
-    case ArmState::estop:
-    case ArmState::jogging:
-    case ArmState::homing: return fmt("refused while the arm is %s (teach at rest)", to_string(t.state));
-  }
-  if (!ctl_.motions().empty()) return "refused while moves are queued";
   return "";
 }
 
 void Console::do_teach(Session& s, const Command& c) {
   const std::string name(c.word.data());
-  if (const std::string no = points_refusal(); !no.empty()) {
+  const TeachResult here = svc_->teach_here();
+  if (const std::string no = points_refusal(here); !no.empty()) {
     answer_error(s, CmdError::bad_state, "teach: " + no);
     return;
   }
-  if (!homed_ok(s)) return;  // a pose in coordinates not established means nothing
-  const Telemetry t = ctl_.telemetry();
+  if (here.refusal == TeachRefusal::not_homed && !s.check_mode) {  // (a check moves nothing)
+    answer_error(s, here.error, here.reason);
+    return;
+  }
   prog::TeachPoint p;
   p.name = name;
-  p.q = kin::JointVector(n_);
-  for (int j = 0; j < n_; ++j) p.q[j] = t.q_act[static_cast<std::size_t>(j)];
-  p.pose = tcp(p.q);
+  p.q = here.q;
+  p.pose = tcp(p.q);  // with the session's tool (check mode has its own selection)
   p.tool = svc_->tool(sel_tool()).name;
   p.frame = svc_->frame(sel_frame()).name;
   prog::PointsData d = points_;
@@ -125,7 +116,8 @@ void Console::do_points(Session& s) {
 
 void Console::do_point_delete(Session& s, const Command& c) {
   const std::string name(c.word.data());
-  if (const std::string no = points_refusal(); !no.empty() && running()) {
+  if (const TeachResult here = svc_->teach_here(); here.refusal == TeachRefusal::program) {
+    const std::string no = points_refusal(here);
     answer_error(s, CmdError::bad_state, "point delete: " + no);
     return;
   }

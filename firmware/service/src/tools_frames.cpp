@@ -266,3 +266,64 @@ FrameResult ArmService::delete_frame(std::string_view name) {
 }
 
 }  // namespace servoarm::fw
+
+namespace servoarm::fw {
+
+// ---------------------------------------------------------------------------
+// Teach
+// ---------------------------------------------------------------------------
+
+const char* to_string(TeachRefusal r) {
+  switch (r) {
+    case TeachRefusal::none: return "none";
+    case TeachRefusal::program: return "program";
+    case TeachRefusal::arm_state: return "arm_state";
+    case TeachRefusal::queued: return "queued";
+    case TeachRefusal::not_homed: return "not_homed";
+  }
+  return "?";
+}
+
+TeachResult ArmService::teach_here() const {
+  TeachResult r;
+  const ArmStatus st = status();
+  r.q = st.q;
+  r.pose = st.pose;
+  r.tool = st.tool;
+  r.frame = st.frame;
+  r.arm = st.state;
+  r.queued = ctl_ != nullptr ? static_cast<std::uint32_t>(ctl_->motions().size()) : 0;
+  r.program = program_status();
+  const auto refuse = [&r](TeachRefusal what, CmdError e) {
+    r.refusal = what;
+    r.error = e;
+  };
+  if (r.program.state != RunState::idle) {
+    refuse(TeachRefusal::program, CmdError::bad_state);
+    return r;
+  }
+  switch (st.state) {
+    case ArmState::idle:
+    case ArmState::disabled:
+    case ArmState::freedrive: break;  // teach where the hand put it
+    case ArmState::boot:
+    case ArmState::enabling:
+    case ArmState::moving:
+    case ArmState::stopping:
+    case ArmState::fault:
+    case ArmState::estop:
+    case ArmState::jogging:
+    case ArmState::homing: refuse(TeachRefusal::arm_state, CmdError::bad_state); return r;
+  }
+  if (r.queued > 0) {
+    refuse(TeachRefusal::queued, CmdError::bad_state);
+    return r;
+  }
+  if (std::string why = unhomed_reason(); !why.empty()) {  // a pose in coordinates not established means nothing
+    refuse(TeachRefusal::not_homed, CmdError::not_homed);
+    r.reason = std::move(why);
+  }
+  return r;
+}
+
+}  // namespace servoarm::fw

@@ -378,7 +378,7 @@ class Console {
   std::string program_where() const;  ///< FILE:LINE of the current step
   /// A program event as its `program: ...` line ("" for the events not rendered).
   std::string program_line(const ArmEvent& e) const;
-  std::string points_refusal() const;  ///< "" when points may change now
+  std::string points_refusal(const TeachResult& r) const;  ///< "" when points may change now (teach_here rendered)
   /// The service's settings (speeds, blend, home, outputs: one place).
   const MotionSettings& motion() const { return svc_->settings(); }
   double feed_now_ = 0;  ///< m/s of the last jog or linear move queued (FS:)

@@ -522,6 +522,32 @@ struct RecordResult {
 /// kept within `tol` of the polyline, first and last included.
 std::vector<std::size_t> decimate(const std::vector<kin::JointVector>& q, double tol);
 
+/// What teach_here() refused (TeachResult::refusal); none: the arm may be taught here.
+enum class TeachRefusal : std::uint8_t {
+  none,
+  program,    ///< a program runs (`program`)
+  arm_state,  ///< the arm is not at rest (`arm`; idle, disabled and free-drive are)
+  queued,     ///< motions are queued (`queued`)
+  not_homed,  ///< a joint is not homed (`reason` names them; the pose is still given)
+};
+const char* to_string(TeachRefusal r);
+
+/// The answer to teach_here(): where the arm is (SI joints, the active tool's pose in the base
+/// frame, the active tool and frame), or why it may not be taught now. The front end keeps the
+/// point (a points file, by name).
+struct TeachResult {
+  CmdError error = CmdError::ok;
+  TeachRefusal refusal = TeachRefusal::none;
+  std::string reason;
+  ArmState arm = ArmState::idle;
+  std::uint32_t queued = 0;
+  ProgramStatus program;
+  kin::JointVector q;
+  kin::Pose pose = kin::Pose::Identity();
+  std::string tool, frame;
+  bool ok() const { return error == CmdError::ok; }
+};
+
 /// Every request the service takes, by one name each: a front end that speaks in messages
 /// (a network API) maps one message to one of these; `query` ones read and change nothing.
 /// kServiceOps lists each once, in this order (a test checks): the names live there only.
@@ -568,6 +594,7 @@ enum class ServiceOp : std::uint8_t {
   frame_delete,         ///< delete_frame(name) -> FrameResult
   record_start,         ///< record_start(rate) -> RecordResult
   record_stop,          ///< record_path(tolerance), then record_stop() -> RecordResult
+  teach_here,           ///< teach_here() -> TeachResult
 };
 
 struct ServiceOpInfo {
@@ -618,6 +645,7 @@ inline constexpr ServiceOpInfo kServiceOps[] = {
     {ServiceOp::frame_delete, "frame_delete", false},
     {ServiceOp::record_start, "record_start", false},
     {ServiceOp::record_stop, "record_stop", false},
+    {ServiceOp::teach_here, "teach_here", true},
 };
 const char* to_string(ServiceOp op);
 /// The op named `name` (kServiceOps); false: none is.
@@ -748,6 +776,11 @@ class ArmService {
   /// The service's periodic work on the console thread: a record sample when one is due,
   /// then program_tick(). Never blocks.
   void tick();
+
+  /// Teach: where the arm is now and whether it may be taught there (no program runs, the
+  /// arm at rest with nothing queued, every joint homed). A query: the front end keeps the
+  /// point and goes back to it with a MoveJoints to its joints.
+  TeachResult teach_here() const;
 
   /// Queries: they read and change nothing.
   ArmStatus status() const;
