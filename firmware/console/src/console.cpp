@@ -779,7 +779,6 @@ void Console::execute(Session& s, std::string_view line) {
 }
 
 void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
-  Reply r;
   auto simple = [&](RequestOp op) { answer_control(s, svc_->control(op)); };
   // While a program runs, motion comes from the program only: a move, jog, dwell, homing or
   // M62/M63 from any console is refused (stop, hold, resume, abort and queries still work).
