@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "../console/console_rig.hpp"
+#include "../program/tmp_dir.hpp"
 #include "servoarm/service/arm_service.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -132,7 +133,7 @@ TEST(ArmService, EventSequenceNumbersIncreaseByOne) {
   for (std::size_t i = 0; i < b.events.size(); ++i) {
     const ArmEvent& e = b.events[i];
     CHECK(e.seq == after + 1 + i);
-    CHECK(e.kind == EventKind::homing);
+    CHECK(e.kind == ArmEventKind::homing);
     LONGS_EQUAL((2 + i) % 6, e.joint);
     CHECK(e.cycle >= cycles_before && e.cycle <= r.app.ctl->telemetry().cycles);
     DOUBLES_EQUAL(static_cast<double>(e.cycle) * r.app.ctl->period_s(), e.t, 1e-12);
@@ -296,4 +297,317 @@ TEST(ArmService, OutputsAreSetByIndexWithTypedResults) {
   LONGS_EQUAL(1u << 16, svc.pending_outputs()[0].value);
   for (int i = 0; i < 20; ++i) r.cycle();
   CHECK(!svc.output_on(0));
+}
+
+// status(): one telemetry snapshot as typed figures (SI): the state, the measured and
+// commanded joints, each joint's homing (joints 2 and 5 home by method 19 and are not
+// homed yet; the others are absolute), the queue. A query changes nothing: asking it twice
+// leaves the motion queue, the event stream and the controller's generation as they were.
+TEST(ArmService, StatusIsATypedSnapshotAndChangesNothing) {
+  FwConfig c;
+  c.drives.resize(6);
+  c.drives[1].homing_method = "19";
+  c.drives[4].homing_method = "19";
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const Telemetry t = r.app.ctl->telemetry();
+  const std::uint64_t seq = svc.next_event_seq();
+  const ArmStatus st = svc.status();
+  const ArmStatus again = svc.status();
+  CHECK(st.state == ArmState::idle);
+  CHECK(again.state == ArmState::idle);
+  LONGS_EQUAL(0, st.queued);
+  LONGS_EQUAL(6, st.q.size());
+  LONGS_EQUAL(6, st.homing.size());
+  for (int j = 0; j < 6; ++j) {
+    DOUBLES_EQUAL(t.q_act[static_cast<std::size_t>(j)], st.q[j], 1e-9);
+    DOUBLES_EQUAL(t.q_cmd[static_cast<std::size_t>(j)], st.q_cmd[j], 1e-9);
+    const bool by_method = j == 1 || j == 4;
+    CHECK_TEXT(st.homing[static_cast<std::size_t>(j)] == (by_method ? JointHoming::unhomed : JointHoming::absolute),
+               to_string(st.homing[static_cast<std::size_t>(j)]));
+  }
+  CHECK(!st.all_homed);
+  CHECK(st.fault_text.empty());
+  LONGS_EQUAL(100, st.feed_pct);
+  CHECK(r.app.ctl->motions().empty());
+  LONGS_EQUAL(seq, svc.next_event_seq());
+  CHECK(r.app.ctl->telemetry().generation == t.generation);
+}
+
+// arm_limits(): the chain's joint limits and kinds and the linear speeds, in SI.
+TEST(ArmService, LimitsAreTheChainsInSi) {
+  test::ConsoleRig r;
+  const ArmLimits a = r.app.console->service().arm_limits();
+  LONGS_EQUAL(6, a.prismatic.size());
+  for (int j = 0; j < 6; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    DOUBLES_EQUAL(r.app.chain.joint(j).lower, a.joints.lower[ju], 0);
+    DOUBLES_EQUAL(r.app.chain.joint(j).upper, a.joints.upper[ju], 0);
+    CHECK(!a.prismatic[ju]);  // the puma560: six revolute joints
+  }
+  DOUBLES_EQUAL(FwConfig{}.max_linear_speed_mm_s * 1e-3, a.max_linear_speed, 1e-12);
+  DOUBLES_EQUAL(FwConfig{}.linear_speed_mm_s * 1e-3, a.default_linear_speed, 1e-12);
+}
+
+// set_settings(): checked whole. A default line speed above the maximum is refused naming
+// the setting and its range, and nothing changes; accepted settings are the ones every front
+// end then uses (the console's `limits` prints the new default speed, the park move goes at
+// the new joint speed).
+TEST(ArmService, SettingsAreCheckedWholeAndUsedByEveryFrontEnd) {
+  test::ConsoleRig r;
+  ArmService& svc = r.app.console->service();
+  const MotionSettings before = svc.settings();
+  MotionSettings s = before;
+  s.default_linear_speed = s.max_linear_speed * 2;
+  s.default_joint_speed_pct = 20;
+  const SettingsResult bad = svc.set_settings(s);
+  CHECK(bad.error == CmdError::out_of_range);
+  CHECK(bad.setting == Setting::default_linear_speed);
+  DOUBLES_EQUAL(s.default_linear_speed, bad.value, 0);
+  DOUBLES_EQUAL(s.max_linear_speed, bad.upper, 0);
+  DOUBLES_EQUAL(before.default_joint_speed_pct, svc.settings().default_joint_speed_pct, 0);
+  s.home = kin::JointVector::Zero(6);
+  s.home[2] = r.app.ctl->limits().upper[2] + 0.1;
+  s.default_linear_speed = 0.05;
+  const SettingsResult home = svc.set_settings(s);
+  CHECK(home.setting == Setting::home);
+  LONGS_EQUAL(2, home.joint);
+  s.home = before.home;
+  const SettingsResult ok = svc.set_settings(s);
+  CHECK(ok.ok());
+  DOUBLES_EQUAL(0.05, svc.settings().default_linear_speed, 0);
+  DOUBLES_EQUAL(20, svc.park_request().speed_pct, 0);
+  const std::string lim = r.cmd("limits");
+  CHECK_TEXT(lim.find("linear speed: default 50.0 mm/s") != std::string::npos, lim.c_str());
+}
+
+// The feed override lives in the service: out of 10..200 % refused with the range; set, it
+// scales the moves planned from then on (a joint move at 50 % takes longer) and the console's
+// status reports it.
+TEST(ArmService, TheFeedOverrideIsTheServicesAndScalesMoves) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const SettingsResult big = svc.set_feed_override(250);
+  CHECK(big.error == CmdError::out_of_range);
+  CHECK(big.setting == Setting::feed_override);
+  DOUBLES_EQUAL(200, big.upper, 0);
+  LONGS_EQUAL(100, svc.feed_override());
+  PathShadow shadow;
+  DryRun dry;
+  dry.tail = svc.tail();
+  dry.shadow = &shadow;
+  MoveContext cx;
+  cx.dry = &dry;
+  MoveJoints m;
+  m.goal = joints({10, -40, 170, 5, 40, -5});
+  m.speed_pct = 40;
+  const double full = svc.move(m, cx).duration;
+  dry.tail = svc.tail();
+  CHECK(svc.set_feed_override(50).ok());
+  LONGS_EQUAL(50, svc.feed_override());
+  const double half = svc.move(m, cx).duration;
+  CHECK(half > full * 1.2);
+  const std::string st = r.cmd("status");
+  CHECK_TEXT(st.find("feed_override=50%") != std::string::npos, st.c_str());
+}
+
+// The request table: every op once, in the enum's order, each name unique and found again by
+// its name; the queries are the ops that only read.
+TEST(ArmService, EveryRequestHasOneNameInTheTable) {
+  const std::size_t n = sizeof kServiceOps / sizeof kServiceOps[0];
+  for (std::size_t i = 0; i < n; ++i) {
+    LONGS_EQUAL(i, static_cast<std::size_t>(kServiceOps[i].op));
+    ServiceOp back{};
+    CHECK_TEXT(service_op_from(kServiceOps[i].name, back), kServiceOps[i].name);
+    CHECK(back == kServiceOps[i].op);
+    STRCMP_EQUAL(kServiceOps[i].name, to_string(kServiceOps[i].op));
+    for (std::size_t k = 0; k < i; ++k) CHECK(std::string(kServiceOps[k].name) != kServiceOps[i].name);
+  }
+  ServiceOp none{};
+  CHECK(!service_op_from("no_such_request", none));
+  CHECK(kServiceOps[static_cast<std::size_t>(ServiceOp::status)].query);
+  CHECK(!kServiceOps[static_cast<std::size_t>(ServiceOp::set_settings)].query);
+}
+
+// Tools through the service: defined, selected and deleted by name with typed results; the
+// active tool is the status's, and its pose is the flange's FK times the tool's (SI); a bad
+// name, an unknown tool and deleting the active one are refused with what was wrong.
+TEST(ArmService, ToolsAreDefinedSelectedAndDeletedByName) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  LONGS_EQUAL(1, svc.tool_count());
+  STRCMP_EQUAL("tool0", svc.tool(0).name.c_str());
+  NamedPose g;
+  g.name = "gripper";
+  g.pose.translation() = Eigen::Vector3d(0, 0, 0.12);
+  const FrameResult d = svc.define_tool(g);
+  CHECK(d.ok());
+  CHECK(!d.redefined);
+  LONGS_EQUAL(2, svc.tool_count());
+  NamedPose bad = g;
+  bad.name = "tool0";
+  CHECK(svc.define_tool(bad).refusal == FrameRefusal::bad_name);
+  CHECK(svc.select_tool("nothing").refusal == FrameRefusal::not_defined);
+  const FrameResult sel = svc.select_tool("gripper");
+  CHECK(sel.ok());
+  CHECK(sel.active);
+  const ArmStatus st = svc.status();
+  STRCMP_EQUAL("gripper", st.tool.c_str());
+  kin::Pose flange;
+  CHECK(kin::forward(r.app.chain, st.q, flange) == kin::Status::ok);
+  CHECK(((flange * g.pose).translation() - st.pose.translation()).norm() < 1e-12);
+  CHECK(svc.delete_tool("gripper").refusal == FrameRefusal::active);
+  CHECK(svc.select_tool("tool0").ok());
+  CHECK(svc.delete_tool("gripper").ok());
+  LONGS_EQUAL(1, svc.tool_count());
+}
+
+// Tools and frames change only while nothing moves or is queued: with a move queued a
+// select is refused as arm_busy (with the arm's state and the queue) and nothing changes.
+TEST(ArmService, ToolsAndFramesDoNotChangeWhileMotionsAreQueued) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  NamedPose f;
+  f.name = "table";
+  f.pose.translation() = Eigen::Vector3d(0.3, 0, 0);
+  CHECK(svc.define_frame(f).ok());
+  MoveJoints m;
+  m.goal = joints({10, -40, 170, 5, 40, -5});
+  CHECK(svc.move(m, MoveContext{}).ok());
+  const FrameResult busy = svc.select_frame("table");
+  CHECK(busy.refusal == FrameRefusal::arm_busy);
+  CHECK(busy.error == CmdError::bad_state);
+  CHECK(busy.queued > 0 || busy.arm == ArmState::moving);
+  LONGS_EQUAL(0, svc.active_frame());
+  for (int i = 0; i < 20000 && (r.app.ctl->telemetry().state != ArmState::idle || !r.app.ctl->motions().empty()); ++i) r.cycle();
+  const FrameResult ok = svc.select_frame("table");
+  CHECK(ok.ok());
+  const ArmStatus st = svc.status();
+  STRCMP_EQUAL("table", st.frame.c_str());
+  CHECK(((f.pose.inverse() * st.pose).translation() - st.pose_in_frame.translation()).norm() < 1e-12);
+}
+
+// A G54..G59 frame selected before it is set is added as the identity; each change goes to
+// the frames file, which a service started later loads with the same tools, frames and
+// selection.
+TEST(ArmService, FramesAreKeptInTheFramesFile) {
+  const std::string dir = test::make_tmp_dir();
+  const std::string path = dir + "/frames.toml";
+  {
+    test::ConsoleRig r;
+    ArmService& svc = r.app.console->service();
+    CHECK(svc.load_frames(path).empty());
+    const FrameResult g55 = svc.select_frame("g55", true);
+    CHECK(g55.ok());
+    CHECK(g55.added);
+    NamedPose t;
+    t.name = "pen";
+    t.pose.translation() = Eigen::Vector3d(0, 0, 0.05);
+    CHECK(svc.define_tool(t).ok());
+    CHECK(svc.select_tool("pen").ok());
+  }
+  test::ConsoleRig r2;
+  ArmService& svc = r2.app.console->service();
+  CHECK(svc.load_frames(path).empty());
+  STRCMP_EQUAL("pen", svc.tool(svc.active_tool()).name.c_str());
+  STRCMP_EQUAL("g55", svc.frame(svc.active_frame()).name.c_str());
+  DOUBLES_EQUAL(0.05, svc.tool(svc.active_tool()).pose.translation().z(), 1e-15);
+}
+
+// Record through the service: started at a rate, the arm jogged along one joint, the path is
+// its samples thinned to the two ends (a straight line in joint space) with the blend half the
+// tolerance; a second start is refused as recording, a path after stop as not_recording.
+TEST(ArmService, ARecordingIsTheJointPathThinnedWithinTheTolerance) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const kin::JointVector q0 = svc.status().q;
+  const RecordResult start = svc.record_start(100);
+  CHECK(start.ok());
+  LONGS_EQUAL(1, start.samples);  // where the arm is now
+  CHECK(svc.record_start(100).refusal == RecordRefusal::recording);
+  JointJog jj;
+  jj.joint = 0;
+  jj.increment = 0.2;
+  jj.speed_pct = 50;
+  CHECK(svc.jog(jj, JogContext{}).ok());
+  for (int i = 0; i < 20000 && (i < 10 || r.app.ctl->telemetry().state == ArmState::jogging); ++i) {
+    r.cycle();
+    svc.tick();
+  }
+  const kin::JointVector q1 = svc.status().q;
+  CHECK(svc.record_samples() > 10);
+  const RecordResult path = svc.record_path(0.01);
+  CHECK(path.ok());
+  DOUBLES_EQUAL(0.005, path.blend, 0);
+  LONGS_EQUAL(2, path.waypoints.size());
+  CHECK((path.waypoints.front() - q0).norm() < 1e-9);
+  CHECK((path.waypoints.back() - q1).norm() < 1e-9);
+  CHECK(svc.recording());
+  CHECK(svc.record_stop().ok());
+  CHECK(!svc.recording());
+  CHECK(svc.record_path(0.01).refusal == RecordRefusal::not_recording);
+}
+
+// Douglas-Peucker keeps a corner farther than the tolerance from the chord, drops one nearer.
+TEST(ArmService, DecimateKeepsCornersBeyondTheTolerance) {
+  std::vector<kin::JointVector> q;
+  for (double y : {0.0, 0.004, 0.02, 0.004, 0.0}) {
+    kin::JointVector v(2);
+    v << static_cast<double>(q.size()), y;
+    q.push_back(v);
+  }
+  const std::vector<std::size_t> keep = decimate(q, 0.01);
+  LONGS_EQUAL(3, keep.size());
+  LONGS_EQUAL(0, keep[0]);
+  LONGS_EQUAL(2, keep[1]);
+  LONGS_EQUAL(4, keep[2]);
+}
+
+// teach_here(): at rest it gives the measured joints, the active tool's pose (FK of them) and
+// the tool and frame; with a move queued it is refused as queued, the arm moving as
+// arm_state; it changes nothing (the queue keeps its move).
+TEST(ArmService, TeachHereGivesTheArmsPlaceOrWhyNot) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const TeachResult here = svc.teach_here();
+  CHECK(here.ok());
+  const Telemetry t = r.app.ctl->telemetry();
+  for (int j = 0; j < 6; ++j) DOUBLES_EQUAL(t.q_act[static_cast<std::size_t>(j)], here.q[j], 1e-12);
+  kin::Pose fk;
+  CHECK(kin::forward(r.app.chain, here.q, fk) == kin::Status::ok);
+  CHECK((fk.translation() - here.pose.translation()).norm() < 1e-12);
+  STRCMP_EQUAL("tool0", here.tool.c_str());
+  STRCMP_EQUAL("base", here.frame.c_str());
+  MoveJoints m;
+  m.goal = joints({10, -40, 170, 5, 40, -5});
+  CHECK(svc.move(m, MoveContext{}).ok());
+  const TeachResult queued = svc.teach_here();
+  CHECK(queued.refusal == TeachRefusal::queued);
+  CHECK(queued.error == CmdError::bad_state);
+  LONGS_EQUAL(1, queued.queued);
+  LONGS_EQUAL(1, r.app.ctl->motions().size());
+  for (int i = 0; i < 20; ++i) r.cycle();
+  const TeachResult moving = svc.teach_here();
+  CHECK(moving.refusal == TeachRefusal::arm_state);
+  CHECK(moving.arm == ArmState::moving);
+}
+
+// An unhomed arm: refused as not_homed naming the joints, the joints still given.
+TEST(ArmService, TeachHereOnAnUnhomedArmNamesTheJoints) {
+  FwConfig c;
+  c.drives.resize(6);
+  c.drives[4].homing_method = "19";
+  test::ConsoleRig r(c);
+  r.enable();
+  const TeachResult here = r.app.console->service().teach_here();
+  CHECK(here.refusal == TeachRefusal::not_homed);
+  CHECK(here.error == CmdError::not_homed);
+  CHECK_TEXT(here.reason.find("joint 5 not homed") != std::string::npos, here.reason.c_str());
+  LONGS_EQUAL(6, here.q.size());
 }

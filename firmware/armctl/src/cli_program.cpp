@@ -567,7 +567,7 @@ ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, c
   ms.cartesian.linear_velocity = options.max_linear_speed;
   ms.default_blend_rad = options.default_blend_rad;
   ms.default_blend_m = options.default_blend_m;
-  ms.park = options.park;
+  ms.home = options.park;
   ck.svc = std::make_unique<ArmService>(chain, ck.lim, options.rate_hz, ms);
   ck.q = q0;
   ck.out.ok = true;

@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <cstdarg>
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstdio>
@@ -143,47 +144,27 @@ std::string refusal_text(const ModelControl& m, ModelPart p) { return bounded_te
 
 Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* ik)
     : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints), ik_(ik) {
-  MotionSettings ms;
-  ms.default_joint_speed_pct = cfg_.default_joint_speed_pct;
-  ms.default_linear_speed = cfg_.default_linear_speed;
-  ms.max_linear_speed = cfg_.max_linear_speed;
-  ms.max_move_duration_s = cfg_.max_move_duration_s;
-  ms.cartesian = cfg_.cartesian;
-  ms.default_blend_rad = cfg_.default_blend_rad;
-  ms.default_blend_m = cfg_.default_blend_m;
-  ms.park = cfg_.home;
-  ms.jog_speed_pct = cfg_.jog_speed_pct;
-  ms.jog_deadman_s = cfg_.jog_deadman_s;
-  for (const ConsoleConfig::Output& o : cfg_.outputs) ms.outputs.push_back(OutputBit{o.joint, o.bit});
-  svc_ = std::make_unique<ArmService>(ctl_, ms);
-  cfg_.home = svc_->settings().park;  // config() shows the park pose the service uses
-  svc_->set_reply_timeout(cfg_.reply_timeout_s);
-  auto t0 = std::make_unique<ToolSlot>();
-  t0->def.name = "tool0";
-  t0->chain = chain_;
-  t0->model = ik_;
-  tools_.push_back(std::move(t0));
-  NamedPose base;
-  base.name = "base";
-  frames_.push_back(base);
+  svc_ = std::make_unique<ArmService>(ctl_, cfg_);
+  cfg_.home = svc_->settings().home;  // config() shows the park pose the service uses
+  svc_->set_ik_model(ik_);
   check_shadow_ = std::make_unique<PathShadow>();
 }
 
 // IK of movel's path check and of the control thread's Cartesian sampling: the App's
 // model (closed form or numeric) when the chain has one, else the damped-Newton fallback.
 // The firmware's options (ik_options.hpp), the same armctl plan previews with.
-kin::IkSolver Console::ik_solver() const { return firmware_ik_solver(tool_slot().model); }
+kin::IkSolver Console::ik_solver() const { return svc_->tool_ik(sel_tool()); }
 
 kin::Pose Console::tcp(const kin::JointVector& q) const {
   kin::Pose p = kin::Pose::Identity();
-  if (kin::forward(tool_slot().chain, q, p) != kin::Status::ok) p.translation().setConstant(std::nan(""));
+  if (kin::forward(tool_chain(), q, p) != kin::Status::ok) p.translation().setConstant(std::nan(""));
   return p;
 }
 
 kin::Pose Console::pose_in_frame(const kin::JointVector& q) const { return user_frame().inverse() * tcp(q); }
 
 std::string Console::where_text() const {
-  return "tool=" + tools_[sel_tool()]->def.name + " frame=" + frames_[sel_frame()].name;
+  return "tool=" + svc_->tool(sel_tool()).name + " frame=" + svc_->frame(sel_frame()).name;
 }
 
 double Console::to_si(int j, double user) const {
@@ -262,7 +243,7 @@ std::string Console::discard_sync_outputs(const char* why) {
   if (pending.empty()) return {};
   std::string names;
   for (const OutputChange& ch : pending)
-    for (const ConsoleConfig::Output& o : cfg_.outputs)
+    for (const ConsoleConfig::Output& o : motion().outputs)
       if (o.joint == ch.joint && ((ch.mask >> o.bit) & 1u))
         names += fmt("%s%s %s", names.empty() ? "" : ", ", o.name.c_str(), ((ch.value >> o.bit) & 1u) ? "on" : "off");
   svc_->clear_pending_outputs();
@@ -296,9 +277,7 @@ kin::JointVector Console::commanded_joints() const {
 kin::Pose Console::commanded_pose() const { return tcp(commanded_joints()); }
 
 std::string Console::status_text() const {
-  const Telemetry t = ctl_.telemetry();
-  kin::JointVector q(n_);
-  for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+  const ArmStatus st = svc_->status();
   const ConsoleUnits& u = cfg_.units;
   // the joints' units: the angle unit, or one per joint when a joint is prismatic (a length)
   std::string ju = u.angle_name();
@@ -308,17 +287,19 @@ std::string Console::status_text() const {
     ju.clear();
     for (int j = 0; j < n_; ++j) ju += std::string(j ? "," : "") + u.joint_name(chain_, j);
   }
-  std::string s = fmt("state=%s%s queue=%u joints=[%s] %s pose=[%s] %s,%s %s", to_string(t.state), t.holding ? " hold=1" : "",
-                      unsigned(t.queued), joints_text(q).c_str(), ju.c_str(), pose_text(q).c_str(), u.length_name(),
+  std::string s = fmt("state=%s%s queue=%u joints=[%s] %s pose=[%s] %s,%s %s", to_string(st.state), st.holding ? " hold=1" : "",
+                      unsigned(st.queued), joints_text(st.q).c_str(), ju.c_str(), pose_text(st.q).c_str(), u.length_name(),
                       u.angle_name(), where_text().c_str());
-  s += " homing=[" + homing_text(t) + "]";
-  s += fmt(" feed_override=%d%%", feed_pct_);
-  if (run_) s += " " + program_text();
-  if (rec_.active) s += fmt(" recording=%zu", rec_.samples.size());
-  if (t.feed_forward != 0 || t.collision_on || t.freedrive != 0)  // (the dynamics parts, when one runs)
-    s += fmt(" feed_forward=%s collision=%s freedrive=%s", to_string(static_cast<FeedForwardKind>(t.feed_forward)),
-             t.collision_on ? "on" : "off", to_string(static_cast<FreedrivePhase>(t.freedrive)));
-  if (bounded_text(t.fault_text).c_str()[0]) s += fmt(" fault=\"%s\"", bounded_text(t.fault_text).c_str());
+  s += " homing=[";
+  for (std::size_t j = 0; j < st.homing.size(); ++j) s += std::string(j ? " " : "") + to_string(st.homing[j]);
+  s += "]";
+  s += fmt(" feed_override=%d%%", st.feed_pct);
+  if (running()) s += " " + program_text();
+  if (svc_->recording()) s += fmt(" recording=%zu", svc_->record_samples());
+  if (st.feed_forward != FeedForwardKind::off || st.collision_on || st.freedrive != FreedrivePhase::off)  // (the dynamics parts, when one runs)
+    s += fmt(" feed_forward=%s collision=%s freedrive=%s", to_string(st.feed_forward), st.collision_on ? "on" : "off",
+             to_string(st.freedrive));
+  if (!st.fault_text.empty()) s += fmt(" fault=\"%s\"", st.fault_text.c_str());
   return s;
 }
 
@@ -336,36 +317,22 @@ std::string Console::dynamics_text() const {
   return s;
 }
 
-std::string Console::homing_text(const Telemetry& t) const {
-  std::string o;
-  for (int j = 0; j < n_; ++j) {
-    const auto ju = static_cast<std::size_t>(j);
-    const char* w = "unhomed";
-    if ((t.homing_now >> j) & 1u) w = "homing";
-    else if (static_cast<hal::HomingKind>(t.homing_kind[ju]) == hal::HomingKind::none) w = "absolute";
-    else if ((t.homed >> j) & 1u) w = "homed";
-    else if ((t.homing_failed >> j) & 1u) w = "failed";
-    o += (j ? " " : "") + std::string(w);
-  }
-  return o;
-}
-
 std::string Console::unhomed_refusal(const Telemetry& t) const { return svc_->unhomed_reason(t); }
 
 // The position field of a GRBL report, in mm, of the active tool's point: `MPos:` (the base
 // frame) with no user frame active; with one, `WPos:` in it and `WCO:` its origin in the
 // base (what GRBL reports for a work offset; a sender shows WPos either way).
 std::string Console::grbl_position(const kin::JointVector& q) const {
-  if (frame_ == 0) {
+  if (svc_->active_frame() == 0) {
     const kin::Pose p = tcp(q);
     return "MPos:" + mm_triple(p.translation());
   }
   const kin::Pose w = pose_in_frame(q);
-  return "WPos:" + mm_triple(w.translation()) + "|WCO:" + mm_triple(frames_[frame_].pose.translation());
+  return "WPos:" + mm_triple(w.translation()) + "|WCO:" + mm_triple(svc_->frame(svc_->active_frame()).pose.translation());
 }
 
 std::string Console::grbl_wcs() const {
-  const std::string& n = frames_[sel_frame()].name;
+  const std::string& n = svc_->frame(sel_frame()).name;
   if (n.size() == 3 && n[0] == 'g' && n[1] == '5' && n[2] >= '4' && n[2] <= '9') return "G" + n.substr(1);
   return "G54";  // base or a named frame: GRBL has no word for it (`frame` says which)
 }
@@ -392,8 +359,11 @@ std::string Console::grbl_report() const {
   // MPos: G-code lengths (mm, as GRBL reports them); J: the console's joint units.
   const int d = cfg_.units.angle == AngleUnit::deg && cfg_.units.length == LengthUnit::mm ? 2 : 5;
   for (int j = 0; j < n_; ++j) s += (j ? "," : "") + fixed(to_user(j, q[j]), d);
-  s += fmt("|Q:%u|Ov:%d", unsigned(t.queued), feed_pct_);
-  if (run_) s += fmt("|Pgm:%s,%s,%s", run_->name.c_str(), to_string(run_->state), program_where().c_str());
+  s += fmt("|Q:%u|Ov:%d", unsigned(t.queued), svc_->feed_override());
+  if (running()) {
+    const ProgramStatus p = svc_->program_status();
+    s += fmt("|Pgm:%s,%s,%s", p.name.c_str(), to_string(p.state), program_where().c_str());
+  }
   return s + ">";
 }
 
@@ -422,9 +392,9 @@ std::string Console::grbl_report(const Session& s) const {
   const long rx_free = static_cast<long>(kGrblRxBuffer) - static_cast<long>(pending);
   const long blocks_free = static_cast<long>(kMotionQueue) - static_cast<long>(t.queued);
   std::string pgm;  // GRBL 1.1's Ln: (the line), and the program and its state
-  if (run_ && run_->current < run_->prog.steps.size())
-    pgm = fmt("|Ln:%d|Pgm:%s,%s", run_->prog.steps[run_->current].line, run_->name.c_str(), to_string(run_->state));
-  return fmt("<%s|%s|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld%s>", st, grbl_position(q).c_str(), feed_now_ * 60e3, feed_pct_,
+  if (const ProgramStatus p = svc_->program_status(); p.state != RunState::idle && p.running < p.steps)
+    pgm = fmt("|Ln:%d|Pgm:%s,%s", p.running_line, p.name.c_str(), to_string(p.state));
+  return fmt("<%s|%s|FS:%.0f,0|Ov:%d,100,100|Bf:%ld,%ld%s>", st, grbl_position(q).c_str(), feed_now_ * 60e3, svc_->feed_override(),
              blocks_free < 0 ? 0 : blocks_free, rx_free < 0 ? 0 : rx_free, pgm.c_str());
 }
 
@@ -457,16 +427,6 @@ std::string Console::drain_events() {
 
 void Console::drain_events(std::string& native, std::string& grbl) {
   tick();
-  if (!program_events_.empty()) {
-    native += program_events_;
-    std::size_t a = 0;  // GRBL: as [MSG:] lines
-    while (a < program_events_.size()) {
-      const std::size_t b = program_events_.find('\n', a);
-      grbl += "[MSG:" + program_events_.substr(a, b - a) + "]\n";
-      a = b + 1;
-    }
-    program_events_.clear();
-  }
   svc_->poll_events();
   const EventBatch b = svc_->events_since(events_seen_);
   if (b.missed > 0) {  // another reader polled the stream faster than this console read it
@@ -481,35 +441,41 @@ void Console::render_event(const ArmEvent& e, std::string& native, std::string& 
   // the control thread's line, from its fixed buffer: whole, or cut after a word with "..."
   const std::string detail = bounded_text(std::string(svc_->event_detail(e)).c_str(), sizeof(Event::message));
   switch (e.kind) {
-    case EventKind::fault:
+    case ArmEventKind::fault:
       native += fmt("alarm: fault %s\n", detail.c_str());
       // ALARM:1 hard limit (a drive or supervisor fault), 2 soft limit (a setpoint outside the limits),
       // 9 homing fail (GRBL: the switch not found)
       grbl += fmt("ALARM:%d\n[MSG:fault %s]\n",
                   e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, detail.c_str());
             break;
-    case EventKind::estop:
+    case ArmEventKind::estop:
       native += "alarm: estop (send reset, then enable)\n";
       grbl += "ALARM:10\n[MSG:e-stop: $X to reset and enable]\n";  // grblHAL: 10 = e-stop
             break;
-    case EventKind::motion_refused:
+    case ArmEventKind::motion_refused:
       native += fmt("alarm: %s\n", detail.c_str());
       grbl += fmt("[MSG:%s]\n", detail.c_str());
       break;
-    case EventKind::jog_stopped:
+    case ArmEventKind::jog_stopped:
       native += fmt("alarm: %s\n", detail.c_str());
       grbl += fmt("[MSG:%s]\n", detail.c_str());
             break;
-    case EventKind::homing:
+    case ArmEventKind::homing:
       native += fmt("homing: %s\n", detail.c_str());
       grbl += fmt("[MSG:homing: %s]\n", detail.c_str());
       break;
-    case EventKind::freedrive:
+    case ArmEventKind::freedrive:
       native += fmt("freedrive: %s\n", detail.c_str());
       grbl += fmt("[MSG:freedrive: %s]\n", detail.c_str());
       break;
-    case EventKind::motion_done:
-    case EventKind::state: break;
+    case ArmEventKind::program:
+      if (const std::string l = program_line(e); !l.empty()) {
+        native += l + "\n";
+        grbl += "[MSG:" + l + "]\n";  // GRBL: as a [MSG:] line
+      }
+      break;
+    case ArmEventKind::motion_done:
+    case ArmEventKind::state: break;
   }
 }
 
@@ -525,7 +491,7 @@ MoveJoints Console::joint_request(const Command& c) const {
   if (c.cmd == Cmd::park) return svc_->park_request();
   m.goal = kin::JointVector(n_);
   for (int j = 0; j < n_; ++j) m.goal[j] = to_si(j, c.vals[static_cast<std::size_t>(j)]);
-  m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
+  m.speed_pct = c.has_speed ? c.speed : motion().default_joint_speed_pct;
   m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : -1.0;
   return m;
 }
@@ -552,9 +518,8 @@ bool Console::homed_ok(Session& s) {
 MoveContext Console::move_context(DryRun* dry, const StepParams* step) const {
   MoveContext cx;
   cx.dry = dry;
-  cx.chain = &tool_slot().chain;
+  cx.chain = &tool_chain();
   cx.ik = ik_solver();
-  cx.feed_pct = feed_pct_;
   cx.outputs = svc_->pending_outputs();
   if (step != nullptr) {
     cx.step_blend = step->blend;
@@ -597,7 +562,7 @@ void Console::answer_refusal(Session& s, const char* what, const MoveResult& r) 
     case MoveRefusal::linear_speed:
       answer_error(s, r.error, fmt("linear speed %g %s/s outside [%g, %g]", u.length_out(r.speed), u.length_name(),
                                    u.length == LengthUnit::mm ? kMinLinearSpeedMmS : kMinLinearSpeedMmS * 1e-3,
-                                   u.length_out(cfg_.max_linear_speed)));
+                                   u.length_out(motion().max_linear_speed)));
       return;
     case MoveRefusal::plan: {
       if (std::string_view(what) != "movel") {
@@ -614,7 +579,7 @@ void Console::answer_refusal(Session& s, const char* what, const MoveResult& r) 
     }
     case MoveRefusal::duration:
       answer_error(s, r.error, fmt("%s refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
-                                   "(raise the speed); nothing queued", what, r.duration, cfg_.max_move_duration_s));
+                                   "(raise the speed); nothing queued", what, r.duration, motion().max_move_duration_s));
       return;
     case MoveRefusal::queue_full:
       answer_error(s, r.error, fmt("motion queue full (%zu moves); nothing queued", kMotionQueue));
@@ -740,14 +705,13 @@ void Console::do_ik(Session& s, const Command& c) {
   kin::JointVector q(n_);
   kin::Status st = kin::Status::unreachable;
   int solutions = -1;
-  const ToolSlot& tool = tool_slot();
-  if (tool.model != nullptr) {
+  if (const kin::IkModel* model = svc_->tool_model(sel_tool()); model != nullptr) {
     auto res = std::make_unique<kin::IkResult>();
-    kin::ik_solve_all(*tool.model, target, &qc, *res);
+    kin::ik_solve_all(*model, target, &qc, *res);
     solutions = res->count;
-    st = kin::ik_solve_nearest(*tool.model, target, qc, q);
+    st = kin::ik_solve_nearest(*model, target, qc, q);
   } else {
-    st = kin::ik_nearest_newton(tool.chain, target, qc, q, nullptr);
+    st = kin::ik_nearest_newton(tool_chain(), target, qc, q, nullptr);
   }
   if (!kin::is_ok(st)) {
     answer_error(s, st == kin::Status::out_of_limits ? CmdError::limits : CmdError::unreachable,
@@ -766,11 +730,12 @@ void Console::do_ik(Session& s, const Command& c) {
 }
 
 void Console::do_limits(Session& s) {
-  const auto& lim = ctl_.limits();
+  const ArmLimits a = svc_->arm_limits();
+  const auto& lim = a.joints;
   const ConsoleUnits& u = cfg_.units;
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
-    const bool pr = chain_.joint(j).type == kin::JointType::prismatic;
+    const bool pr = a.prismatic[ju];
     const int d = pr ? u.length_decimals() : u.angle_decimals();
     const auto f = [&](double si) { return fixed(to_user(j, si), d); };
     s.out += fmt("joint %d: %s [%s, %s] %s  vmax=%s amax=%s jmax=%s %s/s^k\n", j + 1, pr ? "prismatic" : "revolute",
@@ -779,9 +744,9 @@ void Console::do_limits(Session& s) {
   }
   const int v = u.length == LengthUnit::mm ? 1 : 4;
   s.out += fmt("linear speed: default %s %s/s, max %s %s/s; following error limit %s %s\n",
-               fixed(u.length_out(cfg_.default_linear_speed), v).c_str(), u.length_name(),
-               fixed(u.length_out(cfg_.max_linear_speed), v).c_str(), u.length_name(),
-               u.angle_text(ctl_.config().following_error).c_str(), u.angle_name());
+               fixed(u.length_out(a.default_linear_speed), v).c_str(), u.length_name(),
+               fixed(u.length_out(a.max_linear_speed), v).c_str(), u.length_name(), u.angle_text(a.following_error).c_str(),
+               u.angle_name());
   answer_ok(s);
 }
 
@@ -814,13 +779,12 @@ void Console::execute(Session& s, std::string_view line) {
 }
 
 void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
-  Reply r;
   auto simple = [&](RequestOp op) { answer_control(s, svc_->control(op)); };
   // While a program runs, motion comes from the program only: a move, jog, dwell, homing or
   // M62/M63 from any console is refused (stop, hold, resume, abort and queries still work).
-  if (run_ && &s != &run_->ps && !s.check_mode && moves_arm(c)) {
+  if (running() && (!run_ || &s != &run_->ps) && !s.check_mode && moves_arm(c)) {
     answer_error(s, CmdError::busy, fmt("program %s is running (%s): stop, pause or abort it first; nothing queued",
-                                        run_->name.c_str(), program_where().c_str()));
+                                        svc_->program_status().name.c_str(), program_where().c_str()));
     return;
   }
   // A move refused: the M62/M63 changes waiting for it are dropped with it (and said so).
@@ -865,25 +829,22 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
       settle(s);
       return;
     case Cmd::disable:
-      end_program("aborted at " + program_where() + ": disable");
+      end_program(ProgramEnd::disable);
       note_line(s, discard_sync_outputs("disable"));
       simple(RequestOp::disable);
       return;
     case Cmd::stop:
-      end_program("aborted at " + program_where() + ": stop");
+      end_program(ProgramEnd::stop);
       note_line(s, discard_sync_outputs("stop"));
       simple(RequestOp::stop);
       return;
     case Cmd::estop:
-      end_program("aborted at " + program_where() + ": e-stop");
+      end_program(ProgramEnd::estop);
       note_line(s, discard_sync_outputs("e-stop"));
       simple(RequestOp::estop);
       return;
     case Cmd::reset: simple(RequestOp::reset); return;
-    case Cmd::hold:
-      if (run_ && run_->state != RunState::paused) run_->state = RunState::paused;
-      simple(RequestOp::hold);
-      return;
+    case Cmd::hold: answer_control(s, svc_->hold()); return;
     case Cmd::resume: do_resume(s); return;
     case Cmd::home_zero: simple(RequestOp::set_zero); return;
     case Cmd::home: do_home(s, c); return;
@@ -952,14 +913,13 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
     case Cmd::step: do_step(s); return;
     case Cmd::abort:
       note_line(s, discard_sync_outputs("abort"));
-      if (!run_) {
+      if (!running()) {
         simple(RequestOp::stop);
         return;
       }
       {
-        const std::string at = program_where(), name = run_->name;
-        end_program("aborted at " + at + ": abort");
-        if (!request(RequestOp::stop, r)) {
+        const std::string at = program_where(), name = svc_->program_status().name;
+        if (svc_->program_abort().error == CmdError::timeout) {
           answer_error(s, CmdError::timeout, "control thread did not answer stop");
           return;
         }
@@ -1061,7 +1021,7 @@ bool Console::settle(Session& s) {
       case ArmState::freedrive:
         if (!ctl_.motions().empty()) return true;  // producer-side view: exact, never stale
         // a running program has more to come (its own `wait` lines wait for the queue only)
-        if (run_ && &s != &run_->ps && run_->state != RunState::paused) return true;
+        if (running() && (!run_ || &s != &run_->ps) && svc_->run_state() != RunState::paused) return true;
         s.waiting = false;
         answer_ok(s, fmt("idle %s", pose_text(tail()).c_str()));
         break;
@@ -1089,9 +1049,7 @@ bool Console::run_one(Session& s) {
 }
 
 void Console::feed_hold(Session& s) {
-  Reply r;
-  if (run_) run_->state = RunState::paused;  // the program pauses with the hold
-  if (!request(RequestOp::hold, r)) s.out += "error: timeout feed hold not acknowledged\n";
+  if (svc_->hold().error == CmdError::timeout) s.out += "error: timeout feed hold not acknowledged\n";
 }
 
 void Console::poll(Session& s) {
@@ -1114,13 +1072,13 @@ void Console::realtime(Session& s, char ch) {
   if (is_feed_override(ch)) {
     // GRBL feed override, 10..200 %: the speed of jogs and of moves queued from now on.
     const auto u = static_cast<unsigned char>(ch);
-    int v = feed_pct_;
+    int v = svc_->feed_override();
     if (u == kRtFeed100) v = 100;
     else if (u == kRtFeedPlus10) v += 10;
     else if (u == kRtFeedMinus10) v -= 10;
     else if (u == kRtFeedPlus1) v += 1;
     else if (u == kRtFeedMinus1) v -= 1;
-    feed_pct_ = v < 10 ? 10 : v > 200 ? 200 : v;
+    svc_->set_feed_override(std::clamp(v, kMinFeedOverride, kMaxFeedOverride));
     return;
   }
   switch (ch) {
@@ -1133,8 +1091,7 @@ void Console::realtime(Session& s, char ch) {
       break;
     case kRtResume:
       s.hold_after = 0;  // a '!' still waiting for the lines before it is resumed too
-      if (run_ && run_->state == RunState::paused) run_->state = RunState::running;
-      if (!request(RequestOp::resume, r)) s.out += "error: timeout resume not acknowledged\n";
+      if (svc_->resume(false).error == CmdError::timeout) s.out += "error: timeout resume not acknowledged\n";
       break;
     case kRtJogCancel: {
       if (svc_->jog_cancel().error == CmdError::timeout) s.out += "error: timeout jog cancel not acknowledged\n";
@@ -1161,7 +1118,7 @@ void Console::realtime(Session& s, char ch) {
       const bool moving = t.state == ArmState::moving || t.state == ArmState::jogging || t.state == ArmState::stopping ||
                           t.state == ArmState::homing;  // Ctrl-X during homing: an e-stop (the joints stay unhomed)
       const RequestOp op = s.dialect == Dialect::grbl && !moving ? RequestOp::stop : RequestOp::estop;
-      end_program("aborted at " + program_where() + (op == RequestOp::estop ? ": e-stop (Ctrl-X)" : ": soft reset (Ctrl-X)"));
+      end_program(op == RequestOp::estop ? ProgramEnd::estop : ProgramEnd::soft_reset, true);
       note_line(s, discard_sync_outputs("Ctrl-X"));
       if (!request(op, r)) s.out += "error: timeout e-stop not acknowledged\n";
       s.partial.clear();
@@ -1271,9 +1228,8 @@ void Console::do_home(Session& s, const Command& c) {
 
 JogContext Console::jog_context() const {
   JogContext cx;
-  cx.chain = &tool_slot().chain;
+  cx.chain = &tool_chain();
   cx.ik = ik_solver();
-  cx.feed_pct = feed_pct_;
   cx.user_axes = user_frame().linear();
   return cx;
 }
@@ -1298,14 +1254,14 @@ void Console::answer_jog(Session& s, const JogResult& r, const char* what, doubl
       return;
     case JogRefusal::duration:
       answer_error(s, r.error, fmt("jog refused: it would take %.6gs, more than motion.max_move_duration_s = %gs "
-                                   "(raise the speed); nothing moved", r.duration, cfg_.max_move_duration_s));
+                                   "(raise the speed); nothing moved", r.duration, motion().max_move_duration_s));
       return;
     case JogRefusal::unreachable:
       answer_error(s, r.error, fmt("%s: the target has no IK solution within the joint limits; nothing moved", what));
       return;
     case JogRefusal::feed:
       answer_error(s, r.error, fmt("%s: feed %g mm/min (with the %d %% override) below %g mm/min; nothing moved", what,
-                                   r.speed * 6e4, feed_pct_, kMinLinearSpeedMmS * 60));
+                                   r.speed * 6e4, svc_->feed_override(), kMinLinearSpeedMmS * 60));
       return;
     case JogRefusal::control: answer_error(s, r.error, r.reason); return;
   }
@@ -1358,7 +1314,7 @@ void Console::do_grbl_jog(Session& s, const Command& c) {
   }
   // In the active user frame (G54..G59), or the base with G53 (machine coordinates).
   const kin::Pose F = c.g53 ? kin::Pose::Identity() : user_frame();
-  const JogFrame kind = c.g53 || frame_ == 0 ? JogFrame::base : JogFrame::user;
+  const JogFrame kind = c.g53 || svc_->active_frame() == 0 ? JogFrame::base : JogFrame::user;
   const JogContext cx = jog_context();
   const kin::Pose here = F.inverse() * svc_->jog_from(kind, cx);
   kin::Pose target = here;
@@ -1396,8 +1352,8 @@ std::string Console::grbl_settings() const {
   // Only the GRBL settings that mean something on an arm; the configuration file sets them.
   double reach = 0;
   for (int j = 0; j < n_; ++j) reach += std::hypot(chain_.joint(j).a, chain_.joint(j).d);
-  const double vmax = cfg_.max_linear_speed * 60e3;       // mm/min
-  const double amax = cfg_.cartesian.linear_acceleration * 1e3;  // mm/s^2
+  const double vmax = motion().max_linear_speed * 60e3;       // mm/min
+  const double amax = motion().cartesian.linear_acceleration * 1e3;  // mm/s^2
   std::string o;
   o += "$10=3\n";   // status report: MPos and buffer data
   o += "$13=0\n";   // report in mm
@@ -1427,11 +1383,11 @@ void Console::do_grbl(Session& s, const Command& c) {
       // orientations are in the frames file and `frame`).
       for (int g = 54; g <= 59; ++g) {
         Eigen::Vector3d o = Eigen::Vector3d::Zero();
-        for (const NamedPose& f : frames_)
-          if (f.name == "g" + std::to_string(g)) o = f.pose.translation();
+        if (const std::size_t k = svc_->find_frame("g" + std::to_string(g)); k < svc_->frame_count())
+          o = svc_->frame(k).pose.translation();
         s.out += fmt("[G%d:%s]\n", g, mm_triple(o, ",").c_str());
       }
-      const kin::Pose h = tcp(cfg_.home);
+      const kin::Pose h = tcp(motion().home);
       s.out += fmt("[G28:%s]\n[G30:0.000,0.000,0.000]\n[G92:0.000,0.000,0.000]\n[TLO:0.000]\n"
                    "[PRB:0.000,0.000,0.000:0]\n",
                    mm_triple(h.translation()).c_str());
@@ -1479,8 +1435,8 @@ void Console::do_grbl(Session& s, const Command& c) {
         }
         s.check_mode = true;
         s.check_tail = tail();
-        s.check_tool = tool_;
-        s.check_frame = frame_;
+        s.check_tool = svc_->active_tool();
+        s.check_frame = svc_->active_frame();
         s.out += s.dialect == Dialect::grbl ? "[MSG:Enabled]\n" : "";
         answer_ok(s, s.dialect == Dialect::grbl ? "" : "check mode on: G-code is parsed and checked, nothing moves");
       } else {
@@ -1501,30 +1457,15 @@ void Console::do_grbl(Session& s, const Command& c) {
 
 namespace servoarm::fw {
 
-std::unique_ptr<Console::ToolSlot> Console::make_tool(const NamedPose& def) const {
-  auto t = std::make_unique<ToolSlot>();
-  t->def = def;
-  t->chain = chain_;
-  kin::set_tool(t->chain, chain_.tool * def.pose);
-  // The tool's own IK model: the closed form of the arm still holds with any TCP (it is
-  // a fixed transform after the last joint); without one, the numeric fallback.
-  if (ik_ != nullptr) {
-    t->own = std::make_unique<kin::IkModel>();
-    if (kin::ik_prepare(t->chain, *t->own) == kin::Status::ok && t->own->method != kin::IkMethod::none) t->model = t->own.get();
-    else t->own.reset();
-  }
-  return t;
-}
-
 std::string Console::frames_refusal() const {
-  const Telemetry t = ctl_.telemetry();
-  switch (t.state) {
+  const FrameResult r = svc_->frames_check();
+  if (r.ok()) return "";
+  switch (r.arm) {
     case ArmState::moving:
     case ArmState::jogging:
     case ArmState::stopping:
     case ArmState::homing:
-    case ArmState::freedrive:
-      return fmt("refused while the arm is %s", to_string(t.state));
+    case ArmState::freedrive: return fmt("refused while the arm is %s", to_string(r.arm));
     case ArmState::boot:
     case ArmState::disabled:
     case ArmState::enabling:
@@ -1532,41 +1473,13 @@ std::string Console::frames_refusal() const {
     case ArmState::fault:
     case ArmState::estop: break;
   }
-  if (!ctl_.motions().empty() || t.queued > 0) return fmt("refused while %u moves are queued (wait, or stop)", unsigned(t.queued));
-  return "";
+  return fmt("refused while %u moves are queued (wait, or stop)", unsigned(r.queued));
 }
 
-FramesData Console::frames_data() const {
-  FramesData d;
-  for (std::size_t i = 1; i < tools_.size(); ++i) d.tools.push_back(tools_[i]->def);
-  for (std::size_t i = 1; i < frames_.size(); ++i) d.frames.push_back(frames_[i]);
-  d.active_tool = tools_[tool_]->def.name;
-  d.active_frame = frames_[frame_].name;
-  return d;
-}
+std::string Console::load_frames() { return svc_->load_frames(cfg_.frames_file); }
 
-std::string Console::save_frames() const {
-  if (cfg_.frames_file.empty()) return "";
-  return save_frames_file(cfg_.frames_file, frames_data());
-}
-
-std::string Console::load_frames() {
-  if (cfg_.frames_file.empty()) return "";
-  FramesData d;
-  const std::string err = load_frames_file(cfg_.frames_file, d);
-  if (!err.empty()) return err;
-  tools_.resize(1);
-  frames_.resize(1);
-  tool_ = frame_ = 0;
-  for (const NamedPose& t : d.tools) {
-    tools_.push_back(make_tool(t));
-    if (t.name == d.active_tool) tool_ = tools_.size() - 1;
-  }
-  for (const NamedPose& f : d.frames) {
-    frames_.push_back(f);
-    if (f.name == d.active_frame) frame_ = frames_.size() - 1;
-  }
-  return "";
+std::string Console::unsaved_text() const {
+  return cfg_.frames_file.empty() ? " (not kept: no frames file, console.frames_file)" : "";
 }
 
 namespace {
@@ -1579,133 +1492,117 @@ std::size_t find_named(const List& l, std::string_view n, Name name) {
 }
 }  // namespace
 
+// A refused tool / frame change whose answer is the same for each request: the name or the
+// arm's state ("<what>: <why>"), a full list.
+void Console::answer_frame_refusal(Session& s, const FrameResult& r, const std::string& what, std::string_view name) {
+  switch (r.refusal) {
+    case FrameRefusal::bad_name: answer_error(s, r.error, what + ": " + r.reason); return;
+    case FrameRefusal::arm_busy: answer_error(s, r.error, what + ": " + frames_refusal()); return;
+    case FrameRefusal::full:
+      answer_error(s, r.error, fmt("%s: %zu %s already (%s delete NAME first)", what.c_str(), what == "tool" ? kMaxTools : kMaxFrames,
+                                   what == "tool" ? "tools" : "frames", what.c_str()));
+      return;
+    case FrameRefusal::bad_values: answer_error(s, r.error, what + " " + std::string(name) + ": " + r.reason); return;
+    case FrameRefusal::none:
+    case FrameRefusal::not_defined:
+    case FrameRefusal::active:
+    case FrameRefusal::storage: answer_error(s, r.error, what + ": " + to_string(r.refusal)); return;
+  }
+}
+
 void Console::do_tool(Session& s, const Command& c) {
   const ConsoleUnits& u = cfg_.units;
   const std::string_view name(c.name.data());
-  auto slot_name = [](const std::unique_ptr<ToolSlot>& t) -> const std::string& { return t->def.name; };
-  const std::size_t at = find_named(tools_, name, slot_name);
-  const std::string unsaved = cfg_.frames_file.empty() ? " (not kept: no frames file, console.frames_file)" : "";
+  const std::string nm(name);
+  const std::string unsaved = unsaved_text();
   if (c.frame_op == FrameOp::list) {
-    for (std::size_t i = 0; i < tools_.size(); ++i) {
-      const ToolSlot& t = *tools_[i];
-      s.out += fmt("%s %s %s", i == sel_tool() ? "*" : " ", t.def.name.c_str(),
-                   i == 0 ? "(the flange)" : pose_values(t.def.pose, u).c_str());
-      if (t.def.has_payload)
-        s.out += fmt(" mass=%g com=%g,%g,%g", t.def.mass, u.length_out(t.def.com.x()), u.length_out(t.def.com.y()),
-                     u.length_out(t.def.com.z()));
+    for (std::size_t i = 0; i < svc_->tool_count(); ++i) {
+      const NamedPose& t = svc_->tool(i);
+      s.out += fmt("%s %s %s", i == sel_tool() ? "*" : " ", t.name.c_str(), i == 0 ? "(the flange)" : pose_values(t.pose, u).c_str());
+      if (t.has_payload)
+        s.out += fmt(" mass=%g com=%g,%g,%g", t.mass, u.length_out(t.com.x()), u.length_out(t.com.y()), u.length_out(t.com.z()));
       s.out += '\n';
     }
-    answer_ok(s, fmt("%zu tools, active %s%s", tools_.size(), tools_[sel_tool()]->def.name.c_str(), unsaved.c_str()));
+    answer_ok(s, fmt("%zu tools, active %s%s", svc_->tool_count(), svc_->tool(sel_tool()).name.c_str(), unsaved.c_str()));
     return;
   }
   if (c.frame_op == FrameOp::select) {
-    if (at == tools_.size()) {
-      answer_error(s, CmdError::bad_option, fmt("tool %.*s is not defined (tool lists them)", int(name.size()), name.data()));
+    const std::size_t at = svc_->find_tool(name);
+    if (at == svc_->tool_count()) {
+      answer_error(s, CmdError::bad_option, "tool " + nm + " is not defined (tool lists them)");
       return;
     }
     if (s.check_mode) {
       s.check_tool = at;
-      answer_ok(s, fmt("check mode: tool=%s for the check", tools_[at]->def.name.c_str()));
+      answer_ok(s, "check mode: tool=" + nm + " for the check");
       return;
     }
-    const std::string no = frames_refusal();
-    if (!no.empty()) {
-      answer_error(s, CmdError::bad_state, "tool: " + no);
-      return;
-    }
-    const std::size_t old = tool_;
-    tool_ = at;
-    const std::string err = save_frames();
-    if (!err.empty()) {
-      tool_ = old;
-      answer_error(s, CmdError::storage, "tool not changed: " + err);
-      return;
-    }
-    answer_ok(s, "tool=" + tools_[at]->def.name + unsaved);
+    const FrameResult r = svc_->select_tool(name);
+    if (r.refusal == FrameRefusal::storage) answer_error(s, r.error, "tool not changed: " + r.reason);
+    else if (!r.ok()) answer_frame_refusal(s, r, "tool", name);
+    else answer_ok(s, "tool=" + r.def.name + unsaved);
     return;
   }
   if (s.check_mode) {  // as GRBL's $C: definitions are not made in check mode
     answer_ok(s, "check mode: not run");
     return;
   }
-  std::string why = check_frame_name(name, true);
-  if (why.empty()) why = frames_refusal();
-  if (!why.empty()) {
-    answer_error(s, why.rfind("refused", 0) == 0 ? CmdError::bad_state : CmdError::bad_option, "tool: " + why);
-    return;
-  }
   if (c.frame_op == FrameOp::remove) {
-    if (at == tools_.size()) {
-      answer_error(s, CmdError::bad_option, fmt("tool %.*s is not defined", int(name.size()), name.data()));
-      return;
+    const FrameResult r = svc_->delete_tool(name);
+    switch (r.refusal) {
+      case FrameRefusal::none: answer_ok(s, "tool " + nm + " deleted"); return;
+      case FrameRefusal::not_defined: answer_error(s, r.error, "tool " + nm + " is not defined"); return;
+      case FrameRefusal::active: answer_error(s, r.error, "tool " + nm + " is active: select another first"); return;
+      case FrameRefusal::storage: answer_error(s, r.error, "tool not deleted: " + r.reason); return;
+      case FrameRefusal::bad_name:
+      case FrameRefusal::bad_values:
+      case FrameRefusal::arm_busy:
+      case FrameRefusal::full: answer_frame_refusal(s, r, "tool", name); return;
     }
-    if (at == tool_) {
-      answer_error(s, CmdError::bad_state, fmt("tool %.*s is active: select another first", int(name.size()), name.data()));
-      return;
-    }
-    std::unique_ptr<ToolSlot> keep = std::move(tools_[at]);
-    tools_.erase(tools_.begin() + static_cast<std::ptrdiff_t>(at));
-    if (tool_ > at) --tool_;
-    const std::string err = save_frames();
-    if (!err.empty()) {
-      tools_.insert(tools_.begin() + static_cast<std::ptrdiff_t>(at), std::move(keep));
-      if (tool_ >= at) ++tool_;
-      answer_error(s, CmdError::storage, "tool not deleted: " + err);
-      return;
-    }
-    answer_ok(s, fmt("tool %.*s deleted", int(name.size()), name.data()));
     return;
   }
-  // define
+  // define: the name and the arm first, then the values as given (console units -> SI)
+  if (FrameResult no = svc_->frames_check(); check_frame_name(name, true).empty() && !no.ok()) {
+    answer_frame_refusal(s, no, "tool", name);
+    return;
+  }
   const double xyz[3] = {u.length_in(c.vals[0]), u.length_in(c.vals[1]), u.length_in(c.vals[2])};
   const double rpy[3] = {u.angle_in(c.vals[3]), u.angle_in(c.vals[4]), u.angle_in(c.vals[5])};
   const double com[3] = {u.length_in(c.com[0]), u.length_in(c.com[1]), u.length_in(c.com[2])};
-  why = check_frame_values(xyz, rpy, c.has_mass, c.mass, com);
-  if (!why.empty()) {
-    answer_error(s, CmdError::out_of_range, fmt("tool %.*s: ", int(name.size()), name.data()) + why);
-    return;
-  }
-  if (at == tools_.size() && tools_.size() >= kMaxTools) {
-    answer_error(s, CmdError::busy, fmt("tool: %zu tools already (tool delete NAME first)", kMaxTools));
+  if (const std::string why = check_frame_values(xyz, rpy, c.has_mass, c.mass, com); !why.empty() && check_frame_name(name, true).empty()) {
+    answer_error(s, CmdError::out_of_range, "tool " + nm + ": " + why);
     return;
   }
   NamedPose def;
-  def.name = std::string(name);
+  def.name = nm;
   def.pose.translation() = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
   def.pose.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
   def.has_payload = c.has_mass;
   def.mass = c.mass;
   def.com = Eigen::Vector3d(com[0], com[1], com[2]);
-  std::unique_ptr<ToolSlot> fresh = make_tool(def);
-  std::unique_ptr<ToolSlot> old;
-  if (at == tools_.size()) tools_.push_back(std::move(fresh));
-  else old = std::exchange(tools_[at], std::move(fresh));
-  const std::string err = save_frames();
-  if (!err.empty()) {
-    if (old) tools_[at] = std::move(old);
-    else tools_.pop_back();
-    answer_error(s, CmdError::storage, "tool not defined: " + err);
-    return;
-  }
-  answer_ok(s, fmt("tool %s %s %s%s", def.name.c_str(), old ? "redefined" : "defined", pose_values(def.pose, u).c_str(),
-                   ((at == tool_ ? " (active)" : "") + unsaved).c_str()));
+  const FrameResult r = svc_->define_tool(def);
+  if (r.refusal == FrameRefusal::storage) answer_error(s, r.error, "tool not defined: " + r.reason);
+  else if (!r.ok()) answer_frame_refusal(s, r, "tool", name);
+  else
+    answer_ok(s, fmt("tool %s %s %s%s", def.name.c_str(), r.redefined ? "redefined" : "defined", pose_values(def.pose, u).c_str(),
+                     ((r.active ? " (active)" : "") + unsaved).c_str()));
 }
 
 void Console::do_frame(Session& s, const Command& c) {
   const ConsoleUnits& u = cfg_.units;
   std::string name(c.name.data());
-  auto frame_name = [](const NamedPose& f) -> const std::string& { return f.name; };
-  const std::string unsaved = cfg_.frames_file.empty() ? " (not kept: no frames file, console.frames_file)" : "";
+  const std::string unsaved = unsaved_text();
+  const std::string full = fmt("frame: %zu frames already (frame delete NAME first)", kMaxFrames);
   if (c.frame_op == FrameOp::list) {
-    for (std::size_t i = 0; i < frames_.size(); ++i)
-      s.out += fmt("%s %s %s\n", i == sel_frame() ? "*" : " ", frames_[i].name.c_str(),
-                   i == 0 ? "(the base frame)" : pose_values(frames_[i].pose, u).c_str());
-    answer_ok(s, fmt("%zu frames, active %s%s", frames_.size(), frames_[sel_frame()].name.c_str(), unsaved.c_str()));
+    for (std::size_t i = 0; i < svc_->frame_count(); ++i)
+      s.out += fmt("%s %s %s\n", i == sel_frame() ? "*" : " ", svc_->frame(i).name.c_str(),
+                   i == 0 ? "(the base frame)" : pose_values(svc_->frame(i).pose, u).c_str());
+    answer_ok(s, fmt("%zu frames, active %s%s", svc_->frame_count(), svc_->frame(sel_frame()).name.c_str(), unsaved.c_str()));
     return;
   }
   if (c.frame_op == FrameOp::set_axes) {  // G10 L2 Pn
     if (c.g10_p == 0) {
-      name = frames_[sel_frame()].name;
+      name = svc_->frame(sel_frame()).name;
       if (sel_frame() == 0) {
         answer_error(s, CmdError::bad_state, "G10 L2 P0: the active frame is base, which cannot be set (select G54..G59 first)");
         return;
@@ -1714,90 +1611,84 @@ void Console::do_frame(Session& s, const Command& c) {
       name = "g5" + std::to_string(3 + c.g10_p);
     }
   }
-  std::size_t at = find_named(frames_, name, frame_name);
+  const std::size_t at = svc_->find_frame(name);
+  const bool defined = at < svc_->frame_count();
   const bool g5x = name.size() == 3 && name[0] == 'g' && name[1] == '5' && name[2] >= '4' && name[2] <= '9';
+  const bool quiet = s.dialect == Dialect::grbl && c.gcode;  // GRBL: G-code answers a bare ok
   if (c.frame_op == FrameOp::select) {
-    if (at == frames_.size() && !g5x) {
+    if (!defined && !g5x) {
       answer_error(s, CmdError::bad_option, "frame " + name + " is not defined (frame lists them)");
       return;
     }
-    if (s.check_mode) {
-      if (at == frames_.size()) {  // g54..g59 not set yet: the identity, as the active one would be
-        answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "check mode: frame=" + name + " (not set: the base frame)");
-        s.check_frame = 0;
-        return;
-      }
-      s.check_frame = at;
-      answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "check mode: frame=" + name + " for the check");
+    if (s.check_mode) {  // g54..g59 not set yet: the identity, as the active one would be
+      s.check_frame = defined ? at : 0;
+      answer_ok(s, quiet ? "" : "check mode: frame=" + name + (defined ? " for the check" : " (not set: the base frame)"));
       return;
     }
-    const std::string no = frames_refusal();
-    if (!no.empty()) {
-      answer_error(s, CmdError::bad_state, (c.gcode ? fmt("G%s: ", name.c_str() + 1) : std::string("frame: ")) + no);
-      return;
-    }
-    bool added = false;
-    if (at == frames_.size()) {  // G54..G59 before G10 L2 set it: an identity frame of that name
-      if (frames_.size() >= kMaxFrames) {
-        answer_error(s, CmdError::busy, fmt("frame: %zu frames already (frame delete NAME first)", kMaxFrames));
-        return;
-      }
-      NamedPose f;
-      f.name = name;
-      frames_.push_back(f);
-      added = true;
-    }
-    const std::size_t old = frame_;
-    frame_ = at;
-    const std::string err = save_frames();
-    if (!err.empty()) {
-      frame_ = old;
-      if (added) frames_.pop_back();
-      answer_error(s, CmdError::storage, "frame not changed: " + err);
-      return;
-    }
-    answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "frame=" + name + unsaved);
+    const FrameResult r = svc_->select_frame(name, g5x);
+    if (r.refusal == FrameRefusal::arm_busy)
+      answer_error(s, r.error, (c.gcode ? fmt("G%s: ", name.c_str() + 1) : std::string("frame: ")) + frames_refusal());
+    else if (r.refusal == FrameRefusal::full) answer_error(s, r.error, full);
+    else if (!r.ok()) answer_error(s, r.error, "frame not changed: " + r.reason);
+    else answer_ok(s, quiet ? "" : "frame=" + name + unsaved);
     return;
   }
   if (s.check_mode) {
-    answer_ok(s, s.dialect == Dialect::grbl && c.gcode ? "" : "check mode: not run");
+    answer_ok(s, quiet ? "" : "check mode: not run");
     return;
   }
-  std::string why = check_frame_name(name, false);
-  if (why.empty()) why = frames_refusal();
-  if (!why.empty()) {
-    answer_error(s, why.rfind("refused", 0) == 0 ? CmdError::bad_state : CmdError::bad_option,
-                 (c.gcode ? std::string("G10: ") : std::string("frame: ")) + why);
-    return;
-  }
+  const std::string prefix = c.gcode ? "G10" : "frame";
   if (c.frame_op == FrameOp::remove) {
-    if (at == frames_.size()) {
-      answer_error(s, CmdError::bad_option, "frame " + name + " is not defined");
-      return;
+    const FrameResult r = svc_->delete_frame(name);
+    switch (r.refusal) {
+      case FrameRefusal::none: answer_ok(s, "frame " + name + " deleted"); return;
+      case FrameRefusal::not_defined: answer_error(s, r.error, "frame " + name + " is not defined"); return;
+      case FrameRefusal::active: answer_error(s, r.error, "frame " + name + " is active: select another first"); return;
+      case FrameRefusal::storage: answer_error(s, r.error, "frame not deleted: " + r.reason); return;
+      case FrameRefusal::bad_name:
+      case FrameRefusal::bad_values:
+      case FrameRefusal::arm_busy:
+      case FrameRefusal::full: answer_frame_refusal(s, r, prefix, name); return;
     }
-    if (at == frame_) {
-      answer_error(s, CmdError::bad_state, "frame " + name + " is active: select another first");
-      return;
-    }
-    const NamedPose keep = frames_[at];
-    frames_.erase(frames_.begin() + static_cast<std::ptrdiff_t>(at));
-    if (frame_ > at) --frame_;
-    const std::string err = save_frames();
-    if (!err.empty()) {
-      frames_.insert(frames_.begin() + static_cast<std::ptrdiff_t>(at), keep);
-      if (frame_ >= at) ++frame_;
-      answer_error(s, CmdError::storage, "frame not deleted: " + err);
-      return;
-    }
-    answer_ok(s, "frame " + name + " deleted");
     return;
   }
-  // define (frame NAME x y z rx ry rz: console units) or G10 L2 (mm / deg, axes not given kept)
+  // define (frame NAME x y z rx ry rz: console units) or G10 L2 / L20 (mm / deg, axes not given kept)
+  if (const std::string why = check_frame_name(name, false); !why.empty()) {
+    answer_error(s, CmdError::bad_option, prefix + ": " + why);
+    return;
+  }
+  if (const FrameResult no = svc_->frames_check(); !no.ok()) {
+    answer_frame_refusal(s, no, prefix, name);
+    return;
+  }
   double xyz[3], rpy[3];
+  frame_values(c, defined ? svc_->frame(at).pose : kin::Pose::Identity(), xyz, rpy);
+  const double none[3] = {0, 0, 0};
+  if (const std::string why = check_frame_values(xyz, rpy, false, 0, none); !why.empty()) {
+    answer_error(s, CmdError::out_of_range, (c.gcode ? std::string("G10: frame ") : std::string("frame ")) + name + ": " + why);
+    return;
+  }
+  NamedPose def;
+  def.name = name;
+  def.pose.translation() = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
+  def.pose.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+  const FrameResult r = svc_->define_frame(def);
+  if (r.refusal == FrameRefusal::full) answer_error(s, r.error, full);
+  else if (r.refusal == FrameRefusal::storage) answer_error(s, r.error, "frame not set: " + r.reason);
+  else if (!r.ok()) answer_frame_refusal(s, r, prefix, name);
+  else
+    answer_ok(s, quiet ? ""
+                       : fmt("frame %s %s %s%s", name.c_str(), r.redefined ? "redefined" : "defined", pose_values(def.pose, u).c_str(),
+                             ((r.active ? " (active)" : "") + unsaved).c_str()));
+}
+
+// A frame definition's values in SI: `frame NAME x y z rx ry rz` in the console's units;
+// G10 L2 in mm / deg, the axes not given kept from `cur`; G10 L20 moves the origin (its axes
+// kept) so that the tool point, where it is now, has the given coordinates in it:
+// w = R^T (p - t), w_k := v_k, t = p - R w.
+void Console::frame_values(const Command& c, const kin::Pose& cur, double xyz[3], double rpy[3]) const {
+  const ConsoleUnits& u = cfg_.units;
   if (c.frame_op == FrameOp::set_axes && c.g10_l20) {
-    // G10 L20: move the frame's origin (its axes kept) so that the tool point, where it is
-    // now, has the given coordinates in it: w = R^T (p - t), w_k := v_k, t = p - R w.
-    const kin::Pose cur = at < frames_.size() ? frames_[at].pose : kin::Pose::Identity();
     const Eigen::Vector3d p = tcp(tail()).translation();
     Eigen::Vector3d w = cur.linear().transpose() * (p - cur.translation());
     for (int k = 0; k < 3; ++k)
@@ -1806,7 +1697,6 @@ void Console::do_frame(Session& s, const Command& c) {
     const Eigen::Vector3d r = kin::rpy_from_rotation(cur.linear());
     for (int k = 0; k < 3; ++k) xyz[k] = t[k], rpy[k] = r[k];
   } else if (c.frame_op == FrameOp::set_axes) {
-    const kin::Pose cur = at < frames_.size() ? frames_[at].pose : kin::Pose::Identity();
     const Eigen::Vector3d r = kin::rpy_from_rotation(cur.linear());
     for (int k = 0; k < 3; ++k) {
       xyz[k] = c.axis_mask & (1u << k) ? c.vals[static_cast<std::size_t>(k)] * 1e-3 : cur.translation()[k];
@@ -1818,35 +1708,6 @@ void Console::do_frame(Session& s, const Command& c) {
       rpy[k] = u.angle_in(c.vals[static_cast<std::size_t>(k + 3)]);
     }
   }
-  const double none[3] = {0, 0, 0};
-  why = check_frame_values(xyz, rpy, false, 0, none);
-  if (!why.empty()) {
-    answer_error(s, CmdError::out_of_range, (c.gcode ? std::string("G10: frame ") : std::string("frame ")) + name + ": " + why);
-    return;
-  }
-  if (at == frames_.size() && frames_.size() >= kMaxFrames) {
-    answer_error(s, CmdError::busy, fmt("frame: %zu frames already (frame delete NAME first)", kMaxFrames));
-    return;
-  }
-  NamedPose def;
-  def.name = name;
-  def.pose.translation() = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
-  def.pose.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
-  const bool fresh = at == frames_.size();
-  NamedPose old;
-  if (fresh) frames_.push_back(def);
-  else old = std::exchange(frames_[at], def);
-  const std::string err = save_frames();
-  if (!err.empty()) {
-    if (fresh) frames_.pop_back();
-    else frames_[at] = old;
-    answer_error(s, CmdError::storage, "frame not set: " + err);
-    return;
-  }
-  answer_ok(s, s.dialect == Dialect::grbl && c.gcode
-                   ? ""
-                   : fmt("frame %s %s %s%s", name.c_str(), fresh ? "defined" : "redefined", pose_values(def.pose, u).c_str(),
-                         ((at == frame_ ? " (active)" : "") + unsaved).c_str()));
 }
 
 }  // namespace servoarm::fw

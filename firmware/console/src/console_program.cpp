@@ -41,62 +41,8 @@ std::string error_of(const std::string& out) {
 }
 
 
-/// Douglas-Peucker on joint vectors (Euclidean in SI joint space): indices kept, first and last included.
-std::vector<std::size_t> decimate(const std::vector<kin::JointVector>& q, double tol) {
-  const std::size_t n = q.size();
-  std::vector<char> keep(n, 0);
-  if (n == 0) return {};
-  keep[0] = keep[n - 1] = 1;
-  std::vector<std::pair<std::size_t, std::size_t>> stack{{0, n - 1}};
-  while (!stack.empty()) {
-    const auto [a, b] = stack.back();
-    stack.pop_back();
-    if (b <= a + 1) continue;
-    // Plain loops over the joints, not Eigen temporaries: gcc 12 for armhf at -O2
-    // takes those for maybe-uninitialized (-Werror in the cross build).
-    const Eigen::Index m = q[a].size();
-    double dd = 0;
-    for (Eigen::Index j = 0; j < m; ++j) dd += (q[b][j] - q[a][j]) * (q[b][j] - q[a][j]);
-    double worst = -1;
-    std::size_t at = a;
-    for (std::size_t i = a + 1; i < b; ++i) {
-      double vd = 0;
-      for (Eigen::Index j = 0; j < m; ++j) vd += (q[i][j] - q[a][j]) * (q[b][j] - q[a][j]);
-      const double s = dd > 0 ? std::clamp(vd / dd, 0.0, 1.0) : 0.0;
-      double dist2 = 0;
-      for (Eigen::Index j = 0; j < m; ++j) {
-        const double e = (q[i][j] - q[a][j]) - s * (q[b][j] - q[a][j]);
-        dist2 += e * e;
-      }
-      const double dist = std::sqrt(dist2);
-      if (dist > worst) worst = dist, at = i;
-    }
-    if (worst > tol) {
-      keep[at] = 1;
-      stack.push_back({a, at});
-      stack.push_back({at, b});
-    }
-  }
-  std::vector<std::size_t> out;
-  for (std::size_t i = 0; i < n; ++i)
-    if (keep[i]) out.push_back(i);
-  return out;
-}
-
-constexpr std::size_t kMaxRecordSamples = 100000;
 
 }  // namespace
-
-const char* to_string(RunState r) {
-  switch (r) {
-    case RunState::idle: return "idle";
-    case RunState::running: return "running";
-    case RunState::pausing: return "pausing";
-    case RunState::paused: return "paused";
-    case RunState::stepping: return "stepping";
-  }
-  return "?";
-}
 
 // ---------------------------------------------------------------------------
 // Teach points
@@ -111,41 +57,35 @@ std::string Console::load_points() {
   return "";
 }
 
-std::string Console::points_refusal() const {
-  if (run_) return fmt("refused while program %s is %s (abort it first)", run_->name.c_str(), to_string(run_->state));
-  const Telemetry t = ctl_.telemetry();
-  switch (t.state) {
-    case ArmState::idle:
-    case ArmState::disabled:
-    case ArmState::freedrive: break;  // teach where the hand put it
-    case ArmState::boot:
-    case ArmState::enabling:
-    case ArmState::moving:
-    case ArmState::stopping:
-    case ArmState::fault:
-    case ArmState::estop:
-    case ArmState::jogging:
-    case ArmState::homing: return fmt("refused while the arm is %s (teach at rest)", to_string(t.state));
+std::string Console::points_refusal(const TeachResult& r) const {
+  switch (r.refusal) {
+    case TeachRefusal::program:
+      return fmt("refused while program %s is %s (abort it first)", r.program.name.c_str(), to_string(r.program.state));
+    case TeachRefusal::arm_state: return fmt("refused while the arm is %s (teach at rest)", to_string(r.arm));
+    case TeachRefusal::queued: return "refused while moves are queued";
+    case TeachRefusal::none:
+    case TeachRefusal::not_homed: break;
   }
-  if (!ctl_.motions().empty()) return "refused while moves are queued";
   return "";
 }
 
 void Console::do_teach(Session& s, const Command& c) {
   const std::string name(c.word.data());
-  if (const std::string no = points_refusal(); !no.empty()) {
+  const TeachResult here = svc_->teach_here();
+  if (const std::string no = points_refusal(here); !no.empty()) {
     answer_error(s, CmdError::bad_state, "teach: " + no);
     return;
   }
-  if (!homed_ok(s)) return;  // a pose in coordinates not established means nothing
-  const Telemetry t = ctl_.telemetry();
+  if (here.refusal == TeachRefusal::not_homed && !s.check_mode) {  // (a check moves nothing)
+    answer_error(s, here.error, here.reason);
+    return;
+  }
   prog::TeachPoint p;
   p.name = name;
-  p.q = kin::JointVector(n_);
-  for (int j = 0; j < n_; ++j) p.q[j] = t.q_act[static_cast<std::size_t>(j)];
-  p.pose = tcp(p.q);
-  p.tool = tools_[sel_tool()]->def.name;
-  p.frame = frames_[sel_frame()].name;
+  p.q = here.q;
+  p.pose = tcp(p.q);  // with the session's tool (check mode has its own selection)
+  p.tool = svc_->tool(sel_tool()).name;
+  p.frame = svc_->frame(sel_frame()).name;
   prog::PointsData d = points_;
   if (const std::string e = prog::put_point(d, p); !e.empty()) {
     answer_error(s, CmdError::bad_option, "teach: " + e);
@@ -176,7 +116,8 @@ void Console::do_points(Session& s) {
 
 void Console::do_point_delete(Session& s, const Command& c) {
   const std::string name(c.word.data());
-  if (const std::string no = points_refusal(); !no.empty() && run_) {
+  if (const TeachResult here = svc_->teach_here(); here.refusal == TeachRefusal::program) {
+    const std::string no = points_refusal(here);
     answer_error(s, CmdError::bad_state, "point delete: " + no);
     return;
   }
@@ -215,7 +156,7 @@ void Console::queue_at_point(Session& s, const Command& c) {
   if (c.cmd == Cmd::movej) {
     MoveJoints m;
     m.goal = p->q;
-    m.speed_pct = c.has_speed ? c.speed : cfg_.default_joint_speed_pct;
+    m.speed_pct = c.has_speed ? c.speed : motion().default_joint_speed_pct;
     m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : -1.0;
     queue(s, m);
     return;
@@ -274,8 +215,9 @@ void Console::do_run(Session& s, const Command& c) {
     answer_error(s, CmdError::program, "run: no programs folder (programs.dir, armfw --programs DIR)");
     return;
   }
-  if (run_) {
-    answer_error(s, CmdError::bad_state, fmt("run: program %s is %s (abort it first)", run_->name.c_str(), to_string(run_->state)));
+  if (running()) {
+    const ProgramStatus p = svc_->program_status();
+    answer_error(s, CmdError::bad_state, fmt("run: program %s is %s (abort it first)", p.name.c_str(), to_string(p.state)));
     return;
   }
   if (!s.check_mode) {
@@ -318,10 +260,10 @@ void Console::do_run(Session& s, const Command& c) {
   pc->cs.check_mode = true;
   pc->from = tail();
   pc->cs.check_tail = pc->from;
-  pc->tool = tool_;
-  pc->frame = frame_;
-  pc->cs.check_tool = tool_;
-  pc->cs.check_frame = frame_;
+  pc->tool = svc_->active_tool();
+  pc->frame = svc_->active_frame();
+  pc->cs.check_tool = pc->tool;
+  pc->cs.check_frame = pc->frame;
   pc->shadow = std::make_unique<PathShadow>();
   pc->check_only = s.check_mode;
   pcheck_ = std::move(pc);
@@ -383,182 +325,170 @@ bool Console::continue_check() {
   // Checked from where the arm was when the check began: it must still be there, at rest,
   // with the same tool and frame, and no other program may have started meanwhile.
   const Telemetry t = ctl_.telemetry();
-  if (run_ || t.state != ArmState::idle || !ctl_.motions().empty() || (tail() - done->from).norm() > 1e-9 ||
-      tool_ != done->tool || frame_ != done->frame) {
+  if (running() || t.state != ArmState::idle || !ctl_.motions().empty() || (tail() - done->from).norm() > 1e-9 ||
+      svc_->active_tool() != done->tool || svc_->active_frame() != done->frame) {
     answer_error(o, CmdError::bad_state,
                  fmt("run: %s: the arm moved, or the tool / frame / program changed, while it was checked (it is %s); "
                      "nothing moved: run it again", name.c_str(), to_string(t.state)));
     return false;
   }
   r->ps.name = "program " + name;
-  r->generation = t.generation;
-  r->started_cycle = t.cycles;
-  r->state = RunState::running;
   run_ = std::move(r);
+  const ProgramResult started = svc_->run_program(spec_of(*run_), [this](std::size_t i) { return run_step(i); });
+  if (!started.ok()) {  // (checked above: the arm at rest, nothing queued, homed)
+    answer_error(o, started.error, fmt("run: %s: %s; nothing moved", name.c_str(), to_string(started.refusal)));
+    return false;
+  }
   answer_ok(o, fmt("running %s: %s", name.c_str(), counts.c_str()));
-  tick();
   return false;
 }
 
 void Console::do_pause(Session& s) {
-  if (!run_) {
+  const ProgramResult r = svc_->program_pause();
+  if (r.refusal == ProgramRefusal::no_program) {
     answer_error(s, CmdError::bad_state, "pause: no program runs (`hold` or `!` holds a move)");
     return;
   }
-  if (run_->state == RunState::running || run_->state == RunState::stepping) run_->state = RunState::pausing;
-  tick();
-  answer_ok(s, fmt("%s %s at %s", run_ ? to_string(run_->state) : "ended", run_ ? run_->name.c_str() : "",
-                   run_ ? program_where().c_str() : ""));
+  const bool on = r.status.state != RunState::idle;
+  answer_ok(s, fmt("%s %s at %s", on ? to_string(r.status.state) : "ended", on ? r.status.name.c_str() : "",
+                   on ? program_where().c_str() : ""));
 }
 
 void Console::do_step(Session& s) {
-  if (!run_) {
-    answer_error(s, CmdError::bad_state, "step: no program runs");
-    return;
+  const ProgramResult r = svc_->program_step();
+  switch (r.refusal) {
+    case ProgramRefusal::none: break;
+    case ProgramRefusal::no_program: answer_error(s, CmdError::bad_state, "step: no program runs"); return;
+    case ProgramRefusal::program_state:
+    case ProgramRefusal::running:
+    case ProgramRefusal::arm_not_ready:
+      answer_error(s, CmdError::bad_state, fmt("step: program %s is %s (pause it first)", r.status.name.c_str(), to_string(r.status.state)));
+      return;
   }
-  if (run_->state != RunState::paused) {
-    answer_error(s, CmdError::bad_state, fmt("step: program %s is %s (pause it first)", run_->name.c_str(), to_string(run_->state)));
-    return;
-  }
-  run_->state = RunState::stepping;
-  run_->step_fed = false;
-  const Telemetry t = ctl_.telemetry();
-  Reply r;
-  if (t.holding || t.mode == Mode::held) request(RequestOp::resume, r);  // a move held by `!` is finished first
-  tick();
-  answer_ok(s, fmt("stepping %s at %s", run_ ? run_->name.c_str() : "", run_ ? program_where().c_str() : "(ended)"));
+  const bool on = r.status.state != RunState::idle;
+  answer_ok(s, fmt("stepping %s at %s", on ? r.status.name.c_str() : "", on ? program_where().c_str() : "(ended)"));
 }
 
 void Console::do_resume(Session& s) {
-  Reply r;
-  if (run_ && (run_->state == RunState::paused || run_->state == RunState::pausing)) run_->state = RunState::running;
-  if (!request(RequestOp::resume, r)) {
+  const ControlResult c = svc_->resume();
+  if (c.error == CmdError::timeout) {
     answer_error(s, CmdError::timeout, "control thread did not answer resume");
     return;
   }
-  if (r.result != RtResult::ok && !run_) {
-    answer_error(s, r.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, bounded_text(r.message));
+  if (c.reply.result != RtResult::ok && !running()) {
+    answer_error(s, c.reply.result == RtResult::fault ? CmdError::fault : CmdError::bad_state, c.reason);
     return;
   }
-  tick();
-  if (run_) answer_ok(s, fmt("%s %s at %s", to_string(run_->state), run_->name.c_str(), program_where().c_str()));
-  else answer_ok(s, bounded_text(r.message));
+  svc_->program_tick();
+  if (running()) {
+    const ProgramStatus p = svc_->program_status();
+    answer_ok(s, fmt("%s %s at %s", to_string(p.state), p.name.c_str(), program_where().c_str()));
+  } else {
+    answer_ok(s, c.reason);
+  }
+}
+
+ProgramSpec Console::spec_of(const ProgramRun& r) {
+  ProgramSpec sp;
+  sp.name = r.name;
+  sp.files = r.prog.files;
+  sp.steps.reserve(r.prog.steps.size());
+  for (const prog::ProgramStep& st : r.prog.steps) {
+    ProgramSpec::Step x;
+    x.file = st.file;
+    x.line = st.line;
+    switch (kind_of(st.cmd)) {
+      case StepKind::motion: x.kind = StepClass::motion; break;
+      case StepKind::needs_idle: x.kind = StepClass::needs_idle; break;
+      case StepKind::wait: x.kind = StepClass::wait; break;
+      case StepKind::other:
+      case StepKind::refused: x.kind = StepClass::other; break;  // (refused steps fail the check before a run)
+    }
+    sp.steps.push_back(x);
+  }
+  return sp;
+}
+
+StepOutcome Console::run_step(std::size_t i) {
+  StepOutcome o;
+  if (!run_ || i >= run_->prog.steps.size()) return o;
+  ProgramRun& r = *run_;
+  r.ps.out.clear();
+  exec_step(r.ps, r.prog, r.prog.steps[i]);
+  const std::string e = error_of(r.ps.out);  // "code: text"
+  if (e.empty()) return o;
+  const std::size_t colon = e.find(": ");
+  const std::string code = e.substr(0, colon);
+  o.error = CmdError::program;
+  for (int k = 0; k < 64; ++k)
+    if (code == to_string(static_cast<CmdError>(k))) o.error = static_cast<CmdError>(k);
+  o.reason = colon == std::string::npos ? std::string() : e.substr(colon + 2);
+  return o;
 }
 
 std::string Console::program_where() const {
-  if (!run_ || run_->prog.steps.empty()) return "-";
-  const ProgramRun& r = *run_;
-  std::size_t i = r.fed.empty() ? std::min(r.next, r.prog.steps.size() - 1) : r.current;
-  return r.prog.where(r.prog.steps[std::min(i, r.prog.steps.size() - 1)]);
+  const ProgramStatus p = svc_->program_status();
+  if (p.state == RunState::idle || p.steps == 0) return "-";
+  return p.file + ":" + std::to_string(p.line);
 }
 
 std::string Console::program_text() const {
-  if (!run_) return "";
-  return fmt("program=%s program_state=%s line=%s", run_->name.c_str(), to_string(run_->state), program_where().c_str());
+  const ProgramStatus p = svc_->program_status();
+  if (p.state == RunState::idle) return "";
+  return fmt("program=%s program_state=%s line=%s", p.name.c_str(), to_string(p.state), program_where().c_str());
 }
 
-void Console::end_program(const std::string& how) {
+void Console::end_program(ProgramEnd how, bool realtime) {
   if (pcheck_) {  // a stop, e-stop, disable or Ctrl-X ends a pending check as it ends a program
-    const std::size_t c = how.rfind(": ");
-    cancel_check(c == std::string::npos ? how : how.substr(c + 2));
+    switch (how) {
+      case ProgramEnd::estop: cancel_check(realtime ? "e-stop (Ctrl-X)" : "e-stop"); break;
+      case ProgramEnd::soft_reset: cancel_check("soft reset (Ctrl-X)"); break;
+      case ProgramEnd::stop:
+      case ProgramEnd::disable:
+      case ProgramEnd::abort: cancel_check(to_string(how)); break;
+      case ProgramEnd::none:
+      case ProgramEnd::done:
+      case ProgramEnd::fault:
+      case ProgramEnd::arm_state:
+      case ProgramEnd::queue_dropped:
+      case ProgramEnd::step_refused: break;  // (the runner's own ends: no check is pending while a program runs)
+    }
   }
-  if (!run_) return;
-  program_events_ += "program: " + run_->name + " " + how + "\n";
-  run_.reset();
+  svc_->program_abort(how, realtime);
+}
+
+std::string Console::program_line(const ArmEvent& e) const {
+  if (e.program != ProgramPhase::ended) return "";
+  const ProgramNames n = svc_->event_program(e);
+  const std::string name(n.program);
+  if (e.end == ProgramEnd::done)
+    return "program: " + name + " done: " + count_text(static_cast<long long>(e.steps), "step") + " in " +
+           fixed(e.seconds, kTimeDecimals) + " s";
+  const std::string at = e.steps == 0 || n.file.empty() ? "-" : std::string(n.file) + ":" + std::to_string(e.line);
+  const std::string detail(svc_->event_detail(e));
+  std::string why;
+  switch (e.end) {
+    case ProgramEnd::none:
+    case ProgramEnd::done: break;
+    case ProgramEnd::stop: why = "stop"; break;
+    case ProgramEnd::estop: why = e.realtime ? "e-stop (Ctrl-X)" : "e-stop"; break;
+    case ProgramEnd::soft_reset: why = "soft reset (Ctrl-X)"; break;
+    case ProgramEnd::disable: why = "disable"; break;
+    case ProgramEnd::abort: why = "abort"; break;
+    case ProgramEnd::fault: why = "fault " + detail; break;
+    case ProgramEnd::arm_state:
+      why = e.state == ArmState::boot || e.state == ArmState::disabled ? std::string("the arm was disabled")
+                                                                       : std::string("the arm is ") + to_string(e.state);
+      break;
+    case ProgramEnd::queue_dropped: why = "the motion queue was dropped"; break;
+    case ProgramEnd::step_refused: why = std::string(to_string(e.error)) + ": " + detail; break;
+  }
+  return "program: " + name + " aborted at " + at + ": " + why;
 }
 
 void Console::tick() {
-  const Telemetry t = ctl_.telemetry();
-  // The recorder: one sample every rate interval of control cycles.
-  if (rec_.active && rec_.samples.size() < kMaxRecordSamples) {
-    const double every = std::max(1.0, std::round(ctl_.config().rate_hz / rec_.rate_hz));
-    if (static_cast<double>(t.cycles - rec_.last_cycle) >= every) {
-      kin::JointVector q(n_);
-      for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
-      rec_.samples.push_back(q);
-      rec_.last_cycle = t.cycles;
-    }
-  }
-  if (!run_ || ticking_) return;
-  ProgramRun& r = *run_;
-  // Finished motions leave the list; its front is the running one.
-  while (!r.fed.empty() && (r.fed.front().first <= t.done_id || (t.running_id != 0 && r.fed.front().first < t.running_id)))
-    r.fed.pop_front();
-  if (!r.fed.empty()) r.current = r.fed.front().second;
-  switch (t.state) {
-    case ArmState::fault: end_program(fmt("aborted at %s: fault %s", program_where().c_str(), bounded_text(t.fault_text).c_str())); return;
-    case ArmState::estop: end_program("aborted at " + program_where() + ": e-stop"); return;
-    case ArmState::boot:
-    case ArmState::disabled: end_program("aborted at " + program_where() + ": the arm was disabled"); return;
-    case ArmState::jogging:
-    case ArmState::homing:
-    case ArmState::freedrive: end_program(fmt("aborted at %s: the arm is %s", program_where().c_str(), to_string(t.state))); return;
-    case ArmState::enabling:
-    case ArmState::idle:
-    case ArmState::moving:
-    case ArmState::stopping: break;
-  }
-  if (t.generation != r.generation) {  // the queue was dropped (a stop from elsewhere) or a move refused
-    end_program("aborted at " + program_where() + ": the motion queue was dropped");
-    return;
-  }
-  if (r.state == RunState::running && (t.mode == Mode::held || t.holding)) r.state = RunState::paused;
-  const bool at_rest = t.state == ArmState::idle && ctl_.motions().empty();
-  ticking_ = true;  // a member, not the run's: end_program() frees the run inside this function
-  struct Busy {
-    bool& b;
-    ~Busy() { b = false; }
-  } busy{ticking_};
-  const auto fail = [&](std::size_t i, const std::string& e) {
-    const std::string at = r.prog.where(r.prog.steps[i]);
-    Reply rp;
-    request(RequestOp::stop, rp);  // the rest is dropped
-    end_program("aborted at " + at + ": " + e);
-  };
-  if (r.ps.waiting) {
-    r.ps.out.clear();
-    settle(r.ps);
-    if (r.ps.waiting) return;
-    if (const std::string e = error_of(r.ps.out); !e.empty()) {
-      fail(r.next == 0 ? 0 : r.next - 1, e);
-      return;
-    }
-  }
-  for (int guard = 0; guard < 64 && r.next < r.prog.steps.size(); ++guard) {
-    if (r.state != RunState::running && r.state != RunState::stepping) break;
-    const prog::ProgramStep& st = r.prog.steps[r.next];
-    const StepKind k = kind_of(st.cmd);
-    if (k == StepKind::motion) {
-      if (r.state == RunState::stepping && r.step_fed) break;
-      if (ctl_.motions().size() >= 2) break;  // one queued behind the running move
-      const Telemetry now = ctl_.telemetry();
-      if (now.state != ArmState::idle && now.state != ArmState::moving) break;
-      if (now.mode == Mode::held || now.holding) break;
-    } else if (k == StepKind::needs_idle) {
-      if (!(ctl_.telemetry().state == ArmState::idle && ctl_.motions().empty())) break;
-    }
-    r.ps.out.clear();
-    const std::size_t i = r.next++;
-    exec_step(r.ps, r.prog, st);
-    if (const std::string e = error_of(r.ps.out); !e.empty()) {
-      fail(i, e);
-      return;
-    }
-    if (k == StepKind::motion) {
-      r.fed.emplace_back(last_motion_id(), i);
-      if (r.fed.size() == 1) r.current = i;
-      r.step_fed = true;
-    }
-    if (r.ps.waiting) break;  // `wait`: the next tick goes on when the queue is done
-  }
-  const bool rest_now = ctl_.telemetry().state == ArmState::idle && ctl_.motions().empty();
-  if (r.next >= r.prog.steps.size() && rest_now && at_rest && !r.ps.waiting) {
-    const double secs = static_cast<double>(ctl_.telemetry().cycles - r.started_cycle) / ctl_.config().rate_hz;
-    end_program("done: " + count_text(static_cast<long long>(r.prog.steps.size()), "step") + " in " + fixed(secs, kTimeDecimals) + " s");
-    return;
-  }
-  if ((r.state == RunState::pausing || (r.state == RunState::stepping && r.step_fed)) && rest_now && at_rest)
-    r.state = RunState::paused;
+  svc_->tick();  // a record sample, the running program's next steps
+  if (!running()) run_.reset();  // the service's run ended: its steps are no longer run
 }
 
 // ---------------------------------------------------------------------------
@@ -566,27 +496,24 @@ void Console::tick() {
 // ---------------------------------------------------------------------------
 
 void Console::do_record(Session& s, const Command& c) {
-  const Telemetry t = ctl_.telemetry();
   if (s.check_mode) {  // a check changes nothing: no recording started or stopped, no file written
     answer_ok(s, "check mode: not run");
     return;
   }
   if (!c.record_stop) {
-    if (rec_.active) {
-      answer_error(s, CmdError::bad_state, fmt("record: already recording (%zu samples): record stop NAME", rec_.samples.size()));
-      return;
+    const RecordResult r = svc_->record_start(c.rate > 0 ? c.rate : cfg_.record_rate_hz);
+    switch (r.refusal) {
+      case RecordRefusal::none: answer_ok(s, fmt("recording at %g Hz: jog, then record stop NAME", r.rate_hz)); return;
+      case RecordRefusal::recording:
+        answer_error(s, r.error, fmt("record: already recording (%zu samples): record stop NAME", r.samples));
+        return;
+      case RecordRefusal::not_homed: answer_error(s, r.error, r.reason); return;
+      case RecordRefusal::not_recording:
+      case RecordRefusal::bad_value: answer_error(s, r.error, std::string("record: ") + to_string(r.refusal)); return;
     }
-    if (!homed_ok(s)) return;
-    rec_.active = true;
-    rec_.rate_hz = c.rate > 0 ? c.rate : cfg_.record_rate_hz;
-    rec_.samples.clear();
-    rec_.samples.reserve(kMaxRecordSamples);
-    rec_.last_cycle = t.cycles - static_cast<std::uint64_t>(std::max(1.0, ctl_.config().rate_hz / rec_.rate_hz)) - 1;
-    tick();  // the first sample: where the arm is now
-    answer_ok(s, fmt("recording at %g Hz: jog, then record stop NAME", rec_.rate_hz));
     return;
   }
-  if (!rec_.active) {
+  if (!svc_->recording()) {
     answer_error(s, CmdError::bad_state, "record stop: nothing is recorded (record start first)");
     return;
   }
@@ -595,29 +522,21 @@ void Console::do_record(Session& s, const Command& c) {
     answer_error(s, CmdError::storage, "record stop: no programs folder (programs.dir, armfw --programs DIR); still recording");
     return;
   }
-  {  // the last sample: where the arm is now
-    kin::JointVector q = kin::JointVector::Zero(n_);
-    bool moved = rec_.samples.empty();
-    for (int j = 0; j < n_; ++j) {
-      q[j] = t.q_act[static_cast<std::size_t>(j)];
-      if (!moved && rec_.samples.back()[j] != q[j]) moved = true;
-    }
-    if (moved) rec_.samples.push_back(q);
-  }
   const double tol = c.tolerance > 0 ? cfg_.units.angle_in(c.tolerance) : cfg_.record_tolerance;
-  // The moves follow the decimated polyline (within tol/2 of the samples) and each blend
-  // stays within blend = tol/2 of its corner, a sample: within tol of the recorded path.
-  const std::vector<std::size_t> keep = decimate(rec_.samples, 0.5 * tol);
+  const RecordResult r = svc_->record_path(tol);
+  if (!r.ok()) {
+    answer_error(s, r.error, std::string("record stop: ") + to_string(r.refusal) + "; still recording");
+    return;
+  }
   const ConsoleUnits& u = cfg_.units;
   std::string text = fmt("# recorded by armfw: record stop %s (%zu samples at %g Hz; within %g %s of the recorded path)\n",
-                         name.c_str(), rec_.samples.size(), rec_.rate_hz, u.angle_out(tol), u.angle_name());
+                         name.c_str(), r.samples, r.rate_hz, u.angle_out(tol), u.angle_name());
   int moves = 0;
-  for (std::size_t k = 0; k < keep.size(); ++k) {
-    const kin::JointVector& q = rec_.samples[keep[k]];
+  for (std::size_t k = 0; k < r.waypoints.size(); ++k) {
     std::string line = "movej";
-    for (int j = 0; j < n_; ++j) line += fmt(" %.10g", to_user(j, q[j]));
-    line += fmt(" speed=%g", cfg_.default_joint_speed_pct);
-    if (k > 0 && k + 1 < keep.size()) line += fmt(" blend=%.6g", u.angle_out(0.5 * tol));
+    for (int j = 0; j < n_; ++j) line += fmt(" %.10g", to_user(j, r.waypoints[k][j]));
+    line += fmt(" speed=%g", motion().default_joint_speed_pct);
+    if (k > 0 && k + 1 < r.waypoints.size()) line += fmt(" blend=%.6g", u.angle_out(r.blend));
     text += line + "\n";
     ++moves;
   }
@@ -627,10 +546,8 @@ void Console::do_record(Session& s, const Command& c) {
     answer_error(s, CmdError::storage, "record stop: " + e + "; still recording");
     return;
   }
-  const std::size_t n = rec_.samples.size();
-  rec_.active = false;
-  rec_.samples.clear();
-  answer_ok(s, fmt("recorded %s: %d moves from %zu samples", name.c_str(), moves, n));
+  svc_->record_stop();
+  answer_ok(s, fmt("recorded %s: %d moves from %zu samples", name.c_str(), moves, r.samples));
 }
 
 // ---------------------------------------------------------------------------
@@ -638,7 +555,7 @@ void Console::do_record(Session& s, const Command& c) {
 // ---------------------------------------------------------------------------
 
 void Console::do_out(Session& s, const Command& c) {
-  const auto& outs = cfg_.outputs;
+  const auto& outs = motion().outputs;
   if (c.out_index == -1) {  // list
     for (std::size_t k = 0; k < outs.size(); ++k) {
       const ConsoleConfig::Output& o = outs[k];

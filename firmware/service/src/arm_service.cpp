@@ -7,6 +7,7 @@
 #include <thread>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 #include "servoarm/lang/text.hpp"
@@ -98,10 +99,18 @@ void ArmService::init() {
   tail_ = kin::JointVector::Zero(n_);
   shadow_ = std::make_unique<PathShadow>();
   scratch_ = std::make_unique<MotionItem>();
-  if (cfg_.park.size() != n_) {  // joint zero clamped into the limits
-    cfg_.park = kin::JointVector::Zero(n_);
+  auto t0 = std::make_unique<ToolSlot>();  // tool0: the flange
+  t0->def.name = "tool0";
+  t0->chain = chain_;
+  t0->model = ik_;
+  tools_.push_back(std::move(t0));
+  NamedPose base;
+  base.name = "base";
+  frames_.push_back(base);
+  if (cfg_.home.size() != n_) {  // joint zero clamped into the limits
+    cfg_.home = kin::JointVector::Zero(n_);
     for (int j = 0; j < n_; ++j)
-      cfg_.park[j] = std::fmin(std::fmax(0.0, lim_.lower[static_cast<std::size_t>(j)]), lim_.upper[static_cast<std::size_t>(j)]);
+      cfg_.home[j] = std::fmin(std::fmax(0.0, lim_.lower[static_cast<std::size_t>(j)]), lim_.upper[static_cast<std::size_t>(j)]);
   }
 }
 
@@ -136,7 +145,7 @@ bool ArmService::request(const Request& rq, Reply& out) {
         out = p;
         return true;
       }
-    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(reply_timeout_s_)) return false;
+    if (std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(cfg_.reply_timeout_s)) return false;
     idle_();
   }
 }
@@ -220,7 +229,7 @@ ControlResult ArmService::collision_detection(bool on) {
 
 MoveJoints ArmService::park_request() const {
   MoveJoints m;
-  m.goal = cfg_.park;
+  m.goal = cfg_.home;
   m.speed_pct = cfg_.default_joint_speed_pct;
   return m;
 }
@@ -338,7 +347,7 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
   const kin::JointVector& goal = req.goal;
   // the feed override (GRBL 0x90..0x94) scales moves queued from now on
   const double pct = std::fmin(100.0, std::fmax(kMinJointSpeedPct, (req.speed_pct > 0 ? req.speed_pct : cfg_.default_joint_speed_pct) *
-                                                                       cx.feed_pct / 100.0));
+                                                                       feed_of(cx.feed_pct) / 100.0));
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
     if (goal[j] < lim_.lower[ju] || goal[j] > lim_.upper[ju]) {
@@ -377,7 +386,7 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
   if (!admitted(*this, cx, r)) return r;
   double speed = req.rapid ? cfg_.max_linear_speed : (req.speed > 0 ? req.speed : cfg_.default_linear_speed);
   if (req.clamp_speed && speed > cfg_.max_linear_speed) speed = cfg_.max_linear_speed;
-  if (cx.feed_pct != 100) speed = std::fmin(speed * cx.feed_pct / 100.0, cfg_.max_linear_speed);  // feed override
+  if (feed_of(cx.feed_pct) != 100) speed = std::fmin(speed * feed_of(cx.feed_pct) / 100.0, cfg_.max_linear_speed);  // feed override
   if (!(speed >= kMinLinearSpeedMmS * 1e-3) || speed > cfg_.max_linear_speed + 1e-12) {
     r = refuse(MoveRefusal::linear_speed, CmdError::out_of_range);
     r.speed = speed;
@@ -511,18 +520,58 @@ namespace servoarm::fw {
 // The event stream
 // ---------------------------------------------------------------------------
 
+namespace {
+ArmEventKind kind_of(EventKind k) {
+  switch (k) {
+    case EventKind::fault: return ArmEventKind::fault;
+    case EventKind::estop: return ArmEventKind::estop;
+    case EventKind::motion_done: return ArmEventKind::motion_done;
+    case EventKind::motion_refused: return ArmEventKind::motion_refused;
+    case EventKind::state: return ArmEventKind::state;
+    case EventKind::jog_stopped: return ArmEventKind::jog_stopped;
+    case EventKind::homing: return ArmEventKind::homing;
+    case EventKind::freedrive: return ArmEventKind::freedrive;
+  }
+  return ArmEventKind::state;
+}
+}  // namespace
+
+const char* to_string(ArmEventKind k) {
+  switch (k) {
+    case ArmEventKind::fault: return "fault";
+    case ArmEventKind::estop: return "estop";
+    case ArmEventKind::motion_done: return "motion_done";
+    case ArmEventKind::motion_refused: return "motion_refused";
+    case ArmEventKind::state: return "state";
+    case ArmEventKind::jog_stopped: return "jog_stopped";
+    case ArmEventKind::homing: return "homing";
+    case ArmEventKind::freedrive: return "freedrive";
+    case ArmEventKind::program: return "program";
+  }
+  return "?";
+}
+
+ArmService::EventSlot& ArmService::push_event() {
+  EventSlot& s = (*ring_)[next_seq_ % kEventRing];
+  s.ev = ArmEvent{};
+  s.ev.seq = next_seq_++;
+  s.detail[0] = '\0';
+  s.program.clear();
+  s.file.clear();
+  if (ctl_ != nullptr) {
+    s.ev.cycle = ctl_->telemetry().cycles;
+    s.ev.t = static_cast<double>(s.ev.cycle) * ctl_->period_s();
+  }
+  return s;
+}
+
 std::size_t ArmService::poll_events() {
   if (ctl_ == nullptr) return 0;
-  const std::uint64_t cycle = ctl_->telemetry().cycles;
   std::size_t n = 0;
   Event e;
   while (ctl_->events().pop(e)) {
-    EventSlot& s = (*ring_)[next_seq_ % kEventRing];
-    s.ev = ArmEvent{};
-    s.ev.seq = next_seq_++;
-    s.ev.cycle = cycle;
-    s.ev.t = static_cast<double>(cycle) * ctl_->period_s();
-    s.ev.kind = e.kind;
+    EventSlot& s = push_event();
+    s.ev.kind = kind_of(e.kind);
     s.ev.state = e.state;
     s.ev.cause = e.cause;
     s.ev.joint = e.joint;
@@ -553,6 +602,12 @@ std::string_view ArmService::event_detail(const ArmEvent& e) const {
   const EventSlot& s = (*ring_)[e.seq % kEventRing];
   if (e.seq == 0 || s.ev.seq != e.seq) return {};
   return std::string_view(s.detail);
+}
+
+ProgramNames ArmService::event_program(const ArmEvent& e) const {
+  const EventSlot& s = (*ring_)[e.seq % kEventRing];
+  if (e.seq == 0 || s.ev.seq != e.seq || e.kind != ArmEventKind::program) return {};
+  return {s.program, s.file};
 }
 
 }  // namespace servoarm::fw
@@ -637,7 +692,7 @@ JogResult ArmService::send_jog(const JogSpec& js) {
 
 JogResult ArmService::jog(const JointJog& rq, const JogContext& cx) {
   const bool jogging = ctl_->telemetry().state == ArmState::jogging && jog_.valid;
-  const double pct = jog_pct(rq.speed_pct, cx.feed_pct);
+  const double pct = jog_pct(rq.speed_pct, feed_of(cx.feed_pct));
   const int j = rq.joint;
   const auto ju = static_cast<std::size_t>(j);
   const kin::JointVector from = commanded();
@@ -692,7 +747,7 @@ JogResult ArmService::jog(const JointJog& rq, const JogContext& cx) {
 
 JogResult ArmService::jog(const ToolJog& rq, const JogContext& cx) {
   const bool jogging = ctl_->telemetry().state == ArmState::jogging && jog_.valid;
-  JogSpec js = tool_spec(jog_pct(rq.speed_pct, cx.feed_pct), cx);
+  JogSpec js = tool_spec(jog_pct(rq.speed_pct, feed_of(cx.feed_pct)), cx);
   js.continuous = rq.continuous;
   const kin::Pose now = commanded_pose(cx);
   const kin::Pose here = jogging && jog_.tool ? jog_.pose : now;
@@ -751,9 +806,10 @@ JogResult ArmService::jog(const PoseJog& rq, const JogContext& cx) {
   const kin::Chain& chain = cx.chain != nullptr ? *cx.chain : chain_;
   if (cx.ik.fn == nullptr || cx.ik.fn(chain, rq.target, commanded(), q, cx.ik.ctx) < kin::Status::ok)
     return jog_refusal(JogRefusal::unreachable, CmdError::unreachable);
-  JogSpec js = tool_spec(cx.feed_pct > 100 ? 100 : cx.feed_pct, cx);
+  const int feed = feed_of(cx.feed_pct);
+  JogSpec js = tool_spec(feed > 100 ? 100 : feed, cx);
   // the path speed (GRBL clamps a jog's feed to the maximum rate); the override scales it
-  js.linear_speed = std::fmin(rq.speed * cx.feed_pct / 100.0, cfg_.max_linear_speed);
+  js.linear_speed = std::fmin(rq.speed * feed / 100.0, cfg_.max_linear_speed);
   js.frame = rq.axes;
   js.target = rq.target;
   JogResult r;
@@ -834,6 +890,174 @@ bool ArmService::output_on(std::size_t index) const {
   if (ctl_ == nullptr || index >= cfg_.outputs.size()) return false;
   const OutputBit& o = cfg_.outputs[index];
   return (ctl_->telemetry().outputs[static_cast<std::size_t>(o.joint)] >> o.bit) & 1u;
+}
+
+}  // namespace servoarm::fw
+
+namespace servoarm::fw {
+
+// ---------------------------------------------------------------------------
+// Queries and settings
+// ---------------------------------------------------------------------------
+
+const char* to_string(Setting s) {
+  switch (s) {
+    case Setting::none: return "none";
+    case Setting::default_joint_speed_pct: return "default_joint_speed_pct";
+    case Setting::default_linear_speed: return "default_linear_speed";
+    case Setting::max_linear_speed: return "max_linear_speed";
+    case Setting::max_move_duration_s: return "max_move_duration_s";
+    case Setting::default_blend_rad: return "default_blend_rad";
+    case Setting::default_blend_m: return "default_blend_m";
+    case Setting::home: return "home";
+    case Setting::jog_speed_pct: return "jog_speed_pct";
+    case Setting::jog_deadman_s: return "jog_deadman_s";
+    case Setting::reply_timeout_s: return "reply_timeout_s";
+    case Setting::outputs: return "outputs";
+    case Setting::feed_override: return "feed_override";
+  }
+  return "?";
+}
+
+const char* to_string(JointHoming h) {
+  switch (h) {
+    case JointHoming::unhomed: return "unhomed";
+    case JointHoming::homing: return "homing";
+    case JointHoming::homed: return "homed";
+    case JointHoming::failed: return "failed";
+    case JointHoming::absolute: return "absolute";
+  }
+  return "?";
+}
+
+ArmStatus ArmService::status() const {
+  ArmStatus s;
+  s.feed_pct = feed_pct_;
+  s.q = kin::JointVector::Zero(n_);
+  s.q_cmd = kin::JointVector::Zero(n_);
+  s.homing.assign(static_cast<std::size_t>(n_), JointHoming::absolute);
+  if (ctl_ == nullptr) return s;  // dry runs only: no arm to report
+  const Telemetry t = ctl_->telemetry();
+  s.state = t.state;
+  s.mode = t.mode;
+  s.holding = t.holding;
+  s.queued = t.queued;
+  s.running_id = t.running_id;
+  s.done_id = t.done_id;
+  s.cycles = t.cycles;
+  s.t = static_cast<double>(t.cycles) * ctl_->period_s();
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    s.q[j] = t.q_act[ju];
+    s.q_cmd[j] = t.q_cmd[ju];
+    JointHoming& h = s.homing[ju];
+    if ((t.homing_now >> j) & 1u) h = JointHoming::homing;
+    else if (static_cast<hal::HomingKind>(t.homing_kind[ju]) == hal::HomingKind::none) h = JointHoming::absolute;
+    else if ((t.homed >> j) & 1u) h = JointHoming::homed;
+    else if ((t.homing_failed >> j) & 1u) h = JointHoming::failed;
+    else h = JointHoming::unhomed;
+  }
+  s.all_homed = t.all_homed();
+  s.fault = t.cause;
+  s.fault_joint = t.fault_joint;
+  s.fault_text = bounded_text(t.fault_text);
+  s.tool = tools_[tool_]->def.name;
+  s.frame = frames_[frame_].name;
+  if (kin::forward(tools_[tool_]->chain, s.q, s.pose) != kin::Status::ok) s.pose.translation().setConstant(std::nan(""));
+  s.pose_in_frame = frames_[frame_].pose.inverse() * s.pose;
+  s.feed_forward = static_cast<FeedForwardKind>(t.feed_forward);
+  s.collision_on = t.collision_on;
+  s.freedrive = static_cast<FreedrivePhase>(t.freedrive);
+  return s;
+}
+
+ArmLimits ArmService::arm_limits() const {
+  ArmLimits a;
+  a.joints = lim_;
+  for (int j = 0; j < n_; ++j) a.prismatic.push_back(chain_.joint(j).type == kin::JointType::prismatic);
+  a.following_error = ctl_ != nullptr ? ctl_->config().following_error : 0.0;
+  a.default_linear_speed = cfg_.default_linear_speed;
+  a.max_linear_speed = cfg_.max_linear_speed;
+  a.cartesian = cfg_.cartesian;
+  return a;
+}
+
+namespace {
+/// `v` within [lo, hi] (NaN is not); else `r` says which setting and its range.
+bool in_range(Setting what, double v, double lo, double hi, SettingsResult& r) {
+  if (v >= lo && v <= hi) return true;
+  r.error = CmdError::out_of_range;
+  r.setting = what;
+  r.value = v, r.lower = lo, r.upper = hi;
+  return false;
+}
+}  // namespace
+
+SettingsResult ArmService::set_settings(const MotionSettings& s) {
+  SettingsResult r;
+  const double inf = std::numeric_limits<double>::infinity();
+  const double v_min = kMinLinearSpeedMmS * 1e-3;
+  if (!in_range(Setting::default_joint_speed_pct, s.default_joint_speed_pct, kMinJointSpeedPct, 100, r) ||
+      !in_range(Setting::max_linear_speed, s.max_linear_speed, v_min, inf, r) ||
+      !in_range(Setting::default_linear_speed, s.default_linear_speed, v_min, s.max_linear_speed, r) ||
+      !in_range(Setting::max_move_duration_s, s.max_move_duration_s, 1e-3, inf, r) ||
+      !in_range(Setting::default_blend_rad, s.default_blend_rad, 0, inf, r) ||
+      !in_range(Setting::default_blend_m, s.default_blend_m, 0, inf, r) ||
+      !in_range(Setting::jog_speed_pct, s.jog_speed_pct, kMinJointSpeedPct, 100, r) ||
+      !in_range(Setting::jog_deadman_s, s.jog_deadman_s, 1e-3, 10, r) ||
+      !in_range(Setting::reply_timeout_s, s.reply_timeout_s, 1e-3, 60, r))
+    return r;
+  if (s.home.size() != n_) {
+    r.error = CmdError::bad_option;
+    r.setting = Setting::home;
+    r.value = static_cast<double>(s.home.size());
+    r.lower = r.upper = n_;
+    return r;
+  }
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    if (!in_range(Setting::home, s.home[j], lim_.lower[ju], lim_.upper[ju], r)) {
+      r.error = CmdError::limits;
+      r.joint = j;
+      return r;
+    }
+  }
+  if (s.outputs.size() != cfg_.outputs.size()) {
+    r.error = CmdError::bad_option;
+    r.setting = Setting::outputs;
+    r.value = static_cast<double>(s.outputs.size());
+    r.lower = r.upper = static_cast<double>(cfg_.outputs.size());
+    return r;
+  }
+  const std::vector<OutputBit> outputs = cfg_.outputs;  // fixed at start: the drives' wiring
+  cfg_ = s;
+  cfg_.outputs = outputs;
+  return r;
+}
+
+SettingsResult ArmService::set_feed_override(int pct) {
+  SettingsResult r;
+  if (in_range(Setting::feed_override, pct, kMinFeedOverride, kMaxFeedOverride, r)) feed_pct_ = pct;
+  return r;
+}
+
+}  // namespace servoarm::fw
+
+namespace servoarm::fw {
+
+const char* to_string(ServiceOp op) {
+  for (const ServiceOpInfo& i : kServiceOps)
+    if (i.op == op) return i.name;
+  return "?";
+}
+
+bool service_op_from(std::string_view name, ServiceOp& op) {
+  for (const ServiceOpInfo& i : kServiceOps)
+    if (name == i.name) {
+      op = i.op;
+      return true;
+    }
+  return false;
 }
 
 }  // namespace servoarm::fw

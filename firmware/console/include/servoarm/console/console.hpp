@@ -44,20 +44,15 @@ namespace servoarm::fw {
 enum class Dialect : std::uint8_t { native, grbl };
 const char* to_string(Dialect d);
 
-struct ConsoleConfig {
-  double default_joint_speed_pct = 50.0;     ///< movej / park without speed=
-  double default_linear_speed = 0.1;         ///< m/s: movel / G1 without speed/F
-  double max_linear_speed = 0.25;            ///< m/s: upper bound of speed= / F, and G0
-  kin::JointVector home;                     ///< SI; empty = all zeros clamped into the limits
-  kin::CartesianLimits cartesian{};          ///< linear_velocity is replaced per move
-  double reply_timeout_s = 1.0;              ///< wait for the control thread to answer a request
-  double max_move_duration_s = 600.0;        ///< longest move accepted (movej, movel, G0/G1, park): out_of_range beyond
+/// The console's configuration: the service's settings (MotionSettings: speeds, blend,
+/// home, jog, outputs; handed to the arm service, which keeps them: the console reads them
+/// there) and what only the console uses.
+struct ConsoleConfig : MotionSettings {
+  using Output = OutputBit;
   std::string config_text;                   ///< what `config` prints (the effective configuration)
   /// What the command language reads and writes (help and status name them); the robot
   /// description's: App sets units_of(chain). G-code keeps G20/G21 mm/inch and degrees.
   ConsoleUnits units{};
-  double jog_deadman_s = 0.25;               ///< a continuous jog not refreshed this long stops
-  double jog_speed_pct = 10.0;               ///< jog speed without speed=: percent of the joint / tool limits
   Dialect dialect = Dialect::native;         ///< of sessions that do not choose their own
   std::string robot_name;                    ///< for $I
   /// Where the tools and user frames are kept (frames.hpp); "" = in memory only (they are
@@ -70,29 +65,8 @@ struct ConsoleConfig {
   std::string programs_dir;
   double record_rate_hz = 50.0;              ///< record start without rate=
   double record_tolerance = 0.5 * M_PI / 180.0;  ///< rad: record stop without tolerance=
-  /// Named digital outputs ([[output]], in order: M62..M65 P = the index): bit `bit` of the
-  /// 60FEh:01 word of joint `joint`'s drive (App maps the node to the joint).
-  struct Output {
-    std::string name;
-    int joint = 0;
-    int bit = 0;
-  };
-  std::vector<Output> outputs;
-  /// Blend tolerance of a move that gives none (movej / movel without blend=, G0/G1 outside a
-  /// program's G64 P / G61): 0 = exact stop (App: motion.default_blend_deg / _mm).
-  double default_blend_rad = 0.0;            ///< movej: joint-space distance (rad)
-  double default_blend_m = 0.0;              ///< movel, G0/G1: tool-point distance (m)
 };
 
-/// A program run by the console (`run NAME`): idle = none.
-enum class RunState : std::uint8_t {
-  idle,       ///< no program
-  running,    ///< lines are fed to the motion queue
-  pausing,    ///< `pause`: nothing more is fed; paused once the queued moves are done
-  paused,     ///< stopped between two lines (or held by `!` mid-move)
-  stepping,   ///< `step`: one motion fed, paused when it is done
-};
-const char* to_string(RunState r);
 
 /// One connected client: its partial line, queued lines, G-code modal state.
 struct Session {
@@ -198,15 +172,15 @@ class Console {
   void client_gone(Session& s);
   /// Feed override in percent (10..200; GRBL 0x90..0x94): scales the speed of jogs and
   /// of moves queued from now on.
-  int feed_override() const { return feed_pct_; }
+  int feed_override() const { return svc_->feed_override(); }
 
   /// Load the tools and user frames of cfg.frames_file (a missing file: none yet). Call once,
   /// before any line. "" or the one-line error (file:line:column); on error nothing is loaded
   /// and armfw does not start (the file is never overwritten).
   std::string load_frames();
   /// Names of the active tool ("tool0" = the flange) and user frame ("base").
-  const std::string& active_tool() const { return tools_[tool_]->def.name; }
-  const std::string& active_frame() const { return frames_[frame_].name; }
+  const std::string& active_tool() const { return svc_->tool(svc_->active_tool()).name; }
+  const std::string& active_frame() const { return svc_->frame(svc_->active_frame()).name; }
   /// The tool point's pose of joints `q` in the active user frame (SI), with the active tool.
   kin::Pose pose_in_frame(const kin::JointVector& q) const;
 
@@ -218,7 +192,7 @@ class Console {
   /// motion queue (one ahead of the running move), notice its end, a hold, a fault; take a
   /// record sample. Console thread; poll() and drain_events() call it. Never blocks.
   void tick();
-  RunState run_state() const { return run_ ? run_->state : RunState::idle; }
+  RunState run_state() const { return svc_->run_state(); }
   /// `program=NAME state=... line=FILE:LINE` of the running program ("" when none).
   std::string program_text() const;
 
@@ -249,8 +223,6 @@ class Console {
   std::string unhomed_refusal(const Telemetry& t) const;
   /// False (and the not_homed answer) when a joint is not homed.
   bool homed_ok(Session& s);
-  /// status's homing=[...]: absolute, homed, homing, failed or unhomed per joint.
-  std::string homing_text(const Telemetry& t) const;
   std::string grbl_settings() const;
   void realtime(Session& s, char ch);
   /// Feed hold: the arm (a move decelerates and stays held, a jog stops) and the program.
@@ -319,61 +291,51 @@ class Console {
   std::uint64_t output_dropped_lines_ = 0, output_dropped_bytes_ = 0;
   kin::IkSolver ik_solver() const;
   const kin::IkModel* ik_ = nullptr;  ///< the App's (outlives the console); nullptr: numeric fallback
-  // Tools and user frames (frames.hpp). A tool's chain is the controller's with the tool's
-  // TCP appended (its own IK model prepared from it); queued Cartesian moves and jogs point
-  // at it, so a slot is changed only while nothing moves, jogs or is queued. unique_ptr:
-  // stable addresses. [0] = tool0 (the flange: ik_), frames_[0] = base.
-  struct ToolSlot {
-    NamedPose def;
-    kin::Chain chain;
-    std::unique_ptr<kin::IkModel> own;
-    const kin::IkModel* model = nullptr;  ///< own.get(), ik_ for tool0, nullptr: numeric fallback
-  };
-  std::vector<std::unique_ptr<ToolSlot>> tools_;
-  std::vector<NamedPose> frames_;
-  std::size_t tool_ = 0, frame_ = 0;
+  // Tools and user frames: the service's (ArmService::tool, frame). A session in check mode
+  // keeps its own selection (indices into the service's lists); another session may delete a
+  // tool or frame meanwhile, so an index past the end falls back to tool0 / base.
   const Session* sel_ = nullptr;   ///< the session executing a line (check mode has its own selection)
-  // A session in check mode keeps its own selection; another session may delete a tool or
-  // frame meanwhile, so an index past the end falls back to tool0 / base.
   std::size_t sel_tool() const {
-    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_tool : tool_;
-    return i < tools_.size() ? i : 0;
+    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_tool : svc_->active_tool();
+    return i < svc_->tool_count() ? i : 0;
   }
   std::size_t sel_frame() const {
-    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_frame : frame_;
-    return i < frames_.size() ? i : 0;
+    const std::size_t i = sel_ != nullptr && sel_->check_mode ? sel_->check_frame : svc_->active_frame();
+    return i < svc_->frame_count() ? i : 0;
   }
-  const ToolSlot& tool_slot() const { return *tools_[sel_tool()]; }
-  const kin::Pose& user_frame() const { return frames_[sel_frame()].pose; }
+  const kin::Chain& tool_chain() const { return svc_->tool_chain(sel_tool()); }
+  const kin::Pose& user_frame() const { return svc_->frame(sel_frame()).pose; }
   /// The active tool point's pose in the base frame.
   kin::Pose tcp(const kin::JointVector& q) const;
-  std::unique_ptr<ToolSlot> make_tool(const NamedPose& def) const;
-  /// "" when tools and frames may change now, else why not.
+  /// "" when tools and frames may change now, else why not (ArmService::frames_check rendered).
   std::string frames_refusal() const;
-  FramesData frames_data() const;
-  /// Save the frames file ("" ok, or the error); nothing to do without a file.
-  std::string save_frames() const;
+  /// A refused tool or frame request (`what`: "tool", "frame", "G10") as its error answer.
+  void answer_frame_refusal(Session& s, const FrameResult& r, const std::string& what, std::string_view name);
+  std::string unsaved_text() const;  ///< " (not kept: ...)" without a frames file
   void do_tool(Session& s, const Command& c);
   void do_frame(Session& s, const Command& c);
+  /// A frame definition's position and roll-pitch-yaw (SI) from `frame NAME ...` or G10 L2 / L20.
+  void frame_values(const Command& c, const kin::Pose& cur, double xyz[3], double rpy[3]) const;
   std::string where_text() const;  ///< "tool=NAME frame=NAME"
   std::string grbl_position(const kin::JointVector& q) const;
   std::string grbl_wcs() const;  ///< "G54".."G59" for $G
   // Teach points and programs (console_program.cpp)
   prog::PointsData points_;
+  /// A loaded program: its steps (the service's runner runs them through exec_step) and the
+  /// session they run in (modal state, answers).
   struct ProgramRun {
     std::string name;
     prog::Program prog;
-    std::size_t next = 0;       ///< next step to feed
-    std::size_t current = 0;    ///< step of the running motion (or the last fed)
-    RunState state = RunState::running;
-    Session ps;                 ///< the runner's own session (modal state, wait)
-    std::deque<std::pair<std::uint32_t, std::size_t>> fed;  ///< motion id -> step, not finished yet
-    std::uint64_t generation = 0;
-    double started_s = 0;
-    std::uint64_t started_cycle = 0;
-    bool step_fed = false;      ///< stepping: the one motion has been fed
+    Session ps;                 ///< the runner's own session
   };
+  /// The program the service runs (kept while it runs: its StepExecutor runs these steps).
   std::unique_ptr<ProgramRun> run_;
+  /// True while the service runs a program (run_ holds it).
+  bool running() const { return svc_->run_state() != RunState::idle; }
+  /// The service's program as the service describes it (names and places of its steps).
+  static ProgramSpec spec_of(const ProgramRun& r);
+  /// The service's StepExecutor: step i of run_ in its session; its error answer as the outcome.
+  StepOutcome run_step(std::size_t i);
   /// A `run` whose program is being checked: a slice of its steps at a time (settle()), so
   /// every transport is read between two slices. One at a time.
   struct PendingCheck {
@@ -392,17 +354,9 @@ class Console {
   bool continue_check();
   /// End a pending check with `error: program ... check interrupted: <why>` (stop, e-stop, ...).
   void cancel_check(const std::string& why);
-  bool ticking_ = false;        ///< tick() is feeding (no re-entry; the run may end inside it)
-  std::string program_events_;  ///< `program: ...` lines for every session (drain_events)
   std::uint64_t events_seen_ = 0;  ///< the last event of the service's stream rendered (drain_events)
   /// An event of the service's stream as its native line and its GRBL lines.
   void render_event(const ArmEvent& e, std::string& native, std::string& grbl);
-  struct Recording {
-    bool active = false;
-    double rate_hz = 50;
-    std::uint64_t last_cycle = 0;
-    std::vector<kin::JointVector> samples;
-  } rec_;
   void do_teach(Session& s, const Command& c);
   void do_points(Session& s);
   void do_point_delete(Session& s, const Command& c);
@@ -418,11 +372,15 @@ class Console {
   /// Run one step in `ps` (its answer in ps.out).
   void exec_step(Session& ps, const prog::Program& p, const prog::ProgramStep& st);
   /// End the program (if one runs) with `program: NAME <how>` (e.g. "aborted at f:3: stop").
-  void end_program(const std::string& how);
+  /// End the running program (if one runs; a pending check too) as `how` (stop, e-stop,
+  /// disable, soft reset: the caller asks the arm), said by a program event.
+  void end_program(ProgramEnd how, bool realtime = false);
   std::string program_where() const;  ///< FILE:LINE of the current step
-  std::string points_refusal() const;  ///< "" when points may change now
-  // Jogging: where the running jog is going (GRBL jog lines are relative to it).
-  int feed_pct_ = 100;
+  /// A program event as its `program: ...` line ("" for the events not rendered).
+  std::string program_line(const ArmEvent& e) const;
+  std::string points_refusal(const TeachResult& r) const;  ///< "" when points may change now (teach_here rendered)
+  /// The service's settings (speeds, blend, home, outputs: one place).
+  const MotionSettings& motion() const { return svc_->settings(); }
   double feed_now_ = 0;  ///< m/s of the last jog or linear move queued (FS:)
 };
 

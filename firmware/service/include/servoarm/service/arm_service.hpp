@@ -24,6 +24,7 @@
 // Controller's SPSC queues and telemetry.
 #include <array>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <span>
@@ -35,6 +36,7 @@
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
 #include "servoarm/lang/commands.hpp"
+#include "servoarm/lang/frames.hpp"
 #include "servoarm/lang/requests.hpp"
 #include "servoarm/rt/controller.hpp"
 
@@ -96,7 +98,7 @@ struct MoveContext {
   DryRun* dry = nullptr;            ///< set: a dry run (planned and checked, nothing queued)
   const kin::Chain* chain = nullptr;  ///< the active tool's chain; nullptr: the arm's
   kin::IkSolver ik{};               ///< its IK (movel's path check and the controller's sampling)
-  int feed_pct = 100;               ///< feed override (10..200): scales the speed of the move
+  int feed_pct = -1;                ///< feed override (10..200) scaling the move's speed; < 0: the service's
   std::span<const OutputChange> outputs{};  ///< M62 / M63 changes the move carries (real run)
   double step_blend = -1;           ///< a program step's blend tolerance (SI; < 0 none)
   bool next_line = false;           ///< a program step whose next motion is a line
@@ -114,8 +116,10 @@ struct ControlResult {
 /// The error code of a control-thread result.
 CmdError control_error(RtResult r);
 
-/// A digital output ([[output]]): bit `bit` of joint `joint`'s drive outputs word.
+/// A digital output ([[output]]): bit `bit` of joint `joint`'s drive outputs word, and the
+/// name it is asked by.
 struct OutputBit {
+  std::string name;
   int joint = 0;
   int bit = 0;
 };
@@ -145,19 +149,100 @@ struct OutputResult {
   bool ok() const { return error == CmdError::ok; }
 };
 
-/// The service's motion settings (SI): the console's configuration of them.
+/// The service's settings (SI), in one place: the configuration gives them at start
+/// (App::console_config), set_settings() changes them; every front end reads them here.
 struct MotionSettings {
-  double default_joint_speed_pct = 50.0;
-  double default_linear_speed = 0.1;   ///< m/s
-  double max_linear_speed = 0.25;      ///< m/s
-  double max_move_duration_s = 600.0;
+  double default_joint_speed_pct = 50.0;  ///< movej / park without a speed: percent of the joint limits
+  double default_linear_speed = 0.1;   ///< m/s: movel / G1 without a speed
+  double max_linear_speed = 0.25;      ///< m/s: upper bound of a line's speed, and G0
+  double max_move_duration_s = 600.0;  ///< longest move or jog accepted: out_of_range beyond
   kin::CartesianLimits cartesian{};    ///< linear_velocity is replaced per move
-  double default_blend_rad = 0.0;      ///< movej without blend=
-  double default_blend_m = 0.0;        ///< movel, G0/G1 without blend=
-  kin::JointVector park;               ///< the park pose (SI); empty: every joint's zero clamped into its limits
+  double default_blend_rad = 0.0;      ///< blend tolerance of a movej that gives none (0: exact stop)
+  double default_blend_m = 0.0;        ///< the same of movel, G0/G1 (tool-point distance)
+  kin::JointVector home;               ///< the park pose (`park`, G28; SI); empty: every joint's zero clamped into its limits
   double jog_speed_pct = 10.0;         ///< jog speed without one given: percent of the joint / tool limits
   double jog_deadman_s = 0.25;         ///< a continuous jog not refreshed this long stops
-  std::vector<OutputBit> outputs;      ///< the digital outputs, in [[output]] order
+  double reply_timeout_s = 1.0;        ///< wait for the control thread to answer a request
+  std::vector<OutputBit> outputs;      ///< the digital outputs, in [[output]] order (fixed at start)
+};
+
+/// A setting set_settings() checks (SettingsResult::setting).
+enum class Setting : std::uint8_t {
+  none,
+  default_joint_speed_pct,
+  default_linear_speed,
+  max_linear_speed,
+  max_move_duration_s,
+  default_blend_rad,
+  default_blend_m,
+  home,
+  jog_speed_pct,
+  jog_deadman_s,
+  reply_timeout_s,
+  outputs,
+  feed_override,
+};
+const char* to_string(Setting s);
+
+/// The answer to set_settings() / set_feed_override(): done, or the setting refused with its
+/// value and range (SI; home: joint `joint`'s value against its limits).
+struct SettingsResult {
+  CmdError error = CmdError::ok;
+  Setting setting = Setting::none;
+  double value = 0, lower = 0, upper = 0;
+  int joint = -1;
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// The feed override's range (percent; GRBL 0x90..0x94 step it within it).
+inline constexpr int kMinFeedOverride = 10;
+inline constexpr int kMaxFeedOverride = 200;
+
+/// A joint's homing as the status reports it.
+enum class JointHoming : std::uint8_t {
+  unhomed,   ///< its zero is not established (not homed since power-on)
+  homing,    ///< it homes now
+  homed,     ///< homed this power cycle
+  failed,    ///< its last homing failed
+  absolute,  ///< an absolute encoder: needs no homing
+};
+const char* to_string(JointHoming h);
+
+/// The answer to status(): what the arm does and where it is (SI), read from one telemetry
+/// snapshot. A query: it changes nothing.
+struct ArmStatus {
+  ArmState state = ArmState::boot;
+  Mode mode = Mode::boot;
+  bool holding = false;            ///< a feed hold is active
+  std::uint32_t queued = 0;        ///< motions in the queue (the running one included)
+  std::uint32_t running_id = 0;    ///< the running motion (0 none)
+  std::uint32_t done_id = 0;       ///< the last motion finished
+  std::uint64_t cycles = 0;        ///< control cycles since start (RT time)
+  double t = 0;                    ///< the same in s
+  kin::JointVector q;              ///< measured joint positions
+  kin::JointVector q_cmd;          ///< commanded joint positions
+  std::vector<JointHoming> homing; ///< per joint
+  bool all_homed = false;
+  FaultCause fault = FaultCause::none;  ///< the fault's cause (state fault)
+  int fault_joint = -1;            ///< the joint concerned (0-based), -1 none
+  std::string fault_text;          ///< the control thread's line for it ("" none)
+  int feed_pct = 100;              ///< the feed override
+  std::string tool = "tool0";      ///< the active tool
+  std::string frame = "base";      ///< the active user frame
+  kin::Pose pose = kin::Pose::Identity();  ///< the active tool point at q, in the base frame (m)
+  kin::Pose pose_in_frame = kin::Pose::Identity();  ///< the same in the active user frame
+  FeedForwardKind feed_forward = FeedForwardKind::off;
+  bool collision_on = false;
+  FreedrivePhase freedrive = FreedrivePhase::off;
+};
+
+/// The answer to arm_limits(): the joint limits, the joints' kinds and the Cartesian limits (SI).
+struct ArmLimits {
+  kin::JointLimits joints;              ///< lower, upper, max velocity / acceleration / jerk per joint
+  std::vector<bool> prismatic;          ///< per joint: a length (m), else an angle (rad)
+  double following_error = 0;           ///< the supervisor's following-error limit (rad)
+  double default_linear_speed = 0, max_linear_speed = 0;  ///< m/s
+  kin::CartesianLimits cartesian{};
 };
 
 /// What a jog request refused (JogResult::refusal); none: accepted.
@@ -208,7 +293,7 @@ struct PoseJog {
 struct JogContext {
   const kin::Chain* chain = nullptr;  ///< nullptr: the arm's
   kin::IkSolver ik{};  ///< tool and pose jogs check their target with it (none: refused as unreachable)
-  int feed_pct = 100;
+  int feed_pct = -1;   ///< < 0: the service's feed override
   Eigen::Matrix3d user_axes = Eigen::Matrix3d::Identity();  ///< the active user frame's orientation
 };
 
@@ -227,17 +312,82 @@ struct JogResult {
   bool ok() const { return error == CmdError::ok; }
 };
 
+/// What an event of the stream is: the control thread's kinds (EventKind, same order), and
+/// the program runner's.
+enum class ArmEventKind : std::uint8_t {
+  fault,
+  estop,
+  motion_done,
+  motion_refused,
+  state,
+  jog_stopped,
+  homing,
+  freedrive,
+  program,  ///< the program runner: ArmEvent::program says what (started, a step, ended)
+};
+const char* to_string(ArmEventKind k);
+
+/// A program run by the service (run_program): idle = none.
+enum class RunState : std::uint8_t {
+  idle,       ///< no program
+  running,    ///< steps are fed to the motion queue
+  pausing,    ///< paused: nothing more is fed; paused once the queued moves are done
+  paused,     ///< stopped between two steps (or held mid-move)
+  stepping,   ///< one motion fed, paused when it is done
+};
+const char* to_string(RunState r);
+
+/// A program event (ArmEventKind::program): what happened.
+enum class ProgramPhase : std::uint8_t {
+  started,  ///< the program runs (`steps` steps)
+  step,     ///< the running motion is now step `step` (`file`, `line`)
+  ended,    ///< it ended: `end` says how
+};
+const char* to_string(ProgramPhase p);
+
+/// How a program ended.
+enum class ProgramEnd : std::uint8_t {
+  none,
+  done,           ///< every step ran (`steps` steps in `seconds`)
+  stop,           ///< a stop request
+  estop,          ///< an e-stop request (`realtime`: asked by a realtime byte), or the arm went into e-stop
+  soft_reset,     ///< a soft reset (a stop asked by a realtime byte)
+  disable,        ///< a disable request
+  abort,          ///< program_abort()
+  fault,          ///< the arm went into fault (event_detail: the fault's line)
+  arm_state,      ///< the arm was disabled, or began jogging, homing or free-drive (`state`)
+  queue_dropped,  ///< the motion queue was dropped (a stop from elsewhere, a refused move)
+  step_refused,   ///< step `step` was refused (`error`; event_detail: the front end's line)
+};
+const char* to_string(ProgramEnd e);
+
 /// One event of the arm's event stream: figures only, no text (the control thread's own line
-/// for it, when it sent one, is ArmService::event_detail).
+/// for it, when it sent one, is ArmService::event_detail; a program event's names are
+/// ArmService::event_program).
 struct ArmEvent {
   std::uint64_t seq = 0;        ///< 1, 2, 3, ...: one more than the event before it
   std::uint64_t cycle = 0;      ///< RT time stamp: the control cycle (Telemetry::cycles) the service took it at
   double t = 0;                 ///< the same in s (cycle times the control period)
-  EventKind kind = EventKind::state;
+  ArmEventKind kind = ArmEventKind::state;
   ArmState state = ArmState::boot;  ///< the arm's state when the control thread sent it
   FaultCause cause = FaultCause::none;  ///< fault: the cause
   std::int8_t joint = -1;       ///< the joint concerned (0-based), -1 none or every joint
   std::uint32_t motion_id = 0;  ///< motion_done / motion_refused: the motion (0 none)
+  // program events
+  ProgramPhase program = ProgramPhase::started;
+  ProgramEnd end = ProgramEnd::none;  ///< ended: how
+  bool realtime = false;        ///< ended by estop / soft_reset: asked by a realtime byte (Ctrl-X)
+  CmdError error = CmdError::ok;  ///< step_refused: the step's error
+  std::uint32_t step = 0;       ///< the step concerned (0-based; ended: where it ended)
+  std::uint32_t steps = 0;      ///< the program's steps
+  std::int32_t line = 0;        ///< the step's line in its file (1-based; 0: none)
+  double seconds = 0;           ///< done: how long it ran (s)
+};
+
+/// A program event's names (event_program): the program and the file of its step.
+struct ProgramNames {
+  std::string_view program;
+  std::string_view file;
 };
 
 /// Events the service keeps for its readers (the oldest is overwritten first).
@@ -248,6 +398,258 @@ struct EventBatch {
   std::vector<ArmEvent> events;
   std::uint64_t missed = 0;  ///< events after `seq` no longer kept (overwritten before this read)
 };
+
+/// What a program step is to the runner (the front end that loaded the program says).
+enum class StepClass : std::uint8_t {
+  motion,      ///< queues one motion (a move, a dwell): fed one ahead of the running motion
+  needs_idle,  ///< runs with the arm at rest and nothing queued (tool, frame, an output at once)
+  wait,        ///< waits until the queued motions have run (the runner does it)
+  other,       ///< runs at once (a query, a modal line, an output with the next move)
+};
+
+/// A loaded program as the runner sees it: its name, its files (as a step's place names
+/// them) and each step's kind and place.
+struct ProgramSpec {
+  struct Step {
+    StepClass kind = StepClass::other;
+    int file = 0;  ///< index into files
+    int line = 0;  ///< 1-based
+  };
+  std::string name;
+  std::vector<std::string> files;
+  std::vector<Step> steps;
+};
+
+/// One step's outcome, from the front end that runs it (StepExecutor): ok, or refused with
+/// the error and the front end's one line for it.
+struct StepOutcome {
+  CmdError error = CmdError::ok;
+  std::string reason;
+  bool ok() const { return error == CmdError::ok; }
+};
+/// Runs step `i` of the running program (a motion step queues its motion through move() /
+/// dwell(): the runner takes its id from the service).
+using StepExecutor = std::function<StepOutcome(std::size_t i)>;
+
+/// The answer to program_status(): the running program and where it is. A query.
+struct ProgramStatus {
+  RunState state = RunState::idle;
+  std::string name;
+  std::size_t steps = 0;
+  std::size_t step = 0;       ///< the step of the running motion (or the next to run): its place
+  std::string file;           ///< that step's file ("" when no program or no steps)
+  int line = 0;               ///< and line (0: none)
+  std::size_t running = 0;    ///< the step of the running motion (or the last fed)
+  int running_line = 0;       ///< its line (0: none)
+  std::uint64_t started_cycle = 0;  ///< the control cycle it started at
+};
+
+/// What a program request refused (ProgramResult::refusal); none: accepted.
+enum class ProgramRefusal : std::uint8_t {
+  none,
+  no_program,     ///< no program runs (pause, step, abort)
+  running,        ///< run: a program runs already (`status` is it)
+  program_state,  ///< step: the program is not paused (`status.state`)
+  arm_not_ready,  ///< run: the arm is not at rest with nothing queued, or a joint is not homed (`arm`)
+};
+const char* to_string(ProgramRefusal r);
+
+struct ProgramResult {
+  CmdError error = CmdError::ok;
+  ProgramRefusal refusal = ProgramRefusal::none;
+  ProgramStatus status;       ///< the program after the request (ended: state idle)
+  ArmState arm = ArmState::idle;  ///< arm_not_ready: the arm's state
+  std::uint32_t queued = 0;   ///< arm_not_ready: motions queued
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// What a tool or user-frame request refused (FrameResult::refusal); none: done.
+enum class FrameRefusal : std::uint8_t {
+  none,
+  not_defined,  ///< no tool / frame of that name
+  bad_name,     ///< the name may not name one (`reason`: check_frame_name's line)
+  bad_values,   ///< the pose or payload is out of range (`reason`: check_frame_values's line)
+  arm_busy,     ///< the arm moves, jogs, homes or is in free-drive (`arm`), or motions are queued (`queued`)
+  active,       ///< delete: it is the active one
+  full,         ///< define: kMaxTools / kMaxFrames already
+  storage,      ///< the frames file could not be written (`reason`); nothing changed
+};
+const char* to_string(FrameRefusal r);
+
+/// The answer to a tool or frame request: done (the definition concerned, whether it
+/// replaced one, whether it is the active one), or what was refused.
+struct FrameResult {
+  CmdError error = CmdError::ok;
+  FrameRefusal refusal = FrameRefusal::none;
+  std::string reason;
+  ArmState arm = ArmState::idle;  ///< arm_busy: the arm's state
+  std::uint32_t queued = 0;       ///< arm_busy: motions queued
+  NamedPose def;                  ///< the tool / frame concerned
+  bool redefined = false;         ///< define: it replaced one of that name
+  bool active = false;            ///< it is the active one
+  bool added = false;             ///< select_frame: a G54..G59 frame not set yet was added (identity)
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// What a record request refused (RecordResult::refusal); none: done.
+enum class RecordRefusal : std::uint8_t {
+  none,
+  recording,      ///< start: already recording (`samples` so far)
+  not_recording,  ///< path / stop: nothing is recorded
+  not_homed,      ///< start: a joint is not homed (`reason` names them)
+  bad_value,      ///< start: the rate, path: the tolerance is not a positive finite number
+};
+const char* to_string(RecordRefusal r);
+
+/// Samples a recording keeps at most (later ones are not taken).
+inline constexpr std::size_t kMaxRecordSamples = 100000;
+
+/// The answer to a record request: the rate and samples, and for record_path() the recorded
+/// path thinned to the waypoints within `tolerance` of it (SI joints; the first and last
+/// sample included), each corner to be blended by `blend` (= tolerance / 2).
+struct RecordResult {
+  CmdError error = CmdError::ok;
+  RecordRefusal refusal = RecordRefusal::none;
+  std::string reason;
+  double rate_hz = 0;
+  std::size_t samples = 0;
+  double tolerance = 0, blend = 0;  ///< rad (joint-space distance)
+  std::vector<kin::JointVector> waypoints;
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// Douglas-Peucker on joint vectors (Euclidean in SI joint space): the indices of the samples
+/// kept within `tol` of the polyline, first and last included.
+std::vector<std::size_t> decimate(const std::vector<kin::JointVector>& q, double tol);
+
+/// What teach_here() refused (TeachResult::refusal); none: the arm may be taught here.
+enum class TeachRefusal : std::uint8_t {
+  none,
+  program,    ///< a program runs (`program`)
+  arm_state,  ///< the arm is not at rest (`arm`; idle, disabled and free-drive are)
+  queued,     ///< motions are queued (`queued`)
+  not_homed,  ///< a joint is not homed (`reason` names them; the pose is still given)
+};
+const char* to_string(TeachRefusal r);
+
+/// The answer to teach_here(): where the arm is (SI joints, the active tool's pose in the base
+/// frame, the active tool and frame), or why it may not be taught now. The front end keeps the
+/// point (a points file, by name).
+struct TeachResult {
+  CmdError error = CmdError::ok;
+  TeachRefusal refusal = TeachRefusal::none;
+  std::string reason;
+  ArmState arm = ArmState::idle;
+  std::uint32_t queued = 0;
+  ProgramStatus program;
+  kin::JointVector q;
+  kin::Pose pose = kin::Pose::Identity();
+  std::string tool, frame;
+  bool ok() const { return error == CmdError::ok; }
+};
+
+/// Every request the service takes, by one name each: a front end that speaks in messages
+/// (a network API) maps one message to one of these; `query` ones read and change nothing.
+/// kServiceOps lists each once, in this order (a test checks): the names live there only.
+enum class ServiceOp : std::uint8_t {
+  move_joints,          ///< move(MoveJoints) -> MoveResult
+  move_line,            ///< move(MoveLine) -> MoveResult
+  dwell,                ///< dwell(s) -> MoveResult
+  park,                 ///< move(park_request()) -> MoveResult
+  enable,               ///< enable() -> ControlResult
+  disable,              ///< control(disable)
+  stop,                 ///< control(stop)
+  estop,                ///< control(estop)
+  reset,                ///< control(reset)
+  hold,                 ///< hold() -> ControlResult (a running program pauses with it)
+  resume,               ///< resume() -> ControlResult (a paused program runs on)
+  set_zero,             ///< control(set_zero)
+  home,                 ///< home(joint) -> ControlResult
+  freedrive,            ///< freedrive(on) -> ControlResult
+  collision_detection,  ///< collision_detection(on) -> ControlResult
+  jog_joint,            ///< jog(JointJog) -> JogResult
+  jog_tool,             ///< jog(ToolJog) -> JogResult
+  jog_pose,             ///< jog(PoseJog) -> JogResult
+  jog_keepalive,        ///< jog_keepalive() -> ControlResult
+  jog_cancel,           ///< jog_cancel() -> ControlResult
+  set_output,           ///< set_output(OutputRequest) -> OutputResult
+  events,               ///< events_since(seq) -> EventBatch
+  status,               ///< status() -> ArmStatus
+  limits,               ///< arm_limits() -> ArmLimits
+  settings,             ///< settings() -> MotionSettings
+  set_settings,         ///< set_settings(MotionSettings) -> SettingsResult
+  set_feed_override,    ///< set_feed_override(pct) -> SettingsResult
+  program_run,          ///< run_program(ProgramSpec, StepExecutor) -> ProgramResult
+  program_pause,        ///< program_pause() -> ProgramResult
+  program_step,         ///< program_step() -> ProgramResult
+  program_abort,        ///< program_abort() -> ProgramResult
+  program_status,       ///< program_status() -> ProgramStatus
+  tools,                ///< tool_count() / tool(i) / active_tool()
+  tool_select,          ///< select_tool(name) -> FrameResult
+  tool_define,          ///< define_tool(NamedPose) -> FrameResult
+  tool_delete,          ///< delete_tool(name) -> FrameResult
+  frames,               ///< frame_count() / frame(i) / active_frame()
+  frame_select,         ///< select_frame(name) -> FrameResult
+  frame_define,         ///< define_frame(NamedPose) -> FrameResult
+  frame_delete,         ///< delete_frame(name) -> FrameResult
+  record_start,         ///< record_start(rate) -> RecordResult
+  record_stop,          ///< record_path(tolerance), then record_stop() -> RecordResult
+  teach_here,           ///< teach_here() -> TeachResult
+};
+
+struct ServiceOpInfo {
+  ServiceOp op;
+  const char* name;
+  bool query;  ///< reads only: never changes the arm, the queue or the service
+};
+inline constexpr ServiceOpInfo kServiceOps[] = {
+    {ServiceOp::move_joints, "move_joints", false},
+    {ServiceOp::move_line, "move_line", false},
+    {ServiceOp::dwell, "dwell", false},
+    {ServiceOp::park, "park", false},
+    {ServiceOp::enable, "enable", false},
+    {ServiceOp::disable, "disable", false},
+    {ServiceOp::stop, "stop", false},
+    {ServiceOp::estop, "estop", false},
+    {ServiceOp::reset, "reset", false},
+    {ServiceOp::hold, "hold", false},
+    {ServiceOp::resume, "resume", false},
+    {ServiceOp::set_zero, "set_zero", false},
+    {ServiceOp::home, "home", false},
+    {ServiceOp::freedrive, "freedrive", false},
+    {ServiceOp::collision_detection, "collision_detection", false},
+    {ServiceOp::jog_joint, "jog_joint", false},
+    {ServiceOp::jog_tool, "jog_tool", false},
+    {ServiceOp::jog_pose, "jog_pose", false},
+    {ServiceOp::jog_keepalive, "jog_keepalive", false},
+    {ServiceOp::jog_cancel, "jog_cancel", false},
+    {ServiceOp::set_output, "set_output", false},
+    {ServiceOp::events, "events", true},
+    {ServiceOp::status, "status", true},
+    {ServiceOp::limits, "limits", true},
+    {ServiceOp::settings, "settings", true},
+    {ServiceOp::set_settings, "set_settings", false},
+    {ServiceOp::set_feed_override, "set_feed_override", false},
+    {ServiceOp::program_run, "program_run", false},
+    {ServiceOp::program_pause, "program_pause", false},
+    {ServiceOp::program_step, "program_step", false},
+    {ServiceOp::program_abort, "program_abort", false},
+    {ServiceOp::program_status, "program_status", true},
+    {ServiceOp::tools, "tools", true},
+    {ServiceOp::tool_select, "tool_select", false},
+    {ServiceOp::tool_define, "tool_define", false},
+    {ServiceOp::tool_delete, "tool_delete", false},
+    {ServiceOp::frames, "frames", true},
+    {ServiceOp::frame_select, "frame_select", false},
+    {ServiceOp::frame_define, "frame_define", false},
+    {ServiceOp::frame_delete, "frame_delete", false},
+    {ServiceOp::record_start, "record_start", false},
+    {ServiceOp::record_stop, "record_stop", false},
+    {ServiceOp::teach_here, "teach_here", true},
+};
+const char* to_string(ServiceOp op);
+/// The op named `name` (kServiceOps); false: none is.
+bool service_op_from(std::string_view name, ServiceOp& op);
 
 class ArmService {
  public:
@@ -302,9 +704,96 @@ class ArmService {
   void clear_pending_outputs() { n_sync_out_ = 0; }
   /// The park move (`park`, G28): to the park pose at the default joint speed.
   MoveJoints park_request() const;
+
+  /// Hold: the arm holds (a move decelerates and stays held, a jog stops) and a running
+  /// program pauses. Resume: the arm resumes and a paused program runs on (one still
+  /// pausing too, unless `end_pause` is false: GRBL's cycle start resumes a hold only).
+  ControlResult hold();
+  ControlResult resume(bool end_pause = true);
+
+  /// Programs (the runner): run a loaded program whose steps the front end runs (`exec`),
+  /// fed one motion ahead of the running one. The arm must be at rest, nothing queued,
+  /// every joint homed. A step refused, a fault, an e-stop, the arm disabled, jogging,
+  /// homing or in free-drive, or the queue dropped ends it (a program event says how).
+  ProgramResult run_program(ProgramSpec spec, StepExecutor exec);
+  /// Pause (nothing more is fed; paused once the queued motions are done), step (a paused
+  /// program runs one motion, a held move is resumed first), abort (ended now and the arm
+  /// stopped; `why` says how it ends: abort, or a front end's stop / e-stop / disable /
+  /// soft reset already asked).
+  ProgramResult program_pause();
+  ProgramResult program_step();
+  ProgramResult program_abort(ProgramEnd why = ProgramEnd::abort, bool realtime = false);
+  ProgramStatus program_status() const;
+  RunState run_state() const;
+  /// Feed the running program's next steps; notice its end, a hold, a fault. The front end
+  /// calls it regularly (the console from its poll). Never blocks.
+  void program_tick();
+  /// A program event's names (empty when the event is no longer kept or is no program event).
+  ProgramNames event_program(const ArmEvent& e) const;
+
+  /// Tools and user frames (frames.hpp). [0] is tool0 (the flange) / base and is always
+  /// there. A tool's chain is the arm's with its TCP appended (with its own IK model when
+  /// the arm has one); queued Cartesian moves and jogs point at it, so tools and frames
+  /// change only while nothing moves, jogs or is queued. Each change is saved to the frames
+  /// file (set_frames_file; "" keeps them in memory only) before it is answered.
+  /// `ik`: the arm's IK model (the caller's, outliving the service; nullptr: numeric fallback).
+  void set_ik_model(const kin::IkModel* ik);
+  /// Load the tools and frames of `path` ("": none, in memory only). "" or the one-line
+  /// error (file:line:column); on error nothing is loaded.
+  std::string load_frames(const std::string& path);
+  const std::string& frames_file() const { return frames_file_; }
+  std::size_t tool_count() const { return tools_.size(); }
+  const NamedPose& tool(std::size_t i) const { return tools_[i]->def; }
+  const kin::Chain& tool_chain(std::size_t i) const { return tools_[i]->chain; }
+  kin::IkSolver tool_ik(std::size_t i) const;
+  const kin::IkModel* tool_model(std::size_t i) const { return tools_[i]->model; }  ///< nullptr: numeric fallback
+  std::size_t active_tool() const { return tool_; }
+  std::size_t frame_count() const { return frames_.size(); }
+  const NamedPose& frame(std::size_t i) const { return frames_[i]; }
+  std::size_t active_frame() const { return frame_; }
+  /// The index of the tool / frame called `name`; the count when there is none.
+  std::size_t find_tool(std::string_view name) const;
+  std::size_t find_frame(std::string_view name) const;
+  FrameResult select_tool(std::string_view name);
+  FrameResult define_tool(const NamedPose& def);
+  FrameResult delete_tool(std::string_view name);
+  /// `add_identity`: a frame not defined yet is added as the identity (G54..G59 before G10 set it).
+  FrameResult select_frame(std::string_view name, bool add_identity = false);
+  FrameResult define_frame(const NamedPose& def);
+  FrameResult delete_frame(std::string_view name);
+  /// arm_busy when tools and frames may not change now, else ok.
+  FrameResult frames_check() const;
+
+  /// Record: sample the measured joints at `rate_hz` (the arm moved by jogs or by hand)
+  /// from now on; record_path(): the path so far (the arm's position now its last sample)
+  /// thinned within `tolerance`, still recording; record_stop(): end it (the samples are
+  /// dropped). The front end keeps the path (as a program) between the two.
+  RecordResult record_start(double rate_hz);
+  RecordResult record_path(double tolerance);
+  RecordResult record_stop();
+  bool recording() const { return rec_.active; }
+  std::size_t record_samples() const { return rec_.samples.size(); }
+  /// The service's periodic work on the console thread: a record sample when one is due,
+  /// then program_tick(). Never blocks.
+  void tick();
+
+  /// Teach: where the arm is now and whether it may be taught there (no program runs, the
+  /// arm at rest with nothing queued, every joint homed). A query: the front end keeps the
+  /// point and goes back to it with a MoveJoints to its joints.
+  TeachResult teach_here() const;
+
+  /// Queries: they read and change nothing.
+  ArmStatus status() const;
+  ArmLimits arm_limits() const;
+  const MotionSettings& settings() const { return cfg_; }
+  int feed_override() const { return feed_pct_; }
+  /// Settings: all of them at once (checked whole: nothing changes when one is refused; the
+  /// outputs are fixed at start), and the feed override (percent, kMinFeedOverride..
+  /// kMaxFeedOverride): scales jogs and the moves queued from now on.
+  SettingsResult set_settings(const MotionSettings& s);
+  SettingsResult set_feed_override(int pct);
   /// How to pass time while waiting for the control thread (default: sleep 200 us).
   void set_idle(std::function<void()> idle) { idle_ = std::move(idle); }
-  void set_reply_timeout(double s) { reply_timeout_s_ = s; }
 
   /// Take every event the control thread has sent into the event ring (numbered and stamped).
   /// Returns how many. The service is the queue's one consumer: nothing else pops it.
@@ -330,7 +819,6 @@ class ArmService {
   kin::JointVector tail() const;
   /// Motions queued so far (ids 1..n).
   std::uint32_t last_motion_id() const { return next_id_ - 1; }
-  const MotionSettings& settings() const { return cfg_; }
   const kin::JointLimits& limits() const { return lim_; }
 
  private:
@@ -382,11 +870,57 @@ class ArmService {
   struct EventSlot {
     ArmEvent ev;
     char detail[sizeof(Event::message)] = {};
+    std::string program, file;  ///< program events: the names
   };
+  EventSlot& push_event();
+  struct ProgramRun {
+    ProgramSpec spec;
+    StepExecutor exec;
+    std::size_t next = 0;       ///< next step to feed
+    std::size_t current = 0;    ///< step of the running motion (or the last fed)
+    RunState state = RunState::running;
+    bool waiting = false;       ///< a `wait` step waits for the queue to run empty
+    bool step_fed = false;      ///< stepping: the one motion has been fed
+    std::deque<std::pair<std::uint32_t, std::size_t>> fed;  ///< motion id -> step, not finished yet
+    std::size_t reported = static_cast<std::size_t>(-1);    ///< the step the last step event named
+    std::uint64_t generation = 0;
+    std::uint64_t started_cycle = 0;
+  };
+  std::unique_ptr<ProgramRun> run_;
+  bool ticking_ = false;  ///< program_tick() runs (no re-entry: the run may end inside it)
+  std::size_t where_step() const;
+  void post_program(ProgramPhase phase, std::size_t step, ProgramEnd end = ProgramEnd::none);
+  void end_program(ProgramEnd how, std::size_t step, bool realtime = false, CmdError error = CmdError::ok,
+                   std::string_view detail = {});
+  bool program_ended_by_arm(const Telemetry& t);
+  bool feed_program();
   std::unique_ptr<std::array<EventSlot, kEventRing>> ring_;  ///< slot seq % kEventRing
   std::uint64_t next_seq_ = 1;
   std::function<void()> idle_;
-  double reply_timeout_s_ = 1.0;
+  int feed_pct_ = 100;
+  struct Recording {
+    bool active = false;
+    double rate_hz = 50;
+    std::uint64_t last_cycle = 0;
+    std::vector<kin::JointVector> samples;
+  } rec_;
+  void record_sample();
+  // Tools and user frames (tools_frames.cpp). unique_ptr: stable chain addresses.
+  struct ToolSlot {
+    NamedPose def;
+    kin::Chain chain;
+    std::unique_ptr<kin::IkModel> own;
+    const kin::IkModel* model = nullptr;  ///< own.get(), ik_ for tool0, nullptr: numeric fallback
+  };
+  std::vector<std::unique_ptr<ToolSlot>> tools_;
+  std::vector<NamedPose> frames_;
+  std::size_t tool_ = 0, frame_ = 0;
+  std::string frames_file_;
+  const kin::IkModel* ik_ = nullptr;
+  std::unique_ptr<ToolSlot> make_tool(const NamedPose& def) const;
+  std::string save_frames() const;
+  FrameResult named(bool tool, std::string_view name) const;
+  int feed_of(int given) const { return given < 0 ? feed_pct_ : given; }
 };
 
 }  // namespace servoarm::fw
