@@ -148,7 +148,7 @@ TEST(FwStream, TheDeadmanBrakesToRestWithAnEvent) {
   const EventBatch b = rig.svc().events_since(seq0 - 1);
   bool said = false;
   for (const ArmEvent& e : b.events)
-    said = said || (e.kind == EventKind::jog_stopped && rig.svc().event_detail(e).find("stream stopped: no target within its deadman time (100 ms)") != std::string_view::npos);
+    said = said || (e.kind == ArmEventKind::jog_stopped && rig.svc().event_detail(e).find("stream stopped: no target within its deadman time (100 ms)") != std::string_view::npos);
   CHECK(said);
   const kin::JointVector rest = rig.q_cmd();
   q[0] += 0.02;

@@ -521,7 +521,7 @@ std::string event_line(const fw::ArmEvent& e, std::string_view detail, std::uint
   j["t"] = e.t;
   j["kind"] = fw::to_string(e.kind);
   j["state"] = fw::to_string(e.state);
-  if (e.kind == fw::EventKind::fault) j["cause"] = fw::to_string(e.cause);
+  if (e.kind == fw::ArmEventKind::fault) j["cause"] = fw::to_string(e.cause);
   j["joint"] = e.joint;
   j["motion"] = e.motion_id;
   j["detail"] = std::string(detail);
