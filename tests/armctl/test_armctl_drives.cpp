@@ -202,6 +202,9 @@ TEST(ArmctlDrives, CommandLineErrorsAreOneLineAndExitTwo) {
   r = run_command(armctl + " drives scan --iface vcan0 --first 0");
   LONGS_EQUAL(2, r.status);
   STRCMP_EQUAL("armctl: --first: '0' is not an id 1..2046\n", r.err.c_str());
+  r = run_command(armctl + " drives scan --iface vcan0 --timeout 0");
+  LONGS_EQUAL(2, r.status);
+  STRCMP_EQUAL("armctl: --timeout: '0' is not a time in ms (1..10000)\n", r.err.c_str());
   r = run_command(armctl + " drives scan --iface nosuchcan9");
   LONGS_EQUAL(2, r.status);
   STRCMP_CONTAINS("armctl: drives scan: cannot open nosuchcan9", r.err.c_str());

@@ -79,7 +79,7 @@ const char* kUsage =
     "                                                      over CAN, ISO-TP (armfw console.can)\n"
 #endif
     "Drive doctor (only reads from the drives; docs/armctl.md#drives):\n"
-    "  armctl drives scan --iface IFACE [--fd] [--first N] [--last N]\n"
+    "  armctl drives scan --iface IFACE [--fd] [--first N] [--last N] [--timeout MS]\n"
     "                                                      what answers on a CAN bus: CANopen nodes and\n"
     "                                                      Damiao motors, one line each (model, mode,\n"
     "                                                      frame format, errors, temperature)\n"

@@ -28,7 +28,7 @@ namespace servoarm::fw {
 namespace {
 
 const char* kDrivesUsage =
-    "usage: armctl drives scan --iface IFACE [--fd] [--first N] [--last N]\n"
+    "usage: armctl drives scan --iface IFACE [--fd] [--first N] [--last N] [--timeout MS]\n"
     "       armctl drives check --config FILE\n"
     "\n"
     "  scan   what answers on a CAN interface, one line per drive: id, family, identity or\n"
@@ -37,6 +37,7 @@ const char* kDrivesUsage =
     "         motors: a register read of CTRL_MODE to each id, then their ranges, gear ratio,\n"
     "         CAN timeout and a status query (error, temperatures). --fd probes with CAN FD\n"
     "         frames (motors set to CAN FD do not see classic ones, and the reverse).\n"
+    "         --timeout: how long answers are awaited (ms, default 50; longer on a busy host).\n"
     "  check  armfw's configuration (FILE) against the buses its [[drive]] tables name: one\n"
     "         line per joint, \"ok\" or what to change; drives that no joint names.\n"
     "Both only read from the drives. Exit status: 0 found / as configured, 1 nothing found /\n"
@@ -248,6 +249,11 @@ int scan_main(int argc, char** argv) {
       if (!parse_id("--first", argv[++i], 0x7FE, opt.first_id, rc)) return rc;
     } else if (a == "--last" && more) {
       if (!parse_id("--last", argv[++i], 0x7FE, opt.last_id, rc)) return rc;
+    } else if (a == "--timeout" && more) {
+      double ms = 0;
+      if (!parse_number(argv[++i], ms) || ms < 1 || ms > 10000)
+        return usage_error(fmt("--timeout: '%s' is not a time in ms (1..10000)", argv[i]));
+      opt.window = opt.timeout = static_cast<hal::Duration>(ms * double(hal::kMillisecond));
     } else return usage_error("drives scan: unknown or incomplete option '" + a + "' (see armctl drives --help)");
   }
   if (iface.empty()) return usage_error("drives scan: --iface IFACE is required (e.g. can0)");
