@@ -11,7 +11,7 @@
 //            TMAX, Gr, TIMEOUT and sw_ver, and its model is the profile with that gear ratio and
 //            TMAX (mit.hpp).
 // A motor at another bitrate or frame format, or in a protocol the scan does not speak, is not
-// seen: describe_scan() says what was not found.
+// seen: `armctl drives scan` and `check` (firmware/armctl/src/cli_drives.cpp) say so and what to check.
 #include <cstddef>
 #include <cstdint>
 #include <span>
