@@ -33,6 +33,10 @@ else log "classic CAN on $CAN_IF (no CAN FD)"; mit_fd= fd_key=false scan_fd=; fi
 hb_timeout_ms=1000
 write_armfw_config "$OUT_DIR/armfw.toml" --own-drives
 sed -i "s|^robot = .*|robot = \"$OUT_DIR/puma560_nog.toml\"|" "$OUT_DIR/armfw.toml"
+# following error limit 90 deg: a starved VM (armsim or armfw descheduled for a few hundred ms
+# during the movej) lets a joint fall 20 deg behind; the scenario is about the frames, the limit
+# has its own tests (fw_mit_arm)
+sed -i "s|^following_error_deg = .*|following_error_deg = 90|" "$OUT_DIR/armfw.toml"
 # free-drive without gravity and without virtual damping (the virtual motors' inertia is not the
 # model's: a damping torque sized for the puma's links would not be stable on them): torque 0
 printf '[dynamics]\nfreedrive = true\nfreedrive_damping = 0\n' >>"$OUT_DIR/armfw.toml"
