@@ -163,4 +163,66 @@ void describe_drive(const ScannedDrive& d, char* buf, std::size_t size) {
   }
 }
 
+bool read_drive_status(CanBus& bus, Clock& clock, const ScanOptions& opt, const ScannedDrive& d, DriveStatus& out) {
+  out = DriveStatus{};
+  switch (d.kind) {
+    case ScannedDrive::Kind::canopen: {
+      SdoClient sdo(bus, clock, opt.timeout);
+      std::uint32_t reg = 0, code = 0;
+      if (sdo.read_u32(static_cast<std::uint8_t>(d.id), 0x1001, 0, reg).status != Status::ok) return false;
+      out.answered = true;
+      out.error = static_cast<std::uint8_t>(reg);
+      if (sdo.read_u32(static_cast<std::uint8_t>(d.id), 0x603F, 0, code).status == Status::ok)
+        out.error_code = static_cast<std::uint16_t>(code);
+      return true;
+    }
+    case ScannedDrive::Kind::damiao: {
+      mit::Ranges r;
+      if (d.model != nullptr) r = mit::ranges_of(*d.model);
+      if (d.pmax > 0) r.p_max = d.pmax;
+      if (d.vmax > 0) r.v_max = d.vmax;
+      if (d.tmax > 0) r.t_max = d.tmax;
+      CanFrame drop;
+      while (bus.receive(drop, 0) == Status::ok) {
+      }
+      send_paced(bus, clock, mit::refresh_frame(d.id), opt.fd);
+      collect(bus, clock, clock.now() + opt.timeout, [&](const CanFrame& f) {
+        mit::Feedback fb;
+        if (out.answered || f.error || f.extended || f.id != d.master_id || f.len != 8) return;
+        if (!mit::decode_feedback(mit::Vendor::damiao, r, f, fb) || fb.id != (d.id & 0x0F)) return;
+        out.answered = true;
+        out.fd = f.fd;
+        out.error = fb.error;
+        out.has_temperature = true;
+        out.t_mos = static_cast<float>(fb.t_mos);
+        out.t_rotor = static_cast<float>(fb.t_rotor);
+      });
+      return out.answered;
+    }
+  }
+  return false;
+}
+
+void describe_status(const ScannedDrive& d, const DriveStatus& s, char* buf, std::size_t size) {
+  if (size == 0) return;
+  if (!s.answered) {
+    std::snprintf(buf, size, "status: no answer");
+    return;
+  }
+  switch (d.kind) {
+    case ScannedDrive::Kind::canopen:
+      if (s.error == 0) std::snprintf(buf, size, "no error");
+      else std::snprintf(buf, size, "error register 0x%02X, error code 0x%04X", unsigned(s.error), unsigned(s.error_code));
+      return;
+    case ScannedDrive::Kind::damiao: {
+      char err[64];
+      if (mit::damiao_is_fault(s.error)) std::snprintf(err, sizeof err, "error %s (%u)", mit::damiao_error_name(s.error), unsigned(s.error));
+      else std::snprintf(err, sizeof err, "no error, %s", s.error == 1 ? "enabled" : "disabled");
+      std::snprintf(buf, size, "%s, %s, MOS %.0f C, rotor %.0f C", s.fd ? "CAN FD" : "classic CAN", err, double(s.t_mos),
+                    double(s.t_rotor));
+      return;
+    }
+  }
+}
+
 }  // namespace servoarm::hal

@@ -1155,3 +1155,35 @@ TEST(Config, BusTrafficCountsTpdo2AsTheMasterMapsIt) {
   c.rate_hz = 250;  // (55 + 12 x 115 + 6 x 135) x 250 + 7800 = 2245 x 250 + 7800 = 569050 bit/s
   DOUBLES_EQUAL(0.56905, servoarm::hal::bus_load(bus_traffic(c, 6), c.bitrate).total(), 1e-9);
 }
+
+// CAN FD with bit-rate switch: the MIT frames' data phase runs at bus.data_bitrate, so six
+// Damiao motors at 1 kHz that classical frames would overload (162 %) fit on an FD bus.
+TEST(Config, BusLoadOfCanFdFramesCountsTheDataBitrate) {
+  std::string six = "[loop]\nrate_hz = 1000\n[bus]\ncan = \"can0\"\n";
+  std::string drives;
+  for (int i = 1; i <= 6; ++i)
+    drives += "[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nnode = " + std::to_string(i) +
+              "\ncan_fd = true\nhoming.method = \"absolute\"\n";
+  FwConfig c;
+  const std::string classic = load_config_text(six + drives, "fd.toml", c);
+  CHECK_TEXT(has(classic, "162.0 %") && has(classic, "above 85 %"), classic.c_str());
+  FwConfig f2, f5;
+  STRCMP_EQUAL("", load_config_text(six + "data_bitrate = 5000000\n" + drives, "fd.toml", f5).c_str());
+  DOUBLES_EQUAL(5e6, f5.data_bitrate, 0);
+  const std::string w5 = bus_load_warning(f5, 6);
+  const std::string e2 = load_config_text(six + "data_bitrate = 2000000\n" + drives, "fd.toml", f2);
+  const std::string w2 = e2.empty() ? bus_load_warning(f2, 6) : e2;
+  std::printf("\n  5 Mbit/s: %s\n  2 Mbit/s: %s\n", w5.empty() ? "(no warning: at most 60 %)" : w5.c_str(), w2.c_str());
+  const auto pct = [](const std::string& s) {
+    const std::size_t k = s.find("bus load ");
+    return k == std::string::npos ? -1.0 : std::atof(s.c_str() + k + 9);
+  };
+  // 2 Mbit/s leaves more bits at the nominal rate than 5 Mbit/s: more load, still under 162 %
+  CHECK_TEXT(pct(w2) > 0 && pct(w2) < 162.0, w2.c_str());
+  CHECK_TEXT(has(w2, "CAN FD, data phase 2000000 bit/s"), w2.c_str());
+  if (!w5.empty()) CHECK_TEXT(pct(w5) < pct(w2), w5.c_str());
+  // classical interfaces ignore it; below the nominal bitrate it is refused
+  FwConfig cl;
+  const std::string slow = load_config_text(six + "data_bitrate = 500000\n" + drives, "fd.toml", cl);
+  CHECK_TEXT(has(slow, "bus.data_bitrate"), slow.c_str());
+}

@@ -3,11 +3,13 @@
 //   armctl kin ...    offline kinematics on a built-in model or a description file
 //   armctl plan ...   offline trajectory planning (when built with the motion module)
 //   armctl program check ...  whole-program validation offline
+//   armctl drives scan / check  the drive doctor: what answers on a CAN bus, the configuration vs the buses
 #include <cstdio>
 #include <cstring>
 #include <string>
 
 #include "servoarm/armctl/cli_common.hpp"
+#include "servoarm/armctl/cli_drives.hpp"
 #include "servoarm/armctl/cli_kin.hpp"
 #if __has_include("servoarm/armctl/cli_ik.hpp")
 #include "servoarm/armctl/cli_ik.hpp"
@@ -76,6 +78,13 @@ const char* kUsage =
     "  armctl console --can IFACE [--tx-id 0x7E0] [--rx-id 0x7E8] [--timeout SEC] [-c LINE]...\n"
     "                                                      over CAN, ISO-TP (armfw console.can)\n"
 #endif
+    "Drive doctor (only reads from the drives; docs/armctl.md#drives):\n"
+    "  armctl drives scan --iface IFACE [--fd] [--first N] [--last N] [--timeout MS]\n"
+    "                                                      what answers on a CAN bus: CANopen nodes and\n"
+    "                                                      Damiao motors, one line each (model, mode,\n"
+    "                                                      frame format, errors, temperature)\n"
+    "  armctl drives check --config FILE                   armfw's [[drive]] tables against the buses:\n"
+    "                                                      per joint \"ok\" or what to change\n"
     "\n"
     "Each command takes --help. Exit status: 0 ok, 1 valid request that failed\n"
     "(e.g. unreachable), 2 bad usage or bad input (one line on stderr naming the option or\n"
@@ -109,6 +118,7 @@ int main(int argc, char** argv) {
     return usage_error("unknown kin command '" + sub + "' (see armctl --help)");
   }
   if (cmd == "urdf") return cli_urdf(argc - 1, argv + 1);
+  if (cmd == "drives") return cli_drives(argc - 1, argv + 1);
 #ifdef SERVOARM_HAVE_CLI_PLAN
   if (cmd == "plan") return cli_plan(argc - 1, argv + 1);
 #endif

@@ -42,6 +42,10 @@ std::string bus_heartbeat_above_period(const FwConfig& c, const FwConfig&) {
   if (c.heartbeat_timeout_ms > c.heartbeat_period_ms) return "";
   return "must be above bus.heartbeat_period_ms (" + num_text(c.heartbeat_period_ms) + ")";
 }
+std::string data_bitrate_not_below_nominal(const FwConfig& c, const FwConfig&) {
+  if (c.data_bitrate == 0 || c.data_bitrate >= c.bitrate) return "";
+  return "must be at least bus.bitrate (" + num_text(c.bitrate) + "), or 0";
+}
 std::string boot_timeout_within_start(const FwConfig& c, const FwConfig&) {
   if (c.boot_timeout_ms <= c.start_timeout_s * 1000.0) return "";
   return "must be at most bus.start_timeout_s (" + num_text(c.start_timeout_s) + " s), which bounds the whole bring-up";
@@ -244,6 +248,13 @@ const ConfigKey kConfigTable[] = {
       "docs/deployment.md#bus-load) is checked on a real bus (not \"sim\" or a vcan): above 85 % the configuration "
       "is refused, above 60 % armfw warns at start"}
         .within(10000, 1000000),
+    K{"bus.data_bitrate", &F::data_bitrate, "bit/s",
+      "CAN FD's data bit rate (`ip link set can0 type can bitrate 1000000 dbitrate 5000000 fd on`): on an interface "
+      "whose drives say drive.can_fd the bus-load check counts their frames as CAN FD with bit-rate switch, the "
+      "arbitration at bus.bitrate and the data phase at this rate; 0 = counted as classical frames (an upper "
+      "bound)"}
+        .within(0, 8000000)
+        .related(data_bitrate_not_below_nominal, "0 or at least bus.bitrate"),
     K{"bus.tpdo2", &F::tpdo2, "",
       "map velocity actual 606Ch and error code 603Fh into TPDO2: one more 6-byte frame per drive and cycle. Off: "
       "the velocity is the change of the position between cycles, the error code comes with the drive's EMCY "
@@ -1169,9 +1180,9 @@ std::string frames_text(const hal::BusLoad& l, double rate) {
 /// Highest rate (Hz) at which the load of `c`'s traffic `t` stays at most `share`.
 double rate_for(const FwConfig& c, hal::BusTraffic t, double share) {
   t.rate_hz = 1;
-  const hal::BusLoad one = hal::bus_load(t, c.bitrate);
+  const hal::BusLoad one = hal::bus_load(t, c.bitrate, c.data_bitrate);
   t.rate_hz = 2;
-  const hal::BusLoad two = hal::bus_load(t, c.bitrate);
+  const hal::BusLoad two = hal::bus_load(t, c.bitrate, c.data_bitrate);
   const double per_hz = two.total() - one.total();  // the cyclic part; heartbeats do not scale
   const double fixed = one.total() - per_hz;
   return per_hz > 0 ? std::max(0.0, (share - fixed) / per_hz) : 1e9;
@@ -1180,7 +1191,9 @@ double rate_for(const FwConfig& c, hal::BusTraffic t, double share) {
 std::string load_line(const FwConfig& c, const hal::BusTraffic& t, const hal::BusLoad& l) {
   return "bus load " + pct_text(l.total()) + " of bus.bitrate " + num_text(c.bitrate) + " bit/s at loop.rate_hz " +
          num_text(c.rate_hz) + " with " + std::to_string(t.joints + t.mit_joints) + " drives (" +
-         frames_text(l, c.rate_hz) + ", worst-case bit stuffing)";
+         frames_text(l, c.rate_hz) +
+         (c.data_bitrate > 0 ? ", CAN FD, data phase " + num_text(c.data_bitrate) + " bit/s" : std::string()) +
+         ", worst-case bit stuffing)";
 }
 
 /// The interfaces the [[drive]] tables use (drive.can, or bus.can for ""), bus.can first.
@@ -1211,6 +1224,9 @@ std::string per_interface(const FwConfig& c, Check&& check) {
   for (const std::string& iface : drive_interfaces(c)) {
     FwConfig ci = c;
     ci.can = iface;
+    ci.data_bitrate = 0;
+    for (const DriveConfig& d : c.drives)
+      if ((d.can.empty() ? c.can : d.can) == iface && d.can_fd) ci.data_bitrate = c.data_bitrate;
     if (!bus_load_checked(ci)) continue;
     const hal::BusTraffic t = interface_traffic(c, iface);
     if (t.joints + t.mit_joints == 0) continue;
@@ -1221,7 +1237,7 @@ std::string per_interface(const FwConfig& c, Check&& check) {
 }
 
 std::string problem_for(const FwConfig& c, const hal::BusTraffic& t) {
-  const hal::BusLoad l = hal::bus_load(t, c.bitrate);
+  const hal::BusLoad l = hal::bus_load(t, c.bitrate, c.data_bitrate);
   if (l.total() <= kBusLoadLimit) return "";
   char b[32];
   std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, t, kBusLoadLimit)));
@@ -1229,7 +1245,7 @@ std::string problem_for(const FwConfig& c, const hal::BusTraffic& t) {
 }
 
 std::string warning_for(const FwConfig& c, const hal::BusTraffic& t) {
-  const hal::BusLoad l = hal::bus_load(t, c.bitrate);
+  const hal::BusLoad l = hal::bus_load(t, c.bitrate, c.data_bitrate);
   if (l.total() <= kBusLoadWarn || l.total() > kBusLoadLimit) return "";
   char b[32];
   std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, t, kBusLoadWarn)));
@@ -1243,13 +1259,17 @@ std::string warning_for(const FwConfig& c, const hal::BusTraffic& t) {
 std::string bus_load_problem(const FwConfig& c, std::size_t joints) {
   if (!c.drives.empty()) return per_interface(c, problem_for);
   if (!bus_load_checked(c) || joints == 0) return "";
-  return problem_for(c, bus_traffic(c, joints));
+  FwConfig classic = c;  // without [[drive]] tables no drive says drive.can_fd
+  classic.data_bitrate = 0;
+  return problem_for(classic, bus_traffic(c, joints));
 }
 
 std::string bus_load_warning(const FwConfig& c, std::size_t joints) {
   if (!c.drives.empty()) return per_interface(c, warning_for);
   if (!bus_load_checked(c) || joints == 0) return "";
-  return warning_for(c, bus_traffic(c, joints));
+  FwConfig classic = c;
+  classic.data_bitrate = 0;
+  return warning_for(classic, bus_traffic(c, joints));
 }
 
 std::string bus_load_table(const FwConfig& c, std::size_t joints) {

@@ -11,7 +11,7 @@
 //            TMAX, Gr, TIMEOUT and sw_ver, and its model is the profile with that gear ratio and
 //            TMAX (mit.hpp).
 // A motor at another bitrate or frame format, or in a protocol the scan does not speak, is not
-// seen: describe_scan() says what was not found.
+// seen: `armctl drives scan` and `check` (firmware/armctl/src/cli_drives.cpp) say so and what to check.
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -49,6 +49,25 @@ struct ScanOptions {
 /// Scans `bus`; fills `out` (CANopen nodes first, then Damiao motors, each by id) and returns how
 /// many were found (at most out.size()).
 std::size_t scan_drives(CanBus& bus, Clock& clock, const ScanOptions& opt, std::span<ScannedDrive> out);
+
+/// What a drive says about its state now (read_drive_status).
+struct DriveStatus {
+  bool answered = false;       ///< false: the status query got no answer in opt.timeout
+  bool fd = false;             ///< Damiao: the answer came as a CAN FD frame
+  std::uint8_t error = 0;      ///< Damiao: the feedback's error nibble; CANopen: 1001h (error register)
+  std::uint16_t error_code = 0;  ///< CANopen: 603Fh (0 = none or not read)
+  bool has_temperature = false;
+  float t_mos = 0, t_rotor = 0;  ///< deg C (Damiao feedback)
+};
+
+/// Asks one drive the scan found for its state: Damiao, a refresh (0x7FF, 0xCC) answered by a
+/// feedback frame (error nibble, MOSFET and rotor temperature), decoded with the ranges its
+/// registers read; CANopen, 1001h and 603Fh by SDO. Queries only: nothing is written.
+bool read_drive_status(CanBus& bus, Clock& clock, const ScanOptions& opt, const ScannedDrive& d, DriveStatus& out);
+
+/// The status part of a drive's line, e.g. "CAN FD, no error, MOS 31 C, rotor 30 C" or
+/// "classic CAN, error under-voltage (9)" or "status: no answer".
+void describe_status(const ScannedDrive& d, const DriveStatus& s, char* buf, std::size_t size);
 
 /// One line per drive, e.g. "id 0x01: damiao DM-J4340 (Gr 40, TMAX 28), mode MIT, master 0x011,
 /// CAN timeout 100 ms, PMAX 12.5, VMAX 8" (a mode other than MIT and a CAN timeout of 0 say what

@@ -126,6 +126,8 @@ struct FwConfig {
   double boot_retry_ms = 200.0;        ///< time between the boot-up attempts
   double state_timeout_ms = 500.0;     ///< longest a drive may sit in one CiA 402 state while enabling / changing mode
   double bitrate = 1000000.0;          ///< bit/s of the drive bus: the bus-load check (bus_load_problem)
+  double data_bitrate = 0.0;           ///< bit/s of CAN FD's data phase (bit-rate switch) on the interfaces
+                                       ///< whose drives say drive.can_fd; 0 = their frames counted as classical
   bool tpdo2 = false;                  ///< velocity actual 606Ch + error code 603Fh in TPDO2
   std::vector<DriveConfig> drives;     ///< [[drive]] tables; empty = defaults for every joint
   // [safety]
