@@ -587,41 +587,34 @@ void Console::answer_refusal(Session& s, const char* what, const MoveResult& r) 
   }
 }
 
-void Console::queue(Session& s, const MoveJoints& req, const StepParams* step) {
-  DryRun dry;
-  if (s.check_mode) dry = dry_run(s);
-  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step));
+void Console::answer_move(Session& s, const char* what, const MoveResult& r, const DryRun* dry) {
   if (!r.ok()) {
-    answer_refusal(s, "movej", r);
+    answer_refusal(s, what, r);
     return;
   }
-  if (s.check_mode) {  // checked, not queued
-    keep_dry_run(s, dry);
+  if (dry != nullptr) {  // checked, not queued
+    keep_dry_run(s, *dry);
     answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(r.duration, kTimeDecimals) + "s" + blend_text(r));
     return;
   }
+  const bool line = std::string_view(what) == "movel";
+  if (line) feed_now_ = r.speed;
   svc_->clear_pending_outputs();
-  answer_ok(s, fmt("queued id=%u duration=%ss%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(), blend_text(r).c_str()));
+  answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(),
+                   line && r.status == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", r.slowdown).c_str() : "",
+                   blend_text(r).c_str()));
+}
+
+void Console::queue(Session& s, const MoveJoints& req, const StepParams* step) {
+  DryRun dry;
+  if (s.check_mode) dry = dry_run(s);
+  answer_move(s, "movej", svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step)), s.check_mode ? &dry : nullptr);
 }
 
 void Console::queue(Session& s, const MoveLine& req, const StepParams* step) {
   DryRun dry;
   if (s.check_mode) dry = dry_run(s);
-  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step));
-  if (!r.ok()) {
-    answer_refusal(s, "movel", r);
-    return;
-  }
-  if (s.check_mode) {  // checked, not queued
-    keep_dry_run(s, dry);
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(r.duration, kTimeDecimals) + "s" + blend_text(r));
-    return;
-  }
-  feed_now_ = r.speed;
-  svc_->clear_pending_outputs();
-  answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(),
-                   r.status == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", r.slowdown).c_str() : "",
-                   blend_text(r).c_str()));
+  answer_move(s, "movel", svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step)), s.check_mode ? &dry : nullptr);
 }
 
 void Console::queue_dwell(Session& s, double secs) {

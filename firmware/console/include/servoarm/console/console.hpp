@@ -187,7 +187,7 @@ class Console {
   /// Load the teach points of cfg.points_file (a missing file: none yet). Call once, before any
   /// line; "" or the error (file:line:column; armfw does not start, the file is kept).
   std::string load_points();
-  const prog::PointsData& points() const { return points_; }
+  const prog::PointsData& points() const { return svc_->points(); }
   /// The program runner and the recorder: feed the running program's next lines into the
   /// motion queue (one ahead of the running move), notice its end, a hold, a fault; take a
   /// record sample. Console thread; poll() and drain_events() call it. Never blocks.
@@ -276,6 +276,9 @@ class Console {
   void dispatch(Session& s, const Command& c, const StepParams* step);
   void queue(Session& s, const MoveLine& m, const StepParams* step);
   void queue(Session& s, const MoveJoints& m, const StepParams* step);
+  /// A move's result (`what`: movej, movel) as the answer: queued, checked (`dry`: the dry run
+  /// it was checked in, kept for the session), or the refusal.
+  void answer_move(Session& s, const char* what, const MoveResult& r, const DryRun* dry);
   /// joint_request(c), with a program step's point joints as the goal (movej @NAME).
   MoveJoints step_joint_request(const Command& c, const StepParams* step) const;
   /// What a move runs with: the mode (check mode: a dry run into `dry`), the executing session's
@@ -320,7 +323,6 @@ class Console {
   std::string grbl_position(const kin::JointVector& q) const;
   std::string grbl_wcs() const;  ///< "G54".."G59" for $G
   // Teach points and programs (console_program.cpp)
-  prog::PointsData points_;
   /// A loaded program: its steps (the service's runner runs them through exec_step) and the
   /// session they run in (modal state, answers).
   struct ProgramRun {
