@@ -145,7 +145,7 @@ std::string refusal_text(const ModelControl& m, ModelPart p) { return bounded_te
 Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* ik)
     : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints), ik_(ik) {
   svc_ = std::make_unique<ArmService>(ctl_, cfg_);
-  cfg_.home = svc_->settings().home;  // config() shows the park pose the service uses
+  static_cast<MotionSettings&>(cfg_) = MotionSettings{};  // the service keeps them: config() reads them there
   svc_->set_ik_model(ik_);
   check_shadow_ = std::make_unique<PathShadow>();
 }
@@ -153,6 +153,12 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
 // IK of movel's path check and of the control thread's Cartesian sampling: the App's
 // model (closed form or numeric) when the chain has one, else the damped-Newton fallback.
 // The firmware's options (ik_options.hpp), the same armctl plan previews with.
+ConsoleConfig Console::config() const {
+  ConsoleConfig c = cfg_;
+  static_cast<MotionSettings&>(c) = svc_->settings();
+  return c;
+}
+
 kin::IkSolver Console::ik_solver() const { return svc_->tool_ik(sel_tool()); }
 
 kin::Pose Console::tcp(const kin::JointVector& q) const {

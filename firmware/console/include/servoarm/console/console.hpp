@@ -155,7 +155,8 @@ class Console {
 
   /// Joint values of the end of the motion queue (or the commanded position).
   kin::JointVector tail() const;
-  const ConsoleConfig& config() const { return cfg_; }
+  /// The configuration: the console's own part, and the service's settings as they are now.
+  ConsoleConfig config() const;
   /// The canonical request of a movel or G0/G1 command (Cmd::movel, Cmd::gmove), from the queue's end.
   /// `from`: the joints relative G-code and a movel without orientation start from (default: tail()).
   MoveLine line_request(const Command& c, const kin::JointVector* from = nullptr) const;
