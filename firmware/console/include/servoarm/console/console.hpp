@@ -275,6 +275,20 @@ class Console {
   };
   /// Run a parsed command (execute() after parsing; a program step as the loader parsed it).
   void dispatch(Session& s, const Command& c, const StepParams* step);
+  /// The command's family (dispatch() has refused moves while a program runs).
+  void run_command(Session& s, const Command& c, const StepParams* step);
+  void do_quit(Session& s);
+  void do_enable(Session& s);
+  /// disable, stop, e-stop: the program (and a pending check) ends as `how`, the M62/M63
+  /// changes waiting for a move are dropped (said as `what`), then the request.
+  void do_halt(Session& s, ProgramEnd how, const char* what, RequestOp op);
+  void do_abort(Session& s);
+  void do_switch(Session& s, const Command& c);  ///< freedrive on|off, collision on|off
+  void do_dynamics(Session& s);                  ///< `freedrive`
+  /// park, movej, movel, G0-G3 (teach points, a program step's point joints).
+  void do_move(Session& s, const Command& c, const StepParams* step);
+  void do_config(Session& s);
+  void do_position(Session& s);  ///< M114
   void queue(Session& s, const MoveLine& m, const StepParams* step);
   void queue(Session& s, const MoveJoints& m, const StepParams* step);
   /// A move's result (`what`: movej, movel) as the answer: queued, checked (`dry`: the dry run
