@@ -38,7 +38,9 @@
 #include "servoarm/lang/commands.hpp"
 #include "servoarm/lang/frames.hpp"
 #include "servoarm/lang/requests.hpp"
+#include "servoarm/lang/units.hpp"
 #include "servoarm/program/points.hpp"
+#include "servoarm/program/program.hpp"
 #include "servoarm/rt/controller.hpp"
 
 namespace servoarm::fw {
@@ -772,6 +774,15 @@ class ArmService {
   /// every joint homed. A step refused, a fault, an e-stop, the arm disabled, jogging,
   /// homing or in free-drive, or the queue dropped ends it (a program event says how).
   ProgramResult run_program(ProgramSpec spec, StepExecutor exec);
+  /// Run a loaded program's typed steps (the parser made them once) on the service itself, no
+  /// front end in between: each step becomes its request in SI (`units`: the program's, for its
+  /// numbers; G-code files in mm and degrees) with its blend tolerance, teach point and whether
+  /// the next motion is a line. A refused step ends the program with its typed CmdError.
+  ProgramResult run_program(const std::string& name, prog::Program p, const ConsoleUnits& units);
+  /// Run step `i` of `p` now (what run_program feeds): ok, or the step's error and one line.
+  StepOutcome run_step(const prog::Program& p, std::size_t i, const ConsoleUnits& units);
+  /// The runner's view of a loaded program (each step's class and place).
+  static ProgramSpec spec_of(const std::string& name, const prog::Program& p);
   /// Pause (nothing more is fed; paused once the queued motions are done), step (a paused
   /// program runs one motion, a held move is resumed first), abort (ended now and the arm
   /// stopped; `why` says how it ends: abort, or a front end's stop / e-stop / disable /
@@ -964,6 +975,7 @@ class ArmService {
                    std::string_view detail = {});
   bool program_ended_by_arm(const Telemetry& t);
   bool feed_program();
+  MoveResult step_move(const prog::Program& p, const prog::ProgramStep& st, const ConsoleUnits& u, const MoveContext& cx);
   std::unique_ptr<std::array<EventSlot, kEventRing>> ring_;  ///< slot seq % kEventRing
   std::uint64_t next_seq_ = 1;
   std::function<void()> idle_;
