@@ -311,7 +311,7 @@ bool Console::continue_check() {
   }
   r->ps.name = "program " + name;
   run_ = std::move(r);
-  const ProgramResult started = svc_->run_program(spec_of(*run_), [this](std::size_t i) { return run_step(i); });
+  const ProgramResult started = svc_->run_program(name, run_->prog, cfg_.units);  // the typed steps, run by the service
   if (!started.ok()) {  // (checked above: the arm at rest, nothing queued, homed)
     answer_error(o, started.error, fmt("run: %s: %s; nothing moved", name.c_str(), to_string(started.refusal)));
     return false;
@@ -363,44 +363,6 @@ void Console::do_resume(Session& s) {
   } else {
     answer_ok(s, c.reason);
   }
-}
-
-ProgramSpec Console::spec_of(const ProgramRun& r) {
-  ProgramSpec sp;
-  sp.name = r.name;
-  sp.files = r.prog.files;
-  sp.steps.reserve(r.prog.steps.size());
-  for (const prog::ProgramStep& st : r.prog.steps) {
-    ProgramSpec::Step x;
-    x.file = st.file;
-    x.line = st.line;
-    switch (kind_of(st.cmd)) {
-      case StepKind::motion: x.kind = StepClass::motion; break;
-      case StepKind::needs_idle: x.kind = StepClass::needs_idle; break;
-      case StepKind::wait: x.kind = StepClass::wait; break;
-      case StepKind::other:
-      case StepKind::refused: x.kind = StepClass::other; break;  // (refused steps fail the check before a run)
-    }
-    sp.steps.push_back(x);
-  }
-  return sp;
-}
-
-StepOutcome Console::run_step(std::size_t i) {
-  StepOutcome o;
-  if (!run_ || i >= run_->prog.steps.size()) return o;
-  ProgramRun& r = *run_;
-  r.ps.out.clear();
-  exec_step(r.ps, r.prog, r.prog.steps[i]);
-  const std::string e = error_of(r.ps.out);  // "code: text"
-  if (e.empty()) return o;
-  const std::size_t colon = e.find(": ");
-  const std::string code = e.substr(0, colon);
-  o.error = CmdError::program;
-  for (int k = 0; k < 64; ++k)
-    if (code == to_string(static_cast<CmdError>(k))) o.error = static_cast<CmdError>(k);
-  o.reason = colon == std::string::npos ? std::string() : e.substr(colon + 2);
-  return o;
 }
 
 std::string Console::program_where() const {

@@ -114,23 +114,68 @@ MoveResult ArmService::step_move(const prog::Program&, const prog::ProgramStep& 
   return move(m, cx);
 }
 
+// A tool or frame step: select, define, delete (the program's units), G10 L2 / L20 (mm, deg).
+FrameResult ArmService::step_frame(const fw::Command& c, const ConsoleUnits& u) {
+  const bool tool = c.cmd == Cmd::tool;
+  std::string name(c.name.data());
+  FrameResult r;
+  if (c.frame_op == FrameOp::set_axes && c.g10_p == 0) {
+    if (frame_ == 0) {
+      r.error = CmdError::bad_state;
+      r.reason = "G10 L2 P0: the active frame is base, which cannot be set (select G54..G59 first)";
+      return r;
+    }
+    name = frames_[frame_].name;
+  } else if (c.frame_op == FrameOp::set_axes) {
+    name = "g5" + std::to_string(3 + c.g10_p);
+  }
+  const bool g5x = name.size() == 3 && name[0] == 'g' && name[1] == '5' && name[2] >= '4' && name[2] <= '9';
+  switch (c.frame_op) {
+    case FrameOp::list: return r;  // a query
+    case FrameOp::select: return tool ? select_tool(name) : select_frame(name, g5x);
+    case FrameOp::remove: return tool ? delete_tool(name) : delete_frame(name);
+    case FrameOp::define:
+    case FrameOp::set_axes: break;
+  }
+  NamedPose def;
+  def.name = name;
+  const std::size_t at = find_frame(name);
+  const kin::Pose cur = !tool && at < frames_.size() ? frames_[at].pose : kin::Pose::Identity();
+  Eigen::Vector3d xyz, rpy = kin::rpy_from_rotation(cur.linear());
+  if (c.frame_op == FrameOp::set_axes && c.g10_l20) {  // the axes given are where the tool point is now
+    const Eigen::Vector3d p = fk_or_nan(tools_[tool_]->chain, tail()).translation();
+    Eigen::Vector3d w = cur.linear().transpose() * (p - cur.translation());
+    for (int k = 0; k < 3; ++k)
+      if (c.axis_mask & (1u << k)) w[k] = c.vals[static_cast<std::size_t>(k)] * 1e-3;
+    xyz = p - cur.linear() * w;
+  } else if (c.frame_op == FrameOp::set_axes) {
+    for (int k = 0; k < 3; ++k) {
+      xyz[k] = c.axis_mask & (1u << k) ? kGcodeUnits.length_in(c.vals[static_cast<std::size_t>(k)]) : cur.translation()[k];
+      if (c.axis_mask & (1u << (k + 3))) rpy[k] = kGcodeUnits.angle_in(c.vals[static_cast<std::size_t>(k + 3)]);
+    }
+  } else {
+    for (int k = 0; k < 3; ++k) {
+      xyz[k] = u.length_in(c.vals[static_cast<std::size_t>(k)]);
+      rpy[k] = u.angle_in(c.vals[static_cast<std::size_t>(k + 3)]);
+    }
+  }
+  def.pose = kin::Pose::Identity();
+  def.pose.translation() = xyz;
+  def.pose.linear() = kin::rotation_from_rpy(rpy[0], rpy[1], rpy[2]);
+  if (tool && c.has_mass) {
+    def.has_payload = true;
+    def.mass = c.mass;
+    def.com = Eigen::Vector3d(u.length_in(c.com[0]), u.length_in(c.com[1]), u.length_in(c.com[2]));
+  }
+  return tool ? define_tool(def) : define_frame(def);
+}
+
 StepOutcome ArmService::run_step(const prog::Program& p, std::size_t i, const ConsoleUnits& u) {
   if (i >= p.steps.size()) return {};
   const prog::ProgramStep& st = p.steps[i];
   const fw::Command& c = st.cmd;
-  switch (kind_of(c)) {
-    case StepKind::refused: return outcome(CmdError::program, std::string(to_string(c.cmd)) + " is not run inside a program");
-    case StepKind::wait:
-    case StepKind::other: return {};  // queries and modal-only lines: nothing to do here
-    case StepKind::needs_idle:
-    case StepKind::motion: break;
-  }
-  if (c.cmd == Cmd::tool || c.cmd == Cmd::frame) {
-    if (c.frame_op != FrameOp::select) return outcome(CmdError::program, std::string(to_string(c.cmd)) + ": only a selection runs in a program");
-    const FrameResult r = c.cmd == Cmd::tool ? select_tool(c.name.data()) : select_frame(c.name.data());
-    return r.ok() ? StepOutcome{} : outcome(r.error, to_string(r.refusal));
-  }
-  if (c.cmd == Cmd::out) {
+  if (c.cmd == Cmd::out && c.out_index == -1) return {};  // the list: a query
+  if (c.cmd == Cmd::out) {  // at once (M64 / M65, out: the arm at rest), or with the next move (M62 / M63)
     OutputRequest rq;
     rq.on = c.out_on;
     rq.sync = c.out_sync;
@@ -139,6 +184,17 @@ StepOutcome ArmService::run_step(const prog::Program& p, std::size_t i, const Co
       if (cfg_.outputs[k].name == c.word.data()) rq.index = k;
     const OutputResult r = set_output(rq);
     return r.ok() ? StepOutcome{} : outcome(r.error, to_string(r.refusal));
+  }
+  switch (kind_of(c)) {
+    case StepKind::refused: return outcome(CmdError::program, std::string(to_string(c.cmd)) + " is not run inside a program");
+    case StepKind::wait:
+    case StepKind::other: return {};  // queries and modal-only lines: nothing to do here
+    case StepKind::needs_idle:
+    case StepKind::motion: break;
+  }
+  if (c.cmd == Cmd::tool || c.cmd == Cmd::frame) {
+    const FrameResult r = step_frame(c, u);
+    return r.ok() ? StepOutcome{} : outcome(r.error, r.reason.empty() ? std::string(to_string(r.refusal)) : r.reason);
   }
   const bool gcode = static_cast<std::size_t>(st.file) < p.files.size() && prog::is_gcode_file(p.files[static_cast<std::size_t>(st.file)]);
   MoveContext cx;

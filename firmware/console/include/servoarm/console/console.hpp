@@ -338,21 +338,17 @@ class Console {
   std::string grbl_position(const kin::JointVector& q) const;
   std::string grbl_wcs() const;  ///< "G54".."G59" for $G
   // Teach points and programs (console_program.cpp)
-  /// A loaded program: its steps (the service's runner runs them through exec_step) and the
-  /// session they run in (modal state, answers).
+  /// A loaded program: its steps (checked here through exec_step, then run by the service's
+  /// own runner: ArmService::run_program(name, Program, units)) and the check's session.
   struct ProgramRun {
     std::string name;
     prog::Program prog;
-    Session ps;                 ///< the runner's own session
+    Session ps;                 ///< the program's session (moves from other sessions are refused while it runs)
   };
-  /// The program the service runs (kept while it runs: its StepExecutor runs these steps).
+  /// The program the service runs (kept while it runs).
   std::unique_ptr<ProgramRun> run_;
   /// True while the service runs a program (run_ holds it).
   bool running() const { return svc_->run_state() != RunState::idle; }
-  /// The service's program as the service describes it (names and places of its steps).
-  static ProgramSpec spec_of(const ProgramRun& r);
-  /// The service's StepExecutor: step i of run_ in its session; its error answer as the outcome.
-  StepOutcome run_step(std::size_t i);
   /// A `run` whose program is being checked: a slice of its steps at a time (settle()), so
   /// every transport is read between two slices. One at a time.
   struct PendingCheck {

@@ -975,6 +975,7 @@ class ArmService {
                    std::string_view detail = {});
   bool program_ended_by_arm(const Telemetry& t);
   bool feed_program();
+  FrameResult step_frame(const fw::Command& c, const ConsoleUnits& u);
   MoveResult step_move(const prog::Program& p, const prog::ProgramStep& st, const ConsoleUnits& u, const MoveContext& cx);
   std::unique_ptr<std::array<EventSlot, kEventRing>> ring_;  ///< slot seq % kEventRing
   std::uint64_t next_seq_ = 1;
