@@ -67,7 +67,12 @@ MoveResult ArmService::step_move(const prog::Program&, const prog::ProgramStep& 
                                       ? &points_.points[static_cast<std::size_t>(st.point)].q
                                       : nullptr;
   const kin::Chain& ch = *cx.chain;
-  if (c.cmd == Cmd::dwell) return dwell(c.vals[0], cx);
+  if (c.cmd == Cmd::dwell) {  // a dwell carries no blend: it is an exact stop
+    MoveContext plain = cx;
+    plain.step_blend = -1;
+    plain.next_line = false;
+    return dwell(c.vals[0], plain);
+  }
   if (c.cmd == Cmd::movej || c.cmd == Cmd::park) {
     MoveJoints m = park_request();
     if (c.cmd == Cmd::movej) {
