@@ -164,3 +164,21 @@ TEST(ConsoleRequests, AJointMoveIsPlannedOnceByTheConsole) {
   LONGS_EQUAL(9000, r.app.ctl->telemetry().done_id);
   LONGS_EQUAL(1, r.app.ctl->telemetry().joint_replans - replans0);
 }
+
+// The park pose is the service's setting, read there: a park pose set through the service
+// (set_settings) is the one the console's configuration shows and `park` goes to: the
+// console keeps no copy of it.
+TEST(ConsoleRequests, TheParkPoseFollowsTheServicesSettings) {
+  test::ConsoleRig r;
+  ArmService& svc = r.app.console->service();
+  MotionSettings s = svc.settings();
+  s.home = kin::JointVector::Zero(6);
+  s.home[1] = -0.25;
+  s.home[4] = 0.5;
+  CHECK(svc.set_settings(s).ok());
+  CHECK(r.app.console->config().home == s.home);
+  Command park;
+  GcodeModal m;
+  CHECK(parse_line("park", 6, m, park).ok());
+  CHECK(r.app.console->joint_request(park).goal == s.home);
+}

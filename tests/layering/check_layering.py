@@ -26,7 +26,7 @@ ALLOWED = {
     "firmware/config": ["firmware/lang", "kinematics", "kinematics/io", "hal"],
     "firmware/lang": ["kinematics", "kinematics/io"],
     "firmware/program": ["firmware/lang", "kinematics", "kinematics/io"],
-    "firmware/service": ["firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
+    "firmware/service": ["firmware/program", "firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
     "firmware/api": ["firmware/service", "firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
     "firmware/console": ["firmware/service", "firmware/program", "firmware/lang", "firmware/rt", "kinematics", "kinematics/io", "hal"],
     "firmware/app": ["firmware/api", "firmware/console", "firmware/service", "firmware/program", "firmware/lang", "firmware/rt", "firmware/config",

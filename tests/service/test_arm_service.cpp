@@ -611,3 +611,76 @@ TEST(ArmService, TeachHereOnAnUnhomedArmNamesTheJoints) {
   CHECK_TEXT(here.reason.find("joint 5 not homed") != std::string::npos, here.reason.c_str());
   LONGS_EQUAL(6, here.q.size());
 }
+
+// Teach points through the service, with no console command: taught where the arm is (its
+// joints, the active tool's pose and names), kept in the points file as the loader reads it,
+// listed, gone to by a joint move that ends at the point's joints, deleted; an unknown name,
+// a bad name and a dry run are typed results that change neither the points nor the file.
+TEST(ArmService, TeachPointsAreTaughtListedGoneToAndDeletedThroughTheService) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const std::string dir = test::make_tmp_dir();
+  const std::string file = dir + "/points.toml";
+  STRCMP_EQUAL("", svc.load_points(file).c_str());
+  STRCMP_EQUAL(file.c_str(), svc.points_file().c_str());
+  TeachRequest tr;
+  tr.name = "pick";
+  const PointResult t = svc.teach(tr);
+  CHECK(t.ok());
+  CHECK(t.kept);
+  CHECK(!t.replaced);
+  LONGS_EQUAL(1, t.count);
+  const Telemetry tel = r.app.ctl->telemetry();
+  for (int j = 0; j < 6; ++j) DOUBLES_EQUAL(tel.q_act[static_cast<std::size_t>(j)], t.point.q[j], 0);
+  kin::Pose fk;
+  CHECK(kin::forward(r.app.chain, t.point.q, fk) == kin::Status::ok);
+  CHECK((fk.translation() - t.point.pose.translation()).norm() < 1e-12);
+  STRCMP_EQUAL("tool0", t.point.tool.c_str());
+  prog::PointsData d;
+  STRCMP_EQUAL("", prog::load_points_file(file, 6, d).c_str());
+  LONGS_EQUAL(1, d.points.size());
+  CHECK((d.points[0].q - t.point.q).norm() == 0);
+  LONGS_EQUAL(1, svc.points().points.size());
+
+  // a dry run and a bad name: nothing stored
+  tr.name = "place";
+  tr.dry = true;
+  CHECK(svc.teach(tr).ok());
+  LONGS_EQUAL(1, svc.points().points.size());
+  tr.dry = false;
+  tr.name = "9lives";
+  const PointResult bad = svc.teach(tr);
+  CHECK(bad.refusal == PointRefusal::bad_point);
+  CHECK(bad.error == CmdError::bad_option);
+  LONGS_EQUAL(1, svc.points().points.size());
+
+  // go-to: away first, then back to the point by a joint move ending at its joints
+  MoveJoints away;
+  away.goal = joints({10, -40, 170, 5, 40, -5});
+  CHECK(svc.move(away, MoveContext{}).ok());
+  PointMove pm;
+  pm.name = "nowhere";
+  const PointResult none = svc.move_to_point(pm, MoveContext{});
+  CHECK(none.refusal == PointRefusal::no_point);
+  CHECK(none.error == CmdError::bad_option);
+  LONGS_EQUAL(1, r.app.ctl->motions().size());
+  pm.name = "pick";
+  const PointResult go = svc.move_to_point(pm, MoveContext{});
+  CHECK(go.ok());
+  CHECK(go.move.id > 0);
+  CHECK((go.move.goal - t.point.q).norm() == 0);
+
+  // delete: unknown refused, known removed from the service and the file
+  const PointResult gone = svc.delete_point("nowhere");
+  CHECK(gone.refusal == PointRefusal::no_point);
+  CHECK(svc.delete_point("pick", true).ok());
+  LONGS_EQUAL(1, svc.points().points.size());
+  const PointResult del = svc.delete_point("pick");
+  CHECK(del.ok());
+  LONGS_EQUAL(0, del.count);
+  LONGS_EQUAL(0, svc.points().points.size());
+  STRCMP_EQUAL("", prog::load_points_file(file, 6, d).c_str());
+  LONGS_EQUAL(0, d.points.size());
+  test::remove_tree(dir);
+}

@@ -8,6 +8,8 @@
 #include <vector>
 
 #include "../console/console_rig.hpp"
+#include "../program/tmp_dir.hpp"
+#include "servoarm/program/program.hpp"
 #include "servoarm/service/arm_service.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -212,4 +214,67 @@ TEST(ProgramRunner, AnEstopEndsTheProgram) {
   CHECK(ev.back().program == ProgramPhase::ended);
   CHECK_TEXT(ev.back().end == ProgramEnd::estop, to_string(ev.back().end));
   CHECK(!ev.back().realtime);
+}
+
+namespace {
+/// Load program file `name` holding `text` (the rig's units: mm and degrees).
+prog::Program load(test::ConsoleRig& r, const std::string& dir, const std::string& name, const std::string& text) {
+  test::write_file(dir + "/" + name, text);
+  prog::ProgramContext ctx;
+  ctx.chain = &r.app.chain;
+  ctx.units = units_of(r.app.chain);
+  ctx.dir = dir;
+  ctx.points = &r.app.console->service().points();
+  prog::Program p;
+  const std::string e = prog::load_program(dir + "/" + name, ctx, p);
+  CHECK_TEXT(e.empty(), e.c_str());
+  return p;
+}
+}  // namespace
+
+// A loaded program's typed steps run by the service itself (no console executes a step, no
+// answer text exists): two joint moves around `wait` and a dwell end where the last movej
+// goes (its joints, degrees in the file, in SI), `ended done` with every step counted.
+TEST(ProgramRunner, AParsedProgramRunsOnTheServiceWithNoConsole) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const std::string dir = test::make_tmp_dir();
+  prog::Program p = load(r, dir, "p.arm", "movej 10 -40 170 5 40 -5 speed=100\nwait\ndwell 0.1\nmovej -10 -50 160 0 30 10 speed=100\n");
+  const std::uint64_t seq0 = svc.next_event_seq() - 1;
+  const ProgramResult started = svc.run_program("p", std::move(p), units_of(r.app.chain));
+  CHECK_TEXT(started.ok(), to_string(started.refusal));
+  LONGS_EQUAL(4, started.status.steps);
+  run_until(r, [&] { return svc.run_state() == RunState::idle; });
+  const std::vector<ArmEvent> ev = program_events(svc, seq0);
+  CHECK(!ev.empty());
+  CHECK(ev.back().program == ProgramPhase::ended);
+  CHECK_TEXT(ev.back().end == ProgramEnd::done, to_string(ev.back().end));
+  LONGS_EQUAL(4, ev.back().steps);
+  const kin::JointVector last = joints({-10, -50, 160, 0, 30, 10});
+  for (int j = 0; j < 6; ++j) DOUBLES_EQUAL(last[j], r.app.ctl->telemetry().q_cmd[static_cast<std::size_t>(j)], 1e-6);
+  test::remove_tree(dir);
+}
+
+// A step the service refuses ends the program with the step's typed error: a movej beyond
+// joint 3's limit is `limits` at its line, nothing after it queued.
+TEST(ProgramRunner, AParsedProgramsFailingStepEndsItWithTheTypedError) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  const std::string dir = test::make_tmp_dir();
+  prog::Program p = load(r, dir, "p.arm", "movej 10 -40 170 5 40 -5 speed=100\nmovej 0 -45 999 0 45 0\nmovej 0 0 0 0 0 0\n");
+  const std::uint64_t seq0 = svc.next_event_seq() - 1;
+  CHECK(svc.run_program("p", std::move(p), units_of(r.app.chain)).ok());
+  run_until(r, [&] { return svc.run_state() == RunState::idle; });
+  const std::vector<ArmEvent> ev = program_events(svc, seq0);
+  CHECK(!ev.empty());
+  const ArmEvent& end = ev.back();
+  CHECK_TEXT(end.end == ProgramEnd::step_refused, to_string(end.end));
+  LONGS_EQUAL(1, end.step);
+  LONGS_EQUAL(2, end.line);
+  CHECK_TEXT(end.error == CmdError::limits, to_string(end.error));
+  run_until(r, [&] { return r.app.ctl->telemetry().state == ArmState::idle; });
+  CHECK(r.app.ctl->motions().empty());
+  test::remove_tree(dir);
 }

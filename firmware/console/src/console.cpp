@@ -145,7 +145,7 @@ std::string refusal_text(const ModelControl& m, ModelPart p) { return bounded_te
 Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* ik)
     : ctl_(ctl), cfg_(cfg), chain_(ctl.chain()), n_(ctl.chain().n_joints), ik_(ik) {
   svc_ = std::make_unique<ArmService>(ctl_, cfg_);
-  cfg_.home = svc_->settings().home;  // config() shows the park pose the service uses
+  static_cast<MotionSettings&>(cfg_) = MotionSettings{};  // the service keeps them: config() reads them there
   svc_->set_ik_model(ik_);
   check_shadow_ = std::make_unique<PathShadow>();
 }
@@ -153,6 +153,12 @@ Console::Console(Controller& ctl, const ConsoleConfig& cfg, const kin::IkModel* 
 // IK of movel's path check and of the control thread's Cartesian sampling: the App's
 // model (closed form or numeric) when the chain has one, else the damped-Newton fallback.
 // The firmware's options (ik_options.hpp), the same armctl plan previews with.
+ConsoleConfig Console::config() const {
+  ConsoleConfig c = cfg_;
+  static_cast<MotionSettings&>(c) = svc_->settings();
+  return c;
+}
+
 kin::IkSolver Console::ik_solver() const { return svc_->tool_ik(sel_tool()); }
 
 kin::Pose Console::tcp(const kin::JointVector& q) const {
@@ -587,41 +593,34 @@ void Console::answer_refusal(Session& s, const char* what, const MoveResult& r) 
   }
 }
 
-void Console::queue(Session& s, const MoveJoints& req, const StepParams* step) {
-  DryRun dry;
-  if (s.check_mode) dry = dry_run(s);
-  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step));
+void Console::answer_move(Session& s, const char* what, const MoveResult& r, const DryRun* dry) {
   if (!r.ok()) {
-    answer_refusal(s, "movej", r);
+    answer_refusal(s, what, r);
     return;
   }
-  if (s.check_mode) {  // checked, not queued
-    keep_dry_run(s, dry);
+  if (dry != nullptr) {  // checked, not queued
+    keep_dry_run(s, *dry);
     answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(r.duration, kTimeDecimals) + "s" + blend_text(r));
     return;
   }
+  const bool line = std::string_view(what) == "movel";
+  if (line) feed_now_ = r.speed;
   svc_->clear_pending_outputs();
-  answer_ok(s, fmt("queued id=%u duration=%ss%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(), blend_text(r).c_str()));
+  answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(),
+                   line && r.status == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", r.slowdown).c_str() : "",
+                   blend_text(r).c_str()));
+}
+
+void Console::queue(Session& s, const MoveJoints& req, const StepParams* step) {
+  DryRun dry;
+  if (s.check_mode) dry = dry_run(s);
+  answer_move(s, "movej", svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step)), s.check_mode ? &dry : nullptr);
 }
 
 void Console::queue(Session& s, const MoveLine& req, const StepParams* step) {
   DryRun dry;
   if (s.check_mode) dry = dry_run(s);
-  const MoveResult r = svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step));
-  if (!r.ok()) {
-    answer_refusal(s, "movel", r);
-    return;
-  }
-  if (s.check_mode) {  // checked, not queued
-    keep_dry_run(s, dry);
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : "checked duration=" + fixed(r.duration, kTimeDecimals) + "s" + blend_text(r));
-    return;
-  }
-  feed_now_ = r.speed;
-  svc_->clear_pending_outputs();
-  answer_ok(s, fmt("queued id=%u duration=%ss%s%s", unsigned(r.id), fixed(r.duration, kTimeDecimals).c_str(),
-                   r.status == kin::MotionStatus::slowed_near_singularity ? fmt(" slowed=%.2fx", r.slowdown).c_str() : "",
-                   blend_text(r).c_str()));
+  answer_move(s, "movel", svc_->move(req, move_context(s.check_mode ? &dry : nullptr, step)), s.check_mode ? &dry : nullptr);
 }
 
 void Console::queue_dwell(Session& s, double secs) {
@@ -779,7 +778,6 @@ void Console::execute(Session& s, std::string_view line) {
 }
 
 void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
-  auto simple = [&](RequestOp op) { answer_control(s, svc_->control(op)); };
   // While a program runs, motion comes from the program only: a move, jog, dwell, homing or
   // M62/M63 from any console is refused (stop, hold, resume, abort and queries still work).
   if (running() && (!run_ || &s != &run_->ps) && !s.check_mode && moves_arm(c)) {
@@ -787,110 +785,43 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
                                         svc_->program_status().name.c_str(), program_where().c_str()));
     return;
   }
-  // A move refused: the M62/M63 changes waiting for it are dropped with it (and said so).
   const std::size_t sync_before = svc_->pending_outputs().size();
   const std::size_t out_before = s.out.size();
-  struct DropSyncOnRefusal {
-    Console& con;
-    Session& s;
-    const Command& c;
-    std::size_t before;
-    std::size_t out0;
-    ~DropSyncOnRefusal() {
-      if (before == 0 || con.svc_->pending_outputs().size() != before || s.check_mode || !carries_outputs(c.cmd)) return;
-      if (!con.last_answer_is_error(s, out0)) return;
-      con.note_before_answer(s, out0, con.discard_sync_outputs("the move was refused"));
-    }
-  } drop_sync{*this, s, c, sync_before, out_before};
+  run_command(s, c, step);
+  // A move refused: the M62/M63 changes waiting for it are dropped with it (and said so).
+  if (sync_before == 0 || svc_->pending_outputs().size() != sync_before || s.check_mode || !carries_outputs(c.cmd)) return;
+  if (last_answer_is_error(s, out_before)) note_before_answer(s, out_before, discard_sync_outputs("the move was refused"));
+}
+
+// One case per command, each handed to its family: arm control, moves and jogs, queries,
+// G-code senders' `$` commands, teach points, programs, record and outputs.
+void Console::run_command(Session& s, const Command& c, const StepParams* step) {
   switch (c.cmd) {
     case Cmd::none: answer_ok(s); return;
     case Cmd::help: do_help(s, std::string_view(c.topic.data())); return;
-    case Cmd::quit:
-      // The session ends here (ConsoleServer ends it as its transport says); lines the client
-      // sent after it are not run, each answered so.
-      answer_ok(s, "bye");
-      for (const std::string& l : s.lines)
-        answer_error(s, CmdError::bad_state, fmt("'%s' not executed: the session ended (quit)", l.c_str()));
-      s.lines.clear();
-      s.hold_after = 0;
-      s.ended = true;
-      return;
+    case Cmd::quit: do_quit(s); return;
     case Cmd::status: answer_ok(s, status_text()); return;
-    case Cmd::enable:
-      if (s.check_mode) {
-        answer_ok(s, "check mode: not run");
-        return;
-      }
-      if (const ControlResult e = svc_->enable(); !e.ok()) {
-        answer_control(s, e);
-        return;
-      }
-      s.enabling = true;
-      settle(s);
-      return;
-    case Cmd::disable:
-      end_program(ProgramEnd::disable);
-      note_line(s, discard_sync_outputs("disable"));
-      simple(RequestOp::disable);
-      return;
-    case Cmd::stop:
-      end_program(ProgramEnd::stop);
-      note_line(s, discard_sync_outputs("stop"));
-      simple(RequestOp::stop);
-      return;
-    case Cmd::estop:
-      end_program(ProgramEnd::estop);
-      note_line(s, discard_sync_outputs("e-stop"));
-      simple(RequestOp::estop);
-      return;
-    case Cmd::reset: simple(RequestOp::reset); return;
+    case Cmd::enable: do_enable(s); return;
+    case Cmd::disable: do_halt(s, ProgramEnd::disable, "disable", RequestOp::disable); return;
+    case Cmd::stop: do_halt(s, ProgramEnd::stop, "stop", RequestOp::stop); return;
+    case Cmd::estop: do_halt(s, ProgramEnd::estop, "e-stop", RequestOp::estop); return;
+    case Cmd::reset: answer_control(s, svc_->control(RequestOp::reset)); return;
     case Cmd::hold: answer_control(s, svc_->hold()); return;
     case Cmd::resume: do_resume(s); return;
-    case Cmd::home_zero: simple(RequestOp::set_zero); return;
+    case Cmd::home_zero: answer_control(s, svc_->control(RequestOp::set_zero)); return;
     case Cmd::home: do_home(s, c); return;
     case Cmd::park:
     case Cmd::movej:
-      if (c.at_point) queue_at_point(s, c);
-      else queue(s, step_joint_request(c, step), step);
-      return;
     case Cmd::movel:
-      if (c.at_point) {
-        queue_at_point(s, c);
-        return;
-      }
-      if (step != nullptr && step->point != nullptr) {  // a program's movel @NAME: the point's joints
-        MoveLine m;
-        m.target = tcp(*step->point);  // where they put the active tool, on a straight line
-        m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
-        queue(s, m, step);
-        return;
-      }
-      [[fallthrough]];
-    case Cmd::gmove: queue(s, line_request(c, s.check_mode ? &s.check_tail : nullptr), step); return;
+    case Cmd::gmove: do_move(s, c, step); return;
     case Cmd::dwell: queue_dwell(s, c.vals[0]); return;
     case Cmd::fk: do_fk(s, c); return;
     case Cmd::ik: do_ik(s, c); return;
     case Cmd::limits: do_limits(s); return;
     case Cmd::stats: answer_ok(s, stats_text()); return;
-    case Cmd::config:
-      s.out += cfg_.config_text;
-      if (!cfg_.config_text.empty() && cfg_.config_text.back() != '\n') s.out += '\n';
-      answer_ok(s);
-      return;
+    case Cmd::config: do_config(s); return;
     case Cmd::wait: s.waiting = true; settle(s); return;
-    case Cmd::position: {
-      const Telemetry t = ctl_.telemetry();
-      kin::JointVector q(n_);
-      for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
-      const kin::Pose p = pose_in_frame(q);  // the active tool's point in the active user frame
-      const Eigen::Vector3d rpy = kGcodeUnits.rpy_of(p.linear()) / kDeg;
-      const double u = s.modal.unit_mm;
-      s.out += "X:" + fixed(p.translation().x() * 1e3 / u, 3) + " Y:" + fixed(p.translation().y() * 1e3 / u, 3) +
-               " Z:" + fixed(p.translation().z() * 1e3 / u, 3) + " A:" + fixed(rpy[0], 3) + " B:" + fixed(rpy[1], 3) +
-               " C:" + fixed(rpy[2], 3) + "\n";
-      answer_ok(s);
-      return;
-    }
+    case Cmd::position: do_position(s); return;
     case Cmd::temperature: answer_ok(s, "T:0 /0 B:0 /0"); return;
     case Cmd::jog: do_jog(s, c); return;
     case Cmd::tool: do_tool(s, c); return;
@@ -911,50 +842,127 @@ void Console::dispatch(Session& s, const Command& c, const StepParams* step) {
     case Cmd::run: do_run(s, c); return;
     case Cmd::pause: do_pause(s); return;
     case Cmd::step: do_step(s); return;
-    case Cmd::abort:
-      note_line(s, discard_sync_outputs("abort"));
-      if (!running()) {
-        simple(RequestOp::stop);
-        return;
-      }
-      {
-        const std::string at = program_where(), name = svc_->program_status().name;
-        if (svc_->program_abort().error == CmdError::timeout) {
-          answer_error(s, CmdError::timeout, "control thread did not answer stop");
-          return;
-        }
-        answer_ok(s, "aborted " + name + " at " + at);
-      }
-      return;
+    case Cmd::abort: do_abort(s); return;
     case Cmd::record: do_record(s, c); return;
     case Cmd::out: do_out(s, c); return;
-    case Cmd::freedrive: {  // the refusals as lines of their own, then `ok <state>`
-      std::string d = dynamics_text();
-      const std::size_t nl = d.find('\n');
-      if (nl != std::string::npos) {
-        s.out += d.substr(nl + 1) + "\n";
-        d.resize(nl);
-      }
-      answer_ok(s, d);
-      return;
-    }
+    case Cmd::freedrive: do_dynamics(s); return;
     case Cmd::freedrive_on:
     case Cmd::freedrive_off:
-      if (s.check_mode) {
-        answer_ok(s, "check mode: not run");
-        return;
-      }
-      answer_control(s, svc_->freedrive(c.cmd == Cmd::freedrive_on));
-      return;
     case Cmd::collision_on:
-    case Cmd::collision_off:
-      if (s.check_mode) {
-        answer_ok(s, "check mode: not run");
-        return;
-      }
-      answer_control(s, svc_->collision_detection(c.cmd == Cmd::collision_on));
-      return;
+    case Cmd::collision_off: do_switch(s, c); return;
   }
+}
+
+// ---------------------------------------------------------------------------
+// Arm control
+// ---------------------------------------------------------------------------
+
+void Console::do_quit(Session& s) {
+  // The session ends here (ConsoleServer ends it as its transport says); lines the client
+  // sent after it are not run, each answered so.
+  answer_ok(s, "bye");
+  for (const std::string& l : s.lines)
+    answer_error(s, CmdError::bad_state, fmt("'%s' not executed: the session ended (quit)", l.c_str()));
+  s.lines.clear();
+  s.hold_after = 0;
+  s.ended = true;
+}
+
+void Console::do_enable(Session& s) {
+  if (s.check_mode) {
+    answer_ok(s, "check mode: not run");
+    return;
+  }
+  if (const ControlResult e = svc_->enable(); !e.ok()) {
+    answer_control(s, e);
+    return;
+  }
+  s.enabling = true;
+  settle(s);
+}
+
+void Console::do_halt(Session& s, ProgramEnd how, const char* what, RequestOp op) {
+  end_program(how);
+  note_line(s, discard_sync_outputs(what));
+  answer_control(s, svc_->control(op));
+}
+
+void Console::do_abort(Session& s) {
+  note_line(s, discard_sync_outputs("abort"));
+  if (!running()) {
+    answer_control(s, svc_->control(RequestOp::stop));
+    return;
+  }
+  const std::string at = program_where(), name = svc_->program_status().name;
+  if (svc_->program_abort().error == CmdError::timeout) {
+    answer_error(s, CmdError::timeout, "control thread did not answer stop");
+    return;
+  }
+  answer_ok(s, "aborted " + name + " at " + at);
+}
+
+// Free-drive and collision detection on or off (a check runs neither).
+void Console::do_switch(Session& s, const Command& c) {
+  if (s.check_mode) {
+    answer_ok(s, "check mode: not run");
+    return;
+  }
+  const bool collision = c.cmd == Cmd::collision_on || c.cmd == Cmd::collision_off;
+  answer_control(s, collision ? svc_->collision_detection(c.cmd == Cmd::collision_on) : svc_->freedrive(c.cmd == Cmd::freedrive_on));
+}
+
+// `freedrive`: the refusals as lines of their own, then `ok <state>`.
+void Console::do_dynamics(Session& s) {
+  std::string d = dynamics_text();
+  const std::size_t nl = d.find('\n');
+  if (nl != std::string::npos) {
+    s.out += d.substr(nl + 1) + "\n";
+    d.resize(nl);
+  }
+  answer_ok(s, d);
+}
+
+// ---------------------------------------------------------------------------
+// Moves and queries
+// ---------------------------------------------------------------------------
+
+void Console::do_move(Session& s, const Command& c, const StepParams* step) {
+  if ((c.cmd == Cmd::movej || c.cmd == Cmd::park || c.cmd == Cmd::movel) && c.at_point) {
+    queue_at_point(s, c);
+    return;
+  }
+  if (c.cmd == Cmd::movej || c.cmd == Cmd::park) {
+    queue(s, step_joint_request(c, step), step);
+    return;
+  }
+  if (c.cmd == Cmd::movel && step != nullptr && step->point != nullptr) {  // a program's movel @NAME: the point's joints
+    MoveLine m;
+    m.target = tcp(*step->point);  // where they put the active tool, on a straight line
+    m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
+    queue(s, m, step);
+    return;
+  }
+  queue(s, line_request(c, s.check_mode ? &s.check_tail : nullptr), step);
+}
+
+void Console::do_config(Session& s) {
+  s.out += cfg_.config_text;
+  if (!cfg_.config_text.empty() && cfg_.config_text.back() != '\n') s.out += '\n';
+  answer_ok(s);
+}
+
+// M114: the active tool's point in the active user frame, in the session's G-code units.
+void Console::do_position(Session& s) {
+  const Telemetry t = ctl_.telemetry();
+  kin::JointVector q(n_);
+  for (int j = 0; j < n_; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+  const kin::Pose p = pose_in_frame(q);
+  const Eigen::Vector3d rpy = kGcodeUnits.rpy_of(p.linear()) / kDeg;
+  const double u = s.modal.unit_mm;
+  s.out += "X:" + fixed(p.translation().x() * 1e3 / u, 3) + " Y:" + fixed(p.translation().y() * 1e3 / u, 3) +
+           " Z:" + fixed(p.translation().z() * 1e3 / u, 3) + " A:" + fixed(rpy[0], 3) + " B:" + fixed(rpy[1], 3) +
+           " C:" + fixed(rpy[2], 3) + "\n";
+  answer_ok(s);
 }
 
 bool Console::settle(Session& s) {

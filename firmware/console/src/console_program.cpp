@@ -48,14 +48,7 @@ std::string error_of(const std::string& out) {
 // Teach points
 // ---------------------------------------------------------------------------
 
-std::string Console::load_points() {
-  if (cfg_.points_file.empty()) return "";
-  prog::PointsData d;
-  const std::string e = prog::load_points_file(cfg_.points_file, n_, d);
-  if (!e.empty()) return e;
-  points_ = std::move(d);
-  return "";
-}
+std::string Console::load_points() { return svc_->load_points(cfg_.points_file); }
 
 std::string Console::points_refusal(const TeachResult& r) const {
   switch (r.refusal) {
@@ -70,102 +63,86 @@ std::string Console::points_refusal(const TeachResult& r) const {
 }
 
 void Console::do_teach(Session& s, const Command& c) {
-  const std::string name(c.word.data());
-  const TeachResult here = svc_->teach_here();
-  if (const std::string no = points_refusal(here); !no.empty()) {
-    answer_error(s, CmdError::bad_state, "teach: " + no);
-    return;
-  }
-  if (here.refusal == TeachRefusal::not_homed && !s.check_mode) {  // (a check moves nothing)
-    answer_error(s, here.error, here.reason);
-    return;
-  }
-  prog::TeachPoint p;
-  p.name = name;
-  p.q = here.q;
-  p.pose = tcp(p.q);  // with the session's tool (check mode has its own selection)
-  p.tool = svc_->tool(sel_tool()).name;
-  p.frame = svc_->frame(sel_frame()).name;
-  prog::PointsData d = points_;
-  if (const std::string e = prog::put_point(d, p); !e.empty()) {
-    answer_error(s, CmdError::bad_option, "teach: " + e);
-    return;
+  TeachRequest rq;
+  rq.name = c.word.data();
+  rq.tool = sel_tool();  // the session's selection (check mode has its own)
+  rq.frame = sel_frame();
+  rq.dry = s.check_mode;
+  const PointResult r = svc_->teach(rq);
+  switch (r.refusal) {
+    case PointRefusal::none: break;
+    case PointRefusal::not_here:
+      if (const std::string no = points_refusal(r.here); !no.empty()) answer_error(s, CmdError::bad_state, "teach: " + no);
+      else answer_error(s, r.error, r.reason);
+      return;
+    case PointRefusal::storage: answer_error(s, r.error, "teach: " + r.reason + "; point not taught, the file kept"); return;
+    case PointRefusal::bad_point:
+    case PointRefusal::no_point:
+    case PointRefusal::joint_count:
+    case PointRefusal::program: answer_error(s, r.error, "teach: " + r.reason); return;
   }
   if (s.check_mode) {  // checked: nothing stored, no file written
-    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked: teach %s (check mode: nothing stored)", name.c_str()));
+    answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked: teach %s (check mode: nothing stored)", rq.name.c_str()));
     return;
   }
-  if (!cfg_.points_file.empty()) {
-    if (const std::string e = prog::save_points_file(cfg_.points_file, d); !e.empty()) {
-      answer_error(s, CmdError::storage, "teach: " + e + "; point not taught, the file kept");
-      return;
-    }
-  }
-  points_ = std::move(d);
-  answer_ok(s, fmt("taught %s joints=[%s] pose=[%s] %s%s", name.c_str(), joints_text(p.q).c_str(), pose_text(p.q).c_str(),
-                   where_text().c_str(), cfg_.points_file.empty() ? " (not kept: no points file)" : ""));
+  const prog::TeachPoint& p = r.point;
+  answer_ok(s, fmt("taught %s joints=[%s] pose=[%s] %s%s", p.name.c_str(), joints_text(p.q).c_str(), pose_text(p.q).c_str(),
+                   where_text().c_str(), r.kept ? "" : " (not kept: no points file)"));
 }
 
 void Console::do_points(Session& s) {
-  for (const prog::TeachPoint& p : points_.points) {
+  const prog::PointsData& pts = svc_->points();
+  for (const prog::TeachPoint& p : pts.points) {
     s.out += fmt("%s joints=[%s] pose=[%s] tool=%s frame=%s\n", p.name.c_str(), joints_text(p.q).c_str(),
                  cfg_.units.pose_text(p.pose).c_str(), p.tool.c_str(), p.frame.c_str());
   }
-  answer_ok(s, fmt("%zu points%s", points_.points.size(), cfg_.points_file.empty() ? " (not kept: no points file)" : ""));
+  answer_ok(s, fmt("%zu points%s", pts.points.size(), svc_->points_file().empty() ? " (not kept: no points file)" : ""));
 }
 
 void Console::do_point_delete(Session& s, const Command& c) {
   const std::string name(c.word.data());
-  if (const TeachResult here = svc_->teach_here(); here.refusal == TeachRefusal::program) {
-    const std::string no = points_refusal(here);
-    answer_error(s, CmdError::bad_state, "point delete: " + no);
-    return;
-  }
-  prog::PointsData d = points_;
-  if (!prog::delete_point(d, name)) {
-    answer_error(s, CmdError::bad_option, fmt("point delete: no point '%s' (%zu points: see points)", name.c_str(), d.points.size()));
-    return;
+  const PointResult r = svc_->delete_point(name, s.check_mode);
+  switch (r.refusal) {
+    case PointRefusal::none: break;
+    case PointRefusal::program: answer_error(s, r.error, "point delete: " + points_refusal(r.here)); return;
+    case PointRefusal::no_point:
+      answer_error(s, r.error, fmt("point delete: no point '%s' (%zu points: see points)", name.c_str(), r.count));
+      return;
+    case PointRefusal::storage: answer_error(s, r.error, "point delete: " + r.reason + "; nothing deleted, the file kept"); return;
+    case PointRefusal::not_here:
+    case PointRefusal::bad_point:
+    case PointRefusal::joint_count: answer_error(s, r.error, "point delete: " + r.reason); return;
   }
   if (s.check_mode) {  // checked: nothing deleted, no file written
     answer_ok(s, s.dialect == Dialect::grbl ? "" : fmt("checked: point delete %s (check mode: nothing deleted)", name.c_str()));
     return;
   }
-  if (!cfg_.points_file.empty()) {
-    if (const std::string e = prog::save_points_file(cfg_.points_file, d); !e.empty()) {
-      answer_error(s, CmdError::storage, "point delete: " + e + "; nothing deleted, the file kept");
-      return;
-    }
-  }
-  points_ = std::move(d);
   answer_ok(s, "deleted " + name);
 }
 
 void Console::queue_at_point(Session& s, const Command& c) {
-  const std::string name(c.word.data());
-  const prog::TeachPoint* p = prog::find_point(points_, name);
-  if (p == nullptr) {
-    answer_error(s, CmdError::bad_option, fmt("%s: no point '%s' (%zu points: see points)", to_string(c.cmd), name.c_str(),
-                                              points_.points.size()));
-    return;
+  PointMove pm;
+  pm.name = c.word.data();
+  pm.line = c.cmd == Cmd::movel;
+  if (c.has_speed) pm.speed = pm.line ? cfg_.units.length_in(c.speed) : c.speed;
+  if (c.has_blend) pm.blend = pm.line ? cfg_.units.length_in(c.blend) : cfg_.units.angle_in(c.blend);
+  DryRun dry;
+  if (s.check_mode) dry = dry_run(s);
+  const PointResult r = svc_->move_to_point(pm, move_context(s.check_mode ? &dry : nullptr, nullptr));
+  switch (r.refusal) {
+    case PointRefusal::none: break;
+    case PointRefusal::no_point:
+      answer_error(s, r.error, fmt("%s: no point '%s' (%zu points: see points)", to_string(c.cmd), pm.name.c_str(), r.count));
+      return;
+    case PointRefusal::joint_count:
+      answer_error(s, r.error, fmt("%s: point '%s' has %d joints, the arm %d", to_string(c.cmd), pm.name.c_str(), r.joints, n_));
+      return;
+    case PointRefusal::not_here:
+    case PointRefusal::bad_point:
+    case PointRefusal::program:
+    case PointRefusal::storage: answer_error(s, r.error, std::string(to_string(c.cmd)) + ": " + r.reason); return;
   }
-  if (p->q.size() != n_) {
-    answer_error(s, CmdError::bad_option, fmt("%s: point '%s' has %d joints, the arm %d", to_string(c.cmd), name.c_str(),
-                                              int(p->q.size()), n_));
-    return;
-  }
-  if (c.cmd == Cmd::movej) {
-    MoveJoints m;
-    m.goal = p->q;
-    m.speed_pct = c.has_speed ? c.speed : motion().default_joint_speed_pct;
-    m.blend = c.has_blend ? cfg_.units.angle_in(c.blend) : -1.0;
-    queue(s, m);
-    return;
-  }
-  MoveLine m;
-  m.target = tcp(p->q);  // where the point's joints put the active tool, on a straight line
-  m.speed = c.has_speed ? cfg_.units.length_in(c.speed) : 0.0;
-  m.blend = c.has_blend ? cfg_.units.length_in(c.blend) : -1.0;
-  queue(s, m);
+  answer_move(s, pm.line ? "movel" : "movej", r.move, s.check_mode ? &dry : nullptr);
 }
 
 // ---------------------------------------------------------------------------
@@ -200,9 +177,9 @@ void Console::exec_step(Session& ps, const prog::Program& p, const prog::Program
                                         : cfg_.units.length_in(st.blend);
   sp.next_line = &st >= p.steps.data() && &st < p.steps.data() + p.steps.size() &&
                  prog::next_motion_is_line(p, static_cast<std::size_t>(&st - p.steps.data()));
-  if (st.point >= 0 && static_cast<std::size_t>(st.point) < points_.points.size() &&
-      points_.points[static_cast<std::size_t>(st.point)].q.size() == n_)
-    sp.point = &points_.points[static_cast<std::size_t>(st.point)].q;
+  const prog::PointsData& pts = svc_->points();
+  if (st.point >= 0 && static_cast<std::size_t>(st.point) < pts.points.size() && pts.points[static_cast<std::size_t>(st.point)].q.size() == n_)
+    sp.point = &pts.points[static_cast<std::size_t>(st.point)].q;
   ++ps.lines_done;
   ps.modal = st.modal;  // the G-code modal state after the line, as parsing it would leave it
   dispatch(ps, st.cmd, &sp);
@@ -244,7 +221,7 @@ void Console::do_run(Session& s, const Command& c) {
   ctx.chain = &chain_;
   ctx.units = cfg_.units;
   ctx.dir = cfg_.programs_dir;
-  ctx.points = &points_;
+  ctx.points = &svc_->points();
   if (const std::string e = prog::load_program(path, ctx, r->prog); !e.empty()) {
     answer_error(s, CmdError::program, e + "; nothing moved");
     return;
@@ -334,7 +311,7 @@ bool Console::continue_check() {
   }
   r->ps.name = "program " + name;
   run_ = std::move(r);
-  const ProgramResult started = svc_->run_program(spec_of(*run_), [this](std::size_t i) { return run_step(i); });
+  const ProgramResult started = svc_->run_program(name, run_->prog, cfg_.units);  // the typed steps, run by the service
   if (!started.ok()) {  // (checked above: the arm at rest, nothing queued, homed)
     answer_error(o, started.error, fmt("run: %s: %s; nothing moved", name.c_str(), to_string(started.refusal)));
     return false;
@@ -386,44 +363,6 @@ void Console::do_resume(Session& s) {
   } else {
     answer_ok(s, c.reason);
   }
-}
-
-ProgramSpec Console::spec_of(const ProgramRun& r) {
-  ProgramSpec sp;
-  sp.name = r.name;
-  sp.files = r.prog.files;
-  sp.steps.reserve(r.prog.steps.size());
-  for (const prog::ProgramStep& st : r.prog.steps) {
-    ProgramSpec::Step x;
-    x.file = st.file;
-    x.line = st.line;
-    switch (kind_of(st.cmd)) {
-      case StepKind::motion: x.kind = StepClass::motion; break;
-      case StepKind::needs_idle: x.kind = StepClass::needs_idle; break;
-      case StepKind::wait: x.kind = StepClass::wait; break;
-      case StepKind::other:
-      case StepKind::refused: x.kind = StepClass::other; break;  // (refused steps fail the check before a run)
-    }
-    sp.steps.push_back(x);
-  }
-  return sp;
-}
-
-StepOutcome Console::run_step(std::size_t i) {
-  StepOutcome o;
-  if (!run_ || i >= run_->prog.steps.size()) return o;
-  ProgramRun& r = *run_;
-  r.ps.out.clear();
-  exec_step(r.ps, r.prog, r.prog.steps[i]);
-  const std::string e = error_of(r.ps.out);  // "code: text"
-  if (e.empty()) return o;
-  const std::size_t colon = e.find(": ");
-  const std::string code = e.substr(0, colon);
-  o.error = CmdError::program;
-  for (int k = 0; k < 64; ++k)
-    if (code == to_string(static_cast<CmdError>(k))) o.error = static_cast<CmdError>(k);
-  o.reason = colon == std::string::npos ? std::string() : e.substr(colon + 2);
-  return o;
 }
 
 std::string Console::program_where() const {

@@ -155,7 +155,8 @@ class Console {
 
   /// Joint values of the end of the motion queue (or the commanded position).
   kin::JointVector tail() const;
-  const ConsoleConfig& config() const { return cfg_; }
+  /// The configuration: the console's own part, and the service's settings as they are now.
+  ConsoleConfig config() const;
   /// The canonical request of a movel or G0/G1 command (Cmd::movel, Cmd::gmove), from the queue's end.
   /// `from`: the joints relative G-code and a movel without orientation start from (default: tail()).
   MoveLine line_request(const Command& c, const kin::JointVector* from = nullptr) const;
@@ -187,7 +188,7 @@ class Console {
   /// Load the teach points of cfg.points_file (a missing file: none yet). Call once, before any
   /// line; "" or the error (file:line:column; armfw does not start, the file is kept).
   std::string load_points();
-  const prog::PointsData& points() const { return points_; }
+  const prog::PointsData& points() const { return svc_->points(); }
   /// The program runner and the recorder: feed the running program's next lines into the
   /// motion queue (one ahead of the running move), notice its end, a hold, a fault; take a
   /// record sample. Console thread; poll() and drain_events() call it. Never blocks.
@@ -274,8 +275,25 @@ class Console {
   };
   /// Run a parsed command (execute() after parsing; a program step as the loader parsed it).
   void dispatch(Session& s, const Command& c, const StepParams* step);
+  /// The command's family (dispatch() has refused moves while a program runs).
+  void run_command(Session& s, const Command& c, const StepParams* step);
+  void do_quit(Session& s);
+  void do_enable(Session& s);
+  /// disable, stop, e-stop: the program (and a pending check) ends as `how`, the M62/M63
+  /// changes waiting for a move are dropped (said as `what`), then the request.
+  void do_halt(Session& s, ProgramEnd how, const char* what, RequestOp op);
+  void do_abort(Session& s);
+  void do_switch(Session& s, const Command& c);  ///< freedrive on|off, collision on|off
+  void do_dynamics(Session& s);                  ///< `freedrive`
+  /// park, movej, movel, G0-G3 (teach points, a program step's point joints).
+  void do_move(Session& s, const Command& c, const StepParams* step);
+  void do_config(Session& s);
+  void do_position(Session& s);  ///< M114
   void queue(Session& s, const MoveLine& m, const StepParams* step);
   void queue(Session& s, const MoveJoints& m, const StepParams* step);
+  /// A move's result (`what`: movej, movel) as the answer: queued, checked (`dry`: the dry run
+  /// it was checked in, kept for the session), or the refusal.
+  void answer_move(Session& s, const char* what, const MoveResult& r, const DryRun* dry);
   /// joint_request(c), with a program step's point joints as the goal (movej @NAME).
   MoveJoints step_joint_request(const Command& c, const StepParams* step) const;
   /// What a move runs with: the mode (check mode: a dry run into `dry`), the executing session's
@@ -320,22 +338,17 @@ class Console {
   std::string grbl_position(const kin::JointVector& q) const;
   std::string grbl_wcs() const;  ///< "G54".."G59" for $G
   // Teach points and programs (console_program.cpp)
-  prog::PointsData points_;
-  /// A loaded program: its steps (the service's runner runs them through exec_step) and the
-  /// session they run in (modal state, answers).
+  /// A loaded program: its steps (checked here through exec_step, then run by the service's
+  /// own runner: ArmService::run_program(name, Program, units)) and the check's session.
   struct ProgramRun {
     std::string name;
     prog::Program prog;
-    Session ps;                 ///< the runner's own session
+    Session ps;                 ///< the program's session (moves from other sessions are refused while it runs)
   };
-  /// The program the service runs (kept while it runs: its StepExecutor runs these steps).
+  /// The program the service runs (kept while it runs).
   std::unique_ptr<ProgramRun> run_;
   /// True while the service runs a program (run_ holds it).
   bool running() const { return svc_->run_state() != RunState::idle; }
-  /// The service's program as the service describes it (names and places of its steps).
-  static ProgramSpec spec_of(const ProgramRun& r);
-  /// The service's StepExecutor: step i of run_ in its session; its error answer as the outcome.
-  StepOutcome run_step(std::size_t i);
   /// A `run` whose program is being checked: a slice of its steps at a time (settle()), so
   /// every transport is read between two slices. One at a time.
   struct PendingCheck {

@@ -38,6 +38,9 @@
 #include "servoarm/lang/commands.hpp"
 #include "servoarm/lang/frames.hpp"
 #include "servoarm/lang/requests.hpp"
+#include "servoarm/lang/units.hpp"
+#include "servoarm/program/points.hpp"
+#include "servoarm/program/program.hpp"
 #include "servoarm/rt/controller.hpp"
 
 namespace servoarm::fw {
@@ -548,6 +551,53 @@ struct TeachResult {
   bool ok() const { return error == CmdError::ok; }
 };
 
+/// What a teach-point request refused (PointResult::refusal); none: done.
+enum class PointRefusal : std::uint8_t {
+  none,
+  not_here,     ///< teach: the arm may not be taught now (`here` says why: teach_here's refusal)
+  bad_point,    ///< teach: the name or the values may not be stored, or the points are full (`reason`: put_point's line)
+  no_point,     ///< delete, go-to: no point of that name (`count` points)
+  joint_count,  ///< go-to: the point has `joints` joints, not the arm's
+  program,      ///< delete: a program runs (`here.program`)
+  storage,      ///< the points file could not be written (`reason`); nothing changed
+};
+const char* to_string(PointRefusal r);
+
+/// Teach a point (ArmService::teach): the arm's joints now, under `name`, with the pose and
+/// names of `tool` / `frame` (indices; the count of tools / frames: the active one); `dry`:
+/// checked only (nothing stored, no file written).
+struct TeachRequest {
+  std::string name;
+  std::size_t tool = static_cast<std::size_t>(-1);
+  std::size_t frame = static_cast<std::size_t>(-1);
+  bool dry = false;
+};
+
+/// Go to a point (ArmService::move_to_point): a joint move to its joints, or (`line`) a
+/// straight line to where its joints put the tool of the context's chain; speed and blend as
+/// in MoveJoints (percent) / MoveLine (m/s), SI.
+struct PointMove {
+  std::string name;
+  bool line = false;
+  double speed = -1;   ///< joint: percent of the joint limits; line: m/s; <= 0: the default
+  double blend = -1;   ///< rad (joint) / m (line); < 0: the default
+};
+
+/// The answer to a teach-point request: the point concerned, or what was refused.
+struct PointResult {
+  CmdError error = CmdError::ok;
+  PointRefusal refusal = PointRefusal::none;
+  std::string reason;
+  TeachResult here;             ///< teach, delete: the arm's place and state (teach_here())
+  prog::TeachPoint point;       ///< the point taught, deleted or gone to
+  bool replaced = false;        ///< teach: a point of that name was replaced
+  bool kept = false;            ///< the change is in the points file (false: no points file)
+  std::size_t count = 0;        ///< points after the request
+  int joints = 0;               ///< joint_count: the point's
+  MoveResult move;              ///< go-to: the move's result (refusal none: the point was found)
+  bool ok() const { return error == CmdError::ok; }
+};
+
 /// Every request the service takes, by one name each: a front end that speaks in messages
 /// (a network API) maps one message to one of these; `query` ones read and change nothing.
 /// kServiceOps lists each once, in this order (a test checks): the names live there only.
@@ -595,6 +645,10 @@ enum class ServiceOp : std::uint8_t {
   record_start,         ///< record_start(rate) -> RecordResult
   record_stop,          ///< record_path(tolerance), then record_stop() -> RecordResult
   teach_here,           ///< teach_here() -> TeachResult
+  points,               ///< points() -> the teach points
+  point_teach,          ///< teach(TeachRequest) -> PointResult
+  point_delete,         ///< delete_point(name, dry) -> PointResult
+  point_move,           ///< move_to_point(PointMove, MoveContext) -> PointResult
 };
 
 struct ServiceOpInfo {
@@ -646,6 +700,10 @@ inline constexpr ServiceOpInfo kServiceOps[] = {
     {ServiceOp::record_start, "record_start", false},
     {ServiceOp::record_stop, "record_stop", false},
     {ServiceOp::teach_here, "teach_here", true},
+    {ServiceOp::points, "points", true},
+    {ServiceOp::point_teach, "point_teach", false},
+    {ServiceOp::point_delete, "point_delete", false},
+    {ServiceOp::point_move, "point_move", false},
 };
 const char* to_string(ServiceOp op);
 /// The op named `name` (kServiceOps); false: none is.
@@ -716,6 +774,15 @@ class ArmService {
   /// every joint homed. A step refused, a fault, an e-stop, the arm disabled, jogging,
   /// homing or in free-drive, or the queue dropped ends it (a program event says how).
   ProgramResult run_program(ProgramSpec spec, StepExecutor exec);
+  /// Run a loaded program's typed steps (the parser made them once) on the service itself, no
+  /// front end in between: each step becomes its request in SI (`units`: the program's, for its
+  /// numbers; G-code files in mm and degrees) with its blend tolerance, teach point and whether
+  /// the next motion is a line. A refused step ends the program with its typed CmdError.
+  ProgramResult run_program(const std::string& name, prog::Program p, const ConsoleUnits& units);
+  /// Run step `i` of `p` now (what run_program feeds): ok, or the step's error and one line.
+  StepOutcome run_step(const prog::Program& p, std::size_t i, const ConsoleUnits& units);
+  /// The runner's view of a loaded program (each step's class and place).
+  static ProgramSpec spec_of(const std::string& name, const prog::Program& p);
   /// Pause (nothing more is fed; paused once the queued motions are done), step (a paused
   /// program runs one motion, a held move is resumed first), abort (ended now and the arm
   /// stopped; `why` says how it ends: abort, or a front end's stop / e-stop / disable /
@@ -781,6 +848,20 @@ class ArmService {
   /// arm at rest with nothing queued, every joint homed). A query: the front end keeps the
   /// point and goes back to it with a MoveJoints to its joints.
   TeachResult teach_here() const;
+
+  /// Teach points (program/points.hpp), kept in the points file (set by load_points; "" keeps
+  /// them in memory only) before a change is answered: a change the file refuses is not made.
+  /// load_points: "" or the file's one-line error (nothing loaded; a missing file: no points).
+  std::string load_points(const std::string& path);
+  const std::string& points_file() const { return points_file_; }
+  const prog::PointsData& points() const { return points_; }
+  /// Store the arm's place as point `rq.name` (refused as teach_here() refuses, except that a
+  /// dry run may teach an unhomed arm: it stores nothing).
+  PointResult teach(const TeachRequest& rq);
+  /// Delete point `name` (not while a program runs); `dry`: checked only.
+  PointResult delete_point(std::string_view name, bool dry = false);
+  /// Move to point `rq.name` (move(), real or dry run as `cx` says).
+  PointResult move_to_point(const PointMove& rq, const MoveContext& cx);
 
   /// Queries: they read and change nothing.
   ArmStatus status() const;
@@ -894,6 +975,8 @@ class ArmService {
                    std::string_view detail = {});
   bool program_ended_by_arm(const Telemetry& t);
   bool feed_program();
+  FrameResult step_frame(const fw::Command& c, const ConsoleUnits& u);
+  MoveResult step_move(const prog::Program& p, const prog::ProgramStep& st, const ConsoleUnits& u, const MoveContext& cx);
   std::unique_ptr<std::array<EventSlot, kEventRing>> ring_;  ///< slot seq % kEventRing
   std::uint64_t next_seq_ = 1;
   std::function<void()> idle_;
@@ -916,6 +999,9 @@ class ArmService {
   std::vector<NamedPose> frames_;
   std::size_t tool_ = 0, frame_ = 0;
   std::string frames_file_;
+  prog::PointsData points_;
+  std::string points_file_;
+  PointResult store_points(prog::PointsData d, PointResult r);
   const kin::IkModel* ik_ = nullptr;
   std::unique_ptr<ToolSlot> make_tool(const NamedPose& def) const;
   std::string save_frames() const;
