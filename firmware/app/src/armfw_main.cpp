@@ -31,6 +31,7 @@
 #endif
 #ifdef SERVOARM_WITH_SIM
 #include "servoarm/sim/sim_plant.hpp"  // --sim: the only firmware file that uses host_sim
+#include "servoarm/sim/mit_motor.hpp"
 #endif
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/lang/number.hpp"
@@ -450,6 +451,20 @@ int run_bench(App& app, double seconds) {
   return 0;
 }
 
+#ifdef SERVOARM_WITH_SIM
+/// The virtual buses of --sim, stepped by one RtLoop pre-cycle hook before each control cycle:
+/// the CiA 402 drives' plant (if any joint is CiA 402) and one MitPlant per MIT interface.
+struct SimPlants {
+  sim::SimPlant* cia = nullptr;
+  std::vector<sim::MitPlant*> mit;
+  static void step_hook(void* ctx, std::int64_t now_ns) {
+    auto* s = static_cast<SimPlants*>(ctx);
+    if (s->cia != nullptr) s->cia->step(now_ns);
+    for (sim::MitPlant* m : s->mit) m->step(now_ns);
+  }
+};
+#endif
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -646,6 +661,24 @@ int main(int argc, char** argv) {
     plant = std::make_unique<sim::SimPlant>(clock, nodes);
     return &plant->master_bus();
   };
+  // Drive groups of the MIT families: one MitPlant per interface, a virtual motor per joint
+  // from its [[drive]] table (model, id, master id, CAN FD).
+  std::vector<std::unique_ptr<sim::MitPlant>> mit_plants;
+  app.sim_group = [&mit_plants, &cfg](hal::Clock& clock, const DriveGroupPlan& p) -> hal::CanBus* {
+    std::vector<sim::MitMotorSpec> specs;
+    for (std::size_t k = 0; k < p.joints.size(); ++k) {
+      const DriveConfig& d = cfg.drives[static_cast<std::size_t>(p.joints[k])];
+      sim::MitMotorSpec s;
+      s.profile = hal::mit::find_profile(d.motor);
+      if (s.profile == nullptr) return nullptr;
+      s.id = p.ids[k];
+      s.master = static_cast<std::uint16_t>(mit_master_id(d, p.ids[k]));
+      s.fd = d.can_fd;
+      specs.push_back(s);
+    }
+    mit_plants.push_back(std::make_unique<sim::MitPlant>(clock, specs));
+    return &mit_plants.back()->master_bus();
+  };
 #else  // built without host_sim (robot-controller build): no virtual drives
   if (cfg.can == "sim") {
     std::fprintf(stderr, "armfw: bus.can = \"sim\" (--sim): this armfw was built without the virtual drives (host_sim)\n");
@@ -668,15 +701,19 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (plant) {
+  if (plant && mit_plants.empty()) {
     // Virtual drives start at the in-limit value closest to 0 (a prismatic joint whose
-    // range excludes 0 could otherwise never be enabled).
+    // range excludes 0 could otherwise never be enabled). Their drive i is joint i: with MIT
+    // joints on other buses that is not so, and they stay at 0.
     std::vector<hal::JointScaling> sc;
     for (std::size_t j = 0; j < app.servo->joint_count(); ++j) sc.push_back(app.servo->scaling(j));
     plant->place_within_limits(app.chain, sc);
+  }
+  if (plant) {
     plant->start_thread();  // the drives answer the bring-up's SDOs from their own thread
     sim_bus = &plant->bus();
   }
+  for (auto& m : mit_plants) m->start_thread();  // and the MIT motors the register reads
 #endif
   err = app.boot();
   if (!err.empty()) {
@@ -700,6 +737,9 @@ int main(int argc, char** argv) {
   lc.priority = app.cfg.priority;
   lc.cpu = app.cfg.cpu;
   lc.lock_memory = app.cfg.lock_memory;
+#ifdef SERVOARM_WITH_SIM
+  SimPlants sim_plants;
+#endif
   RtLoop loop(*app.ctl, lc);
 #ifdef SERVOARM_WITH_SIM
   if (plant) {
@@ -709,7 +749,13 @@ int main(int argc, char** argv) {
     plant->set_frames_at_arrival(true);  // the drives sample at the SYNC, not at the next cycle
     // a host that stalls the loop for more than two cycles pauses the virtual arm with it
     plant->set_pause_after(2 * static_cast<hal::Duration>(1e9 / app.cfg.rate_hz + 0.5));
-    loop.set_pre_cycle(&sim::SimPlant::step_hook, plant.get());
+  }
+  for (auto& m : mit_plants) m->stop_thread();
+  if (!mit_plants.empty() || plant) {
+    // One pre-cycle hook steps every virtual bus: the CiA 402 plant and each MIT plant.
+    sim_plants.cia = plant.get();
+    for (auto& m : mit_plants) sim_plants.mit.push_back(m.get());
+    loop.set_pre_cycle(&SimPlants::step_hook, &sim_plants);
   }
 #endif
   if (!loop.start()) {
