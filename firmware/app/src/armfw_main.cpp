@@ -26,6 +26,9 @@
 #include "servoarm/app/app.hpp"
 #ifdef SERVOARM_WITH_API
 #include "servoarm/api/server.hpp"  // the network API (optional: libwebsockets)
+#ifdef SERVOARM_WITH_MQTT
+#include "servoarm/api/mqtt.hpp"  // the MQTT bridge (optional: libmosquitto)
+#endif
 #include "servoarm/lang/ik_options.hpp"
 #include "servoarm/service/stream.hpp"
 #endif
@@ -778,12 +781,26 @@ int main(int argc, char** argv) {
   std::unique_ptr<NoApi> api_server;
   const int api_cx = 0;
 #endif
-  if (app.cfg.api_enabled || api_ws >= 0 || api_tcp >= 0) {
+#ifdef SERVOARM_WITH_MQTT
+  std::unique_ptr<api::MqttBridge> mqtt;
+#else
+  std::unique_ptr<NoApi> mqtt;
+#endif
+  const bool want_api = app.cfg.api_enabled || api_ws >= 0 || api_tcp >= 0;
+  if (want_api || app.cfg.mqtt_enabled) {
 #ifndef SERVOARM_WITH_API
-    std::fprintf(stderr, "armfw: built without the network API (libwebsockets-dev, nlohmann-json3-dev)\n");
+    std::fprintf(stderr, "armfw: built without the network API (libwebsockets-dev, nlohmann-json3-dev)%s\n",
+                 want_api ? "" : ": mqtt.enabled needs it");
     loop.stop();
     return 2;
 #else
+#ifndef SERVOARM_WITH_MQTT
+    if (app.cfg.mqtt_enabled) {
+      std::fprintf(stderr, "armfw: mqtt.enabled: built without the MQTT bridge (libmosquitto-dev)\n");
+      loop.stop();
+      return 2;
+    }
+#endif
     api::ApiConfig ac;
     ac.bind = app.cfg.api_bind;
     const bool flags = api_ws >= 0 || api_tcp >= 0;  // the flags name the ports: only those listen
@@ -797,12 +814,14 @@ int main(int argc, char** argv) {
     ac.partial_timeout_s = app.cfg.api_partial_timeout_s;
     ac.rate_hz = app.cfg.rate_hz;
     ac.robot = app.cfg.robot;
-    api_server = std::make_unique<api::ApiServer>(ac, *app.ctl, app.chain, app.ctl->limits());
-    const std::string e = api_server->start();
-    if (!e.empty()) {
-      std::fprintf(stderr, "armfw: %s\n", e.c_str());
-      loop.stop();
-      return 2;
+    if (want_api) {
+      api_server = std::make_unique<api::ApiServer>(ac, *app.ctl, app.chain, app.ctl->limits());
+      const std::string e = api_server->start();
+      if (!e.empty()) {
+        std::fprintf(stderr, "armfw: %s\n", e.c_str());
+        loop.stop();
+        return 2;
+      }
     }
     api_cx.svc = &app.console->service();
     api_cx.ctl = app.ctl.get();
@@ -814,10 +833,46 @@ int main(int argc, char** argv) {
     for (int j = 0; j < app.chain.n_joints; ++j) ss.max_step.push_back(kConfigUnits.joint_in(app.chain, j, app.cfg.api_stream_max_step_deg));
     stream = std::make_unique<StreamService>(app.console->service(), *app.ctl, ss);
     api_cx.stream = stream.get();
-    std::fprintf(stderr, "armfw: api: WebSocket port %d, TCP port %d on %s\n", api_server->ws_port(), api_server->tcp_port(),
-                 ac.bind.c_str());
+    if (api_server)
+      std::fprintf(stderr, "armfw: api: WebSocket port %d, TCP port %d on %s\n", api_server->ws_port(),
+                   api_server->tcp_port(), ac.bind.c_str());
+#ifdef SERVOARM_WITH_MQTT
+    if (app.cfg.mqtt_enabled) {
+      api::MqttConfig mc;
+      mc.host = app.cfg.mqtt_host;
+      mc.port = app.cfg.mqtt_port;
+      mc.name = app.cfg.mqtt_name;
+      mc.username = app.cfg.mqtt_username;
+      mc.password_file = app.cfg.mqtt_password_file;
+      mc.cafile = app.cfg.mqtt_cafile;
+      mc.certfile = app.cfg.mqtt_certfile;
+      mc.keyfile = app.cfg.mqtt_keyfile;
+      mc.state_rate_hz = app.cfg.mqtt_state_rate_hz;
+      mc.keepalive_s = app.cfg.mqtt_keepalive_s;
+      mc.rate_hz = app.cfg.rate_hz;
+      mqtt = std::make_unique<api::MqttBridge>(mc, *app.ctl, app.chain);
+      const std::string e = mqtt->start();
+      if (!e.empty()) {
+        std::fprintf(stderr, "armfw: %s\n", e.c_str());
+        loop.stop();
+        return 2;
+      }
+      std::fprintf(stderr, "armfw: mqtt: servoarm/%s/ at %s:%d\n", mc.name.c_str(), mc.host.c_str(), mc.port);
+    }
+#endif
 #endif
   }
+  // The API's and the MQTT bridge's requests run here, on the console thread (the service's one caller).
+  const auto pump_network = [&] {
+    if (api_server) api_server->pump(api_cx);
+#ifdef SERVOARM_WITH_MQTT
+    if (mqtt) mqtt->pump(api_cx, api_server.get());
+#endif
+  };
+  const auto network_fds = [&](std::vector<pollfd>& pf) {
+    if (api_server) pf.push_back({api_server->wake_fd(), POLLIN, 0});
+    if (mqtt) pf.push_back({mqtt->wake_fd(), POLLIN, 0});
+  };
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
   signal(SIGPIPE, SIG_IGN);
@@ -882,7 +937,7 @@ int main(int argc, char** argv) {
       if (rc == 0 && !ts.empty()) {
         std::fprintf(stderr, "armfw: %s ready (%d joints, %.0f Hz); type help\n", app.cfg.robot.c_str(), app.chain.n_joints,
                      app.cfg.rate_hz);
-        if (!api_server) {
+        if (!api_server && !mqtt) {
           serve_consoles(*app.console, ts, app.cfg.console_stdin, &g_quit);
         } else {
           // Consoles and the API on one thread: wait for console input or API requests (at most
@@ -890,23 +945,25 @@ int main(int argc, char** argv) {
           ConsoleServer srv(*app.console, ts);
           for (;;) {
             if (g_quit) break;
-            std::vector<pollfd> pf{{api_server->wake_fd(), POLLIN, 0}};
+            std::vector<pollfd> pf;
+            network_fds(pf);
             for (const FdTransport* t : ts) {
               if (t->rd >= 0 && !t->eof && !t->no_peer) pf.push_back({t->rd, POLLIN, 0});
               if (t->wr >= 0 && !t->pending.empty()) pf.push_back({t->wr, POLLOUT, 0});
             }
             ::poll(pf.data(), pf.size(), 10);
-            api_server->pump(api_cx);
+            pump_network();
             if (!srv.round(0, app.cfg.console_stdin)) break;
           }
         }
-      } else if (rc == 0 && api_server) {
+      } else if (rc == 0 && (api_server || mqtt)) {
         std::fprintf(stderr, "armfw: %s ready (%d joints, %.0f Hz); API only\n", app.cfg.robot.c_str(), app.chain.n_joints,
                      app.cfg.rate_hz);
         while (!g_quit) {
-          pollfd pf{api_server->wake_fd(), POLLIN, 0};
-          ::poll(&pf, 1, 10);
-          api_server->pump(api_cx);
+          std::vector<pollfd> pf;
+          network_fds(pf);
+          ::poll(pf.data(), pf.size(), 10);
+          pump_network();
         }
       }
       can.stop();
@@ -914,6 +971,7 @@ int main(int argc, char** argv) {
   }
   // Shut down: stop motion, power down, stop the loop, statistics at exit.
   if (api_server) api_server->stop();
+  if (mqtt) mqtt->stop();
   {
     Session s;
     app.console->execute(s, "stop");
