@@ -784,7 +784,11 @@ int main(int argc, char** argv) {
 #ifdef SERVOARM_WITH_MQTT
   std::unique_ptr<api::MqttBridge> mqtt;
 #else
-  std::unique_ptr<NoApi> mqtt;
+  struct NoMqtt {
+    int wake_fd() const { return -1; }
+    void stop() {}
+  };
+  std::unique_ptr<NoMqtt> mqtt;
 #endif
   const bool want_api = app.cfg.api_enabled || api_ws >= 0 || api_tcp >= 0;
   if (want_api || app.cfg.mqtt_enabled) {
