@@ -30,15 +30,17 @@ import time
 def start(exe, extra=()):
     p = subprocess.Popen([exe, "--sim", "--no-stdin", "--api-tcp", "0", *extra], stderr=subprocess.PIPE,
                          stdout=subprocess.DEVNULL, text=True)
-    pty = None
+    pty, port = None, 0
     for line in p.stderr:
         m = re.search(r"console pty: (\S+)", line)
         if m:
             pty = m.group(1)
         m = re.search(r"TCP port (\d+)", line)
         if m:
+            port = int(m.group(1))
+        if port and (pty or "--pty" not in extra):
             threading.Thread(target=lambda: [None for _ in p.stderr], daemon=True).start()
-            return (p, int(m.group(1)), pty) if extra else (p, int(m.group(1)))
+            return (p, port, pty) if extra else (p, port)
     raise RuntimeError("armfw did not start")
 
 
