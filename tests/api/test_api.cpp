@@ -124,8 +124,9 @@ struct Rig {
   std::thread pump_th;
   std::atomic<bool> stop{false};
 
-  explicit Rig(api::ApiConfig ac = {}) {
+  explicit Rig(api::ApiConfig ac = {}, bool collision = false) {
     FwConfig cfg;
+    cfg.collision = collision;  // the drives map their measured torque (6077h) then
     cfg.can = "sim";
     cfg.priority = 0;
     cfg.lock_memory = false;
@@ -219,6 +220,48 @@ TEST(FwApi, RequestAndResultRoundTrip) {
   CHECK_EQUAL(1u, rig.tel().done_id);
   const std::string s = c.ask(3, "\"cmd\":\"state\"");
   CHECK_TEXT(is_ok(s) && has(s, "\"cycle\":") && has(s, "\"q_cmd\":[0.2") && has(s, "\"tool\":"), s.c_str());
+}
+
+// The state stream carries what the drives measure: joint velocity (follows the commanded one
+// during a move) and torque (a number where the drive maps 6077h, null where it does not; the
+// first-order plant's drives report 0), beside the setpoints.
+TEST(FwApi, StateCarriesMeasuredVelocityAndTorque) {
+  Rig rig({}, true);
+  Client c(rig.port());
+  // the observer off (the first-order plant has no arm dynamics to match): 6077h stays mapped
+  CHECK(is_ok(c.ask(3, "\"cmd\":\"take_control\"")));
+  const std::string off = c.ask(4, "\"cmd\":\"collision\",\"on\":false");
+  CHECK_TEXT(is_ok(off), off.c_str());
+  rig.enable(c);
+  CHECK(is_ok(c.ask(1, "\"cmd\":\"subscribe\",\"topic\":\"state\",\"rate_hz\":200")));
+  CHECK(is_ok(c.ask(2, "\"cmd\":\"movej\",\"q\":[0.5,0,0,0,0,0],\"speed_pct\":50")));
+  const std::regex qd("\"qd\":\\[([-0-9.e]+)"), qdc("\"qd_cmd\":\\[([-0-9.e]+)"),
+      tau("\"torque\":\\[((null|[-0-9.e]+)(,(null|[-0-9.e]+)){5})\\]");
+  double max_qd = 0, max_qdc = 0, max_tau = 0;
+  int samples = 0, with_tau = 0;
+  const double end = now_s() + 20;
+  while (now_s() < end && (rig.tel().done_id < 1 || samples < 50)) {
+    const std::string l = c.line(1);
+    if (!has(l, "\"topic\":\"state\"")) continue;
+    ++samples;
+    std::smatch m;
+    CHECK_TEXT(std::regex_search(l, m, qd), l.c_str());
+    max_qd = std::max(max_qd, std::fabs(std::stod(m[1].str())));
+    CHECK_TEXT(std::regex_search(l, m, qdc), l.c_str());
+    max_qdc = std::max(max_qdc, std::fabs(std::stod(m[1].str())));
+    CHECK_TEXT(std::regex_search(l, m, tau), l.c_str());
+    if (m[2].str() != "null") ++with_tau, max_tau = std::max(max_tau, std::fabs(std::stod(m[2].str())));
+  }
+  CHECK(samples >= 50);
+  // the measured velocity is the drive's, not the setpoint's: near it at the top of the move
+  CHECK_TEXT(max_qd > 0.5 * max_qdc && max_qd < 1.5 * max_qdc, (std::to_string(max_qd) + " " + std::to_string(max_qdc)).c_str());
+  CHECK_TEXT(with_tau == samples, std::to_string(with_tau).c_str());
+  CHECK_TEXT(std::isfinite(max_tau), std::to_string(max_tau).c_str());
+  // drives that do not report their torque (6077h not mapped): null, not a measured 0
+  Rig plain;
+  Client p(plain.port());
+  const std::string st = p.ask(5, "\"cmd\":\"state\"");
+  CHECK_TEXT(has(st, "\"torque\":[null,null,null,null,null,null]"), st.c_str());
 }
 
 // Bad input: every message gets one error naming what is wrong, and nothing moves.

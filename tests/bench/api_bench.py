@@ -6,8 +6,17 @@ thread, and a service message run on the console thread), the state stream's del
 and interval jitter at 1 kHz with 8 subscribers, and a console `state`-free baseline: the
 round trip of a stop (service thread, control thread's reply).
 
-  python3 tests/bench/api_bench.py build/bin/armfw
+With --stream: streaming targets (a sine and a hand-like motion at 30 / 100 / 500 Hz with
++-5 ms jitter) tracked by the arm, against a naive client-side linear interpolation of the same
+targets computed in the same run; the deadman's stop distance; the pty console's round trip next
+to the API's; the e-stop's time to the arm's stop while another client floods requests.
+
+  python3 tests/bench/api_bench.py build/bin/armfw [--stream]
 """
+import math
+import os
+import random
+import termios
 import json
 import re
 import socket
@@ -18,14 +27,20 @@ import threading
 import time
 
 
-def start(exe):
-    p = subprocess.Popen([exe, "--sim", "--no-stdin", "--api-tcp", "0"], stderr=subprocess.PIPE,
+def start(exe, extra=()):
+    p = subprocess.Popen([exe, "--sim", "--no-stdin", "--api-tcp", "0", *extra], stderr=subprocess.PIPE,
                          stdout=subprocess.DEVNULL, text=True)
+    pty, port = None, 0
     for line in p.stderr:
+        m = re.search(r"console pty: (\S+)", line)
+        if m:
+            pty = m.group(1)
         m = re.search(r"TCP port (\d+)", line)
         if m:
+            port = int(m.group(1))
+        if port and (pty or "--pty" not in extra):
             threading.Thread(target=lambda: [None for _ in p.stderr], daemon=True).start()
-            return p, int(m.group(1))
+            return (p, port, pty) if extra else (p, port)
     raise RuntimeError("armfw did not start")
 
 
@@ -76,7 +91,276 @@ def stream_rate(port, subs, seconds):
     return res
 
 
+class Api:
+    """One connection: requests answered by id; state samples and events kept by a reader thread."""
+
+    def __init__(self, port):
+        self.s, self.f = conn(port)
+        self.lock = threading.Lock()
+        self.answers = {}
+        self.states = []  # (wall time received, sample)
+        self.cv = threading.Condition(self.lock)
+        self.n = 0
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.f:
+            t = time.perf_counter()
+            m = json.loads(line)
+            with self.cv:
+                if m.get("topic") == "state":
+                    self.states.append((t, m))
+                elif "id" in m:
+                    self.answers[m["id"]] = (t, m)
+                    self.cv.notify_all()
+
+    def send(self, cmd, **kw):
+        with self.lock:
+            self.n += 1
+            i = self.n
+        self.s.sendall((json.dumps({"id": i, "cmd": cmd, **kw}) + "\n").encode())
+        return i
+
+    def ask(self, cmd, timeout=10, **kw):
+        i = self.send(cmd, **kw)
+        with self.cv:
+            self.cv.wait_for(lambda: i in self.answers, timeout)
+            return self.answers.get(i, (0, {}))[1]
+
+
+def wait_idle(a, timeout=20):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if a.ask("state").get("state") == "idle":
+            return
+        time.sleep(0.02)
+
+
+def sine(t):
+    return 0.4 * math.sin(2 * math.pi * 0.5 * t)
+
+
+def hand(t):
+    # a recorded-looking hand motion: slow reach, tremor-free corrections, a quick flick
+    return (0.3 * math.sin(2 * math.pi * 0.25 * t) + 0.08 * math.sin(2 * math.pi * 1.3 * t + 1.0)
+            + 0.03 * math.sin(2 * math.pi * 3.1 * t + 2.0) + 0.1 * math.tanh(4 * (t - 2.0)))
+
+
+def peaks(ts, xs, lim):
+    """Peak |v|, |a|, |j| of x(t) on a 1 ms grid (linear interpolation of the samples), as fractions of lim."""
+    if len(ts) < 4:
+        return (0, 0, 0)
+    t0, t1 = ts[0], ts[-1]
+    n = int((t1 - t0) * 1000)
+    g, k = [], 0
+    for i in range(n):
+        t = t0 + i * 1e-3
+        while k + 1 < len(ts) - 1 and ts[k + 1] < t:
+            k += 1
+        u = (t - ts[k]) / (ts[k + 1] - ts[k]) if ts[k + 1] > ts[k] else 0
+        g.append(xs[k] + u * (xs[k + 1] - xs[k]))
+    v = [(b - a) / 1e-3 for a, b in zip(g, g[1:])]
+    acc = [(b - a) / 1e-3 for a, b in zip(v, v[1:])]
+    j = [(b - a) / 1e-3 for a, b in zip(acc, acc[1:])]
+    return tuple(max(map(abs, x or [0])) / l for x, l in ((v, lim[0]), (acc, lim[1]), (j, lim[2])))
+
+
+def setpoint_peaks(ts, v, lim):
+    """Peak |a| (5 ms steps) and |j| (10 ms steps) of the velocity samples v(t), as fractions of lim."""
+    def grid(ts, xs, h):
+        out, k, t = [], 0, ts[0]
+        while t < ts[-1]:
+            while k + 1 < len(ts) - 1 and ts[k + 1] < t:
+                k += 1
+            u = (t - ts[k]) / (ts[k + 1] - ts[k]) if ts[k + 1] > ts[k] else 0
+            out.append(xs[k] + u * (xs[k + 1] - xs[k]))
+            t += h
+        return out
+    a = [(b - c) / 5e-3 for c, b in zip(grid(ts, v, 5e-3), grid(ts, v, 5e-3)[1:])]
+    ta = [ts[0] + (i + 0.5) * 5e-3 for i in range(len(a))]
+    a10 = grid(ta, a, 10e-3)
+    j = [(b - c) / 10e-3 for c, b in zip(a10, a10[1:])]
+    return max(map(abs, a or [0])) / lim[1], max(map(abs, j or [0])) / lim[2]
+
+
+def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005):
+    a = Api(port)
+    a.ask("take_control")
+    a.ask("enable")
+    wait_idle(a)
+    a.ask("movej", q=[fn(0), 0, 0, 0, 0, 0], speed_pct=50)
+    wait_idle(a)
+    a.ask("subscribe", topic="state", rate_hz=1000)
+    sent = []
+    # send times on an absolute timeline: k / rate, each moved by up to +-jitter (kept in order)
+    plan, prev = [], 0.0
+    for k in range(int(seconds * rate)):
+        prev = max(prev, k / rate + random.uniform(-jitter, jitter))
+        plan.append(prev)
+    t0 = time.perf_counter() + 0.01
+    for k, ts in enumerate(plan):
+        d = t0 + ts - time.perf_counter()
+        if d > 0:
+            time.sleep(d)
+        t = time.perf_counter() - t0
+        x = fn(t)
+        a.send("stream", q=[x, 0, 0, 0, 0, 0], **({"start": True} if k == 0 else {}))
+        sent.append((t0 + t, x))
+    time.sleep(0.5)
+    with a.lock:
+        st = [(t, m) for t, m in a.states if t >= t0]
+    a.ask("stop")
+    wait_idle(a)
+    a.ask("release_control")
+    a.s.close()
+    # the arm's samples on the RT clock, placed on the wall clock by the earliest arrival
+    off = min(t - m["cycle"] / 1000.0 for t, m in st)
+    at = [m["cycle"] / 1000.0 + off for _, m in st]
+    q = [m["q"][0] for _, m in st]
+    qc = [m["q_cmd"][0] for _, m in st]
+    # lag: the shift of the ideal signal that best matches the measured joint (0..400 ms)
+    win = [(t, x) for t, x in zip(at, q) if t0 + 0.5 < t < t0 + seconds]
+    best = min(range(0, 401, 2), key=lambda d: sum((x - fn(t - t0 - d * 1e-3)) ** 2 for t, x in win))
+    err = max(abs(x - fn(t - t0 - best * 1e-3)) for t, x in win)
+    # the naive client: linear interpolation from the target before to the newest, over one period
+    nt = [t for t, _ in sent]
+    nx = [x for _, x in sent]
+    ngrid = [(t0 + 0.5 + i * 1e-3) for i in range(int((seconds - 0.5) * 1000))]
+    nq, k = [], 0
+    for t in ngrid:
+        while k + 1 < len(nt) and nt[k + 1] <= t:
+            k += 1
+        if k == 0:
+            nq.append(nx[0])
+            continue
+        per = nt[k] - nt[k - 1]
+        u = min(1.0, (t - nt[k]) / per) if per > 0 else 1.0
+        nq.append(nx[k - 1] + u * (nx[k] - nx[k - 1]))
+    nbest = min(range(0, 401, 2), key=lambda d: sum((x - fn(t - t0 - d * 1e-3)) ** 2 for t, x in zip(ngrid, nq)))
+    nerr = max(abs(x - fn(t - t0 - nbest * 1e-3)) for t, x in zip(ngrid, nq))
+    # the arm's setpoints: velocity as commanded (qd_cmd), acceleration and jerk from it on 5 / 10 ms
+    # steps (the samples are not every cycle: finer differences would show the gaps, not the arm)
+    qdc = [m["qd_cmd"][0] for _, m in st]
+    pk = (max(map(abs, qdc)) / lim[0],) + setpoint_peaks(at, qdc, lim)
+    return dict(lag=best, err=err, pk=pk, nlag=nbest, nerr=nerr, npk=peaks(ngrid, nq, lim),
+                samples=len(st), targets=len(sent))
+
+
+def deadman(port, lim):
+    a = Api(port)
+    a.ask("take_control")
+    wait_idle(a)
+    a.ask("subscribe", topic="state", rate_hz=1000)
+    t0 = time.perf_counter()
+    first, last = True, 0.0
+    while time.perf_counter() - t0 < 1.0:  # 0.5 rad/s ramp at 100 Hz, then silence
+        last = 0.5 * (time.perf_counter() - t0)
+        a.send("stream", q=[last, 0, 0, 0, 0, 0], **({"start": True} if first else {}))
+        first = False
+        time.sleep(0.01)
+    t_last = time.perf_counter()
+    time.sleep(1.0)
+    with a.lock:
+        st = [(t, m) for t, m in a.states if t >= t_last]
+    rest = next((t, m) for t, m in st if not m["streaming"] and all(abs(v) < 1e-9 for v in m["qd_cmd"]))
+    a.ask("release_control")
+    a.s.close()
+    return rest[1]["q_cmd"][0] - last, (rest[0] - t_last) * 1e3
+
+
+def pty_roundtrips(path, n):
+    fd = os.open(path, os.O_RDWR | os.O_NOCTTY)
+    at = termios.tcgetattr(fd)
+    at[3] &= ~(termios.ECHO | termios.ICANON)
+    termios.tcsetattr(fd, termios.TCSANOW, at)
+    buf, out = b"", []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        os.write(fd, b"status\n")
+        while b"\n" not in buf:
+            buf += os.read(fd, 4096)
+        line, buf = buf.split(b"\n", 1)
+        out.append((time.perf_counter() - t0) * 1e3)
+    os.close(fd)
+    out.sort()
+    return statistics.median(out), out[int(0.99 * len(out)) - 1]
+
+
+def estop_under_flood(port):
+    flood_n = [0]
+    stop = threading.Event()
+
+    def flood():
+        s, f = conn(port)
+        threading.Thread(target=lambda: [None for _ in f], daemon=True).start()
+        batch = b"".join(b'{"id":%d,"cmd":"state"}\n' % i for i in range(100))
+        t0 = time.perf_counter()
+        while not stop.is_set():
+            s.sendall(batch)
+            flood_n[0] += 100
+            d = t0 + flood_n[0] / 10000.0 - time.perf_counter()
+            if d > 0:
+                time.sleep(d)
+        s.close()
+
+    a = Api(port)
+    a.ask("take_control")
+    a.ask("reset")
+    a.ask("enable")
+    wait_idle(a)
+    a.ask("subscribe", topic="state", rate_hz=1000)
+    th = threading.Thread(target=flood, daemon=True)
+    tf = time.perf_counter()
+    th.start()
+    a.ask("movej", q=[1.0, 0, 0, 0, 0, 0], speed_pct=30)
+    time.sleep(0.5)
+    t0 = time.perf_counter()
+    i = a.send("estop")
+    time.sleep(0.5)
+    stop.set()
+    th.join()
+    rate = flood_n[0] / (time.perf_counter() - tf)
+    with a.lock:
+        ans = a.answers.get(i, (0, {}))[0]
+        st = [(t, m) for t, m in a.states if t >= t0]
+    seen = next(((t, m) for t, m in st if m["state"] != "moving"), None)
+    cyc0 = next((m["cycle"] for t, m in st), 0)
+    a.s.close()
+    return (ans - t0) * 1e3, ((seen[0] - t0) * 1e3 if seen else -1), (seen[1]["state"] if seen else "?"), rate
+
+
+def stream_main(exe):
+    p, port, pty = start(exe, ("--pty",))
+    try:
+        time.sleep(1)
+        h = Api(port)
+        j0 = h.ask("hello")["joints"][0]
+        h.s.close()
+        lim = (j0["max_velocity"], j0["max_acceleration"], j0["max_jerk"])
+        print(f"joint 1 limits: v {lim[0]:.3f} rad/s, a {lim[1]:.3f} rad/s^2, j {lim[2]:.1f} rad/s^3")
+        for name, fn in (("sine", sine), ("hand", hand)):
+            for rate in (30, 100, 500):
+                r = stream_run(port, lim, fn, rate)
+                print(f"{name} {rate:3d} Hz: targets {r['targets']}, samples {r['samples']}; stream: lag {r['lag']} ms, "
+                      f"max error {r['err']:.4f} rad, peak v/a/j {r['pk'][0]:.2f}/{r['pk'][1]:.2f}/{r['pk'][2]:.2f}; "
+                      f"naive interpolation: lag {r['nlag']} ms, max error {r['nerr']:.4f} rad, peak v/a/j "
+                      f"{r['npk'][0]:.2f}/{r['npk'][1]:.2f}/{r['npk'][2]:.2f}")
+        d, ms = deadman(port, lim)
+        print(f"deadman: 0.5 rad/s stream stopped: rest {d * 1000:.1f} mrad beyond the last target, {ms:.0f} ms after it")
+        med, p99 = roundtrips(port, "events", 1000)
+        print(f"round trip API events: median {med:.3f} ms, p99 {p99:.3f} ms (1000)")
+        med, p99 = pty_roundtrips(pty, 1000)
+        print(f"round trip pty status: median {med:.3f} ms, p99 {p99:.3f} ms (1000)")
+        ans, seen, state, rate = estop_under_flood(port)
+        print(f"estop with a {rate:.0f} req/s flood: answered after {ans:.2f} ms, state stream shows {state} after {seen:.2f} ms")
+    finally:
+        p.terminate()
+        p.wait()
+
+
 def main():
+    if "--stream" in sys.argv:
+        return stream_main(next((x for x in sys.argv[1:] if not x.startswith("--")), "build/bin/armfw"))
     p, port = start(sys.argv[1] if len(sys.argv) > 1 else "build/bin/armfw")
     try:
         time.sleep(1)

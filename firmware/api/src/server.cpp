@@ -105,7 +105,7 @@ struct ApiServer::Impl {
   int efd = -1;
   std::uint64_t next_client = 1;
   std::map<std::uint64_t, std::unique_ptr<Client>> clients;  // network thread only
-  std::uint64_t controller = 0;                              // network thread only
+  std::atomic<std::uint64_t> controller{0};                  // written by the network thread only
   int tfd = -1;             ///< timerfd of the state streams (µs resolution; poll's ms would halve 1 kHz)
   bool timer_armed = false;
   // network thread -> service thread
@@ -232,7 +232,7 @@ struct ApiServer::Impl {
     if (m.gate == Gate::control && controller != c.id) {
       if (controller == 0) return answer_error(c, rq, to_string(ApiError::not_in_control), std::string(m.name) + ": take_control first");
       return answer_error(c, rq, to_string(ApiError::controlled),
-                          std::string(m.name) + ": client " + std::to_string(controller) + " holds control");
+                          std::string(m.name) + ": client " + std::to_string(controller.load()) + " holds control");
     }
     if (m.where == Where::service) {
       {
@@ -263,7 +263,7 @@ struct ApiServer::Impl {
       h.rate_hz = cfg.rate_hz;
       h.role = role_name(c.role);
       h.client = c.id;
-      h.controller = controller;
+      h.controller = controller.load();
       return send(c, hello_line(rq, h, chain, limits), true);
     }
     if (name == "subscribe" || name == "unsubscribe") {
@@ -292,7 +292,7 @@ struct ApiServer::Impl {
     }
     if (name == "take_control") {
       if (controller != 0 && controller != c.id)
-        return answer_error(c, rq, to_string(ApiError::controlled), "client " + std::to_string(controller) + " holds control");
+        return answer_error(c, rq, to_string(ApiError::controlled), "client " + std::to_string(controller.load()) + " holds control");
       send(c, ok_line(rq), true);
       if (controller != c.id) set_controller(c.id);
       return;
@@ -689,5 +689,7 @@ std::size_t ApiServer::pump(ServiceContext& cx) {
   }
   return ran;
 }
+
+std::uint64_t ApiServer::controller() const { return impl_->controller.load(); }
 
 }  // namespace servoarm::api

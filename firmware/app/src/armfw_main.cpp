@@ -26,11 +26,15 @@
 #include "servoarm/app/app.hpp"
 #ifdef SERVOARM_WITH_API
 #include "servoarm/api/server.hpp"  // the network API (optional: libwebsockets)
+#ifdef SERVOARM_WITH_MQTT
+#include "servoarm/api/mqtt.hpp"  // the MQTT bridge (optional: libmosquitto)
+#endif
 #include "servoarm/lang/ik_options.hpp"
 #include "servoarm/service/stream.hpp"
 #endif
 #ifdef SERVOARM_WITH_SIM
 #include "servoarm/sim/sim_plant.hpp"  // --sim: the only firmware file that uses host_sim
+#include "servoarm/sim/mit_motor.hpp"
 #endif
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/lang/number.hpp"
@@ -450,6 +454,20 @@ int run_bench(App& app, double seconds) {
   return 0;
 }
 
+#ifdef SERVOARM_WITH_SIM
+/// The virtual buses of --sim, stepped by one RtLoop pre-cycle hook before each control cycle:
+/// the CiA 402 drives' plant (if any joint is CiA 402) and one MitPlant per MIT interface.
+struct SimPlants {
+  sim::SimPlant* cia = nullptr;
+  std::vector<sim::MitPlant*> mit;
+  static void step_hook(void* ctx, std::int64_t now_ns) {
+    auto* s = static_cast<SimPlants*>(ctx);
+    if (s->cia != nullptr) s->cia->step(now_ns);
+    for (sim::MitPlant* m : s->mit) m->step(now_ns);
+  }
+};
+#endif
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -646,6 +664,24 @@ int main(int argc, char** argv) {
     plant = std::make_unique<sim::SimPlant>(clock, nodes);
     return &plant->master_bus();
   };
+  // Drive groups of the MIT families: one MitPlant per interface, a virtual motor per joint
+  // from its [[drive]] table (model, id, master id, CAN FD).
+  std::vector<std::unique_ptr<sim::MitPlant>> mit_plants;
+  app.sim_group = [&mit_plants, &cfg](hal::Clock& clock, const DriveGroupPlan& p) -> hal::CanBus* {
+    std::vector<sim::MitMotorSpec> specs;
+    for (std::size_t k = 0; k < p.joints.size(); ++k) {
+      const DriveConfig& d = cfg.drives[static_cast<std::size_t>(p.joints[k])];
+      sim::MitMotorSpec s;
+      s.profile = hal::mit::find_profile(d.motor);
+      if (s.profile == nullptr) return nullptr;
+      s.id = p.ids[k];
+      s.master = static_cast<std::uint16_t>(mit_master_id(d, p.ids[k]));
+      s.fd = d.can_fd;
+      specs.push_back(s);
+    }
+    mit_plants.push_back(std::make_unique<sim::MitPlant>(clock, specs));
+    return &mit_plants.back()->master_bus();
+  };
 #else  // built without host_sim (robot-controller build): no virtual drives
   if (cfg.can == "sim") {
     std::fprintf(stderr, "armfw: bus.can = \"sim\" (--sim): this armfw was built without the virtual drives (host_sim)\n");
@@ -668,15 +704,19 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (plant) {
+  if (plant && mit_plants.empty()) {
     // Virtual drives start at the in-limit value closest to 0 (a prismatic joint whose
-    // range excludes 0 could otherwise never be enabled).
+    // range excludes 0 could otherwise never be enabled). Their drive i is joint i: with MIT
+    // joints on other buses that is not so, and they stay at 0.
     std::vector<hal::JointScaling> sc;
     for (std::size_t j = 0; j < app.servo->joint_count(); ++j) sc.push_back(app.servo->scaling(j));
     plant->place_within_limits(app.chain, sc);
+  }
+  if (plant) {
     plant->start_thread();  // the drives answer the bring-up's SDOs from their own thread
     sim_bus = &plant->bus();
   }
+  for (auto& m : mit_plants) m->start_thread();  // and the MIT motors the register reads
 #endif
   err = app.boot();
   if (!err.empty()) {
@@ -700,6 +740,9 @@ int main(int argc, char** argv) {
   lc.priority = app.cfg.priority;
   lc.cpu = app.cfg.cpu;
   lc.lock_memory = app.cfg.lock_memory;
+#ifdef SERVOARM_WITH_SIM
+  SimPlants sim_plants;
+#endif
   RtLoop loop(*app.ctl, lc);
 #ifdef SERVOARM_WITH_SIM
   if (plant) {
@@ -709,7 +752,13 @@ int main(int argc, char** argv) {
     plant->set_frames_at_arrival(true);  // the drives sample at the SYNC, not at the next cycle
     // a host that stalls the loop for more than two cycles pauses the virtual arm with it
     plant->set_pause_after(2 * static_cast<hal::Duration>(1e9 / app.cfg.rate_hz + 0.5));
-    loop.set_pre_cycle(&sim::SimPlant::step_hook, plant.get());
+  }
+  for (auto& m : mit_plants) m->stop_thread();
+  if (!mit_plants.empty() || plant) {
+    // One pre-cycle hook steps every virtual bus: the CiA 402 plant and each MIT plant.
+    sim_plants.cia = plant.get();
+    for (auto& m : mit_plants) sim_plants.mit.push_back(m.get());
+    loop.set_pre_cycle(&SimPlants::step_hook, &sim_plants);
   }
 #endif
   if (!loop.start()) {
@@ -732,12 +781,30 @@ int main(int argc, char** argv) {
   std::unique_ptr<NoApi> api_server;
   const int api_cx = 0;
 #endif
-  if (app.cfg.api_enabled || api_ws >= 0 || api_tcp >= 0) {
+#ifdef SERVOARM_WITH_MQTT
+  std::unique_ptr<api::MqttBridge> mqtt;
+#else
+  struct NoMqtt {
+    int wake_fd() const { return -1; }
+    void stop() {}
+  };
+  std::unique_ptr<NoMqtt> mqtt;
+#endif
+  const bool want_api = app.cfg.api_enabled || api_ws >= 0 || api_tcp >= 0;
+  if (want_api || app.cfg.mqtt_enabled) {
 #ifndef SERVOARM_WITH_API
-    std::fprintf(stderr, "armfw: built without the network API (libwebsockets-dev, nlohmann-json3-dev)\n");
+    std::fprintf(stderr, "armfw: built without the network API (libwebsockets-dev, nlohmann-json3-dev)%s\n",
+                 want_api ? "" : ": mqtt.enabled needs it");
     loop.stop();
     return 2;
 #else
+#ifndef SERVOARM_WITH_MQTT
+    if (app.cfg.mqtt_enabled) {
+      std::fprintf(stderr, "armfw: mqtt.enabled: built without the MQTT bridge (libmosquitto-dev)\n");
+      loop.stop();
+      return 2;
+    }
+#endif
     api::ApiConfig ac;
     ac.bind = app.cfg.api_bind;
     const bool flags = api_ws >= 0 || api_tcp >= 0;  // the flags name the ports: only those listen
@@ -751,12 +818,14 @@ int main(int argc, char** argv) {
     ac.partial_timeout_s = app.cfg.api_partial_timeout_s;
     ac.rate_hz = app.cfg.rate_hz;
     ac.robot = app.cfg.robot;
-    api_server = std::make_unique<api::ApiServer>(ac, *app.ctl, app.chain, app.ctl->limits());
-    const std::string e = api_server->start();
-    if (!e.empty()) {
-      std::fprintf(stderr, "armfw: %s\n", e.c_str());
-      loop.stop();
-      return 2;
+    if (want_api) {
+      api_server = std::make_unique<api::ApiServer>(ac, *app.ctl, app.chain, app.ctl->limits());
+      const std::string e = api_server->start();
+      if (!e.empty()) {
+        std::fprintf(stderr, "armfw: %s\n", e.c_str());
+        loop.stop();
+        return 2;
+      }
     }
     api_cx.svc = &app.console->service();
     api_cx.ctl = app.ctl.get();
@@ -768,10 +837,46 @@ int main(int argc, char** argv) {
     for (int j = 0; j < app.chain.n_joints; ++j) ss.max_step.push_back(kConfigUnits.joint_in(app.chain, j, app.cfg.api_stream_max_step_deg));
     stream = std::make_unique<StreamService>(app.console->service(), *app.ctl, ss);
     api_cx.stream = stream.get();
-    std::fprintf(stderr, "armfw: api: WebSocket port %d, TCP port %d on %s\n", api_server->ws_port(), api_server->tcp_port(),
-                 ac.bind.c_str());
+    if (api_server)
+      std::fprintf(stderr, "armfw: api: WebSocket port %d, TCP port %d on %s\n", api_server->ws_port(),
+                   api_server->tcp_port(), ac.bind.c_str());
+#ifdef SERVOARM_WITH_MQTT
+    if (app.cfg.mqtt_enabled) {
+      api::MqttConfig mc;
+      mc.host = app.cfg.mqtt_host;
+      mc.port = app.cfg.mqtt_port;
+      mc.name = app.cfg.mqtt_name;
+      mc.username = app.cfg.mqtt_username;
+      mc.password_file = app.cfg.mqtt_password_file;
+      mc.cafile = app.cfg.mqtt_cafile;
+      mc.certfile = app.cfg.mqtt_certfile;
+      mc.keyfile = app.cfg.mqtt_keyfile;
+      mc.state_rate_hz = app.cfg.mqtt_state_rate_hz;
+      mc.keepalive_s = app.cfg.mqtt_keepalive_s;
+      mc.rate_hz = app.cfg.rate_hz;
+      mqtt = std::make_unique<api::MqttBridge>(mc, *app.ctl, app.chain);
+      const std::string e = mqtt->start();
+      if (!e.empty()) {
+        std::fprintf(stderr, "armfw: %s\n", e.c_str());
+        loop.stop();
+        return 2;
+      }
+      std::fprintf(stderr, "armfw: mqtt: servoarm/%s/ at %s:%d\n", mc.name.c_str(), mc.host.c_str(), mc.port);
+    }
+#endif
 #endif
   }
+  // The API's and the MQTT bridge's requests run here, on the console thread (the service's one caller).
+  const auto pump_network = [&] {
+    if (api_server) api_server->pump(api_cx);
+#ifdef SERVOARM_WITH_MQTT
+    if (mqtt) mqtt->pump(api_cx, api_server.get());
+#endif
+  };
+  const auto network_fds = [&](std::vector<pollfd>& pf) {
+    if (api_server) pf.push_back({api_server->wake_fd(), POLLIN, 0});
+    if (mqtt) pf.push_back({mqtt->wake_fd(), POLLIN, 0});
+  };
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
   signal(SIGPIPE, SIG_IGN);
@@ -836,7 +941,7 @@ int main(int argc, char** argv) {
       if (rc == 0 && !ts.empty()) {
         std::fprintf(stderr, "armfw: %s ready (%d joints, %.0f Hz); type help\n", app.cfg.robot.c_str(), app.chain.n_joints,
                      app.cfg.rate_hz);
-        if (!api_server) {
+        if (!api_server && !mqtt) {
           serve_consoles(*app.console, ts, app.cfg.console_stdin, &g_quit);
         } else {
           // Consoles and the API on one thread: wait for console input or API requests (at most
@@ -844,23 +949,25 @@ int main(int argc, char** argv) {
           ConsoleServer srv(*app.console, ts);
           for (;;) {
             if (g_quit) break;
-            std::vector<pollfd> pf{{api_server->wake_fd(), POLLIN, 0}};
+            std::vector<pollfd> pf;
+            network_fds(pf);
             for (const FdTransport* t : ts) {
               if (t->rd >= 0 && !t->eof && !t->no_peer) pf.push_back({t->rd, POLLIN, 0});
               if (t->wr >= 0 && !t->pending.empty()) pf.push_back({t->wr, POLLOUT, 0});
             }
             ::poll(pf.data(), pf.size(), 10);
-            api_server->pump(api_cx);
+            pump_network();
             if (!srv.round(0, app.cfg.console_stdin)) break;
           }
         }
-      } else if (rc == 0 && api_server) {
+      } else if (rc == 0 && (api_server || mqtt)) {
         std::fprintf(stderr, "armfw: %s ready (%d joints, %.0f Hz); API only\n", app.cfg.robot.c_str(), app.chain.n_joints,
                      app.cfg.rate_hz);
         while (!g_quit) {
-          pollfd pf{api_server->wake_fd(), POLLIN, 0};
-          ::poll(&pf, 1, 10);
-          api_server->pump(api_cx);
+          std::vector<pollfd> pf;
+          network_fds(pf);
+          ::poll(pf.data(), pf.size(), 10);
+          pump_network();
         }
       }
       can.stop();
@@ -868,6 +975,7 @@ int main(int argc, char** argv) {
   }
   // Shut down: stop motion, power down, stop the loop, statistics at exit.
   if (api_server) api_server->stop();
+  if (mqtt) mqtt->stop();
   {
     Session s;
     app.console->execute(s, "stop");

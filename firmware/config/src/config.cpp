@@ -415,6 +415,23 @@ const ConfigKey kConfigTable[] = {
       "an API client that begins a message and does not end it within this time is disconnected (a slow-loris "
       "client holds no connection)"}
         .within(1, 600),
+    K{"mqtt.enabled", &F::mqtt_enabled, "",
+      "the MQTT bridge (docs/api.md#mqtt): state and events published on `servoarm/<mqtt.name>/...`, the API's "
+      "messages taken on `servoarm/<mqtt.name>/cmd`, last will `offline`"},
+    K{"mqtt.host", &F::mqtt_host, "", "the MQTT broker's host name or address"},
+    K{"mqtt.port", &F::mqtt_port, "", "the broker's port (1883 plain, 8883 TLS by convention)"}.within(1, 65535),
+    K{"mqtt.name", &F::mqtt_name, "", "this arm's name in the topics: `servoarm/<name>/state` ..."},
+    K{"mqtt.username", &F::mqtt_username, "", "user name at the broker; \"\" = none"},
+    K{"mqtt.password_file", &F::mqtt_password_file, "",
+      "a file whose first line is the broker password (kept out of the configuration); \"\" = none"},
+    K{"mqtt.cafile", &F::mqtt_cafile, "", "TLS to the broker, checked against this CA certificate (PEM); \"\" = plain TCP"},
+    K{"mqtt.certfile", &F::mqtt_certfile, "", "TLS client certificate (PEM) for a broker that asks for one; \"\" = none"},
+    K{"mqtt.keyfile", &F::mqtt_keyfile, "", "the client certificate's key (PEM)"},
+    K{"mqtt.state_rate_hz", &F::mqtt_state_rate_hz, "Hz", "state samples published per second"}.within(0.1, 100),
+    K{"mqtt.keepalive_s", &F::mqtt_keepalive_s, "s",
+      "keep-alive interval: the broker publishes the last will (`offline`) after 1.5 times this without traffic "
+      "(libmosquitto takes 5 s at least)"}
+        .within(5, 600),
 };
 
 using D = DriveConfig;

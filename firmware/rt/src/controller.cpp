@@ -1129,6 +1129,9 @@ void Controller::publish() {
     t.qd_cmd[ju] = cmd_.vel[j];
     const auto& fb = bus_.feedback(ju);
     t.q_act[ju] = fb.position;
+    t.qd_act[ju] = fb.velocity;
+    t.tau_act[ju] = fb.has_torque ? fb.torque : 0.0;
+    if (fb.has_torque) t.torque_valid = static_cast<std::uint16_t>(t.torque_valid | (1u << j));
     t.joint_state[ju] = static_cast<std::uint8_t>(fb.state);
   }
   t.queued = static_cast<std::uint32_t>(exec_.queue().size());

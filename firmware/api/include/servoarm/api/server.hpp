@@ -72,6 +72,8 @@ class ApiServer {
   /// Returns how many requests ran.
   std::size_t pump(ServiceContext& cx);
   ApiStats stats() const;
+  /// The client holding control (0: nobody); read from any thread.
+  std::uint64_t controller() const;
 
   struct Impl;
 

@@ -189,6 +189,19 @@ struct FwConfig {
   std::string api_stream_step = "clamp"; ///< a larger step: "clamp" or "refuse"
   int api_partial_timeout_s = 10;        ///< a message begun and not ended this long: the connection is closed
 
+  // [mqtt]: the MQTT bridge (docs/api.md#mqtt)
+  bool mqtt_enabled = false;             ///< connect to the broker, publish state / events, take commands
+  std::string mqtt_host = "127.0.0.1";   ///< the broker
+  int mqtt_port = 1883;
+  std::string mqtt_name = "arm";         ///< topics under servoarm/<name>/
+  std::string mqtt_username;             ///< "" none
+  std::string mqtt_password_file;        ///< the password's file (first line); "" none
+  std::string mqtt_cafile;               ///< TLS to the broker with this CA (PEM); "" plain TCP
+  std::string mqtt_certfile;             ///< TLS client certificate (PEM); "" none
+  std::string mqtt_keyfile;              ///< its key (PEM)
+  double mqtt_state_rate_hz = 10.0;      ///< state samples published per second
+  int mqtt_keepalive_s = 10;             ///< keep-alive: the broker publishes the last will after 1.5 x this
+
   bool operator==(const FwConfig&) const = default;
 };
 

@@ -160,6 +160,9 @@ struct Telemetry {
   std::array<double, kin::kMaxJoints> q_cmd{};  ///< last commanded (SI)
   std::array<double, kin::kMaxJoints> q_act{};  ///< last measured (SI)
   std::array<double, kin::kMaxJoints> qd_cmd{}; ///< last commanded velocity (SI per s)
+  std::array<double, kin::kMaxJoints> qd_act{}; ///< last measured velocity (SI per s), as the drive reports it
+  std::array<double, kin::kMaxJoints> tau_act{}; ///< last measured torque (N m / N, joint side); see torque_valid
+  std::uint16_t torque_valid = 0;  ///< bit j: joint j's drive reports its torque (tau_act[j] is measured, else 0)
   bool streaming = false;          ///< a stream of targets runs (JogSpec::stream) and is not braking
   std::array<std::uint8_t, kin::kMaxJoints> joint_state{};  ///< hal::JointState
   std::uint32_t queued = 0;        ///< motions in the queue (including the running one)
