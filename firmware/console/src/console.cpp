@@ -197,6 +197,8 @@ std::string Console::pose_text(const kin::JointVector& q) const {
 }
 
 void Console::answer_error(Session& s, CmdError e, const std::string& msg) {
+  s.last_error = e;
+  s.last_error_text = msg;
   if (s.dialect == Dialect::grbl) {
     // GRBL senders match `error:N`; the text goes on a [MSG:] line before it.
     s.out += fmt("[MSG:%s: %s]\nerror:%d\n", to_string(e), msg.c_str(), grbl_error(e));

@@ -30,18 +30,6 @@ std::string fmt(const char* f, ...) {
   return buf;
 }
 
-/// "error: code text\n" -> "text"; "" when the answer is no error.
-std::string error_of(const std::string& out) {
-  const std::size_t k = out.rfind("error: ");
-  if (k == std::string::npos) return "";
-  std::string e = out.substr(k + 7);
-  while (!e.empty() && e.back() == '\n') e.pop_back();
-  const std::size_t sp = e.find(' ');  // the code, then the message
-  return sp == std::string::npos ? e : e.substr(0, sp) + ": " + e.substr(sp + 1);
-}
-
-
-
 }  // namespace
 
 // ---------------------------------------------------------------------------
@@ -279,8 +267,10 @@ bool Console::continue_check() {
         case StepKind::needs_idle: break;
       }
       pc.cs.out.clear();
+      pc.cs.last_error = CmdError::ok;
       exec_step(pc.cs, p, st);
-      if (const std::string e = error_of(pc.cs.out); !e.empty()) err = p.where(st) + ": " + e;
+      if (pc.cs.last_error != CmdError::ok)
+        err = p.where(st) + ": " + to_string(pc.cs.last_error) + ": " + pc.cs.last_error_text;
       if (std::chrono::steady_clock::now() - t0 > std::chrono::milliseconds(2)) break;
     }
     std::swap(check_shadow_, pc.shadow);

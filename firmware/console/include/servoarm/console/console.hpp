@@ -87,6 +87,8 @@ struct Session {
   bool homing = false;                 ///< `$H` waits for the homing cycle to end
   bool checking = false;               ///< `run` waits for its program's check (run in slices)
   std::string out;                     ///< text to send to the client
+  CmdError last_error = CmdError::ok;  ///< the code and text of the last error answered
+  std::string last_error_text;         ///<   (a program's check reads its steps' refusals here, typed)
   std::uint64_t lines_done = 0;
   Dialect dialect = Dialect::native;
   bool check_mode = false;             ///< GRBL $C: G-code parsed and checked, nothing moves
