@@ -2,6 +2,7 @@
 // The armsim and canmaster binaries as separate processes, talking SocketCAN
 // frames (struct can_frame records) over a socketpair(AF_UNIX, SOCK_SEQPACKET)
 // passed with --fd: the shell scenarios of the vcan VM, without kernel CAN.
+#include <poll.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -79,15 +80,32 @@ Run run_pair(std::vector<std::string> master_args, std::vector<std::string> sim_
   int sv[2];
   socketpair(AF_UNIX, SOCK_SEQPACKET, 0, sv);
   sim_args.insert(sim_args.begin(), {ARMSIM_PATH, "--fd", std::to_string(sv[1])});
-  master_args.insert(master_args.begin(), {CANMASTER_PATH, "--fd", std::to_string(sv[0])});
+  // SDO answers within 2 s, not a real drive's 200 ms: two emulated processes on a loaded
+  // machine are descheduled for longer than that, and no case here tests SDO timeouts.
+  master_args.insert(master_args.begin(), {CANMASTER_PATH, "--fd", std::to_string(sv[0]), "--sdo-timeout-ms", "2000"});
   Proc sim = spawn(sim_args, sv[1], sv[0]);
+  // The master starts once armsim says it is ready: its SDO timeouts are the drive's, and
+  // an armsim still starting (qemu on a loaded machine takes seconds) is not a drive that
+  // does not answer. Up to 60 s; armsim failing to start shows in its output.
+  std::string sim_head;
+  for (int waited = 0; sim_head.find("armsim ready") == std::string::npos && waited < 60000;) {
+    pollfd p{sim.out, POLLIN, 0};
+    if (poll(&p, 1, 100) <= 0) {
+      waited += 100;
+      continue;
+    }
+    char buf[512];
+    const ssize_t n = read(sim.out, buf, sizeof buf);
+    if (n <= 0) break;
+    sim_head.append(buf, std::size_t(n));
+  }
   Proc master = spawn(master_args, sv[0], sv[1]);
   close(sv[0]);
   close(sv[1]);
   Run r;
   r.master_out = read_all(master.out);
   r.master_rc = wait_rc(master.pid);
-  r.sim_out = read_all(sim.out);
+  r.sim_out = sim_head + read_all(sim.out);
   r.sim_rc = wait_rc(sim.pid);
   return r;
 }
