@@ -129,7 +129,7 @@ function jogKeepAlive() {
 function startJog(joint, direction, button) {
   if (!canOperate()) return;
   endJog(true);
-  P.jogging = { joint, direction, button };
+  P.jogging = { joint, direction, button, t0: P.state ? P.state.t : 0 };
   button.classList.add('active');
   jogKeepAlive();
   jogTimer = setInterval(jogKeepAlive, JOG_KEEPALIVE_MS);
@@ -226,6 +226,13 @@ api.on('state', (st) => {
 });
 
 api.on('event', (ev) => {
+  // The firmware ended the jog while the button is still held (keep-alives late: a stalled
+  // browser or network, or a joint at its limit): the page does not start it again by itself;
+  // the operator releases and presses again.
+  if (ev.kind === 'jog_stopped' && P.jogging && ev.t >= P.jogging.t0) {
+    endJog(true);
+    say(ev.detail + ': release and press again');
+  }
   const li = document.createElement('li');
   li.textContent = ev.t.toFixed(3) + ' s ' + ev.kind + ' ' + ev.state + (ev.detail ? ': ' + ev.detail : '');
   const ol = $('event-list');

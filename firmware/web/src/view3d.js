@@ -36,8 +36,10 @@ export class ArmView {
     new ResizeObserver(() => this.resize()).observe(el);
     this.resize();
     this.controls.addEventListener('change', () => { this.dirty = true; });
-    const loop = () => {
-      if (this.dirty) { this.renderer.render(this.scene, this.camera); this.dirty = false; }
+    // at most 20 frames a second: drawing shares the page's thread with the jog keep-alives
+    let last = 0;
+    const loop = (t) => {
+      if (this.dirty && t - last >= 50) { this.renderer.render(this.scene, this.camera); this.dirty = false; last = t; }
       requestAnimationFrame(loop);
     };
     requestAnimationFrame(loop);
@@ -78,7 +80,7 @@ export class ArmView {
       let reach = 0;
       for (const f of frames) reach = Math.max(reach, Math.hypot(f[0], f[1], f[2]));
       this.build(frames.length, Math.max(reach, 0.2));
-      const d = Math.max(reach, 0.3) * 2.2;
+      const d = Math.max(reach, 0.3) * 1.5;
       this.camera.position.set(d, -d, d * 0.75);
       this.controls.target.set(0, 0, reach * 0.35);
       this.controls.update();
