@@ -431,6 +431,8 @@ async function main() {
       assert(role === 'role: observer', `role shown: ${role}`);
       const disabled = await p.$$eval('button.jog, #take, button.op', (bs) => bs.length > 0 && bs.every((b) => b.disabled));
       assert(disabled, 'an observer\'s page has enabled command buttons');
+      const stops = await p.$$eval('#stop, button.any', (bs) => bs.length === 3 && bs.every((b) => !b.disabled));
+      assert(stops, 'an observer\'s page cannot stop, hold or e-stop');
       const q0 = (await tcp.state()).q[0];
       await pressHold(p, '#joints button.jog[data-joint="0"][data-dir="1"]');
       await sleep(1000);  // a window for a motion that must not come

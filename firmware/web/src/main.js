@@ -54,6 +54,8 @@ function refreshRole() {
   const inControl = P.controller !== 0 && P.controller === P.client;
   $('control').textContent = 'control: ' + (P.controller === 0 ? 'nobody' : inControl ? 'this pendant' : 'client ' + P.controller);
   for (const b of document.querySelectorAll('button.op, button.jog, #take, #release')) b.disabled = !canOperate();
+  // hold and e-stop, like stop, are any authenticated client's (docs/api.md)
+  for (const b of document.querySelectorAll('button.any')) b.disabled = !P.role || !api.open;
   document.body.dataset.role = P.role || '';
 }
 
