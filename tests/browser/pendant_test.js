@@ -69,8 +69,8 @@ async function until(what, fn, timeoutS = WAIT_S, periodMs = 10) {
 }
 
 // ---- armfw --sim ------------------------------------------------------------------------------
-function startArmfw(exe, extra = []) {
-  const args = ['--sim', '--no-stdin', '--priority', '0', '--api-ws', '0', '--api-tcp', '0', ...extra];
+function startArmfw(exe, extra = [], wsPort = 0) {
+  const args = ['--sim', '--no-stdin', '--priority', '0', '--api-ws', String(wsPort), '--api-tcp', '0', ...extra];
   const p = childProcess.spawn(exe, args, { stdio: ['ignore', 'ignore', 'pipe'] });
   const lines = [];
   let buf = '';
@@ -391,6 +391,20 @@ async function main() {
         await page.evaluate(() => window.scrollTo(0, 0));
         await shot(page, name);
       }
+    });
+    await check('armfw restarted: the page connects again by itself', async () => {
+      const wsPort = Number(new URL(armfw.url).port);
+      tcp.close();
+      await stopArmfw(armfw);
+      armfw = null;
+      await page.waitForFunction(() => document.getElementById('conn').textContent === 'offline', { timeout: WAIT_S * 1000 });
+      armfw = await startArmfw(args.armfw, [], wsPort);
+      tcp = new Tcp(armfw.tcp);
+      await tcp.connect();
+      await page.waitForFunction(() => document.getElementById('conn').textContent === 'online' && window.pendant.role === 'operator' &&
+                                 window.pendant.state !== null, { timeout: WAIT_S * 1000 });
+      const ctl = await page.$eval('#control', (e) => e.textContent);
+      assert(ctl === 'control: nobody', `after the reconnection: ${ctl} (control is not taken again by itself)`);
     });
     if (page) await page.close();
     tcp.close();

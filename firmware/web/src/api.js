@@ -27,11 +27,17 @@ export class ApiClient {
       ws.onopen = () => { opened = true; this.emit('open', {}); resolve(); };
       ws.onerror = () => { if (!opened) reject(new Error('cannot connect to ' + this.url)); };
       ws.onclose = () => {
-        if (this.ws === ws) this.ws = null;
-        for (const [, p] of this.pending) p.resolve({ error: 'closed', message: 'the connection closed' });
-        this.pending.clear();
-        this.emit('close', {});
+        // the requests sent on this socket get an answer; a socket replaced by connect() or
+        // closed by close() is not reported as a lost connection
+        for (const [id, p] of this.pending) {
+          if (p.ws !== ws) continue;
+          p.resolve({ error: 'closed', message: 'the connection closed' });
+          this.pending.delete(id);
+        }
         if (!opened) reject(new Error('cannot connect to ' + this.url));
+        if (this.ws !== ws) return;
+        this.ws = null;
+        this.emit('close', {});
       };
       ws.onmessage = (ev) => {
         let m;
@@ -59,7 +65,7 @@ export class ApiClient {
     if (!this.open) return Promise.resolve({ error: 'closed', message: 'not connected' });
     const id = this.nextId++;
     return new Promise((resolve) => {
-      this.pending.set(id, { resolve });
+      this.pending.set(id, { resolve, ws: this.ws });
       this.ws.send(JSON.stringify({ id, cmd, ...args }));
     });
   }

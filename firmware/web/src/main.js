@@ -68,15 +68,15 @@ async function connect() {
     await api.connect();
   } catch (e) {
     say(String(e.message || e));
-    return;
+    return;  // the close handler tries again when the page was connected before
   }
   const h = await api.request('hello', token ? { token } : {});
   if (h.error) {
     report('hello', h);
     say('refused: ' + (h.error === 'unauthenticated' ? 'wrong token' : h.error) + (h.message ? ' (' + h.message + ')' : ''));
-    $('conn').textContent = 'refused';
     document.body.dataset.auth = 'refused';
     api.close();
+    $('conn').textContent = 'refused';
     return;
   }
   document.body.dataset.auth = 'ok';
@@ -93,11 +93,18 @@ async function connect() {
 }
 
 api.on('open', () => { $('conn').textContent = 'online'; });
+let retry = null;
 api.on('close', () => {
   endJog(false);
   $('conn').textContent = 'offline';
   P.controller = 0;
   refreshRole();
+  // a connection that was accepted and is lost (armfw restarted, network gone): connect again
+  // every 2 s; control is not taken again by itself
+  if (document.body.dataset.auth === 'ok' && retry === null) {
+    say('connection lost: connecting again');
+    retry = setTimeout(() => { retry = null; connect(); }, 2000);
+  }
 });
 api.on('control', (m) => { P.controller = m.holder; refreshRole(); });
 $('login').addEventListener('submit', (e) => { e.preventDefault(); connect(); });
