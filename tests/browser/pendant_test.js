@@ -260,6 +260,13 @@ async function main() {
       assert(await page.$('#stop') !== null, 'no stop button');
       // the 3D view drew the arm from the state's frames
       await page.waitForFunction(() => window.pendant.state && Array.isArray(window.pendant.state.frames), { timeout: WAIT_S * 1000 });
+      const nFrames = await page.evaluate(() => window.pendant.state.frames.length);
+      assert(nFrames === s.frames.length && nFrames >= 7, `the page has ${nFrames} frames, the API ${s.frames.length}`);
+      assert(await page.$('#three canvas') !== null, 'no 3D view (WebGL canvas)');
+      // the three live plots (following error, speed, torque), one series per joint
+      await page.waitForFunction(() => document.querySelectorAll('#plots .uplot').length === 3, { timeout: WAIT_S * 1000 });
+      const legends = await page.$$eval('#plot-fe .u-legend .u-series', (e) => e.length);
+      assert(legends === 6, `following-error plot: ${legends} legend rows, expected one per joint (6)`);
       assert(page.errors.length === 0, 'errors in the page: ' + page.errors.join('; '));
       await shot(page, 'pendant-overview');
     });
