@@ -10,6 +10,7 @@
 # What goes where (CPACK_PACKAGING_INSTALL_PREFIX /usr):
 #   /usr/bin/armfw, /usr/bin/armctl          install() rules of firmware/app/ and firmware/armctl/CMakeLists.txt
 #   /usr/share/servoarm/models/*.toml        built-in robot descriptions
+#   /usr/share/servoarm/web/                 the browser pendant armfw serves (firmware/web/dist, docs/pendant.md)
 #   /etc/servoarm/armfw.toml                 default firmware config (conffile)
 #   /etc/default/servoarm                    CAN bitrate, extra armfw arguments (conffile)
 #   /lib/systemd/system/servoarm.service     the firmware, real-time limits, service user
@@ -24,6 +25,7 @@ set(SERVOARM_SYSTEMD_UNITDIR "/lib/systemd/system" CACHE PATH "Where the systemd
 
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/kinematics/models/ DESTINATION share/servoarm/models
         COMPONENT servoarm FILES_MATCHING PATTERN "*.toml")
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/firmware/web/dist/ DESTINATION share/servoarm/web COMPONENT servoarm)
 install(FILES ${_pkg}/armfw.toml DESTINATION ${SERVOARM_SYSCONFDIR}/servoarm COMPONENT servoarm
         PERMISSIONS OWNER_READ OWNER_WRITE GROUP_READ)
 install(FILES ${_pkg}/servoarm.default DESTINATION ${SERVOARM_SYSCONFDIR}/default RENAME servoarm COMPONENT servoarm)

@@ -560,3 +560,87 @@ TEST(FwApi, ReferencePageIsGeneratedFromTheTable) {
   extra.insert(at, "| `fly` | anyone | network thread | `-` | flies |\n");
   CHECK(!api::api_reference_mismatch(extra).empty());
 }
+
+namespace {
+/// One HTTP GET on the WebSocket port: the status line and the body ("" when nothing came).
+std::string http_get(int port, const std::string& path, std::string* body = nullptr) {
+  Client c(port);
+  c.send_raw("GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n");
+  std::string all;
+  const double end = now_s() + 10;
+  for (;;) {
+    bool closed = false;
+    const std::string l = c.line(std::max(0.0, end - now_s()), &closed);
+    if (closed || now_s() > end) break;
+    all += l + "\n";
+  }
+  all += c.buf;
+  const auto sep = all.find("\r\n\r\n");
+  if (body) *body = sep == std::string::npos ? "" : all.substr(sep + 4);
+  return all.substr(0, all.find('\r'));
+}
+}  // namespace
+
+// The state sample carries the joint frames a viewer draws the links between (the browser
+// pendant computes no kinematics): the base, one per DH row and the tool, the tool's last.
+TEST(FwApi, StateCarriesJointFrames) {
+  Rig rig;
+  Client c(rig.port());
+  const std::string s = c.ask(1, "\"cmd\":\"state\"");
+  CHECK_TEXT(is_ok(s), s.c_str());
+  const std::regex fr("\"frames\":\\[((\\[[^\\]]*\\],?)+)\\]");
+  std::smatch m;
+  CHECK_TEXT(std::regex_search(s, m, fr), s.c_str());
+  const std::string frames = m[1].str();
+  CHECK_EQUAL(rig.app.chain.n_rows + 2, static_cast<int>(std::count(frames.begin(), frames.end(), '[')));
+  const std::regex tool("\"tool\":\\{\"position\":(\\[[^\\]]*\\])");
+  std::smatch t;
+  CHECK_TEXT(std::regex_search(s, t, tool), s.c_str());
+  const std::string last = frames.substr(frames.rfind('['));
+  CHECK_EQUAL(t[1].str(), last);
+  CHECK(frames.rfind("[0,0,0]", 0) == 0 || frames.rfind("[0.0,0.0,0.0]", 0) == 0);  // puma560's base at the origin
+}
+
+// The WebSocket port serves a folder's static files (the pendant) over HTTP GET, index.html at
+// "/", nothing outside the folder; without web_root it serves no file.
+TEST(FwApi, ServesStaticFilesOnTheWebSocketPort) {
+  const std::string dir = "/tmp/servoarm_fw_api_web_" + std::to_string(::getpid());
+  ::mkdir(dir.c_str(), 0755);
+  std::ofstream(dir + "/index.html") << "<!doctype html><title>pendant test page</title>";
+  std::ofstream(dir + "/app.js") << "export const x = 1;";
+  {
+    api::ApiConfig ac;
+    ac.ws_port = 0;
+    ac.tcp_port = 0;
+    ac.web_root = dir;
+    Rig rig(ac);
+    CHECK(rig.server->serves_web());
+    const int port = rig.server->ws_port();
+    std::string body;
+    std::string st = http_get(port, "/", &body);
+    CHECK_TEXT(has(st, " 200"), st.c_str());
+    CHECK_TEXT(has(body, "pendant test page"), body.c_str());
+    st = http_get(port, "/app.js", &body);
+    CHECK_TEXT(has(st, " 200"), st.c_str());
+    CHECK_TEXT(has(body, "export const x"), body.c_str());
+    st = http_get(port, "/../../etc/passwd", &body);
+    CHECK_TEXT(!has(st, " 200") || !has(body, "root:"), (st + body).c_str());
+    st = http_get(port, "/nothing.js", &body);
+    CHECK_TEXT(has(st, " 404"), st.c_str());
+    // the API still answers on the same port's TCP sibling
+    Client c(rig.port());
+    CHECK(is_ok(c.ask(1, "\"cmd\":\"hello\"")));
+  }
+  {
+    api::ApiConfig ac;
+    ac.ws_port = 0;
+    ac.tcp_port = 0;
+    Rig rig(ac);
+    CHECK(!rig.server->serves_web());
+    const std::string st = http_get(rig.server->ws_port(), "/");
+    CHECK_TEXT(!has(st, " 200"), st.c_str());
+  }
+  std::remove((dir + "/index.html").c_str());
+  std::remove((dir + "/app.js").c_str());
+  ::rmdir(dir.c_str());
+}

@@ -198,7 +198,8 @@ TEST(Package, FileList) {
       "./etc/servoarm/armfw.toml", "./etc/default/servoarm", "./lib/systemd/system/servoarm.service",
       "./lib/systemd/system/servoarm-can.service", "./usr/lib/servoarm/servoarm-can-up",
       "./usr/share/servoarm/models/puma560.toml", "./usr/share/doc/servoarm/README.md",
-      "./usr/share/doc/servoarm/docs/deployment.md"};  // the units' Documentation=
+      "./usr/share/doc/servoarm/docs/deployment.md",  // the units' Documentation=
+      "./usr/share/servoarm/web/index.html", "./usr/share/servoarm/web/pendant.js"};  // the pendant armfw serves
   if (HAVE_ARMCTL) want.push_back("./usr/bin/armctl");
   if (HAVE_ARMFW) want.push_back("./usr/bin/armfw");
   for (const auto& w : want) CHECK_TEXT(has(c.out, " " + w + "\n"), (w + " missing from:\n" + c.out).c_str());

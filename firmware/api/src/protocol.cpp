@@ -504,10 +504,20 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
   j["streaming"] = t.streaming;
   j["following_error"] = std::move(fe);
   kin::Pose p = kin::Pose::Identity();
-  if (t.n == chain.n_joints && kin::forward(chain, qa, p) == kin::Status::ok) {
+  kin::FrameSet fs;
+  if (t.n == chain.n_joints && kin::forward_frames(chain, qa, fs, p) == kin::Status::ok) {
     const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear());
     j["tool"] = {{"position", {p.translation().x(), p.translation().y(), p.translation().z()}},
                  {"rpy", {rpy.x(), rpy.y(), rpy.z()}}};
+    // the origins of the base frame, of the frame after each DH row and of the tool: what a
+    // viewer draws the links between (the pendant computes no kinematics of its own)
+    json fr = json::array();
+    for (int i = 0; i < fs.count; ++i) {
+      const Eigen::Vector3d o = fs.frame[i].translation();
+      fr.push_back({o.x(), o.y(), o.z()});
+    }
+    fr.push_back({p.translation().x(), p.translation().y(), p.translation().z()});
+    j["frames"] = std::move(fr);
   }
   j["queued"] = t.queued;
   j["running"] = t.running_id;

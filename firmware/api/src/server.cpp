@@ -100,6 +100,8 @@ struct ApiServer::Impl {
   lws_context* ctx = nullptr;
   lws_vhost* ws_vh = nullptr;
   lws_vhost* raw_vh = nullptr;
+  lws_http_mount web_mount{};  ///< the static files of cfg.web_root (must outlive the vhost)
+  bool web = false;
   std::thread th;
   std::atomic<bool> quit{false};
   int efd = -1;
@@ -578,6 +580,7 @@ std::string ApiServer::start() {
     v.iface = iface.c_str();
     v.protocols = protos;
     v.user = &s;
+    if (!raw && s.web) v.mounts = &s.web_mount;
     if (raw) {
       v.options = LWS_SERVER_OPTION_ADOPT_APPLY_LISTEN_ACCEPT_CONFIG;
       v.listen_accept_role = "raw-skt";
@@ -585,6 +588,19 @@ std::string ApiServer::start() {
     }
     return lws_create_vhost(s.ctx, &v);
   };
+  // the pendant's files: GET on the WebSocket port; a request that is not a WebSocket upgrade
+  // gets a file of the folder (libwebsockets refuses paths leaving it and sends 404 for others)
+  struct stat wst {};
+  s.web = s.cfg.ws_port >= 0 && !s.cfg.web_root.empty() && ::stat((s.cfg.web_root + "/index.html").c_str(), &wst) == 0;
+  if (s.web) {
+    std::memset(&s.web_mount, 0, sizeof s.web_mount);
+    s.web_mount.mountpoint = "/";
+    s.web_mount.mountpoint_len = 1;
+    s.web_mount.origin = s.cfg.web_root.c_str();
+    s.web_mount.def = "index.html";
+    s.web_mount.origin_protocol = LWSMPRO_FILE;
+    s.web_mount.cache_max_age = 0;
+  }
   std::string err;
   if (s.cfg.ws_port >= 0 && (s.ws_vh = vhost("ws", s.cfg.ws_port, kWsProtocols, false)) == nullptr)
     err = "api: cannot listen on " + s.cfg.bind + ":" + std::to_string(s.cfg.ws_port) + " (WebSocket)";
@@ -634,6 +650,7 @@ void ApiServer::stop() {
 }
 
 int ApiServer::ws_port() const { return impl_->ws_vh ? lws_get_vhost_listen_port(impl_->ws_vh) : -1; }
+bool ApiServer::serves_web() const { return impl_->ws_vh != nullptr && impl_->web; }
 int ApiServer::tcp_port() const { return impl_->raw_vh ? lws_get_vhost_listen_port(impl_->raw_vh) : -1; }
 int ApiServer::wake_fd() const { return impl_->efd; }
 

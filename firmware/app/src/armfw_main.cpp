@@ -818,6 +818,15 @@ int main(int argc, char** argv) {
     ac.partial_timeout_s = app.cfg.api_partial_timeout_s;
     ac.rate_hz = app.cfg.rate_hz;
     ac.robot = app.cfg.robot;
+    // the browser pendant (docs/pendant.md): the installed files; with --sim the source tree's
+    // built page first, so a build tree's armfw serves the page of its own sources
+    for (const char* dir : {sim ? SERVOARM_WEB_TREE_DIR : "", SERVOARM_WEB_INSTALL_DIR, "/usr/share/servoarm/web"}) {
+      struct stat wst {};
+      if (*dir != '\0' && ::stat((std::string(dir) + "/index.html").c_str(), &wst) == 0) {
+        ac.web_root = dir;
+        break;
+      }
+    }
     if (want_api) {
       api_server = std::make_unique<api::ApiServer>(ac, *app.ctl, app.chain, app.ctl->limits());
       const std::string e = api_server->start();
@@ -840,6 +849,14 @@ int main(int argc, char** argv) {
     if (api_server)
       std::fprintf(stderr, "armfw: api: WebSocket port %d, TCP port %d on %s\n", api_server->ws_port(),
                    api_server->tcp_port(), ac.bind.c_str());
+    if (api_server && api_server->serves_web()) {
+      const bool any = ac.bind == "0.0.0.0" || ac.bind == "::";
+      const bool v6 = ac.bind.find(':') != std::string::npos && !any;
+      std::fprintf(stderr, "armfw: pendant: http://%s%s%s:%d/\n", v6 ? "[" : "", any ? "<this host>" : ac.bind.c_str(),
+                   v6 ? "]" : "", api_server->ws_port());
+    } else if (api_server && api_server->ws_port() >= 0) {
+      std::fprintf(stderr, "armfw: pendant: not served (no index.html in %s)\n", SERVOARM_WEB_INSTALL_DIR);
+    }
 #ifdef SERVOARM_WITH_MQTT
     if (app.cfg.mqtt_enabled) {
       api::MqttConfig mc;

@@ -42,6 +42,10 @@ struct ApiConfig {
   int partial_timeout_s = 10;      ///< a message begun and not ended within this: the connection is closed (slow loris)
   double rate_hz = 1000;           ///< the control rate (state streams at most this)
   std::string robot;               ///< hello's robot name
+  /// A folder of static files (the browser pendant, docs/pendant.md) served over HTTP GET on the
+  /// WebSocket port, index.html at "/"; "" serves none. The files hold no secret: what the page
+  /// may do is decided by its WebSocket's token and role, as for every client.
+  std::string web_root;
 };
 
 /// Counters (diagnostics; read any time).
@@ -66,6 +70,8 @@ class ApiServer {
   /// The ports listened on (the free port chosen for 0), -1 when off.
   int ws_port() const;
   int tcp_port() const;
+  /// Whether web_root is served (start() succeeded with a web_root that holds index.html).
+  bool serves_web() const;
   /// Readable while requests wait for pump() (an eventfd); -1 before start().
   int wake_fd() const;
   /// Service thread: run every request waiting, hand back their results, pass new events on.

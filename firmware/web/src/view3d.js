@@ -1,0 +1,107 @@
+// SPDX-License-Identifier: Apache-2.0
+// The live 3D view: the links drawn between the frame origins the state stream carries
+// (`frames`: base, each DH row, tool); the page computes no kinematics.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+
+export class ArmView {
+  constructor(el) {
+    this.el = el;
+    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+    el.appendChild(this.renderer.domElement);
+    this.scene = new THREE.Scene();
+    this.scene.background = new THREE.Color(0xe5e7eb);
+    this.camera = new THREE.PerspectiveCamera(45, 1, 0.01, 100);
+    this.camera.up.set(0, 0, 1);
+    this.camera.position.set(1.6, -1.6, 1.2);
+    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    this.controls.target.set(0, 0, 0.3);
+    this.controls.update();
+    const grid = new THREE.GridHelper(2, 20, 0x9ca3af, 0xd1d5db);
+    grid.rotation.x = Math.PI / 2;  // the base's x-y plane (z up)
+    this.scene.add(grid);
+    this.scene.add(new THREE.AxesHelper(0.2));
+    this.scene.add(new THREE.AmbientLight(0xffffff, 0.7));
+    const sun = new THREE.DirectionalLight(0xffffff, 0.9);
+    sun.position.set(2, -1, 3);
+    this.scene.add(sun);
+    this.links = new THREE.Group();
+    this.scene.add(this.links);
+    this.jointMat = new THREE.MeshStandardMaterial({ color: 0x2563eb });
+    this.linkMat = new THREE.MeshStandardMaterial({ color: 0x6b7280 });
+    this.toolMat = new THREE.MeshStandardMaterial({ color: 0xf59e0b });
+    this.count = -1;
+    this.dirty = true;
+    new ResizeObserver(() => this.resize()).observe(el);
+    this.resize();
+    this.controls.addEventListener('change', () => { this.dirty = true; });
+    // at most 20 frames a second: drawing shares the page's thread with the jog keep-alives
+    let last = 0;
+    const loop = (t) => {
+      if (this.dirty && t - last >= 50) { this.renderer.render(this.scene, this.camera); this.dirty = false; last = t; }
+      requestAnimationFrame(loop);
+    };
+    requestAnimationFrame(loop);
+  }
+
+  resize() {
+    const w = this.el.clientWidth || 300, h = this.el.clientHeight || 300;
+    this.renderer.setSize(w, h, false);
+    this.renderer.domElement.style.width = '100%';
+    this.renderer.domElement.style.height = '100%';
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.dirty = true;
+  }
+
+  build(n, scale) {
+    this.links.clear();
+    this.spheres = [];
+    this.rods = [];
+    const r = Math.max(0.01, 0.025 * scale);
+    for (let i = 0; i < n; ++i) {
+      const s = new THREE.Mesh(new THREE.SphereGeometry(i === n - 1 ? r * 0.8 : r, 16, 12), i === n - 1 ? this.toolMat : this.jointMat);
+      this.links.add(s);
+      this.spheres.push(s);
+      if (i > 0) {
+        const c = new THREE.Mesh(new THREE.CylinderGeometry(r * 0.55, r * 0.55, 1, 12), this.linkMat);
+        this.links.add(c);
+        this.rods.push(c);
+      }
+    }
+    this.count = n;
+  }
+
+  /** frames: [[x, y, z], ...] in m, base first, tool last. */
+  update(frames) {
+    if (!Array.isArray(frames) || frames.length < 2) return;
+    if (frames.length !== this.count) {
+      let reach = 0;
+      for (const f of frames) reach = Math.max(reach, Math.hypot(f[0], f[1], f[2]));
+      this.build(frames.length, Math.max(reach, 0.2));
+      const d = Math.max(reach, 0.3) * 1.5;
+      this.camera.position.set(d, -d, d * 0.75);
+      this.controls.target.set(0, 0, reach * 0.35);
+      this.controls.update();
+    }
+    const up = new THREE.Vector3(0, 1, 0);
+    for (let i = 0; i < frames.length; ++i) {
+      const p = new THREE.Vector3(frames[i][0], frames[i][1], frames[i][2]);
+      this.spheres[i].position.copy(p);
+      if (i > 0) {
+        const a = this.spheres[i - 1].position;
+        const rod = this.rods[i - 1];
+        const dir = p.clone().sub(a);
+        const len = dir.length();
+        rod.visible = len > 1e-6;
+        if (rod.visible) {
+          rod.position.copy(a).addScaledVector(dir, 0.5);
+          rod.scale.set(1, len, 1);
+          rod.quaternion.setFromUnitVectors(up, dir.normalize());
+        }
+      }
+    }
+    this.dirty = true;
+  }
+}

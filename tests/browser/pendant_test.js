@@ -1,0 +1,489 @@
+#!/usr/bin/env node
+// SPDX-License-Identifier: Apache-2.0
+// The browser pendant (firmware/web, docs/pendant.md) in a real browser: Debian's chromium,
+// headless, driven by puppeteer-core (package-lock.json beside this file; no browser download)
+// against armfw --sim serving the page and the API on free loopback ports. An independent
+// client on the API's TCP port reads the arm's state, so what the page shows is never what
+// the test checks the arm against.
+//
+// usage: node pendant_test.js --armfw PATH [--workdir DIR] [--chromium PATH]
+// Exit status: 0 passed, 1 failed, 77 skipped (chromium not found; the reason on stderr).
+// Screenshots of each view go to DIR/screenshots; measured times are printed as "figure:" lines.
+'use strict';
+
+const childProcess = require('child_process');
+const fs = require('fs');
+const net = require('net');
+const path = require('path');
+
+const SKIP = 77;
+const here = __dirname;
+// Generous limits: the machine may be busy; every wait polls for its condition.
+const WAIT_S = 30;
+
+function parseArgs(argv) {
+  const a = { workdir: path.join(process.cwd(), 'pendant-test'), chromium: process.env.CHROMIUM || '' };
+  for (let i = 2; i < argv.length; ++i) {
+    const k = argv[i];
+    const v = () => {
+      if (i + 1 >= argv.length) throw new Error(`${k} needs a value`);
+      return argv[++i];
+    };
+    if (k === '--armfw') a.armfw = v();
+    else if (k === '--workdir') a.workdir = v();
+    else if (k === '--chromium') a.chromium = v();
+    else throw new Error(`unknown argument '${k}'`);
+  }
+  if (!a.armfw) throw new Error('--armfw is required');
+  return a;
+}
+
+function findChromium(given) {
+  const candidates = given ? [given] : ['/usr/bin/chromium', '/usr/bin/chromium-browser'];
+  for (const c of candidates) if (fs.existsSync(c)) return c;
+  process.stderr.write(`pendant_browser: SKIPPED: chromium not found (${candidates.join(', ')}); ` +
+                       'install Debian\'s chromium (bash .ci/deps) or pass --chromium PATH\n');
+  process.exit(SKIP);
+}
+
+function puppeteer() {
+  const p = path.join(here, 'node_modules', 'puppeteer-core');
+  try {
+    return require(p);
+  } catch (e) {
+    throw new Error(`${p} is not installed (run: bash .ci/npm)`);
+  }
+}
+
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+const now = () => Number(process.hrtime.bigint()) / 1e9;
+
+async function until(what, fn, timeoutS = WAIT_S, periodMs = 10) {
+  const end = now() + timeoutS;
+  for (;;) {
+    const v = await fn();
+    if (v) return v;
+    if (now() > end) throw new Error(`timed out after ${timeoutS} s waiting for ${what}`);
+    await sleep(periodMs);
+  }
+}
+
+// ---- armfw --sim ------------------------------------------------------------------------------
+function startArmfw(exe, extra = [], wsPort = 0) {
+  const args = ['--sim', '--no-stdin', '--priority', '0', '--api-ws', String(wsPort), '--api-tcp', '0', ...extra];
+  const p = childProcess.spawn(exe, args, { stdio: ['ignore', 'ignore', 'pipe'] });
+  const lines = [];
+  let buf = '';
+  return new Promise((resolve, reject) => {
+    const timer = setTimeout(() => reject(new Error('armfw did not print the pendant URL:\n' + lines.join('\n'))), WAIT_S * 1000);
+    const info = {};
+    p.stderr.on('data', (d) => {
+      buf += d.toString();
+      let nl;
+      while ((nl = buf.indexOf('\n')) >= 0) {
+        const l = buf.slice(0, nl);
+        buf = buf.slice(nl + 1);
+        lines.push(l);
+        let m = /TCP port (\d+)/.exec(l);
+        if (m) info.tcp = Number(m[1]);
+        m = /armfw: pendant: (http:\/\/\S+)/.exec(l);
+        if (m) info.url = m[1];
+        if (/pendant: not served/.test(l)) { clearTimeout(timer); reject(new Error(l)); }
+        if (info.url && info.tcp && !info.done) {
+          info.done = true;
+          clearTimeout(timer);
+          resolve({ proc: p, url: info.url, tcp: info.tcp, lines });
+        }
+      }
+    });
+    p.on('exit', (code) => { clearTimeout(timer); reject(new Error(`armfw exited (${code}):\n${lines.join('\n')}`)); });
+  });
+}
+
+function stopArmfw(a) {
+  if (!a) return Promise.resolve();
+  a.proc.removeAllListeners('exit');
+  return new Promise((resolve) => {
+    const t = setTimeout(() => { a.proc.kill('SIGKILL'); resolve(); }, 10000);
+    a.proc.on('exit', () => { clearTimeout(t); resolve(); });
+    a.proc.kill('SIGTERM');
+  });
+}
+
+// ---- the independent client: newline-delimited JSON on the API's TCP port ---------------------------
+class Tcp {
+  constructor(port) {
+    this.port = port;
+    this.id = 1;
+    this.pending = new Map();
+    this.buf = '';
+  }
+  connect() {
+    return new Promise((resolve, reject) => {
+      this.s = net.connect(this.port, '127.0.0.1', resolve);
+      this.s.on('error', reject);
+      this.s.on('data', (d) => {
+        this.buf += d.toString();
+        let nl;
+        while ((nl = this.buf.indexOf('\n')) >= 0) {
+          const l = this.buf.slice(0, nl);
+          this.buf = this.buf.slice(nl + 1);
+          let m;
+          try { m = JSON.parse(l); } catch { continue; }
+          if (m.id !== undefined && this.pending.has(m.id)) {
+            this.pending.get(m.id)(m);
+            this.pending.delete(m.id);
+          }
+        }
+      });
+    });
+  }
+  ask(cmd, args = {}) {
+    const id = this.id++;
+    return new Promise((resolve, reject) => {
+      const t = setTimeout(() => reject(new Error(`no answer to ${cmd} within ${WAIT_S} s`)), WAIT_S * 1000);
+      this.pending.set(id, (m) => { clearTimeout(t); resolve(m); });
+      this.s.write(JSON.stringify({ id, cmd, ...args }) + '\n');
+    });
+  }
+  async state() {
+    const s = await this.ask('state');
+    if (s.error) throw new Error('state: ' + JSON.stringify(s));
+    return s;
+  }
+  close() { if (this.s) this.s.destroy(); }
+}
+
+/** Waits for standstill after a stop; the time from the first sample below the speed the move
+ *  had to the first at rest, on the arm's clock (the state's t), in ms. */
+async function brakeTimes(tcp, j, speed) {
+  let tBrake = null;
+  let tRest = null;
+  await until('standstill after the stop', async () => {
+    const s = await tcp.state();
+    if (tBrake === null && Math.abs(s.qd_cmd[j]) < Math.abs(speed) * 0.98) tBrake = s.t;
+    if (allStill(s)) { tRest = s.t; return true; }
+    return false;
+  });
+  return tBrake === null ? 'n/a' : ((tRest - tBrake) * 1000).toFixed(0);
+}
+
+const still = (s, j) => Math.abs(s.qd_cmd[j]) < 1e-6;
+const allStill = (s) => s.qd_cmd.every((v) => Math.abs(v) < 1e-6) && s.running === 0;
+
+// ---- the browser ----------------------------------------------------------------------------------
+async function openPage(browser, url, viewport = { width: 1280, height: 900 }) {
+  const page = await browser.newPage();
+  await page.setViewport(viewport);
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(String(e)));
+  page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
+  await page.goto(url, { waitUntil: 'load', timeout: WAIT_S * 1000 });
+  page.errors = errors;
+  return page;
+}
+
+async function waitAuth(page, want) {
+  await page.waitForFunction((w) => document.body.dataset.auth === w, { timeout: WAIT_S * 1000 }, want);
+}
+
+async function takeControl(page) {
+  await page.click('#take');
+  await page.waitForFunction(() => /this pendant/.test(document.getElementById('control').textContent), { timeout: WAIT_S * 1000 });
+}
+
+async function pressHold(page, selector) {
+  const b = await page.$(selector);
+  if (!b) throw new Error(`no ${selector} on the page`);
+  const box = await b.boundingBox();
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  await page.mouse.down();
+}
+
+// ---- the cases ------------------------------------------------------------------------------------
+const results = [];
+const figures = [];
+async function check(name, fn) {
+  const t0 = now();
+  try {
+    await fn();
+    results.push([name, 'ok']);
+    console.log(`ok   ${name} (${(now() - t0).toFixed(1)} s)`);
+  } catch (e) {
+    results.push([name, 'FAILED']);
+    console.log(`FAIL ${name}: ${e.stack || e}`);
+  }
+}
+function figure(text) {
+  figures.push(text);
+  console.log('figure: ' + text);
+}
+function assert(cond, text) { if (!cond) throw new Error(text); }
+
+async function main() {
+  const args = parseArgs(process.argv);
+  const chromium = findChromium(args.chromium);
+  const pptr = puppeteer();
+  const shots = path.join(args.workdir, 'screenshots');
+  fs.mkdirSync(shots, { recursive: true });
+  const shot = (page, name) => page.screenshot({ path: path.join(shots, name + '.png') });
+  const browser = await pptr.launch({
+    executablePath: chromium,
+    headless: true,
+    args: ['--no-sandbox', '--disable-dev-shm-usage', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
+           '--disable-background-timer-throttling', '--disable-renderer-backgrounding'],
+    protocolTimeout: WAIT_S * 4000,
+  });
+  console.log(`chromium: ${await browser.version()}, puppeteer-core ${require(path.join(here, 'node_modules/puppeteer-core/package.json')).version}`);
+  let armfw = null;
+  let tcp = null;
+  try {
+    // ------------------------------------------------------------ no token file: loopback operators
+    armfw = await startArmfw(args.armfw);
+    console.log(`armfw: pendant at ${armfw.url}, API TCP port ${armfw.tcp}`);
+    tcp = new Tcp(armfw.tcp);
+    await tcp.connect();
+    let page = null;
+
+    await check('the page loads and shows the joints', async () => {
+      page = await openPage(browser, armfw.url);
+      await waitAuth(page, 'ok');
+      await page.waitForFunction(() => {
+        const v = [...document.querySelectorAll('#joints td.val')];
+        return v.length === 6 && v.every((td) => /^-?\d+\.\d+ rad$/.test(td.textContent));
+      }, { timeout: WAIT_S * 1000 });
+      const s = await tcp.state();
+      const shown = await page.$$eval('#joints td.val', (tds) => tds.map((td) => parseFloat(td.textContent)));
+      shown.forEach((v, j) => assert(Math.abs(v - s.q[j]) < 1e-3, `J${j + 1} shows ${v}, the arm is at ${s.q[j]}`));
+      const role = await page.$eval('#role', (e) => e.textContent);
+      assert(role === 'role: operator', `role shown: ${role}`);
+      assert(await page.$('#stop') !== null, 'no stop button');
+      // the 3D view drew the arm from the state's frames
+      await page.waitForFunction(() => window.pendant.state && Array.isArray(window.pendant.state.frames), { timeout: WAIT_S * 1000 });
+      const nFrames = await page.evaluate(() => window.pendant.state.frames.length);
+      assert(nFrames === s.frames.length && nFrames >= 7, `the page has ${nFrames} frames, the API ${s.frames.length}`);
+      assert(await page.$('#three canvas') !== null, 'no 3D view (WebGL canvas)');
+      // the three live plots (following error, speed, torque), one series per joint
+      await page.waitForFunction(() => document.querySelectorAll('#plots .uplot').length === 3, { timeout: WAIT_S * 1000 });
+      const legends = await page.$$eval('#plot-fe .u-legend .u-series', (e) => e.length);
+      assert(legends === 6, `following-error plot: ${legends} legend rows, expected one per joint (6)`);
+      assert(page.errors.length === 0, 'errors in the page: ' + page.errors.join('; '));
+      await shot(page, 'pendant-overview');
+    });
+
+    await check('hold a jog button: the joint moves; release: it stops', async () => {
+      await takeControl(page);
+      await page.click('#arm button[data-cmd="enable"]');
+      await until('the arm idle', async () => (await tcp.state()).state === 'idle');
+      const q0 = (await tcp.state()).q[0];
+      const sel = '#joints button.jog[data-joint="0"][data-dir="1"]';
+      await pressHold(page, sel);
+      await until('J1 moving', async () => (await tcp.state()).q[0] > q0 + 0.01);
+      await shot(page, 'pendant-jog');
+      // held for a while: the keep-alives keep it moving past several deadman periods. On a
+      // loaded machine the browser may stall past the deadman; the firmware then stops the jog
+      // and the page waits for a new press: the test presses again and counts it.
+      let lapses = 0;
+      const qa = (await tcp.state()).q[0];
+      await until('J1 still moving 1 s on', async () => {
+        if (await page.evaluate(() => window.pendant.jogging === null)) {
+          ++lapses;
+          await page.mouse.up();
+          await pressHold(page, sel);
+        }
+        return (await tcp.state()).q[0] > qa + 0.02;
+      });
+      if (lapses) figure(`the held jog lapsed ${lapses} time(s) (keep-alives later than the deadman: a busy machine)`);
+      await page.mouse.up();
+      const t0 = now();
+      await until('J1 at rest after the release', async () => still(await tcp.state(), 0));
+      figure(`jog release -> J1 commanded at rest: ${((now() - t0) * 1000).toFixed(0)} ms (the page ends the jog at once)`);
+      const qr = (await tcp.state()).q[0];
+      await sleep(300);
+      const qr2 = (await tcp.state()).q[0];
+      assert(Math.abs(qr2 - qr) < 1e-3, `J1 moved on after the release: ${qr} -> ${qr2}`);
+      await page.screenshot({ path: path.join(shots, 'pendant-full.png'), fullPage: true });  // the plots of the jog
+    });
+
+    await check('close the tab while holding: the arm stops within the jog deadman', async () => {
+      const q0 = (await tcp.state()).q[1];
+      await pressHold(page, '#joints button.jog[data-joint="1"][data-dir="1"]');
+      await until('J2 moving', async () => (await tcp.state()).q[1] > q0 + 0.01);
+      const speed = (await tcp.state()).qd_cmd[1];
+      const t0 = now();
+      await page.close({ runBeforeUnload: false });
+      page = null;
+      let tBrake = null;
+      await until('J2 at rest after the tab closed', async () => {
+        const s = await tcp.state();
+        if (tBrake === null && Math.abs(s.qd_cmd[1]) < Math.abs(speed) * 0.98) tBrake = now();
+        return still(s, 1);
+      });
+      const tRest = now();
+      figure(`tab closed while jogging J2 at ${speed.toFixed(3)} rad/s -> braking begins ${((tBrake - t0) * 1000).toFixed(0)} ms, at rest ${((tRest - t0) * 1000).toFixed(0)} ms (console.jog_deadman_ms = 250)`);
+      // generous on a busy machine: the deadman (250 ms) plus braking plus scheduling
+      assert(tBrake - t0 < 2.0, `braking began ${(tBrake - t0).toFixed(3)} s after the tab closed`);
+    });
+
+    await check('a hung page while holding: the firmware\'s jog deadman stops the arm', async () => {
+      // the page's script frozen: no keep-alive and no jog_cancel, the connection stays open
+      page = await openPage(browser, armfw.url);
+      await waitAuth(page, 'ok');
+      await takeControl(page);
+      const q0 = (await tcp.state()).q[2];
+      await pressHold(page, '#joints button.jog[data-joint="2"][data-dir="1"]');
+      await until('J3 moving', async () => (await tcp.state()).q[2] > q0 + 0.01);
+      const speed = (await tcp.state()).qd_cmd[2];
+      const hang = page.evaluate(() => { const end = Date.now() + 4000; while (Date.now() < end); });
+      const t0 = now();
+      let tBrake = null;
+      await until('J3 at rest with the page hung', async () => {
+        const s = await tcp.state();
+        if (tBrake === null && Math.abs(s.qd_cmd[2]) < Math.abs(speed) * 0.98) tBrake = now();
+        return still(s, 2);
+      });
+      const tRest = now();
+      figure(`page hung while jogging J3 at ${speed.toFixed(3)} rad/s -> braking begins ${((tBrake - t0) * 1000).toFixed(0)} ms, at rest ${((tRest - t0) * 1000).toFixed(0)} ms (console.jog_deadman_ms = 250)`);
+      assert(tBrake - t0 < 2.0, `braking began ${(tBrake - t0).toFixed(3)} s after the page hung`);
+      await hang;
+      await page.mouse.up();
+      await page.close({ runBeforeUnload: false });
+      page = null;
+    });
+
+    await check('the stop button stops a running movej', async () => {
+      page = await openPage(browser, armfw.url);
+      await waitAuth(page, 'ok');
+      await takeControl(page);
+      await until('the arm idle', async () => (await tcp.state()).state === 'idle');
+      const s0 = await tcp.state();
+      // a long, slow move (several seconds), so the stop comes in its middle even on a busy machine
+      const goal = s0.q.map((v, j) => (j === 0 ? v - 2.0 : v));
+      await page.$eval('#movej-q', (e, g) => { e.value = g; }, goal.map((v) => v.toFixed(4)).join(', '));
+      await page.$eval('#speed', (e) => { e.value = '8'; e.dispatchEvent(new Event('input')); });
+      await page.click('#movej-form button[type=submit]');
+      const moving = await until('the movej a third of its way', async () => {
+        const s = await tcp.state();
+        return Math.abs(s.q[0] - s0.q[0]) > 0.6 ? s : null;
+      });
+      const t0 = now();
+      await page.click('#stop');
+      const b1 = await brakeTimes(tcp, 0, moving.qd_cmd[0]);
+      figure(`stop button during a movej at ${moving.qd_cmd[0].toFixed(3)} rad/s -> standstill (every joint commanded at rest, nothing running) ${((now() - t0) * 1000).toFixed(0)} ms after the click began; braking to rest ${b1} ms of the arm's clock`);
+      const s1 = await tcp.state();
+      assert(Math.abs(s1.q[0] - goal[0]) > 0.05, `the movej reached its goal (${s1.q[0]}): the stop did not stop it`);
+      await shot(page, 'pendant-stopped');
+      // the space bar stops too
+      await page.click('#movej-form button[type=submit]');
+      const moving2 = await until('the movej running again', async () => {
+        const s = await tcp.state();
+        return Math.abs(s.q[0] - s1.q[0]) > 0.3 ? s : null;
+      });
+      await page.focus('#stop');
+      const t1 = now();
+      await page.keyboard.press('Space');
+      const b2 = await brakeTimes(tcp, 0, moving2.qd_cmd[0]);
+      figure(`space bar during a movej at ${moving2.qd_cmd[0].toFixed(3)} rad/s -> standstill ${((now() - t1) * 1000).toFixed(0)} ms after the key press began; braking to rest ${b2} ms of the arm's clock`);
+      assert(Math.abs((await tcp.state()).q[0] - goal[0]) > 0.05, 'the movej reached its goal: the space bar did not stop it');
+    });
+
+    await check('tablet and phone layouts keep the stop button in view', async () => {
+      for (const [name, vp] of [['pendant-tablet', { width: 1280, height: 800 }], ['pendant-phone', { width: 390, height: 844, isMobile: true, hasTouch: true }]]) {
+        await page.setViewport(vp);
+        await page.evaluate(() => window.scrollTo(0, document.body.scrollHeight));
+        const box = await page.$eval('#stop', (e) => { const r = e.getBoundingClientRect(); return { top: r.top, bottom: r.bottom, left: r.left, right: r.right }; });
+        assert(box.top >= 0 && box.bottom <= vp.height && box.left >= 0 && box.right <= vp.width, `${name}: the stop button is off screen: ${JSON.stringify(box)}`);
+        const overflow = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
+        assert(overflow <= 1, `${name}: the page is ${overflow} px wider than the screen`);
+        await page.evaluate(() => window.scrollTo(0, 0));
+        await shot(page, name);
+      }
+    });
+    await check('armfw restarted: the page connects again by itself', async () => {
+      const wsPort = Number(new URL(armfw.url).port);
+      tcp.close();
+      await stopArmfw(armfw);
+      armfw = null;
+      await page.waitForFunction(() => document.getElementById('conn').textContent === 'offline', { timeout: WAIT_S * 1000 });
+      armfw = await startArmfw(args.armfw, [], wsPort);
+      tcp = new Tcp(armfw.tcp);
+      await tcp.connect();
+      await page.waitForFunction(() => document.getElementById('conn').textContent === 'online' && window.pendant.role === 'operator' &&
+                                 window.pendant.state !== null, { timeout: WAIT_S * 1000 });
+      const ctl = await page.$eval('#control', (e) => e.textContent);
+      assert(ctl === 'control: nobody', `after the reconnection: ${ctl} (control is not taken again by itself)`);
+    });
+    if (page) await page.close();
+    tcp.close();
+    await stopArmfw(armfw);
+    armfw = null;
+
+    // ------------------------------------------------------------ a token file: observer, operator
+    const opTok = 'operator-token-0123456789abcdef';
+    const obsTok = 'observer-token-0123456789abcdef';
+    const tokens = path.join(args.workdir, 'tokens');
+    fs.writeFileSync(tokens, `operator ${opTok}\nobserver ${obsTok}\n`, { mode: 0o600 });
+    fs.chmodSync(tokens, 0o600);
+    armfw = await startArmfw(args.armfw, ['--api-tokens', tokens]);
+    tcp = new Tcp(armfw.tcp);
+    await tcp.connect();
+    const hello = await tcp.ask('hello', { token: opTok });
+    assert(hello.ok, 'the test\'s operator client: ' + JSON.stringify(hello));
+
+    await check('a wrong token is refused', async () => {
+      const p = await openPage(browser, armfw.url + '#token=wrong-token-0000000000000');
+      await waitAuth(p, 'refused');
+      const msg = await p.$eval('#msg', (e) => e.textContent);
+      assert(/wrong token/.test(msg), `message shown: ${msg}`);
+      const jogs = await p.$$eval('button.jog', (b) => b.length);
+      assert(jogs === 0, 'a refused page shows jog buttons');
+      await shot(p, 'pendant-refused');
+      await p.close();
+    });
+
+    await check('an observer cannot jog', async () => {
+      assert((await tcp.ask('take_control')).ok, 'take_control');
+      assert((await tcp.ask('enable')).ok, 'enable');
+      await until('the arm idle', async () => (await tcp.state()).state === 'idle');
+      assert((await tcp.ask('release_control')).ok, 'release_control');
+      const p = await openPage(browser, armfw.url + '#token=' + obsTok);
+      await waitAuth(p, 'ok');
+      const role = await p.$eval('#role', (e) => e.textContent);
+      assert(role === 'role: observer', `role shown: ${role}`);
+      const disabled = await p.$$eval('button.jog, #take, button.op', (bs) => bs.length > 0 && bs.every((b) => b.disabled));
+      assert(disabled, 'an observer\'s page has enabled command buttons');
+      const stops = await p.$$eval('#stop, button.any', (bs) => bs.length === 3 && bs.every((b) => !b.disabled));
+      assert(stops, 'an observer\'s page cannot stop, hold or e-stop');
+      const q0 = (await tcp.state()).q[0];
+      await pressHold(p, '#joints button.jog[data-joint="0"][data-dir="1"]');
+      await sleep(1000);  // a window for a motion that must not come
+      await p.mouse.up();
+      const q1 = (await tcp.state()).q[0];
+      assert(Math.abs(q1 - q0) < 1e-4, `J1 moved for an observer: ${q0} -> ${q1}`);
+      // and the server refuses it whatever the page does: a jog sent on the page's own connection
+      const r = await p.evaluate(async (tok) => new Promise((resolve) => {
+        const ws = new WebSocket('ws://' + location.host + '/');
+        ws.onopen = () => {
+          ws.send(JSON.stringify({ id: 1, cmd: 'hello', token: tok }));
+          ws.send(JSON.stringify({ id: 2, cmd: 'take_control' }));
+          ws.send(JSON.stringify({ id: 3, cmd: 'jog', joint: 0, direction: 1 }));
+        };
+        const got = {};
+        ws.onmessage = (e) => { const m = JSON.parse(e.data); if (m.id) got[m.id] = m; if (got[3]) { ws.close(); resolve(got); } };
+      }), obsTok);
+      assert(r[2].error === 'forbidden' && r[3].error, `observer's take_control / jog: ${JSON.stringify(r)}`);
+      await shot(p, 'pendant-observer');
+      await p.close();
+    });
+  } finally {
+    if (tcp) tcp.close();
+    await browser.close();
+    await stopArmfw(armfw);
+  }
+  const failed = results.filter((r) => r[1] !== 'ok').length;
+  fs.writeFileSync(path.join(args.workdir, 'figures.txt'), figures.join('\n') + '\n');
+  console.log(`${results.length - failed} of ${results.length} passed; screenshots in ${shots}`);
+  return failed === 0 ? 0 : 1;
+}
+
+main().then((c) => process.exit(c), (e) => { console.error(e.stack || String(e)); process.exit(1); });
