@@ -163,8 +163,11 @@ std::string McapRecorder::start(const McapSettings& s, double rate_hz, bool thre
   struct stat st {};
   if (::stat(s.dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) return "record.dir " + s.dir + ": not a folder";
   const double loop = ctl_.config().rate_hz;
-  if (!(rate_hz > 0) || !std::isfinite(rate_hz) || rate_hz > loop * (1 + 1e-9))
-    return "rate " + std::to_string(rate_hz) + " Hz: outside (0, " + std::to_string(static_cast<int>(loop)) + "] (the control rate)";
+  if (!(rate_hz > 0) || !std::isfinite(rate_hz) || rate_hz > loop * (1 + 1e-9)) {
+    char b[96];
+    std::snprintf(b, sizeof b, "rate %g Hz: outside (0, %g] (the control rate)", rate_hz, loop);
+    return b;
+  }
   cfg_ = s;
   every_ = static_cast<std::uint64_t>(std::max(1.0, std::ceil(loop / rate_hz - 1e-9)));
   period_ns_ = 1e9 / loop;
@@ -189,6 +192,7 @@ std::string McapRecorder::start(const McapSettings& s, double rate_hz, bool thre
   quit_ = false;
   if (threaded) {
     thread_ = std::thread([this] {
+      ::pthread_setname_np(::pthread_self(), "mcap-recorder");  // top -H, the CPU figures in tests/bench
       if (cfg_.priority > 0) {  // best effort: without the right to, the thread runs at normal priority
         sched_param sp{};
         sp.sched_priority = cfg_.priority;

@@ -27,7 +27,7 @@ namespace servoarm::api {
 
 struct FoxgloveConfig {
   std::string bind = "127.0.0.1";
-  int port = 8765;                     ///< 0: any free port (port() tells)
+  int port = 8767;                     ///< 0: any free port (port() tells)
   double state_rate_hz = 50;           ///< /arm/state and /tool_pose
   double tf_rate_hz = 30;              ///< /tf
   double rate_hz = 1000;               ///< the control rate (the state's time base)

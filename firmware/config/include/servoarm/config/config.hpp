@@ -212,7 +212,7 @@ struct FwConfig {
   // [foxglove]: the Foxglove WebSocket server (docs/foxglove-mcap.md)
   bool foxglove_enabled = false;         ///< serve live data to Foxglove / Lichtblick
   std::string foxglove_bind = "127.0.0.1";
-  int foxglove_port = 8765;
+  int foxglove_port = 8767;               ///< not 8765 (Foxglove's usual port): api.ws_port has it
   double foxglove_state_rate_hz = 50.0;  ///< joint states and the tool pose per second
   double foxglove_tf_rate_hz = 30.0;     ///< link transforms per second
 
