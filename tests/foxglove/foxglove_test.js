@@ -9,7 +9,8 @@
 //         subscription decodes (JSON) and has its schema's fields; /tf holds every link's
 //         transform, chained from world to tool; the rates measured over a window are within
 //         [0.5, 1.15] x the configured rates (low bound loose: a busy machine delays the
-//         publisher, never speeds it up); faults and events arrive as foxglove.Log.
+//         publisher, never speeds it up) while another client subscribed to everything does not
+//         read; faults and events arrive as foxglove.Log.
 //  MCAP:  `record mcap rate=1000` for RECORD_S seconds (a few seconds here, not the
 //         10 minutes of a soak run: pass --record-s 600 for that) then at 100 Hz: the indexed
 //         reader reads the summary; every message decodes; log times increase on every channel;
@@ -103,6 +104,12 @@ async function main() {
     }
   });
   for (const topic of Object.keys(want)) subTopic[client.subscribe(byTopic[topic].id)] = topic;
+  // A client that subscribes to everything and never reads: it loses its own messages; the
+  // rates measured below on the reading client are its rates with this one connected.
+  const slow = new ws.WebSocket(`ws://127.0.0.1:${port}`, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
+  await new Promise((res) => slow.on("open", res));
+  slow.send(JSON.stringify({ op: "subscribe", subscriptions: channels.map((c, i) => ({ id: i, channelId: c.id })) }));
+  slow._socket.pause();
   await sleep(500);  // settle
   for (const k of Object.keys(got)) got[k] = [];
   const window = 3000;
@@ -161,6 +168,7 @@ async function main() {
   check(/rate .*outside/.test(refused[1]), `a rate above the control rate is refused: ${refused[1]}`);
 
   client.close();
+  slow.terminate();
   send("quit");
   fw.stdin.end();
   await new Promise((r) => { fw.on("exit", r); setTimeout(() => { fw.kill("SIGTERM"); }, 5000); });

@@ -198,10 +198,13 @@ std::string McapRecorder::start(const McapSettings& s, double rate_hz, bool thre
         sp.sched_priority = cfg_.priority;
         ::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &sp);
       }
-      const auto nap = static_cast<long>(period_ns_ / 4);
       while (!quit_.load()) {
         poll();
-        timespec d{0, nap};
+        // A quarter period while the next due cycle is the next one; below the control rate,
+        // asleep until one period before it (the cost scales with the recorded rate).
+        const std::uint64_t ahead = next_ > seen_ + 1 ? next_ - seen_ - 1 : 0;
+        const double nap = ahead > 0 ? static_cast<double>(ahead) * period_ns_ : period_ns_ / 4;
+        timespec d{static_cast<time_t>(nap / 1e9), static_cast<long>(std::fmod(nap, 1e9))};
         ::nanosleep(&d, nullptr);
       }
     });
@@ -277,6 +280,7 @@ void McapRecorder::end(std::string why) {
 void McapRecorder::poll() {
   if (!active_.load()) return;
   const Telemetry t = ctl_.telemetry();
+  seen_ = t.cycles;
   if (t.cycles >= next_) {
     const std::uint64_t last_due = t.cycles - t.cycles % every_;
     std::uint64_t missed = (last_due - next_) / every_ + (t.cycles == last_due ? 0 : 1);

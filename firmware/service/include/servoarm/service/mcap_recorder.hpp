@@ -8,7 +8,8 @@
 // gets the next number).
 //
 // Threads: a recorder thread of its own (non-real-time) reads the telemetry seqlock four times
-// per control period and writes each cycle due (cycle % decimation == 0); the control thread
+// per control period around each cycle due (cycle % decimation == 0; below the control rate it
+// sleeps in between) and writes it; the control thread
 // is never touched and never waits. A cycle the recorder did not see in time (the thread not
 // scheduled for longer than a period) is counted as missed, never silently: the count is in
 // every state message after it (`missed`) and in the result of `record mcap stop`. Events are
@@ -64,7 +65,8 @@ class McapRecorder {
   McapStatus status_;
   std::vector<std::pair<std::uint64_t, std::string>> events_;
   std::uint64_t every_ = 1;      ///< decimation
-  std::uint64_t next_ = 0;       ///< next cycle due
+  std::atomic<std::uint64_t> next_{0};  ///< next cycle due
+  std::atomic<std::uint64_t> seen_{0};  ///< the cycle of the last look
   std::uint64_t start_cycle_ = 0;
   std::int64_t epoch_ns_ = 0;    ///< wall clock (ns) of cycle start_cycle_
   double period_ns_ = 1e6;
