@@ -51,7 +51,7 @@ const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 async function main() {
   const dir = fs.mkdtempSync(path.join(os.tmpdir(), "servoarm_fox_"));
-  const fw = spawn(armfw, ["--sim", "--foxglove-port", "0", "--record-dir", dir], { stdio: ["pipe", "pipe", "pipe"] });
+  const fw = spawn(armfw, ["--sim", "--foxglove-port", "0", "--record-dir", dir, "--api-tcp", "0"], { stdio: ["pipe", "pipe", "pipe"] });
   let out = "", err = "";
   fw.stdout.on("data", (d) => (out += d));
   fw.stderr.on("data", (d) => (err += d));
@@ -164,6 +164,29 @@ async function main() {
   const stop2 = await answer("record mcap stop", /ok recorded MCAP (\S+): (\d+) files, (\d+) frames at (\S+) Hz, (\d+) missed, (\d+) events/);
   check(rec2[2] !== rec1[2], `a second recording is a new file (${path.basename(rec2[2])})`);
   await verify(rec2[2], 10, stop2, false);
+  // ---------------- the same through the network API ----------------
+  const apiPort = Number(err.match(/api: WebSocket port -?\d+, TCP port (\d+)/)[1]);
+  const sock = require("net").connect(apiPort, "127.0.0.1");
+  let apiIn = "";
+  sock.on("data", (d) => (apiIn += d));
+  const api = async (msg) => {
+    sock.write(JSON.stringify(msg) + "\n");
+    for (let t = 0; t < 10000; t += 20) {
+      const line = apiIn.split("\n").find((l) => l.includes(`"id":${msg.id}`));
+      if (line) return JSON.parse(line);
+      await sleep(20);
+    }
+    throw new Error(`no API answer to ${JSON.stringify(msg)}`);
+  };
+  await api({ id: 1, cmd: "hello" });
+  const a1 = await api({ id: 2, cmd: "record_mcap", rate_hz: 500 });
+  check(a1.ok === true && typeof a1.file === "string" && a1.rate_hz === 500, `API record_mcap starts: ${JSON.stringify(a1)}`);
+  await sleep(1000);
+  const a2 = await api({ id: 3, cmd: "record_mcap", stop: true });
+  check(a2.ok === true && a2.file === a1.file && a2.frames > 300 && a2.frames + a2.missed >= 450,
+        `API record_mcap stop: ${a2.frames} frames, ${a2.missed} missed`);
+  await verify(a1.file, 2, [null, null, null, String(a2.frames), null, String(a2.missed)], false);
+  sock.destroy();
   const refused = await answer("record mcap rate=5000", /\n?(error[^\n]*)\n/);
   check(/rate .*outside/.test(refused[1]), `a rate above the control rate is refused: ${refused[1]}`);
 

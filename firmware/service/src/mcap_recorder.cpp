@@ -200,9 +200,10 @@ std::string McapRecorder::start(const McapSettings& s, double rate_hz, bool thre
       }
       while (!quit_.load()) {
         poll();
-        // A quarter period while the next due cycle is the next one; below the control rate,
-        // asleep until one period before it (the cost scales with the recorded rate).
-        const std::uint64_t ahead = next_ > seen_ + 1 ? next_ - seen_ - 1 : 0;
+        // A quarter period while the next due cycle is one of the next two; below the control
+        // rate, asleep until about two periods before it (the cost scales with the recorded
+        // rate; the phase within the cycle seen is unknown, hence the margin).
+        const std::uint64_t ahead = next_ > seen_ + 2 ? next_ - seen_ - 2 : 0;
         const double nap = ahead > 0 ? static_cast<double>(ahead) * period_ns_ : period_ns_ / 4;
         timespec d{static_cast<time_t>(nap / 1e9), static_cast<long>(std::fmod(nap, 1e9))};
         ::nanosleep(&d, nullptr);
