@@ -182,6 +182,9 @@ constexpr ArgSpec kOn[] = {{"on", ArgType::boolean, true, 0, 1, "on (true) or of
 constexpr ArgSpec kOutput[] = {{"index", ArgType::integer, true, 0, 1023, "the [[output]] index (0-based)"},
                                {"on", ArgType::boolean, true, 0, 1, "on (true) or off"}};
 constexpr ArgSpec kEvents[] = {{"since", ArgType::integer, false, 0, 9e15, "the last sequence number the client has (default 0: every event kept)"}};
+constexpr ArgSpec kRecordMcap[] = {
+    {"rate_hz", ArgType::number, false, 1e-3, 1e5, "state samples per second, at most the control rate (default record.rate_hz)"},
+    {"stop", ArgType::boolean, false, 0, 1, "true: ends the recording"}};
 constexpr ArgSpec kStream[] = {
     {"q", ArgType::numbers, true, -1e6, 1e6, "the newest joint target, one value per joint (rad / m)"},
     {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"}};
@@ -286,6 +289,22 @@ constexpr MessageSpec kMessages[] = {
      +[](C& c, R& out) { control_result(c.cx.svc->freedrive(c.rq.arg("on")->num != 0), out); }},
     {"collision", kOn, Gate::control, Where::service, "ArmService::collision_detection", "collision detection on or off",
      +[](C& c, R& out) { control_result(c.cx.svc->collision_detection(c.rq.arg("on")->num != 0), out); }},
+    {"record_mcap", kRecordMcap, Gate::operator_, Where::service, "ArmService::record_mcap_start / record_mcap_stop",
+     "records the telemetry, setpoints, events and robot description into an MCAP file in record.dir "
+     "(docs/foxglove-mcap.md); answers the file, or at stop its files, frames and missed cycles",
+     +[](C& c, R& out) {
+       if (c.rq.arg("stop")->present && c.rq.arg("stop")->num != 0) {
+         if (!c.cx.svc->mcap_status().active && c.cx.svc->mcap_status().error.empty())
+           return out.fail(CmdError::bad_state, "no MCAP recording");
+         const fw::McapStatus s = c.cx.svc->record_mcap_stop();
+         out.j = {{"file", s.file}, {"files", s.files}, {"frames", s.frames}, {"missed", s.missed}, {"events", s.events},
+                  {"bytes", s.bytes}, {"rate_hz", s.rate_hz}, {"ended", s.error}};
+         return;
+       }
+       const std::string e = c.cx.svc->record_mcap_start(num_or(c, "rate_hz", c.cx.svc->mcap_settings().rate_hz));
+       if (!e.empty()) return out.fail(CmdError::bad_state, e);
+       out.j = {{"file", c.cx.svc->mcap_status().file}, {"rate_hz", c.cx.svc->mcap_status().rate_hz}};
+     }},
     {"output", kOutput, Gate::control, Where::service, "ArmService::set_output", "sets a digital output at once",
      +[](C& c, R& out) {
        fw::OutputRequest o;

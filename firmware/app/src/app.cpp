@@ -166,6 +166,14 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   console = std::make_unique<Console>(*ctl, console_config(), ik_ready ? ik.get() : nullptr);
   if (const std::string e = console->load_frames(); !e.empty()) return "frames file refused: " + e;
   if (const std::string e = console->load_points(); !e.empty()) return "points file refused: " + e;
+  McapSettings ms;  // `record mcap`: an absolute folder only (armfw resolves a relative record.dir)
+  if (!cfg.record_dir.empty() && cfg.record_dir[0] == '/') ms.dir = cfg.record_dir;
+  ms.rate_hz = std::min(cfg.record_rate_hz, cfg.rate_hz);
+  ms.max_file_mb = cfg.record_max_file_mb;
+  ms.max_files = cfg.record_max_files;
+  ms.chunk_kb = static_cast<std::size_t>(cfg.record_chunk_kb);
+  ms.priority = cfg.priority > 1 ? cfg.priority - 1 : 0;  // just below the control thread: sees every cycle
+  console->service().set_mcap_settings(ms);
   return "";
 }
 

@@ -26,6 +26,7 @@
 #include "servoarm/app/app.hpp"
 #ifdef SERVOARM_WITH_API
 #include "servoarm/api/server.hpp"  // the network API (optional: libwebsockets)
+#include "servoarm/api/foxglove.hpp"  // the Foxglove WebSocket server (same library)
 #ifdef SERVOARM_WITH_MQTT
 #include "servoarm/api/mqtt.hpp"  // the MQTT bridge (optional: libmosquitto)
 #endif
@@ -86,6 +87,9 @@ int usage(FILE* f, int code) {
                "                        api.enabled on (docs/api.md)\n"
                "  --api-tcp PORT        serve the network API's newline-delimited JSON on PORT (0: a free port)\n"
                "  --api-tokens FILE     the API's tokens file (api.tokens_file)\n"
+               "  --foxglove-port PORT  serve live data to Foxglove / Lichtblick on PORT (0: a free port, printed); turns\n"
+               "                        foxglove.enabled on (docs/foxglove-mcap.md)\n"
+               "  --record-dir DIR      where `record mcap` writes its MCAP files (record.dir)\n"
                "  --api-reference       print the generated reference section of docs/api.md and exit\n"
                "  -h, --help            this text\n");
   return code;
@@ -479,6 +483,8 @@ int main(int argc, char** argv) {
   double bench = -1, rate = -1;
   int priority = -1, cpu = -2, baud = -1;
   int api_ws = -2, api_tcp = -2;  // -2: not given
+  int foxglove_port = -2;
+  std::string record_dir;
   std::string api_tokens;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -532,6 +538,8 @@ int main(int argc, char** argv) {
     else if (a == "--api-ws") api_ws = static_cast<int>(number("--api-ws", 0, 65535));
     else if (a == "--api-tcp") api_tcp = static_cast<int>(number("--api-tcp", 0, 65535));
     else if (a == "--api-tokens") api_tokens = value("--api-tokens");
+    else if (a == "--foxglove-port") foxglove_port = static_cast<int>(number("--foxglove-port", 0, 65535));
+    else if (a == "--record-dir") record_dir = value("--record-dir");
     else if (a == "--api-reference") {
 #ifdef SERVOARM_WITH_API
       std::fputs(api::api_reference_markdown().c_str(), stdout);
@@ -614,6 +622,7 @@ int main(int argc, char** argv) {
   resolve(cfg.programs_dir, programs_dir);
   resolve(cfg.programs_points_file, points_file);
   resolve(cfg.api_tokens_file, api_tokens);
+  resolve(cfg.record_dir, record_dir);
   // Where armfw keeps files must exist at start, not first fail when a tool, point or
   // program is saved: the programs folder, and the folders of the frames and points files.
   // Given on the command line, a missing one is refused; from the configuration (which may
@@ -772,13 +781,14 @@ int main(int argc, char** argv) {
   std::unique_ptr<api::ApiServer> api_server;
   api::ServiceContext api_cx;
   std::unique_ptr<StreamService> stream;
+  std::unique_ptr<api::FoxgloveServer> foxglove;
 #else
   struct NoApi {
     int wake_fd() const { return -1; }
     void pump(int) {}
     void stop() {}
   };
-  std::unique_ptr<NoApi> api_server;
+  std::unique_ptr<NoApi> api_server, foxglove;
   const int api_cx = 0;
 #endif
 #ifdef SERVOARM_WITH_MQTT
@@ -791,10 +801,11 @@ int main(int argc, char** argv) {
   std::unique_ptr<NoMqtt> mqtt;
 #endif
   const bool want_api = app.cfg.api_enabled || api_ws >= 0 || api_tcp >= 0;
-  if (want_api || app.cfg.mqtt_enabled) {
+  const bool want_foxglove = app.cfg.foxglove_enabled || foxglove_port >= 0;
+  if (want_api || app.cfg.mqtt_enabled || want_foxglove) {
 #ifndef SERVOARM_WITH_API
     std::fprintf(stderr, "armfw: built without the network API (libwebsockets-dev, nlohmann-json3-dev)%s\n",
-                 want_api ? "" : ": mqtt.enabled needs it");
+                 want_api ? "" : ": mqtt.enabled and foxglove.enabled need it");
     loop.stop();
     return 2;
 #else
@@ -883,9 +894,28 @@ int main(int argc, char** argv) {
 #endif
 #endif
   }
+#ifdef SERVOARM_WITH_API
+  if (want_foxglove) {
+    api::FoxgloveConfig fc;
+    fc.bind = app.cfg.foxglove_bind;
+    fc.port = foxglove_port >= 0 ? foxglove_port : app.cfg.foxglove_port;
+    fc.state_rate_hz = app.cfg.foxglove_state_rate_hz;
+    fc.tf_rate_hz = app.cfg.foxglove_tf_rate_hz;
+    fc.rate_hz = app.cfg.rate_hz;
+    fc.name = "servoarm " + app.cfg.robot;
+    foxglove = std::make_unique<api::FoxgloveServer>(fc, *app.ctl, app.chain);
+    if (const std::string e = foxglove->start(); !e.empty()) {
+      std::fprintf(stderr, "armfw: %s\n", e.c_str());
+      loop.stop();
+      return 2;
+    }
+    std::fprintf(stderr, "armfw: foxglove: ws://%s:%d (foxglove.websocket.v1)\n", fc.bind.c_str(), foxglove->port());
+  }
+#endif
   // The API's and the MQTT bridge's requests run here, on the console thread (the service's one caller).
   const auto pump_network = [&] {
     if (api_server) api_server->pump(api_cx);
+    if (foxglove) foxglove->pump(api_cx);
 #ifdef SERVOARM_WITH_MQTT
     if (mqtt) mqtt->pump(api_cx, api_server.get());
 #endif
@@ -958,7 +988,7 @@ int main(int argc, char** argv) {
       if (rc == 0 && !ts.empty()) {
         std::fprintf(stderr, "armfw: %s ready (%d joints, %.0f Hz); type help\n", app.cfg.robot.c_str(), app.chain.n_joints,
                      app.cfg.rate_hz);
-        if (!api_server && !mqtt) {
+        if (!api_server && !mqtt && !foxglove) {
           serve_consoles(*app.console, ts, app.cfg.console_stdin, &g_quit);
         } else {
           // Consoles and the API on one thread: wait for console input or API requests (at most
@@ -992,6 +1022,7 @@ int main(int argc, char** argv) {
   }
   // Shut down: stop motion, power down, stop the loop, statistics at exit.
   if (api_server) api_server->stop();
+  if (foxglove) foxglove->stop();
   if (mqtt) mqtt->stop();
   {
     Session s;

@@ -432,6 +432,32 @@ const ConfigKey kConfigTable[] = {
       "keep-alive interval: the broker publishes the last will (`offline`) after 1.5 times this without traffic "
       "(libmosquitto takes 5 s at least)"}
         .within(5, 600),
+    K{"record.dir", &F::record_dir, "",
+      "the folder `record mcap` writes its MCAP files to (`servoarm-<UTC time>-NNN.mcap`, never overwriting one); a "
+      "relative path is relative to the configuration file's folder; `\"\"` = none (`armfw --record-dir DIR` sets it)"}
+        .length(0, 4095),
+    K{"record.rate_hz", &F::record_rate_hz, "Hz",
+      "`record mcap` without rate=: state samples per second (the control rate divided by a whole number; at most the "
+      "control rate)"}
+        .within(1, 4000),
+    K{"record.max_file_mb", &F::record_max_file_mb, "MB",
+      "an MCAP file reaching this size is closed (summary written) and the next one begun"}
+        .within(1, 1000000),
+    K{"record.max_files", &F::record_max_files, "",
+      "files of one `record mcap` recording at most: the recording ends at the limit; 0 = no limit"}
+        .within(0, 100000),
+    K{"record.chunk_kb", &F::record_chunk_kb, "KiB",
+      "MCAP chunk size; a chunk is also written every second, so a power cut loses at most the last second"}
+        .within(4, 65536),
+    K{"foxglove.enabled", &F::foxglove_enabled, "",
+      "the Foxglove WebSocket server (docs/foxglove-mcap.md): joint states, link transforms, the tool pose and the "
+      "events for Foxglove or Lichtblick (`armfw --foxglove-port PORT` turns it on)"},
+    K{"foxglove.bind", &F::foxglove_bind, "", "the address the Foxglove server listens on (loopback by default)"},
+    K{"foxglove.port", &F::foxglove_port, "", "the Foxglove server's port (0: any free port, printed)"}.within(0, 65535),
+    K{"foxglove.state_rate_hz", &F::foxglove_state_rate_hz, "Hz",
+      "joint states and tool pose messages per second (at most the control rate)"}
+        .within(0.1, 1000),
+    K{"foxglove.tf_rate_hz", &F::foxglove_tf_rate_hz, "Hz", "link transform messages per second"}.within(0.1, 1000),
 };
 
 using D = DriveConfig;

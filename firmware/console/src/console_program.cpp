@@ -429,6 +429,23 @@ void Console::do_record(Session& s, const Command& c) {
     answer_ok(s, "check mode: not run");
     return;
   }
+  if (c.record_mcap) {  // an MCAP file of the telemetry, setpoints and events (docs/foxglove-mcap.md)
+    if (!c.record_stop) {
+      const std::string e = svc_->record_mcap_start(c.rate > 0 ? c.rate : svc_->mcap_settings().rate_hz);
+      if (!e.empty()) return answer_error(s, CmdError::bad_state, "record mcap: " + e);
+      const McapStatus st = svc_->mcap_status();
+      answer_ok(s, fmt("recording MCAP at %g Hz to %s", st.rate_hz, st.file.c_str()));
+      return;
+    }
+    if (!svc_->mcap_status().active && svc_->mcap_status().error.empty())
+      return answer_error(s, CmdError::bad_state, "record mcap stop: no MCAP recording (record mcap first)");
+    const McapStatus st = svc_->record_mcap_stop();
+    answer_ok(s, fmt("recorded MCAP %s: %d files, %llu frames at %g Hz, %llu missed, %llu events, %llu bytes%s%s", st.file.c_str(), st.files,
+                     static_cast<unsigned long long>(st.frames), st.rate_hz, static_cast<unsigned long long>(st.missed),
+                     static_cast<unsigned long long>(st.events), static_cast<unsigned long long>(st.bytes),
+                     st.error.empty() ? "" : "; ended: ", st.error.c_str()));
+    return;
+  }
   if (!c.record_stop) {
     const RecordResult r = svc_->record_start(c.rate > 0 ? c.rate : cfg_.record_rate_hz);
     switch (r.refusal) {

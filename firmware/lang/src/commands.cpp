@@ -791,9 +791,31 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
       break;
     }
     case ArgShape::record: {
-      if (nargs < 1) return fail(CmdError::arg_count, "record start [rate=Hz] | record stop NAME [tolerance=angle]");
+      if (nargs < 1) return fail(CmdError::arg_count, "record start [rate=Hz] | record stop NAME [tolerance=angle] | record mcap [rate=Hz] | record mcap stop");
       const std::string_view op = ws.w[used];
       int k = used + 1;
+      if (ieq(op, "mcap")) {  // record mcap [rate=Hz] | record mcap stop: an MCAP file (the service checks the rate)
+        c.record_mcap = true;
+        if (k < ws.n && ieq(ws.w[k], "stop")) {
+          c.record_stop = true;
+          if (++k < ws.n) return fail(CmdError::arg_count, "record mcap stop takes no arguments");
+        }
+        for (; k < ws.n; ++k) {
+          const std::string_view w = ws.w[k];
+          const std::size_t eq = w.find('=');
+          if (eq == std::string_view::npos || !ieq(w.substr(0, eq), "rate"))
+            return fail(CmdError::bad_option, "record mcap: unexpected '%.*s' (only rate=)", int(w.size() > 20 ? 20 : w.size()), w.data());
+          double v = 0;
+          switch (parse_decimal(w.substr(eq + 1), v)) {
+            case Num::ok: break;
+            case Num::bad: return fail(CmdError::bad_number, "record mcap: rate '%.*s' is not a number", int(w.size() - eq - 1), w.data() + eq + 1);
+            case Num::not_finite: return fail(CmdError::not_finite, "record mcap: rate is not finite");
+          }
+          if (!(v > 0)) return fail(CmdError::out_of_range, "record mcap: rate=%g must be > 0", v);
+          c.rate = v;
+        }
+        break;
+      }
       if (ieq(op, "stop")) {
         if (nargs < 2 || std::string_view(ws.w[k]).find('=') != std::string_view::npos)
           return fail(CmdError::arg_count, "record stop needs a program name (record stop NAME)");

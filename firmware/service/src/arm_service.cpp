@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 // The arm service's motion path (arm_service.hpp).
 #include "servoarm/service/arm_service.hpp"
+#include "servoarm/service/mcap_recorder.hpp"
 
 #include <chrono>
 #include <cmath>

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "servoarm/service/arm_service.hpp"
+#include "servoarm/service/mcap_recorder.hpp"
 
 namespace servoarm::fw {
 
@@ -62,6 +63,7 @@ std::vector<std::size_t> decimate(const std::vector<kin::JointVector>& q, double
 
 void ArmService::tick() {
   record_sample();
+  mcap_events();
   program_tick();
 }
 
@@ -152,6 +154,36 @@ RecordResult ArmService::record_stop() {
   rec_.active = false;
   rec_.samples.clear();
   return r;
+}
+
+std::string ArmService::record_mcap_start(double rate_hz, bool threaded) {
+  if (ctl_ == nullptr) return "no control thread (a dry run records nothing)";
+  if (!mcap_) mcap_ = std::make_unique<McapRecorder>(*ctl_, ctl_->chain());
+  mcap_seq_ = next_seq_ - 1;
+  return mcap_->start(mcap_cfg_, rate_hz, threaded);
+}
+
+McapStatus ArmService::record_mcap_stop() {
+  if (!mcap_) return {};
+  mcap_events();
+  return mcap_->stop();
+}
+
+McapStatus ArmService::mcap_status() const { return mcap_ ? mcap_->status() : McapStatus{}; }
+
+void ArmService::mcap_poll() {
+  mcap_events();
+  if (mcap_) mcap_->poll();
+}
+
+// The service's new events to the recorder (the service thread: the event ring's reader).
+void ArmService::mcap_events() {
+  if (!mcap_ || !mcap_->active()) return;
+  const EventBatch b = events_since(mcap_seq_);
+  for (const ArmEvent& e : b.events) {
+    mcap_->event(e, event_detail(e));
+    mcap_seq_ = e.seq;
+  }
 }
 
 }  // namespace servoarm::fw

@@ -202,6 +202,20 @@ struct FwConfig {
   double mqtt_state_rate_hz = 10.0;      ///< state samples published per second
   int mqtt_keepalive_s = 10;             ///< keep-alive: the broker publishes the last will after 1.5 x this
 
+  // [record]: MCAP recordings (`record mcap`, docs/foxglove-mcap.md)
+  std::string record_dir;                ///< the recordings folder; relative: to the config file's folder; "" = none
+  double record_rate_hz = 100.0;         ///< state samples per second without rate=
+  double record_max_file_mb = 256.0;     ///< a file reaching this size is closed and the next begun
+  int record_max_files = 0;              ///< files of one recording at most; 0 = no limit
+  int record_chunk_kb = 256;             ///< MCAP chunk size
+
+  // [foxglove]: the Foxglove WebSocket server (docs/foxglove-mcap.md)
+  bool foxglove_enabled = false;         ///< serve live data to Foxglove / Lichtblick
+  std::string foxglove_bind = "127.0.0.1";
+  int foxglove_port = 8767;               ///< not 8765 (Foxglove's usual port): api.ws_port has it
+  double foxglove_state_rate_hz = 50.0;  ///< joint states and the tool pose per second
+  double foxglove_tf_rate_hz = 30.0;     ///< link transforms per second
+
   bool operator==(const FwConfig&) const = default;
 };
 

@@ -196,13 +196,16 @@ inline constexpr CommandSpec kCommands[] = {
      "after `!` with a move held: that move (and one queued behind it) is finished first", false},
     {"abort", Cmd::abort, ArgShape::none, "abort", "end the running program: ramp down and drop its queued moves",
      "answers `ok aborted NAME at FILE:LINE`; as `stop` when no program runs", false},
-    {"record", Cmd::record, ArgShape::record, "record start [rate=Hz]; record stop NAME [tolerance=angle]",
-     "record the joints while jogging; `record stop NAME` writes program NAME.arm of blended joint moves",
+    {"record", Cmd::record, ArgShape::record, "record start [rate=Hz]; record stop NAME [tolerance=angle]; record mcap [rate=Hz]; record mcap stop",
+     "record the joints while jogging; `record stop NAME` writes program NAME.arm of blended joint moves; `record mcap` writes an MCAP file",
      "start samples the measured joints at rate= Hz (default 50, 1..100: on the console thread; at most 100 000 samples); stop writes "
      "NAME.arm in programs.dir (atomically; an existing program of that name is replaced): the recorded path "
      "decimated (Douglas-Peucker in joint space) so that the joint-space path of the moves, and each blend "
      "(blend= half the tolerance), stay within tolerance= (angle unit, default 0.5 deg) of the recorded path. "
-     "Answers `ok recorded NAME.arm: N moves from M samples`",
+     "Answers `ok recorded NAME.arm: N moves from M samples`. `record mcap [rate=Hz]` records the telemetry (every "
+     "control cycle at rate= the control rate; default record.rate_hz), the setpoints, the events and the robot "
+     "description into an MCAP file in record.dir (docs/foxglove-mcap.md); `record mcap stop` closes it and answers its "
+     "files, frames and missed cycles",
      false},
     {"freedrive on", Cmd::freedrive_on, ArgShape::none, "freedrive on",
      "hand guiding: every drive in torque mode (CST) holding the arm against gravity and friction; push it",

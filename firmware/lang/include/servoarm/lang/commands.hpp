@@ -161,6 +161,7 @@ struct Command {
   bool has_blend = false;
   double blend = 0;                     ///< movej (angle unit) / movel (length unit) blend=: tolerance >= 0
   bool record_stop = false;             ///< record: stop (else start)
+  bool record_mcap = false;             ///< record mcap: an MCAP file (record_stop: end it)
   double rate = 0;                      ///< record start rate= (Hz; 0: the default)
   double tolerance = 0;                 ///< record stop tolerance= (angle unit; 0: the default)
   int out_index = -1;                   ///< out: -1 list, -2 by name (word), >= 0 M62..M65 P

@@ -504,6 +504,30 @@ enum class RecordRefusal : std::uint8_t {
 };
 const char* to_string(RecordRefusal r);
 
+/// MCAP recording (`record mcap`, mcap_recorder.hpp): where and how big.
+struct McapSettings {
+  std::string dir;                 ///< the folder the files go to; "" none (recording refused)
+  double rate_hz = 100;            ///< state samples per second without rate= (at most the control rate)
+  double max_file_mb = 256;        ///< a file reaching this size is closed and the next begun
+  int max_files = 0;               ///< files of one recording at most (then it ends); 0 no limit
+  std::size_t chunk_kb = 256;      ///< chunk size (also flushed every second: the loss at a power cut)
+  int priority = 0;                ///< the recorder thread's SCHED_FIFO priority (below the control thread's); 0 normal
+};
+
+struct McapStatus {
+  bool active = false;
+  double rate_hz = 0;
+  std::string file;                ///< the file being written (the last one after stop)
+  std::uint64_t frames = 0;        ///< state samples written
+  std::uint64_t missed = 0;        ///< due cycles not seen in time (not written)
+  std::uint64_t events = 0;
+  int files = 0;
+  std::uint64_t bytes = 0;         ///< in all files
+  std::string error;               ///< why the recording ended on its own ("" none)
+};
+
+class McapRecorder;
+
 /// Samples a recording keeps at most (later ones are not taken).
 inline constexpr std::size_t kMaxRecordSamples = 100000;
 
@@ -839,6 +863,17 @@ class ArmService {
   RecordResult record_path(double tolerance);
   RecordResult record_stop();
   bool recording() const { return rec_.active; }
+  /// MCAP recording (mcap_recorder.hpp): the telemetry at `rate_hz` (up to the control rate),
+  /// the setpoints, the events and the robot description into files in settings().dir.
+  /// Start: "" or why not (no folder, a rate out of range, already recording); stop: the
+  /// recording's figures (files, frames, missed cycles), error bad_state when none runs.
+  /// `threaded` false: the caller polls (mcap_poll(); tests on a manual clock).
+  void set_mcap_settings(const McapSettings& s) { mcap_cfg_ = s; }
+  const McapSettings& mcap_settings() const { return mcap_cfg_; }
+  std::string record_mcap_start(double rate_hz, bool threaded = true);
+  McapStatus record_mcap_stop();
+  McapStatus mcap_status() const;
+  void mcap_poll();
   std::size_t record_samples() const { return rec_.samples.size(); }
   /// The service's periodic work on the console thread: a record sample when one is due,
   /// then program_tick(). Never blocks.
@@ -988,6 +1023,10 @@ class ArmService {
     std::vector<kin::JointVector> samples;
   } rec_;
   void record_sample();
+  McapSettings mcap_cfg_;
+  std::unique_ptr<McapRecorder> mcap_;
+  std::uint64_t mcap_seq_ = 0;  ///< the last event handed to the recorder
+  void mcap_events();
   // Tools and user frames (tools_frames.cpp). unique_ptr: stable chain addresses.
   struct ToolSlot {
     NamedPose def;

@@ -1,0 +1,78 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+// The arm service's MCAP recording (`record mcap`, docs/foxglove-mcap.md): the control
+// thread's telemetry at a chosen rate up to the control rate, the setpoints, the service's
+// events and the robot description, as JSON messages with JSON schemas in MCAP files
+// (mcap_writer.hpp) in a configured folder. A new file begins when one reaches its size limit;
+// at the file limit the recording ends. Files are never overwritten (O_EXCL; a taken name
+// gets the next number).
+//
+// Threads: a recorder thread of its own (non-real-time) reads the telemetry seqlock four times
+// per control period around each cycle due (cycle % decimation == 0; below the control rate it
+// sleeps in between) and writes it; the control thread
+// is never touched and never waits. A cycle the recorder did not see in time (the thread not
+// scheduled for longer than a period) is counted as missed, never silently: the count is in
+// every state message after it (`missed`) and in the result of `record mcap stop`. Events are
+// handed over by the service thread (event()) through a mutex-guarded list.
+#include <atomic>
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "servoarm/kinematics/chain.hpp"
+#include "servoarm/rt/controller.hpp"
+#include "servoarm/service/arm_service.hpp"
+#include "servoarm/service/mcap_writer.hpp"
+
+namespace servoarm::fw {
+
+class McapRecorder {
+ public:
+  McapRecorder(Controller& ctl, const kin::Chain& chain) : ctl_(ctl), chain_(chain) {}
+  ~McapRecorder() { stop(); }
+  McapRecorder(const McapRecorder&) = delete;
+  McapRecorder& operator=(const McapRecorder&) = delete;
+
+  /// Begin recording at `rate_hz` (the control rate divided by a whole number: the nearest
+  /// such rate at or below it). `threaded` false: nothing polls; the caller calls poll()
+  /// (tests driving the controller by hand). "" or the error (one line).
+  std::string start(const McapSettings& s, double rate_hz, bool threaded = true);
+  /// End the recording, close the file (summary and footer written). Its status.
+  McapStatus stop();
+  McapStatus status() const;
+  bool active() const { return active_.load(); }
+  /// Service thread: an event of the service's stream and its detail line.
+  void event(const ArmEvent& e, std::string_view detail);
+  /// One look at the telemetry: writes the cycle when due, and the events waiting.
+  void poll();
+
+ private:
+  std::string open_next();
+  void write_state(const Telemetry& t);
+  void end(std::string why);
+  std::uint64_t t_ns(std::uint64_t cycle) const;
+  Controller& ctl_;
+  const kin::Chain& chain_;
+  McapSettings cfg_;
+  McapWriter w_;
+  std::uint16_t ch_state_ = 0, ch_setpoint_ = 0, ch_event_ = 0, ch_robot_ = 0;
+  std::atomic<bool> active_{false};
+  std::atomic<bool> quit_{false};
+  std::thread thread_;
+  mutable std::mutex mu_;  ///< status_, events_
+  McapStatus status_;
+  std::vector<std::pair<std::uint64_t, std::string>> events_;
+  std::uint64_t every_ = 1;      ///< decimation
+  std::atomic<std::uint64_t> next_{0};  ///< next cycle due
+  std::atomic<std::uint64_t> seen_{0};  ///< the cycle of the last look
+  std::uint64_t start_cycle_ = 0;
+  std::int64_t epoch_ns_ = 0;    ///< wall clock (ns) of cycle start_cycle_
+  double period_ns_ = 1e6;
+  std::int64_t last_flush_ns_ = 0;
+  std::uint64_t bytes_before_ = 0;  ///< of the files closed
+  std::string json_;
+};
+
+}  // namespace servoarm::fw
