@@ -144,21 +144,22 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
       std::snprintf(name, sizeof name, "%s", to_string(v.function));
       break;
   }
-  const char* what = "";
   double scale = 1000.0;
   const char* unit = "mm";
   switch (v.function) {
-    case SafetyFunction::none: what = "value"; break;
-    case SafetyFunction::plane: what = "distance above the plane (sphere surface) must be at least"; break;
-    case SafetyFunction::keep_in: what = "clearance to the box faces must be at least the radius"; break;
-    case SafetyFunction::keep_out: what = "distance to the box must be at least the radius"; break;
-    case SafetyFunction::orientation: what = "tool axis angle from the cone axis must be at most"; scale = 180.0 / kPi; unit = "deg"; break;
+    case SafetyFunction::none:
+    case SafetyFunction::plane:
+    case SafetyFunction::keep_in:
+    case SafetyFunction::keep_out: break;
+    case SafetyFunction::orientation: scale = 180.0 / kPi; unit = "deg"; break;
     case SafetyFunction::tcp_speed:
-    case SafetyFunction::elbow_speed: what = "speed must be at most"; unit = "mm/s"; break;
+    case SafetyFunction::elbow_speed: unit = "mm/s"; break;
   }
-  std::snprintf(buf, size, "safety %s at s=%.3f (x=%.1f, y=%.1f, z=%.1f mm): %s limit %.3f %s, value %.3f %s",
-                name, v.s, v.where.x() * 1000.0, v.where.y() * 1000.0, v.where.z() * 1000.0, what, v.limit * scale,
-                unit, v.value * scale, unit);
+  char at[24] = "";
+  if (v.s >= 0) std::snprintf(at, sizeof at, " at s=%.3f", v.s);
+  std::snprintf(buf, size, "safety %s%s (x=%.1f, y=%.1f, z=%.1f mm): limit %.1f %s, value %.1f %s", name, at,
+                v.where.x() * 1000.0, v.where.y() * 1000.0, v.where.z() * 1000.0, v.limit * scale, unit,
+                v.value * scale, unit);
   return buf;
 }
 

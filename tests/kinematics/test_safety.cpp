@@ -280,8 +280,9 @@ TEST(Safety, DescribeNamesFunctionWhereLimitValue) {
   STRCMP_CONTAINS("safety plane 0 (tool sphere)", line.c_str());
   STRCMP_CONTAINS("s=0.500", line.c_str());
   STRCMP_CONTAINS("x=250.0, y=-100.0, z=110.0 mm", line.c_str());
-  STRCMP_CONTAINS("limit 100.000 mm", line.c_str());
-  STRCMP_CONTAINS("value 90.000 mm", line.c_str());
+  STRCMP_CONTAINS("limit 100.0 mm", line.c_str());
+  STRCMP_CONTAINS("value 90.0 mm", line.c_str());
+  CHECK(line.size() < 110);  // fits an event's line with its prefix
   CHECK(line.find('\n') == std::string::npos);
 }
 

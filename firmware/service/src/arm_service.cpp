@@ -373,6 +373,12 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
     return r;
   }
   if (!duration_ok(jm.plan.duration, r)) return r;
+  {
+    kin::JointVector v(n_), a(n_);
+    const kin::JointTrajectory& plan_ = jm.plan;
+    auto at = [&](double t, kin::JointVector& q) { plan_.sample(t, q, v, a); return true; };
+    if (!envelope_ok(cx.chain != nullptr ? *cx.chain : chain_, plan_.duration, at, "movej", r)) return r;
+  }
   r.duration = jm.plan.duration;  // (jm is replaced when the move goes as a blended segment)
   const double tol = blend_of(req.blend, false, cx);
   const bool path = path_segment(*m, false, goal, kin::Pose::Identity(), cfg_.cartesian, pct / 100.0, tol, cx, r);
@@ -408,6 +414,11 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
     return r;
   }
   if (!duration_ok(traj.duration, r)) return r;
+  {
+    kin::JointVector v(n_), a(n_);
+    auto at = [&](double t, kin::JointVector& q) { traj.sample_precomputed(t, q, v, a); return true; };
+    if (!envelope_ok(chain, traj.duration, at, "movel", r)) return r;
+  }
   traj.ik = cx.ik;
   r.status = ms;
   r.speed = speed;
@@ -726,6 +737,15 @@ JogResult ArmService::jog(const JointJog& rq, const JogContext& cx) {
     goal[j] = to;
     if (!jog_duration_ok(std::fabs(goal[j] - from[j]) / (pct / 100.0 * lim_.dyn[ju].max_velocity), pre)) return pre;
   }
+  if (!rq.continuous) {
+    const kin::JointVector q0 = from;
+    auto at = [&](double t, kin::JointVector& q) { q = q0 + t * (goal - q0); return true; };
+    if (std::string why = jog_envelope(cx.chain != nullptr ? *cx.chain : chain_, at); !why.empty()) {
+      JogResult r = jog_refusal(JogRefusal::control, CmdError::limits);
+      r.reason = "jog refused: " + why;
+      return r;
+    }
+  }
   JogSpec js;
   js.space = JogSpace::joint;
   js.continuous = rq.continuous;
@@ -780,6 +800,11 @@ JogResult ArmService::jog(const ToolJog& rq, const JogContext& cx) {
     kin::JointVector q(n_);
     if (cx.ik.fn == nullptr || cx.ik.fn(*js.chain, target, commanded(), q, cx.ik.ctx) < kin::Status::ok)
       return jog_refusal(JogRefusal::unreachable, CmdError::unreachable);
+    if (std::string why = jog_envelope_line(*js.chain, here, target, commanded(), cx.ik); !why.empty()) {
+      r = jog_refusal(JogRefusal::control, CmdError::limits);
+      r.reason = "jog refused: " + why;
+      return r;
+    }
     js.target = target;
     jog_.pose = target;
   }
@@ -822,6 +847,11 @@ JogResult ArmService::jog(const PoseJog& rq, const JogContext& cx) {
   const double dist = (rq.target.translation() - from.translation()).norm();
   const double ang = Eigen::AngleAxisd(rq.target.linear() * from.linear().transpose()).angle();
   if (!jog_duration_ok(std::fmax(dist / js.linear_speed, ang / js.angular_speed), r)) return r;
+  if (std::string why = jog_envelope_line(chain, from, rq.target, commanded(), cx.ik); !why.empty()) {
+    r = jog_refusal(JogRefusal::control, CmdError::limits);
+    r.reason = "jog refused: " + why;
+    return r;
+  }
   r = send_jog(js);
   r.speed = js.linear_speed;
   if (!r.ok()) {
@@ -933,6 +963,9 @@ const char* to_string(JointHoming h) {
 ArmStatus ArmService::status() const {
   ArmStatus s;
   s.feed_pct = feed_pct_;
+  s.safety_on = cfg_.safety.enabled;
+  s.safety_mode = safety_mode_;
+  s.safety_checksum = cfg_.safety_checksum;
   s.q = kin::JointVector::Zero(n_);
   s.q_cmd = kin::JointVector::Zero(n_);
   s.homing.assign(static_cast<std::size_t>(n_), JointHoming::absolute);

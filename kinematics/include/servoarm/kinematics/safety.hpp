@@ -91,7 +91,7 @@ struct SafetyViolation {
   SafetyFunction function = SafetyFunction::none;
   int index = -1;      ///< plane or box index
   bool elbow = false;  ///< the elbow sphere, not the tool sphere
-  double s = 0;        ///< where along the path (the sample's s; 0..1 for a move)
+  double s = 0;        ///< where along the path (the sample's s; 0..1 for a move; < 0 at run time)
   Eigen::Vector3d where{0, 0, 0};  ///< m: the sphere's centre (TCP or elbow)
   double limit = 0;    ///< m, rad or m/s (see the conventions above)
   double value = 0;
@@ -99,8 +99,9 @@ struct SafetyViolation {
   double excess() const;
 };
 
-/// One line into buf: "safety plane 0 (tool): z=0.0123 m beyond 0 ... at s=0.42 (x=.., y=.., z=..) ..."
-/// in the firmware's units (mm, deg, mm/s). Returns buf.
+/// One line into buf, in the firmware's units (mm, deg, mm/s): "safety plane 0 (tool sphere)
+/// at s=0.420 (x=250.0, y=-100.0, z=110.0 mm): limit 100.0 mm, value 90.0 mm" (no "at s=" when
+/// s < 0: a run-time sample). Returns buf.
 const char* describe(const SafetyViolation& v, char* buf, std::size_t size);
 
 /// One state to check: the TCP pose, the elbow frame's origin (when the config has one) and,
