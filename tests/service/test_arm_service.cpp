@@ -743,7 +743,7 @@ TEST(ArmService, MovesThroughASafetyPlaneAreRefusedNamingWhereAndByHowMuch) {
     if (dry_run) dcx.dry = &dry;
     const MoveResult res = svc.move(down, dcx);
     CHECK(res.error == CmdError::limits);
-    STRCMP_CONTAINS("movel refused: safety plane 0 (tool sphere) at s=", res.reason.c_str());
+    STRCMP_CONTAINS("safety plane 0 (tool sphere) at s=", res.reason.c_str());
     char limit[48];
     std::snprintf(limit, sizeof limit, "limit %.1f mm", plane_mm);
     STRCMP_CONTAINS(limit, res.reason.c_str());
@@ -767,7 +767,7 @@ TEST(ArmService, MovesThroughASafetyPlaneAreRefusedNamingWhereAndByHowMuch) {
   CHECK(tool_at(r.app.chain, swing.goal).z() < plane_mm * 1e-3);
   const MoveResult sw = svc.move(swing, cx);
   CHECK(sw.error == CmdError::limits);
-  STRCMP_CONTAINS("movej refused: safety plane 0", sw.reason.c_str());
+  STRCMP_CONTAINS("safety plane 0 (tool sphere)", sw.reason.c_str());
   CHECK(r.app.ctl->motions().empty());
 }
 
@@ -818,7 +818,7 @@ TEST(ArmService, JogStepsAndTheReducedModeAreCheckedToo) {
   dry.tail = svc.tail();
   const MoveResult slow = svc.move(side, dcx);
   CHECK(slow.error == CmdError::limits);
-  STRCMP_CONTAINS("movel refused: safety tcp speed", slow.reason.c_str());
+  STRCMP_CONTAINS("safety tcp speed", slow.reason.c_str());
   STRCMP_CONTAINS("limit 100.0 mm/s", slow.reason.c_str());
   side.speed = 0.09;
   CHECK(svc.move(side, dcx).ok());

@@ -41,7 +41,7 @@ std::string ArmService::check_target(const kin::JointVector& q_prev, const kin::
 }
 
 bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
-                             const std::function<bool(double, kin::JointVector&)>& at, const char* what,
+                             const std::function<bool(double, kin::JointVector&)>& at, const char* /*what*/,
                              MoveResult& r) const {
   const kin::SafetyConfig& env = cfg_.safety;
   if (!env.enabled || !(duration >= 0) || !std::isfinite(duration)) return true;
@@ -68,7 +68,8 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
       r = refuse(MoveRefusal::arm_state, CmdError::limits);
       r.s = v.s;
       r.position = v.where;
-      r.reason = std::string(what) + " refused: " + line_of(v) + "; nothing queued";
+      // (the front ends put "movej refused: " or their own words in front)
+      r.reason = line_of(v) + "; nothing queued";
       return false;
     }
     prev = x;
