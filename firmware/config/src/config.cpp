@@ -341,8 +341,9 @@ const ConfigKey kConfigTable[] = {
     K{"safety.cone_deg", &F::safety_cone_deg, "deg", "half-angle of the orientation cone in Normal mode"}
         .above(0, 180),
     K{"safety.tcp_speed_mm_s", &F::safety_tcp_speed_mm_s, "mm/s",
-      "TCP speed limit in Normal mode: moves faster are refused at plan time; at run time the speed is scaled down "
-      "(the override), a protective stop only beyond safety.tolerance_mm_s; 0 = none"}.within(0, 10000),
+      "TCP speed limit in Normal mode: moves are planned within it (a line's speed capped, a joint move at a lower "
+      "override); the run-time monitor makes a protective stop beyond it plus safety.tolerance_mm_s; 0 = none"}
+        .within(0, 10000),
     K{"safety.elbow_speed_mm_s", &F::safety_elbow_speed_mm_s, "mm/s",
       "speed limit of the elbow frame's origin in Normal mode (needs safety.elbow_frame); 0 = none"}.within(0, 10000),
     K{"safety.reduced_tcp_speed_mm_s", &F::safety_reduced_tcp_speed_mm_s, "mm/s",

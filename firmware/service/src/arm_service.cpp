@@ -373,15 +373,29 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
     return r;
   }
   if (!duration_ok(jm.plan.duration, r)) return r;
-  {
+  // The envelope along the plan. A TCP or elbow speed above its limit slows the move down
+  // instead (the same joint path at a lower override: every speed scales with it), the
+  // override divided by the highest speed / limit along the path (sampled: a few times at most).
+  for (int attempt = 0;; ++attempt) {
     kin::JointVector v(n_), a(n_);
     const kin::JointTrajectory& plan_ = jm.plan;
     auto at = [&](double t, kin::JointVector& q) { plan_.sample(t, q, v, a); return true; };
-    if (!envelope_ok(cx.chain != nullptr ? *cx.chain : chain_, plan_.duration, at, "movej", r)) return r;
+    kin::SafetyViolation sv;
+    double ratio = 1;
+    if (envelope_ok(cx.chain != nullptr ? *cx.chain : chain_, plan_.duration, at, "movej", r, &sv, &ratio)) break;
+    const bool speed = sv.function == kin::SafetyFunction::tcp_speed || sv.function == kin::SafetyFunction::elbow_speed;
+    const double slower = jm.override * 0.995 / std::max(ratio, 1.0);
+    if (!speed || attempt >= 5 || !(slower >= kMinJointSpeedPct / 100.0)) return r;
+    const MoveResult refused = r;
+    r = MoveResult{};
+    jm.override = o.override = slower;
+    r.status = kin::plan_movej(lim_, kin::JointState::rest(cx.dry != nullptr ? cx.dry->tail : tail()), goal, o, jm.plan);
+    if (!kin::is_ok(r.status)) return refused;
+    if (!duration_ok(jm.plan.duration, r)) return r;
   }
   r.duration = jm.plan.duration;  // (jm is replaced when the move goes as a blended segment)
   const double tol = blend_of(req.blend, false, cx);
-  const bool path = path_segment(*m, false, goal, kin::Pose::Identity(), cfg_.cartesian, pct / 100.0, tol, cx, r);
+  const bool path = path_segment(*m, false, goal, kin::Pose::Identity(), cfg_.cartesian, jm.override, tol, cx, r);
   if (!path) jm.blend = tol;  // the controller blends it into the next joint move
   commit(*m, goal, cx, r, path);
   return r;
@@ -398,6 +412,9 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
     r.speed = speed;
     return r;
   }
+  // the envelope's TCP speed limit (the mode's) caps the line's speed: slowed, not refused
+  if (const double cap = cfg_.safety.enabled ? cfg_.safety.limits(safety_mode_).tcp_speed : 0.0; cap > 0 && speed > cap)
+    speed = cap;
   MotionItem* m = slot(cx.dry != nullptr, r);
   if (m == nullptr) return r;
   kin::CartesianLimits cl = cfg_.cartesian;

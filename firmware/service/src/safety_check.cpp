@@ -42,7 +42,7 @@ std::string ArmService::check_target(const kin::JointVector& q_prev, const kin::
 
 bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
                              const std::function<bool(double, kin::JointVector&)>& at, const char* /*what*/,
-                             MoveResult& r) const {
+                             MoveResult& r, kin::SafetyViolation* violation, double* speed_ratio) const {
   const kin::SafetyConfig& env = cfg_.safety;
   if (!env.enabled || !(duration >= 0) || !std::isfinite(duration)) return true;
   // Sampled at the control rate, at most 4000 samples a move (a 10 s move every 2.5 ms): at
@@ -53,6 +53,9 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
   kin::SafetySample prev, x;
   bool have_prev = false;
   kin::SafetyViolation v;
+  const kin::SafetyLimits& lim = env.limits(safety_mode_);
+  double ratio = 0;  // the highest speed / limit along the whole path
+  bool refused = false;
   for (int k = 0; k <= n; ++k) {
     const double t = std::min(duration, k * dt);
     if (!at(t, q) || !kin::safety_sample(chain, env, q, duration > 0 ? t / duration : 1.0, x)) continue;
@@ -64,18 +67,27 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
         x.elbow_velocity = (x.elbow - prev.elbow) / h;
       }
     }
-    if (kin::check_sample(env, safety_mode_, x, 0.0, 0.0, 0.0, v)) {
+    if (x.has_velocity) {
+      if (lim.tcp_speed > 0) ratio = std::max(ratio, x.tcp_velocity.norm() / lim.tcp_speed);
+      if (lim.elbow_speed > 0 && env.elbow_frame >= 0) ratio = std::max(ratio, x.elbow_velocity.norm() / lim.elbow_speed);
+    }
+    // (speeds: 1e-6 m/s of rounding, so that a line planned at the limit passes)
+    if (!refused && kin::check_sample(env, safety_mode_, x, 0.0, 0.0, 1e-6, v)) {
       r = refuse(MoveRefusal::arm_state, CmdError::limits);
       r.s = v.s;
       r.position = v.where;
       // (the front ends put "movej refused: " or their own words in front)
       r.reason = line_of(v) + "; nothing queued";
-      return false;
+      if (violation != nullptr) *violation = v;
+      refused = true;
+      const bool speed = v.function == kin::SafetyFunction::tcp_speed || v.function == kin::SafetyFunction::elbow_speed;
+      if (speed_ratio == nullptr || !speed) return false;  // (a speed: on to the path's highest)
     }
     prev = x;
     have_prev = true;
   }
-  return true;
+  if (speed_ratio != nullptr) *speed_ratio = ratio;
+  return !refused;
 }
 
 std::string ArmService::jog_envelope(const kin::Chain& chain,

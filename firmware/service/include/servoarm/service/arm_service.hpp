@@ -960,8 +960,11 @@ class ArmService {
   kin::SafetyMode safety_mode_ = kin::SafetyMode::normal;
   /// The envelope check of a planned motion whose joints at time t (0..duration) `at` gives:
   /// true when inside; false with r refused (limits, the violation's line in r.reason).
+  /// `violation` (optional): the function found; `speed_ratio` (optional): the highest TCP or
+  /// elbow speed over its limit along the whole path.
   bool envelope_ok(const kin::Chain& chain, double duration, const std::function<bool(double, kin::JointVector&)>& at,
-                   const char* what, MoveResult& r) const;
+                   const char* what, MoveResult& r, kin::SafetyViolation* violation = nullptr,
+                   double* speed_ratio = nullptr) const;
   /// A jog step's path (joints at the fraction s in 0..1 from `at`) against the envelope,
   /// positions and orientation only (a jog's speed is the jog's): "" or the violation's line.
   std::string jog_envelope(const kin::Chain& chain, const std::function<bool(double, kin::JointVector&)>& at) const;
