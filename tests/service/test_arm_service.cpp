@@ -861,3 +861,23 @@ TEST(ArmService, TheSafetyModeNeedsAnEnvelope) {
   CHECK(svc.status().safety_mode == kin::SafetyMode::normal);
   CHECK(!svc.status().safety_on);
 }
+
+// The hook for streamed targets: check_target(q_prev, q, dt) says "" for a target inside and
+// the violation's line for one through the plane or one that steps faster than the TCP limit.
+TEST(ArmService, AStreamedTargetIsCheckedByTheHook) {
+  const FwConfig c = table_config(60);
+  test::ConsoleRig r(c);
+  ArmService& svc = r.app.console->service();
+  const kin::JointVector work = joints({0, -45, 180, 0, 45, 0});
+  kin::JointVector down = work;
+  down[1] += 25 * kDeg;
+  kin::JointVector near = work;
+  near[0] += 0.01 * kDeg;
+  STRCMP_EQUAL("", svc.check_target(work, near, 0.001).c_str());
+  STRCMP_CONTAINS("safety plane 0 (tool sphere)", svc.check_target(work, down, 0).c_str());
+  // 0.5 deg of the base joint in 1 ms: the tool moves at several m/s
+  kin::JointVector jump = work;
+  jump[0] += 0.5 * kDeg;
+  STRCMP_CONTAINS("safety tcp speed", svc.check_target(work, jump, 0.001).c_str());
+  STRCMP_EQUAL("", svc.check_target(work, jump, 0.5).c_str());
+}
