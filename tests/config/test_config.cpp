@@ -23,6 +23,7 @@
 #include "servoarm/config/config.hpp"
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/description.hpp"
+#include "servoarm/kinematics/safety.hpp"
 
 #include <CppUTest/TestHarness.h>
 
@@ -1186,4 +1187,91 @@ TEST(Config, BusLoadOfCanFdFramesCountsTheDataBitrate) {
   FwConfig cl;
   const std::string slow = load_config_text(six + "data_bitrate = 500000\n" + drives, "fd.toml", cl);
   CHECK_TEXT(has(slow, "bus.data_bitrate"), slow.c_str());
+}
+
+// [safety]: the envelope's keys are read into the kinematics core's SI struct; bad ones
+// (NaN, zero normal, inverted box, partial groups, a keep-in box narrower than the tool sphere)
+// are refused at load with one line naming the key; the park pose outside is refused against
+// the robot; the checksum covers exactly the [safety] section's canonical form.
+TEST(Config, SafetyKeysAreReadAndBadOnesRefusedNamingTheKey) {
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[safety]\nplanes = [0, 0, 2, 100]\nkeep_in = [-1000, -1000, -500, 1000, 1000, 1500]\n"
+                                    "keep_out = [300, -50, 0, 400, 50, 200]\ntool_radius_mm = 40\ncone_axis = [0, 0, -1]\n"
+                                    "cone_deg = 30\ntcp_speed_mm_s = 250\nreduced_tcp_speed_mm_s = 100\n",
+                                    "s.toml", c)
+                   .c_str());
+  servoarm::kin::SafetyConfig e;
+  STRCMP_EQUAL("", safety_envelope(c, e).c_str());
+  CHECK(e.enabled);
+  CHECK_EQUAL(1, e.plane_count);
+  DOUBLES_EQUAL(1.0, e.planes[0].normal.z(), 1e-12);  // normalised
+  DOUBLES_EQUAL(0.1, e.planes[0].offset, 1e-12);      // mm -> m
+  CHECK_EQUAL(2, e.box_count);
+  CHECK(e.boxes[0].keep_in);
+  CHECK_FALSE(e.boxes[1].keep_in);
+  DOUBLES_EQUAL(0.3, e.boxes[1].min.x(), 1e-12);
+  DOUBLES_EQUAL(0.04, e.tool_radius, 1e-12);
+  CHECK(e.cone);
+  DOUBLES_EQUAL(30.0 * M_PI / 180.0, e.normal.cone_half_angle, 1e-12);
+  DOUBLES_EQUAL(0.25, e.normal.tcp_speed, 1e-12);
+  DOUBLES_EQUAL(0.1, e.reduced.tcp_speed, 1e-12);
+  // the defaults: no envelope
+  FwConfig d;
+  STRCMP_EQUAL("", safety_envelope(d, e).c_str());
+  CHECK_FALSE(e.enabled);
+
+  expect_refused("[safety]\nplanes = [0, 0, 1, nan]\n", {"safety.planes"});
+  expect_refused("[safety]\nplanes = [0, 0, 0, 100]\n", {"safety.planes", "zero normal"});
+  expect_refused("[safety]\nplanes = [0, 0, 1]\n", {"safety.planes", "groups of 4"});
+  expect_refused("[safety]\nkeep_in = [0, 0, 0, 1000, -10, 1000]\n", {"safety.keep_in", "inverted", "ymin"});
+  expect_refused("[safety]\nkeep_out = [0, 0, 500, 100, 100, 400]\n", {"safety.keep_out", "inverted", "zmin"});
+  expect_refused("[safety]\ntool_radius_mm = 60\nkeep_in = [0, 0, 0, 1000, 100, 1000]\n",
+                 {"safety.keep_in", "narrower along y", "tool sphere"});
+  expect_refused("[safety]\ncone_axis = [0, 0, 0]\n", {"safety.cone_axis", "zero axis"});
+  expect_refused("[safety]\ntool_radius_mm = inf\n", {"safety.tool_radius_mm"});
+  expect_refused("[safety]\ncone_deg = 0\n", {"safety.cone_deg"});
+}
+
+TEST(Config, SafetyParkPoseOutsideTheEnvelopeIsRefused) {
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  servoarm::kin::Pose tcp;
+  CHECK(servoarm::kin::forward(lr.chain, servoarm::kin::JointVector::Zero(6), tcp) == servoarm::kin::Status::ok);
+  const double z_mm = tcp.translation().z() * 1000.0;
+  FwConfig c;
+  c.safety_planes = {0, 0, 1, z_mm - 50};  // the park pose (zeros) 50 mm above the plane
+  c.safety_tool_radius_mm = 20;
+  STRCMP_EQUAL("", validate_for_chain(c, lr.chain).c_str());
+  c.safety_tool_radius_mm = 60;  // the sphere reaches 10 mm below it
+  const std::string e = validate_for_chain(c, lr.chain);
+  STRCMP_CONTAINS("safety: the park pose (motion.home_deg) lies outside the envelope: safety plane 0", e.c_str());
+  CHECK(e.find('\n') == std::string::npos);
+  c.safety_tool_radius_mm = 0;
+  c.safety_planes.clear();
+  c.safety_elbow_frame = 12;
+  STRCMP_CONTAINS("safety.elbow_frame: 12 is not a frame of puma560", validate_for_chain(c, lr.chain).c_str());
+}
+
+TEST(Config, SafetyChecksumCoversTheSafetySectionOnly) {
+  FwConfig a;
+  const std::uint32_t base = safety_checksum(a);
+  CHECK_EQUAL(base, safety_checksum(a));  // stable
+  STRCMP_CONTAINS("safety.planes = []\n", safety_canonical(a).c_str());
+  FwConfig b = a;
+  b.linear_speed_mm_s = 50;  // not a safety key
+  CHECK_EQUAL(base, safety_checksum(b));
+  b.safety_tcp_speed_mm_s = 250;
+  CHECK(safety_checksum(b) != base);
+  FwConfig p = a;
+  p.safety_planes = {0, 0, 1, 100};
+  CHECK(safety_checksum(p) != base);
+  p.safety_planes = {0, 0, 1, 100.001};
+  CHECK(safety_checksum(p) != safety_checksum(b));
+  // the checksum survives a round trip through the file
+  FwConfig r;
+  STRCMP_EQUAL("", load_config_text(to_toml(p), "rt", r).c_str());
+  CHECK_EQUAL(safety_checksum(p), safety_checksum(r));
+  // the canonical form holds every [safety] key, the older ones too
+  const std::string canon = safety_canonical(a);
+  CHECK(canon.find("safety.stop = \"ramp\"\n") != std::string::npos);
 }

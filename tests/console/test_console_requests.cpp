@@ -182,3 +182,34 @@ TEST(ConsoleRequests, TheParkPoseFollowsTheServicesSettings) {
   CHECK(parse_line("park", 6, m, park).ok());
   CHECK(r.app.console->joint_request(park).goal == s.home);
 }
+
+// The safety envelope on the console: `safety` shows on/off, the mode, the checksum of the
+// configuration's [safety] section (fw::safety_checksum, computed here from the same
+// configuration) and the stops; `safety reduced` / `safety normal` switch the mode, which
+// `status` shows with the checksum; without [safety] the switch is refused with one line.
+TEST(ConsoleRequests, SafetyShowsModeAndChecksumAndSwitchesTheMode) {
+  FwConfig c;
+  c.safety_planes = {0, 0, 1, -500};
+  c.safety_tcp_speed_mm_s = 1000;
+  c.safety_reduced_tcp_speed_mm_s = 100;
+  test::ConsoleRig r(c);
+  char sum[16];
+  std::snprintf(sum, sizeof sum, "%08X", static_cast<unsigned>(safety_checksum(c)));
+  const std::string a = r.cmd("safety");
+  CHECK_TEXT(answer_ok(a), a.c_str());
+  STRCMP_CONTAINS((std::string("safety=on mode=normal checksum=") + sum + " stops=0").c_str(), a.c_str());
+  const std::string red = r.cmd("safety reduced");
+  CHECK_TEXT(answer_ok(red), red.c_str());
+  STRCMP_CONTAINS("safety mode reduced", red.c_str());
+  STRCMP_CONTAINS((std::string("safety=reduced checksum=") + sum).c_str(), r.cmd("status").c_str());
+  STRCMP_CONTAINS("mode=reduced", r.cmd("safety").c_str());
+  CHECK(r.app.ctl->safety_mode() == kin::SafetyMode::reduced);
+  CHECK_TEXT(answer_ok(r.cmd("safety normal")), "safety normal");
+  CHECK(r.app.ctl->safety_mode() == kin::SafetyMode::normal);
+
+  test::ConsoleRig plain;
+  STRCMP_CONTAINS("safety=off", plain.cmd("safety").c_str());
+  const std::string refused = plain.cmd("safety reduced");
+  STRCMP_CONTAINS("error: bad_state no safety envelope is configured", refused.c_str());
+  CHECK(plain.cmd("status").find("safety=") == std::string::npos);
+}

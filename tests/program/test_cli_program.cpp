@@ -173,3 +173,24 @@ TEST(CliProgram, PickPlaceExampleGoesDownAndBlendingGains) {
   std::printf("\npick_place.arm: %.3f s blended, %.3f s with every move to rest\n", blended, exact);
   CHECK_TEXT(blended > 0 && exact > 0 && blended < exact, r.out.c_str());
 }
+
+// [safety] from --config: the whole-program check refuses the line whose move goes through a
+// safety plane, with the service's own line (function, where, limit, value), at file:line.
+TEST(CliProgram, ASafetyPlaneRefusesTheLineThatCrossesIt) {
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  servoarm::kin::JointVector q(6);
+  const double d[6] = {0, -45, 180, 0, 45, 0};
+  for (int j = 0; j < 6; ++j) q[j] = d[j] * M_PI / 180.0;
+  servoarm::kin::Pose p;
+  CHECK(servoarm::kin::forward(lr.chain, q, p) == servoarm::kin::Status::ok);
+  char cfg[200];
+  std::snprintf(cfg, sizeof cfg, "robot = \"puma560\"\n[safety]\nplanes = [0, 0, 1, %.3f]\ntool_radius_mm = 10\n",
+                p.translation().z() * 1000.0 - 60.0);
+  write_file(dir + "/armfw.toml", cfg);
+  const std::string text = "movej 0 -45 180 0 45 0\nmovej 0 -50 180 0 45 0\nmovej 0 -20 180 0 45 0\n";
+  bad("plane.arm", text, "plane.arm:3:", "movej refused: safety plane 0 (tool sphere) at s=",
+      "--config " + dir + "/armfw.toml");
+  const auto fine = check("fine.arm", "movej 0 -45 180 0 45 0\nmovej 0 -50 180 0 45 0\n", "--config " + dir + "/armfw.toml");
+  LONGS_EQUAL_TEXT(0, fine.status, (fine.out + fine.err).c_str());
+}

@@ -11,6 +11,7 @@
 
 #include "../console/console_rig.hpp"
 #include "../program/tmp_dir.hpp"
+#include "servoarm/kinematics/description.hpp"
 #include "servoarm/service/arm_service.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -683,4 +684,200 @@ TEST(ArmService, TeachPointsAreTaughtListedGoneToAndDeletedThroughTheService) {
   STRCMP_EQUAL("", prog::load_points_file(file, 6, d).c_str());
   LONGS_EQUAL(0, d.points.size());
   test::remove_tree(dir);
+}
+
+// ---------------------------------------------------------------------------
+// The safety envelope before motion (docs/safety.md)
+// ---------------------------------------------------------------------------
+namespace {
+// The puma560's tool point at joints q (m, base frame), computed here with the chain.
+Eigen::Vector3d tool_at(const kin::Chain& c, const kin::JointVector& q) {
+  kin::Pose p;
+  CHECK(kin::forward(c, q, p) == kin::Status::ok);
+  return p.translation();
+}
+
+// A table plane 60 mm below the tool at `work` (the park pose must stay above it).
+FwConfig table_config(double below_mm) {
+  const kin::LoadResult lr = kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  const Eigen::Vector3d p = tool_at(lr.chain, joints({0, -45, 180, 0, 45, 0}));
+  FwConfig c;
+  c.safety_planes = {0, 0, 1, p.z() * 1000.0 - below_mm};
+  c.safety_tool_radius_mm = 10;
+  c.safety_tcp_speed_mm_s = 300;
+  c.safety_reduced_tcp_speed_mm_s = 100;
+  return c;
+}
+}  // namespace
+
+// Every planned move is checked along its path: a movel and a movej through the table plane
+// are refused with one line naming the function, where along the path and the limit and
+// value, and nothing is queued; the same moves above it are queued. A dry run says the same.
+TEST(ArmService, MovesThroughASafetyPlaneAreRefusedNamingWhereAndByHowMuch) {
+  const FwConfig c = table_config(60);
+  const double plane_mm = c.safety_planes[3];
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  const MoveResult to_work = svc.move(mj, cx);
+  CHECK_TEXT(to_work.ok(), to_work.reason.c_str());
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  for (int i = 0; i < 20000 && !r.app.ctl->motions().empty(); ++i) r.cycle();
+  const Eigen::Vector3d p = tool_at(r.app.chain, mj.goal);
+  // a line 100 mm straight down: through the plane (60 mm down, minus the 10 mm sphere)
+  MoveLine down;
+  down.target = kin::Pose::Identity();
+  kin::forward(r.app.chain, mj.goal, down.target);
+  down.target.translation().z() -= 0.1;
+  for (int dry_run = 0; dry_run < 2; ++dry_run) {
+    PathShadow shadow;
+    DryRun dry;
+    dry.tail = svc.tail();
+    dry.shadow = &shadow;
+    MoveContext dcx = cx;
+    if (dry_run) dcx.dry = &dry;
+    const MoveResult res = svc.move(down, dcx);
+    CHECK(res.error == CmdError::limits);
+    STRCMP_CONTAINS("safety plane 0 (tool sphere) at s=", res.reason.c_str());
+    char limit[48];
+    std::snprintf(limit, sizeof limit, "limit %.1f mm", plane_mm);
+    STRCMP_CONTAINS(limit, res.reason.c_str());
+    CHECK(res.reason.find('\n') == std::string::npos);
+    // where: the first sample past the plane, within a sample's travel of it (z = plane + r)
+    DOUBLES_EQUAL(plane_mm * 1e-3 + 0.010, res.position.z(), 0.002);
+    CHECK(res.s > 0.3 && res.s < 0.9);  // 50 of 100 mm, on a jerk-limited time law
+    CHECK(r.app.ctl->motions().empty());
+  }
+  // 40 mm down stays 10 mm above it: queued
+  MoveLine shallow = down;
+  shallow.target.translation().z() = p.z() - 0.04;
+  const MoveResult ok = svc.move(shallow, cx);
+  CHECK_TEXT(ok.ok(), ok.reason.c_str());
+  for (int i = 0; i < 20000 && !r.app.ctl->motions().empty(); ++i) r.cycle();
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  // a joint move that swings the tool down through the table
+  MoveJoints swing;
+  swing.goal = joints({0, -45, 180, 0, 45, 0});
+  swing.goal[1] += 25 * kDeg;
+  CHECK(tool_at(r.app.chain, swing.goal).z() < plane_mm * 1e-3);
+  const MoveResult sw = svc.move(swing, cx);
+  CHECK(sw.error == CmdError::limits);
+  STRCMP_CONTAINS("safety plane 0 (tool sphere)", sw.reason.c_str());
+  CHECK(r.app.ctl->motions().empty());
+}
+
+// A joint jog step that would dip the tool through the plane is refused with the line. The
+// TCP speed limit is the mode's and slows moves down rather than refusing them: a 200 mm/s
+// line runs at 200 in Normal (300) and at 100 in Reduced (100); a movej whose tool would pass
+// 300 mm/s is planned slower (its tool speed, sampled here, stays within 300); the mode and the
+// checksum show in the status.
+TEST(ArmService, JogStepsAndTheReducedModeAreCheckedToo) {
+  const FwConfig c = table_config(60);
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  for (int i = 0; i < 20000 && !r.app.ctl->motions().empty(); ++i) r.cycle();
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  JointJog jj;
+  jj.joint = 1;
+  jj.increment = 25 * kDeg;
+  const JogResult bad = svc.jog(jj, r.app.console->jog_context());
+  CHECK(bad.error == CmdError::limits);
+  STRCMP_CONTAINS("jog refused: safety plane 0 (tool sphere)", bad.reason.c_str());
+  CHECK(r.app.ctl->telemetry().state != ArmState::jogging);
+
+  const ArmStatus normal = svc.status();
+  CHECK(normal.safety_on);
+  CHECK(normal.safety_mode == kin::SafetyMode::normal);
+  CHECK_EQUAL(safety_checksum(c), normal.safety_checksum);
+
+  MoveLine side;
+  kin::forward(r.app.chain, mj.goal, side.target);
+  side.target.translation().y() += 0.1;
+  side.speed = 0.2;
+  PathShadow shadow;
+  DryRun dry;
+  dry.tail = svc.tail();
+  dry.shadow = &shadow;
+  MoveContext dcx = cx;
+  dcx.dry = &dry;
+  const MoveResult fast_ok = svc.move(side, dcx);
+  CHECK_TEXT(fast_ok.ok(), fast_ok.reason.c_str());
+  const ControlResult m = svc.set_safety_mode(kin::SafetyMode::reduced);
+  CHECK_TEXT(m.ok(), m.reason.c_str());
+  CHECK(svc.status().safety_mode == kin::SafetyMode::reduced);
+  CHECK(r.app.ctl->safety_mode() == kin::SafetyMode::reduced);
+  dry.tail = svc.tail();
+  DOUBLES_EQUAL(0.2, fast_ok.speed, 1e-12);
+  const MoveResult slow = svc.move(side, dcx);
+  CHECK_TEXT(slow.ok(), slow.reason.c_str());
+  DOUBLES_EQUAL(0.1, slow.speed, 1e-12);
+  CHECK(slow.duration > fast_ok.duration);
+  CHECK(svc.set_safety_mode(kin::SafetyMode::normal).ok());
+  // a fast movej: slowed until its tool stays within 300 mm/s (checked here every 1 ms)
+  MoveJoints quick;
+  quick.goal = joints({40, -45, 180, 0, 45, 0});
+  quick.speed_pct = 100;
+  PathShadow shadow2;
+  dry.tail = mj.goal;
+  dry.shadow = &shadow2;
+  const MoveResult q = svc.move(quick, dcx);
+  CHECK_TEXT(q.ok(), q.reason.c_str());
+  kin::MovejOptions o;
+  kin::JointTrajectory full;
+  CHECK(kin::plan_movej(r.app.ctl->limits(), kin::JointState::rest(mj.goal), quick.goal, o, full) == kin::MotionStatus::ok);
+  CHECK(q.duration > full.duration);  // slower than at 100 %
+  const double k = full.duration / q.duration;  // the override it was planned with
+  kin::JointVector pos(6), vel(6), acc(6);
+  double vmax = 0;
+  Eigen::Vector3d prev = tool_at(r.app.chain, mj.goal);
+  for (double t = 0.001 * k; t <= full.duration; t += 0.001 * k) {
+    full.sample(t, pos, vel, acc);
+    const Eigen::Vector3d p = tool_at(r.app.chain, pos);
+    vmax = std::fmax(vmax, (p - prev).norm() / 0.001);
+    prev = p;
+  }
+  CHECK_TEXT(vmax <= 0.3 * 1.001, std::to_string(vmax).c_str());
+  CHECK_TEXT(vmax > 0.25, std::to_string(vmax).c_str());  // not slower than it needs
+}
+
+// Without [safety], switching the mode is refused with one line and nothing changes.
+TEST(ArmService, TheSafetyModeNeedsAnEnvelope) {
+  test::ConsoleRig r;
+  ArmService& svc = r.app.console->service();
+  const ControlResult m = svc.set_safety_mode(kin::SafetyMode::reduced);
+  CHECK(m.error == CmdError::bad_state);
+  STRCMP_CONTAINS("no safety envelope", m.reason.c_str());
+  CHECK(svc.status().safety_mode == kin::SafetyMode::normal);
+  CHECK(!svc.status().safety_on);
+}
+
+// The hook for streamed targets: check_target(q_prev, q, dt) says "" for a target inside and
+// the violation's line for one through the plane or one that steps faster than the TCP limit.
+TEST(ArmService, AStreamedTargetIsCheckedByTheHook) {
+  const FwConfig c = table_config(60);
+  test::ConsoleRig r(c);
+  ArmService& svc = r.app.console->service();
+  const kin::JointVector work = joints({0, -45, 180, 0, 45, 0});
+  kin::JointVector down = work;
+  down[1] += 25 * kDeg;
+  kin::JointVector near = work;
+  near[0] += 0.01 * kDeg;
+  STRCMP_EQUAL("", svc.check_target(work, near, 0.001).c_str());
+  STRCMP_CONTAINS("safety plane 0 (tool sphere)", svc.check_target(work, down, 0).c_str());
+  // 0.5 deg of the base joint in 1 ms: the tool moves at several m/s
+  kin::JointVector jump = work;
+  jump[0] += 0.5 * kDeg;
+  STRCMP_CONTAINS("safety tcp speed", svc.check_target(work, jump, 0.001).c_str());
+  STRCMP_EQUAL("", svc.check_target(work, jump, 0.5).c_str());
 }

@@ -139,6 +139,7 @@ std::string apply_config(const FwConfig& cfg, kin::Chain& chain, ProgramCheckOpt
   opt.rate_hz = cfg.rate_hz;
   opt.default_blend_rad = kConfigUnits.angle_in(cfg.default_blend_deg);
   opt.default_blend_m = kConfigUnits.length_in(cfg.default_blend_mm);
+  if (const std::string e = safety_envelope(cfg, opt.safety); !e.empty()) return e;
   return "";
 }
 
@@ -568,6 +569,7 @@ ProgramCheck check_program(const kin::Chain& chain, const prog::Program& prog, c
   ms.default_blend_rad = options.default_blend_rad;
   ms.default_blend_m = options.default_blend_m;
   ms.home = options.park;
+  ms.safety = options.safety;
   ck.svc = std::make_unique<ArmService>(chain, ck.lim, options.rate_hz, ms);
   ck.q = q0;
   ck.out.ok = true;

@@ -9,6 +9,7 @@
 #include <cstring>
 #include "servoarm/hal/mit.hpp"
 #include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/safety.hpp"
 #include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/lang/markdown.hpp"
 #include "servoarm/lang/units.hpp"
@@ -53,6 +54,45 @@ std::string boot_timeout_within_start(const FwConfig& c, const FwConfig&) {
 std::string linear_speed_at_most_max(const FwConfig& c, const FwConfig&) {
   if (c.linear_speed_mm_s <= c.max_linear_speed_mm_s) return "";
   return "must be at most motion.max_linear_speed_mm_s (" + num_text(c.max_linear_speed_mm_s) + ")";
+}
+// [safety] lists: whole groups, normals and axes not zero, boxes not inverted, keep-in boxes
+// wider than the tool sphere.
+std::string safety_groups(const std::vector<double>& v, std::size_t n) {
+  if (v.size() % n == 0) return "";
+  return "needs groups of " + std::to_string(n) + " numbers (got " + std::to_string(v.size()) + ")";
+}
+std::string safety_planes_ok(const FwConfig& c, const FwConfig&) {
+  if (std::string bad = safety_groups(c.safety_planes, 4); !bad.empty()) return bad;
+  for (std::size_t i = 0; i + 3 < c.safety_planes.size(); i += 4) {
+    const double* p = &c.safety_planes[i];
+    if (p[0] * p[0] + p[1] * p[1] + p[2] * p[2] < 1e-18) return "plane " + std::to_string(i / 4) + ": zero normal";
+  }
+  return "";
+}
+std::string safety_boxes_ok(const std::vector<double>& v, double radius_mm) {
+  if (std::string bad = safety_groups(v, 6); !bad.empty()) return bad;
+  for (std::size_t i = 0; i + 5 < v.size(); i += 6)
+    for (std::size_t a = 0; a < 3; ++a) {
+      const char axis = static_cast<char>('x' + a);
+      if (v[i + a] > v[i + 3 + a])
+        return "box " + std::to_string(i / 6) + ": inverted (" + axis + "min " + num_text(v[i + a]) + " above " +
+               axis + "max " + num_text(v[i + 3 + a]) + ")";
+      if (radius_mm >= 0 && v[i + 3 + a] - v[i + a] < 2.0 * radius_mm)
+        return "box " + std::to_string(i / 6) + ": narrower along " + axis + " (" + num_text(v[i + 3 + a] - v[i + a]) +
+               " mm) than the tool sphere (safety.tool_radius_mm " + num_text(radius_mm) + ")";
+    }
+  return "";
+}
+std::string safety_keep_in_ok(const FwConfig& c, const FwConfig&) {
+  return safety_boxes_ok(c.safety_keep_in, c.safety_tool_radius_mm);
+}
+std::string safety_keep_out_ok(const FwConfig& c, const FwConfig&) { return safety_boxes_ok(c.safety_keep_out, -1); }
+std::string safety_cone_axis_ok(const FwConfig& c, const FwConfig&) {
+  const auto& a = c.safety_cone_axis;
+  if (a.empty()) return "";
+  if (a.size() != 3) return "needs 3 numbers or none (got " + std::to_string(a.size()) + ")";
+  if (a[0] * a[0] + a[1] * a[1] + a[2] * a[2] < 1e-18) return "zero axis";
+  return "";
 }
 std::string can_rx_id_free(const FwConfig& c, const FwConfig&) {
   const char* why = can_console_id_problem(c.console_can_rx_id);
@@ -272,6 +312,55 @@ const ConfigKey kConfigTable[] = {
         .among(std::span<const char* const>(kStops)),
     K{"safety.drive_stop_timeout_s", &F::drive_stop_timeout_s, "s",
       "with stop = \"drive\": power the drives down after this long even if one still reports motion"}.within(0.05, 60),
+    K{"safety.planes", &F::safety_planes, "mm",
+      "safety planes (docs/safety.md), four numbers each: the normal nx, ny, nz (towards the allowed side, any "
+      "length but not zero) and the offset along it (mm): the tool sphere (and the elbow sphere) stays where "
+      "n.p >= offset, e.g. `[0, 0, 1, 100]` = above a table top at z = 100 mm; `[]` = none"}
+        .within(-kMaxLength, kMaxLength).length(0, 4 * kin::kMaxSafetyPlanes)
+        .related(safety_planes_ok, "groups of 4, normals not zero"),
+    K{"safety.keep_in", &F::safety_keep_in, "mm",
+      "keep-in boxes, six numbers each: xmin, ymin, zmin, xmax, ymax, zmax in the base frame (mm); the whole tool "
+      "sphere (and the elbow sphere) stays inside every one; `[]` = none"}
+        .within(-kMaxLength, kMaxLength).length(0, 6 * kin::kMaxSafetyBoxes)
+        .related(safety_keep_in_ok, "groups of 6, min <= max, wider than the tool sphere"),
+    K{"safety.keep_out", &F::safety_keep_out, "mm",
+      "keep-out boxes (a fixture, a column), six numbers each as safety.keep_in; neither sphere may touch one; "
+      "`[]` = none"}
+        .within(-kMaxLength, kMaxLength).length(0, 6 * kin::kMaxSafetyBoxes)
+        .related(safety_keep_out_ok, "groups of 6, min <= max"),
+    K{"safety.tool_radius_mm", &F::safety_tool_radius_mm, "mm",
+      "radius of the sphere around the TCP that the planes and boxes restrict"}.within(0, 2000),
+    K{"safety.elbow_frame", &F::safety_elbow_frame, "",
+      "frame whose origin is the centre of the elbow sphere (0 = base, k = the frame after DH row k); -1 = no elbow "
+      "sphere"}.within(-1, kin::kMaxRows),
+    K{"safety.elbow_radius_mm", &F::safety_elbow_radius_mm, "mm", "radius of the elbow sphere"}.within(0, 2000),
+    K{"safety.cone_axis", &F::safety_cone_axis, "",
+      "tool orientation limit: the tool's z axis stays within safety.cone_deg of this direction (x, y, z in the base "
+      "frame, any length but not zero), e.g. `[0, 0, -1]` = pointing down; `[]` = no orientation limit"}
+        .within(-1e6, 1e6).length(0, 3).related(safety_cone_axis_ok, "3 numbers, not zero"),
+    K{"safety.cone_deg", &F::safety_cone_deg, "deg", "half-angle of the orientation cone in Normal mode"}
+        .above(0, 180),
+    K{"safety.tcp_speed_mm_s", &F::safety_tcp_speed_mm_s, "mm/s",
+      "TCP speed limit in Normal mode: moves are planned within it (a line's speed capped, a joint move at a lower "
+      "override); the run-time monitor makes a protective stop beyond it plus safety.tolerance_mm_s; 0 = none"}
+        .within(0, 10000),
+    K{"safety.elbow_speed_mm_s", &F::safety_elbow_speed_mm_s, "mm/s",
+      "speed limit of the elbow frame's origin in Normal mode (needs safety.elbow_frame); 0 = none"}.within(0, 10000),
+    K{"safety.reduced_tcp_speed_mm_s", &F::safety_reduced_tcp_speed_mm_s, "mm/s",
+      "TCP speed limit in Reduced mode; 0 = none"}.within(0, 10000),
+    K{"safety.reduced_elbow_speed_mm_s", &F::safety_reduced_elbow_speed_mm_s, "mm/s",
+      "elbow speed limit in Reduced mode; 0 = none"}.within(0, 10000),
+    K{"safety.reduced_cone_deg", &F::safety_reduced_cone_deg, "deg",
+      "half-angle of the orientation cone in Reduced mode"}.above(0, 180),
+    K{"safety.tolerance_mm", &F::safety_tolerance_mm, "mm",
+      "how far beyond a plane or box the run-time monitor lets the tool go before a protective stop (plan time "
+      "allows none)"}.within(0, 100),
+    K{"safety.tolerance_deg", &F::safety_tolerance_deg, "deg",
+      "how far beyond the orientation cone the run-time monitor lets the tool turn before a protective stop"}
+        .within(0, 30),
+    K{"safety.tolerance_mm_s", &F::safety_tolerance_mm_s, "mm/s",
+      "how far above a speed limit the run-time monitor lets the TCP or elbow go before a protective stop"}
+        .within(0, 1000),
     K{"motion.home_deg", &F::home_deg, "deg (mm)",
       "park pose for `park` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
       "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
@@ -1494,7 +1583,103 @@ std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
       return scale_key + ": joint " + std::to_string(j + 1) + "'s maximum velocity " + shown_text(vmax) + u +
              "/s is " + shown_text(vmax * per_unit) + " counts/s, beyond the drive's 32-bit velocity" + scaling;
   }
+  return safety_for_chain(c, chain);
+}
+
+std::string safety_for_chain(const FwConfig& c, const kin::Chain& chain) {
+  kin::SafetyConfig env;
+  if (std::string bad = safety_envelope(c, env); !bad.empty()) return bad;
+  if (c.safety_elbow_frame > chain.n_rows)
+    return "safety.elbow_frame: " + std::to_string(c.safety_elbow_frame) + " is not a frame of " + c.robot + " (0.." +
+           std::to_string(chain.n_rows) + ")";
+  if (!env.enabled) return "";
+  // The park pose (motion.home_deg, else zeros clamped into the limits, drive.limits included)
+  // must lie inside the envelope's planes and boxes: an arm that cannot park is refused here.
+  const int n = chain.n_joints;
+  kin::JointVector home = kin::JointVector::Zero(n);
+  for (int j = 0; j < n; ++j) {
+    const double unit = kConfigUnits.joint_in(chain, j, 1.0);
+    if (!c.home_deg.empty()) {
+      home[j] = c.home_deg[static_cast<std::size_t>(j)] * unit;
+      continue;
+    }
+    double lo = chain.joint(j).lower, hi = chain.joint(j).upper;
+    if (!c.drives.empty() && c.drives[static_cast<std::size_t>(j)].limits.size() == 2) {
+      lo = c.drives[static_cast<std::size_t>(j)].limits[0] * unit;
+      hi = c.drives[static_cast<std::size_t>(j)].limits[1] * unit;
+    }
+    home[j] = std::clamp(0.0, lo, hi);
+  }
+  kin::SafetySample x;
+  if (!kin::safety_sample(chain, env, home, 0.0, x)) return "";  // the joint checks name a bad home
+  kin::SafetyConfig positions = env;  // the park pose is checked for position only
+  positions.cone = false;
+  kin::SafetyViolation v;
+  if (kin::check_sample(positions, kin::SafetyMode::normal, x, 0.0, 0.0, 0.0, v)) {
+    char line[256];
+    return std::string("safety: the park pose (motion.home_deg) lies outside the envelope: ") +
+           kin::describe(v, line, sizeof line);
+  }
   return "";
+}
+
+std::string safety_envelope(const FwConfig& c, kin::SafetyConfig& out) {
+  out = kin::SafetyConfig{};
+  kin::SafetyConfig e;
+  constexpr double mm = 1e-3, deg = 3.14159265358979323846 / 180.0;
+  for (std::size_t i = 0; i + 3 < c.safety_planes.size() && e.plane_count < kin::kMaxSafetyPlanes; i += 4) {
+    const Eigen::Vector3d n(c.safety_planes[i], c.safety_planes[i + 1], c.safety_planes[i + 2]);
+    if (!(n.norm() > 1e-9)) return "safety.planes: plane " + std::to_string(i / 4) + ": zero normal";
+    e.planes[static_cast<std::size_t>(e.plane_count++)] = {n.normalized(), c.safety_planes[i + 3] * mm, true};
+  }
+  for (int pass = 0; pass < 2; ++pass) {
+    const std::vector<double>& v = pass == 0 ? c.safety_keep_in : c.safety_keep_out;
+    for (std::size_t i = 0; i + 5 < v.size() && e.box_count < kin::kMaxSafetyBoxes; i += 6)
+      e.boxes[static_cast<std::size_t>(e.box_count++)] = {Eigen::Vector3d(v[i], v[i + 1], v[i + 2]) * mm,
+                                                          Eigen::Vector3d(v[i + 3], v[i + 4], v[i + 5]) * mm,
+                                                          pass == 0, true};
+  }
+  e.tool_radius = c.safety_tool_radius_mm * mm;
+  e.elbow_frame = c.safety_elbow_frame;
+  e.elbow_radius = c.safety_elbow_radius_mm * mm;
+  if (c.safety_cone_axis.size() == 3) {
+    const Eigen::Vector3d a(c.safety_cone_axis[0], c.safety_cone_axis[1], c.safety_cone_axis[2]);
+    if (!(a.norm() > 1e-9)) return "safety.cone_axis: zero axis";
+    e.cone = true;
+    e.cone_axis = a.normalized();
+  }
+  e.normal = {c.safety_tcp_speed_mm_s * mm, c.safety_elbow_speed_mm_s * mm, c.safety_cone_deg * deg};
+  e.reduced = {c.safety_reduced_tcp_speed_mm_s * mm, c.safety_reduced_elbow_speed_mm_s * mm,
+               c.safety_reduced_cone_deg * deg};
+  e.position_tolerance = c.safety_tolerance_mm * mm;
+  e.angle_tolerance = c.safety_tolerance_deg * deg;
+  e.speed_tolerance = c.safety_tolerance_mm_s * mm;
+  e.enabled = e.plane_count > 0 || e.box_count > 0 || e.cone || e.normal.tcp_speed > 0 || e.normal.elbow_speed > 0 ||
+              e.reduced.tcp_speed > 0 || e.reduced.elbow_speed > 0;
+  char buf[160];
+  if (const std::string bad = kin::safety_config_problem(e, buf, sizeof buf); !bad.empty()) return "safety: " + bad;
+  out = e;
+  return "";
+}
+
+std::string safety_canonical(const FwConfig& c) {
+  std::string text;
+  for (const ConfigKey& k : config_keys()) {
+    const std::string name = k.name;
+    if (name.rfind("safety.", 0) != 0) continue;
+    text += name + " = " + value_text(k, c) + "\n";
+  }
+  return text;
+}
+
+std::uint32_t safety_checksum(const FwConfig& c) {
+  const std::string text = safety_canonical(c);
+  std::uint32_t crc = 0xFFFFFFFFu;
+  for (const char ch : text) {
+    crc ^= static_cast<unsigned char>(ch);
+    for (int b = 0; b < 8; ++b) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+  }
+  return ~crc;
 }
 
 namespace {

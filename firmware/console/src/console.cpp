@@ -110,6 +110,9 @@ bool moves_arm(const Command& c) {
     case Cmd::freedrive_off:
     case Cmd::collision_on:
     case Cmd::collision_off:
+    case Cmd::safety:
+    case Cmd::safety_normal:
+    case Cmd::safety_reduced:
     case Cmd::quit: return false;
   }
   return false;
@@ -307,8 +310,17 @@ std::string Console::status_text() const {
   if (st.feed_forward != FeedForwardKind::off || st.collision_on || st.freedrive != FreedrivePhase::off)  // (the dynamics parts, when one runs)
     s += fmt(" feed_forward=%s collision=%s freedrive=%s", to_string(st.feed_forward), st.collision_on ? "on" : "off",
              to_string(st.freedrive));
+  if (st.safety_on)
+    s += fmt(" safety=%s checksum=%08X", kin::to_string(st.safety_mode), static_cast<unsigned>(st.safety_checksum));
   if (!st.fault_text.empty()) s += fmt(" fault=\"%s\"", st.fault_text.c_str());
   return s;
+}
+
+std::string Console::safety_text() const {
+  const ArmStatus st = svc_->status();
+  if (!st.safety_on) return "safety=off";
+  return fmt("safety=on mode=%s checksum=%08X stops=%u", kin::to_string(st.safety_mode),
+             static_cast<unsigned>(st.safety_checksum), static_cast<unsigned>(ctl_.telemetry().safety_stops));
 }
 
 std::string Console::dynamics_text() const {
@@ -852,6 +864,16 @@ void Console::run_command(Session& s, const Command& c, const StepParams* step) 
     case Cmd::freedrive_off:
     case Cmd::collision_on:
     case Cmd::collision_off: do_switch(s, c); return;
+    case Cmd::safety: answer_ok(s, safety_text()); return;
+    case Cmd::safety_normal:
+    case Cmd::safety_reduced:
+      if (s.check_mode) {
+        answer_ok(s, "check mode: not run");
+        return;
+      }
+      answer_control(s, svc_->set_safety_mode(c.cmd == Cmd::safety_reduced ? kin::SafetyMode::reduced
+                                                                              : kin::SafetyMode::normal));
+      return;
   }
 }
 

@@ -99,6 +99,9 @@ const char* to_string(Cmd c) {
     case Cmd::freedrive_off: return "freedrive off";
     case Cmd::collision_on: return "collision on";
     case Cmd::collision_off: return "collision off";
+    case Cmd::safety: return "safety";
+    case Cmd::safety_normal: return "safety normal";
+    case Cmd::safety_reduced: return "safety reduced";
     case Cmd::quit: return "quit";
   }
   return "?";

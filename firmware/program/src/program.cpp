@@ -513,9 +513,12 @@ StepKind kind_of(fw::Cmd c) {
     case fw::Cmd::freedrive_off:
     case fw::Cmd::collision_on:
     case fw::Cmd::collision_off:
+    case fw::Cmd::safety_normal:
+    case fw::Cmd::safety_reduced:
     case fw::Cmd::quit: return StepKind::refused;
     case fw::Cmd::none:
     case fw::Cmd::help:
+    case fw::Cmd::safety:
     case fw::Cmd::status:
     case fw::Cmd::fk:
     case fw::Cmd::ik:

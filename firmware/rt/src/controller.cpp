@@ -87,6 +87,7 @@ Controller::Controller(hal::ServoBus& bus, const kin::Chain& chain, const Contro
   q_prev_ = kin::JointVector::Zero(n_);
   jog_.configure(chain_, limits_, period_s_);
   exec_.configure(limits_, n_, period_s_, *this);
+  safety_.configure(chain_, cfg_.safety, period_s_);
 }
 
 hal::Status Controller::boot(TimePoint now, TimePoint deadline) {
@@ -1155,6 +1156,8 @@ void Controller::publish() {
   t.path_time = exec_.path_time();
   t.path_id = exec_.path_id();
   t.homing_now = hrunning_;
+  t.safety_mode = safety_mode_.load(std::memory_order_relaxed);
+  t.safety_stops = safety_stops_;
   t.homing_failed = 0;
   std::uint16_t attained = 0;  // homed_mask() from the progress read here: one homing() a joint
   for (int j = 0; j < n_; ++j) {
@@ -1185,6 +1188,73 @@ void Controller::publish() {
   telemetry_.write(t);
 }
 
+namespace {
+// dst = a + b, cut to size (an event's fixed line).
+void join_text(char* dst, std::size_t size, const char* a, const char* b) {
+  std::size_t n = 0;
+  for (; *a != '\0' && n + 1 < size; ++a) dst[n++] = *a;
+  for (; *b != '\0' && n + 1 < size; ++b) dst[n++] = *b;
+  dst[n] = '\0';
+}
+}  // namespace
+
+void Controller::step_safety() {
+  if (!safety_.enabled()) return;
+  bool watch = false;  // the modes a protective stop acts in (the planner's moves, jogs, a hold on a line)
+  switch (mode_) {
+    case Mode::moving:
+    case Mode::hold_line:
+    case Mode::jogging: watch = true; break;
+    case Mode::idle:
+    case Mode::held:
+    case Mode::hold_ramp:
+    case Mode::stopping_to_idle:
+    case Mode::stopping_to_disabled:
+    case Mode::fault_ramp:
+    case Mode::estop_ramp: break;  // at rest or braking already: monitored for the speeds' continuity
+    case Mode::boot:
+    case Mode::disabled:
+    case Mode::enabling:
+    case Mode::fault_quick_stop:
+    case Mode::fault:
+    case Mode::estop_quick_stop:
+    case Mode::estop:
+    case Mode::homing:
+    case Mode::homing_abort:
+    case Mode::freedrive:
+    case Mode::freedrive_end: safety_.reset(); return;  // not powered on the setpoints
+  }
+  const kin::SafetyMode sm = safety_mode();
+  const bool jogging = mode_ == Mode::jogging;
+  kin::SafetyViolation v;
+  bool on_actual = false;
+  const bool hit = safety_.update(cmd_.pos, q_act_, sm, jogging, v, on_actual);
+  if (!watch) return;
+  char line[sizeof(Event::message)];
+  char what[sizeof(Event::message)];
+  if (jogging && !hit && safety_.predict_stop(limits_, cmd_, sm, v)) {
+    // the ramp from here ends beyond a plane or box: brake now, to rest at it
+    const int j = jog_.joint();
+    kin::describe(v, what, sizeof what);
+    join_text(line, sizeof line, "jog stopped at the ", what + 7);  // (what: "safety ...")
+    cmd_.acc.setZero();
+    begin_ramp(Mode::stopping_to_idle);
+    ++safety_stops_;
+    emit(EventKind::jog_stopped, FaultCause::none, j, 0, line);
+    return;
+  }
+  if (!hit) return;
+  kin::describe(v, what, sizeof what);
+  join_text(line, sizeof line, on_actual ? "protective stop (measured): " : "protective stop (commanded): ", what + 7);
+  const std::uint32_t id = exec_.running_id();
+  const bool was_jog = jogging;
+  flush_motions();
+  if (was_jog) cmd_.acc.setZero();
+  begin_ramp(Mode::stopping_to_idle);
+  ++safety_stops_;
+  emit(was_jog ? EventKind::jog_stopped : EventKind::motion_refused, FaultCause::none, -1, id, line);
+}
+
 void Controller::apply_output(const OutputChange& c) {
   if (c.joint < 0 || c.joint >= n_) return;
   const auto j = static_cast<std::size_t>(c.joint);
@@ -1210,6 +1280,7 @@ void Controller::cycle(TimePoint now) {
   supervise(now);
   // 3 motion, and the model's feed-forward of the setpoint (60B1h / 60B2h with this write)
   step_motion();
+  step_safety();
   if (model_ != nullptr) model_->feed_forward(cmd_);
   // 4 + 5 validate, write setpoints + SYNC
   validate_and_write(now);

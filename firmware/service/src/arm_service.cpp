@@ -374,9 +374,29 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
     return r;
   }
   if (!duration_ok(jm.plan.duration, r)) return r;
+  // The envelope along the plan. A TCP or elbow speed above its limit slows the move down
+  // instead (the same joint path at a lower override: every speed scales with it), the
+  // override divided by the highest speed / limit along the path (sampled: a few times at most).
+  for (int attempt = 0;; ++attempt) {
+    kin::JointVector v(n_), a(n_);
+    const kin::JointTrajectory& plan_ = jm.plan;
+    auto at = [&](double t, kin::JointVector& q) { plan_.sample(t, q, v, a); return true; };
+    kin::SafetyViolation sv;
+    double ratio = 1;
+    if (envelope_ok(cx.chain != nullptr ? *cx.chain : chain_, plan_.duration, at, "movej", r, &sv, &ratio)) break;
+    const bool speed = sv.function == kin::SafetyFunction::tcp_speed || sv.function == kin::SafetyFunction::elbow_speed;
+    const double slower = jm.override * 0.995 / std::max(ratio, 1.0);
+    if (!speed || attempt >= 5 || !(slower >= kMinJointSpeedPct / 100.0)) return r;
+    const MoveResult refused = r;
+    r = MoveResult{};
+    jm.override = o.override = slower;
+    r.status = kin::plan_movej(lim_, kin::JointState::rest(cx.dry != nullptr ? cx.dry->tail : tail()), goal, o, jm.plan);
+    if (!kin::is_ok(r.status)) return refused;
+    if (!duration_ok(jm.plan.duration, r)) return r;
+  }
   r.duration = jm.plan.duration;  // (jm is replaced when the move goes as a blended segment)
   const double tol = blend_of(req.blend, false, cx);
-  const bool path = path_segment(*m, false, goal, kin::Pose::Identity(), cfg_.cartesian, pct / 100.0, tol, cx, r);
+  const bool path = path_segment(*m, false, goal, kin::Pose::Identity(), cfg_.cartesian, jm.override, tol, cx, r);
   if (!path) jm.blend = tol;  // the controller blends it into the next joint move
   commit(*m, goal, cx, r, path);
   return r;
@@ -393,6 +413,9 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
     r.speed = speed;
     return r;
   }
+  // the envelope's TCP speed limit (the mode's) caps the line's speed: slowed, not refused
+  if (const double cap = cfg_.safety.enabled ? cfg_.safety.limits(safety_mode_).tcp_speed : 0.0; cap > 0 && speed > cap)
+    speed = cap;
   MotionItem* m = slot(cx.dry != nullptr, r);
   if (m == nullptr) return r;
   kin::CartesianLimits cl = cfg_.cartesian;
@@ -409,6 +432,11 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
     return r;
   }
   if (!duration_ok(traj.duration, r)) return r;
+  {
+    kin::JointVector v(n_), a(n_);
+    auto at = [&](double t, kin::JointVector& q) { traj.sample_precomputed(t, q, v, a); return true; };
+    if (!envelope_ok(chain, traj.duration, at, "movel", r)) return r;
+  }
   traj.ik = cx.ik;
   r.status = ms;
   r.speed = speed;
@@ -727,6 +755,15 @@ JogResult ArmService::jog(const JointJog& rq, const JogContext& cx) {
     goal[j] = to;
     if (!jog_duration_ok(std::fabs(goal[j] - from[j]) / (pct / 100.0 * lim_.dyn[ju].max_velocity), pre)) return pre;
   }
+  if (!rq.continuous) {
+    const kin::JointVector q0 = from;
+    auto at = [&](double t, kin::JointVector& q) { q = q0 + t * (goal - q0); return true; };
+    if (std::string why = jog_envelope(cx.chain != nullptr ? *cx.chain : chain_, at); !why.empty()) {
+      JogResult r = jog_refusal(JogRefusal::control, CmdError::limits);
+      r.reason = "jog refused: " + why;
+      return r;
+    }
+  }
   JogSpec js;
   js.space = JogSpace::joint;
   js.continuous = rq.continuous;
@@ -781,6 +818,11 @@ JogResult ArmService::jog(const ToolJog& rq, const JogContext& cx) {
     kin::JointVector q(n_);
     if (cx.ik.fn == nullptr || cx.ik.fn(*js.chain, target, commanded(), q, cx.ik.ctx) < kin::Status::ok)
       return jog_refusal(JogRefusal::unreachable, CmdError::unreachable);
+    if (std::string why = jog_envelope_line(*js.chain, here, target, commanded(), cx.ik); !why.empty()) {
+      r = jog_refusal(JogRefusal::control, CmdError::limits);
+      r.reason = "jog refused: " + why;
+      return r;
+    }
     js.target = target;
     jog_.pose = target;
   }
@@ -823,6 +865,11 @@ JogResult ArmService::jog(const PoseJog& rq, const JogContext& cx) {
   const double dist = (rq.target.translation() - from.translation()).norm();
   const double ang = Eigen::AngleAxisd(rq.target.linear() * from.linear().transpose()).angle();
   if (!jog_duration_ok(std::fmax(dist / js.linear_speed, ang / js.angular_speed), r)) return r;
+  if (std::string why = jog_envelope_line(chain, from, rq.target, commanded(), cx.ik); !why.empty()) {
+    r = jog_refusal(JogRefusal::control, CmdError::limits);
+    r.reason = "jog refused: " + why;
+    return r;
+  }
   r = send_jog(js);
   r.speed = js.linear_speed;
   if (!r.ok()) {
@@ -934,6 +981,9 @@ const char* to_string(JointHoming h) {
 ArmStatus ArmService::status() const {
   ArmStatus s;
   s.feed_pct = feed_pct_;
+  s.safety_on = cfg_.safety.enabled;
+  s.safety_mode = safety_mode_;
+  s.safety_checksum = cfg_.safety_checksum;
   s.q = kin::JointVector::Zero(n_);
   s.q_cmd = kin::JointVector::Zero(n_);
   s.homing.assign(static_cast<std::size_t>(n_), JointHoming::absolute);

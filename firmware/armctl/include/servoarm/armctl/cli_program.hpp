@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/safety.hpp"
 #include "servoarm/program/program.hpp"
 
 namespace servoarm::fw {
@@ -78,6 +79,7 @@ struct ProgramCheckOptions {
   double rate_hz = 1000;            ///< loop.rate_hz: the rate the path blends are checked at
   double default_blend_rad = 0;     ///< motion.default_blend_deg (SI): movej without blend=
   double default_blend_m = 0;       ///< motion.default_blend_mm (SI): movel / G1 without blend=
+  kin::SafetyConfig safety{};       ///< [safety]: the envelope every step is checked against (docs/safety.md)
 };
 
 /// What armfw takes from its configuration for a program (App::build and console_config,

@@ -25,6 +25,7 @@
 
 namespace servoarm::kin {
 struct Chain;
+struct SafetyConfig;
 }
 
 namespace servoarm::fw {
@@ -136,6 +137,23 @@ struct FwConfig {
   double feedback_timeout_ms = 50.0;
   std::string stop = "ramp";           ///< e-stop / fault reaction: "ramp" (controller) or "drive" (CiA 402 quick stop)
   double drive_stop_timeout_s = 2.0;   ///< stop = "drive": power down after this long even if a drive still moves
+  // [safety] envelope (docs/safety.md): base frame, mm / deg / mm/s
+  std::vector<double> safety_planes;     ///< nx, ny, nz, offset_mm per plane; [] = none
+  std::vector<double> safety_keep_in;    ///< xmin, ymin, zmin, xmax, ymax, zmax (mm) per box
+  std::vector<double> safety_keep_out;   ///< same
+  double safety_tool_radius_mm = 0.0;    ///< the sphere around the TCP
+  int safety_elbow_frame = -1;           ///< frame (0 = base, k = after DH row k) of the elbow sphere; -1 = none
+  double safety_elbow_radius_mm = 0.0;
+  std::vector<double> safety_cone_axis;  ///< x, y, z; [] = no orientation limit
+  double safety_cone_deg = 180.0;        ///< half-angle of the orientation cone (Normal mode)
+  double safety_tcp_speed_mm_s = 0.0;    ///< 0 = none
+  double safety_elbow_speed_mm_s = 0.0;  ///< 0 = none
+  double safety_reduced_tcp_speed_mm_s = 0.0;
+  double safety_reduced_elbow_speed_mm_s = 0.0;
+  double safety_reduced_cone_deg = 180.0;
+  double safety_tolerance_mm = 2.0;      ///< run-time monitor margin of planes and boxes
+  double safety_tolerance_deg = 2.0;     ///< run-time monitor margin of the cone
+  double safety_tolerance_mm_s = 20.0;   ///< run-time monitor margin of the speed limits
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;
@@ -347,10 +365,23 @@ std::string bus_load_reference_mismatch(const std::string& page);
 /// 32-bit position at its scaling, one count is finer than the following-error limit,
 /// and the joint's maximum velocity fits 32-bit counts/s. "" when fine, else "key: reason".
 std::string validate_for_chain(const FwConfig& cfg, const kin::Chain& chain);
+/// The [safety] checks that need the robot (part of validate_for_chain): the envelope builds
+/// (safety_envelope), safety.elbow_frame is a frame of the chain, and the park pose
+/// (motion.home_deg, else zeros clamped into the limits) lies inside the planes and boxes.
+std::string safety_for_chain(const FwConfig& cfg, const kin::Chain& chain);
 /// Why `id` cannot be a console ISO-TP id (not 11-bit, or a CANopen id of nodes 1..127), or null.
 const char* can_console_id_problem(int id);
 /// drive.homing.method as a number: 1..35, 37 or -128..-1 (CiA 402 6098h); 0 for "none" / "hard_stop" / not a method.
 int homing_method_number(const std::string& method);
+/// The [safety] envelope of `cfg` in SI for the kinematics core (normals normalised).
+/// Returns "" or why it cannot be built (one line naming the key); `out` is then disabled.
+std::string safety_envelope(const FwConfig& cfg, kin::SafetyConfig& out);
+/// The canonical form of the [safety] section: one `key = value` line per key of the
+/// table's safety.* rows, in table order, values as to_toml writes them.
+std::string safety_canonical(const FwConfig& cfg);
+/// CRC-32 (IEEE 802.3) of safety_canonical(): what `status` shows as the safety checksum.
+std::uint32_t safety_checksum(const FwConfig& cfg);
+
 /// The effective configuration as TOML (what `config` prints); loads back to `cfg`.
 /// Unset [[drive]] keys are left out.
 std::string to_toml(const FwConfig& cfg);

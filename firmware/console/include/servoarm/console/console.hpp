@@ -301,6 +301,8 @@ class Console {
   /// What a move runs with: the mode (check mode: a dry run into `dry`), the executing session's
   /// selected tool, the feed override, the M62 / M63 changes and the program step's blend.
   MoveContext move_context(DryRun* dry, const StepParams* step) const;
+  /// `safety`: on / off, the mode, the checksum, the stops (a query).
+  std::string safety_text() const;
   /// A check-mode session's dry-run state, and back after the move.
   DryRun dry_run(Session& s);
   static void keep_dry_run(Session& s, const DryRun& d);

@@ -231,6 +231,17 @@ inline constexpr CommandSpec kCommands[] = {
     {"collision off", Cmd::collision_off, ArgShape::none, "collision off",
      "collision detection off: to move the arm clear of what it hit (it is still pressed against it: detected again "
      "at once otherwise), then `collision on`", "", false},
+    {"safety normal", Cmd::safety_normal, ArgShape::none, "safety normal",
+     "the safety envelope's Normal limits ([safety], docs/safety.md)",
+     "the moves planned from now on and the control thread's monitor (from its next cycle) use them; refused "
+     "(`error: bad_state no safety envelope is configured ...`) without [safety]", false},
+    {"safety reduced", Cmd::safety_reduced, ArgShape::none, "safety reduced",
+     "the safety envelope's Reduced limits (safety.reduced_*: TCP and elbow speed, orientation cone)",
+     "as `safety normal`; a move faster than the Reduced TCP speed limit is refused at plan time", false},
+    {"safety", Cmd::safety, ArgShape::none, "safety",
+     "the safety envelope: on or off, the mode, the configuration's checksum and the stops it made",
+     "`safety=on mode=normal|reduced checksum=XXXXXXXX stops=N` (`safety=off` without [safety]); not a "
+     "safety-rated function: docs/safety.md", true},
     {"out", Cmd::out, ArgShape::output, "out [NAME on/off]",
      "digital output NAME ([[output]]: a drive's 60FEh:01 bit) on or off at once; `out` lists them",
      "sent to the drive with the next control cycle's PDOs (M64 / M65 P<n> the same, n the output's index in "

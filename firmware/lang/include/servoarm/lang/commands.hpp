@@ -98,6 +98,9 @@ enum class Cmd : std::uint8_t {
   freedrive_off,  ///< `freedrive off`: back to position mode, holding where it stands
   collision_on,   ///< `collision on`: collision detection on (when available)
   collision_off,  ///< `collision off`: collision detection off (to move clear of what the arm hit)
+  safety,         ///< `safety`: the safety envelope's mode, checksum and stops (query)
+  safety_normal,  ///< `safety normal`: the envelope's Normal limits
+  safety_reduced, ///< `safety reduced`: the envelope's Reduced limits
   quit,           ///< `quit` / `exit`: end this console session (the transport decides what ends: ConsoleServer)
 };
 

@@ -30,6 +30,7 @@
 #include "servoarm/rt/messages.hpp"
 #include "servoarm/rt/mode_table.hpp"
 #include "servoarm/rt/model_control.hpp"
+#include "servoarm/rt/safety_monitor.hpp"
 #include "servoarm/rt/seqlock.hpp"
 #include "servoarm/rt/spsc_queue.hpp"
 #include "servoarm/rt/stats.hpp"
@@ -69,6 +70,8 @@ struct ControllerConfig {
   /// While a joint is not homed: joint jogs run at this fraction of the speed asked; tool jogs and
   /// every queued joint / Cartesian move are refused (RtResult::not_homed).
   double unhomed_jog_scale = 0.25;
+  /// The safety envelope the monitor checks every cycle (docs/safety.md); disabled: none.
+  kin::SafetyConfig safety{};
 };
 
 inline constexpr std::size_t kRequestQueue = 16;
@@ -114,6 +117,15 @@ class Controller final : private SegmentHost {
   const ControllerConfig& config() const { return cfg_; }
   double period_s() const { return period_s_; }
 
+  /// Any thread: the safety envelope's mode (docs/safety.md); the monitor uses it from its next
+  /// cycle. Lock-free (one atomic byte).
+  void set_safety_mode(kin::SafetyMode m) { safety_mode_.store(static_cast<std::uint8_t>(m), std::memory_order_relaxed); }
+  kin::SafetyMode safety_mode() const {
+    return static_cast<kin::SafetyMode>(safety_mode_.load(std::memory_order_relaxed));
+  }
+  /// Real-time / tests: the safety monitor (its last commanded TCP sample).
+  const SafetyMonitor& safety_monitor() const { return safety_; }
+
   /// Events dropped because the event queue was full (counted, never silent).
   std::uint64_t events_dropped() const { return events_dropped_.load(std::memory_order_relaxed); }
 
@@ -145,6 +157,9 @@ class Controller final : private SegmentHost {
   void follow_measured();
   void step_jog();
   void step_motion();
+  /// The safety envelope's monitor, after the motion's sample: a protective stop (ramp to rest
+  /// on the limits, then idle holding) with an event naming the function and values.
+  void step_safety();
   // SegmentHost: the executor's calls
   bool may_move() const override;
   void segment_started(const MotionItem& m) override;
@@ -226,6 +241,9 @@ class Controller final : private SegmentHost {
   std::array<std::uint32_t, kin::kMaxJoints> emcy_seen_{};
   double max_follow_ = 0;
   TimePoint estop_seen_ = -1;
+  SafetyMonitor safety_;
+  std::atomic<std::uint8_t> safety_mode_{0};  ///< kin::SafetyMode
+  std::uint32_t safety_stops_ = 0;
   std::int64_t estop_latency_ = -1;
 
   // Replies are committed after the cycle's telemetry is published, so a

@@ -211,6 +211,8 @@ struct Telemetry {
   std::uint64_t feed_forward_cycles = 0;  ///< cycles with feed-forward given to the drives
   /// True when every joint is homed.
   bool all_homed() const { return n > 0 && homed == static_cast<std::uint16_t>((1u << n) - 1u); }
+  std::uint8_t safety_mode = 0;    ///< kin::SafetyMode the monitor runs with
+  std::uint32_t safety_stops = 0;  ///< protective stops and jogs stopped by the safety envelope
 };
 
 }  // namespace servoarm::fw

@@ -34,6 +34,7 @@
 
 #include "servoarm/kinematics/blend_path.hpp"
 #include "servoarm/kinematics/ik.hpp"
+#include "servoarm/kinematics/safety.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
 #include "servoarm/lang/commands.hpp"
 #include "servoarm/lang/frames.hpp"
@@ -57,6 +58,14 @@ enum class MoveRefusal : std::uint8_t {
   queue_full,    ///< the motion queue is full (real run)
 };
 const char* to_string(MoveRefusal r);
+
+/// The safety envelope at one target (docs/safety.md): the tool (and elbow) sphere at joints q
+/// against the planes, boxes and orientation cone of `env` in `mode`, and, when dt > 0, the
+/// TCP and elbow speeds of the step from q_prev to q taken in dt seconds. "" inside, else the
+/// one line naming the function, where and the limit and value. The hook for streamed targets
+/// (service/stream.hpp): ArmService::check_target calls it with the service's envelope and mode.
+std::string envelope_violation_at(const kin::SafetyConfig& env, kin::SafetyMode mode, const kin::Chain& chain,
+                                  const kin::JointVector& q_prev, const kin::JointVector& q, double dt);
 
 /// The error code of a planner status.
 CmdError motion_error(kin::MotionStatus m);
@@ -167,6 +176,10 @@ struct MotionSettings {
   double jog_deadman_s = 0.25;         ///< a continuous jog not refreshed this long stops
   double reply_timeout_s = 1.0;        ///< wait for the control thread to answer a request
   std::vector<OutputBit> outputs;      ///< the digital outputs, in [[output]] order (fixed at start)
+  /// The safety envelope ([safety], docs/safety.md) every planned move, blended run, program
+  /// step and jog step is checked against; disabled: none. Fixed at start.
+  kin::SafetyConfig safety{};
+  std::uint32_t safety_checksum = 0;   ///< CRC-32 of the [safety] section's canonical form (fw::safety_checksum)
 };
 
 /// A setting set_settings() checks (SettingsResult::setting).
@@ -237,6 +250,9 @@ struct ArmStatus {
   FeedForwardKind feed_forward = FeedForwardKind::off;
   bool collision_on = false;
   FreedrivePhase freedrive = FreedrivePhase::off;
+  bool safety_on = false;                              ///< a safety envelope is configured
+  kin::SafetyMode safety_mode = kin::SafetyMode::normal;  ///< Normal or Reduced
+  std::uint32_t safety_checksum = 0;                   ///< of the [safety] section (MotionSettings::safety_checksum)
 };
 
 /// The answer to arm_limits(): the joint limits, the joints' kinds and the Cartesian limits (SI).
@@ -673,6 +689,7 @@ enum class ServiceOp : std::uint8_t {
   point_teach,          ///< teach(TeachRequest) -> PointResult
   point_delete,         ///< delete_point(name, dry) -> PointResult
   point_move,           ///< move_to_point(PointMove, MoveContext) -> PointResult
+  safety_mode,          ///< set_safety_mode(mode) -> ControlResult (Normal / Reduced)
 };
 
 struct ServiceOpInfo {
@@ -728,6 +745,7 @@ inline constexpr ServiceOpInfo kServiceOps[] = {
     {ServiceOp::point_teach, "point_teach", false},
     {ServiceOp::point_delete, "point_delete", false},
     {ServiceOp::point_move, "point_move", false},
+    {ServiceOp::safety_mode, "safety_mode", false},
 };
 const char* to_string(ServiceOp op);
 /// The op named `name` (kServiceOps); false: none is.
@@ -898,6 +916,16 @@ class ArmService {
   /// Move to point `rq.name` (move(), real or dry run as `cx` says).
   PointResult move_to_point(const PointMove& rq, const MoveContext& cx);
 
+  /// Switch the safety envelope's mode (docs/safety.md): the planning checks of the moves
+  /// queued from now on and the control thread's monitor (from its next cycle) use the
+  /// mode's limits. Refused (bad_state, one line) when no envelope is configured.
+  ControlResult set_safety_mode(kin::SafetyMode mode);
+  kin::SafetyMode safety_mode() const { return safety_mode_; }
+  /// One streamed target against the envelope (envelope_violation_at with the service's
+  /// envelope and mode, the arm's chain unless `chain` is given): "" or the refusal's line.
+  std::string check_target(const kin::JointVector& q_prev, const kin::JointVector& q, double dt,
+                           const kin::Chain* chain = nullptr) const;
+
   /// Queries: they read and change nothing.
   ArmStatus status() const;
   ArmLimits arm_limits() const;
@@ -964,6 +992,20 @@ class ArmService {
   std::unique_ptr<PathShadow> shadow_;  ///< the real run's blended segments (the controller runs copies)
   std::uint32_t shadow_tail_id_ = 0;    ///< the motion the newest segment was queued as (0: none)
   std::unique_ptr<MotionItem> scratch_;  ///< a dry run's motion (planned, never queued)
+  kin::SafetyMode safety_mode_ = kin::SafetyMode::normal;
+  /// The envelope check of a planned motion whose joints at time t (0..duration) `at` gives:
+  /// true when inside; false with r refused (limits, the violation's line in r.reason).
+  /// `violation` (optional): the function found; `speed_ratio` (optional): the highest TCP or
+  /// elbow speed over its limit along the whole path.
+  bool envelope_ok(const kin::Chain& chain, double duration, const std::function<bool(double, kin::JointVector&)>& at,
+                   const char* what, MoveResult& r, kin::SafetyViolation* violation = nullptr,
+                   double* speed_ratio = nullptr) const;
+  /// A jog step's path (joints at the fraction s in 0..1 from `at`) against the envelope,
+  /// positions and orientation only (a jog's speed is the jog's): "" or the violation's line.
+  std::string jog_envelope(const kin::Chain& chain, const std::function<bool(double, kin::JointVector&)>& at) const;
+  /// A tool jog's straight line from pose `a` to `b` (IK along it from `seed`): as jog_envelope.
+  std::string jog_envelope_line(const kin::Chain& chain, const kin::Pose& a, const kin::Pose& b,
+                                const kin::JointVector& seed, const kin::IkSolver& ik) const;
   MoveResult last_;
   std::uint32_t seq_ = 0;  ///< request sequence numbers (replies are matched by them)
   std::array<OutputChange, kMotionOutputs> sync_out_{};  ///< M62 / M63 changes for the next move (one per joint, merged)

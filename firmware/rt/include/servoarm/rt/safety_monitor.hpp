@@ -1,0 +1,55 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+// The safety envelope's run-time monitor (docs/safety.md): every control cycle, the commanded
+// and the measured TCP (and elbow) against the planes, boxes, orientation cone and speed
+// limits of kin::SafetyConfig, with the functions' tolerances; and, while jogging, the
+// predicted stop (the ramp the controller would brake with now) against the planes and boxes,
+// so that a jog towards a plane comes to rest at it and a jog away from it is let go.
+//
+// Real-time: update() and predict_stop() are heap-free, lock-free and throw nothing
+// (fixed-size Eigen, the kinematics core's FK and plan_stop); configure() is set-up code.
+#include <cstdint>
+
+#include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/safety.hpp"
+#include "servoarm/kinematics/trajectory.hpp"
+
+namespace servoarm::fw {
+
+class SafetyMonitor {
+ public:
+  /// Set-up: `chain` outlives the monitor; `period_s` is the control period.
+  void configure(const kin::Chain& chain, const kin::SafetyConfig& cfg, double period_s);
+  bool enabled() const { return cfg_.enabled; }
+  const kin::SafetyConfig& config() const { return cfg_; }
+
+  /// Forget the previous samples (the next update() computes no speed): after a power-up, a
+  /// free-drive, anything that moved the arm without the commanded path.
+  void reset() { have_prev_ = false; }
+
+  /// One cycle: the commanded and measured joints. True when a function is beyond its limit
+  /// by more than its tolerance on either, `out` naming it and `on_actual` which one.
+  /// `only_growing` (a jog): a function already beyond is reported only while its excess grows
+  /// on the commanded state (so that a jog may move back in).
+  bool update(const kin::JointVector& q_cmd, const kin::JointVector& q_act, kin::SafetyMode mode, bool only_growing,
+              kin::SafetyViolation& out, bool& on_actual);
+
+  /// While jogging: the commanded state `cmd` braked to rest now with `limits` (the
+  /// controller's ramp) ends outside a plane or box, further out than `cmd` itself is (a jog
+  /// towards it, not one moving back in): true, `out` naming it at the stop point.
+  bool predict_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
+                    kin::SafetyViolation& out);
+
+  /// The last commanded TCP sample (base frame) update() computed.
+  const kin::SafetySample& commanded() const { return cmd_; }
+
+ private:
+  const kin::Chain* chain_ = nullptr;
+  kin::SafetyConfig cfg_{};
+  double period_s_ = 0.001;
+  kin::SafetySample cmd_{}, act_{}, prev_cmd_{}, prev_act_{};
+  bool have_prev_ = false;
+  kin::JointTrajectory stop_{};  ///< predict_stop's ramp (kept here: no stack copy per cycle)
+};
+
+}  // namespace servoarm::fw

@@ -1,0 +1,67 @@
+// SPDX-License-Identifier: Apache-2.0
+// The safety envelope's run-time monitor (servoarm/rt/safety_monitor.hpp).
+#include "servoarm/rt/safety_monitor.hpp"
+
+namespace servoarm::fw {
+
+void SafetyMonitor::configure(const kin::Chain& chain, const kin::SafetyConfig& cfg, double period_s) {
+  chain_ = &chain;
+  cfg_ = cfg;
+  period_s_ = period_s;
+  have_prev_ = false;
+}
+
+bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector& q_act, kin::SafetyMode mode,
+                           bool only_growing, kin::SafetyViolation& out, bool& on_actual) {
+  if (!cfg_.enabled || chain_ == nullptr) return false;
+  const bool ok_cmd = kin::safety_sample(*chain_, cfg_, q_cmd, -1.0, cmd_);
+  const bool ok_act = kin::safety_sample(*chain_, cfg_, q_act, -1.0, act_);
+  cmd_.has_velocity = act_.has_velocity = false;
+  const bool had_prev = have_prev_;
+  if (had_prev) {
+    cmd_.has_velocity = true;
+    cmd_.tcp_velocity = (cmd_.tcp.translation() - prev_cmd_.tcp.translation()) / period_s_;
+    cmd_.elbow_velocity = (cmd_.elbow - prev_cmd_.elbow) / period_s_;
+  }
+  // The measured state's speed would be the drives' position quantisation differenced every
+  // cycle: only its positions and orientation are checked.
+  const double pm = cfg_.position_tolerance, am = cfg_.angle_tolerance, sm = cfg_.speed_tolerance;
+  bool hit = false;
+  if (ok_cmd && kin::check_sample(cfg_, mode, cmd_, pm, am, sm, out)) {
+    hit = !only_growing || !had_prev || out.excess() > kin::safety_excess(cfg_, mode, prev_cmd_, out);
+    on_actual = false;
+  }
+  if (!hit && ok_act && kin::check_sample(cfg_, mode, act_, pm, am, sm, out)) {
+    hit = !only_growing || !had_prev || out.excess() > kin::safety_excess(cfg_, mode, prev_act_, out);
+    on_actual = true;
+  }
+  have_prev_ = ok_cmd && ok_act;
+  prev_cmd_ = cmd_;
+  prev_act_ = act_;
+  return hit;
+}
+
+bool SafetyMonitor::predict_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
+                                 kin::SafetyViolation& out) {
+  if (!cfg_.enabled || chain_ == nullptr) return false;
+  kin::MovejOptions o;
+  if (kin::plan_stop(limits, cmd, o, stop_) != kin::MotionStatus::ok) return false;
+  kin::JointState end;
+  end.pos = cmd.pos;
+  end.vel = cmd.vel;
+  end.acc = cmd.acc;
+  stop_.sample(stop_.duration, end);
+  kin::SafetySample here, there;
+  if (!kin::safety_sample(*chain_, cfg_, cmd.pos, 0.0, here) || !kin::safety_sample(*chain_, cfg_, end.pos, -1.0, there))
+    return false;
+  // positions only: the cone and the speeds are the per-cycle check's
+  kin::SafetyConfig positions_only = cfg_;
+  positions_only.cone = false;
+  kin::SafetyViolation v;
+  if (!kin::check_sample(positions_only, mode, there, 0.0, 0.0, 0.0, v)) return false;
+  if (kin::safety_excess(cfg_, mode, there, v) <= kin::safety_excess(cfg_, mode, here, v)) return false;  // moving back in
+  out = v;
+  return true;
+}
+
+}  // namespace servoarm::fw

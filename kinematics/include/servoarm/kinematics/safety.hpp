@@ -1,0 +1,142 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+// The safety envelope's geometry: planes, keep-in and keep-out boxes, a tool sphere at the
+// TCP, an optional elbow sphere at a joint frame, a tool-orientation cone and TCP / elbow
+// speed limits, as pure functions over plain structs (docs/safety.md).
+//
+// These are monitoring functions, not a safety-rated controller: they catch a jog into the
+// table or a program line through a fixture; the safety chain is the drives' STO and an
+// external safety relay.
+//
+// Conventions (base frame, SI: metres, radians, m/s):
+//  - a plane is the set n.p = offset with n a unit normal; the allowed side is n.p >= offset.
+//    The tool sphere (centre c, radius r) is inside when n.c - r >= offset: value n.c - r,
+//    limit offset.
+//  - a keep-in box holds the whole sphere: min + r <= c <= max - r per axis; the value is the
+//    worst axis's distance from c to the box face minus r (limit 0).
+//  - a keep-out box must not touch the sphere: the distance from c to the box is at least r
+//    (value the distance, negative inside the box: minus the clearance to its nearest face;
+//    limit r).
+//  - the cone: the angle between the tool's z axis and `axis` is at most `half_angle`.
+//  - speeds: |v| of the TCP / of the elbow frame's origin at most the limit.
+// A function is violated when its value is beyond its limit by more than the margin the
+// caller passes (0 at plan time, the function's tolerance in the run-time monitor).
+//
+// Real-time: every function here is heap-free, lock-free and throws nothing.
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/types.hpp"
+
+namespace servoarm::kin {
+
+inline constexpr int kMaxSafetyPlanes = 8;
+inline constexpr int kMaxSafetyBoxes = 8;
+
+struct SafetyPlane {
+  Eigen::Vector3d normal{0, 0, 1};  ///< unit, towards the allowed side
+  double offset = 0;                ///< m: the allowed side is normal.p >= offset
+  bool elbow = true;                ///< restricts the elbow sphere too (when there is one)
+};
+
+struct SafetyBox {
+  Eigen::Vector3d min{0, 0, 0}, max{0, 0, 0};  ///< m, base frame, min <= max per axis
+  bool keep_in = true;                         ///< true: the sphere stays inside; false: outside
+  bool elbow = true;
+};
+
+/// The values that differ between Normal and Reduced mode.
+struct SafetyLimits {
+  double tcp_speed = 0;    ///< m/s; 0 = no limit
+  double elbow_speed = 0;  ///< m/s; 0 = no limit
+  double cone_half_angle = 0;  ///< rad; used when SafetyConfig::cone is set
+};
+
+enum class SafetyMode : std::uint8_t { normal, reduced };
+
+struct SafetyConfig {
+  bool enabled = false;
+  std::array<SafetyPlane, kMaxSafetyPlanes> planes{};
+  int plane_count = 0;
+  std::array<SafetyBox, kMaxSafetyBoxes> boxes{};
+  int box_count = 0;
+  double tool_radius = 0;  ///< m: the sphere around the TCP
+  int elbow_frame = -1;    ///< FrameSet index of the elbow sphere's centre; -1 = no elbow sphere
+  double elbow_radius = 0; ///< m
+  bool cone = false;
+  Eigen::Vector3d cone_axis{0, 0, -1};  ///< unit: the tool's z axis stays within the cone around it
+  SafetyLimits normal{}, reduced{};
+  double position_tolerance = 0.002;  ///< m: run-time margin of planes and boxes
+  double angle_tolerance = 0.035;     ///< rad: run-time margin of the cone
+  double speed_tolerance = 0.02;      ///< m/s: run-time margin of the speed limits
+  const SafetyLimits& limits(SafetyMode m) const;
+};
+
+enum class SafetyFunction : std::uint8_t {
+  none,
+  plane,        ///< index = plane
+  keep_in,      ///< index = box
+  keep_out,     ///< index = box
+  orientation,  ///< the tool-orientation cone
+  tcp_speed,
+  elbow_speed,
+};
+const char* to_string(SafetyFunction f);
+const char* to_string(SafetyMode m);
+
+struct SafetyViolation {
+  SafetyFunction function = SafetyFunction::none;
+  int index = -1;      ///< plane or box index
+  bool elbow = false;  ///< the elbow sphere, not the tool sphere
+  double s = 0;        ///< where along the path (the sample's s; 0..1 for a move; < 0 at run time)
+  Eigen::Vector3d where{0, 0, 0};  ///< m: the sphere's centre (TCP or elbow)
+  double limit = 0;    ///< m, rad or m/s (see the conventions above)
+  double value = 0;
+  /// How far beyond the limit (>= 0 when violated): m, rad or m/s.
+  double excess() const;
+};
+
+/// One line into buf, in the firmware's units (mm, deg, mm/s): "safety plane 0 (tool sphere)
+/// at s=0.420 (x=250.0, y=-100.0, z=110.0 mm): limit 100.0 mm, value 90.0 mm" (no "at s=" when
+/// s < 0: a run-time sample). Returns buf.
+const char* describe(const SafetyViolation& v, char* buf, std::size_t size);
+
+/// One state to check: the TCP pose, the elbow frame's origin (when the config has one) and,
+/// for the speed limits, their velocities (has_velocity).
+struct SafetySample {
+  double s = 0;
+  Pose tcp = Pose::Identity();
+  Eigen::Vector3d elbow{0, 0, 0};
+  bool has_velocity = false;
+  Eigen::Vector3d tcp_velocity{0, 0, 0};
+  Eigen::Vector3d elbow_velocity{0, 0, 0};
+};
+
+/// The functions at `x` in order (planes, boxes, cone, then the speeds when x.has_velocity):
+/// true and `out` filled for the first one beyond its limit by more than its margin
+/// (position_margin m, angle_margin rad, speed_margin m/s); false (out untouched) when none is.
+bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
+                  double angle_margin, double speed_margin, SafetyViolation& out);
+
+/// How far beyond its limit the function `which` names (function, index, elbow) is at `x`
+/// (m, rad or m/s; negative inside). Lets a monitor tell a move back towards the inside
+/// (the excess shrinks) from one further out.
+double safety_excess(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, const SafetyViolation& which);
+
+/// The first sample of a path whose check fails with zero margins (plan time): true and
+/// `out` filled, false when the whole path is inside.
+bool check_path(const SafetyConfig& cfg, SafetyMode mode, std::span<const SafetySample> path, SafetyViolation& out);
+
+/// The sample for joint values q (FK of the chain; elbow from forward_frames). Returns false
+/// on a bad q (NaN, wrong size).
+bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVector& q, double s, SafetySample& out);
+
+/// "" when the config is consistent, else why not (written into buf, one line): a NaN, a zero
+/// normal, an inverted box, a keep-in box smaller than the tool sphere, a negative radius or
+/// limit. Returns buf or "".
+const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_t size);
+
+}  // namespace servoarm::kin

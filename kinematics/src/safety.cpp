@@ -1,0 +1,261 @@
+// SPDX-License-Identifier: Apache-2.0
+// The safety envelope's geometry (servoarm/kinematics/safety.hpp): heap-free, no I/O.
+#include "servoarm/kinematics/safety.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+namespace servoarm::kin {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+bool finite3(const Eigen::Vector3d& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
+
+// Signed clearance of point c inside box b: the smallest distance to a face (negative outside).
+double inside_clearance(const SafetyBox& b, const Eigen::Vector3d& c) {
+  double d = INFINITY;
+  for (int i = 0; i < 3; ++i) d = std::min({d, c[i] - b.min[i], b.max[i] - c[i]});
+  return d;
+}
+
+// Signed distance from point c to box b: positive outside, minus the clearance to the
+// nearest face inside (so that a centre deep inside is further from allowed than one at a face).
+double outside_distance(const SafetyBox& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d q = c.cwiseMax(b.min).cwiseMin(b.max);
+  const double d = (c - q).norm();
+  return d > 0 ? d : -inside_clearance(b, c);
+}
+
+double tool_angle(const SafetyConfig& cfg, const Pose& tcp) {
+  const Eigen::Vector3d z = tcp.linear().col(2);
+  const double cosang = std::clamp(z.dot(cfg.cone_axis) / std::max(z.norm() * cfg.cone_axis.norm(), 1e-300), -1.0, 1.0);
+  return std::acos(cosang);
+}
+
+// Fills v for the function `fn` at sample x; returns its excess (m, rad, m/s; negative inside).
+double evaluate(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, SafetyFunction fn, int index,
+                bool elbow, SafetyViolation& v) {
+  v.function = fn;
+  v.index = index;
+  v.elbow = elbow;
+  v.s = x.s;
+  const Eigen::Vector3d c = elbow ? x.elbow : Eigen::Vector3d(x.tcp.translation());
+  const double r = elbow ? cfg.elbow_radius : cfg.tool_radius;
+  v.where = c;
+  const SafetyLimits& lim = cfg.limits(mode);
+  switch (fn) {
+    case SafetyFunction::none:
+      v.limit = v.value = 0;
+      return -INFINITY;
+    case SafetyFunction::plane: {
+      const SafetyPlane& p = cfg.planes[static_cast<std::size_t>(index)];
+      v.limit = p.offset;
+      v.value = p.normal.dot(c) - r;
+      return v.limit - v.value;
+    }
+    case SafetyFunction::keep_in:
+      v.limit = r;
+      v.value = inside_clearance(cfg.boxes[static_cast<std::size_t>(index)], c);
+      return v.limit - v.value;
+    case SafetyFunction::keep_out:
+      v.limit = r;
+      v.value = outside_distance(cfg.boxes[static_cast<std::size_t>(index)], c);
+      return v.limit - v.value;
+    case SafetyFunction::orientation:
+      v.where = x.tcp.translation();
+      v.limit = lim.cone_half_angle;
+      v.value = tool_angle(cfg, x.tcp);
+      return v.value - v.limit;
+    case SafetyFunction::tcp_speed:
+      v.where = x.tcp.translation();
+      v.limit = lim.tcp_speed;
+      v.value = x.tcp_velocity.norm();
+      return lim.tcp_speed > 0 ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::elbow_speed:
+      v.where = x.elbow;
+      v.limit = lim.elbow_speed;
+      v.value = x.elbow_velocity.norm();
+      return lim.elbow_speed > 0 && cfg.elbow_frame >= 0 ? v.value - v.limit : -INFINITY;
+  }
+  return -INFINITY;
+}
+
+}  // namespace
+
+const SafetyLimits& SafetyConfig::limits(SafetyMode m) const {
+  switch (m) {
+    case SafetyMode::normal: return normal;
+    case SafetyMode::reduced: return reduced;
+  }
+  return normal;
+}
+
+const char* to_string(SafetyFunction f) {
+  switch (f) {
+    case SafetyFunction::none: return "none";
+    case SafetyFunction::plane: return "plane";
+    case SafetyFunction::keep_in: return "keep-in box";
+    case SafetyFunction::keep_out: return "keep-out box";
+    case SafetyFunction::orientation: return "tool orientation";
+    case SafetyFunction::tcp_speed: return "tcp speed";
+    case SafetyFunction::elbow_speed: return "elbow speed";
+  }
+  return "?";
+}
+
+const char* to_string(SafetyMode m) {
+  switch (m) {
+    case SafetyMode::normal: return "normal";
+    case SafetyMode::reduced: return "reduced";
+  }
+  return "?";
+}
+
+double SafetyViolation::excess() const {
+  switch (function) {
+    case SafetyFunction::none: return -INFINITY;
+    case SafetyFunction::plane:
+    case SafetyFunction::keep_in:
+    case SafetyFunction::keep_out: return limit - value;
+    case SafetyFunction::orientation:
+    case SafetyFunction::tcp_speed:
+    case SafetyFunction::elbow_speed: return value - limit;
+  }
+  return -INFINITY;
+}
+
+const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
+  if (size == 0) return buf;
+  const char* who = v.elbow ? "elbow" : "tool";
+  char name[48];
+  switch (v.function) {
+    case SafetyFunction::plane:
+    case SafetyFunction::keep_in:
+    case SafetyFunction::keep_out:
+      std::snprintf(name, sizeof name, "%s %d (%s sphere)", to_string(v.function), v.index, who);
+      break;
+    case SafetyFunction::none:
+    case SafetyFunction::orientation:
+    case SafetyFunction::tcp_speed:
+    case SafetyFunction::elbow_speed:
+      std::snprintf(name, sizeof name, "%s", to_string(v.function));
+      break;
+  }
+  double scale = 1000.0;
+  const char* unit = "mm";
+  switch (v.function) {
+    case SafetyFunction::none:
+    case SafetyFunction::plane:
+    case SafetyFunction::keep_in:
+    case SafetyFunction::keep_out: break;
+    case SafetyFunction::orientation: scale = 180.0 / kPi; unit = "deg"; break;
+    case SafetyFunction::tcp_speed:
+    case SafetyFunction::elbow_speed: unit = "mm/s"; break;
+  }
+  char at[24] = "";
+  if (v.s >= 0) std::snprintf(at, sizeof at, " at s=%.3f", v.s);
+  std::snprintf(buf, size, "safety %s%s (x=%.1f, y=%.1f, z=%.1f mm): limit %.1f %s, value %.1f %s", name, at,
+                v.where.x() * 1000.0, v.where.y() * 1000.0, v.where.z() * 1000.0, v.limit * scale, unit,
+                v.value * scale, unit);
+  return buf;
+}
+
+bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
+                  double angle_margin, double speed_margin, SafetyViolation& out) {
+  if (!cfg.enabled) return false;
+  SafetyViolation v;
+  const bool has_elbow = cfg.elbow_frame >= 0;
+  for (int e = 0; e < (has_elbow ? 2 : 1); ++e) {
+    const bool elbow = e == 1;
+    for (int i = 0; i < cfg.plane_count; ++i) {
+      if (elbow && !cfg.planes[static_cast<std::size_t>(i)].elbow) continue;
+      if (evaluate(cfg, mode, x, SafetyFunction::plane, i, elbow, v) > position_margin) { out = v; return true; }
+    }
+    for (int i = 0; i < cfg.box_count; ++i) {
+      const SafetyBox& b = cfg.boxes[static_cast<std::size_t>(i)];
+      if (elbow && !b.elbow) continue;
+      const SafetyFunction fn = b.keep_in ? SafetyFunction::keep_in : SafetyFunction::keep_out;
+      if (evaluate(cfg, mode, x, fn, i, elbow, v) > position_margin) { out = v; return true; }
+    }
+  }
+  if (cfg.cone && evaluate(cfg, mode, x, SafetyFunction::orientation, -1, false, v) > angle_margin) {
+    out = v;
+    return true;
+  }
+  if (x.has_velocity) {
+    if (evaluate(cfg, mode, x, SafetyFunction::tcp_speed, -1, false, v) > speed_margin) { out = v; return true; }
+    if (evaluate(cfg, mode, x, SafetyFunction::elbow_speed, -1, true, v) > speed_margin) { out = v; return true; }
+  }
+  return false;
+}
+
+double safety_excess(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, const SafetyViolation& which) {
+  SafetyViolation v;
+  return evaluate(cfg, mode, x, which.function, which.index, which.elbow, v);
+}
+
+bool check_path(const SafetyConfig& cfg, SafetyMode mode, std::span<const SafetySample> path, SafetyViolation& out) {
+  for (const SafetySample& x : path)
+    if (check_sample(cfg, mode, x, 0.0, 0.0, 0.0, out)) return true;
+  return false;
+}
+
+bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVector& q, double s, SafetySample& out) {
+  FrameSet frames;
+  Pose tcp;
+  if (forward_frames(chain, q, frames, tcp) != Status::ok) return false;
+  out.s = s;
+  out.tcp = tcp;
+  out.has_velocity = false;
+  if (cfg.elbow_frame >= 0 && cfg.elbow_frame < frames.count)
+    out.elbow = frames.frame[cfg.elbow_frame].translation();
+  else
+    out.elbow = tcp.translation();
+  return true;
+}
+
+const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_t size) {
+  if (size == 0) return buf;
+  buf[0] = '\0';
+  auto bad = [&](const char* what, int i) {
+    std::snprintf(buf, size, what, i);
+    return buf;
+  };
+  if (!std::isfinite(cfg.tool_radius) || cfg.tool_radius < 0) return bad("tool radius must be finite and >= 0", 0);
+  if (!std::isfinite(cfg.elbow_radius) || cfg.elbow_radius < 0) return bad("elbow radius must be finite and >= 0", 0);
+  if (cfg.plane_count < 0 || cfg.plane_count > kMaxSafetyPlanes) return bad("at most %d planes", kMaxSafetyPlanes);
+  if (cfg.box_count < 0 || cfg.box_count > kMaxSafetyBoxes) return bad("at most %d boxes", kMaxSafetyBoxes);
+  for (int i = 0; i < cfg.plane_count; ++i) {
+    const SafetyPlane& p = cfg.planes[static_cast<std::size_t>(i)];
+    if (!finite3(p.normal) || !std::isfinite(p.offset)) return bad("plane %d: not a finite number", i);
+    if (std::abs(p.normal.norm() - 1.0) > 1e-9) return bad("plane %d: the normal must be a unit vector (zero or unnormalised)", i);
+  }
+  for (int i = 0; i < cfg.box_count; ++i) {
+    const SafetyBox& b = cfg.boxes[static_cast<std::size_t>(i)];
+    if (!finite3(b.min) || !finite3(b.max)) return bad("box %d: not a finite number", i);
+    if ((b.min.array() > b.max.array()).any()) return bad("box %d: inverted (a min above its max)", i);
+    if (b.keep_in && ((b.max - b.min).minCoeff() < 2.0 * cfg.tool_radius))
+      return bad("box %d: keep-in box narrower than the tool sphere's diameter", i);
+    if (b.keep_in && b.elbow && cfg.elbow_frame >= 0 && (b.max - b.min).minCoeff() < 2.0 * cfg.elbow_radius)
+      return bad("box %d: keep-in box narrower than the elbow sphere's diameter", i);
+  }
+  if (cfg.cone) {
+    if (!finite3(cfg.cone_axis) || std::abs(cfg.cone_axis.norm() - 1.0) > 1e-9)
+      return bad("cone axis must be a finite unit vector", 0);
+  }
+  for (const SafetyLimits* l : {&cfg.normal, &cfg.reduced}) {
+    if (!std::isfinite(l->tcp_speed) || l->tcp_speed < 0 || !std::isfinite(l->elbow_speed) || l->elbow_speed < 0)
+      return bad("speed limits must be finite and >= 0", 0);
+    if (cfg.cone && (!std::isfinite(l->cone_half_angle) || l->cone_half_angle <= 0 || l->cone_half_angle > kPi))
+      return bad("cone half angle must be in (0, 180] deg", 0);
+  }
+  if (!std::isfinite(cfg.position_tolerance) || cfg.position_tolerance < 0 || !std::isfinite(cfg.angle_tolerance) ||
+      cfg.angle_tolerance < 0 || !std::isfinite(cfg.speed_tolerance) || cfg.speed_tolerance < 0)
+    return bad("tolerances must be finite and >= 0", 0);
+  return buf;
+}
+
+}  // namespace servoarm::kin

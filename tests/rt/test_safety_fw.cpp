@@ -1,0 +1,204 @@
+// SPDX-License-Identifier: Apache-2.0
+// The safety envelope's run-time monitor in the control cycle (firmware/rt/src/safety_monitor.cpp,
+// Controller::step_safety) on the puma560 with virtual drives, sampled every cycle:
+//  - a continuous tool jog straight down towards a table plane at 100, 250 and 500 mm/s comes
+//    to rest at the plane (the tool sphere's commanded and measured lowest point within the
+//    tolerance of it), with an event naming the plane; a jog away from it is let go;
+//  - a move the planner never saw (put in the motion queue directly) that dips through the
+//    plane is stopped by a protective stop (ramp to rest, then idle) in the cycle its commanded
+//    TCP passes the tolerance, with an event naming the function, limit and value;
+//  - no allocation on the control thread (the allocation counter around every cycle).
+// The figures (overshoot, cycles from violation to stop) are printed for tests/bench/RESULTS.md.
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+#include "../support/sim_app.hpp"
+#include "alloc_counter.hpp"
+#include "servoarm/kinematics/description.hpp"
+#include "servoarm/service/arm_service.hpp"
+
+#include <CppUTest/TestHarness.h>
+
+using namespace servoarm;
+using namespace servoarm::fw;
+
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+constexpr double kBelowMm = 60.0;   // the plane below the tool at the work pose
+constexpr double kRadiusMm = 10.0;  // the tool sphere
+constexpr double kTolMm = 2.0;      // safety.tolerance_mm
+
+kin::JointVector work_pose() {
+  kin::JointVector q(6);
+  const double d[6] = {0, -45, 180, 0, 45, 0};
+  for (int j = 0; j < 6; ++j) q[j] = d[j] * kDeg;
+  return q;
+}
+
+double plane_mm() {
+  const kin::LoadResult lr = kin::load_robot("puma560");
+  kin::Pose p;
+  (void)kin::forward(lr.chain, work_pose(), p);
+  return p.translation().z() * 1000.0 - kBelowMm;
+}
+
+struct Rig {
+  hal::ManualClock clock;
+  test::SimApp app;
+  hal::Duration period = hal::kMillisecond;
+  std::size_t rt_allocs = 0;
+  double low_cmd = INFINITY, low_act = INFINITY;  // lowest sphere bottom (mm), commanded / measured
+
+  explicit Rig(FwConfig cfg) {
+    cfg.can = "sim";
+    const std::string e = app.build(cfg, &clock);
+    if (!e.empty()) FAIL(e.c_str());
+    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
+    const std::string b = app.boot();
+    if (!b.empty()) FAIL(b.c_str());
+    app.console->set_idle([this] { cycle(); });
+  }
+  ~Rig() { clock.set_idle_hook(nullptr); }
+  ArmService& svc() { return app.console->service(); }
+  Telemetry tel() const { return app.ctl->telemetry(); }
+  double tool_z_mm(bool commanded) const {
+    const Telemetry t = tel();
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = commanded ? t.q_cmd[std::size_t(j)] : t.q_act[std::size_t(j)];
+    kin::Pose p;
+    (void)kin::forward(app.chain, q, p);
+    return p.translation().z() * 1000.0;
+  }
+  void cycle() {
+    test::alloc_count_begin();
+    app.ctl->cycle(clock.now());
+    rt_allocs += test::alloc_count_end();
+    clock.advance(period);
+    low_cmd = std::fmin(low_cmd, tool_z_mm(true) - kRadiusMm);
+    low_act = std::fmin(low_act, tool_z_mm(false) - kRadiusMm);
+  }
+  void until_idle(int max_cycles) {
+    for (int i = 0; i < max_cycles && (!app.ctl->motions().empty() || tel().state != ArmState::idle); ++i) cycle();
+  }
+  void enable() {
+    CHECK(svc().enable().ok());
+    for (int i = 0; i < 3000 && tel().state != ArmState::idle; ++i) cycle();
+    CHECK(tel().state == ArmState::idle);
+  }
+  void to_work() {
+    MoveJoints m;
+    m.goal = work_pose();
+    const MoveResult r = svc().move(m, MoveContext{});
+    CHECK_TEXT(r.ok(), r.reason.c_str());
+    until_idle(30000);
+    low_cmd = low_act = INFINITY;
+  }
+  std::string last_event() {
+    svc().poll_events();
+    const EventBatch b = svc().events_since(0);
+    return b.events.empty() ? std::string() : std::string(svc().event_detail(b.events.back()));
+  }
+};
+
+FwConfig table(double max_speed_mm_s) {
+  FwConfig c;
+  c.safety_planes = {0, 0, 1, plane_mm()};
+  c.safety_tool_radius_mm = kRadiusMm;
+  c.safety_tolerance_mm = kTolMm;
+  c.max_linear_speed_mm_s = max_speed_mm_s;
+  return c;
+}
+
+}  // namespace
+
+TEST_GROUP(SafetyMonitor){};
+
+// A continuous tool jog straight down at 100, 250 and 500 mm/s stops at the plane: the
+// commanded and the measured sphere stay above plane - tolerance; the event names the plane.
+// Then a jog straight up (away) runs.
+TEST(SafetyMonitor, AJogTowardsAPlaneStopsAtItAndMayMoveAway) {
+  for (const double speed : {100.0, 250.0, 500.0}) {
+    Rig r(table(500));
+    r.enable();
+    r.to_work();
+    const double plane = plane_mm();
+    ToolJog down;
+    down.axis = 2;
+    down.continuous = true;
+    down.direction = -1;
+    down.speed_pct = speed / 500.0 * 100.0;
+    const JogContext jc = r.app.console->jog_context();
+    const JogResult j = r.svc().jog(down, jc);
+    CHECK_TEXT(j.ok(), j.reason.c_str());
+    int cycles = 0;
+    for (; cycles < 20000; ++cycles) {
+      if (cycles % 100 == 0 && r.tel().state == ArmState::jogging) (void)r.svc().jog_keepalive();
+      r.cycle();
+      if (r.tel().state == ArmState::idle) break;
+    }
+    for (int i = 0; i < 200; ++i) r.cycle();  // the measured arm settles
+    char fig[160];
+    std::snprintf(fig, sizeof fig, "jog at %.0f mm/s: commanded %.3f mm, measured %.3f mm past the plane (tolerance %.1f)",
+                  speed, plane - r.low_cmd, plane - r.low_act, kTolMm);
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(r.tel().state == ArmState::idle, fig);
+    CHECK_TEXT(r.low_cmd >= plane - kTolMm, fig);
+    CHECK_TEXT(r.low_act >= plane - kTolMm, fig);
+    CHECK_TEXT(r.low_cmd <= plane + 5.0, fig);  // it did come down to the plane
+    const std::string ev = r.last_event();
+    STRCMP_CONTAINS("jog stopped at the plane 0 (tool sphere)", ev.c_str());
+    // away from it: the jog runs, the tool rises
+    const double z0 = r.tool_z_mm(true);
+    ToolJog up = down;
+    up.direction = 1;
+    up.continuous = false;
+    up.increment = 0.02;
+    const JogResult u = r.svc().jog(up, jc);
+    CHECK_TEXT(u.ok(), u.reason.c_str());
+    for (int i = 0; i < 5000 && r.tel().state == ArmState::jogging; ++i) r.cycle();
+    DOUBLES_EQUAL(z0 + 20.0, r.tool_z_mm(true), 0.5);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}
+
+// A move the planner never checked (queued directly) dips through the plane: a protective
+// stop starts in the cycle the commanded sphere passes the tolerance, the arm ramps to rest and
+// stays powered (idle), the queue is emptied, the event names the plane, limit and value.
+TEST(SafetyMonitor, AnUncheckedMoveThroughAPlaneGetsAProtectiveStop) {
+  Rig r(table(250));
+  r.enable();
+  r.to_work();
+  const double plane = plane_mm();
+  MotionItem* m = r.app.ctl->motions().back();
+  CHECK(m != nullptr);
+  m->id = 900;
+  JointMove& jm = m->payload.emplace<JointMove>();
+  jm.goal = work_pose();
+  jm.goal[1] += 25 * kDeg;  // swings the tool down through the table
+  jm.override = 0.5;
+  jm.plan.n = 0;
+  r.app.ctl->motions().commit();
+  int crossed = -1, stopped = -1;
+  for (int i = 0; i < 20000; ++i) {
+    r.cycle();
+    const double bottom = r.tool_z_mm(true) - kRadiusMm;
+    if (crossed < 0 && bottom < plane - kTolMm) crossed = i;
+    if (stopped < 0 && r.tel().state == ArmState::stopping) stopped = i;
+    if (stopped >= 0 && r.tel().state == ArmState::idle) break;
+  }
+  std::printf("\n  protective stop: commanded sphere past the tolerance in cycle %d, stop ramp from cycle %d; "
+              "lowest commanded %.3f mm past the plane",
+              crossed, stopped, plane - r.low_cmd);
+  CHECK(crossed >= 0);
+  CHECK(stopped == crossed);  // the same cycle
+  CHECK(r.tel().state == ArmState::idle);  // at rest, powered, holding
+  CHECK(r.app.ctl->motions().empty());
+  const std::string ev = r.last_event();
+  STRCMP_CONTAINS("protective stop (commanded): plane 0 (tool sphere)", ev.c_str());
+  STRCMP_CONTAINS("limit ", ev.c_str());
+  STRCMP_CONTAINS("value ", ev.c_str());
+  CHECK_EQUAL(1u, r.tel().safety_stops);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
