@@ -761,3 +761,82 @@ TEST(FwApi, ProgramRunPauseStepResumeAbort) {
   CHECK_TEXT(program_state(end) == "idle", end.c_str());
   CHECK_EQUAL("bad_state", error_of(c.ask(952, "\"cmd\":\"program_step\"")));
 }
+
+// Teach points over the API: teach stores the arm's joints, points lists them, point_go moves
+// back to one, point_delete removes it; an unknown point is refused and moves nothing. Tools and
+// frames: listed with the active ones; selecting one that does not exist is refused.
+TEST(FwApi, TeachPointsToolsAndFrames) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0.2,0.1,0,0,0,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string t = c.ask(2, "\"cmd\":\"teach\",\"name\":\"p1\"");
+  CHECK_TEXT(is_ok(t) && has(t, "\"name\":\"p1\"") && int_field(t, "count") == 1, t.c_str());
+  const std::string l = c.ask(3, "\"cmd\":\"points\"");
+  CHECK_TEXT(is_ok(l) && has(l, "\"name\":\"p1\"") && has(l, "\"tool\":\"tool0\""), l.c_str());
+  const std::regex q("\"q\":\\[([-0-9.e]+),([-0-9.e]+),");  // the measured joints when taught
+  std::smatch m;
+  CHECK_TEXT(std::regex_search(l, m, q), l.c_str());
+  const double q0 = std::stod(m[1].str()), q1 = std::stod(m[2].str());
+  DOUBLES_EQUAL(0.2, q0, 1e-3);
+  DOUBLES_EQUAL(0.1, q1, 1e-3);
+  CHECK(is_ok(c.ask(4, "\"cmd\":\"movej\",\"q\":[-0.2,0,0,0,0,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 2; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string g = c.ask(5, "\"cmd\":\"point_go\",\"name\":\"p1\"");
+  CHECK_TEXT(is_ok(g) && int_field(g, "motion") == 3, g.c_str());
+  for (int i = 0; i < 600 && rig.tel().done_id < 3; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  DOUBLES_EQUAL(q0, rig.tel().q_cmd[0], 1e-9);
+  DOUBLES_EQUAL(q1, rig.tel().q_cmd[1], 1e-9);
+  const std::string none = c.ask(6, "\"cmd\":\"point_go\",\"name\":\"nowhere\"");
+  CHECK_TEXT(!is_ok(none) && has(none, "no_point"), none.c_str());
+  CHECK_EQUAL(3u, rig.tel().done_id);
+  CHECK_EQUAL(0u, rig.tel().queued);
+  const std::string d = c.ask(7, "\"cmd\":\"point_delete\",\"name\":\"p1\"");
+  CHECK_TEXT(is_ok(d) && int_field(d, "count") == 0, d.c_str());
+  CHECK_TEXT(has(c.ask(8, "\"cmd\":\"points\""), "\"points\":[]"), "p1 still listed");
+  const std::string tl = c.ask(9, "\"cmd\":\"tools\"");
+  CHECK_TEXT(is_ok(tl) && has(tl, "\"tool\":\"tool0\"") && has(tl, "\"frame\":\"base\"") && has(tl, "\"name\":\"tool0\""), tl.c_str());
+  const std::string ts = c.ask(10, "\"cmd\":\"tool_select\",\"name\":\"gripper9\"");
+  CHECK_TEXT(!is_ok(ts) && has(ts, "not_defined"), ts.c_str());
+  const std::string fs = c.ask(11, "\"cmd\":\"frame_select\",\"name\":\"base\"");
+  CHECK_TEXT(is_ok(fs) && has(fs, "\"frame\":\"base\""), fs.c_str());
+}
+
+// A Cartesian jog moves the tool along the axis asked (base frame: x) and not off it, by the
+// increment; continuous jogs stop at the deadman; the feed override set over the API is the
+// service's and shows in the state stream; out of its range it is refused.
+TEST(FwApi, CartesianJogAndFeedOverride) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0,0.3,-0.6,0,0.6,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const auto tool_at = [&](int id) {
+    const std::string s = c.ask(id, "\"cmd\":\"state\"");
+    const std::regex e("\"tool\":\\{\"position\":\\[([-0-9.e]+),([-0-9.e]+),([-0-9.e]+)\\]");
+    std::smatch m;
+    CHECK_TEXT(std::regex_search(s, m, e), s.c_str());
+    return std::array<double, 3>{std::stod(m[1].str()), std::stod(m[2].str()), std::stod(m[3].str())};
+  };
+  const auto p0 = tool_at(2);
+  const std::string j = c.ask(3, "\"cmd\":\"jog_cartesian\",\"axis\":0,\"frame\":\"base\",\"increment\":0.02");
+  CHECK_TEXT(is_ok(j), j.c_str());
+  for (int i = 0; i < 600 && (rig.tel().state != ArmState::idle || i < 20); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the measured joints settle
+  const auto p1 = tool_at(4);
+  DOUBLES_EQUAL(p0[0] + 0.02, p1[0], 1e-3);
+  DOUBLES_EQUAL(p0[1], p1[1], 1e-3);
+  DOUBLES_EQUAL(p0[2], p1[2], 1e-3);
+  const std::string bad = c.ask(5, "\"cmd\":\"jog_cartesian\",\"axis\":0,\"frame\":\"moon\",\"increment\":0.01");
+  STRCMP_EQUAL("bad_option", error_of(bad).c_str());
+  STRCMP_EQUAL("arg_count", error_of(c.ask(6, "\"cmd\":\"jog_cartesian\",\"axis\":2")).c_str());
+  const std::string f = c.ask(7, "\"cmd\":\"feed_override\",\"pct\":40");
+  CHECK_TEXT(is_ok(f) && int_field(f, "feed_pct") == 40, f.c_str());
+  CHECK_EQUAL(40, rig.app.console->service().feed_override());
+  std::string st;
+  for (int i = 0; i < 100 && int_field(st, "feed_pct") != 40; ++i) st = c.ask(100 + i, "\"cmd\":\"state\"");
+  CHECK_EQUAL(40, int_field(st, "feed_pct"));
+  STRCMP_EQUAL("out_of_range", error_of(c.ask(8, "\"cmd\":\"feed_override\",\"pct\":500")).c_str());
+  CHECK_EQUAL(40, rig.app.console->service().feed_override());
+}
