@@ -693,8 +693,18 @@ TEST(FwApi, ProgramCheckNamesTheRefusedLineAndRunMovesNothing) {
   const std::string g = c.ask(3, "\"cmd\":\"program_check\",\"gcode\":true,\"text\":" + jstr("G21 G90\nG1 X5000 Y0 Z0 F100\n"));
   CHECK_TEXT(!is_ok(g) && int_field(g, "line") == 2 && has(g, "editor.gcode:2: "), g.c_str());
   const std::string good = c.ask(4, "\"cmd\":\"program_check\",\"text\":" + jstr("movej 10 0 0 0 0 0\ndwell 0.1\nmovej 0 0 0 0 0 0\n"));
-  CHECK_TEXT(is_ok(good) && int_field(good, "steps") == 3 && int_field(good, "joint_moves") == 2 && int_field(good, "dwells") == 1,
+  CHECK_TEXT(is_ok(good) && int_field(good, "steps") == 3 && int_field(good, "joint_moves") == 2 && int_field(good, "dwells") == 1 &&
+                 int_field(good, "planned_steps") == 3,
              good.c_str());
+  // a tool defined by the program, then selected: accepted (a check makes no definition, so the
+  // moves after it are planned when they run: planned_steps says where planning stopped)
+  const std::string def = c.ask(40, "\"cmd\":\"program_check\",\"text\":" +
+                                        jstr("movej 10 0 0 0 0 0\ntool grip 0 0 100 0 0 0\ntool grip\nmovej 0 0 0 0 0 0\n"));
+  CHECK_TEXT(is_ok(def) && int_field(def, "steps") == 4 && int_field(def, "planned_steps") == 1, def.c_str());
+  CHECK_EQUAL(1u, rig.app.console->service().tool_count());  // nothing defined
+  // a tool that neither exists nor is defined: its line
+  const std::string nt = c.ask(41, "\"cmd\":\"program_check\",\"text\":" + jstr("movej 10 0 0 0 0 0\ntool nosuch\n"));
+  CHECK_TEXT(!is_ok(nt) && int_field(nt, "line") == 2, nt.c_str());
   // the check moved nothing; the run of the bad program refuses line 3 and moves nothing
   const double q0 = rig.tel().q_cmd[0];
   const std::string run = c.ask(5, "\"cmd\":\"program_run\",\"text\":" + jstr(bad));

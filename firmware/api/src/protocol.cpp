@@ -279,6 +279,7 @@ void counts_result(const fw::ProgramCheckResult& r, R& out) {
   out.j["dwells"] = r.counts.dwells;
   out.j["duration"] = r.duration;
   out.j["summary"] = prog::counts_text(r.counts);
+  out.j["planned_steps"] = r.planned;  // fewer than steps: a tool / frame definition at that step
 }
 
 json program_json(const fw::ProgramStatus& p) {
@@ -502,8 +503,9 @@ constexpr MessageSpec kMessages[] = {
      }},
     {"program_check", kProgram, Gate::observer, Where::service, "ArmService::check_program",
      "checks a whole program without running it (the service's dry run: the planning and checks of a real run, from "
-     "where the motion queue ends): ok with its step counts and planned time, or the first error with its `file`, "
-     "`line`, `step`, the error code and one line",
+     "where the motion queue ends): ok with its step counts, planned time and `planned_steps` (fewer than `steps`: "
+     "the moves after a tool or frame definition, which a check does not make, are planned when they run), or the "
+     "first error with its `file`, `line`, `step`, the error code and one line",
      +[](C& c, R& out) {
        prog::Program p;
        std::string name;

@@ -2,7 +2,10 @@
 // The arm service's whole-program check (arm_service.hpp: check_program): every step of a
 // loaded program through the service's dry run, as run_step() would run it (step_move with a
 // DryRun: the same planning and checks, nothing queued), from where the motion queue ends.
-// The first step refused ends the check with its place. Console thread.
+// The first step refused ends the check with its place. A tool or frame definition, deletion
+// or G10 is not made by a check (it would change the arm's tools and frames): the moves after it
+// are not planned (they are when they run), the steps the runner refuses still are. Console
+// thread.
 #include <memory>
 #include <string>
 
@@ -28,6 +31,8 @@ ProgramCheckResult ArmService::check_program(const prog::Program& p, const Conso
     ~Restore() { at = was; }
   } restore{frame_, frame_};
   std::size_t tool = tool_;
+  bool planning = true;  // false after a definition the check does not make
+  res.planned = p.steps.size();
   for (std::size_t i = 0; i < p.steps.size(); ++i) {
     const prog::ProgramStep& st = p.steps[i];
     const fw::Command& c = st.cmd;
@@ -59,10 +64,14 @@ ProgramCheckResult ArmService::check_program(const prog::Program& p, const Conso
       case StepKind::needs_idle:
       case StepKind::motion: break;
     }
+    if (!planning) continue;
     if (c.cmd == Cmd::tool || c.cmd == Cmd::frame) {
-      // A selection is followed; a definition or deletion is not made by a check (the moves
-      // after it are checked with the tool and frame active before it).
-      if (c.frame_op != FrameOp::select) continue;
+      if (c.frame_op == FrameOp::list) continue;  // a query
+      if (c.frame_op != FrameOp::select) {  // a definition: not made, so not followed
+        planning = false;
+        res.planned = i;
+        continue;
+      }
       const std::string name(c.name.data());
       if (c.cmd == Cmd::tool) {
         const std::size_t at = find_tool(name);

@@ -279,7 +279,8 @@ function showCheck(r) {
   p.dataset.line = String(errorLine);
   p.className = 'check ' + (r.error ? 'bad' : 'good');
   p.textContent = r.error ? (r.line ? 'line ' + r.line + ': ' : '') + r.error + ': ' + r.message
-                          : 'checked: ' + r.summary + ', ' + Number(r.duration).toFixed(2) + ' s planned';
+                          : 'checked: ' + r.summary + ', ' + Number(r.duration).toFixed(2) + ' s planned' +
+                            (r.planned_steps < r.steps ? ' (the moves after step ' + r.planned_steps + ', a tool or frame definition, are planned when they run)' : '');
   const g = $('prog-gutter').children[errorLine - 1];
   if (g) g.title = p.textContent;
   drawGutter();

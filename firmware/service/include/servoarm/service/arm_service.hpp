@@ -457,6 +457,7 @@ struct ProgramCheckResult {
   MoveResult move;          ///< a refused move or dwell: what the planner found
   prog::StepCounts counts;  ///< the program's steps (prog::count_steps)
   double duration = 0;      ///< s: the planned time of its moves and dwells (blended runs overlapped)
+  std::size_t planned = 0;  ///< steps dry-run: all, or up to a tool / frame definition (not made by a check)
   bool ok() const { return error == CmdError::ok; }
 };
 
@@ -806,8 +807,9 @@ class ArmService {
   ProgramStatus program_status() const;
   /// Check a whole loaded program without running it: each step through the dry run of what
   /// run_step() does (the same planning and checks, from where the motion queue ends; tool and
-  /// frame selections followed, their definitions not made), nothing queued or changed. ok with
-  /// its counts and planned time, or the first step refused (program_check.cpp).
+  /// frame selections followed), nothing queued or changed. A tool or frame definition is not
+  /// made by a check: the moves after it are not planned (`planned`). ok with its counts and
+  /// planned time, or the first step refused (program_check.cpp).
   ProgramCheckResult check_program(const prog::Program& p, const ConsoleUnits& units);
   RunState run_state() const;
   /// Feed the running program's next steps; notice its end, a hold, a fault. The front end
