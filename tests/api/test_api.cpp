@@ -158,6 +158,8 @@ struct Rig {
     ss.max_step.assign(6, 0.5);
     stream = std::make_unique<StreamService>(app.console->service(), *app.ctl, ss);
     cx.stream = stream.get();
+    cx.units = app.console->config().units;
+    cx.programs_dir = app.console->config().programs_dir;
     pump_th = std::thread([this] {
       while (!stop) {
         pollfd p{server->wake_fd(), POLLIN, 0};
@@ -643,4 +645,208 @@ TEST(FwApi, ServesStaticFilesOnTheWebSocketPort) {
   std::remove((dir + "/index.html").c_str());
   std::remove((dir + "/app.js").c_str());
   ::rmdir(dir.c_str());
+}
+
+namespace {
+/// A JSON string literal of `s` (quotes, backslashes and newlines escaped).
+std::string jstr(const std::string& s) {
+  std::string o = "\"";
+  for (char ch : s) {
+    if (ch == '\n') o += "\\n";
+    else if (ch == '"' || ch == '\\') o += '\\', o += ch;
+    else o += ch;
+  }
+  return o + "\"";
+}
+/// The state sample's program state ("" when it has none).
+std::string program_state(const std::string& s) {
+  const std::regex e("\"program\":\\{[^}]*\"state\":\"([a-z]+)\"");
+  std::smatch m;
+  return std::regex_search(s, m, e) ? m[1].str() : "";
+}
+int int_field(const std::string& s, const std::string& key) {
+  const std::regex e("\"" + key + "\":(-?[0-9]+)");
+  std::smatch m;
+  return std::regex_search(s, m, e) ? std::stoi(m[1].str()) : -999;
+}
+}  // namespace
+
+// program_check runs the whole program through the service's dry run: a line the planner
+// refuses (line 3: a target 5 m away) is named with its line, file and error code, a line the
+// parser refuses likewise, and a good program answers its step counts. program_run checks
+// first: the bad program moves nothing and queues nothing.
+TEST(FwApi, ProgramCheckNamesTheRefusedLineAndRunMovesNothing) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  const std::string bad = "movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\nmovel 5000 0 500 0 0 0\nmovej 0 0 0 0 0 0\n";
+  const std::string r = c.ask(1, "\"cmd\":\"program_check\",\"text\":" + jstr(bad));
+  CHECK_TEXT(!is_ok(r), r.c_str());
+  CHECK_EQUAL(3, int_field(r, "line"));
+  CHECK_EQUAL(2, int_field(r, "step"));
+  CHECK_TEXT(has(r, "\"file\":\"editor.arm\"") && has(r, "editor.arm:3: "), r.c_str());
+  CHECK_TEXT(error_of(r) != "" && error_of(r) != "program", r.c_str());  // the planner's code
+  // a line the loader refuses: its line too
+  const std::string syn = c.ask(2, "\"cmd\":\"program_check\",\"text\":" + jstr("movej 0 0 0 0 0 0\nfly 3\n"));
+  CHECK_TEXT(error_of(syn) == "program" && int_field(syn, "line") == 2, syn.c_str());
+  // G-code: the same checks
+  const std::string g = c.ask(3, "\"cmd\":\"program_check\",\"gcode\":true,\"text\":" + jstr("G21 G90\nG1 X5000 Y0 Z0 F100\n"));
+  CHECK_TEXT(!is_ok(g) && int_field(g, "line") == 2 && has(g, "editor.gcode:2: "), g.c_str());
+  const std::string good = c.ask(4, "\"cmd\":\"program_check\",\"text\":" + jstr("movej 10 0 0 0 0 0\ndwell 0.1\nmovej 0 0 0 0 0 0\n"));
+  CHECK_TEXT(is_ok(good) && int_field(good, "steps") == 3 && int_field(good, "joint_moves") == 2 && int_field(good, "dwells") == 1 &&
+                 int_field(good, "planned_steps") == 3,
+             good.c_str());
+  // a tool defined by the program, then selected: accepted (a check makes no definition, so the
+  // moves after it are planned when they run: planned_steps says where planning stopped)
+  const std::string def = c.ask(40, "\"cmd\":\"program_check\",\"text\":" +
+                                        jstr("movej 10 0 0 0 0 0\ntool grip 0 0 100 0 0 0\ntool grip\nmovej 0 0 0 0 0 0\n"));
+  CHECK_TEXT(is_ok(def) && int_field(def, "steps") == 4 && int_field(def, "planned_steps") == 1, def.c_str());
+  CHECK_EQUAL(1u, rig.app.console->service().tool_count());  // nothing defined
+  // a tool that neither exists nor is defined: its line
+  const std::string nt = c.ask(41, "\"cmd\":\"program_check\",\"text\":" + jstr("movej 10 0 0 0 0 0\ntool nosuch\n"));
+  CHECK_TEXT(!is_ok(nt) && int_field(nt, "line") == 2, nt.c_str());
+  // the check moved nothing; the run of the bad program refuses line 3 and moves nothing
+  const double q0 = rig.tel().q_cmd[0];
+  const std::string run = c.ask(5, "\"cmd\":\"program_run\",\"text\":" + jstr(bad));
+  CHECK_TEXT(!is_ok(run) && int_field(run, "line") == 3, run.c_str());
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  CHECK_EQUAL(0u, rig.tel().done_id);
+  CHECK_EQUAL(0u, rig.tel().queued);
+  DOUBLES_EQUAL(q0, rig.tel().q_cmd[0], 1e-12);
+  CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(rig.tel().state));
+  const std::string st = c.ask(6, "\"cmd\":\"state\"");
+  CHECK_TEXT(program_state(st) == "idle", st.c_str());
+}
+
+// program_run runs a good program: the state stream names it and its line while it runs; pause
+// pauses it once the running motion is done, step runs one motion, resume runs it on, abort
+// ends it and stops the arm.
+TEST(FwApi, ProgramRunPauseStepResumeAbort) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  std::string text;
+  for (int k = 0; k < 6; ++k) text += (k % 2 ? "movej 0 0 0 0 0 0\n" : "movej 20 0 0 0 0 0\n");
+  const std::string r = c.ask(1, "\"cmd\":\"program_run\",\"name\":\"swing\",\"text\":" + jstr(text));
+  CHECK_TEXT(is_ok(r) && has(r, "\"state\":\"running\""), r.c_str());
+  std::string st;
+  for (int i = 0; i < 100; ++i) {
+    st = c.ask(10 + i, "\"cmd\":\"state\"");
+    if (has(st, "\"name\":\"swing\"") && int_field(st, "running_line") >= 1) break;
+  }
+  CHECK_TEXT(has(st, "\"name\":\"swing\""), st.c_str());
+  CHECK_TEXT(has(st, "\"state\":\"running\""), st.c_str());
+  const std::string p = c.ask(200, "\"cmd\":\"program_pause\"");
+  CHECK_TEXT(is_ok(p), p.c_str());
+  bool paused = false;
+  for (int i = 0; i < 400 && !paused; ++i) {
+    paused = has(c.ask(300 + i, "\"cmd\":\"state\""), "\"state\":\"paused\"");
+    if (!paused) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  CHECK(paused);
+  const std::uint32_t done = rig.tel().done_id;
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  CHECK_EQUAL(done, rig.tel().done_id);  // paused: nothing more runs
+  const std::string s1 = c.ask(700, "\"cmd\":\"program_step\"");
+  CHECK_TEXT(is_ok(s1), s1.c_str());
+  for (int i = 0; i < 600 && rig.tel().done_id < done + 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  CHECK_EQUAL(done + 1, rig.tel().done_id);
+  paused = false;  // the one motion done: paused again
+  for (int i = 0; i < 400 && !paused; ++i) {
+    paused = has(c.ask(1000 + i, "\"cmd\":\"state\""), "\"state\":\"paused\"");
+    if (!paused) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  CHECK(paused);
+  const std::string rs = c.ask(701, "\"cmd\":\"resume\"");
+  CHECK_TEXT(is_ok(rs), rs.c_str());
+  bool running = false;
+  std::string last;
+  for (int i = 0; i < 100 && !running; ++i) running = has(last = c.ask(800 + i, "\"cmd\":\"state\""), "\"state\":\"running\"");
+  CHECK_TEXT(running, (rs + " | " + last).c_str());
+  const std::string a = c.ask(950, "\"cmd\":\"program_abort\"");
+  CHECK_TEXT(is_ok(a), a.c_str());
+  for (int i = 0; i < 600 && rig.tel().state != ArmState::idle; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(rig.tel().state));
+  const std::string end = c.ask(951, "\"cmd\":\"state\"");
+  CHECK_TEXT(program_state(end) == "idle", end.c_str());
+  CHECK_EQUAL("bad_state", error_of(c.ask(952, "\"cmd\":\"program_step\"")));
+}
+
+// Teach points over the API: teach stores the arm's joints, points lists them, point_go moves
+// back to one, point_delete removes it; an unknown point is refused and moves nothing. Tools and
+// frames: listed with the active ones; selecting one that does not exist is refused.
+TEST(FwApi, TeachPointsToolsAndFrames) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0.2,0.1,0,0,0,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string t = c.ask(2, "\"cmd\":\"teach\",\"name\":\"p1\"");
+  CHECK_TEXT(is_ok(t) && has(t, "\"name\":\"p1\"") && int_field(t, "count") == 1, t.c_str());
+  const std::string l = c.ask(3, "\"cmd\":\"points\"");
+  CHECK_TEXT(is_ok(l) && has(l, "\"name\":\"p1\"") && has(l, "\"tool\":\"tool0\""), l.c_str());
+  const std::regex q("\"q\":\\[([-0-9.e]+),([-0-9.e]+),");  // the measured joints when taught
+  std::smatch m;
+  CHECK_TEXT(std::regex_search(l, m, q), l.c_str());
+  const double q0 = std::stod(m[1].str()), q1 = std::stod(m[2].str());
+  DOUBLES_EQUAL(0.2, q0, 1e-3);
+  DOUBLES_EQUAL(0.1, q1, 1e-3);
+  CHECK(is_ok(c.ask(4, "\"cmd\":\"movej\",\"q\":[-0.2,0,0,0,0,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 2; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string g = c.ask(5, "\"cmd\":\"point_go\",\"name\":\"p1\"");
+  CHECK_TEXT(is_ok(g) && int_field(g, "motion") == 3, g.c_str());
+  for (int i = 0; i < 600 && rig.tel().done_id < 3; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  DOUBLES_EQUAL(q0, rig.tel().q_cmd[0], 1e-9);
+  DOUBLES_EQUAL(q1, rig.tel().q_cmd[1], 1e-9);
+  const std::string none = c.ask(6, "\"cmd\":\"point_go\",\"name\":\"nowhere\"");
+  CHECK_TEXT(!is_ok(none) && has(none, "no_point"), none.c_str());
+  CHECK_EQUAL(3u, rig.tel().done_id);
+  CHECK_EQUAL(0u, rig.tel().queued);
+  const std::string d = c.ask(7, "\"cmd\":\"point_delete\",\"name\":\"p1\"");
+  CHECK_TEXT(is_ok(d) && int_field(d, "count") == 0, d.c_str());
+  CHECK_TEXT(has(c.ask(8, "\"cmd\":\"points\""), "\"points\":[]"), "p1 still listed");
+  const std::string tl = c.ask(9, "\"cmd\":\"tools\"");
+  CHECK_TEXT(is_ok(tl) && has(tl, "\"tool\":\"tool0\"") && has(tl, "\"frame\":\"base\"") && has(tl, "\"name\":\"tool0\""), tl.c_str());
+  const std::string ts = c.ask(10, "\"cmd\":\"tool_select\",\"name\":\"gripper9\"");
+  CHECK_TEXT(!is_ok(ts) && has(ts, "not_defined"), ts.c_str());
+  const std::string fs = c.ask(11, "\"cmd\":\"frame_select\",\"name\":\"base\"");
+  CHECK_TEXT(is_ok(fs) && has(fs, "\"frame\":\"base\""), fs.c_str());
+}
+
+// A Cartesian jog moves the tool along the axis asked (base frame: x) and not off it, by the
+// increment; continuous jogs stop at the deadman; the feed override set over the API is the
+// service's and shows in the state stream; out of its range it is refused.
+TEST(FwApi, CartesianJogAndFeedOverride) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0,0.3,-0.6,0,0.6,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const auto tool_at = [&](int id) {
+    const std::string s = c.ask(id, "\"cmd\":\"state\"");
+    const std::regex e("\"tool\":\\{\"position\":\\[([-0-9.e]+),([-0-9.e]+),([-0-9.e]+)\\]");
+    std::smatch m;
+    CHECK_TEXT(std::regex_search(s, m, e), s.c_str());
+    return std::array<double, 3>{std::stod(m[1].str()), std::stod(m[2].str()), std::stod(m[3].str())};
+  };
+  const auto p0 = tool_at(2);
+  const std::string j = c.ask(3, "\"cmd\":\"jog_cartesian\",\"axis\":0,\"frame\":\"base\",\"increment\":0.02");
+  CHECK_TEXT(is_ok(j), j.c_str());
+  for (int i = 0; i < 600 && (rig.tel().state != ArmState::idle || i < 20); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the measured joints settle
+  const auto p1 = tool_at(4);
+  DOUBLES_EQUAL(p0[0] + 0.02, p1[0], 1e-3);
+  DOUBLES_EQUAL(p0[1], p1[1], 1e-3);
+  DOUBLES_EQUAL(p0[2], p1[2], 1e-3);
+  const std::string bad = c.ask(5, "\"cmd\":\"jog_cartesian\",\"axis\":0,\"frame\":\"moon\",\"increment\":0.01");
+  STRCMP_EQUAL("bad_option", error_of(bad).c_str());
+  STRCMP_EQUAL("arg_count", error_of(c.ask(6, "\"cmd\":\"jog_cartesian\",\"axis\":2")).c_str());
+  const std::string f = c.ask(7, "\"cmd\":\"feed_override\",\"pct\":40");
+  CHECK_TEXT(is_ok(f) && int_field(f, "feed_pct") == 40, f.c_str());
+  CHECK_EQUAL(40, rig.app.console->service().feed_override());
+  std::string st;
+  for (int i = 0; i < 100 && int_field(st, "feed_pct") != 40; ++i) st = c.ask(100 + i, "\"cmd\":\"state\"");
+  CHECK_EQUAL(40, int_field(st, "feed_pct"));
+  STRCMP_EQUAL("out_of_range", error_of(c.ask(8, "\"cmd\":\"feed_override\",\"pct\":500")).c_str());
+  CHECK_EQUAL(40, rig.app.console->service().feed_override());
 }

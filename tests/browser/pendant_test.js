@@ -387,6 +387,110 @@ async function main() {
       assert(Math.abs((await tcp.state()).q[0] - goal[0]) > 0.05, 'the movej reached its goal: the space bar did not stop it');
     });
 
+    await check('a program with an unreachable line 3 shows the error on line 3 and does not run', async () => {
+      await until('the arm idle', async () => (await tcp.state()).state === 'idle');
+      const s0 = await tcp.state();
+      // typed as a person types it: checked as typed (debounced), the space bar types a space there
+      await page.click('#prog-text');
+      await page.type('#prog-text', 'movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\nmovel 5000 0 500 0 0 0\nmovej 0 0 0 0 0 0');
+      await page.waitForFunction(() => document.getElementById('prog-check').dataset.line === '3', { timeout: WAIT_S * 1000 });
+      const marked = await page.$$eval('#prog-gutter div', (d) => d.map((e, i) => (e.classList.contains('error') ? i + 1 : 0)).filter((x) => x));
+      assert(marked.length === 1 && marked[0] === 3, `lines marked as errors: ${JSON.stringify(marked)}`);
+      const msg = await page.$eval('#prog-check', (e) => e.textContent);
+      assert(/^line 3: /.test(msg), `the check shows: ${msg}`);
+      // the independent client: the same program refused at line 3 by the API's own check
+      const ind = await tcp.ask('program_check', { text: await page.$eval('#prog-text', (e) => e.value), name: 'editor' });
+      assert(ind.error && ind.line === 3, `program_check over TCP: ${JSON.stringify(ind)}`);
+      await shot(page, 'pendant-program-error');
+      await page.click('#prog-run');
+      await page.waitForFunction(() => window.pendant.results.some((r) => r.cmd === 'program_run'), { timeout: WAIT_S * 1000 });
+      const run = await page.evaluate(() => window.pendant.results.filter((r) => r.cmd === 'program_run').pop());
+      assert(run.error && run.line === 3, `run answered: ${JSON.stringify(run)}`);
+      await sleep(500);  // a window for a motion that must not come
+      const s1 = await tcp.state();
+      assert(s1.done === s0.done && s1.queued === 0 && s1.running === 0, `the arm ran motions: ${s0.done} -> ${s1.done}, ${s1.queued} queued`);
+      s1.q_cmd.forEach((v, j) => assert(Math.abs(v - s0.q_cmd[j]) < 1e-9, `J${j + 1} moved: ${s0.q_cmd[j]} -> ${v}`));
+      assert(s1.program.state === 'idle', `a program runs: ${JSON.stringify(s1.program)}`);
+    });
+
+    await check('a good program runs with its current line highlighted; pause, resume, abort', async () => {
+      const text = 'movej 0 0 0 0 0 0\nmovej 60 0 0 0 0 0\nmovej -60 0 0 0 0 0\nmovej 60 0 0 0 0 0\nmovej 0 0 0 0 0 0';
+      await page.$eval('#prog-text', (e, t) => { e.value = t; e.dispatchEvent(new Event('input')); }, text);
+      await page.waitForFunction(() => /^checked: /.test(document.getElementById('prog-check').textContent), { timeout: WAIT_S * 1000 });
+      await page.$eval('#speed', (e) => { e.value = '10'; e.dispatchEvent(new Event('input')); });
+      await page.click('#prog-run');
+      await until('the program running (independent client)', async () => (await tcp.state()).program.state === 'running');
+      const line = await page.waitForFunction(() => {
+        const d = [...document.querySelectorAll('#prog-gutter div.current')];
+        return d.length === 1 ? Number(d[0].textContent) : 0;
+      }, { timeout: WAIT_S * 1000 });
+      const shown = await line.jsonValue();
+      assert(shown >= 1 && shown <= 5, `current line shown: ${shown}`);
+      await shot(page, 'pendant-program-running');
+      await page.click('#prog-pause');
+      await until('the program paused', async () => (await tcp.state()).program.state === 'paused');
+      await page.click('#prog-resume');
+      await until('the program running again', async () => (await tcp.state()).program.state === 'running');
+      await page.click('#prog-abort');
+      await until('the program ended and the arm at rest', async () => {
+        const s = await tcp.state();
+        return s.program.state === 'idle' && allStill(s);
+      });
+      await page.waitForFunction(() => document.querySelectorAll('#prog-gutter div.current').length === 0, { timeout: WAIT_S * 1000 });
+    });
+
+    await check('Cartesian jog: hold x+ in the base frame, the tool moves along x; the override slider sets the arm\'s', async () => {
+      await until('the arm idle', async () => (await tcp.state()).state === 'idle');
+      // away from the zero pose's singularity first
+      await page.$eval('#movej-q', (e) => { e.value = '0, 0.3, -0.6, 0, 0.6, 0'; });
+      await page.$eval('#speed', (e) => { e.value = '30'; e.dispatchEvent(new Event('input')); });
+      await page.click('#movej-form button[type=submit]');
+      await until('the arm at the start pose', async () => { const s = await tcp.state(); return Math.abs(s.q[1] - 0.3) < 1e-3 && allStill(s); });
+      const p0 = (await tcp.state()).tool.position;
+      await page.select('#cjog-frame', 'base');
+      const sel = '#cjog-axes button.cjog[data-axis="0"][data-dir="1"]';
+      await page.$eval(sel, (e) => e.scrollIntoView({ block: 'center' }));
+      await pressHold(page, sel);
+      try {
+        await until('the tool moving along x', async () => (await tcp.state()).tool.position[0] > p0[0] + 0.005);
+      } finally {
+        await page.mouse.up();
+      }
+      await until('at rest after the release', async () => allStill(await tcp.state()));
+      const p1 = (await tcp.state()).tool.position;
+      assert(Math.abs(p1[1] - p0[1]) < 2e-3 && Math.abs(p1[2] - p0[2]) < 2e-3, `the tool left its line: ${p0} -> ${p1}`);
+      await page.$eval('#override', (e) => { e.value = '55'; e.dispatchEvent(new Event('input')); });
+      await until('the arm\'s feed override at 55 %', async () => (await tcp.state()).feed_pct === 55);
+      await page.$eval('#override', (e) => { e.value = '100'; e.dispatchEvent(new Event('input')); });
+      await until('the arm\'s feed override at 100 %', async () => (await tcp.state()).feed_pct === 100);
+    });
+
+    await check('teach a point: listed, drawn, gone to, deleted', async () => {
+      await page.$eval('#teach-name', (e) => { e.value = 'here1'; });
+      await page.click('#teach-form button[type=submit]');
+      await page.waitForSelector('#points tr[data-point="here1"]', { timeout: WAIT_S * 1000 });
+      const pts = await tcp.ask('points');
+      const pt = (pts.points || []).find((x) => x.name === 'here1');
+      assert(pt, `points over TCP: ${JSON.stringify(pts)}`);
+      const s = await tcp.state();
+      pt.q.forEach((v, j) => assert(Math.abs(v - s.q[j]) < 1e-3, `the point's J${j + 1} ${v}, the arm ${s.q[j]}`));
+      const drawn = await page.evaluate(() => window.pendant.points.length);
+      assert(drawn === pts.points.length, `the page has ${drawn} points`);
+      await shot(page, 'pendant-teach');
+      // away from it, then back with its go button
+      await page.$eval('#movej-q', (e, q) => { e.value = q.map((v, j) => (j === 0 ? v + 0.3 : v).toFixed(4)).join(', '); }, pt.q);
+      await page.click('#movej-form button[type=submit]');
+      await until('the arm away from the point', async () => { const a = await tcp.state(); return Math.abs(a.q[0] - pt.q[0]) > 0.29 && allStill(a); });
+      await page.click('#points tr[data-point="here1"] button[data-action="go"]');
+      await until('the arm back at the point', async () => {
+        const a = await tcp.state();
+        return allStill(a) && a.q.every((v, j) => Math.abs(v - pt.q[j]) < 1e-3);
+      });
+      await page.click('#points tr[data-point="here1"] button[data-action="delete"]');
+      await page.waitForFunction(() => !document.querySelector('#points tr[data-point="here1"]'), { timeout: WAIT_S * 1000 });
+      assert(!((await tcp.ask('points')).points || []).some((x) => x.name === 'here1'), 'the point is still there');
+    });
+
     await check('tablet and phone layouts keep the stop button in view', async () => {
       for (const [name, vp] of [['pendant-tablet', { width: 1280, height: 800 }], ['pendant-phone', { width: 390, height: 844, isMobile: true, hasTouch: true }]]) {
         await page.setViewport(vp);

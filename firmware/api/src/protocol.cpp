@@ -4,8 +4,12 @@
 // compile, so no header of the project includes it). Non-real-time threads only.
 #include "servoarm/api/protocol.hpp"
 
+#include <stdlib.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 
 #include <nlohmann/json.hpp>
 
@@ -150,6 +154,9 @@ fw::MoveContext move_cx(ServiceCall& c) {
   return m;
 }
 
+// Resume: the arm after a hold, and a paused program (which needs no held move to resume).
+void resume_result(ServiceCall& c, ResultFields& out);
+
 // ---------------------------------------------------------------------------------------------
 // The message table
 // ---------------------------------------------------------------------------------------------
@@ -192,6 +199,194 @@ constexpr ArgSpec kStream[] = {
 using C = ServiceCall;
 using R = ResultFields;
 
+// Programs, teach points, tools and frames: the answers' fields.
+
+/// The program a program_check / program_run names: its text (loaded as the program loader
+/// reads a file, from a private temporary folder; `call` looks in the programs folder), or a
+/// program of the programs folder. False: `out` has the error (a line the loader refuses: its
+/// file and line too).
+bool load_api_program(C& c, prog::Program& p, std::string& name, R& out) {
+  const ArgValue* text = c.rq.arg("text");
+  const ArgValue* nm = c.rq.arg("name");
+  const bool gcode = num_or(c, "gcode", 0) != 0;
+  if (!text->present && !nm->present) return out.fail(CmdError::arg_count, "give text or name"), false;
+  if (nm->present) {
+    if (std::string why = prog::check_program_name(nm->text); !why.empty()) return out.fail(CmdError::bad_option, "name: " + why), false;
+    name = nm->text;
+  } else {
+    name = gcode ? "editor.gcode" : "editor.arm";
+  }
+  prog::ProgramContext px;
+  px.chain = c.cx.chain;
+  px.units = c.cx.units;
+  px.dir = c.cx.programs_dir;
+  px.points = &c.cx.svc->points();
+  std::string err, path, dir;
+  if (text->present) {
+    char tmpl[] = "/tmp/servoarm_api_XXXXXX";
+    if (::mkdtemp(tmpl) == nullptr) return out.fail(CmdError::storage, "cannot make a temporary folder for the program"), false;
+    dir = tmpl;
+    std::string file = name;
+    if (gcode != prog::is_gcode_file(file)) file += gcode ? ".gcode" : ".arm";
+    path = dir + "/" + file;
+    {
+      std::ofstream f(path, std::ios::binary);
+      f << text->text;
+      if (!f) err = "cannot write the program to a temporary file";
+    }
+    if (err.empty()) err = prog::load_program(path, px, p);
+    ::unlink(path.c_str());
+    ::rmdir(dir.c_str());
+    // the temporary folder is nobody's business: the program is shown by its name
+    for (std::string* s : {&err}) {
+      for (auto at = s->find(dir + "/"); at != std::string::npos; at = s->find(dir + "/")) s->erase(at, dir.size() + 1);
+    }
+    for (std::string& f : p.files)
+      if (f.rfind(dir + "/", 0) == 0) f.erase(0, dir.size() + 1);
+  } else {
+    if (c.cx.programs_dir.empty()) return out.fail(CmdError::program, "name: no programs folder (programs.dir)"), false;
+    path = prog::find_program(c.cx.programs_dir, name);
+    if (path.empty()) return out.fail(CmdError::program, "name: no program '" + name + "' in " + c.cx.programs_dir), false;
+    err = prog::load_program(path, px, p);
+  }
+  if (err.empty()) return true;
+  // "<file>:<line>: <reason>": the place as fields too
+  const auto colon = err.find(':');
+  if (colon != std::string::npos) {
+    std::size_t k = colon + 1;
+    int line = 0;
+    while (k < err.size() && err[k] >= '0' && err[k] <= '9' && line < 100000000) line = line * 10 + (err[k++] - '0');
+    if (k > colon + 1 && k < err.size() && err[k] == ':') {
+      out.j["file"] = err.substr(0, colon);
+      out.j["line"] = line;
+    }
+  }
+  out.fail(CmdError::program, err);
+  return false;
+}
+
+void check_refusal(const fw::ProgramCheckResult& r, R& out) {
+  R m;
+  if (r.move.error != CmdError::ok) move_result(r.move, m);
+  out.j["file"] = r.file;
+  out.j["line"] = r.line;
+  out.j["step"] = r.step;
+  out.fail(r.error, r.file + ":" + std::to_string(r.line) + ": " + (m.message.empty() ? r.reason : m.message));
+}
+
+void counts_result(const fw::ProgramCheckResult& r, R& out) {
+  out.j["steps"] = r.counts.steps;
+  out.j["moves"] = r.counts.moves;
+  out.j["joint_moves"] = r.counts.joint_moves;
+  out.j["line_moves"] = r.counts.line_moves;
+  out.j["dwells"] = r.counts.dwells;
+  out.j["duration"] = r.duration;
+  out.j["summary"] = prog::counts_text(r.counts);
+  out.j["planned_steps"] = r.planned;  // fewer than steps: a tool / frame definition at that step
+}
+
+json program_json(const fw::ProgramStatus& p) {
+  return {{"state", fw::to_string(p.state)}, {"name", p.name},   {"file", p.file},
+          {"line", p.line},                  {"step", p.step},   {"steps", p.steps},
+          {"running_line", p.running_line}};
+}
+
+void program_refusal(const fw::ProgramResult& r, R& out) {
+  std::string m = fw::to_string(r.refusal);
+  switch (r.refusal) {
+    case fw::ProgramRefusal::running: m += ": program " + r.status.name + " is " + fw::to_string(r.status.state); break;
+    case fw::ProgramRefusal::program_state: m += ": the program is " + std::string(fw::to_string(r.status.state)) + ", not paused"; break;
+    case fw::ProgramRefusal::arm_not_ready:
+      m += ": needs the arm at rest with nothing queued and every joint homed (it is " + std::string(fw::to_string(r.arm)) + ", " +
+           std::to_string(r.queued) + " queued)";
+      break;
+    case fw::ProgramRefusal::none:
+    case fw::ProgramRefusal::no_program: break;
+  }
+  out.fail(r.error, m);
+}
+
+void program_answer(const fw::ProgramResult& r, R& out) {
+  if (!r.ok()) return program_refusal(r, out);
+  out.j["program"] = program_json(r.status);
+}
+
+void resume_result(C& c, R& out) {
+  const fw::ControlResult r = c.cx.svc->resume();
+  const bool program = c.cx.svc->run_state() != fw::RunState::idle;
+  if (r.error == CmdError::timeout || (!r.ok() && !program)) return control_result(r, out);
+  c.cx.svc->program_tick();
+  out.j["reason"] = r.reason;
+  if (program) out.j["program"] = program_json(c.cx.svc->program_status());
+}
+
+json pose_json(const kin::Pose& p) {
+  const Eigen::Vector3d rpy = kin::rpy_from_rotation(p.linear());
+  return {{"position", {p.translation().x(), p.translation().y(), p.translation().z()}}, {"rpy", {rpy.x(), rpy.y(), rpy.z()}}};
+}
+
+json point_json(const prog::TeachPoint& t) {
+  return {{"name", t.name}, {"q", vec(t.q)}, {"pose", pose_json(t.pose)}, {"tool", t.tool}, {"frame", t.frame}};
+}
+
+json named_pose_json(const fw::NamedPose& n) {
+  json j = pose_json(n.pose);
+  j["name"] = n.name;
+  if (n.has_payload) j["mass"] = n.mass;
+  return j;
+}
+
+void point_answer(const fw::PointResult& r, R& out) {
+  if (!r.ok()) {
+    std::string m = fw::to_string(r.refusal);
+    switch (r.refusal) {
+      case fw::PointRefusal::not_here:
+        m += ": " + std::string(fw::to_string(r.here.refusal));
+        if (!r.here.reason.empty()) m += ": " + r.here.reason;
+        break;
+      case fw::PointRefusal::no_point: m += " (" + std::to_string(r.count) + " points)"; break;
+      case fw::PointRefusal::joint_count: m += ": the point has " + std::to_string(r.joints) + " joints"; break;
+      case fw::PointRefusal::program: m += ": a program runs"; break;
+      case fw::PointRefusal::none:
+      case fw::PointRefusal::bad_point:
+      case fw::PointRefusal::storage: if (!r.reason.empty()) m += ": " + r.reason; break;
+    }
+    return out.fail(r.error, m);
+  }
+  out.j["point"] = point_json(r.point);
+  out.j["count"] = r.count;
+  out.j["kept"] = r.kept;
+}
+
+void frame_answer(const fw::FrameResult& r, const char* what, R& out) {
+  if (!r.ok()) {
+    std::string m = std::string(what) + ": " + fw::to_string(r.refusal);
+    if (r.refusal == fw::FrameRefusal::arm_busy)
+      m += " (" + std::string(fw::to_string(r.arm)) + ", " + std::to_string(r.queued) + " queued)";
+    if (!r.reason.empty()) m += ": " + r.reason;
+    return out.fail(r.error, m);
+  }
+  out.j[what] = r.def.name;
+}
+
+constexpr ArgSpec kProgram[] = {
+    {"text", ArgType::text, false, 1, 1 << 20, "the program's text (the native language, or G-code when `gcode` is true); left out: `name` is a program of the programs folder"},
+    {"gcode", ArgType::boolean, false, 0, 1, "`text` is G-code (default false: the native language)"},
+    {"name", ArgType::text, false, 1, 63, "a program of the programs folder (programs.dir); with `text`: the name the text is shown and run by"}};
+constexpr ArgSpec kPointName[] = {{"name", ArgType::text, true, 1, 31, "the teach point's name"}};
+constexpr ArgSpec kPointGo[] = {
+    {"name", ArgType::text, true, 1, 31, "the teach point's name"},
+    {"line", ArgType::boolean, false, 0, 1, "true: a straight tool line to it; false (default): a joint move to its joints"},
+    {"speed", ArgType::number, false, 1e-6, 1e3, "joint move: percent of the joint limits; line: m/s (default: the configured)"}};
+constexpr ArgSpec kFrameName[] = {{"name", ArgType::text, true, 1, 23, "the tool's / user frame's name"}};
+constexpr ArgSpec kJogCartesian[] = {
+    {"axis", ArgType::integer, true, 0, 5, "0..2: along x, y, z (m); 3..5: about x, y, z (rad)"},
+    {"frame", ArgType::text, false, 4, 4, "whose axes: `base` (default), `tool` or `user` (the active user frame)"},
+    {"increment", ArgType::number, false, -10, 10, "by this much (m / rad); left out: continuous towards `direction`"},
+    {"direction", ArgType::integer, false, -1, 1, "continuous jog: +1 or -1 (kept alive by repeating it within console.jog_deadman_ms)"},
+    {"speed_pct", ArgType::number, false, 1, 100, "percent of the linear and angular limits (default console.jog_speed_pct)"}};
+constexpr ArgSpec kFeed[] = {{"pct", ArgType::integer, true, fw::kMinFeedOverride, fw::kMaxFeedOverride, "the feed override (percent): scales jogs and the moves queued from now on"}};
+
 constexpr MessageSpec kMessages[] = {
     {"hello", kHello, Gate::open, Where::session, "-",
      "authenticates (with a token when the server has a token file) and answers protocol, robot, joints with their "
@@ -217,12 +412,12 @@ constexpr MessageSpec kMessages[] = {
      }},
     {"stop", none(), Gate::stop, Where::service, "ArmService::control(stop)", "stops on the limits and drops the queue",
      +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::stop), out); }},
-    {"hold", none(), Gate::stop, Where::service, "ArmService::control(hold)", "feed hold: ramps down, keeps the queue",
-     +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::hold), out); }},
+    {"hold", none(), Gate::stop, Where::service, "ArmService::hold", "feed hold: ramps down, keeps the queue (a running program pauses)",
+     +[](C& c, R& out) { control_result(c.cx.svc->hold(), out); }},
     {"estop", none(), Gate::stop, Where::service, "ArmService::control(estop)", "emergency stop (needs `reset`)",
      +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::estop), out); }},
-    {"resume", none(), Gate::control, Where::service, "ArmService::control(resume)", "resumes after a hold",
-     +[](C& c, R& out) { control_result(c.cx.svc->control(fw::RequestOp::resume), out); }},
+    {"resume", none(), Gate::control, Where::service, "ArmService::resume", "resumes after a hold; a paused program runs on",
+     +[](C& c, R& out) { resume_result(c, out); }},
     {"enable", none(), Gate::control, Where::service, "ArmService::enable", "powers the drives",
      +[](C& c, R& out) { control_result(c.cx.svc->enable(), out); }},
     {"disable", none(), Gate::control, Where::service, "ArmService::control(disable)", "powers the drives down",
@@ -324,6 +519,122 @@ constexpr MessageSpec kMessages[] = {
        const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0);
        if (!r.ok()) return out.fail(r.error, r.reason);
        if (r.clamped) out.j["clamped"] = true;
+     }},
+    {"program_check", kProgram, Gate::observer, Where::service, "ArmService::check_program",
+     "checks a whole program without running it (the service's dry run: the planning and checks of a real run, from "
+     "where the motion queue ends): ok with its step counts, planned time and `planned_steps` (fewer than `steps`: "
+     "the moves after a tool or frame definition, which a check does not make, are planned when they run), or the "
+     "first error with its `file`, `line`, `step`, the error code and one line",
+     +[](C& c, R& out) {
+       prog::Program p;
+       std::string name;
+       if (!load_api_program(c, p, name, out)) return;
+       const fw::ProgramCheckResult r = c.cx.svc->check_program(p, c.cx.units);
+       if (!r.ok()) return check_refusal(r, out);
+       counts_result(r, out);
+     }},
+    {"program_run", kProgram, Gate::control, Where::service, "ArmService::check_program, ArmService::run_program",
+     "checks the whole program as `program_check` does, then runs it (nothing moves when the check refuses a line); "
+     "its place is in the state stream (`program`), its steps in the event stream",
+     +[](C& c, R& out) {
+       prog::Program p;
+       std::string name;
+       if (!load_api_program(c, p, name, out)) return;
+       const fw::ProgramCheckResult r = c.cx.svc->check_program(p, c.cx.units);
+       if (!r.ok()) return check_refusal(r, out);
+       const fw::ProgramResult pr = c.cx.svc->run_program(name, std::move(p), c.cx.units);
+       if (!pr.ok()) return program_refusal(pr, out);
+       counts_result(r, out);
+       out.j["program"] = program_json(pr.status);
+     }},
+    {"program_pause", none(), Gate::stop, Where::service, "ArmService::program_pause",
+     "the running program pauses once its queued motions are done (`resume` runs it on)",
+     +[](C& c, R& out) { program_answer(c.cx.svc->program_pause(), out); }},
+    {"program_step", none(), Gate::control, Where::service, "ArmService::program_step",
+     "a paused program runs its next motion, then pauses again",
+     +[](C& c, R& out) { program_answer(c.cx.svc->program_step(), out); }},
+    {"program_abort", none(), Gate::stop, Where::service, "ArmService::program_abort",
+     "ends the running program now and stops the arm",
+     +[](C& c, R& out) { program_answer(c.cx.svc->program_abort(), out); }},
+    {"points", none(), Gate::observer, Where::service, "ArmService::points", "the teach points: name, joints, tool pose, tool and frame",
+     +[](C& c, R& out) {
+       json a = json::array();
+       for (const prog::TeachPoint& t : c.cx.svc->points().points) a.push_back(point_json(t));
+       out.j["points"] = std::move(a);
+     }},
+    {"teach", kPointName, Gate::control, Where::service, "ArmService::teach",
+     "stores where the arm is as teach point `name` (replacing one of that name), kept in the points file",
+     +[](C& c, R& out) {
+       fw::TeachRequest rq;
+       rq.name = c.rq.arg("name")->text;
+       point_answer(c.cx.svc->teach(rq), out);
+     }},
+    {"point_delete", kPointName, Gate::control, Where::service, "ArmService::delete_point", "deletes teach point `name`",
+     +[](C& c, R& out) { point_answer(c.cx.svc->delete_point(c.rq.arg("name")->text), out); }},
+    {"point_go", kPointGo, Gate::control, Where::service, "ArmService::move_to_point",
+     "moves to teach point `name` (a joint move to its joints, or a line with the active tool), queued",
+     +[](C& c, R& out) {
+       fw::PointMove pm;
+       pm.name = c.rq.arg("name")->text;
+       pm.line = num_or(c, "line", 0) != 0;
+       pm.speed = num_or(c, "speed", -1);
+       fw::MoveContext m = move_cx(c);
+       m.chain = &c.cx.svc->tool_chain(c.cx.svc->active_tool());
+       m.ik = c.cx.svc->tool_ik(c.cx.svc->active_tool());
+       const fw::PointResult r = c.cx.svc->move_to_point(pm, m);
+       if (r.refusal != fw::PointRefusal::none) return point_answer(r, out);
+       move_result(r.move, out);
+     }},
+    {"tools", none(), Gate::observer, Where::service, "ArmService::tool / frame",
+     "the tools and user frames (name, pose in the flange / base frame) and which are active",
+     +[](C& c, R& out) {
+       const fw::ArmService& s = *c.cx.svc;
+       json t = json::array(), f = json::array();
+       for (std::size_t i = 0; i < s.tool_count(); ++i) t.push_back(named_pose_json(s.tool(i)));
+       for (std::size_t i = 0; i < s.frame_count(); ++i) f.push_back(named_pose_json(s.frame(i)));
+       out.j["tools"] = std::move(t);
+       out.j["frames"] = std::move(f);
+       out.j["tool"] = s.tool(s.active_tool()).name;
+       out.j["frame"] = s.frame(s.active_frame()).name;
+     }},
+    {"tool_select", kFrameName, Gate::control, Where::service, "ArmService::select_tool",
+     "makes tool `name` the active one (only while nothing moves or is queued)",
+     +[](C& c, R& out) { frame_answer(c.cx.svc->select_tool(c.rq.arg("name")->text), "tool", out); }},
+    {"frame_select", kFrameName, Gate::control, Where::service, "ArmService::select_frame",
+     "makes user frame `name` the active one (only while nothing moves or is queued)",
+     +[](C& c, R& out) { frame_answer(c.cx.svc->select_frame(c.rq.arg("name")->text), "frame", out); }},
+    {"jog_cartesian", kJogCartesian, Gate::control, Where::service, "ArmService::jog(ToolJog)",
+     "jogs the active tool along or about an axis of the base, tool or user frame, by an increment or continuously "
+     "(stops unless repeated within the deadman time)",
+     +[](C& c, R& out) {
+       fw::ToolJog j;
+       j.axis = static_cast<int>(num_or(c, "axis", 0));
+       const ArgValue* fr = c.rq.arg("frame");
+       if (!fr->present || fr->text == "base") j.frame = fw::JogFrame::base;
+       else if (fr->text == "tool") j.frame = fw::JogFrame::tool;
+       else if (fr->text == "user") j.frame = fw::JogFrame::user;
+       else return out.fail(CmdError::bad_option, "frame: base, tool or user");
+       const ArgValue* inc = c.rq.arg("increment");
+       const ArgValue* dir = c.rq.arg("direction");
+       if (inc->present == dir->present) return out.fail(CmdError::arg_count, "give one of increment and direction");
+       j.continuous = dir->present;
+       j.direction = dir->num < 0 ? -1 : 1;
+       if (j.continuous && dir->num == 0) return out.fail(CmdError::out_of_range, "direction: +1 or -1");
+       j.increment = inc->num;
+       j.speed_pct = num_or(c, "speed_pct", -1);
+       fw::ArmService& s = *c.cx.svc;
+       fw::JogContext jx;
+       jx.chain = &s.tool_chain(s.active_tool());
+       jx.ik = s.tool_ik(s.active_tool());
+       jx.user_axes = s.frame(s.active_frame()).pose.linear();
+       jog_result(s.jog(j, jx), out);
+     }},
+    {"feed_override", kFeed, Gate::control, Where::service, "ArmService::set_feed_override",
+     "sets the feed override (percent; in the state stream as `feed_pct`)",
+     +[](C& c, R& out) {
+       const fw::SettingsResult r = c.cx.svc->set_feed_override(static_cast<int>(num_or(c, "pct", 100)));
+       if (!r.ok()) return out.fail(r.error, "pct: outside [" + std::to_string(fw::kMinFeedOverride) + ", " + std::to_string(fw::kMaxFeedOverride) + "]");
+       out.j["feed_pct"] = c.cx.svc->feed_override();
      }},
 };
 
@@ -460,7 +771,14 @@ std::string execute(ServiceContext& cx, const ApiRequest& rq) {
   ServiceCall call{cx, rq};
   ResultFields out;
   rq.spec->handler(call, out);
-  if (!out.error.empty()) return error_line(rq.has_id, rq.id, out.error, out.message);
+  if (!out.error.empty()) {  // with the fields the refusal filled (a program's line)
+    std::string e = error_line(rq.has_id, rq.id, out.error, out.message);
+    if (!out.j.empty()) {
+      e.pop_back();
+      e += ',' + out.j.dump(-1, ' ', false, json::error_handler_t::replace).substr(1);
+    }
+    return e;
+  }
   return ok_line(rq, out.j.dump(-1, ' ', false, json::error_handler_t::replace));
 }
 
@@ -490,7 +808,8 @@ std::string hello_line(const ApiRequest& rq, const HelloInfo& h, const kin::Chai
   return ok_line(rq, f.dump(-1, ' ', false, json::error_handler_t::replace));
 }
 
-std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain& chain, std::uint64_t dropped) {
+std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain& chain, std::uint64_t dropped,
+                       const ServiceSnapshot* svc) {
   json j = json::object();
   j["topic"] = "state";
   j["cycle"] = t.cycles;
@@ -547,6 +866,12 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
   j["freedrive"] = t.freedrive != 0;
   j["collision_detection"] = t.collision_on;
   j["dropped"] = dropped;
+  if (svc != nullptr) {
+    j["program"] = program_json(svc->program);
+    j["feed_pct"] = svc->feed_pct;
+    j["active_tool"] = svc->tool;
+    j["active_frame"] = svc->frame;
+  }
   return j.dump(-1, ' ', false, json::error_handler_t::replace);
 }
 

@@ -121,6 +121,13 @@ struct ApiServer::Impl {
   bool event_seq_set = false;
   std::uint64_t events_missed = 0;
   std::atomic<int> n_event_subs{0};
+  // the service's part of the state samples (taken on the service thread in pump())
+  std::mutex snap_mu;
+  ServiceSnapshot snap;
+  ServiceSnapshot snapshot() {
+    std::lock_guard<std::mutex> l(snap_mu);
+    return snap;
+  }
   // stats
   mutable std::mutex st_mu;
   ApiStats st;
@@ -289,7 +296,8 @@ struct ApiServer::Impl {
       return send(c, ok_line(rq), true);
     }
     if (name == "state") {
-      std::string s = state_line(ctl.telemetry(), cfg.rate_hz, chain, c.dropped);
+      const ServiceSnapshot sn = snapshot();
+      std::string s = state_line(ctl.telemetry(), cfg.rate_hz, chain, c.dropped, &sn);
       return send(c, ok_line(rq, s), true);
     }
     if (name == "take_control") {
@@ -433,13 +441,14 @@ struct ApiServer::Impl {
     const std::int64_t t = now_ns();
     bool any = false;
     fw::Telemetry tel;
+    ServiceSnapshot sn;
     bool have = false;
     for (auto& [id, c] : clients) {
       if (c->state_period == 0) continue;
       any = true;
       if (c->state_due - c->state_period / 2 <= t) {  // due within half a period: this tick
-        if (!have) tel = ctl.telemetry(), have = true;
-        send(*c, state_line(tel, cfg.rate_hz, chain, c->dropped), false);
+        if (!have) tel = ctl.telemetry(), sn = snapshot(), have = true;
+        send(*c, state_line(tel, cfg.rate_hz, chain, c->dropped, &sn), false);
         c->state_due += c->state_period;
         if (c->state_due <= t) c->state_due = t + c->state_period;  // behind: skip, do not burst
       }
@@ -682,6 +691,16 @@ std::size_t ApiServer::pump(ServiceContext& cx) {
   // the service's new events, for the subscribers (the service is polled here as by the console)
   std::vector<std::string> evs;
   if (cx.svc != nullptr) {
+    cx.svc->tick();  // its periodic work, as the console's poll does: a program started here runs on
+    ServiceSnapshot sn;
+    sn.program = cx.svc->program_status();
+    sn.feed_pct = cx.svc->feed_override();
+    sn.tool = cx.svc->tool(cx.svc->active_tool()).name;
+    sn.frame = cx.svc->frame(cx.svc->active_frame()).name;
+    {
+      std::lock_guard<std::mutex> l(s.snap_mu);
+      s.snap = std::move(sn);
+    }
     cx.svc->poll_events();
     if (!s.event_seq_set) {
       s.event_seq = cx.svc->next_event_seq() - 1;

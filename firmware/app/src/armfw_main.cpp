@@ -851,6 +851,8 @@ int main(int argc, char** argv) {
     api_cx.ctl = app.ctl.get();
     api_cx.chain = &app.chain;
     api_cx.ik = firmware_ik_solver(app.ik_ready ? app.ik.get() : nullptr);
+    api_cx.units = app.console->config().units;
+    api_cx.programs_dir = app.console->config().programs_dir;
     StreamSettings ss;
     ss.deadman_s = app.cfg.api_stream_deadman_ms * 1e-3;
     ss.clamp_step = app.cfg.api_stream_step == "clamp";

@@ -20,13 +20,20 @@ __all__ = ["Arm", "ArmError", "ArmStopped", "Stream", "Subscription"]
 
 
 class ArmError(Exception):
-    """A request the firmware refused: `code` is its error code (docs/api.md), `message` one line."""
+    """A request the firmware refused: `code` is its error code (docs/api.md), `message` one line.
 
-    def __init__(self, code: str, message: str, cmd: str = ""):
+    A program the firmware's check refused also names its place: `file`, `line` (1-based) and
+    `step` (None otherwise)."""
+
+    def __init__(self, code: str, message: str, cmd: str = "", fields: Optional[Dict[str, Any]] = None):
         super().__init__(f"{cmd}: {code}: {message}" if cmd else f"{code}: {message}")
         self.code = code
         self.message = message
         self.cmd = cmd
+        f = fields or {}
+        self.file: Optional[str] = f.get("file")
+        self.line: Optional[int] = f.get("line")
+        self.step: Optional[int] = f.get("step")
 
 
 class ArmStopped(ArmError):
@@ -188,7 +195,7 @@ class Arm:
                 self._pending.pop(rid, None)
             raise ArmError("timeout", f"no answer within {self.timeout} s", cmd) from None
         if "error" in r:
-            raise ArmError(r["error"], r.get("message", ""), cmd)
+            raise ArmError(r["error"], r.get("message", ""), cmd, r)
         return r
 
     def close(self) -> None:
@@ -310,6 +317,102 @@ class Arm:
         if speed_pct is not None:
             args["speed_pct"] = float(speed_pct)
         return self.call("jog", **args)
+
+    def jog_cartesian(self, axis: int, frame: str = "base", increment: Optional[float] = None,
+                      direction: Optional[int] = None, speed_pct: Optional[float] = None) -> Dict[str, Any]:
+        """Jog the active tool along (axis 0..2: x, y, z, m) or about (3..5, rad) an axis of the
+        `base`, `tool` or `user` frame: by `increment`, or continuously towards `direction`
+        (+1 / -1; repeat within the jog deadman to keep it going)."""
+        args: Dict[str, Any] = {"axis": int(axis), "frame": frame}
+        if increment is not None:
+            args["increment"] = float(increment)
+        if direction is not None:
+            args["direction"] = int(direction)
+        if speed_pct is not None:
+            args["speed_pct"] = float(speed_pct)
+        return self.call("jog_cartesian", **args)
+
+    def set_feed_override(self, pct: int) -> int:
+        """The arm's feed override (percent, 10..200): scales jogs and the moves queued from now on."""
+        return self.call("feed_override", pct=int(pct))["feed_pct"]
+
+    # -- programs --------------------------------------------------------------------------
+    @staticmethod
+    def _program_args(text: Optional[str], name: Optional[str], gcode: bool) -> Dict[str, Any]:
+        if text is None and name is None:
+            raise ValueError("give the program's text or its name")
+        args: Dict[str, Any] = {}
+        if text is not None:
+            args["text"] = text
+            args["gcode"] = bool(gcode)
+        if name is not None:
+            args["name"] = name
+        return args
+
+    def check_program(self, text: Optional[str] = None, name: Optional[str] = None, gcode: bool = False) -> Dict[str, Any]:
+        """Check a whole program without running it (the firmware's dry run): its step counts
+        and planned `duration`, or ArmError with the first refused line (`.line`, `.file`).
+        `text`: the program (native, or G-code with `gcode`); `name`: a program of the
+        controller's programs folder, or with `text` the name it is shown by."""
+        return self.call("program_check", **self._program_args(text, name, gcode))
+
+    def run_program(self, text: Optional[str] = None, name: Optional[str] = None, gcode: bool = False,
+                    wait: bool = True, timeout: float = 600.0) -> Dict[str, Any]:
+        """Check the whole program, then run it (a refused line: ArmError with `.line`, nothing
+        moved). `wait`: until it has ended (ArmStopped on a fault, e-stop or stop); returns the
+        run's answer (step counts, `program`: its state when it started)."""
+        seq = self._last_seq()
+        r = self.call("program_run", **self._program_args(text, name, gcode))
+        if wait:
+            self._wait(lambda s: s["program"]["state"] == "idle" and s["queued"] == 0, seq, timeout)
+        return r
+
+    def pause_program(self) -> Dict[str, Any]:
+        """The running program pauses once its running motion is done (`resume` runs it on)."""
+        return self.call("program_pause")["program"]
+
+    def step_program(self) -> Dict[str, Any]:
+        """A paused program runs its next motion, then pauses."""
+        return self.call("program_step")["program"]
+
+    def abort_program(self) -> None:
+        """End the running program now and stop the arm."""
+        self.call("program_abort")
+
+    def program(self) -> Dict[str, Any]:
+        """The running program's place: state, name, file, line, step, steps."""
+        return self.state()["program"]
+
+    # -- teach points, tools and frames ------------------------------------------------------
+    def points(self) -> List[Dict[str, Any]]:
+        """The teach points: name, q (rad / m), pose, tool, frame."""
+        return self.call("points")["points"]
+
+    def teach(self, name: str) -> Dict[str, Any]:
+        """Store where the arm is as point `name` (kept in the controller's points file)."""
+        return self.call("teach", name=name)["point"]
+
+    def delete_point(self, name: str) -> None:
+        self.call("point_delete", name=name)
+
+    def go_to_point(self, name: str, line: bool = False, speed: Optional[float] = None,
+                    wait: bool = True, timeout: float = 120.0) -> Dict[str, Any]:
+        """Move to point `name`: a joint move (`speed`: percent of the joint limits), or with
+        `line` a straight tool line (`speed`: m/s)."""
+        args: Dict[str, Any] = {"name": name, "line": bool(line)}
+        if speed is not None:
+            args["speed"] = float(speed)
+        return self._move("point_go", args, wait, timeout)
+
+    def tools(self) -> Dict[str, Any]:
+        """The tools and user frames (`tools`, `frames`: name, position, rpy) and the active `tool` and `frame`."""
+        return self.call("tools")
+
+    def select_tool(self, name: str) -> None:
+        self.call("tool_select", name=name)
+
+    def select_frame(self, name: str) -> None:
+        self.call("frame_select", name=name)
 
     def _move(self, cmd: str, args: Dict[str, Any], wait: bool, timeout: float) -> Dict[str, Any]:
         seq = self._last_seq()

@@ -134,6 +134,61 @@ class ClientTest(unittest.TestCase):
             other.close()
             recover(arm)
 
+    def test_programs(self):
+        with self.arm() as arm:
+            arm.enable()
+            bad = "movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\nmovel 5000 0 500 0 0 0\n"
+            with self.assertRaises(ArmError) as e:
+                arm.check_program(bad)
+            self.assertEqual(e.exception.line, 3)
+            self.assertEqual(e.exception.step, 2)
+            done = arm.state()["done"]
+            with self.assertRaises(ArmError) as e:
+                arm.run_program(bad)
+            self.assertEqual(e.exception.line, 3)
+            time.sleep(0.3)
+            self.assertEqual(arm.state()["done"], done)  # nothing moved
+            good = "movej 10 0 0 0 0 0\ndwell 0.1\nmovej 0 0 0 0 0 0\n"
+            c = arm.check_program(good)
+            self.assertEqual((c["steps"], c["joint_moves"], c["dwells"]), (3, 2, 1))
+            arm.run_program(good, name="swing")
+            s = arm.state()
+            self.assertEqual(s["program"]["state"], "idle")
+            self.assertEqual(s["done"], done + 3)  # two moves and the dwell
+            self.assertAlmostEqual(s["q_cmd"][0], 0.0, places=9)
+            arm.run_program("movej 30 0 0 0 0 0\nmovej 0 0 0 0 0 0\n", wait=False)
+            self.assertEqual(arm.program()["state"], "running")
+            arm.abort_program()
+            self.assertEqual(arm.program()["state"], "idle")
+
+    def test_points_tools_cartesian_jog_override(self):
+        with self.arm() as arm:
+            arm.enable()
+            arm.movej([0, 0.3, -0.6, 0, 0.6, 0])
+            p = arm.teach("py1")
+            self.assertIn("py1", [x["name"] for x in arm.points()])
+            arm.movej([0.2, 0.3, -0.6, 0, 0.6, 0])
+            arm.go_to_point("py1")
+            for a, b in zip(arm.state()["q_cmd"], p["q"]):
+                self.assertAlmostEqual(a, b, places=9)
+            arm.delete_point("py1")
+            self.assertNotIn("py1", [x["name"] for x in arm.points()])
+            t = arm.tools()
+            self.assertEqual((t["tool"], t["frame"]), ("tool0", "base"))
+            with self.assertRaises(ArmError) as e:
+                arm.select_tool("no_such_tool")
+            self.assertEqual(e.exception.code, "bad_option")
+            x0 = arm.state()["tool"]["position"][0]
+            arm.jog_cartesian(0, "base", increment=0.01)
+            end = time.monotonic() + 10
+            while arm.state()["state"] != "idle" and time.monotonic() < end:
+                time.sleep(0.02)
+            time.sleep(0.1)
+            self.assertAlmostEqual(arm.state()["tool"]["position"][0], x0 + 0.01, delta=1e-3)
+            self.assertEqual(arm.set_feed_override(50), 50)
+            self.assertEqual(arm.state()["feed_pct"], 50)
+            arm.set_feed_override(100)
+
 
 if __name__ == "__main__":
     unittest.main()

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
-// The browser pendant (docs/pendant.md): state bar and stop, arm commands, hold-to-run jog,
-// live 3D view and plots, outputs, over armfw's network API on the port that served the page.
+// The browser pendant (docs/pendant.md): state bar and stop, arm commands, hold-to-run joint and
+// Cartesian jog, feed override, program editor (checked as typed by the arm's dry run), teach
+// points, tools and frames, live 3D view and plots, outputs, over armfw's network API on the
+// port that served the page.
 import './pendant.css';
 import { ApiClient } from './api.js';
 import { ArmView } from './view3d.js';
@@ -10,7 +12,8 @@ const $ = (id) => document.getElementById(id);
 const wsUrl = (location.protocol === 'https:' ? 'wss://' : 'ws://') + location.host + '/';
 const api = new ApiClient(wsUrl);
 // What the page knows, for people and for the tests that read it.
-const P = (window.pendant = { hello: null, role: null, client: 0, controller: 0, state: null, results: [], jogging: null });
+const P = (window.pendant = { hello: null, role: null, client: 0, controller: 0, state: null, results: [], jogging: null,
+                              check: null, points: [], tools: null });
 
 // Keep-alive period of a held jog: well inside the firmware's jog deadman (console.jog_deadman_ms,
 // 250 ms by default), so one late message does not stop the arm, while a released button, a
@@ -53,9 +56,10 @@ function refreshRole() {
   $('role').textContent = 'role: ' + (P.role || '-');
   const inControl = P.controller !== 0 && P.controller === P.client;
   $('control').textContent = 'control: ' + (P.controller === 0 ? 'nobody' : inControl ? 'this pendant' : 'client ' + P.controller);
-  for (const b of document.querySelectorAll('button.op, button.jog, #take, #release')) b.disabled = !canOperate();
-  // hold and e-stop, like stop, are any authenticated client's (docs/api.md)
-  for (const b of document.querySelectorAll('button.any')) b.disabled = !P.role || !api.open;
+  for (const b of document.querySelectorAll('button.op, button.jog, #take, #release, .op-input')) b.disabled = !canOperate();
+  // hold and e-stop, like stop, are any authenticated client's (docs/api.md); so are a program's
+  // pause and abort
+  for (const b of document.querySelectorAll('button.any, button.stopper')) b.disabled = !P.role || !api.open;
   document.body.dataset.role = P.role || '';
 }
 
@@ -85,11 +89,15 @@ async function connect() {
   P.client = h.client;
   P.controller = h.controller;
   buildJoints(h.joints || []);
+  buildCartesian();
   refreshRole();
   const s = await api.request('subscribe', { topic: 'state', rate_hz: 30 });
   if (s.error) report('subscribe', s);
   await api.request('subscribe', { topic: 'events' });
   say('connected to ' + (h.robot || 'the arm') + ' as ' + h.role);
+  loadPoints();
+  loadTools();
+  scheduleCheck(0);
 }
 
 api.on('open', () => { $('conn').textContent = 'online'; });
@@ -130,15 +138,16 @@ let jogTimer = null;
 function jogKeepAlive() {
   const j = P.jogging;
   if (!j) return;
-  api.request('jog', { joint: j.joint, direction: j.direction, speed_pct: speed() }).then((r) => {
-    if (r.error && P.jogging === j) { report('jog', r); endJog(true); }
+  api.request(j.cmd, { ...j.args, direction: j.direction, speed_pct: speed() }).then((r) => {
+    if (r.error && P.jogging === j) { report(j.cmd, r); endJog(true); }
   });
 }
 
-function startJog(joint, direction, button) {
+/** A joint jog (`jog`, args {joint}) or a Cartesian one (`jog_cartesian`, args {axis, frame}). */
+function startJog(cmd, args, direction, button) {
   if (!canOperate()) return;
   endJog(true);
-  P.jogging = { joint, direction, button, t0: P.state ? P.state.t : 0 };
+  P.jogging = { cmd, args, joint: args.joint, direction, button, t0: P.state ? P.state.t : 0 };
   button.classList.add('active');
   jogKeepAlive();
   jogTimer = setInterval(jogKeepAlive, JOG_KEEPALIVE_MS);
@@ -183,10 +192,7 @@ function buildJoints(joints) {
       b.dataset.joint = String(j);
       b.dataset.dir = String(dir);
       b.title = 'hold to jog J' + (j + 1) + (dir < 0 ? ' negative' : ' positive');
-      b.addEventListener('pointerdown', (e) => { e.preventDefault(); b.setPointerCapture?.(e.pointerId); startJog(j, dir, b); });
-      b.addEventListener('pointerup', release);
-      b.addEventListener('lostpointercapture', release);
-      b.addEventListener('contextmenu', (e) => e.preventDefault());
+      holdToRun(b, () => startJog('jog', { joint: j }, dir, b));
       td.append(b);
       tr.append(td);
     }
@@ -194,6 +200,194 @@ function buildJoints(joints) {
   });
   refreshRole();
 }
+
+function holdToRun(b, start) {
+  b.addEventListener('pointerdown', (e) => { e.preventDefault(); b.setPointerCapture?.(e.pointerId); start(); });
+  b.addEventListener('pointerup', release);
+  b.addEventListener('lostpointercapture', release);
+  b.addEventListener('contextmenu', (e) => e.preventDefault());
+}
+
+// ---- hold-to-run Cartesian jog: along / about the axes of the base, the tool or the user frame ------
+function buildCartesian() {
+  const tb = $('cjog-axes').querySelector('tbody');
+  tb.textContent = '';
+  ['x', 'y', 'z', 'rx', 'ry', 'rz'].forEach((name, axis) => {
+    const tr = document.createElement('tr');
+    const td0 = document.createElement('td');
+    td0.textContent = name + (axis < 3 ? ' (m)' : ' (rad)');
+    tr.append(td0);
+    for (const dir of [-1, 1]) {
+      const td = document.createElement('td');
+      const b = document.createElement('button');
+      b.className = 'jog cjog';
+      b.textContent = dir < 0 ? '−' : '+';
+      b.dataset.axis = String(axis);
+      b.dataset.dir = String(dir);
+      b.title = 'hold to jog ' + name + (dir < 0 ? ' negative' : ' positive');
+      holdToRun(b, () => startJog('jog_cartesian', { axis, frame: $('cjog-frame').value }, dir, b));
+      td.append(b);
+      tr.append(td);
+    }
+    tb.append(tr);
+  });
+  refreshRole();
+}
+
+// ---- feed override: the arm's, bound both ways (the state stream's feed_pct) ---------------------
+let overrideTimer = null;
+$('override').addEventListener('input', () => {
+  $('override-out').textContent = $('override').value;
+  clearTimeout(overrideTimer);
+  overrideTimer = setTimeout(async () => {
+    await command('feed_override', { pct: Number($('override').value) });
+    overrideTimer = null;  // the state stream shows the arm's value again
+  }, 120);
+});
+
+// ---- program editor: checked as typed by the arm's dry run, the error shown on its line ----------
+const progName = () => $('prog-name').value.trim() || 'editor';
+const progArgs = () => ({ text: $('prog-text').value, gcode: $('prog-gcode').checked, name: progName() });
+let errorLine = 0;
+let currentLine = 0;
+let checkTimer = null;
+let checkSeq = 0;
+
+function drawGutter() {
+  const g = $('prog-gutter');
+  const n = Math.max(1, $('prog-text').value.split('\n').length);
+  while (g.children.length < n) {
+    const d = document.createElement('div');
+    d.textContent = String(g.children.length + 1);
+    g.append(d);
+  }
+  while (g.children.length > n) g.lastChild.remove();
+  for (let i = 0; i < n; ++i) {
+    const d = g.children[i];
+    d.classList.toggle('error', i + 1 === errorLine);
+    d.classList.toggle('current', i + 1 === currentLine);
+  }
+  g.scrollTop = $('prog-text').scrollTop;
+}
+
+/** Show a check's or a run's answer: ok with its counts, or the error on its line. */
+function showCheck(r) {
+  P.check = r;
+  const p = $('prog-check');
+  const ours = r.file === undefined || r.file === progName() || r.file === progName() + '.arm' || r.file === progName() + '.gcode';
+  errorLine = r.error && r.line && ours ? r.line : 0;
+  p.dataset.line = String(errorLine);
+  p.className = 'check ' + (r.error ? 'bad' : 'good');
+  p.textContent = r.error ? (r.line ? 'line ' + r.line + ': ' : '') + r.error + ': ' + r.message
+                          : 'checked: ' + r.summary + ', ' + Number(r.duration).toFixed(2) + ' s planned' +
+                            (r.planned_steps < r.steps ? ' (the moves after step ' + r.planned_steps + ', a tool or frame definition, are planned when they run)' : '');
+  const g = $('prog-gutter').children[errorLine - 1];
+  if (g) g.title = p.textContent;
+  drawGutter();
+}
+
+function scheduleCheck(ms = 300) {
+  clearTimeout(checkTimer);
+  checkTimer = setTimeout(async () => {
+    if (!api.open || !P.role) return;
+    if ($('prog-text').value.trim() === '') {
+      errorLine = 0;
+      $('prog-check').textContent = '';
+      $('prog-check').dataset.line = '0';
+      drawGutter();
+      return;
+    }
+    const seq = ++checkSeq;
+    const r = await api.request('program_check', progArgs());
+    if (seq === checkSeq) showCheck(r);  // an older answer to an older text is not shown
+  }, ms);
+}
+$('prog-text').addEventListener('input', () => { drawGutter(); scheduleCheck(); });
+$('prog-text').addEventListener('scroll', drawGutter);
+$('prog-gcode').addEventListener('change', () => scheduleCheck(0));
+$('prog-name').addEventListener('input', () => scheduleCheck());
+$('prog-run').addEventListener('click', async () => {
+  ++checkSeq;  // the run's own check answers now
+  const r = await command('program_run', progArgs());
+  showCheck(r);
+});
+$('prog-pause').addEventListener('click', () => command('program_pause'));
+$('prog-resume').addEventListener('click', () => command('resume'));
+$('prog-step').addEventListener('click', () => command('program_step'));
+$('prog-abort').addEventListener('click', () => command('program_abort'));
+drawGutter();
+
+function showProgram(pr) {
+  if (!pr) return;
+  const on = pr.state !== 'idle';
+  $('prog-status').textContent = on ? pr.name + ': ' + pr.state + ' at ' + pr.file + ':' + (pr.running_line || pr.line) +
+                                      ' (step ' + (pr.step + 1) + ' of ' + pr.steps + ')' : 'no program runs';
+  const line = on && (pr.name === progName()) ? (pr.running_line || pr.line) : 0;
+  if (line !== currentLine) {
+    currentLine = line;
+    drawGutter();
+  }
+}
+
+// ---- teach points ---------------------------------------------------------------------------------
+async function loadPoints() {
+  const r = await api.request('points');
+  if (r.error) return;
+  P.points = r.points;
+  const tb = $('points').querySelector('tbody');
+  tb.textContent = '';
+  for (const pt of r.points) {
+    const tr = document.createElement('tr');
+    tr.dataset.point = pt.name;
+    const name = document.createElement('td');
+    name.textContent = pt.name;
+    name.title = 'joints ' + pt.q.map((v) => v.toFixed(4)).join(', ') + '; tool ' + pt.tool + ', frame ' + pt.frame;
+    tr.append(name);
+    for (const [label, fn] of [['go', () => command('point_go', { name: pt.name, speed: speed() })],
+                               ['line', () => command('point_go', { name: pt.name, line: true })],
+                               ['delete', () => command('point_delete', { name: pt.name }).then(loadPoints)]]) {
+      const td = document.createElement('td');
+      const b = document.createElement('button');
+      b.className = 'op';
+      b.textContent = label;
+      b.dataset.action = label;
+      b.addEventListener('click', fn);
+      td.append(b);
+      tr.append(td);
+    }
+    tb.append(tr);
+  }
+  view.points?.(r.points.map((pt) => pt.pose.position));
+  refreshRole();
+}
+$('teach-form').addEventListener('submit', async (e) => {
+  e.preventDefault();
+  const name = $('teach-name').value.trim();
+  if (!name) return say('teach: give the point a name');
+  const r = await command('teach', { name });
+  if (!r.error) loadPoints();
+});
+
+// ---- tools and frames -------------------------------------------------------------------------------
+function fillSelect(sel, list, active) {
+  sel.textContent = '';
+  for (const t of list) {
+    const o = document.createElement('option');
+    o.value = o.textContent = t.name;
+    sel.append(o);
+  }
+  sel.value = active;
+}
+async function loadTools() {
+  const r = await api.request('tools');
+  if (r.error) return;
+  P.tools = r;
+  fillSelect($('tool-sel'), r.tools, r.tool);
+  fillSelect($('frame-sel'), r.frames, r.frame);
+  view.frames?.(r.frames);
+}
+$('tool-sel').addEventListener('change', async () => { await command('tool_select', { name: $('tool-sel').value }); loadTools(); });
+$('frame-sel').addEventListener('change', async () => { await command('frame_select', { name: $('frame-sel').value }); loadTools(); });
 
 // ---- state bar, joints, view, plots ---------------------------------------------------------------
 let view = { update() {} };
@@ -232,6 +426,15 @@ api.on('state', (st) => {
   }
   view.update(st.frames);
   plots.push(st);
+  showProgram(st.program);
+  if (st.feed_pct !== undefined && document.activeElement !== $('override') && overrideTimer === null) {
+    $('override').value = String(st.feed_pct);
+    $('override-out').textContent = String(st.feed_pct);
+  }
+  if (st.active_tool !== undefined && document.activeElement !== $('tool-sel') && $('tool-sel').value !== st.active_tool &&
+      P.tools && P.tools.tools.some((t) => t.name === st.active_tool)) $('tool-sel').value = st.active_tool;
+  if (st.active_frame !== undefined && document.activeElement !== $('frame-sel') && $('frame-sel').value !== st.active_frame &&
+      P.tools && P.tools.frames.some((t) => t.name === st.active_frame)) $('frame-sel').value = st.active_frame;
 });
 
 api.on('event', (ev) => {

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 // The live 3D view: the links drawn between the frame origins the state stream carries
-// (`frames`: base, each DH row, tool); the page computes no kinematics.
+// (`frames`: base, each DH row, tool), the taught points (their tool points, from `points`) and
+// the user frames (from `tools`); the page computes no kinematics.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 
@@ -43,6 +44,39 @@ export class ArmView {
       requestAnimationFrame(loop);
     };
     requestAnimationFrame(loop);
+  }
+
+  /** The taught points: a marker at each tool point (positions [x, y, z] in m, base frame). */
+  points(list) {
+    if (!this.pointGroup) {
+      this.pointGroup = new THREE.Group();
+      this.scene.add(this.pointGroup);
+      this.pointMat = new THREE.MeshStandardMaterial({ color: 0x16a34a });
+    }
+    this.pointGroup.clear();
+    for (const p of list) {
+      const m = new THREE.Mesh(new THREE.OctahedronGeometry(0.018), this.pointMat);
+      m.position.set(p[0], p[1], p[2]);
+      this.pointGroup.add(m);
+    }
+    this.dirty = true;
+  }
+
+  /** The user frames: axes at each frame's origin, turned by its roll, pitch, yaw (base frame). */
+  frames(list) {
+    if (!this.frameGroup) {
+      this.frameGroup = new THREE.Group();
+      this.scene.add(this.frameGroup);
+    }
+    this.frameGroup.clear();
+    for (const f of list) {
+      if (f.name === 'base') continue;  // the base's axes are drawn already
+      const a = new THREE.AxesHelper(0.1);
+      a.position.set(f.position[0], f.position[1], f.position[2]);
+      a.rotation.set(f.rpy[0], f.rpy[1], f.rpy[2], 'ZYX');  // R = Rz(yaw) Ry(pitch) Rx(roll)
+      this.frameGroup.add(a);
+    }
+    this.dirty = true;
   }
 
   resize() {

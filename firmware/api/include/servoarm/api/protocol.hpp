@@ -123,6 +123,8 @@ struct ServiceContext {
   fw::StreamService* stream = nullptr;  ///< streaming targets (nullptr: refused as unsupported)
   const kin::Chain* chain = nullptr;
   kin::IkSolver ik{};
+  fw::ConsoleUnits units{};   ///< a native program's units (the console's)
+  std::string programs_dir;   ///< programs.dir: `call` and program names ("" none)
 };
 
 struct ServiceCall {
@@ -150,7 +152,16 @@ std::string hello_line(const ApiRequest& rq, const HelloInfo& h, const kin::Chai
 
 /// One state sample: `{"topic":"state",...}` from the telemetry (RT clock: cycle and t), the
 /// tool pose by FK of the measured joints, and the client's dropped count.
-std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain& chain, std::uint64_t dropped);
+/// What a state sample carries from the service (taken on the service thread, the service's
+/// one caller): the running program's place, the feed override, the active tool and frame.
+struct ServiceSnapshot {
+  fw::ProgramStatus program;
+  int feed_pct = 100;
+  std::string tool = "tool0", frame = "base";
+};
+/// `svc`: the service's part (nullptr: left out).
+std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain& chain, std::uint64_t dropped,
+                       const ServiceSnapshot* svc = nullptr);
 /// One event of the service's stream: `{"topic":"event","seq":N,...,"missed":M}`.
 std::string event_line(const fw::ArmEvent& e, std::string_view detail, std::uint64_t missed);
 /// `{"topic":"control","holder":N}` (0: nobody).

@@ -463,6 +463,20 @@ struct ProgramStatus {
   std::uint64_t started_cycle = 0;  ///< the control cycle it started at
 };
 
+/// The answer to check_program(): ok, or the first step refused with its place and one line.
+struct ProgramCheckResult {
+  CmdError error = CmdError::ok;
+  std::size_t step = 0;     ///< the refused step (index into the program's steps)
+  std::string file;         ///< its file and line (1-based)
+  int line = 0;
+  std::string reason;       ///< one line: why
+  MoveResult move;          ///< a refused move or dwell: what the planner found
+  prog::StepCounts counts;  ///< the program's steps (prog::count_steps)
+  double duration = 0;      ///< s: the planned time of its moves and dwells (blended runs overlapped)
+  std::size_t planned = 0;  ///< steps dry-run: all, or up to a tool / frame definition (not made by a check)
+  bool ok() const { return error == CmdError::ok; }
+};
+
 /// What a program request refused (ProgramResult::refusal); none: accepted.
 enum class ProgramRefusal : std::uint8_t {
   none,
@@ -833,6 +847,12 @@ class ArmService {
   ProgramResult program_step();
   ProgramResult program_abort(ProgramEnd why = ProgramEnd::abort, bool realtime = false);
   ProgramStatus program_status() const;
+  /// Check a whole loaded program without running it: each step through the dry run of what
+  /// run_step() does (the same planning and checks, from where the motion queue ends; tool and
+  /// frame selections followed), nothing queued or changed. A tool or frame definition is not
+  /// made by a check: the moves after it are not planned (`planned`). ok with its counts and
+  /// planned time, or the first step refused (program_check.cpp).
+  ProgramCheckResult check_program(const prog::Program& p, const ConsoleUnits& units);
   RunState run_state() const;
   /// Feed the running program's next steps; notice its end, a hold, a fault. The front end
   /// calls it regularly (the console from its poll). Never blocks.
