@@ -675,6 +675,24 @@ int int_field(const std::string& s, const std::string& key) {
 // refuses (line 3: a target 5 m away) is named with its line, file and error code, a line the
 // parser refuses likewise, and a good program answers its step counts. program_run checks
 // first: the bad program moves nothing and queues nothing.
+// Relative G-code lines (G91) move from the previous line's target, in the check as in the run.
+TEST(FwApi, ProgramCheckPlansRelativeLinesFromThePreviousTarget) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  // relative G-code lines move from the previous line's target, in the check as in the run:
+  // from a pose away from the wrist singularity, ten 150 mm steps along x leave the arm's reach
+  // part way (each step alone from where the arm is would be within it)
+  CHECK(is_ok(c.ask(42, "\"cmd\":\"movej\",\"q\":[0,0.3,-0.6,0,0.6,0],\"speed_pct\":100")));
+  for (const double end = now_s() + 20; now_s() < end && rig.tel().done_id < 1;) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  std::string rel = "G21\nG91\n";
+  for (int k = 0; k < 10; ++k) rel += "G1 X150 F3000\n";
+  const std::string one = c.ask(43, "\"cmd\":\"program_check\",\"gcode\":true,\"text\":" + jstr("G21\nG91\nG1 X150 F3000\n"));
+  CHECK_TEXT(is_ok(one), one.c_str());
+  const std::string rl = c.ask(44, "\"cmd\":\"program_check\",\"gcode\":true,\"text\":" + jstr(rel));
+  CHECK_TEXT(!is_ok(rl) && int_field(rl, "line") > 3 && int_field(rl, "line") <= 12, rl.c_str());
+}
+
 TEST(FwApi, ProgramCheckNamesTheRefusedLineAndRunMovesNothing) {
   Rig rig;
   Client c(rig.port());

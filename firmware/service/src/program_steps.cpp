@@ -90,7 +90,7 @@ MoveResult ArmService::step_move(const prog::Program&, const prog::ProgramStep& 
     if (point != nullptr) {
       m.target = fk_or_nan(ch, *point);  // where the point's joints put the tool, on a straight line
     } else {
-      kin::Pose at = F.inverse() * fk_or_nan(ch, tail());
+      kin::Pose at = F.inverse() * fk_or_nan(ch, cx.dry != nullptr ? cx.dry->tail : tail());
       at.translation() = Eigen::Vector3d(u.length_in(c.vals[0]), u.length_in(c.vals[1]), u.length_in(c.vals[2]));
       if (c.count == 6) at.linear() = kin::rotation_from_rpy(u.angle_in(c.vals[3]), u.angle_in(c.vals[4]), u.angle_in(c.vals[5]));
       m.target = F * at;
@@ -102,7 +102,7 @@ MoveResult ArmService::step_move(const prog::Program&, const prog::ProgramStep& 
   // G0 / G1: the axes given replace (G90) or move (G91) the queue's end pose, in G-code's units.
   const ConsoleUnits& g = kGcodeUnits;
   const kin::Pose G = c.g53 ? kin::Pose::Identity() : F;
-  const kin::Pose cur = G.inverse() * fk_or_nan(ch, tail());
+  const kin::Pose cur = G.inverse() * fk_or_nan(ch, cx.dry != nullptr ? cx.dry->tail : tail());
   m.target = cur;
   Eigen::Vector3d rpy = kin::rpy_from_rotation(cur.linear());
   for (int k = 0; k < 6; ++k) {
