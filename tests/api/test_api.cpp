@@ -787,7 +787,7 @@ TEST(FwApi, ProgramRunPauseStepResumeAbort) {
   CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(rig.tel().state));
   const std::string end = c.ask(951, "\"cmd\":\"state\"");
   CHECK_TEXT(program_state(end) == "idle", end.c_str());
-  CHECK_EQUAL("bad_state", error_of(c.ask(952, "\"cmd\":\"program_step\"")));
+  CHECK_EQUAL(std::string("bad_state"), error_of(c.ask(952, "\"cmd\":\"program_step\"")));
 }
 
 // Teach points over the API: teach stores the arm's joints, points lists them, point_go moves

@@ -27,8 +27,8 @@ struct Rig {
   std::vector<kin::JointVector> trace;  ///< q_cmd after every cycle
   bool record = false;
 
-  Rig() {
-    FwConfig cfg;
+  explicit Rig(const FwConfig& base = {}) {
+    FwConfig cfg = base;
     cfg.can = "sim";
     const std::string e = app.build(cfg, &clock);
     if (!e.empty()) FAIL(e.c_str());
@@ -217,4 +217,54 @@ TEST(FwStream, BadTargetsAreRefused) {
   StreamService strict(rig.svc(), *rig.app.ctl, s);
   const StreamResult r = strict.target(jump + kin::JointVector::Constant(6, 0.0), true);
   CHECK_EQUAL(static_cast<int>(CmdError::out_of_range), static_cast<int>(r.error));
+}
+
+// The safety envelope (docs/safety.md) checks each streamed target before the control thread
+// gets it: a target whose tool sphere is beyond a plane is refused with the plane's line, the
+// stream keeps its last target, and the arm stays on the allowed side.
+TEST(FwStream, ATargetBeyondASafetyPlaneIsRefused) {
+  double z0 = 0;
+  kin::JointVector q0;
+  {
+    Rig plain;
+    plain.enable();
+    q0 = plain.q_cmd();
+    kin::Pose p;
+    CHECK(kin::forward(plain.svc().tool_chain(plain.svc().active_tool()), q0, p) == kin::Status::ok);
+    z0 = p.translation().z();
+  }
+  FwConfig c;
+  c.safety_planes = {0, 0, -1, -(z0 * 1000.0 + 30.0)};  // a ceiling 30 mm above the tool: z <= z0 + 30 mm
+  c.safety_tool_radius_mm = 10;
+  Rig rig(c);
+  rig.enable();
+  const kin::Chain& ch = rig.svc().tool_chain(rig.svc().active_tool());
+  auto z_of = [&](const kin::JointVector& q) {
+    kin::Pose p;
+    CHECK(kin::forward(ch, q, p) == kin::Status::ok);
+    return p.translation().z();
+  };
+  // a target that lifts the tool 40 mm or more (the shoulder or the elbow, within 0.3 rad)
+  kin::JointVector up = q0;
+  bool found = false;
+  for (int j = 1; j <= 2 && !found; ++j)
+    for (const double d : {0.3, -0.3}) {
+      kin::JointVector q = q0;
+      q[j] += d;
+      if (z_of(q) > z0 + 0.040) {
+        up = q;
+        found = true;
+        break;
+      }
+    }
+  CHECK_TEXT(found, "no 0.3 rad shoulder or elbow step lifts the tool 40 mm");
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  CHECK(st.target(q0, true).ok());
+  rig.run(0.05);
+  const StreamResult r = st.target(up, false);
+  CHECK_FALSE(r.ok());
+  CHECK_EQUAL(static_cast<int>(CmdError::limits), static_cast<int>(r.error));
+  STRCMP_CONTAINS("safety plane 0", r.reason.c_str());
+  rig.run(0.5);
+  CHECK(z_of(rig.q_cmd()) < z0 + 0.030);
 }

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <utility>
 
 namespace servoarm::fw {
 
@@ -56,6 +57,14 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
     }
     q[j] = from[j] + std::copysign(step, d);
     r.clamped = true;
+  }
+  // The safety envelope (docs/safety.md): the target's tool (and elbow) sphere, planes, boxes
+  // and orientation, with the active tool. Speed is the control thread's: it tracks within the
+  // limits, and its monitor scales or stops.
+  if (std::string why = svc_.check_target(from, q, 0.0, &svc_.tool_chain(svc_.active_tool())); !why.empty()) {
+    r.error = CmdError::limits;
+    r.reason = std::move(why);
+    return r;
   }
   Request rq;
   rq.op = RequestOp::jog;
