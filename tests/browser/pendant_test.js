@@ -373,7 +373,10 @@ async function main() {
       const s1 = await tcp.state();
       assert(Math.abs(s1.q[0] - goal[0]) > 0.05, `the movej reached its goal (${s1.q[0]}): the stop did not stop it`);
       await shot(page, 'pendant-stopped');
-      // the space bar stops too
+      // the space bar stops too: a second long move, from where the first stopped the other way
+      // (2 rad), so the key comes in its middle however slow the machine is
+      const goal2 = s1.q.map((v, j) => (j === 0 ? v + 2.0 : v));
+      await page.$eval('#movej-q', (e, g) => { e.value = g; }, goal2.map((v) => v.toFixed(4)).join(', '));
       await page.click('#movej-form button[type=submit]');
       const moving2 = await until('the movej running again', async () => {
         const s = await tcp.state();
@@ -384,7 +387,7 @@ async function main() {
       await page.keyboard.press('Space');
       const b2 = await brakeTimes(tcp, 0, moving2.qd_cmd[0]);
       figure(`space bar during a movej at ${moving2.qd_cmd[0].toFixed(3)} rad/s -> standstill ${((now() - t1) * 1000).toFixed(0)} ms after the key press began; braking to rest ${b2} ms of the arm's clock`);
-      assert(Math.abs((await tcp.state()).q[0] - goal[0]) > 0.05, 'the movej reached its goal: the space bar did not stop it');
+      assert(Math.abs((await tcp.state()).q[0] - goal2[0]) > 0.05, 'the movej reached its goal: the space bar did not stop it');
     });
 
     await check('a program with an unreachable line 3 shows the error on line 3 and does not run', async () => {

@@ -42,6 +42,7 @@ struct Rig {
   Rig() {
     McapSettings s = svc.mcap_settings();
     s.dir = dir;
+    s.threaded = false;  // the manual clock's cycles are polled by run(), the console's `record mcap` too
     svc.set_mcap_settings(s);
   }
   ~Rig() { test::remove_tree(dir); }

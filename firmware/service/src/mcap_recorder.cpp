@@ -190,6 +190,7 @@ std::string McapRecorder::start(const McapSettings& s, double rate_hz, bool thre
     status_.active = true;
   }
   quit_ = false;
+  threaded_ = threaded;
   if (threaded) {
     thread_ = std::thread([this] {
       ::pthread_setname_np(::pthread_self(), "mcap-recorder");  // top -H, the CPU figures in tests/bench

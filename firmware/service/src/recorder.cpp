@@ -160,7 +160,7 @@ std::string ArmService::record_mcap_start(double rate_hz, bool threaded) {
   if (ctl_ == nullptr) return "no control thread (a dry run records nothing)";
   if (!mcap_) mcap_ = std::make_unique<McapRecorder>(*ctl_, ctl_->chain());
   mcap_seq_ = next_seq_ - 1;
-  return mcap_->start(mcap_cfg_, rate_hz, threaded);
+  return mcap_->start(mcap_cfg_, rate_hz, threaded && mcap_cfg_.threaded);
 }
 
 McapStatus ArmService::record_mcap_stop() {
@@ -173,7 +173,7 @@ McapStatus ArmService::mcap_status() const { return mcap_ ? mcap_->status() : Mc
 
 void ArmService::mcap_poll() {
   mcap_events();
-  if (mcap_) mcap_->poll();
+  if (mcap_ && !mcap_->threaded()) mcap_->poll();  // a recorder thread polls on its own
 }
 
 // The service's new events to the recorder (the service thread: the event ring's reader).

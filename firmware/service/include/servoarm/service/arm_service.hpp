@@ -542,6 +542,7 @@ struct McapSettings {
   int max_files = 0;               ///< files of one recording at most (then it ends); 0 no limit
   std::size_t chunk_kb = 256;      ///< chunk size (also flushed every second: the loss at a power cut)
   int priority = 0;                ///< the recorder thread's SCHED_FIFO priority (below the control thread's); 0 normal
+  bool threaded = true;            ///< false: no recorder thread, the caller polls (mcap_poll(); tests on a manual clock)
 };
 
 struct McapStatus {
@@ -905,7 +906,9 @@ class ArmService {
   /// the setpoints, the events and the robot description into files in settings().dir.
   /// Start: "" or why not (no folder, a rate out of range, already recording); stop: the
   /// recording's figures (files, frames, missed cycles), error bad_state when none runs.
-  /// `threaded` false: the caller polls (mcap_poll(); tests on a manual clock).
+  /// `threaded` false (or the settings' `threaded` false): the caller polls (mcap_poll(); tests
+  /// on a manual clock). mcap_poll() polls only such a recording: a recorder thread is the only
+  /// writer of its file.
   void set_mcap_settings(const McapSettings& s) { mcap_cfg_ = s; }
   const McapSettings& mcap_settings() const { return mcap_cfg_; }
   std::string record_mcap_start(double rate_hz, bool threaded = true);

@@ -43,6 +43,8 @@ class McapRecorder {
   McapStatus stop();
   McapStatus status() const;
   bool active() const { return active_.load(); }
+  /// The recording runs on its own thread (poll() is that thread's).
+  bool threaded() const { return threaded_; }
   /// Service thread: an event of the service's stream and its detail line.
   void event(const ArmEvent& e, std::string_view detail);
   /// One look at the telemetry: writes the cycle when due, and the events waiting.
@@ -61,6 +63,7 @@ class McapRecorder {
   std::atomic<bool> active_{false};
   std::atomic<bool> quit_{false};
   std::thread thread_;
+  bool threaded_ = false;  ///< set by start() before the thread begins
   mutable std::mutex mu_;  ///< status_, events_
   McapStatus status_;
   std::vector<std::pair<std::uint64_t, std::string>> events_;
