@@ -25,6 +25,7 @@
 #include <thread>
 #include <vector>
 
+#include "servoarm/api/foxglove.hpp"
 #include "servoarm/api/server.hpp"
 #include "servoarm/lang/ik_options.hpp"
 #include "servoarm/rt/rt_loop.hpp"
@@ -867,4 +868,26 @@ TEST(FwApi, CartesianJogAndFeedOverride) {
   CHECK_EQUAL(40, int_field(st, "feed_pct"));
   STRCMP_EQUAL("out_of_range", error_of(c.ask(8, "\"cmd\":\"feed_override\",\"pct\":500")).c_str());
   CHECK_EQUAL(40, rig.app.console->service().feed_override());
+}
+
+// The Foxglove server has no authentication: it listens on loopback only and refuses any other
+// address in one line, before it opens anything.
+TEST(FwApi, FoxgloveServerRefusesABindBeyondLoopback) {
+  Rig rig;
+  for (const char* bind : {"0.0.0.0", "::", "192.168.1.10"}) {
+    api::FoxgloveConfig fc;
+    fc.bind = bind;
+    fc.port = 0;
+    fc.rate_hz = rig.app.cfg.rate_hz;
+    api::FoxgloveServer fox(fc, *rig.app.ctl, rig.app.chain);
+    const std::string e = fox.start();
+    CHECK_TEXT(e.find("loopback only") != std::string::npos, (std::string(bind) + ": " + e).c_str());
+    fox.stop();
+  }
+  api::FoxgloveConfig lo;
+  lo.port = 0;
+  lo.rate_hz = rig.app.cfg.rate_hz;
+  api::FoxgloveServer fox(lo, *rig.app.ctl, rig.app.chain);
+  STRCMP_EQUAL("", fox.start().c_str());
+  fox.stop();
 }

@@ -4,6 +4,7 @@
 // connect; a client sends `subscribe` / `unsubscribe`; each message goes to a subscriber as a
 // binary frame: opcode 0x01, subscription id (u32 LE), receive time (u64 LE, ns), the JSON.
 #include "servoarm/api/foxglove.hpp"
+#include "servoarm/api/server.hpp"
 
 #include <libwebsockets.h>
 #include <time.h>
@@ -354,6 +355,10 @@ std::string FoxgloveServer::start() {
   Impl& s = *impl_;
   if (s.ctx != nullptr) return "";
   if (!(s.cfg.state_rate_hz > 0) || !(s.cfg.tf_rate_hz > 0)) return "foxglove: rates must be > 0";
+  // The Foxglove WebSocket protocol carries no authentication: the server listens on this
+  // machine only, and a viewer elsewhere reaches it through a tunnel (ssh -L).
+  if (!is_loopback(s.cfg.bind))
+    return "foxglove.bind = " + s.cfg.bind + ": loopback only (the Foxglove protocol has no authentication; use ssh -L from the viewer)";
   lws_set_log_level(LLL_ERR, nullptr);
   lws_context_creation_info info;
   std::memset(&info, 0, sizeof info);

@@ -46,12 +46,6 @@ bool same_token(const std::string& a, const std::string& b) {
   return diff == 0;
 }
 
-bool is_loopback(const std::string& addr) {
-  if (addr == "localhost" || addr == "::1") return true;
-  in_addr a{};
-  return inet_pton(AF_INET, addr.c_str(), &a) == 1 && (ntohl(a.s_addr) >> 24) == 127;
-}
-
 enum class Role : std::uint8_t { none, observer, operator_ };
 const char* role_name(Role r) {
   switch (r) {
@@ -727,5 +721,11 @@ std::size_t ApiServer::pump(ServiceContext& cx) {
 }
 
 std::uint64_t ApiServer::controller() const { return impl_->controller.load(); }
+
+bool is_loopback(const std::string& addr) {
+  if (addr == "localhost" || addr == "::1") return true;
+  in_addr a{};
+  return inet_pton(AF_INET, addr.c_str(), &a) == 1 && (ntohl(a.s_addr) >> 24) == 127;
+}
 
 }  // namespace servoarm::api

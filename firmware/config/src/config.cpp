@@ -541,7 +541,7 @@ const ConfigKey kConfigTable[] = {
     K{"foxglove.enabled", &F::foxglove_enabled, "",
       "the Foxglove WebSocket server (docs/foxglove-mcap.md): joint states, link transforms, the tool pose and the "
       "events for Foxglove or Lichtblick (`armfw --foxglove-port PORT` turns it on)"},
-    K{"foxglove.bind", &F::foxglove_bind, "", "the address the Foxglove server listens on (loopback by default)"},
+    K{"foxglove.bind", &F::foxglove_bind, "", "the address the Foxglove server listens on: a loopback address only (the Foxglove protocol carries no authentication; a viewer elsewhere uses an ssh tunnel)"},
     K{"foxglove.port", &F::foxglove_port, "", "the Foxglove server's port (0: any free port, printed)"}.within(0, 65535),
     K{"foxglove.state_rate_hz", &F::foxglove_state_rate_hz, "Hz",
       "joint states and tool pose messages per second (at most the control rate)"}

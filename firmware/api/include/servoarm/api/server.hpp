@@ -54,6 +54,10 @@ struct ApiStats {
   int clients = 0;
 };
 
+/// A loopback address (127.0.0.0/8, ::1, localhost): a listener there is reachable from this
+/// machine only.
+bool is_loopback(const std::string& addr);
+
 class ApiServer {
  public:
   ApiServer(const ApiConfig& cfg, fw::Controller& ctl, const kin::Chain& chain, const kin::JointLimits& limits);
