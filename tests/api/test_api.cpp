@@ -135,6 +135,7 @@ struct Rig {
     const int slow = servoarm::test::kSlowBuild ? 10 : 1;
     cfg.feedback_timeout_ms = 1000 * slow;
     cfg.heartbeat_timeout_ms = 1000 * slow;
+    cfg.sdo_timeout_ms = 1000.0 * slow;  // the simulated drives answer on a thread a busy machine may stall
     cfg.following_error_deg = 30;
     std::string e = app.build(cfg);
     CHECK_TEXT(e.empty(), e.c_str());
@@ -384,7 +385,9 @@ TEST(FwApi, ANonReadingSubscriberDelaysNobody) {
     CHECK_TEXT(is_ok(a), a.c_str());
     worst = std::max(worst, now_s() - t0);
   }
-  CHECK_TEXT(worst < 0.1, std::to_string(worst).c_str());
+  // a client held up by the other's full buffers would wait until it reads (never, here);
+  // 0.1 s (1 s under the sanitizers) is a busy machine's scheduling, not a wait for it
+  CHECK_TEXT(worst < 0.1 * (servoarm::test::kSlowBuild ? 10 : 1), std::to_string(worst).c_str());
   CHECK_TEXT(rig.server->stats().dropped > 0, std::to_string(n).c_str());
   // once it reads, its samples say how many it lost
   std::uint64_t dropped = 0;
