@@ -127,6 +127,22 @@ void BM_FwCycleFixed_Movej(benchmark::State& state) {
 }
 BENCHMARK(BM_FwCycleFixed_Movej)->UseManualTime()->Iterations(kFixedCycles);
 
+// Movej while a recorder takes every cycle (Controller::start_samples(1), the ring emptied
+// outside the timed cycle as the recorder's thread would): the control thread's cost of an
+// MCAP recording at the control rate.
+void BM_FwCycleFixed_MovejSampled(benchmark::State& state) {
+  FwRig r;
+  r.app.ctl->start_samples(1);
+  fw::CycleSample c;
+  run_cycles(state, r, [&r, &c](int k) {
+    while (r.app.ctl->pop_sample(c)) {
+    }
+    return r.command(k % 2 ? "movej 20 -40 160 10 -50 30 speed=60" : "movej -20 -60 140 -10 -30 -30 speed=60");
+  });
+  state.counters["dropped"] = static_cast<double>(r.app.ctl->samples_dropped());
+}
+BENCHMARK(BM_FwCycleFixed_MovejSampled)->UseManualTime()->Iterations(kFixedCycles);
+
 void BM_FwCycleFixed_Movel(benchmark::State& state) {
   FwRig r;
   if (r.ok) r.ok = r.command("movej 20 -40 160 10 -50 30 speed=100") && r.command("wait") && r.command("G91");

@@ -20,7 +20,7 @@ run() {  # run RATE (0: no recording)
   if [ "$rate" != 0 ]; then echo "record mcap rate=$rate" >&7; fi
   sleep "$sec"
   for t in /proc/$pid/task/*; do
-    if [ "$(cat "$t/comm")" = mcap-recorder ]; then
+    if [ "$(cat "$t/comm" 2>/dev/null)" = mcap-recorder ]; then  # a thread may end meanwhile
       tid=$(awk '{print $14+$15}' "$t/stat"); rec_cpu=$tid
     fi
   done

@@ -14,8 +14,9 @@
 //  MCAP:  `record mcap rate=1000` for RECORD_S seconds (a few seconds here, not the
 //         10 minutes of a soak run: pass --record-s 600 for that) then at 100 Hz: the indexed
 //         reader reads the summary; every message decodes; log times increase on every channel;
-//         state frames are consecutive cycles (step 1 at 1 kHz, 10 at 100 Hz) except the missed
-//         cycles the recorder reports (counted, never silent: frames + missed = the span); the
+//         state frames are consecutive cycles (step 1 at 1 kHz, 10 at 100 Hz) with none missed
+//         (the control thread keeps 2 s of cycles for the recorder), and any missed cycle would
+//         be reported (counted, never silent: frames + missed = the span); the
 //         robot description and events are in; a copy cut in the middle of a chunk reads in
 //         the streaming reader up to its last whole chunk.
 // Exit 0 pass, 1 fail, 77 skipped (node_modules missing).
@@ -185,7 +186,7 @@ async function main() {
   const a2 = await api({ id: 3, cmd: "record_mcap", stop: true });
   check(a2.ok === true && a2.file === a1.file && a2.frames > 300 && a2.frames + a2.missed >= 450,
         `API record_mcap stop: ${a2.frames} frames, ${a2.missed} missed`);
-  await verify(a1.file, 2, [null, null, null, String(a2.frames), null, String(a2.missed)], false);
+  await verify(a1.file, 2, [null, null, String(a2.files), String(a2.frames), null, String(a2.missed)], false);
   sock.destroy();
   const refused = await answer("record mcap rate=5000", /\n?(error[^\n]*)\n/);
   check(/rate .*outside/.test(refused[1]), `a rate above the control rate is refused: ${refused[1]}`);
@@ -198,30 +199,50 @@ async function main() {
   fs.rmSync(dir, { recursive: true, force: true });
 }
 
-async function verify(file, step, stop, cut) {
-  const bytes = fs.readFileSync(file);
-  const readable = { size: async () => BigInt(bytes.length), read: async (o, n) => bytes.subarray(Number(o), Number(o + n)) };
-  const r = await mcap.McapIndexedReader.Initialize({ readable });
-  const topics = new Map([...r.channelsById.values()].map((c) => [c.id, c.topic]));
-  const schemas = [...r.schemasById.values()];
-  check(schemas.every((s) => s.encoding === "jsonschema" && JSON.parse(new TextDecoder().decode(s.data)).type === "object"),
-        `${path.basename(file)}: ${schemas.length} JSON schemas`);
+// The files of one recording (`record mcap stop` said how many: a new file begins at
+// record.max_file_mb): the first one and the ones after it by name.
+function recordingFiles(first, count) {
+  const dir = path.dirname(first);
+  const all = fs.readdirSync(dir).filter((f) => f.endsWith(".mcap")).sort();
+  const i = all.indexOf(path.basename(first));
+  return all.slice(i, i + count).map((f) => path.join(dir, f));
+}
+
+async function verify(first, step, stop, cut) {
+  const files = recordingFiles(first, Number(stop[2] || 1));
   const per = {};
-  let bad = 0, nonMono = 0;
+  let bad = 0, nonMono = 0, r = null, bytes = null, described = 0;
   const lastT = {};
-  for await (const m of r.readMessages()) {
-    const topic = topics.get(m.channelId);
-    let j;
-    try { j = JSON.parse(new TextDecoder().decode(m.data)); } catch (e) { bad++; continue; }
-    if (lastT[topic] !== undefined && m.logTime < lastT[topic]) nonMono++;  // events of one cycle share its time
-    lastT[topic] = m.logTime;
-    (per[topic] = per[topic] || []).push(j);
+  for (const file of files) {
+    const fileBytes = fs.readFileSync(file);
+    const readable = { size: async () => BigInt(fileBytes.length), read: async (o, n) => fileBytes.subarray(Number(o), Number(o + n)) };
+    const fr = await mcap.McapIndexedReader.Initialize({ readable });
+    if (r === null) { r = fr; bytes = fileBytes; }
+    const topics = new Map([...fr.channelsById.values()].map((c) => [c.id, c.topic]));
+    const schemas = [...fr.schemasById.values()];
+    check(schemas.every((s) => s.encoding === "jsonschema" && JSON.parse(new TextDecoder().decode(s.data)).type === "object"),
+          `${path.basename(file)}: ${schemas.length} JSON schemas`);
+    let inFile = 0;
+    for await (const m of fr.readMessages()) {
+      const topic = topics.get(m.channelId);
+      let j;
+      try { j = JSON.parse(new TextDecoder().decode(m.data)); } catch (e) { bad++; continue; }
+      if (lastT[topic] !== undefined && m.logTime < lastT[topic]) nonMono++;  // events of one cycle share its time
+      lastT[topic] = m.logTime;
+      if (topic === "/robot_description") {
+        described++;
+        if (j.rows.length >= 6) continue;
+      }
+      (per[topic] = per[topic] || []).push(j);
+      ++inFile;
+    }
+    check(fr.statistics && Number(fr.statistics.messageCount) === inFile + 1,
+          `${path.basename(file)}: the summary's statistics count every message (${fr.statistics && fr.statistics.messageCount})`);
   }
   const states = per["/arm/state"] || [];
-  check(bad === 0, `every message decodes (${Object.entries(per).map(([k, v]) => `${k} ${v.length}`).join(", ")})`);
+  check(bad === 0, `every message of ${files.length} file(s) decodes (${Object.entries(per).map(([k, v]) => `${k} ${v.length}`).join(", ")})`);
   check(nonMono === 0, `log times never decrease on any channel (${nonMono} did)`);
-  check(r.statistics && Number(r.statistics.messageCount) === Object.values(per).reduce((a, v) => a + v.length, 0),
-        `the summary's statistics count every message (${r.statistics && r.statistics.messageCount})`);
+  check(described === files.length && !per["/robot_description"], `the robot description (its DH rows) in each of the ${files.length} file(s)`);
   let gaps = 0, wrongStep = 0;
   for (let i = 1; i < states.length; i++) {
     const d = states[i].cycle - states[i - 1].cycle;
@@ -231,11 +252,12 @@ async function verify(file, step, stop, cut) {
   const frames = Number(stop[3]), missed = Number(stop[5]);
   check(states.length === frames && wrongStep === 0, `${states.length} state frames (record mcap stop said ${frames}), every one a multiple of ${step} cycles apart`);
   const span = (states.at(-1).cycle - states[0].cycle) / step + 1;
-  // every cycle due is written or reported missed: nothing is lost silently
+  // every cycle due is written or reported missed: nothing is lost silently; and the control
+  // thread's sample ring (2 s at 1 kHz) keeps every cycle for a recorder kept off the CPU
   check(gaps <= missed && states.length + gaps === span, `frames ${states.length} + gaps ${gaps} = span ${span} cycles; missed reported ${missed}`);
-  console.log(`     ${path.basename(file)}: ${states.length} of ${span} due cycles written (${(100 * states.length / span).toFixed(2)} %), ${missed} missed`);
+  check(missed === 0 && gaps === 0, `every cycle due is in the file (${missed} missed, ${gaps} gaps)`);
+  console.log(`     ${path.basename(first)} (${files.length} file(s)): ${states.length} of ${span} due cycles written (${(100 * states.length / span).toFixed(2)} %), ${missed} missed`);
   check((per["/arm/setpoint"] || []).length === states.length, "a setpoint message per state frame");
-  check((per["/robot_description"] || []).length === 1 && per["/robot_description"][0].rows.length >= 6, "the robot description (its DH rows)");
   if (step === 1) check((per["/arm/events"] || []).length > 0, `events recorded (${(per["/arm/events"] || []).length})`);
   if (!cut) return;
   // A copy cut in the middle of its second-last chunk: the streaming reader reads up to the last whole chunk.

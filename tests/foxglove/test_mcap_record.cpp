@@ -78,17 +78,44 @@ TEST(McapRecord, EveryCycleIsAFrameAtTheControlRate) {
   }
 }
 
-// A recorder that did not look for three periods: those cycles are counted as missed, never
-// silently absent.
-TEST(McapRecord, UnseenCyclesAreCountedAsMissed) {
+// A recorder that did not look for half a second (500 cycles at 1 kHz: its thread kept off the
+// CPU) still writes every one of them: the control thread kept them in its sample ring.
+TEST(McapRecord, CyclesARecorderDidNotLookAtAreStillWritten) {
   Rig g;
   CHECK_EQUAL(std::string(""), g.svc.record_mcap_start(1000, false));
   g.run(100);
-  for (int i = 0; i < 3; ++i) g.r.cycle();
+  for (int i = 0; i < 500; ++i) g.r.cycle();
   g.run(100);
   const McapStatus s = g.svc.record_mcap_stop();
-  LONGS_EQUAL(3, s.missed);
-  CHECK(s.frames >= 199 && s.frames <= 201);
+  LONGS_EQUAL(0, s.missed);
+  CHECK_TEXT(s.frames >= 699 && s.frames <= 701, std::to_string(s.frames).c_str());
+}
+
+// Longer than the ring holds: the cycles it could not keep are counted as missed, never
+// silently absent, and every cycle it kept is written.
+TEST(McapRecord, CyclesBeyondTheRingAreCountedAsMissed) {
+  Rig g;
+  CHECK_EQUAL(std::string(""), g.svc.record_mcap_start(1000, false));
+  g.run(100);
+  const int unseen = static_cast<int>(Controller::kSampleRing) + 37;
+  for (int i = 0; i < unseen; ++i) g.r.cycle();
+  g.run(100);
+  const McapStatus s = g.svc.record_mcap_stop();
+  LONGS_EQUAL(37 + 1, s.missed);  // and run()'s first cycle, which comes before its first look
+  const std::uint64_t want = 100 + Controller::kSampleRing + 99;
+  CHECK_TEXT(s.frames + 1 >= want && s.frames <= want + 1, std::to_string(s.frames).c_str());
+}
+
+// At 100 Hz the ring carries only the cycles due: 20 s without a look (2 000 of them) lose none.
+TEST(McapRecord, BelowTheControlRateTheRingHoldsOnlyTheCyclesDue) {
+  Rig g;
+  CHECK_EQUAL(std::string(""), g.svc.record_mcap_start(100, false));
+  g.run(100);
+  for (int i = 0; i < 20000; ++i) g.r.cycle();
+  g.run(100);
+  const McapStatus s = g.svc.record_mcap_stop();
+  LONGS_EQUAL(0, s.missed);
+  CHECK_TEXT(s.frames >= 2019 && s.frames <= 2021, std::to_string(s.frames).c_str());
 }
 
 // The console's command; a second recording is a new file; the old one is untouched.

@@ -1359,3 +1359,48 @@ TEST(RtThread, SimDrivesSteppedOnTheControlThreadRideThroughAStall) {
   for (int j = 0; j < 6; ++j) q[j] = t.q_act[std::size_t(j)];
   CHECK(max_abs_diff(q, goal * kDeg) < 0.01 * kDeg);
 }
+
+// The sample ring a recorder reads (Controller::start_samples): every cycle due, in order, with
+// the joints the cycle commanded and measured; a full ring counts the cycles it could not keep;
+// the control cycle allocates nothing while it fills the ring.
+TEST(Controller, SampleRingCarriesEveryCycleDueAndCountsTheOnesItCouldNotKeep) {
+  Rig r;
+  r.enable();
+  r.app.ctl->start_samples(1);
+  CHECK(is_ok(r.cmd("movej 10 -20 30 5 20 -15 speed=100")));
+  r.run(1.0);  // 1 000 cycles of the move: fewer than the ring holds
+  CycleSample c;
+  std::uint64_t prev = 0, taken = 0;
+  double largest_step = 0;
+  kin::JointVector q_prev(6);
+  while (r.app.ctl->pop_sample(c)) {
+    if (taken > 0) LONGS_EQUAL(prev + 1, c.cycles);
+    LONGS_EQUAL(6, c.n);
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = c.q_cmd[static_cast<std::size_t>(j)];
+    if (taken > 0) largest_step = std::max(largest_step, max_abs_diff(q, q_prev));
+    q_prev = q;
+    prev = c.cycles;
+    ++taken;
+  }
+  CHECK(taken > 10);
+  CHECK(largest_step > 0);  // the samples carry the moving setpoint
+  LONGS_EQUAL(r.tel().cycles, prev);  // up to the last cycle run
+  LONGS_EQUAL(0, r.app.ctl->samples_dropped());
+
+  r.app.ctl->start_samples(10);  // every 10th cycle; then nobody reads for longer than the ring
+  const std::uint64_t from = r.tel().cycles;
+  for (std::size_t i = 0; i < 10 * Controller::kSampleRing + 55; ++i) r.cycle();
+  std::uint64_t kept = 0;
+  while (r.app.ctl->pop_sample(c)) {
+    LONGS_EQUAL(0, c.cycles % 10);
+    ++kept;
+  }
+  LONGS_EQUAL(Controller::kSampleRing, kept);
+  const std::uint64_t due = (r.tel().cycles / 10) - (from / 10);
+  LONGS_EQUAL(due - Controller::kSampleRing, r.app.ctl->samples_dropped());
+  r.app.ctl->stop_samples();
+  r.run(0.05);
+  CHECK(!r.app.ctl->pop_sample(c));  // stopped: nothing more is taken
+  LONGS_EQUAL(0, r.rt_allocs);
+}

@@ -1186,6 +1186,39 @@ void Controller::publish() {
     t.feed_forward_cycles = ms.ff_cycles;
   }
   telemetry_.write(t);
+  if (sampling_.load(std::memory_order_acquire)) take_sample(t);
+}
+
+void Controller::take_sample(const Telemetry& t) {
+  if (t.cycles % sample_every_.load(std::memory_order_relaxed) != 0) return;
+  CycleSample* s = samples_->back();
+  if (s == nullptr) {  // the recorder is behind by a whole ring: counted, the cycle never waits
+    samples_dropped_.store(samples_dropped_.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+    return;
+  }
+  s->cycles = t.cycles;
+  s->state = t.state;
+  s->mode = t.mode;
+  s->holding = t.holding;
+  s->n = static_cast<std::uint8_t>(t.n);
+  s->torque_valid = t.torque_valid;
+  s->homed = t.homed;
+  s->running_id = t.running_id;
+  s->queued = t.queued;
+  s->q_cmd = t.q_cmd;
+  s->qd_cmd = t.qd_cmd;
+  s->q_act = t.q_act;
+  s->qd_act = t.qd_act;
+  s->tau_act = t.tau_act;
+  samples_->commit();
+}
+
+void Controller::start_samples(std::uint64_t every) {
+  sampling_.store(false, std::memory_order_release);
+  if (samples_ == nullptr) samples_ = std::make_unique<SpscQueue<CycleSample, kSampleRing>>();
+  samples_->clear();
+  sample_every_.store(every > 0 ? every : 1, std::memory_order_relaxed);
+  sampling_.store(true, std::memory_order_release);
 }
 
 namespace {

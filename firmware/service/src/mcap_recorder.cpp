@@ -27,7 +27,7 @@ std::string schema_state() {
          R"("q":)" + kNumbers + R"(,"qd":)" + kNumbers +
          R"(,"torque":{"type":"array","items":{"type":["number","null"]},"description":"null: the drive reports none"},)" +
          R"("following_error":)" + kNumbers + R"(,"running":{"type":"integer"},"queued":{"type":"integer"},"homed":{"type":"integer"},)" +
-         R"("missed":{"type":"integer","description":"due cycles the recorder did not see in time, since the recording began"}}})";
+         R"("missed":{"type":"integer","description":"due cycles the control thread could not keep for the recorder (its sample ring full), since the recording began"}}})";
 }
 std::string schema_setpoint() {
   return std::string(R"({"title":"servoarm.Setpoint","description":"the setpoints the control thread sent to the drives","type":"object","properties":{)") +
@@ -175,6 +175,8 @@ std::string McapRecorder::start(const McapSettings& s, double rate_hz, bool thre
   start_cycle_ = t.cycles;
   epoch_ns_ = wall_ns();
   next_ = (t.cycles / every_ + 1) * every_;
+  ctl_.start_samples(every_);
+  dropped_at_start_ = ctl_.samples_dropped();
   {
     std::lock_guard<std::mutex> l(mu_);
     status_ = McapStatus{};
@@ -201,12 +203,9 @@ std::string McapRecorder::start(const McapSettings& s, double rate_hz, bool thre
       }
       while (!quit_.load()) {
         poll();
-        // A quarter period while the next due cycle is one of the next two; below the control
-        // rate, asleep until about two periods before it (the cost scales with the recorded
-        // rate; the phase within the cycle seen is unknown, hence the margin).
-        const std::uint64_t ahead = next_ > seen_ + 2 ? next_ - seen_ - 2 : 0;
-        const double nap = ahead > 0 ? static_cast<double>(ahead) * period_ns_ : period_ns_ / 4;
-        timespec d{static_cast<time_t>(nap / 1e9), static_cast<long>(std::fmod(nap, 1e9))};
+        // The control thread keeps every cycle due in its sample ring (Controller::kSampleRing
+        // cycles, about 2 s at 1 kHz): a look every 10 ms writes them in batches.
+        timespec d{0, 10 * 1000 * 1000};
         ::nanosleep(&d, nullptr);
       }
     });
@@ -231,8 +230,8 @@ void McapRecorder::event(const ArmEvent& e, std::string_view detail) {
   events_.emplace_back(e.cycle, std::move(s));
 }
 
-void McapRecorder::write_state(const Telemetry& t) {
-  const int n = std::min(t.n, chain_.n_joints);
+void McapRecorder::write_state(const CycleSample& t) {
+  const int n = std::min(static_cast<int>(t.n), chain_.n_joints);
   const std::uint64_t ts = t_ns(t.cycles);
   std::uint64_t missed = 0;
   {
@@ -272,6 +271,7 @@ void McapRecorder::write_state(const Telemetry& t) {
 }
 
 void McapRecorder::end(std::string why) {
+  ctl_.stop_samples();
   w_.close();
   active_ = false;
   std::lock_guard<std::mutex> l(mu_);
@@ -281,17 +281,15 @@ void McapRecorder::end(std::string why) {
 
 void McapRecorder::poll() {
   if (!active_.load()) return;
-  const Telemetry t = ctl_.telemetry();
-  seen_ = t.cycles;
-  if (t.cycles >= next_) {
-    const std::uint64_t last_due = t.cycles - t.cycles % every_;
-    std::uint64_t missed = (last_due - next_) / every_ + (t.cycles == last_due ? 0 : 1);
-    if (missed) {
-      std::lock_guard<std::mutex> l(mu_);
-      status_.missed += missed;
-    }
-    next_ = last_due + every_;
-    if (t.cycles == last_due) write_state(t);
+  CycleSample c;
+  while (active_.load() && ctl_.pop_sample(c)) {
+    if (c.cycles < next_) continue;  // left from before this recording began
+    next_ = c.cycles + every_;
+    write_state(c);
+  }
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    status_.missed = ctl_.samples_dropped() - dropped_at_start_;
   }
   if (!active_.load()) return;
   std::vector<std::pair<std::uint64_t, std::string>> evs;
@@ -326,8 +324,9 @@ void McapRecorder::poll() {
 McapStatus McapRecorder::stop() {
   quit_ = true;
   if (thread_.joinable()) thread_.join();
+  ctl_.stop_samples();
   if (active_.load()) {
-    poll();  // the events handed over last
+    poll();  // the cycles and the events handed over last
     const std::uint64_t size = w_.size();
     const std::string e = w_.close();
     active_ = false;

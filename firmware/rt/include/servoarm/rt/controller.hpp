@@ -21,9 +21,11 @@
 //   outputs   (console -> RT)  OutputChange: a digital output set at once (M64 / M65, `out`)
 //   events    (RT -> console)  Event: faults, move finished/refused, state changes
 //   telemetry (RT -> anyone)   Telemetry snapshot (seqlock), published every cycle
+//   samples   (RT -> recorder) CycleSample of every cycle due, while a recorder asks for them
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <memory>
 
 #include "servoarm/rt/executor.hpp"
 #include "servoarm/rt/jog.hpp"
@@ -129,6 +131,21 @@ class Controller final : private SegmentHost {
   /// Events dropped because the event queue was full (counted, never silent).
   std::uint64_t events_dropped() const { return events_dropped_.load(std::memory_order_relaxed); }
 
+  /// Cycles the sample ring holds: at 1 kHz, a recorder may be kept off the CPU this many
+  /// periods (about 2 s) and still write every cycle.
+  static constexpr std::size_t kSampleRing = 2048;
+  /// One consumer thread (a recorder): from the next cycle on, every cycle whose number is a
+  /// multiple of `every` is copied into the sample ring by the control thread. The ring is
+  /// allocated here the first time (never on the control thread) and kept until destruction;
+  /// samples left from an earlier recording are dropped.
+  void start_samples(std::uint64_t every);
+  /// The consumer: no further samples are taken (those in the ring stay until popped).
+  void stop_samples() { sampling_.store(false, std::memory_order_release); }
+  /// The consumer: the oldest sample, false when none waits.
+  bool pop_sample(CycleSample& out) { return samples_ != nullptr && samples_->pop(out); }
+  /// Cycles due while the ring was full (not taken; counted, never silent), since construction.
+  std::uint64_t samples_dropped() const { return samples_dropped_.load(std::memory_order_relaxed); }
+
  /// Real-time / tests: the mode right now (the RT thread's view; others read Telemetry::mode).
   Mode mode() const { return mode_; }
   /// Real-time / tests: the running segment's phase (the motion executor's state, mode_table.hpp).
@@ -218,6 +235,11 @@ class Controller final : private SegmentHost {
   void apply_output(const OutputChange& c);
   Seqlock<Telemetry> telemetry_;
   std::atomic<std::uint64_t> events_dropped_{0};
+  void take_sample(const Telemetry& t);
+  std::unique_ptr<SpscQueue<CycleSample, kSampleRing>> samples_;  ///< allocated by start_samples()
+  std::atomic<bool> sampling_{false};
+  std::atomic<std::uint64_t> sample_every_{1};
+  std::atomic<std::uint64_t> samples_dropped_{0};
 
   Mode mode_ = Mode::boot;          ///< the arm's state: nothing beside it
   TimePoint now_ = 0;

@@ -215,4 +215,20 @@ struct Telemetry {
   std::uint32_t safety_stops = 0;  ///< protective stops and jogs stopped by the safety envelope
 };
 
+/// One control cycle's joint sample for a recorder (Controller::start_samples): what an MCAP
+/// state and setpoint message carry, copied by the control thread in that cycle, so a recorder
+/// that was not scheduled for a while still gets every cycle due.
+struct CycleSample {
+  std::uint64_t cycles = 0;
+  ArmState state = ArmState::boot;
+  Mode mode = Mode::boot;
+  bool holding = false;
+  std::uint8_t n = 0;
+  std::uint16_t torque_valid = 0;  ///< bit j: tau_act[j] is measured
+  std::uint16_t homed = 0;
+  std::uint32_t running_id = 0;
+  std::uint32_t queued = 0;
+  std::array<double, kin::kMaxJoints> q_cmd{}, qd_cmd{}, q_act{}, qd_act{}, tau_act{};
+};
+
 }  // namespace servoarm::fw

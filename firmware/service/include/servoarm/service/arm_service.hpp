@@ -550,7 +550,7 @@ struct McapStatus {
   double rate_hz = 0;
   std::string file;                ///< the file being written (the last one after stop)
   std::uint64_t frames = 0;        ///< state samples written
-  std::uint64_t missed = 0;        ///< due cycles not seen in time (not written)
+  std::uint64_t missed = 0;        ///< due cycles the control thread could not keep for the recorder (not written)
   std::uint64_t events = 0;
   int files = 0;
   std::uint64_t bytes = 0;         ///< in all files

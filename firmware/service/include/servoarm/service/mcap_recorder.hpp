@@ -7,13 +7,13 @@
 // at the file limit the recording ends. Files are never overwritten (O_EXCL; a taken name
 // gets the next number).
 //
-// Threads: a recorder thread of its own (non-real-time) reads the telemetry seqlock four times
-// per control period around each cycle due (cycle % decimation == 0; below the control rate it
-// sleeps in between) and writes it; the control thread
-// is never touched and never waits. A cycle the recorder did not see in time (the thread not
-// scheduled for longer than a period) is counted as missed, never silently: the count is in
-// every state message after it (`missed`) and in the result of `record mcap stop`. Events are
-// handed over by the service thread (event()) through a mutex-guarded list.
+// Threads: the control thread copies every cycle due (cycle % decimation == 0) into its sample
+// ring (Controller::start_samples; a fixed ring allocated before the recording starts, never
+// waited on); a recorder thread of its own (non-real-time) empties it every 10 ms and writes
+// the cycles. A cycle due while the ring was full (the recorder kept off the CPU for longer
+// than the ring holds) is counted as missed, never silently: the count is in every state
+// message after it (`missed`) and in the result of `record mcap stop`. Events are handed over
+// by the service thread (event()) through a mutex-guarded list.
 #include <atomic>
 #include <cstdint>
 #include <mutex>
@@ -52,7 +52,7 @@ class McapRecorder {
 
  private:
   std::string open_next();
-  void write_state(const Telemetry& t);
+  void write_state(const CycleSample& t);
   void end(std::string why);
   std::uint64_t t_ns(std::uint64_t cycle) const;
   Controller& ctl_;
@@ -68,8 +68,8 @@ class McapRecorder {
   McapStatus status_;
   std::vector<std::pair<std::uint64_t, std::string>> events_;
   std::uint64_t every_ = 1;      ///< decimation
-  std::atomic<std::uint64_t> next_{0};  ///< next cycle due
-  std::atomic<std::uint64_t> seen_{0};  ///< the cycle of the last look
+  std::uint64_t next_ = 0;       ///< next cycle due (the recorder's thread, or the caller of poll())
+  std::uint64_t dropped_at_start_ = 0;  ///< Controller::samples_dropped() when the recording began
   std::uint64_t start_cycle_ = 0;
   std::int64_t epoch_ns_ = 0;    ///< wall clock (ns) of cycle start_cycle_
   double period_ns_ = 1e6;
