@@ -194,7 +194,9 @@ constexpr ArgSpec kRecordMcap[] = {
     {"stop", ArgType::boolean, false, 0, 1, "true: ends the recording"}};
 constexpr ArgSpec kStream[] = {
     {"q", ArgType::numbers, true, -1e6, 1e6, "the newest joint target, one value per joint (rad / m)"},
-    {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"}};
+    {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"},
+    {"qd", ArgType::numbers, false, -1e6, 1e6,
+     "the target's joint velocities (rad/s / m/s); left out: estimated from this target and the one before"}};
 
 using C = ServiceCall;
 using R = ResultFields;
@@ -509,14 +511,17 @@ constexpr MessageSpec kMessages[] = {
        if (!r.ok()) return out.fail(r.error, std::string(fw::to_string(r.refusal)) + " (" + std::to_string(r.count) + " outputs)");
      }},
     {"stream", kStream, Gate::control, Where::service, "StreamService::target",
-     "streaming (servo) mode: the newest joint target, latest wins; the arm tracks it jerk-limited within its limits "
-     "and brakes to rest, ending the stream with an event, when no target comes within api.stream_deadman_ms; a stop "
+     "streaming (servo) mode: the newest joint target, latest wins, moving on at its velocity (`qd`, or estimated) "
+     "for up to twice the time between targets; the arm tracks it jerk-limited within its limits, matching its "
+     "velocity rather than stopping at each target, and brakes to rest, ending the stream with an event, when no target comes within api.stream_deadman_ms; a stop "
      "ends it (the next target must say start)",
      +[](C& c, R& out) {
        if (c.cx.stream == nullptr) return out.fail(CmdError::unsupported, "streaming targets are not available here");
        kin::JointVector q;
        if (!joints_of(c, "q", q, out)) return;
-       const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0);
+       kin::JointVector qd;
+       if (const ArgValue* v = c.rq.arg("qd"); v != nullptr && v->present && !joints_of(c, "qd", qd, out)) return;
+       const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0, qd);
        if (!r.ok()) return out.fail(r.error, r.reason);
        if (r.clamped) out.j["clamped"] = true;
      }},

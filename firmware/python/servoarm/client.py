@@ -88,8 +88,16 @@ class Stream:
         self._started = False
         self.clamped = 0
 
-    def send(self, q: Sequence[float]) -> None:
-        r = self._arm.call("stream", q=[float(v) for v in q], **({} if self._started else {"start": True}))
+    def send(self, q: Sequence[float], qd: Optional[Sequence[float]] = None) -> None:
+        """The newest target `q`, with its joint velocities `qd` when the application knows them
+        (otherwise the firmware estimates them from the targets' times): the arm follows a moving
+        target at its velocity instead of stopping at each one."""
+        args: Dict[str, Any] = {"q": [float(v) for v in q]}
+        if qd is not None:
+            args["qd"] = [float(v) for v in qd]
+        if not self._started:
+            args["start"] = True
+        r = self._arm.call("stream", **args)
         self._started = True
         if r.get("clamped"):
             self.clamped += 1

@@ -123,6 +123,41 @@ class ClientTest(unittest.TestCase):
             self.assertTrue(any(e["kind"] == "jog_stopped" and "stream stopped" in e["detail"]
                                 for e in arm.events(seq)))
 
+    def test_stream_with_velocities_moves_through_the_targets(self):
+        # 30 Hz of a 0.5 Hz sine on joint 0, each target with its velocity: mid-swing the arm's
+        # commanded velocity keeps the sine's sign and most of its size (it does not stop at
+        # each target); a wrong number of velocities is refused.
+        with self.arm() as arm:
+            arm.enable()
+            q0 = arm.state()["q_cmd"]
+            amp, w = 0.2, 2 * math.pi * 0.5
+            sub = arm.subscribe(200)
+            ratios = []
+            with arm.stream() as st:
+                t0 = time.monotonic()
+                while time.monotonic() - t0 < 2.0:
+                    t = time.monotonic() - t0
+                    q, qd = list(q0), [0.0] * len(q0)
+                    q[0] = q0[0] + amp * math.sin(w * t)
+                    qd[0] = amp * w * math.cos(w * t)
+                    st.send(q, qd)
+                    end = time.monotonic() + 1 / 30
+                    while time.monotonic() < end:
+                        try:
+                            s = sub.get(timeout=0.05)
+                        except Exception:
+                            continue
+                        ts = time.monotonic() - t0
+                        v = amp * w * math.cos(w * ts)
+                        if ts > 0.5 and abs(v) > 0.6 * amp * w:
+                            ratios.append(s["qd_cmd"][0] / v)
+                with self.assertRaises(ArmError) as e:
+                    st.send(q0, [0.0] * 5)
+                self.assertEqual(e.exception.code, "arg_count")
+            sub.close()
+            self.assertGreater(len(ratios), 20)
+            self.assertGreater(min(ratios), 0.3, ratios)
+
     def test_estop_from_another_client_ends_the_wait(self):
         with self.arm() as arm:
             arm.enable()

@@ -7,7 +7,7 @@
 
 namespace servoarm::fw {
 
-StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
+StreamResult StreamService::target(const kin::JointVector& q_in, bool start, const kin::JointVector& qd_in) {
   StreamResult r;
   const kin::JointLimits& lim = svc_.limits();
   const int n = lim.n;
@@ -31,6 +31,17 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
       return r;
     }
   }
+  if (qd_in.size() != 0 && qd_in.size() != n) {
+    r.error = CmdError::arg_count;
+    r.reason = "qd: expected " + std::to_string(n) + " joint velocities, got " + std::to_string(qd_in.size());
+    return r;
+  }
+  for (int j = 0; j < qd_in.size(); ++j)
+    if (!std::isfinite(qd_in[j])) {
+      r.error = CmdError::not_finite;
+      r.reason = "qd: joint " + std::to_string(j) + ": not finite";
+      return r;
+    }
   const Telemetry t = ctl_.telemetry();
   // The stream runs while the control thread says so, or the target before this one was taken
   // in the cycle the telemetry shows (its own publication may not have come yet).
@@ -66,6 +77,26 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
     r.reason = std::move(why);
     return r;
   }
+  // The target's velocity: the client's, or estimated from the target before and the time
+  // between them (the control thread's clock). The target moves on at it for `horizon` (twice
+  // the time between targets, at most the deadman time); a velocity that would carry it through
+  // the safety envelope within that time is dropped (the arm comes to rest at the target).
+  const double now = static_cast<double>(t.cycles) * ctl_.period_s();
+  const double gap = now - sent_t_;
+  const bool spaced = running && gap > 0 && gap <= cfg_.deadman_s;
+  kin::JointVector qd = kin::JointVector::Zero(n);
+  if (qd_in.size() == n)
+    qd = qd_in;
+  else if (spaced)
+    qd = (q - from) / gap;
+  const double horizon = spaced ? std::fmin(cfg_.deadman_s, 2 * gap) : cfg_.deadman_s;
+  if (qd.cwiseAbs().maxCoeff() > 0) {
+    const kin::JointVector ahead = q + qd * horizon;
+    bool inside = true;
+    for (int j = 0; j < n; ++j)
+      inside = inside && ahead[j] >= lim.lower[static_cast<std::size_t>(j)] && ahead[j] <= lim.upper[static_cast<std::size_t>(j)];
+    if (!inside || !svc_.check_target(q, ahead, 0.0, &svc_.tool_chain(svc_.active_tool())).empty()) qd.setZero();
+  }
   Request rq;
   rq.op = RequestOp::jog;
   rq.jog.space = JogSpace::joint;
@@ -74,6 +105,8 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
   rq.jog.q_goal = q;
   rq.jog.override = std::fmin(1.0, std::fmax(0.01, cfg_.speed_pct / 100.0));
   rq.jog.axis = -1;
+  rq.jog.qd_goal = qd;
+  rq.jog.horizon_s = horizon;
   Reply rep;
   if (!svc_.request(rq, rep)) {
     r.error = CmdError::timeout;
@@ -85,6 +118,7 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
       last_ = q;
       sent_ = true;
       sent_cycle_ = ctl_.telemetry().cycles;
+      sent_t_ = now;
       svc_.jog_forget();  // the next jog starts from the commanded position, not a jog's tail
       return r;
     case RtResult::busy: r.error = CmdError::busy; break;
