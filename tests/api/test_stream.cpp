@@ -406,3 +406,85 @@ TEST(FwStream, ATargetBeyondASafetyPlaneIsRefused) {
   rig.run(0.5);
   CHECK(z_of(rig.q_cmd()) < z0 + 0.030);
 }
+
+// Cartesian targets: a 30 Hz stream of tool poses (a 30 mm circle in the base frame's x-y plane,
+// the orientation kept) is solved by the service's IK with the active tool and followed: the tool
+// point by forward kinematics of q_cmd stays within a few mm of the circle. A pose out of reach,
+// NaN, and a pose whose solution is a large joint step are refused with one line and do not move
+// the arm (it keeps tracking its last target).
+TEST(FwStream, CartesianTargetsAreSolvedAndFollowed) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  const kin::Chain& ch = rig.svc().tool_chain(rig.svc().active_tool());
+  kin::Pose p0;
+  CHECK(kin::forward(ch, rig.q_cmd(), p0) == kin::Status::ok);
+  auto circle = [&](double t) {
+    kin::Pose p = p0;
+    p.translation() += Eigen::Vector3d(0.03 * (std::cos(2 * M_PI * 0.5 * t) - 1), 0.03 * std::sin(2 * M_PI * 0.5 * t), 0);
+    return p;
+  };
+  double t = 0, worst = 0;
+  bool first = true;
+  while (t < 3.0) {
+    const StreamResult r = st.target_pose(circle(t), false, first);
+    CHECK_TEXT(r.ok(), r.reason.c_str());
+    first = false;
+    for (int k = 0; k < 33; ++k) {
+      rig.cycle();
+      t += 1e-3;
+      kin::Pose p;
+      CHECK(kin::forward(ch, rig.q_cmd(), p) == kin::Status::ok);
+      if (t > 0.5) worst = std::max(worst, (p.translation() - circle(t).translation()).norm());
+    }
+  }
+  const std::string fig = "tool point off the circle by up to " + std::to_string(worst * 1e3) + " mm";
+  CHECK_TEXT(worst < 0.005, fig.c_str());
+  CHECK_TEXT(worst > 0, fig.c_str());
+  // bad poses: refused, the stream holds its last target
+  const kin::JointVector before = rig.q_cmd();
+  kin::Pose far = circle(t);
+  far.translation() += Eigen::Vector3d(5, 0, 0);
+  const StreamResult u = st.target_pose(far, false, false);
+  CHECK_EQUAL(static_cast<int>(CmdError::unreachable), static_cast<int>(u.error));
+  CHECK(u.reason.find('\n') == std::string::npos && !u.reason.empty());
+  kin::Pose nan = circle(t);
+  nan.translation().x() = std::nan("");
+  CHECK_EQUAL(static_cast<int>(CmdError::not_finite), static_cast<int>(st.target_pose(nan, false, false).error));
+  kin::Pose flipped = circle(t);  // the tool turned half round about z: far in joint space
+  flipped.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()).toRotationMatrix() * flipped.linear();
+  const StreamResult f = st.target_pose(flipped, false, false);
+  CHECK_FALSE(f.ok());
+  for (int k = 0; k < 60; ++k) rig.cycle();
+  kin::Pose p;
+  CHECK(kin::forward(ch, rig.q_cmd(), p) == kin::Status::ok);
+  CHECK((p.translation() - circle(t).translation()).norm() < 0.01);  // near the last good target
+  CHECK((rig.q_cmd() - before).cwiseAbs().maxCoeff() < 0.05);
+}
+
+// A pose in the active user frame: the frame's pose applied, the same joints as the base pose.
+TEST(FwStream, ACartesianTargetInTheActiveFrame) {
+  Rig rig;
+  rig.enable();
+  kin::Pose F = kin::Pose::Identity();
+  F.translation() = Eigen::Vector3d(0.1, -0.05, 0.02);
+  F.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  NamedPose def;
+  def.name = "table";
+  def.pose = F;
+  CHECK(rig.svc().define_frame(def).ok());
+  CHECK(rig.svc().select_frame("table").ok());
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  const kin::Chain& ch = rig.svc().tool_chain(rig.svc().active_tool());
+  kin::Pose p0;
+  CHECK(kin::forward(ch, rig.q_cmd(), p0) == kin::Status::ok);
+  kin::Pose goal = p0;
+  goal.translation() += Eigen::Vector3d(0, 0, 0.02);
+  for (int i = 0; i < 30; ++i) {
+    CHECK(st.target_pose(F.inverse() * goal, true, i == 0).ok());
+    rig.run(0.02);
+  }
+  kin::Pose p;
+  CHECK(kin::forward(ch, rig.q_cmd(), p) == kin::Status::ok);
+  CHECK((p.translation() - goal.translation()).norm() < 1e-4);
+}

@@ -197,6 +197,11 @@ constexpr ArgSpec kStream[] = {
     {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"},
     {"qd", ArgType::numbers, false, -1e6, 1e6,
      "the target's joint velocities (rad/s / m/s); left out: estimated from this target and the one before"}};
+constexpr ArgSpec kStreamPose[] = {
+    {"position", ArgType::numbers, true, -1000, 1000, "the tool point [x, y, z] (m), in the base frame or the active user frame"},
+    {"rpy", ArgType::numbers, true, -10, 10, "the tool orientation [roll, pitch, yaw] (rad) in the same frame"},
+    {"frame", ArgType::text, false, 4, 4, "`base` (default) or `user` (the active user frame)"},
+    {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"}};
 
 using C = ServiceCall;
 using R = ResultFields;
@@ -524,6 +529,28 @@ constexpr MessageSpec kMessages[] = {
        const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0, qd);
        if (!r.ok()) return out.fail(r.error, r.reason);
        if (r.clamped) out.j["clamped"] = true;
+     }},
+    {"stream_pose", kStreamPose, Gate::control, Where::service, "StreamService::target_pose",
+     "streaming (servo) mode with a Cartesian target: the active tool's pose, solved by the active tool's IK on the "
+     "service thread (nearest to the last target) and streamed as `stream` streams joints; refused in one line, the arm "
+     "keeping its last target, when the pose has no solution within the joint limits (`unreachable`), its solution is "
+     "more than api.stream_max_step_deg from the last target on a joint (`out_of_range`, never clamped) or it is "
+     "outside the safety envelope (`limits`)",
+     +[](C& c, R& out) {
+       if (c.cx.stream == nullptr) return out.fail(CmdError::unsupported, "streaming targets are not available here");
+       const ArgValue* p = c.rq.arg("position");
+       const ArgValue* r = c.rq.arg("rpy");
+       if (p->list.size() != 3) return out.fail(CmdError::arg_count, "position: expected [x, y, z]");
+       if (r->list.size() != 3) return out.fail(CmdError::arg_count, "rpy: expected [roll, pitch, yaw]");
+       const ArgValue* f = c.rq.arg("frame");
+       const bool user = f != nullptr && f->present && f->text == "user";
+       if (f != nullptr && f->present && !user && f->text != "base")
+         return out.fail(CmdError::bad_option, "frame: `base` or `user`, not `" + f->text + "`");
+       kin::Pose pose = kin::Pose::Identity();
+       pose.linear() = kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]);
+       pose.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
+       const fw::StreamResult res = c.cx.stream->target_pose(pose, user, num_or(c, "start", 0) != 0);
+       if (!res.ok()) return out.fail(res.error, res.reason);
      }},
     {"program_check", kProgram, Gate::observer, Where::service, "ArmService::check_program",
      "checks a whole program without running it (the service's dry run: the planning and checks of a real run, from "

@@ -102,6 +102,17 @@ class Stream:
         if r.get("clamped"):
             self.clamped += 1
 
+    def send_pose(self, position: Sequence[float], rpy: Sequence[float], frame: str = "base") -> None:
+        """The newest Cartesian target: the active tool's `position` (m) and `rpy` (rad) in the base
+        frame or the active user frame (`frame="user"`), solved by the firmware's IK. A pose out of
+        reach or too far from the last target raises ArmError; the arm keeps its last target."""
+        args: Dict[str, Any] = {"position": [float(v) for v in position], "rpy": [float(v) for v in rpy],
+                                "frame": frame}
+        if not self._started:
+            args["start"] = True
+        self._arm.call("stream_pose", **args)
+        self._started = True
+
     def __enter__(self) -> "Stream":
         return self
 

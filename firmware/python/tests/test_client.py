@@ -158,6 +158,27 @@ class ClientTest(unittest.TestCase):
             self.assertGreater(len(ratios), 20)
             self.assertGreater(min(ratios), 0.3, ratios)
 
+    def test_stream_poses(self):
+        # Cartesian targets at 30 Hz: 20 mm down along z, the orientation kept; then a pose out of
+        # reach is refused (unreachable) and the arm stays where the last good target was.
+        with self.arm() as arm:
+            arm.enable()
+            tool = arm.state()["tool"]
+            p0, rpy = tool["position"], tool["rpy"]
+            with arm.stream() as st:
+                for k in range(31):
+                    st.send_pose([p0[0], p0[1], p0[2] - 0.02 * k / 30], rpy)
+                    time.sleep(1 / 30)
+                for _ in range(10):
+                    st.send_pose([p0[0], p0[1], p0[2] - 0.02], rpy)
+                    time.sleep(1 / 30)
+                self.assertAlmostEqual(arm.state()["tool"]["position"][2], p0[2] - 0.02, delta=1e-3)
+                with self.assertRaises(ArmError) as e:
+                    st.send_pose([p0[0] + 5, p0[1], p0[2]], rpy)
+                self.assertEqual(e.exception.code, "unreachable")
+                time.sleep(0.05)
+                self.assertAlmostEqual(arm.state()["tool"]["position"][2], p0[2] - 0.02, delta=1e-3)
+
     def test_estop_from_another_client_ends_the_wait(self):
         with self.arm() as arm:
             arm.enable()

@@ -7,7 +7,7 @@
 
 namespace servoarm::fw {
 
-StreamResult StreamService::target(const kin::JointVector& q_in, bool start, const kin::JointVector& qd_in) {
+StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool start, const kin::JointVector& qd_in, bool clamp_step) {
   StreamResult r;
   const kin::JointLimits& lim = svc_.limits();
   const int n = lim.n;
@@ -45,7 +45,7 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start, con
   const Telemetry t = ctl_.telemetry();
   // The stream runs while the control thread says so, or the target before this one was taken
   // in the cycle the telemetry shows (its own publication may not have come yet).
-  const bool running = sent_ && (t.streaming || t.cycles <= sent_cycle_ + 1);
+  const bool running = this->running(t);
   if (!start && !running) {
     r.error = CmdError::bad_state;
     r.reason = sent_ ? std::string("the stream ended (the arm is ") + to_string(t.state) + "): start a new one"
@@ -59,7 +59,7 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start, con
     const double step = cfg_.max_step[static_cast<std::size_t>(j)];
     const double d = q[j] - from[j];
     if (!(step > 0) || std::fabs(d) <= step) continue;
-    if (!cfg_.clamp_step) {
+    if (!clamp_step) {
       char b[160];
       std::snprintf(b, sizeof b, "joint %d: a step of %.6g from the last target, more than %.6g", j, d, step);
       r.error = CmdError::out_of_range;
@@ -87,8 +87,8 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start, con
   kin::JointVector qd = kin::JointVector::Zero(n);
   if (qd_in.size() == n)
     qd = qd_in;
-  else if (spaced)
-    qd = (q - from) / gap;
+  else if (spaced)  // two targets that arrive close together (delayed on the way) are not a burst of speed
+    qd = (q - from) / std::fmax(gap, 0.5 * gap_avg_);
   const double horizon = spaced ? std::fmin(cfg_.deadman_s, 2 * gap) : cfg_.deadman_s;
   if (qd.cwiseAbs().maxCoeff() > 0) {
     const kin::JointVector ahead = q + qd * horizon;
@@ -119,6 +119,7 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start, con
       sent_ = true;
       sent_cycle_ = ctl_.telemetry().cycles;
       sent_t_ = now;
+      gap_avg_ = spaced ? (gap_avg_ > 0 ? 0.8 * gap_avg_ + 0.2 * gap : gap) : 0.0;
       svc_.jog_forget();  // the next jog starts from the commanded position, not a jog's tail
       return r;
     case RtResult::busy: r.error = CmdError::busy; break;
@@ -130,6 +131,34 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start, con
   }
   r.reason = rep.message;
   return r;
+}
+
+StreamResult StreamService::target_pose(const kin::Pose& pose_in, bool in_frame, bool start) {
+  StreamResult r;
+  if (!pose_in.matrix().allFinite()) {
+    r.error = CmdError::not_finite;
+    r.reason = "pose: not finite";
+    return r;
+  }
+  const std::size_t tool = svc_.active_tool();
+  const kin::Pose pose = in_frame ? svc_.frame(svc_.active_frame()).pose * pose_in : pose_in;
+  const Telemetry t = ctl_.telemetry();
+  const int n = svc_.limits().n;
+  kin::JointVector seed(n);
+  const bool run = running(t) && last_.size() == n;
+  for (int j = 0; j < n; ++j) seed[j] = run ? last_[j] : t.q_cmd[static_cast<std::size_t>(j)];
+  const kin::IkSolver ik = svc_.tool_ik(tool);
+  kin::JointVector q(n);
+  if (ik.fn == nullptr || ik.fn(svc_.tool_chain(tool), pose, seed, q, ik.ctx) < kin::Status::ok) {
+    const Eigen::Vector3d p = pose.translation();
+    char b[160];
+    std::snprintf(b, sizeof b, "pose [%.4g, %.4g, %.4g] m (base frame) of tool %s: no IK solution within the joint limits",
+                  p.x(), p.y(), p.z(), svc_.tool(tool).name.c_str());
+    r.error = CmdError::unreachable;
+    r.reason = b;
+    return r;
+  }
+  return joint_target(q, start, kin::JointVector(), false);
 }
 
 }  // namespace servoarm::fw

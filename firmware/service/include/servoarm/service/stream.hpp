@@ -51,15 +51,27 @@ class StreamService {
   StreamResult target(const kin::JointVector& q, bool start) { return target(q, start, kin::JointVector()); }
   /// The same with the target's joint velocities `qd` (SI per s; empty: estimated from this
   /// target and the one before, by the control thread's clock).
-  StreamResult target(const kin::JointVector& q, bool start, const kin::JointVector& qd);
+  StreamResult target(const kin::JointVector& q, bool start, const kin::JointVector& qd) { return joint_target(q, start, qd, cfg_.clamp_step); }
+  /// A Cartesian target: the active tool's pose in the base frame, or in the active user frame
+  /// (`in_frame`), solved by the active tool's IK here on the service thread (nearest to the last
+  /// target) and streamed as its joint target. Refused in one line, nothing sent, when a value is
+  /// not finite (not_finite), the pose has no solution within the joint limits (unreachable), or
+  /// its solution is more than max_step from the last target on a joint (out_of_range: never
+  /// clamped, a clamped joint would be another pose); then the checks of target().
+  StreamResult target_pose(const kin::Pose& pose, bool in_frame, bool start);
   const StreamSettings& settings() const { return cfg_; }
 
  private:
+  StreamResult joint_target(const kin::JointVector& q, bool start, const kin::JointVector& qd, bool clamp_step);
+  /// The stream runs (the last target was taken and no stop, deadman or fault ended it since).
+  bool running(const Telemetry& t) const { return sent_ && (t.streaming || t.cycles <= sent_cycle_ + 1); }
+
   ArmService& svc_;
   Controller& ctl_;
   StreamSettings cfg_;
   kin::JointVector last_;        ///< the last target sent
   std::uint64_t sent_cycle_ = 0; ///< the control cycle the last target was accepted in
+  double gap_avg_ = 0;           ///< the running average of the time between targets (s)
   double sent_t_ = 0;            ///< the control thread's clock (s) when the last target was sent
   bool sent_ = false;
 };
