@@ -894,3 +894,57 @@ TEST(FwApi, FoxgloveServerRefusesABindBeyondLoopback) {
   STRCMP_EQUAL("", fox.start().c_str());
   fox.stop();
 }
+
+// Tools and frames defined and deleted over the API (the service's define/delete: the console's
+// calls), and movel in the active tool and user frame: after the line, the active tool's point by
+// forward kinematics, in the frame, is the position asked. A bad name or value, and deleting the
+// active tool, are refused; nothing is defined then.
+TEST(FwApi, ToolsAndFramesDefinedAndMovelInThem) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0,0.3,-0.6,0,0.6,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string td = c.ask(2, "\"cmd\":\"tool_define\",\"name\":\"pen\",\"position\":[0,0,0.1],\"rpy\":[0,0,0]");
+  CHECK_TEXT(is_ok(td) && has(td, "\"tool\":\"pen\""), td.c_str());
+  const std::string fd = c.ask(3, "\"cmd\":\"frame_define\",\"name\":\"table\",\"position\":[0.05,-0.02,0.01],\"rpy\":[0,0,0.3]");
+  CHECK_TEXT(is_ok(fd) && has(fd, "\"frame\":\"table\""), fd.c_str());
+  STRCMP_EQUAL("bad_option", error_of(c.ask(4, "\"cmd\":\"tool_define\",\"name\":\"bad name\",\"position\":[0,0,0.1],\"rpy\":[0,0,0]")).c_str());
+  STRCMP_EQUAL("out_of_range", error_of(c.ask(5, "\"cmd\":\"tool_define\",\"name\":\"huge\",\"position\":[0,0,50],\"rpy\":[0,0,0]")).c_str());
+  fw::ArmService& svc = rig.app.console->service();
+  CHECK_EQUAL(2u, svc.tool_count());
+  CHECK(is_ok(c.ask(6, "\"cmd\":\"tool_select\",\"name\":\"pen\"")));
+  CHECK(is_ok(c.ask(7, "\"cmd\":\"frame_select\",\"name\":\"table\"")));
+  // where the pen is now, in the table frame; 20 mm along the frame's x from there
+  const kin::Chain& pen = svc.tool_chain(svc.find_tool("pen"));
+  const kin::Pose F = svc.frame(svc.find_frame("table")).pose;
+  auto pen_in_table = [&] {
+    const Telemetry t = rig.tel();
+    kin::JointVector q(t.n);
+    for (int j = 0; j < t.n; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+    kin::Pose p;
+    CHECK(kin::forward(pen, q, p) == kin::Status::ok);
+    return F.inverse() * p;
+  };
+  const kin::Pose p0 = pen_in_table();
+  const Eigen::Vector3d goal = p0.translation() + Eigen::Vector3d(0.02, 0, 0);
+  char mv[200];
+  std::snprintf(mv, sizeof mv, "\"cmd\":\"movel\",\"position\":[%.9f,%.9f,%.9f],\"speed\":0.1", goal.x(), goal.y(), goal.z());
+  const std::string ml = c.ask(8, mv);
+  CHECK_TEXT(is_ok(ml), ml.c_str());
+  for (int i = 0; i < 600 && rig.tel().done_id < 2; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const kin::Pose p1 = pen_in_table();
+  const std::string fig = "pen in table at " + std::to_string(p1.translation().x()) + " " + std::to_string(p1.translation().y()) +
+                          " " + std::to_string(p1.translation().z()) + ", asked " + std::to_string(goal.x()) + " " +
+                          std::to_string(goal.y()) + " " + std::to_string(goal.z());
+  CHECK_TEXT((p1.translation() - goal).norm() < 1e-4, fig.c_str());
+  CHECK_TEXT(p1.linear().isApprox(p0.linear(), 1e-6), "the orientation changed");
+  // deleting the active ones is refused; after selecting others, they go
+  CHECK_TEXT(has(c.ask(9, "\"cmd\":\"tool_delete\",\"name\":\"pen\""), "active"), "the active tool was deleted");
+  CHECK(is_ok(c.ask(10, "\"cmd\":\"tool_select\",\"name\":\"tool0\"")));
+  CHECK(is_ok(c.ask(11, "\"cmd\":\"frame_select\",\"name\":\"base\"")));
+  CHECK(is_ok(c.ask(12, "\"cmd\":\"tool_delete\",\"name\":\"pen\"")));
+  CHECK(is_ok(c.ask(13, "\"cmd\":\"frame_delete\",\"name\":\"table\"")));
+  CHECK_EQUAL(1u, svc.tool_count());
+  STRCMP_EQUAL("bad_option", error_of(c.ask(14, "\"cmd\":\"tool_delete\",\"name\":\"pen\"")).c_str());  // no longer defined
+}

@@ -147,10 +147,11 @@ double num_or(const ServiceCall& c, const char* name, double dflt) {
   return a != nullptr && a->present ? a->num : dflt;
 }
 
+// The active tool's chain and IK, as the console's moves have them.
 fw::MoveContext move_cx(ServiceCall& c) {
   fw::MoveContext m;
-  m.chain = c.cx.chain;
-  m.ik = c.cx.ik;
+  m.chain = &c.cx.svc->tool_chain(c.cx.svc->active_tool());
+  m.ik = c.cx.svc->tool_ik(c.cx.svc->active_tool());
   return m;
 }
 
@@ -176,8 +177,8 @@ constexpr ArgSpec kMovej[] = {
     {"speed_pct", ArgType::number, false, 1, 100, "percent of the joint limits (default motion.joint_speed_pct)"},
     {"blend", ArgType::number, false, 0, 1e3, "blend tolerance at the goal (rad); 0: exact stop"}};
 constexpr ArgSpec kMovel[] = {
-    {"position", ArgType::numbers, true, -1e3, 1e3, "the tool point [x, y, z] in the base frame (m)"},
-    {"rpy", ArgType::numbers, false, -10, 10, "the tool orientation [roll, pitch, yaw] (rad); left out: the orientation the queue ends with"},
+    {"position", ArgType::numbers, true, -1e3, 1e3, "the active tool's point [x, y, z] in the active user frame (m)"},
+    {"rpy", ArgType::numbers, false, -10, 10, "the tool orientation [roll, pitch, yaw] in the active user frame (rad); left out: the orientation the queue ends with"},
     {"speed", ArgType::number, false, 1e-6, 1e3, "tool speed (m/s; default motion.linear_speed_mm_s)"},
     {"blend", ArgType::number, false, 0, 1e3, "blend tolerance at the target (m)"}};
 constexpr ArgSpec kJog[] = {
@@ -385,6 +386,40 @@ constexpr ArgSpec kPointGo[] = {
     {"name", ArgType::text, true, 1, 31, "the teach point's name"},
     {"line", ArgType::boolean, false, 0, 1, "true: a straight tool line to it; false (default): a joint move to its joints"},
     {"speed", ArgType::number, false, 1e-6, 1e3, "joint move: percent of the joint limits; line: m/s (default: the configured)"}};
+constexpr ArgSpec kToolDefine[] = {
+    {"name", ArgType::text, true, 1, 23, "the tool's name (letters, digits, `_`, `-`; not tool0)"},
+    {"position", ArgType::numbers, true, -10, 10, "the tool point [x, y, z] in the flange frame (m)"},
+    {"rpy", ArgType::numbers, true, -10, 10, "the tool's orientation [roll, pitch, yaw] in the flange frame (rad)"},
+    {"mass", ArgType::number, false, 0, 1000, "its payload (kg); left out: none"},
+    {"com", ArgType::numbers, false, -10, 10, "the payload's centre of mass [x, y, z] in the tool frame (m; with mass)"}};
+constexpr ArgSpec kFrameDefine[] = {
+    {"name", ArgType::text, true, 1, 23, "the user frame's name (letters, digits, `_`, `-`; not base)"},
+    {"position", ArgType::numbers, true, -10, 10, "the frame's origin [x, y, z] in the base frame (m)"},
+    {"rpy", ArgType::numbers, true, -10, 10, "the frame's orientation [roll, pitch, yaw] in the base frame (rad)"}};
+
+// A tool's or frame's definition from its arguments; false (answered) on a wrong count.
+bool named_pose_of(ServiceCall& c, fw::NamedPose& d, R& out) {
+  const ArgValue* p = c.rq.arg("position");
+  const ArgValue* r = c.rq.arg("rpy");
+  if (p->list.size() != 3) return out.fail(CmdError::arg_count, "position: expected [x, y, z]"), false;
+  if (r->list.size() != 3) return out.fail(CmdError::arg_count, "rpy: expected [roll, pitch, yaw]"), false;
+  d.name = c.rq.arg("name")->text;
+  d.pose.linear() = kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]);
+  d.pose.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
+  const ArgValue* m = c.rq.arg("mass");
+  const ArgValue* com = c.rq.arg("com");
+  if (com != nullptr && com->present && !(m != nullptr && m->present)) return out.fail(CmdError::bad_option, "com: only with mass"), false;
+  if (m != nullptr && m->present) {
+    d.has_payload = true;
+    d.mass = m->num;
+    if (com != nullptr && com->present) {
+      if (com->list.size() != 3) return out.fail(CmdError::arg_count, "com: expected [x, y, z]"), false;
+      d.com = Eigen::Vector3d(com->list[0], com->list[1], com->list[2]);
+    }
+  }
+  return true;
+}
+
 constexpr ArgSpec kFrameName[] = {{"name", ArgType::text, true, 1, 23, "the tool's / user frame's name"}};
 constexpr ArgSpec kJogCartesian[] = {
     {"axis", ArgType::integer, true, 0, 5, "0..2: along x, y, z (m); 3..5: about x, y, z (rad)"},
@@ -450,20 +485,24 @@ constexpr MessageSpec kMessages[] = {
        move_result(c.cx.svc->move(m, move_cx(c)), out);
      }},
     {"movel", kMovel, Gate::control, Where::service, "ArmService::move(MoveLine)",
-     "straight tool line, path-checked and queued",
+     "straight line of the active tool in the active user frame, path-checked and queued",
      +[](C& c, R& out) {
        const ArgValue* p = c.rq.arg("position");
        const ArgValue* r = c.rq.arg("rpy");
        if (p->list.size() != 3) return out.fail(CmdError::arg_count, "position: expected [x, y, z]");
        if (r->present && r->list.size() != 3) return out.fail(CmdError::arg_count, "rpy: expected [roll, pitch, yaw]");
        fw::MoveLine m;
-       kin::Pose from = kin::Pose::Identity();
-       kin::forward(*c.cx.chain, c.cx.svc->tail(), from);
-       m.target.linear() = r->present ? kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]) : from.linear();
-       m.target.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
+       const fw::MoveContext cx = move_cx(c);
+       const kin::Pose F = c.cx.svc->frame(c.cx.svc->active_frame()).pose;  // the active user frame
+       kin::Pose at = kin::Pose::Identity();  // where the queue ends, in the frame
+       kin::forward(*cx.chain, c.cx.svc->tail(), at);
+       at = F.inverse() * at;
+       if (r->present) at.linear() = kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]);
+       at.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
+       m.target = F * at;
        m.speed = num_or(c, "speed", 0);
        m.blend = num_or(c, "blend", -1);
-       move_result(c.cx.svc->move(m, move_cx(c)), out);
+       move_result(c.cx.svc->move(m, cx), out);
      }},
     {"jog", kJog, Gate::control, Where::service, "ArmService::jog(JointJog)",
      "joint jog by an increment, or continuous (stops unless repeated within the deadman time)",
@@ -610,9 +649,7 @@ constexpr MessageSpec kMessages[] = {
        pm.name = c.rq.arg("name")->text;
        pm.line = num_or(c, "line", 0) != 0;
        pm.speed = num_or(c, "speed", -1);
-       fw::MoveContext m = move_cx(c);
-       m.chain = &c.cx.svc->tool_chain(c.cx.svc->active_tool());
-       m.ik = c.cx.svc->tool_ik(c.cx.svc->active_tool());
+       const fw::MoveContext m = move_cx(c);
        const fw::PointResult r = c.cx.svc->move_to_point(pm, m);
        if (r.refusal != fw::PointRefusal::none) return point_answer(r, out);
        move_result(r.move, out);
@@ -635,6 +672,26 @@ constexpr MessageSpec kMessages[] = {
     {"frame_select", kFrameName, Gate::control, Where::service, "ArmService::select_frame",
      "makes user frame `name` the active one (only while nothing moves or is queued)",
      +[](C& c, R& out) { frame_answer(c.cx.svc->select_frame(c.rq.arg("name")->text), "frame", out); }},
+    {"tool_define", kToolDefine, Gate::control, Where::service, "ArmService::define_tool",
+     "defines tool `name` (or replaces the one of that name) by its pose in the flange frame and its payload, kept in "
+     "the frames file (only while nothing moves or is queued)",
+     +[](C& c, R& out) {
+       fw::NamedPose d;
+       if (named_pose_of(c, d, out)) frame_answer(c.cx.svc->define_tool(d), "tool", out);
+     }},
+    {"tool_delete", kFrameName, Gate::control, Where::service, "ArmService::delete_tool",
+     "deletes tool `name` (not the active one; only while nothing moves or is queued)",
+     +[](C& c, R& out) { frame_answer(c.cx.svc->delete_tool(c.rq.arg("name")->text), "tool", out); }},
+    {"frame_define", kFrameDefine, Gate::control, Where::service, "ArmService::define_frame",
+     "defines user frame `name` (or replaces the one of that name) by its pose in the base frame, kept in the frames "
+     "file (only while nothing moves or is queued)",
+     +[](C& c, R& out) {
+       fw::NamedPose d;
+       if (named_pose_of(c, d, out)) frame_answer(c.cx.svc->define_frame(d), "frame", out);
+     }},
+    {"frame_delete", kFrameName, Gate::control, Where::service, "ArmService::delete_frame",
+     "deletes user frame `name` (not the active one; only while nothing moves or is queued)",
+     +[](C& c, R& out) { frame_answer(c.cx.svc->delete_frame(c.rq.arg("name")->text), "frame", out); }},
     {"jog_cartesian", kJogCartesian, Gate::control, Where::service, "ArmService::jog(ToolJog)",
      "jogs the active tool along or about an axis of the base, tool or user frame, by an increment or continuously "
      "(stops unless repeated within the deadman time)",

@@ -433,6 +433,27 @@ class Arm:
     def select_frame(self, name: str) -> None:
         self.call("frame_select", name=name)
 
+    def define_tool(self, name: str, position: Sequence[float], rpy: Sequence[float] = (0.0, 0.0, 0.0),
+                    mass: Optional[float] = None, com: Optional[Sequence[float]] = None) -> None:
+        """Defines (or replaces) tool `name`: its point `position` (m) and `rpy` (rad) in the flange
+        frame, and optionally its payload `mass` (kg) with its centre of mass `com` (m, tool frame)."""
+        args: Dict[str, Any] = {"name": name, "position": [float(v) for v in position], "rpy": [float(v) for v in rpy]}
+        if mass is not None:
+            args["mass"] = float(mass)
+        if com is not None:
+            args["com"] = [float(v) for v in com]
+        self.call("tool_define", **args)
+
+    def delete_tool(self, name: str) -> None:
+        self.call("tool_delete", name=name)
+
+    def define_frame(self, name: str, position: Sequence[float], rpy: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+        """Defines (or replaces) user frame `name`: its origin `position` (m) and `rpy` (rad) in the base frame."""
+        self.call("frame_define", name=name, position=[float(v) for v in position], rpy=[float(v) for v in rpy])
+
+    def delete_frame(self, name: str) -> None:
+        self.call("frame_delete", name=name)
+
     def _move(self, cmd: str, args: Dict[str, Any], wait: bool, timeout: float) -> Dict[str, Any]:
         seq = self._last_seq()
         r = self.call(cmd, **args)

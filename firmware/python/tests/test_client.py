@@ -179,6 +179,42 @@ class ClientTest(unittest.TestCase):
                 time.sleep(0.05)
                 self.assertAlmostEqual(arm.state()["tool"]["position"][2], p0[2] - 0.02, delta=1e-3)
 
+    def test_define_tool_and_frame_movel_in_them(self):
+        # A 100 mm tool and a frame shifted 50 mm along x: movel to the frame's coordinates of the
+        # tool point moves that point there (the state's tool pose is the flange's: compared as a
+        # difference); bad definitions are refused; the active tool is not deleted.
+        with self.arm() as arm:
+            arm.enable()
+            arm.movej([0, 0.3, -0.6, 0, 0.6, 0], speed_pct=50)
+            arm.define_tool("pen", [0, 0, 0.1])
+            arm.define_frame("table", [0.05, 0, 0])
+            with self.assertRaises(ArmError) as e:
+                arm.define_tool("bad name", [0, 0, 0.1])
+            self.assertEqual(e.exception.code, "bad_option")
+            self.assertIn("pen", [t["name"] for t in arm.tools()["tools"]])
+            arm.select_tool("pen")
+            arm.select_frame("table")
+            t = arm.state()["tool"]  # the flange: the pen point is 100 mm along its z
+            a, (r, p, y) = t["position"], t["rpy"]
+            z_axis = [math.cos(y) * math.sin(p) * math.cos(r) + math.sin(y) * math.sin(r),
+                      math.sin(y) * math.sin(p) * math.cos(r) - math.cos(y) * math.sin(r),
+                      math.cos(p) * math.cos(r)]
+            pen = [a[i] + 0.1 * z_axis[i] for i in range(3)]
+            # 10 mm along the table's x from the pen's point, in table coordinates; the orientation
+            # kept, the flange moves as the pen point does
+            arm.movel([pen[0] - 0.05 + 0.01, pen[1], pen[2]], speed=0.1)
+            b = arm.state()["tool"]["position"]
+            self.assertAlmostEqual(b[2] - a[2], 0.0, delta=1e-3)
+            self.assertAlmostEqual(b[0] - a[0], 0.01, delta=1e-3)
+            self.assertAlmostEqual(b[1] - a[1], 0.0, delta=1e-3)
+            with self.assertRaises(ArmError):
+                arm.delete_tool("pen")
+            arm.select_tool("tool0")
+            arm.select_frame("base")
+            arm.delete_tool("pen")
+            arm.delete_frame("table")
+            self.assertNotIn("pen", [t["name"] for t in arm.tools()["tools"]])
+
     def test_estop_from_another_client_ends_the_wait(self):
         with self.arm() as arm:
             arm.enable()
