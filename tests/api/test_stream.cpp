@@ -407,6 +407,29 @@ TEST(FwStream, ATargetBeyondASafetyPlaneIsRefused) {
   CHECK(z_of(rig.q_cmd()) < z0 + 0.030);
 }
 
+// Targets that reach the service in pairs (as when they are delayed on the way: two together,
+// then a gap of two periods) at a steady 1 rad/s: the estimated velocity is the pace's, not the
+// pair's (a small step over a very short time), so the commanded velocity stays near 1 rad/s.
+TEST(FwStream, TargetsArrivingInPairsAreNotABurstOfSpeed) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  kin::JointVector q = rig.q_cmd();
+  double peak = 0;
+  for (int i = 0; i < 40; ++i) {  // 30 Hz pace: 1/30 rad each, sent two at a time
+    for (int k = 0; k < 2; ++k) {
+      q[0] += 1.0 / 30;
+      CHECK(st.target(q, i == 0 && k == 0).ok());
+      rig.cycle();
+    }
+    for (int k = 0; k < 65; ++k) {
+      rig.cycle();
+      if (i > 10) peak = std::max(peak, std::fabs(rig.tel().qd_cmd[0]));
+    }
+  }
+  CHECK_TEXT(peak < 1.4, ("peak commanded velocity " + std::to_string(peak) + " rad/s at a 1 rad/s pace").c_str());
+}
+
 // Cartesian targets: a 30 Hz stream of tool poses (a 30 mm circle in the base frame's x-y plane,
 // the orientation kept) is solved by the service's IK with the active tool and followed: the tool
 // point by forward kinematics of q_cmd stays within a few mm of the circle. A pose out of reach,
