@@ -142,9 +142,9 @@ class ClientTest(unittest.TestCase):
                     qd[0] = amp * w * math.cos(w * t)
                     st.send(q, qd)
                     end = time.monotonic() + 1 / 30
-                    while time.monotonic() < end:
+                    while time.monotonic() < end:  # (never waiting past the next target's time)
                         try:
-                            s = sub.get(timeout=0.05)
+                            s = sub.get(timeout=max(0.001, end - time.monotonic()))
                         except Exception:
                             continue
                         ts = time.monotonic() - t0
