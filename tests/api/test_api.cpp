@@ -948,3 +948,64 @@ TEST(FwApi, ToolsAndFramesDefinedAndMovelInThem) {
   CHECK_EQUAL(1u, svc.tool_count());
   STRCMP_EQUAL("bad_option", error_of(c.ask(14, "\"cmd\":\"tool_delete\",\"name\":\"pen\"")).c_str());  // no longer defined
 }
+
+// TLS (api.tls_cert / api.tls_key): a certificate path that cannot be read, a file that is not a
+// certificate, or one without the other refuse the start in one line; with a self-signed
+// certificate (made by the openssl tool) a client speaking TLS (openssl s_client) gets hello's
+// answer over the TCP port, and the token check beyond loopback is unchanged.
+TEST(FwApi, TlsServesWithACertificateAndRefusesABadOne) {
+  Rig rig;
+  const std::string dir = "/tmp/servoarm_tls_" + std::to_string(::getpid());
+  const std::string cert = dir + "/cert.pem", key = dir + "/key.pem", junk = dir + "/junk.pem";
+  CHECK_EQUAL(0, std::system(("mkdir -p " + dir + " && openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=localhost -keyout " +
+                              key + " -out " + cert + " >/dev/null 2>&1").c_str()));
+  std::ofstream(junk) << "not a certificate\n";
+  auto start = [&](const std::string& c, const std::string& k, const std::string& bind = "127.0.0.1") {
+    api::ApiConfig ac;
+    ac.tcp_port = 0;
+    ac.bind = bind;
+    ac.tls_cert = c;
+    ac.tls_key = k;
+    ac.rate_hz = rig.app.cfg.rate_hz;
+    auto s = std::make_unique<api::ApiServer>(ac, *rig.app.ctl, rig.app.chain, rig.app.ctl->limits());
+    const std::string e = s->start();
+    return std::make_pair(std::move(s), e);
+  };
+  {
+    const auto [s, e] = start(dir + "/missing.pem", key);
+    CHECK_TEXT(e.find("api.tls_cert = " + dir + "/missing.pem: No such file") == 0, e.c_str());
+    CHECK(e.find('\n') == std::string::npos);
+  }
+  {
+    const auto [s, e] = start(junk, key);
+    CHECK_TEXT(e.find("TLS") != std::string::npos && e.find('\n') == std::string::npos, ("[" + e + "]").c_str());
+  }
+  {
+    const auto [s, e] = start(cert, "");
+    CHECK_TEXT(e.find("both api.tls_cert and api.tls_key") != std::string::npos, e.c_str());
+  }
+  {
+    const auto [s, e] = start(cert, key, "0.0.0.0");  // TLS is no authentication: the tokens are still needed
+    CHECK_TEXT(e.find("beyond loopback only with api.tokens_file") != std::string::npos, e.c_str());
+  }
+  auto [s, e] = start(cert, key);
+  CHECK_TEXT(e.empty(), e.c_str());
+  // hello is answered on the server's own thread: no service pump is needed here
+  const std::string cmd = "(printf '%s\\n' '{\"id\":1,\"cmd\":\"hello\"}'; sleep 2) | timeout 10 openssl s_client -quiet -connect 127.0.0.1:" +
+                          std::to_string(s->tcp_port()) + " 2>/dev/null";
+  std::string out;
+  if (FILE* p = ::popen(cmd.c_str(), "r")) {
+    char buf[4096];
+    std::size_t n;
+    while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+    ::pclose(p);
+  }
+  // a client without TLS gets no answer in plain text
+  Client plain(s->tcp_port());
+  plain.send("{\"id\":2,\"cmd\":\"hello\"}");
+  const std::string no = plain.answer(2, 1.0);
+  s->stop();
+  std::system(("rm -rf " + dir).c_str());
+  CHECK_TEXT(out.find("\"id\":1") != std::string::npos && out.find("\"protocol\":1") != std::string::npos, out.c_str());
+  CHECK_TEXT(no.find("\"protocol\":1") == std::string::npos, no.c_str());
+}

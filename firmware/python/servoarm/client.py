@@ -12,6 +12,7 @@ import itertools
 import json
 import queue
 import socket
+import ssl
 import threading
 import time
 from typing import Any, Dict, List, Optional, Sequence
@@ -133,10 +134,12 @@ class Arm:
     """
 
     def __init__(self, host: str = "127.0.0.1", token: Optional[str] = None, port: int = 8766,
-                 timeout: float = 10.0, take_control: bool = True):
+                 timeout: float = 10.0, take_control: bool = True, tls: Optional[ssl.SSLContext] = None):
         self.timeout = timeout
         self._sock = socket.create_connection((host, port), timeout=timeout)
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        if tls is not None:  # armfw with api.tls_cert: the certificate checked by the context
+            self._sock = tls.wrap_socket(self._sock, server_hostname=host)
         self._sock.settimeout(None)
         self._wlock = threading.Lock()
         self._ids = itertools.count(1)

@@ -4,7 +4,10 @@ per test class, on a free port. ARMFW names the armfw binary (CTest sets it)."""
 import math
 import os
 import re
+import shutil
+import ssl
 import subprocess
+import tempfile
 import threading
 import time
 import unittest
@@ -13,9 +16,9 @@ from servoarm import Arm, ArmError, ArmStopped
 
 
 class ArmfwSim:
-    def __init__(self):
+    def __init__(self, extra=()):
         exe = os.environ.get("ARMFW", "build/bin/armfw")
-        self.p = subprocess.Popen([exe, "--sim", "--no-stdin", "--api-tcp", "0"], stderr=subprocess.PIPE,
+        self.p = subprocess.Popen([exe, "--sim", "--no-stdin", "--api-tcp", "0", *extra], stderr=subprocess.PIPE,
                                   stdout=subprocess.DEVNULL, text=True)
         self.port = None
         self.lines = []
@@ -53,6 +56,42 @@ def recover(arm, timeout=10.0):
             arm.reset()
         except ArmError:
             time.sleep(0.05)
+
+
+class TlsTest(unittest.TestCase):
+    """armfw with --api-tls-cert / --api-tls-key: a client checking the certificate connects over
+    TLS; a certificate path that cannot be read refuses the start in one line."""
+
+    def setUp(self):
+        self.dir = tempfile.mkdtemp(prefix="servoarm_tls_")
+        self.cert, self.key = os.path.join(self.dir, "cert.pem"), os.path.join(self.dir, "key.pem")
+        subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-subj",
+                        "/CN=localhost", "-addext", "subjectAltName=IP:127.0.0.1", "-keyout", self.key, "-out",
+                        self.cert], check=True, capture_output=True)
+
+    def tearDown(self):
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def test_tls_client(self):
+        fw = ArmfwSim(["--api-tls-cert", self.cert, "--api-tls-key", self.key])
+        try:
+            ctx = ssl.create_default_context(cafile=self.cert)
+            with Arm("127.0.0.1", port=fw.port, tls=ctx) as arm:
+                self.assertEqual(arm.info["protocol"], 1)
+                self.assertIn("state", arm.state())
+            other = ssl.create_default_context()  # without the certificate as a CA: refused
+            with self.assertRaises(ssl.SSLError):
+                Arm("127.0.0.1", port=fw.port, tls=other)
+        finally:
+            fw.stop()
+
+    def test_bad_certificate_path(self):
+        exe = os.environ.get("ARMFW", "build/bin/armfw")
+        p = subprocess.run([exe, "--sim", "--no-stdin", "--api-tcp", "0", "--api-tls-cert",
+                            os.path.join(self.dir, "missing.pem"), "--api-tls-key", self.key],
+                           capture_output=True, text=True, timeout=30)
+        self.assertNotEqual(p.returncode, 0)
+        self.assertIn("api.tls_cert = " + os.path.join(self.dir, "missing.pem") + ": No such file", p.stderr)
 
 
 class ClientTest(unittest.TestCase):
