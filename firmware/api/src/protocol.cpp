@@ -7,8 +7,10 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 
 #include <nlohmann/json.hpp>
@@ -386,6 +388,11 @@ constexpr ArgSpec kPointGo[] = {
     {"name", ArgType::text, true, 1, 31, "the teach point's name"},
     {"line", ArgType::boolean, false, 0, 1, "true: a straight tool line to it; false (default): a joint move to its joints"},
     {"speed", ArgType::number, false, 1e-6, 1e3, "joint move: percent of the joint limits; line: m/s (default: the configured)"}};
+constexpr ArgSpec kProgramSave[] = {
+    {"name", ArgType::text, true, 1, 63, "the program's name in the programs folder"},
+    {"text", ArgType::text, true, 1, 1 << 20, "the program's text (the native language, or G-code when `gcode` is true)"},
+    {"gcode", ArgType::boolean, false, 0, 1, "`text` is G-code, saved as `name`.gcode (default false: `name`.arm)"}};
+
 constexpr ArgSpec kToolDefine[] = {
     {"name", ArgType::text, true, 1, 23, "the tool's name (letters, digits, `_`, `-`; not tool0)"},
     {"position", ArgType::numbers, true, -10, 10, "the tool point [x, y, z] in the flange frame (m)"},
@@ -590,6 +597,36 @@ constexpr MessageSpec kMessages[] = {
        pose.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
        const fw::StreamResult res = c.cx.stream->target_pose(pose, user, num_or(c, "start", 0) != 0);
        if (!res.ok()) return out.fail(res.error, res.reason);
+     }},
+    {"program_save", kProgramSave, Gate::control, Where::service, "prog::load_program",
+     "saves a program into the programs folder (programs.dir) as `name`.arm, or `name`.gcode for G-code, replacing "
+     "one of that name; the text must load first (as `program_check` reads it: an error answers with its `line`, "
+     "nothing written); written whole (a temporary file renamed)",
+     +[](C& c, R& out) {
+       if (c.cx.programs_dir.empty()) return out.fail(CmdError::storage, "no programs folder (programs.dir)");
+       prog::Program p;
+       std::string name;
+       if (!load_api_program(c, p, name, out)) return;
+       const bool gcode = num_or(c, "gcode", 0) != 0;
+       std::string file = name;
+       const bool has_arm = file.size() > 4 && file.compare(file.size() - 4, 4, ".arm") == 0;
+       if (gcode ? !prog::is_gcode_file(file) : !has_arm) file += gcode ? ".gcode" : ".arm";
+       const std::string path = c.cx.programs_dir + "/" + file, tmp = path + ".saving";
+       {
+         std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+         f << c.rq.arg("text")->text;
+         f.flush();
+         if (!f) {
+           ::unlink(tmp.c_str());
+           return out.fail(CmdError::storage, "cannot write " + tmp);
+         }
+       }
+       if (::rename(tmp.c_str(), path.c_str()) != 0) {
+         const std::string why = std::strerror(errno);
+         ::unlink(tmp.c_str());
+         return out.fail(CmdError::storage, "cannot save " + path + ": " + why);
+       }
+       out.j["file"] = file;
      }},
     {"program_check", kProgram, Gate::observer, Where::service, "ArmService::check_program",
      "checks a whole program without running it (the service's dry run: the planning and checks of a real run, from "

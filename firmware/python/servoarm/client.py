@@ -371,6 +371,12 @@ class Arm:
             args["name"] = name
         return args
 
+    def save_program(self, name: str, text: str, gcode: bool = False) -> Dict[str, Any]:
+        """Save `text` (native, or G-code with `gcode`) as program `name` in the controller's
+        programs folder (replacing one of that name) once it loads; ArmError with the refused
+        line otherwise, nothing written. The result's `file` is the file name."""
+        return self.call("program_save", name=name, text=text, **({"gcode": True} if gcode else {}))
+
     def check_program(self, text: Optional[str] = None, name: Optional[str] = None, gcode: bool = False) -> Dict[str, Any]:
         """Check a whole program without running it (the firmware's dry run): its step counts
         and planned `duration`, or ArmError with the first refused line (`.line`, `.file`).

@@ -94,6 +94,32 @@ class TlsTest(unittest.TestCase):
         self.assertIn("api.tls_cert = " + os.path.join(self.dir, "missing.pem") + ": No such file", p.stderr)
 
 
+class ProgramSaveTest(unittest.TestCase):
+    """save_program writes a program that loads into the programs folder (--programs), where
+    check_program finds it by name; a bad name, a text that does not load: refused, nothing written."""
+
+    def test_save_program(self):
+        d = tempfile.mkdtemp(prefix="servoarm_programs_")
+        fw = ArmfwSim(["--programs", d])
+        try:
+            with Arm("127.0.0.1", port=fw.port) as arm:
+                r = arm.save_program("square", "movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\n")
+                self.assertEqual(r["file"], "square.arm")
+                self.assertEqual(open(os.path.join(d, "square.arm")).read(), "movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\n")
+                self.assertEqual(arm.check_program(name="square")["steps"], 2)
+                with self.assertRaises(ArmError) as e:
+                    arm.save_program("../evil", "movej 0 0 0 0 0 0\n")
+                self.assertEqual(e.exception.code, "bad_option")
+                with self.assertRaises(ArmError) as e:
+                    arm.save_program("broken", "movej 0 0 0 0 0 0\nfrobnicate 3\n")
+                self.assertEqual(e.exception.code, "program")
+                self.assertEqual(e.exception.line, 2)
+                self.assertEqual(sorted(os.listdir(d)), ["square.arm"])
+        finally:
+            fw.stop()
+            shutil.rmtree(d, ignore_errors=True)
+
+
 class ClientTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
