@@ -894,3 +894,118 @@ TEST(FwApi, FoxgloveServerRefusesABindBeyondLoopback) {
   STRCMP_EQUAL("", fox.start().c_str());
   fox.stop();
 }
+
+// Tools and frames defined and deleted over the API (the service's define/delete: the console's
+// calls), and movel in the active tool and user frame: after the line, the active tool's point by
+// forward kinematics, in the frame, is the position asked. A bad name or value, and deleting the
+// active tool, are refused; nothing is defined then.
+TEST(FwApi, ToolsAndFramesDefinedAndMovelInThem) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0,0.3,-0.6,0,0.6,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string td = c.ask(2, "\"cmd\":\"tool_define\",\"name\":\"pen\",\"position\":[0,0,0.1],\"rpy\":[0,0,0]");
+  CHECK_TEXT(is_ok(td) && has(td, "\"tool\":\"pen\""), td.c_str());
+  const std::string fd = c.ask(3, "\"cmd\":\"frame_define\",\"name\":\"table\",\"position\":[0.05,-0.02,0.01],\"rpy\":[0,0,0.3]");
+  CHECK_TEXT(is_ok(fd) && has(fd, "\"frame\":\"table\""), fd.c_str());
+  STRCMP_EQUAL("bad_option", error_of(c.ask(4, "\"cmd\":\"tool_define\",\"name\":\"bad name\",\"position\":[0,0,0.1],\"rpy\":[0,0,0]")).c_str());
+  STRCMP_EQUAL("out_of_range", error_of(c.ask(5, "\"cmd\":\"tool_define\",\"name\":\"huge\",\"position\":[0,0,50],\"rpy\":[0,0,0]")).c_str());
+  fw::ArmService& svc = rig.app.console->service();
+  CHECK_EQUAL(2u, svc.tool_count());
+  CHECK(is_ok(c.ask(6, "\"cmd\":\"tool_select\",\"name\":\"pen\"")));
+  CHECK(is_ok(c.ask(7, "\"cmd\":\"frame_select\",\"name\":\"table\"")));
+  // where the pen is now, in the table frame; 20 mm along the frame's x from there
+  const kin::Chain& pen = svc.tool_chain(svc.find_tool("pen"));
+  const kin::Pose F = svc.frame(svc.find_frame("table")).pose;
+  auto pen_in_table = [&] {
+    const Telemetry t = rig.tel();
+    kin::JointVector q(t.n);
+    for (int j = 0; j < t.n; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
+    kin::Pose p;
+    CHECK(kin::forward(pen, q, p) == kin::Status::ok);
+    return F.inverse() * p;
+  };
+  const kin::Pose p0 = pen_in_table();
+  const Eigen::Vector3d goal = p0.translation() + Eigen::Vector3d(0.02, 0, 0);
+  char mv[200];
+  std::snprintf(mv, sizeof mv, "\"cmd\":\"movel\",\"position\":[%.9f,%.9f,%.9f],\"speed\":0.1", goal.x(), goal.y(), goal.z());
+  const std::string ml = c.ask(8, mv);
+  CHECK_TEXT(is_ok(ml), ml.c_str());
+  for (int i = 0; i < 600 && rig.tel().done_id < 2; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const kin::Pose p1 = pen_in_table();
+  const std::string fig = "pen in table at " + std::to_string(p1.translation().x()) + " " + std::to_string(p1.translation().y()) +
+                          " " + std::to_string(p1.translation().z()) + ", asked " + std::to_string(goal.x()) + " " +
+                          std::to_string(goal.y()) + " " + std::to_string(goal.z());
+  CHECK_TEXT((p1.translation() - goal).norm() < 1e-4, fig.c_str());
+  CHECK_TEXT(p1.linear().isApprox(p0.linear(), 1e-6), "the orientation changed");
+  // deleting the active ones is refused; after selecting others, they go
+  CHECK_TEXT(has(c.ask(9, "\"cmd\":\"tool_delete\",\"name\":\"pen\""), "active"), "the active tool was deleted");
+  CHECK(is_ok(c.ask(10, "\"cmd\":\"tool_select\",\"name\":\"tool0\"")));
+  CHECK(is_ok(c.ask(11, "\"cmd\":\"frame_select\",\"name\":\"base\"")));
+  CHECK(is_ok(c.ask(12, "\"cmd\":\"tool_delete\",\"name\":\"pen\"")));
+  CHECK(is_ok(c.ask(13, "\"cmd\":\"frame_delete\",\"name\":\"table\"")));
+  CHECK_EQUAL(1u, svc.tool_count());
+  STRCMP_EQUAL("bad_option", error_of(c.ask(14, "\"cmd\":\"tool_delete\",\"name\":\"pen\"")).c_str());  // no longer defined
+}
+
+// TLS (api.tls_cert / api.tls_key): a certificate path that cannot be read, a file that is not a
+// certificate, or one without the other refuse the start in one line; with a self-signed
+// certificate (made by the openssl tool) a client speaking TLS (openssl s_client) gets hello's
+// answer over the TCP port, and the token check beyond loopback is unchanged.
+TEST(FwApi, TlsServesWithACertificateAndRefusesABadOne) {
+  Rig rig;
+  const std::string dir = "/tmp/servoarm_tls_" + std::to_string(::getpid());
+  const std::string cert = dir + "/cert.pem", key = dir + "/key.pem", junk = dir + "/junk.pem";
+  CHECK_EQUAL(0, std::system(("mkdir -p " + dir + " && openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=localhost -keyout " +
+                              key + " -out " + cert + " >/dev/null 2>&1").c_str()));
+  std::ofstream(junk) << "not a certificate\n";
+  auto start = [&](const std::string& c, const std::string& k, const std::string& bind = "127.0.0.1") {
+    api::ApiConfig ac;
+    ac.tcp_port = 0;
+    ac.bind = bind;
+    ac.tls_cert = c;
+    ac.tls_key = k;
+    ac.rate_hz = rig.app.cfg.rate_hz;
+    auto s = std::make_unique<api::ApiServer>(ac, *rig.app.ctl, rig.app.chain, rig.app.ctl->limits());
+    const std::string e = s->start();
+    return std::make_pair(std::move(s), e);
+  };
+  {
+    const auto [s, e] = start(dir + "/missing.pem", key);
+    CHECK_TEXT(e.find("api.tls_cert = " + dir + "/missing.pem: No such file") == 0, e.c_str());
+    CHECK(e.find('\n') == std::string::npos);
+  }
+  {
+    const auto [s, e] = start(junk, key);
+    CHECK_TEXT(e.find("TLS") != std::string::npos && e.find('\n') == std::string::npos, ("[" + e + "]").c_str());
+  }
+  {
+    const auto [s, e] = start(cert, "");
+    CHECK_TEXT(e.find("both api.tls_cert and api.tls_key") != std::string::npos, e.c_str());
+  }
+  {
+    const auto [s, e] = start(cert, key, "0.0.0.0");  // TLS is no authentication: the tokens are still needed
+    CHECK_TEXT(e.find("beyond loopback only with api.tokens_file") != std::string::npos, e.c_str());
+  }
+  auto [s, e] = start(cert, key);
+  CHECK_TEXT(e.empty(), e.c_str());
+  // hello is answered on the server's own thread: no service pump is needed here
+  const std::string cmd = "(printf '%s\\n' '{\"id\":1,\"cmd\":\"hello\"}'; sleep 2) | timeout 10 openssl s_client -quiet -connect 127.0.0.1:" +
+                          std::to_string(s->tcp_port()) + " 2>/dev/null";
+  std::string out;
+  if (FILE* p = ::popen(cmd.c_str(), "r")) {
+    char buf[4096];
+    std::size_t n;
+    while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+    ::pclose(p);
+  }
+  // a client without TLS gets no answer in plain text
+  Client plain(s->tcp_port());
+  plain.send("{\"id\":2,\"cmd\":\"hello\"}");
+  const std::string no = plain.answer(2, 1.0);
+  s->stop();
+  std::system(("rm -rf " + dir).c_str());
+  CHECK_TEXT(out.find("\"id\":1") != std::string::npos && out.find("\"protocol\":1") != std::string::npos, out.c_str());
+  CHECK_TEXT(no.find("\"protocol\":1") == std::string::npos, no.c_str());
+}

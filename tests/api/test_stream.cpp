@@ -6,6 +6,8 @@
 // event; a stop ends the stream and later targets do not move the arm; bad targets are refused.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <random>
 #include <string>
 #include <vector>
@@ -73,9 +75,140 @@ kin::JointVector sine(const kin::JointVector& q0, double t) {
   return q;
 }
 
+/// Peak velocity, acceleration and jerk of a q_cmd trace (finite differences, 1 ms cycles) as
+/// fractions of the joints' limits.
+struct Peaks {
+  double v = 0, a = 0, j = 0;
+};
+Peaks peak_ratios(const std::vector<kin::JointVector>& tr, const kin::JointLimits& L) {
+  const double dt = 1e-3;
+  Peaks p;
+  for (std::size_t k = 3; k < tr.size(); ++k)
+    for (int j = 0; j < tr[k].size(); ++j) {
+      const auto u = static_cast<std::size_t>(j);
+      const double v = (tr[k][j] - tr[k - 1][j]) / dt;
+      const double a = (tr[k][j] - 2 * tr[k - 1][j] + tr[k - 2][j]) / (dt * dt);
+      const double jk = (tr[k][j] - 3 * tr[k - 1][j] + 3 * tr[k - 2][j] - tr[k - 3][j]) / (dt * dt * dt);
+      p.v = std::max(p.v, std::fabs(v) / L.dyn[u].max_velocity);
+      p.a = std::max(p.a, std::fabs(a) / L.dyn[u].max_acceleration);
+      p.j = std::max(p.j, std::fabs(jk) / L.dyn[u].max_jerk);
+    }
+  return p;
+}
+
+/// A 30 Hz stream (±5 ms jitter) of a 0.5 Hz, 0.4 rad sine on every joint for 4 s, each target
+/// with its velocity (`with_qd`) or without (the service estimates it). Returns, over the last
+/// 3 s: the smallest |commanded velocity| / the sine's velocity where the sine moves at more than
+/// half its peak speed (mid-swing), the largest and the RMS tracking error (q_cmd against the
+/// sine at the same time), and the peaks as fractions of the limits.
+struct SineRun {
+  double min_mid_ratio = 1e9, worst = 0, rms = 0;
+  Peaks peaks;
+  std::string figure() const {
+    return "mid-swing min |qd_cmd|/|qd_sine| " + std::to_string(min_mid_ratio) + ", tracking error max " +
+           std::to_string(worst) + " rms " + std::to_string(rms) + " rad, peak/limit v " + std::to_string(peaks.v) +
+           " a " + std::to_string(peaks.a) + " j " + std::to_string(peaks.j);
+  }
+};
+SineRun run_sine(Rig& rig, bool with_qd) {
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  const kin::JointVector q0 = rig.q_cmd();
+  const double f = 0.5, amp = 0.4, w = 2 * M_PI * f;
+  auto at = [&](double t) {
+    kin::JointVector q = q0;
+    for (int j = 0; j < q.size(); ++j) q[j] += amp * std::sin(w * t + 0.5 * j);
+    return q;
+  };
+  auto vel = [&](double t) {
+    kin::JointVector v = kin::JointVector::Zero(q0.size());
+    for (int j = 0; j < v.size(); ++j) v[j] = amp * w * std::cos(w * t + 0.5 * j);
+    return v;
+  };
+  std::mt19937 rng(38);
+  std::uniform_real_distribution<double> jitter(-0.005, 0.005);
+  SineRun out;
+  rig.record = true;
+  rig.trace.clear();
+  double t = 0, sum2 = 0;
+  long samples = 0;
+  bool first = true;
+  while (t < 4.0) {
+    const StreamResult r = with_qd ? st.target(at(t), first, vel(t)) : st.target(at(t), first);
+    CHECK_TEXT(r.ok(), r.reason.c_str());
+    first = false;
+    const double gap = 1.0 / 30 + jitter(rng);
+    for (double g = 0; g < gap; g += 1e-3) {
+      rig.cycle();
+      t += 1e-3;
+      if (t < 1.0) continue;
+      const Telemetry tel = rig.tel();
+      const kin::JointVector e = rig.q_cmd() - at(t), v = vel(t);
+      out.worst = std::max(out.worst, e.cwiseAbs().maxCoeff());
+      sum2 += e.squaredNorm() / static_cast<double>(e.size());
+      ++samples;
+      for (int j = 0; j < v.size(); ++j)
+        if (std::fabs(v[j]) > 0.5 * amp * w)
+          out.min_mid_ratio = std::min(out.min_mid_ratio, tel.qd_cmd[static_cast<std::size_t>(j)] / v[j]);
+    }
+    CHECK(rig.tel().streaming);
+  }
+  out.rms = std::sqrt(sum2 / static_cast<double>(std::max(1L, samples)));
+  out.peaks = peak_ratios(rig.trace, rig.svc().limits());
+  rig.record = false;
+  if (std::getenv("SERVOARM_STREAM_FIGURES") != nullptr)
+    std::printf("\n30 Hz stream of a 0.5 Hz sine, %s: %s\n", with_qd ? "qd sent" : "qd estimated", out.figure().c_str());
+  return out;
+}
+
 }  // namespace
 
 TEST_GROUP(FwStream){};
+
+// A 30 Hz stream of a 0.5 Hz sine is followed without coming to rest at each target: mid-swing
+// the commanded velocity stays near the sine's (never zero between targets), the tracking error
+// is small, and the setpoints stay within the velocity, acceleration and jerk limits; the same
+// with the service estimating the velocity from the targets' times and with the client sending it.
+TEST(FwStream, A30HzSineIsFollowedWithoutStoppingBetweenTargets) {
+  for (const bool with_qd : {false, true}) {
+    Rig rig;
+    rig.enable();
+    const SineRun r = run_sine(rig, with_qd);
+    const std::string fig = std::string(with_qd ? "qd sent: " : "qd estimated: ") + r.figure();
+    CHECK_TEXT(r.min_mid_ratio > 0.5, fig.c_str());
+    CHECK_TEXT(r.worst < 0.05, fig.c_str());
+    CHECK_TEXT(r.peaks.v <= 1.0 + 1e-6 && r.peaks.a <= 1.0 + 1e-3 && r.peaks.j <= 1.0 + 1e-2, fig.c_str());
+  }
+}
+
+// Mid-swing the client stops sending: the target moves on at its velocity for at most its
+// horizon, then the arm comes to rest near the last target and the deadman ends the stream, still
+// within the limits.
+TEST(FwStream, TheDeadmanStopsAMovingStream) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  kin::JointVector q = rig.q_cmd();
+  rig.record = true;
+  for (int i = 0; i < 30; ++i) {  // joint 0 at 1 rad/s, 30 Hz, with its velocity
+    q[0] += 1.0 / 30;
+    kin::JointVector qd = kin::JointVector::Zero(q.size());
+    qd[0] = 1.0;
+    CHECK(st.target(q, i == 0, qd).ok());
+    for (int k = 0; k < 33; ++k) rig.cycle();
+  }
+  CHECK(std::fabs(rig.tel().qd_cmd[0]) > 0.5);
+  for (int k = 0; k < 1000; ++k) rig.cycle();
+  const Telemetry t = rig.tel();
+  CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(t.state));
+  CHECK(!t.streaming);
+  DOUBLES_EQUAL(0.0, t.qd_cmd[0], 1e-9);
+  // beyond the last target: at most its velocity for the deadman's 100 ms and a stop on the limits
+  const kin::JointDynamics& d0 = rig.svc().limits().dyn[0];
+  const Peaks p = peak_ratios(rig.trace, rig.svc().limits());
+  const double vmax = p.v * d0.max_velocity;  // the fastest it went (catching up with the target)
+  CHECK(t.q_cmd[0] < q[0] + 0.1 * 1.0 + vmax * vmax / (2 * d0.max_acceleration) + vmax * d0.max_acceleration / d0.max_jerk);
+  CHECK(p.v <= 1.0 + 1e-6 && p.a <= 1.0 + 1e-3 && p.j <= 1.0 + 1e-2);
+}
 
 // 30 Hz with ±5 ms jitter for 4 s: the setpoints' velocity, acceleration and jerk (finite
 // differences of q_cmd, cycle by cycle) never exceed the joints' limits, and the arm tracks.
@@ -172,6 +305,10 @@ TEST(FwStream, AStopWins) {
     CHECK(st.target(q, i == 0).ok());
     rig.run(0.01);
   }
+  // Where a stop from here can get to: its braking distance on joint 0's limits.
+  const kin::JointDynamics& d0 = rig.svc().limits().dyn[0];
+  const double v0 = std::fabs(rig.tel().qd_cmd[0]);
+  const double reach = rig.tel().q_cmd[0] + v0 * v0 / (2 * d0.max_acceleration) + v0 * d0.max_acceleration / d0.max_jerk;
   CHECK(rig.svc().control(RequestOp::stop).ok());
   for (int i = 0; i < 40; ++i) {  // the client keeps streaming
     q[0] += 0.01;
@@ -181,7 +318,8 @@ TEST(FwStream, AStopWins) {
   }
   const Telemetry t = rig.tel();
   CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(t.state));
-  CHECK(t.q_cmd[0] < q[0] - 0.3);  // stopped, long before the targets sent after the stop
+  CHECK(t.q_cmd[0] <= reach + 1e-9);  // stopped on its limits: the targets sent after the stop did not move it
+  CHECK(t.q_cmd[0] < q[0] - 0.2);  // long before the targets sent after the stop
 }
 
 // Targets outside the joint limits are refused; a step beyond max_step is clamped, or refused
@@ -267,4 +405,109 @@ TEST(FwStream, ATargetBeyondASafetyPlaneIsRefused) {
   STRCMP_CONTAINS("safety plane 0", r.reason.c_str());
   rig.run(0.5);
   CHECK(z_of(rig.q_cmd()) < z0 + 0.030);
+}
+
+// Targets that reach the service in pairs (as when they are delayed on the way: two together,
+// then a gap of two periods) at a steady 1 rad/s: the estimated velocity is the pace's, not the
+// pair's (a small step over a very short time), so the commanded velocity stays near 1 rad/s.
+TEST(FwStream, TargetsArrivingInPairsAreNotABurstOfSpeed) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  kin::JointVector q = rig.q_cmd();
+  double peak = 0;
+  for (int i = 0; i < 40; ++i) {  // 30 Hz pace: 1/30 rad each, sent two at a time
+    for (int k = 0; k < 2; ++k) {
+      q[0] += 1.0 / 30;
+      CHECK(st.target(q, i == 0 && k == 0).ok());
+      rig.cycle();
+    }
+    for (int k = 0; k < 65; ++k) {
+      rig.cycle();
+      if (i > 10) peak = std::max(peak, std::fabs(rig.tel().qd_cmd[0]));
+    }
+  }
+  CHECK_TEXT(peak < 1.4, ("peak commanded velocity " + std::to_string(peak) + " rad/s at a 1 rad/s pace").c_str());
+}
+
+// Cartesian targets: a 30 Hz stream of tool poses (a 30 mm circle in the base frame's x-y plane,
+// the orientation kept) is solved by the service's IK with the active tool and followed: the tool
+// point by forward kinematics of q_cmd stays within a few mm of the circle. A pose out of reach,
+// NaN, and a pose whose solution is a large joint step are refused with one line and do not move
+// the arm (it keeps tracking its last target).
+TEST(FwStream, CartesianTargetsAreSolvedAndFollowed) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  const kin::Chain& ch = rig.svc().tool_chain(rig.svc().active_tool());
+  kin::Pose p0;
+  CHECK(kin::forward(ch, rig.q_cmd(), p0) == kin::Status::ok);
+  auto circle = [&](double t) {
+    kin::Pose p = p0;
+    p.translation() += Eigen::Vector3d(0.03 * (std::cos(2 * M_PI * 0.5 * t) - 1), 0.03 * std::sin(2 * M_PI * 0.5 * t), 0);
+    return p;
+  };
+  double t = 0, worst = 0;
+  bool first = true;
+  while (t < 3.0) {
+    const StreamResult r = st.target_pose(circle(t), false, first);
+    CHECK_TEXT(r.ok(), r.reason.c_str());
+    first = false;
+    for (int k = 0; k < 33; ++k) {
+      rig.cycle();
+      t += 1e-3;
+      kin::Pose p;
+      CHECK(kin::forward(ch, rig.q_cmd(), p) == kin::Status::ok);
+      if (t > 0.5) worst = std::max(worst, (p.translation() - circle(t).translation()).norm());
+    }
+  }
+  const std::string fig = "tool point off the circle by up to " + std::to_string(worst * 1e3) + " mm";
+  CHECK_TEXT(worst < 0.005, fig.c_str());
+  CHECK_TEXT(worst > 0, fig.c_str());
+  // bad poses: refused, the stream holds its last target
+  const kin::JointVector before = rig.q_cmd();
+  kin::Pose far = circle(t);
+  far.translation() += Eigen::Vector3d(5, 0, 0);
+  const StreamResult u = st.target_pose(far, false, false);
+  CHECK_EQUAL(static_cast<int>(CmdError::unreachable), static_cast<int>(u.error));
+  CHECK(u.reason.find('\n') == std::string::npos && !u.reason.empty());
+  kin::Pose nan = circle(t);
+  nan.translation().x() = std::nan("");
+  CHECK_EQUAL(static_cast<int>(CmdError::not_finite), static_cast<int>(st.target_pose(nan, false, false).error));
+  kin::Pose flipped = circle(t);  // the tool turned half round about z: far in joint space
+  flipped.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()).toRotationMatrix() * flipped.linear();
+  const StreamResult f = st.target_pose(flipped, false, false);
+  CHECK_FALSE(f.ok());
+  for (int k = 0; k < 60; ++k) rig.cycle();
+  kin::Pose p;
+  CHECK(kin::forward(ch, rig.q_cmd(), p) == kin::Status::ok);
+  CHECK((p.translation() - circle(t).translation()).norm() < 0.01);  // near the last good target
+  CHECK((rig.q_cmd() - before).cwiseAbs().maxCoeff() < 0.05);
+}
+
+// A pose in the active user frame: the frame's pose applied, the same joints as the base pose.
+TEST(FwStream, ACartesianTargetInTheActiveFrame) {
+  Rig rig;
+  rig.enable();
+  kin::Pose F = kin::Pose::Identity();
+  F.translation() = Eigen::Vector3d(0.1, -0.05, 0.02);
+  F.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  NamedPose def;
+  def.name = "table";
+  def.pose = F;
+  CHECK(rig.svc().define_frame(def).ok());
+  CHECK(rig.svc().select_frame("table").ok());
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  const kin::Chain& ch = rig.svc().tool_chain(rig.svc().active_tool());
+  kin::Pose p0;
+  CHECK(kin::forward(ch, rig.q_cmd(), p0) == kin::Status::ok);
+  kin::Pose goal = p0;
+  goal.translation() += Eigen::Vector3d(0, 0, 0.02);
+  for (int i = 0; i < 30; ++i) {
+    CHECK(st.target_pose(F.inverse() * goal, true, i == 0).ok());
+    rig.run(0.02);
+  }
+  kin::Pose p;
+  CHECK(kin::forward(ch, rig.q_cmd(), p) == kin::Status::ok);
+  CHECK((p.translation() - goal.translation()).norm() < 1e-4);
 }

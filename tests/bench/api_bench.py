@@ -183,7 +183,7 @@ def setpoint_peaks(ts, v, lim):
     return max(map(abs, a or [0])) / lim[1], max(map(abs, j or [0])) / lim[2]
 
 
-def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005):
+def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005, send_qd=False):
     a = Api(port)
     a.ask("take_control")
     a.ask("enable")
@@ -204,7 +204,10 @@ def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005):
             time.sleep(d)
         t = time.perf_counter() - t0
         x = fn(t)
-        a.send("stream", q=[x, 0, 0, 0, 0, 0], **({"start": True} if k == 0 else {}))
+        extra = {"start": True} if k == 0 else {}
+        if send_qd:  # the target's velocity, as a client that knows its signal sends it
+            extra["qd"] = [(fn(t + 1e-4) - fn(t - 1e-4)) / 2e-4, 0, 0, 0, 0, 0]
+        a.send("stream", q=[x, 0, 0, 0, 0, 0], **extra)
         sent.append((t0 + t, x))
     time.sleep(0.5)
     with a.lock:
@@ -222,6 +225,9 @@ def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005):
     win = [(t, x) for t, x in zip(at, q) if t0 + 0.5 < t < t0 + seconds]
     best = min(range(0, 401, 2), key=lambda d: sum((x - fn(t - t0 - d * 1e-3)) ** 2 for t, x in win))
     err = max(abs(x - fn(t - t0 - best * 1e-3)) for t, x in win)
+    # and against the signal itself (no shift): what a follower's lag costs
+    err0 = max(abs(x - fn(t - t0)) for t, x in win)
+    rms0 = (sum((x - fn(t - t0)) ** 2 for t, x in win) / max(1, len(win))) ** 0.5
     # the naive client: linear interpolation from the target before to the newest, over one period
     nt = [t for t, _ in sent]
     nx = [x for _, x in sent]
@@ -242,7 +248,7 @@ def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005):
     # steps (the samples are not every cycle: finer differences would show the gaps, not the arm)
     qdc = [m["qd_cmd"][0] for _, m in st]
     pk = (max(map(abs, qdc)) / lim[0],) + setpoint_peaks(at, qdc, lim)
-    return dict(lag=best, err=err, pk=pk, nlag=nbest, nerr=nerr, npk=peaks(ngrid, nq, lim),
+    return dict(lag=best, err=err, err0=err0, rms0=rms0, pk=pk, nlag=nbest, nerr=nerr, npk=peaks(ngrid, nq, lim),
                 samples=len(st), targets=len(sent))
 
 

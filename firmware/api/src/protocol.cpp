@@ -7,8 +7,10 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 
 #include <nlohmann/json.hpp>
@@ -147,10 +149,11 @@ double num_or(const ServiceCall& c, const char* name, double dflt) {
   return a != nullptr && a->present ? a->num : dflt;
 }
 
+// The active tool's chain and IK, as the console's moves have them.
 fw::MoveContext move_cx(ServiceCall& c) {
   fw::MoveContext m;
-  m.chain = c.cx.chain;
-  m.ik = c.cx.ik;
+  m.chain = &c.cx.svc->tool_chain(c.cx.svc->active_tool());
+  m.ik = c.cx.svc->tool_ik(c.cx.svc->active_tool());
   return m;
 }
 
@@ -176,8 +179,8 @@ constexpr ArgSpec kMovej[] = {
     {"speed_pct", ArgType::number, false, 1, 100, "percent of the joint limits (default motion.joint_speed_pct)"},
     {"blend", ArgType::number, false, 0, 1e3, "blend tolerance at the goal (rad); 0: exact stop"}};
 constexpr ArgSpec kMovel[] = {
-    {"position", ArgType::numbers, true, -1e3, 1e3, "the tool point [x, y, z] in the base frame (m)"},
-    {"rpy", ArgType::numbers, false, -10, 10, "the tool orientation [roll, pitch, yaw] (rad); left out: the orientation the queue ends with"},
+    {"position", ArgType::numbers, true, -1e3, 1e3, "the active tool's point [x, y, z] in the active user frame (m)"},
+    {"rpy", ArgType::numbers, false, -10, 10, "the tool orientation [roll, pitch, yaw] in the active user frame (rad); left out: the orientation the queue ends with"},
     {"speed", ArgType::number, false, 1e-6, 1e3, "tool speed (m/s; default motion.linear_speed_mm_s)"},
     {"blend", ArgType::number, false, 0, 1e3, "blend tolerance at the target (m)"}};
 constexpr ArgSpec kJog[] = {
@@ -194,6 +197,13 @@ constexpr ArgSpec kRecordMcap[] = {
     {"stop", ArgType::boolean, false, 0, 1, "true: ends the recording"}};
 constexpr ArgSpec kStream[] = {
     {"q", ArgType::numbers, true, -1e6, 1e6, "the newest joint target, one value per joint (rad / m)"},
+    {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"},
+    {"qd", ArgType::numbers, false, -1e6, 1e6,
+     "the target's joint velocities (rad/s / m/s); left out: estimated from this target and the one before"}};
+constexpr ArgSpec kStreamPose[] = {
+    {"position", ArgType::numbers, true, -1000, 1000, "the tool point [x, y, z] (m), in the base frame or the active user frame"},
+    {"rpy", ArgType::numbers, true, -10, 10, "the tool orientation [roll, pitch, yaw] (rad) in the same frame"},
+    {"frame", ArgType::text, false, 4, 4, "`base` (default) or `user` (the active user frame)"},
     {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"}};
 
 using C = ServiceCall;
@@ -378,6 +388,45 @@ constexpr ArgSpec kPointGo[] = {
     {"name", ArgType::text, true, 1, 31, "the teach point's name"},
     {"line", ArgType::boolean, false, 0, 1, "true: a straight tool line to it; false (default): a joint move to its joints"},
     {"speed", ArgType::number, false, 1e-6, 1e3, "joint move: percent of the joint limits; line: m/s (default: the configured)"}};
+constexpr ArgSpec kProgramSave[] = {
+    {"name", ArgType::text, true, 1, 63, "the program's name in the programs folder"},
+    {"text", ArgType::text, true, 1, 1 << 20, "the program's text (the native language, or G-code when `gcode` is true)"},
+    {"gcode", ArgType::boolean, false, 0, 1, "`text` is G-code, saved as `name`.gcode (default false: `name`.arm)"}};
+
+constexpr ArgSpec kToolDefine[] = {
+    {"name", ArgType::text, true, 1, 23, "the tool's name (letters, digits, `_`, `-`; not tool0)"},
+    {"position", ArgType::numbers, true, -10, 10, "the tool point [x, y, z] in the flange frame (m)"},
+    {"rpy", ArgType::numbers, true, -10, 10, "the tool's orientation [roll, pitch, yaw] in the flange frame (rad)"},
+    {"mass", ArgType::number, false, 0, 1000, "its payload (kg); left out: none"},
+    {"com", ArgType::numbers, false, -10, 10, "the payload's centre of mass [x, y, z] in the tool frame (m; with mass)"}};
+constexpr ArgSpec kFrameDefine[] = {
+    {"name", ArgType::text, true, 1, 23, "the user frame's name (letters, digits, `_`, `-`; not base)"},
+    {"position", ArgType::numbers, true, -10, 10, "the frame's origin [x, y, z] in the base frame (m)"},
+    {"rpy", ArgType::numbers, true, -10, 10, "the frame's orientation [roll, pitch, yaw] in the base frame (rad)"}};
+
+// A tool's or frame's definition from its arguments; false (answered) on a wrong count.
+bool named_pose_of(ServiceCall& c, fw::NamedPose& d, R& out) {
+  const ArgValue* p = c.rq.arg("position");
+  const ArgValue* r = c.rq.arg("rpy");
+  if (p->list.size() != 3) return out.fail(CmdError::arg_count, "position: expected [x, y, z]"), false;
+  if (r->list.size() != 3) return out.fail(CmdError::arg_count, "rpy: expected [roll, pitch, yaw]"), false;
+  d.name = c.rq.arg("name")->text;
+  d.pose.linear() = kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]);
+  d.pose.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
+  const ArgValue* m = c.rq.arg("mass");
+  const ArgValue* com = c.rq.arg("com");
+  if (com != nullptr && com->present && !(m != nullptr && m->present)) return out.fail(CmdError::bad_option, "com: only with mass"), false;
+  if (m != nullptr && m->present) {
+    d.has_payload = true;
+    d.mass = m->num;
+    if (com != nullptr && com->present) {
+      if (com->list.size() != 3) return out.fail(CmdError::arg_count, "com: expected [x, y, z]"), false;
+      d.com = Eigen::Vector3d(com->list[0], com->list[1], com->list[2]);
+    }
+  }
+  return true;
+}
+
 constexpr ArgSpec kFrameName[] = {{"name", ArgType::text, true, 1, 23, "the tool's / user frame's name"}};
 constexpr ArgSpec kJogCartesian[] = {
     {"axis", ArgType::integer, true, 0, 5, "0..2: along x, y, z (m); 3..5: about x, y, z (rad)"},
@@ -443,20 +492,24 @@ constexpr MessageSpec kMessages[] = {
        move_result(c.cx.svc->move(m, move_cx(c)), out);
      }},
     {"movel", kMovel, Gate::control, Where::service, "ArmService::move(MoveLine)",
-     "straight tool line, path-checked and queued",
+     "straight line of the active tool in the active user frame, path-checked and queued",
      +[](C& c, R& out) {
        const ArgValue* p = c.rq.arg("position");
        const ArgValue* r = c.rq.arg("rpy");
        if (p->list.size() != 3) return out.fail(CmdError::arg_count, "position: expected [x, y, z]");
        if (r->present && r->list.size() != 3) return out.fail(CmdError::arg_count, "rpy: expected [roll, pitch, yaw]");
        fw::MoveLine m;
-       kin::Pose from = kin::Pose::Identity();
-       kin::forward(*c.cx.chain, c.cx.svc->tail(), from);
-       m.target.linear() = r->present ? kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]) : from.linear();
-       m.target.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
+       const fw::MoveContext cx = move_cx(c);
+       const kin::Pose F = c.cx.svc->frame(c.cx.svc->active_frame()).pose;  // the active user frame
+       kin::Pose at = kin::Pose::Identity();  // where the queue ends, in the frame
+       kin::forward(*cx.chain, c.cx.svc->tail(), at);
+       at = F.inverse() * at;
+       if (r->present) at.linear() = kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]);
+       at.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
+       m.target = F * at;
        m.speed = num_or(c, "speed", 0);
        m.blend = num_or(c, "blend", -1);
-       move_result(c.cx.svc->move(m, move_cx(c)), out);
+       move_result(c.cx.svc->move(m, cx), out);
      }},
     {"jog", kJog, Gate::control, Where::service, "ArmService::jog(JointJog)",
      "joint jog by an increment, or continuous (stops unless repeated within the deadman time)",
@@ -509,16 +562,71 @@ constexpr MessageSpec kMessages[] = {
        if (!r.ok()) return out.fail(r.error, std::string(fw::to_string(r.refusal)) + " (" + std::to_string(r.count) + " outputs)");
      }},
     {"stream", kStream, Gate::control, Where::service, "StreamService::target",
-     "streaming (servo) mode: the newest joint target, latest wins; the arm tracks it jerk-limited within its limits "
-     "and brakes to rest, ending the stream with an event, when no target comes within api.stream_deadman_ms; a stop "
+     "streaming (servo) mode: the newest joint target, latest wins, moving on at its velocity (`qd`, or estimated) "
+     "for up to twice the time between targets; the arm tracks it jerk-limited within its limits, matching its "
+     "velocity rather than stopping at each target, and brakes to rest, ending the stream with an event, when no target comes within api.stream_deadman_ms; a stop "
      "ends it (the next target must say start)",
      +[](C& c, R& out) {
        if (c.cx.stream == nullptr) return out.fail(CmdError::unsupported, "streaming targets are not available here");
        kin::JointVector q;
        if (!joints_of(c, "q", q, out)) return;
-       const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0);
+       kin::JointVector qd;
+       if (const ArgValue* v = c.rq.arg("qd"); v != nullptr && v->present && !joints_of(c, "qd", qd, out)) return;
+       const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0, qd);
        if (!r.ok()) return out.fail(r.error, r.reason);
        if (r.clamped) out.j["clamped"] = true;
+     }},
+    {"stream_pose", kStreamPose, Gate::control, Where::service, "StreamService::target_pose",
+     "streaming (servo) mode with a Cartesian target: the active tool's pose, solved by the active tool's IK on the "
+     "service thread (nearest to the last target) and streamed as `stream` streams joints; refused in one line, the arm "
+     "keeping its last target, when the pose has no solution within the joint limits (`unreachable`), its solution is "
+     "more than api.stream_max_step_deg from the last target on a joint (`out_of_range`, never clamped) or it is "
+     "outside the safety envelope (`limits`)",
+     +[](C& c, R& out) {
+       if (c.cx.stream == nullptr) return out.fail(CmdError::unsupported, "streaming targets are not available here");
+       const ArgValue* p = c.rq.arg("position");
+       const ArgValue* r = c.rq.arg("rpy");
+       if (p->list.size() != 3) return out.fail(CmdError::arg_count, "position: expected [x, y, z]");
+       if (r->list.size() != 3) return out.fail(CmdError::arg_count, "rpy: expected [roll, pitch, yaw]");
+       const ArgValue* f = c.rq.arg("frame");
+       const bool user = f != nullptr && f->present && f->text == "user";
+       if (f != nullptr && f->present && !user && f->text != "base")
+         return out.fail(CmdError::bad_option, "frame: `base` or `user`, not `" + f->text + "`");
+       kin::Pose pose = kin::Pose::Identity();
+       pose.linear() = kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]);
+       pose.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
+       const fw::StreamResult res = c.cx.stream->target_pose(pose, user, num_or(c, "start", 0) != 0);
+       if (!res.ok()) return out.fail(res.error, res.reason);
+     }},
+    {"program_save", kProgramSave, Gate::control, Where::service, "prog::load_program",
+     "saves a program into the programs folder (programs.dir) as `name`.arm, or `name`.gcode for G-code, replacing "
+     "one of that name; the text must load first (as `program_check` reads it: an error answers with its `line`, "
+     "nothing written); written whole (a temporary file renamed)",
+     +[](C& c, R& out) {
+       if (c.cx.programs_dir.empty()) return out.fail(CmdError::storage, "no programs folder (programs.dir)");
+       prog::Program p;
+       std::string name;
+       if (!load_api_program(c, p, name, out)) return;
+       const bool gcode = num_or(c, "gcode", 0) != 0;
+       std::string file = name;
+       const bool has_arm = file.size() > 4 && file.compare(file.size() - 4, 4, ".arm") == 0;
+       if (gcode ? !prog::is_gcode_file(file) : !has_arm) file += gcode ? ".gcode" : ".arm";
+       const std::string path = c.cx.programs_dir + "/" + file, tmp = path + ".saving";
+       {
+         std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+         f << c.rq.arg("text")->text;
+         f.flush();
+         if (!f) {
+           ::unlink(tmp.c_str());
+           return out.fail(CmdError::storage, "cannot write " + tmp);
+         }
+       }
+       if (::rename(tmp.c_str(), path.c_str()) != 0) {
+         const std::string why = std::strerror(errno);
+         ::unlink(tmp.c_str());
+         return out.fail(CmdError::storage, "cannot save " + path + ": " + why);
+       }
+       out.j["file"] = file;
      }},
     {"program_check", kProgram, Gate::observer, Where::service, "ArmService::check_program",
      "checks a whole program without running it (the service's dry run: the planning and checks of a real run, from "
@@ -578,9 +686,7 @@ constexpr MessageSpec kMessages[] = {
        pm.name = c.rq.arg("name")->text;
        pm.line = num_or(c, "line", 0) != 0;
        pm.speed = num_or(c, "speed", -1);
-       fw::MoveContext m = move_cx(c);
-       m.chain = &c.cx.svc->tool_chain(c.cx.svc->active_tool());
-       m.ik = c.cx.svc->tool_ik(c.cx.svc->active_tool());
+       const fw::MoveContext m = move_cx(c);
        const fw::PointResult r = c.cx.svc->move_to_point(pm, m);
        if (r.refusal != fw::PointRefusal::none) return point_answer(r, out);
        move_result(r.move, out);
@@ -603,6 +709,26 @@ constexpr MessageSpec kMessages[] = {
     {"frame_select", kFrameName, Gate::control, Where::service, "ArmService::select_frame",
      "makes user frame `name` the active one (only while nothing moves or is queued)",
      +[](C& c, R& out) { frame_answer(c.cx.svc->select_frame(c.rq.arg("name")->text), "frame", out); }},
+    {"tool_define", kToolDefine, Gate::control, Where::service, "ArmService::define_tool",
+     "defines tool `name` (or replaces the one of that name) by its pose in the flange frame and its payload, kept in "
+     "the frames file (only while nothing moves or is queued)",
+     +[](C& c, R& out) {
+       fw::NamedPose d;
+       if (named_pose_of(c, d, out)) frame_answer(c.cx.svc->define_tool(d), "tool", out);
+     }},
+    {"tool_delete", kFrameName, Gate::control, Where::service, "ArmService::delete_tool",
+     "deletes tool `name` (not the active one; only while nothing moves or is queued)",
+     +[](C& c, R& out) { frame_answer(c.cx.svc->delete_tool(c.rq.arg("name")->text), "tool", out); }},
+    {"frame_define", kFrameDefine, Gate::control, Where::service, "ArmService::define_frame",
+     "defines user frame `name` (or replaces the one of that name) by its pose in the base frame, kept in the frames "
+     "file (only while nothing moves or is queued)",
+     +[](C& c, R& out) {
+       fw::NamedPose d;
+       if (named_pose_of(c, d, out)) frame_answer(c.cx.svc->define_frame(d), "frame", out);
+     }},
+    {"frame_delete", kFrameName, Gate::control, Where::service, "ArmService::delete_frame",
+     "deletes user frame `name` (not the active one; only while nothing moves or is queued)",
+     +[](C& c, R& out) { frame_answer(c.cx.svc->delete_frame(c.rq.arg("name")->text), "frame", out); }},
     {"jog_cartesian", kJogCartesian, Gate::control, Where::service, "ArmService::jog(ToolJog)",
      "jogs the active tool along or about an axis of the base, tool or user frame, by an increment or continuously "
      "(stops unless repeated within the deadman time)",

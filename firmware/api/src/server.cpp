@@ -5,6 +5,7 @@
 #include "servoarm/api/server.hpp"
 
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <sys/socket.h>
 #include <sys/eventfd.h>
 #include <sys/stat.h>
@@ -383,6 +384,23 @@ struct ApiServer::Impl {
       if (w < static_cast<int>(s.size())) return -1;
       c.out_bytes -= s.size() + 1;
       c.out.pop_front();
+    } else if (!cfg.tls_cert.empty()) {
+      // Raw TCP in TLS: through lws_write, which encrypts (and keeps what the kernel does not take
+      // of one write: it is written only when the connection is not choked, so that stays small).
+      if (lws_send_pipe_choked(c.wsi)) {
+        lws_callback_on_writable(c.wsi);
+        return 0;
+      }
+      std::string s;  // several lines in one write
+      while (!c.out.empty() && s.size() < 16 * 1024) {
+        s += c.out.front();
+        s += '\n';
+        c.out_bytes -= c.out.front().size() + 1;
+        c.out.pop_front();
+      }
+      std::vector<unsigned char> buf(LWS_PRE + s.size());
+      std::memcpy(buf.data() + LWS_PRE, s.data(), s.size());
+      if (lws_write(c.wsi, buf.data() + LWS_PRE, s.size(), LWS_WRITE_RAW) < static_cast<int>(s.size())) return -1;
     } else {
       // Raw TCP: written on the socket here, without lws_write, so what the kernel does not
       // take stays in this client's outbox (counted by its limit), never in a buffer of lws.
@@ -566,10 +584,20 @@ std::string ApiServer::start() {
   } else if (!is_loopback(s.cfg.bind)) {
     return "api.bind = " + s.cfg.bind + ": beyond loopback only with api.tokens_file";
   }
+  const bool tls = !s.cfg.tls_cert.empty() || !s.cfg.tls_key.empty();
+  if (tls) {
+    if (s.cfg.tls_cert.empty() || s.cfg.tls_key.empty()) return "api: TLS needs both api.tls_cert and api.tls_key";
+    for (const auto& [key, path] : {std::pair<const char*, const std::string&>{"api.tls_cert", s.cfg.tls_cert},
+                                    std::pair<const char*, const std::string&>{"api.tls_key", s.cfg.tls_key}}) {
+      const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+      if (fd < 0) return std::string(key) + " = " + path + ": " + std::strerror(errno);
+      ::close(fd);
+    }
+  }
   lws_set_log_level(LLL_ERR, nullptr);
   lws_context_creation_info info;
   std::memset(&info, 0, sizeof info);
-  info.options = LWS_SERVER_OPTION_EXPLICIT_VHOSTS;
+  info.options = LWS_SERVER_OPTION_EXPLICIT_VHOSTS | (tls ? LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT : 0);
   info.user = &s;
   info.port = CONTEXT_PORT_NO_LISTEN;
   s.ctx = lws_create_context(&info);
@@ -583,9 +611,14 @@ std::string ApiServer::start() {
     v.iface = iface.c_str();
     v.protocols = protos;
     v.user = &s;
+    if (tls) {  // (libwebsockets serves TLS on a vhost only with this option in the vhost's own info)
+      v.options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT;
+      v.ssl_cert_filepath = s.cfg.tls_cert.c_str();
+      v.ssl_private_key_filepath = s.cfg.tls_key.c_str();
+    }
     if (!raw && s.web) v.mounts = &s.web_mount;
     if (raw) {
-      v.options = LWS_SERVER_OPTION_ADOPT_APPLY_LISTEN_ACCEPT_CONFIG;
+      v.options |= LWS_SERVER_OPTION_ADOPT_APPLY_LISTEN_ACCEPT_CONFIG;
       v.listen_accept_role = "raw-skt";
       v.listen_accept_protocol = "servoarm-raw";
     }
@@ -605,10 +638,11 @@ std::string ApiServer::start() {
     s.web_mount.cache_max_age = 0;
   }
   std::string err;
+  const std::string tls_why = tls ? ", TLS: is api.tls_cert a PEM certificate and api.tls_key its key?" : "";
   if (s.cfg.ws_port >= 0 && (s.ws_vh = vhost("ws", s.cfg.ws_port, kWsProtocols, false)) == nullptr)
-    err = "api: cannot listen on " + s.cfg.bind + ":" + std::to_string(s.cfg.ws_port) + " (WebSocket)";
+    err = "api: cannot listen on " + s.cfg.bind + ":" + std::to_string(s.cfg.ws_port) + " (WebSocket" + tls_why + ")";
   if (err.empty() && s.cfg.tcp_port >= 0 && (s.raw_vh = vhost("tcp", s.cfg.tcp_port, kRawProtocols, true)) == nullptr)
-    err = "api: cannot listen on " + s.cfg.bind + ":" + std::to_string(s.cfg.tcp_port) + " (TCP)";
+    err = "api: cannot listen on " + s.cfg.bind + ":" + std::to_string(s.cfg.tcp_port) + " (TCP" + tls_why + ")";
   if (err.empty()) {
     s.efd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
     if (s.efd < 0) err = std::string("api: eventfd: ") + std::strerror(errno);

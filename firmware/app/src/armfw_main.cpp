@@ -87,6 +87,8 @@ int usage(FILE* f, int code) {
                "                        api.enabled on (docs/api.md)\n"
                "  --api-tcp PORT        serve the network API's newline-delimited JSON on PORT (0: a free port)\n"
                "  --api-tokens FILE     the API's tokens file (api.tokens_file)\n"
+               "  --api-tls-cert FILE   TLS on the API's ports: the certificate (api.tls_cert)\n"
+               "  --api-tls-key FILE    and its key (api.tls_key)\n"
                "  --foxglove-port PORT  serve live data to Foxglove / Lichtblick on PORT (0: a free port, printed); turns\n"
                "                        foxglove.enabled on (docs/foxglove-mcap.md)\n"
                "  --record-dir DIR      where `record mcap` writes its MCAP files (record.dir)\n"
@@ -486,6 +488,7 @@ int main(int argc, char** argv) {
   int foxglove_port = -2;
   std::string record_dir;
   std::string api_tokens;
+  std::string api_tls_cert, api_tls_key;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&](const char* what) -> const char* {
@@ -538,6 +541,8 @@ int main(int argc, char** argv) {
     else if (a == "--api-ws") api_ws = static_cast<int>(number("--api-ws", 0, 65535));
     else if (a == "--api-tcp") api_tcp = static_cast<int>(number("--api-tcp", 0, 65535));
     else if (a == "--api-tokens") api_tokens = value("--api-tokens");
+    else if (a == "--api-tls-cert") api_tls_cert = value("--api-tls-cert");
+    else if (a == "--api-tls-key") api_tls_key = value("--api-tls-key");
     else if (a == "--foxglove-port") foxglove_port = static_cast<int>(number("--foxglove-port", 0, 65535));
     else if (a == "--record-dir") record_dir = value("--record-dir");
     else if (a == "--api-reference") {
@@ -622,6 +627,8 @@ int main(int argc, char** argv) {
   resolve(cfg.programs_dir, programs_dir);
   resolve(cfg.programs_points_file, points_file);
   resolve(cfg.api_tokens_file, api_tokens);
+  resolve(cfg.api_tls_cert, api_tls_cert);
+  resolve(cfg.api_tls_key, api_tls_key);
   resolve(cfg.record_dir, record_dir);
   // Where armfw keeps files must exist at start, not first fail when a tool, point or
   // program is saved: the programs folder, and the folders of the frames and points files.
@@ -822,6 +829,8 @@ int main(int argc, char** argv) {
     ac.ws_port = flags ? (api_ws >= 0 ? api_ws : -1) : (app.cfg.api_ws_port > 0 ? app.cfg.api_ws_port : -1);
     ac.tcp_port = flags ? (api_tcp >= 0 ? api_tcp : -1) : (app.cfg.api_tcp_port > 0 ? app.cfg.api_tcp_port : -1);
     ac.tokens_file = app.cfg.api_tokens_file;
+    ac.tls_cert = app.cfg.api_tls_cert;
+    ac.tls_key = app.cfg.api_tls_key;
     ac.max_message = static_cast<std::size_t>(app.cfg.api_max_message_kb) * 1024;
     ac.max_rate_hz = app.cfg.api_max_rate_hz;
     ac.max_clients = app.cfg.api_max_clients;

@@ -504,6 +504,15 @@ const ConfigKey kConfigTable[] = {
       "an API client that begins a message and does not end it within this time is disconnected (a slow-loris "
       "client holds no connection)"}
         .within(1, 600),
+    K{"api.tls_cert", &F::api_tls_cert, "",
+      "TLS on the API's ports (WebSocket: wss://, TCP: TLS around the JSON lines): the server's certificate (PEM, "
+      "its chain after it); with api.tls_key; a file that cannot be read or loaded refuses the start; `\"\"` = "
+      "plain; a relative path is relative to the configuration file's folder"}
+        .length(0, 4095),
+    K{"api.tls_key", &F::api_tls_key, "",
+      "the private key (PEM) of api.tls_cert (keep the file unreadable by others); a relative path is relative to the "
+      "configuration file's folder"}
+        .length(0, 4095),
     K{"mqtt.enabled", &F::mqtt_enabled, "",
       "the MQTT bridge (docs/api.md#mqtt): state and events published on `servoarm/<mqtt.name>/...`, the API's "
       "messages taken on `servoarm/<mqtt.name>/cmd`, last will `offline`"},

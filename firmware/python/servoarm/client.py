@@ -12,6 +12,7 @@ import itertools
 import json
 import queue
 import socket
+import ssl
 import threading
 import time
 from typing import Any, Dict, List, Optional, Sequence
@@ -88,11 +89,30 @@ class Stream:
         self._started = False
         self.clamped = 0
 
-    def send(self, q: Sequence[float]) -> None:
-        r = self._arm.call("stream", q=[float(v) for v in q], **({} if self._started else {"start": True}))
+    def send(self, q: Sequence[float], qd: Optional[Sequence[float]] = None) -> None:
+        """The newest target `q`, with its joint velocities `qd` when the application knows them
+        (otherwise the firmware estimates them from the targets' times): the arm follows a moving
+        target at its velocity instead of stopping at each one."""
+        args: Dict[str, Any] = {"q": [float(v) for v in q]}
+        if qd is not None:
+            args["qd"] = [float(v) for v in qd]
+        if not self._started:
+            args["start"] = True
+        r = self._arm.call("stream", **args)
         self._started = True
         if r.get("clamped"):
             self.clamped += 1
+
+    def send_pose(self, position: Sequence[float], rpy: Sequence[float], frame: str = "base") -> None:
+        """The newest Cartesian target: the active tool's `position` (m) and `rpy` (rad) in the base
+        frame or the active user frame (`frame="user"`), solved by the firmware's IK. A pose out of
+        reach or too far from the last target raises ArmError; the arm keeps its last target."""
+        args: Dict[str, Any] = {"position": [float(v) for v in position], "rpy": [float(v) for v in rpy],
+                                "frame": frame}
+        if not self._started:
+            args["start"] = True
+        self._arm.call("stream_pose", **args)
+        self._started = True
 
     def __enter__(self) -> "Stream":
         return self
@@ -114,10 +134,12 @@ class Arm:
     """
 
     def __init__(self, host: str = "127.0.0.1", token: Optional[str] = None, port: int = 8766,
-                 timeout: float = 10.0, take_control: bool = True):
+                 timeout: float = 10.0, take_control: bool = True, tls: Optional[ssl.SSLContext] = None):
         self.timeout = timeout
         self._sock = socket.create_connection((host, port), timeout=timeout)
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        if tls is not None:  # armfw with api.tls_cert: the certificate checked by the context
+            self._sock = tls.wrap_socket(self._sock, server_hostname=host)
         self._sock.settimeout(None)
         self._wlock = threading.Lock()
         self._ids = itertools.count(1)
@@ -349,6 +371,12 @@ class Arm:
             args["name"] = name
         return args
 
+    def save_program(self, name: str, text: str, gcode: bool = False) -> Dict[str, Any]:
+        """Save `text` (native, or G-code with `gcode`) as program `name` in the controller's
+        programs folder (replacing one of that name) once it loads; ArmError with the refused
+        line otherwise, nothing written. The result's `file` is the file name."""
+        return self.call("program_save", name=name, text=text, **({"gcode": True} if gcode else {}))
+
     def check_program(self, text: Optional[str] = None, name: Optional[str] = None, gcode: bool = False) -> Dict[str, Any]:
         """Check a whole program without running it (the firmware's dry run): its step counts
         and planned `duration`, or ArmError with the first refused line (`.line`, `.file`).
@@ -413,6 +441,27 @@ class Arm:
 
     def select_frame(self, name: str) -> None:
         self.call("frame_select", name=name)
+
+    def define_tool(self, name: str, position: Sequence[float], rpy: Sequence[float] = (0.0, 0.0, 0.0),
+                    mass: Optional[float] = None, com: Optional[Sequence[float]] = None) -> None:
+        """Defines (or replaces) tool `name`: its point `position` (m) and `rpy` (rad) in the flange
+        frame, and optionally its payload `mass` (kg) with its centre of mass `com` (m, tool frame)."""
+        args: Dict[str, Any] = {"name": name, "position": [float(v) for v in position], "rpy": [float(v) for v in rpy]}
+        if mass is not None:
+            args["mass"] = float(mass)
+        if com is not None:
+            args["com"] = [float(v) for v in com]
+        self.call("tool_define", **args)
+
+    def delete_tool(self, name: str) -> None:
+        self.call("tool_delete", name=name)
+
+    def define_frame(self, name: str, position: Sequence[float], rpy: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+        """Defines (or replaces) user frame `name`: its origin `position` (m) and `rpy` (rad) in the base frame."""
+        self.call("frame_define", name=name, position=[float(v) for v in position], rpy=[float(v) for v in rpy])
+
+    def delete_frame(self, name: str) -> None:
+        self.call("frame_delete", name=name)
 
     def _move(self, cmd: str, args: Dict[str, Any], wait: bool, timeout: float) -> Dict[str, Any]:
         seq = self._last_seq()

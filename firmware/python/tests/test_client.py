@@ -4,7 +4,10 @@ per test class, on a free port. ARMFW names the armfw binary (CTest sets it)."""
 import math
 import os
 import re
+import shutil
+import ssl
 import subprocess
+import tempfile
 import threading
 import time
 import unittest
@@ -13,9 +16,9 @@ from servoarm import Arm, ArmError, ArmStopped
 
 
 class ArmfwSim:
-    def __init__(self):
+    def __init__(self, extra=()):
         exe = os.environ.get("ARMFW", "build/bin/armfw")
-        self.p = subprocess.Popen([exe, "--sim", "--no-stdin", "--api-tcp", "0"], stderr=subprocess.PIPE,
+        self.p = subprocess.Popen([exe, "--sim", "--no-stdin", "--api-tcp", "0", *extra], stderr=subprocess.PIPE,
                                   stdout=subprocess.DEVNULL, text=True)
         self.port = None
         self.lines = []
@@ -53,6 +56,68 @@ def recover(arm, timeout=10.0):
             arm.reset()
         except ArmError:
             time.sleep(0.05)
+
+
+class TlsTest(unittest.TestCase):
+    """armfw with --api-tls-cert / --api-tls-key: a client checking the certificate connects over
+    TLS; a certificate path that cannot be read refuses the start in one line."""
+
+    def setUp(self):
+        self.dir = tempfile.mkdtemp(prefix="servoarm_tls_")
+        self.cert, self.key = os.path.join(self.dir, "cert.pem"), os.path.join(self.dir, "key.pem")
+        subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-subj",
+                        "/CN=localhost", "-addext", "subjectAltName=IP:127.0.0.1", "-keyout", self.key, "-out",
+                        self.cert], check=True, capture_output=True)
+
+    def tearDown(self):
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def test_tls_client(self):
+        fw = ArmfwSim(["--api-tls-cert", self.cert, "--api-tls-key", self.key])
+        try:
+            ctx = ssl.create_default_context(cafile=self.cert)
+            with Arm("127.0.0.1", port=fw.port, tls=ctx) as arm:
+                self.assertEqual(arm.info["protocol"], 1)
+                self.assertIn("state", arm.state())
+            other = ssl.create_default_context()  # without the certificate as a CA: refused
+            with self.assertRaises(ssl.SSLError):
+                Arm("127.0.0.1", port=fw.port, tls=other)
+        finally:
+            fw.stop()
+
+    def test_bad_certificate_path(self):
+        exe = os.environ.get("ARMFW", "build/bin/armfw")
+        p = subprocess.run([exe, "--sim", "--no-stdin", "--api-tcp", "0", "--api-tls-cert",
+                            os.path.join(self.dir, "missing.pem"), "--api-tls-key", self.key],
+                           capture_output=True, text=True, timeout=30)
+        self.assertNotEqual(p.returncode, 0)
+        self.assertIn("api.tls_cert = " + os.path.join(self.dir, "missing.pem") + ": No such file", p.stderr)
+
+
+class ProgramSaveTest(unittest.TestCase):
+    """save_program writes a program that loads into the programs folder (--programs), where
+    check_program finds it by name; a bad name, a text that does not load: refused, nothing written."""
+
+    def test_save_program(self):
+        d = tempfile.mkdtemp(prefix="servoarm_programs_")
+        fw = ArmfwSim(["--programs", d])
+        try:
+            with Arm("127.0.0.1", port=fw.port) as arm:
+                r = arm.save_program("square", "movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\n")
+                self.assertEqual(r["file"], "square.arm")
+                self.assertEqual(open(os.path.join(d, "square.arm")).read(), "movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\n")
+                self.assertEqual(arm.check_program(name="square")["steps"], 2)
+                with self.assertRaises(ArmError) as e:
+                    arm.save_program("../evil", "movej 0 0 0 0 0 0\n")
+                self.assertEqual(e.exception.code, "bad_option")
+                with self.assertRaises(ArmError) as e:
+                    arm.save_program("broken", "movej 0 0 0 0 0 0\nfrobnicate 3\n")
+                self.assertEqual(e.exception.code, "program")
+                self.assertEqual(e.exception.line, 2)
+                self.assertEqual(sorted(os.listdir(d)), ["square.arm"])
+        finally:
+            fw.stop()
+            shutil.rmtree(d, ignore_errors=True)
 
 
 class ClientTest(unittest.TestCase):
@@ -122,6 +187,98 @@ class ClientTest(unittest.TestCase):
             self.assertEqual(s["state"], "idle")
             self.assertTrue(any(e["kind"] == "jog_stopped" and "stream stopped" in e["detail"]
                                 for e in arm.events(seq)))
+
+    def test_stream_with_velocities_moves_through_the_targets(self):
+        # 30 Hz of a 0.5 Hz sine on joint 0, each target with its velocity: mid-swing the arm's
+        # commanded velocity keeps the sine's sign and most of its size (it does not stop at
+        # each target); a wrong number of velocities is refused.
+        with self.arm() as arm:
+            arm.enable()
+            q0 = arm.state()["q_cmd"]
+            amp, w = 0.2, 2 * math.pi * 0.5
+            sub = arm.subscribe(200)
+            ratios = []
+            with arm.stream() as st:
+                t0 = time.monotonic()
+                while time.monotonic() - t0 < 2.0:
+                    t = time.monotonic() - t0
+                    q, qd = list(q0), [0.0] * len(q0)
+                    q[0] = q0[0] + amp * math.sin(w * t)
+                    qd[0] = amp * w * math.cos(w * t)
+                    st.send(q, qd)
+                    end = time.monotonic() + 1 / 30
+                    while time.monotonic() < end:  # (never waiting past the next target's time)
+                        try:
+                            s = sub.get(timeout=max(0.001, end - time.monotonic()))
+                        except Exception:
+                            continue
+                        ts = time.monotonic() - t0
+                        v = amp * w * math.cos(w * ts)
+                        if ts > 0.5 and abs(v) > 0.6 * amp * w:
+                            ratios.append(s["qd_cmd"][0] / v)
+                with self.assertRaises(ArmError) as e:
+                    st.send(q0, [0.0] * 5)
+                self.assertEqual(e.exception.code, "arg_count")
+            sub.close()
+            self.assertGreater(len(ratios), 20)
+            self.assertGreater(min(ratios), 0.3, ratios)
+
+    def test_stream_poses(self):
+        # Cartesian targets at 30 Hz: 20 mm down along z, the orientation kept; then a pose out of
+        # reach is refused (unreachable) and the arm stays where the last good target was.
+        with self.arm() as arm:
+            arm.enable()
+            tool = arm.state()["tool"]
+            p0, rpy = tool["position"], tool["rpy"]
+            with arm.stream() as st:
+                for k in range(31):
+                    st.send_pose([p0[0], p0[1], p0[2] - 0.02 * k / 30], rpy)
+                    time.sleep(1 / 30)
+                for _ in range(10):
+                    st.send_pose([p0[0], p0[1], p0[2] - 0.02], rpy)
+                    time.sleep(1 / 30)
+                self.assertAlmostEqual(arm.state()["tool"]["position"][2], p0[2] - 0.02, delta=1e-3)
+                with self.assertRaises(ArmError) as e:
+                    st.send_pose([p0[0] + 5, p0[1], p0[2]], rpy)
+                self.assertEqual(e.exception.code, "unreachable")
+                time.sleep(0.05)
+                self.assertAlmostEqual(arm.state()["tool"]["position"][2], p0[2] - 0.02, delta=1e-3)
+
+    def test_define_tool_and_frame_movel_in_them(self):
+        # A 100 mm tool and a frame shifted 50 mm along x: movel to the frame's coordinates of the
+        # tool point moves that point there (the state's tool pose is the flange's: compared as a
+        # difference); bad definitions are refused; the active tool is not deleted.
+        with self.arm() as arm:
+            arm.enable()
+            arm.movej([0, 0.3, -0.6, 0, 0.6, 0], speed_pct=50)
+            arm.define_tool("pen", [0, 0, 0.1])
+            arm.define_frame("table", [0.05, 0, 0])
+            with self.assertRaises(ArmError) as e:
+                arm.define_tool("bad name", [0, 0, 0.1])
+            self.assertEqual(e.exception.code, "bad_option")
+            self.assertIn("pen", [t["name"] for t in arm.tools()["tools"]])
+            arm.select_tool("pen")
+            arm.select_frame("table")
+            t = arm.state()["tool"]  # the flange: the pen point is 100 mm along its z
+            a, (r, p, y) = t["position"], t["rpy"]
+            z_axis = [math.cos(y) * math.sin(p) * math.cos(r) + math.sin(y) * math.sin(r),
+                      math.sin(y) * math.sin(p) * math.cos(r) - math.cos(y) * math.sin(r),
+                      math.cos(p) * math.cos(r)]
+            pen = [a[i] + 0.1 * z_axis[i] for i in range(3)]
+            # 10 mm along the table's x from the pen's point, in table coordinates; the orientation
+            # kept, the flange moves as the pen point does
+            arm.movel([pen[0] - 0.05 + 0.01, pen[1], pen[2]], speed=0.1)
+            b = arm.state()["tool"]["position"]
+            self.assertAlmostEqual(b[2] - a[2], 0.0, delta=1e-3)
+            self.assertAlmostEqual(b[0] - a[0], 0.01, delta=1e-3)
+            self.assertAlmostEqual(b[1] - a[1], 0.0, delta=1e-3)
+            with self.assertRaises(ArmError):
+                arm.delete_tool("pen")
+            arm.select_tool("tool0")
+            arm.select_frame("base")
+            arm.delete_tool("pen")
+            arm.delete_frame("table")
+            self.assertNotIn("pen", [t["name"] for t in arm.tools()["tools"]])
 
     def test_estop_from_another_client_ends_the_wait(self):
         with self.arm() as arm:

@@ -65,6 +65,49 @@ bool Jogger::plan_joint(const kin::JointState& cmd) {
   return true;
 }
 
+bool Jogger::plan_moving(const kin::JointState& cmd) {
+  if (spec_.qd_goal.size() != n_ || !finite(spec_.qd_goal, n_) || !(spec_.horizon_s > 0) ||
+      !std::isfinite(spec_.horizon_s) || spec_.qd_goal.cwiseAbs().maxCoeff() == 0)
+    return false;
+  const double h = spec_.horizon_s;
+  // The relative limits: |v_rel| <= vmax - |v_target| keeps |v| <= vmax; the target's speed is
+  // held to kMovingShare of the limit so the arm keeps room to catch up.
+  kin::JointLimits L = limits_;
+  kin::JointVector v = spec_.qd_goal;
+  kin::JointState rel = cmd;
+  for (int j = 0; j < n_; ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    const double vmax = limits_.dyn[u].max_velocity * spec_.override;
+    v[j] = std::fmax(-kMovingShare * vmax, std::fmin(kMovingShare * vmax, v[j]));
+    L.dyn[u].max_velocity = vmax - std::fabs(v[j]);
+    L.lower[u] = -1e9;
+    L.upper[u] = 1e9;
+    rel.pos[j] = cmd.pos[j] - spec_.q_goal[j];
+    rel.vel[j] = cmd.vel[j] - v[j];
+  }
+  kin::JointTrajectory plan;
+  if (kin::plan_movej(L, rel, kin::JointVector::Zero(n_), kin::MovejOptions{}, plan) != kin::MotionStatus::ok) return false;
+  // Where the arm can get to: the relative path's extremes, the target's travel over the horizon,
+  // and the braking from its speed, all within the joint's limits.
+  for (int j = 0; j < n_; ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    const kin::JointPeaks pk = kin::peaks(plan, j);
+    const double travel = v[j] * h;
+    const double a = limits_.dyn[u].max_acceleration, jk = limits_.dyn[u].max_jerk;
+    const double reach = v[j] * v[j] / (2 * a) + std::fabs(v[j]) * (a / jk + dt_);
+    const double lo = spec_.q_goal[j] + pk.min_position + std::fmin(0.0, travel) - (v[j] < 0 ? reach : 0.0);
+    const double hi = spec_.q_goal[j] + pk.max_position + std::fmax(0.0, travel) + (v[j] > 0 ? reach : 0.0);
+    if (lo < limits_.lower[u] || hi > limits_.upper[u]) return false;
+  }
+  plan_ = plan;
+  q_ref_ = spec_.q_goal;
+  v_ref_ = v;
+  horizon_ = h;
+  moving_ = true;
+  t_ = 0;
+  return true;
+}
+
 // Per-axis limits proportional to the axis's share of the move, so that a move from rest
 // is a straight line at the asked speed (the planner synchronises the axes).
 bool Jogger::plan_tool(const kin::JointVector& c_goal) {
@@ -116,7 +159,12 @@ bool Jogger::set(const JogSpec& spec, const kin::JointState& cmd, hal::TimePoint
     }
     const JogSpec old = spec_;
     spec_ = spec;
-    if (!plan_joint(cmd)) {
+    const bool was_moving = moving_;
+    moving_ = false;
+    if (spec.stream && plan_moving(cmd)) {
+      // tracking the moving target
+    } else if (!plan_joint(cmd)) {
+      moving_ = was_moving;
       spec_ = old;
       why = "jog cannot be planned from here (it would overshoot a joint limit)";
       return false;
@@ -172,6 +220,7 @@ bool Jogger::set(const JogSpec& spec, const kin::JointState& cmd, hal::TimePoint
 void Jogger::stop(const kin::JointState& cmd) {
   if (!active_ || stopping_) return;
   kin::MovejOptions o;
+  moving_ = false;  // cmd is where the arm is: the stop is planned in joint space from there
   if (spec_.space == JogSpace::joint) {
     if (kin::plan_stop(limits_, cmd, o, plan_) != kin::MotionStatus::ok) {
       end(JogEnd::done, -1, true);
@@ -204,7 +253,23 @@ JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
   const JogEnd at_end = deadman_ ? JogEnd::deadman : JogEnd::done;
 
   if (spec_.space == JogSpace::joint) {
+    if (moving_ && t_ + dt_ >= horizon_) {
+      // No newer target within the horizon: to rest where the target has got to (or, should
+      // that overshoot a limit, to rest as soon as the limits allow).
+      moving_ = false;
+      spec_.q_goal = q_ref_ + v_ref_ * horizon_;
+      if (!plan_joint(cmd)) {
+        if (kin::plan_stop(limits_, cmd, kin::MovejOptions{}, plan_) != kin::MotionStatus::ok) return end(JogEnd::done, -1, true);
+        t_ = 0;
+      }
+    }
     t_ += dt_;
+    if (moving_) {
+      plan_.sample(t_, cmd);
+      cmd.pos += q_ref_ + v_ref_ * t_;
+      cmd.vel += v_ref_;
+      return JogEnd::running;
+    }
     plan_.sample(t_, cmd);
     if (t_ < plan_.duration) return JogEnd::running;
     if (spec_.stream && !stopping_) {  // at the target: held there until the next one (or the deadman)

@@ -7,7 +7,7 @@
 
 namespace servoarm::fw {
 
-StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
+StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool start, const kin::JointVector& qd_in, bool clamp_step) {
   StreamResult r;
   const kin::JointLimits& lim = svc_.limits();
   const int n = lim.n;
@@ -31,10 +31,21 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
       return r;
     }
   }
+  if (qd_in.size() != 0 && qd_in.size() != n) {
+    r.error = CmdError::arg_count;
+    r.reason = "qd: expected " + std::to_string(n) + " joint velocities, got " + std::to_string(qd_in.size());
+    return r;
+  }
+  for (int j = 0; j < qd_in.size(); ++j)
+    if (!std::isfinite(qd_in[j])) {
+      r.error = CmdError::not_finite;
+      r.reason = "qd: joint " + std::to_string(j) + ": not finite";
+      return r;
+    }
   const Telemetry t = ctl_.telemetry();
   // The stream runs while the control thread says so, or the target before this one was taken
   // in the cycle the telemetry shows (its own publication may not have come yet).
-  const bool running = sent_ && (t.streaming || t.cycles <= sent_cycle_ + 1);
+  const bool running = this->running(t);
   if (!start && !running) {
     r.error = CmdError::bad_state;
     r.reason = sent_ ? std::string("the stream ended (the arm is ") + to_string(t.state) + "): start a new one"
@@ -48,7 +59,7 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
     const double step = cfg_.max_step[static_cast<std::size_t>(j)];
     const double d = q[j] - from[j];
     if (!(step > 0) || std::fabs(d) <= step) continue;
-    if (!cfg_.clamp_step) {
+    if (!clamp_step) {
       char b[160];
       std::snprintf(b, sizeof b, "joint %d: a step of %.6g from the last target, more than %.6g", j, d, step);
       r.error = CmdError::out_of_range;
@@ -66,6 +77,26 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
     r.reason = std::move(why);
     return r;
   }
+  // The target's velocity: the client's, or estimated from the target before and the time
+  // between them (the control thread's clock). The target moves on at it for `horizon` (twice
+  // the time between targets, at most the deadman time); a velocity that would carry it through
+  // the safety envelope within that time is dropped (the arm comes to rest at the target).
+  const double now = static_cast<double>(t.cycles) * ctl_.period_s();
+  const double gap = now - sent_t_;
+  const bool spaced = running && gap > 0 && gap <= cfg_.deadman_s;
+  kin::JointVector qd = kin::JointVector::Zero(n);
+  if (qd_in.size() == n)
+    qd = qd_in;
+  else if (spaced)  // two targets that arrive close together (delayed on the way) are not a burst of speed
+    qd = (q - from) / std::fmax(gap, 0.5 * gap_avg_);
+  const double horizon = spaced ? std::fmin(cfg_.deadman_s, 2 * gap) : cfg_.deadman_s;
+  if (qd.cwiseAbs().maxCoeff() > 0) {
+    const kin::JointVector ahead = q + qd * horizon;
+    bool inside = true;
+    for (int j = 0; j < n; ++j)
+      inside = inside && ahead[j] >= lim.lower[static_cast<std::size_t>(j)] && ahead[j] <= lim.upper[static_cast<std::size_t>(j)];
+    if (!inside || !svc_.check_target(q, ahead, 0.0, &svc_.tool_chain(svc_.active_tool())).empty()) qd.setZero();
+  }
   Request rq;
   rq.op = RequestOp::jog;
   rq.jog.space = JogSpace::joint;
@@ -74,6 +105,8 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
   rq.jog.q_goal = q;
   rq.jog.override = std::fmin(1.0, std::fmax(0.01, cfg_.speed_pct / 100.0));
   rq.jog.axis = -1;
+  rq.jog.qd_goal = qd;
+  rq.jog.horizon_s = horizon;
   Reply rep;
   if (!svc_.request(rq, rep)) {
     r.error = CmdError::timeout;
@@ -85,6 +118,8 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
       last_ = q;
       sent_ = true;
       sent_cycle_ = ctl_.telemetry().cycles;
+      sent_t_ = now;
+      gap_avg_ = spaced ? (gap_avg_ > 0 ? 0.8 * gap_avg_ + 0.2 * gap : gap) : 0.0;
       svc_.jog_forget();  // the next jog starts from the commanded position, not a jog's tail
       return r;
     case RtResult::busy: r.error = CmdError::busy; break;
@@ -96,6 +131,34 @@ StreamResult StreamService::target(const kin::JointVector& q_in, bool start) {
   }
   r.reason = rep.message;
   return r;
+}
+
+StreamResult StreamService::target_pose(const kin::Pose& pose_in, bool in_frame, bool start) {
+  StreamResult r;
+  if (!pose_in.matrix().allFinite()) {
+    r.error = CmdError::not_finite;
+    r.reason = "pose: not finite";
+    return r;
+  }
+  const std::size_t tool = svc_.active_tool();
+  const kin::Pose pose = in_frame ? svc_.frame(svc_.active_frame()).pose * pose_in : pose_in;
+  const Telemetry t = ctl_.telemetry();
+  const int n = svc_.limits().n;
+  kin::JointVector seed(n);
+  const bool run = running(t) && last_.size() == n;
+  for (int j = 0; j < n; ++j) seed[j] = run ? last_[j] : t.q_cmd[static_cast<std::size_t>(j)];
+  const kin::IkSolver ik = svc_.tool_ik(tool);
+  kin::JointVector q(n);
+  if (ik.fn == nullptr || ik.fn(svc_.tool_chain(tool), pose, seed, q, ik.ctx) < kin::Status::ok) {
+    const Eigen::Vector3d p = pose.translation();
+    char b[160];
+    std::snprintf(b, sizeof b, "pose [%.4g, %.4g, %.4g] m (base frame) of tool %s: no IK solution within the joint limits",
+                  p.x(), p.y(), p.z(), svc_.tool(tool).name.c_str());
+    r.error = CmdError::unreachable;
+    r.reason = b;
+    return r;
+  }
+  return joint_target(q, start, kin::JointVector(), false);
 }
 
 }  // namespace servoarm::fw

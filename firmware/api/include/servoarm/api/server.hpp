@@ -46,6 +46,10 @@ struct ApiConfig {
   /// WebSocket port, index.html at "/"; "" serves none. The files hold no secret: what the page
   /// may do is decided by its WebSocket's token and role, as for every client.
   std::string web_root;
+  /// TLS on both ports: the server's certificate (PEM, its chain after it) and its private key;
+  /// both or neither ("": plain). A file that cannot be read or loaded refuses the start.
+  std::string tls_cert;
+  std::string tls_key;
 };
 
 /// Counters (diagnostics; read any time).

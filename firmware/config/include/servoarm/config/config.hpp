@@ -206,6 +206,8 @@ struct FwConfig {
   double api_stream_max_step_deg = 30.0; ///< largest change of a joint between two targets (deg / mm); 0 = none
   std::string api_stream_step = "clamp"; ///< a larger step: "clamp" or "refuse"
   int api_partial_timeout_s = 10;        ///< a message begun and not ended this long: the connection is closed
+  std::string api_tls_cert;              ///< TLS on the API's ports: the certificate (PEM); "" = plain
+  std::string api_tls_key;               ///< its private key (PEM)
 
   // [mqtt]: the MQTT bridge (docs/api.md#mqtt)
   bool mqtt_enabled = false;             ///< connect to the broker, publish state / events, take commands

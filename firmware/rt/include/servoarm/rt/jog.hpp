@@ -44,6 +44,15 @@ struct JogSpec {
   /// on its limits and ends (JogEnd::deadman).
   bool stream = false;
   double deadman_s = 0.25;
+  /// Stream: the target's joint velocities (SI per s; empty or all zero: rest at the target).
+  /// The target then moves on at them, and the arm tracks it moving: the trajectory is planned
+  /// in the frame moving with the target (relative velocity limit: the joint's limit less the
+  /// target's speed, accelerations and jerks its own), so the arm matches the target's velocity
+  /// instead of coming to rest at each one. After `horizon_s` without a newer target it comes to
+  /// rest where the target has got to. A target velocity whose path over the horizon and its
+  /// braking would leave a joint's limits is dropped (rest at the target).
+  kin::JointVector qd_goal;
+  double horizon_s = 0;  ///< stream with qd_goal: how long the target moves on at qd_goal
   // joint jog
   kin::JointVector q_goal;       ///< absolute joint target (continuous: the limit in the jog's direction)
   double override = 1.0;         ///< fraction of the joint limits, [0.01, 1]
@@ -81,6 +90,8 @@ class Jogger {
   static constexpr double kMinScale = 0.05;
   /// A joint that would need more than this fraction of its velocity limit stops the tool jog.
   static constexpr double kStopRatio = 0.9;
+  /// A streamed target's velocity is held to this fraction of the joint's velocity limit.
+  static constexpr double kMovingShare = 0.9;
 
   void configure(const kin::Chain& chain, const kin::JointLimits& limits, double period_s);
 
@@ -109,10 +120,13 @@ class Jogger {
   bool needs_joint_ramp() const { return needs_ramp_; }
   /// Current time scaling of a tool jog (1 = full speed; < 1 slowed near a singularity).
   double scale() const { return scale_; }
-  void reset() { active_ = stopping_ = needs_ramp_ = deadman_ = false; }
+  void reset() { active_ = stopping_ = needs_ramp_ = deadman_ = moving_ = false; }
 
  private:
   bool plan_joint(const kin::JointState& cmd);
+  /// Stream with a target velocity: the plan in the target's moving frame (moving_), or false
+  /// (nothing changed) when the velocity cannot be followed within the limits.
+  bool plan_moving(const kin::JointState& cmd);
   bool plan_tool(const kin::JointVector& c_goal);
   void tool_pose(const kin::JointState& c, kin::Pose& out) const;
   JogEnd end(JogEnd e, int joint, bool ramp);
@@ -133,6 +147,10 @@ class Jogger {
   // joint jog, and the tool jog's virtual axes: the plan being sampled
   kin::JointTrajectory plan_{};
   double t_ = 0;
+  // stream with a target velocity: plan_ is relative to the target q_ref_ + v_ref_ t
+  bool moving_ = false;
+  kin::JointVector q_ref_, v_ref_;
+  double horizon_ = 0;
   // tool jog
   kin::Pose origin_ = kin::Pose::Identity();  ///< tool pose at the jog's start
   Eigen::Matrix3d frame_ = Eigen::Matrix3d::Identity();
