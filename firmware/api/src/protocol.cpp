@@ -931,6 +931,9 @@ std::string hello_line(const ApiRequest& rq, const HelloInfo& h, const kin::Chai
   f["role"] = h.role;
   f["client"] = h.client;
   f["controller"] = h.controller;
+  char crc[9];
+  std::snprintf(crc, sizeof crc, "%08X", static_cast<unsigned>(h.safety_checksum));
+  f["safety"] = {{"enabled", h.safety_on}, {"checksum", crc}};
   return ok_line(rq, f.dump(-1, ' ', false, json::error_handler_t::replace));
 }
 
@@ -943,6 +946,8 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
   j["state"] = fw::to_string(t.state);
   j["mode"] = fw::to_string(t.mode);
   j["holding"] = t.holding;
+  j["safety_mode"] = kin::to_string(static_cast<kin::SafetyMode>(t.safety_mode));
+  j["safety_stops"] = t.safety_stops;
   json q = json::array(), qc = json::array(), fe = json::array();
   kin::JointVector qa(chain.n_joints);
   for (int i = 0; i < t.n && i < chain.n_joints; ++i) {

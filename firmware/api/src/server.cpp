@@ -268,6 +268,8 @@ struct ApiServer::Impl {
       h.role = role_name(c.role);
       h.client = c.id;
       h.controller = controller.load();
+      h.safety_on = cfg.safety_on;
+      h.safety_checksum = cfg.safety_checksum;
       return send(c, hello_line(rq, h, chain, limits), true);
     }
     if (name == "subscribe" || name == "unsubscribe") {

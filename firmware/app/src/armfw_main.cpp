@@ -838,6 +838,8 @@ int main(int argc, char** argv) {
     ac.partial_timeout_s = app.cfg.api_partial_timeout_s;
     ac.rate_hz = app.cfg.rate_hz;
     ac.robot = app.cfg.robot;
+    ac.safety_on = app.console->config().safety.enabled;
+    ac.safety_checksum = app.console->config().safety_checksum;
     // the browser pendant (docs/pendant.md): the installed files; with --sim the source tree's
     // built page first, so a build tree's armfw serves the page of its own sources
     for (const char* dir : {sim ? SERVOARM_WEB_TREE_DIR : "", SERVOARM_WEB_INSTALL_DIR, "/usr/share/servoarm/web"}) {

@@ -94,6 +94,72 @@ class TlsTest(unittest.TestCase):
         self.assertIn("api.tls_cert = " + os.path.join(self.dir, "missing.pem") + ": No such file", p.stderr)
 
 
+class SafetyHelloTest(unittest.TestCase):
+    """hello tells the safety envelope armfw runs with: enabled and the checksum that the
+    console's `safety` shows for the same armfw; another envelope, another checksum; none: off."""
+
+    def start(self, toml):
+        args = [os.environ.get("ARMFW", "build/bin/armfw"), "--sim", "--api-tcp", "0"]
+        if toml is not None:
+            path = os.path.join(self.dir, "armfw%d.toml" % len(os.listdir(self.dir)))
+            with open(path, "w") as f:
+                f.write(toml)
+            args += ["--config", path]
+        p = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.procs.append(p)
+        port = None
+        end = time.monotonic() + 30
+        while port is None and time.monotonic() < end:
+            line = p.stderr.readline()
+            if not line:
+                break
+            m = re.search(r"TCP port (\d+)", line)
+            port = int(m.group(1)) if m else None
+        self.assertIsNotNone(port, "armfw did not start its API")
+        threading.Thread(target=lambda: [None for _ in p.stderr], daemon=True).start()
+        return p, port
+
+    def console_checksum(self, p):
+        p.stdin.write("safety\n")
+        p.stdin.flush()
+        end = time.monotonic() + 10
+        while time.monotonic() < end:
+            line = p.stdout.readline()
+            m = re.search(r"checksum=([0-9A-F]{8})", line)
+            if m:
+                return m.group(1)
+        self.fail("no checksum in the console's `safety` answer")
+
+    def setUp(self):
+        self.dir = tempfile.mkdtemp(prefix="servoarm_safety_hello_")
+        self.procs = []
+
+    def tearDown(self):
+        for p in self.procs:
+            p.terminate()
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def test_hello_carries_the_safety_checksum(self):
+        table = "[safety]\nplanes = [0, 0, 1, -300]\ntool_radius_mm = 20\n"
+        p, port = self.start(table)
+        with Arm("127.0.0.1", port=port) as arm:
+            s = arm.info["safety"]
+            self.assertTrue(s["enabled"])
+            self.assertEqual(s["checksum"], self.console_checksum(p))
+            self.assertEqual(arm.state()["safety_mode"], "normal")
+        _, port2 = self.start(table.replace("-300", "-250"))
+        with Arm("127.0.0.1", port=port2) as arm:
+            self.assertTrue(arm.info["safety"]["enabled"])
+            self.assertNotEqual(arm.info["safety"]["checksum"], s["checksum"])
+        _, port3 = self.start(None)
+        with Arm("127.0.0.1", port=port3) as arm:
+            self.assertFalse(arm.info["safety"]["enabled"])
+
+
 class ProgramSaveTest(unittest.TestCase):
     """save_program writes a program that loads into the programs folder (--programs), where
     check_program finds it by name; a bad name, a text that does not load: refused, nothing written."""

@@ -147,6 +147,8 @@ struct HelloInfo {
   const char* role = "";
   std::uint64_t client = 0;
   std::uint64_t controller = 0;  ///< 0: nobody
+  bool safety_on = false;        ///< a safety envelope is configured
+  std::uint32_t safety_checksum = 0;  ///< CRC-32 of the [safety] section (as `safety` on the console shows it)
 };
 std::string hello_line(const ApiRequest& rq, const HelloInfo& h, const kin::Chain& chain, const kin::JointLimits& lim);
 

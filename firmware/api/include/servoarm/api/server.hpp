@@ -50,6 +50,10 @@ struct ApiConfig {
   /// both or neither ("": plain). A file that cannot be read or loaded refuses the start.
   std::string tls_cert;
   std::string tls_key;
+  /// The safety envelope the service checks with ([safety], docs/safety.md; fixed at start):
+  /// configured or not and its checksum, which hello tells every client.
+  bool safety_on = false;
+  std::uint32_t safety_checksum = 0;
 };
 
 /// Counters (diagnostics; read any time).
