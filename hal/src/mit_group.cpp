@@ -239,6 +239,7 @@ Status MitGroup::bring_up(std::size_t j, TimePoint deadline) {
   if (cutoff <= 0) cutoff = 80;  // no published cut-off: stay well below what windings take
   J.temp_fault = c.temp_fault > 0 ? c.temp_fault : cutoff - 5;
   J.temp_warning = c.temp_warning > 0 ? c.temp_warning : cutoff - 15;
+  J.temp_cutoff = cutoff;
   // the start position (and proof the motor takes frames on its id)
   mit::Feedback m;
   const bool got = ask(mit::special_frame(c.motor_id, mit::Special::disable),
@@ -316,6 +317,11 @@ void MitGroup::take_feedback(std::size_t j, const mit::Feedback& m, TimePoint no
   J.error = m.error;
   const double hottest = std::max(m.t_mos, m.t_rotor);
   J.hot = hottest >= J.temp_warning;
+  fb.has_temperature = true;
+  fb.temperature = hottest;
+  fb.temperature_warning = J.temp_warning;
+  fb.temperature_limit = J.temp_fault;
+  fb.temperature_cutoff = J.temp_cutoff;
   // enable() after a fault: the answers sent before the clear-error frame still carry the old
   // error; the state follows the answer to the clear-error frame
   if (J.clear) return;

@@ -516,3 +516,52 @@ TEST(FwMitArm, RobstrideArmMoves) {
   for (std::size_t j = 0; j < 6; ++j) DOUBLES_EQUAL(goal[j] * kDeg, a.tel().q_act[j], 0.05 * kDeg);
   LONGS_EQUAL(0, long(a.rt_allocs));
 }
+
+// Temperatures: each MIT joint's hottest reported temperature (MOSFET or winding) reaches the
+// service's status and the console's `status`; a CiA 402 joint, whose drive reports none, shows
+// "-". DM-J4340's OT_Value is 100 deg C (the virtual motor's register): warning from 85, fault at
+// 95, before the motor's own cut-off.
+TEST(FwMitArm, TemperaturesReachStatusWarnAndFaultBeforeTheMotorsCutOff) {
+  FwConfig c = damiao_arm("off");
+  c.drives[5] = DriveConfig{};  // a CiA 402 wrist on a second bus
+  c.drives[5].node = 6;
+  c.drives[5].can = "sim1";
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  a.motor(2).set_temperature(60.4);
+  a.run(0.05);
+  std::string st = a.cmd("status");
+  CHECK_TEXT(has(st, " temperature_c=[30 30 60 30 30 -]"), st.c_str());
+  CHECK_TEXT(!has(st, "hot="), st.c_str());
+  ArmStatus s = a.app.console->service().status();
+  LONGS_EQUAL(6, long(s.temperature.size()));
+  DOUBLES_EQUAL(60, s.temperature[2], 1.0);
+  CHECK(std::isnan(s.temperature[5]));
+  LONGS_EQUAL(0, long(s.temperature_warning));
+  // 88 deg C: at or above the warning (85), below the fault (95): status says so, the arm runs on
+  a.motor(2).set_temperature(88.4);
+  a.run(0.05);
+  st = a.cmd("status");
+  CHECK_TEXT(has(st, "temperature_c=[30 30 88 30 30 -] hot=[3]"), st.c_str());
+  s = a.app.console->service().status();
+  LONGS_EQUAL(1 << 2, long(s.temperature_warning));
+  CHECK_TEXT(s.state == ArmState::idle, s.fault_text.c_str());
+  CHECK_TEXT(has(a.events, "joint 3 at 88 deg C: over-temperature warning (from 85 deg C; the arm stops at 95)"),
+             a.events.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 0 5 0 0 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  // 97 deg C: the arm stops in fault, one line naming the joint, the temperature and the limit,
+  // while the motor (cut-off 100) has not tripped itself
+  a.motor(2).set_temperature(97.4);
+  a.run(0.05);
+  const Telemetry t = a.tel();
+  CHECK_TEXT(t.state == ArmState::fault, a.events.c_str());
+  CHECK_TEXT(t.cause == FaultCause::over_temperature, t.fault_text);
+  LONGS_EQUAL(2, t.fault_joint);
+  STRCMP_EQUAL("joint 3 over_temperature: 97 deg C, at or above its limit 95 deg C (the motor's own cut-off 100 deg C)",
+               t.fault_text);
+  CHECK_TEXT(has(a.events, "alarm: fault joint 3 over_temperature: 97 deg C"), a.events.c_str());
+  LONGS_EQUAL(0, long(a.motor(2).error()));
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}

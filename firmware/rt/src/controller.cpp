@@ -24,6 +24,7 @@ const char* to_string(FaultCause c) {
     case FaultCause::feedback_invalid: return "feedback_invalid";
     case FaultCause::homing_failed: return "homing_failed";
     case FaultCause::collision: return "collision";
+    case FaultCause::over_temperature: return "over_temperature";
   }
   return "?";
 }
@@ -61,6 +62,7 @@ const char* to_string(EventKind k) {
     case EventKind::jog_stopped: return "jog_stopped";
     case EventKind::homing: return "homing";
     case EventKind::freedrive: return "freedrive";
+    case EventKind::warning: return "warning";
   }
   return "?";
 }
@@ -381,6 +383,13 @@ void Controller::supervise(TimePoint now) {
         case hal::Status::homing_error:
         case hal::Status::bad_state: c = FaultCause::bus_error; break;
       }
+      if (fb.fault == hal::Status::drive_fault && fb.has_temperature && fb.temperature >= fb.temperature_limit) {
+        char t[96];
+        std::snprintf(t, sizeof t, "%.0f deg C, at or above its limit %.0f deg C (the motor's own cut-off %.0f deg C)",
+                      fb.temperature, fb.temperature_limit, fb.temperature_cutoff);
+        raise_fault(FaultCause::over_temperature, j, t);
+        return;
+      }
       std::snprintf(d, sizeof d, "%s, error code 0x%04X", hal::to_string(fb.fault), unsigned(fb.error_code));
       raise_fault(c, j, d);
       return;
@@ -463,6 +472,21 @@ void Controller::supervise(TimePoint now) {
           return;
         }
     }
+  }
+}
+
+void Controller::watch_temperatures() {
+  for (int j = 0; j < n_; ++j) {
+    const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+    const auto bit = static_cast<std::uint16_t>(1u << j);
+    const bool hot = fb.has_temperature && fb.temperature >= fb.temperature_warning;
+    if (hot && (hot_ & bit) == 0) {
+      char m[sizeof(Event::message)];
+      std::snprintf(m, sizeof m, "joint %d at %.0f deg C: over-temperature warning (from %.0f deg C; the arm stops at %.0f)",
+                    j + 1, fb.temperature, fb.temperature_warning, fb.temperature_limit);
+      emit(EventKind::warning, FaultCause::none, j, 0, m);
+    }
+    hot_ = static_cast<std::uint16_t>(hot ? hot_ | bit : hot_ & ~bit);
   }
 }
 
@@ -1133,12 +1157,17 @@ void Controller::publish() {
     t.qd_act[ju] = fb.velocity;
     t.tau_act[ju] = fb.has_torque ? fb.torque : 0.0;
     if (fb.has_torque) t.torque_valid = static_cast<std::uint16_t>(t.torque_valid | (1u << j));
+    if (fb.has_temperature) {
+      t.temperature[ju] = fb.temperature;
+      t.temperature_valid = static_cast<std::uint16_t>(t.temperature_valid | (1u << j));
+    }
     t.joint_state[ju] = static_cast<std::uint8_t>(fb.state);
   }
   t.queued = static_cast<std::uint32_t>(exec_.queue().size());
   t.streaming = mode_ == Mode::jogging && jog_.streaming();
   t.running_id = exec_.running_id();
   t.done_id = done_id_;
+  t.temperature_warning = hot_;
   t.cause = cause_;
   t.fault_joint = static_cast<std::int8_t>(fault_joint_);
   std::memcpy(t.fault_text, fault_text_, sizeof t.fault_text);
@@ -1278,6 +1307,7 @@ void Controller::cycle(TimePoint now) {
   for (int i = 0; i < 8 && outputs_.pop(oc); ++i) apply_output(oc);
   // 2 supervisor
   supervise(now);
+  watch_temperatures();
   // 3 motion, and the model's feed-forward of the setpoint (60B1h / 60B2h with this write)
   step_motion();
   step_safety();

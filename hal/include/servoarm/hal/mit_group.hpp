@@ -131,7 +131,7 @@ class MitGroup final : public DriveGroup {
     double zero = 0;         ///< actuator rad at joint zero
     double p_act = 0;        ///< actuator position, multi-turn
     double t_mos = 0, t_rotor = 0;
-    double temp_warning = 0, temp_fault = 0;
+    double temp_warning = 0, temp_fault = 0, temp_cutoff = 0;
     bool hot = false;
     std::uint8_t error = 0;  ///< the last error nibble / code
     bool want = false;       ///< enable() asked for operation

@@ -48,6 +48,14 @@ struct JointFeedback {
   TimePoint last_heartbeat = 0; ///< time of the last heartbeat (0 = none)
   TimePoint fault_since = 0;    ///< when the fault was detected
   Duration age = -1;            ///< now - last_feedback at the last read(), -1 = none yet
+  /// The drive's hottest reported temperature (deg C: MIT motors' MOSFET or winding), with the
+  /// limits the family supervises it against (below the motor's own cut-off). has_temperature
+  /// false: the drive reports none (CiA 402 here), the three values are 0.
+  bool has_temperature = false;
+  double temperature = 0.0;
+  double temperature_warning = 0.0;  ///< deg C: from here on the joint is hot (a warning)
+  double temperature_limit = 0.0;    ///< deg C: here the family faults the joint (drive_fault)
+  double temperature_cutoff = 0.0;   ///< deg C: where the motor stops by itself
 };
 
 /// How a joint establishes its zero at power-up (docs/servo-bus.md#homing).
