@@ -76,6 +76,12 @@ void ArmServoBus::disable() {
 void ArmServoBus::quick_stop() {
   for (std::size_t g = 0; g < groups_n_; ++g) groups_[g]->quick_stop();
 }
+bool ArmServoBus::quick_stop_holds() const {
+  for (std::size_t g = 0; g < groups_n_; ++g)
+    if (groups_[g]->quick_stop_holds()) return true;
+  return false;
+}
+bool ArmServoBus::holding(std::size_t j) const { return ours(j) && sub(j).holding(slot(j).local); }
 
 Status ArmServoBus::read(TimePoint now) {
   Status result = Status::ok;

@@ -312,6 +312,8 @@ void MitGroup::take_feedback(std::size_t j, const mit::Feedback& m, TimePoint no
   fb.last_feedback = fb.sampled = now;
   fb.drive_state = m.error;
   fb.statusword = m.error;
+  J.v_act = m.v;
+  J.t_act = m.t;
   J.t_mos = m.t_mos;
   J.t_rotor = m.t_rotor;
   J.error = m.error;
@@ -355,8 +357,12 @@ void MitGroup::take_feedback(std::size_t j, const mit::Feedback& m, TimePoint no
       on = J.want && J.answered;  // no state in the frame: the enable frame was answered
       break;
   }
+  if (J.qstop && !on) {  // the motor dropped out of its hold by itself (its own watchdog): powered down
+    J.qstop = false;
+    J.want = false;
+  }
   if (on && J.want) {
-    fb.state = JointState::enabled;
+    fb.state = J.qstop ? JointState::stopping : JointState::enabled;
     J.enabling_since = 0;
   } else if (on) {
     fb.state = JointState::stopping;
@@ -431,6 +437,22 @@ Status MitGroup::family_write(std::span<const double> setpoints, TimePoint now) 
       f = mit::special_frame(c.motor_id, mit::Special::disable);
       J.sent = {};
       J.answered = false;
+      J.qstop = false;
+    } else if (J.qstop) {
+      // Damping first: the set point follows the measured position (kp pulls at nothing), KD_MAX
+      // brakes the joint without overshoot whatever its inertia; once it is at rest the set
+      // point stays there and kp holds it.
+      if (!J.qstop_rest) {
+        J.qstop_at = J.p_act;
+        J.qstop_rest = std::fabs(J.v_act) <= rest_band(J);
+      }
+      const double wrap = static_cast<double>(J.unwrap.turns()) * 2.0 * J.r.p_max;
+      // the model's torque at the measured pose when the controller gives one (gravity), else
+      // the torque the motor measured when the stop began
+      const mit::Command cmd{J.qstop_at - wrap, 0, c.kp, J.r.kd_max, J.ff ? J.ff_t : J.qstop_t};
+      mit::pack_command(J.r, c.motor_id, cmd, f);
+      J.sent = cmd;
+      J.ff = false;
     } else if (fb.state != JointState::enabled) {
       f = mit::special_frame(c.motor_id, mit::Special::enable);
       if (J.enabling_since == 0) J.enabling_since = now;
@@ -483,6 +505,10 @@ void MitGroup::enable() {
     Joint& J = joints_[j];
     JointFeedback& fb = fb_[j];
     J.want = true;
+    if (J.qstop) {  // holding after quick_stop(): back to the setpoints through the enable frame
+      J.qstop = false;
+      if (fb.state == JointState::stopping) fb.state = JointState::enabling;
+    }
     if (fb.state == JointState::fault) {
       J.clear = true;
       J.overheated = false;
@@ -497,10 +523,44 @@ void MitGroup::enable() {
   }
 }
 
+void MitGroup::quick_stop() {
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    Joint& J = joints_[j];
+    JointFeedback& fb = fb_[j];
+    if (!J.want || J.qstop || (fb.state != JointState::enabled && fb.state != JointState::stopping)) {
+      if (!J.qstop) J.want = false;  // not powered: powered down as disable() does
+      if (fb.state == JointState::enabling) fb.state = JointState::stopping;
+      continue;
+    }
+    J.qstop = true;
+    J.qstop_rest = false;
+    J.qstop_at = J.p_act;
+    J.qstop_t = std::clamp(std::isfinite(J.t_act) ? J.t_act : 0.0, -J.r.t_max, J.r.t_max);
+    J.hold = false;
+    J.enabling_since = 0;
+    if (J.mode != CyclicMode::position) {
+      J.mode = CyclicMode::position;
+      J.mode_status = Status::aborted;
+    }
+    fb.state = JointState::stopping;
+  }
+}
+
+double MitGroup::rest_band(const Joint& J) {
+  return std::max(0.05, 8.0 * J.r.v_max / 4095.0);  // rad/s, actuator: at least four codes of the velocity
+}
+
+bool MitGroup::holding(std::size_t j) const {
+  if (j >= cfg_.joint_count) return false;
+  const Joint& J = joints_[j];
+  return J.qstop && J.qstop_rest && fb_[j].state == JointState::stopping && std::fabs(J.v_act) <= rest_band(J);
+}
+
 void MitGroup::disable() {
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
     Joint& J = joints_[j];
     J.want = false;
+    J.qstop = false;
     J.clear = false;
     J.enabling_since = 0;
     if (J.mode != CyclicMode::position) {

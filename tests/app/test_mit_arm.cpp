@@ -565,3 +565,75 @@ TEST(FwMitArm, TemperaturesReachStatusWarnAndFaultBeforeTheMotorsCutOff) {
   LONGS_EQUAL(0, long(a.motor(2).error()));
   LONGS_EQUAL(0, long(a.rt_allocs));
 }
+
+// E-stop on an arm of MIT motors, which have no brakes: the motors hold where the arm came to
+// rest (the measured position, zero velocity, the configured kp / kd and the torque they gave
+// then) instead of being powered down, so a heavy arm does not fall. On the dynamic plant under
+// gravity, with the controller's ramp (safety.stop = "ramp") and with the drives' own stop
+// ("drive"); a joint that does not come to rest (pushed beyond T_MAX) is powered down after
+// safety.drive_stop_timeout_s, as CiA 402 drives are. The puma's base brakes on KD_MAX alone
+// (time constant I / KD_MAX near 0.85 s): the timeout here is 4 s.
+void estop_holds(const char* stop) {
+  FwConfig c = damiao_arm("torque");
+  c.stop = stop;
+  c.drive_stop_timeout_s = 4;
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  kin::JointVector q = kin::JointVector::Zero(6);
+  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
+  a.arm_inertia(q);
+  a.gravity = true;
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  a.run(0.3);
+  CHECK_TEXT(ok(a.cmd("movej 20 -10 40 10 0 10")), a.s.out.c_str());
+  a.run(0.4);  // mid-move
+  CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
+  // the motors brake on their damping and hold where the arm comes to rest: the e-stop is latched
+  // with the motors powered
+  int ms = 0;
+  for (; ms < 4000 && a.tel().mode != Mode::estop; ++ms) a.run(0.001);
+  CHECK_TEXT(a.tel().mode == Mode::estop, a.events.c_str());
+  for (std::size_t j = 0; j < 6; ++j) CHECK_TEXT(a.motor(j).enabled(), a.events.c_str());
+  const Telemetry t0 = a.tel();
+  a.run(4.5);  // past safety.drive_stop_timeout_s
+  const Telemetry t1 = a.tel();
+  CHECK_TEXT(t1.state == ArmState::estop, a.events.c_str());
+  double drop = 0;
+  for (std::size_t j = 0; j < 6; ++j) drop = std::max(drop, std::fabs(t1.q_act[j] - t0.q_act[j]));
+  std::printf("\n  e-stop (safety.stop = \"%s\") mid-move on six virtual DM-J4340 under gravity: at rest and held "
+              "%d ms after it, then moved %.4f deg in 4.5 s\n", stop, ms, drop / kDeg);
+  CHECK(drop < 0.2 * kDeg);
+  for (std::size_t j = 0; j < 6; ++j) CHECK_TEXT(a.motor(j).enabled(), a.events.c_str());
+  const auto& g = static_cast<const hal::MitGroup&>(a.app.servo->group(0));
+  DOUBLES_EQUAL(60, g.last_command(1).kp, 0.2);
+  DOUBLES_EQUAL(5, g.last_command(1).kd, 0.01);  // KD_MAX
+  DOUBLES_EQUAL(0, g.last_command(1).v, 0);
+  CHECK(std::fabs(a.app.servo->feedback(1).velocity) < 0.01);
+  // reset, enable: it moves on from where it held
+  CHECK_TEXT(ok(a.cmd("reset")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  CHECK_TEXT(a.tel().state == ArmState::idle, (a.tel().fault_text + a.events).c_str());
+  // e-stop while joint 1 is pushed beyond its T_MAX: it does not come to rest, so the drives are
+  // powered down after the timeout
+  CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
+  a.gravity = false;  // (cycle() would set the load back to gravity alone)
+  for (int i = 0; i < 4500; ++i) {
+    a.load_gravity();
+    a.motor(0).load_torque += 40.0;
+    a.cycle();
+    a.app.console->poll(a.s);
+
+  }
+  CHECK_TEXT(a.tel().state == ArmState::estop, a.events.c_str());
+  CHECK_FALSE(a.motor(0).enabled());
+  CHECK_FALSE(a.motor(3).enabled());
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}
+
+TEST(FwMitArm, EstopHoldsTheArmAgainstGravityWithTheControllersRamp) { estop_holds("ramp"); }
+
+TEST(FwMitArm, EstopHoldsTheArmAgainstGravityWithTheDrivesStop) { estop_holds("drive"); }

@@ -191,8 +191,16 @@ void Controller::end_of_ramp(Mode ramp) {
     case Mode::hold_ramp: set_mode(Mode::held); return;  // at rest, the motion kept
     case Mode::stopping_to_idle: set_mode(Mode::idle); return;
     case Mode::stopping_to_disabled: power_down(Mode::disabled); return;
-    case Mode::fault_ramp: power_down(Mode::fault); return;
-    case Mode::estop_ramp: power_down(Mode::estop); return;
+    case Mode::fault_ramp:
+    case Mode::estop_ramp:
+      if (bus_.quick_stop_holds()) {  // drives without brakes (MIT motors) hold where the ramp ended
+        bus_.quick_stop();
+        stop_t_ = 0;
+        set_mode(ramp == Mode::estop_ramp ? Mode::estop_quick_stop : Mode::fault_quick_stop);
+        return;
+      }
+      power_down(ramp == Mode::estop_ramp ? Mode::estop : Mode::fault);
+      return;
     case Mode::boot:
     case Mode::disabled:
     case Mode::enabling:
@@ -248,16 +256,40 @@ void Controller::step_ramp() {
 // or quick stop active with speed; `enabled`), or at the timeout.
 void Controller::step_drive_stop() {
   stop_t_ += period_s_;
-  bool moving = false;
+  bool moving = false, held = false;
   for (int j = 0; j < n_; ++j) {
     const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
     if (fb.valid) cmd_.pos[j] = fb.position;
-    if (fb.state == hal::JointState::stopping || fb.state == hal::JointState::enabled) moving = true;
+    const bool holds = bus_.holding(static_cast<std::size_t>(j));  // at rest, held powered (no brakes)
+    held = held || holds;
+    if ((fb.state == hal::JointState::stopping || fb.state == hal::JointState::enabled) && !holds) moving = true;
   }
   cmd_.vel.setZero();
   cmd_.acc.setZero();
   if (moving && stop_t_ < cfg_.drive_stop_timeout) return;
-  power_down(mode_ == Mode::estop_quick_stop ? Mode::estop : Mode::fault);
+  const Mode latched = mode_ == Mode::estop_quick_stop ? Mode::estop : Mode::fault;
+  if (!moving && held) {  // the drives hold the arm where it came to rest (watch_hold)
+    stop_t_ = 0;
+    set_mode(latched);
+  } else {
+    power_down(latched);
+  }
+}
+
+// Latched fault / e-stop whose drives hold the arm (ServoBus::quick_stop_holds): a joint driven
+// out of its hold (pushed beyond the motor's torque) for safety.drive_stop_timeout_s is powered
+// down, as a stop that does not come to rest is.
+void Controller::watch_hold() {
+  if (!bus_.quick_stop_holds()) return;
+  bool moving = false;
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    if (bus_.feedback(ju).state == hal::JointState::stopping && !bus_.holding(ju)) moving = true;
+  }
+  stop_t_ = moving ? stop_t_ + period_s_ : 0;
+  if (stop_t_ < cfg_.drive_stop_timeout) return;
+  bus_.disable();
+  stop_t_ = 0;
 }
 
 void Controller::raise_fault(FaultCause c, int joint, const char* detail) {

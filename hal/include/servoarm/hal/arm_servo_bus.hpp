@@ -44,6 +44,9 @@ class ArmServoBus final : public ServoBus {
   void enable() override;
   void disable() override;
   void quick_stop() override;
+  /// True when a group holds after quick_stop() (an MIT group).
+  bool quick_stop_holds() const override;
+  bool holding(std::size_t j) const override;
   /// Every group's read(); the first group status that is not ok.
   Status read(TimePoint now) override;
   /// Each group's setpoints from the arm's; the first group status that is not ok.

@@ -83,6 +83,18 @@ class MitGroup final : public DriveGroup {
   std::size_t joint_count() const override { return cfg_.joint_count; }
   void enable() override;
   void disable() override;
+  /// Every powered joint stops and holds where it comes to rest: the MIT frame with the measured
+  /// position (each cycle until the joint is at rest, then that one), zero velocity, the
+  /// configured kp, KD_MAX (the most damping the frame carries) and as tau_ff the torque feed-forward of the cycle
+  /// (set_feed_forward: the model's gravity at the measured pose), or without one the torque the
+  /// motor measured when the stop began, so an arm without brakes does not fall; the joint reports `stopping`. Joints
+  /// not powered are disabled. enable() takes the joints back to the setpoints, disable() powers
+  /// them down.
+  void quick_stop() override;
+  bool quick_stop_holds() const override { return true; }
+  /// Joint j holds after quick_stop(), has come to rest and is at rest now (its velocity within
+  /// 0.05 rad/s at the actuator, at least four codes of the frame's velocity).
+  bool holding(std::size_t j) const override;
   Status set_position_zero(std::size_t j) override;
   std::int64_t zero_offset(std::size_t j) const override {
     return j < cfg_.joint_count ? cfg_.joints[j].scaling.zero_offset : 0;
@@ -147,9 +159,14 @@ class MitGroup final : public DriveGroup {
     CyclicMode mode = CyclicMode::position;
     Status mode_status = Status::ok;
     bool hold = false;          ///< hold where it stands in the next write (leaving torque mode)
+    bool qstop = false;         ///< quick_stop(): holds at qstop_at with qstop_t until enable() / disable()
+    bool qstop_rest = false;    ///< the held joint came to rest: qstop_at is fixed, kp holds it there
+    double qstop_at = 0, qstop_t = 0;  ///< actuator rad, N m
+    double v_act = 0, t_act = 0;       ///< the last feedback's velocity and torque, actuator side
     double hold_at = 0;         ///< actuator rad
     mit::Command sent{};
   };
+  static double rest_band(const Joint& J);
   std::uint16_t master(std::size_t j) const;
   bool is_feedback_of(std::size_t j, const CanFrame& f) const;
   void take_feedback(std::size_t j, const mit::Feedback& m, TimePoint now);

@@ -147,6 +147,16 @@ class ServoBus {
   /// Real-time: controlled stop on the drives' own quick-stop ramp, then hold there
   /// (CiA 402 quick stop). enable() resumes. Protocols without one just disable().
   virtual void quick_stop() { disable(); }
+  /// After quick_stop() the drives hold where they stopped, powered, until enable() or
+  /// disable() (drives without brakes, whose arm falls when powered down: MIT motors). The
+  /// controller then powers down only a stop that does not come to rest.
+  virtual bool quick_stop_holds() const { return false; }
+  /// Real-time: joint `j` holds at rest after quick_stop() (quick_stop_holds()): powered, its
+  /// velocity within the drive's rest band.
+  virtual bool holding(std::size_t j) const {
+    (void)j;
+    return false;
+  }
 
   /// Real-time: consume received frames and update feedback; checks heartbeat
   /// and state-machine timeouts against `now`. Never blocks.

@@ -144,6 +144,9 @@ class Controller final : private SegmentHost {
   /// Over-temperature warnings: one `warning` event when a joint's drive reports it at or
   /// above its warning temperature (again after it has cooled below).
   void watch_temperatures();
+  /// fault / estop with the drives holding the arm after a quick stop: powers down a hold
+  /// that does not stay at rest (controller.cpp).
+  void watch_hold();
   void raise_fault(FaultCause c, int joint, const char* detail);
   /// Start the controller's ramp to rest from the commanded state and enter `ramp` (a
   /// ramping mode); when no ramp can be planned (never seen) the arm is at rest at once.
