@@ -129,6 +129,9 @@ JointCapabilities ArmServoBus::capabilities(std::size_t j) const {
 Status ArmServoBus::set_feed_forward(std::size_t j, double velocity, double torque) {
   return ours(j) ? sub(j).set_feed_forward(slot(j).local, velocity, torque) : Status::invalid_argument;
 }
+Status ArmServoBus::set_torque_damping(std::size_t j, double damping) {
+  return ours(j) ? sub(j).set_torque_damping(slot(j).local, damping) : Status::invalid_argument;
+}
 Status ArmServoBus::set_target_torque(std::size_t j, double torque) {
   return ours(j) ? sub(j).set_target_torque(slot(j).local, torque) : Status::invalid_argument;
 }

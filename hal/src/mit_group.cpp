@@ -440,8 +440,8 @@ Status MitGroup::family_write(std::span<const double> setpoints, TimePoint now) 
       J.qstop = false;
     } else if (J.qstop) {
       // Damping first: the set point follows the measured position (kp pulls at nothing), KD_MAX
-      // brakes the joint without overshoot whatever its inertia; once it is at rest the set
-      // point stays there and kp holds it.
+      // brakes the joint without overshoot whatever its inertia; once it is at rest the set point
+      // stays there and kp holds it.
       if (!J.qstop_rest) {
         J.qstop_at = J.p_act;
         J.qstop_rest = std::fabs(J.v_act) <= rest_band(J);
@@ -465,8 +465,9 @@ Status MitGroup::family_write(std::span<const double> setpoints, TimePoint now) 
         J.hold = false;
       } else if (J.mode == CyclicMode::torque || J.mode == CyclicMode::entering_torque) {
         J.mode = CyclicMode::torque;
-        cmd.kp = cmd.kd = 0;
-        cmd.t = J.target_t / J.k;
+        cmd.kp = 0;  // free-drive: the motor damps the hand's motion itself
+        if (J.torque_kd >= 0) cmd.kd = J.torque_kd;
+        cmd.t = J.target_t / J.k - J.torque_kd_rest * J.v_act;
       } else if (std::isfinite(setpoints[j])) {
         cmd.p = J.zero + J.k * setpoints[j] - wrap;
         if (J.ff) {
@@ -601,7 +602,7 @@ Status MitGroup::family_start_homing(std::size_t j, TimePoint now) {
 JointCapabilities MitGroup::capabilities(std::size_t j) const {
   JointCapabilities c;
   if (j >= cfg_.joint_count) return c;
-  c.velocity_offset = c.torque_offset = c.torque_mode = c.measured_torque = true;
+  c.velocity_offset = c.torque_offset = c.torque_mode = c.measured_torque = c.torque_mode_damping = true;
   return c;
 }
 
@@ -629,6 +630,15 @@ Status MitGroup::set_target_torque(std::size_t j, double torque) {
   if (!std::isfinite(torque) || std::fabs(torque / J.k) > J.r.t_max) return Status::invalid_argument;
   J.target_t = torque;
   J.have_target = true;
+  return Status::ok;
+}
+
+Status MitGroup::set_torque_damping(std::size_t j, double damping) {
+  if (j >= cfg_.joint_count || !std::isfinite(damping) || damping < 0) return Status::invalid_argument;
+  Joint& J = joints_[j];
+  const double kd = damping / (J.k * J.k);  // actuator side: tau_a = d qd_joint / k = d / k^2 qd_actuator
+  J.torque_kd = std::min(kd, J.r.kd_max);
+  J.torque_kd_rest = kd - J.torque_kd;  // beyond KD_MAX: added to tau_ff from the measured velocity
   return Status::ok;
 }
 

@@ -216,8 +216,8 @@ TEST(FwMitArm, FreeDriveHoldsAgainstGravityAndMovesWhenPushed) {
   CHECK_TEXT(has(on, "ok free-drive on"), (on + a.events).c_str());
   a.run(0.05);
   const auto& g = static_cast<const hal::MitGroup&>(a.app.servo->group(0));
-  DOUBLES_EQUAL(0, g.last_command(1).kp, 0);  // free-drive: kp = kd = 0 and the gravity torque
-  DOUBLES_EQUAL(0, g.last_command(1).kd, 0);
+  DOUBLES_EQUAL(0, g.last_command(1).kp, 0);  // free-drive: kp = 0, the damping as the motor's kd, gravity
+  CHECK(g.last_command(1).kd > 0);
   CHECK(std::fabs(g.last_command(1).t) > 0.5);
   Telemetry t0 = a.tel();
   a.run(1.0);
@@ -637,3 +637,67 @@ void estop_holds(const char* stop) {
 TEST(FwMitArm, EstopHoldsTheArmAgainstGravityWithTheControllersRamp) { estop_holds("ramp"); }
 
 TEST(FwMitArm, EstopHoldsTheArmAgainstGravityWithTheDrivesStop) { estop_holds("drive"); }
+
+// Free-drive on MIT motors: kp = 0, the free-drive damping (dynamics.freedrive_damping x the
+// joint's largest inertia) as the motor's kd (it damps the hand's motion in its own loop, so the
+// model adds no damping torque of its own) and the gravity torque as tau_ff. A
+// joint the hand carries past its joint limit stops the arm in fault, one line naming the joint
+// and the limit.
+TEST(FwMitArm, FreeDriveDampsWithTheMotorsKdAndFaultsPastAJointLimit) {
+  FwConfig c = damiao_arm("torque");
+  c.freedrive = true;
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  kin::JointVector q = kin::JointVector::Zero(6);
+  q << 0, -30 * kDeg, 60 * kDeg, 0, 95 * kDeg, 0;
+  a.arm_inertia(q);
+  a.gravity = true;
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 95 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  a.run(0.3);
+  CHECK_TEXT(has(a.cmd("freedrive on"), "ok free-drive on"), (a.s.out + a.events).c_str());
+  a.run(0.05);
+  // the hand pushes joint 5 (0.5 N m) towards its upper limit (100 deg)
+  a.gravity = false;
+  double max_ff_error = 0, speed = 0, kd = 0;
+  int i = 0;
+  for (; i < 3000 && a.tel().state == ArmState::freedrive; ++i) {
+    a.load_gravity();
+    a.motor(4).load_torque += 0.5;
+    a.cycle();
+    a.app.console->poll(a.s);
+    const auto& g = static_cast<const hal::MitGroup&>(a.app.servo->group(0));
+    if (a.tel().state != ArmState::freedrive || i < 20) continue;
+    DOUBLES_EQUAL(0, g.last_command(4).kp, 0);
+    kd = g.last_command(4).kd;
+    // tau_ff: the gravity torque alone, however fast the hand moves the joint
+    kin::JointVector qa = kin::JointVector::Zero(6), gr = kin::JointVector::Zero(6);
+    for (std::size_t j = 0; j < 6; ++j) qa[static_cast<int>(j)] = a.app.servo->feedback(j).position;
+    kin::gravity_torques(a.app.chain, qa, gr);
+    max_ff_error = std::max(max_ff_error, std::fabs(g.last_command(4).t - gr[4]));
+    speed = std::max(speed, std::fabs(a.app.servo->feedback(4).velocity));
+  }
+  const Telemetry t = a.tel();
+  std::printf("\n  free-drive, joint 5 pushed with 0.5 N m: top speed %.3f rad/s (kd %.3f in the motor), tau_ff within %.4f "
+              "N m of gravity, fault after %d ms: %s\n", speed, kd, max_ff_error, i, t.fault_text);
+  CHECK(kd > 0);
+  CHECK(speed > 0.6 * 0.5 / kd && speed < 1.05 * 0.5 / kd);  // the motor's damping alone: 0.5 N m / kd
+  CHECK(max_ff_error < 0.02);
+  CHECK_TEXT(t.state == ArmState::fault, a.events.c_str());
+  CHECK_TEXT(t.cause == FaultCause::joint_limit, t.fault_text);
+  LONGS_EQUAL(4, t.fault_joint);
+  CHECK_TEXT(has(t.fault_text, "joint 5 joint_limit: free-drive carried it to 1.74"), t.fault_text);
+  CHECK_TEXT(has(t.fault_text, "beyond its upper limit 1.7453 rad"), t.fault_text);
+  CHECK_TEXT(has(a.events, "alarm: fault joint 5 joint_limit"), a.events.c_str());
+  // the arm stops (the hand lets go): the motors brake it and hold it there
+  a.gravity = true;
+  a.run(1.5);
+  std::printf("  after the fault: %s, joint 5 at %.3f deg, motor %s\n", to_string(a.tel().mode), a.tel().q_act[4] / kDeg,
+              a.motor(4).enabled() ? "enabled" : "disabled");
+  CHECK(a.tel().q_act[4] < 101 * kDeg);
+  CHECK(a.tel().mode == Mode::fault);
+  CHECK(a.motor(4).enabled());
+  CHECK(std::fabs(a.app.servo->feedback(4).velocity) < 0.01);
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}

@@ -25,6 +25,7 @@ const char* to_string(FaultCause c) {
     case FaultCause::homing_failed: return "homing_failed";
     case FaultCause::collision: return "collision";
     case FaultCause::over_temperature: return "over_temperature";
+    case FaultCause::joint_limit: return "joint_limit";
   }
   return "?";
 }
@@ -1069,6 +1070,20 @@ void Controller::step_freedrive() {
   // measured pose (write() ignores it in CST; CSP resumes where the drive stands). A move queued
   // meanwhile is dropped with an event (the arm is not where the console planned it from).
   follow_measured();
+  if (mode_ == Mode::freedrive) {
+    // the hand may carry a joint anywhere: past a position limit the arm stops in fault
+    for (int j = 0; j < n_; ++j) {
+      const auto ju = static_cast<std::size_t>(j);
+      const double q = q_act_[j], lo = limits_.lower[ju], hi = limits_.upper[ju];
+      if (q >= lo - cfg_.position_tolerance && q <= hi + cfg_.position_tolerance) continue;
+      const char* u = chain_.joint(j).type == kin::JointType::prismatic ? "m" : "rad";
+      char d[96];
+      std::snprintf(d, sizeof d, "free-drive carried it to %.4f %s, beyond its %s limit %.4f %s", q, u,
+                    q > hi ? "upper" : "lower", q > hi ? hi : lo, u);
+      raise_fault(FaultCause::joint_limit, j, d);
+      return;
+    }
+  }
   const FreedrivePhase ph = model_ != nullptr ? model_->freedrive_step() : FreedrivePhase::off;
   if (mode_ == Mode::freedrive && ph != FreedrivePhase::entering && ph != FreedrivePhase::active) {
     // a joint left torque mode by itself (refused, fault, heartbeat): every drive back to CSP

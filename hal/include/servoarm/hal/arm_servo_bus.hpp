@@ -61,6 +61,7 @@ class ArmServoBus final : public ServoBus {
   JointCapabilities capabilities(std::size_t j) const override;
   Status set_feed_forward(std::size_t j, double velocity, double torque) override;
   Status set_target_torque(std::size_t j, double torque) override;
+  Status set_torque_damping(std::size_t j, double damping) override;
   Status set_torque_mode(std::size_t j, bool on) override;
   CyclicModeState cyclic_mode(std::size_t j) const override;
   Status set_digital_outputs(std::size_t j, std::uint32_t value) override;

@@ -17,7 +17,8 @@
 //
 // Each cycle (write()), one frame per motor: enabled joints the MIT command (position from the
 // setpoint through the joint mapping, kp/kd as configured, velocity and torque feed-forward from
-// set_feed_forward(); in torque mode kp = kd = 0 and the target torque: free-drive), joints
+// set_feed_forward(); in torque mode kp = 0, the configured kd and the target torque: free-drive,
+// damped in the motor), joints
 // being enabled the enable frame (a latched fault is cleared first), the others the disable frame
 // (which the motor answers with feedback, so a disabled joint's position stays fresh). read()
 // takes the feedback: position (multi-turn, from the +-P_MAX wrapped value), velocity, measured
@@ -101,6 +102,9 @@ class MitGroup final : public DriveGroup {
   }
   JointCapabilities capabilities(std::size_t j) const override;
   Status set_target_torque(std::size_t j, double torque) override;
+  /// Torque mode's kd (free-drive): `damping` joint side, as the actuator's kd (clamped to
+  /// KD_MAX); until given, the configured kd.
+  Status set_torque_damping(std::size_t j, double damping) override;
   CyclicModeState cyclic_mode(std::size_t j) const override {
     return j < cfg_.joint_count ? CyclicModeState{joints_[j].mode, joints_[j].mode_status} : CyclicModeState{};
   }
@@ -156,6 +160,8 @@ class MitGroup final : public DriveGroup {
     double ff_v = 0, ff_t = 0;  ///< actuator side
     bool have_target = false;
     double target_t = 0;        ///< joint side
+    double torque_kd = -1;      ///< actuator kd in torque mode (set_torque_damping); < 0: the configured kd
+    double torque_kd_rest = 0;  ///< the part of it beyond KD_MAX, applied through tau_ff
     CyclicMode mode = CyclicMode::position;
     Status mode_status = Status::ok;
     bool hold = false;          ///< hold where it stands in the next write (leaving torque mode)

@@ -127,6 +127,9 @@ struct JointCapabilities {
   bool torque_mode = false;      ///< set_torque_mode works (CST supported and 6060h/6061h/6071h mapped)
   bool measured_torque = false;  ///< JointFeedback::torque comes from the drive (6077h mapped)
   bool digital_outputs = false;  ///< set_digital_outputs reaches the drive (CANopen: 60FEh:01 mapped)
+  /// In torque mode the drive damps the joint's motion itself (MIT motors: kd with kp = 0), so a
+  /// caller adds no damping torque of its own (free-drive).
+  bool torque_mode_damping = false;
 };
 
 class ServoBus {
@@ -255,6 +258,15 @@ class ServoBus {
   virtual Status set_target_torque(std::size_t j, double torque) {
     (void)j;
     (void)torque;
+    return Status::not_supported;
+  }
+  /// Real-time: the viscous damping (N m s / rad or N s / m, joint side) a drive with
+  /// JointCapabilities::torque_mode_damping applies itself to joint `j` in torque mode (kept
+  /// until changed).
+  /// @retval ok; invalid_argument (no such joint, negative or not finite); not_supported
+  virtual Status set_torque_damping(std::size_t j, double damping) {
+    (void)j;
+    (void)damping;
     return Status::not_supported;
   }
   /// Real-time: switch joint `j` to torque mode (on) or back to position mode (off). On: the

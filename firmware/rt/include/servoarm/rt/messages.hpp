@@ -34,6 +34,7 @@ enum class FaultCause : std::uint8_t {
   homing_failed,      ///< a joint's homing failed (timeout, homing error, refused): the arm is disabled
   collision,          ///< the collision observer's residual on a joint above its threshold
   over_temperature,   ///< a drive's reported temperature at or above its limit (JointFeedback::temperature_limit)
+  joint_limit,        ///< free-drive: the hand carried a joint past its position limit
 };
 const char* to_string(FaultCause c);
 
