@@ -345,7 +345,7 @@ int run_demo(App& app) {
       return (x.translation() - p).norm() * 1e3;
     });
   };
-  std::printf("== armfw demo: %s, %d joints, virtual CiA 402 servos on the in-process CAN bus, %.0f Hz loop\n",
+  std::printf("== armfw demo: %s, %d joints, virtual drives on the in-process CAN bus, %.0f Hz loop\n",
               app.cfg.robot.c_str(), n, app.cfg.rate_hz);
   std::printf("   (progress lines while a move runs are the `status` answer)\n");
   d.run("help movel", false);
