@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "target_exec.hpp"
@@ -118,4 +119,34 @@ TEST(MitProcess, JogAndAProgramOnSixDamiaoMotors) {
   CHECK_TEXT(last_joints(out, q), out.c_str());
   const double target[6] = {10, -20, 50, 5, 10, 5};
   for (int j = 0; j < 6; ++j) CHECK_TEXT(std::fabs(q[j] - target[j]) < 0.5, out.c_str());
+}
+
+// Homing by hard stop on a Damiao joint through armfw --sim: the virtual motor has an end stop
+// 10 deg from where it starts in the joint's homing direction; joint 5 homes against it, backs
+// off 3 deg and takes homing.offset (-60 deg) there.
+TEST(MitProcess, HardStopHomingOnADamiaoJoint) {
+  const std::string cfg = write_config("armfw-damiao-home", false);
+  // joint 5's table with hard-stop homing, the others as write_config gives them
+  std::ifstream in(cfg);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  in.close();
+  const std::string j5 = "node = 5\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmit_kp = 60\nmit_kd = 2\n";
+  const auto at = text.find(j5);
+  CHECK(at != std::string::npos);
+  text.insert(at + j5.size(),
+              "homing.method = \"hard_stop\"\nhoming.direction = -1\nhoming.speed_switch = 5\nhoming.acceleration = 50\n"
+              "homing.following_limit = 0.5\nhoming.backoff = 3\nhoming.offset = -60\n");
+  {
+    std::ofstream f(cfg);
+    f << text;
+  }
+  int st = 0;
+  const std::string out = run_script(cfg, "enable\\nhome\\nwait\\nstatus\\n", st);
+  std::remove(cfg.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
+  CHECK_TEXT(out.find("error:") == std::string::npos && out.find("alarm:") == std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("homing=[absolute absolute absolute absolute homed absolute]") != std::string::npos, out.c_str());
+  double q[6] = {};
+  CHECK_TEXT(last_joints(out, q), out.c_str());
+  CHECK_TEXT(std::fabs(q[4] - -60) < 0.5, out.c_str());
 }
