@@ -313,7 +313,7 @@ std::string Console::status_text() const {
     if (st.temperature_warning != 0) {
       s += " hot=[";
       for (int j = 0, k = 0; j < st.temperature.size(); ++j)
-        if ((st.temperature_warning >> j) & 1u) s += fmt(k++ ? " %d" : "%d", j + 1);
+        if ((st.temperature_warning >> j) & 1u) s += fmt("%s%d", k++ ? " " : "", j + 1);
       s += "]";
     }
   }
