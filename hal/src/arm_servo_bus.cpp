@@ -76,6 +76,12 @@ void ArmServoBus::disable() {
 void ArmServoBus::quick_stop() {
   for (std::size_t g = 0; g < groups_n_; ++g) groups_[g]->quick_stop();
 }
+bool ArmServoBus::quick_stop_holds() const {
+  for (std::size_t g = 0; g < groups_n_; ++g)
+    if (groups_[g]->quick_stop_holds()) return true;
+  return false;
+}
+bool ArmServoBus::holding(std::size_t j) const { return ours(j) && sub(j).holding(slot(j).local); }
 
 Status ArmServoBus::read(TimePoint now) {
   Status result = Status::ok;
@@ -122,6 +128,9 @@ JointCapabilities ArmServoBus::capabilities(std::size_t j) const {
 }
 Status ArmServoBus::set_feed_forward(std::size_t j, double velocity, double torque) {
   return ours(j) ? sub(j).set_feed_forward(slot(j).local, velocity, torque) : Status::invalid_argument;
+}
+Status ArmServoBus::set_torque_damping(std::size_t j, double damping) {
+  return ours(j) ? sub(j).set_torque_damping(slot(j).local, damping) : Status::invalid_argument;
 }
 Status ArmServoBus::set_target_torque(std::size_t j, double torque) {
   return ours(j) ? sub(j).set_target_torque(slot(j).local, torque) : Status::invalid_argument;

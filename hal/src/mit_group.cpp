@@ -239,6 +239,7 @@ Status MitGroup::bring_up(std::size_t j, TimePoint deadline) {
   if (cutoff <= 0) cutoff = 80;  // no published cut-off: stay well below what windings take
   J.temp_fault = c.temp_fault > 0 ? c.temp_fault : cutoff - 5;
   J.temp_warning = c.temp_warning > 0 ? c.temp_warning : cutoff - 15;
+  J.temp_cutoff = cutoff;
   // the start position (and proof the motor takes frames on its id)
   mit::Feedback m;
   const bool got = ask(mit::special_frame(c.motor_id, mit::Special::disable),
@@ -311,11 +312,18 @@ void MitGroup::take_feedback(std::size_t j, const mit::Feedback& m, TimePoint no
   fb.last_feedback = fb.sampled = now;
   fb.drive_state = m.error;
   fb.statusword = m.error;
+  J.v_act = m.v;
+  J.t_act = m.t;
   J.t_mos = m.t_mos;
   J.t_rotor = m.t_rotor;
   J.error = m.error;
   const double hottest = std::max(m.t_mos, m.t_rotor);
   J.hot = hottest >= J.temp_warning;
+  fb.has_temperature = true;
+  fb.temperature = hottest;
+  fb.temperature_warning = J.temp_warning;
+  fb.temperature_limit = J.temp_fault;
+  fb.temperature_cutoff = J.temp_cutoff;
   // enable() after a fault: the answers sent before the clear-error frame still carry the old
   // error; the state follows the answer to the clear-error frame
   if (J.clear) return;
@@ -349,8 +357,12 @@ void MitGroup::take_feedback(std::size_t j, const mit::Feedback& m, TimePoint no
       on = J.want && J.answered;  // no state in the frame: the enable frame was answered
       break;
   }
+  if (J.qstop && !on) {  // the motor dropped out of its hold by itself (its own watchdog): powered down
+    J.qstop = false;
+    J.want = false;
+  }
   if (on && J.want) {
-    fb.state = JointState::enabled;
+    fb.state = J.qstop ? JointState::stopping : JointState::enabled;
     J.enabling_since = 0;
   } else if (on) {
     fb.state = JointState::stopping;
@@ -425,6 +437,22 @@ Status MitGroup::family_write(std::span<const double> setpoints, TimePoint now) 
       f = mit::special_frame(c.motor_id, mit::Special::disable);
       J.sent = {};
       J.answered = false;
+      J.qstop = false;
+    } else if (J.qstop) {
+      // Damping first: the set point follows the measured position (kp pulls at nothing), KD_MAX
+      // brakes the joint without overshoot whatever its inertia; once it is at rest the set point
+      // stays there and kp holds it.
+      if (!J.qstop_rest) {
+        J.qstop_at = J.p_act;
+        J.qstop_rest = std::fabs(J.v_act) <= rest_band(J);
+      }
+      const double wrap = static_cast<double>(J.unwrap.turns()) * 2.0 * J.r.p_max;
+      // the model's torque at the measured pose when the controller gives one (gravity), else
+      // the torque the motor measured when the stop began
+      const mit::Command cmd{J.qstop_at - wrap, 0, c.kp, J.r.kd_max, J.ff ? J.ff_t : J.qstop_t};
+      mit::pack_command(J.r, c.motor_id, cmd, f);
+      J.sent = cmd;
+      J.ff = false;
     } else if (fb.state != JointState::enabled) {
       f = mit::special_frame(c.motor_id, mit::Special::enable);
       if (J.enabling_since == 0) J.enabling_since = now;
@@ -437,8 +465,9 @@ Status MitGroup::family_write(std::span<const double> setpoints, TimePoint now) 
         J.hold = false;
       } else if (J.mode == CyclicMode::torque || J.mode == CyclicMode::entering_torque) {
         J.mode = CyclicMode::torque;
-        cmd.kp = cmd.kd = 0;
-        cmd.t = J.target_t / J.k;
+        cmd.kp = 0;  // free-drive: the motor damps the hand's motion itself
+        if (J.torque_kd >= 0) cmd.kd = J.torque_kd;
+        cmd.t = J.target_t / J.k - J.torque_kd_rest * J.v_act;
       } else if (std::isfinite(setpoints[j])) {
         cmd.p = J.zero + J.k * setpoints[j] - wrap;
         if (J.ff) {
@@ -477,6 +506,10 @@ void MitGroup::enable() {
     Joint& J = joints_[j];
     JointFeedback& fb = fb_[j];
     J.want = true;
+    if (J.qstop) {  // holding after quick_stop(): back to the setpoints through the enable frame
+      J.qstop = false;
+      if (fb.state == JointState::stopping) fb.state = JointState::enabling;
+    }
     if (fb.state == JointState::fault) {
       J.clear = true;
       J.overheated = false;
@@ -491,10 +524,44 @@ void MitGroup::enable() {
   }
 }
 
+void MitGroup::quick_stop() {
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
+    Joint& J = joints_[j];
+    JointFeedback& fb = fb_[j];
+    if (!J.want || J.qstop || (fb.state != JointState::enabled && fb.state != JointState::stopping)) {
+      if (!J.qstop) J.want = false;  // not powered: powered down as disable() does
+      if (fb.state == JointState::enabling) fb.state = JointState::stopping;
+      continue;
+    }
+    J.qstop = true;
+    J.qstop_rest = false;
+    J.qstop_at = J.p_act;
+    J.qstop_t = std::clamp(std::isfinite(J.t_act) ? J.t_act : 0.0, -J.r.t_max, J.r.t_max);
+    J.hold = false;
+    J.enabling_since = 0;
+    if (J.mode != CyclicMode::position) {
+      J.mode = CyclicMode::position;
+      J.mode_status = Status::aborted;
+    }
+    fb.state = JointState::stopping;
+  }
+}
+
+double MitGroup::rest_band(const Joint& J) {
+  return std::max(0.05, 8.0 * J.r.v_max / 4095.0);  // rad/s, actuator: at least four codes of the velocity
+}
+
+bool MitGroup::holding(std::size_t j) const {
+  if (j >= cfg_.joint_count) return false;
+  const Joint& J = joints_[j];
+  return J.qstop && J.qstop_rest && fb_[j].state == JointState::stopping && std::fabs(J.v_act) <= rest_band(J);
+}
+
 void MitGroup::disable() {
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
     Joint& J = joints_[j];
     J.want = false;
+    J.qstop = false;
     J.clear = false;
     J.enabling_since = 0;
     if (J.mode != CyclicMode::position) {
@@ -535,7 +602,7 @@ Status MitGroup::family_start_homing(std::size_t j, TimePoint now) {
 JointCapabilities MitGroup::capabilities(std::size_t j) const {
   JointCapabilities c;
   if (j >= cfg_.joint_count) return c;
-  c.velocity_offset = c.torque_offset = c.torque_mode = c.measured_torque = true;
+  c.velocity_offset = c.torque_offset = c.torque_mode = c.measured_torque = c.torque_mode_damping = true;
   return c;
 }
 
@@ -563,6 +630,15 @@ Status MitGroup::set_target_torque(std::size_t j, double torque) {
   if (!std::isfinite(torque) || std::fabs(torque / J.k) > J.r.t_max) return Status::invalid_argument;
   J.target_t = torque;
   J.have_target = true;
+  return Status::ok;
+}
+
+Status MitGroup::set_torque_damping(std::size_t j, double damping) {
+  if (j >= cfg_.joint_count || !std::isfinite(damping) || damping < 0) return Status::invalid_argument;
+  Joint& J = joints_[j];
+  const double kd = damping / (J.k * J.k);  // actuator side: tau_a = d qd_joint / k = d / k^2 qd_actuator
+  J.torque_kd = std::min(kd, J.r.kd_max);
+  J.torque_kd_rest = kd - J.torque_kd;  // beyond KD_MAX: added to tau_ff from the measured velocity
   return Status::ok;
 }
 

@@ -216,8 +216,8 @@ TEST(FwMitArm, FreeDriveHoldsAgainstGravityAndMovesWhenPushed) {
   CHECK_TEXT(has(on, "ok free-drive on"), (on + a.events).c_str());
   a.run(0.05);
   const auto& g = static_cast<const hal::MitGroup&>(a.app.servo->group(0));
-  DOUBLES_EQUAL(0, g.last_command(1).kp, 0);  // free-drive: kp = kd = 0 and the gravity torque
-  DOUBLES_EQUAL(0, g.last_command(1).kd, 0);
+  DOUBLES_EQUAL(0, g.last_command(1).kp, 0);  // free-drive: kp = 0, the damping as the motor's kd, gravity
+  CHECK(g.last_command(1).kd > 0);
   CHECK(std::fabs(g.last_command(1).t) > 0.5);
   Telemetry t0 = a.tel();
   a.run(1.0);
@@ -514,5 +514,190 @@ TEST(FwMitArm, RobstrideArmMoves) {
   a.run(0.3);
   const double goal[6] = {10, -10, 10, 10, -10, 10};
   for (std::size_t j = 0; j < 6; ++j) DOUBLES_EQUAL(goal[j] * kDeg, a.tel().q_act[j], 0.05 * kDeg);
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}
+
+// Temperatures: each MIT joint's hottest reported temperature (MOSFET or winding) reaches the
+// service's status and the console's `status`; a CiA 402 joint, whose drive reports none, shows
+// "-". DM-J4340's OT_Value is 100 deg C (the virtual motor's register): warning from 85, fault at
+// 95, before the motor's own cut-off.
+TEST(FwMitArm, TemperaturesReachStatusWarnAndFaultBeforeTheMotorsCutOff) {
+  FwConfig c = damiao_arm("off");
+  c.drives[5] = DriveConfig{};  // a CiA 402 wrist on a second bus
+  c.drives[5].node = 6;
+  c.drives[5].can = "sim1";
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  a.motor(2).set_temperature(60.4);
+  a.run(0.05);
+  std::string st = a.cmd("status");
+  CHECK_TEXT(has(st, " temperature_c=[30 30 60 30 30 -]"), st.c_str());
+  CHECK_TEXT(!has(st, "hot="), st.c_str());
+  ArmStatus s = a.app.console->service().status();
+  LONGS_EQUAL(6, long(s.temperature.size()));
+  DOUBLES_EQUAL(60, s.temperature[2], 1.0);
+  CHECK(std::isnan(s.temperature[5]));
+  LONGS_EQUAL(0, long(s.temperature_warning));
+  // 88 deg C: at or above the warning (85), below the fault (95): status says so, the arm runs on
+  a.motor(2).set_temperature(88.4);
+  a.run(0.05);
+  st = a.cmd("status");
+  CHECK_TEXT(has(st, "temperature_c=[30 30 88 30 30 -] hot=[3]"), st.c_str());
+  s = a.app.console->service().status();
+  LONGS_EQUAL(1 << 2, long(s.temperature_warning));
+  CHECK_TEXT(s.state == ArmState::idle, s.fault_text.c_str());
+  CHECK_TEXT(has(a.events, "joint 3 at 88 deg C: over-temperature warning (from 85 deg C; the arm stops at 95)"),
+             a.events.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 0 5 0 0 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  // 97 deg C: the arm stops in fault, one line naming the joint, the temperature and the limit,
+  // while the motor (cut-off 100) has not tripped itself
+  a.motor(2).set_temperature(97.4);
+  a.run(0.05);
+  const Telemetry t = a.tel();
+  CHECK_TEXT(t.state == ArmState::fault, a.events.c_str());
+  CHECK_TEXT(t.cause == FaultCause::over_temperature, t.fault_text);
+  LONGS_EQUAL(2, t.fault_joint);
+  STRCMP_EQUAL("joint 3 over_temperature: 97 deg C, at or above its limit 95 deg C (the motor's own cut-off 100 deg C)",
+               t.fault_text);
+  CHECK_TEXT(has(a.events, "alarm: fault joint 3 over_temperature: 97 deg C"), a.events.c_str());
+  LONGS_EQUAL(0, long(a.motor(2).error()));
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}
+
+// E-stop on an arm of MIT motors, which have no brakes: the motors hold where the arm came to
+// rest (the measured position, zero velocity, the configured kp / kd and the torque they gave
+// then) instead of being powered down, so a heavy arm does not fall. On the dynamic plant under
+// gravity, with the controller's ramp (safety.stop = "ramp") and with the drives' own stop
+// ("drive"); a joint that does not come to rest (pushed beyond T_MAX) is powered down after
+// safety.drive_stop_timeout_s, as CiA 402 drives are. The puma's base brakes on KD_MAX alone
+// (time constant I / KD_MAX near 0.85 s): the timeout here is 4 s.
+void estop_holds(const char* stop) {
+  FwConfig c = damiao_arm("torque");
+  c.stop = stop;
+  c.drive_stop_timeout_s = 4;
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  kin::JointVector q = kin::JointVector::Zero(6);
+  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
+  a.arm_inertia(q);
+  a.gravity = true;
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  a.run(0.3);
+  CHECK_TEXT(ok(a.cmd("movej 20 -10 40 10 0 10")), a.s.out.c_str());
+  a.run(0.4);  // mid-move
+  CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
+  // the motors brake on their damping and hold where the arm comes to rest: the e-stop is latched
+  // with the motors powered
+  int ms = 0;
+  for (; ms < 4000 && a.tel().mode != Mode::estop; ++ms) a.run(0.001);
+  CHECK_TEXT(a.tel().mode == Mode::estop, a.events.c_str());
+  for (std::size_t j = 0; j < 6; ++j) CHECK_TEXT(a.motor(j).enabled(), a.events.c_str());
+  const Telemetry t0 = a.tel();
+  a.run(4.5);  // past safety.drive_stop_timeout_s
+  const Telemetry t1 = a.tel();
+  CHECK_TEXT(t1.state == ArmState::estop, a.events.c_str());
+  double drop = 0;
+  for (std::size_t j = 0; j < 6; ++j) drop = std::max(drop, std::fabs(t1.q_act[j] - t0.q_act[j]));
+  std::printf("\n  e-stop (safety.stop = \"%s\") mid-move on six virtual DM-J4340 under gravity: at rest and held "
+              "%d ms after it, then moved %.4f deg in 4.5 s\n", stop, ms, drop / kDeg);
+  CHECK(drop < 0.2 * kDeg);
+  for (std::size_t j = 0; j < 6; ++j) CHECK_TEXT(a.motor(j).enabled(), a.events.c_str());
+  const auto& g = static_cast<const hal::MitGroup&>(a.app.servo->group(0));
+  DOUBLES_EQUAL(60, g.last_command(1).kp, 0.2);
+  DOUBLES_EQUAL(5, g.last_command(1).kd, 0.01);  // KD_MAX
+  DOUBLES_EQUAL(0, g.last_command(1).v, 0);
+  CHECK(std::fabs(a.app.servo->feedback(1).velocity) < 0.01);
+  // reset, enable: it moves on from where it held
+  CHECK_TEXT(ok(a.cmd("reset")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  CHECK_TEXT(a.tel().state == ArmState::idle, (a.tel().fault_text + a.events).c_str());
+  // e-stop while joint 1 is pushed beyond its T_MAX: it does not come to rest, so the drives are
+  // powered down after the timeout
+  CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
+  a.gravity = false;  // (cycle() would set the load back to gravity alone)
+  for (int i = 0; i < 4500; ++i) {
+    a.load_gravity();
+    a.motor(0).load_torque += 40.0;
+    a.cycle();
+    a.app.console->poll(a.s);
+
+  }
+  CHECK_TEXT(a.tel().state == ArmState::estop, a.events.c_str());
+  CHECK_FALSE(a.motor(0).enabled());
+  CHECK_FALSE(a.motor(3).enabled());
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}
+
+TEST(FwMitArm, EstopHoldsTheArmAgainstGravityWithTheControllersRamp) { estop_holds("ramp"); }
+
+TEST(FwMitArm, EstopHoldsTheArmAgainstGravityWithTheDrivesStop) { estop_holds("drive"); }
+
+// Free-drive on MIT motors: kp = 0, the free-drive damping (dynamics.freedrive_damping x the
+// joint's largest inertia) as the motor's kd (it damps the hand's motion in its own loop, so the
+// model adds no damping torque of its own) and the gravity torque as tau_ff. A
+// joint the hand carries past its joint limit stops the arm in fault, one line naming the joint
+// and the limit.
+TEST(FwMitArm, FreeDriveDampsWithTheMotorsKdAndFaultsPastAJointLimit) {
+  FwConfig c = damiao_arm("torque");
+  c.freedrive = true;
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  kin::JointVector q = kin::JointVector::Zero(6);
+  q << 0, -30 * kDeg, 60 * kDeg, 0, 95 * kDeg, 0;
+  a.arm_inertia(q);
+  a.gravity = true;
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 95 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  a.run(0.3);
+  CHECK_TEXT(has(a.cmd("freedrive on"), "ok free-drive on"), (a.s.out + a.events).c_str());
+  a.run(0.05);
+  // the hand pushes joint 5 (0.5 N m) towards its upper limit (100 deg)
+  a.gravity = false;
+  double max_ff_error = 0, speed = 0, kd = 0;
+  int i = 0;
+  for (; i < 3000 && a.tel().state == ArmState::freedrive; ++i) {
+    a.load_gravity();
+    a.motor(4).load_torque += 0.5;
+    a.cycle();
+    a.app.console->poll(a.s);
+    const auto& g = static_cast<const hal::MitGroup&>(a.app.servo->group(0));
+    if (a.tel().state != ArmState::freedrive || i < 20) continue;
+    DOUBLES_EQUAL(0, g.last_command(4).kp, 0);
+    kd = g.last_command(4).kd;
+    // tau_ff: the gravity torque alone, however fast the hand moves the joint
+    kin::JointVector qa = kin::JointVector::Zero(6), gr = kin::JointVector::Zero(6);
+    for (std::size_t j = 0; j < 6; ++j) qa[static_cast<int>(j)] = a.app.servo->feedback(j).position;
+    kin::gravity_torques(a.app.chain, qa, gr);
+    max_ff_error = std::max(max_ff_error, std::fabs(g.last_command(4).t - gr[4]));
+    speed = std::max(speed, std::fabs(a.app.servo->feedback(4).velocity));
+  }
+  const Telemetry t = a.tel();
+  std::printf("\n  free-drive, joint 5 pushed with 0.5 N m: top speed %.3f rad/s (kd %.3f in the motor), tau_ff within %.4f "
+              "N m of gravity, fault after %d ms: %s\n", speed, kd, max_ff_error, i, t.fault_text);
+  CHECK(kd > 0);
+  CHECK(speed > 0.6 * 0.5 / kd && speed < 1.05 * 0.5 / kd);  // the motor's damping alone: 0.5 N m / kd
+  CHECK(max_ff_error < 0.02);
+  CHECK_TEXT(t.state == ArmState::fault, a.events.c_str());
+  CHECK_TEXT(t.cause == FaultCause::joint_limit, t.fault_text);
+  LONGS_EQUAL(4, t.fault_joint);
+  CHECK_TEXT(has(t.fault_text, "joint 5 joint_limit: free-drive carried it to 1.74"), t.fault_text);
+  CHECK_TEXT(has(t.fault_text, "beyond its upper limit 1.7453 rad"), t.fault_text);
+  CHECK_TEXT(has(a.events, "alarm: fault joint 5 joint_limit"), a.events.c_str());
+  // the arm stops (the hand lets go): the motors brake it and hold it there
+  a.gravity = true;
+  a.run(1.5);
+  std::printf("  after the fault: %s, joint 5 at %.3f deg, motor %s\n", to_string(a.tel().mode), a.tel().q_act[4] / kDeg,
+              a.motor(4).enabled() ? "enabled" : "disabled");
+  CHECK(a.tel().q_act[4] < 101 * kDeg);
+  CHECK(a.tel().mode == Mode::fault);
+  CHECK(a.motor(4).enabled());
+  CHECK(std::fabs(a.app.servo->feedback(4).velocity) < 0.01);
   LONGS_EQUAL(0, long(a.rt_allocs));
 }

@@ -3,6 +3,7 @@
 // motors stand in for the [[drive]] tables of the configuration, stepped by the control thread
 // before each cycle. Six DM-J4340 answer `status`, enable and run a movej; a mixed arm (four
 // Damiao on one bus, two CiA 402 drives on a second) does the same.
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -10,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "target_exec.hpp"
@@ -23,10 +25,10 @@ using servoarm::test::run_capture;
 
 /// A configuration file for the puma560 whose joint j is `family(j)`: Damiao DM-J4340 (kp 60,
 /// kd 2, shoulder and elbow through 4:1) or CiA 402 on drive.can = "can1". Returns its path.
-std::string write_config(const char* name, bool mixed) {
+std::string write_config(const char* name, bool mixed, const char* extra = "") {
   const std::string path = "/tmp/" + std::string(name) + "-" + std::to_string(getpid()) + ".toml";
   std::ofstream f(path);
-  f << "robot = \"puma560\"\n[bus]\ncan = \"sim\"\n";
+  f << "robot = \"puma560\"\n[bus]\ncan = \"sim\"\n" << extra;
   for (int j = 0; j < 6; ++j) {
     f << "[[drive]]\nnode = " << j + 1 << "\n";
     if (mixed && j >= 4) {
@@ -39,9 +41,9 @@ std::string write_config(const char* name, bool mixed) {
   return path;
 }
 
-/// Runs `armfw --sim --config FILE` with a script on stdin; stdout+stderr.
-std::string run_script(const std::string& cfg, const std::string& script, int& st) {
-  return run_capture("printf '" + script + "' | " + emulator_prefix() + ARMFW_PATH " --sim --config " + cfg +
+/// Runs `armfw --sim --config FILE [args]` with a script on stdin; stdout+stderr.
+std::string run_script(const std::string& cfg, const std::string& script, int& st, const std::string& args = "") {
+  return run_capture("printf '" + script + "' | " + emulator_prefix() + ARMFW_PATH " --sim --config " + cfg + " " + args +
                          " --priority 0 2>&1",
                      st);
 }
@@ -75,3 +77,76 @@ TEST_GROUP(MitProcess){};
 TEST(MitProcess, SixDamiaoMotorsAnswerEnableAndMove) { check_arm(false); }
 
 TEST(MitProcess, MixedArmOnTwoBusesMoves) { check_arm(true); }
+
+// The named scenarios on six Damiao DM-J4340 (velocity feed-forward): the demo (not under an
+// emulator: a wall-clock run of the 1 kHz loop, as fw_demo_models), a jog and a program.
+TEST(MitProcess, DemoOnSixDamiaoMotorsPasses) {
+  if (!emulator_prefix().empty()) return;  // qemu-user does not keep the 1 kHz loop
+  const std::string cfg = write_config("armfw-damiao-demo", false, "[dynamics]\nfeed_forward = \"velocity\"\n");
+  int st = 0;
+  const std::string out = run_capture(emulator_prefix() + ARMFW_PATH " --sim --config " + cfg +
+                                          " --demo --priority 0 2>&1 </dev/null", st);
+  std::remove(cfg.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
+  CHECK_TEXT(out.find("result: PASS") != std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("unexpected errors: 0") != std::string::npos, out.c_str());
+}
+
+TEST(MitProcess, JogAndAProgramOnSixDamiaoMotors) {
+  const std::string cfg = write_config("armfw-damiao-prog", false, "[dynamics]\nfeed_forward = \"velocity\"\n");
+  const std::string dir = "/tmp/armfw-damiao-programs-" + std::to_string(getpid());
+  mkdir(dir.c_str(), 0755);
+  {
+    std::ofstream p(dir + "/two.arm");
+    p << "movej 0 -30 60 0 20 0 speed=50\nmovej 10 -20 50 5 10 5 speed=50\n";
+  }
+  int st = 0;
+  const std::string out =
+      run_script(cfg, "enable\\njog j1 10\\nwait\\nstatus\\nrun two\\nwait\\nstatus\\n", st, "--programs " + dir);
+  std::remove(cfg.c_str());
+  std::remove((dir + "/two.arm").c_str());
+  rmdir(dir.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
+  CHECK_TEXT(out.find("error:") == std::string::npos && out.find("alarm:") == std::string::npos, out.c_str());
+  // the jog: joint 1 10 deg on
+  const auto first = out.find("joints=[");
+  double j1 = 0;
+  CHECK_TEXT(first != std::string::npos && std::sscanf(out.c_str() + first + 8, "%lf", &j1) == 1, out.c_str());
+  CHECK_TEXT(std::fabs(j1 - 10) < 0.5, out.c_str());
+  // the program: its two moves ran, the arm stands at the second
+  CHECK_TEXT(out.find("program: two done: 2 steps") != std::string::npos, out.c_str());
+  double q[6] = {};
+  CHECK_TEXT(last_joints(out, q), out.c_str());
+  const double target[6] = {10, -20, 50, 5, 10, 5};
+  for (int j = 0; j < 6; ++j) CHECK_TEXT(std::fabs(q[j] - target[j]) < 0.5, out.c_str());
+}
+
+// Homing by hard stop on a Damiao joint through armfw --sim: the virtual motor has an end stop
+// 10 deg from where it starts in the joint's homing direction; joint 5 homes against it, backs
+// off 3 deg and takes homing.offset (-60 deg) there.
+TEST(MitProcess, HardStopHomingOnADamiaoJoint) {
+  const std::string cfg = write_config("armfw-damiao-home", false);
+  // joint 5's table with hard-stop homing, the others as write_config gives them
+  std::ifstream in(cfg);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  in.close();
+  const std::string j5 = "node = 5\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmit_kp = 60\nmit_kd = 2\n";
+  const auto at = text.find(j5);
+  CHECK(at != std::string::npos);
+  text.insert(at + j5.size(),
+              "homing.method = \"hard_stop\"\nhoming.direction = -1\nhoming.speed_switch = 5\nhoming.acceleration = 50\n"
+              "homing.following_limit = 0.5\nhoming.backoff = 3\nhoming.offset = -60\n");
+  {
+    std::ofstream f(cfg);
+    f << text;
+  }
+  int st = 0;
+  const std::string out = run_script(cfg, "enable\\nhome\\nwait\\nstatus\\n", st);
+  std::remove(cfg.c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, out.c_str());
+  CHECK_TEXT(out.find("error:") == std::string::npos && out.find("alarm:") == std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("homing=[absolute absolute absolute absolute homed absolute]") != std::string::npos, out.c_str());
+  double q[6] = {};
+  CHECK_TEXT(last_joints(out, q), out.c_str());
+  CHECK_TEXT(std::fabs(q[4] - -60) < 0.5, out.c_str());
+}

@@ -325,8 +325,13 @@ TEST(MitGroup, TorqueModeIsKpZeroAndTheTargetTorque) {
   rig.cycle(rig.held());
   LONGS_EQUAL(int(CyclicMode::torque), int(rig.group->cyclic_mode(0).mode));
   DOUBLES_EQUAL(0, rig.group->last_command(0).kp, 0);
-  DOUBLES_EQUAL(0, rig.group->last_command(0).kd, 0);
+  DOUBLES_EQUAL(1, rig.group->last_command(0).kd, 0);  // the configured kd damps (no set_torque_damping given)
   DOUBLES_EQUAL(1.5, rig.group->last_command(0).t, 0);
+  // the damping a caller gives (free-drive), as the actuator's kd; none: the target torque alone
+  LONGS_EQUAL(int(Status::invalid_argument), int(rig.group->set_torque_damping(0, -1)));
+  LONGS_EQUAL(int(Status::ok), int(rig.group->set_torque_damping(0, 0)));
+  rig.cycle(rig.held());
+  DOUBLES_EQUAL(0, rig.group->last_command(0).kd, 0);
   rig.cycle(rig.held());
   DOUBLES_EQUAL(1.5, rig.plant->at(0).torque(), 28.0 / 4095);
   LONGS_EQUAL(int(Status::ok), int(rig.group->set_torque_mode(0, false)));

@@ -92,7 +92,8 @@ int level_of(fw::ArmEventKind k) {
     case fw::ArmEventKind::fault:
     case fw::ArmEventKind::estop: return 4;
     case fw::ArmEventKind::motion_refused:
-    case fw::ArmEventKind::jog_stopped: return 3;
+    case fw::ArmEventKind::jog_stopped:
+    case fw::ArmEventKind::warning: return 3;
     case fw::ArmEventKind::motion_done:
     case fw::ArmEventKind::state:
     case fw::ArmEventKind::homing:

@@ -347,7 +347,7 @@ int run_demo(App& app) {
       return (x.translation() - p).norm() * 1e3;
     });
   };
-  std::printf("== armfw demo: %s, %d joints, virtual CiA 402 servos on the in-process CAN bus, %.0f Hz loop\n",
+  std::printf("== armfw demo: %s, %d joints, virtual drives on the in-process CAN bus, %.0f Hz loop\n",
               app.cfg.robot.c_str(), n, app.cfg.rate_hz);
   std::printf("   (progress lines while a move runs are the `status` answer)\n");
   d.run("help movel", false);
@@ -681,7 +681,8 @@ int main(int argc, char** argv) {
     return &plant->master_bus();
   };
   // Drive groups of the MIT families: one MitPlant per interface, a virtual motor per joint
-  // from its [[drive]] table (model, id, master id, CAN FD).
+  // from its [[drive]] table (model, id, master id, CAN FD). A joint homed by hard stop gets an
+  // end stop 10 deg (joint side) from where its motor starts, in its homing direction.
   std::vector<std::unique_ptr<sim::MitPlant>> mit_plants;
   app.sim_group = [&mit_plants, &cfg](hal::Clock& clock, const DriveGroupPlan& p) -> hal::CanBus* {
     std::vector<sim::MitMotorSpec> specs;
@@ -696,6 +697,14 @@ int main(int argc, char** argv) {
       specs.push_back(s);
     }
     mit_plants.push_back(std::make_unique<sim::MitPlant>(clock, specs));
+    for (std::size_t k = 0; k < p.joints.size(); ++k) {
+      const DriveConfig& d = cfg.drives[static_cast<std::size_t>(p.joints[k])];
+      if (d.homing_method != "hard_stop") continue;
+      const double gear = d.gear_ratio != 0 ? d.gear_ratio : 1.0;  // as the drive factory maps it
+      const double at = d.homing_direction * d.direction * gear * 10.0 * M_PI / 180.0;  // actuator rad
+      sim::VirtualMitMotor& m = mit_plants.back()->at(k);
+      (at < 0 ? m.stop_lo : m.stop_hi) = at;
+    }
     return &mit_plants.back()->master_bus();
   };
 #else  // built without host_sim (robot-controller build): no virtual drives

@@ -305,6 +305,18 @@ std::string Console::status_text() const {
   for (std::size_t j = 0; j < st.homing.size(); ++j) s += std::string(j ? " " : "") + to_string(st.homing[j]);
   s += "]";
   s += fmt(" feed_override=%d%%", st.feed_pct);
+  if (st.temperature.size() > 0 && st.temperature.array().isFinite().any()) {  // drives that report one
+    s += " temperature_c=[";
+    for (int j = 0; j < st.temperature.size(); ++j)
+      s += (j ? " " : "") + (std::isfinite(st.temperature[j]) ? fmt("%.0f", st.temperature[j]) : std::string("-"));
+    s += "]";
+    if (st.temperature_warning != 0) {
+      s += " hot=[";
+      for (int j = 0, k = 0; j < st.temperature.size(); ++j)
+        if ((st.temperature_warning >> j) & 1u) s += fmt("%s%d", k++ ? " " : "", j + 1);
+      s += "]";
+    }
+  }
   if (running()) s += " " + program_text();
   if (svc_->recording()) s += fmt(" recording=%zu", svc_->record_samples());
   if (st.feed_forward != FeedForwardKind::off || st.collision_on || st.freedrive != FreedrivePhase::off)  // (the dynamics parts, when one runs)
@@ -483,6 +495,10 @@ void Console::render_event(const ArmEvent& e, std::string& native, std::string& 
     case ArmEventKind::homing:
       native += fmt("homing: %s\n", detail.c_str());
       grbl += fmt("[MSG:homing: %s]\n", detail.c_str());
+      break;
+    case ArmEventKind::warning:
+      native += fmt("warning: %s\n", detail.c_str());
+      grbl += fmt("[MSG:warning: %s]\n", detail.c_str());
       break;
     case ArmEventKind::freedrive:
       native += fmt("freedrive: %s\n", detail.c_str());

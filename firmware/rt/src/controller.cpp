@@ -24,6 +24,8 @@ const char* to_string(FaultCause c) {
     case FaultCause::feedback_invalid: return "feedback_invalid";
     case FaultCause::homing_failed: return "homing_failed";
     case FaultCause::collision: return "collision";
+    case FaultCause::over_temperature: return "over_temperature";
+    case FaultCause::joint_limit: return "joint_limit";
   }
   return "?";
 }
@@ -61,6 +63,7 @@ const char* to_string(EventKind k) {
     case EventKind::jog_stopped: return "jog_stopped";
     case EventKind::homing: return "homing";
     case EventKind::freedrive: return "freedrive";
+    case EventKind::warning: return "warning";
   }
   return "?";
 }
@@ -189,8 +192,16 @@ void Controller::end_of_ramp(Mode ramp) {
     case Mode::hold_ramp: set_mode(Mode::held); return;  // at rest, the motion kept
     case Mode::stopping_to_idle: set_mode(Mode::idle); return;
     case Mode::stopping_to_disabled: power_down(Mode::disabled); return;
-    case Mode::fault_ramp: power_down(Mode::fault); return;
-    case Mode::estop_ramp: power_down(Mode::estop); return;
+    case Mode::fault_ramp:
+    case Mode::estop_ramp:
+      if (bus_.quick_stop_holds()) {  // drives without brakes (MIT motors) hold where the ramp ended
+        bus_.quick_stop();
+        stop_t_ = 0;
+        set_mode(ramp == Mode::estop_ramp ? Mode::estop_quick_stop : Mode::fault_quick_stop);
+        return;
+      }
+      power_down(ramp == Mode::estop_ramp ? Mode::estop : Mode::fault);
+      return;
     case Mode::boot:
     case Mode::disabled:
     case Mode::enabling:
@@ -246,16 +257,40 @@ void Controller::step_ramp() {
 // or quick stop active with speed; `enabled`), or at the timeout.
 void Controller::step_drive_stop() {
   stop_t_ += period_s_;
-  bool moving = false;
+  bool moving = false, held = false;
   for (int j = 0; j < n_; ++j) {
     const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
     if (fb.valid) cmd_.pos[j] = fb.position;
-    if (fb.state == hal::JointState::stopping || fb.state == hal::JointState::enabled) moving = true;
+    const bool holds = bus_.holding(static_cast<std::size_t>(j));  // at rest, held powered (no brakes)
+    held = held || holds;
+    if ((fb.state == hal::JointState::stopping || fb.state == hal::JointState::enabled) && !holds) moving = true;
   }
   cmd_.vel.setZero();
   cmd_.acc.setZero();
   if (moving && stop_t_ < cfg_.drive_stop_timeout) return;
-  power_down(mode_ == Mode::estop_quick_stop ? Mode::estop : Mode::fault);
+  const Mode latched = mode_ == Mode::estop_quick_stop ? Mode::estop : Mode::fault;
+  if (!moving && held) {  // the drives hold the arm where it came to rest (watch_hold)
+    stop_t_ = 0;
+    set_mode(latched);
+  } else {
+    power_down(latched);
+  }
+}
+
+// Latched fault / e-stop whose drives hold the arm (ServoBus::quick_stop_holds): a joint driven
+// out of its hold (pushed beyond the motor's torque) for safety.drive_stop_timeout_s is powered
+// down, as a stop that does not come to rest is.
+void Controller::watch_hold() {
+  if (!bus_.quick_stop_holds()) return;
+  bool moving = false;
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    if (bus_.feedback(ju).state == hal::JointState::stopping && !bus_.holding(ju)) moving = true;
+  }
+  stop_t_ = moving ? stop_t_ + period_s_ : 0;
+  if (stop_t_ < cfg_.drive_stop_timeout) return;
+  bus_.disable();
+  stop_t_ = 0;
 }
 
 void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
@@ -381,6 +416,13 @@ void Controller::supervise(TimePoint now) {
         case hal::Status::homing_error:
         case hal::Status::bad_state: c = FaultCause::bus_error; break;
       }
+      if (fb.fault == hal::Status::drive_fault && fb.has_temperature && fb.temperature >= fb.temperature_limit) {
+        char t[96];
+        std::snprintf(t, sizeof t, "%.0f deg C, at or above its limit %.0f deg C (the motor's own cut-off %.0f deg C)",
+                      fb.temperature, fb.temperature_limit, fb.temperature_cutoff);
+        raise_fault(FaultCause::over_temperature, j, t);
+        return;
+      }
       std::snprintf(d, sizeof d, "%s, error code 0x%04X", hal::to_string(fb.fault), unsigned(fb.error_code));
       raise_fault(c, j, d);
       return;
@@ -463,6 +505,21 @@ void Controller::supervise(TimePoint now) {
           return;
         }
     }
+  }
+}
+
+void Controller::watch_temperatures() {
+  for (int j = 0; j < n_; ++j) {
+    const auto& fb = bus_.feedback(static_cast<std::size_t>(j));
+    const auto bit = static_cast<std::uint16_t>(1u << j);
+    const bool hot = fb.has_temperature && fb.temperature >= fb.temperature_warning;
+    if (hot && (hot_ & bit) == 0) {
+      char m[sizeof(Event::message)];
+      std::snprintf(m, sizeof m, "joint %d at %.0f deg C: over-temperature warning (from %.0f deg C; the arm stops at %.0f)",
+                    j + 1, fb.temperature, fb.temperature_warning, fb.temperature_limit);
+      emit(EventKind::warning, FaultCause::none, j, 0, m);
+    }
+    hot_ = static_cast<std::uint16_t>(hot ? hot_ | bit : hot_ & ~bit);
   }
 }
 
@@ -1013,6 +1070,20 @@ void Controller::step_freedrive() {
   // measured pose (write() ignores it in CST; CSP resumes where the drive stands). A move queued
   // meanwhile is dropped with an event (the arm is not where the console planned it from).
   follow_measured();
+  if (mode_ == Mode::freedrive) {
+    // the hand may carry a joint anywhere: past a position limit the arm stops in fault
+    for (int j = 0; j < n_; ++j) {
+      const auto ju = static_cast<std::size_t>(j);
+      const double q = q_act_[j], lo = limits_.lower[ju], hi = limits_.upper[ju];
+      if (q >= lo - cfg_.position_tolerance && q <= hi + cfg_.position_tolerance) continue;
+      const char* u = chain_.joint(j).type == kin::JointType::prismatic ? "m" : "rad";
+      char d[96];
+      std::snprintf(d, sizeof d, "free-drive carried it to %.4f %s, beyond its %s limit %.4f %s", q, u,
+                    q > hi ? "upper" : "lower", q > hi ? hi : lo, u);
+      raise_fault(FaultCause::joint_limit, j, d);
+      return;
+    }
+  }
   const FreedrivePhase ph = model_ != nullptr ? model_->freedrive_step() : FreedrivePhase::off;
   if (mode_ == Mode::freedrive && ph != FreedrivePhase::entering && ph != FreedrivePhase::active) {
     // a joint left torque mode by itself (refused, fault, heartbeat): every drive back to CSP
@@ -1133,12 +1204,17 @@ void Controller::publish() {
     t.qd_act[ju] = fb.velocity;
     t.tau_act[ju] = fb.has_torque ? fb.torque : 0.0;
     if (fb.has_torque) t.torque_valid = static_cast<std::uint16_t>(t.torque_valid | (1u << j));
+    if (fb.has_temperature) {
+      t.temperature[ju] = fb.temperature;
+      t.temperature_valid = static_cast<std::uint16_t>(t.temperature_valid | (1u << j));
+    }
     t.joint_state[ju] = static_cast<std::uint8_t>(fb.state);
   }
   t.queued = static_cast<std::uint32_t>(exec_.queue().size());
   t.streaming = mode_ == Mode::jogging && jog_.streaming();
   t.running_id = exec_.running_id();
   t.done_id = done_id_;
+  t.temperature_warning = hot_;
   t.cause = cause_;
   t.fault_joint = static_cast<std::int8_t>(fault_joint_);
   std::memcpy(t.fault_text, fault_text_, sizeof t.fault_text);
@@ -1311,6 +1387,7 @@ void Controller::cycle(TimePoint now) {
   for (int i = 0; i < 8 && outputs_.pop(oc); ++i) apply_output(oc);
   // 2 supervisor
   supervise(now);
+  watch_temperatures();
   // 3 motion, and the model's feed-forward of the setpoint (60B1h / 60B2h with this write)
   step_motion();
   step_safety();

@@ -364,9 +364,12 @@ void Controller::step_motion() {
     case Mode::estop_ramp: step_ramp(); return;  // a stop has priority over everything
     case Mode::boot:
     case Mode::disabled:
-    case Mode::enabling:
+    case Mode::enabling: follow_measured(); return;
     case Mode::fault:
-    case Mode::estop: follow_measured(); return;
+    case Mode::estop:
+      follow_measured();
+      watch_hold();
+      return;
     case Mode::jogging: step_jog(); return;
     case Mode::homing:
     case Mode::homing_abort: step_homing(); return;

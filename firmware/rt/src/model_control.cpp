@@ -68,7 +68,7 @@ bool ModelControl::configure(const kin::Chain& chain, hal::ServoBus& bus, const 
   watching_ = false;
   ff_on_.store(false, std::memory_order_relaxed);
   coll_on_.store(false, std::memory_order_relaxed);
-  q_ = qd_ = tau_ = damping_vec_ = kin::JointVector::Zero(n_);
+  q_ = qd_ = tau_ = damping_vec_ = fd_damping_ = kin::JointVector::Zero(n_);
   thr_.fill(0);
   damping_.fill(0);
 
@@ -333,7 +333,15 @@ hal::Status ModelControl::freedrive_enter() {
     }
   }
   measured(q_, qd_, nullptr);
-  if (kin::free_drive_torque(*chain_, q_, qd_, damping_vec_, tau_) != kin::Status::ok) {
+  // A drive that damps in torque mode (MIT: kd in the motor's own loop) takes the damping; the
+  // model's torque is then gravity and friction alone for it.
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    const bool drive_damps = bus_->capabilities(ju).torque_mode_damping &&
+                             bus_->set_torque_damping(ju, damping_vec_[j]) == hal::Status::ok;
+    fd_damping_[j] = drive_damps ? 0.0 : damping_vec_[j];
+  }
+  if (kin::free_drive_torque(*chain_, q_, qd_, fd_damping_, tau_) != kin::Status::ok) {
     std::snprintf(error_, sizeof error_, "the model gives no free-drive torque at the measured pose (NaN?)");
     return hal::Status::invalid_argument;
   }
@@ -363,7 +371,7 @@ hal::Status ModelControl::freedrive_enter() {
 FreedrivePhase ModelControl::freedrive_step() {
   if (phase_ == FreedrivePhase::off) return phase_;
   measured(q_, qd_, nullptr);
-  const bool have_tau = kin::free_drive_torque(*chain_, q_, qd_, damping_vec_, tau_) == kin::Status::ok;
+  const bool have_tau = kin::free_drive_torque(*chain_, q_, qd_, fd_damping_, tau_) == kin::Status::ok;
   bool all_torque = true, all_position = true;
   int lost = -1;
   hal::Status why = hal::Status::ok;

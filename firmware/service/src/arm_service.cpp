@@ -560,6 +560,7 @@ ArmEventKind kind_of(EventKind k) {
     case EventKind::jog_stopped: return ArmEventKind::jog_stopped;
     case EventKind::homing: return ArmEventKind::homing;
     case EventKind::freedrive: return ArmEventKind::freedrive;
+    case EventKind::warning: return ArmEventKind::warning;
   }
   return ArmEventKind::state;
 }
@@ -576,6 +577,7 @@ const char* to_string(ArmEventKind k) {
     case ArmEventKind::homing: return "homing";
     case ArmEventKind::freedrive: return "freedrive";
     case ArmEventKind::program: return "program";
+    case ArmEventKind::warning: return "warning";
   }
   return "?";
 }
@@ -986,6 +988,7 @@ ArmStatus ArmService::status() const {
   s.safety_checksum = cfg_.safety_checksum;
   s.q = kin::JointVector::Zero(n_);
   s.q_cmd = kin::JointVector::Zero(n_);
+  s.temperature = kin::JointVector::Constant(n_, std::nan(""));
   s.homing.assign(static_cast<std::size_t>(n_), JointHoming::absolute);
   if (ctl_ == nullptr) return s;  // dry runs only: no arm to report
   const Telemetry t = ctl_->telemetry();
@@ -1001,6 +1004,7 @@ ArmStatus ArmService::status() const {
     const auto ju = static_cast<std::size_t>(j);
     s.q[j] = t.q_act[ju];
     s.q_cmd[j] = t.q_cmd[ju];
+    if ((t.temperature_valid >> j) & 1u) s.temperature[j] = t.temperature[ju];
     JointHoming& h = s.homing[ju];
     if ((t.homing_now >> j) & 1u) h = JointHoming::homing;
     else if (static_cast<hal::HomingKind>(t.homing_kind[ju]) == hal::HomingKind::none) h = JointHoming::absolute;
@@ -1009,6 +1013,7 @@ ArmStatus ArmService::status() const {
     else h = JointHoming::unhomed;
   }
   s.all_homed = t.all_homed();
+  s.temperature_warning = t.temperature_warning;
   s.fault = t.cause;
   s.fault_joint = t.fault_joint;
   s.fault_text = bounded_text(t.fault_text);

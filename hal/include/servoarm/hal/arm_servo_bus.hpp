@@ -44,6 +44,9 @@ class ArmServoBus final : public ServoBus {
   void enable() override;
   void disable() override;
   void quick_stop() override;
+  /// True when a group holds after quick_stop() (an MIT group).
+  bool quick_stop_holds() const override;
+  bool holding(std::size_t j) const override;
   /// Every group's read(); the first group status that is not ok.
   Status read(TimePoint now) override;
   /// Each group's setpoints from the arm's; the first group status that is not ok.
@@ -58,6 +61,7 @@ class ArmServoBus final : public ServoBus {
   JointCapabilities capabilities(std::size_t j) const override;
   Status set_feed_forward(std::size_t j, double velocity, double torque) override;
   Status set_target_torque(std::size_t j, double torque) override;
+  Status set_torque_damping(std::size_t j, double damping) override;
   Status set_torque_mode(std::size_t j, bool on) override;
   CyclicModeState cyclic_mode(std::size_t j) const override;
   Status set_digital_outputs(std::size_t j, std::uint32_t value) override;

@@ -17,7 +17,8 @@
 //
 // Each cycle (write()), one frame per motor: enabled joints the MIT command (position from the
 // setpoint through the joint mapping, kp/kd as configured, velocity and torque feed-forward from
-// set_feed_forward(); in torque mode kp = kd = 0 and the target torque: free-drive), joints
+// set_feed_forward(); in torque mode kp = 0, the configured kd and the target torque: free-drive,
+// damped in the motor), joints
 // being enabled the enable frame (a latched fault is cleared first), the others the disable frame
 // (which the motor answers with feedback, so a disabled joint's position stays fresh). read()
 // takes the feedback: position (multi-turn, from the +-P_MAX wrapped value), velocity, measured
@@ -83,12 +84,27 @@ class MitGroup final : public DriveGroup {
   std::size_t joint_count() const override { return cfg_.joint_count; }
   void enable() override;
   void disable() override;
+  /// Every powered joint stops and holds where it comes to rest: the MIT frame with the measured
+  /// position (each cycle until the joint is at rest, then that one), zero velocity, the
+  /// configured kp, KD_MAX (the most damping the frame carries) and as tau_ff the torque feed-forward of the cycle
+  /// (set_feed_forward: the model's gravity at the measured pose), or without one the torque the
+  /// motor measured when the stop began, so an arm without brakes does not fall; the joint reports `stopping`. Joints
+  /// not powered are disabled. enable() takes the joints back to the setpoints, disable() powers
+  /// them down.
+  void quick_stop() override;
+  bool quick_stop_holds() const override { return true; }
+  /// Joint j holds after quick_stop(), has come to rest and is at rest now (its velocity within
+  /// 0.05 rad/s at the actuator, at least four codes of the frame's velocity).
+  bool holding(std::size_t j) const override;
   Status set_position_zero(std::size_t j) override;
   std::int64_t zero_offset(std::size_t j) const override {
     return j < cfg_.joint_count ? cfg_.joints[j].scaling.zero_offset : 0;
   }
   JointCapabilities capabilities(std::size_t j) const override;
   Status set_target_torque(std::size_t j, double torque) override;
+  /// Torque mode's kd (free-drive): `damping` joint side, as the actuator's kd (clamped to
+  /// KD_MAX); until given, the configured kd.
+  Status set_torque_damping(std::size_t j, double damping) override;
   CyclicModeState cyclic_mode(std::size_t j) const override {
     return j < cfg_.joint_count ? CyclicModeState{joints_[j].mode, joints_[j].mode_status} : CyclicModeState{};
   }
@@ -131,7 +147,7 @@ class MitGroup final : public DriveGroup {
     double zero = 0;         ///< actuator rad at joint zero
     double p_act = 0;        ///< actuator position, multi-turn
     double t_mos = 0, t_rotor = 0;
-    double temp_warning = 0, temp_fault = 0;
+    double temp_warning = 0, temp_fault = 0, temp_cutoff = 0;
     bool hot = false;
     std::uint8_t error = 0;  ///< the last error nibble / code
     bool want = false;       ///< enable() asked for operation
@@ -144,12 +160,19 @@ class MitGroup final : public DriveGroup {
     double ff_v = 0, ff_t = 0;  ///< actuator side
     bool have_target = false;
     double target_t = 0;        ///< joint side
+    double torque_kd = -1;      ///< actuator kd in torque mode (set_torque_damping); < 0: the configured kd
+    double torque_kd_rest = 0;  ///< the part of it beyond KD_MAX, applied through tau_ff
     CyclicMode mode = CyclicMode::position;
     Status mode_status = Status::ok;
     bool hold = false;          ///< hold where it stands in the next write (leaving torque mode)
+    bool qstop = false;         ///< quick_stop(): holds at qstop_at with qstop_t until enable() / disable()
+    bool qstop_rest = false;    ///< the held joint came to rest: qstop_at is fixed, kp holds it there
+    double qstop_at = 0, qstop_t = 0;  ///< actuator rad, N m
+    double v_act = 0, t_act = 0;       ///< the last feedback's velocity and torque, actuator side
     double hold_at = 0;         ///< actuator rad
     mit::Command sent{};
   };
+  static double rest_band(const Joint& J);
   std::uint16_t master(std::size_t j) const;
   bool is_feedback_of(std::size_t j, const CanFrame& f) const;
   void take_feedback(std::size_t j, const mit::Feedback& m, TimePoint now);

@@ -48,6 +48,14 @@ struct JointFeedback {
   TimePoint last_heartbeat = 0; ///< time of the last heartbeat (0 = none)
   TimePoint fault_since = 0;    ///< when the fault was detected
   Duration age = -1;            ///< now - last_feedback at the last read(), -1 = none yet
+  /// The drive's hottest reported temperature (deg C: MIT motors' MOSFET or winding), with the
+  /// limits the family supervises it against (below the motor's own cut-off). has_temperature
+  /// false: the drive reports none (CiA 402 here), the three values are 0.
+  bool has_temperature = false;
+  double temperature = 0.0;
+  double temperature_warning = 0.0;  ///< deg C: from here on the joint is hot (a warning)
+  double temperature_limit = 0.0;    ///< deg C: here the family faults the joint (drive_fault)
+  double temperature_cutoff = 0.0;   ///< deg C: where the motor stops by itself
 };
 
 /// How a joint establishes its zero at power-up (docs/servo-bus.md#homing).
@@ -119,6 +127,9 @@ struct JointCapabilities {
   bool torque_mode = false;      ///< set_torque_mode works (CST supported and 6060h/6061h/6071h mapped)
   bool measured_torque = false;  ///< JointFeedback::torque comes from the drive (6077h mapped)
   bool digital_outputs = false;  ///< set_digital_outputs reaches the drive (CANopen: 60FEh:01 mapped)
+  /// In torque mode the drive damps the joint's motion itself (MIT motors: kd with kp = 0), so a
+  /// caller adds no damping torque of its own (free-drive).
+  bool torque_mode_damping = false;
 };
 
 class ServoBus {
@@ -139,6 +150,16 @@ class ServoBus {
   /// Real-time: controlled stop on the drives' own quick-stop ramp, then hold there
   /// (CiA 402 quick stop). enable() resumes. Protocols without one just disable().
   virtual void quick_stop() { disable(); }
+  /// After quick_stop() the drives hold where they stopped, powered, until enable() or
+  /// disable() (drives without brakes, whose arm falls when powered down: MIT motors). The
+  /// controller then powers down only a stop that does not come to rest.
+  virtual bool quick_stop_holds() const { return false; }
+  /// Real-time: joint `j` holds at rest after quick_stop() (quick_stop_holds()): powered, its
+  /// velocity within the drive's rest band.
+  virtual bool holding(std::size_t j) const {
+    (void)j;
+    return false;
+  }
 
   /// Real-time: consume received frames and update feedback; checks heartbeat
   /// and state-machine timeouts against `now`. Never blocks.
@@ -237,6 +258,15 @@ class ServoBus {
   virtual Status set_target_torque(std::size_t j, double torque) {
     (void)j;
     (void)torque;
+    return Status::not_supported;
+  }
+  /// Real-time: the viscous damping (N m s / rad or N s / m, joint side) a drive with
+  /// JointCapabilities::torque_mode_damping applies itself to joint `j` in torque mode (kept
+  /// until changed).
+  /// @retval ok; invalid_argument (no such joint, negative or not finite); not_supported
+  virtual Status set_torque_damping(std::size_t j, double damping) {
+    (void)j;
+    (void)damping;
     return Status::not_supported;
   }
   /// Real-time: switch joint `j` to torque mode (on) or back to position mode (off). On: the

@@ -158,6 +158,12 @@ class Controller final : private SegmentHost {
   void emit(EventKind k, FaultCause c, int joint, std::uint32_t id, const char* msg);
   void set_mode(Mode m);
   void supervise(TimePoint now);
+  /// Over-temperature warnings: one `warning` event when a joint's drive reports it at or
+  /// above its warning temperature (again after it has cooled below).
+  void watch_temperatures();
+  /// fault / estop with the drives holding the arm after a quick stop: powers down a hold
+  /// that does not stay at rest (controller.cpp).
+  void watch_hold();
   void raise_fault(FaultCause c, int joint, const char* detail);
   /// Start the controller's ramp to rest from the commanded state and enter `ramp` (a
   /// ramping mode); when no ramp can be planned (never seen) the arm is at rest at once.
@@ -261,6 +267,7 @@ class Controller final : private SegmentHost {
   int fault_joint_ = -1;
   char fault_text_[120] = {};
   std::array<std::uint32_t, kin::kMaxJoints> emcy_seen_{};
+  std::uint16_t hot_ = 0;  ///< joints warned of as hot (watch_temperatures)
   double max_follow_ = 0;
   TimePoint estop_seen_ = -1;
   SafetyMonitor safety_;

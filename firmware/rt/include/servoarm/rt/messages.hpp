@@ -33,6 +33,8 @@ enum class FaultCause : std::uint8_t {
   feedback_invalid,   ///< no (or stale) position feedback from an enabled joint
   homing_failed,      ///< a joint's homing failed (timeout, homing error, refused): the arm is disabled
   collision,          ///< the collision observer's residual on a joint above its threshold
+  over_temperature,   ///< a drive's reported temperature at or above its limit (JointFeedback::temperature_limit)
+  joint_limit,        ///< free-drive: the hand carried a joint past its position limit
 };
 const char* to_string(FaultCause c);
 
@@ -140,7 +142,8 @@ struct MotionItem {
 /// a singularity, no IK solution); the message says why and names the joint.
 /// homing: progress of the homing cycle (a joint started, homed, aborted; the cycle done), `joint` named.
 /// freedrive: free-drive on / off, or ended by a joint that left torque mode by itself.
-enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state, jog_stopped, homing, freedrive };
+/// warning: something the operator should know that does not stop the arm (a hot joint).
+enum class EventKind : std::uint8_t { fault, estop, motion_done, motion_refused, state, jog_stopped, homing, freedrive, warning };
 const char* to_string(EventKind k);
 
 struct Event {
@@ -163,6 +166,9 @@ struct Telemetry {
   std::array<double, kin::kMaxJoints> qd_act{}; ///< last measured velocity (SI per s), as the drive reports it
   std::array<double, kin::kMaxJoints> tau_act{}; ///< last measured torque (N m / N, joint side); see torque_valid
   std::uint16_t torque_valid = 0;  ///< bit j: joint j's drive reports its torque (tau_act[j] is measured, else 0)
+  std::array<double, kin::kMaxJoints> temperature{};  ///< deg C, the drive's hottest reported; see temperature_valid
+  std::uint16_t temperature_valid = 0;    ///< bit j: joint j's drive reports a temperature
+  std::uint16_t temperature_warning = 0;  ///< bit j: joint j at or above its warning temperature
   bool streaming = false;          ///< a stream of targets runs (JogSpec::stream) and is not braking
   std::array<std::uint8_t, kin::kMaxJoints> joint_state{};  ///< hal::JointState
   std::uint32_t queued = 0;        ///< motions in the queue (including the running one)

@@ -181,6 +181,7 @@ class ModelControl {
   hal::TimePoint sampled_ = 0;  ///< sample time of the feedback of the last update (0 = none)
   kin::FeedForward ff_;
   kin::JointVector q_, qd_, tau_, damping_vec_;
+  kin::JointVector fd_damping_;  ///< free-drive's: damping_vec_, 0 where the drive damps itself (torque_mode_damping)
   std::array<double, kin::kMaxJoints> damping_{};
   FreedrivePhase phase_ = FreedrivePhase::off;
   ModelControlStats stats_{};

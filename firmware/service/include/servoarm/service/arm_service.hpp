@@ -237,6 +237,10 @@ struct ArmStatus {
   double t = 0;                    ///< the same in s
   kin::JointVector q;              ///< measured joint positions
   kin::JointVector q_cmd;          ///< commanded joint positions
+  /// Per joint: the drive's hottest reported temperature (deg C; MIT motors: MOSFET or winding),
+  /// NaN for a drive that reports none (CiA 402).
+  kin::JointVector temperature;
+  std::uint16_t temperature_warning = 0;  ///< bit j: joint j at or above its warning temperature
   std::vector<JointHoming> homing; ///< per joint
   bool all_homed = false;
   FaultCause fault = FaultCause::none;  ///< the fault's cause (state fault)
@@ -343,6 +347,7 @@ enum class ArmEventKind : std::uint8_t {
   homing,
   freedrive,
   program,  ///< the program runner: ArmEvent::program says what (started, a step, ended)
+  warning,  ///< the arm runs on, but the operator should know (a joint at its warning temperature)
 };
 const char* to_string(ArmEventKind k);
 
