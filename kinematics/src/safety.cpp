@@ -79,6 +79,14 @@ double evaluate(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x,
       v.limit = lim.elbow_speed;
       v.value = x.elbow_velocity.norm();
       return lim.elbow_speed > 0 && cfg.elbow_frame >= 0 ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::joint_speed: {
+      const auto j = static_cast<std::size_t>(index);
+      v.where = x.tcp.translation();
+      v.linear = ((cfg.prismatic >> j) & 1u) != 0;
+      v.limit = lim.joint_speed[j];
+      v.value = std::abs(x.joint_velocity[j]);
+      return v.limit > 0 ? v.value - v.limit : -INFINITY;
+    }
   }
   return -INFINITY;
 }
@@ -102,6 +110,7 @@ const char* to_string(SafetyFunction f) {
     case SafetyFunction::orientation: return "tool orientation";
     case SafetyFunction::tcp_speed: return "tcp speed";
     case SafetyFunction::elbow_speed: return "elbow speed";
+    case SafetyFunction::joint_speed: return "joint speed";
   }
   return "?";
 }
@@ -122,7 +131,8 @@ double SafetyViolation::excess() const {
     case SafetyFunction::keep_out: return limit - value;
     case SafetyFunction::orientation:
     case SafetyFunction::tcp_speed:
-    case SafetyFunction::elbow_speed: return value - limit;
+    case SafetyFunction::elbow_speed:
+    case SafetyFunction::joint_speed: return value - limit;
   }
   return -INFINITY;
 }
@@ -143,6 +153,9 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
     case SafetyFunction::elbow_speed:
       std::snprintf(name, sizeof name, "%s", to_string(v.function));
       break;
+    case SafetyFunction::joint_speed:
+      std::snprintf(name, sizeof name, "joint %d speed", v.index + 1);
+      break;
   }
   double scale = 1000.0;
   const char* unit = "mm";
@@ -154,6 +167,14 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
     case SafetyFunction::orientation: scale = 180.0 / kPi; unit = "deg"; break;
     case SafetyFunction::tcp_speed:
     case SafetyFunction::elbow_speed: unit = "mm/s"; break;
+    case SafetyFunction::joint_speed:
+      if (v.linear) {
+        unit = "mm/s";
+      } else {
+        scale = 180.0 / kPi;
+        unit = "deg/s";
+      }
+      break;
   }
   char at[24] = "";
   if (v.s >= 0) std::snprintf(at, sizeof at, " at s=%.3f", v.s);
@@ -164,7 +185,7 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
 }
 
 bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
-                  double angle_margin, double speed_margin, SafetyViolation& out) {
+                  double angle_margin, double speed_margin, SafetyViolation& out, double joint_tolerance_scale) {
   if (!cfg.enabled) return false;
   SafetyViolation v;
   const bool has_elbow = cfg.elbow_frame >= 0;
@@ -188,6 +209,49 @@ bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& 
   if (x.has_velocity) {
     if (evaluate(cfg, mode, x, SafetyFunction::tcp_speed, -1, false, v) > speed_margin) { out = v; return true; }
     if (evaluate(cfg, mode, x, SafetyFunction::elbow_speed, -1, true, v) > speed_margin) { out = v; return true; }
+    for (int j = 0; j < x.joint_count && j < kMaxJoints; ++j) {
+      const double m = joint_tolerance_scale > 0
+                           ? joint_tolerance_scale * cfg.joint_speed_tolerance[static_cast<std::size_t>(j)]
+                           : speed_margin;
+      if (evaluate(cfg, mode, x, SafetyFunction::joint_speed, j, false, v) > m) { out = v; return true; }
+    }
+  }
+  return false;
+}
+
+void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_prev, const JointVector& q, double h) {
+  if (!(h > 0)) return;
+  x.has_velocity = true;
+  x.tcp_velocity = (x.tcp.translation() - p.tcp.translation()) / h;
+  x.elbow_velocity = (x.elbow - p.elbow) / h;
+  const int n = static_cast<int>(std::min<Eigen::Index>(std::min(q.size(), q_prev.size()), kMaxJoints));
+  x.joint_count = n;
+  for (int j = 0; j < n; ++j) x.joint_velocity[static_cast<std::size_t>(j)] = (q[j] - q_prev[j]) / h;
+}
+
+double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x) {
+  if (!cfg.enabled || !x.has_velocity) return 0;
+  const SafetyLimits& lim = cfg.limits(mode);
+  double r = 0;
+  if (lim.tcp_speed > 0) r = std::max(r, x.tcp_velocity.norm() / lim.tcp_speed);
+  if (lim.elbow_speed > 0 && cfg.elbow_frame >= 0) r = std::max(r, x.elbow_velocity.norm() / lim.elbow_speed);
+  for (int j = 0; j < x.joint_count && j < kMaxJoints; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    if (lim.joint_speed[ju] > 0) r = std::max(r, std::abs(x.joint_velocity[ju]) / lim.joint_speed[ju]);
+  }
+  return r;
+}
+
+bool is_speed(SafetyFunction f) {
+  switch (f) {
+    case SafetyFunction::tcp_speed:
+    case SafetyFunction::elbow_speed:
+    case SafetyFunction::joint_speed: return true;
+    case SafetyFunction::none:
+    case SafetyFunction::plane:
+    case SafetyFunction::keep_in:
+    case SafetyFunction::keep_out:
+    case SafetyFunction::orientation: return false;
   }
   return false;
 }
@@ -210,6 +274,7 @@ bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVecto
   out.s = s;
   out.tcp = tcp;
   out.has_velocity = false;
+  out.joint_count = 0;
   if (cfg.elbow_frame >= 0 && cfg.elbow_frame < frames.count)
     out.elbow = frames.frame[cfg.elbow_frame].translation();
   else
@@ -249,12 +314,16 @@ const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_
   for (const SafetyLimits* l : {&cfg.normal, &cfg.reduced}) {
     if (!std::isfinite(l->tcp_speed) || l->tcp_speed < 0 || !std::isfinite(l->elbow_speed) || l->elbow_speed < 0)
       return bad("speed limits must be finite and >= 0", 0);
+    for (const double js : l->joint_speed)
+      if (!std::isfinite(js) || js < 0) return bad("joint speed limits must be finite and >= 0", 0);
     if (cfg.cone && (!std::isfinite(l->cone_half_angle) || l->cone_half_angle <= 0 || l->cone_half_angle > kPi))
       return bad("cone half angle must be in (0, 180] deg", 0);
   }
   if (!std::isfinite(cfg.position_tolerance) || cfg.position_tolerance < 0 || !std::isfinite(cfg.angle_tolerance) ||
       cfg.angle_tolerance < 0 || !std::isfinite(cfg.speed_tolerance) || cfg.speed_tolerance < 0)
     return bad("tolerances must be finite and >= 0", 0);
+  for (const double t : cfg.joint_speed_tolerance)
+    if (!std::isfinite(t) || t < 0) return bad("tolerances must be finite and >= 0", 0);
   return buf;
 }
 

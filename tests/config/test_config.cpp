@@ -1200,8 +1200,10 @@ TEST(Config, SafetyKeysAreReadAndBadOnesRefusedNamingTheKey) {
                                     "cone_deg = 30\ntcp_speed_mm_s = 250\nreduced_tcp_speed_mm_s = 100\n",
                                     "s.toml", c)
                    .c_str());
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
   servoarm::kin::SafetyConfig e;
-  STRCMP_EQUAL("", safety_envelope(c, e).c_str());
+  STRCMP_EQUAL("", safety_envelope(c, lr.chain, e).c_str());
   CHECK(e.enabled);
   CHECK_EQUAL(1, e.plane_count);
   DOUBLES_EQUAL(1.0, e.planes[0].normal.z(), 1e-12);  // normalised
@@ -1217,7 +1219,7 @@ TEST(Config, SafetyKeysAreReadAndBadOnesRefusedNamingTheKey) {
   DOUBLES_EQUAL(0.1, e.reduced.tcp_speed, 1e-12);
   // the defaults: no envelope
   FwConfig d;
-  STRCMP_EQUAL("", safety_envelope(d, e).c_str());
+  STRCMP_EQUAL("", safety_envelope(d, lr.chain, e).c_str());
   CHECK_FALSE(e.enabled);
 
   expect_refused("[safety]\nplanes = [0, 0, 1, nan]\n", {"safety.planes"});
@@ -1230,6 +1232,39 @@ TEST(Config, SafetyKeysAreReadAndBadOnesRefusedNamingTheKey) {
   expect_refused("[safety]\ncone_axis = [0, 0, 0]\n", {"safety.cone_axis", "zero axis"});
   expect_refused("[safety]\ntool_radius_mm = inf\n", {"safety.tool_radius_mm"});
   expect_refused("[safety]\ncone_deg = 0\n", {"safety.cone_deg"});
+}
+
+// Joint speed limits: one per joint in deg/s (mm/s for a prismatic joint), per mode, read into
+// rad/s; a negative or NaN one is refused at load, a list not one per joint against the robot,
+// each in one line naming the key; they are part of the checksum.
+TEST(Config, SafetyJointSpeedKeysAreReadAndCheckedAgainstTheRobot) {
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[safety]\njoint_speed_deg_s = [90, 90, 90, 180, 180, 180]\n"
+                                    "reduced_joint_speed_deg_s = [30, 30, 30, 0, 60, 60]\ntolerance_deg_s = 3\n",
+                                    "s.toml", c)
+                   .c_str());
+  servoarm::kin::SafetyConfig e;
+  STRCMP_EQUAL("", safety_envelope(c, lr.chain, e).c_str());
+  CHECK(e.enabled);
+  DOUBLES_EQUAL(M_PI / 2, e.normal.joint_speed[0], 1e-12);
+  DOUBLES_EQUAL(M_PI, e.normal.joint_speed[5], 1e-12);
+  DOUBLES_EQUAL(M_PI / 6, e.reduced.joint_speed[0], 1e-12);
+  DOUBLES_EQUAL(0.0, e.reduced.joint_speed[3], 0);
+  DOUBLES_EQUAL(3 * M_PI / 180, e.joint_speed_tolerance[2], 1e-12);
+  STRCMP_EQUAL("", validate_for_chain(c, lr.chain).c_str());
+  FwConfig other = c;
+  other.safety_reduced_joint_speed_deg_s[0] = 31;
+  CHECK(safety_checksum(other) != safety_checksum(c));
+
+  expect_refused("[safety]\njoint_speed_deg_s = [90, -1, 90, 90, 90, 90]\n", {"safety.joint_speed_deg_s"});
+  expect_refused("[safety]\nreduced_joint_speed_deg_s = [nan, 1, 1, 1, 1, 1]\n", {"safety.reduced_joint_speed_deg_s"});
+  expect_refused("[safety]\ntolerance_deg_s = -2\n", {"safety.tolerance_deg_s"});
+  FwConfig five = c;
+  five.safety_reduced_joint_speed_deg_s = {30, 30, 30, 30, 30};
+  const std::string bad = validate_for_chain(five, lr.chain);
+  STRCMP_EQUAL("safety.reduced_joint_speed_deg_s: needs one value per joint of puma560 (6), got 5", bad.c_str());
 }
 
 TEST(Config, SafetyParkPoseOutsideTheEnvelopeIsRefused) {

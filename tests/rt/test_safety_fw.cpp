@@ -202,3 +202,60 @@ TEST(SafetyMonitor, AnUncheckedMoveThroughAPlaneGetsAProtectiveStop) {
   CHECK_EQUAL(1u, r.tel().safety_stops);
   LONGS_EQUAL(0, r.rt_allocs);
 }
+
+// Joint speed limits per mode: a joint move of joint 1 the planner never saw (queued
+// directly, at full speed) runs in Normal mode (limit 200 deg/s) and gets a protective stop in
+// Reduced mode (limit 20 deg/s) in the cycle its commanded speed passes limit + tolerance; the
+// event names the joint, its speed and the limit.
+TEST(SafetyMonitor, AJointFasterThanItsModesSpeedLimitGetsAProtectiveStopNamingIt) {
+  FwConfig c = table(250);
+  c.safety_joint_speed_deg_s = {200, 200, 200, 200, 200, 200};
+  c.safety_reduced_joint_speed_deg_s = {20, 200, 200, 200, 200, 200};
+  c.safety_tolerance_deg_s = 2;
+  for (const kin::SafetyMode mode : {kin::SafetyMode::normal, kin::SafetyMode::reduced}) {
+    Rig r(c);
+    r.enable();
+    r.to_work();
+    CHECK(r.svc().set_safety_mode(mode).ok());
+    MotionItem* m = r.app.ctl->motions().back();
+    CHECK(m != nullptr);
+    m->id = 901;
+    JointMove& jm = m->payload.emplace<JointMove>();
+    jm.goal = work_pose();
+    jm.goal[0] += 40 * kDeg;
+    jm.override = 1.0;
+    jm.plan.n = 0;
+    r.app.ctl->motions().commit();
+    double prev = r.tel().q_cmd[0], vmax = 0;
+    int crossed = -1, stopped = -1;
+    for (int i = 0; i < 20000; ++i) {
+      r.cycle();
+      const double q0 = r.tel().q_cmd[0];
+      const double v = std::fabs(q0 - prev) / 0.001 / kDeg;  // deg/s
+      prev = q0;
+      vmax = std::fmax(vmax, v);
+      if (crossed < 0 && v > 22.0 + 1e-9) crossed = i;
+      if (stopped < 0 && r.tel().state == ArmState::stopping) stopped = i;
+      if (i > 10 && r.tel().state == ArmState::idle && r.app.ctl->motions().empty()) break;
+    }
+    std::printf("\n  joint speed (%s): joint 1 at most %.1f deg/s; past 22 deg/s in cycle %d, stop from cycle %d",
+                kin::to_string(mode), vmax, crossed, stopped);
+    CHECK(vmax > 22.0);  // the move is faster than the Reduced limit
+    if (mode == kin::SafetyMode::normal) {
+      CHECK_EQUAL(-1, stopped);
+      CHECK_EQUAL(0u, r.tel().safety_stops);
+      DOUBLES_EQUAL(work_pose()[0] + 40 * kDeg, r.tel().q_cmd[0], 1e-6);
+      continue;
+    }
+    CHECK(crossed >= 0);
+    CHECK(stopped == crossed);
+    CHECK(r.tel().state == ArmState::idle);
+    CHECK(r.app.ctl->motions().empty());
+    CHECK(r.tel().q_cmd[0] < work_pose()[0] + 20 * kDeg);  // stopped well short of the goal
+    const std::string ev = r.last_event();
+    STRCMP_CONTAINS("protective stop (commanded): joint 1 speed", ev.c_str());
+    STRCMP_CONTAINS("limit 20.0 deg/s, value 22.", ev.c_str());
+    CHECK_EQUAL(1u, r.tel().safety_stops);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}

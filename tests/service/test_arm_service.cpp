@@ -851,6 +851,70 @@ TEST(ArmService, JogStepsAndTheReducedModeAreCheckedToo) {
   CHECK_TEXT(vmax > 0.25, std::to_string(vmax).c_str());  // not slower than it needs
 }
 
+// Joint speed limits per mode slow moves down instead of refusing them: a movej of joint 1 at
+// 100 % and a 400 mm/s line sideways (mostly joint 1; slowed in Reduced) are planned slower, and run on the
+// controller, their commanded joint 1 speed (differenced every cycle here) stays within the
+// mode's limit, 30 deg/s in Normal, 10 deg/s in Reduced, with no protective stop.
+TEST(ArmService, JointSpeedLimitsOfTheModeSlowMovesDown) {
+  FwConfig c = table_config(60);
+  c.safety_tcp_speed_mm_s = c.safety_reduced_tcp_speed_mm_s = 0;
+  c.safety_joint_speed_deg_s = {30, 0, 0, 0, 0, 0};
+  c.safety_reduced_joint_speed_deg_s = {10, 0, 0, 0, 0, 0};
+  c.max_linear_speed_mm_s = 500;
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  const double dt = 1.0 / c.rate_hz;
+  // runs the queue to rest; the highest commanded speed of joint 1 (deg/s)
+  auto run = [&] {
+    double prev = r.app.ctl->telemetry().q_cmd[0], vmax = 0;
+    for (int i = 0; i < 60000 && (!r.app.ctl->motions().empty() || r.app.ctl->telemetry().state != ArmState::idle); ++i) {
+      r.cycle();
+      const double q = r.app.ctl->telemetry().q_cmd[0];
+      vmax = std::fmax(vmax, std::fabs(q - prev) / dt / kDeg);
+      prev = q;
+    }
+    return vmax;
+  };
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  run();
+  for (const kin::SafetyMode mode : {kin::SafetyMode::normal, kin::SafetyMode::reduced}) {
+    const double limit = mode == kin::SafetyMode::normal ? 30 : 10;
+    CHECK(svc.set_safety_mode(mode).ok());
+    MoveJoints quick;
+    quick.goal = joints({40, -45, 180, 0, 45, 0});
+    quick.speed_pct = 100;
+    const MoveResult q = svc.move(quick, cx);
+    CHECK_TEXT(q.ok(), q.reason.c_str());
+    const double vj = run();
+    char fig[120];
+    std::snprintf(fig, sizeof fig, "%s movej: joint 1 at most %.2f deg/s (limit %.0f)", kin::to_string(mode), vj, limit);
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(vj <= limit * 1.002, fig);
+    CHECK_TEXT(vj > limit * 0.8, fig);  // not slower than it needs
+    MoveLine side;
+    kin::forward(r.app.chain, quick.goal, side.target);
+    side.target.translation().y() -= 0.1;
+    side.speed = 0.4;
+    const MoveResult l = svc.move(side, cx);
+    CHECK_TEXT(l.ok(), l.reason.c_str());
+    if (mode == kin::SafetyMode::reduced) CHECK_TEXT(l.speed < 0.4, std::to_string(l.speed).c_str());
+    const double vl = run();
+    std::snprintf(fig, sizeof fig, "%s movel: %.1f mm/s, joint 1 at most %.2f deg/s (limit %.0f)", kin::to_string(mode),
+                  l.speed * 1e3, vl, limit);
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(vl <= limit * 1.002, fig);
+    MoveJoints back = mj;
+    CHECK(svc.move(back, cx).ok());
+    run();
+  }
+  CHECK_EQUAL(0u, r.app.ctl->telemetry().safety_stops);
+}
+
 // Without [safety], switching the mode is refused with one line and nothing changes.
 TEST(ArmService, TheSafetyModeNeedsAnEnvelope) {
   test::ConsoleRig r;

@@ -18,16 +18,12 @@ bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector
   const bool ok_act = kin::safety_sample(*chain_, cfg_, q_act, -1.0, act_);
   cmd_.has_velocity = act_.has_velocity = false;
   const bool had_prev = have_prev_;
-  if (had_prev) {
-    cmd_.has_velocity = true;
-    cmd_.tcp_velocity = (cmd_.tcp.translation() - prev_cmd_.tcp.translation()) / period_s_;
-    cmd_.elbow_velocity = (cmd_.elbow - prev_cmd_.elbow) / period_s_;
-  }
+  if (had_prev) kin::set_velocity(cmd_, prev_cmd_, prev_q_cmd_, q_cmd, period_s_);
   // The measured state's speed would be the drives' position quantisation differenced every
   // cycle: only its positions and orientation are checked.
   const double pm = cfg_.position_tolerance, am = cfg_.angle_tolerance, sm = cfg_.speed_tolerance;
   bool hit = false;
-  if (ok_cmd && kin::check_sample(cfg_, mode, cmd_, pm, am, sm, out)) {
+  if (ok_cmd && kin::check_sample(cfg_, mode, cmd_, pm, am, sm, out, 1.0)) {
     hit = !only_growing || !had_prev || out.excess() > kin::safety_excess(cfg_, mode, prev_cmd_, out);
     on_actual = false;
   }
@@ -38,6 +34,7 @@ bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector
   have_prev_ = ok_cmd && ok_act;
   prev_cmd_ = cmd_;
   prev_act_ = act_;
+  prev_q_cmd_ = q_cmd;
   return hit;
 }
 

@@ -18,7 +18,8 @@
 //    (value the distance, negative inside the box: minus the clearance to its nearest face;
 //    limit r).
 //  - the cone: the angle between the tool's z axis and `axis` is at most `half_angle`.
-//  - speeds: |v| of the TCP / of the elbow frame's origin at most the limit.
+//  - speeds: |v| of the TCP / of the elbow frame's origin at most the limit; |qd_j| of each
+//    joint at most its limit (rad/s, m/s for a prismatic joint).
 // A function is violated when its value is beyond its limit by more than the margin the
 // caller passes (0 at plan time, the function's tolerance in the run-time monitor).
 //
@@ -53,6 +54,7 @@ struct SafetyLimits {
   double tcp_speed = 0;    ///< m/s; 0 = no limit
   double elbow_speed = 0;  ///< m/s; 0 = no limit
   double cone_half_angle = 0;  ///< rad; used when SafetyConfig::cone is set
+  std::array<double, kMaxJoints> joint_speed{};  ///< rad/s (m/s prismatic) per joint; 0 = no limit
 };
 
 enum class SafetyMode : std::uint8_t { normal, reduced };
@@ -72,6 +74,8 @@ struct SafetyConfig {
   double position_tolerance = 0.002;  ///< m: run-time margin of planes and boxes
   double angle_tolerance = 0.035;     ///< rad: run-time margin of the cone
   double speed_tolerance = 0.02;      ///< m/s: run-time margin of the speed limits
+  std::array<double, kMaxJoints> joint_speed_tolerance{};  ///< rad/s (m/s): run-time margin per joint
+  std::uint32_t prismatic = 0;  ///< bit j: joint j is prismatic (its speeds in mm/s, not deg/s)
   const SafetyLimits& limits(SafetyMode m) const;
 };
 
@@ -83,6 +87,7 @@ enum class SafetyFunction : std::uint8_t {
   orientation,  ///< the tool-orientation cone
   tcp_speed,
   elbow_speed,
+  joint_speed,  ///< index = joint (0-based; "joint j+1" in text)
 };
 const char* to_string(SafetyFunction f);
 const char* to_string(SafetyMode m);
@@ -91,6 +96,7 @@ struct SafetyViolation {
   SafetyFunction function = SafetyFunction::none;
   int index = -1;      ///< plane or box index
   bool elbow = false;  ///< the elbow sphere, not the tool sphere
+  bool linear = false; ///< joint_speed of a prismatic joint: m/s (mm/s in text), else rad/s (deg/s)
   double s = 0;        ///< where along the path (the sample's s; 0..1 for a move; < 0 at run time)
   Eigen::Vector3d where{0, 0, 0};  ///< m: the sphere's centre (TCP or elbow)
   double limit = 0;    ///< m, rad or m/s (see the conventions above)
@@ -105,7 +111,7 @@ struct SafetyViolation {
 const char* describe(const SafetyViolation& v, char* buf, std::size_t size);
 
 /// One state to check: the TCP pose, the elbow frame's origin (when the config has one) and,
-/// for the speed limits, their velocities (has_velocity).
+/// for the speed limits, their velocities and the joints' (has_velocity; joint_count joints).
 struct SafetySample {
   double s = 0;
   Pose tcp = Pose::Identity();
@@ -113,13 +119,17 @@ struct SafetySample {
   bool has_velocity = false;
   Eigen::Vector3d tcp_velocity{0, 0, 0};
   Eigen::Vector3d elbow_velocity{0, 0, 0};
+  int joint_count = 0;
+  std::array<double, kMaxJoints> joint_velocity{};  ///< rad/s (m/s prismatic)
 };
 
 /// The functions at `x` in order (planes, boxes, cone, then the speeds when x.has_velocity):
 /// true and `out` filled for the first one beyond its limit by more than its margin
-/// (position_margin m, angle_margin rad, speed_margin m/s); false (out untouched) when none is.
+/// (position_margin m, angle_margin rad, speed_margin m/s; a joint's speed joint_tolerance_scale
+/// times its joint_speed_tolerance, 1 in the monitor, or speed_margin when the scale is 0: plan time);
+/// false (out untouched) when none is.
 bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
-                  double angle_margin, double speed_margin, SafetyViolation& out);
+                  double angle_margin, double speed_margin, SafetyViolation& out, double joint_tolerance_scale = 0.0);
 
 /// How far beyond its limit the function `which` names (function, index, elbow) is at `x`
 /// (m, rad or m/s; negative inside). Lets a monitor tell a move back towards the inside
@@ -133,6 +143,17 @@ bool check_path(const SafetyConfig& cfg, SafetyMode mode, std::span<const Safety
 /// The sample for joint values q (FK of the chain; elbow from forward_frames). Returns false
 /// on a bad q (NaN, wrong size).
 bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVector& q, double s, SafetySample& out);
+
+/// Fills x's velocities (has_velocity) from the previous sample p, h seconds earlier, at joints
+/// q_prev -> q: the TCP's, the elbow's and each joint's difference over h. Does nothing when h <= 0.
+void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_prev, const JointVector& q, double h);
+
+/// The highest value / limit of the mode's speed limits (TCP, elbow, joints) at x (0 when none
+/// is set or x has no velocity): a path whose highest ratio is k runs within them k times slower.
+double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x);
+
+/// True for the functions a lower speed cures (TCP, elbow and joint speeds).
+bool is_speed(SafetyFunction f);
 
 /// "" when the config is consistent, else why not (written into buf, one line): a NaN, a zero
 /// normal, an inverted box, a keep-in box smaller than the tool sphere, a negative radius or

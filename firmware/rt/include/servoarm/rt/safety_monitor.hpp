@@ -2,7 +2,7 @@
 #pragma once
 // The safety envelope's run-time monitor (docs/safety.md): every control cycle, the commanded
 // and the measured TCP (and elbow) against the planes, boxes, orientation cone and speed
-// limits of kin::SafetyConfig, with the functions' tolerances; and, while jogging, the
+// limits (TCP, elbow, each joint's) of kin::SafetyConfig, with the functions' tolerances; and, while jogging, the
 // predicted stop (the ramp the controller would brake with now) against the planes and boxes,
 // so that a jog towards a plane comes to rest at it and a jog away from it is let go.
 //
@@ -48,6 +48,7 @@ class SafetyMonitor {
   kin::SafetyConfig cfg_{};
   double period_s_ = 0.001;
   kin::SafetySample cmd_{}, act_{}, prev_cmd_{}, prev_act_{};
+  kin::JointVector prev_q_cmd_{};  ///< the joint speeds' previous commanded joints
   bool have_prev_ = false;
   kin::JointTrajectory stop_{};  ///< predict_stop's ramp (kept here: no stack copy per cycle)
 };
