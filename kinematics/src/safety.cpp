@@ -87,6 +87,16 @@ double evaluate(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x,
       v.value = std::abs(x.joint_velocity[j]);
       return v.limit > 0 ? v.value - v.limit : -INFINITY;
     }
+    case SafetyFunction::stop_time:
+      v.where = x.tcp.translation();
+      v.limit = lim.stop_time;
+      v.value = x.stop_time;
+      return v.limit > 0 && x.has_stop ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::stop_distance:
+      v.where = x.tcp.translation();
+      v.limit = lim.stop_distance;
+      v.value = x.stop_distance;
+      return v.limit > 0 && x.has_stop ? v.value - v.limit : -INFINITY;
   }
   return -INFINITY;
 }
@@ -111,6 +121,8 @@ const char* to_string(SafetyFunction f) {
     case SafetyFunction::tcp_speed: return "tcp speed";
     case SafetyFunction::elbow_speed: return "elbow speed";
     case SafetyFunction::joint_speed: return "joint speed";
+    case SafetyFunction::stop_time: return "stop time";
+    case SafetyFunction::stop_distance: return "stop distance";
   }
   return "?";
 }
@@ -132,7 +144,9 @@ double SafetyViolation::excess() const {
     case SafetyFunction::orientation:
     case SafetyFunction::tcp_speed:
     case SafetyFunction::elbow_speed:
-    case SafetyFunction::joint_speed: return value - limit;
+    case SafetyFunction::joint_speed:
+    case SafetyFunction::stop_time:
+    case SafetyFunction::stop_distance: return value - limit;
   }
   return -INFINITY;
 }
@@ -151,6 +165,8 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
     case SafetyFunction::orientation:
     case SafetyFunction::tcp_speed:
     case SafetyFunction::elbow_speed:
+    case SafetyFunction::stop_time:
+    case SafetyFunction::stop_distance:
       std::snprintf(name, sizeof name, "%s", to_string(v.function));
       break;
     case SafetyFunction::joint_speed:
@@ -159,11 +175,18 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
   }
   double scale = 1000.0;
   const char* unit = "mm";
+  int digits = 1;
   switch (v.function) {
     case SafetyFunction::none:
     case SafetyFunction::plane:
     case SafetyFunction::keep_in:
-    case SafetyFunction::keep_out: break;
+    case SafetyFunction::keep_out:
+    case SafetyFunction::stop_distance: break;
+    case SafetyFunction::stop_time:
+      scale = 1.0;
+      unit = "s";
+      digits = 3;
+      break;
     case SafetyFunction::orientation: scale = 180.0 / kPi; unit = "deg"; break;
     case SafetyFunction::tcp_speed:
     case SafetyFunction::elbow_speed: unit = "mm/s"; break;
@@ -178,14 +201,14 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
   }
   char at[24] = "";
   if (v.s >= 0) std::snprintf(at, sizeof at, " at s=%.3f", v.s);
-  std::snprintf(buf, size, "safety %s%s (x=%.1f, y=%.1f, z=%.1f mm): limit %.1f %s, value %.1f %s", name, at,
-                v.where.x() * 1000.0, v.where.y() * 1000.0, v.where.z() * 1000.0, v.limit * scale, unit,
-                v.value * scale, unit);
+  std::snprintf(buf, size, "safety %s%s (x=%.1f, y=%.1f, z=%.1f mm): limit %.*f %s, value %.*f %s", name, at,
+                v.where.x() * 1000.0, v.where.y() * 1000.0, v.where.z() * 1000.0, digits, v.limit * scale, unit,
+                digits, v.value * scale, unit);
   return buf;
 }
 
 bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
-                  double angle_margin, double speed_margin, SafetyViolation& out, double joint_tolerance_scale) {
+                  double angle_margin, double speed_margin, SafetyViolation& out, double tolerance_scale) {
   if (!cfg.enabled) return false;
   SafetyViolation v;
   const bool has_elbow = cfg.elbow_frame >= 0;
@@ -210,13 +233,39 @@ bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& 
     if (evaluate(cfg, mode, x, SafetyFunction::tcp_speed, -1, false, v) > speed_margin) { out = v; return true; }
     if (evaluate(cfg, mode, x, SafetyFunction::elbow_speed, -1, true, v) > speed_margin) { out = v; return true; }
     for (int j = 0; j < x.joint_count && j < kMaxJoints; ++j) {
-      const double m = joint_tolerance_scale > 0
-                           ? joint_tolerance_scale * cfg.joint_speed_tolerance[static_cast<std::size_t>(j)]
-                           : speed_margin;
+      const double m = tolerance_scale > 0 ? tolerance_scale * cfg.joint_speed_tolerance[static_cast<std::size_t>(j)]
+                                           : speed_margin;
       if (evaluate(cfg, mode, x, SafetyFunction::joint_speed, j, false, v) > m) { out = v; return true; }
     }
   }
+  return check_stop(cfg, mode, x, position_margin, tolerance_scale, out);
+}
+
+bool check_stop(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
+                double tolerance_scale, SafetyViolation& out) {
+  if (!cfg.enabled || !x.has_stop) return false;
+  SafetyViolation v;
+  if (evaluate(cfg, mode, x, SafetyFunction::stop_time, -1, false, v) > tolerance_scale * cfg.stop_time_tolerance) {
+    out = v;
+    return true;
+  }
+  if (evaluate(cfg, mode, x, SafetyFunction::stop_distance, -1, false, v) > position_margin) {
+    out = v;
+    return true;
+  }
   return false;
+}
+
+bool stop_prediction(const Chain& chain, const JointLimits& limits, const JointState& from, JointTrajectory& scratch,
+                     SafetySample& x) {
+  MovejOptions o;
+  if (plan_stop(limits, from, o, scratch) != MotionStatus::ok) return false;
+  Pose end;
+  if (forward(chain, scratch.goal, end) != Status::ok) return false;
+  x.has_stop = true;
+  x.stop_time = scratch.duration;
+  x.stop_distance = (end.translation() - x.tcp.translation()).norm();
+  return true;
 }
 
 void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_prev, const JointVector& q, double h) {
@@ -230,7 +279,7 @@ void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_p
 }
 
 double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x) {
-  if (!cfg.enabled || !x.has_velocity) return 0;
+  if (!cfg.enabled || (!x.has_velocity && !x.has_stop)) return 0;
   const SafetyLimits& lim = cfg.limits(mode);
   double r = 0;
   if (lim.tcp_speed > 0) r = std::max(r, x.tcp_velocity.norm() / lim.tcp_speed);
@@ -239,6 +288,13 @@ double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample&
     const auto ju = static_cast<std::size_t>(j);
     if (lim.joint_speed[ju] > 0) r = std::max(r, std::abs(x.joint_velocity[ju]) / lim.joint_speed[ju]);
   }
+  // A jerk-limited stop from a low speed v lasts about 2 sqrt(v / jerk) and travels about
+  // v sqrt(v / jerk): speed goes with the square of the time and the 2/3 power of the
+  // distance there (less steeply at higher speeds), so these ratios slow a path enough.
+  if (x.has_stop) {
+    if (lim.stop_time > 0) r = std::max(r, std::pow(x.stop_time / lim.stop_time, 2.0));
+    if (lim.stop_distance > 0) r = std::max(r, std::cbrt(std::pow(x.stop_distance / lim.stop_distance, 2.0)));
+  }
   return r;
 }
 
@@ -246,7 +302,9 @@ bool is_speed(SafetyFunction f) {
   switch (f) {
     case SafetyFunction::tcp_speed:
     case SafetyFunction::elbow_speed:
-    case SafetyFunction::joint_speed: return true;
+    case SafetyFunction::joint_speed:
+    case SafetyFunction::stop_time:
+    case SafetyFunction::stop_distance: return true;
     case SafetyFunction::none:
     case SafetyFunction::plane:
     case SafetyFunction::keep_in:
@@ -275,6 +333,7 @@ bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVecto
   out.tcp = tcp;
   out.has_velocity = false;
   out.joint_count = 0;
+  out.has_stop = false;
   if (cfg.elbow_frame >= 0 && cfg.elbow_frame < frames.count)
     out.elbow = frames.frame[cfg.elbow_frame].translation();
   else
@@ -314,6 +373,8 @@ const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_
   for (const SafetyLimits* l : {&cfg.normal, &cfg.reduced}) {
     if (!std::isfinite(l->tcp_speed) || l->tcp_speed < 0 || !std::isfinite(l->elbow_speed) || l->elbow_speed < 0)
       return bad("speed limits must be finite and >= 0", 0);
+    if (!std::isfinite(l->stop_time) || l->stop_time < 0 || !std::isfinite(l->stop_distance) || l->stop_distance < 0)
+      return bad("stop time and distance limits must be finite and >= 0", 0);
     for (const double js : l->joint_speed)
       if (!std::isfinite(js) || js < 0) return bad("joint speed limits must be finite and >= 0", 0);
     if (cfg.cone && (!std::isfinite(l->cone_half_angle) || l->cone_half_angle <= 0 || l->cone_half_angle > kPi))
@@ -321,6 +382,8 @@ const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_
   }
   if (!std::isfinite(cfg.position_tolerance) || cfg.position_tolerance < 0 || !std::isfinite(cfg.angle_tolerance) ||
       cfg.angle_tolerance < 0 || !std::isfinite(cfg.speed_tolerance) || cfg.speed_tolerance < 0)
+    return bad("tolerances must be finite and >= 0", 0);
+  if (!std::isfinite(cfg.stop_time_tolerance) || cfg.stop_time_tolerance < 0)
     return bad("tolerances must be finite and >= 0", 0);
   for (const double t : cfg.joint_speed_tolerance)
     if (!std::isfinite(t) || t < 0) return bad("tolerances must be finite and >= 0", 0);

@@ -1267,6 +1267,34 @@ TEST(Config, SafetyJointSpeedKeysAreReadAndCheckedAgainstTheRobot) {
   STRCMP_EQUAL("safety.reduced_joint_speed_deg_s: needs one value per joint of puma560 (6), got 5", bad.c_str());
 }
 
+// Stopping time and distance limits per mode, read into s and m; negative or NaN ones refused
+// at load naming the key; part of the checksum.
+TEST(Config, SafetyStopKeysAreReadAndBadOnesRefused) {
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[safety]\nstop_time_s = 0.4\nstop_distance_mm = 150\nreduced_stop_time_s = 0.2\n"
+                                    "reduced_stop_distance_mm = 50\ntolerance_s = 0.05\n",
+                                    "s.toml", c)
+                   .c_str());
+  servoarm::kin::SafetyConfig e;
+  STRCMP_EQUAL("", safety_envelope(c, lr.chain, e).c_str());
+  CHECK(e.enabled);
+  DOUBLES_EQUAL(0.4, e.normal.stop_time, 1e-12);
+  DOUBLES_EQUAL(0.15, e.normal.stop_distance, 1e-12);
+  DOUBLES_EQUAL(0.2, e.reduced.stop_time, 1e-12);
+  DOUBLES_EQUAL(0.05, e.reduced.stop_distance, 1e-12);
+  DOUBLES_EQUAL(0.05, e.stop_time_tolerance, 1e-12);
+  FwConfig other = c;
+  other.safety_reduced_stop_distance_mm = 51;
+  CHECK(safety_checksum(other) != safety_checksum(c));
+  expect_refused("[safety]\nstop_time_s = -1\n", {"safety.stop_time_s"});
+  expect_refused("[safety]\nstop_distance_mm = nan\n", {"safety.stop_distance_mm"});
+  expect_refused("[safety]\nreduced_stop_time_s = inf\n", {"safety.reduced_stop_time_s"});
+  expect_refused("[safety]\nreduced_stop_distance_mm = -5\n", {"safety.reduced_stop_distance_mm"});
+  expect_refused("[safety]\ntolerance_s = -0.1\n", {"safety.tolerance_s"});
+}
+
 TEST(Config, SafetyParkPoseOutsideTheEnvelopeIsRefused) {
   const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
   CHECK_TEXT(lr.ok, lr.error.c_str());

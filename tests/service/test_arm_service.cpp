@@ -915,6 +915,72 @@ TEST(ArmService, JointSpeedLimitsOfTheModeSlowMovesDown) {
   CHECK_EQUAL(0u, r.app.ctl->telemetry().safety_stops);
 }
 
+// Stopping distance and time limits per mode slow moves down: a movej of joint 1 at 100 % is
+// planned slower so that, run on the controller, the stop predicted every cycle from its
+// commanded state (computed here with plan_stop on the controller's limits and FK) stays within
+// the mode's limits: 30 mm / 0.3 s in Normal, 10 mm / 0.2 s in Reduced; no protective stop.
+TEST(ArmService, StoppingDistanceAndTimeLimitsOfTheModeSlowMovesDown) {
+  FwConfig c = table_config(60);
+  c.safety_tcp_speed_mm_s = c.safety_reduced_tcp_speed_mm_s = 0;
+  c.safety_stop_distance_mm = 30;
+  c.safety_stop_time_s = 0.3;
+  c.safety_reduced_stop_distance_mm = 10;
+  c.safety_reduced_stop_time_s = 0.2;
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  const double dt = 1.0 / c.rate_hz;
+  // runs the queue to rest; the longest predicted stop (s) and its farthest TCP travel (mm)
+  auto run = [&](double& t_max, double& d_max) {
+    t_max = d_max = 0;
+    kin::JointState st;
+    st.pos = st.vel = st.acc = kin::JointVector::Zero(6);
+    kin::JointTrajectory stop;
+    for (int i = 0; i < 60000 && (!r.app.ctl->motions().empty() || r.app.ctl->telemetry().state != ArmState::idle); ++i) {
+      r.cycle();
+      const Telemetry t = r.app.ctl->telemetry();
+      for (int j = 0; j < 6; ++j) {
+        const auto ju = static_cast<std::size_t>(j);
+        st.acc[j] = (t.qd_cmd[ju] - st.vel[j]) / dt;
+        st.pos[j] = t.q_cmd[ju];
+        st.vel[j] = t.qd_cmd[ju];
+      }
+      CHECK(kin::plan_stop(r.app.ctl->limits(), st, kin::MovejOptions{}, stop) == kin::MotionStatus::ok);
+      t_max = std::fmax(t_max, stop.duration);
+      d_max = std::fmax(d_max, (tool_at(r.app.chain, stop.goal) - tool_at(r.app.chain, st.pos)).norm() * 1e3);
+    }
+  };
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  double t_max = 0, d_max = 0;
+  run(t_max, d_max);
+  for (const kin::SafetyMode mode : {kin::SafetyMode::normal, kin::SafetyMode::reduced}) {
+    const bool normal = mode == kin::SafetyMode::normal;
+    const double d_lim = normal ? 30 : 10, t_lim = normal ? 0.3 : 0.2;
+    CHECK(svc.set_safety_mode(mode).ok());
+    MoveJoints quick;
+    quick.goal = joints({60, -45, 180, 0, 45, 0});
+    quick.speed_pct = 100;
+    const MoveResult q = svc.move(quick, cx);
+    CHECK_TEXT(q.ok(), q.reason.c_str());
+    run(t_max, d_max);
+    char fig[160];
+    std::snprintf(fig, sizeof fig, "%s movej in %.3f s: predicted stop at most %.3f s (limit %.1f), %.2f mm (limit %.0f)",
+                  kin::to_string(mode), q.duration, t_max, t_lim, d_max, d_lim);
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(d_max <= d_lim * 1.02, fig);  // (the acceleration here is differenced: 2 %)
+    CHECK_TEXT(t_max <= t_lim * 1.02, fig);
+    CHECK_TEXT(d_max > d_lim * 0.5 || t_max > t_lim * 0.5, fig);  // slowed, not stopped
+    MoveJoints back = mj;
+    CHECK(svc.move(back, cx).ok());
+    run(t_max, d_max);
+  }
+  CHECK_EQUAL(0u, r.app.ctl->telemetry().safety_stops);
+}
+
 // Without [safety], switching the mode is refused with one line and nothing changes.
 TEST(ArmService, TheSafetyModeNeedsAnEnvelope) {
   test::ConsoleRig r;

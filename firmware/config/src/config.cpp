@@ -360,6 +360,20 @@ const ConfigKey kConfigTable[] = {
     K{"safety.reduced_joint_speed_deg_s", &F::safety_reduced_joint_speed_deg_s, "deg/s (mm/s)",
       "joint speed limits in Reduced mode, one per joint (0 = none for that joint); `[]` = none"}
         .within(0, 1e6).length(0, kin::kMaxJoints),
+    K{"safety.stop_time_s", &F::safety_stop_time_s, "s",
+      "stopping time limit in Normal mode: the stop predicted from the commanded state, braked on the joints' "
+      "limits as a protective stop brakes, lasts at most this long; moves are planned slower to keep it, the "
+      "run-time monitor makes a protective stop beyond it plus safety.tolerance_s; 0 = none"}
+        .within(0, 60),
+    K{"safety.stop_distance_mm", &F::safety_stop_distance_mm, "mm",
+      "stopping distance limit in Normal mode: the TCP's straight-line travel during that predicted stop; moves "
+      "are planned slower to keep it, the monitor makes a protective stop beyond it plus safety.tolerance_mm; "
+      "0 = none"}
+        .within(0, 10000),
+    K{"safety.reduced_stop_time_s", &F::safety_reduced_stop_time_s, "s", "stopping time limit in Reduced mode; 0 = none"}
+        .within(0, 60),
+    K{"safety.reduced_stop_distance_mm", &F::safety_reduced_stop_distance_mm, "mm",
+      "stopping distance limit in Reduced mode; 0 = none"}.within(0, 10000),
     K{"safety.tolerance_mm", &F::safety_tolerance_mm, "mm",
       "how far beyond a plane or box the run-time monitor lets the tool go before a protective stop (plan time "
       "allows none)"}.within(0, 100),
@@ -372,6 +386,9 @@ const ConfigKey kConfigTable[] = {
     K{"safety.tolerance_deg_s", &F::safety_tolerance_deg_s, "deg/s (mm/s)",
       "how far above its speed limit the run-time monitor lets a joint go before a protective stop"}
         .within(0, 1000),
+    K{"safety.tolerance_s", &F::safety_tolerance_s, "s",
+      "how far above the stopping time limit the run-time monitor lets the predicted stop go before a protective "
+      "stop"}.within(0, 10),
     K{"motion.home_deg", &F::home_deg, "deg (mm)",
       "park pose for `park` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
       "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
@@ -1683,11 +1700,17 @@ std::string safety_envelope(const FwConfig& c, const kin::Chain& chain, kin::Saf
   e.reduced.tcp_speed = c.safety_reduced_tcp_speed_mm_s * mm;
   e.reduced.elbow_speed = c.safety_reduced_elbow_speed_mm_s * mm;
   e.reduced.cone_half_angle = c.safety_reduced_cone_deg * deg;
+  e.normal.stop_time = c.safety_stop_time_s;
+  e.normal.stop_distance = c.safety_stop_distance_mm * mm;
+  e.reduced.stop_time = c.safety_reduced_stop_time_s;
+  e.reduced.stop_distance = c.safety_reduced_stop_distance_mm * mm;
+  e.stop_time_tolerance = c.safety_tolerance_s;
   e.position_tolerance = c.safety_tolerance_mm * mm;
   e.angle_tolerance = c.safety_tolerance_deg * deg;
   e.speed_tolerance = c.safety_tolerance_mm_s * mm;
   e.enabled = e.plane_count > 0 || e.box_count > 0 || e.cone || e.normal.tcp_speed > 0 || e.normal.elbow_speed > 0 ||
-              e.reduced.tcp_speed > 0 || e.reduced.elbow_speed > 0 || joint_limits;
+              e.reduced.tcp_speed > 0 || e.reduced.elbow_speed > 0 || joint_limits || e.normal.has_stop_limit() ||
+              e.reduced.has_stop_limit();
   char buf[160];
   if (const std::string bad = kin::safety_config_problem(e, buf, sizeof buf); !bad.empty()) return "safety: " + bad;
   out = e;

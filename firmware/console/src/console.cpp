@@ -335,6 +335,8 @@ std::string Console::safety_text() const {
     js += fmt("%s%g", j ? "," : "", ((env.prismatic >> j) & 1u) ? v * 1e3 : v * 180.0 / M_PI);
   }
   if (any) s += " joint_speed_deg_s=[" + js + "]";
+  if (lim.stop_time > 0) s += fmt(" stop_time_s=%g", lim.stop_time);
+  if (lim.stop_distance > 0) s += fmt(" stop_distance_mm=%g", lim.stop_distance * 1e3);
   return s;
 }
 

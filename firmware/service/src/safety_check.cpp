@@ -47,6 +47,13 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
   const double dt = std::max(1.0 / rate_hz_, duration / 4000.0);
   const int n = std::max(1, static_cast<int>(std::ceil(duration / dt)));
   kin::JointVector q(n_), q_prev(n_);
+  // the predicted stop at each sample (stop limits): from the sampled joints, their velocities
+  // and accelerations by differences, braked with the joints' limits as the controller brakes
+  const bool stops = env.limits(safety_mode_).has_stop_limit();
+  kin::JointState st;
+  st.pos = st.vel = st.acc = kin::JointVector::Zero(n_);
+  kin::JointVector v_prev = kin::JointVector::Zero(n_);
+  kin::JointTrajectory ramp;
   kin::SafetySample prev, x;
   bool have_prev = false;
   kin::SafetyViolation v;
@@ -55,7 +62,17 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
   for (int k = 0; k <= n; ++k) {
     const double t = std::min(duration, k * dt);
     if (!at(t, q) || !kin::safety_sample(chain, env, q, duration > 0 ? t / duration : 1.0, x)) continue;
-    if (have_prev) kin::set_velocity(x, prev, q_prev, q, t - prev.s * duration);
+    const double h = t - prev.s * duration;
+    if (have_prev) kin::set_velocity(x, prev, q_prev, q, h);
+    if (stops && x.has_velocity) {
+      st.pos = q;
+      for (int j = 0; j < n_; ++j) {
+        st.vel[j] = x.joint_velocity[static_cast<std::size_t>(j)];
+        st.acc[j] = (st.vel[j] - v_prev[j]) / h;
+      }
+      v_prev = st.vel;
+      (void)kin::stop_prediction(chain, lim_, st, ramp, x);
+    }
     ratio = std::max(ratio, kin::speed_ratio(env, safety_mode_, x));
     // (speeds: 1e-6 m/s of rounding, so that a line planned at the limit passes)
     if (!refused && kin::check_sample(env, safety_mode_, x, 0.0, 0.0, 1e-6, v)) {

@@ -20,6 +20,10 @@
 //  - the cone: the angle between the tool's z axis and `axis` is at most `half_angle`.
 //  - speeds: |v| of the TCP / of the elbow frame's origin at most the limit; |qd_j| of each
 //    joint at most its limit (rad/s, m/s for a prismatic joint).
+//  - the predicted stop: from the state (positions, velocities, accelerations) braked with the
+//    joints' limits (plan_stop, the ramp the controller stops with), its duration at most the
+//    stop time limit and the TCP's straight-line travel to where it rests at most the stop
+//    distance limit.
 // A function is violated when its value is beyond its limit by more than the margin the
 // caller passes (0 at plan time, the function's tolerance in the run-time monitor).
 //
@@ -30,6 +34,7 @@
 #include <span>
 
 #include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/trajectory.hpp"
 #include "servoarm/kinematics/types.hpp"
 
 namespace servoarm::kin {
@@ -55,6 +60,9 @@ struct SafetyLimits {
   double elbow_speed = 0;  ///< m/s; 0 = no limit
   double cone_half_angle = 0;  ///< rad; used when SafetyConfig::cone is set
   std::array<double, kMaxJoints> joint_speed{};  ///< rad/s (m/s prismatic) per joint; 0 = no limit
+  double stop_time = 0;      ///< s: the predicted stop's duration; 0 = no limit
+  double stop_distance = 0;  ///< m: the TCP's travel during the predicted stop; 0 = no limit
+  bool has_stop_limit() const { return stop_time > 0 || stop_distance > 0; }
 };
 
 enum class SafetyMode : std::uint8_t { normal, reduced };
@@ -75,6 +83,7 @@ struct SafetyConfig {
   double angle_tolerance = 0.035;     ///< rad: run-time margin of the cone
   double speed_tolerance = 0.02;      ///< m/s: run-time margin of the speed limits
   std::array<double, kMaxJoints> joint_speed_tolerance{};  ///< rad/s (m/s): run-time margin per joint
+  double stop_time_tolerance = 0.02;  ///< s: run-time margin of the stop time (the stop distance's: position_tolerance)
   std::uint32_t prismatic = 0;  ///< bit j: joint j is prismatic (its speeds in mm/s, not deg/s)
   const SafetyLimits& limits(SafetyMode m) const;
 };
@@ -88,6 +97,8 @@ enum class SafetyFunction : std::uint8_t {
   tcp_speed,
   elbow_speed,
   joint_speed,  ///< index = joint (0-based; "joint j+1" in text)
+  stop_time,      ///< the predicted stop's duration
+  stop_distance,  ///< the TCP's travel during the predicted stop
 };
 const char* to_string(SafetyFunction f);
 const char* to_string(SafetyMode m);
@@ -121,15 +132,30 @@ struct SafetySample {
   Eigen::Vector3d elbow_velocity{0, 0, 0};
   int joint_count = 0;
   std::array<double, kMaxJoints> joint_velocity{};  ///< rad/s (m/s prismatic)
+  bool has_stop = false;     ///< stop_time / stop_distance hold the predicted stop (stop_prediction)
+  double stop_time = 0;      ///< s
+  double stop_distance = 0;  ///< m
 };
 
 /// The functions at `x` in order (planes, boxes, cone, then the speeds when x.has_velocity):
 /// true and `out` filled for the first one beyond its limit by more than its margin
-/// (position_margin m, angle_margin rad, speed_margin m/s; a joint's speed joint_tolerance_scale
-/// times its joint_speed_tolerance, 1 in the monitor, or speed_margin when the scale is 0: plan time);
-/// false (out untouched) when none is.
+/// (position_margin m, angle_margin rad, speed_margin m/s; a joint's speed tolerance_scale
+/// times its joint_speed_tolerance, 1 in the monitor, or speed_margin when the scale is 0: plan
+/// time; the stop time tolerance_scale times stop_time_tolerance, the stop distance
+/// position_margin); false (out untouched) when none is.
 bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
-                  double angle_margin, double speed_margin, SafetyViolation& out, double joint_tolerance_scale = 0.0);
+                  double angle_margin, double speed_margin, SafetyViolation& out, double tolerance_scale = 0.0);
+
+/// The stop functions only (stop time, stop distance) at x (x.has_stop), margins as check_sample.
+bool check_stop(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
+                double tolerance_scale, SafetyViolation& out);
+
+/// The stop predicted from `from` braked with `limits` (plan_stop: the controller's ramp): its
+/// duration and the TCP's straight-line travel from x.tcp (the TCP at from.pos) to where the
+/// joints rest, into x.stop_time / x.stop_distance (x.has_stop). `scratch` holds the ramp (kept
+/// by the caller: no stack copy per call). False (x untouched) when the stop cannot be planned.
+bool stop_prediction(const Chain& chain, const JointLimits& limits, const JointState& from, JointTrajectory& scratch,
+                     SafetySample& x);
 
 /// How far beyond its limit the function `which` names (function, index, elbow) is at `x`
 /// (m, rad or m/s; negative inside). Lets a monitor tell a move back towards the inside
@@ -148,11 +174,13 @@ bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVecto
 /// q_prev -> q: the TCP's, the elbow's and each joint's difference over h. Does nothing when h <= 0.
 void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_prev, const JointVector& q, double h);
 
-/// The highest value / limit of the mode's speed limits (TCP, elbow, joints) at x (0 when none
-/// is set or x has no velocity): a path whose highest ratio is k runs within them k times slower.
+/// The highest value / limit of the mode's speed limits (TCP, elbow, joints) at x and of its
+/// stop limits ((time / limit)^2 and (distance / limit)^(2/3): how speed goes with a
+/// jerk-limited stop's duration and travel from low speeds) (0 when none is set or x has
+/// neither velocity nor stop): a path whose highest ratio is k runs within them k times slower.
 double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x);
 
-/// True for the functions a lower speed cures (TCP, elbow and joint speeds).
+/// True for the functions a lower speed cures (TCP, elbow and joint speeds, stop time and distance).
 bool is_speed(SafetyFunction f);
 
 /// "" when the config is consistent, else why not (written into buf, one line): a NaN, a zero

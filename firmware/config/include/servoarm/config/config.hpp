@@ -153,10 +153,15 @@ struct FwConfig {
   double safety_reduced_cone_deg = 180.0;
   std::vector<double> safety_joint_speed_deg_s;          ///< per joint, deg/s (mm/s prismatic), 0 = none; [] = none
   std::vector<double> safety_reduced_joint_speed_deg_s;  ///< same, Reduced mode
+  double safety_stop_time_s = 0.0;               ///< the predicted stop's duration, Normal mode; 0 = none
+  double safety_stop_distance_mm = 0.0;          ///< the TCP's travel during the predicted stop, Normal; 0 = none
+  double safety_reduced_stop_time_s = 0.0;
+  double safety_reduced_stop_distance_mm = 0.0;
   double safety_tolerance_mm = 2.0;      ///< run-time monitor margin of planes and boxes
   double safety_tolerance_deg = 2.0;     ///< run-time monitor margin of the cone
   double safety_tolerance_mm_s = 20.0;   ///< run-time monitor margin of the speed limits
   double safety_tolerance_deg_s = 2.0;   ///< run-time monitor margin of the joint speed limits (mm/s prismatic)
+  double safety_tolerance_s = 0.02;      ///< run-time monitor margin of the stop time limit
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;

@@ -2,7 +2,8 @@
 #pragma once
 // The safety envelope's run-time monitor (docs/safety.md): every control cycle, the commanded
 // and the measured TCP (and elbow) against the planes, boxes, orientation cone and speed
-// limits (TCP, elbow, each joint's) of kin::SafetyConfig, with the functions' tolerances; and, while jogging, the
+// limits (TCP, elbow, each joint's) of kin::SafetyConfig, and the stop predicted from the
+// commanded state (its duration and the TCP's travel) against the stop time and distance limits, with the functions' tolerances; and, while jogging, the
 // predicted stop (the ramp the controller would brake with now) against the planes and boxes,
 // so that a jog towards a plane comes to rest at it and a jog away from it is let go.
 //
@@ -39,6 +40,13 @@ class SafetyMonitor {
   /// towards it, not one moving back in): true, `out` naming it at the stop point.
   bool predict_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
                     kin::SafetyViolation& out);
+
+  /// After update(), while the arm moves: the stop predicted from the commanded state `cmd`
+  /// braked with `limits` (the controller's ramp) takes longer than the mode's stop time limit,
+  /// or moves the TCP further than its stop distance limit, beyond the tolerances: true, `out`
+  /// naming it. Nothing is planned when the mode has neither limit.
+  bool check_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
+                  kin::SafetyViolation& out);
 
   /// The last commanded TCP sample (base frame) update() computed.
   const kin::SafetySample& commanded() const { return cmd_; }
