@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "servoarm/kinematics/dynamics.hpp"
+
 namespace servoarm::kin {
 
 namespace {
@@ -97,6 +99,16 @@ double evaluate(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x,
       v.limit = lim.stop_distance;
       v.value = x.stop_distance;
       return v.limit > 0 && x.has_stop ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::momentum:
+      v.where = x.tcp.translation();
+      v.limit = lim.momentum;
+      v.value = x.momentum;
+      return v.limit > 0 && x.has_dynamics ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::power:
+      v.where = x.tcp.translation();
+      v.limit = lim.power;
+      v.value = x.power;
+      return v.limit > 0 && x.has_dynamics ? v.value - v.limit : -INFINITY;
   }
   return -INFINITY;
 }
@@ -123,6 +135,8 @@ const char* to_string(SafetyFunction f) {
     case SafetyFunction::joint_speed: return "joint speed";
     case SafetyFunction::stop_time: return "stop time";
     case SafetyFunction::stop_distance: return "stop distance";
+    case SafetyFunction::momentum: return "momentum";
+    case SafetyFunction::power: return "power";
   }
   return "?";
 }
@@ -146,7 +160,9 @@ double SafetyViolation::excess() const {
     case SafetyFunction::elbow_speed:
     case SafetyFunction::joint_speed:
     case SafetyFunction::stop_time:
-    case SafetyFunction::stop_distance: return value - limit;
+    case SafetyFunction::stop_distance:
+    case SafetyFunction::momentum:
+    case SafetyFunction::power: return value - limit;
   }
   return -INFINITY;
 }
@@ -167,6 +183,8 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
     case SafetyFunction::elbow_speed:
     case SafetyFunction::stop_time:
     case SafetyFunction::stop_distance:
+    case SafetyFunction::momentum:
+    case SafetyFunction::power:
       std::snprintf(name, sizeof name, "%s", to_string(v.function));
       break;
     case SafetyFunction::joint_speed:
@@ -186,6 +204,15 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
       scale = 1.0;
       unit = "s";
       digits = 3;
+      break;
+    case SafetyFunction::momentum:
+      scale = 1.0;
+      unit = "kg m/s";
+      digits = 2;
+      break;
+    case SafetyFunction::power:
+      scale = 1.0;
+      unit = "W";
       break;
     case SafetyFunction::orientation: scale = 180.0 / kPi; unit = "deg"; break;
     case SafetyFunction::tcp_speed:
@@ -243,8 +270,19 @@ bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& 
 
 bool check_stop(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
                 double tolerance_scale, SafetyViolation& out) {
-  if (!cfg.enabled || !x.has_stop) return false;
+  if (!cfg.enabled) return false;
   SafetyViolation v;
+  if (x.has_dynamics) {
+    if (evaluate(cfg, mode, x, SafetyFunction::momentum, -1, false, v) > tolerance_scale * cfg.momentum_tolerance) {
+      out = v;
+      return true;
+    }
+    if (evaluate(cfg, mode, x, SafetyFunction::power, -1, false, v) > tolerance_scale * cfg.power_tolerance) {
+      out = v;
+      return true;
+    }
+  }
+  if (!x.has_stop) return false;
   if (evaluate(cfg, mode, x, SafetyFunction::stop_time, -1, false, v) > tolerance_scale * cfg.stop_time_tolerance) {
     out = v;
     return true;
@@ -268,6 +306,31 @@ bool stop_prediction(const Chain& chain, const JointLimits& limits, const JointS
   return true;
 }
 
+bool dynamics_prediction(const Chain& chain, const JointState& s, SafetySample& x) {
+  if (!chain.has_inertial) return false;
+  JointVector tau(s.pos.size());
+  if (inverse_dynamics(chain, s.pos, s.vel, s.acc, tau) != Status::ok) return false;
+  // the centres of mass a short step along the velocity: their speeds by the difference
+  constexpr double h = 1e-4;  // s
+  const JointVector q2 = s.pos + h * s.vel;
+  FrameSet a, b;
+  Pose pa, pb;
+  if (forward_frames(chain, s.pos, a, pa) != Status::ok || forward_frames(chain, q2, b, pb) != Status::ok) return false;
+  double p = 0;
+  for (int i = 0; i < chain.n_rows && i + 1 < a.count; ++i) {
+    const LinkInertial& in = chain.inertial[static_cast<std::size_t>(i)];
+    if (!(in.mass > 0)) continue;
+    const Eigen::Vector3d c(in.com[0], in.com[1], in.com[2]);
+    p += in.mass * (b.frame[i + 1] * c - a.frame[i + 1] * c).norm() / h;
+  }
+  double w = 0;
+  for (Eigen::Index j = 0; j < tau.size(); ++j) w += std::abs(tau[j] * s.vel[j]);
+  x.has_dynamics = true;
+  x.momentum = p;
+  x.power = w;
+  return true;
+}
+
 void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_prev, const JointVector& q, double h) {
   if (!(h > 0)) return;
   x.has_velocity = true;
@@ -279,7 +342,7 @@ void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_p
 }
 
 double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x) {
-  if (!cfg.enabled || (!x.has_velocity && !x.has_stop)) return 0;
+  if (!cfg.enabled || (!x.has_velocity && !x.has_stop && !x.has_dynamics)) return 0;
   const SafetyLimits& lim = cfg.limits(mode);
   double r = 0;
   if (lim.tcp_speed > 0) r = std::max(r, x.tcp_velocity.norm() / lim.tcp_speed);
@@ -295,6 +358,12 @@ double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample&
     if (lim.stop_time > 0) r = std::max(r, std::pow(x.stop_time / lim.stop_time, 2.0));
     if (lim.stop_distance > 0) r = std::max(r, std::cbrt(std::pow(x.stop_distance / lim.stop_distance, 2.0)));
   }
+  if (x.has_dynamics) {
+    if (lim.momentum > 0) r = std::max(r, x.momentum / lim.momentum);
+    // power: from proportional to speed (gravity, friction) to its cube (inertia); the square
+    // root between them, the caller plans again until it holds
+    if (lim.power > 0) r = std::max(r, std::sqrt(x.power / lim.power));
+  }
   return r;
 }
 
@@ -304,7 +373,9 @@ bool is_speed(SafetyFunction f) {
     case SafetyFunction::elbow_speed:
     case SafetyFunction::joint_speed:
     case SafetyFunction::stop_time:
-    case SafetyFunction::stop_distance: return true;
+    case SafetyFunction::stop_distance:
+    case SafetyFunction::momentum:
+    case SafetyFunction::power: return true;
     case SafetyFunction::none:
     case SafetyFunction::plane:
     case SafetyFunction::keep_in:
@@ -334,6 +405,7 @@ bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVecto
   out.has_velocity = false;
   out.joint_count = 0;
   out.has_stop = false;
+  out.has_dynamics = false;
   if (cfg.elbow_frame >= 0 && cfg.elbow_frame < frames.count)
     out.elbow = frames.frame[cfg.elbow_frame].translation();
   else
@@ -375,6 +447,8 @@ const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_
       return bad("speed limits must be finite and >= 0", 0);
     if (!std::isfinite(l->stop_time) || l->stop_time < 0 || !std::isfinite(l->stop_distance) || l->stop_distance < 0)
       return bad("stop time and distance limits must be finite and >= 0", 0);
+    if (!std::isfinite(l->momentum) || l->momentum < 0 || !std::isfinite(l->power) || l->power < 0)
+      return bad("momentum and power limits must be finite and >= 0", 0);
     for (const double js : l->joint_speed)
       if (!std::isfinite(js) || js < 0) return bad("joint speed limits must be finite and >= 0", 0);
     if (cfg.cone && (!std::isfinite(l->cone_half_angle) || l->cone_half_angle <= 0 || l->cone_half_angle > kPi))
@@ -383,7 +457,8 @@ const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_
   if (!std::isfinite(cfg.position_tolerance) || cfg.position_tolerance < 0 || !std::isfinite(cfg.angle_tolerance) ||
       cfg.angle_tolerance < 0 || !std::isfinite(cfg.speed_tolerance) || cfg.speed_tolerance < 0)
     return bad("tolerances must be finite and >= 0", 0);
-  if (!std::isfinite(cfg.stop_time_tolerance) || cfg.stop_time_tolerance < 0)
+  if (!std::isfinite(cfg.stop_time_tolerance) || cfg.stop_time_tolerance < 0 || !std::isfinite(cfg.momentum_tolerance) ||
+      cfg.momentum_tolerance < 0 || !std::isfinite(cfg.power_tolerance) || cfg.power_tolerance < 0)
     return bad("tolerances must be finite and >= 0", 0);
   for (const double t : cfg.joint_speed_tolerance)
     if (!std::isfinite(t) || t < 0) return bad("tolerances must be finite and >= 0", 0);

@@ -1295,6 +1295,44 @@ TEST(Config, SafetyStopKeysAreReadAndBadOnesRefused) {
   expect_refused("[safety]\ntolerance_s = -0.1\n", {"safety.tolerance_s"});
 }
 
+// Momentum and power limits per mode; negative or NaN ones refused at load naming the key; against
+// a robot without inertial data (the ABB IRB 2400's description has none) refused in one line.
+TEST(Config, SafetyMomentumAndPowerKeysNeedTheRobotsMasses) {
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[safety]\nmomentum_kg_m_s = 10\npower_w = 80\nreduced_momentum_kg_m_s = 4\n"
+                                    "reduced_power_w = 30\ntolerance_kg_m_s = 0.3\ntolerance_w = 3\n",
+                                    "s.toml", c)
+                   .c_str());
+  servoarm::kin::SafetyConfig e;
+  STRCMP_EQUAL("", safety_envelope(c, lr.chain, e).c_str());
+  CHECK(e.enabled);
+  DOUBLES_EQUAL(10, e.normal.momentum, 0);
+  DOUBLES_EQUAL(80, e.normal.power, 0);
+  DOUBLES_EQUAL(4, e.reduced.momentum, 0);
+  DOUBLES_EQUAL(30, e.reduced.power, 0);
+  DOUBLES_EQUAL(0.3, e.momentum_tolerance, 0);
+  DOUBLES_EQUAL(3, e.power_tolerance, 0);
+  FwConfig other = c;
+  other.safety_reduced_power_w = 31;
+  CHECK(safety_checksum(other) != safety_checksum(c));
+  expect_refused("[safety]\nmomentum_kg_m_s = -1\n", {"safety.momentum_kg_m_s"});
+  expect_refused("[safety]\npower_w = nan\n", {"safety.power_w"});
+  expect_refused("[safety]\nreduced_momentum_kg_m_s = inf\n", {"safety.reduced_momentum_kg_m_s"});
+  expect_refused("[safety]\nreduced_power_w = -5\n", {"safety.reduced_power_w"});
+  expect_refused("[safety]\ntolerance_w = -1\n", {"safety.tolerance_w"});
+  const servoarm::kin::LoadResult abb = servoarm::kin::load_robot("abb_irb2400");
+  CHECK_TEXT(abb.ok, abb.error.c_str());
+  CHECK_FALSE(abb.chain.has_inertial);
+  FwConfig a;
+  a.robot = "abb_irb2400";
+  a.safety_reduced_power_w = 30;
+  STRCMP_EQUAL("safety.reduced_power_w: needs the robot's masses (abb_irb2400's description has no inertial data, "
+               "docs/dynamics.md)",
+               safety_for_chain(a, abb.chain).c_str());
+}
+
 TEST(Config, SafetyParkPoseOutsideTheEnvelopeIsRefused) {
   const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
   CHECK_TEXT(lr.ok, lr.error.c_str());

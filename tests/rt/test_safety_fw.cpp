@@ -331,3 +331,54 @@ TEST(SafetyMonitor, APredictedStopBeyondTheStoppingDistanceOrTimeGetsAProtective
     LONGS_EQUAL(0, r.rt_allocs);
   }
 }
+
+// Momentum and power (Reduced mode's limits; the puma560's masses): a fast joint move of joint 1
+// the planner never saw (queued directly) gets a protective stop in Reduced mode once the arm's
+// momentum passes 2 kg m/s (or its mechanical power 40 W) plus the tolerance; the event names
+// the function and the limit.
+TEST(SafetyMonitor, MomentumOrPowerAboveTheModesLimitGetsAProtectiveStop) {
+  for (const bool momentum : {true, false}) {
+    FwConfig c = table(250);
+    if (momentum)
+      c.safety_reduced_momentum_kg_m_s = 2;
+    else
+      c.safety_reduced_power_w = 40;
+    c.safety_tolerance_kg_m_s = 0.2;
+    c.safety_tolerance_w = 2;
+    Rig r(c);
+    r.enable();
+    r.to_work();
+    CHECK(r.svc().set_safety_mode(kin::SafetyMode::reduced).ok());
+    MotionItem* m = r.app.ctl->motions().back();
+    CHECK(m != nullptr);
+    m->id = 903;
+    JointMove& jm = m->payload.emplace<JointMove>();
+    jm.goal = work_pose();
+    jm.goal[0] += 90 * kDeg;
+    jm.override = 1.0;
+    jm.plan.n = 0;
+    r.app.ctl->motions().commit();
+    int stopped = -1;
+    for (int i = 0; i < 20000; ++i) {
+      r.cycle();
+      if (stopped < 0 && r.tel().state == ArmState::stopping) stopped = i;
+      if (stopped >= 0 && r.tel().state == ArmState::idle) break;
+    }
+    const std::string ev = r.last_event();
+    std::printf("\n  %s: protective stop from cycle %d: %s", momentum ? "momentum 2 kg m/s" : "power 40 W", stopped,
+                ev.c_str());
+    CHECK(stopped >= 0);
+    CHECK(r.tel().state == ArmState::idle);
+    CHECK(r.tel().q_cmd[0] < work_pose()[0] + 60 * kDeg);  // well short of the goal
+    CHECK(r.app.ctl->motions().empty());
+    if (momentum) {
+      STRCMP_CONTAINS("protective stop (commanded): momentum", ev.c_str());
+      STRCMP_CONTAINS("limit 2.00 kg m/s, value 2.2", ev.c_str());
+    } else {
+      STRCMP_CONTAINS("protective stop (commanded): power", ev.c_str());
+      STRCMP_CONTAINS("limit 40.0 W, value 4", ev.c_str());
+    }
+    CHECK_EQUAL(1u, r.tel().safety_stops);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}

@@ -374,6 +374,20 @@ const ConfigKey kConfigTable[] = {
         .within(0, 60),
     K{"safety.reduced_stop_distance_mm", &F::safety_reduced_stop_distance_mm, "mm",
       "stopping distance limit in Reduced mode; 0 = none"}.within(0, 10000),
+    K{"safety.momentum_kg_m_s", &F::safety_momentum_kg_m_s, "kg m/s",
+      "momentum limit in Normal mode: the sum over the links of mass x the speed of its centre of mass (the "
+      "description's inertial data); moves are planned slower to keep it, the run-time monitor makes a protective "
+      "stop beyond it plus safety.tolerance_kg_m_s; 0 = none"}
+        .within(0, 10000),
+    K{"safety.power_w", &F::safety_power_w, "W",
+      "mechanical power limit in Normal mode: the sum over the joints of |torque x velocity| (inverse dynamics: "
+      "inertia, gravity, friction); moves are planned slower to keep it, the monitor makes a protective stop "
+      "beyond it plus safety.tolerance_w; 0 = none"}
+        .within(0, 1e6),
+    K{"safety.reduced_momentum_kg_m_s", &F::safety_reduced_momentum_kg_m_s, "kg m/s",
+      "momentum limit in Reduced mode; 0 = none"}.within(0, 10000),
+    K{"safety.reduced_power_w", &F::safety_reduced_power_w, "W", "mechanical power limit in Reduced mode; 0 = none"}
+        .within(0, 1e6),
     K{"safety.tolerance_mm", &F::safety_tolerance_mm, "mm",
       "how far beyond a plane or box the run-time monitor lets the tool go before a protective stop (plan time "
       "allows none)"}.within(0, 100),
@@ -389,6 +403,11 @@ const ConfigKey kConfigTable[] = {
     K{"safety.tolerance_s", &F::safety_tolerance_s, "s",
       "how far above the stopping time limit the run-time monitor lets the predicted stop go before a protective "
       "stop"}.within(0, 10),
+    K{"safety.tolerance_kg_m_s", &F::safety_tolerance_kg_m_s, "kg m/s",
+      "how far above the momentum limit the run-time monitor lets the arm go before a protective stop"}
+        .within(0, 10000),
+    K{"safety.tolerance_w", &F::safety_tolerance_w, "W",
+      "how far above the power limit the run-time monitor lets the arm go before a protective stop"}.within(0, 1e6),
     K{"motion.home_deg", &F::home_deg, "deg (mm)",
       "park pose for `park` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
       "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
@@ -1705,12 +1724,24 @@ std::string safety_envelope(const FwConfig& c, const kin::Chain& chain, kin::Saf
   e.reduced.stop_time = c.safety_reduced_stop_time_s;
   e.reduced.stop_distance = c.safety_reduced_stop_distance_mm * mm;
   e.stop_time_tolerance = c.safety_tolerance_s;
+  e.normal.momentum = c.safety_momentum_kg_m_s;
+  e.normal.power = c.safety_power_w;
+  e.reduced.momentum = c.safety_reduced_momentum_kg_m_s;
+  e.reduced.power = c.safety_reduced_power_w;
+  e.momentum_tolerance = c.safety_tolerance_kg_m_s;
+  e.power_tolerance = c.safety_tolerance_w;
+  if ((e.normal.has_dynamics_limit() || e.reduced.has_dynamics_limit()) && !chain.has_inertial)
+    return std::string(e.normal.momentum > 0   ? "safety.momentum_kg_m_s"
+                       : e.normal.power > 0    ? "safety.power_w"
+                       : e.reduced.momentum > 0 ? "safety.reduced_momentum_kg_m_s"
+                                                : "safety.reduced_power_w") +
+           ": needs the robot's masses (" + c.robot + "'s description has no inertial data, docs/dynamics.md)";
   e.position_tolerance = c.safety_tolerance_mm * mm;
   e.angle_tolerance = c.safety_tolerance_deg * deg;
   e.speed_tolerance = c.safety_tolerance_mm_s * mm;
   e.enabled = e.plane_count > 0 || e.box_count > 0 || e.cone || e.normal.tcp_speed > 0 || e.normal.elbow_speed > 0 ||
               e.reduced.tcp_speed > 0 || e.reduced.elbow_speed > 0 || joint_limits || e.normal.has_stop_limit() ||
-              e.reduced.has_stop_limit();
+              e.reduced.has_stop_limit() || e.normal.has_dynamics_limit() || e.reduced.has_dynamics_limit();
   char buf[160];
   if (const std::string bad = kin::safety_config_problem(e, buf, sizeof buf); !bad.empty()) return "safety: " + bad;
   out = e;

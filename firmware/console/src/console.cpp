@@ -337,6 +337,8 @@ std::string Console::safety_text() const {
   if (any) s += " joint_speed_deg_s=[" + js + "]";
   if (lim.stop_time > 0) s += fmt(" stop_time_s=%g", lim.stop_time);
   if (lim.stop_distance > 0) s += fmt(" stop_distance_mm=%g", lim.stop_distance * 1e3);
+  if (lim.momentum > 0) s += fmt(" momentum_kg_m_s=%g", lim.momentum);
+  if (lim.power > 0) s += fmt(" power_w=%g", lim.power);
   return s;
 }
 

@@ -38,13 +38,16 @@ bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector
   return hit;
 }
 
-bool SafetyMonitor::check_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
-                               kin::SafetyViolation& out) {
-  if (!cfg_.enabled || chain_ == nullptr || !cfg_.limits(mode).has_stop_limit()) return false;
+bool SafetyMonitor::check_state(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
+                                kin::SafetyViolation& out) {
+  if (!cfg_.enabled || chain_ == nullptr) return false;
+  const kin::SafetyLimits& lim = cfg_.limits(mode);
+  if (!lim.has_stop_limit() && !lim.has_dynamics_limit()) return false;
   // cmd_ is the TCP at cmd.pos (update() of this cycle)
-  if (!kin::stop_prediction(*chain_, limits, cmd, stop_, cmd_)) return false;
+  if (lim.has_stop_limit()) (void)kin::stop_prediction(*chain_, limits, cmd, stop_, cmd_);
+  if (lim.has_dynamics_limit()) (void)kin::dynamics_prediction(*chain_, cmd, cmd_);
   const bool hit = kin::check_stop(cfg_, mode, cmd_, cfg_.position_tolerance, 1.0, out);
-  cmd_.has_stop = false;
+  cmd_.has_stop = cmd_.has_dynamics = false;
   return hit;
 }
 

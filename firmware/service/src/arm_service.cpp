@@ -386,7 +386,7 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
     if (envelope_ok(cx.chain != nullptr ? *cx.chain : chain_, plan_.duration, at, "movej", r, &sv, &ratio)) break;
     const bool speed = kin::is_speed(sv.function);
     const double slower = jm.override * 0.995 / std::max(ratio, 1.0);
-    if (!speed || attempt >= 5 || !(slower >= kMinJointSpeedPct / 100.0)) return r;
+    if (!speed || attempt >= 12 || !(slower >= kMinJointSpeedPct / 100.0)) return r;
     const MoveResult refused = r;
     r = MoveResult{};
     jm.override = o.override = slower;
@@ -442,7 +442,7 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
     double ratio = 1;
     if (envelope_ok(chain, traj.duration, at, "movel", r, &sv, &ratio)) break;
     const double slower = speed * 0.995 / std::max(ratio, 1.0);
-    if (!kin::is_speed(sv.function) || attempt >= 5 || !(slower >= kMinLinearSpeedMmS * 1e-3)) return r;
+    if (!kin::is_speed(sv.function) || attempt >= 12 || !(slower >= kMinLinearSpeedMmS * 1e-3)) return r;
     r = MoveResult{};
     speed = slower;
   }

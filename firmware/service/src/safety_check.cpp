@@ -48,8 +48,10 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
   const int n = std::max(1, static_cast<int>(std::ceil(duration / dt)));
   kin::JointVector q(n_), q_prev(n_);
   // the predicted stop at each sample (stop limits): from the sampled joints, their velocities
-  // and accelerations by differences, braked with the joints' limits as the controller brakes
+  // and accelerations by differences, braked with the joints' limits as the controller brakes;
+  // the momentum and power (their limits) at the same state
   const bool stops = env.limits(safety_mode_).has_stop_limit();
+  const bool dynamics = env.limits(safety_mode_).has_dynamics_limit();
   kin::JointState st;
   st.pos = st.vel = st.acc = kin::JointVector::Zero(n_);
   kin::JointVector v_prev = kin::JointVector::Zero(n_);
@@ -64,14 +66,16 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
     if (!at(t, q) || !kin::safety_sample(chain, env, q, duration > 0 ? t / duration : 1.0, x)) continue;
     const double h = t - prev.s * duration;
     if (have_prev) kin::set_velocity(x, prev, q_prev, q, h);
-    if (stops && x.has_velocity) {
+    // (not on a last sample much closer than dt: its acceleration by difference would blow up)
+    if ((stops || dynamics) && x.has_velocity && h >= 0.5 * dt) {
       st.pos = q;
       for (int j = 0; j < n_; ++j) {
         st.vel[j] = x.joint_velocity[static_cast<std::size_t>(j)];
         st.acc[j] = (st.vel[j] - v_prev[j]) / h;
       }
       v_prev = st.vel;
-      (void)kin::stop_prediction(chain, lim_, st, ramp, x);
+      if (stops) (void)kin::stop_prediction(chain, lim_, st, ramp, x);
+      if (dynamics) (void)kin::dynamics_prediction(chain, st, x);
     }
     ratio = std::max(ratio, kin::speed_ratio(env, safety_mode_, x));
     // (speeds: 1e-6 m/s of rounding, so that a line planned at the limit passes)

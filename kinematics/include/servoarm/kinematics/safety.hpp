@@ -24,6 +24,10 @@
 //    joints' limits (plan_stop, the ramp the controller stops with), its duration at most the
 //    stop time limit and the TCP's straight-line travel to where it rests at most the stop
 //    distance limit.
+//  - momentum: the sum over the links of mass x the speed of its centre of mass (kg m/s), and
+//    mechanical power: the sum over the joints of |torque x velocity| (W, torques by inverse
+//    dynamics: inertia, Coriolis, gravity, friction), each at most its limit (needs the
+//    description's inertial data).
 // A function is violated when its value is beyond its limit by more than the margin the
 // caller passes (0 at plan time, the function's tolerance in the run-time monitor).
 //
@@ -63,6 +67,9 @@ struct SafetyLimits {
   double stop_time = 0;      ///< s: the predicted stop's duration; 0 = no limit
   double stop_distance = 0;  ///< m: the TCP's travel during the predicted stop; 0 = no limit
   bool has_stop_limit() const { return stop_time > 0 || stop_distance > 0; }
+  double momentum = 0;  ///< kg m/s; 0 = no limit
+  double power = 0;     ///< W; 0 = no limit
+  bool has_dynamics_limit() const { return momentum > 0 || power > 0; }
 };
 
 enum class SafetyMode : std::uint8_t { normal, reduced };
@@ -84,6 +91,8 @@ struct SafetyConfig {
   double speed_tolerance = 0.02;      ///< m/s: run-time margin of the speed limits
   std::array<double, kMaxJoints> joint_speed_tolerance{};  ///< rad/s (m/s): run-time margin per joint
   double stop_time_tolerance = 0.02;  ///< s: run-time margin of the stop time (the stop distance's: position_tolerance)
+  double momentum_tolerance = 0.5;    ///< kg m/s: run-time margin of the momentum
+  double power_tolerance = 5;         ///< W: run-time margin of the power
   std::uint32_t prismatic = 0;  ///< bit j: joint j is prismatic (its speeds in mm/s, not deg/s)
   const SafetyLimits& limits(SafetyMode m) const;
 };
@@ -99,6 +108,8 @@ enum class SafetyFunction : std::uint8_t {
   joint_speed,  ///< index = joint (0-based; "joint j+1" in text)
   stop_time,      ///< the predicted stop's duration
   stop_distance,  ///< the TCP's travel during the predicted stop
+  momentum,       ///< the links' mass x centre-of-mass speed, summed
+  power,          ///< the joints' |torque x velocity|, summed
 };
 const char* to_string(SafetyFunction f);
 const char* to_string(SafetyMode m);
@@ -135,6 +146,9 @@ struct SafetySample {
   bool has_stop = false;     ///< stop_time / stop_distance hold the predicted stop (stop_prediction)
   double stop_time = 0;      ///< s
   double stop_distance = 0;  ///< m
+  bool has_dynamics = false;  ///< momentum / power hold the state's (dynamics_prediction)
+  double momentum = 0;        ///< kg m/s
+  double power = 0;           ///< W
 };
 
 /// The functions at `x` in order (planes, boxes, cone, then the speeds when x.has_velocity):
@@ -146,7 +160,9 @@ struct SafetySample {
 bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
                   double angle_margin, double speed_margin, SafetyViolation& out, double tolerance_scale = 0.0);
 
-/// The stop functions only (stop time, stop distance) at x (x.has_stop), margins as check_sample.
+/// The stop functions (stop time, stop distance; x.has_stop) and the dynamics functions
+/// (momentum, power; x.has_dynamics) only, margins as check_sample (the momentum's and the
+/// power's: tolerance_scale times their tolerances).
 bool check_stop(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
                 double tolerance_scale, SafetyViolation& out);
 
@@ -176,9 +192,16 @@ void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_p
 
 /// The highest value / limit of the mode's speed limits (TCP, elbow, joints) at x and of its
 /// stop limits ((time / limit)^2 and (distance / limit)^(2/3): how speed goes with a
-/// jerk-limited stop's duration and travel from low speeds) (0 when none is set or x has
+/// jerk-limited stop's duration and travel from low speeds) and its momentum limit (value /
+/// limit) and power limit (its square root: power goes with speed to the first (gravity) to the
+/// third (inertia) power, so a caller plans again until it holds) (0 when none is set or x has
 /// neither velocity nor stop): a path whose highest ratio is k runs within them k times slower.
 double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x);
+
+/// The arm's momentum and mechanical power at state s (see the conventions above) into
+/// x.momentum / x.power (x.has_dynamics); the centres of mass' speeds from FK at s.pos and a
+/// step along s.vel. False (x untouched) when the chain has no inertial data or s is bad.
+bool dynamics_prediction(const Chain& chain, const JointState& s, SafetySample& x);
 
 /// True for the functions a lower speed cures (TCP, elbow and joint speeds, stop time and distance).
 bool is_speed(SafetyFunction f);

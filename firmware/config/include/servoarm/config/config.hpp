@@ -157,11 +157,17 @@ struct FwConfig {
   double safety_stop_distance_mm = 0.0;          ///< the TCP's travel during the predicted stop, Normal; 0 = none
   double safety_reduced_stop_time_s = 0.0;
   double safety_reduced_stop_distance_mm = 0.0;
+  double safety_momentum_kg_m_s = 0.0;           ///< the links' mass x COM speed, summed, Normal; 0 = none
+  double safety_power_w = 0.0;                   ///< the joints' |torque x velocity|, summed, Normal; 0 = none
+  double safety_reduced_momentum_kg_m_s = 0.0;
+  double safety_reduced_power_w = 0.0;
   double safety_tolerance_mm = 2.0;      ///< run-time monitor margin of planes and boxes
   double safety_tolerance_deg = 2.0;     ///< run-time monitor margin of the cone
   double safety_tolerance_mm_s = 20.0;   ///< run-time monitor margin of the speed limits
   double safety_tolerance_deg_s = 2.0;   ///< run-time monitor margin of the joint speed limits (mm/s prismatic)
   double safety_tolerance_s = 0.02;      ///< run-time monitor margin of the stop time limit
+  double safety_tolerance_kg_m_s = 0.5;  ///< run-time monitor margin of the momentum limit
+  double safety_tolerance_w = 5.0;       ///< run-time monitor margin of the power limit
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;
