@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "servoarm/kinematics/dynamics.hpp"
+
 namespace servoarm::kin {
 
 namespace {
@@ -79,6 +81,34 @@ double evaluate(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x,
       v.limit = lim.elbow_speed;
       v.value = x.elbow_velocity.norm();
       return lim.elbow_speed > 0 && cfg.elbow_frame >= 0 ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::joint_speed: {
+      const auto j = static_cast<std::size_t>(index);
+      v.where = x.tcp.translation();
+      v.linear = ((cfg.prismatic >> j) & 1u) != 0;
+      v.limit = lim.joint_speed[j];
+      v.value = std::abs(x.joint_velocity[j]);
+      return v.limit > 0 ? v.value - v.limit : -INFINITY;
+    }
+    case SafetyFunction::stop_time:
+      v.where = x.tcp.translation();
+      v.limit = lim.stop_time;
+      v.value = x.stop_time;
+      return v.limit > 0 && x.has_stop ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::stop_distance:
+      v.where = x.tcp.translation();
+      v.limit = lim.stop_distance;
+      v.value = x.stop_distance;
+      return v.limit > 0 && x.has_stop ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::momentum:
+      v.where = x.tcp.translation();
+      v.limit = lim.momentum;
+      v.value = x.momentum;
+      return v.limit > 0 && x.has_dynamics ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::power:
+      v.where = x.tcp.translation();
+      v.limit = lim.power;
+      v.value = x.power;
+      return v.limit > 0 && x.has_dynamics ? v.value - v.limit : -INFINITY;
   }
   return -INFINITY;
 }
@@ -102,6 +132,11 @@ const char* to_string(SafetyFunction f) {
     case SafetyFunction::orientation: return "tool orientation";
     case SafetyFunction::tcp_speed: return "tcp speed";
     case SafetyFunction::elbow_speed: return "elbow speed";
+    case SafetyFunction::joint_speed: return "joint speed";
+    case SafetyFunction::stop_time: return "stop time";
+    case SafetyFunction::stop_distance: return "stop distance";
+    case SafetyFunction::momentum: return "momentum";
+    case SafetyFunction::power: return "power";
   }
   return "?";
 }
@@ -122,7 +157,12 @@ double SafetyViolation::excess() const {
     case SafetyFunction::keep_out: return limit - value;
     case SafetyFunction::orientation:
     case SafetyFunction::tcp_speed:
-    case SafetyFunction::elbow_speed: return value - limit;
+    case SafetyFunction::elbow_speed:
+    case SafetyFunction::joint_speed:
+    case SafetyFunction::stop_time:
+    case SafetyFunction::stop_distance:
+    case SafetyFunction::momentum:
+    case SafetyFunction::power: return value - limit;
   }
   return -INFINITY;
 }
@@ -141,30 +181,61 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
     case SafetyFunction::orientation:
     case SafetyFunction::tcp_speed:
     case SafetyFunction::elbow_speed:
+    case SafetyFunction::stop_time:
+    case SafetyFunction::stop_distance:
+    case SafetyFunction::momentum:
+    case SafetyFunction::power:
       std::snprintf(name, sizeof name, "%s", to_string(v.function));
+      break;
+    case SafetyFunction::joint_speed:
+      std::snprintf(name, sizeof name, "joint %d speed", v.index + 1);
       break;
   }
   double scale = 1000.0;
   const char* unit = "mm";
+  int digits = 1;
   switch (v.function) {
     case SafetyFunction::none:
     case SafetyFunction::plane:
     case SafetyFunction::keep_in:
-    case SafetyFunction::keep_out: break;
+    case SafetyFunction::keep_out:
+    case SafetyFunction::stop_distance: break;
+    case SafetyFunction::stop_time:
+      scale = 1.0;
+      unit = "s";
+      digits = 3;
+      break;
+    case SafetyFunction::momentum:
+      scale = 1.0;
+      unit = "kg m/s";
+      digits = 2;
+      break;
+    case SafetyFunction::power:
+      scale = 1.0;
+      unit = "W";
+      break;
     case SafetyFunction::orientation: scale = 180.0 / kPi; unit = "deg"; break;
     case SafetyFunction::tcp_speed:
     case SafetyFunction::elbow_speed: unit = "mm/s"; break;
+    case SafetyFunction::joint_speed:
+      if (v.linear) {
+        unit = "mm/s";
+      } else {
+        scale = 180.0 / kPi;
+        unit = "deg/s";
+      }
+      break;
   }
   char at[24] = "";
   if (v.s >= 0) std::snprintf(at, sizeof at, " at s=%.3f", v.s);
-  std::snprintf(buf, size, "safety %s%s (x=%.1f, y=%.1f, z=%.1f mm): limit %.1f %s, value %.1f %s", name, at,
-                v.where.x() * 1000.0, v.where.y() * 1000.0, v.where.z() * 1000.0, v.limit * scale, unit,
-                v.value * scale, unit);
+  std::snprintf(buf, size, "safety %s%s (x=%.1f, y=%.1f, z=%.1f mm): limit %.*f %s, value %.*f %s", name, at,
+                v.where.x() * 1000.0, v.where.y() * 1000.0, v.where.z() * 1000.0, digits, v.limit * scale, unit,
+                digits, v.value * scale, unit);
   return buf;
 }
 
 bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
-                  double angle_margin, double speed_margin, SafetyViolation& out) {
+                  double angle_margin, double speed_margin, SafetyViolation& out, double tolerance_scale) {
   if (!cfg.enabled) return false;
   SafetyViolation v;
   const bool has_elbow = cfg.elbow_frame >= 0;
@@ -188,6 +259,128 @@ bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& 
   if (x.has_velocity) {
     if (evaluate(cfg, mode, x, SafetyFunction::tcp_speed, -1, false, v) > speed_margin) { out = v; return true; }
     if (evaluate(cfg, mode, x, SafetyFunction::elbow_speed, -1, true, v) > speed_margin) { out = v; return true; }
+    for (int j = 0; j < x.joint_count && j < kMaxJoints; ++j) {
+      const double m = tolerance_scale > 0 ? tolerance_scale * cfg.joint_speed_tolerance[static_cast<std::size_t>(j)]
+                                           : speed_margin;
+      if (evaluate(cfg, mode, x, SafetyFunction::joint_speed, j, false, v) > m) { out = v; return true; }
+    }
+  }
+  return check_stop(cfg, mode, x, position_margin, tolerance_scale, out);
+}
+
+bool check_stop(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
+                double tolerance_scale, SafetyViolation& out) {
+  if (!cfg.enabled) return false;
+  SafetyViolation v;
+  if (x.has_dynamics) {
+    if (evaluate(cfg, mode, x, SafetyFunction::momentum, -1, false, v) > tolerance_scale * cfg.momentum_tolerance) {
+      out = v;
+      return true;
+    }
+    if (evaluate(cfg, mode, x, SafetyFunction::power, -1, false, v) > tolerance_scale * cfg.power_tolerance) {
+      out = v;
+      return true;
+    }
+  }
+  if (!x.has_stop) return false;
+  if (evaluate(cfg, mode, x, SafetyFunction::stop_time, -1, false, v) > tolerance_scale * cfg.stop_time_tolerance) {
+    out = v;
+    return true;
+  }
+  if (evaluate(cfg, mode, x, SafetyFunction::stop_distance, -1, false, v) > position_margin) {
+    out = v;
+    return true;
+  }
+  return false;
+}
+
+bool stop_prediction(const Chain& chain, const JointLimits& limits, const JointState& from, JointTrajectory& scratch,
+                     SafetySample& x) {
+  MovejOptions o;
+  if (plan_stop(limits, from, o, scratch) != MotionStatus::ok) return false;
+  Pose end;
+  if (forward(chain, scratch.goal, end) != Status::ok) return false;
+  x.has_stop = true;
+  x.stop_time = scratch.duration;
+  x.stop_distance = (end.translation() - x.tcp.translation()).norm();
+  return true;
+}
+
+bool dynamics_prediction(const Chain& chain, const JointState& s, SafetySample& x) {
+  if (!chain.has_inertial) return false;
+  JointVector tau(s.pos.size());
+  if (inverse_dynamics(chain, s.pos, s.vel, s.acc, tau) != Status::ok) return false;
+  // the centres of mass a short step along the velocity: their speeds by the difference
+  constexpr double h = 1e-4;  // s
+  const JointVector q2 = s.pos + h * s.vel;
+  FrameSet a, b;
+  Pose pa, pb;
+  if (forward_frames(chain, s.pos, a, pa) != Status::ok || forward_frames(chain, q2, b, pb) != Status::ok) return false;
+  double p = 0;
+  for (int i = 0; i < chain.n_rows && i + 1 < a.count; ++i) {
+    const LinkInertial& in = chain.inertial[static_cast<std::size_t>(i)];
+    if (!(in.mass > 0)) continue;
+    const Eigen::Vector3d c(in.com[0], in.com[1], in.com[2]);
+    p += in.mass * (b.frame[i + 1] * c - a.frame[i + 1] * c).norm() / h;
+  }
+  double w = 0;
+  for (Eigen::Index j = 0; j < tau.size(); ++j) w += std::abs(tau[j] * s.vel[j]);
+  x.has_dynamics = true;
+  x.momentum = p;
+  x.power = w;
+  return true;
+}
+
+void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_prev, const JointVector& q, double h) {
+  if (!(h > 0)) return;
+  x.has_velocity = true;
+  x.tcp_velocity = (x.tcp.translation() - p.tcp.translation()) / h;
+  x.elbow_velocity = (x.elbow - p.elbow) / h;
+  const int n = static_cast<int>(std::min<Eigen::Index>(std::min(q.size(), q_prev.size()), kMaxJoints));
+  x.joint_count = n;
+  for (int j = 0; j < n; ++j) x.joint_velocity[static_cast<std::size_t>(j)] = (q[j] - q_prev[j]) / h;
+}
+
+double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x) {
+  if (!cfg.enabled || (!x.has_velocity && !x.has_stop && !x.has_dynamics)) return 0;
+  const SafetyLimits& lim = cfg.limits(mode);
+  double r = 0;
+  if (lim.tcp_speed > 0) r = std::max(r, x.tcp_velocity.norm() / lim.tcp_speed);
+  if (lim.elbow_speed > 0 && cfg.elbow_frame >= 0) r = std::max(r, x.elbow_velocity.norm() / lim.elbow_speed);
+  for (int j = 0; j < x.joint_count && j < kMaxJoints; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    if (lim.joint_speed[ju] > 0) r = std::max(r, std::abs(x.joint_velocity[ju]) / lim.joint_speed[ju]);
+  }
+  // A jerk-limited stop from a low speed v lasts about 2 sqrt(v / jerk) and travels about
+  // v sqrt(v / jerk): speed goes with the square of the time and the 2/3 power of the
+  // distance there (less steeply at higher speeds), so these ratios slow a path enough.
+  if (x.has_stop) {
+    if (lim.stop_time > 0) r = std::max(r, std::pow(x.stop_time / lim.stop_time, 2.0));
+    if (lim.stop_distance > 0) r = std::max(r, std::cbrt(std::pow(x.stop_distance / lim.stop_distance, 2.0)));
+  }
+  if (x.has_dynamics) {
+    if (lim.momentum > 0) r = std::max(r, x.momentum / lim.momentum);
+    // power: from proportional to speed (gravity, friction) to its cube (inertia); the square
+    // root between them, the caller plans again until it holds
+    if (lim.power > 0) r = std::max(r, std::sqrt(x.power / lim.power));
+  }
+  return r;
+}
+
+bool is_speed(SafetyFunction f) {
+  switch (f) {
+    case SafetyFunction::tcp_speed:
+    case SafetyFunction::elbow_speed:
+    case SafetyFunction::joint_speed:
+    case SafetyFunction::stop_time:
+    case SafetyFunction::stop_distance:
+    case SafetyFunction::momentum:
+    case SafetyFunction::power: return true;
+    case SafetyFunction::none:
+    case SafetyFunction::plane:
+    case SafetyFunction::keep_in:
+    case SafetyFunction::keep_out:
+    case SafetyFunction::orientation: return false;
   }
   return false;
 }
@@ -210,6 +403,9 @@ bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVecto
   out.s = s;
   out.tcp = tcp;
   out.has_velocity = false;
+  out.joint_count = 0;
+  out.has_stop = false;
+  out.has_dynamics = false;
   if (cfg.elbow_frame >= 0 && cfg.elbow_frame < frames.count)
     out.elbow = frames.frame[cfg.elbow_frame].translation();
   else
@@ -249,12 +445,23 @@ const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_
   for (const SafetyLimits* l : {&cfg.normal, &cfg.reduced}) {
     if (!std::isfinite(l->tcp_speed) || l->tcp_speed < 0 || !std::isfinite(l->elbow_speed) || l->elbow_speed < 0)
       return bad("speed limits must be finite and >= 0", 0);
+    if (!std::isfinite(l->stop_time) || l->stop_time < 0 || !std::isfinite(l->stop_distance) || l->stop_distance < 0)
+      return bad("stop time and distance limits must be finite and >= 0", 0);
+    if (!std::isfinite(l->momentum) || l->momentum < 0 || !std::isfinite(l->power) || l->power < 0)
+      return bad("momentum and power limits must be finite and >= 0", 0);
+    for (const double js : l->joint_speed)
+      if (!std::isfinite(js) || js < 0) return bad("joint speed limits must be finite and >= 0", 0);
     if (cfg.cone && (!std::isfinite(l->cone_half_angle) || l->cone_half_angle <= 0 || l->cone_half_angle > kPi))
       return bad("cone half angle must be in (0, 180] deg", 0);
   }
   if (!std::isfinite(cfg.position_tolerance) || cfg.position_tolerance < 0 || !std::isfinite(cfg.angle_tolerance) ||
       cfg.angle_tolerance < 0 || !std::isfinite(cfg.speed_tolerance) || cfg.speed_tolerance < 0)
     return bad("tolerances must be finite and >= 0", 0);
+  if (!std::isfinite(cfg.stop_time_tolerance) || cfg.stop_time_tolerance < 0 || !std::isfinite(cfg.momentum_tolerance) ||
+      cfg.momentum_tolerance < 0 || !std::isfinite(cfg.power_tolerance) || cfg.power_tolerance < 0)
+    return bad("tolerances must be finite and >= 0", 0);
+  for (const double t : cfg.joint_speed_tolerance)
+    if (!std::isfinite(t) || t < 0) return bad("tolerances must be finite and >= 0", 0);
   return buf;
 }
 

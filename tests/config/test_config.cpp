@@ -1200,8 +1200,10 @@ TEST(Config, SafetyKeysAreReadAndBadOnesRefusedNamingTheKey) {
                                     "cone_deg = 30\ntcp_speed_mm_s = 250\nreduced_tcp_speed_mm_s = 100\n",
                                     "s.toml", c)
                    .c_str());
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
   servoarm::kin::SafetyConfig e;
-  STRCMP_EQUAL("", safety_envelope(c, e).c_str());
+  STRCMP_EQUAL("", safety_envelope(c, lr.chain, e).c_str());
   CHECK(e.enabled);
   CHECK_EQUAL(1, e.plane_count);
   DOUBLES_EQUAL(1.0, e.planes[0].normal.z(), 1e-12);  // normalised
@@ -1217,7 +1219,7 @@ TEST(Config, SafetyKeysAreReadAndBadOnesRefusedNamingTheKey) {
   DOUBLES_EQUAL(0.1, e.reduced.tcp_speed, 1e-12);
   // the defaults: no envelope
   FwConfig d;
-  STRCMP_EQUAL("", safety_envelope(d, e).c_str());
+  STRCMP_EQUAL("", safety_envelope(d, lr.chain, e).c_str());
   CHECK_FALSE(e.enabled);
 
   expect_refused("[safety]\nplanes = [0, 0, 1, nan]\n", {"safety.planes"});
@@ -1230,6 +1232,105 @@ TEST(Config, SafetyKeysAreReadAndBadOnesRefusedNamingTheKey) {
   expect_refused("[safety]\ncone_axis = [0, 0, 0]\n", {"safety.cone_axis", "zero axis"});
   expect_refused("[safety]\ntool_radius_mm = inf\n", {"safety.tool_radius_mm"});
   expect_refused("[safety]\ncone_deg = 0\n", {"safety.cone_deg"});
+}
+
+// Joint speed limits: one per joint in deg/s (mm/s for a prismatic joint), per mode, read into
+// rad/s; a negative or NaN one is refused at load, a list not one per joint against the robot,
+// each in one line naming the key; they are part of the checksum.
+TEST(Config, SafetyJointSpeedKeysAreReadAndCheckedAgainstTheRobot) {
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[safety]\njoint_speed_deg_s = [90, 90, 90, 180, 180, 180]\n"
+                                    "reduced_joint_speed_deg_s = [30, 30, 30, 0, 60, 60]\ntolerance_deg_s = 3\n",
+                                    "s.toml", c)
+                   .c_str());
+  servoarm::kin::SafetyConfig e;
+  STRCMP_EQUAL("", safety_envelope(c, lr.chain, e).c_str());
+  CHECK(e.enabled);
+  DOUBLES_EQUAL(M_PI / 2, e.normal.joint_speed[0], 1e-12);
+  DOUBLES_EQUAL(M_PI, e.normal.joint_speed[5], 1e-12);
+  DOUBLES_EQUAL(M_PI / 6, e.reduced.joint_speed[0], 1e-12);
+  DOUBLES_EQUAL(0.0, e.reduced.joint_speed[3], 0);
+  DOUBLES_EQUAL(3 * M_PI / 180, e.joint_speed_tolerance[2], 1e-12);
+  STRCMP_EQUAL("", validate_for_chain(c, lr.chain).c_str());
+  FwConfig other = c;
+  other.safety_reduced_joint_speed_deg_s[0] = 31;
+  CHECK(safety_checksum(other) != safety_checksum(c));
+
+  expect_refused("[safety]\njoint_speed_deg_s = [90, -1, 90, 90, 90, 90]\n", {"safety.joint_speed_deg_s"});
+  expect_refused("[safety]\nreduced_joint_speed_deg_s = [nan, 1, 1, 1, 1, 1]\n", {"safety.reduced_joint_speed_deg_s"});
+  expect_refused("[safety]\ntolerance_deg_s = -2\n", {"safety.tolerance_deg_s"});
+  FwConfig five = c;
+  five.safety_reduced_joint_speed_deg_s = {30, 30, 30, 30, 30};
+  const std::string bad = validate_for_chain(five, lr.chain);
+  STRCMP_EQUAL("safety.reduced_joint_speed_deg_s: needs one value per joint of puma560 (6), got 5", bad.c_str());
+}
+
+// Stopping time and distance limits per mode, read into s and m; negative or NaN ones refused
+// at load naming the key; part of the checksum.
+TEST(Config, SafetyStopKeysAreReadAndBadOnesRefused) {
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[safety]\nstop_time_s = 0.4\nstop_distance_mm = 150\nreduced_stop_time_s = 0.2\n"
+                                    "reduced_stop_distance_mm = 50\ntolerance_s = 0.05\n",
+                                    "s.toml", c)
+                   .c_str());
+  servoarm::kin::SafetyConfig e;
+  STRCMP_EQUAL("", safety_envelope(c, lr.chain, e).c_str());
+  CHECK(e.enabled);
+  DOUBLES_EQUAL(0.4, e.normal.stop_time, 1e-12);
+  DOUBLES_EQUAL(0.15, e.normal.stop_distance, 1e-12);
+  DOUBLES_EQUAL(0.2, e.reduced.stop_time, 1e-12);
+  DOUBLES_EQUAL(0.05, e.reduced.stop_distance, 1e-12);
+  DOUBLES_EQUAL(0.05, e.stop_time_tolerance, 1e-12);
+  FwConfig other = c;
+  other.safety_reduced_stop_distance_mm = 51;
+  CHECK(safety_checksum(other) != safety_checksum(c));
+  expect_refused("[safety]\nstop_time_s = -1\n", {"safety.stop_time_s"});
+  expect_refused("[safety]\nstop_distance_mm = nan\n", {"safety.stop_distance_mm"});
+  expect_refused("[safety]\nreduced_stop_time_s = inf\n", {"safety.reduced_stop_time_s"});
+  expect_refused("[safety]\nreduced_stop_distance_mm = -5\n", {"safety.reduced_stop_distance_mm"});
+  expect_refused("[safety]\ntolerance_s = -0.1\n", {"safety.tolerance_s"});
+}
+
+// Momentum and power limits per mode; negative or NaN ones refused at load naming the key; against
+// a robot without inertial data (the ABB IRB 2400's description has none) refused in one line.
+TEST(Config, SafetyMomentumAndPowerKeysNeedTheRobotsMasses) {
+  const servoarm::kin::LoadResult lr = servoarm::kin::load_robot("puma560");
+  CHECK_TEXT(lr.ok, lr.error.c_str());
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text("[safety]\nmomentum_kg_m_s = 10\npower_w = 80\nreduced_momentum_kg_m_s = 4\n"
+                                    "reduced_power_w = 30\ntolerance_kg_m_s = 0.3\ntolerance_w = 3\n",
+                                    "s.toml", c)
+                   .c_str());
+  servoarm::kin::SafetyConfig e;
+  STRCMP_EQUAL("", safety_envelope(c, lr.chain, e).c_str());
+  CHECK(e.enabled);
+  DOUBLES_EQUAL(10, e.normal.momentum, 0);
+  DOUBLES_EQUAL(80, e.normal.power, 0);
+  DOUBLES_EQUAL(4, e.reduced.momentum, 0);
+  DOUBLES_EQUAL(30, e.reduced.power, 0);
+  DOUBLES_EQUAL(0.3, e.momentum_tolerance, 0);
+  DOUBLES_EQUAL(3, e.power_tolerance, 0);
+  FwConfig other = c;
+  other.safety_reduced_power_w = 31;
+  CHECK(safety_checksum(other) != safety_checksum(c));
+  expect_refused("[safety]\nmomentum_kg_m_s = -1\n", {"safety.momentum_kg_m_s"});
+  expect_refused("[safety]\npower_w = nan\n", {"safety.power_w"});
+  expect_refused("[safety]\nreduced_momentum_kg_m_s = inf\n", {"safety.reduced_momentum_kg_m_s"});
+  expect_refused("[safety]\nreduced_power_w = -5\n", {"safety.reduced_power_w"});
+  expect_refused("[safety]\ntolerance_w = -1\n", {"safety.tolerance_w"});
+  const servoarm::kin::LoadResult abb = servoarm::kin::load_robot("abb_irb2400");
+  CHECK_TEXT(abb.ok, abb.error.c_str());
+  CHECK_FALSE(abb.chain.has_inertial);
+  FwConfig a;
+  a.robot = "abb_irb2400";
+  a.safety_reduced_power_w = 30;
+  STRCMP_EQUAL("safety.reduced_power_w: needs the robot's masses (abb_irb2400's description has no inertial data, "
+               "docs/dynamics.md)",
+               safety_for_chain(a, abb.chain).c_str());
 }
 
 TEST(Config, SafetyParkPoseOutsideTheEnvelopeIsRefused) {

@@ -185,24 +185,34 @@ TEST(ConsoleRequests, TheParkPoseFollowsTheServicesSettings) {
 
 // The safety envelope on the console: `safety` shows on/off, the mode, the checksum of the
 // configuration's [safety] section (fw::safety_checksum, computed here from the same
-// configuration) and the stops; `safety reduced` / `safety normal` switch the mode, which
+// configuration), the stops and the mode's limits; `safety reduced` / `safety normal` switch the mode, which
 // `status` shows with the checksum; without [safety] the switch is refused with one line.
 TEST(ConsoleRequests, SafetyShowsModeAndChecksumAndSwitchesTheMode) {
   FwConfig c;
   c.safety_planes = {0, 0, 1, -500};
   c.safety_tcp_speed_mm_s = 1000;
   c.safety_reduced_tcp_speed_mm_s = 100;
+  c.safety_joint_speed_deg_s = {90, 90, 90, 180, 180, 180};
+  c.safety_reduced_joint_speed_deg_s = {30, 30, 30, 60, 60, 60};
+  c.safety_stop_time_s = 0.5;
+  c.safety_reduced_stop_distance_mm = 40;
+  c.safety_reduced_momentum_kg_m_s = 4;
+  c.safety_power_w = 80;
   test::ConsoleRig r(c);
   char sum[16];
   std::snprintf(sum, sizeof sum, "%08X", static_cast<unsigned>(safety_checksum(c)));
   const std::string a = r.cmd("safety");
   CHECK_TEXT(answer_ok(a), a.c_str());
   STRCMP_CONTAINS((std::string("safety=on mode=normal checksum=") + sum + " stops=0").c_str(), a.c_str());
+  // the mode's limits, in the keys' units
+  STRCMP_CONTAINS("tcp_speed_mm_s=1000 joint_speed_deg_s=[90,90,90,180,180,180] stop_time_s=0.5 power_w=80", a.c_str());
+  CHECK(a.find("stop_distance_mm") == std::string::npos);  // (Reduced mode's only)
   const std::string red = r.cmd("safety reduced");
   CHECK_TEXT(answer_ok(red), red.c_str());
   STRCMP_CONTAINS("safety mode reduced", red.c_str());
   STRCMP_CONTAINS((std::string("safety=reduced checksum=") + sum).c_str(), r.cmd("status").c_str());
   STRCMP_CONTAINS("mode=reduced", r.cmd("safety").c_str());
+  STRCMP_CONTAINS("tcp_speed_mm_s=100 joint_speed_deg_s=[30,30,30,60,60,60] stop_distance_mm=40 momentum_kg_m_s=4", r.cmd("safety").c_str());
   CHECK(r.app.ctl->safety_mode() == kin::SafetyMode::reduced);
   CHECK_TEXT(answer_ok(r.cmd("safety normal")), "safety normal");
   CHECK(r.app.ctl->safety_mode() == kin::SafetyMode::normal);

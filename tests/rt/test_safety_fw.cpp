@@ -202,3 +202,183 @@ TEST(SafetyMonitor, AnUncheckedMoveThroughAPlaneGetsAProtectiveStop) {
   CHECK_EQUAL(1u, r.tel().safety_stops);
   LONGS_EQUAL(0, r.rt_allocs);
 }
+
+// Joint speed limits per mode: a joint move of joint 1 the planner never saw (queued
+// directly, at full speed) runs in Normal mode (limit 200 deg/s) and gets a protective stop in
+// Reduced mode (limit 20 deg/s) in the cycle its commanded speed passes limit + tolerance; the
+// event names the joint, its speed and the limit.
+TEST(SafetyMonitor, AJointFasterThanItsModesSpeedLimitGetsAProtectiveStopNamingIt) {
+  FwConfig c = table(250);
+  c.safety_joint_speed_deg_s = {200, 200, 200, 200, 200, 200};
+  c.safety_reduced_joint_speed_deg_s = {20, 200, 200, 200, 200, 200};
+  c.safety_tolerance_deg_s = 2;
+  for (const kin::SafetyMode mode : {kin::SafetyMode::normal, kin::SafetyMode::reduced}) {
+    Rig r(c);
+    r.enable();
+    r.to_work();
+    CHECK(r.svc().set_safety_mode(mode).ok());
+    MotionItem* m = r.app.ctl->motions().back();
+    CHECK(m != nullptr);
+    m->id = 901;
+    JointMove& jm = m->payload.emplace<JointMove>();
+    jm.goal = work_pose();
+    jm.goal[0] += 40 * kDeg;
+    jm.override = 1.0;
+    jm.plan.n = 0;
+    r.app.ctl->motions().commit();
+    double prev = r.tel().q_cmd[0], vmax = 0;
+    int crossed = -1, stopped = -1;
+    for (int i = 0; i < 20000; ++i) {
+      r.cycle();
+      const double q0 = r.tel().q_cmd[0];
+      const double v = std::fabs(q0 - prev) / 0.001 / kDeg;  // deg/s
+      prev = q0;
+      vmax = std::fmax(vmax, v);
+      if (crossed < 0 && v > 22.0 + 1e-9) crossed = i;
+      if (stopped < 0 && r.tel().state == ArmState::stopping) stopped = i;
+      if (i > 10 && r.tel().state == ArmState::idle && r.app.ctl->motions().empty()) break;
+    }
+    std::printf("\n  joint speed (%s): joint 1 at most %.1f deg/s; past 22 deg/s in cycle %d, stop from cycle %d",
+                kin::to_string(mode), vmax, crossed, stopped);
+    CHECK(vmax > 22.0);  // the move is faster than the Reduced limit
+    if (mode == kin::SafetyMode::normal) {
+      CHECK_EQUAL(-1, stopped);
+      CHECK_EQUAL(0u, r.tel().safety_stops);
+      DOUBLES_EQUAL(work_pose()[0] + 40 * kDeg, r.tel().q_cmd[0], 1e-6);
+      continue;
+    }
+    CHECK(crossed >= 0);
+    CHECK(stopped == crossed);
+    CHECK(r.tel().state == ArmState::idle);
+    CHECK(r.app.ctl->motions().empty());
+    CHECK(r.tel().q_cmd[0] < work_pose()[0] + 20 * kDeg);  // stopped well short of the goal
+    const std::string ev = r.last_event();
+    STRCMP_CONTAINS("protective stop (commanded): joint 1 speed", ev.c_str());
+    STRCMP_CONTAINS("limit 20.0 deg/s, value 22.", ev.c_str());
+    CHECK_EQUAL(1u, r.tel().safety_stops);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}
+
+// Stopping distance and time (Reduced mode's limits): a fast joint move of joint 1 the planner
+// never saw (queued directly) gets a protective stop in the cycle the stop predicted from its commanded state
+// (braked on the joints' limits, as the stop brakes) would take the TCP further than 20 mm, or
+// last longer than 0.15 s, beyond the tolerances; the arm then comes to rest within that: the
+// TCP's travel from the stop's start to rest is at most the limit plus the tolerance, and the
+// stop lasts at most the time limit plus its tolerance (plus two cycles). The event names the limit.
+TEST(SafetyMonitor, APredictedStopBeyondTheStoppingDistanceOrTimeGetsAProtectiveStop) {
+  for (const bool distance : {true, false}) {
+    FwConfig c = table(250);
+    if (distance)
+      c.safety_reduced_stop_distance_mm = 20;
+    else
+      c.safety_reduced_stop_time_s = 0.15;
+    c.safety_tolerance_s = 0.01;
+    Rig r(c);
+    r.enable();
+    r.to_work();
+    CHECK(r.svc().set_safety_mode(kin::SafetyMode::reduced).ok());
+    MotionItem* m = r.app.ctl->motions().back();
+    CHECK(m != nullptr);
+    m->id = 902;
+    JointMove& jm = m->payload.emplace<JointMove>();
+    jm.goal = work_pose();
+    jm.goal[0] += 90 * kDeg;
+    jm.override = 1.0;
+    jm.plan.n = 0;
+    r.app.ctl->motions().commit();
+    auto tcp = [&r] {
+      const Telemetry t = r.tel();
+      kin::JointVector q(6);
+      for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[std::size_t(j)];
+      kin::Pose p;
+      (void)kin::forward(r.app.chain, q, p);
+      return Eigen::Vector3d(p.translation());
+    };
+    Eigen::Vector3d at_stop = Eigen::Vector3d::Zero();
+    int stopped = -1, rest = -1;
+    for (int i = 0; i < 20000; ++i) {
+      r.cycle();
+      if (stopped < 0 && r.tel().state == ArmState::stopping) {
+        stopped = i;
+        at_stop = tcp();
+      }
+      if (stopped >= 0 && r.tel().state == ArmState::idle) {
+        rest = i;
+        break;
+      }
+    }
+    const double travel_mm = (tcp() - at_stop).norm() * 1e3;
+    const double stop_s = (rest - stopped) * 0.001;
+    std::printf("\n  stop %s: protective stop from cycle %d, TCP travel to rest %.2f mm, stop %.3f s",
+                distance ? "distance 20 mm" : "time 0.15 s", stopped, travel_mm, stop_s);
+    CHECK(stopped >= 0 && rest > stopped);
+    CHECK(r.tel().q_cmd[0] < work_pose()[0] + 80 * kDeg);  // well short of the goal
+    CHECK(r.app.ctl->motions().empty());
+    const std::string ev = r.last_event();
+    if (distance) {
+      STRCMP_CONTAINS("protective stop (commanded): stop distance", ev.c_str());
+      STRCMP_CONTAINS("limit 20.0 mm", ev.c_str());
+      CHECK(travel_mm <= 20.0 + kTolMm + 0.5);
+      CHECK(travel_mm > 15.0);  // stopped at the limit, not far before it
+    } else {
+      STRCMP_CONTAINS("protective stop (commanded): stop time", ev.c_str());
+      STRCMP_CONTAINS("limit 0.150 s", ev.c_str());
+      CHECK(stop_s <= 0.15 + 0.01 + 0.0025);  // (whole cycles, from the first "stopping" to the first "idle")
+      CHECK(stop_s > 0.12);
+    }
+    CHECK_EQUAL(1u, r.tel().safety_stops);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}
+
+// Momentum and power (Reduced mode's limits; the puma560's masses): a fast joint move of joint 1
+// the planner never saw (queued directly) gets a protective stop in Reduced mode once the arm's
+// momentum passes 2 kg m/s (or its mechanical power 40 W) plus the tolerance; the event names
+// the function and the limit.
+TEST(SafetyMonitor, MomentumOrPowerAboveTheModesLimitGetsAProtectiveStop) {
+  for (const bool momentum : {true, false}) {
+    FwConfig c = table(250);
+    if (momentum)
+      c.safety_reduced_momentum_kg_m_s = 2;
+    else
+      c.safety_reduced_power_w = 40;
+    c.safety_tolerance_kg_m_s = 0.2;
+    c.safety_tolerance_w = 2;
+    Rig r(c);
+    r.enable();
+    r.to_work();
+    CHECK(r.svc().set_safety_mode(kin::SafetyMode::reduced).ok());
+    MotionItem* m = r.app.ctl->motions().back();
+    CHECK(m != nullptr);
+    m->id = 903;
+    JointMove& jm = m->payload.emplace<JointMove>();
+    jm.goal = work_pose();
+    jm.goal[0] += 90 * kDeg;
+    jm.override = 1.0;
+    jm.plan.n = 0;
+    r.app.ctl->motions().commit();
+    int stopped = -1;
+    for (int i = 0; i < 20000; ++i) {
+      r.cycle();
+      if (stopped < 0 && r.tel().state == ArmState::stopping) stopped = i;
+      if (stopped >= 0 && r.tel().state == ArmState::idle) break;
+    }
+    const std::string ev = r.last_event();
+    std::printf("\n  %s: protective stop from cycle %d: %s", momentum ? "momentum 2 kg m/s" : "power 40 W", stopped,
+                ev.c_str());
+    CHECK(stopped >= 0);
+    CHECK(r.tel().state == ArmState::idle);
+    CHECK(r.tel().q_cmd[0] < work_pose()[0] + 60 * kDeg);  // well short of the goal
+    CHECK(r.app.ctl->motions().empty());
+    if (momentum) {
+      STRCMP_CONTAINS("protective stop (commanded): momentum", ev.c_str());
+      STRCMP_CONTAINS("limit 2.00 kg m/s, value 2.2", ev.c_str());
+    } else {
+      STRCMP_CONTAINS("protective stop (commanded): power", ev.c_str());
+      STRCMP_CONTAINS("limit 40.0 W, value 4", ev.c_str());
+    }
+    CHECK_EQUAL(1u, r.tel().safety_stops);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}

@@ -12,6 +12,7 @@
 #include "../console/console_rig.hpp"
 #include "../program/tmp_dir.hpp"
 #include "servoarm/kinematics/description.hpp"
+#include "servoarm/kinematics/dynamics.hpp"
 #include "servoarm/service/arm_service.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -849,6 +850,229 @@ TEST(ArmService, JogStepsAndTheReducedModeAreCheckedToo) {
   }
   CHECK_TEXT(vmax <= 0.3 * 1.001, std::to_string(vmax).c_str());
   CHECK_TEXT(vmax > 0.25, std::to_string(vmax).c_str());  // not slower than it needs
+}
+
+// Joint speed limits per mode slow moves down instead of refusing them: a movej of joint 1 at
+// 100 % and a 400 mm/s line sideways (mostly joint 1; slowed in Reduced) are planned slower, and run on the
+// controller, their commanded joint 1 speed (differenced every cycle here) stays within the
+// mode's limit, 30 deg/s in Normal, 10 deg/s in Reduced, with no protective stop.
+TEST(ArmService, JointSpeedLimitsOfTheModeSlowMovesDown) {
+  FwConfig c = table_config(60);
+  c.safety_tcp_speed_mm_s = c.safety_reduced_tcp_speed_mm_s = 0;
+  c.safety_joint_speed_deg_s = {30, 0, 0, 0, 0, 0};
+  c.safety_reduced_joint_speed_deg_s = {10, 0, 0, 0, 0, 0};
+  c.max_linear_speed_mm_s = 500;
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  const double dt = 1.0 / c.rate_hz;
+  // runs the queue to rest; the highest commanded speed of joint 1 (deg/s)
+  auto run = [&] {
+    double prev = r.app.ctl->telemetry().q_cmd[0], vmax = 0;
+    for (int i = 0; i < 60000 && (!r.app.ctl->motions().empty() || r.app.ctl->telemetry().state != ArmState::idle); ++i) {
+      r.cycle();
+      const double q = r.app.ctl->telemetry().q_cmd[0];
+      vmax = std::fmax(vmax, std::fabs(q - prev) / dt / kDeg);
+      prev = q;
+    }
+    return vmax;
+  };
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  run();
+  for (const kin::SafetyMode mode : {kin::SafetyMode::normal, kin::SafetyMode::reduced}) {
+    const double limit = mode == kin::SafetyMode::normal ? 30 : 10;
+    CHECK(svc.set_safety_mode(mode).ok());
+    MoveJoints quick;
+    quick.goal = joints({40, -45, 180, 0, 45, 0});
+    quick.speed_pct = 100;
+    const MoveResult q = svc.move(quick, cx);
+    CHECK_TEXT(q.ok(), q.reason.c_str());
+    const double vj = run();
+    char fig[120];
+    std::snprintf(fig, sizeof fig, "%s movej: joint 1 at most %.2f deg/s (limit %.0f)", kin::to_string(mode), vj, limit);
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(vj <= limit * 1.002, fig);
+    CHECK_TEXT(vj > limit * 0.8, fig);  // not slower than it needs
+    MoveLine side;
+    kin::forward(r.app.chain, quick.goal, side.target);
+    side.target.translation().y() -= 0.1;
+    side.speed = 0.4;
+    const MoveResult l = svc.move(side, cx);
+    CHECK_TEXT(l.ok(), l.reason.c_str());
+    if (mode == kin::SafetyMode::reduced) CHECK_TEXT(l.speed < 0.4, std::to_string(l.speed).c_str());
+    const double vl = run();
+    std::snprintf(fig, sizeof fig, "%s movel: %.1f mm/s, joint 1 at most %.2f deg/s (limit %.0f)", kin::to_string(mode),
+                  l.speed * 1e3, vl, limit);
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(vl <= limit * 1.002, fig);
+    MoveJoints back = mj;
+    CHECK(svc.move(back, cx).ok());
+    run();
+  }
+  CHECK_EQUAL(0u, r.app.ctl->telemetry().safety_stops);
+}
+
+// Stopping distance and time limits per mode slow moves down: a movej of joint 1 at 100 % is
+// planned slower so that, run on the controller, the stop predicted every cycle from its
+// commanded state (computed here with plan_stop on the controller's limits and FK) stays within
+// the mode's limits: 30 mm / 0.3 s in Normal, 10 mm / 0.2 s in Reduced; no protective stop.
+TEST(ArmService, StoppingDistanceAndTimeLimitsOfTheModeSlowMovesDown) {
+  FwConfig c = table_config(60);
+  c.safety_tcp_speed_mm_s = c.safety_reduced_tcp_speed_mm_s = 0;
+  c.safety_stop_distance_mm = 30;
+  c.safety_stop_time_s = 0.3;
+  c.safety_reduced_stop_distance_mm = 10;
+  c.safety_reduced_stop_time_s = 0.2;
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  const double dt = 1.0 / c.rate_hz;
+  // runs the queue to rest; the longest predicted stop (s) and its farthest TCP travel (mm)
+  auto run = [&](double& t_max, double& d_max) {
+    t_max = d_max = 0;
+    kin::JointState st;
+    st.pos = st.vel = st.acc = kin::JointVector::Zero(6);
+    kin::JointTrajectory stop;
+    for (int i = 0; i < 60000 && (!r.app.ctl->motions().empty() || r.app.ctl->telemetry().state != ArmState::idle); ++i) {
+      r.cycle();
+      const Telemetry t = r.app.ctl->telemetry();
+      for (int j = 0; j < 6; ++j) {
+        const auto ju = static_cast<std::size_t>(j);
+        st.acc[j] = (t.qd_cmd[ju] - st.vel[j]) / dt;
+        st.pos[j] = t.q_cmd[ju];
+        st.vel[j] = t.qd_cmd[ju];
+      }
+      CHECK(kin::plan_stop(r.app.ctl->limits(), st, kin::MovejOptions{}, stop) == kin::MotionStatus::ok);
+      t_max = std::fmax(t_max, stop.duration);
+      d_max = std::fmax(d_max, (tool_at(r.app.chain, stop.goal) - tool_at(r.app.chain, st.pos)).norm() * 1e3);
+    }
+  };
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  double t_max = 0, d_max = 0;
+  run(t_max, d_max);
+  for (const kin::SafetyMode mode : {kin::SafetyMode::normal, kin::SafetyMode::reduced}) {
+    const bool normal = mode == kin::SafetyMode::normal;
+    const double d_lim = normal ? 30 : 10, t_lim = normal ? 0.3 : 0.2;
+    CHECK(svc.set_safety_mode(mode).ok());
+    MoveJoints quick;
+    quick.goal = joints({60, -45, 180, 0, 45, 0});
+    quick.speed_pct = 100;
+    const MoveResult q = svc.move(quick, cx);
+    CHECK_TEXT(q.ok(), q.reason.c_str());
+    run(t_max, d_max);
+    char fig[160];
+    std::snprintf(fig, sizeof fig, "%s movej in %.3f s: predicted stop at most %.3f s (limit %.1f), %.2f mm (limit %.0f)",
+                  kin::to_string(mode), q.duration, t_max, t_lim, d_max, d_lim);
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(d_max <= d_lim * 1.02, fig);  // (the acceleration here is differenced: 2 %)
+    CHECK_TEXT(t_max <= t_lim * 1.02, fig);
+    CHECK_TEXT(d_max > d_lim * 0.5 || t_max > t_lim * 0.5, fig);  // slowed, not stopped
+    MoveJoints back = mj;
+    CHECK(svc.move(back, cx).ok());
+    run(t_max, d_max);
+  }
+  CHECK_EQUAL(0u, r.app.ctl->telemetry().safety_stops);
+}
+
+// Momentum and power limits per mode slow moves down: a movej of joint 1 at 100 % is planned
+// slower so that, run on the controller, the arm's momentum (each link's mass x the speed of its
+// centre of mass, differenced every cycle here from FK of the commanded joints) and mechanical
+// power (sum |tau qd|, tau by inverse dynamics) stay within the mode's limits: 6 kg m/s / 2 W
+// in Normal (the power binds; the planner's estimate from (power / limit)^(1/2) slows more than
+// needed), 2 kg m/s / 40 W in Reduced (the momentum binds: no slower than needed); no protective stop.
+TEST(ArmService, MomentumAndPowerLimitsOfTheModeSlowMovesDown) {
+  FwConfig c = table_config(60);
+  c.safety_tcp_speed_mm_s = c.safety_reduced_tcp_speed_mm_s = 0;
+  c.safety_momentum_kg_m_s = 6;
+  c.safety_power_w = 2;  // (joint 1 turns about the vertical: little power, this one binds)
+  c.safety_reduced_momentum_kg_m_s = 2;
+  c.safety_reduced_power_w = 40;
+  test::ConsoleRig r(c);
+  CHECK(r.app.chain.has_inertial);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  const double dt = 1.0 / c.rate_hz;
+  const kin::Chain& ch = r.app.chain;
+  auto coms = [&](const kin::JointVector& q, std::array<Eigen::Vector3d, kin::kMaxRows>& out) {
+    kin::FrameSet f;
+    kin::Pose p;
+    CHECK(kin::forward_frames(ch, q, f, p) == kin::Status::ok);
+    for (int i = 0; i < ch.n_rows; ++i) {
+      const auto& in = ch.inertial[static_cast<std::size_t>(i)];
+      out[static_cast<std::size_t>(i)] = f.frame[i + 1] * Eigen::Vector3d(in.com[0], in.com[1], in.com[2]);
+    }
+  };
+  // runs the queue to rest; the highest momentum (kg m/s) and power (W)
+  auto run = [&](double& p_max, double& w_max) {
+    p_max = w_max = 0;
+    kin::JointVector q(6), qd(6), qd_prev = kin::JointVector::Zero(6), qdd(6), tau(6);
+    std::array<Eigen::Vector3d, kin::kMaxRows> c0{}, c1{};
+    for (int j = 0; j < 6; ++j) q[j] = r.app.ctl->telemetry().q_cmd[static_cast<std::size_t>(j)];
+    coms(q, c0);
+    for (int i = 0; i < 60000 && (!r.app.ctl->motions().empty() || r.app.ctl->telemetry().state != ArmState::idle); ++i) {
+      r.cycle();
+      const Telemetry t = r.app.ctl->telemetry();
+      for (int j = 0; j < 6; ++j) {
+        const auto ju = static_cast<std::size_t>(j);
+        q[j] = t.q_cmd[ju];
+        qd[j] = t.qd_cmd[ju];
+        qdd[j] = (qd[j] - qd_prev[j]) / dt;
+      }
+      qd_prev = qd;
+      coms(q, c1);
+      double p = 0;
+      for (int k = 0; k < ch.n_rows; ++k)
+        p += ch.inertial[static_cast<std::size_t>(k)].mass * (c1[std::size_t(k)] - c0[std::size_t(k)]).norm() / dt;
+      c0 = c1;
+      CHECK(kin::inverse_dynamics(ch, q, qd, qdd, tau) == kin::Status::ok);
+      double w = 0;
+      for (int j = 0; j < 6; ++j) w += std::fabs(tau[j] * qd[j]);
+      p_max = std::fmax(p_max, p);
+      w_max = std::fmax(w_max, w);
+    }
+  };
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  double p_max = 0, w_max = 0;
+  run(p_max, w_max);
+  for (const kin::SafetyMode mode : {kin::SafetyMode::normal, kin::SafetyMode::reduced}) {
+    const bool normal = mode == kin::SafetyMode::normal;
+    const double p_lim = normal ? 6 : 2, w_lim = normal ? 2 : 40;
+    CHECK(svc.set_safety_mode(mode).ok());
+    MoveJoints quick;
+    quick.goal = joints({60, -45, 180, 0, 45, 0});
+    quick.speed_pct = 100;
+    const MoveResult q = svc.move(quick, cx);
+    CHECK_TEXT(q.ok(), q.reason.c_str());
+    run(p_max, w_max);
+    char fig[160];
+    std::snprintf(fig, sizeof fig, "%s movej in %.3f s: momentum at most %.3f kg m/s (limit %.0f), power %.1f W (limit %.0f)",
+                  kin::to_string(mode), q.duration, p_max, p_lim, w_max, w_lim);
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(p_max <= p_lim * 1.02, fig);  // (differenced here: 2 %)
+    CHECK_TEXT(w_max <= w_lim * 1.02, fig);
+    // slowed: longer than at 100 %; by the momentum (proportional to speed) not more than needed
+    kin::JointTrajectory full;
+    CHECK(kin::plan_movej(r.app.ctl->limits(), kin::JointState::rest(mj.goal), quick.goal, kin::MovejOptions{}, full) ==
+          kin::MotionStatus::ok);
+    CHECK_TEXT(q.duration > full.duration * 1.5, fig);
+    if (!normal) CHECK_TEXT(p_max > p_lim * 0.9, fig);
+    MoveJoints back = mj;
+    CHECK(svc.move(back, cx).ok());
+    run(p_max, w_max);
+  }
+  CHECK_EQUAL(0u, r.app.ctl->telemetry().safety_stops);
 }
 
 // Without [safety], switching the mode is refused with one line and nothing changes.

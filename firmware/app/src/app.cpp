@@ -20,7 +20,7 @@ ControllerConfig App::controller_config() const {
   c.drive_quick_stop = cfg.stop == "drive";
   c.drive_stop_timeout = cfg.drive_stop_timeout_s;
   c.unhomed_jog_scale = cfg.homing_unhomed_jog_pct / 100.0;
-  (void)safety_envelope(cfg, c.safety);  // validated in build(): [safety] -> SI (disabled when none)
+  (void)safety_envelope(cfg, chain, c.safety);  // validated in build(): [safety] -> SI (disabled when none)
   // homing.order (1-based joints) -> bit masks; [] = one group of every joint
   c.homing_groups = 0;
   if (cfg.homing_order.empty()) {
@@ -77,7 +77,7 @@ ConsoleConfig App::console_config() const {
   c.jog_speed_pct = cfg.console_jog_speed_pct;
   c.dialect = cfg.console_dialect == "grbl" ? Dialect::grbl : Dialect::native;
   c.config_text = to_toml(cfg);
-  (void)safety_envelope(cfg, c.safety);  // the service checks every planned move against it
+  (void)safety_envelope(cfg, chain, c.safety);  // the service checks every planned move against it
   c.safety_checksum = safety_checksum(cfg);
   // Only an absolute path (armfw resolves console.frames_file against the configuration
   // file's folder): a relative one would land in whatever the working directory is.

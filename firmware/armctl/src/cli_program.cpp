@@ -139,7 +139,7 @@ std::string apply_config(const FwConfig& cfg, kin::Chain& chain, ProgramCheckOpt
   opt.rate_hz = cfg.rate_hz;
   opt.default_blend_rad = kConfigUnits.angle_in(cfg.default_blend_deg);
   opt.default_blend_m = kConfigUnits.length_in(cfg.default_blend_mm);
-  if (const std::string e = safety_envelope(cfg, opt.safety); !e.empty()) return e;
+  if (const std::string e = safety_envelope(cfg, chain, opt.safety); !e.empty()) return e;
   return "";
 }
 

@@ -352,6 +352,42 @@ const ConfigKey kConfigTable[] = {
       "elbow speed limit in Reduced mode; 0 = none"}.within(0, 10000),
     K{"safety.reduced_cone_deg", &F::safety_reduced_cone_deg, "deg",
       "half-angle of the orientation cone in Reduced mode"}.above(0, 180),
+    K{"safety.joint_speed_deg_s", &F::safety_joint_speed_deg_s, "deg/s (mm/s)",
+      "joint speed limits in Normal mode, one per joint (0 = none for that joint), tighter than the joints' motion "
+      "limits: moves are planned within them (a joint move at a lower override, a line at a lower speed); the "
+      "run-time monitor makes a protective stop naming the joint beyond one plus safety.tolerance_deg_s; `[]` = none"}
+        .within(0, 1e6).length(0, kin::kMaxJoints),
+    K{"safety.reduced_joint_speed_deg_s", &F::safety_reduced_joint_speed_deg_s, "deg/s (mm/s)",
+      "joint speed limits in Reduced mode, one per joint (0 = none for that joint); `[]` = none"}
+        .within(0, 1e6).length(0, kin::kMaxJoints),
+    K{"safety.stop_time_s", &F::safety_stop_time_s, "s",
+      "stopping time limit in Normal mode: the stop predicted from the commanded state, braked on the joints' "
+      "limits as a protective stop brakes, lasts at most this long; moves are planned slower to keep it, the "
+      "run-time monitor makes a protective stop beyond it plus safety.tolerance_s; 0 = none"}
+        .within(0, 60),
+    K{"safety.stop_distance_mm", &F::safety_stop_distance_mm, "mm",
+      "stopping distance limit in Normal mode: the TCP's straight-line travel during that predicted stop; moves "
+      "are planned slower to keep it, the monitor makes a protective stop beyond it plus safety.tolerance_mm; "
+      "0 = none"}
+        .within(0, 10000),
+    K{"safety.reduced_stop_time_s", &F::safety_reduced_stop_time_s, "s", "stopping time limit in Reduced mode; 0 = none"}
+        .within(0, 60),
+    K{"safety.reduced_stop_distance_mm", &F::safety_reduced_stop_distance_mm, "mm",
+      "stopping distance limit in Reduced mode; 0 = none"}.within(0, 10000),
+    K{"safety.momentum_kg_m_s", &F::safety_momentum_kg_m_s, "kg m/s",
+      "momentum limit in Normal mode: the sum over the links of mass x the speed of its centre of mass (the "
+      "description's inertial data); moves are planned slower to keep it, the run-time monitor makes a protective "
+      "stop beyond it plus safety.tolerance_kg_m_s; 0 = none"}
+        .within(0, 10000),
+    K{"safety.power_w", &F::safety_power_w, "W",
+      "mechanical power limit in Normal mode: the sum over the joints of |torque x velocity| (inverse dynamics: "
+      "inertia, gravity, friction); moves are planned slower to keep it, the monitor makes a protective stop "
+      "beyond it plus safety.tolerance_w; 0 = none"}
+        .within(0, 1e6),
+    K{"safety.reduced_momentum_kg_m_s", &F::safety_reduced_momentum_kg_m_s, "kg m/s",
+      "momentum limit in Reduced mode; 0 = none"}.within(0, 10000),
+    K{"safety.reduced_power_w", &F::safety_reduced_power_w, "W", "mechanical power limit in Reduced mode; 0 = none"}
+        .within(0, 1e6),
     K{"safety.tolerance_mm", &F::safety_tolerance_mm, "mm",
       "how far beyond a plane or box the run-time monitor lets the tool go before a protective stop (plan time "
       "allows none)"}.within(0, 100),
@@ -361,6 +397,17 @@ const ConfigKey kConfigTable[] = {
     K{"safety.tolerance_mm_s", &F::safety_tolerance_mm_s, "mm/s",
       "how far above a speed limit the run-time monitor lets the TCP or elbow go before a protective stop"}
         .within(0, 1000),
+    K{"safety.tolerance_deg_s", &F::safety_tolerance_deg_s, "deg/s (mm/s)",
+      "how far above its speed limit the run-time monitor lets a joint go before a protective stop"}
+        .within(0, 1000),
+    K{"safety.tolerance_s", &F::safety_tolerance_s, "s",
+      "how far above the stopping time limit the run-time monitor lets the predicted stop go before a protective "
+      "stop"}.within(0, 10),
+    K{"safety.tolerance_kg_m_s", &F::safety_tolerance_kg_m_s, "kg m/s",
+      "how far above the momentum limit the run-time monitor lets the arm go before a protective stop"}
+        .within(0, 10000),
+    K{"safety.tolerance_w", &F::safety_tolerance_w, "W",
+      "how far above the power limit the run-time monitor lets the arm go before a protective stop"}.within(0, 1e6),
     K{"motion.home_deg", &F::home_deg, "deg (mm)",
       "park pose for `park` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
       "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
@@ -1597,7 +1644,7 @@ std::string validate_for_chain(const FwConfig& c, const kin::Chain& chain) {
 
 std::string safety_for_chain(const FwConfig& c, const kin::Chain& chain) {
   kin::SafetyConfig env;
-  if (std::string bad = safety_envelope(c, env); !bad.empty()) return bad;
+  if (std::string bad = safety_envelope(c, chain, env); !bad.empty()) return bad;
   if (c.safety_elbow_frame > chain.n_rows)
     return "safety.elbow_frame: " + std::to_string(c.safety_elbow_frame) + " is not a frame of " + c.robot + " (0.." +
            std::to_string(chain.n_rows) + ")";
@@ -1632,10 +1679,28 @@ std::string safety_for_chain(const FwConfig& c, const kin::Chain& chain) {
   return "";
 }
 
-std::string safety_envelope(const FwConfig& c, kin::SafetyConfig& out) {
+std::string safety_envelope(const FwConfig& c, const kin::Chain& chain, kin::SafetyConfig& out) {
   out = kin::SafetyConfig{};
   kin::SafetyConfig e;
   constexpr double mm = 1e-3, deg = 3.14159265358979323846 / 180.0;
+  // per joint: deg/s for a revolute joint, mm/s for a prismatic one, one value per joint
+  const int n = std::min(chain.n_joints, kin::kMaxJoints);
+  for (const auto& [key, list] : {std::pair{"safety.joint_speed_deg_s", &c.safety_joint_speed_deg_s},
+                                  std::pair{"safety.reduced_joint_speed_deg_s", &c.safety_reduced_joint_speed_deg_s}})
+    if (!list->empty() && list->size() != static_cast<std::size_t>(n))
+      return std::string(key) + ": needs one value per joint of " + c.robot + " (" + std::to_string(n) + "), got " +
+             std::to_string(list->size());
+  bool joint_limits = false;
+  for (int j = 0; j < n; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    if (chain.joint(j).type == kin::JointType::prismatic) e.prismatic |= 1u << j;
+    e.joint_speed_tolerance[ju] = kConfigUnits.joint_in(chain, j, c.safety_tolerance_deg_s);
+    if (!c.safety_joint_speed_deg_s.empty())
+      e.normal.joint_speed[ju] = kConfigUnits.joint_in(chain, j, c.safety_joint_speed_deg_s[ju]);
+    if (!c.safety_reduced_joint_speed_deg_s.empty())
+      e.reduced.joint_speed[ju] = kConfigUnits.joint_in(chain, j, c.safety_reduced_joint_speed_deg_s[ju]);
+    joint_limits = joint_limits || e.normal.joint_speed[ju] > 0 || e.reduced.joint_speed[ju] > 0;
+  }
   for (std::size_t i = 0; i + 3 < c.safety_planes.size() && e.plane_count < kin::kMaxSafetyPlanes; i += 4) {
     const Eigen::Vector3d n(c.safety_planes[i], c.safety_planes[i + 1], c.safety_planes[i + 2]);
     if (!(n.norm() > 1e-9)) return "safety.planes: plane " + std::to_string(i / 4) + ": zero normal";
@@ -1657,14 +1722,35 @@ std::string safety_envelope(const FwConfig& c, kin::SafetyConfig& out) {
     e.cone = true;
     e.cone_axis = a.normalized();
   }
-  e.normal = {c.safety_tcp_speed_mm_s * mm, c.safety_elbow_speed_mm_s * mm, c.safety_cone_deg * deg};
-  e.reduced = {c.safety_reduced_tcp_speed_mm_s * mm, c.safety_reduced_elbow_speed_mm_s * mm,
-               c.safety_reduced_cone_deg * deg};
+  e.normal.tcp_speed = c.safety_tcp_speed_mm_s * mm;
+  e.normal.elbow_speed = c.safety_elbow_speed_mm_s * mm;
+  e.normal.cone_half_angle = c.safety_cone_deg * deg;
+  e.reduced.tcp_speed = c.safety_reduced_tcp_speed_mm_s * mm;
+  e.reduced.elbow_speed = c.safety_reduced_elbow_speed_mm_s * mm;
+  e.reduced.cone_half_angle = c.safety_reduced_cone_deg * deg;
+  e.normal.stop_time = c.safety_stop_time_s;
+  e.normal.stop_distance = c.safety_stop_distance_mm * mm;
+  e.reduced.stop_time = c.safety_reduced_stop_time_s;
+  e.reduced.stop_distance = c.safety_reduced_stop_distance_mm * mm;
+  e.stop_time_tolerance = c.safety_tolerance_s;
+  e.normal.momentum = c.safety_momentum_kg_m_s;
+  e.normal.power = c.safety_power_w;
+  e.reduced.momentum = c.safety_reduced_momentum_kg_m_s;
+  e.reduced.power = c.safety_reduced_power_w;
+  e.momentum_tolerance = c.safety_tolerance_kg_m_s;
+  e.power_tolerance = c.safety_tolerance_w;
+  if ((e.normal.has_dynamics_limit() || e.reduced.has_dynamics_limit()) && !chain.has_inertial)
+    return std::string(e.normal.momentum > 0   ? "safety.momentum_kg_m_s"
+                       : e.normal.power > 0    ? "safety.power_w"
+                       : e.reduced.momentum > 0 ? "safety.reduced_momentum_kg_m_s"
+                                                : "safety.reduced_power_w") +
+           ": needs the robot's masses (" + c.robot + "'s description has no inertial data, docs/dynamics.md)";
   e.position_tolerance = c.safety_tolerance_mm * mm;
   e.angle_tolerance = c.safety_tolerance_deg * deg;
   e.speed_tolerance = c.safety_tolerance_mm_s * mm;
   e.enabled = e.plane_count > 0 || e.box_count > 0 || e.cone || e.normal.tcp_speed > 0 || e.normal.elbow_speed > 0 ||
-              e.reduced.tcp_speed > 0 || e.reduced.elbow_speed > 0;
+              e.reduced.tcp_speed > 0 || e.reduced.elbow_speed > 0 || joint_limits || e.normal.has_stop_limit() ||
+              e.reduced.has_stop_limit() || e.normal.has_dynamics_limit() || e.reduced.has_dynamics_limit();
   char buf[160];
   if (const std::string bad = kin::safety_config_problem(e, buf, sizeof buf); !bad.empty()) return "safety: " + bad;
   out = e;

@@ -331,8 +331,27 @@ std::string Console::status_text() const {
 std::string Console::safety_text() const {
   const ArmStatus st = svc_->status();
   if (!st.safety_on) return "safety=off";
-  return fmt("safety=on mode=%s checksum=%08X stops=%u", kin::to_string(st.safety_mode),
-             static_cast<unsigned>(st.safety_checksum), static_cast<unsigned>(ctl_.telemetry().safety_stops));
+  std::string s = fmt("safety=on mode=%s checksum=%08X stops=%u", kin::to_string(st.safety_mode),
+                      static_cast<unsigned>(st.safety_checksum), static_cast<unsigned>(ctl_.telemetry().safety_stops));
+  // the mode's limits that are set, in the [safety] keys' units (docs/safety.md)
+  const kin::SafetyConfig& env = svc_->settings().safety;
+  const kin::SafetyLimits& lim = env.limits(st.safety_mode);
+  if (lim.tcp_speed > 0) s += fmt(" tcp_speed_mm_s=%g", lim.tcp_speed * 1e3);
+  if (lim.elbow_speed > 0 && env.elbow_frame >= 0) s += fmt(" elbow_speed_mm_s=%g", lim.elbow_speed * 1e3);
+  const int n = std::min(chain_.n_joints, kin::kMaxJoints);
+  std::string js;
+  bool any = false;
+  for (int j = 0; j < n; ++j) {
+    const double v = lim.joint_speed[static_cast<std::size_t>(j)];
+    any = any || v > 0;
+    js += fmt("%s%g", j ? "," : "", ((env.prismatic >> j) & 1u) ? v * 1e3 : v * 180.0 / M_PI);
+  }
+  if (any) s += " joint_speed_deg_s=[" + js + "]";
+  if (lim.stop_time > 0) s += fmt(" stop_time_s=%g", lim.stop_time);
+  if (lim.stop_distance > 0) s += fmt(" stop_distance_mm=%g", lim.stop_distance * 1e3);
+  if (lim.momentum > 0) s += fmt(" momentum_kg_m_s=%g", lim.momentum);
+  if (lim.power > 0) s += fmt(" power_w=%g", lim.power);
+  return s;
 }
 
 std::string Console::dynamics_text() const {

@@ -1337,8 +1337,9 @@ void Controller::step_safety() {
   const bool jogging = mode_ == Mode::jogging;
   kin::SafetyViolation v;
   bool on_actual = false;
-  const bool hit = safety_.update(cmd_.pos, q_act_, sm, jogging, v, on_actual);
+  bool hit = safety_.update(cmd_.pos, q_act_, sm, jogging, v, on_actual);
   if (!watch) return;
+  if (!hit && safety_.check_state(limits_, cmd_, sm, v)) hit = true, on_actual = false;  // stop, momentum, power
   char line[sizeof(Event::message)];
   char what[sizeof(Event::message)];
   if (jogging && !hit && safety_.predict_stop(limits_, cmd_, sm, v)) {

@@ -18,16 +18,12 @@ bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector
   const bool ok_act = kin::safety_sample(*chain_, cfg_, q_act, -1.0, act_);
   cmd_.has_velocity = act_.has_velocity = false;
   const bool had_prev = have_prev_;
-  if (had_prev) {
-    cmd_.has_velocity = true;
-    cmd_.tcp_velocity = (cmd_.tcp.translation() - prev_cmd_.tcp.translation()) / period_s_;
-    cmd_.elbow_velocity = (cmd_.elbow - prev_cmd_.elbow) / period_s_;
-  }
+  if (had_prev) kin::set_velocity(cmd_, prev_cmd_, prev_q_cmd_, q_cmd, period_s_);
   // The measured state's speed would be the drives' position quantisation differenced every
   // cycle: only its positions and orientation are checked.
   const double pm = cfg_.position_tolerance, am = cfg_.angle_tolerance, sm = cfg_.speed_tolerance;
   bool hit = false;
-  if (ok_cmd && kin::check_sample(cfg_, mode, cmd_, pm, am, sm, out)) {
+  if (ok_cmd && kin::check_sample(cfg_, mode, cmd_, pm, am, sm, out, 1.0)) {
     hit = !only_growing || !had_prev || out.excess() > kin::safety_excess(cfg_, mode, prev_cmd_, out);
     on_actual = false;
   }
@@ -38,6 +34,20 @@ bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector
   have_prev_ = ok_cmd && ok_act;
   prev_cmd_ = cmd_;
   prev_act_ = act_;
+  prev_q_cmd_ = q_cmd;
+  return hit;
+}
+
+bool SafetyMonitor::check_state(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
+                                kin::SafetyViolation& out) {
+  if (!cfg_.enabled || chain_ == nullptr) return false;
+  const kin::SafetyLimits& lim = cfg_.limits(mode);
+  if (!lim.has_stop_limit() && !lim.has_dynamics_limit()) return false;
+  // cmd_ is the TCP at cmd.pos (update() of this cycle)
+  if (lim.has_stop_limit()) (void)kin::stop_prediction(*chain_, limits, cmd, stop_, cmd_);
+  if (lim.has_dynamics_limit()) (void)kin::dynamics_prediction(*chain_, cmd, cmd_);
+  const bool hit = kin::check_stop(cfg_, mode, cmd_, cfg_.position_tolerance, 1.0, out);
+  cmd_.has_stop = cmd_.has_dynamics = false;
   return hit;
 }
 

@@ -374,7 +374,7 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
     return r;
   }
   if (!duration_ok(jm.plan.duration, r)) return r;
-  // The envelope along the plan. A TCP or elbow speed above its limit slows the move down
+  // The envelope along the plan. A TCP, elbow or joint speed above its limit slows the move down
   // instead (the same joint path at a lower override: every speed scales with it), the
   // override divided by the highest speed / limit along the path (sampled: a few times at most).
   for (int attempt = 0;; ++attempt) {
@@ -384,9 +384,9 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
     kin::SafetyViolation sv;
     double ratio = 1;
     if (envelope_ok(cx.chain != nullptr ? *cx.chain : chain_, plan_.duration, at, "movej", r, &sv, &ratio)) break;
-    const bool speed = sv.function == kin::SafetyFunction::tcp_speed || sv.function == kin::SafetyFunction::elbow_speed;
+    const bool speed = kin::is_speed(sv.function);
     const double slower = jm.override * 0.995 / std::max(ratio, 1.0);
-    if (!speed || attempt >= 5 || !(slower >= kMinJointSpeedPct / 100.0)) return r;
+    if (!speed || attempt >= 12 || !(slower >= kMinJointSpeedPct / 100.0)) return r;
     const MoveResult refused = r;
     r = MoveResult{};
     jm.override = o.override = slower;
@@ -419,23 +419,32 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
   MotionItem* m = slot(cx.dry != nullptr, r);
   if (m == nullptr) return r;
   kin::CartesianLimits cl = cfg_.cartesian;
-  cl.linear_velocity = speed;
   const kin::MovelOptions mo;
   kin::PathReport rep;
   const kin::JointVector q0 = cx.dry != nullptr ? cx.dry->tail : tail();
   kin::CartesianTrajectory& traj = m->payload.emplace<CartesianMove>().path;
   const kin::Chain& chain = cx.chain != nullptr ? *cx.chain : chain_;
-  const kin::MotionStatus ms = kin::plan_movel(chain, q0, req.target, cl, mo, cx.ik, traj, &rep);
-  if (!kin::is_ok(ms)) {
-    r = refuse(MoveRefusal::plan, motion_error(ms));
-    r.status = ms, r.s = rep.s, r.position = rep.position, r.joint = rep.joint;
-    return r;
-  }
-  if (!duration_ok(traj.duration, r)) return r;
-  {
+  kin::MotionStatus ms = kin::MotionStatus::ok;
+  // The envelope along the line. A speed above its limit (a joint's, the elbow's) slows the
+  // line down instead: planned again at its speed divided by the highest speed / limit found.
+  for (int attempt = 0;; ++attempt) {
+    cl.linear_velocity = speed;
+    ms = kin::plan_movel(chain, q0, req.target, cl, mo, cx.ik, traj, &rep);
+    if (!kin::is_ok(ms)) {
+      r = refuse(MoveRefusal::plan, motion_error(ms));
+      r.status = ms, r.s = rep.s, r.position = rep.position, r.joint = rep.joint;
+      return r;
+    }
+    if (!duration_ok(traj.duration, r)) return r;
     kin::JointVector v(n_), a(n_);
     auto at = [&](double t, kin::JointVector& q) { traj.sample_precomputed(t, q, v, a); return true; };
-    if (!envelope_ok(chain, traj.duration, at, "movel", r)) return r;
+    kin::SafetyViolation sv;
+    double ratio = 1;
+    if (envelope_ok(chain, traj.duration, at, "movel", r, &sv, &ratio)) break;
+    const double slower = speed * 0.995 / std::max(ratio, 1.0);
+    if (!kin::is_speed(sv.function) || attempt >= 12 || !(slower >= kMinLinearSpeedMmS * 1e-3)) return r;
+    r = MoveResult{};
+    speed = slower;
   }
   traj.ik = cx.ik;
   r.status = ms;

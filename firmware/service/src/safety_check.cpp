@@ -25,11 +25,8 @@ std::string envelope_violation_at(const kin::SafetyConfig& env, kin::SafetyMode 
   kin::SafetySample x;
   if (!kin::safety_sample(chain, env, q, 1.0, x)) return "";  // a bad q is refused by the joint checks
   kin::SafetySample p;
-  if (dt > 0 && q_prev.size() == q.size() && kin::safety_sample(chain, env, q_prev, 0.0, p)) {
-    x.has_velocity = true;
-    x.tcp_velocity = (x.tcp.translation() - p.tcp.translation()) / dt;
-    x.elbow_velocity = (x.elbow - p.elbow) / dt;
-  }
+  if (dt > 0 && q_prev.size() == q.size() && kin::safety_sample(chain, env, q_prev, 0.0, p))
+    kin::set_velocity(x, p, q_prev, q, dt);
   kin::SafetyViolation v;
   if (kin::check_sample(env, mode, x, 0.0, 0.0, 0.0, v)) return line_of(v);
   return "";
@@ -49,28 +46,38 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
   // 250 mm/s the tool moves at most 0.6 mm between two samples.
   const double dt = std::max(1.0 / rate_hz_, duration / 4000.0);
   const int n = std::max(1, static_cast<int>(std::ceil(duration / dt)));
-  kin::JointVector q(n_);
+  kin::JointVector q(n_), q_prev(n_);
+  // the predicted stop at each sample (stop limits): from the sampled joints, their velocities
+  // and accelerations by differences, braked with the joints' limits as the controller brakes;
+  // the momentum and power (their limits) at the same state
+  const bool stops = env.limits(safety_mode_).has_stop_limit();
+  const bool dynamics = env.limits(safety_mode_).has_dynamics_limit();
+  kin::JointState st;
+  st.pos = st.vel = st.acc = kin::JointVector::Zero(n_);
+  kin::JointVector v_prev = kin::JointVector::Zero(n_);
+  kin::JointTrajectory ramp;
   kin::SafetySample prev, x;
   bool have_prev = false;
   kin::SafetyViolation v;
-  const kin::SafetyLimits& lim = env.limits(safety_mode_);
   double ratio = 0;  // the highest speed / limit along the whole path
   bool refused = false;
   for (int k = 0; k <= n; ++k) {
     const double t = std::min(duration, k * dt);
     if (!at(t, q) || !kin::safety_sample(chain, env, q, duration > 0 ? t / duration : 1.0, x)) continue;
-    if (have_prev && t > prev.s * duration) {
-      const double h = t - prev.s * duration;
-      x.has_velocity = h > 0;
-      if (h > 0) {
-        x.tcp_velocity = (x.tcp.translation() - prev.tcp.translation()) / h;
-        x.elbow_velocity = (x.elbow - prev.elbow) / h;
+    const double h = t - prev.s * duration;
+    if (have_prev) kin::set_velocity(x, prev, q_prev, q, h);
+    // (not on a last sample much closer than dt: its acceleration by difference would blow up)
+    if ((stops || dynamics) && x.has_velocity && h >= 0.5 * dt) {
+      st.pos = q;
+      for (int j = 0; j < n_; ++j) {
+        st.vel[j] = x.joint_velocity[static_cast<std::size_t>(j)];
+        st.acc[j] = (st.vel[j] - v_prev[j]) / h;
       }
+      v_prev = st.vel;
+      if (stops) (void)kin::stop_prediction(chain, lim_, st, ramp, x);
+      if (dynamics) (void)kin::dynamics_prediction(chain, st, x);
     }
-    if (x.has_velocity) {
-      if (lim.tcp_speed > 0) ratio = std::max(ratio, x.tcp_velocity.norm() / lim.tcp_speed);
-      if (lim.elbow_speed > 0 && env.elbow_frame >= 0) ratio = std::max(ratio, x.elbow_velocity.norm() / lim.elbow_speed);
-    }
+    ratio = std::max(ratio, kin::speed_ratio(env, safety_mode_, x));
     // (speeds: 1e-6 m/s of rounding, so that a line planned at the limit passes)
     if (!refused && kin::check_sample(env, safety_mode_, x, 0.0, 0.0, 1e-6, v)) {
       r = refuse(MoveRefusal::arm_state, CmdError::limits);
@@ -80,10 +87,10 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
       r.reason = line_of(v) + "; nothing queued";
       if (violation != nullptr) *violation = v;
       refused = true;
-      const bool speed = v.function == kin::SafetyFunction::tcp_speed || v.function == kin::SafetyFunction::elbow_speed;
-      if (speed_ratio == nullptr || !speed) return false;  // (a speed: on to the path's highest)
+      if (speed_ratio == nullptr || !kin::is_speed(v.function)) return false;  // (a speed: on to the path's highest)
     }
     prev = x;
+    q_prev = q;
     have_prev = true;
   }
   if (speed_ratio != nullptr) *speed_ratio = ratio;

@@ -18,7 +18,16 @@
 //    (value the distance, negative inside the box: minus the clearance to its nearest face;
 //    limit r).
 //  - the cone: the angle between the tool's z axis and `axis` is at most `half_angle`.
-//  - speeds: |v| of the TCP / of the elbow frame's origin at most the limit.
+//  - speeds: |v| of the TCP / of the elbow frame's origin at most the limit; |qd_j| of each
+//    joint at most its limit (rad/s, m/s for a prismatic joint).
+//  - the predicted stop: from the state (positions, velocities, accelerations) braked with the
+//    joints' limits (plan_stop, the ramp the controller stops with), its duration at most the
+//    stop time limit and the TCP's straight-line travel to where it rests at most the stop
+//    distance limit.
+//  - momentum: the sum over the links of mass x the speed of its centre of mass (kg m/s), and
+//    mechanical power: the sum over the joints of |torque x velocity| (W, torques by inverse
+//    dynamics: inertia, Coriolis, gravity, friction), each at most its limit (needs the
+//    description's inertial data).
 // A function is violated when its value is beyond its limit by more than the margin the
 // caller passes (0 at plan time, the function's tolerance in the run-time monitor).
 //
@@ -29,6 +38,7 @@
 #include <span>
 
 #include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/trajectory.hpp"
 #include "servoarm/kinematics/types.hpp"
 
 namespace servoarm::kin {
@@ -53,6 +63,13 @@ struct SafetyLimits {
   double tcp_speed = 0;    ///< m/s; 0 = no limit
   double elbow_speed = 0;  ///< m/s; 0 = no limit
   double cone_half_angle = 0;  ///< rad; used when SafetyConfig::cone is set
+  std::array<double, kMaxJoints> joint_speed{};  ///< rad/s (m/s prismatic) per joint; 0 = no limit
+  double stop_time = 0;      ///< s: the predicted stop's duration; 0 = no limit
+  double stop_distance = 0;  ///< m: the TCP's travel during the predicted stop; 0 = no limit
+  bool has_stop_limit() const { return stop_time > 0 || stop_distance > 0; }
+  double momentum = 0;  ///< kg m/s; 0 = no limit
+  double power = 0;     ///< W; 0 = no limit
+  bool has_dynamics_limit() const { return momentum > 0 || power > 0; }
 };
 
 enum class SafetyMode : std::uint8_t { normal, reduced };
@@ -72,6 +89,11 @@ struct SafetyConfig {
   double position_tolerance = 0.002;  ///< m: run-time margin of planes and boxes
   double angle_tolerance = 0.035;     ///< rad: run-time margin of the cone
   double speed_tolerance = 0.02;      ///< m/s: run-time margin of the speed limits
+  std::array<double, kMaxJoints> joint_speed_tolerance{};  ///< rad/s (m/s): run-time margin per joint
+  double stop_time_tolerance = 0.02;  ///< s: run-time margin of the stop time (the stop distance's: position_tolerance)
+  double momentum_tolerance = 0.5;    ///< kg m/s: run-time margin of the momentum
+  double power_tolerance = 5;         ///< W: run-time margin of the power
+  std::uint32_t prismatic = 0;  ///< bit j: joint j is prismatic (its speeds in mm/s, not deg/s)
   const SafetyLimits& limits(SafetyMode m) const;
 };
 
@@ -83,6 +105,11 @@ enum class SafetyFunction : std::uint8_t {
   orientation,  ///< the tool-orientation cone
   tcp_speed,
   elbow_speed,
+  joint_speed,  ///< index = joint (0-based; "joint j+1" in text)
+  stop_time,      ///< the predicted stop's duration
+  stop_distance,  ///< the TCP's travel during the predicted stop
+  momentum,       ///< the links' mass x centre-of-mass speed, summed
+  power,          ///< the joints' |torque x velocity|, summed
 };
 const char* to_string(SafetyFunction f);
 const char* to_string(SafetyMode m);
@@ -91,6 +118,7 @@ struct SafetyViolation {
   SafetyFunction function = SafetyFunction::none;
   int index = -1;      ///< plane or box index
   bool elbow = false;  ///< the elbow sphere, not the tool sphere
+  bool linear = false; ///< joint_speed of a prismatic joint: m/s (mm/s in text), else rad/s (deg/s)
   double s = 0;        ///< where along the path (the sample's s; 0..1 for a move; < 0 at run time)
   Eigen::Vector3d where{0, 0, 0};  ///< m: the sphere's centre (TCP or elbow)
   double limit = 0;    ///< m, rad or m/s (see the conventions above)
@@ -105,7 +133,7 @@ struct SafetyViolation {
 const char* describe(const SafetyViolation& v, char* buf, std::size_t size);
 
 /// One state to check: the TCP pose, the elbow frame's origin (when the config has one) and,
-/// for the speed limits, their velocities (has_velocity).
+/// for the speed limits, their velocities and the joints' (has_velocity; joint_count joints).
 struct SafetySample {
   double s = 0;
   Pose tcp = Pose::Identity();
@@ -113,13 +141,37 @@ struct SafetySample {
   bool has_velocity = false;
   Eigen::Vector3d tcp_velocity{0, 0, 0};
   Eigen::Vector3d elbow_velocity{0, 0, 0};
+  int joint_count = 0;
+  std::array<double, kMaxJoints> joint_velocity{};  ///< rad/s (m/s prismatic)
+  bool has_stop = false;     ///< stop_time / stop_distance hold the predicted stop (stop_prediction)
+  double stop_time = 0;      ///< s
+  double stop_distance = 0;  ///< m
+  bool has_dynamics = false;  ///< momentum / power hold the state's (dynamics_prediction)
+  double momentum = 0;        ///< kg m/s
+  double power = 0;           ///< W
 };
 
 /// The functions at `x` in order (planes, boxes, cone, then the speeds when x.has_velocity):
 /// true and `out` filled for the first one beyond its limit by more than its margin
-/// (position_margin m, angle_margin rad, speed_margin m/s); false (out untouched) when none is.
+/// (position_margin m, angle_margin rad, speed_margin m/s; a joint's speed tolerance_scale
+/// times its joint_speed_tolerance, 1 in the monitor, or speed_margin when the scale is 0: plan
+/// time; the stop time tolerance_scale times stop_time_tolerance, the stop distance
+/// position_margin); false (out untouched) when none is.
 bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
-                  double angle_margin, double speed_margin, SafetyViolation& out);
+                  double angle_margin, double speed_margin, SafetyViolation& out, double tolerance_scale = 0.0);
+
+/// The stop functions (stop time, stop distance; x.has_stop) and the dynamics functions
+/// (momentum, power; x.has_dynamics) only, margins as check_sample (the momentum's and the
+/// power's: tolerance_scale times their tolerances).
+bool check_stop(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double position_margin,
+                double tolerance_scale, SafetyViolation& out);
+
+/// The stop predicted from `from` braked with `limits` (plan_stop: the controller's ramp): its
+/// duration and the TCP's straight-line travel from x.tcp (the TCP at from.pos) to where the
+/// joints rest, into x.stop_time / x.stop_distance (x.has_stop). `scratch` holds the ramp (kept
+/// by the caller: no stack copy per call). False (x untouched) when the stop cannot be planned.
+bool stop_prediction(const Chain& chain, const JointLimits& limits, const JointState& from, JointTrajectory& scratch,
+                     SafetySample& x);
 
 /// How far beyond its limit the function `which` names (function, index, elbow) is at `x`
 /// (m, rad or m/s; negative inside). Lets a monitor tell a move back towards the inside
@@ -133,6 +185,26 @@ bool check_path(const SafetyConfig& cfg, SafetyMode mode, std::span<const Safety
 /// The sample for joint values q (FK of the chain; elbow from forward_frames). Returns false
 /// on a bad q (NaN, wrong size).
 bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVector& q, double s, SafetySample& out);
+
+/// Fills x's velocities (has_velocity) from the previous sample p, h seconds earlier, at joints
+/// q_prev -> q: the TCP's, the elbow's and each joint's difference over h. Does nothing when h <= 0.
+void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_prev, const JointVector& q, double h);
+
+/// The highest value / limit of the mode's speed limits (TCP, elbow, joints) at x and of its
+/// stop limits ((time / limit)^2 and (distance / limit)^(2/3): how speed goes with a
+/// jerk-limited stop's duration and travel from low speeds) and its momentum limit (value /
+/// limit) and power limit (its square root: power goes with speed to the first (gravity) to the
+/// third (inertia) power, so a caller plans again until it holds) (0 when none is set or x has
+/// neither velocity nor stop): a path whose highest ratio is k runs within them k times slower.
+double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x);
+
+/// The arm's momentum and mechanical power at state s (see the conventions above) into
+/// x.momentum / x.power (x.has_dynamics); the centres of mass' speeds from FK at s.pos and a
+/// step along s.vel. False (x untouched) when the chain has no inertial data or s is bad.
+bool dynamics_prediction(const Chain& chain, const JointState& s, SafetySample& x);
+
+/// True for the functions a lower speed cures (TCP, elbow and joint speeds, stop time and distance).
+bool is_speed(SafetyFunction f);
 
 /// "" when the config is consistent, else why not (written into buf, one line): a NaN, a zero
 /// normal, an inverted box, a keep-in box smaller than the tool sphere, a negative radius or

@@ -151,9 +151,23 @@ struct FwConfig {
   double safety_reduced_tcp_speed_mm_s = 0.0;
   double safety_reduced_elbow_speed_mm_s = 0.0;
   double safety_reduced_cone_deg = 180.0;
+  std::vector<double> safety_joint_speed_deg_s;          ///< per joint, deg/s (mm/s prismatic), 0 = none; [] = none
+  std::vector<double> safety_reduced_joint_speed_deg_s;  ///< same, Reduced mode
+  double safety_stop_time_s = 0.0;               ///< the predicted stop's duration, Normal mode; 0 = none
+  double safety_stop_distance_mm = 0.0;          ///< the TCP's travel during the predicted stop, Normal; 0 = none
+  double safety_reduced_stop_time_s = 0.0;
+  double safety_reduced_stop_distance_mm = 0.0;
+  double safety_momentum_kg_m_s = 0.0;           ///< the links' mass x COM speed, summed, Normal; 0 = none
+  double safety_power_w = 0.0;                   ///< the joints' |torque x velocity|, summed, Normal; 0 = none
+  double safety_reduced_momentum_kg_m_s = 0.0;
+  double safety_reduced_power_w = 0.0;
   double safety_tolerance_mm = 2.0;      ///< run-time monitor margin of planes and boxes
   double safety_tolerance_deg = 2.0;     ///< run-time monitor margin of the cone
   double safety_tolerance_mm_s = 20.0;   ///< run-time monitor margin of the speed limits
+  double safety_tolerance_deg_s = 2.0;   ///< run-time monitor margin of the joint speed limits (mm/s prismatic)
+  double safety_tolerance_s = 0.02;      ///< run-time monitor margin of the stop time limit
+  double safety_tolerance_kg_m_s = 0.5;  ///< run-time monitor margin of the momentum limit
+  double safety_tolerance_w = 5.0;       ///< run-time monitor margin of the power limit
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;
@@ -375,9 +389,10 @@ std::string safety_for_chain(const FwConfig& cfg, const kin::Chain& chain);
 const char* can_console_id_problem(int id);
 /// drive.homing.method as a number: 1..35, 37 or -128..-1 (CiA 402 6098h); 0 for "none" / "hard_stop" / not a method.
 int homing_method_number(const std::string& method);
-/// The [safety] envelope of `cfg` in SI for the kinematics core (normals normalised).
-/// Returns "" or why it cannot be built (one line naming the key); `out` is then disabled.
-std::string safety_envelope(const FwConfig& cfg, kin::SafetyConfig& out);
+/// The [safety] envelope of `cfg` in SI for the kinematics core (normals normalised; the
+/// per-joint values in rad or m by `chain`'s joint types). Returns "" or why it cannot be
+/// built (one line naming the key); `out` is then disabled.
+std::string safety_envelope(const FwConfig& cfg, const kin::Chain& chain, kin::SafetyConfig& out);
 /// The canonical form of the [safety] section: one `key = value` line per key of the
 /// table's safety.* rows, in table order, values as to_toml writes them.
 std::string safety_canonical(const FwConfig& cfg);

@@ -2,7 +2,9 @@
 #pragma once
 // The safety envelope's run-time monitor (docs/safety.md): every control cycle, the commanded
 // and the measured TCP (and elbow) against the planes, boxes, orientation cone and speed
-// limits of kin::SafetyConfig, with the functions' tolerances; and, while jogging, the
+// limits (TCP, elbow, each joint's) of kin::SafetyConfig, and the stop predicted from the
+// commanded state (its duration and the TCP's travel) against the stop time and distance limits,
+// and the arm's momentum and power (inverse dynamics at the commanded state) against theirs, with the functions' tolerances; and, while jogging, the
 // predicted stop (the ramp the controller would brake with now) against the planes and boxes,
 // so that a jog towards a plane comes to rest at it and a jog away from it is let go.
 //
@@ -40,6 +42,14 @@ class SafetyMonitor {
   bool predict_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
                     kin::SafetyViolation& out);
 
+  /// After update(), while the arm moves: the stop predicted from the commanded state `cmd`
+  /// braked with `limits` (the controller's ramp) takes longer than the mode's stop time limit,
+  /// or moves the TCP further than its stop distance limit, or the arm's momentum or power at
+  /// `cmd` is above the mode's limit, beyond the tolerances: true, `out` naming it. Nothing is
+  /// computed for the limits the mode does not set.
+  bool check_state(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
+                  kin::SafetyViolation& out);
+
   /// The last commanded TCP sample (base frame) update() computed.
   const kin::SafetySample& commanded() const { return cmd_; }
 
@@ -48,6 +58,7 @@ class SafetyMonitor {
   kin::SafetyConfig cfg_{};
   double period_s_ = 0.001;
   kin::SafetySample cmd_{}, act_{}, prev_cmd_{}, prev_act_{};
+  kin::JointVector prev_q_cmd_{};  ///< the joint speeds' previous commanded joints
   bool have_prev_ = false;
   kin::JointTrajectory stop_{};  ///< predict_stop's ramp (kept here: no stack copy per cycle)
 };
