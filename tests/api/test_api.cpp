@@ -215,7 +215,8 @@ TEST(FwApi, RequestAndResultRoundTrip) {
   CHECK_TEXT(has(h, "\"protocol\":1"), h.c_str());
   CHECK_TEXT(has(h, "\"robot\":\"puma560\""), h.c_str());
   CHECK_TEXT(has(h, "\"role\":\"operator\""), h.c_str());
-  CHECK_EQUAL(6, static_cast<int>(std::count(h.begin(), h.end(), '{')) - 2);  // the answer, units, 6 joints
+  CHECK_EQUAL(6, static_cast<int>(std::count(h.begin(), h.end(), '{')) - 3);  // the answer, units, safety, 6 joints
+  CHECK_TEXT(has(h, "\"safety\":{\"checksum\":\"00000000\",\"enabled\":false}"), h.c_str());  // no envelope
   rig.enable(c);
   const std::string m = c.ask(2, "\"cmd\":\"movej\",\"q\":[0.2,0,0,0,0,0],\"speed_pct\":50");
   CHECK_TEXT(is_ok(m), m.c_str());
