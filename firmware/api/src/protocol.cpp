@@ -957,14 +957,17 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
     fe.push_back(t.q_cmd[u] - t.q_act[u]);
     qa[i] = t.q_act[u];
   }
-  json qd = json::array(), qdm = json::array(), tau = json::array();
+  json qd = json::array(), qdm = json::array(), tau = json::array(), temp = json::array();
   for (int i = 0; i < t.n && i < chain.n_joints; ++i) {
     const auto u = static_cast<std::size_t>(i);
     qd.push_back(t.qd_cmd[u]);
     qdm.push_back(t.qd_act[u]);
-    // a drive that does not report its torque: null (not a measured 0)
+    // a drive that does not report its torque or temperature: null (not a measured 0)
     tau.push_back((t.torque_valid >> i) & 1u ? json(t.tau_act[u]) : json(nullptr));
+    temp.push_back((t.temperature_valid >> i) & 1u ? json(t.temperature[u]) : json(nullptr));
   }
+  j["temperature"] = std::move(temp);
+  j["temperature_warning"] = t.temperature_warning;
   j["q"] = std::move(q);
   j["qd"] = std::move(qdm);
   j["torque"] = std::move(tau);

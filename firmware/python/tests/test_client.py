@@ -94,9 +94,9 @@ class TlsTest(unittest.TestCase):
         self.assertIn("api.tls_cert = " + os.path.join(self.dir, "missing.pem") + ": No such file", p.stderr)
 
 
-class SafetyHelloTest(unittest.TestCase):
-    """hello tells the safety envelope armfw runs with: enabled and the checksum that the
-    console's `safety` shows for the same armfw; another envelope, another checksum; none: off."""
+class ConfiguredArmTest(unittest.TestCase):
+    """armfw --sim with a configuration file, its console on a pipe: what hello and the state
+    samples say about the configured arm."""
 
     def start(self, toml):
         args = [os.environ.get("ARMFW", "build/bin/armfw"), "--sim", "--api-tcp", "0"]
@@ -143,7 +143,25 @@ class SafetyHelloTest(unittest.TestCase):
                 p.kill()
         shutil.rmtree(self.dir, ignore_errors=True)
 
+    def test_state_carries_the_motors_temperatures(self):
+        """Four Damiao motors report their temperature, two CiA 402 drives on a second bus none
+        (null, not a measured number); no joint is over its warning temperature."""
+        toml = 'robot = "puma560"\n[bus]\ncan = "sim"\n'
+        for j in range(6):
+            toml += "[[drive]]\nnode = %d\n" % (j + 1)
+            toml += 'can = "can1"\n' if j >= 4 else 'family = "damiao"\nmotor = "DM-J4340"\nmit_kp = 60\nmit_kd = 2\n'
+        _, port = self.start(toml)
+        with Arm("127.0.0.1", port=port) as arm:
+            st = arm.state()
+            temps = st["temperature"]
+            self.assertEqual(len(temps), 6)
+            self.assertTrue(all(isinstance(t, (int, float)) and 0 < t < 100 for t in temps[:4]), temps)
+            self.assertEqual(temps[4:], [None, None])
+            self.assertEqual(st["temperature_warning"], 0)
+
     def test_hello_carries_the_safety_checksum(self):
+        """hello tells the safety envelope armfw runs with: enabled and the checksum that the
+        console's `safety` shows for the same armfw; another envelope, another checksum; none: off."""
         table = "[safety]\nplanes = [0, 0, 1, -300]\ntool_radius_mm = 20\n"
         p, port = self.start(table)
         with Arm("127.0.0.1", port=port) as arm:
