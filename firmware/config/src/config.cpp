@@ -311,7 +311,8 @@ const ConfigKey kConfigTable[] = {
       "on its own quick-stop ramp (605Ah/6085h), power-down once all are at rest"}
         .among(std::span<const char* const>(kStops)),
     K{"safety.drive_stop_timeout_s", &F::drive_stop_timeout_s, "s",
-      "with stop = \"drive\": power the drives down after this long even if one still reports motion"}.within(0.05, 60),
+      "with stop = \"drive\", and on MIT motors after either stop (they hold the arm, docs/mit-motors.md): power "
+      "the drives down after this long if one still reports motion or a held joint is pushed out of its hold"}.within(0.05, 60),
     K{"safety.planes", &F::safety_planes, "mm",
       "safety planes (docs/safety.md), four numbers each: the normal nx, ny, nz (towards the allowed side, any "
       "length but not zero) and the offset along it (mm): the tool sphere (and the elbow sphere) stays where "
