@@ -28,7 +28,9 @@ using servoarm::test::run_capture;
 std::string write_config(const char* name, bool mixed, const char* extra = "") {
   const std::string path = "/tmp/" + std::string(name) + "-" + std::to_string(getpid()) + ".toml";
   std::ofstream f(path);
-  f << "robot = \"puma560\"\n[bus]\ncan = \"sim\"\n" << extra;
+  // feedback: armfw's control loop starts slowly under qemu (35 cycles with 9 overruns before an
+  // enable saw no position feedback for 283 ms at the default): 2 s here
+  f << "robot = \"puma560\"\n[bus]\ncan = \"sim\"\n[safety]\nfeedback_timeout_ms = 2000\n" << extra;
   for (int j = 0; j < 6; ++j) {
     f << "[[drive]]\nnode = " << j + 1 << "\n";
     if (mixed && j >= 4) {

@@ -18,6 +18,7 @@
 
 #include "alloc_counter.hpp"
 #include "sim_app.hpp"
+#include "sweep.hpp"
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/console/transport.hpp"
 #include "servoarm/hal/can_frame.hpp"
@@ -1137,6 +1138,8 @@ TEST(RtThread, RealLoopRunsMovesWithoutAllocatingOnTheControlThread) {
   // deterministic tests above check the real ones).
   cfg.feedback_timeout_ms = 1000;
   cfg.heartbeat_timeout_ms = 1000;
+  // the simulated drives answer SDOs on a thread a busy machine may stall (bring-up)
+  cfg.sdo_timeout_ms = 1000.0 * (servoarm::test::kSlowBuild ? 10 : 1);
   cfg.following_error_deg = 30;
   const std::string e = app.build(cfg);
   CHECK_TEXT(e.empty(), e.c_str());
@@ -1217,6 +1220,8 @@ TEST(RtThread, StalledPtyClientDelaysNeitherAnEstopNorOtherClients) {
   cfg.lock_memory = false;
   cfg.feedback_timeout_ms = 1000;  // a shared 2-core machine can stall the drive thread
   cfg.heartbeat_timeout_ms = 1000;
+  // the simulated drives answer SDOs on a thread a busy machine may stall (bring-up)
+  cfg.sdo_timeout_ms = 1000.0 * (servoarm::test::kSlowBuild ? 10 : 1);
   cfg.following_error_deg = 30;
   CHECK(app.build(cfg).empty());
   CHECK(app.boot().empty());

@@ -79,6 +79,12 @@ class TlsTest(unittest.TestCase):
             with Arm("127.0.0.1", port=fw.port, tls=ctx) as arm:
                 self.assertEqual(arm.info["protocol"], 1)
                 self.assertIn("state", arm.state())
+            # every connection answers: 60 in a row (a handshake that stalls is closed after 5 s)
+            answered = 0
+            for _ in range(60):
+                with Arm("127.0.0.1", port=fw.port, tls=ctx, take_control=False) as arm:
+                    answered += arm.info["protocol"] == 1
+            self.assertEqual(answered, 60)
             other = ssl.create_default_context()  # without the certificate as a CA: refused
             with self.assertRaises(ssl.SSLError):
                 Arm("127.0.0.1", port=fw.port, tls=other)
