@@ -257,6 +257,8 @@ async function main() {
       shown.forEach((v, j) => assert(Math.abs(v - s.q[j]) < 1e-3, `J${j + 1} shows ${v}, the arm is at ${s.q[j]}`));
       const role = await page.$eval('#role', (e) => e.textContent);
       assert(role === 'role: operator', `role shown: ${role}`);
+      const safety = await page.$eval('#st-safety', (e) => e.textContent);
+      assert(safety === 'safety: off', `safety shown without an envelope: ${safety}`);
       assert(await page.$('#stop') !== null, 'no stop button');
       // the 3D view drew the arm from the state's frames
       await page.waitForFunction(() => window.pendant.state && Array.isArray(window.pendant.state.frames), { timeout: WAIT_S * 1000 });
@@ -531,7 +533,10 @@ async function main() {
     const tokens = path.join(args.workdir, 'tokens');
     fs.writeFileSync(tokens, `operator ${opTok}\nobserver ${obsTok}\n`, { mode: 0o600 });
     fs.chmodSync(tokens, 0o600);
-    armfw = await startArmfw(args.armfw, ['--api-tokens', tokens]);
+    // and a safety envelope far from the arm (a floor 2 m below the base): the page shows its checksum
+    const armToml = path.join(args.workdir, 'armfw.toml');
+    fs.writeFileSync(armToml, '[safety]\nplanes = [0, 0, 1, -2000]\n');
+    armfw = await startArmfw(args.armfw, ['--api-tokens', tokens, '--config', armToml]);
     tcp = new Tcp(armfw.tcp);
     await tcp.connect();
     const hello = await tcp.ask('hello', { token: opTok });
@@ -557,6 +562,10 @@ async function main() {
       await waitAuth(p, 'ok');
       const role = await p.$eval('#role', (e) => e.textContent);
       assert(role === 'role: observer', `role shown: ${role}`);
+      const env = hello.safety;
+      assert(env && env.enabled && /^[0-9A-F]{8}$/.test(env.checksum), 'hello\'s safety: ' + JSON.stringify(env));
+      await p.waitForFunction((want) => document.querySelector('#st-safety').textContent === want,
+                              { timeout: WAIT_S * 1000 }, 'safety: normal ' + env.checksum);
       const disabled = await p.$$eval('button.jog, #take, button.op', (bs) => bs.length > 0 && bs.every((b) => b.disabled));
       assert(disabled, 'an observer\'s page has enabled command buttons');
       const stops = await p.$$eval('#stop, button.any', (bs) => bs.length === 3 && bs.every((b) => !b.disabled));

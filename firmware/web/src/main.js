@@ -415,6 +415,9 @@ api.on('state', (st) => {
   $('st-mode').textContent = 'mode: ' + st.mode + (st.freedrive ? ', free-drive' : '');
   $('st-homed').textContent = 'homed: ' + bits(st.homed, n) + '/' + n + (st.homing ? ' (homing)' : '');
   $('st-speed').textContent = 'speed: ' + speed() + ' %';
+  // the envelope the arm runs with: its mode now and the checksum of [safety] hello told
+  const env = (P.hello && P.hello.safety) || {};
+  $('st-safety').textContent = env.enabled ? 'safety: ' + st.safety_mode + ' ' + env.checksum + (st.safety_stops ? ', ' + st.safety_stops + ' stops' : '') : 'safety: off';
   const f = st.fault || {};
   $('st-fault').textContent = f.cause && f.cause !== 'none' ? 'fault: ' + f.cause + (f.joint >= 0 ? ' J' + (f.joint + 1) : '') + (f.text ? ': ' + f.text : '') : '';
   $('freedrive').textContent = st.freedrive ? 'free-drive off' : 'free-drive on';
