@@ -613,7 +613,11 @@ Status MitGroup::family_set_feed_forward(std::size_t j, double velocity, double 
     J.ff = false;
     return Status::invalid_argument;
   }
-  const double v = velocity * J.k, t = torque / J.k;  // actuator side
+  double v = velocity * J.k, t = torque / J.k;  // actuator side
+  if (J.qstop) {  // the hold's braking torque: the motor gives at most T_MAX whatever is asked
+    v = std::clamp(v, -J.r.v_max, J.r.v_max);
+    t = std::clamp(t, -J.r.t_max, J.r.t_max);
+  }
   if (std::fabs(v) > J.r.v_max || std::fabs(t) > J.r.t_max) {
     J.ff = false;
     return Status::invalid_argument;

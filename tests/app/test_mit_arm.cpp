@@ -571,8 +571,8 @@ TEST(FwMitArm, TemperaturesReachStatusWarnAndFaultBeforeTheMotorsCutOff) {
 // then) instead of being powered down, so a heavy arm does not fall. On the dynamic plant under
 // gravity, with the controller's ramp (safety.stop = "ramp") and with the drives' own stop
 // ("drive"); a joint that does not come to rest (pushed beyond T_MAX) is powered down after
-// safety.drive_stop_timeout_s, as CiA 402 drives are. The puma's base brakes on KD_MAX alone
-// (time constant I / KD_MAX near 0.85 s): the timeout here is 4 s.
+// safety.drive_stop_timeout_s, as CiA 402 drives are (the timeout here is 4 s; the default's
+// case is EstopBrakesAHeavyBaseWithinTheDefaultTimeout*).
 void estop_holds(const char* stop) {
   FwConfig c = damiao_arm("torque");
   c.stop = stop;
@@ -637,6 +637,61 @@ void estop_holds(const char* stop) {
 TEST(FwMitArm, EstopHoldsTheArmAgainstGravityWithTheControllersRamp) { estop_holds("ramp"); }
 
 TEST(FwMitArm, EstopHoldsTheArmAgainstGravityWithTheDrivesStop) { estop_holds("drive"); }
+
+// E-stop mid-move with the default safety.drive_stop_timeout_s (2 s): the puma's base, whose
+// inertia KD_MAX alone would take about 2.3 s to brake from the speed it has here, brakes on its
+// deceleration limit instead and holds well within the timeout; no motor is powered down, and
+// the joints that were not moving never drop. (They move a little while the base brakes: the
+// model's feed-forward gives them the torque the base's deceleration couples into a real arm,
+// which these motors, each moving an inertia of its own, do not feel: up to 0.7 deg on joint 2.)
+void estop_base_brakes_within_the_default_timeout(const char* stop) {
+  FwConfig c = damiao_arm("torque");
+  c.stop = stop;  // safety.drive_stop_timeout_s left at its default
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  DOUBLES_EQUAL(2.0, c.drive_stop_timeout_s, 0);
+  kin::JointVector q = kin::JointVector::Zero(6);
+  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
+  a.arm_inertia(q);
+  a.gravity = true;
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  a.run(0.3);
+  CHECK_TEXT(ok(a.cmd("movej 60 -30 60 0 20 0")), a.s.out.c_str());  // the base alone
+  a.run(0.6);  // mid-move, the base near its top speed
+  const double v0 = a.app.servo->feedback(0).velocity;
+  const Telemetry before = a.tel();
+  CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
+  int rest_ms = -1;
+  double moved_others = 0;
+  for (int ms = 0; ms < 4000; ++ms) {
+    a.run(0.001);
+    if (rest_ms < 0 && a.app.servo->holding(0)) rest_ms = ms;
+    const Telemetry t = a.tel();
+    for (std::size_t j = 1; j < 6; ++j) moved_others = std::max(moved_others, std::fabs(t.q_act[j] - before.q_act[j]));
+  }
+  const Telemetry t = a.tel();
+  std::printf("\n  e-stop (safety.stop = \"%s\", drive_stop_timeout_s 2) with the puma's base at %.2f rad/s: base at rest "
+              "and held after %d ms, motors %s, the other joints moved at most %.4f deg in 4 s\n",
+              stop, v0, rest_ms, a.motor(0).enabled() && a.motor(1).enabled() ? "powered" : "powered DOWN",
+              moved_others / kDeg);
+  CHECK(std::fabs(v0) > 0.5);
+  CHECK_TEXT(t.state == ArmState::estop, a.events.c_str());
+  for (std::size_t j = 0; j < 6; ++j) CHECK_TEXT(a.motor(j).enabled(), a.events.c_str());
+  CHECK(rest_ms >= 0 && rest_ms < 1500);
+  CHECK(moved_others < 1.0 * kDeg);
+  CHECK(std::fabs(a.app.servo->feedback(0).velocity) < 0.01);
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}
+
+TEST(FwMitArm, EstopBrakesAHeavyBaseWithinTheDefaultTimeoutWithTheDrivesStop) {
+  estop_base_brakes_within_the_default_timeout("drive");
+}
+
+TEST(FwMitArm, EstopBrakesAHeavyBaseWithinTheDefaultTimeoutWithTheControllersRamp) {
+  estop_base_brakes_within_the_default_timeout("ramp");
+}
 
 // Free-drive on MIT motors: kp = 0, the free-drive damping (dynamics.freedrive_damping x the
 // joint's largest inertia) as the motor's kd (it damps the hand's motion in its own loop, so the

@@ -267,6 +267,7 @@ void Controller::step_drive_stop() {
   }
   cmd_.vel.setZero();
   cmd_.acc.setZero();
+  brake_holding_drives();
   if (moving && stop_t_ < cfg_.drive_stop_timeout) return;
   const Mode latched = mode_ == Mode::estop_quick_stop ? Mode::estop : Mode::fault;
   if (!moving && held) {  // the drives hold the arm where it came to rest (watch_hold)
@@ -277,11 +278,32 @@ void Controller::step_drive_stop() {
   }
 }
 
+// Drives that hold the arm after a quick stop (ServoBus::quick_stop_holds: MIT motors) brake on
+// the damping of their hold frame alone, which takes a heavy joint seconds (its inertia over the
+// frame's largest kd). The torque feed-forward of this cycle's setpoint (the model, when it runs:
+// dynamics.feed_forward = "torque") then carries the torque that brakes each joint on its
+// acceleration limit: the setpoint is the measured state with qdd = -qd / kBrakeTime, at most
+// the limit, so the torque is M(q) qdd + c(q, qd) + g(q); near rest it is a velocity loop of
+// time constant kBrakeTime on the model's inertia, and once the joint is held it damps the hold.
+// Drives in a CiA 402 quick stop follow their own ramp and ignore the offsets.
+void Controller::brake_holding_drives() {
+  if (!bus_.quick_stop_holds()) return;
+  constexpr double kBrakeTime = 0.05;  // s
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    const auto& fb = bus_.feedback(ju);
+    const double v = fb.valid && std::isfinite(fb.velocity) ? fb.velocity : 0.0;
+    cmd_.vel[j] = v;
+    cmd_.acc[j] = -std::copysign(std::min(limits_.dyn[ju].max_acceleration, std::fabs(v) / kBrakeTime), v);
+  }
+}
+
 // Latched fault / e-stop whose drives hold the arm (ServoBus::quick_stop_holds): a joint driven
 // out of its hold (pushed beyond the motor's torque) for safety.drive_stop_timeout_s is powered
 // down, as a stop that does not come to rest is.
 void Controller::watch_hold() {
   if (!bus_.quick_stop_holds()) return;
+  brake_holding_drives();
   bool moving = false;
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);

@@ -164,6 +164,9 @@ class Controller final : private SegmentHost {
   /// fault / estop with the drives holding the arm after a quick stop: powers down a hold
   /// that does not stay at rest (controller.cpp).
   void watch_hold();
+  /// With drives that hold after a quick stop: this cycle's setpoint velocity and acceleration
+  /// brake every joint on its acceleration limit through the torque feed-forward (controller.cpp).
+  void brake_holding_drives();
   void raise_fault(FaultCause c, int joint, const char* detail);
   /// Start the controller's ramp to rest from the commanded state and enter `ramp` (a
   /// ramping mode); when no ramp can be planned (never seen) the arm is at rest at once.
