@@ -82,6 +82,9 @@ bool ArmServoBus::quick_stop_holds() const {
   return false;
 }
 bool ArmServoBus::holding(std::size_t j) const { return ours(j) && sub(j).holding(slot(j).local); }
+void ArmServoBus::disable_joint(std::size_t j) {
+  if (ours(j)) sub(j).disable_joint(slot(j).local);
+}
 
 Status ArmServoBus::read(TimePoint now) {
   Status result = Status::ok;

@@ -558,18 +558,21 @@ bool MitGroup::holding(std::size_t j) const {
 }
 
 void MitGroup::disable() {
-  for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
-    Joint& J = joints_[j];
-    J.want = false;
-    J.qstop = false;
-    J.clear = false;
-    J.enabling_since = 0;
-    if (J.mode != CyclicMode::position) {
-      J.mode = CyclicMode::position;
-      J.mode_status = Status::aborted;
-    }
-    if (fb_[j].state == JointState::enabled || fb_[j].state == JointState::enabling) fb_[j].state = JointState::stopping;
+  for (std::size_t j = 0; j < cfg_.joint_count; ++j) disable_joint(j);
+}
+
+void MitGroup::disable_joint(std::size_t j) {
+  if (j >= cfg_.joint_count) return;
+  Joint& J = joints_[j];
+  J.want = false;
+  J.qstop = false;
+  J.clear = false;
+  J.enabling_since = 0;
+  if (J.mode != CyclicMode::position) {
+    J.mode = CyclicMode::position;
+    J.mode_status = Status::aborted;
   }
+  if (fb_[j].state == JointState::enabled || fb_[j].state == JointState::enabling) fb_[j].state = JointState::stopping;
 }
 
 Status MitGroup::set_position_zero(std::size_t j) {

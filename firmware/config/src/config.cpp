@@ -312,7 +312,8 @@ const ConfigKey kConfigTable[] = {
         .among(std::span<const char* const>(kStops)),
     K{"safety.drive_stop_timeout_s", &F::drive_stop_timeout_s, "s",
       "with stop = \"drive\", and on MIT motors after either stop (they hold the arm, docs/mit-motors.md): power "
-      "the drives down after this long if one still reports motion or a held joint is pushed out of its hold"}.within(0.05, 60),
+      "the drives down after this long if one still reports motion; on MIT motors only the joint that is not at "
+      "rest or is pushed out of its hold, the others keep holding"}.within(0.05, 60),
     K{"safety.planes", &F::safety_planes, "mm",
       "safety planes (docs/safety.md), four numbers each: the normal nx, ny, nz (towards the allowed side, any "
       "length but not zero) and the offset along it (mm): the tool sphere (and the elbow sphere) stays where "

@@ -270,11 +270,23 @@ void Controller::step_drive_stop() {
   brake_holding_drives();
   if (moving && stop_t_ < cfg_.drive_stop_timeout) return;
   const Mode latched = mode_ == Mode::estop_quick_stop ? Mode::estop : Mode::fault;
-  if (!moving && held) {  // the drives hold the arm where it came to rest (watch_hold)
+  if (held) {  // the drives hold the arm where it came to rest (watch_hold)
+    if (moving) power_down_moving_holds();  // at the timeout: the joints still moving, alone
     stop_t_ = 0;
     set_mode(latched);
   } else {
     power_down(latched);
+  }
+}
+
+// Drives that hold after a quick stop (no brakes): a joint that does not come to rest, or is
+// driven out of its hold, is powered down alone; the others keep holding the arm, which would
+// fall if they were powered down too.
+void Controller::power_down_moving_holds() {
+  for (int j = 0; j < n_; ++j) {
+    const auto ju = static_cast<std::size_t>(j);
+    const auto st = bus_.feedback(ju).state;
+    if ((st == hal::JointState::stopping || st == hal::JointState::enabled) && !bus_.holding(ju)) bus_.disable_joint(ju);
   }
 }
 
@@ -285,6 +297,7 @@ void Controller::step_drive_stop() {
 // acceleration limit: the setpoint is the measured state with qdd = -qd / kBrakeTime, at most
 // the limit, so the torque is M(q) qdd + c(q, qd) + g(q); near rest it is a velocity loop of
 // time constant kBrakeTime on the model's inertia, and once the joint is held it damps the hold.
+// A joint powered down brakes on nothing: 0 there.
 // Drives in a CiA 402 quick stop follow their own ramp and ignore the offsets.
 void Controller::brake_holding_drives() {
   if (!bus_.quick_stop_holds()) return;
@@ -293,14 +306,15 @@ void Controller::brake_holding_drives() {
     const auto ju = static_cast<std::size_t>(j);
     const auto& fb = bus_.feedback(ju);
     const double v = fb.valid && std::isfinite(fb.velocity) ? fb.velocity : 0.0;
+    const bool powered = fb.state == hal::JointState::stopping || fb.state == hal::JointState::enabled;
     cmd_.vel[j] = v;
-    cmd_.acc[j] = -std::copysign(std::min(limits_.dyn[ju].max_acceleration, std::fabs(v) / kBrakeTime), v);
+    cmd_.acc[j] = powered ? -std::copysign(std::min(limits_.dyn[ju].max_acceleration, std::fabs(v) / kBrakeTime), v) : 0.0;
   }
 }
 
 // Latched fault / e-stop whose drives hold the arm (ServoBus::quick_stop_holds): a joint driven
 // out of its hold (pushed beyond the motor's torque) for safety.drive_stop_timeout_s is powered
-// down, as a stop that does not come to rest is.
+// down (that joint alone), as a stop that does not come to rest is.
 void Controller::watch_hold() {
   if (!bus_.quick_stop_holds()) return;
   brake_holding_drives();
@@ -311,7 +325,7 @@ void Controller::watch_hold() {
   }
   stop_t_ = moving ? stop_t_ + period_s_ : 0;
   if (stop_t_ < cfg_.drive_stop_timeout) return;
-  bus_.disable();
+  power_down_moving_holds();
   stop_t_ = 0;
 }
 

@@ -47,6 +47,8 @@ class ArmServoBus final : public ServoBus {
   /// True when a group holds after quick_stop() (an MIT group).
   bool quick_stop_holds() const override;
   bool holding(std::size_t j) const override;
+  /// Joint j's group powers it down (an MIT group that joint alone, a CiA 402 group all its drives).
+  void disable_joint(std::size_t j) override;
   /// Every group's read(); the first group status that is not ok.
   Status read(TimePoint now) override;
   /// Each group's setpoints from the arm's; the first group status that is not ok.

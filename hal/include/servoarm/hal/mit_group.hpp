@@ -96,6 +96,8 @@ class MitGroup final : public DriveGroup {
   /// Joint j holds after quick_stop(), has come to rest and is at rest now (its velocity within
   /// 0.05 rad/s at the actuator, at least four codes of the frame's velocity).
   bool holding(std::size_t j) const override;
+  /// Joint j alone gets the disable frame from the next write(); the others keep what they do.
+  void disable_joint(std::size_t j) override;
   Status set_position_zero(std::size_t j) override;
   std::int64_t zero_offset(std::size_t j) const override {
     return j < cfg_.joint_count ? cfg_.joints[j].scaling.zero_offset : 0;

@@ -160,6 +160,13 @@ class ServoBus {
     (void)j;
     return false;
   }
+  /// Real-time: power joint `j` down and leave the others as they are (a held joint that does not
+  /// come to rest while the others hold the arm). Buses that cannot power one joint down alone
+  /// power every joint down (disable()).
+  virtual void disable_joint(std::size_t j) {
+    (void)j;
+    disable();
+  }
 
   /// Real-time: consume received frames and update feedback; checks heartbeat
   /// and state-machine timeouts against `now`. Never blocks.

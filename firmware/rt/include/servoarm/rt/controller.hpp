@@ -167,6 +167,9 @@ class Controller final : private SegmentHost {
   /// With drives that hold after a quick stop: this cycle's setpoint velocity and acceleration
   /// brake every joint on its acceleration limit through the torque feed-forward (controller.cpp).
   void brake_holding_drives();
+  /// With drives that hold after a quick stop: power down each joint that is powered and not
+  /// held at rest, that joint alone.
+  void power_down_moving_holds();
   void raise_fault(FaultCause c, int joint, const char* detail);
   /// Start the controller's ramp to rest from the commanded state and enter `ramp` (a
   /// ramping mode); when no ramp can be planned (never seen) the arm is at rest at once.
