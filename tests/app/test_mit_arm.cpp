@@ -737,6 +737,60 @@ TEST(FwMitArm, AJointNotAtRestAtTheTimeoutIsPoweredDownAloneTheOthersHold) {
   LONGS_EQUAL(0, long(a.rt_allocs));
 }
 
+// `reset` after an e-stop on MIT motors (no brakes): the motors keep holding the arm where it
+// came to rest until the next `enable` (back to the setpoints, no jump) or `disable` (powered
+// down); a heavy arm does not drop between the two commands.
+TEST(FwMitArm, ResetKeepsTheMotorsHoldingUntilTheNextEnable) {
+  FwConfig c = damiao_arm("torque");
+  c.stop = "drive";
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  kin::JointVector q = kin::JointVector::Zero(6);
+  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
+  a.arm_inertia(q);
+  a.gravity = true;
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  a.run(0.3);
+  CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
+  a.run(0.5);
+  CHECK_TEXT(a.tel().mode == Mode::estop, a.events.c_str());
+  const Telemetry t0 = a.tel();
+  const std::string r = a.cmd("reset");
+  CHECK_TEXT(ok(r), r.c_str());
+  a.run(3.0);  // longer than any operator takes to send enable
+  const Telemetry t1 = a.tel();
+  double drop = 0;
+  for (std::size_t j = 0; j < 6; ++j) drop = std::max(drop, std::fabs(t1.q_act[j] - t0.q_act[j]));
+  int powered = 0;
+  for (std::size_t j = 0; j < 6; ++j) powered += a.motor(j).enabled() ? 1 : 0;
+  std::printf("\n  reset after an e-stop on six virtual DM-J4340 under gravity: '%s', 3 s later %d of 6 motors powered, the "
+              "arm moved %.4f deg\n", r.substr(0, r.find('\n')).c_str(), powered, drop / kDeg);
+  CHECK_TEXT(has(r, "the motors hold the arm until enable"), r.c_str());
+  LONGS_EQUAL(6, powered);
+  CHECK(drop < 0.2 * kDeg);
+  CHECK_TEXT(t1.state == ArmState::disabled, a.events.c_str());
+  // enable: back to the setpoints from where the arm holds, then it moves
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  a.run(0.1);
+  CHECK_TEXT(a.tel().state == ArmState::idle, (a.tel().fault_text + a.events).c_str());
+  double jump = 0;
+  for (std::size_t j = 0; j < 6; ++j) jump = std::max(jump, std::fabs(a.tel().q_act[j] - t0.q_act[j]));
+  CHECK(jump < 0.2 * kDeg);
+  CHECK_TEXT(ok(a.cmd("movej 10 -30 60 0 20 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  DOUBLES_EQUAL(10 * kDeg, a.tel().q_act[0], 0.1 * kDeg);
+  // e-stop, reset, disable: powered down
+  CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
+  a.run(0.5);
+  CHECK_TEXT(ok(a.cmd("reset")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("disable")), a.s.out.c_str());
+  a.run(0.05);
+  for (std::size_t j = 0; j < 6; ++j) CHECK_FALSE(a.motor(j).enabled());
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}
+
 // Free-drive on MIT motors: kp = 0, the free-drive damping (dynamics.freedrive_damping x the
 // joint's largest inertia) as the motor's kd (it damps the hand's motion in its own loop, so the
 // model adds no damping torque of its own) and the gravity torque as tau_ff. A

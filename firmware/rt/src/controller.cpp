@@ -822,14 +822,23 @@ void Controller::estop_done(const Request& r, std::size_t dropped) {
 }
 
 void Controller::reset_latched(const Request& r) {
-  bus_.disable();
+  // Drives that hold the arm after a quick stop (no brakes: MIT motors) go on holding it until
+  // the next enable (back to the setpoints) or disable: powered down here, a heavy arm would fall
+  // between reset and enable. A joint not held at rest is powered down (as at the timeout).
+  bool holds = false;
+  if (bus_.quick_stop_holds()) {
+    for (int j = 0; j < n_; ++j) holds = holds || bus_.holding(static_cast<std::size_t>(j));
+  }
+  if (holds) power_down_moving_holds();
+  else bus_.disable();
   cause_ = FaultCause::none;
   fault_joint_ = -1;
   fault_text_[0] = '\0';
   max_follow_ = 0;
   hold_measured();
   set_mode(Mode::disabled);
-  reply(r.seq, RtResult::ok, "reset; drives disabled, send enable");
+  reply(r.seq, RtResult::ok,
+        holds ? "reset; the motors hold the arm until enable (disable powers them down)" : "reset; drives disabled, send enable");
 }
 
 void Controller::set_zero(const Request& r) {

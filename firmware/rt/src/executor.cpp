@@ -363,8 +363,11 @@ void Controller::step_motion() {
     case Mode::fault_ramp:
     case Mode::estop_ramp: step_ramp(); return;  // a stop has priority over everything
     case Mode::boot:
-    case Mode::disabled:
     case Mode::enabling: follow_measured(); return;
+    case Mode::disabled:  // after reset, drives without brakes may still hold the arm
+      follow_measured();
+      watch_hold();
+      return;
     case Mode::fault:
     case Mode::estop:
       follow_measured();

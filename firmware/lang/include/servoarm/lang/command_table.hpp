@@ -112,7 +112,7 @@ inline constexpr CommandSpec kCommands[] = {
      false},
     {"estop", Cmd::estop, ArgShape::none, "estop", "emergency stop (quick stop, drives off, latched); then reset + enable",
      "", false},
-    {"reset", Cmd::reset, ArgShape::none, "reset", "clear a fault / e-stop (drives stay disabled)", "", false},
+    {"reset", Cmd::reset, ArgShape::none, "reset", "clear a fault / e-stop (drives stay disabled; MIT motors hold the arm until enable)", "", false},
     {"fk", Cmd::fk, ArgShape::joints_opt, "fk [j1..jn]", "tool pose of the given (or current) joints", "", true},
     {"ik", Cmd::ik, ArgShape::pose, "ik x y z [rx ry rz]", "joints for a tool pose, nearest to the current joints",
      "the nearest solution within the joint limits, and how many solutions exist", true},

@@ -161,8 +161,8 @@ class Controller final : private SegmentHost {
   /// Over-temperature warnings: one `warning` event when a joint's drive reports it at or
   /// above its warning temperature (again after it has cooled below).
   void watch_temperatures();
-  /// fault / estop with the drives holding the arm after a quick stop: powers down a hold
-  /// that does not stay at rest (controller.cpp).
+  /// fault / estop, and disabled after reset, with the drives holding the arm after a quick
+  /// stop: powers down a hold that does not stay at rest (controller.cpp).
   void watch_hold();
   /// With drives that hold after a quick stop: this cycle's setpoint velocity and acceleration
   /// brake every joint on its acceleration limit through the torque feed-forward (controller.cpp).
