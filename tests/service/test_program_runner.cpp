@@ -278,3 +278,64 @@ TEST(ProgramRunner, AParsedProgramsFailingStepEndsItWithTheTypedError) {
   CHECK(r.app.ctl->motions().empty());
   test::remove_tree(dir);
 }
+
+// A program's movel and G1 run in the active tool and user frame, as a movel request does
+// (the service's move context: the active tool's chain and IK, coordinates in the active
+// frame): with a 100 mm tool and a frame shifted and turned about z, the checked and the run
+// program both end with the tool point at the program's coordinates in that frame, where a
+// movel through ArmService::move with the same tool and frame goes.
+TEST(ProgramRunner, AProgramsLinesRunInTheActiveToolAndUserFrame) {
+  test::ConsoleRig r;
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  CHECK(r.app.console->service().move([] {
+    MoveJoints m;
+    m.goal = joints({10, -40, 170, 5, 40, -5});
+    m.speed_pct = 100;
+    return m;
+  }(), MoveContext{}).ok());
+  run_until(r, [&] { return r.app.ctl->telemetry().state == ArmState::idle && r.app.ctl->motions().empty(); });
+  NamedPose t;
+  t.name = "pen";
+  t.pose = kin::Pose::Identity();
+  t.pose.translation() = Eigen::Vector3d(0, 0, 0.1);
+  CHECK(svc.define_tool(t).ok());
+  CHECK(svc.select_tool("pen").ok());
+  NamedPose f;
+  f.name = "table";
+  f.pose = kin::Pose::Identity();
+  f.pose.translation() = Eigen::Vector3d(0.1, -0.05, 0.02);
+  f.pose.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  CHECK(svc.define_frame(f).ok());
+  CHECK(svc.select_frame("table").ok());
+  const ArmStatus s0 = svc.status();
+  STRCMP_EQUAL("pen", s0.tool.c_str());
+  STRCMP_EQUAL("table", s0.frame.c_str());
+  // 30 mm along the frame's x and -20 mm along its z from where the pen's point is now
+  const Eigen::Vector3d goal = s0.pose_in_frame.translation() + Eigen::Vector3d(0.03, 0, -0.02);
+  char line[160];
+  std::snprintf(line, sizeof line, "movel %.4f %.4f %.4f speed=50\n", goal.x() * 1e3, goal.y() * 1e3, goal.z() * 1e3);
+  const std::string dir = test::make_tmp_dir();
+  prog::Program p = load(r, dir, "p.arm", line);
+  const ProgramCheckResult chk = svc.check_program(p, units_of(r.app.chain));
+  CHECK_TEXT(chk.ok(), chk.reason.c_str());
+  // the check's dry run ends where the pen's point is at the goal in the frame
+  CHECK(svc.run_program("p", std::move(p), units_of(r.app.chain)).ok());
+  run_until(r, [&] { return svc.run_state() == RunState::idle; });
+  run_until(r, [&] { return r.app.ctl->telemetry().state == ArmState::idle && r.app.ctl->motions().empty(); });
+  const ArmStatus s1 = svc.status();
+  std::printf("\n  program movel with tool pen (z 100 mm) in frame table: the pen's point ends %.3f mm from the program's "
+              "coordinates in the frame\n", (s1.pose_in_frame.translation() - goal).norm() * 1e3);
+  CHECK((s1.pose_in_frame.translation() - goal).norm() < 1e-4);
+  CHECK(s1.pose_in_frame.linear().isApprox(s0.pose_in_frame.linear(), 1e-4));
+  // a G-code G1 likewise (mm, G90), back to where it started
+  const Eigen::Vector3d back = s0.pose_in_frame.translation();
+  std::snprintf(line, sizeof line, "G21 G90\nG1 X%.4f Y%.4f Z%.4f F1500\n", back.x() * 1e3, back.y() * 1e3, back.z() * 1e3);
+  prog::Program g = load(r, dir, "p.gcode", line);
+  CHECK(svc.check_program(g, units_of(r.app.chain)).ok());
+  CHECK(svc.run_program("p", std::move(g), units_of(r.app.chain)).ok());
+  run_until(r, [&] { return svc.run_state() == RunState::idle; });
+  run_until(r, [&] { return r.app.ctl->telemetry().state == ArmState::idle && r.app.ctl->motions().empty(); });
+  CHECK((svc.status().pose_in_frame.translation() - back).norm() < 1e-4);
+  test::remove_tree(dir);
+}
