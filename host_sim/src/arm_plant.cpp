@@ -199,6 +199,7 @@ void ArmPlant::advance(hal::TimePoint now, hal::CanBus& bus) {
   kin::Jacobian J(6, n_);
   kin::JointVector a1(n_), a2(n_), a3(n_), a4(n_), q2(n_), v2(n_);
   bool any = false;
+  if (t0_ < 0) t0_ = t_;
   while (t_ + step <= now) {
     t_ += step;
     any = true;
@@ -211,6 +212,10 @@ void ArmPlant::advance(hal::TimePoint now, hal::CanBus& bus) {
     }
     tau_ext_.setZero();
     for (int j = 0; j < n_; ++j) tau_ext_[j] = params_.external_torque[static_cast<std::size_t>(j)];
+    const double ts = double(t_ - step - t0_) * 1e-9;  // the step's start: the torques hold over it
+    for (const ArmPlantParams::Push& p : params_.pushes)
+      if (p.joint >= 0 && p.joint < n_)
+        tau_ext_[p.joint] += p.amplitude * (p.frequency > 0 ? std::sin(2.0 * M_PI * p.frequency * ts + p.phase) : 1.0);
     if (params_.tool_force.squaredNorm() > 0 && kin::jacobian(chain_, q_, J) == kin::Status::ok)
       tau_ext_ += J.topRows<3>().transpose() * params_.tool_force;
     // Classical Runge-Kutta 4 on (q, qd).

@@ -75,6 +75,9 @@ int usage(FILE* f, int code) {
                "  --priority N          SCHED_FIFO priority 1..99, 0 = normal scheduling (default 80)\n"
                "  --cpu N               pin the control thread to CPU N\n"
                "  --plant KIND          with --sim: first-order (default) or dynamic (rigid-body arm; needs inertial data)\n"
+               "  --push J:NM:HZ[:DEG]  with --plant dynamic: a scripted external torque NM x sin(2 pi HZ t + DEG) on\n"
+               "                        joint J (HZ 0: constant), t from the plant's start; up to 8, added up (a hand\n"
+               "                        moving the arm in free-drive, e.g. a teleoperation leader)\n"
                "  --pty                 also open a pty console and print its path\n"
                "  --dialect grbl|native the consoles' language: GRBL 1.1 for G-code senders (cncjs, UGS,\n"
                "                        bCNC: banner, $ commands, error:N, <Idle|MPos:..> reports) or servoarm's\n"
@@ -481,6 +484,11 @@ int main(int argc, char** argv) {
   bool sim = false, demo = false, interactive = false, pty = false, no_stdin = false, bus_load = false;
   std::string dialect;
   std::string plant_kind = "first-order";
+  struct Push {
+    int joint;
+    double amplitude, frequency, phase;
+  };
+  std::vector<Push> pushes;
   std::string config_file, frames_file, programs_dir, points_file, robot, serial, can_console;
   double bench = -1, rate = -1;
   int priority = -1, cpu = -2, baud = -1;
@@ -527,6 +535,25 @@ int main(int argc, char** argv) {
         return 2;
       }
     }
+    else if (a == "--push") {
+      const char* v = value("--push");
+      Push p{0, 0, 0, 0};
+      double deg = 0;
+      char tail = 0;
+      const int got = std::sscanf(v, "%d:%lf:%lf:%lf%c", &p.joint, &p.amplitude, &p.frequency, &deg, &tail);
+      if ((got != 3 && got != 4) || p.joint < 1 || p.joint > 16 || !std::isfinite(p.amplitude) ||
+          std::fabs(p.amplitude) > 1e4 || !(p.frequency >= 0 && p.frequency <= 100) || !std::isfinite(deg)) {
+        std::fprintf(stderr, "armfw: --push: '%s' is not J:NM:HZ[:DEG] (joint 1..16, |NM| <= 10000, HZ 0..100)\n", v);
+        return 2;
+      }
+      if (pushes.size() >= 8) {
+        std::fprintf(stderr, "armfw: --push: at most 8\n");
+        return 2;
+      }
+      p.joint -= 1;
+      p.phase = deg * M_PI / 180.0;
+      pushes.push_back(p);
+    }
     else if (a == "--dialect") {
       dialect = value("--dialect");
       if (dialect != "grbl" && dialect != "native") {
@@ -570,6 +597,10 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "armfw: unknown argument '%s'\n", a.c_str());
       return usage(stderr, 2);
     }
+  }
+  if (!pushes.empty() && plant_kind != "dynamic") {
+    std::fprintf(stderr, "armfw: --push needs --plant dynamic (it is an external torque on the rigid-body arm)\n");
+    return 2;
   }
   if (plant_kind == "dynamic" && !sim) {
     std::fprintf(stderr, "armfw: --plant dynamic needs --sim (it is the virtual drives' arm)\n");
@@ -723,7 +754,15 @@ int main(int argc, char** argv) {
   if (plant && plant_kind == "dynamic") {
     std::vector<hal::JointScaling> sc;
     for (std::size_t j = 0; j < app.servo->joint_count(); ++j) sc.push_back(app.servo->scaling(j));
-    const std::string e = plant->use_dynamic_plant(app.chain, sc);
+    sim::ArmPlantParams pp;
+    for (std::size_t k = 0; k < pushes.size(); ++k) {
+      if (pushes[k].joint >= static_cast<int>(app.servo->joint_count())) {
+        std::fprintf(stderr, "armfw: --push: joint %d, the arm has %zu\n", pushes[k].joint + 1, app.servo->joint_count());
+        return 2;
+      }
+      pp.pushes[k] = {pushes[k].joint, pushes[k].amplitude, pushes[k].frequency, pushes[k].phase};
+    }
+    const std::string e = plant->use_dynamic_plant(app.chain, sc, pp);
     if (!e.empty()) {
       std::fprintf(stderr, "armfw: --plant dynamic: %s\n", e.c_str());
       return 2;

@@ -114,6 +114,10 @@ class Stream:
         self._arm.call("stream_pose", **args)
         self._started = True
 
+    def restart(self) -> None:
+        """The next send() starts a new stream (after the deadman or a stop ended this one)."""
+        self._started = False
+
     def __enter__(self) -> "Stream":
         return self
 
@@ -272,6 +276,10 @@ class Arm:
 
     def reset(self) -> None:
         self.call("reset")
+
+    def freedrive(self, on: bool = True) -> None:
+        """Hand guiding on or off (needs `dynamics.freedrive = true` in armfw's configuration)."""
+        self.call("freedrive", on=bool(on))
 
     def state(self) -> Dict[str, Any]:
         """One state sample (docs/api.md, Streams)."""

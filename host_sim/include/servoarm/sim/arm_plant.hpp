@@ -70,6 +70,18 @@ struct ArmPlantParams {
   /// joint torques (N m / N). Applied as tau_ext = J^T f + external_torque.
   Eigen::Vector3d tool_force = Eigen::Vector3d::Zero();
   std::array<double, kin::kMaxJoints> external_torque{};
+  /// Scripted external load, on top of the constant one: each push is a joint torque
+  /// amplitude x sin(2 pi frequency t + phase) from the plant's start (t = 0) on, a hand moving
+  /// an arm in free-drive (a teleoperation leader), t in s from the plant's first advance().
+  /// Pushes on the same joint add up.
+  struct Push {
+    int joint = -1;          ///< -1 = none
+    double amplitude = 0;    ///< N m (N)
+    double frequency = 0;    ///< Hz; 0 = constant
+    double phase = 0;        ///< rad
+  };
+  static constexpr std::size_t kMaxPushes = 8;
+  std::array<Push, kMaxPushes> pushes{};
 };
 
 /// Per joint: the figures configure() chose (tests, armsim --verbose, docs).
@@ -133,6 +145,7 @@ class ArmPlant {
   int n_ = 0;
   bool configured_ = false, busy_ = false, started_ = false;
   hal::TimePoint t_ = 0;
+  hal::TimePoint t0_ = -1;  ///< the first advance(): t = 0 of the pushes
   std::uint64_t steps_ = 0;
   kin::JointVector q_, qd_, tau_motor_, tau_ext_, tau_contact_;
 };
