@@ -301,6 +301,12 @@ void Controller::power_down_moving_holds() {
 // Drives in a CiA 402 quick stop follow their own ramp and ignore the offsets.
 void Controller::brake_holding_drives() {
   if (!bus_.quick_stop_holds()) return;
+  bool any = false;  // no joint powered (disabled after a disable): the setpoint stays at rest
+  for (int j = 0; j < n_ && !any; ++j) {
+    const auto st = bus_.feedback(static_cast<std::size_t>(j)).state;
+    any = st == hal::JointState::stopping || st == hal::JointState::enabled;
+  }
+  if (!any) return;
   constexpr double kBrakeTime = 0.05;  // s
   for (int j = 0; j < n_; ++j) {
     const auto ju = static_cast<std::size_t>(j);
