@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "run_command.hpp"
+#include "sweep.hpp"
 #include "servoarm/armctl/cli_workspace.hpp"
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/description.hpp"
@@ -247,7 +248,8 @@ TEST(Workspace, TurningArmWithOffsetWristHoldsEveryPointDenseFkSamplingReaches) 
   // printed extent (cell centres) must hold every such point to within one cell, and
   // every point must lie within two cells of a filled cell (no cut, no hole wider than
   // about two cells: joints 4 and 5 are sampled in steps, the gripper's sideways offset
-  // between two steps is not drawn).
+  // between two steps is not drawn). Under qemu and the sanitizers the first 1/20 of the
+  // samples (tests/support/sweep.hpp).
   constexpr int kReachCells = 2;  // a sampled point's distance to a filled cell, at most (cells)
   const std::string f = write_temp("ar4_like.toml", kAr4);
   const servoarm::kin::LoadResult lr = servoarm::kin::load_robot(f);
@@ -269,7 +271,8 @@ TEST(Workspace, TurningArmWithOffsetWristHoldsEveryPointDenseFkSamplingReaches) 
     double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
     int points = 0, uncovered = 0;
     std::string first;
-    for (int k = 0; k < 400000; ++k) {
+    const int samples = servoarm::test::sweep(400000);
+    for (int k = 0; k < samples; ++k) {
       servoarm::kin::JointVector q(c.n_joints);
       q[0] = 0;
       for (int j = 1; j < c.n_joints; ++j) {
@@ -310,7 +313,7 @@ TEST(Workspace, TurningArmWithOffsetWristHoldsEveryPointDenseFkSamplingReaches) 
                   "%s: printed %c %.1f..%.1f, z %.1f..%.1f mm; FK sampling %.1f..%.1f, z %.1f..%.1f mm (%d points, cell %.2f mm); "
                   "%d points farther than %d cells from a filled cell, first %s",
                   plane, plane[0], e[0], e[1], e[2], e[3], lo[0], hi[0], lo[1], hi[1], points, cell, uncovered, kReachCells, first.c_str());
-    CHECK_TEXT(points > 100000, msg);
+    CHECK_TEXT(points > samples / 4, msg);
     CHECK_TEXT(e[0] <= lo[0] + cell && e[1] >= hi[0] - cell && e[2] <= lo[1] + cell && e[3] >= hi[1] - cell, msg);
     CHECK_TEXT(uncovered == 0, msg);
   }

@@ -13,6 +13,7 @@
 #include "servoarm/hal/canopen.hpp"
 #include "servoarm/hal/sdo_client.hpp"
 #include "sim_fixture.hpp"
+#include "sweep.hpp"
 
 // CppUTest last: its leak detector redefines `new`.
 #include <CppUTest/TestHarness.h>
@@ -554,13 +555,14 @@ TEST(Homing, ControlPathIsAllocationFreeWhileHoming) {
 TEST(Homing, SeededRunsSpreadOfThePositionAfterHoming) {
   // 100 runs per method family: random switch / index positions and start positions; the
   // spread (max - min) of (physical position after homing - the simulated mark), in counts.
+  // Under qemu and the sanitizers the first 1/20 of the runs (tests/support/sweep.hpp).
   const int methods[] = {1, 17, 19, 21, 23, 27, 33, 35};
   std::mt19937 rng(17);
   std::uniform_real_distribution<double> u(0, 1);
   std::printf("\n");
   for (int m : methods) {
     double lo = 1e9, hi = -1e9, tsum = 0;
-    const int runs = 100;
+    const int runs = test::sweep(100);
     for (int k = 0; k < runs; ++k) {
       Rig r(1, [&](CanopenMasterConfig& cfg) { cfg.joints[0].homing = drive_homing(m); });
       sim::DriveSwitches& s = r.drive(0).switches();

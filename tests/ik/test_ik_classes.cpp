@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "ik_class_util.hpp"
+#include "sweep.hpp"
 
 using namespace servoarm;
 using namespace servoarm::test;
@@ -30,7 +31,7 @@ const ClassCase kClassModels[] = {
 
 int samples() {
   const char* s = std::getenv("SERVOARM_IK_SAMPLES");
-  return s ? std::atoi(s) : 10000;
+  return s ? std::atoi(s) : servoarm::test::sweep(10000);  // 1/20 under qemu and the sanitizers
 }
 
 // The OPW forward kinematics of Brandstoetter et al. 2014 (wrist centre and

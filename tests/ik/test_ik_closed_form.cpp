@@ -11,6 +11,7 @@
 
 #include "servoarm/kinematics/ik.hpp"
 #include "kin_test_util.hpp"
+#include "sweep.hpp"
 
 using namespace servoarm;
 using namespace servoarm::test;
@@ -24,7 +25,7 @@ int generic_count(const char* name) { return std::string(name) == "cylindrical_r
 
 int samples_per_arm() {
   const char* s = std::getenv("SERVOARM_IK_SAMPLES");
-  return s ? std::atoi(s) : 100000;
+  return s ? std::atoi(s) : servoarm::test::sweep(100000);  // 1/20 under qemu and the sanitizers
 }
 
 kin::IkModel prepared(const char* name) {

@@ -7,6 +7,7 @@
 
 #include "servoarm/kinematics/ik.hpp"
 #include "kin_test_util.hpp"
+#include "sweep.hpp"
 
 using namespace servoarm;
 using namespace servoarm::test;
@@ -26,7 +27,7 @@ const Case kCases[] = {
 
 int samples() {
   const char* s = std::getenv("SERVOARM_IK_SAMPLES");
-  return s ? std::atoi(s) : 100000;
+  return s ? std::atoi(s) : servoarm::test::sweep(100000);  // 1/20 under qemu and the sanitizers
 }
 
 double gap(const kin::Chain& c, const kin::JointVector& a, const kin::JointVector& b) {
