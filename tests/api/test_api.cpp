@@ -1077,3 +1077,37 @@ TEST(FwApi, PlannedPathOfAJointMoveAndALine) {
   CHECK_EQUAL(std::string("out_of_range"), error_of(c.ask(7, "\"cmd\":\"planned_path\",\"motion\":999")));
   CHECK_EQUAL(std::string("out_of_range"), error_of(c.ask(8, "\"cmd\":\"planned_path\",\"motion\":-1")));
 }
+
+namespace {
+/// The [x, y, z] after `"key":{"position":` in a state line.
+Eigen::Vector3d pose_position(const std::string& s, const std::string& key) {
+  const std::regex e("\"" + key + "\":\\{\"position\":\\[(-?[0-9.eE+-]+),(-?[0-9.eE+-]+),(-?[0-9.eE+-]+)\\]");
+  std::smatch m;
+  if (!std::regex_search(s, m, e)) return Eigen::Vector3d::Constant(1e9);
+  return {std::stod(m[1].str()), std::stod(m[2].str()), std::stod(m[3].str())};
+}
+}  // namespace
+
+// The state carries `tcp`, the active tool's point: with tool0 the flange's (`tool`), with a
+// tool defined 100 mm out along the flange's z axis and tilted, the tool chain's forward
+// kinematics of the measured joints (the service's chain for it, computed by the test).
+TEST(FwApi, StateCarriesTheActiveToolsPoint) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0.2,0.3,-0.6,0,0.6,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string s0 = c.ask(2, "\"cmd\":\"state\"");
+  CHECK_TEXT((pose_position(s0, "tcp") - pose_position(s0, "tool")).norm() < 1e-12, s0.c_str());
+  CHECK(is_ok(c.ask(3, "\"cmd\":\"tool_define\",\"name\":\"pen\",\"position\":[0.01,0,0.1],\"rpy\":[0,0.3,0]")));
+  CHECK(is_ok(c.ask(4, "\"cmd\":\"tool_select\",\"name\":\"pen\"")));
+  const fw::ArmService& svc = rig.app.console->service();
+  const Telemetry t = rig.tel();
+  kin::JointVector q(t.n);
+  for (int j = 0; j < t.n; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+  const Eigen::Vector3d want = tool_point(svc.tool_chain(svc.find_tool("pen")), q);
+  const std::string s1 = c.ask(5, "\"cmd\":\"state\"");
+  const Eigen::Vector3d tcp = pose_position(s1, "tcp");
+  CHECK_TEXT((tcp - want).norm() < 1e-6, s1.c_str());
+  CHECK_TEXT((tcp - pose_position(s1, "tool")).norm() > 0.09, s1.c_str());
+}

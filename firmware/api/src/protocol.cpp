@@ -1011,6 +1011,11 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
     }
     fr.push_back({p.translation().x(), p.translation().y(), p.translation().z()});
     j["frames"] = std::move(fr);
+    if (svc != nullptr) {  // the active tool's point and orientation (tool0: the same as `tool`)
+      const kin::Pose x = p * svc->tool_pose;
+      const Eigen::Vector3d r = kin::rpy_from_rotation(x.linear());
+      j["tcp"] = {{"position", {x.translation().x(), x.translation().y(), x.translation().z()}}, {"rpy", {r.x(), r.y(), r.z()}}};
+    }
   }
   j["queued"] = t.queued;
   j["running"] = t.running_id;
