@@ -125,8 +125,9 @@ struct Rig {
   std::thread pump_th;
   std::atomic<bool> stop{false};
 
-  explicit Rig(api::ApiConfig ac = {}, bool collision = false) {
+  explicit Rig(api::ApiConfig ac = {}, bool collision = false, std::vector<OutputConfig> outputs = {}) {
     FwConfig cfg;
+    cfg.outputs = std::move(outputs);
     cfg.collision = collision;  // the drives map their measured torque (6077h) then
     cfg.can = "sim";
     cfg.priority = 0;
@@ -1110,4 +1111,31 @@ TEST(FwApi, StateCarriesTheActiveToolsPoint) {
   const Eigen::Vector3d tcp = pose_position(s1, "tcp");
   CHECK_TEXT((tcp - want).norm() < 1e-6, s1.c_str());
   CHECK_TEXT((tcp - pose_position(s1, "tool")).norm() > 0.09, s1.c_str());
+}
+
+// The state carries the digital outputs ([[output]] order, the index `output` takes) with their
+// names and whether each is on, read back from the drives' output words: `output` 1 on turns
+// the second on and leaves the first off, and off again.
+TEST(FwApi, StateCarriesTheDigitalOutputs) {
+  Rig rig({}, false, {OutputConfig{"gripper", 1, 16}, OutputConfig{"lamp", 2, 17}});
+  Client c(rig.port());
+  rig.enable(c);
+  const std::string s0 = c.ask(1, "\"cmd\":\"state\"");
+  CHECK_TEXT(has(s0, "\"outputs\":[{\"name\":\"gripper\",\"on\":false},{\"name\":\"lamp\",\"on\":false}]"), s0.c_str());
+  CHECK(is_ok(c.ask(2, "\"cmd\":\"output\",\"index\":1,\"on\":true")));
+  std::string s1;
+  for (int i = 0; i < 200; ++i) {
+    s1 = c.ask(10 + i, "\"cmd\":\"state\"");
+    if (has(s1, "\"lamp\",\"on\":true")) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  CHECK_TEXT(has(s1, "\"outputs\":[{\"name\":\"gripper\",\"on\":false},{\"name\":\"lamp\",\"on\":true}]"), s1.c_str());
+  CHECK(is_ok(c.ask(3, "\"cmd\":\"output\",\"index\":1,\"on\":false")));
+  std::string s2;
+  for (int i = 0; i < 200; ++i) {
+    s2 = c.ask(300 + i, "\"cmd\":\"state\"");
+    if (has(s2, "\"lamp\",\"on\":false")) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  CHECK_TEXT(has(s2, "\"lamp\",\"on\":false"), s2.c_str());
 }

@@ -264,7 +264,11 @@ async function main() {
     const progDir = path.join(args.workdir, 'programs');
     fs.rmSync(progDir, { recursive: true, force: true });
     fs.mkdirSync(progDir, { recursive: true });
-    armfw = await startArmfw(args.armfw, ['--programs', progDir]);
+    // two digital outputs; tools, frames and points kept in memory only (as without --config)
+    const simToml = path.join(args.workdir, 'sim.toml');
+    fs.writeFileSync(simToml, '[console]\nframes_file = ""\n\n[programs]\npoints_file = ""\n\n' +
+                     '[[output]]\nname = "gripper"\nnode = 1\nbit = 16\n\n[[output]]\nname = "lamp"\nnode = 2\nbit = 17\n');
+    armfw = await startArmfw(args.armfw, ['--config', simToml, '--programs', progDir]);
     console.log(`armfw: pendant at ${armfw.url}, API TCP port ${armfw.tcp}`);
     tcp = new Tcp(armfw.tcp);
     await tcp.connect();
@@ -648,6 +652,20 @@ async function main() {
       assert(!after.tools.some((t) => t.name === 'pen') && !after.frames.some((f) => f.name === 'table'), 'still defined: ' + JSON.stringify(after));
       const left = await page.evaluate(() => window.pendant.view.frameGroup.children.length);
       assert(left === 0, `${left} user frames still drawn`);
+    });
+
+    await check('digital outputs: one row each from the state, switched on and off from the page', async () => {
+      await page.waitForFunction(() => document.querySelectorAll('#outputs tr').length === 2, { timeout: WAIT_S * 1000 });
+      const names = await page.$$eval('#outputs tr td:first-child', (t) => t.map((e) => e.textContent));
+      assert(names.join('|') === '0 gripper|1 lamp', `output rows: ${names}`);
+      await page.$eval('#outputs tr[data-output="1"] button[data-on="true"]', (b) => b.click());
+      await until('lamp on (independent client)', async () => { const o = (await tcp.state()).outputs; return o[1].on && !o[0].on; });
+      await page.waitForFunction(() => document.querySelector('#outputs tr[data-output="1"] .val').textContent === 'on', { timeout: WAIT_S * 1000 });
+      await page.$eval('#io', (e) => e.scrollIntoView({ block: 'center' }));
+      await shot(page, 'pendant-outputs');
+      await page.$eval('#outputs tr[data-output="1"] button[data-on="false"]', (b) => b.click());
+      await until('lamp off', async () => !(await tcp.state()).outputs[1].on);
+      await page.waitForFunction(() => document.querySelector('#outputs tr[data-output="1"] .val').textContent === 'off', { timeout: WAIT_S * 1000 });
     });
 
     await check('tablet and phone layouts keep the stop button in view', async () => {

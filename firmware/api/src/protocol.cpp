@@ -1031,6 +1031,9 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
     j["feed_pct"] = svc->feed_pct;
     j["active_tool"] = svc->tool;
     j["active_frame"] = svc->frame;
+    json outs = json::array();
+    for (const auto& [name, on] : svc->outputs) outs.push_back({{"name", name}, {"on", on}});
+    j["outputs"] = std::move(outs);
   }
   return j.dump(-1, ' ', false, json::error_handler_t::replace);
 }

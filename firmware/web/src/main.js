@@ -133,8 +133,6 @@ $('movej-form').addEventListener('submit', (e) => {
   const q = $('movej-q').value.split(/[\s,]+/).filter((x) => x !== '').map(Number);
   command('movej', { q, speed_pct: speed() });
 });
-for (const b of document.querySelectorAll('#out-form button[data-out]'))
-  b.addEventListener('click', () => command('output', { index: Number($('out-index').value), on: b.dataset.out === '1' }));
 
 // ---- hold-to-run joint jog ------------------------------------------------------------------------
 let jogTimer = null;
@@ -483,6 +481,7 @@ api.on('state', (st) => {
   view.update(st.frames);
   if (st.tcp && Array.isArray(st.frames) && st.frames.length) view.tool?.(st.frames[st.frames.length - 1], st.tcp.position);
   showPath(st.running);
+  showOutputs(st.outputs);
   plots.push(st);
   showProgram(st.program);
   if (st.feed_pct !== undefined && document.activeElement !== $('override') && overrideTimer === null) {
@@ -494,6 +493,42 @@ api.on('state', (st) => {
   if (st.active_frame !== undefined && document.activeElement !== $('frame-sel') && $('frame-sel').value !== st.active_frame &&
       P.tools && P.tools.frames.some((t) => t.name === st.active_frame)) $('frame-sel').value = st.active_frame;
 });
+
+// ---- digital outputs: one row each from the state's `outputs` ([[output]] order: the index `output` takes)
+function showOutputs(outs) {
+  if (!Array.isArray(outs)) return;
+  const tb = $('outputs').querySelector('tbody');
+  if (tb.children.length !== outs.length) {
+    tb.textContent = '';
+    outs.forEach((o, i) => {
+      const tr = document.createElement('tr');
+      tr.dataset.output = String(i);
+      const name = document.createElement('td');
+      name.textContent = i + ' ' + o.name;
+      const val = document.createElement('td');
+      val.className = 'val';
+      tr.append(name, val);
+      for (const on of [true, false]) {
+        const td = document.createElement('td');
+        const b = document.createElement('button');
+        b.className = 'op';
+        b.textContent = on ? 'on' : 'off';
+        b.dataset.on = String(on);
+        b.addEventListener('click', () => command('output', { index: i, on }));
+        td.append(b);
+        tr.append(td);
+      }
+      tb.append(tr);
+    });
+    $('no-outputs').hidden = outs.length > 0;
+    refreshRole();
+  }
+  outs.forEach((o, i) => {
+    const td = tb.children[i].querySelector('.val');
+    td.textContent = o.on ? 'on' : 'off';
+    td.classList.toggle('on', o.on);
+  });
+}
 
 // ---- the planned path of the running move: the firmware's own, asked once when a motion starts --
 let pathFor = 0;
