@@ -668,6 +668,75 @@ async function main() {
       await page.waitForFunction(() => document.querySelector('#outputs tr[data-output="1"] .val').textContent === 'off', { timeout: WAIT_S * 1000 });
     });
 
+    await check('park: the arm goes to its park pose', async () => {
+      await until('the arm idle and at rest', async () => { const s = await tcp.state(); return s.state === 'idle' && allStill(s); });
+      const q0 = (await tcp.state()).q;
+      await page.click('#arm button[data-cmd="park"]');
+      await page.waitForFunction(() => window.pendant.results.some((r) => r.cmd === 'park'), { timeout: WAIT_S * 1000 });
+      const r = await page.evaluate(() => window.pendant.results.filter((x) => x.cmd === 'park').pop());
+      assert(r.ok && Array.isArray(r.goal), 'park answered: ' + JSON.stringify(r));
+      // motion.home_deg left out: the park pose is every joint at 0 (clamped into its limits)
+      assert(r.goal.every((v) => Math.abs(v) < 1e-9), `park goal ${r.goal}`);
+      assert(q0.some((v) => Math.abs(v) > 0.05), 'the arm was at the park pose already: nothing tested');
+      await until('the arm at rest at the park pose', async () => { const s = await tcp.state(); return allStill(s) && s.q.every((v) => Math.abs(v) < 1e-3); });
+    });
+
+    await check('Cartesian jog in the tool frame: z+ moves the tool along its own z axis', async () => {
+      await page.$eval('#movej-q', (e) => { e.value = '0.2, 0.3, -0.6, 0, 0.9, 0.4'; });
+      await page.click('#movej-form button[type=submit]');
+      await until('the arm at the start pose', async () => { const s = await tcp.state(); return Math.abs(s.q[4] - 0.9) < 1e-3 && allStill(s); });
+      const s0 = await tcp.state();
+      const [r, p, y] = s0.tool.rpy;  // R = Rz(y) Ry(p) Rx(r): its z column is the tool's z axis in the base
+      const zAxis = [Math.cos(y) * Math.sin(p) * Math.cos(r) + Math.sin(y) * Math.sin(r),
+                     Math.sin(y) * Math.sin(p) * Math.cos(r) - Math.cos(y) * Math.sin(r),
+                     Math.cos(p) * Math.cos(r)];
+      await page.select('#cjog-frame', 'tool');
+      const sel = '#cjog-axes button.cjog[data-axis="2"][data-dir="1"]';
+      await page.$eval(sel, (e) => e.scrollIntoView({ block: 'center' }));
+      const p0 = s0.tool.position;
+      await holdUntil(page, sel, 'the tool moving along its z axis', async () => {
+        const q = (await tcp.state()).tool.position;
+        return Math.hypot(q[0] - p0[0], q[1] - p0[1], q[2] - p0[2]) > 0.01;
+      });
+      await until('at rest after the release', async () => allStill(await tcp.state()));
+      const p1 = (await tcp.state()).tool.position;
+      const d = [0, 1, 2].map((i) => p1[i] - p0[i]);
+      const cos = (d[0] * zAxis[0] + d[1] * zAxis[1] + d[2] * zAxis[2]) / Math.hypot(...d);
+      assert(cos > 0.99, `jogged z+ in the tool frame, the tool went ${d}, its z axis is ${zAxis} (cos ${cos})`);
+      await page.select('#cjog-frame', 'base');
+    });
+
+    await check('step: a paused program runs one motion, then pauses again', async () => {
+      const text = 'movej 0 0 0 0 0 0\nmovej 20 0 0 0 0 0\nmovej 0 0 0 0 0 0\nmovej 20 0 0 0 0 0\nmovej 0 0 0 0 0 0';
+      await page.$eval('#prog-text', (e, t) => { e.value = t; e.dispatchEvent(new Event('input')); }, text);
+      await page.waitForFunction(() => /^checked: /.test(document.getElementById('prog-check').textContent), { timeout: WAIT_S * 1000 });
+      await page.click('#prog-run');
+      await until('the program running', async () => (await tcp.state()).program.state === 'running');
+      await page.click('#prog-pause');
+      await until('the program paused and the arm at rest', async () => { const s = await tcp.state(); return s.program.state === 'paused' && allStill(s); });
+      const d0 = (await tcp.state()).done;
+      await sleep(300);
+      assert((await tcp.state()).done === d0, 'a paused program ran a motion');
+      await page.click('#prog-step');
+      await until('one motion done, paused again', async () => { const s = await tcp.state(); return s.done === d0 + 1 && s.program.state === 'paused' && allStill(s); });
+      await sleep(300);
+      assert((await tcp.state()).done === d0 + 1, 'the step ran more than one motion');
+      await page.click('#prog-abort');
+      await until('the program ended', async () => (await tcp.state()).program.state === 'idle');
+      await page.$eval('#prog-text', (e) => { e.value = ''; e.dispatchEvent(new Event('input')); });
+    });
+
+    await check('free-drive: the button asks the firmware, which names why the simulated drives cannot', async () => {
+      await page.click('#freedrive');
+      await page.waitForFunction(() => window.pendant.results.some((r) => r.cmd === 'freedrive'), { timeout: WAIT_S * 1000 });
+      const r = await page.evaluate(() => window.pendant.results.filter((x) => x.cmd === 'freedrive').pop());
+      // armfw --sim's drives have no cyclic synchronous torque mode: refused in one line, shown
+      assert(r.error === 'bad_state' && /free-drive needs it/.test(r.message), 'freedrive answered: ' + JSON.stringify(r));
+      const msg = await page.$eval('#msg', (e) => e.textContent);
+      assert(/^freedrive: bad_state: /.test(msg), `message shown: ${msg}`);
+      assert(!(await tcp.state()).freedrive, 'the arm is in free-drive');
+    });
+
     await check('tablet and phone layouts keep the stop button in view', async () => {
       for (const [name, vp] of [['pendant-tablet', { width: 1280, height: 800 }], ['pendant-phone', { width: 390, height: 844, isMobile: true, hasTouch: true }]]) {
         await page.setViewport(vp);
