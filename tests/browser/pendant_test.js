@@ -545,6 +545,8 @@ async function main() {
       assert(Math.abs(p1[1] - p0[1]) < 2e-3 && Math.abs(p1[2] - p0[2]) < 2e-3, `the tool left its line: ${p0} -> ${p1}`);
       await page.$eval('#override', (e) => { e.value = '55'; e.dispatchEvent(new Event('input')); });
       await until('the arm\'s feed override at 55 %', async () => (await tcp.state()).feed_pct === 55);
+      // the state bar shows the arm's override (from the state stream)
+      await page.waitForFunction(() => document.getElementById('st-override').textContent === 'override: 55 %', { timeout: WAIT_S * 1000 });
       await page.$eval('#override', (e) => { e.value = '100'; e.dispatchEvent(new Event('input')); });
       await until('the arm\'s feed override at 100 %', async () => (await tcp.state()).feed_pct === 100);
     });

@@ -466,6 +466,7 @@ api.on('state', (st) => {
   $('st-mode').textContent = 'mode: ' + st.mode + (st.freedrive ? ', free-drive' : '');
   $('st-homed').textContent = 'homed: ' + bits(st.homed, n) + '/' + n + (st.homing ? ' (homing)' : '');
   $('st-speed').textContent = 'speed: ' + speed() + ' %';
+  if (st.feed_pct !== undefined) $('st-override').textContent = 'override: ' + st.feed_pct + ' %';
   // the envelope the arm runs with: its mode now and the checksum of [safety] hello told
   const env = (P.hello && P.hello.safety) || {};
   $('st-safety').textContent = env.enabled ? 'safety: ' + st.safety_mode + ' ' + env.checksum + (st.safety_stops ? ', ' + st.safety_stops + ' stops' : '') : 'safety: off';
