@@ -453,6 +453,11 @@ async function main() {
       assert(miss < 1e-3, `the drawn path ends ${miss} m from where the arm stopped (${end} vs ${tool})`);
       // nothing runs: the path goes
       await page.waitForFunction(() => window.pendant.path === null && !window.pendant.view.pathLine.visible, { timeout: WAIT_S * 1000 });
+      // back where it started: the checks after this one start from the pose the stop left
+      await page.$eval('#movej-q', (e, g) => { e.value = g; }, s0.q.map((v) => v.toFixed(6)).join(', '));
+      await page.$eval('#speed', (e) => { e.value = '30'; e.dispatchEvent(new Event('input')); });
+      await page.click('#movej-form button[type=submit]');
+      await until('the arm back at the start', async () => { const s = await tcp.state(); return allStill(s) && s.q.every((v, j) => Math.abs(v - s0.q[j]) < 1e-3); });
     });
 
     await check('a program with an unreachable line 3 shows the error on line 3 and does not run', async () => {
@@ -737,6 +742,29 @@ async function main() {
       const msg = await page.$eval('#msg', (e) => e.textContent);
       assert(/^freedrive: bad_state: /.test(msg), `message shown: ${msg}`);
       assert(!(await tcp.state()).freedrive, 'the arm is in free-drive');
+    });
+
+    await check('e-stop, reset, disable, enable and home from the page: the arm follows', async () => {
+      const arm = (cmd) => page.$eval(`#arm button[data-cmd="${cmd}"]`, (b) => b.click());
+      await until('the arm idle and at rest', async () => { const s = await tcp.state(); return s.state === 'idle' && allStill(s); });
+      await arm('estop');
+      await until('the arm in e-stop', async () => (await tcp.state()).state === 'estop');
+      await page.waitForFunction(() => document.body.dataset.state === 'estop', { timeout: WAIT_S * 1000 });
+      await arm('reset');
+      await until('the e-stop reset', async () => (await tcp.state()).state !== 'estop');
+      await arm('enable');
+      await until('the arm idle again', async () => (await tcp.state()).state === 'idle');
+      await arm('disable');
+      await until('the arm disabled', async () => (await tcp.state()).state === 'disabled');
+      await arm('enable');
+      await until('the arm idle again', async () => (await tcp.state()).state === 'idle');
+      // armfw --sim's joints home by method none (at once): the homing cycle's events say it ran
+      const seq0 = Math.max(0, ...((await tcp.ask('events')).events || []).map((e) => e.seq));
+      await arm('home');
+      await until('the homing cycle\'s events', async () => ((await tcp.ask('events', { since: seq0 })).events || []).some((e) => e.kind === 'homing'));
+      await until('every joint homed, homing over', async () => { const s = await tcp.state(); return s.homing === 0 && s.homed === 63 && s.state === 'idle'; }, 120);
+      const bar = await page.$eval('#st-homed', (e) => e.textContent);
+      assert(bar === 'homed: 6/6', `the bar shows ${bar}`);
     });
 
     await check('tablet and phone layouts keep the stop button in view', async () => {
