@@ -125,8 +125,9 @@ struct Rig {
   std::thread pump_th;
   std::atomic<bool> stop{false};
 
-  explicit Rig(api::ApiConfig ac = {}, bool collision = false) {
+  explicit Rig(api::ApiConfig ac = {}, bool collision = false, std::vector<OutputConfig> outputs = {}) {
     FwConfig cfg;
+    cfg.outputs = std::move(outputs);
     cfg.collision = collision;  // the drives map their measured torque (6077h) then
     cfg.can = "sim";
     cfg.priority = 0;
@@ -1009,4 +1010,132 @@ TEST(FwApi, TlsServesWithACertificateAndRefusesABadOne) {
   std::system(("rm -rf " + dir).c_str());
   CHECK_TEXT(out.find("\"id\":1") != std::string::npos && out.find("\"protocol\":1") != std::string::npos, out.c_str());
   CHECK_TEXT(no.find("\"protocol\":1") == std::string::npos, no.c_str());
+}
+
+namespace {
+/// The [x, y, z] points of a planned_path answer.
+std::vector<Eigen::Vector3d> path_points(const std::string& s) {
+  std::vector<Eigen::Vector3d> out;
+  const auto at = s.find("\"points\":[");
+  if (at == std::string::npos) return out;
+  const std::string rest = s.substr(at);
+  const std::regex e("\\[(-?[0-9.eE+-]+),(-?[0-9.eE+-]+),(-?[0-9.eE+-]+)\\]");
+  for (auto it = std::sregex_iterator(rest.begin(), rest.begin() + static_cast<long>(rest.find("]]") + 2), e);
+       it != std::sregex_iterator(); ++it)
+    out.emplace_back(std::stod((*it)[1].str()), std::stod((*it)[2].str()), std::stod((*it)[3].str()));
+  return out;
+}
+Eigen::Vector3d tool_point(const kin::Chain& ch, const kin::JointVector& q) {
+  kin::Pose p = kin::Pose::Identity();
+  CHECK(kin::forward(ch, q, p) == kin::Status::ok);
+  return p.translation();
+}
+}  // namespace
+
+// planned_path: the tool path the service planned a move with, sampled along its plan. A movej's
+// path starts at the tool point where the arm is and ends at the tool point of its goal (the
+// arm's own FK, not the service's); asked without a motion while it runs, it is the running
+// one's. A movel's path lies on the straight line and ends at its target. A motion never queued
+// is refused, and with nothing running the running one's is too.
+TEST(FwApi, PlannedPathOfAJointMoveAndALine) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  const kin::Chain& ch = rig.app.chain;
+  kin::JointVector q0(6), goal(6);
+  q0 << 0, 0, 0, 0, 0, 0;
+  goal << 0.4, 0.3, -0.6, 0, 0.6, 0;
+  const std::string m = c.ask(1, "\"cmd\":\"movej\",\"q\":[0.4,0.3,-0.6,0,0.6,0],\"speed_pct\":20");
+  CHECK_TEXT(is_ok(m), m.c_str());
+  const int id = int_field(m, "motion");
+  for (int i = 0; i < 400 && rig.tel().running_id != static_cast<std::uint32_t>(id); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string running = c.ask(2, "\"cmd\":\"planned_path\"");
+  CHECK_TEXT(is_ok(running) && int_field(running, "motion") == id && has(running, "\"kind\":\"joint\""), running.c_str());
+  const std::vector<Eigen::Vector3d> pj = path_points(c.ask(3, "\"cmd\":\"planned_path\",\"motion\":" + std::to_string(id)));
+  CHECK_EQUAL(fw::ArmService::kPlannedPathSamples, static_cast<int>(pj.size()));
+  CHECK_TEXT((pj.front() - tool_point(ch, q0)).norm() < 1e-6, "the path does not start where the arm is");
+  CHECK_TEXT((pj.back() - tool_point(ch, goal)).norm() < 1e-6, "the path does not end at the goal's tool point");
+  double len = 0;
+  for (std::size_t k = 1; k < pj.size(); ++k) len += (pj[k] - pj[k - 1]).norm();
+  CHECK_TEXT(len > (pj.back() - pj.front()).norm() + 1e-3, "a joint move's tool path drawn as a straight line");
+  for (int i = 0; i < 1000 && rig.tel().done_id < static_cast<std::uint32_t>(id); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  CHECK_EQUAL(std::string("bad_state"), error_of(c.ask(4, "\"cmd\":\"planned_path\"")));  // nothing runs
+  // a line 60 mm along x from the goal's tool point
+  const Eigen::Vector3d a = tool_point(ch, goal), b = a + Eigen::Vector3d(0.06, 0, 0);
+  char mv[200];
+  std::snprintf(mv, sizeof mv, "\"cmd\":\"movel\",\"position\":[%.9f,%.9f,%.9f],\"speed\":0.05", b.x(), b.y(), b.z());
+  const std::string ml = c.ask(5, mv);
+  CHECK_TEXT(is_ok(ml), ml.c_str());
+  const std::string lp = c.ask(6, "\"cmd\":\"planned_path\",\"motion\":" + std::to_string(int_field(ml, "motion")));
+  const std::vector<Eigen::Vector3d> pl = path_points(lp);
+  CHECK_TEXT(static_cast<int>(pl.size()) == fw::ArmService::kPlannedPathSamples, lp.c_str());
+  for (const Eigen::Vector3d& x : pl) {
+    const double off = ((x - a) - (x - a).dot(Eigen::Vector3d::UnitX()) * Eigen::Vector3d::UnitX()).norm();
+    CHECK_TEXT(off < 1e-4 && x.x() > a.x() - 1e-4 && x.x() < b.x() + 1e-4, lp.c_str());
+  }
+  CHECK_TEXT((pl.back() - b).norm() < 1e-5, lp.c_str());
+  CHECK_EQUAL(std::string("out_of_range"), error_of(c.ask(7, "\"cmd\":\"planned_path\",\"motion\":999")));
+  CHECK_EQUAL(std::string("out_of_range"), error_of(c.ask(8, "\"cmd\":\"planned_path\",\"motion\":-1")));
+}
+
+namespace {
+/// The [x, y, z] after `"key":{"position":` in a state line.
+Eigen::Vector3d pose_position(const std::string& s, const std::string& key) {
+  const std::regex e("\"" + key + "\":\\{\"position\":\\[(-?[0-9.eE+-]+),(-?[0-9.eE+-]+),(-?[0-9.eE+-]+)\\]");
+  std::smatch m;
+  if (!std::regex_search(s, m, e)) return Eigen::Vector3d::Constant(1e9);
+  return {std::stod(m[1].str()), std::stod(m[2].str()), std::stod(m[3].str())};
+}
+}  // namespace
+
+// The state carries `tcp`, the active tool's point: with tool0 the flange's (`tool`), with a
+// tool defined 100 mm out along the flange's z axis and tilted, the tool chain's forward
+// kinematics of the measured joints (the service's chain for it, computed by the test).
+TEST(FwApi, StateCarriesTheActiveToolsPoint) {
+  Rig rig;
+  Client c(rig.port());
+  rig.enable(c);
+  CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0.2,0.3,-0.6,0,0.6,0],\"speed_pct\":50")));
+  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string s0 = c.ask(2, "\"cmd\":\"state\"");
+  CHECK_TEXT((pose_position(s0, "tcp") - pose_position(s0, "tool")).norm() < 1e-12, s0.c_str());
+  CHECK(is_ok(c.ask(3, "\"cmd\":\"tool_define\",\"name\":\"pen\",\"position\":[0.01,0,0.1],\"rpy\":[0,0.3,0]")));
+  CHECK(is_ok(c.ask(4, "\"cmd\":\"tool_select\",\"name\":\"pen\"")));
+  const fw::ArmService& svc = rig.app.console->service();
+  const Telemetry t = rig.tel();
+  kin::JointVector q(t.n);
+  for (int j = 0; j < t.n; ++j) q[j] = t.q_act[static_cast<std::size_t>(j)];
+  const Eigen::Vector3d want = tool_point(svc.tool_chain(svc.find_tool("pen")), q);
+  const std::string s1 = c.ask(5, "\"cmd\":\"state\"");
+  const Eigen::Vector3d tcp = pose_position(s1, "tcp");
+  CHECK_TEXT((tcp - want).norm() < 1e-6, s1.c_str());
+  CHECK_TEXT((tcp - pose_position(s1, "tool")).norm() > 0.09, s1.c_str());
+}
+
+// The state carries the digital outputs ([[output]] order, the index `output` takes) with their
+// names and whether each is on, read back from the drives' output words: `output` 1 on turns
+// the second on and leaves the first off, and off again.
+TEST(FwApi, StateCarriesTheDigitalOutputs) {
+  Rig rig({}, false, {OutputConfig{"gripper", 1, 16}, OutputConfig{"lamp", 2, 17}});
+  Client c(rig.port());
+  rig.enable(c);
+  const std::string s0 = c.ask(1, "\"cmd\":\"state\"");
+  CHECK_TEXT(has(s0, "\"outputs\":[{\"name\":\"gripper\",\"on\":false},{\"name\":\"lamp\",\"on\":false}]"), s0.c_str());
+  CHECK(is_ok(c.ask(2, "\"cmd\":\"output\",\"index\":1,\"on\":true")));
+  std::string s1;
+  for (int i = 0; i < 200; ++i) {
+    s1 = c.ask(10 + i, "\"cmd\":\"state\"");
+    if (has(s1, "\"lamp\",\"on\":true")) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  CHECK_TEXT(has(s1, "\"outputs\":[{\"name\":\"gripper\",\"on\":false},{\"name\":\"lamp\",\"on\":true}]"), s1.c_str());
+  CHECK(is_ok(c.ask(3, "\"cmd\":\"output\",\"index\":1,\"on\":false")));
+  std::string s2;
+  for (int i = 0; i < 200; ++i) {
+    s2 = c.ask(300 + i, "\"cmd\":\"state\"");
+    if (has(s2, "\"lamp\",\"on\":false")) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  CHECK_TEXT(has(s2, "\"lamp\",\"on\":false"), s2.c_str());
 }

@@ -200,6 +200,27 @@ async function pressHold(page, selector) {
   await page.mouse.down();
 }
 
+/** Hold `selector` until cond() holds, then release. On a loaded machine the browser may stall
+ *  past the jog deadman: the firmware ends the jog and the page waits for a new press; it is
+ *  pressed again and counted (a figure line). */
+async function holdUntil(page, selector, what, cond) {
+  let lapses = 0;
+  await pressHold(page, selector);
+  try {
+    await until(what, async () => {
+      if (await page.evaluate(() => window.pendant.jogging === null)) {
+        ++lapses;
+        await page.mouse.up();
+        await pressHold(page, selector);
+      }
+      return cond();
+    });
+  } finally {
+    await page.mouse.up();
+  }
+  if (lapses) figure(`${what}: the held jog lapsed ${lapses} time(s) (keep-alives later than the deadman: a busy machine)`);
+}
+
 // ---- the cases ------------------------------------------------------------------------------------
 const results = [];
 const figures = [];
@@ -239,7 +260,15 @@ async function main() {
   let tcp = null;
   try {
     // ------------------------------------------------------------ no token file: loopback operators
-    armfw = await startArmfw(args.armfw);
+    // a programs folder for the editor's save (emptied: a file there is this run's)
+    const progDir = path.join(args.workdir, 'programs');
+    fs.rmSync(progDir, { recursive: true, force: true });
+    fs.mkdirSync(progDir, { recursive: true });
+    // two digital outputs; tools, frames and points kept in memory only (as without --config)
+    const simToml = path.join(args.workdir, 'sim.toml');
+    fs.writeFileSync(simToml, '[console]\nframes_file = ""\n\n[programs]\npoints_file = ""\n\n' +
+                     '[[output]]\nname = "gripper"\nnode = 1\nbit = 16\n\n[[output]]\nname = "lamp"\nnode = 2\nbit = 17\n');
+    armfw = await startArmfw(args.armfw, ['--config', simToml, '--programs', progDir]);
     console.log(`armfw: pendant at ${armfw.url}, API TCP port ${armfw.tcp}`);
     tcp = new Tcp(armfw.tcp);
     await tcp.connect();
@@ -392,6 +421,45 @@ async function main() {
       assert(Math.abs((await tcp.state()).q[0] - goal2[0]) > 0.05, 'the movej reached its goal: the space bar did not stop it');
     });
 
+    await check('the 3D view draws the running move\'s planned path, the firmware\'s, ending where the arm stops', async () => {
+      await until('the arm idle and at rest', async () => { const s = await tcp.state(); return s.state === 'idle' && allStill(s); });
+      const s0 = await tcp.state();
+      // a joint move whose tool point sweeps a wide arc (J1 turns, the arm leans out)
+      const goal = s0.q.map((v, j) => (j === 0 ? v + 1.0 : j === 1 ? 0.5 : j === 2 ? -0.3 : v));
+      await page.$eval('#movej-q', (e, g) => { e.value = g; }, goal.map((v) => v.toFixed(4)).join(', '));
+      await page.$eval('#speed', (e) => { e.value = '8'; e.dispatchEvent(new Event('input')); });
+      await page.click('#movej-form button[type=submit]');
+      const run = await until('the movej running', async () => { const s = await tcp.state(); return s.running ? s : null; });
+      // the firmware's planned path of that motion, asked by the independent client
+      const ref = await tcp.ask('planned_path', { motion: run.running });
+      assert(ref.ok && ref.motion === run.running && ref.points.length >= 24, 'planned_path over TCP: ' + JSON.stringify(ref).slice(0, 300));
+      const drawn = await (await page.waitForFunction((id) => {
+        const v = window.pendant.view, p = window.pendant.path;
+        if (!p || p.motion !== id || !v.pathLine || !v.pathLine.visible) return null;
+        return Array.from(v.pathLine.geometry.attributes.position.array);
+      }, { timeout: WAIT_S * 1000 }, run.running)).jsonValue();
+      assert(drawn.length === 3 * ref.points.length, `the view draws ${drawn.length / 3} points, the firmware planned ${ref.points.length}`);
+      ref.points.forEach((p, k) => p.forEach((v, i) => assert(Math.abs(drawn[3 * k + i] - v) < 1e-5, `drawn point ${k} differs from the plan: ${drawn.slice(3 * k, 3 * k + 3)} vs ${p}`)));
+      await page.$eval('#view', (e) => e.scrollIntoView({ block: 'center' }));
+      await sleep(150);  // a frame drawn (the view draws at most every 50 ms)
+      await shot(page, 'pendant-path');
+      await until('the move done and the arm at rest', async () => { const s = await tcp.state(); return s.done >= run.running && allStill(s); });
+      // where the arm stopped (its tool point, measured) is where the drawn path ends; 1 mm
+      // covers the float32 of the drawing and the simulated drives' settling
+      const tool = (await tcp.state()).tool.position;
+      const end = drawn.slice(-3);
+      const miss = Math.hypot(end[0] - tool[0], end[1] - tool[1], end[2] - tool[2]);
+      figure(`planned path drawn: ${ref.points.length} points over ${ref.duration.toFixed(2)} s; its end ${(miss * 1000).toFixed(3)} mm from the tool point the arm stopped at`);
+      assert(miss < 1e-3, `the drawn path ends ${miss} m from where the arm stopped (${end} vs ${tool})`);
+      // nothing runs: the path goes
+      await page.waitForFunction(() => window.pendant.path === null && !window.pendant.view.pathLine.visible, { timeout: WAIT_S * 1000 });
+      // back where it started: the checks after this one start from the pose the stop left
+      await page.$eval('#movej-q', (e, g) => { e.value = g; }, s0.q.map((v) => v.toFixed(6)).join(', '));
+      await page.$eval('#speed', (e) => { e.value = '30'; e.dispatchEvent(new Event('input')); });
+      await page.click('#movej-form button[type=submit]');
+      await until('the arm back at the start', async () => { const s = await tcp.state(); return allStill(s) && s.q.every((v, j) => Math.abs(v - s0.q[j]) < 1e-3); });
+    });
+
     await check('a program with an unreachable line 3 shows the error on line 3 and does not run', async () => {
       await until('the arm idle', async () => (await tcp.state()).state === 'idle');
       const s0 = await tcp.state();
@@ -444,6 +512,27 @@ async function main() {
       await page.waitForFunction(() => document.querySelectorAll('#prog-gutter div.current').length === 0, { timeout: WAIT_S * 1000 });
     });
 
+    await check('save the program from the editor: written to the programs folder; a line the loader refuses is marked, nothing written', async () => {
+      const text = 'movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\n';
+      await page.$eval('#prog-name', (e) => { e.value = 'saved1'; e.dispatchEvent(new Event('input')); });
+      await page.$eval('#prog-text', (e, t) => { e.value = t; e.dispatchEvent(new Event('input')); }, text);
+      await page.click('#prog-save');
+      const file = path.join(progDir, 'saved1.arm');
+      await until('saved1.arm in the programs folder', async () => fs.existsSync(file));
+      assert(fs.readFileSync(file, 'utf8') === text, `saved1.arm holds: ${JSON.stringify(fs.readFileSync(file, 'utf8'))}`);
+      // the arm runs it by name from the folder (the independent client)
+      const chk = await tcp.ask('program_check', { name: 'saved1' });
+      assert(chk.ok && chk.steps === 2, 'program_check of the saved file: ' + JSON.stringify(chk));
+      await page.$eval('#prog-name', (e) => { e.value = 'bad1'; e.dispatchEvent(new Event('input')); });
+      await page.$eval('#prog-text', (e) => { e.value = 'movej 0 0 0 0 0 0\nfrobnicate 1 2\n'; e.dispatchEvent(new Event('input')); });
+      await page.click('#prog-save');
+      await page.waitForFunction(() => window.pendant.results.some((r) => r.cmd === 'program_save' && r.error), { timeout: WAIT_S * 1000 });
+      await page.waitForFunction(() => document.getElementById('prog-check').dataset.line === '2', { timeout: WAIT_S * 1000 });
+      assert(!fs.existsSync(path.join(progDir, 'bad1.arm')), 'a program the loader refuses was saved');
+      await page.$eval('#prog-name', (e) => { e.value = 'editor'; e.dispatchEvent(new Event('input')); });
+      await page.$eval('#prog-text', (e) => { e.value = ''; e.dispatchEvent(new Event('input')); });
+    });
+
     await check('Cartesian jog: hold x+ in the base frame, the tool moves along x; the override slider sets the arm\'s', async () => {
       await until('the arm idle', async () => (await tcp.state()).state === 'idle');
       // away from the zero pose's singularity first
@@ -455,17 +544,14 @@ async function main() {
       await page.select('#cjog-frame', 'base');
       const sel = '#cjog-axes button.cjog[data-axis="0"][data-dir="1"]';
       await page.$eval(sel, (e) => e.scrollIntoView({ block: 'center' }));
-      await pressHold(page, sel);
-      try {
-        await until('the tool moving along x', async () => (await tcp.state()).tool.position[0] > p0[0] + 0.005);
-      } finally {
-        await page.mouse.up();
-      }
+      await holdUntil(page, sel, 'the tool moving along x', async () => (await tcp.state()).tool.position[0] > p0[0] + 0.005);
       await until('at rest after the release', async () => allStill(await tcp.state()));
       const p1 = (await tcp.state()).tool.position;
       assert(Math.abs(p1[1] - p0[1]) < 2e-3 && Math.abs(p1[2] - p0[2]) < 2e-3, `the tool left its line: ${p0} -> ${p1}`);
       await page.$eval('#override', (e) => { e.value = '55'; e.dispatchEvent(new Event('input')); });
       await until('the arm\'s feed override at 55 %', async () => (await tcp.state()).feed_pct === 55);
+      // the state bar shows the arm's override (from the state stream)
+      await page.waitForFunction(() => document.getElementById('st-override').textContent === 'override: 55 %', { timeout: WAIT_S * 1000 });
       await page.$eval('#override', (e) => { e.value = '100'; e.dispatchEvent(new Event('input')); });
       await until('the arm\'s feed override at 100 %', async () => (await tcp.state()).feed_pct === 100);
     });
@@ -494,6 +580,191 @@ async function main() {
       await page.click('#points tr[data-point="here1"] button[data-action="delete"]');
       await page.waitForFunction(() => !document.querySelector('#points tr[data-point="here1"]'), { timeout: WAIT_S * 1000 });
       assert(!((await tcp.ask('points')).points || []).some((x) => x.name === 'here1'), 'the point is still there');
+    });
+
+    await check('tools and user frames defined from the page: in the API\'s lists, drawn, jogged in, deleted', async () => {
+      await until('the arm idle and at rest', async () => { const s = await tcp.state(); return s.state === 'idle' && allStill(s); });
+      const define = async (kind, name, pos, rpy) => {
+        await page.select('#def-kind', kind);
+        await page.$eval('#def-name', (e, v) => { e.value = v; }, name);
+        await page.$eval('#def-pos', (e, v) => { e.value = v; }, pos.join(', '));
+        await page.$eval('#def-rpy', (e, v) => { e.value = v; }, rpy.join(', '));
+        await page.click('#define-form button[type=submit]');
+        await page.waitForSelector(`#tf-list tr[data-${kind}="${name}"]`, { timeout: WAIT_S * 1000 });
+      };
+      const near = (a, b, tol = 1e-9) => a.length === b.length && a.every((v, i) => Math.abs(v - b[i]) < tol);
+      await define('tool', 'pen', [0, 0, 0.1], [0, 0, 0]);
+      await define('frame', 'table', [0.3, 0.4, 0.05], [0, 0, 0.5]);
+      const tf = await tcp.ask('tools');
+      const pen = tf.tools.find((t) => t.name === 'pen');
+      const table = tf.frames.find((f) => f.name === 'table');
+      assert(pen && near(pen.position, [0, 0, 0.1]) && near(pen.rpy, [0, 0, 0]), 'tools over TCP: ' + JSON.stringify(tf.tools));
+      assert(table && near(table.position, [0.3, 0.4, 0.05]) && near(table.rpy, [0, 0, 0.5]), 'frames over TCP: ' + JSON.stringify(tf.frames));
+      const opts = await page.$$eval('#tool-sel option, #frame-sel option', (o) => o.map((x) => x.value));
+      assert(opts.includes('pen') && opts.includes('table'), `the selectors offer ${opts}`);
+      // the frame drawn in the 3D view: axes at its origin, with the taught points
+      const axes = await page.evaluate(() => window.pendant.view.frameGroup.children.map((c) => [c.position.x, c.position.y, c.position.z, c.rotation.z]));
+      assert(axes.some((a) => near(a, [0.3, 0.4, 0.05, 0.5], 1e-6)), `frames drawn: ${JSON.stringify(axes)}`);
+      // a bad definition is refused in one line and adds nothing
+      await page.select('#def-kind', 'tool');
+      await page.$eval('#def-name', (e) => { e.value = 'bad name'; });
+      await page.click('#define-form button[type=submit]');
+      await page.waitForFunction(() => /^tool_define: bad_option/.test(document.getElementById('msg').textContent), { timeout: WAIT_S * 1000 });
+      assert((await tcp.ask('tools')).tools.length === tf.tools.length, 'a refused tool was added');
+      // active from the selectors, then jog along the table's x axis (Cartesian jog, user frame)
+      await page.select('#tool-sel', 'pen');
+      await page.select('#frame-sel', 'table');
+      await until('pen and table active', async () => { const a = await tcp.ask('tools'); return a.tool === 'pen' && a.frame === 'table'; });
+      // the active tool drawn: a rod from the flange to the tool point the API's state gives (tcp)
+      const st = await tcp.state();
+      const off = Math.hypot(...st.tcp.position.map((v, i) => v - st.tool.position[i]));
+      assert(Math.abs(off - 0.1) < 1e-6, `the state's tcp is ${off} m from the flange, the pen is 0.1 m long`);
+      await page.waitForFunction((want) => {
+        const r = window.pendant.view.toolRod;
+        if (!r || !r.visible) return false;
+        r.updateMatrixWorld();
+        const e = r.localToWorld(new r.position.constructor(0, 0.5, 0));
+        return Math.hypot(e.x - want[0], e.y - want[1], e.z - want[2]) < 1e-4;
+      }, { timeout: WAIT_S * 1000 }, st.tcp.position);
+      await page.$eval('#frames', (e) => e.scrollIntoView({ block: 'center' }));
+      await shot(page, 'pendant-tools-frames');
+      await (await page.$('#view')).screenshot({ path: path.join(shots, 'pendant-frame-view.png') });
+      const pose0 = (await tcp.state()).tool.position;
+      await page.select('#cjog-frame', 'user');
+      const sel = '#cjog-axes button.cjog[data-axis="0"][data-dir="1"]';
+      await page.$eval(sel, (e) => e.scrollIntoView({ block: 'center' }));
+      await holdUntil(page, sel, 'the tool moving in the table frame', async () => {
+        const p = (await tcp.state()).tool.position;
+        return Math.hypot(p[0] - pose0[0], p[1] - pose0[1]) > 0.01;
+      });
+      await until('at rest after the release', async () => allStill(await tcp.state()));
+      const pose1 = (await tcp.state()).tool.position;
+      // the flange (the state's tool point) moves as the pen does in a pure translation: along the table's x = (cos 0.5, sin 0.5, 0)
+      const d = [pose1[0] - pose0[0], pose1[1] - pose0[1], pose1[2] - pose0[2]];
+      const len = Math.hypot(...d);
+      const along = (d[0] * Math.cos(0.5) + d[1] * Math.sin(0.5)) / len;
+      assert(along > 0.99, `jogged x+ in the table frame, the tool went ${d} (cos to the frame's x ${along})`);
+      // back to tool0 / base; then both deleted from their rows
+      await page.select('#cjog-frame', 'base');
+      await page.select('#tool-sel', 'tool0');
+      await page.select('#frame-sel', 'base');
+      await until('tool0 and base active', async () => { const a = await tcp.ask('tools'); return a.tool === 'tool0' && a.frame === 'base'; });
+      await page.waitForFunction(() => !window.pendant.view.toolRod.visible, { timeout: WAIT_S * 1000 });
+      // (clicked in the page: the list is drawn again after each answer)
+      await page.$eval('#tf-list tr[data-tool="pen"] button[data-action="delete"]', (b) => b.click());
+      await page.waitForFunction(() => !document.querySelector('#tf-list tr[data-tool="pen"]'), { timeout: WAIT_S * 1000 });
+      await page.$eval('#tf-list tr[data-frame="table"] button[data-action="delete"]', (b) => b.click());
+      await page.waitForFunction(() => !document.querySelector('#tf-list tr'), { timeout: WAIT_S * 1000 });
+      const after = await tcp.ask('tools');
+      assert(!after.tools.some((t) => t.name === 'pen') && !after.frames.some((f) => f.name === 'table'), 'still defined: ' + JSON.stringify(after));
+      const left = await page.evaluate(() => window.pendant.view.frameGroup.children.length);
+      assert(left === 0, `${left} user frames still drawn`);
+    });
+
+    await check('digital outputs: one row each from the state, switched on and off from the page', async () => {
+      await page.waitForFunction(() => document.querySelectorAll('#outputs tr').length === 2, { timeout: WAIT_S * 1000 });
+      const names = await page.$$eval('#outputs tr td:first-child', (t) => t.map((e) => e.textContent));
+      assert(names.join('|') === '0 gripper|1 lamp', `output rows: ${names}`);
+      await page.$eval('#outputs tr[data-output="1"] button[data-on="true"]', (b) => b.click());
+      await until('lamp on (independent client)', async () => { const o = (await tcp.state()).outputs; return o[1].on && !o[0].on; });
+      await page.waitForFunction(() => document.querySelector('#outputs tr[data-output="1"] .val').textContent === 'on', { timeout: WAIT_S * 1000 });
+      await page.$eval('#io', (e) => e.scrollIntoView({ block: 'center' }));
+      await shot(page, 'pendant-outputs');
+      await page.$eval('#outputs tr[data-output="1"] button[data-on="false"]', (b) => b.click());
+      await until('lamp off', async () => !(await tcp.state()).outputs[1].on);
+      await page.waitForFunction(() => document.querySelector('#outputs tr[data-output="1"] .val').textContent === 'off', { timeout: WAIT_S * 1000 });
+    });
+
+    await check('park: the arm goes to its park pose', async () => {
+      await until('the arm idle and at rest', async () => { const s = await tcp.state(); return s.state === 'idle' && allStill(s); });
+      const q0 = (await tcp.state()).q;
+      await page.click('#arm button[data-cmd="park"]');
+      await page.waitForFunction(() => window.pendant.results.some((r) => r.cmd === 'park'), { timeout: WAIT_S * 1000 });
+      const r = await page.evaluate(() => window.pendant.results.filter((x) => x.cmd === 'park').pop());
+      assert(r.ok && Array.isArray(r.goal), 'park answered: ' + JSON.stringify(r));
+      // motion.home_deg left out: the park pose is every joint at 0 (clamped into its limits)
+      assert(r.goal.every((v) => Math.abs(v) < 1e-9), `park goal ${r.goal}`);
+      assert(q0.some((v) => Math.abs(v) > 0.05), 'the arm was at the park pose already: nothing tested');
+      await until('the arm at rest at the park pose', async () => { const s = await tcp.state(); return allStill(s) && s.q.every((v) => Math.abs(v) < 1e-3); });
+    });
+
+    await check('Cartesian jog in the tool frame: z+ moves the tool along its own z axis', async () => {
+      await page.$eval('#movej-q', (e) => { e.value = '0.2, 0.3, -0.6, 0, 0.9, 0.4'; });
+      await page.click('#movej-form button[type=submit]');
+      await until('the arm at the start pose', async () => { const s = await tcp.state(); return Math.abs(s.q[4] - 0.9) < 1e-3 && allStill(s); });
+      const s0 = await tcp.state();
+      const [r, p, y] = s0.tool.rpy;  // R = Rz(y) Ry(p) Rx(r): its z column is the tool's z axis in the base
+      const zAxis = [Math.cos(y) * Math.sin(p) * Math.cos(r) + Math.sin(y) * Math.sin(r),
+                     Math.sin(y) * Math.sin(p) * Math.cos(r) - Math.cos(y) * Math.sin(r),
+                     Math.cos(p) * Math.cos(r)];
+      await page.select('#cjog-frame', 'tool');
+      const sel = '#cjog-axes button.cjog[data-axis="2"][data-dir="1"]';
+      await page.$eval(sel, (e) => e.scrollIntoView({ block: 'center' }));
+      const p0 = s0.tool.position;
+      await holdUntil(page, sel, 'the tool moving along its z axis', async () => {
+        const q = (await tcp.state()).tool.position;
+        return Math.hypot(q[0] - p0[0], q[1] - p0[1], q[2] - p0[2]) > 0.01;
+      });
+      await until('at rest after the release', async () => allStill(await tcp.state()));
+      const p1 = (await tcp.state()).tool.position;
+      const d = [0, 1, 2].map((i) => p1[i] - p0[i]);
+      const cos = (d[0] * zAxis[0] + d[1] * zAxis[1] + d[2] * zAxis[2]) / Math.hypot(...d);
+      assert(cos > 0.99, `jogged z+ in the tool frame, the tool went ${d}, its z axis is ${zAxis} (cos ${cos})`);
+      await page.select('#cjog-frame', 'base');
+    });
+
+    await check('step: a paused program runs one motion, then pauses again', async () => {
+      const text = 'movej 0 0 0 0 0 0\nmovej 20 0 0 0 0 0\nmovej 0 0 0 0 0 0\nmovej 20 0 0 0 0 0\nmovej 0 0 0 0 0 0';
+      await page.$eval('#prog-text', (e, t) => { e.value = t; e.dispatchEvent(new Event('input')); }, text);
+      await page.waitForFunction(() => /^checked: /.test(document.getElementById('prog-check').textContent), { timeout: WAIT_S * 1000 });
+      await page.click('#prog-run');
+      await until('the program running', async () => (await tcp.state()).program.state === 'running');
+      await page.click('#prog-pause');
+      await until('the program paused and the arm at rest', async () => { const s = await tcp.state(); return s.program.state === 'paused' && allStill(s); });
+      const d0 = (await tcp.state()).done;
+      await sleep(300);
+      assert((await tcp.state()).done === d0, 'a paused program ran a motion');
+      await page.click('#prog-step');
+      await until('one motion done, paused again', async () => { const s = await tcp.state(); return s.done === d0 + 1 && s.program.state === 'paused' && allStill(s); });
+      await sleep(300);
+      assert((await tcp.state()).done === d0 + 1, 'the step ran more than one motion');
+      await page.click('#prog-abort');
+      await until('the program ended', async () => (await tcp.state()).program.state === 'idle');
+      await page.$eval('#prog-text', (e) => { e.value = ''; e.dispatchEvent(new Event('input')); });
+    });
+
+    await check('free-drive: the button asks the firmware, which names why the simulated drives cannot', async () => {
+      await page.click('#freedrive');
+      await page.waitForFunction(() => window.pendant.results.some((r) => r.cmd === 'freedrive'), { timeout: WAIT_S * 1000 });
+      const r = await page.evaluate(() => window.pendant.results.filter((x) => x.cmd === 'freedrive').pop());
+      // armfw --sim's drives have no cyclic synchronous torque mode: refused in one line, shown
+      assert(r.error === 'bad_state' && /free-drive needs it/.test(r.message), 'freedrive answered: ' + JSON.stringify(r));
+      const msg = await page.$eval('#msg', (e) => e.textContent);
+      assert(/^freedrive: bad_state: /.test(msg), `message shown: ${msg}`);
+      assert(!(await tcp.state()).freedrive, 'the arm is in free-drive');
+    });
+
+    await check('e-stop, reset, disable, enable and home from the page: the arm follows', async () => {
+      const arm = (cmd) => page.$eval(`#arm button[data-cmd="${cmd}"]`, (b) => b.click());
+      await until('the arm idle and at rest', async () => { const s = await tcp.state(); return s.state === 'idle' && allStill(s); });
+      await arm('estop');
+      await until('the arm in e-stop', async () => (await tcp.state()).state === 'estop');
+      await page.waitForFunction(() => document.body.dataset.state === 'estop', { timeout: WAIT_S * 1000 });
+      await arm('reset');
+      await until('the e-stop reset', async () => (await tcp.state()).state !== 'estop');
+      await arm('enable');
+      await until('the arm idle again', async () => (await tcp.state()).state === 'idle');
+      await arm('disable');
+      await until('the arm disabled', async () => (await tcp.state()).state === 'disabled');
+      await arm('enable');
+      await until('the arm idle again', async () => (await tcp.state()).state === 'idle');
+      // armfw --sim's joints home by method none (at once): the homing cycle's events say it ran
+      const seq0 = Math.max(0, ...((await tcp.ask('events')).events || []).map((e) => e.seq));
+      await arm('home');
+      await until('the homing cycle\'s events', async () => ((await tcp.ask('events', { since: seq0 })).events || []).some((e) => e.kind === 'homing'));
+      await until('every joint homed, homing over', async () => { const s = await tcp.state(); return s.homing === 0 && s.homed === 63 && s.state === 'idle'; }, 120);
+      const bar = await page.$eval('#st-homed', (e) => e.textContent);
+      assert(bar === 'homed: 6/6', `the bar shows ${bar}`);
     });
 
     await check('tablet and phone layouts keep the stop button in view', async () => {

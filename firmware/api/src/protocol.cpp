@@ -434,6 +434,8 @@ constexpr ArgSpec kJogCartesian[] = {
     {"increment", ArgType::number, false, -10, 10, "by this much (m / rad); left out: continuous towards `direction`"},
     {"direction", ArgType::integer, false, -1, 1, "continuous jog: +1 or -1 (kept alive by repeating it within console.jog_deadman_ms)"},
     {"speed_pct", ArgType::number, false, 1, 100, "percent of the linear and angular limits (default console.jog_speed_pct)"}};
+constexpr ArgSpec kMotion[] = {
+    {"motion", ArgType::integer, false, 0, 4e9, "the motion's id (a move's answer, the state's `running`); left out: the running motion"}};
 constexpr ArgSpec kFeed[] = {{"pct", ArgType::integer, true, fw::kMinFeedOverride, fw::kMaxFeedOverride, "the feed override (percent): scales jogs and the moves queued from now on"}};
 
 constexpr MessageSpec kMessages[] = {
@@ -702,6 +704,25 @@ constexpr MessageSpec kMessages[] = {
        out.j["frames"] = std::move(f);
        out.j["tool"] = s.tool(s.active_tool()).name;
        out.j["frame"] = s.frame(s.active_frame()).name;
+     }},
+    {"planned_path", kMotion, Gate::observer, Where::service, "ArmService::planned_path",
+     "the tool path a move was planned with, for drawing it: `points`, the tool point of the move's `tool` in the base "
+     "frame (m) at instants evenly spaced along its plan from its start to its goal, with its `kind` and `duration`; "
+     "kept for the last 64 moves (not dwells)",
+     +[](C& c, R& out) {
+       const ArgValue* m = c.rq.arg("motion");
+       const std::uint32_t id = m->present ? static_cast<std::uint32_t>(m->num)
+                                           : (c.cx.ctl != nullptr ? c.cx.ctl->telemetry().running_id : 0u);
+       if (id == 0) return out.fail(CmdError::bad_state, "no motion runs");
+       const fw::ArmService::PlannedPath* p = c.cx.svc->planned_path(id);
+       if (p == nullptr) return out.fail(CmdError::out_of_range, "motion " + std::to_string(id) + ": no planned path kept (a dwell, or not among the last 64 moves)");
+       json pts = json::array();
+       for (const Eigen::Vector3d& x : p->points) pts.push_back({x.x(), x.y(), x.z()});
+       out.j["motion"] = p->id;
+       out.j["kind"] = fw::to_string(p->kind);
+       out.j["tool"] = p->tool;
+       out.j["duration"] = p->duration;
+       out.j["points"] = std::move(pts);
      }},
     {"tool_select", kFrameName, Gate::control, Where::service, "ArmService::select_tool",
      "makes tool `name` the active one (only while nothing moves or is queued)",
@@ -990,6 +1011,11 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
     }
     fr.push_back({p.translation().x(), p.translation().y(), p.translation().z()});
     j["frames"] = std::move(fr);
+    if (svc != nullptr) {  // the active tool's point and orientation (tool0: the same as `tool`)
+      const kin::Pose x = p * svc->tool_pose;
+      const Eigen::Vector3d r = kin::rpy_from_rotation(x.linear());
+      j["tcp"] = {{"position", {x.translation().x(), x.translation().y(), x.translation().z()}}, {"rpy", {r.x(), r.y(), r.z()}}};
+    }
   }
   j["queued"] = t.queued;
   j["running"] = t.running_id;
@@ -1005,6 +1031,9 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
     j["feed_pct"] = svc->feed_pct;
     j["active_tool"] = svc->tool;
     j["active_frame"] = svc->frame;
+    json outs = json::array();
+    for (const auto& [name, on] : svc->outputs) outs.push_back({{"name", name}, {"on", on}});
+    j["outputs"] = std::move(outs);
   }
   return j.dump(-1, ' ', false, json::error_handler_t::replace);
 }

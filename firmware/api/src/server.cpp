@@ -732,6 +732,9 @@ std::size_t ApiServer::pump(ServiceContext& cx) {
     sn.program = cx.svc->program_status();
     sn.feed_pct = cx.svc->feed_override();
     sn.tool = cx.svc->tool(cx.svc->active_tool()).name;
+    sn.tool_pose = cx.svc->tool(cx.svc->active_tool()).pose;
+    for (std::size_t i = 0; i < cx.svc->output_count(); ++i)
+      sn.outputs.emplace_back(cx.svc->settings().outputs[i].name, cx.svc->output_on(i));
     sn.frame = cx.svc->frame(cx.svc->active_frame()).name;
     {
       std::lock_guard<std::mutex> l(s.snap_mu);

@@ -334,8 +334,63 @@ void ArmService::commit(MotionItem& m, const kin::JointVector& goal, const MoveC
   tail_id_ = m.id;
   shadow_tail_id_ = path ? m.id : 0;
   tail_gen_ = ctl_->telemetry().generation;
+  keep_planned_path(m, cx.chain != nullptr ? *cx.chain : chain_);  // before the control thread owns m
   ctl_->motions().commit();
   r.id = m.id;
+}
+
+// The planned path of a queued move, for viewers: its plan sampled in time (the joint plan,
+// the line's precomputed knots, a blended segment alone) and the tool point of the move's
+// chain at each sample. Console thread, before the move is handed to the control thread.
+void ArmService::keep_planned_path(const MotionItem& m, const kin::Chain& chain) {
+  PlannedPath p;
+  p.id = m.id;
+  p.kind = m.kind();
+  p.tool = tool(active_tool()).name;
+  std::function<void(double, kin::JointVector&)> at;
+  kin::JointVector v(n_), a(n_);
+  double t0 = 0;
+  switch (m.kind()) {
+    case MotionKind::joint: {
+      const JointMove& jm = std::get<JointMove>(m.payload);
+      p.duration = jm.plan.duration;
+      at = [&](double t, kin::JointVector& q) { jm.plan.sample(t, q, v, a); };
+      break;
+    }
+    case MotionKind::cartesian: {
+      const CartesianMove& cm = std::get<CartesianMove>(m.payload);
+      p.duration = cm.path.duration;
+      at = [&](double t, kin::JointVector& q) { cm.path.sample_precomputed(t, q, v, a); };
+      break;
+    }
+    case MotionKind::path: {
+      const kin::PathSegment& g = std::get<PathMove>(m.payload).seg;
+      p.duration = g.duration;
+      t0 = g.start;
+      kin::JointVector seed;
+      kin::path_segment_start(g, n_, seed);
+      at = [&g, seed](double t, kin::JointVector& q) mutable {
+        (void)kin::path_sample_pair(nullptr, g, t, seed, q);
+        seed = q;
+      };
+      break;
+    }
+    case MotionKind::dwell: return;
+  }
+  kin::JointVector q(n_);
+  for (int k = 0; k < kPlannedPathSamples; ++k) {
+    at(t0 + p.duration * k / (kPlannedPathSamples - 1), q);
+    kin::Pose x = kin::Pose::Identity();
+    if (kin::forward(chain, q, x) == kin::Status::ok) p.points.push_back(x.translation());
+  }
+  if (paths_.size() >= kPlannedPaths) paths_.pop_front();
+  paths_.push_back(std::move(p));
+}
+
+const ArmService::PlannedPath* ArmService::planned_path(std::uint32_t id) const {
+  for (const PlannedPath& p : paths_)
+    if (p.id == id) return &p;
+  return nullptr;
 }
 
 MoveResult ArmService::move(const MoveJoints& req, const MoveContext& cx) { return last_ = plan(req, cx); }

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 // The browser pendant (docs/pendant.md): state bar and stop, arm commands, hold-to-run joint and
-// Cartesian jog, feed override, program editor (checked as typed by the arm's dry run), teach
-// points, tools and frames, live 3D view and plots, outputs, over armfw's network API on the
+// Cartesian jog, feed override, program editor (checked as typed by the arm's dry run, saved to
+// the controller), teach points, tools and frames, live 3D view with the running move's planned
+// path, and plots, outputs, over armfw's network API on the
 // port that served the page.
 import './pendant.css';
 import { ApiClient } from './api.js';
@@ -13,7 +14,7 @@ const wsUrl = (location.protocol === 'https:' ? 'wss://' : 'ws://') + location.h
 const api = new ApiClient(wsUrl);
 // What the page knows, for people and for the tests that read it.
 const P = (window.pendant = { hello: null, role: null, client: 0, controller: 0, state: null, results: [], jogging: null,
-                              check: null, points: [], tools: null });
+                              check: null, points: [], tools: null, path: null });
 
 // Keep-alive period of a held jog: well inside the firmware's jog deadman (console.jog_deadman_ms,
 // 250 ms by default), so one late message does not stop the arm, while a released button, a
@@ -104,6 +105,9 @@ api.on('open', () => { $('conn').textContent = 'online'; });
 let retry = null;
 api.on('close', () => {
   endJog(false);
+  pathFor = 0;  // motions are numbered again by an armfw started again
+  P.path = null;
+  view.path?.([]);
   $('conn').textContent = 'offline';
   P.controller = 0;
   refreshRole();
@@ -129,8 +133,6 @@ $('movej-form').addEventListener('submit', (e) => {
   const q = $('movej-q').value.split(/[\s,]+/).filter((x) => x !== '').map(Number);
   command('movej', { q, speed_pct: speed() });
 });
-for (const b of document.querySelectorAll('#out-form button[data-out]'))
-  b.addEventListener('click', () => command('output', { index: Number($('out-index').value), on: b.dataset.out === '1' }));
 
 // ---- hold-to-run joint jog ------------------------------------------------------------------------
 let jogTimer = null;
@@ -315,6 +317,12 @@ $('prog-pause').addEventListener('click', () => command('program_pause'));
 $('prog-resume').addEventListener('click', () => command('resume'));
 $('prog-step').addEventListener('click', () => command('program_step'));
 $('prog-abort').addEventListener('click', () => command('program_abort'));
+// save: into the controller's programs folder (program_save loads it first: a line it refuses is marked, nothing written)
+$('prog-save').addEventListener('click', async () => {
+  const r = await command('program_save', progArgs());
+  if (r.error) showCheck(r);
+  else say('saved as ' + r.file + ' in the programs folder');
+});
 drawGutter();
 
 function showProgram(pr) {
@@ -384,8 +392,50 @@ async function loadTools() {
   P.tools = r;
   fillSelect($('tool-sel'), r.tools, r.tool);
   fillSelect($('frame-sel'), r.frames, r.frame);
+  // the defined ones, each with its pose and a delete button (tool0 and base are always there)
+  const tb = $('tf-list').querySelector('tbody');
+  tb.textContent = '';
+  for (const [kind, list] of [['tool', r.tools], ['frame', r.frames]]) {
+    for (const t of list) {
+      if (t.name === 'tool0' || t.name === 'base') continue;
+      const tr = document.createElement('tr');
+      tr.dataset[kind] = t.name;
+      const name = document.createElement('td');
+      name.textContent = (kind === 'tool' ? 'tool ' : 'frame ') + t.name;
+      const pose = document.createElement('td');
+      pose.className = 'pose';
+      pose.textContent = t.position.map((v) => v.toFixed(3)).join(' ') + ' m, ' + t.rpy.map((v) => v.toFixed(3)).join(' ') + ' rad';
+      const td = document.createElement('td');
+      const b = document.createElement('button');
+      b.className = 'op';
+      b.textContent = 'delete';
+      b.dataset.action = 'delete';
+      b.title = 'deletes it (not the active one, not while the arm moves)';
+      b.addEventListener('click', async () => { if (!(await command(kind + '_delete', { name: t.name })).error) loadTools(); });
+      td.append(b);
+      tr.append(name, pose, td);
+      tb.append(tr);
+    }
+  }
   view.frames?.(r.frames);
+  refreshRole();
 }
+// define a tool (its pose in the flange frame) or a user frame (its pose in the base frame);
+// delete the selected one (the controller refuses the active one, and any change while the arm moves)
+const triple = (id) => $(id).value.split(/[\s,]+/).filter((x) => x !== '').map(Number);
+$('define-form').addEventListener('submit', async (e) => {
+  e.preventDefault();
+  const kind = $('def-kind').value;
+  const r = await command(kind + '_define', { name: $('def-name').value.trim(), position: triple('def-pos'), rpy: triple('def-rpy') });
+  if (!r.error) loadTools();
+});
+$('def-here').addEventListener('click', () => {
+  const t = P.state && P.state.tool;
+  if (!t) return say('no tool pose in the state yet');
+  $('def-kind').value = 'frame';
+  $('def-pos').value = t.position.map((v) => v.toFixed(4)).join(', ');
+  $('def-rpy').value = t.rpy.map((v) => v.toFixed(4)).join(', ');
+});
 $('tool-sel').addEventListener('change', async () => { await command('tool_select', { name: $('tool-sel').value }); loadTools(); });
 $('frame-sel').addEventListener('change', async () => { await command('frame_select', { name: $('frame-sel').value }); loadTools(); });
 
@@ -396,6 +446,7 @@ try {
 } catch (e) {  // no WebGL here: everything but the 3D view still works
   $('three').textContent = '3D view unavailable: ' + (e.message || e);
 }
+P.view = view;
 const plots = new Plots([
   { el: $('plot-fe'), title: 'following error', field: 'following_error', unit: 'rad / m' },
   { el: $('plot-qd'), title: 'speed', field: 'qd', unit: 'rad/s / m/s' },
@@ -415,6 +466,7 @@ api.on('state', (st) => {
   $('st-mode').textContent = 'mode: ' + st.mode + (st.freedrive ? ', free-drive' : '');
   $('st-homed').textContent = 'homed: ' + bits(st.homed, n) + '/' + n + (st.homing ? ' (homing)' : '');
   $('st-speed').textContent = 'speed: ' + speed() + ' %';
+  if (st.feed_pct !== undefined) $('st-override').textContent = 'override: ' + st.feed_pct + ' %';
   // the envelope the arm runs with: its mode now and the checksum of [safety] hello told
   const env = (P.hello && P.hello.safety) || {};
   $('st-safety').textContent = env.enabled ? 'safety: ' + st.safety_mode + ' ' + env.checksum + (st.safety_stops ? ', ' + st.safety_stops + ' stops' : '') : 'safety: off';
@@ -428,6 +480,9 @@ api.on('state', (st) => {
     if (j < n) td.textContent = st.q[j].toFixed(4) + ' ' + td.dataset.unit;
   }
   view.update(st.frames);
+  if (st.tcp && Array.isArray(st.frames) && st.frames.length) view.tool?.(st.frames[st.frames.length - 1], st.tcp.position);
+  showPath(st.running);
+  showOutputs(st.outputs);
   plots.push(st);
   showProgram(st.program);
   if (st.feed_pct !== undefined && document.activeElement !== $('override') && overrideTimer === null) {
@@ -439,6 +494,58 @@ api.on('state', (st) => {
   if (st.active_frame !== undefined && document.activeElement !== $('frame-sel') && $('frame-sel').value !== st.active_frame &&
       P.tools && P.tools.frames.some((t) => t.name === st.active_frame)) $('frame-sel').value = st.active_frame;
 });
+
+// ---- digital outputs: one row each from the state's `outputs` ([[output]] order: the index `output` takes)
+function showOutputs(outs) {
+  if (!Array.isArray(outs)) return;
+  const tb = $('outputs').querySelector('tbody');
+  if (tb.children.length !== outs.length) {
+    tb.textContent = '';
+    outs.forEach((o, i) => {
+      const tr = document.createElement('tr');
+      tr.dataset.output = String(i);
+      const name = document.createElement('td');
+      name.textContent = i + ' ' + o.name;
+      const val = document.createElement('td');
+      val.className = 'val';
+      tr.append(name, val);
+      for (const on of [true, false]) {
+        const td = document.createElement('td');
+        const b = document.createElement('button');
+        b.className = 'op';
+        b.textContent = on ? 'on' : 'off';
+        b.dataset.on = String(on);
+        b.addEventListener('click', () => command('output', { index: i, on }));
+        td.append(b);
+        tr.append(td);
+      }
+      tb.append(tr);
+    });
+    $('no-outputs').hidden = outs.length > 0;
+    refreshRole();
+  }
+  outs.forEach((o, i) => {
+    const td = tb.children[i].querySelector('.val');
+    td.textContent = o.on ? 'on' : 'off';
+    td.classList.toggle('on', o.on);
+  });
+}
+
+// ---- the planned path of the running move: the firmware's own, asked once when a motion starts --
+let pathFor = 0;
+async function showPath(running) {
+  if (running === pathFor) return;
+  pathFor = running;
+  if (!running) {  // nothing runs: the path goes
+    P.path = null;
+    view.path?.([]);
+    return;
+  }
+  const r = await api.request('planned_path', { motion: running });
+  if (pathFor !== running) return;  // another motion started meanwhile
+  P.path = r.error ? null : r;
+  view.path?.(r.error ? [] : r.points);  // a dwell has none
+}
 
 api.on('event', (ev) => {
   // The firmware ended the jog while the button is still held (keep-alives late: a stalled

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 // The live 3D view: the links drawn between the frame origins the state stream carries
-// (`frames`: base, each DH row, tool), the taught points (their tool points, from `points`) and
-// the user frames (from `tools`); the page computes no kinematics.
+// (`frames`: base, each DH row, flange), the active tool (to the state's `tcp`), the planned path of the running move (from
+// `planned_path`), the taught points (their tool points, from `points`) and the user frames
+// (from `tools`); the page computes no kinematics.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 
@@ -62,6 +63,24 @@ export class ArmView {
     this.dirty = true;
   }
 
+  /** The planned path of the running move: a line through its tool points ([x, y, z] in m, base
+   *  frame, from the API's planned_path), its goal marked; an empty list removes it. */
+  path(points) {
+    if (!this.pathLine) {
+      this.pathLine = new THREE.Line(new THREE.BufferGeometry(), new THREE.LineBasicMaterial({ color: 0xdb2777 }));
+      this.pathDots = new THREE.Points(new THREE.BufferGeometry(), new THREE.PointsMaterial({ color: 0xdb2777, size: 5, sizeAttenuation: false }));
+      this.pathGoal = new THREE.Mesh(new THREE.SphereGeometry(0.012, 12, 8), new THREE.MeshStandardMaterial({ color: 0xdb2777 }));
+      this.scene.add(this.pathLine, this.pathDots, this.pathGoal);
+    }
+    const ok = Array.isArray(points) && points.length >= 2;
+    this.pathLine.geometry.dispose();
+    this.pathLine.geometry = new THREE.BufferGeometry().setAttribute('position', new THREE.Float32BufferAttribute(ok ? points.flat() : [], 3));
+    this.pathDots.geometry = this.pathLine.geometry;  // the samples themselves, a dot each
+    this.pathLine.visible = this.pathDots.visible = this.pathGoal.visible = ok;
+    if (ok) this.pathGoal.position.set(...points[points.length - 1]);
+    this.dirty = true;
+  }
+
   /** The user frames: axes at each frame's origin, turned by its roll, pitch, yaw (base frame). */
   frames(list) {
     if (!this.frameGroup) {
@@ -71,7 +90,7 @@ export class ArmView {
     this.frameGroup.clear();
     for (const f of list) {
       if (f.name === 'base') continue;  // the base's axes are drawn already
-      const a = new THREE.AxesHelper(0.1);
+      const a = new THREE.AxesHelper(0.15);
       a.position.set(f.position[0], f.position[1], f.position[2]);
       a.rotation.set(f.rpy[0], f.rpy[1], f.rpy[2], 'ZYX');  // R = Rz(yaw) Ry(pitch) Rx(roll)
       this.frameGroup.add(a);
@@ -105,6 +124,29 @@ export class ArmView {
       }
     }
     this.count = n;
+  }
+
+  /** The active tool: a rod from the flange (the last frame) to its point `tcp` ([x, y, z] in m,
+   *  the state's `tcp`), hidden when the tool is the flange itself (tool0). */
+  tool(flange, tcp) {
+    if (!this.toolRod) {
+      this.toolRod = new THREE.Mesh(new THREE.CylinderGeometry(0.006, 0.006, 1, 8), this.toolMat);
+      this.toolTip = new THREE.Mesh(new THREE.ConeGeometry(0.012, 0.03, 12), this.toolMat);
+      this.scene.add(this.toolRod, this.toolTip);
+    }
+    const a = new THREE.Vector3(...flange), b = new THREE.Vector3(...tcp);
+    const dir = b.clone().sub(a);
+    const len = dir.length();
+    this.toolRod.visible = this.toolTip.visible = len > 1e-4;
+    if (len > 1e-4) {
+      const q = new THREE.Quaternion().setFromUnitVectors(new THREE.Vector3(0, 1, 0), dir.clone().normalize());
+      this.toolRod.position.copy(a).addScaledVector(dir, 0.5);
+      this.toolRod.scale.set(1, len, 1);
+      this.toolRod.quaternion.copy(q);
+      this.toolTip.position.copy(b).addScaledVector(dir, -0.015 / len);  // its apex at the tool point
+      this.toolTip.quaternion.copy(q);
+    }
+    this.dirty = true;
   }
 
   /** frames: [[x, y, z], ...] in m, base first, tool last. */

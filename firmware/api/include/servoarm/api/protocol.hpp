@@ -14,6 +14,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "servoarm/kinematics/chain.hpp"
@@ -155,11 +156,15 @@ std::string hello_line(const ApiRequest& rq, const HelloInfo& h, const kin::Chai
 /// One state sample: `{"topic":"state",...}` from the telemetry (RT clock: cycle and t), the
 /// tool pose by FK of the measured joints, and the client's dropped count.
 /// What a state sample carries from the service (taken on the service thread, the service's
-/// one caller): the running program's place, the feed override, the active tool and frame.
+/// one caller): the running program's place, the feed override, the active tool (with its pose
+/// in the flange frame: the state's `tcp`) and frame, the digital outputs.
 struct ServiceSnapshot {
   fw::ProgramStatus program;
   int feed_pct = 100;
   std::string tool = "tool0", frame = "base";
+  kin::Pose tool_pose = kin::Pose::Identity();
+  /// The digital outputs ([[output]] order): name and whether it is on (the drives' output words).
+  std::vector<std::pair<std::string, bool>> outputs;
 };
 /// `svc`: the service's part (nullptr: left out).
 std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain& chain, std::uint64_t dropped,

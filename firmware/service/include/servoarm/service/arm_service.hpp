@@ -989,6 +989,20 @@ class ArmService {
   std::string unhomed_reason(const Telemetry& t) const;
   /// Joint values of the end of the motion queue (or the commanded position).
   kin::JointVector tail() const;
+  /// The tool path a queued move was planned with (kept for the last kPlannedPaths moves):
+  /// the tool point of the move's tool in the base frame (m), kPlannedPathSamples points
+  /// evenly spaced in time along its plan, from where it starts to its goal. A viewer draws it
+  /// (the pendant's 3D view); nullptr when motion `id` is a dwell or no longer kept.
+  struct PlannedPath {
+    std::uint32_t id = 0;
+    MotionKind kind = MotionKind::joint;
+    std::string tool;     ///< the tool whose point it is
+    double duration = 0;  ///< s, the plan's (a blended segment: alone, from rest)
+    std::vector<Eigen::Vector3d> points;
+  };
+  static constexpr std::size_t kPlannedPaths = 64;
+  static constexpr int kPlannedPathSamples = 48;
+  const PlannedPath* planned_path(std::uint32_t id) const;
   /// Motions queued so far (ids 1..n).
   std::uint32_t last_motion_id() const { return next_id_ - 1; }
   const kin::JointLimits& limits() const { return lim_; }
@@ -998,6 +1012,7 @@ class ArmService {
   MoveResult plan(const MoveJoints& req, const MoveContext& cx);
   MoveResult plan(const MoveLine& req, const MoveContext& cx);
   MoveResult plan_dwell(double seconds, const MoveContext& cx);
+  void keep_planned_path(const MotionItem& m, const kin::Chain& chain);
   MotionItem* slot(bool dry, MoveResult& r);
   bool duration_ok(double duration, MoveResult& r) const;
   MoveResult refuse(MoveRefusal what, CmdError e) const;
@@ -1035,6 +1050,7 @@ class ArmService {
   std::string jog_envelope_line(const kin::Chain& chain, const kin::Pose& a, const kin::Pose& b,
                                 const kin::JointVector& seed, const kin::IkSolver& ik) const;
   MoveResult last_;
+  std::deque<PlannedPath> paths_;  ///< the last kPlannedPaths moves' tool paths, oldest first
   std::uint32_t seq_ = 0;  ///< request sequence numbers (replies are matched by them)
   std::array<OutputChange, kMotionOutputs> sync_out_{};  ///< M62 / M63 changes for the next move (one per joint, merged)
   std::uint8_t n_sync_out_ = 0;
