@@ -116,6 +116,49 @@ TEST(Safety, BoxCaseTable) {
   }
 }
 
+// A box in a user frame is axis-aligned in that frame: a 100 x 20 x 20 mm keep-out box turned
+// 45 deg about z and moved to (200, 100, 50) mm holds the points along its turned long axis and
+// not those of the base-aligned box of the same size; values against the reference computed
+// here in the box's frame.
+TEST(Safety, BoxInAUserFrame) {
+  kin::Pose f = kin::Pose::Identity();
+  f.linear() = Eigen::AngleAxisd(M_PI / 4, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  f.translation() = Eigen::Vector3d(0.2, 0.1, 0.05);
+  kin::SafetyConfig c;
+  c.enabled = true;
+  c.box_count = 1;
+  c.boxes[0].min = Eigen::Vector3d(-0.05, -0.01, -0.01);
+  c.boxes[0].max = Eigen::Vector3d(0.05, 0.01, 0.01);
+  c.boxes[0].keep_in = false;
+  c.boxes[0].frame = f;
+  struct Case { double along, across; bool violated; };
+  // (along, across): metres along the box's x and y axes from its centre
+  const Case cases[] = {{0.04, 0.0, true}, {0.0, 0.009, true}, {0.06, 0.0, false}, {0.0, 0.02, false}, {-0.049, 0.0, true}};
+  for (const Case& k : cases) {
+    const Eigen::Vector3d p = f * Eigen::Vector3d(k.along, k.across, 0.0);
+    kin::SafetyViolation v;
+    const bool got = kin::check_sample(c, kin::SafetyMode::normal, at(p.x(), p.y(), p.z()), 0, 0, 0, v);
+    char line[160];
+    std::snprintf(line, sizeof line, "along %g across %g: expected %s", k.along, k.across, k.violated ? "violation" : "none");
+    CHECK_TEXT(got == k.violated, line);
+    if (got) {
+      // inside: minus the clearance to the nearest face, in the box's frame
+      const double clear = std::fmin(0.05 - std::fabs(k.along), 0.01 - std::fabs(k.across));
+      DOUBLES_EQUAL_TEXT(-clear, v.value, 1e-9, line);
+      CHECK_TEXT((v.where - p).norm() < 1e-12, line);  // where: the base frame
+    }
+  }
+  // (0.24, 0.1, 0.05) is inside the base-aligned box of the same size there, outside the turned one
+  kin::SafetyViolation v;
+  CHECK(!kin::check_sample(c, kin::SafetyMode::normal, at(0.24, 0.1, 0.05), 0, 0, 0, v));
+  c.boxes[0].frame.linear().setIdentity();
+  CHECK(kin::check_sample(c, kin::SafetyMode::normal, at(0.24, 0.1, 0.05), 0, 0, 0, v));
+  // a frame that is not a rotation is a configuration problem
+  c.boxes[0].frame.linear() *= 2.0;
+  char buf[160];
+  STRCMP_CONTAINS("box 0: its frame is not a finite rotation", kin::safety_config_problem(c, buf, sizeof buf));
+}
+
 TEST(Safety, ConeAndSpeedCaseTable) {
   kin::SafetyConfig c;
   c.enabled = true;

@@ -203,6 +203,42 @@ TEST(SafetyMonitor, AnUncheckedMoveThroughAPlaneGetsAProtectiveStop) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+// The same table plane given in a user frame (safety.plane_frames: [0, 0, -1, -100] in a frame
+// 100 mm above the table turned 180 deg about x): the unchecked move through it gets the
+// protective stop in the cycle its commanded sphere passes the tolerance, naming the plane.
+TEST(SafetyMonitor, APlaneInAUserFrameStopsAnUncheckedMove) {
+  FwConfig c = table(250);
+  const double plane = plane_mm();
+  char toml[256];
+  std::snprintf(toml, sizeof toml, "[safety]\nplanes = [0, 0, -1, -100]\nplane_frames = [0, 0, %.6f, 180, 0, 0]\n",
+                plane + 100.0);
+  const std::string e = load_config_text(toml, "frame.toml", c);
+  CHECK_TEXT(e.empty(), e.c_str());
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  MotionItem* m = r.app.ctl->motions().back();
+  CHECK(m != nullptr);
+  m->id = 901;
+  JointMove& jm = m->payload.emplace<JointMove>();
+  jm.goal = work_pose();
+  jm.goal[1] += 25 * kDeg;
+  jm.override = 0.5;
+  jm.plan.n = 0;
+  r.app.ctl->motions().commit();
+  int crossed = -1, stopped = -1;
+  for (int i = 0; i < 20000; ++i) {
+    r.cycle();
+    if (crossed < 0 && r.tool_z_mm(true) - kRadiusMm < plane - kTolMm) crossed = i;
+    if (stopped < 0 && r.tel().state == ArmState::stopping) stopped = i;
+    if (stopped >= 0 && r.tel().state == ArmState::idle) break;
+  }
+  CHECK(crossed >= 0);
+  CHECK_EQUAL(crossed, stopped);
+  STRCMP_CONTAINS("protective stop (commanded): plane 0 (tool sphere)", r.last_event().c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 // Joint speed limits per mode: a joint move of joint 1 the planner never saw (queued
 // directly, at full speed) runs in Normal mode (limit 200 deg/s) and gets a protective stop in
 // Reduced mode (limit 20 deg/s) in the cycle its commanded speed passes limit + tolerance; the

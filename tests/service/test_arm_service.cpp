@@ -772,6 +772,68 @@ TEST(ArmService, MovesThroughASafetyPlaneAreRefusedNamingWhereAndByHowMuch) {
   CHECK(r.app.ctl->motions().empty());
 }
 
+// Planes and boxes given in a user frame (safety.plane_frames, safety.keep_out_frames): the
+// table plane written as [0, 0, -1, -100] in a frame 100 mm above it and turned 180 deg about x
+// refuses the line down exactly as the base frame's plane does (same limit, same place); a
+// keep-out box turned 45 deg about z beside the tool refuses a line sideways into it naming
+// the box; the checksum changes with a frame alone.
+TEST(ArmService, ZonesInAUserFrameAreCheckedAtPlanTime) {
+  FwConfig c = table_config(60);
+  const double plane_mm = c.safety_planes[3];
+  const kin::LoadResult lr = kin::load_robot("puma560");
+  const Eigen::Vector3d w = tool_at(lr.chain, joints({0, -45, 180, 0, 45, 0})) * 1000.0;
+  char toml[512];
+  std::snprintf(toml, sizeof toml,
+                "[safety]\nplanes = [0, 0, -1, -100]\nplane_frames = [0, 0, %.6f, 180, 0, 0]\n"
+                "keep_out = [-50, -10, -10, 50, 10, 10]\nkeep_out_frames = [%.6f, %.6f, %.6f, 0, 0, 45]\n",
+                plane_mm + 100.0, w.x(), w.y() + 80.0, w.z());
+  const std::string e = load_config_text(toml, "zones.toml", c);
+  CHECK_TEXT(e.empty(), e.c_str());
+  FwConfig moved = c;
+  moved.safety_plane_frames[2] += 1.0;
+  CHECK(safety_checksum(c) != safety_checksum(moved));
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  for (int i = 0; i < 20000 && !r.app.ctl->motions().empty(); ++i) r.cycle();
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  MoveLine down;
+  kin::forward(r.app.chain, mj.goal, down.target);
+  down.target.translation().z() -= 0.1;
+  const MoveResult res = svc.move(down, cx);
+  CHECK(res.error == CmdError::limits);
+  STRCMP_CONTAINS("safety plane 0 (tool sphere) at s=", res.reason.c_str());
+  char limit[48];
+  std::snprintf(limit, sizeof limit, "limit %.1f mm", plane_mm);
+  STRCMP_CONTAINS(limit, res.reason.c_str());
+  DOUBLES_EQUAL(plane_mm * 1e-3 + 0.010, res.position.z(), 0.002);
+  // sideways +y: the turned box's nearest corner region is about 80 - 10 / cos 45 - 50 sin 45 mm away
+  MoveLine side;
+  kin::forward(r.app.chain, mj.goal, side.target);
+  side.target.translation().y() += 0.1;
+  const MoveResult sb = svc.move(side, cx);
+  CHECK(sb.error == CmdError::limits);
+  STRCMP_CONTAINS("safety keep-out box 0 (tool sphere)", sb.reason.c_str());
+  // where it stopped: the sphere (10 mm) touches the turned box, computed here in its frame
+  kin::Pose bf = kin::Pose::Identity();
+  bf.linear() = Eigen::AngleAxisd(M_PI / 4, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  bf.translation() = Eigen::Vector3d(w.x(), w.y() + 80.0, w.z()) * 1e-3;
+  const Eigen::Vector3d local = bf.inverse() * sb.position;
+  const Eigen::Vector3d near = local.cwiseMax(Eigen::Vector3d(-0.05, -0.01, -0.01)).cwiseMin(Eigen::Vector3d(0.05, 0.01, 0.01));
+  DOUBLES_EQUAL(0.010, (local - near).norm(), 0.002);
+  CHECK(r.app.ctl->motions().empty());
+  // a frame list that is not 6 numbers per zone is refused at load, naming the key
+  FwConfig bad = table_config(60);
+  const std::string e2 = load_config_text("[safety]\nplane_frames = [0, 0, 100]\n", "bad.toml", bad);
+  STRCMP_CONTAINS("safety.plane_frames", e2.c_str());
+  STRCMP_CONTAINS("6 numbers", e2.c_str());
+}
+
 // A joint jog step that would dip the tool through the plane is refused with the line. The
 // TCP speed limit is the mode's and slows moves down rather than refusing them: a 200 mm/s
 // line runs at 200 in Normal (300) and at 100 in Reduced (100); a movej whose tool would pass

@@ -12,6 +12,9 @@
 //  - a plane is the set n.p = offset with n a unit normal; the allowed side is n.p >= offset.
 //    The tool sphere (centre c, radius r) is inside when n.c - r >= offset: value n.c - r,
 //    limit offset.
+//  - a box is axis-aligned in its own frame (SafetyBox::frame, the base frame unless given):
+//    the sphere's centre is taken into that frame first; a plane given in a user frame is
+//    turned into the base frame when the configuration is loaded.
 //  - a keep-in box holds the whole sphere: min + r <= c <= max - r per axis; the value is the
 //    worst axis's distance from c to the box face minus r (limit 0).
 //  - a keep-out box must not touch the sphere: the distance from c to the box is at least r
@@ -53,9 +56,12 @@ struct SafetyPlane {
 };
 
 struct SafetyBox {
-  Eigen::Vector3d min{0, 0, 0}, max{0, 0, 0};  ///< m, base frame, min <= max per axis
+  Eigen::Vector3d min{0, 0, 0}, max{0, 0, 0};  ///< m, in the box's frame, min <= max per axis
   bool keep_in = true;                         ///< true: the sphere stays inside; false: outside
   bool elbow = true;
+  /// The box's frame in the base frame (a user frame: the box is axis-aligned in it). The
+  /// sphere's centre c (base frame) is checked at frame^-1 * c; identity = the base frame.
+  Pose frame = Pose::Identity();
 };
 
 /// The values that differ between Normal and Reduced mode.
