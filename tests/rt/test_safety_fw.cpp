@@ -239,6 +239,51 @@ TEST(SafetyMonitor, APlaneInAUserFrameStopsAnUncheckedMove) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+// The active tool's own sphere (tool define ... radius=): with a tool whose sphere is 40 mm
+// (safety.tool_radius_mm 10), the unchecked move through the table gets its protective stop in
+// the cycle the 40 mm sphere passes the tolerance, cycles before a 10 mm one would.
+TEST(SafetyMonitor, TheActiveToolsRadiusIsTheMonitorsSphere) {
+  int at_radius[2] = {-1, -1};
+  for (int k = 0; k < 2; ++k) {
+    const double radius = k == 0 ? kRadiusMm : 40.0;
+    Rig r(table(250));
+    r.enable();
+    r.to_work();
+    if (k == 1) {
+      NamedPose big;
+      big.name = "big";
+      big.radius = radius * 1e-3;
+      const FrameResult d = r.svc().define_tool(big);
+      CHECK_TEXT(d.ok(), d.reason.c_str());
+      CHECK(r.svc().select_tool("big").ok());
+    }
+    const double plane = plane_mm();
+    MotionItem* m = r.app.ctl->motions().back();
+    CHECK(m != nullptr);
+    m->id = 902;
+    JointMove& jm = m->payload.emplace<JointMove>();
+    jm.goal = work_pose();
+    jm.goal[1] += 25 * kDeg;
+    jm.override = 0.5;
+    jm.plan.n = 0;
+    r.app.ctl->motions().commit();
+    int crossed = -1, stopped = -1;
+    for (int i = 0; i < 20000; ++i) {
+      r.cycle();
+      if (crossed < 0 && r.tool_z_mm(true) - radius < plane - kTolMm) crossed = i;
+      if (stopped < 0 && r.tel().state == ArmState::stopping) stopped = i;
+      if (stopped >= 0 && r.tel().state == ArmState::idle) break;
+    }
+    CHECK(crossed >= 0);
+    CHECK_EQUAL(crossed, stopped);
+    STRCMP_CONTAINS("protective stop (commanded): plane 0 (tool sphere)", r.last_event().c_str());
+    LONGS_EQUAL(0, r.rt_allocs);
+    at_radius[k] = stopped;
+  }
+  std::printf("\n  protective stop in cycle %d with a 10 mm sphere, %d with the 40 mm tool", at_radius[0], at_radius[1]);
+  CHECK(at_radius[1] < at_radius[0]);
+}
+
 // Joint speed limits per mode: a joint move of joint 1 the planner never saw (queued
 // directly, at full speed) runs in Normal mode (limit 200 deg/s) and gets a protective stop in
 // Reduced mode (limit 20 deg/s) in the cycle its commanded speed passes limit + tolerance; the

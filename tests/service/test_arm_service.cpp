@@ -834,6 +834,84 @@ TEST(ArmService, ZonesInAUserFrameAreCheckedAtPlanTime) {
   STRCMP_CONTAINS("6 numbers", e2.c_str());
 }
 
+// The tool sphere's radius is the active tool's (radius=, else safety.tool_radius_mm): a line
+// 40 mm down, 10 mm clear of the table with the 10 mm default, is refused with a 40 mm tool
+// selected and queued again with tool0; a tool whose sphere does not fit a keep-in box or puts
+// the park pose outside the envelope is refused in one line, here and in the frames file.
+TEST(ArmService, TheActiveToolsRadiusIsTheToolSphere) {
+  FwConfig c = table_config(60);
+  c.safety_keep_in = {-1000, -1000, -1000, 1000, 1000, 1500};
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  for (int i = 0; i < 20000 && !r.app.ctl->motions().empty(); ++i) r.cycle();
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  MoveLine down;
+  kin::forward(r.app.chain, mj.goal, down.target);
+  down.target.translation().z() -= 0.04;
+  PathShadow shadow;
+  DryRun dry;
+  dry.tail = svc.tail();
+  dry.shadow = &shadow;
+  MoveContext dcx = cx;
+  dcx.dry = &dry;
+  const MoveResult ok = svc.move(down, dcx);
+  CHECK_TEXT(ok.ok(), ok.reason.c_str());
+  NamedPose big;
+  big.name = "big";
+  big.radius = 0.04;
+  CHECK(svc.define_tool(big).ok());
+  CHECK(svc.select_tool("big").ok());
+  DOUBLES_EQUAL(0.04, svc.tool_radius(svc.tool(svc.active_tool())), 1e-12);
+  dcx.chain = &svc.tool_chain(svc.active_tool());
+  const MoveResult no = svc.move(down, dcx);
+  CHECK(no.error == CmdError::limits);
+  STRCMP_CONTAINS("safety plane 0 (tool sphere)", no.reason.c_str());
+  // the refusal's value: the 40 mm sphere's lowest point
+  DOUBLES_EQUAL(no.position.z() * 1000.0 - 40.0, std::strtod(no.reason.substr(no.reason.find("value ") + 6).c_str(), nullptr), 0.11);
+  // too wide for the keep-in box (2000 mm): refused, one line, nothing defined
+  NamedPose huge;
+  huge.name = "huge";
+  huge.radius = 1.2;
+  const FrameResult wide = svc.define_tool(huge);
+  CHECK(wide.refusal == FrameRefusal::bad_values);
+  STRCMP_CONTAINS("is wider than keep-in box 0", wide.reason.c_str());
+  CHECK(wide.reason.find('\n') == std::string::npos);
+  CHECK(svc.find_tool("huge") == svc.tool_count());
+  // a sphere that puts the park pose (all zeros: the tool above the table) below the plane:
+  // one 50 mm deeper than the tool's height above the table there reaches through it
+  NamedPose deep;
+  deep.name = "deep";
+  deep.radius = tool_at(r.app.chain, kin::JointVector::Zero(6)).z() - c.safety_planes[3] * 1e-3 + 0.05;
+  CHECK(deep.radius < 0.99);
+  const FrameResult park = svc.define_tool(deep);
+  CHECK(park.refusal == FrameRefusal::bad_values);
+  STRCMP_CONTAINS("the park pose lies outside the envelope with it: safety plane 0", park.reason.c_str());
+  // the console's words
+  const std::string line = r.cmd("tool fat 0 0 0 0 0 0 radius=1200");
+  STRCMP_CONTAINS("error", line.c_str());
+  STRCMP_CONTAINS("tool fat: its safety sphere (radius 1200.0 mm) is wider than keep-in box 0", line.c_str());
+  // the frames file keeps the radius; one that does not fit is refused when the file is loaded
+  const std::string dir = test::make_tmp_dir();
+  FramesData d;
+  d.tools.push_back(big);
+  d.active_tool = "big";
+  STRCMP_EQUAL("", save_frames_file(dir + "/ok.toml", d).c_str());
+  FramesData back;
+  STRCMP_EQUAL("", load_frames_file(dir + "/ok.toml", back).c_str());
+  DOUBLES_EQUAL(0.04, back.tools.at(0).radius, 1e-12);
+  d.tools.push_back(huge);
+  STRCMP_EQUAL("", save_frames_file(dir + "/wide.toml", d).c_str());
+  const std::string e = svc.load_frames(dir + "/wide.toml");
+  STRCMP_CONTAINS("wide.toml: tool huge: its safety sphere (radius 1200.0 mm) is wider than keep-in box 0", e.c_str());
+  test::remove_tree(dir);
+}
+
 // A joint jog step that would dip the tool through the plane is refused with the line. The
 // TCP speed limit is the mode's and slows moves down rather than refusing them: a 200 mm/s
 // line runs at 200 in Normal (300) and at 100 in Reduced (100); a movej whose tool would pass

@@ -1309,6 +1309,12 @@ void join_text(char* dst, std::size_t size, const char* a, const char* b) {
 
 void Controller::step_safety() {
   if (!safety_.enabled()) return;
+  SafetyToolChange tc;
+  while (safety_tools_.pop(tc)) {
+    kin::Pose tool;
+    for (int i = 0; i < 16; ++i) tool.matrix().data()[i] = tc.m[static_cast<std::size_t>(i)];
+    safety_.set_tool(tool, tc.radius);
+  }
   bool watch = false;  // the modes a protective stop acts in (the planner's moves, jogs, a hold on a line)
   switch (mode_) {
     case Mode::moving:

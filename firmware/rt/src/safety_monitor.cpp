@@ -5,9 +5,17 @@
 namespace servoarm::fw {
 
 void SafetyMonitor::configure(const kin::Chain& chain, const kin::SafetyConfig& cfg, double period_s) {
-  chain_ = &chain;
+  own_ = chain;
+  flange_ = chain.tool;
+  chain_ = &own_;
   cfg_ = cfg;
   period_s_ = period_s;
+  have_prev_ = false;
+}
+
+void SafetyMonitor::set_tool(const kin::Pose& tool, double radius) {
+  kin::set_tool(own_, flange_ * tool);
+  cfg_.tool_radius = radius;
   have_prev_ = false;
 }
 

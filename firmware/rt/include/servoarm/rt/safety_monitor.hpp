@@ -20,8 +20,12 @@ namespace servoarm::fw {
 
 class SafetyMonitor {
  public:
-  /// Set-up: `chain` outlives the monitor; `period_s` is the control period.
+  /// Set-up: the monitor keeps a copy of `chain` (its tool becomes the active tool's);
+  /// `period_s` is the control period.
   void configure(const kin::Chain& chain, const kin::SafetyConfig& cfg, double period_s);
+  /// Real-time: the active tool, its TCP in the chain's tool frame (TCP = FK(chain) * tool) and
+  /// its sphere's radius (m); the next update() checks that sphere and computes no speed.
+  void set_tool(const kin::Pose& tool, double radius);
   bool enabled() const { return cfg_.enabled; }
   const kin::SafetyConfig& config() const { return cfg_; }
 
@@ -54,7 +58,9 @@ class SafetyMonitor {
   const kin::SafetySample& commanded() const { return cmd_; }
 
  private:
-  const kin::Chain* chain_ = nullptr;
+  const kin::Chain* chain_ = nullptr;  ///< &own_ once configured
+  kin::Chain own_{};                   ///< the chain with the active tool
+  kin::Pose flange_{kin::Pose::Identity()};  ///< the configured chain's own tool (tool0)
   kin::SafetyConfig cfg_{};
   double period_s_ = 0.001;
   kin::SafetySample cmd_{}, act_{}, prev_cmd_{}, prev_act_{};
