@@ -387,6 +387,16 @@ bool is_speed(SafetyFunction f) {
   return false;
 }
 
+int trigger_plane(const SafetyConfig& cfg, const SafetySample& x) {
+  if (!cfg.enabled) return -1;
+  const Eigen::Vector3d c = x.tcp.translation();
+  for (int i = 0; i < cfg.trigger_count && i < kMaxSafetyPlanes; ++i) {
+    const SafetyPlane& p = cfg.trigger_planes[static_cast<std::size_t>(i)];
+    if (p.normal.dot(c) - cfg.tool_radius < p.offset) return i;
+  }
+  return -1;
+}
+
 double safety_excess(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, const SafetyViolation& which) {
   SafetyViolation v;
   return evaluate(cfg, mode, x, which.function, which.index, which.elbow, v);
@@ -430,6 +440,12 @@ const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_
     const SafetyPlane& p = cfg.planes[static_cast<std::size_t>(i)];
     if (!finite3(p.normal) || !std::isfinite(p.offset)) return bad("plane %d: not a finite number", i);
     if (std::abs(p.normal.norm() - 1.0) > 1e-9) return bad("plane %d: the normal must be a unit vector (zero or unnormalised)", i);
+  }
+  if (cfg.trigger_count < 0 || cfg.trigger_count > kMaxSafetyPlanes) return bad("at most %d trigger planes", kMaxSafetyPlanes);
+  for (int i = 0; i < cfg.trigger_count; ++i) {
+    const SafetyPlane& p = cfg.trigger_planes[static_cast<std::size_t>(i)];
+    if (!finite3(p.normal) || !std::isfinite(p.offset)) return bad("trigger plane %d: not a finite number", i);
+    if (std::abs(p.normal.norm() - 1.0) > 1e-9) return bad("trigger plane %d: the normal must be a unit vector", i);
   }
   for (int i = 0; i < cfg.box_count; ++i) {
     const SafetyBox& b = cfg.boxes[static_cast<std::size_t>(i)];

@@ -159,6 +159,37 @@ TEST(Safety, BoxInAUserFrame) {
   STRCMP_CONTAINS("box 0: its frame is not a finite rotation", kin::safety_config_problem(c, buf, sizeof buf));
 }
 
+// A trigger plane switches the functions to Reduced mode while the tool sphere reaches beyond
+// it (any part of it: n.c - r < offset) and restricts nothing: the mode at each height.
+TEST(Safety, TriggerPlaneReducesWhileTheSphereReachesBeyond) {
+  kin::SafetyConfig c;
+  c.enabled = true;
+  c.tool_radius = 0.02;
+  c.trigger_count = 1;
+  c.trigger_planes[0].normal = Eigen::Vector3d(0, 0, 1);
+  c.trigger_planes[0].offset = 0.3;  // Reduced below z = 300 mm (the sphere's lowest point)
+  c.normal.tcp_speed = 0.25;
+  c.reduced.tcp_speed = 0.1;
+  struct Case { double z; int plane; };
+  const Case cases[] = {{0.5, -1}, {0.3201, -1}, {0.3199, 0}, {0.1, 0}};
+  for (const Case& k : cases) {
+    kin::SafetySample x = at(0.2, 0, k.z);
+    char line[64];
+    std::snprintf(line, sizeof line, "z=%g", k.z);
+    LONGS_EQUAL_TEXT(k.plane, kin::trigger_plane(c, x), line);
+    const kin::SafetyMode m = kin::effective_mode(c, kin::SafetyMode::normal, x);
+    CHECK_TEXT(m == (k.plane >= 0 ? kin::SafetyMode::reduced : kin::SafetyMode::normal), line);
+    CHECK_TEXT(kin::effective_mode(c, kin::SafetyMode::reduced, x) == kin::SafetyMode::reduced, line);
+    // no position function: nothing is violated at rest, whatever the side
+    kin::SafetyViolation v;
+    CHECK_TEXT(!kin::check_sample(c, m, x, 0, 0, 0, v), line);
+    // 200 mm/s: within Normal's 250, beyond Reduced's 100
+    x.has_velocity = true;
+    x.tcp_velocity = Eigen::Vector3d(0.2, 0, 0);
+    CHECK_TEXT(kin::check_sample(c, m, x, 0, 0, 0, v) == (k.plane >= 0), line);
+  }
+}
+
 TEST(Safety, ConeAndSpeedCaseTable) {
   kin::SafetyConfig c;
   c.enabled = true;

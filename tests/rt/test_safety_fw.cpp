@@ -284,6 +284,89 @@ TEST(SafetyMonitor, TheActiveToolsRadiusIsTheMonitorsSphere) {
   CHECK(at_radius[1] < at_radius[0]);
 }
 
+// A trigger plane at run time: a planned line sideways into the zone and back runs without a
+// protective stop (planned at the Reduced 100 mm/s), the monitor switches to Reduced with an
+// event naming the plane as the commanded sphere crosses it and back to Normal when it leaves;
+// a joint move the planner never saw, fast (no Normal TCP limit), gets a protective stop on the
+// Reduced TCP limit once inside.
+TEST(SafetyMonitor, ATriggerPlaneSwitchesToReducedWhileTheToolIsBeyondIt) {
+  FwConfig c = table(250);
+  c.safety_tcp_speed_mm_s = 0;
+  c.safety_reduced_tcp_speed_mm_s = 100;
+  kin::Pose w;
+  {
+    const kin::LoadResult lr = kin::load_robot("puma560");
+    (void)kin::forward(lr.chain, work_pose(), w);
+  }
+  const double y_plane = w.translation().y() * 1000.0 + 50.0;
+  c.safety_reduced_planes = {0, -1, 0, -y_plane};  // Reduced where the sphere reaches past y_plane
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveLine side;
+  side.target = w;
+  side.target.translation().y() += 0.1;
+  side.speed = 0.2;
+  const MoveResult in = r.svc().move(side, cx);
+  CHECK_TEXT(in.ok(), in.reason.c_str());
+  MoveLine back = side;
+  back.target = w;
+  const MoveResult out = r.svc().move(back, cx);
+  CHECK_TEXT(out.ok(), out.reason.c_str());
+  int entered = -1, left = -1;
+  double vmax_in = 0, y_prev = NAN;
+  std::string ev_in, ev_out;
+  for (int i = 0; i < 20000 && (!r.app.ctl->motions().empty() || r.tel().state != ArmState::idle); ++i) {
+    r.cycle();
+    const Telemetry t = r.tel();
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[std::size_t(j)];
+    kin::Pose p;
+    (void)kin::forward(r.app.chain, q, p);
+    const double y = p.translation().y() * 1000.0;
+    const bool beyond = y + kRadiusMm > y_plane;
+    if (beyond && !std::isnan(y_prev)) vmax_in = std::fmax(vmax_in, std::fabs(y - y_prev) / 1e-3);
+    y_prev = y;
+    if (entered < 0 && t.safety_zone == 0) {
+      entered = i;
+      ev_in = r.last_event();
+      CHECK(beyond);
+    }
+    if (entered >= 0 && left < 0 && t.safety_zone < 0) {
+      left = i;
+      ev_out = r.last_event();
+      CHECK(!beyond);
+    }
+  }
+  std::printf("\n  trigger plane: entered in cycle %d, left in cycle %d, highest speed inside %.1f mm/s", entered, left,
+              vmax_in);
+  CHECK(entered >= 0 && left > entered);
+  STRCMP_CONTAINS("safety mode reduced: the tool entered reduced plane 0", ev_in.c_str());
+  STRCMP_CONTAINS("safety mode normal: the tool left reduced plane 0", ev_out.c_str());
+  CHECK(vmax_in <= 100.0 + 1.0);
+  CHECK_EQUAL(0u, r.tel().safety_stops);
+  // an unchecked fast joint move into the zone (joint 1 swings the tool towards +y)
+  MotionItem* m = r.app.ctl->motions().back();
+  CHECK(m != nullptr);
+  m->id = 903;
+  JointMove& jm = m->payload.emplace<JointMove>();
+  jm.goal = work_pose();
+  jm.goal[0] += (w.translation().x() > 0 ? 20 : -20) * kDeg;
+  jm.override = 1.0;
+  jm.plan.n = 0;
+  r.app.ctl->motions().commit();
+  for (int i = 0; i < 20000; ++i) {
+    r.cycle();
+    if (r.tel().safety_stops > 0 && r.tel().state == ArmState::idle) break;
+  }
+  CHECK_EQUAL(1u, r.tel().safety_stops);
+  STRCMP_CONTAINS("protective stop (commanded): tcp speed", r.last_event().c_str());
+  STRCMP_CONTAINS("limit 100.0 mm/s", r.last_event().c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 // Joint speed limits per mode: a joint move of joint 1 the planner never saw (queued
 // directly, at full speed) runs in Normal mode (limit 200 deg/s) and gets a protective stop in
 // Reduced mode (limit 20 deg/s) in the cycle its commanded speed passes limit + tolerance; the

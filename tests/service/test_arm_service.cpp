@@ -912,6 +912,60 @@ TEST(ArmService, TheActiveToolsRadiusIsTheToolSphere) {
   test::remove_tree(dir);
 }
 
+// A trigger plane (safety.reduced_planes): a 200 mm/s line sideways that ends with the tool
+// beyond it is planned with the Reduced TCP limit (100 mm/s), the same line short of it at 200;
+// the plane refuses nothing.
+TEST(ArmService, AMoveIntoATriggerZoneIsPlannedWithTheReducedLimits) {
+  FwConfig c = table_config(60);
+  c.safety_tcp_speed_mm_s = 300;
+  c.safety_reduced_tcp_speed_mm_s = 100;
+  const kin::LoadResult lr = kin::load_robot("puma560");
+  const Eigen::Vector3d w = tool_at(lr.chain, joints({0, -45, 180, 0, 45, 0})) * 1000.0;
+  // Reduced where the sphere (10 mm) reaches beyond y = w.y + 80 mm: n = -y, offset -(w.y + 80)
+  c.safety_reduced_planes = {0, -1, 0, -(w.y() + 80.0)};
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  for (int i = 0; i < 20000 && !r.app.ctl->motions().empty(); ++i) r.cycle();
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  PathShadow shadow;
+  DryRun dry;
+  dry.tail = svc.tail();
+  dry.shadow = &shadow;
+  MoveContext dcx = cx;
+  dcx.dry = &dry;
+  MoveLine side;
+  kin::forward(r.app.chain, mj.goal, side.target);
+  side.speed = 0.2;
+  side.target.translation().y() += 0.06;  // the sphere ends 10 mm short of the plane
+  const MoveResult shy = svc.move(side, dcx);
+  CHECK_TEXT(shy.ok(), shy.reason.c_str());
+  DOUBLES_EQUAL(0.2, shy.speed, 1e-12);
+  side.target.translation().y() += 0.04;  // 30 mm beyond it
+  const MoveResult in = svc.move(side, dcx);
+  CHECK_TEXT(in.ok(), in.reason.c_str());
+  CHECK_TEXT(in.speed <= 0.1 + 1e-9 && in.speed > 0.09, std::to_string(in.speed).c_str());
+  // without the trigger plane the same line runs at 200 mm/s
+  FwConfig plain = table_config(60);
+  test::ConsoleRig r2(plain);
+  r2.enable();
+  PathShadow shadow2;
+  DryRun dry2;
+  dry2.tail = mj.goal;
+  dry2.shadow = &shadow2;
+  MoveContext dcx2;
+  dcx2.ik = r2.app.console->jog_context().ik;
+  dcx2.dry = &dry2;
+  const MoveResult fast = r2.app.console->service().move(side, dcx2);
+  CHECK_TEXT(fast.ok(), fast.reason.c_str());
+  DOUBLES_EQUAL(0.2, fast.speed, 1e-12);
+}
+
 // A joint jog step that would dip the tool through the plane is refused with the line. The
 // TCP speed limit is the mode's and slows moves down rather than refusing them: a 200 mm/s
 // line runs at 200 in Normal (300) and at 100 in Reduced (100); a movej whose tool would pass

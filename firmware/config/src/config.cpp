@@ -107,6 +107,17 @@ std::string safety_frames_ok(const std::vector<double>& frames, const std::vecto
 std::string safety_plane_frames_ok(const FwConfig& c, const FwConfig&) {
   return safety_frames_ok(c.safety_plane_frames, c.safety_planes, 4, "safety.planes");
 }
+std::string safety_reduced_planes_ok(const FwConfig& c, const FwConfig&) {
+  if (std::string bad = safety_groups(c.safety_reduced_planes, 4); !bad.empty()) return bad;
+  for (std::size_t i = 0; i + 3 < c.safety_reduced_planes.size(); i += 4) {
+    const double* p = &c.safety_reduced_planes[i];
+    if (p[0] * p[0] + p[1] * p[1] + p[2] * p[2] < 1e-18) return "plane " + std::to_string(i / 4) + ": zero normal";
+  }
+  return "";
+}
+std::string safety_reduced_plane_frames_ok(const FwConfig& c, const FwConfig&) {
+  return safety_frames_ok(c.safety_reduced_plane_frames, c.safety_reduced_planes, 4, "safety.reduced_planes");
+}
 std::string safety_keep_in_frames_ok(const FwConfig& c, const FwConfig&) {
   return safety_frames_ok(c.safety_keep_in_frames, c.safety_keep_in, 6, "safety.keep_in");
 }
@@ -444,6 +455,17 @@ const ConfigKey kConfigTable[] = {
       "in the base frame"}
         .within(-kMaxLength, kMaxLength).length(0, 6 * kin::kMaxSafetyBoxes)
         .related(safety_keep_out_frames_ok, "none or 6 per box"),
+    K{"safety.reduced_planes", &F::safety_reduced_planes, "mm",
+      "trigger planes, four numbers each as safety.planes: they restrict nothing, the arm runs in Reduced mode "
+      "while the tool sphere reaches beyond one (to the side opposite its normal) and in Normal mode again once it "
+      "is wholly back; moves that enter one are planned with the Reduced limits there; `[]` = none"}
+        .within(-kMaxLength, kMaxLength).length(0, 4 * kin::kMaxSafetyPlanes)
+        .related(safety_reduced_planes_ok, "groups of 4, normals not zero"),
+    K{"safety.reduced_plane_frames", &F::safety_reduced_plane_frames, "mm, deg",
+      "the frame each of safety.reduced_planes is given in, six numbers per plane as safety.plane_frames; `[]` = "
+      "every trigger plane in the base frame"}
+        .within(-kMaxLength, kMaxLength).length(0, 6 * kin::kMaxSafetyPlanes)
+        .related(safety_reduced_plane_frames_ok, "none or 6 per plane"),
     K{"motion.home_deg", &F::home_deg, "deg (mm)",
       "park pose for `park` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
       "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
@@ -1755,6 +1777,14 @@ std::string safety_envelope(const FwConfig& c, const kin::Chain& chain, kin::Saf
     e.planes[static_cast<std::size_t>(e.plane_count++)] = {nb, c.safety_planes[i + 3] * mm + nb.dot(f.translation()),
                                                            true};
   }
+  for (std::size_t i = 0; i + 3 < c.safety_reduced_planes.size() && e.trigger_count < kin::kMaxSafetyPlanes; i += 4) {
+    const std::vector<double>& v = c.safety_reduced_planes;
+    const Eigen::Vector3d n(v[i], v[i + 1], v[i + 2]);
+    if (!(n.norm() > 1e-9)) return "safety.reduced_planes: plane " + std::to_string(i / 4) + ": zero normal";
+    const kin::Pose f = frame_of(c.safety_reduced_plane_frames, i / 4);
+    const Eigen::Vector3d nb = f.linear() * n.normalized();
+    e.trigger_planes[static_cast<std::size_t>(e.trigger_count++)] = {nb, v[i + 3] * mm + nb.dot(f.translation()), false};
+  }
   for (int pass = 0; pass < 2; ++pass) {
     const std::vector<double>& v = pass == 0 ? c.safety_keep_in : c.safety_keep_out;
     const std::vector<double>& fr = pass == 0 ? c.safety_keep_in_frames : c.safety_keep_out_frames;
@@ -1798,7 +1828,7 @@ std::string safety_envelope(const FwConfig& c, const kin::Chain& chain, kin::Saf
   e.position_tolerance = c.safety_tolerance_mm * mm;
   e.angle_tolerance = c.safety_tolerance_deg * deg;
   e.speed_tolerance = c.safety_tolerance_mm_s * mm;
-  e.enabled = e.plane_count > 0 || e.box_count > 0 || e.cone || e.normal.tcp_speed > 0 || e.normal.elbow_speed > 0 ||
+  e.enabled = e.plane_count > 0 || e.box_count > 0 || e.trigger_count > 0 || e.cone || e.normal.tcp_speed > 0 || e.normal.elbow_speed > 0 ||
               e.reduced.tcp_speed > 0 || e.reduced.elbow_speed > 0 || joint_limits || e.normal.has_stop_limit() ||
               e.reduced.has_stop_limit() || e.normal.has_dynamics_limit() || e.reduced.has_dynamics_limit();
   char buf[160];

@@ -331,11 +331,13 @@ std::string Console::status_text() const {
 std::string Console::safety_text() const {
   const ArmStatus st = svc_->status();
   if (!st.safety_on) return "safety=off";
+  const Telemetry tel = ctl_.telemetry();
   std::string s = fmt("safety=on mode=%s checksum=%08X stops=%u", kin::to_string(st.safety_mode),
-                      static_cast<unsigned>(st.safety_checksum), static_cast<unsigned>(ctl_.telemetry().safety_stops));
+                      static_cast<unsigned>(st.safety_checksum), static_cast<unsigned>(tel.safety_stops));
+  if (tel.safety_zone >= 0) s += fmt(" zone=reduced_plane_%d", static_cast<int>(tel.safety_zone));
   // the mode's limits that are set, in the [safety] keys' units (docs/safety.md)
   const kin::SafetyConfig& env = svc_->settings().safety;
-  const kin::SafetyLimits& lim = env.limits(st.safety_mode);
+  const kin::SafetyLimits& lim = env.limits(tel.safety_zone >= 0 ? kin::SafetyMode::reduced : st.safety_mode);
   const NamedPose& tool = svc_->tool(svc_->active_tool());
   s += fmt(" tool=%s tool_radius_mm=%g", tool.name.c_str(), svc_->tool_radius(tool) * 1e3);
   if (lim.tcp_speed > 0) s += fmt(" tcp_speed_mm_s=%g", lim.tcp_speed * 1e3);

@@ -29,7 +29,7 @@ std::string envelope_violation_at(const kin::SafetyConfig& env, kin::SafetyMode 
   if (dt > 0 && q_prev.size() == q.size() && kin::safety_sample(chain, env, q_prev, 0.0, p))
     kin::set_velocity(x, p, q_prev, q, dt);
   kin::SafetyViolation v;
-  if (kin::check_sample(env, mode, x, 0.0, 0.0, 0.0, v)) return line_of(v);
+  if (kin::check_sample(env, kin::effective_mode(env, mode, x), x, 0.0, 0.0, 0.0, v)) return line_of(v);
   return "";
 }
 
@@ -92,8 +92,10 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
   // the predicted stop at each sample (stop limits): from the sampled joints, their velocities
   // and accelerations by differences, braked with the joints' limits as the controller brakes;
   // the momentum and power (their limits) at the same state
-  const bool stops = env.limits(safety_mode_).has_stop_limit();
-  const bool dynamics = env.limits(safety_mode_).has_dynamics_limit();
+  // (with trigger planes a sample may run in either mode)
+  const bool zones = env.trigger_count > 0;
+  const bool stops = env.limits(safety_mode_).has_stop_limit() || (zones && env.reduced.has_stop_limit());
+  const bool dynamics = env.limits(safety_mode_).has_dynamics_limit() || (zones && env.reduced.has_dynamics_limit());
   kin::JointState st;
   st.pos = st.vel = st.acc = kin::JointVector::Zero(n_);
   kin::JointVector v_prev = kin::JointVector::Zero(n_);
@@ -119,9 +121,11 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
       if (stops) (void)kin::stop_prediction(chain, lim_, st, ramp, x);
       if (dynamics) (void)kin::dynamics_prediction(chain, st, x);
     }
-    ratio = std::max(ratio, kin::speed_ratio(env, safety_mode_, x));
+    // the mode at this sample: Reduced where the tool reaches beyond a trigger plane
+    const kin::SafetyMode mode = kin::effective_mode(env, safety_mode_, x);
+    ratio = std::max(ratio, kin::speed_ratio(env, mode, x));
     // (speeds: 1e-6 m/s of rounding, so that a line planned at the limit passes)
-    if (!refused && kin::check_sample(env, safety_mode_, x, 0.0, 0.0, 1e-6, v)) {
+    if (!refused && kin::check_sample(env, mode, x, 0.0, 0.0, 1e-6, v)) {
       r = refuse(MoveRefusal::arm_state, CmdError::limits);
       r.s = v.s;
       r.position = v.where;
@@ -150,7 +154,7 @@ std::string ArmService::jog_envelope(const kin::Chain& chain,
   for (int k = 0; k <= kSamples; ++k) {
     const double s = static_cast<double>(k) / kSamples;
     if (!at(s, q) || !kin::safety_sample(chain, env, q, s, x)) continue;
-    if (kin::check_sample(env, safety_mode_, x, 0.0, 0.0, 0.0, v)) return line_of(v);
+    if (kin::check_sample(env, kin::effective_mode(env, safety_mode_, x), x, 0.0, 0.0, 0.0, v)) return line_of(v);
   }
   return "";
 }

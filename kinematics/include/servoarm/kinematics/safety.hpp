@@ -86,6 +86,11 @@ struct SafetyConfig {
   int plane_count = 0;
   std::array<SafetyBox, kMaxSafetyBoxes> boxes{};
   int box_count = 0;
+  /// Trigger planes: the arm runs in Reduced mode while the tool sphere reaches beyond one
+  /// (n.c - r < offset: not wholly on the side the normal points to), Normal again once it is
+  /// wholly back (trigger_plane, effective_mode). They restrict nothing.
+  std::array<SafetyPlane, kMaxSafetyPlanes> trigger_planes{};
+  int trigger_count = 0;
   double tool_radius = 0;  ///< m: the sphere around the TCP
   int elbow_frame = -1;    ///< FrameSet index of the elbow sphere's centre; -1 = no elbow sphere
   double elbow_radius = 0; ///< m
@@ -183,6 +188,15 @@ bool stop_prediction(const Chain& chain, const JointLimits& limits, const JointS
 /// (m, rad or m/s; negative inside). Lets a monitor tell a move back towards the inside
 /// (the excess shrinks) from one further out.
 double safety_excess(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, const SafetyViolation& which);
+
+/// The first trigger plane the tool sphere at x reaches beyond (index), -1 when none.
+int trigger_plane(const SafetyConfig& cfg, const SafetySample& x);
+
+/// The mode the functions run in at x: Reduced when `mode` is or when the tool sphere reaches
+/// beyond a trigger plane, else Normal.
+inline SafetyMode effective_mode(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x) {
+  return mode == SafetyMode::reduced || trigger_plane(cfg, x) >= 0 ? SafetyMode::reduced : SafetyMode::normal;
+}
 
 /// The first sample of a path whose check fails with zero margins (plan time): true and
 /// `out` filled, false when the whole path is inside.

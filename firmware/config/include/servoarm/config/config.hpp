@@ -172,6 +172,8 @@ struct FwConfig {
   std::vector<double> safety_plane_frames;     ///< one frame per safety.planes plane
   std::vector<double> safety_keep_in_frames;   ///< one frame per safety.keep_in box
   std::vector<double> safety_keep_out_frames;  ///< one frame per safety.keep_out box
+  std::vector<double> safety_reduced_planes;   ///< trigger planes: nx, ny, nz, offset_mm; Reduced beyond one
+  std::vector<double> safety_reduced_plane_frames;  ///< one frame per safety.reduced_planes plane
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;
