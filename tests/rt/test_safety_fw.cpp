@@ -367,6 +367,77 @@ TEST(SafetyMonitor, ATriggerPlaneSwitchesToReducedWhileTheToolIsBeyondIt) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+// The elbow sphere (safety.elbow_frame = 3, 30 mm) against a vertical plane (x = const) the
+// elbow crosses half-way through a 40 deg turn of joint 1 (the tool stays on the allowed side): the planner
+// refuses the movej naming the elbow sphere; the same move queued directly gets a protective
+// stop in the cycle the commanded elbow sphere passes the tolerance, computed here by FK.
+TEST(SafetyMonitor, TheElbowSphereAgainstAVerticalPlane) {
+  const kin::LoadResult lr = kin::load_robot("puma560");
+  kin::JointVector goal = work_pose();
+  goal[0] += 40 * kDeg;
+  auto elbow_at = [&](const kin::JointVector& q) {
+    kin::FrameSet f;
+    kin::Pose t;
+    (void)kin::forward_frames(lr.chain, q, f, t);
+    return Eigen::Vector3d(f.frame[3].translation());
+  };
+  // the plane x = midway between where the elbow starts and ends (joint 1 turns both the elbow
+  // and the tool about z, their x shrinking; the tool, further out, stays beyond the plane)
+  const Eigen::Vector3d e0 = elbow_at(work_pose()), e1 = elbow_at(goal);
+  const Eigen::Vector3d n(1, 0, 0);
+  const double off_mm = n.dot(0.5 * (e0 + e1)) * 1000.0;
+  constexpr double kElbowMm = 30.0;
+  FwConfig c;
+  c.safety_planes = {n.x(), n.y(), 0.0, off_mm};
+  c.safety_tool_radius_mm = kRadiusMm;
+  c.safety_elbow_frame = 3;
+  c.safety_elbow_radius_mm = kElbowMm;
+  c.safety_tolerance_mm = kTolMm;
+  // the tool stays on the allowed side all along (so the elbow is what the plane stops)
+  for (int k = 0; k <= 40; ++k) {
+    kin::JointVector q = work_pose();
+    q[0] += k * kDeg;
+    kin::Pose t;
+    (void)kin::forward(lr.chain, q, t);
+    CHECK(n.dot(t.translation()) * 1000.0 - kRadiusMm > off_mm + 5.0);
+  }
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  MoveJoints mj;
+  mj.goal = goal;
+  const MoveResult no = r.svc().move(mj, MoveContext{});
+  CHECK(no.error == CmdError::limits);
+  STRCMP_CONTAINS("safety plane 0 (elbow sphere)", no.reason.c_str());
+  MotionItem* m = r.app.ctl->motions().back();
+  CHECK(m != nullptr);
+  m->id = 904;
+  JointMove& jm = m->payload.emplace<JointMove>();
+  jm.goal = goal;
+  jm.override = 0.5;
+  jm.plan.n = 0;
+  r.app.ctl->motions().commit();
+  int crossed = -1, stopped = -1;
+  double worst = -INFINITY;
+  for (int i = 0; i < 20000; ++i) {
+    r.cycle();
+    const Telemetry t = r.tel();
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[std::size_t(j)];
+    const double past = off_mm - (n.dot(elbow_at(q)) * 1000.0 - kElbowMm);  // mm beyond the plane
+    worst = std::fmax(worst, past);
+    if (crossed < 0 && past > kTolMm) crossed = i;
+    if (stopped < 0 && t.state == ArmState::stopping) stopped = i;
+    if (stopped >= 0 && t.state == ArmState::idle) break;
+  }
+  std::printf("\n  elbow: past the tolerance in cycle %d, stop from cycle %d, elbow sphere at most %.2f mm past the plane",
+              crossed, stopped, worst);
+  CHECK(crossed >= 0);
+  CHECK_EQUAL(crossed, stopped);
+  STRCMP_CONTAINS("protective stop (commanded): plane 0 (elbow sphere)", r.last_event().c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 // Joint speed limits per mode: a joint move of joint 1 the planner never saw (queued
 // directly, at full speed) runs in Normal mode (limit 200 deg/s) and gets a protective stop in
 // Reduced mode (limit 20 deg/s) in the cycle its commanded speed passes limit + tolerance; the
