@@ -17,7 +17,8 @@ constexpr double kPi = 3.14159265358979323846;
 bool finite3(const Eigen::Vector3d& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
 
 // Signed clearance of point c inside box b: the smallest distance to a face (negative outside).
-double inside_clearance(const SafetyBox& b, const Eigen::Vector3d& c) {
+double inside_clearance(const SafetyBox& b, const Eigen::Vector3d& c_base) {
+  const Eigen::Vector3d c = b.frame.inverse(Eigen::Isometry) * c_base;
   double d = INFINITY;
   for (int i = 0; i < 3; ++i) d = std::min({d, c[i] - b.min[i], b.max[i] - c[i]});
   return d;
@@ -25,10 +26,11 @@ double inside_clearance(const SafetyBox& b, const Eigen::Vector3d& c) {
 
 // Signed distance from point c to box b: positive outside, minus the clearance to the
 // nearest face inside (so that a centre deep inside is further from allowed than one at a face).
-double outside_distance(const SafetyBox& b, const Eigen::Vector3d& c) {
+double outside_distance(const SafetyBox& b, const Eigen::Vector3d& c_base) {
+  const Eigen::Vector3d c = b.frame.inverse(Eigen::Isometry) * c_base;
   const Eigen::Vector3d q = c.cwiseMax(b.min).cwiseMin(b.max);
   const double d = (c - q).norm();
-  return d > 0 ? d : -inside_clearance(b, c);
+  return d > 0 ? d : -inside_clearance(b, c_base);
 }
 
 double tool_angle(const SafetyConfig& cfg, const Pose& tcp) {
@@ -385,6 +387,16 @@ bool is_speed(SafetyFunction f) {
   return false;
 }
 
+int trigger_plane(const SafetyConfig& cfg, const SafetySample& x) {
+  if (!cfg.enabled) return -1;
+  const Eigen::Vector3d c = x.tcp.translation();
+  for (int i = 0; i < cfg.trigger_count && i < kMaxSafetyPlanes; ++i) {
+    const SafetyPlane& p = cfg.trigger_planes[static_cast<std::size_t>(i)];
+    if (p.normal.dot(c) - cfg.tool_radius < p.offset) return i;
+  }
+  return -1;
+}
+
 double safety_excess(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, const SafetyViolation& which) {
   SafetyViolation v;
   return evaluate(cfg, mode, x, which.function, which.index, which.elbow, v);
@@ -429,9 +441,18 @@ const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_
     if (!finite3(p.normal) || !std::isfinite(p.offset)) return bad("plane %d: not a finite number", i);
     if (std::abs(p.normal.norm() - 1.0) > 1e-9) return bad("plane %d: the normal must be a unit vector (zero or unnormalised)", i);
   }
+  if (cfg.trigger_count < 0 || cfg.trigger_count > kMaxSafetyPlanes) return bad("at most %d trigger planes", kMaxSafetyPlanes);
+  for (int i = 0; i < cfg.trigger_count; ++i) {
+    const SafetyPlane& p = cfg.trigger_planes[static_cast<std::size_t>(i)];
+    if (!finite3(p.normal) || !std::isfinite(p.offset)) return bad("trigger plane %d: not a finite number", i);
+    if (std::abs(p.normal.norm() - 1.0) > 1e-9) return bad("trigger plane %d: the normal must be a unit vector", i);
+  }
   for (int i = 0; i < cfg.box_count; ++i) {
     const SafetyBox& b = cfg.boxes[static_cast<std::size_t>(i)];
     if (!finite3(b.min) || !finite3(b.max)) return bad("box %d: not a finite number", i);
+    if (!b.frame.matrix().allFinite() ||
+        !(b.frame.linear().transpose() * b.frame.linear()).isApprox(Eigen::Matrix3d::Identity(), 1e-9))
+      return bad("box %d: its frame is not a finite rotation and translation", i);
     if ((b.min.array() > b.max.array()).any()) return bad("box %d: inverted (a min above its max)", i);
     if (b.keep_in && ((b.max - b.min).minCoeff() < 2.0 * cfg.tool_radius))
       return bad("box %d: keep-in box narrower than the tool sphere's diameter", i);

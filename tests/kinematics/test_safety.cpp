@@ -116,6 +116,80 @@ TEST(Safety, BoxCaseTable) {
   }
 }
 
+// A box in a user frame is axis-aligned in that frame: a 100 x 20 x 20 mm keep-out box turned
+// 45 deg about z and moved to (200, 100, 50) mm holds the points along its turned long axis and
+// not those of the base-aligned box of the same size; values against the reference computed
+// here in the box's frame.
+TEST(Safety, BoxInAUserFrame) {
+  kin::Pose f = kin::Pose::Identity();
+  f.linear() = Eigen::AngleAxisd(M_PI / 4, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  f.translation() = Eigen::Vector3d(0.2, 0.1, 0.05);
+  kin::SafetyConfig c;
+  c.enabled = true;
+  c.box_count = 1;
+  c.boxes[0].min = Eigen::Vector3d(-0.05, -0.01, -0.01);
+  c.boxes[0].max = Eigen::Vector3d(0.05, 0.01, 0.01);
+  c.boxes[0].keep_in = false;
+  c.boxes[0].frame = f;
+  struct Case { double along, across; bool violated; };
+  // (along, across): metres along the box's x and y axes from its centre
+  const Case cases[] = {{0.04, 0.0, true}, {0.0, 0.009, true}, {0.06, 0.0, false}, {0.0, 0.02, false}, {-0.049, 0.0, true}};
+  for (const Case& k : cases) {
+    const Eigen::Vector3d p = f * Eigen::Vector3d(k.along, k.across, 0.0);
+    kin::SafetyViolation v;
+    const bool got = kin::check_sample(c, kin::SafetyMode::normal, at(p.x(), p.y(), p.z()), 0, 0, 0, v);
+    char line[160];
+    std::snprintf(line, sizeof line, "along %g across %g: expected %s", k.along, k.across, k.violated ? "violation" : "none");
+    CHECK_TEXT(got == k.violated, line);
+    if (got) {
+      // inside: minus the clearance to the nearest face, in the box's frame
+      const double clear = std::fmin(0.05 - std::fabs(k.along), 0.01 - std::fabs(k.across));
+      DOUBLES_EQUAL_TEXT(-clear, v.value, 1e-9, line);
+      CHECK_TEXT((v.where - p).norm() < 1e-12, line);  // where: the base frame
+    }
+  }
+  // (0.24, 0.1, 0.05) is inside the base-aligned box of the same size there, outside the turned one
+  kin::SafetyViolation v;
+  CHECK(!kin::check_sample(c, kin::SafetyMode::normal, at(0.24, 0.1, 0.05), 0, 0, 0, v));
+  c.boxes[0].frame.linear().setIdentity();
+  CHECK(kin::check_sample(c, kin::SafetyMode::normal, at(0.24, 0.1, 0.05), 0, 0, 0, v));
+  // a frame that is not a rotation is a configuration problem
+  c.boxes[0].frame.linear() *= 2.0;
+  char buf[160];
+  STRCMP_CONTAINS("box 0: its frame is not a finite rotation", kin::safety_config_problem(c, buf, sizeof buf));
+}
+
+// A trigger plane switches the functions to Reduced mode while the tool sphere reaches beyond
+// it (any part of it: n.c - r < offset) and restricts nothing: the mode at each height.
+TEST(Safety, TriggerPlaneReducesWhileTheSphereReachesBeyond) {
+  kin::SafetyConfig c;
+  c.enabled = true;
+  c.tool_radius = 0.02;
+  c.trigger_count = 1;
+  c.trigger_planes[0].normal = Eigen::Vector3d(0, 0, 1);
+  c.trigger_planes[0].offset = 0.3;  // Reduced below z = 300 mm (the sphere's lowest point)
+  c.normal.tcp_speed = 0.25;
+  c.reduced.tcp_speed = 0.1;
+  struct Case { double z; int plane; };
+  const Case cases[] = {{0.5, -1}, {0.3201, -1}, {0.3199, 0}, {0.1, 0}};
+  for (const Case& k : cases) {
+    kin::SafetySample x = at(0.2, 0, k.z);
+    char line[64];
+    std::snprintf(line, sizeof line, "z=%g", k.z);
+    LONGS_EQUAL_TEXT(k.plane, kin::trigger_plane(c, x), line);
+    const kin::SafetyMode m = kin::effective_mode(c, kin::SafetyMode::normal, x);
+    CHECK_TEXT(m == (k.plane >= 0 ? kin::SafetyMode::reduced : kin::SafetyMode::normal), line);
+    CHECK_TEXT(kin::effective_mode(c, kin::SafetyMode::reduced, x) == kin::SafetyMode::reduced, line);
+    // no position function: nothing is violated at rest, whatever the side
+    kin::SafetyViolation v;
+    CHECK_TEXT(!kin::check_sample(c, m, x, 0, 0, 0, v), line);
+    // 200 mm/s: within Normal's 250, beyond Reduced's 100
+    x.has_velocity = true;
+    x.tcp_velocity = Eigen::Vector3d(0.2, 0, 0);
+    CHECK_TEXT(kin::check_sample(c, m, x, 0, 0, 0, v) == (k.plane >= 0), line);
+  }
+}
+
 TEST(Safety, ConeAndSpeedCaseTable) {
   kin::SafetyConfig c;
   c.enabled = true;

@@ -15,7 +15,9 @@
 // nothing heard), feedback stale (the joint's feedback frozen, heartbeat alive), bus-off
 // (every write answers Status::bus_off), a drive refusing to enable, a jammed joint
 // (its drive holds where it is: the following error grows while the arm moves), e-stop,
-// a cycle overrun (the loop stalls 20 ms, the loop reports 20 missed deadlines).
+// a cycle overrun (the loop stalls 20 ms, the loop reports 20 missed deadlines), the safety
+// envelope switched to Reduced mode (`safety reduced`) whose joint speed limits (1 deg/s) the
+// running motion exceeds: a protective stop (docs/safety.md), not a fault.
 //
 // Checked in each cell, after a fixed number of cycles (the same in a baseline run of
 // the state without a fault):
@@ -25,6 +27,9 @@
 //  - fault cells: Telemetry cause and joint, the fault text names the joint, one fault
 //    event with that cause and joint, the motion queue empty and its moves dropped (none
 //    of them finished), the generation bumped; e-stop: the estop event, queue dropped;
+//  - protective-stop cells: at rest, powered and idle, no fault, the queue empty and its moves
+//    dropped, one event (motion_refused, jog_stopped for a jog) naming the protective stop and
+//    the joint speed, one safety stop counted;
 //  - no-reaction cells: no fault, no fault event, the same state, finished moves and
 //    commanded position as the baseline;
 //  - every cycle: no setpoint step larger than the joint's velocity limit x one period
@@ -121,6 +126,7 @@ enum class Fx : std::uint8_t {
   jammed_joint,
   estop,
   overrun,
+  reduced_mode,
 };
 const char* name(St s) {
   switch (s) {
@@ -147,6 +153,7 @@ const char* name(Fx f) {
     case Fx::jammed_joint: return "jammed joint";
     case Fx::estop: return "e-stop";
     case Fx::overrun: return "cycle overrun";
+    case Fx::reduced_mode: return "reduced mode";
   }
   return "?";
 }
@@ -177,6 +184,9 @@ struct Rig {
     FwConfig cfg;
     cfg.can = "sim";
     cfg.following_error_deg = 2.0;  // the jammed joint trips within the stop ramps
+    // a safety envelope with no Normal limits (the baseline moves as without one) and Reduced
+    // joint speed limits every motion here exceeds
+    cfg.safety_reduced_joint_speed_deg_s = {1, 1, 1, 1, 1, 1};
     const std::string e = app.build(cfg, &clock);
     if (!e.empty()) FAIL(e.c_str());
     clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
@@ -324,6 +334,7 @@ struct Rig {
       case Fx::bus_off: bus->set_bus_off(); break;
       case Fx::refuse_enable: app.plant->arm().at(static_cast<std::size_t>(k)).faults().refuse_enable = true; break;
       case Fx::jammed_joint: bus->jam(k); break;
+      case Fx::reduced_mode: ctl->set_safety_mode(kin::SafetyMode::reduced); break;
       case Fx::estop: {
         Request r(RequestOp::estop, ++seq);
         if (!ctl->requests().push(r)) FAIL("request queue full");
@@ -369,6 +380,7 @@ struct Outcome {
   std::uint64_t overruns = 0;
   std::string worst_step;  // "" or the largest setpoint step over its bound
   std::size_t rt_allocs = 0;
+  std::uint32_t safety_stops = 0;
 };
 
 Outcome run_cell(St s, Fx f, int k) {
@@ -400,6 +412,7 @@ Outcome run_cell(St s, Fx f, int k) {
     if (e.kind == EventKind::motion_done && e.motion_id == kQueuedId) o.queued_move_finished = true;
   o.generation_after = t.generation;
   o.overruns = t.overruns;
+  o.safety_stops = t.safety_stops;
   // Setpoint steps: at most one period at the joint's velocity limit (+ rounding).
   const kin::JointLimits& lim = r.ctl->limits();
   const double dt = r.ctl->period_s();
@@ -433,6 +446,7 @@ enum class Re : std::uint8_t {
   none,   // no reaction: as the baseline
   fault,  // fault: `cause` on `joint` (-1: the bus), drives down, queue dropped
   estop,  // e-stop: drives down, queue dropped
+  protective_stop,  // the safety envelope: ramp to rest, idle and powered, queue dropped, no fault
 };
 struct Cell {
   St state;
@@ -468,6 +482,7 @@ const Cell kCells[] = {
     {St::disabled, Fx::jammed_joint, 0, Re::none, kNoCause, -1},
     {St::disabled, Fx::estop, 0, Re::estop, kNoCause, -1},
     {St::disabled, Fx::overrun, 0, Re::none, kNoCause, -1},
+    {St::disabled, Fx::reduced_mode, 0, Re::none, kNoCause, -1},
     // enabling (one cycle after the enable request)
     {St::enabling, Fx::drive_fault, 2, Re::fault, kDrive, 2},
     {St::enabling, Fx::heartbeat_loss, 3, Re::fault, kHb, 3},
@@ -478,6 +493,7 @@ const Cell kCells[] = {
     {St::enabling, Fx::jammed_joint, 1, Re::none, kNoCause, -1},
     {St::enabling, Fx::estop, 0, Re::estop, kNoCause, -1},
     {St::enabling, Fx::overrun, 0, Re::none, kNoCause, -1},
+    {St::enabling, Fx::reduced_mode, 0, Re::none, kNoCause, -1},
     // idle (enabled, at rest)
     {St::idle, Fx::drive_fault, 3, Re::fault, kEmcy, 3},
     {St::idle, Fx::heartbeat_loss, 4, Re::fault, kHb, 4},
@@ -488,6 +504,7 @@ const Cell kCells[] = {
     {St::idle, Fx::jammed_joint, 2, Re::none, kNoCause, -1},
     {St::idle, Fx::estop, 0, Re::estop, kNoCause, -1},
     {St::idle, Fx::overrun, 0, Re::none, kNoCause, -1},
+    {St::idle, Fx::reduced_mode, 0, Re::none, kNoCause, -1},
     // moving joint
     {St::moving_joint, Fx::drive_fault, 4, Re::fault, kEmcy, 4},
     {St::moving_joint, Fx::heartbeat_loss, 5, Re::fault, kHb, 5},
@@ -498,6 +515,7 @@ const Cell kCells[] = {
     {St::moving_joint, Fx::jammed_joint, 3, Re::fault, kFollow, 3},
     {St::moving_joint, Fx::estop, 0, Re::estop, kNoCause, -1},
     {St::moving_joint, Fx::overrun, 0, Re::none, kNoCause, -1},
+    {St::moving_joint, Fx::reduced_mode, 0, Re::protective_stop, kNoCause, -1},
     // moving linear
     {St::moving_linear, Fx::drive_fault, 5, Re::fault, kEmcy, 5},
     {St::moving_linear, Fx::heartbeat_loss, 0, Re::fault, kHb, 0},
@@ -508,6 +526,7 @@ const Cell kCells[] = {
     {St::moving_linear, Fx::jammed_joint, 2, Re::fault, kFollow, 2},
     {St::moving_linear, Fx::estop, 0, Re::estop, kNoCause, -1},
     {St::moving_linear, Fx::overrun, 0, Re::none, kNoCause, -1},
+    {St::moving_linear, Fx::reduced_mode, 0, Re::protective_stop, kNoCause, -1},
     // jogging (joint 1)
     {St::jogging, Fx::drive_fault, 0, Re::fault, kEmcy, 0},
     {St::jogging, Fx::heartbeat_loss, 1, Re::fault, kHb, 1},
@@ -518,6 +537,7 @@ const Cell kCells[] = {
     {St::jogging, Fx::jammed_joint, 0, Re::fault, kFollow, 0},
     {St::jogging, Fx::estop, 0, Re::estop, kNoCause, -1},
     {St::jogging, Fx::overrun, 0, Re::none, kNoCause, -1},
+    {St::jogging, Fx::reduced_mode, 0, Re::protective_stop, kNoCause, -1},
     // holding (feed hold, at rest, moves queued)
     {St::holding, Fx::drive_fault, 1, Re::fault, kEmcy, 1},
     {St::holding, Fx::heartbeat_loss, 2, Re::fault, kHb, 2},
@@ -528,6 +548,7 @@ const Cell kCells[] = {
     {St::holding, Fx::jammed_joint, 0, Re::none, kNoCause, -1},
     {St::holding, Fx::estop, 0, Re::estop, kNoCause, -1},
     {St::holding, Fx::overrun, 0, Re::none, kNoCause, -1},
+    {St::holding, Fx::reduced_mode, 0, Re::none, kNoCause, -1},  // (held at rest: no speed)
     // stopping (the ramp of `stop` from a joint move at speed)
     {St::stopping, Fx::drive_fault, 2, Re::fault, kEmcy, 2},
     {St::stopping, Fx::heartbeat_loss, 3, Re::fault, kHb, 3},
@@ -538,6 +559,7 @@ const Cell kCells[] = {
     {St::stopping, Fx::jammed_joint, 1, Re::fault, kFollow, 1},
     {St::stopping, Fx::estop, 0, Re::estop, kNoCause, -1},
     {St::stopping, Fx::overrun, 0, Re::none, kNoCause, -1},
+    {St::stopping, Fx::reduced_mode, 0, Re::none, kNoCause, -1},  // (the ramp of a stop is not watched)
 };
 
 bool has_moves(St s) { return s == St::moving_joint || s == St::moving_linear || s == St::holding; }
@@ -560,6 +582,22 @@ std::string check_cell(const Cell& c, const Outcome& o, const Outcome& base) {
       if (!(dq < 1e-6)) bad("commanded position " + std::to_string(dq) + " rad from the baseline's");
       if (c.fault == Fx::overrun && o.overruns != base.overruns + static_cast<std::uint64_t>(kStall / hal::kMillisecond))
         bad("overruns " + std::to_string(o.overruns) + ", baseline " + std::to_string(base.overruns) + " + 20");
+      break;
+    }
+    case Re::protective_stop: {
+      if (o.state != ArmState::idle) bad(std::string("state ") + to_string(o.state) + ", wanted idle");
+      if (!o.powered) bad("drives not powered");
+      if (o.cause != FaultCause::none) bad(std::string("a fault: ") + o.fault_text);
+      if (o.queued != 0) bad("motion queue not empty: " + std::to_string(o.queued));
+      if (o.queued_move_finished) bad("the queued move ran");
+      if (o.safety_stops != 1) bad(std::to_string(o.safety_stops) + " safety stops, wanted 1");
+      const EventKind kind = c.state == St::jogging ? EventKind::jog_stopped : EventKind::motion_refused;
+      int stops = 0;
+      for (const Event& e : o.events)
+        if (e.kind == kind && std::string(e.message).find("protective stop (commanded): joint ") != std::string::npos &&
+            std::string(e.message).find(" speed") != std::string::npos)
+          ++stops;
+      if (stops != 1) bad(std::to_string(stops) + " protective stop events naming a joint speed, wanted 1");
       break;
     }
     case Re::fault:
@@ -629,6 +667,6 @@ TEST(FaultMatrix, EveryCellReactsAsTabled) {
     ++cells;
     if (!e.empty()) failures += std::string("\n  ") + name(c.state) + " x " + name(c.fault) + " (joint " + std::to_string(c.k + 1) + "):" + e;
   }
-  std::printf("\n[fault matrix] %d cells (8 states x 9 faults), %s\n", cells, failures.empty() ? "all as tabled" : "FAILED");
+  std::printf("\n[fault matrix] %d cells (8 states x 10 faults), %s\n", cells, failures.empty() ? "all as tabled" : "FAILED");
   CHECK_TEXT(failures.empty(), failures.c_str());
 }

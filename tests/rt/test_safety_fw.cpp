@@ -203,6 +203,241 @@ TEST(SafetyMonitor, AnUncheckedMoveThroughAPlaneGetsAProtectiveStop) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+// The same table plane given in a user frame (safety.plane_frames: [0, 0, -1, -100] in a frame
+// 100 mm above the table turned 180 deg about x): the unchecked move through it gets the
+// protective stop in the cycle its commanded sphere passes the tolerance, naming the plane.
+TEST(SafetyMonitor, APlaneInAUserFrameStopsAnUncheckedMove) {
+  FwConfig c = table(250);
+  const double plane = plane_mm();
+  char toml[256];
+  std::snprintf(toml, sizeof toml, "[safety]\nplanes = [0, 0, -1, -100]\nplane_frames = [0, 0, %.6f, 180, 0, 0]\n",
+                plane + 100.0);
+  const std::string e = load_config_text(toml, "frame.toml", c);
+  CHECK_TEXT(e.empty(), e.c_str());
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  MotionItem* m = r.app.ctl->motions().back();
+  CHECK(m != nullptr);
+  m->id = 901;
+  JointMove& jm = m->payload.emplace<JointMove>();
+  jm.goal = work_pose();
+  jm.goal[1] += 25 * kDeg;
+  jm.override = 0.5;
+  jm.plan.n = 0;
+  r.app.ctl->motions().commit();
+  int crossed = -1, stopped = -1;
+  for (int i = 0; i < 20000; ++i) {
+    r.cycle();
+    if (crossed < 0 && r.tool_z_mm(true) - kRadiusMm < plane - kTolMm) crossed = i;
+    if (stopped < 0 && r.tel().state == ArmState::stopping) stopped = i;
+    if (stopped >= 0 && r.tel().state == ArmState::idle) break;
+  }
+  CHECK(crossed >= 0);
+  CHECK_EQUAL(crossed, stopped);
+  STRCMP_CONTAINS("protective stop (commanded): plane 0 (tool sphere)", r.last_event().c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+// The active tool's own sphere (tool define ... radius=): with a tool whose sphere is 40 mm
+// (safety.tool_radius_mm 10), the unchecked move through the table gets its protective stop in
+// the cycle the 40 mm sphere passes the tolerance, cycles before a 10 mm one would.
+TEST(SafetyMonitor, TheActiveToolsRadiusIsTheMonitorsSphere) {
+  int at_radius[2] = {-1, -1};
+  for (int k = 0; k < 2; ++k) {
+    const double radius = k == 0 ? kRadiusMm : 40.0;
+    Rig r(table(250));
+    r.enable();
+    r.to_work();
+    if (k == 1) {
+      NamedPose big;
+      big.name = "big";
+      big.radius = radius * 1e-3;
+      const FrameResult d = r.svc().define_tool(big);
+      CHECK_TEXT(d.ok(), d.reason.c_str());
+      CHECK(r.svc().select_tool("big").ok());
+    }
+    const double plane = plane_mm();
+    MotionItem* m = r.app.ctl->motions().back();
+    CHECK(m != nullptr);
+    m->id = 902;
+    JointMove& jm = m->payload.emplace<JointMove>();
+    jm.goal = work_pose();
+    jm.goal[1] += 25 * kDeg;
+    jm.override = 0.5;
+    jm.plan.n = 0;
+    r.app.ctl->motions().commit();
+    int crossed = -1, stopped = -1;
+    for (int i = 0; i < 20000; ++i) {
+      r.cycle();
+      if (crossed < 0 && r.tool_z_mm(true) - radius < plane - kTolMm) crossed = i;
+      if (stopped < 0 && r.tel().state == ArmState::stopping) stopped = i;
+      if (stopped >= 0 && r.tel().state == ArmState::idle) break;
+    }
+    CHECK(crossed >= 0);
+    CHECK_EQUAL(crossed, stopped);
+    STRCMP_CONTAINS("protective stop (commanded): plane 0 (tool sphere)", r.last_event().c_str());
+    LONGS_EQUAL(0, r.rt_allocs);
+    at_radius[k] = stopped;
+  }
+  std::printf("\n  protective stop in cycle %d with a 10 mm sphere, %d with the 40 mm tool", at_radius[0], at_radius[1]);
+  CHECK(at_radius[1] < at_radius[0]);
+}
+
+// A trigger plane at run time: a planned line sideways into the zone and back runs without a
+// protective stop (planned at the Reduced 100 mm/s), the monitor switches to Reduced with an
+// event naming the plane as the commanded sphere crosses it and back to Normal when it leaves;
+// a joint move the planner never saw, fast (no Normal TCP limit), gets a protective stop on the
+// Reduced TCP limit once inside.
+TEST(SafetyMonitor, ATriggerPlaneSwitchesToReducedWhileTheToolIsBeyondIt) {
+  FwConfig c = table(250);
+  c.safety_tcp_speed_mm_s = 0;
+  c.safety_reduced_tcp_speed_mm_s = 100;
+  kin::Pose w;
+  {
+    const kin::LoadResult lr = kin::load_robot("puma560");
+    (void)kin::forward(lr.chain, work_pose(), w);
+  }
+  const double y_plane = w.translation().y() * 1000.0 + 50.0;
+  c.safety_reduced_planes = {0, -1, 0, -y_plane};  // Reduced where the sphere reaches past y_plane
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveLine side;
+  side.target = w;
+  side.target.translation().y() += 0.1;
+  side.speed = 0.2;
+  const MoveResult in = r.svc().move(side, cx);
+  CHECK_TEXT(in.ok(), in.reason.c_str());
+  MoveLine back = side;
+  back.target = w;
+  const MoveResult out = r.svc().move(back, cx);
+  CHECK_TEXT(out.ok(), out.reason.c_str());
+  int entered = -1, left = -1;
+  double vmax_in = 0, y_prev = NAN;
+  std::string ev_in, ev_out;
+  for (int i = 0; i < 20000 && (!r.app.ctl->motions().empty() || r.tel().state != ArmState::idle); ++i) {
+    r.cycle();
+    const Telemetry t = r.tel();
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[std::size_t(j)];
+    kin::Pose p;
+    (void)kin::forward(r.app.chain, q, p);
+    const double y = p.translation().y() * 1000.0;
+    const bool beyond = y + kRadiusMm > y_plane;
+    if (beyond && !std::isnan(y_prev)) vmax_in = std::fmax(vmax_in, std::fabs(y - y_prev) / 1e-3);
+    y_prev = y;
+    if (entered < 0 && t.safety_zone == 0) {
+      entered = i;
+      ev_in = r.last_event();
+      CHECK(beyond);
+    }
+    if (entered >= 0 && left < 0 && t.safety_zone < 0) {
+      left = i;
+      ev_out = r.last_event();
+      CHECK(!beyond);
+    }
+  }
+  std::printf("\n  trigger plane: entered in cycle %d, left in cycle %d, highest speed inside %.1f mm/s", entered, left,
+              vmax_in);
+  CHECK(entered >= 0 && left > entered);
+  STRCMP_CONTAINS("safety mode reduced: the tool entered reduced plane 0", ev_in.c_str());
+  STRCMP_CONTAINS("safety mode normal: the tool left reduced plane 0", ev_out.c_str());
+  CHECK(vmax_in <= 100.0 + 1.0);
+  CHECK_EQUAL(0u, r.tel().safety_stops);
+  // an unchecked fast joint move into the zone (joint 1 swings the tool towards +y)
+  MotionItem* m = r.app.ctl->motions().back();
+  CHECK(m != nullptr);
+  m->id = 903;
+  JointMove& jm = m->payload.emplace<JointMove>();
+  jm.goal = work_pose();
+  jm.goal[0] += (w.translation().x() > 0 ? 20 : -20) * kDeg;
+  jm.override = 1.0;
+  jm.plan.n = 0;
+  r.app.ctl->motions().commit();
+  for (int i = 0; i < 20000; ++i) {
+    r.cycle();
+    if (r.tel().safety_stops > 0 && r.tel().state == ArmState::idle) break;
+  }
+  CHECK_EQUAL(1u, r.tel().safety_stops);
+  STRCMP_CONTAINS("protective stop (commanded): tcp speed", r.last_event().c_str());
+  STRCMP_CONTAINS("limit 100.0 mm/s", r.last_event().c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+// The elbow sphere (safety.elbow_frame = 3, 30 mm) against a vertical plane (x = const) the
+// elbow crosses half-way through a 40 deg turn of joint 1 (the tool stays on the allowed side): the planner
+// refuses the movej naming the elbow sphere; the same move queued directly gets a protective
+// stop in the cycle the commanded elbow sphere passes the tolerance, computed here by FK.
+TEST(SafetyMonitor, TheElbowSphereAgainstAVerticalPlane) {
+  const kin::LoadResult lr = kin::load_robot("puma560");
+  kin::JointVector goal = work_pose();
+  goal[0] += 40 * kDeg;
+  auto elbow_at = [&](const kin::JointVector& q) {
+    kin::FrameSet f;
+    kin::Pose t;
+    (void)kin::forward_frames(lr.chain, q, f, t);
+    return Eigen::Vector3d(f.frame[3].translation());
+  };
+  // the plane x = midway between where the elbow starts and ends (joint 1 turns both the elbow
+  // and the tool about z, their x shrinking; the tool, further out, stays beyond the plane)
+  const Eigen::Vector3d e0 = elbow_at(work_pose()), e1 = elbow_at(goal);
+  const Eigen::Vector3d n(1, 0, 0);
+  const double off_mm = n.dot(0.5 * (e0 + e1)) * 1000.0;
+  constexpr double kElbowMm = 30.0;
+  FwConfig c;
+  c.safety_planes = {n.x(), n.y(), 0.0, off_mm};
+  c.safety_tool_radius_mm = kRadiusMm;
+  c.safety_elbow_frame = 3;
+  c.safety_elbow_radius_mm = kElbowMm;
+  c.safety_tolerance_mm = kTolMm;
+  // the tool stays on the allowed side all along (so the elbow is what the plane stops)
+  for (int k = 0; k <= 40; ++k) {
+    kin::JointVector q = work_pose();
+    q[0] += k * kDeg;
+    kin::Pose t;
+    (void)kin::forward(lr.chain, q, t);
+    CHECK(n.dot(t.translation()) * 1000.0 - kRadiusMm > off_mm + 5.0);
+  }
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  MoveJoints mj;
+  mj.goal = goal;
+  const MoveResult no = r.svc().move(mj, MoveContext{});
+  CHECK(no.error == CmdError::limits);
+  STRCMP_CONTAINS("safety plane 0 (elbow sphere)", no.reason.c_str());
+  MotionItem* m = r.app.ctl->motions().back();
+  CHECK(m != nullptr);
+  m->id = 904;
+  JointMove& jm = m->payload.emplace<JointMove>();
+  jm.goal = goal;
+  jm.override = 0.5;
+  jm.plan.n = 0;
+  r.app.ctl->motions().commit();
+  int crossed = -1, stopped = -1;
+  double worst = -INFINITY;
+  for (int i = 0; i < 20000; ++i) {
+    r.cycle();
+    const Telemetry t = r.tel();
+    kin::JointVector q(6);
+    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[std::size_t(j)];
+    const double past = off_mm - (n.dot(elbow_at(q)) * 1000.0 - kElbowMm);  // mm beyond the plane
+    worst = std::fmax(worst, past);
+    if (crossed < 0 && past > kTolMm) crossed = i;
+    if (stopped < 0 && t.state == ArmState::stopping) stopped = i;
+    if (stopped >= 0 && t.state == ArmState::idle) break;
+  }
+  std::printf("\n  elbow: past the tolerance in cycle %d, stop from cycle %d, elbow sphere at most %.2f mm past the plane",
+              crossed, stopped, worst);
+  CHECK(crossed >= 0);
+  CHECK_EQUAL(crossed, stopped);
+  STRCMP_CONTAINS("protective stop (commanded): plane 0 (elbow sphere)", r.last_event().c_str());
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 // Joint speed limits per mode: a joint move of joint 1 the planner never saw (queued
 // directly, at full speed) runs in Normal mode (limit 200 deg/s) and gets a protective stop in
 // Reduced mode (limit 20 deg/s) in the cycle its commanded speed passes limit + tolerance; the

@@ -772,6 +772,200 @@ TEST(ArmService, MovesThroughASafetyPlaneAreRefusedNamingWhereAndByHowMuch) {
   CHECK(r.app.ctl->motions().empty());
 }
 
+// Planes and boxes given in a user frame (safety.plane_frames, safety.keep_out_frames): the
+// table plane written as [0, 0, -1, -100] in a frame 100 mm above it and turned 180 deg about x
+// refuses the line down exactly as the base frame's plane does (same limit, same place); a
+// keep-out box turned 45 deg about z beside the tool refuses a line sideways into it naming
+// the box; the checksum changes with a frame alone.
+TEST(ArmService, ZonesInAUserFrameAreCheckedAtPlanTime) {
+  FwConfig c = table_config(60);
+  const double plane_mm = c.safety_planes[3];
+  const kin::LoadResult lr = kin::load_robot("puma560");
+  const Eigen::Vector3d w = tool_at(lr.chain, joints({0, -45, 180, 0, 45, 0})) * 1000.0;
+  char toml[512];
+  std::snprintf(toml, sizeof toml,
+                "[safety]\nplanes = [0, 0, -1, -100]\nplane_frames = [0, 0, %.6f, 180, 0, 0]\n"
+                "keep_out = [-50, -10, -10, 50, 10, 10]\nkeep_out_frames = [%.6f, %.6f, %.6f, 0, 0, 45]\n",
+                plane_mm + 100.0, w.x(), w.y() + 80.0, w.z());
+  const std::string e = load_config_text(toml, "zones.toml", c);
+  CHECK_TEXT(e.empty(), e.c_str());
+  FwConfig moved = c;
+  moved.safety_plane_frames[2] += 1.0;
+  CHECK(safety_checksum(c) != safety_checksum(moved));
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  for (int i = 0; i < 20000 && !r.app.ctl->motions().empty(); ++i) r.cycle();
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  MoveLine down;
+  kin::forward(r.app.chain, mj.goal, down.target);
+  down.target.translation().z() -= 0.1;
+  const MoveResult res = svc.move(down, cx);
+  CHECK(res.error == CmdError::limits);
+  STRCMP_CONTAINS("safety plane 0 (tool sphere) at s=", res.reason.c_str());
+  char limit[48];
+  std::snprintf(limit, sizeof limit, "limit %.1f mm", plane_mm);
+  STRCMP_CONTAINS(limit, res.reason.c_str());
+  DOUBLES_EQUAL(plane_mm * 1e-3 + 0.010, res.position.z(), 0.002);
+  // sideways +y: the turned box's nearest corner region is about 80 - 10 / cos 45 - 50 sin 45 mm away
+  MoveLine side;
+  kin::forward(r.app.chain, mj.goal, side.target);
+  side.target.translation().y() += 0.1;
+  const MoveResult sb = svc.move(side, cx);
+  CHECK(sb.error == CmdError::limits);
+  STRCMP_CONTAINS("safety keep-out box 0 (tool sphere)", sb.reason.c_str());
+  // where it stopped: the sphere (10 mm) touches the turned box, computed here in its frame
+  kin::Pose bf = kin::Pose::Identity();
+  bf.linear() = Eigen::AngleAxisd(M_PI / 4, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  bf.translation() = Eigen::Vector3d(w.x(), w.y() + 80.0, w.z()) * 1e-3;
+  const Eigen::Vector3d local = bf.inverse() * sb.position;
+  const Eigen::Vector3d near = local.cwiseMax(Eigen::Vector3d(-0.05, -0.01, -0.01)).cwiseMin(Eigen::Vector3d(0.05, 0.01, 0.01));
+  DOUBLES_EQUAL(0.010, (local - near).norm(), 0.002);
+  CHECK(r.app.ctl->motions().empty());
+  // a frame list that is not 6 numbers per zone is refused at load, naming the key
+  FwConfig bad = table_config(60);
+  const std::string e2 = load_config_text("[safety]\nplane_frames = [0, 0, 100]\n", "bad.toml", bad);
+  STRCMP_CONTAINS("safety.plane_frames", e2.c_str());
+  STRCMP_CONTAINS("6 numbers", e2.c_str());
+}
+
+// The tool sphere's radius is the active tool's (radius=, else safety.tool_radius_mm): a line
+// 40 mm down, 10 mm clear of the table with the 10 mm default, is refused with a 40 mm tool
+// selected and queued again with tool0; a tool whose sphere does not fit a keep-in box or puts
+// the park pose outside the envelope is refused in one line, here and in the frames file.
+TEST(ArmService, TheActiveToolsRadiusIsTheToolSphere) {
+  FwConfig c = table_config(60);
+  c.safety_keep_in = {-1000, -1000, -1000, 1000, 1000, 1500};
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  for (int i = 0; i < 20000 && !r.app.ctl->motions().empty(); ++i) r.cycle();
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  MoveLine down;
+  kin::forward(r.app.chain, mj.goal, down.target);
+  down.target.translation().z() -= 0.04;
+  PathShadow shadow;
+  DryRun dry;
+  dry.tail = svc.tail();
+  dry.shadow = &shadow;
+  MoveContext dcx = cx;
+  dcx.dry = &dry;
+  const MoveResult ok = svc.move(down, dcx);
+  CHECK_TEXT(ok.ok(), ok.reason.c_str());
+  NamedPose big;
+  big.name = "big";
+  big.radius = 0.04;
+  CHECK(svc.define_tool(big).ok());
+  CHECK(svc.select_tool("big").ok());
+  DOUBLES_EQUAL(0.04, svc.tool_radius(svc.tool(svc.active_tool())), 1e-12);
+  dcx.chain = &svc.tool_chain(svc.active_tool());
+  const MoveResult no = svc.move(down, dcx);
+  CHECK(no.error == CmdError::limits);
+  STRCMP_CONTAINS("safety plane 0 (tool sphere)", no.reason.c_str());
+  // the refusal's value: the 40 mm sphere's lowest point
+  DOUBLES_EQUAL(no.position.z() * 1000.0 - 40.0, std::strtod(no.reason.substr(no.reason.find("value ") + 6).c_str(), nullptr), 0.11);
+  // too wide for the keep-in box (2000 mm): refused, one line, nothing defined
+  NamedPose huge;
+  huge.name = "huge";
+  huge.radius = 1.2;
+  const FrameResult wide = svc.define_tool(huge);
+  CHECK(wide.refusal == FrameRefusal::bad_values);
+  STRCMP_CONTAINS("is wider than keep-in box 0", wide.reason.c_str());
+  CHECK(wide.reason.find('\n') == std::string::npos);
+  CHECK(svc.find_tool("huge") == svc.tool_count());
+  // a sphere that puts the park pose (all zeros: the tool above the table) below the plane:
+  // one 50 mm deeper than the tool's height above the table there reaches through it
+  NamedPose deep;
+  deep.name = "deep";
+  deep.radius = tool_at(r.app.chain, kin::JointVector::Zero(6)).z() - c.safety_planes[3] * 1e-3 + 0.05;
+  CHECK(deep.radius < 0.99);
+  const FrameResult park = svc.define_tool(deep);
+  CHECK(park.refusal == FrameRefusal::bad_values);
+  STRCMP_CONTAINS("the park pose lies outside the envelope with it: safety plane 0", park.reason.c_str());
+  // the console's words
+  const std::string line = r.cmd("tool fat 0 0 0 0 0 0 radius=1200");
+  STRCMP_CONTAINS("error", line.c_str());
+  STRCMP_CONTAINS("tool fat: its safety sphere (radius 1200.0 mm) is wider than keep-in box 0", line.c_str());
+  // the frames file keeps the radius; one that does not fit is refused when the file is loaded
+  const std::string dir = test::make_tmp_dir();
+  FramesData d;
+  d.tools.push_back(big);
+  d.active_tool = "big";
+  STRCMP_EQUAL("", save_frames_file(dir + "/ok.toml", d).c_str());
+  FramesData back;
+  STRCMP_EQUAL("", load_frames_file(dir + "/ok.toml", back).c_str());
+  DOUBLES_EQUAL(0.04, back.tools.at(0).radius, 1e-12);
+  d.tools.push_back(huge);
+  STRCMP_EQUAL("", save_frames_file(dir + "/wide.toml", d).c_str());
+  const std::string e = svc.load_frames(dir + "/wide.toml");
+  STRCMP_CONTAINS("wide.toml: tool huge: its safety sphere (radius 1200.0 mm) is wider than keep-in box 0", e.c_str());
+  test::remove_tree(dir);
+}
+
+// A trigger plane (safety.reduced_planes): a 200 mm/s line sideways that ends with the tool
+// beyond it is planned with the Reduced TCP limit (100 mm/s), the same line short of it at 200;
+// the plane refuses nothing.
+TEST(ArmService, AMoveIntoATriggerZoneIsPlannedWithTheReducedLimits) {
+  FwConfig c = table_config(60);
+  c.safety_tcp_speed_mm_s = 300;
+  c.safety_reduced_tcp_speed_mm_s = 100;
+  const kin::LoadResult lr = kin::load_robot("puma560");
+  const Eigen::Vector3d w = tool_at(lr.chain, joints({0, -45, 180, 0, 45, 0})) * 1000.0;
+  // Reduced where the sphere (10 mm) reaches beyond y = w.y + 80 mm: n = -y, offset -(w.y + 80)
+  c.safety_reduced_planes = {0, -1, 0, -(w.y() + 80.0)};
+  test::ConsoleRig r(c);
+  r.enable();
+  ArmService& svc = r.app.console->service();
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  MoveJoints mj;
+  mj.goal = joints({0, -45, 180, 0, 45, 0});
+  CHECK(svc.move(mj, cx).ok());
+  for (int i = 0; i < 20000 && !r.app.ctl->motions().empty(); ++i) r.cycle();
+  for (int i = 0; i < 20000 && r.app.ctl->telemetry().state != ArmState::idle; ++i) r.cycle();
+  PathShadow shadow;
+  DryRun dry;
+  dry.tail = svc.tail();
+  dry.shadow = &shadow;
+  MoveContext dcx = cx;
+  dcx.dry = &dry;
+  MoveLine side;
+  kin::forward(r.app.chain, mj.goal, side.target);
+  side.speed = 0.2;
+  side.target.translation().y() += 0.06;  // the sphere ends 10 mm short of the plane
+  const MoveResult shy = svc.move(side, dcx);
+  CHECK_TEXT(shy.ok(), shy.reason.c_str());
+  DOUBLES_EQUAL(0.2, shy.speed, 1e-12);
+  side.target.translation().y() += 0.04;  // 30 mm beyond it
+  const MoveResult in = svc.move(side, dcx);
+  CHECK_TEXT(in.ok(), in.reason.c_str());
+  CHECK_TEXT(in.speed <= 0.1 + 1e-9 && in.speed > 0.09, std::to_string(in.speed).c_str());
+  // without the trigger plane the same line runs at 200 mm/s
+  FwConfig plain = table_config(60);
+  test::ConsoleRig r2(plain);
+  r2.enable();
+  PathShadow shadow2;
+  DryRun dry2;
+  dry2.tail = mj.goal;
+  dry2.shadow = &shadow2;
+  MoveContext dcx2;
+  dcx2.ik = r2.app.console->jog_context().ik;
+  dcx2.dry = &dry2;
+  const MoveResult fast = r2.app.console->service().move(side, dcx2);
+  CHECK_TEXT(fast.ok(), fast.reason.c_str());
+  DOUBLES_EQUAL(0.2, fast.speed, 1e-12);
+}
+
 // A joint jog step that would dip the tool through the plane is refused with the line. The
 // TCP speed limit is the mode's and slows moves down rather than refusing them: a 200 mm/s
 // line runs at 200 in Normal (300) and at 100 in Reduced (100); a movej whose tool would pass

@@ -9,6 +9,7 @@
 #include <cstring>
 #include "servoarm/hal/mit.hpp"
 #include "servoarm/kinematics/chain.hpp"
+#include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/kinematics/safety.hpp"
 #include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/lang/markdown.hpp"
@@ -93,6 +94,35 @@ std::string safety_cone_axis_ok(const FwConfig& c, const FwConfig&) {
   if (a.size() != 3) return "needs 3 numbers or none (got " + std::to_string(a.size()) + ")";
   if (a[0] * a[0] + a[1] * a[1] + a[2] * a[2] < 1e-18) return "zero axis";
   return "";
+}
+// A zone list's frames: none, or one frame (6 numbers) per zone of `zones` (group size `per`).
+std::string safety_frames_ok(const std::vector<double>& frames, const std::vector<double>& zones, std::size_t per,
+                             const char* key) {
+  if (frames.empty()) return "";
+  const std::size_t n = zones.size() / per;
+  if (frames.size() == 6 * n) return "";
+  return "needs 6 numbers (x, y, z, rx, ry, rz) per zone of " + std::string(key) + " (" + std::to_string(n) +
+         " zones: " + std::to_string(6 * n) + " numbers), got " + std::to_string(frames.size());
+}
+std::string safety_plane_frames_ok(const FwConfig& c, const FwConfig&) {
+  return safety_frames_ok(c.safety_plane_frames, c.safety_planes, 4, "safety.planes");
+}
+std::string safety_reduced_planes_ok(const FwConfig& c, const FwConfig&) {
+  if (std::string bad = safety_groups(c.safety_reduced_planes, 4); !bad.empty()) return bad;
+  for (std::size_t i = 0; i + 3 < c.safety_reduced_planes.size(); i += 4) {
+    const double* p = &c.safety_reduced_planes[i];
+    if (p[0] * p[0] + p[1] * p[1] + p[2] * p[2] < 1e-18) return "plane " + std::to_string(i / 4) + ": zero normal";
+  }
+  return "";
+}
+std::string safety_reduced_plane_frames_ok(const FwConfig& c, const FwConfig&) {
+  return safety_frames_ok(c.safety_reduced_plane_frames, c.safety_reduced_planes, 4, "safety.reduced_planes");
+}
+std::string safety_keep_in_frames_ok(const FwConfig& c, const FwConfig&) {
+  return safety_frames_ok(c.safety_keep_in_frames, c.safety_keep_in, 6, "safety.keep_in");
+}
+std::string safety_keep_out_frames_ok(const FwConfig& c, const FwConfig&) {
+  return safety_frames_ok(c.safety_keep_out_frames, c.safety_keep_out, 6, "safety.keep_out");
 }
 std::string can_rx_id_free(const FwConfig& c, const FwConfig&) {
   const char* why = can_console_id_problem(c.console_can_rx_id);
@@ -410,6 +440,33 @@ const ConfigKey kConfigTable[] = {
         .within(0, 10000),
     K{"safety.tolerance_w", &F::safety_tolerance_w, "W",
       "how far above the power limit the run-time monitor lets the arm go before a protective stop"}.within(0, 1e6),
+    K{"safety.plane_frames", &F::safety_plane_frames, "mm, deg",
+      "the frame each of safety.planes is given in, six numbers per plane: its origin x, y, z (mm) and its "
+      "rotation rx, ry, rz (deg, R = Rz(rz) Ry(ry) Rx(rx), as the frames file) in the base frame; the plane's normal "
+      "and offset are in that frame; `[]` = every plane in the base frame"}
+        .within(-kMaxLength, kMaxLength).length(0, 6 * kin::kMaxSafetyPlanes)
+        .related(safety_plane_frames_ok, "none or 6 per plane"),
+    K{"safety.keep_in_frames", &F::safety_keep_in_frames, "mm, deg",
+      "the frame each of safety.keep_in is given in, six numbers per box as safety.plane_frames: the box is "
+      "axis-aligned in it; `[]` = every box in the base frame"}
+        .within(-kMaxLength, kMaxLength).length(0, 6 * kin::kMaxSafetyBoxes)
+        .related(safety_keep_in_frames_ok, "none or 6 per box"),
+    K{"safety.keep_out_frames", &F::safety_keep_out_frames, "mm, deg",
+      "the frame each of safety.keep_out is given in, six numbers per box as safety.plane_frames; `[]` = every box "
+      "in the base frame"}
+        .within(-kMaxLength, kMaxLength).length(0, 6 * kin::kMaxSafetyBoxes)
+        .related(safety_keep_out_frames_ok, "none or 6 per box"),
+    K{"safety.reduced_planes", &F::safety_reduced_planes, "mm",
+      "trigger planes, four numbers each as safety.planes: they restrict nothing, the arm runs in Reduced mode "
+      "while the tool sphere reaches beyond one (to the side opposite its normal) and in Normal mode again once it "
+      "is wholly back; moves that enter one are planned with the Reduced limits there; `[]` = none"}
+        .within(-kMaxLength, kMaxLength).length(0, 4 * kin::kMaxSafetyPlanes)
+        .related(safety_reduced_planes_ok, "groups of 4, normals not zero"),
+    K{"safety.reduced_plane_frames", &F::safety_reduced_plane_frames, "mm, deg",
+      "the frame each of safety.reduced_planes is given in, six numbers per plane as safety.plane_frames; `[]` = "
+      "every trigger plane in the base frame"}
+        .within(-kMaxLength, kMaxLength).length(0, 6 * kin::kMaxSafetyPlanes)
+        .related(safety_reduced_plane_frames_ok, "none or 6 per plane"),
     K{"motion.home_deg", &F::home_deg, "deg (mm)",
       "park pose for `park` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
       "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
@@ -1703,17 +1760,39 @@ std::string safety_envelope(const FwConfig& c, const kin::Chain& chain, kin::Saf
       e.reduced.joint_speed[ju] = kConfigUnits.joint_in(chain, j, c.safety_reduced_joint_speed_deg_s[ju]);
     joint_limits = joint_limits || e.normal.joint_speed[ju] > 0 || e.reduced.joint_speed[ju] > 0;
   }
+  // zone k's frame in the base frame (identity when the list gives none)
+  auto frame_of = [&](const std::vector<double>& f, std::size_t k) {
+    kin::Pose p = kin::Pose::Identity();
+    if (f.size() < 6 * (k + 1)) return p;
+    const double* v = &f[6 * k];
+    p.translation() = Eigen::Vector3d(v[0], v[1], v[2]) * mm;
+    p.linear() = kin::rotation_from_rpy(v[3] * deg, v[4] * deg, v[5] * deg);
+    return p;
+  };
   for (std::size_t i = 0; i + 3 < c.safety_planes.size() && e.plane_count < kin::kMaxSafetyPlanes; i += 4) {
     const Eigen::Vector3d n(c.safety_planes[i], c.safety_planes[i + 1], c.safety_planes[i + 2]);
     if (!(n.norm() > 1e-9)) return "safety.planes: plane " + std::to_string(i / 4) + ": zero normal";
-    e.planes[static_cast<std::size_t>(e.plane_count++)] = {n.normalized(), c.safety_planes[i + 3] * mm, true};
+    // n_f.p_f >= o in the frame F is (R n_f).p >= o + (R n_f).t in the base frame
+    const kin::Pose f = frame_of(c.safety_plane_frames, i / 4);
+    const Eigen::Vector3d nb = f.linear() * n.normalized();
+    e.planes[static_cast<std::size_t>(e.plane_count++)] = {nb, c.safety_planes[i + 3] * mm + nb.dot(f.translation()),
+                                                           true};
+  }
+  for (std::size_t i = 0; i + 3 < c.safety_reduced_planes.size() && e.trigger_count < kin::kMaxSafetyPlanes; i += 4) {
+    const std::vector<double>& v = c.safety_reduced_planes;
+    const Eigen::Vector3d n(v[i], v[i + 1], v[i + 2]);
+    if (!(n.norm() > 1e-9)) return "safety.reduced_planes: plane " + std::to_string(i / 4) + ": zero normal";
+    const kin::Pose f = frame_of(c.safety_reduced_plane_frames, i / 4);
+    const Eigen::Vector3d nb = f.linear() * n.normalized();
+    e.trigger_planes[static_cast<std::size_t>(e.trigger_count++)] = {nb, v[i + 3] * mm + nb.dot(f.translation()), false};
   }
   for (int pass = 0; pass < 2; ++pass) {
     const std::vector<double>& v = pass == 0 ? c.safety_keep_in : c.safety_keep_out;
+    const std::vector<double>& fr = pass == 0 ? c.safety_keep_in_frames : c.safety_keep_out_frames;
     for (std::size_t i = 0; i + 5 < v.size() && e.box_count < kin::kMaxSafetyBoxes; i += 6)
       e.boxes[static_cast<std::size_t>(e.box_count++)] = {Eigen::Vector3d(v[i], v[i + 1], v[i + 2]) * mm,
                                                           Eigen::Vector3d(v[i + 3], v[i + 4], v[i + 5]) * mm,
-                                                          pass == 0, true};
+                                                          pass == 0, true, frame_of(fr, i / 6)};
   }
   e.tool_radius = c.safety_tool_radius_mm * mm;
   e.elbow_frame = c.safety_elbow_frame;
@@ -1750,7 +1829,7 @@ std::string safety_envelope(const FwConfig& c, const kin::Chain& chain, kin::Saf
   e.position_tolerance = c.safety_tolerance_mm * mm;
   e.angle_tolerance = c.safety_tolerance_deg * deg;
   e.speed_tolerance = c.safety_tolerance_mm_s * mm;
-  e.enabled = e.plane_count > 0 || e.box_count > 0 || e.cone || e.normal.tcp_speed > 0 || e.normal.elbow_speed > 0 ||
+  e.enabled = e.plane_count > 0 || e.box_count > 0 || e.trigger_count > 0 || e.cone || e.normal.tcp_speed > 0 || e.normal.elbow_speed > 0 ||
               e.reduced.tcp_speed > 0 || e.reduced.elbow_speed > 0 || joint_limits || e.normal.has_stop_limit() ||
               e.reduced.has_stop_limit() || e.normal.has_dynamics_limit() || e.reduced.has_dynamics_limit();
   char buf[160];

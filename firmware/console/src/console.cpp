@@ -331,11 +331,15 @@ std::string Console::status_text() const {
 std::string Console::safety_text() const {
   const ArmStatus st = svc_->status();
   if (!st.safety_on) return "safety=off";
+  const Telemetry tel = ctl_.telemetry();
   std::string s = fmt("safety=on mode=%s checksum=%08X stops=%u", kin::to_string(st.safety_mode),
-                      static_cast<unsigned>(st.safety_checksum), static_cast<unsigned>(ctl_.telemetry().safety_stops));
+                      static_cast<unsigned>(st.safety_checksum), static_cast<unsigned>(tel.safety_stops));
+  if (tel.safety_zone >= 0) s += fmt(" zone=reduced_plane_%d", static_cast<int>(tel.safety_zone));
   // the mode's limits that are set, in the [safety] keys' units (docs/safety.md)
   const kin::SafetyConfig& env = svc_->settings().safety;
-  const kin::SafetyLimits& lim = env.limits(st.safety_mode);
+  const kin::SafetyLimits& lim = env.limits(tel.safety_zone >= 0 ? kin::SafetyMode::reduced : st.safety_mode);
+  const NamedPose& tool = svc_->tool(svc_->active_tool());
+  s += fmt(" tool=%s tool_radius_mm=%g", tool.name.c_str(), svc_->tool_radius(tool) * 1e3);
   if (lim.tcp_speed > 0) s += fmt(" tcp_speed_mm_s=%g", lim.tcp_speed * 1e3);
   if (lim.elbow_speed > 0 && env.elbow_frame >= 0) s += fmt(" elbow_speed_mm_s=%g", lim.elbow_speed * 1e3);
   const int n = std::min(chain_.n_joints, kin::kMaxJoints);
@@ -1647,6 +1651,13 @@ void Console::do_tool(Session& s, const Command& c) {
   def.has_payload = c.has_mass;
   def.mass = c.mass;
   def.com = Eigen::Vector3d(com[0], com[1], com[2]);
+  if (c.has_radius) {
+    def.radius = u.length_in(c.radius);
+    if (const std::string why = check_tool_radius(def.radius); !why.empty()) {
+      answer_error(s, CmdError::out_of_range, "tool " + nm + ": " + why);
+      return;
+    }
+  }
   const FrameResult r = svc_->define_tool(def);
   if (r.refusal == FrameRefusal::storage) answer_error(s, r.error, "tool not defined: " + r.reason);
   else if (!r.ok()) answer_frame_refusal(s, r, "tool", name);

@@ -580,7 +580,7 @@ ParseResult parse_named(const Words& ws, int first, bool is_tool, const ConsoleU
     const std::string_view w = ws.w[static_cast<std::size_t>(k)];
     const std::size_t eq = w.find('=');
     if (eq == std::string_view::npos) {
-      if (c.has_mass || c.has_com) return fail(CmdError::bad_option, "%s: options go after the values", what);
+      if (c.has_mass || c.has_com || c.has_radius) return fail(CmdError::bad_option, "%s: options go after the values", what);
       if (c.count >= 6) return fail(CmdError::arg_count, "%s: too many values (x y z rx ry rz)", what);
       double v = 0;
       switch (parse_decimal(w, v)) {
@@ -618,8 +618,17 @@ ParseResult parse_named(const Words& ws, int first, bool is_tool, const ConsoleU
         rest = comma == std::string_view::npos ? std::string_view() : rest.substr(comma + 1);
       }
       c.has_com = true;
+    } else if (ieq(key, "radius")) {
+      if (c.has_radius) return fail(CmdError::bad_option, "tool: radius given twice");
+      switch (parse_decimal(val, c.radius)) {
+        case Num::ok: break;
+        case Num::bad: return fail(CmdError::bad_number, "tool: radius '%.*s' is not a number", int(val.size() > 20 ? 20 : val.size()), val.data());
+        case Num::not_finite: return fail(CmdError::not_finite, "tool: radius is not finite");
+      }
+      if (c.radius < 0) return fail(CmdError::out_of_range, "tool: radius must be >= 0 (got %g)", c.radius);
+      c.has_radius = true;
     } else {
-      return fail(CmdError::bad_option, "tool: unknown option '%.*s' (mass=, com=)", int(key.size() > 20 ? 20 : key.size()), key.data());
+      return fail(CmdError::bad_option, "tool: unknown option '%.*s' (mass=, com=, radius=)", int(key.size() > 20 ? 20 : key.size()), key.data());
     }
   }
   if (c.count != 6) return fail(CmdError::arg_count, "%s %s needs x y z rx ry rz, got %d values", what, c.name.data(), c.count);

@@ -67,7 +67,7 @@ struct Reader {
   bool entry(const toml::node& node, const std::string& label, bool is_tool, NamedPose& out) {
     const toml::table* t = node.as_table();
     if (t == nullptr) return fail(node, label, std::string("expected a table (got ") + kin::type_name(node) + ")");
-    double xyz[3] = {0, 0, 0}, rpy[3] = {0, 0, 0}, com[3] = {0, 0, 0}, mass = 0;
+    double xyz[3] = {0, 0, 0}, rpy[3] = {0, 0, 0}, com[3] = {0, 0, 0}, mass = 0, radius = -1;
     bool has_xyz = false, has_rpy = false, has_mass = false, has_com = false;
     for (const auto& [k, v] : *t) {
       const std::string key = label + "." + std::string(k.str());
@@ -83,8 +83,11 @@ struct Reader {
       } else if (is_tool && k.str() == "com") {
         if (!vec3(v, key, com)) return false;
         has_com = true;
+      } else if (is_tool && k.str() == "radius") {
+        if (!number(v, key, radius)) return false;
+        if (const std::string why = check_tool_radius(radius); !why.empty()) return fail(v, key, why);
       } else {
-        return fail(v, key, is_tool ? "unknown key (xyz, rpy, mass, com)" : "unknown key (xyz, rpy)");
+        return fail(v, key, is_tool ? "unknown key (xyz, rpy, mass, com, radius)" : "unknown key (xyz, rpy)");
       }
     }
     if (!has_xyz || !has_rpy) return fail(node, label, "needs both xyz (m) and rpy (deg)");
@@ -98,6 +101,7 @@ struct Reader {
     out.has_payload = has_mass;
     out.mass = mass;
     out.com = Eigen::Vector3d(com[0], com[1], com[2]);
+    out.radius = radius;
     return true;
   }
 };
@@ -112,6 +116,7 @@ void write_entry(std::string& o, const char* kind, const NamedPose& e) {
     o += "mass = " + num(e.mass) + "\n";
     o += "com = [" + num(e.com.x()) + ", " + num(e.com.y()) + ", " + num(e.com.z()) + "]\n";
   }
+  if (e.radius >= 0) o += "radius = " + num(e.radius) + "\n";
 }
 
 }  // namespace
@@ -128,6 +133,12 @@ std::string check_frame_name(std::string_view name, bool is_tool) {
   if (ieq(name, "delete")) return std::string(what) + " name 'delete' is reserved (tool delete NAME)";
   if (is_tool && ieq(name, "tool0")) return "tool0 is the flange: it cannot be redefined";
   if (!is_tool && ieq(name, "base")) return "base is the base frame: it cannot be redefined";
+  return "";
+}
+
+std::string check_tool_radius(double radius_m) {
+  if (!std::isfinite(radius_m) || radius_m < 0 || radius_m > kMaxToolRadiusM)
+    return "radius = " + num(radius_m * 1000.0) + " mm must be within [0, " + num(kMaxToolRadiusM * 1000.0) + "] mm";
   return "";
 }
 

@@ -1285,6 +1285,7 @@ void Controller::publish() {
   t.homing_now = hrunning_;
   t.safety_mode = safety_mode_.load(std::memory_order_relaxed);
   t.safety_stops = safety_stops_;
+  t.safety_zone = static_cast<std::int8_t>(safety_.zone());
   t.homing_failed = 0;
   std::uint16_t attained = 0;  // homed_mask() from the progress read here: one homing() a joint
   for (int j = 0; j < n_; ++j) {
@@ -1360,6 +1361,12 @@ void join_text(char* dst, std::size_t size, const char* a, const char* b) {
 
 void Controller::step_safety() {
   if (!safety_.enabled()) return;
+  SafetyToolChange tc;
+  while (safety_tools_.pop(tc)) {
+    kin::Pose tool;
+    for (int i = 0; i < 16; ++i) tool.matrix().data()[i] = tc.m[static_cast<std::size_t>(i)];
+    safety_.set_tool(tool, tc.radius);
+  }
   bool watch = false;  // the modes a protective stop acts in (the planner's moves, jogs, a hold on a line)
   switch (mode_) {
     case Mode::moving:
@@ -1384,11 +1391,21 @@ void Controller::step_safety() {
     case Mode::freedrive:
     case Mode::freedrive_end: safety_.reset(); return;  // not powered on the setpoints
   }
-  const kin::SafetyMode sm = safety_mode();
+  const kin::SafetyMode op = safety_mode();
   const bool jogging = mode_ == Mode::jogging;
   kin::SafetyViolation v;
   bool on_actual = false;
-  bool hit = safety_.update(cmd_.pos, q_act_, sm, jogging, v, on_actual);
+  const int zone_before = safety_.zone();
+  bool hit = safety_.update(cmd_.pos, q_act_, op, jogging, v, on_actual);
+  const kin::SafetyMode sm = safety_.effective(op);  // Reduced in a trigger plane's zone
+  if (const int zone = safety_.zone(); zone != zone_before) {
+    char z[sizeof(Event::message)];
+    if (zone >= 0)
+      std::snprintf(z, sizeof z, "safety mode reduced: the tool entered reduced plane %d", zone);
+    else
+      std::snprintf(z, sizeof z, "safety mode %s: the tool left reduced plane %d", kin::to_string(op), zone_before);
+    emit(EventKind::warning, FaultCause::none, -1, 0, z);
+  }
   if (!watch) return;
   if (!hit && safety_.check_state(limits_, cmd_, sm, v)) hit = true, on_actual = false;  // stop, momentum, power
   char line[sizeof(Event::message)];

@@ -5,9 +5,17 @@
 namespace servoarm::fw {
 
 void SafetyMonitor::configure(const kin::Chain& chain, const kin::SafetyConfig& cfg, double period_s) {
-  chain_ = &chain;
+  own_ = chain;
+  flange_ = chain.tool;
+  chain_ = &own_;
   cfg_ = cfg;
   period_s_ = period_s;
+  have_prev_ = false;
+}
+
+void SafetyMonitor::set_tool(const kin::Pose& tool, double radius) {
+  kin::set_tool(own_, flange_ * tool);
+  cfg_.tool_radius = radius;
   have_prev_ = false;
 }
 
@@ -17,6 +25,8 @@ bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector
   const bool ok_cmd = kin::safety_sample(*chain_, cfg_, q_cmd, -1.0, cmd_);
   const bool ok_act = kin::safety_sample(*chain_, cfg_, q_act, -1.0, act_);
   cmd_.has_velocity = act_.has_velocity = false;
+  if (ok_cmd) zone_ = kin::trigger_plane(cfg_, cmd_);
+  mode = effective(mode);
   const bool had_prev = have_prev_;
   if (had_prev) kin::set_velocity(cmd_, prev_cmd_, prev_q_cmd_, q_cmd, period_s_);
   // The measured state's speed would be the drives' position quantisation differenced every

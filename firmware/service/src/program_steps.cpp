@@ -172,6 +172,7 @@ FrameResult ArmService::step_frame(const fw::Command& c, const ConsoleUnits& u) 
     def.mass = c.mass;
     def.com = Eigen::Vector3d(u.length_in(c.com[0]), u.length_in(c.com[1]), u.length_in(c.com[2]));
   }
+  if (tool && c.has_radius) def.radius = u.length_in(c.radius);
   return tool ? define_tool(def) : define_frame(def);
 }
 

@@ -4,6 +4,7 @@
 // (servoarm/kinematics/safety.hpp), the same functions the control thread's monitor runs.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include "servoarm/service/arm_service.hpp"
@@ -28,19 +29,60 @@ std::string envelope_violation_at(const kin::SafetyConfig& env, kin::SafetyMode 
   if (dt > 0 && q_prev.size() == q.size() && kin::safety_sample(chain, env, q_prev, 0.0, p))
     kin::set_velocity(x, p, q_prev, q, dt);
   kin::SafetyViolation v;
-  if (kin::check_sample(env, mode, x, 0.0, 0.0, 0.0, v)) return line_of(v);
+  if (kin::check_sample(env, kin::effective_mode(env, mode, x), x, 0.0, 0.0, 0.0, v)) return line_of(v);
   return "";
 }
 
 std::string ArmService::check_target(const kin::JointVector& q_prev, const kin::JointVector& q, double dt,
                                      const kin::Chain* chain) const {
-  return envelope_violation_at(cfg_.safety, safety_mode_, chain != nullptr ? *chain : chain_, q_prev, q, dt);
+  const kin::Chain& c = chain != nullptr ? *chain : chain_;
+  return envelope_violation_at(envelope_for(c), safety_mode_, c, q_prev, q, dt);
+}
+
+kin::SafetyConfig ArmService::envelope_for(const kin::Chain& chain) const {
+  kin::SafetyConfig env = cfg_.safety;
+  for (const auto& t : tools_)
+    if (&t->chain == &chain) env.tool_radius = tool_radius(t->def);
+  return env;
+}
+
+std::string ArmService::tool_envelope_problem(const ToolSlot& t) const {
+  const kin::SafetyConfig& base = cfg_.safety;
+  if (!base.enabled) return "";
+  const double r = tool_radius(t.def);
+  char line[256];
+  for (int i = 0; i < base.box_count; ++i) {
+    const kin::SafetyBox& b = base.boxes[static_cast<std::size_t>(i)];
+    const double w = (b.max - b.min).minCoeff();
+    if (b.keep_in && w < 2.0 * r) {
+      std::snprintf(line, sizeof line, "its safety sphere (radius %.1f mm) is wider than keep-in box %d (%.1f mm)",
+                    r * 1000.0, i, w * 1000.0);
+      return line;
+    }
+  }
+  kin::SafetyConfig positions = base;  // the park pose: positions only, with this tool
+  positions.tool_radius = r;
+  positions.cone = false;
+  kin::SafetySample x;
+  kin::SafetyViolation v;
+  if (kin::safety_sample(t.chain, positions, cfg_.home, 0.0, x) &&
+      kin::check_sample(positions, kin::SafetyMode::normal, x, 0.0, 0.0, 0.0, v)) {
+    char what[256];
+    std::snprintf(line, sizeof line, "the park pose lies outside the envelope with it: %s", kin::describe(v, what, sizeof what));
+    return line;
+  }
+  return "";
+}
+
+void ArmService::push_safety_tool() {
+  if (ctl_ == nullptr || !cfg_.safety.enabled || tool_ >= tools_.size()) return;
+  (void)ctl_->set_safety_tool(tools_[tool_]->def.pose, tool_radius(tools_[tool_]->def));
 }
 
 bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
                              const std::function<bool(double, kin::JointVector&)>& at, const char* /*what*/,
                              MoveResult& r, kin::SafetyViolation* violation, double* speed_ratio) const {
-  const kin::SafetyConfig& env = cfg_.safety;
+  const kin::SafetyConfig env = envelope_for(chain);
   if (!env.enabled || !(duration >= 0) || !std::isfinite(duration)) return true;
   // Sampled at the control rate, at most 4000 samples a move (a 10 s move every 2.5 ms): at
   // 250 mm/s the tool moves at most 0.6 mm between two samples.
@@ -50,8 +92,10 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
   // the predicted stop at each sample (stop limits): from the sampled joints, their velocities
   // and accelerations by differences, braked with the joints' limits as the controller brakes;
   // the momentum and power (their limits) at the same state
-  const bool stops = env.limits(safety_mode_).has_stop_limit();
-  const bool dynamics = env.limits(safety_mode_).has_dynamics_limit();
+  // (with trigger planes a sample may run in either mode)
+  const bool zones = env.trigger_count > 0;
+  const bool stops = env.limits(safety_mode_).has_stop_limit() || (zones && env.reduced.has_stop_limit());
+  const bool dynamics = env.limits(safety_mode_).has_dynamics_limit() || (zones && env.reduced.has_dynamics_limit());
   kin::JointState st;
   st.pos = st.vel = st.acc = kin::JointVector::Zero(n_);
   kin::JointVector v_prev = kin::JointVector::Zero(n_);
@@ -77,9 +121,11 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
       if (stops) (void)kin::stop_prediction(chain, lim_, st, ramp, x);
       if (dynamics) (void)kin::dynamics_prediction(chain, st, x);
     }
-    ratio = std::max(ratio, kin::speed_ratio(env, safety_mode_, x));
+    // the mode at this sample: Reduced where the tool reaches beyond a trigger plane
+    const kin::SafetyMode mode = kin::effective_mode(env, safety_mode_, x);
+    ratio = std::max(ratio, kin::speed_ratio(env, mode, x));
     // (speeds: 1e-6 m/s of rounding, so that a line planned at the limit passes)
-    if (!refused && kin::check_sample(env, safety_mode_, x, 0.0, 0.0, 1e-6, v)) {
+    if (!refused && kin::check_sample(env, mode, x, 0.0, 0.0, 1e-6, v)) {
       r = refuse(MoveRefusal::arm_state, CmdError::limits);
       r.s = v.s;
       r.position = v.where;
@@ -99,7 +145,7 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
 
 std::string ArmService::jog_envelope(const kin::Chain& chain,
                                      const std::function<bool(double, kin::JointVector&)>& at) const {
-  const kin::SafetyConfig& env = cfg_.safety;
+  const kin::SafetyConfig env = envelope_for(chain);
   if (!env.enabled) return "";
   constexpr int kSamples = 200;
   kin::JointVector q(n_);
@@ -108,7 +154,7 @@ std::string ArmService::jog_envelope(const kin::Chain& chain,
   for (int k = 0; k <= kSamples; ++k) {
     const double s = static_cast<double>(k) / kSamples;
     if (!at(s, q) || !kin::safety_sample(chain, env, q, s, x)) continue;
-    if (kin::check_sample(env, safety_mode_, x, 0.0, 0.0, 0.0, v)) return line_of(v);
+    if (kin::check_sample(env, kin::effective_mode(env, safety_mode_, x), x, 0.0, 0.0, 0.0, v)) return line_of(v);
   }
   return "";
 }

@@ -121,12 +121,18 @@ std::string ArmService::load_frames(const std::string& path) {
   tool_ = frame_ = 0;
   for (const NamedPose& t : d.tools) {
     tools_.push_back(make_tool(t));
+    if (std::string why = tool_envelope_problem(*tools_.back()); !why.empty()) {
+      tools_.resize(1);
+      tool_ = 0;
+      return path + ": tool " + t.name + ": " + why;
+    }
     if (t.name == d.active_tool) tool_ = tools_.size() - 1;
   }
   for (const NamedPose& f : d.frames) {
     frames_.push_back(f);
     if (f.name == d.active_frame) frame_ = frames_.size() - 1;
   }
+  push_safety_tool();
   return "";
 }
 
@@ -147,6 +153,7 @@ FrameResult ArmService::select_tool(std::string_view name) {
     tool_ = old;
     return frame_refusal(FrameRefusal::storage, CmdError::storage, std::move(err));
   }
+  push_safety_tool();
   FrameResult r;
   r.def = tools_[at]->def;
   r.active = true;
@@ -164,6 +171,8 @@ FrameResult ArmService::define_tool(const NamedPose& def) {
   const std::size_t at = find_tool(def.name);
   if (at == tools_.size() && tools_.size() >= kMaxTools) return frame_refusal(FrameRefusal::full, CmdError::busy);
   std::unique_ptr<ToolSlot> fresh = make_tool(def);
+  if (std::string why = tool_envelope_problem(*fresh); !why.empty())
+    return frame_refusal(FrameRefusal::bad_values, CmdError::limits, std::move(why));
   std::unique_ptr<ToolSlot> old;
   if (at == tools_.size()) tools_.push_back(std::move(fresh));
   else old = std::exchange(tools_[at], std::move(fresh));
@@ -172,6 +181,7 @@ FrameResult ArmService::define_tool(const NamedPose& def) {
     else tools_.pop_back();
     return frame_refusal(FrameRefusal::storage, CmdError::storage, std::move(err));
   }
+  if (at == tool_) push_safety_tool();
   FrameResult r;
   r.def = def;
   r.redefined = old != nullptr;

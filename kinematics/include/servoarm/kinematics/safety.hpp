@@ -12,6 +12,9 @@
 //  - a plane is the set n.p = offset with n a unit normal; the allowed side is n.p >= offset.
 //    The tool sphere (centre c, radius r) is inside when n.c - r >= offset: value n.c - r,
 //    limit offset.
+//  - a box is axis-aligned in its own frame (SafetyBox::frame, the base frame unless given):
+//    the sphere's centre is taken into that frame first; a plane given in a user frame is
+//    turned into the base frame when the configuration is loaded.
 //  - a keep-in box holds the whole sphere: min + r <= c <= max - r per axis; the value is the
 //    worst axis's distance from c to the box face minus r (limit 0).
 //  - a keep-out box must not touch the sphere: the distance from c to the box is at least r
@@ -53,9 +56,12 @@ struct SafetyPlane {
 };
 
 struct SafetyBox {
-  Eigen::Vector3d min{0, 0, 0}, max{0, 0, 0};  ///< m, base frame, min <= max per axis
+  Eigen::Vector3d min{0, 0, 0}, max{0, 0, 0};  ///< m, in the box's frame, min <= max per axis
   bool keep_in = true;                         ///< true: the sphere stays inside; false: outside
   bool elbow = true;
+  /// The box's frame in the base frame (a user frame: the box is axis-aligned in it). The
+  /// sphere's centre c (base frame) is checked at frame^-1 * c; identity = the base frame.
+  Pose frame = Pose::Identity();
 };
 
 /// The values that differ between Normal and Reduced mode.
@@ -80,6 +86,11 @@ struct SafetyConfig {
   int plane_count = 0;
   std::array<SafetyBox, kMaxSafetyBoxes> boxes{};
   int box_count = 0;
+  /// Trigger planes: the arm runs in Reduced mode while the tool sphere reaches beyond one
+  /// (n.c - r < offset: not wholly on the side the normal points to), Normal again once it is
+  /// wholly back (trigger_plane, effective_mode). They restrict nothing.
+  std::array<SafetyPlane, kMaxSafetyPlanes> trigger_planes{};
+  int trigger_count = 0;
   double tool_radius = 0;  ///< m: the sphere around the TCP
   int elbow_frame = -1;    ///< FrameSet index of the elbow sphere's centre; -1 = no elbow sphere
   double elbow_radius = 0; ///< m
@@ -177,6 +188,15 @@ bool stop_prediction(const Chain& chain, const JointLimits& limits, const JointS
 /// (m, rad or m/s; negative inside). Lets a monitor tell a move back towards the inside
 /// (the excess shrinks) from one further out.
 double safety_excess(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, const SafetyViolation& which);
+
+/// The first trigger plane the tool sphere at x reaches beyond (index), -1 when none.
+int trigger_plane(const SafetyConfig& cfg, const SafetySample& x);
+
+/// The mode the functions run in at x: Reduced when `mode` is or when the tool sphere reaches
+/// beyond a trigger plane, else Normal.
+inline SafetyMode effective_mode(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x) {
+  return mode == SafetyMode::reduced || trigger_plane(cfg, x) >= 0 ? SafetyMode::reduced : SafetyMode::normal;
+}
 
 /// The first sample of a path whose check fails with zero margins (plan time): true and
 /// `out` filled, false when the whole path is inside.

@@ -168,6 +168,12 @@ struct FwConfig {
   double safety_tolerance_s = 0.02;      ///< run-time monitor margin of the stop time limit
   double safety_tolerance_kg_m_s = 0.5;  ///< run-time monitor margin of the momentum limit
   double safety_tolerance_w = 5.0;       ///< run-time monitor margin of the power limit
+  // zones in user frames: x, y, z (mm), rx, ry, rz (deg, R = Rz Ry Rx) per zone; [] = base frame
+  std::vector<double> safety_plane_frames;     ///< one frame per safety.planes plane
+  std::vector<double> safety_keep_in_frames;   ///< one frame per safety.keep_in box
+  std::vector<double> safety_keep_out_frames;  ///< one frame per safety.keep_out box
+  std::vector<double> safety_reduced_planes;   ///< trigger planes: nx, ny, nz, offset_mm; Reduced beyond one
+  std::vector<double> safety_reduced_plane_frames;  ///< one frame per safety.reduced_planes plane
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;

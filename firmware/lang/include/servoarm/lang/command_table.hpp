@@ -27,7 +27,7 @@ enum class ArgShape : std::uint8_t {
   pose,          ///< x y z [rx ry rz], no options (ik)
   joints_opt,    ///< nothing or exactly n joint values (fk)
   jog,           ///< nothing, `stop`, or <axis> <+v, -v, + or ->, then [speed=%] [frame=base, tool or user] (jog)
-  tool,          ///< nothing, NAME, `delete NAME`, or NAME x y z rx ry rz [mass=kg] [com=x,y,z] (tool)
+  tool,          ///< nothing, NAME, `delete NAME`, or NAME x y z rx ry rz [mass=kg] [com=x,y,z] [radius=r] (tool)
   frame,         ///< nothing, NAME, `delete NAME`, or NAME x y z rx ry rz (frame)
   joint_word,    ///< nothing or one joint jN (home)
   point_name,    ///< exactly one teach point name (teach, point delete)
@@ -141,12 +141,14 @@ inline constexpr CommandSpec kCommands[] = {
      "a joint limit a jog stops on the limit (`alarm: jog stopped: joint 3 at its limit`); near a singularity a "
      "tool jog slows, then stops and says which joint. Refused (`error: busy`) while a move runs",
      false},
-    {"tool", Cmd::tool, ArgShape::tool, "tool [NAME [x y z rx ry rz [mass=kg] [com=x,y,z]]]; tool delete NAME",
+    {"tool", Cmd::tool, ArgShape::tool, "tool [NAME [x y z rx ry rz [mass=kg] [com=x,y,z] [radius=r]]]; tool delete NAME",
      "tools (TCP offsets from the flange): list, select NAME, define NAME, delete NAME; tool0 is the flange",
      "`tool` lists them (`*` marks the active one); `tool NAME` selects one: Cartesian moves, jogs, fk, ik, "
      "status, M114 and the GRBL report then use its tool point; `tool NAME x y z rx ry rz` defines (or redefines) "
      "one: the tool point and orientation in the flange frame, in the length and angle units (payload: mass= in "
-     "kg, com= x,y,z in the length unit, kept for dynamics). Definitions and the selection are kept in the frames "
+     "kg, com= x,y,z in the length unit, kept for dynamics; radius= in the length unit: the safety envelope's "
+     "sphere around this tool point, else safety.tool_radius_mm; a radius that does not fit a keep-in box, or "
+     "puts the park pose outside the envelope, is refused). Definitions and the selection are kept in the frames "
      "file (console.frames_file), written atomically; a definition that cannot be saved is not made. Refused "
      "while the arm moves, jogs or has moves queued (`error: bad_state`)",
      false},
@@ -240,8 +242,8 @@ inline constexpr CommandSpec kCommands[] = {
      "as `safety normal`; a move faster than the Reduced TCP speed limit is refused at plan time", false},
     {"safety", Cmd::safety, ArgShape::none, "safety",
      "the safety envelope: on or off, the mode, the configuration's checksum and the stops it made",
-     "`safety=on mode=normal|reduced checksum=XXXXXXXX stops=N` (`safety=off` without [safety]); not a "
-     "safety-rated function: docs/safety.md", true},
+     "`safety=on mode=normal|reduced checksum=XXXXXXXX stops=N [zone=reduced_plane_K] tool=NAME tool_radius_mm=R` "
+     "then the limits in force (`safety=off` without [safety]); not a safety-rated function: docs/safety.md", true},
     {"out", Cmd::out, ArgShape::output, "out [NAME on/off]",
      "digital output NAME ([[output]]: a drive's 60FEh:01 bit) on or off at once; `out` lists them",
      "sent to the drive with the next control cycle's PDOs (M64 / M65 P<n> the same, n the output's index in "

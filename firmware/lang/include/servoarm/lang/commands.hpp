@@ -117,7 +117,7 @@ enum class JogFrame : std::uint8_t { base, tool, user };
 enum class FrameOp : std::uint8_t {
   list,      ///< `tool` / `frame`: list them, the active one marked
   select,    ///< `tool NAME` / `frame NAME` / G54..G59
-  define,    ///< `tool NAME x y z rx ry rz [mass=kg com=x,y,z]` / `frame NAME x y z rx ry rz`
+  define,    ///< `tool NAME x y z rx ry rz [mass=kg com=x,y,z radius=r]` / `frame NAME x y z rx ry rz`
   remove,    ///< `tool delete NAME` / `frame delete NAME`
   set_axes,  ///< G10 L2 Pn: the axes in axis_mask (vals[0..5], mm / deg) replace frame gN's; P0 = the active one
 };
@@ -158,6 +158,8 @@ struct Command {
   double mass = 0;                      ///< kg
   bool has_com = false;
   std::array<double, 3> com{};          ///< length unit, in the tool frame
+  bool has_radius = false;
+  double radius = 0;                    ///< length unit: the tool's safety sphere (radius=)
   // teach points and programs
   std::array<char, 64> word{};          ///< point name (teach, point delete, movej/movel @NAME) or program name (run, record stop)
   bool at_point = false;                ///< movej / movel @NAME: the target is teach point `word`

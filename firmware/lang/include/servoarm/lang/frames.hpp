@@ -19,6 +19,7 @@
 //   rpy = [0.0, 0.0, 90.0]       # deg, roll-pitch-yaw R = Rz(rz) Ry(ry) Rx(rx)
 //   mass = 0.8                   # kg, optional (payload, for dynamics later)
 //   com = [0.0, 0.0, 0.05]       # m, in the tool frame, optional (with mass)
+//   radius = 0.04                # m: the safety envelope's tool sphere, optional
 //   [frame.g54]
 //   xyz = [0.4, 0.0, 0.0]
 //   rpy = [0.0, 0.0, 0.0]
@@ -44,6 +45,7 @@ inline constexpr std::size_t kMaxFrames = 16;   ///< base included
 inline constexpr std::size_t kMaxFrameName = 24;
 inline constexpr double kMaxOffsetM = 10.0;      ///< |x|, |y|, |z| of a tool or frame, m
 inline constexpr double kMaxPayloadKg = 1000.0;
+inline constexpr double kMaxToolRadiusM = 2.0;   ///< a tool's safety sphere (safety.tool_radius_mm's range)
 inline constexpr const char* kFramesFormat = "servoarm-frames-1";
 
 /// A named tool or frame: pose (SI), and for tools an optional payload.
@@ -53,6 +55,9 @@ struct NamedPose {
   bool has_payload = false;
   double mass = 0.0;                            ///< kg
   Eigen::Vector3d com = Eigen::Vector3d::Zero();  ///< m, in the tool frame
+  /// Tools: the radius of the safety envelope's sphere around this TCP (m, docs/safety.md);
+  /// < 0 = not given: safety.tool_radius_mm.
+  double radius = -1.0;
 };
 
 /// What the frames file holds (tool0 and base are implicit: never stored).
@@ -74,6 +79,9 @@ std::string check_frame_name(std::string_view name, bool is_tool);
 /// xyz in m, rpy in rad.
 std::string check_frame_values(const double xyz[3], const double rpy_rad[3], bool has_payload, double mass,
                                const double com[3]);
+
+/// "" when a tool's safety radius (m) is within [0, kMaxToolRadiusM]; else the reason.
+std::string check_tool_radius(double radius_m);
 
 /// Read and check `path`. A missing file is not an error (empty data, `missing` true).
 /// Returns "" or the one-line error ("<path>:<line>:<col>: ..."); `out` is set only on success.

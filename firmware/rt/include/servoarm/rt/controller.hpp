@@ -125,6 +125,15 @@ class Controller final : private SegmentHost {
   kin::SafetyMode safety_mode() const {
     return static_cast<kin::SafetyMode>(safety_mode_.load(std::memory_order_relaxed));
   }
+  /// Console thread: the active tool for the safety monitor (docs/safety.md): its TCP in the
+  /// flange frame (as ArmService's tools: TCP = FK(chain) * tool) and its sphere's radius (m).
+  /// The monitor takes it in its next cycle. False when the queue is full (not taken).
+  bool set_safety_tool(const kin::Pose& tool, double radius) {
+    SafetyToolChange c;
+    for (int i = 0; i < 16; ++i) c.m[static_cast<std::size_t>(i)] = tool.matrix().data()[i];
+    c.radius = radius;
+    return safety_tools_.push(c);
+  }
   /// Real-time / tests: the safety monitor (its last commanded TCP sample).
   const SafetyMonitor& safety_monitor() const { return safety_; }
 
@@ -277,6 +286,11 @@ class Controller final : private SegmentHost {
   double max_follow_ = 0;
   TimePoint estop_seen_ = -1;
   SafetyMonitor safety_;
+  struct SafetyToolChange {
+    std::array<double, 16> m{};  ///< the tool's 4x4 matrix, column-major
+    double radius = 0;
+  };
+  SpscQueue<SafetyToolChange, 8> safety_tools_;  ///< set_safety_tool -> the monitor
   std::atomic<std::uint8_t> safety_mode_{0};  ///< kin::SafetyMode
   std::uint32_t safety_stops_ = 0;
   std::int64_t estop_latency_ = -1;

@@ -219,6 +219,7 @@ struct Telemetry {
   bool all_homed() const { return n > 0 && homed == static_cast<std::uint16_t>((1u << n) - 1u); }
   std::uint8_t safety_mode = 0;    ///< kin::SafetyMode the monitor runs with
   std::uint32_t safety_stops = 0;  ///< protective stops and jogs stopped by the safety envelope
+  std::int8_t safety_zone = -1;    ///< the trigger plane the commanded tool sphere reaches beyond (Reduced), -1: none
 };
 
 /// One control cycle's joint sample for a recorder (Controller::start_samples): what an MCAP

@@ -20,8 +20,12 @@ namespace servoarm::fw {
 
 class SafetyMonitor {
  public:
-  /// Set-up: `chain` outlives the monitor; `period_s` is the control period.
+  /// Set-up: the monitor keeps a copy of `chain` (its tool becomes the active tool's);
+  /// `period_s` is the control period.
   void configure(const kin::Chain& chain, const kin::SafetyConfig& cfg, double period_s);
+  /// Real-time: the active tool, its TCP in the chain's tool frame (TCP = FK(chain) * tool) and
+  /// its sphere's radius (m); the next update() checks that sphere and computes no speed.
+  void set_tool(const kin::Pose& tool, double radius);
   bool enabled() const { return cfg_.enabled; }
   const kin::SafetyConfig& config() const { return cfg_; }
 
@@ -29,7 +33,8 @@ class SafetyMonitor {
   /// free-drive, anything that moved the arm without the commanded path.
   void reset() { have_prev_ = false; }
 
-  /// One cycle: the commanded and measured joints. True when a function is beyond its limit
+  /// One cycle: the commanded and measured joints, in `mode` or Reduced while the commanded
+  /// tool sphere reaches beyond a trigger plane (zone()). True when a function is beyond its limit
   /// by more than its tolerance on either, `out` naming it and `on_actual` which one.
   /// `only_growing` (a jog): a function already beyond is reported only while its excess grows
   /// on the commanded state (so that a jog may move back in).
@@ -50,16 +55,25 @@ class SafetyMonitor {
   bool check_state(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
                   kin::SafetyViolation& out);
 
+  /// The trigger plane the commanded tool sphere reaches beyond at the last update() (its
+  /// functions then ran in Reduced mode), -1 when none.
+  int zone() const { return zone_; }
+  /// The mode the functions run in: Reduced when `mode` is or the tool is in a trigger zone.
+  kin::SafetyMode effective(kin::SafetyMode mode) const { return zone_ >= 0 ? kin::SafetyMode::reduced : mode; }
+
   /// The last commanded TCP sample (base frame) update() computed.
   const kin::SafetySample& commanded() const { return cmd_; }
 
  private:
-  const kin::Chain* chain_ = nullptr;
+  const kin::Chain* chain_ = nullptr;  ///< &own_ once configured
+  kin::Chain own_{};                   ///< the chain with the active tool
+  kin::Pose flange_{kin::Pose::Identity()};  ///< the configured chain's own tool (tool0)
   kin::SafetyConfig cfg_{};
   double period_s_ = 0.001;
   kin::SafetySample cmd_{}, act_{}, prev_cmd_{}, prev_act_{};
   kin::JointVector prev_q_cmd_{};  ///< the joint speeds' previous commanded joints
   bool have_prev_ = false;
+  int zone_ = -1;  ///< trigger plane of the last commanded sample
   kin::JointTrajectory stop_{};  ///< predict_stop's ramp (kept here: no stack copy per cycle)
 };
 

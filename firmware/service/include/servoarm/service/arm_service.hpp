@@ -947,6 +947,8 @@ class ArmService {
   /// Switch the safety envelope's mode (docs/safety.md): the planning checks of the moves
   /// queued from now on and the control thread's monitor (from its next cycle) use the
   /// mode's limits. Refused (bad_state, one line) when no envelope is configured.
+  /// A tool's safety sphere radius (m): its radius=, else safety.tool_radius_mm.
+  double tool_radius(const NamedPose& def) const { return def.radius >= 0 ? def.radius : cfg_.safety.tool_radius; }
   ControlResult set_safety_mode(kin::SafetyMode mode);
   kin::SafetyMode safety_mode() const { return safety_mode_; }
   /// One streamed target against the envelope (envelope_violation_at with the service's
@@ -1046,6 +1048,11 @@ class ArmService {
   /// A jog step's path (joints at the fraction s in 0..1 from `at`) against the envelope,
   /// positions and orientation only (a jog's speed is the jog's): "" or the violation's line.
   std::string jog_envelope(const kin::Chain& chain, const std::function<bool(double, kin::JointVector&)>& at) const;
+  /// The envelope a move with `chain` (a tool's chain, or chain_: tool0) is checked against:
+  /// the configured one with that tool's sphere radius (its radius=, else safety.tool_radius_mm).
+  kin::SafetyConfig envelope_for(const kin::Chain& chain) const;
+  /// The active tool to the control thread's monitor (Controller::set_safety_tool).
+  void push_safety_tool();
   /// A tool jog's straight line from pose `a` to `b` (IK along it from `seed`): as jog_envelope.
   std::string jog_envelope_line(const kin::Chain& chain, const kin::Pose& a, const kin::Pose& b,
                                 const kin::JointVector& seed, const kin::IkSolver& ik) const;
@@ -1120,6 +1127,10 @@ class ArmService {
     std::unique_ptr<kin::IkModel> own;
     const kin::IkModel* model = nullptr;  ///< own.get(), ik_ for tool0, nullptr: numeric fallback
   };
+  /// "" or why tool `t` contradicts the envelope (one line, without the tool's name): its
+  /// sphere wider than a keep-in box, or the park pose outside the planes and boxes with its
+  /// TCP and sphere.
+  std::string tool_envelope_problem(const ToolSlot& t) const;
   std::vector<std::unique_ptr<ToolSlot>> tools_;
   std::vector<NamedPose> frames_;
   std::size_t tool_ = 0, frame_ = 0;
