@@ -222,7 +222,7 @@ TEST(FwApi, RequestAndResultRoundTrip) {
   const std::string m = c.ask(2, "\"cmd\":\"movej\",\"q\":[0.2,0,0,0,0,0],\"speed_pct\":50");
   CHECK_TEXT(is_ok(m), m.c_str());
   CHECK_TEXT(has(m, "\"motion\":1"), m.c_str());
-  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  for (int i = 0; i < 6000 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   CHECK_EQUAL(1u, rig.tel().done_id);
   const std::string s = c.ask(3, "\"cmd\":\"state\"");
   CHECK_TEXT(is_ok(s) && has(s, "\"cycle\":") && has(s, "\"q_cmd\":[0.2") && has(s, "\"tool\":"), s.c_str());
@@ -773,7 +773,7 @@ TEST(FwApi, ProgramRunPauseStepResumeAbort) {
   CHECK_EQUAL(done, rig.tel().done_id);  // paused: nothing more runs
   const std::string s1 = c.ask(700, "\"cmd\":\"program_step\"");
   CHECK_TEXT(is_ok(s1), s1.c_str());
-  for (int i = 0; i < 600 && rig.tel().done_id < done + 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  for (int i = 0; i < 6000 && rig.tel().done_id < done + 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   CHECK_EQUAL(done + 1, rig.tel().done_id);
   paused = false;  // the one motion done: paused again
   for (int i = 0; i < 400 && !paused; ++i) {
@@ -804,7 +804,9 @@ TEST(FwApi, TeachPointsToolsAndFrames) {
   Client c(rig.port());
   rig.enable(c);
   CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0.2,0.1,0,0,0,0],\"speed_pct\":50")));
-  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  // The waits for a move's end allow 30 s (they end when it does): the loop runs in real time
+  // and a loaded machine stretches a move of a second well beyond it.
+  for (int i = 0; i < 6000 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   const std::string t = c.ask(2, "\"cmd\":\"teach\",\"name\":\"p1\"");
   CHECK_TEXT(is_ok(t) && has(t, "\"name\":\"p1\"") && int_field(t, "count") == 1, t.c_str());
   const std::string l = c.ask(3, "\"cmd\":\"points\"");
@@ -816,10 +818,10 @@ TEST(FwApi, TeachPointsToolsAndFrames) {
   DOUBLES_EQUAL(0.2, q0, 1e-3);
   DOUBLES_EQUAL(0.1, q1, 1e-3);
   CHECK(is_ok(c.ask(4, "\"cmd\":\"movej\",\"q\":[-0.2,0,0,0,0,0],\"speed_pct\":50")));
-  for (int i = 0; i < 600 && rig.tel().done_id < 2; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  for (int i = 0; i < 6000 && rig.tel().done_id < 2; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   const std::string g = c.ask(5, "\"cmd\":\"point_go\",\"name\":\"p1\"");
   CHECK_TEXT(is_ok(g) && int_field(g, "motion") == 3, g.c_str());
-  for (int i = 0; i < 600 && rig.tel().done_id < 3; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  for (int i = 0; i < 6000 && rig.tel().done_id < 3; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   DOUBLES_EQUAL(q0, rig.tel().q_cmd[0], 1e-9);
   DOUBLES_EQUAL(q1, rig.tel().q_cmd[1], 1e-9);
   const std::string none = c.ask(6, "\"cmd\":\"point_go\",\"name\":\"nowhere\"");
@@ -845,7 +847,7 @@ TEST(FwApi, CartesianJogAndFeedOverride) {
   Client c(rig.port());
   rig.enable(c);
   CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0,0.3,-0.6,0,0.6,0],\"speed_pct\":50")));
-  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  for (int i = 0; i < 6000 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   const auto tool_at = [&](int id) {
     const std::string s = c.ask(id, "\"cmd\":\"state\"");
     const std::regex e("\"tool\":\\{\"position\":\\[([-0-9.e]+),([-0-9.e]+),([-0-9.e]+)\\]");
@@ -906,7 +908,7 @@ TEST(FwApi, ToolsAndFramesDefinedAndMovelInThem) {
   Client c(rig.port());
   rig.enable(c);
   CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0,0.3,-0.6,0,0.6,0],\"speed_pct\":50")));
-  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  for (int i = 0; i < 6000 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   const std::string td = c.ask(2, "\"cmd\":\"tool_define\",\"name\":\"pen\",\"position\":[0,0,0.1],\"rpy\":[0,0,0]");
   CHECK_TEXT(is_ok(td) && has(td, "\"tool\":\"pen\""), td.c_str());
   const std::string fd = c.ask(3, "\"cmd\":\"frame_define\",\"name\":\"table\",\"position\":[0.05,-0.02,0.01],\"rpy\":[0,0,0.3]");
@@ -934,7 +936,7 @@ TEST(FwApi, ToolsAndFramesDefinedAndMovelInThem) {
   std::snprintf(mv, sizeof mv, "\"cmd\":\"movel\",\"position\":[%.9f,%.9f,%.9f],\"speed\":0.1", goal.x(), goal.y(), goal.z());
   const std::string ml = c.ask(8, mv);
   CHECK_TEXT(is_ok(ml), ml.c_str());
-  for (int i = 0; i < 600 && rig.tel().done_id < 2; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  for (int i = 0; i < 6000 && rig.tel().done_id < 2; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   const kin::Pose p1 = pen_in_table();
   const std::string fig = "pen in table at " + std::to_string(p1.translation().x()) + " " + std::to_string(p1.translation().y()) +
                           " " + std::to_string(p1.translation().z()) + ", asked " + std::to_string(goal.x()) + " " +
@@ -1097,7 +1099,7 @@ TEST(FwApi, StateCarriesTheActiveToolsPoint) {
   Client c(rig.port());
   rig.enable(c);
   CHECK(is_ok(c.ask(1, "\"cmd\":\"movej\",\"q\":[0.2,0.3,-0.6,0,0.6,0],\"speed_pct\":50")));
-  for (int i = 0; i < 600 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  for (int i = 0; i < 6000 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   const std::string s0 = c.ask(2, "\"cmd\":\"state\"");
   CHECK_TEXT((pose_position(s0, "tcp") - pose_position(s0, "tool")).norm() < 1e-12, s0.c_str());
   CHECK(is_ok(c.ask(3, "\"cmd\":\"tool_define\",\"name\":\"pen\",\"position\":[0.01,0,0.1],\"rpy\":[0,0.3,0]")));
