@@ -183,6 +183,18 @@ double movej_following_error(const char* ff, std::size_t& allocs) {
   return fe;
 }
 
+// The arm's inertia taken at the work pose (0 -30 60 0 20 0), gravity on, enabled and moved
+// there, at rest.
+void enable_at_work_pose(Arm& a) {
+  kin::JointVector q = kin::JointVector::Zero(6);
+  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
+  a.arm_inertia(q);
+  a.gravity = true;
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+}
+
 }  // namespace
 
 TEST_GROUP(FwMitArm){};
@@ -204,13 +216,7 @@ TEST(FwMitArm, FreeDriveHoldsAgainstGravityAndMovesWhenPushed) {
   c.freedrive = true;
   Arm a(c);
   CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
-  kin::JointVector q = kin::JointVector::Zero(6);
-  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
-  a.arm_inertia(q);
-  a.gravity = true;
-  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  enable_at_work_pose(a);
   a.run(0.3);
   const std::string on = a.cmd("freedrive on");
   CHECK_TEXT(has(on, "ok free-drive on"), (on + a.events).c_str());
@@ -579,13 +585,7 @@ void estop_holds(const char* stop) {
   c.drive_stop_timeout_s = 4;
   Arm a(c);
   CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
-  kin::JointVector q = kin::JointVector::Zero(6);
-  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
-  a.arm_inertia(q);
-  a.gravity = true;
-  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  enable_at_work_pose(a);
   a.run(0.3);
   CHECK_TEXT(ok(a.cmd("movej 20 -10 40 10 0 10")), a.s.out.c_str());
   a.run(0.4);  // mid-move
@@ -650,13 +650,7 @@ void estop_base_brakes_within_the_default_timeout(const char* stop) {
   Arm a(c);
   CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
   DOUBLES_EQUAL(2.0, c.drive_stop_timeout_s, 0);
-  kin::JointVector q = kin::JointVector::Zero(6);
-  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
-  a.arm_inertia(q);
-  a.gravity = true;
-  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  enable_at_work_pose(a);
   a.run(0.3);
   CHECK_TEXT(ok(a.cmd("movej 60 -30 60 0 20 0")), a.s.out.c_str());  // the base alone
   a.run(0.6);  // mid-move, the base near its top speed
@@ -703,13 +697,7 @@ TEST(FwMitArm, AJointNotAtRestAtTheTimeoutIsPoweredDownAloneTheOthersHold) {
   c.stop = "drive";
   Arm a(c);
   CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
-  kin::JointVector q = kin::JointVector::Zero(6);
-  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
-  a.arm_inertia(q);
-  a.gravity = true;
-  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  enable_at_work_pose(a);
   a.run(0.3);
   const Telemetry before = a.tel();
   CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
@@ -745,13 +733,7 @@ TEST(FwMitArm, ResetKeepsTheMotorsHoldingUntilTheNextEnable) {
   c.stop = "drive";
   Arm a(c);
   CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
-  kin::JointVector q = kin::JointVector::Zero(6);
-  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
-  a.arm_inertia(q);
-  a.gravity = true;
-  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
-  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  enable_at_work_pose(a);
   a.run(0.3);
   CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
   a.run(0.5);
