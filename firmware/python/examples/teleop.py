@@ -8,7 +8,9 @@
 The leader is another armfw (in free-drive, a person moves it; or any motion), read through its
 state stream; with --from-file each line of FILE (or of a pipe or socket: `-` is stdin) is one set
 of joint values (rad / m, whitespace-separated), a leader device of your own. The follower
-tracks every target jerk-limited; when the targets stop, its deadman brakes it to rest. At the
+tracks every target jerk-limited; when the targets stop, its deadman brakes it to rest. A file's
+last line is held (sent on at the rate) until the follower is within 0.001 of it or --settle
+seconds pass, so a replay ends where the file does even when the follower lags. At the
 end the follower's lag and error are printed (one line): the error is the largest joint
 difference between the follower's measured joints and the leader's sample sent just before,
 the lag the time shift of the leader's motion that best matches the follower's (least squares
@@ -74,6 +76,7 @@ def main(argv=None):
     ap.add_argument("--token")
     ap.add_argument("--rate", type=float, default=100.0)
     ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--settle", type=float, default=5.0)
     a = ap.parse_args(argv)
     if (a.leader is None) == (a.from_file is None):
         ap.error("give one of --leader and --from-file")
@@ -131,6 +134,15 @@ def main(argv=None):
                 follow_log.append((time.monotonic(), qf))
                 errors.append(max(abs(x - y) for x, y in zip(qf, q)))
                 time.sleep(max(0.0, period - (time.monotonic() - t0)))
+            if f is not sys.stdin:
+                f.close()
+            end = time.monotonic() + a.settle
+            while lead_log and time.monotonic() < end:  # hold the last line until the follower is there
+                q = lead_log[-1][1]
+                if max(abs(x - y) for x, y in zip(follower.state()["q"], q)) < 1e-3:
+                    break
+                send(st, q)
+                time.sleep(period)
     errors.sort()
     if errors:
         lag, lag_max, lag_med = lag_and_error(lead_log, follow_log)

@@ -195,7 +195,8 @@ class ProgramSaveTest(unittest.TestCase):
             with Arm("127.0.0.1", port=fw.port) as arm:
                 r = arm.save_program("square", "movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\n")
                 self.assertEqual(r["file"], "square.arm")
-                self.assertEqual(open(os.path.join(d, "square.arm")).read(), "movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\n")
+                with open(os.path.join(d, "square.arm")) as f:
+                    self.assertEqual(f.read(), "movej 0 0 0 0 0 0\nmovej 10 0 0 0 0 0\n")
                 self.assertEqual(arm.check_program(name="square")["steps"], 2)
                 with self.assertRaises(ArmError) as e:
                     arm.save_program("../evil", "movej 0 0 0 0 0 0\n")

@@ -88,7 +88,7 @@ class TeleopTest(unittest.TestCase):
         self.assertEqual(p.returncode, 0, p.stderr)
         time.sleep(0.3)
         with Arm(port=self.follower.port, take_control=False) as f:
-            self.assertAlmostEqual(f.state()["q"][0], 0.198, delta=0.01)
+            self.assertAlmostEqual(f.state()["q"][0], 0.198, delta=0.002)
 
 
 class TeleopFreeDriveTest(unittest.TestCase):
