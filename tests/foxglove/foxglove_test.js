@@ -52,7 +52,12 @@ const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 async function main() {
   const dir = fs.mkdtempSync(path.join(os.tmpdir(), "servoarm_fox_"));
-  const fw = spawn(armfw, ["--sim", "--foxglove-port", "0", "--record-dir", dir, "--api-tcp", "0"], { stdio: ["pipe", "pipe", "pipe"] });
+  // the virtual drives answer bring-up's SDOs from a thread of armfw: on a loaded machine (the
+  // sanitizer tree beside a browser test) that took longer than the default 100 ms, so 1 s here
+  const cfg = path.join(dir, "armfw.toml");
+  fs.writeFileSync(cfg, "[bus]\nsdo_timeout_ms = 1000\n");
+  const fw = spawn(armfw, ["--sim", "--config", cfg, "--foxglove-port", "0", "--record-dir", dir, "--api-tcp", "0"],
+                   { stdio: ["pipe", "pipe", "pipe"] });
   let out = "", err = "";
   fw.stdout.on("data", (d) => (out += d));
   fw.stderr.on("data", (d) => (err += d));
