@@ -288,6 +288,10 @@ async function main() {
       assert(role === 'role: operator', `role shown: ${role}`);
       const safety = await page.$eval('#st-safety', (e) => e.textContent);
       assert(safety === 'safety: off', `safety shown without an envelope: ${safety}`);
+      // CiA 402 drives report no temperature: no warning, empty temperature cells
+      assert(await page.$eval('#st-temp', (e) => e.hidden), 'a temperature warning without a temperature');
+      const temps = await page.$$eval('#joints td.temp', (tds) => tds.map((td) => td.textContent));
+      assert(temps.length === 6 && temps.every((t) => t === ''), `temperatures shown for CiA 402 drives: ${temps}`);
       assert(await page.$('#stop') !== null, 'no stop button');
       // the 3D view drew the arm from the state's frames
       await page.waitForFunction(() => window.pendant.state && Array.isArray(window.pendant.state.frames), { timeout: WAIT_S * 1000 });
@@ -501,7 +505,8 @@ async function main() {
       assert(shown >= 1 && shown <= 5, `current line shown: ${shown}`);
       await shot(page, 'pendant-program-running');
       await page.click('#prog-pause');
-      await until('the program paused', async () => (await tcp.state()).program.state === 'paused');
+      // a pause takes effect when the running motion ends: up to 120 deg at 10 % (some 20 s, more on a busy machine)
+      await until('the program paused', async () => (await tcp.state()).program.state === 'paused', 3 * WAIT_S);
       await page.click('#prog-resume');
       await until('the program running again', async () => (await tcp.state()).program.state === 'running');
       await page.click('#prog-abort');
@@ -860,6 +865,42 @@ async function main() {
       }), obsTok);
       assert(r[2].error === 'forbidden' && r[3].error, `observer's take_control / jog: ${JSON.stringify(r)}`);
       await shot(p, 'pendant-observer');
+      await p.close();
+    });
+    tcp.close();
+    await stopArmfw(armfw);
+    armfw = null;
+
+    // ------------------------------------------------------------ MIT motors: temperatures
+    // six virtual Damiao DM-J4340 (warning from 85 deg C, fault at 95), joint 3's standing at 88
+    const mitToml = path.join(args.workdir, 'mit.toml');
+    // the virtual motors' answers and watchdog given 1-2 s: they run on a thread of armfw (a loaded machine)
+    let mit = 'robot = "puma560"\n[bus]\ncan = "sim"\nheartbeat_timeout_ms = 2000\nsdo_timeout_ms = 1000\n' +
+              '[safety]\nfeedback_timeout_ms = 2000\n';
+    for (let j = 0; j < 6; ++j) mit += `[[drive]]\nnode = ${j + 1}\nfamily = "damiao"\nmotor = "DM-J4340"\nmit_kp = 60\nmit_kd = 2\n`;
+    fs.writeFileSync(mitToml, mit);
+    armfw = await startArmfw(args.armfw, ['--config', mitToml, '--motor-temperature', '3:88']);
+    tcp = new Tcp(armfw.tcp);
+    await tcp.connect();
+
+    await check('a joint at its warning temperature is named in the state bar', async () => {
+      const s = await until('the state\'s temperatures', async () => {
+        const st = await tcp.state();
+        return st.temperature_warning ? st : null;
+      });
+      assert(s.temperature_warning === 4, `temperature_warning ${s.temperature_warning}, joint 3 is hot (4)`);
+      const p = await openPage(browser, armfw.url);
+      await waitAuth(p, 'ok');
+      await p.waitForFunction(() => !document.querySelector('#st-temp').hidden, { timeout: WAIT_S * 1000 });
+      const bar = await p.$eval('#st-temp', (e) => e.textContent);
+      assert(bar === `hot: J3 ${s.temperature[2].toFixed(0)} °C`, `state bar: '${bar}', the API: J3 ${s.temperature[2]}`);
+      assert(Math.abs(s.temperature[2] - 88) < 1, `J3's temperature ${s.temperature[2]}, stood at 88`);
+      const cells = await p.$$eval('#joints td.temp', (tds) => tds.map((td) => [td.textContent, td.classList.contains('hot')]));
+      cells.forEach(([text, hot], j) => {
+        assert(text === s.temperature[j].toFixed(0) + ' °C', `J${j + 1} shows '${text}', the API ${s.temperature[j]}`);
+        assert(hot === (j === 2), `J${j + 1} ${hot ? 'marked' : 'not marked'} hot`);
+      });
+      await shot(p, 'pendant-temperature');
       await p.close();
     });
   } finally {

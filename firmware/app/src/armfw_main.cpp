@@ -78,6 +78,8 @@ int usage(FILE* f, int code) {
                "  --push J:NM:HZ[:DEG]  with --plant dynamic: a scripted external torque NM x sin(2 pi HZ t + DEG) on\n"
                "                        joint J (HZ 0: constant), t from the plant's start; up to 8, added up (a hand\n"
                "                        moving the arm in free-drive, e.g. a teleoperation leader)\n"
+               "  --motor-temperature J:DEGC  with --sim: joint J's virtual MIT motor stands at DEGC (its ambient;\n"
+               "                        the temperature warning and fault are the drive family's own)\n"
                "  --pty                 also open a pty console and print its path\n"
                "  --dialect grbl|native the consoles' language: GRBL 1.1 for G-code senders (cncjs, UGS,\n"
                "                        bCNC: banner, $ commands, error:N, <Idle|MPos:..> reports) or servoarm's\n"
@@ -489,6 +491,7 @@ int main(int argc, char** argv) {
     double amplitude, frequency, phase;
   };
   std::vector<Push> pushes;
+  std::vector<std::pair<int, double>> motor_temps;  // --motor-temperature: (joint, deg C)
   std::string config_file, frames_file, programs_dir, points_file, robot, serial, can_console;
   double bench = -1, rate = -1;
   int priority = -1, cpu = -2, baud = -1;
@@ -553,6 +556,17 @@ int main(int argc, char** argv) {
       p.joint -= 1;
       p.phase = deg * M_PI / 180.0;
       pushes.push_back(p);
+    }
+    else if (a == "--motor-temperature") {
+      const char* v = value("--motor-temperature");
+      int j = 0;
+      double t = 0;
+      char tail = 0;
+      if (std::sscanf(v, "%d:%lf%c", &j, &t, &tail) != 2 || j < 1 || j > 16 || !(t >= -40 && t <= 200)) {
+        std::fprintf(stderr, "armfw: --motor-temperature: '%s' is not J:DEGC (joint 1..16, -40..200 deg C)\n", v);
+        return 2;
+      }
+      motor_temps.emplace_back(j - 1, t);
     }
     else if (a == "--dialect") {
       dialect = value("--dialect");
@@ -715,7 +729,9 @@ int main(int argc, char** argv) {
   // from its [[drive]] table (model, id, master id, CAN FD). A joint homed by hard stop gets an
   // end stop 10 deg (joint side) from where its motor starts, in its homing direction.
   std::vector<std::unique_ptr<sim::MitPlant>> mit_plants;
-  app.sim_group = [&mit_plants, &cfg](hal::Clock& clock, const DriveGroupPlan& p) -> hal::CanBus* {
+  std::vector<int> temps_applied;  // the joints of --motor-temperature that are virtual MIT motors
+  app.sim_group = [&mit_plants, &cfg, &motor_temps, &temps_applied](hal::Clock& clock,
+                                                                   const DriveGroupPlan& p) -> hal::CanBus* {
     std::vector<sim::MitMotorSpec> specs;
     for (std::size_t k = 0; k < p.joints.size(); ++k) {
       const DriveConfig& d = cfg.drives[static_cast<std::size_t>(p.joints[k])];
@@ -725,6 +741,11 @@ int main(int argc, char** argv) {
       s.id = p.ids[k];
       s.master = static_cast<std::uint16_t>(mit_master_id(d, p.ids[k]));
       s.fd = d.can_fd;
+      for (const auto& [j, t] : motor_temps) {
+        if (j != p.joints[k]) continue;
+        s.params.ambient = t;
+        temps_applied.push_back(j);
+      }
       specs.push_back(s);
     }
     mit_plants.push_back(std::make_unique<sim::MitPlant>(clock, specs));
@@ -749,6 +770,20 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "armfw: %s\n", err.c_str());
     return 2;
   }
+#ifdef SERVOARM_WITH_SIM
+  for (const auto& mt : motor_temps) {
+    if (std::find(temps_applied.begin(), temps_applied.end(), mt.first) == temps_applied.end()) {
+      std::fprintf(stderr, "armfw: --motor-temperature: joint %d is not a virtual MIT motor (--sim with a [[drive]] "
+                   "family damiao, cubemars_mit or robstride_mit)\n", mt.first + 1);
+      return 2;
+    }
+  }
+#else
+  if (!motor_temps.empty()) {
+    std::fprintf(stderr, "armfw: --motor-temperature: this armfw was built without the virtual drives (host_sim)\n");
+    return 2;
+  }
+#endif
   hal::SimBus* sim_bus = nullptr;  // the virtual drives' bus (console.can = "sim")
 #ifdef SERVOARM_WITH_SIM
   if (plant && plant_kind == "dynamic") {

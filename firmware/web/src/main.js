@@ -185,7 +185,9 @@ function buildJoints(joints) {
     val.className = 'val';
     val.dataset.unit = jt.type === 'prismatic' ? unit.length : unit.angle;
     val.textContent = '-';
-    tr.append(name, val);
+    const temp = document.createElement('td');  // the drive's temperature, empty when it reports none
+    temp.className = 'temp';
+    tr.append(name, val, temp);
     for (const dir of [-1, 1]) {
       const td = document.createElement('td');
       const b = document.createElement('button');
@@ -472,6 +474,7 @@ api.on('state', (st) => {
   $('st-safety').textContent = env.enabled ? 'safety: ' + st.safety_mode + ' ' + env.checksum + (st.safety_stops ? ', ' + st.safety_stops + ' stops' : '') : 'safety: off';
   const f = st.fault || {};
   $('st-fault').textContent = f.cause && f.cause !== 'none' ? 'fault: ' + f.cause + (f.joint >= 0 ? ' J' + (f.joint + 1) : '') + (f.text ? ': ' + f.text : '') : '';
+  showTemperatures(st.temperature, st.temperature_warning || 0, n);
   $('freedrive').textContent = st.freedrive ? 'free-drive off' : 'free-drive on';
   document.body.dataset.state = st.state;
   for (const tr of $('joints').querySelectorAll('tr')) {
@@ -494,6 +497,23 @@ api.on('state', (st) => {
   if (st.active_frame !== undefined && document.activeElement !== $('frame-sel') && $('frame-sel').value !== st.active_frame &&
       P.tools && P.tools.frames.some((t) => t.name === st.active_frame)) $('frame-sel').value = st.active_frame;
 });
+
+// ---- temperatures: each joint's in its row (deg C; null: the drive reports none); the joints at or
+// above their warning temperature (the state's temperature_warning bits) named in the state bar
+function showTemperatures(temps, hot, n) {
+  if (!Array.isArray(temps)) return;
+  const names = [];
+  for (let j = 0; j < n; ++j) {
+    const isHot = ((hot >> j) & 1) === 1;
+    if (isHot) names.push('J' + (j + 1) + (temps[j] === null ? '' : ' ' + temps[j].toFixed(0) + ' °C'));
+    const td = $('joints').querySelector(`tr[data-joint="${j}"] .temp`);
+    if (!td) continue;
+    td.textContent = temps[j] === null ? '' : temps[j].toFixed(0) + ' °C';
+    td.classList.toggle('hot', isHot);
+  }
+  $('st-temp').hidden = names.length === 0;
+  $('st-temp').textContent = names.length ? 'hot: ' + names.join(', ') : '';
+}
 
 // ---- digital outputs: one row each from the state's `outputs` ([[output]] order: the index `output` takes)
 function showOutputs(outs) {
