@@ -214,11 +214,17 @@ class ProgramSaveTest(unittest.TestCase):
 class ClientTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        cls.fw = ArmfwSim()
+        # The streams' deadman at 1 s instead of 100 ms: this Python loop stalls longer than
+        # 100 ms on a loaded machine, which ends a stream the test is still sending.
+        cls.cfg = tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False)
+        cls.cfg.write("[api]\nstream_deadman_ms = 1000\n")
+        cls.cfg.close()
+        cls.fw = ArmfwSim(["--config", cls.cfg.name])
 
     @classmethod
     def tearDownClass(cls):
         cls.fw.stop()
+        os.unlink(cls.cfg.name)
 
     def arm(self, **kw):
         return Arm("127.0.0.1", port=self.fw.port, **kw)
@@ -272,8 +278,11 @@ class ClientTest(unittest.TestCase):
                     time.sleep(0.02)
                 self.assertTrue(arm.state()["streaming"])
             seq = max([e["seq"] for e in arm.events()] or [0])
-            time.sleep(0.6)  # no target: the deadman brakes the arm to rest
+            end = time.monotonic() + 10  # no target: after the deadman (1 s) the arm brakes to rest
             s = arm.state()
+            while (s["streaming"] or s["state"] != "idle") and time.monotonic() < end:
+                time.sleep(0.05)
+                s = arm.state()
             self.assertFalse(s["streaming"])
             self.assertEqual(s["state"], "idle")
             self.assertTrue(any(e["kind"] == "jog_stopped" and "stream stopped" in e["detail"]
