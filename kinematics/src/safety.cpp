@@ -184,7 +184,7 @@ double SafetyViolation::excess() const {
 const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
   if (size == 0) return buf;
   const char* who = v.elbow ? "elbow" : "tool";
-  char name[48];
+  char name[64];
   switch (v.function) {
     case SafetyFunction::plane:
     case SafetyFunction::keep_in:

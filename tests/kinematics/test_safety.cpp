@@ -472,7 +472,7 @@ TEST(Safety, SegmentDistanceAgainstBruteForceSampling) {
   std::uniform_real_distribution<double> u(-0.5, 0.5);
   auto point = [&] { return Eigen::Vector3d(u(rng), u(rng), u(rng)); };
   constexpr int kGrid = 241;
-  const int cases = sweep(3000);
+  const int cases = sweep(1000);
   double worst_gap = 0;
   for (int k = 0; k < cases; ++k) {
     const Eigen::Vector3d p1 = point(), q1 = point(), p2 = point();
