@@ -9,13 +9,17 @@
 
 #include "servoarm/kinematics/dynamics.hpp"
 #include "servoarm/kinematics/io/file_input.hpp"
+#include "servoarm/kinematics/safety.hpp"
 #ifdef SERVOARM_WITH_URDF
 #include "servoarm/kinematics/urdf.hpp"
 #endif
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <set>
+#include <vector>
 
 #include <unistd.h>
 
@@ -138,6 +142,89 @@ bool read_transform(Reader& rd, const toml::node& n, const std::string& key, dou
   return true;
 }
 
+// A capsule (self-collision, docs/safety.md): `{ from = [x, y, z], to = [x, y, z], radius = r }`,
+// lengths in the description's unit, in the frame after the row (the base frame for
+// base_capsule): every point within r of the segment from-to.
+bool read_capsule(Reader& rd, const toml::node& n, const std::string& where, const std::string& key, double L,
+                  Capsule& c) {
+  const toml::table* t = n.as_table();
+  if (!t) return rd.fail(&n, where, "key '" + key + "': expected a table { from = [x, y, z], to = [x, y, z], radius = r }");
+  SERVOARM_TRY(rd.only_keys(*t, {"from", "to", "radius"}, where.empty() ? key : where + ": " + key));
+  for (const char* k : {"from", "to", "radius"})
+    if (!t->contains(k)) return rd.fail(&n, where, "key '" + key + "': '" + k + "' is missing (from, to, radius)");
+  double a[3], b[3], r = 0;
+  SERVOARM_TRY(rd.numbers(*t->get("from"), where, key + ".from", a, 3));
+  SERVOARM_TRY(rd.numbers(*t->get("to"), where, key + ".to", b, 3));
+  for (int i = 0; i < 3; ++i)
+    if (std::fabs(a[i] * L) > kMaxLength || std::fabs(b[i] * L) > kMaxLength)
+      return rd.fail(&n, where, "key '" + key + "': a point outside the plausible range (magnitude at most 100 m)");
+  const toml::node* rv = t->get("radius");
+  SERVOARM_TRY(rd.number(*rv, where, key + ".radius", r));
+  if (r < 0) return rd.fail(rv, where, "key '" + key + ".radius': " + shown(r) + " must not be negative");
+  if (r * L > 10.0) return rd.fail(rv, where, "key '" + key + ".radius': " + shown(r) + " is more than 10 m (wrong length unit?)");
+  c.a = Eigen::Vector3d(a[0], a[1], a[2]) * L;
+  c.b = Eigen::Vector3d(b[0], b[1], b[2]) * L;
+  c.radius = r * L;
+  return true;
+}
+
+// The capsules' pairs: self_collision_ignore = [[i, j], ...] (0 = base, k = the link of the
+// k-th [[joint]] table, "tool"), then no checked pair may overlap at the zero pose (every
+// joint at 0, clamped into its limits): a description whose arm collides with itself at rest
+// is wrong, and naming the pair tells which capsule to shrink or which pair to ignore.
+bool read_capsule_pairs(Reader& rd, const toml::table& root, Chain& chain, const std::vector<const toml::node*>& at) {
+  std::vector<std::array<int, 2>> ignore;
+  if (const toml::node* v = root.get("self_collision_ignore")) {
+    const toml::array* arr = v->as_array();
+    if (!arr) return rd.fail(v, "", "key 'self_collision_ignore': expected an array of pairs [[1, 3], [2, \"tool\"]]");
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const toml::node& e = *arr->get(i);
+      const toml::array* pair = e.as_array();
+      if (!pair || pair->size() != 2) return rd.fail(&e, "", "key 'self_collision_ignore': each entry is a pair [i, j]");
+      std::array<int, 2> p{};
+      for (std::size_t k = 0; k < 2; ++k) {
+        const toml::node& x = *pair->get(k);
+        if (const auto* s = x.as_string(); s && s->get() == "tool") {
+          p[k] = kToolCapsule;
+        } else if (const auto* s2 = x.as_string(); s2 && s2->get() == "base") {
+          p[k] = 0;
+        } else if (const auto* n = x.as_integer(); n && n->get() >= 0 && n->get() <= chain.n_rows) {
+          p[k] = static_cast<int>(n->get());
+        } else {
+          return rd.fail(&x, "", "key 'self_collision_ignore': expected 0 (the base), 1.." + std::to_string(chain.n_rows) +
+                                     " (a [[joint]] table's link) or \"tool\"");
+        }
+        if (p[k] != kToolCapsule && ((chain.capsule_mask >> p[k]) & 1u) == 0) {
+          char nm[16];
+          return rd.fail(&x, "", std::string("key 'self_collision_ignore': ") + capsule_name(p[k], nm, sizeof nm) +
+                                     " has no capsule");
+        }
+      }
+      if (p[0] == p[1]) return rd.fail(&e, "", "key 'self_collision_ignore': a pair of one capsule with itself");
+      ignore.push_back(p);
+    }
+  }
+  set_capsule_pairs(chain, ignore);
+  if (chain.capsule_mask == 0) return true;
+  JointVector q = JointVector::Zero(chain.n_joints);
+  for (int j = 0; j < chain.n_joints; ++j) q[j] = std::clamp(0.0, chain.joint(j).lower, chain.joint(j).upper);
+  FrameSet frames;
+  Pose tcp;
+  if (forward_frames(chain, q, frames, tcp) != Status::ok) return rd.fail(nullptr, "", "the zero pose has no forward kinematics");
+  SafetySample x;
+  self_capsules(chain, frames, tcp, false, 0.0, x);
+  if (x.has_self && x.self_distance < 0) {
+    char a[16], b[16];
+    return rd.fail(at[static_cast<std::size_t>(x.self_b)], "",
+                   std::string("the capsules of ") + capsule_name(x.self_a, a, sizeof a) + " and " +
+                       capsule_name(x.self_b, b, sizeof b) + " overlap by " + shown(-x.self_distance / chain.length_unit) +
+                       (chain.length_unit == 1.0 ? " m" : " mm") +
+                       " at the zero pose (joints at 0, clamped into their limits): make one smaller or list the pair "
+                       "in self_collision_ignore");
+  }
+  return true;
+}
+
 // Inertial keys of one row (docs/dynamics.md): mass [kg], com [length unit, DH frame of
 // the row], inertia [kg m^2, about the COM, DH frame: ixx iyy izz ixy ixz iyz],
 // rotor_inertia [kg m^2, motor side], gear_ratio [motor turns per joint turn],
@@ -207,7 +294,8 @@ bool read_row(Reader& rd, const toml::node& node, std::size_t i, int& njoints, d
   if (!jt) return rd.fail(&node, where, "expected a table");
   const toml::table& j = *jt;
   SERVOARM_TRY(rd.only_keys(j, {"type", "theta", "d", "a", "alpha", "direction", "limits", "max_velocity", "max_acceleration",
-                                "max_jerk", "max_effort", "name", "mass", "com", "inertia", "rotor_inertia", "gear_ratio", "friction"},
+                                "max_jerk", "max_effort", "name", "mass", "com", "inertia", "rotor_inertia", "gear_ratio", "friction",
+                                "capsule"},
                             where));
   const toml::node* tv = j.get("type");
   if (!tv) return rd.fail(&j, where, "key 'type' is missing (revolute, prismatic or fixed)");
@@ -295,6 +383,10 @@ bool read_row(Reader& rd, const toml::node& node, std::size_t i, int& njoints, d
     }
   }
   if (add_row(chain, row) != Status::ok) return rd.fail(&j, where, "row rejected (capacity or bad value)");
+  if (const toml::node* v = j.get("capsule")) {
+    SERVOARM_TRY(read_capsule(rd, *v, where, "capsule", L, chain.capsule[static_cast<std::size_t>(chain.n_rows)]));
+    chain.capsule_mask |= 1u << chain.n_rows;
+  }
   return read_inertial(rd, j, where, chain, L);
 }
 
@@ -311,7 +403,9 @@ bool unit_key(Reader& rd, const toml::table& root, const char* key, const char* 
 }
 
 bool parse(Reader& rd, const toml::table& root, Chain& chain) {
-  SERVOARM_TRY(rd.only_keys(root, {"name", "convention", "length_unit", "angle_unit", "joint", "tool", "base", "summary", "gravity"}, ""));
+  SERVOARM_TRY(rd.only_keys(root, {"name", "convention", "length_unit", "angle_unit", "joint", "tool", "base", "summary", "gravity",
+                                    "base_capsule", "self_collision_ignore"},
+                            ""));
   const toml::node* nv = root.get("name");
   if (!nv) return rd.fail(nullptr, "", "key 'name' is missing");
   std::string name;
@@ -357,7 +451,16 @@ bool parse(Reader& rd, const toml::table& root, Chain& chain) {
     if (!(std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]) <= 100)) return rd.fail(v, "", "key 'gravity': more than 100 m/s^2");
     chain.gravity = {g[0], g[1], g[2]};
   }
-  return true;
+  if (const toml::node* v = root.get("base_capsule")) {
+    SERVOARM_TRY(read_capsule(rd, *v, "", "base_capsule", L, chain.capsule[0]));
+    chain.capsule_mask |= 1u;
+  }
+  // where each capsule was given (the zero-pose check's message points at one)
+  std::vector<const toml::node*> at(kMaxCapsules, nullptr);
+  at[0] = root.get("base_capsule");
+  for (std::size_t i = 0; i < arr->size() && i < static_cast<std::size_t>(kMaxRows); ++i)
+    if (const toml::table* t = arr->get(i)->as_table()) at[i + 1] = t->get("capsule");
+  return read_capsule_pairs(rd, root, chain, at);
 }
 
 #undef SERVOARM_TRY

@@ -3,6 +3,7 @@
 #include "servoarm/kinematics/safety.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdio>
 
@@ -44,6 +45,7 @@ double evaluate(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x,
                 bool elbow, SafetyViolation& v) {
   v.function = fn;
   v.index = index;
+  v.other = -1;
   v.elbow = elbow;
   v.s = x.s;
   const Eigen::Vector3d c = elbow ? x.elbow : Eigen::Vector3d(x.tcp.translation());
@@ -111,6 +113,14 @@ double evaluate(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x,
       v.limit = lim.power;
       v.value = x.power;
       return v.limit > 0 && x.has_dynamics ? v.value - v.limit : -INFINITY;
+    case SafetyFunction::self_collision:
+      // the sample's closest pair (the closest is the first beyond a margin common to all pairs)
+      v.index = x.self_a;
+      v.other = x.self_b;
+      v.where = x.self_where;
+      v.limit = cfg.self_collision_margin;
+      v.value = x.self_distance;
+      return cfg.self_collision && x.has_self ? v.limit - v.value : -INFINITY;
   }
   return -INFINITY;
 }
@@ -139,6 +149,7 @@ const char* to_string(SafetyFunction f) {
     case SafetyFunction::stop_distance: return "stop distance";
     case SafetyFunction::momentum: return "momentum";
     case SafetyFunction::power: return "power";
+    case SafetyFunction::self_collision: return "self_collision";
   }
   return "?";
 }
@@ -156,7 +167,8 @@ double SafetyViolation::excess() const {
     case SafetyFunction::none: return -INFINITY;
     case SafetyFunction::plane:
     case SafetyFunction::keep_in:
-    case SafetyFunction::keep_out: return limit - value;
+    case SafetyFunction::keep_out:
+    case SafetyFunction::self_collision: return limit - value;
     case SafetyFunction::orientation:
     case SafetyFunction::tcp_speed:
     case SafetyFunction::elbow_speed:
@@ -172,7 +184,7 @@ double SafetyViolation::excess() const {
 const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
   if (size == 0) return buf;
   const char* who = v.elbow ? "elbow" : "tool";
-  char name[48];
+  char name[64];
   switch (v.function) {
     case SafetyFunction::plane:
     case SafetyFunction::keep_in:
@@ -192,6 +204,12 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
     case SafetyFunction::joint_speed:
       std::snprintf(name, sizeof name, "joint %d speed", v.index + 1);
       break;
+    case SafetyFunction::self_collision: {
+      char a[16], b[16];
+      std::snprintf(name, sizeof name, "%s %s and %s", to_string(v.function), capsule_name(v.index, a, sizeof a),
+                    capsule_name(v.other, b, sizeof b));
+      break;
+    }
   }
   double scale = 1000.0;
   const char* unit = "mm";
@@ -201,6 +219,7 @@ const char* describe(const SafetyViolation& v, char* buf, std::size_t size) {
     case SafetyFunction::plane:
     case SafetyFunction::keep_in:
     case SafetyFunction::keep_out:
+    case SafetyFunction::self_collision:
     case SafetyFunction::stop_distance: break;
     case SafetyFunction::stop_time:
       scale = 1.0;
@@ -255,6 +274,10 @@ bool check_sample(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& 
     }
   }
   if (cfg.cone && evaluate(cfg, mode, x, SafetyFunction::orientation, -1, false, v) > angle_margin) {
+    out = v;
+    return true;
+  }
+  if (x.has_self && evaluate(cfg, mode, x, SafetyFunction::self_collision, -1, false, v) > position_margin) {
     out = v;
     return true;
   }
@@ -382,7 +405,8 @@ bool is_speed(SafetyFunction f) {
     case SafetyFunction::plane:
     case SafetyFunction::keep_in:
     case SafetyFunction::keep_out:
-    case SafetyFunction::orientation: return false;
+    case SafetyFunction::orientation:
+    case SafetyFunction::self_collision: return false;
   }
   return false;
 }
@@ -422,7 +446,140 @@ bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVecto
     out.elbow = frames.frame[cfg.elbow_frame].translation();
   else
     out.elbow = tcp.translation();
+  out.has_self = false;
+  if (cfg.self_collision) self_capsules(chain, frames, tcp, true, cfg.tool_radius, out);
   return true;
+}
+
+double segment_distance(const Eigen::Vector3d& p1, const Eigen::Vector3d& q1, const Eigen::Vector3d& p2,
+                        const Eigen::Vector3d& q2, Eigen::Vector3d& c1, Eigen::Vector3d& c2) {
+  // Ericson, Real-Time Collision Detection (2005), 5.1.9: the closest points are
+  // p1 + s d1 and p2 + t d2 with (s, t) minimising |r + s d1 - t d2|^2 over [0, 1]^2. Unclamped,
+  // s = (b f - c e) / (a e - b^2); s is clamped, t taken for it, and where t leaves [0, 1] it is
+  // clamped and s taken again for it, which reaches the constrained minimum.
+  constexpr double kPoint = 1e-24;  // m^2: a segment shorter than 1e-12 m is a point
+  const Eigen::Vector3d d1 = q1 - p1, d2 = q2 - p2, r = p1 - p2;
+  const double a = d1.squaredNorm(), e = d2.squaredNorm(), f = d2.dot(r);
+  double s = 0, t = 0;
+  if (a <= kPoint && e <= kPoint) {
+    // both points
+  } else if (a <= kPoint) {
+    t = std::clamp(f / e, 0.0, 1.0);
+  } else {
+    const double c = d1.dot(r);
+    if (e <= kPoint) {
+      s = std::clamp(-c / a, 0.0, 1.0);
+    } else {
+      const double b = d1.dot(d2);
+      const double denom = a * e - b * b;  // >= 0; 0 (to rounding) when the segments are parallel
+      // parallel (to within 1e-7 rad: below that denom is rounding): s = 0, the first end, then t
+      // and s as below; exact for parallel segments, within 1e-7 of their length short of it
+      s = denom > 1e-14 * a * e ? std::clamp((b * f - c * e) / denom, 0.0, 1.0) : 0.0;
+      t = (b * s + f) / e;
+      if (t < 0.0) {
+        t = 0.0;
+        s = std::clamp(-c / a, 0.0, 1.0);
+      } else if (t > 1.0) {
+        t = 1.0;
+        s = std::clamp((b - c) / a, 0.0, 1.0);
+      }
+    }
+  }
+  c1 = p1 + s * d1;
+  c2 = p2 + t * d2;
+  return (c1 - c2).norm();
+}
+
+void self_capsules(const Chain& chain, const FrameSet& frames, const Pose& tcp, bool with_tool, double tool_radius,
+                   SafetySample& x) {
+  x.has_self = false;
+  // every capsule in the base frame (slots as kMaxCapsules)
+  std::array<Eigen::Vector3d, kMaxCapsules> a, b;
+  std::array<double, kMaxCapsules> r{};
+  std::uint32_t present = chain.capsule_mask & ((1u << kToolCapsule) - 1u);
+  for (std::uint32_t m = present; m != 0; m &= m - 1) {
+    const int k = std::countr_zero(m);
+    if (k >= frames.count) {  // (a chain changed after its capsules were set)
+      present &= ~(1u << k);
+      continue;
+    }
+    const Capsule& c = chain.capsule[static_cast<std::size_t>(k)];
+    const Pose& f = frames.frame[k];
+    a[static_cast<std::size_t>(k)] = f * c.a;
+    b[static_cast<std::size_t>(k)] = f * c.b;
+    r[static_cast<std::size_t>(k)] = c.radius;
+  }
+  if (with_tool && chain.n_rows < frames.count) {
+    a[kToolCapsule] = frames.frame[chain.n_rows].translation();
+    b[kToolCapsule] = tcp.translation();
+    r[kToolCapsule] = tool_radius;
+    present |= 1u << kToolCapsule;
+  }
+  double best = INFINITY;
+  Eigen::Vector3d c1, c2;
+  for (std::uint32_t mi = present; mi != 0; mi &= mi - 1) {
+    const int i = std::countr_zero(mi);
+    const auto iu = static_cast<std::size_t>(i);
+    for (std::uint32_t mj = chain.capsule_pairs[iu] & present; mj != 0; mj &= mj - 1) {
+      const int j = std::countr_zero(mj);
+      const auto ju = static_cast<std::size_t>(j);
+      const double d = segment_distance(a[iu], b[iu], a[ju], b[ju], c1, c2) - r[iu] - r[ju];
+      if (d < best) {
+        best = d;
+        x.self_a = static_cast<std::int8_t>(i);
+        x.self_b = static_cast<std::int8_t>(j);
+        x.self_where = 0.5 * (c1 + c2);
+      }
+    }
+  }
+  if (best < INFINITY) {
+    x.has_self = true;
+    x.self_distance = best;
+  }
+}
+
+void set_capsule_pairs(Chain& chain, std::span<const std::array<int, 2>> ignore) {
+  // the body each slot moves with: 0 the base, then one more after each joint row
+  std::array<int, kMaxCapsules> body{};
+  int joints = 0;
+  for (int k = 1; k <= chain.n_rows && k < kMaxCapsules; ++k) {
+    if (chain.rows[static_cast<std::size_t>(k - 1)].type != JointType::fixed) ++joints;
+    body[static_cast<std::size_t>(k)] = joints;
+  }
+  body[kToolCapsule] = joints;
+  const std::uint32_t present = (chain.capsule_mask & ((1u << kToolCapsule) - 1u)) | (1u << kToolCapsule);
+  for (int i = 0; i < kMaxCapsules; ++i) {
+    std::uint32_t m = 0;
+    for (int j = i + 1; j < kMaxCapsules; ++j) {
+      const bool both = ((present >> i) & 1u) != 0 && ((present >> j) & 1u) != 0;
+      if (both && std::abs(body[static_cast<std::size_t>(i)] - body[static_cast<std::size_t>(j)]) > 1) m |= 1u << j;
+    }
+    chain.capsule_pairs[static_cast<std::size_t>(i)] = m;
+  }
+  for (const auto& p : ignore) {
+    const int i = std::min(p[0], p[1]), j = std::max(p[0], p[1]);
+    if (i >= 0 && j < kMaxCapsules) chain.capsule_pairs[static_cast<std::size_t>(i)] &= ~(1u << j);
+  }
+}
+
+int capsule_pair_count(const Chain& chain) {
+  if (chain.capsule_mask == 0) return 0;
+  const std::uint32_t present = (chain.capsule_mask & ((1u << kToolCapsule) - 1u)) | (1u << kToolCapsule);
+  int n = 0;
+  for (std::uint32_t m = present; m != 0; m &= m - 1)
+    n += std::popcount(chain.capsule_pairs[static_cast<std::size_t>(std::countr_zero(m))] & present);
+  return n;
+}
+
+const char* capsule_name(int slot, char* buf, std::size_t size) {
+  if (size == 0) return buf;
+  if (slot == 0)
+    std::snprintf(buf, size, "base");
+  else if (slot == kToolCapsule)
+    std::snprintf(buf, size, "tool");
+  else
+    std::snprintf(buf, size, "link %d", slot);
+  return buf;
 }
 
 const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_t size) {
@@ -483,6 +640,8 @@ const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_
     return bad("tolerances must be finite and >= 0", 0);
   for (const double t : cfg.joint_speed_tolerance)
     if (!std::isfinite(t) || t < 0) return bad("tolerances must be finite and >= 0", 0);
+  if (!std::isfinite(cfg.self_collision_margin) || cfg.self_collision_margin < 0)
+    return bad("the self-collision margin must be finite and >= 0", 0);
   return buf;
 }
 

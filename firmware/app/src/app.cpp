@@ -78,7 +78,7 @@ ConsoleConfig App::console_config() const {
   c.dialect = cfg.console_dialect == "grbl" ? Dialect::grbl : Dialect::native;
   c.config_text = to_toml(cfg);
   (void)safety_envelope(cfg, chain, c.safety);  // the service checks every planned move against it
-  c.safety_checksum = safety_checksum(cfg);
+  c.safety_checksum = safety_checksum(cfg, chain);  // [safety] and the description's capsules
   // Only an absolute path (armfw resolves console.frames_file against the configuration
   // file's folder): a relative one would land in whatever the working directory is.
   if (!cfg.console_frames_file.empty() && cfg.console_frames_file[0] == '/') c.frames_file = cfg.console_frames_file;

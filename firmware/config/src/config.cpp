@@ -467,6 +467,15 @@ const ConfigKey kConfigTable[] = {
       "every trigger plane in the base frame"}
         .within(-kMaxLength, kMaxLength).length(0, 6 * kin::kMaxSafetyPlanes)
         .related(safety_reduced_plane_frames_ok, "none or 6 per plane"),
+    K{"safety.self_collision", &F::safety_self_collision, "",
+      "self-collision check (docs/safety.md#self-collision): the capsules of the robot description (capsule per "
+      "[[joint]], base_capsule) and the tool's (from the flange to the TCP, radius the tool sphere's) stay "
+      "safety.self_collision_margin_mm apart for every pair of links not joined by one joint (less the "
+      "description's self_collision_ignore); moves are refused at plan time naming the pair, the run-time monitor "
+      "makes a protective stop when a pair comes closer than the margin less safety.tolerance_mm; needs a "
+      "description with capsules"},
+    K{"safety.self_collision_margin_mm", &F::safety_self_collision_margin_mm, "mm",
+      "least distance between the surfaces of two capsules that safety.self_collision checks"}.within(0, 1000),
     K{"motion.home_deg", &F::home_deg, "deg (mm)",
       "park pose for `park` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
       "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),
@@ -1826,12 +1835,18 @@ std::string safety_envelope(const FwConfig& c, const kin::Chain& chain, kin::Saf
                        : e.reduced.momentum > 0 ? "safety.reduced_momentum_kg_m_s"
                                                 : "safety.reduced_power_w") +
            ": needs the robot's masses (" + c.robot + "'s description has no inertial data, docs/dynamics.md)";
+  e.self_collision = c.safety_self_collision;
+  e.self_collision_margin = c.safety_self_collision_margin_mm * mm;
+  if (e.self_collision && chain.capsule_mask == 0)
+    return "safety.self_collision: " + c.robot +
+           "'s description has no capsules (capsule = { from, to, radius } per [[joint]], docs/safety.md)";
   e.position_tolerance = c.safety_tolerance_mm * mm;
   e.angle_tolerance = c.safety_tolerance_deg * deg;
   e.speed_tolerance = c.safety_tolerance_mm_s * mm;
   e.enabled = e.plane_count > 0 || e.box_count > 0 || e.trigger_count > 0 || e.cone || e.normal.tcp_speed > 0 || e.normal.elbow_speed > 0 ||
               e.reduced.tcp_speed > 0 || e.reduced.elbow_speed > 0 || joint_limits || e.normal.has_stop_limit() ||
-              e.reduced.has_stop_limit() || e.normal.has_dynamics_limit() || e.reduced.has_dynamics_limit();
+              e.reduced.has_stop_limit() || e.normal.has_dynamics_limit() || e.reduced.has_dynamics_limit() ||
+              e.self_collision;
   char buf[160];
   if (const std::string bad = kin::safety_config_problem(e, buf, sizeof buf); !bad.empty()) return "safety: " + bad;
   out = e;
@@ -1848,14 +1863,42 @@ std::string safety_canonical(const FwConfig& c) {
   return text;
 }
 
-std::uint32_t safety_checksum(const FwConfig& c) {
-  const std::string text = safety_canonical(c);
+namespace {
+std::uint32_t crc32_of(const std::string& text) {
   std::uint32_t crc = 0xFFFFFFFFu;
   for (const char ch : text) {
     crc ^= static_cast<unsigned char>(ch);
     for (int b = 0; b < 8; ++b) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
   }
   return ~crc;
+}
+}  // namespace
+
+std::uint32_t safety_checksum(const FwConfig& c) { return crc32_of(safety_canonical(c)); }
+
+std::string safety_description_canonical(const kin::Chain& chain) {
+  std::string text;
+  char line[256];
+  for (int k = 0; k <= kin::kMaxRows; ++k) {
+    if (((chain.capsule_mask >> k) & 1u) == 0) continue;
+    const kin::Capsule& cp = chain.capsule[static_cast<std::size_t>(k)];
+    char name[16];
+    std::snprintf(line, sizeof line, "capsule %s = from [%.6f, %.6f, %.6f] to [%.6f, %.6f, %.6f] radius %.6f mm\n",
+                  kin::capsule_name(k, name, sizeof name), cp.a.x() * 1e3, cp.a.y() * 1e3, cp.a.z() * 1e3,
+                  cp.b.x() * 1e3, cp.b.y() * 1e3, cp.b.z() * 1e3, cp.radius * 1e3);
+    text += line;
+  }
+  if (chain.capsule_mask == 0) return text;
+  for (int i = 0; i < kin::kMaxCapsules; ++i) {
+    std::snprintf(line, sizeof line, "capsule pairs %d = %08X\n", i,
+                  static_cast<unsigned>(chain.capsule_pairs[static_cast<std::size_t>(i)]));
+    text += line;
+  }
+  return text;
+}
+
+std::uint32_t safety_checksum(const FwConfig& c, const kin::Chain& chain) {
+  return crc32_of(safety_canonical(c) + safety_description_canonical(chain));
 }
 
 namespace {

@@ -355,6 +355,9 @@ std::string Console::safety_text() const {
   if (lim.stop_distance > 0) s += fmt(" stop_distance_mm=%g", lim.stop_distance * 1e3);
   if (lim.momentum > 0) s += fmt(" momentum_kg_m_s=%g", lim.momentum);
   if (lim.power > 0) s += fmt(" power_w=%g", lim.power);
+  if (env.self_collision)
+    s += fmt(" self_collision_margin_mm=%g capsule_pairs=%d", env.self_collision_margin * 1e3,
+             kin::capsule_pair_count(chain_));
   return s;
 }
 

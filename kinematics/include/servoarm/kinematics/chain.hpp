@@ -75,6 +75,21 @@ struct LinkInertial {
   std::array<double, 6> io{};
 };
 
+/// A capsule: every point within `radius` of the segment from `a` to `b` (m, in the frame of
+/// the link it belongs to). The self-collision check of the safety envelope (safety.hpp,
+/// docs/safety.md) keeps the capsules of non-adjacent links apart.
+struct Capsule {
+  Eigen::Vector3d a{0, 0, 0}, b{0, 0, 0};
+  double radius = 0;
+};
+
+/// Capsule slots of a chain: 0 the base (in the base frame), k = 1..kMaxRows the link of DH
+/// row k (in the frame after row k, as FrameSet::frame[k]), and kToolCapsule the tool's (from
+/// the flange to the TCP, made from the active tool when the envelope is checked).
+inline constexpr int kMaxCapsules = kMaxRows + 2;
+inline constexpr int kToolCapsule = kMaxRows + 1;
+static_assert(kMaxCapsules <= 32, "the capsule pair masks are 32-bit");
+
 /// A serial chain of up to kMaxRows DH rows (kMaxJoints of them joints).
 struct Chain {
   std::array<char, 48> name{};
@@ -94,6 +109,13 @@ struct Chain {
   std::array<LinkInertial, kMaxRows> inertial{};
   bool has_inertial = false;  ///< false: the dynamics functions return unsupported
   std::array<double, 3> gravity{0.0, 0.0, -9.81};
+  /// Self-collision geometry from the description (slots as kMaxCapsules says; the tool slot
+  /// is never stored here). capsule_mask bit k: slot k holds a capsule. capsule_pairs[i] bit j
+  /// (j > i): the pair (i, j) is checked: both present (the tool always is), their links not
+  /// the same body nor joined by one joint, and not in the description's ignore list.
+  std::array<Capsule, kMaxRows + 1> capsule{};
+  std::uint32_t capsule_mask = 0;
+  std::array<std::uint32_t, kMaxCapsules> capsule_pairs{};
 
   const DhRow& joint(int j) const { return rows[static_cast<std::size_t>(joint_row[static_cast<std::size_t>(j)])]; }
   DhRow& joint(int j) { return rows[static_cast<std::size_t>(joint_row[static_cast<std::size_t>(j)])]; }

@@ -31,6 +31,12 @@
 //    mechanical power: the sum over the joints of |torque x velocity| (W, torques by inverse
 //    dynamics: inertia, Coriolis, gravity, friction), each at most its limit (needs the
 //    description's inertial data).
+//  - self-collision: the description's capsules (Chain::capsule, one per link and the base)
+//    and the tool's (the segment from the flange to the TCP, radius tool_radius), each pair
+//    the chain checks (Chain::capsule_pairs: non-adjacent links, minus an ignore list) at least
+//    self_collision_margin apart, surface to surface: value the smallest such distance
+//    (negative when two overlap), limit the margin. The segment distance is exact (closed
+//    form, segment_distance).
 // A function is violated when its value is beyond its limit by more than the margin the
 // caller passes (0 at plan time, the function's tolerance in the run-time monitor).
 //
@@ -104,6 +110,11 @@ struct SafetyConfig {
   double stop_time_tolerance = 0.02;  ///< s: run-time margin of the stop time (the stop distance's: position_tolerance)
   double momentum_tolerance = 0.5;    ///< kg m/s: run-time margin of the momentum
   double power_tolerance = 5;         ///< W: run-time margin of the power
+  /// Self-collision: safety_sample finds the closest pair of the chain's capsules (and the
+  /// tool's) and check_sample keeps it self_collision_margin apart (run-time margin:
+  /// position_tolerance). Needs a description with capsules.
+  bool self_collision = false;
+  double self_collision_margin = 0;  ///< m: least distance between two capsules' surfaces
   std::uint32_t prismatic = 0;  ///< bit j: joint j is prismatic (its speeds in mm/s, not deg/s)
   const SafetyLimits& limits(SafetyMode m) const;
 };
@@ -121,6 +132,7 @@ enum class SafetyFunction : std::uint8_t {
   stop_distance,  ///< the TCP's travel during the predicted stop
   momentum,       ///< the links' mass x centre-of-mass speed, summed
   power,          ///< the joints' |torque x velocity|, summed
+  self_collision,  ///< index, other = the two capsules (0 base, k link k, kToolCapsule the tool)
 };
 const char* to_string(SafetyFunction f);
 const char* to_string(SafetyMode m);
@@ -128,6 +140,7 @@ const char* to_string(SafetyMode m);
 struct SafetyViolation {
   SafetyFunction function = SafetyFunction::none;
   int index = -1;      ///< plane or box index
+  int other = -1;      ///< self_collision: the second capsule (index is the first)
   bool elbow = false;  ///< the elbow sphere, not the tool sphere
   bool linear = false; ///< joint_speed of a prismatic joint: m/s (mm/s in text), else rad/s (deg/s)
   double s = 0;        ///< where along the path (the sample's s; 0..1 for a move; < 0 at run time)
@@ -160,9 +173,14 @@ struct SafetySample {
   bool has_dynamics = false;  ///< momentum / power hold the state's (dynamics_prediction)
   double momentum = 0;        ///< kg m/s
   double power = 0;           ///< W
+  /// Self-collision (cfg.self_collision and the chain has capsules): the closest checked pair.
+  bool has_self = false;
+  double self_distance = 0;  ///< m: between the pair's surfaces (negative: they overlap)
+  std::int8_t self_a = -1, self_b = -1;  ///< its capsules (a < b; slots as kMaxCapsules)
+  Eigen::Vector3d self_where{0, 0, 0};   ///< m: midway between the pair's closest points
 };
 
-/// The functions at `x` in order (planes, boxes, cone, then the speeds when x.has_velocity):
+/// The functions at `x` in order (planes, boxes, cone, self-collision, then the speeds when x.has_velocity):
 /// true and `out` filled for the first one beyond its limit by more than its margin
 /// (position_margin m, angle_margin rad, speed_margin m/s; a joint's speed tolerance_scale
 /// times its joint_speed_tolerance, 1 in the monitor, or speed_margin when the scale is 0: plan
@@ -202,9 +220,35 @@ inline SafetyMode effective_mode(const SafetyConfig& cfg, SafetyMode mode, const
 /// `out` filled, false when the whole path is inside.
 bool check_path(const SafetyConfig& cfg, SafetyMode mode, std::span<const SafetySample> path, SafetyViolation& out);
 
-/// The sample for joint values q (FK of the chain; elbow from forward_frames). Returns false
-/// on a bad q (NaN, wrong size).
+/// The sample for joint values q (FK of the chain; elbow from forward_frames; with
+/// cfg.self_collision the closest capsule pair, self_capsules). Returns false on a bad q
+/// (NaN, wrong size).
 bool safety_sample(const Chain& chain, const SafetyConfig& cfg, const JointVector& q, double s, SafetySample& out);
+
+/// The distance between the segments p1-q1 and p2-q2 (closed form: Ericson, Real-Time
+/// Collision Detection, 2005, section 5.1.9, ClosestPtSegmentSegment; a segment of zero length
+/// is a point, parallel segments take the first end's projection). c1, c2: the closest points.
+double segment_distance(const Eigen::Vector3d& p1, const Eigen::Vector3d& q1, const Eigen::Vector3d& p2,
+                        const Eigen::Vector3d& q2, Eigen::Vector3d& c1, Eigen::Vector3d& c2);
+
+/// The closest pair of capsules the chain checks (Chain::capsule_pairs) placed by `frames`
+/// (forward_frames at some q): the description's, and with `with_tool` the tool's from the
+/// flange (frames.frame[n_rows]) to tcp with radius tool_radius. Fills x.has_self and the
+/// self_ fields; x.has_self false when no pair is checked. Heap-free; cost: one
+/// segment_distance per checked pair.
+void self_capsules(const Chain& chain, const FrameSet& frames, const Pose& tcp, bool with_tool, double tool_radius,
+                   SafetySample& x);
+
+/// Fills chain.capsule_pairs from its capsules, its joints (a link is adjacent to the one
+/// joined to it by one joint; a fixed row's link is the body before it; the tool is the last
+/// body's) and `ignore` (pairs of slots, either order). Set-up code (the description loader).
+void set_capsule_pairs(Chain& chain, std::span<const std::array<int, 2>> ignore);
+
+/// How many capsule pairs self_capsules checks with the tool's capsule (0 without capsules).
+int capsule_pair_count(const Chain& chain);
+
+/// "base", "link k" or "tool" for a capsule slot, into buf. Returns buf.
+const char* capsule_name(int slot, char* buf, std::size_t size);
 
 /// Fills x's velocities (has_velocity) from the previous sample p, h seconds earlier, at joints
 /// q_prev -> q: the TCP's, the elbow's and each joint's difference over h. Does nothing when h <= 0.
@@ -227,8 +271,8 @@ bool dynamics_prediction(const Chain& chain, const JointState& s, SafetySample& 
 bool is_speed(SafetyFunction f);
 
 /// "" when the config is consistent, else why not (written into buf, one line): a NaN, a zero
-/// normal, an inverted box, a keep-in box smaller than the tool sphere, a negative radius or
-/// limit. Returns buf or "".
+/// normal, an inverted box, a keep-in box smaller than the tool sphere, a negative radius,
+/// limit or self-collision margin. Returns buf or "".
 const char* safety_config_problem(const SafetyConfig& cfg, char* buf, std::size_t size);
 
 }  // namespace servoarm::kin

@@ -174,6 +174,8 @@ struct FwConfig {
   std::vector<double> safety_keep_out_frames;  ///< one frame per safety.keep_out box
   std::vector<double> safety_reduced_planes;   ///< trigger planes: nx, ny, nz, offset_mm; Reduced beyond one
   std::vector<double> safety_reduced_plane_frames;  ///< one frame per safety.reduced_planes plane
+  bool safety_self_collision = false;            ///< the description's capsules kept apart pairwise
+  double safety_self_collision_margin_mm = 0.0;  ///< least distance between two capsules' surfaces
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;
@@ -402,8 +404,14 @@ std::string safety_envelope(const FwConfig& cfg, const kin::Chain& chain, kin::S
 /// The canonical form of the [safety] section: one `key = value` line per key of the
 /// table's safety.* rows, in table order, values as to_toml writes them.
 std::string safety_canonical(const FwConfig& cfg);
-/// CRC-32 (IEEE 802.3) of safety_canonical(): what `status` shows as the safety checksum.
+/// CRC-32 (IEEE 802.3) of safety_canonical().
 std::uint32_t safety_checksum(const FwConfig& cfg);
+/// The description's part of the safety configuration: its self-collision capsules (mm) and
+/// the pairs checked, one line each; "" for a description without capsules.
+std::string safety_description_canonical(const kin::Chain& chain);
+/// CRC-32 of safety_canonical() followed by safety_description_canonical(): what `status`
+/// shows as the safety checksum (equal to safety_checksum(cfg) for a robot without capsules).
+std::uint32_t safety_checksum(const FwConfig& cfg, const kin::Chain& chain);
 
 /// The effective configuration as TOML (what `config` prints); loads back to `cfg`.
 /// Unset [[drive]] keys are left out.
