@@ -565,8 +565,12 @@ JitterRun run_jittered_arrival(Rig& rig, bool timed) {
   int k = 0;
   double arrive = delay(rng);
   kin::JointVector qd_prev = kin::JointVector::Zero(q0.size());
-  for (int c = 0; c < 4000; ++c) {
-    const double now = c * 1e-3;
+  // the control thread's clock is the time base (a request to it runs cycles of its own here)
+  const std::uint64_t c0 = rig.tel().cycles;
+  auto clock_s = [&] { return static_cast<double>(rig.tel().cycles - c0) * 1e-3; };
+  double t_prev = 0;
+  while (clock_s() < 4.0) {
+    const double now = clock_s();
     while (now >= arrive) {  // every target due by now, oldest first
       const double ts = k * T;
       const StreamResult r = st.target(at(ts), k == 0, kin::JointVector(), timed ? std::optional<double>(100.0 + ts) : std::nullopt);
@@ -579,9 +583,10 @@ JitterRun run_jittered_arrival(Rig& rig, bool timed) {
     const Telemetry tel = rig.tel();
     kin::JointVector qd(tel.n);
     for (int j = 0; j < tel.n; ++j) qd[j] = tel.qd_cmd[static_cast<std::size_t>(j)];
-    const double t = now + 1e-3;
+    const double t = clock_s();
+    const double dt = t - t_prev;  // one cycle, or more when a target's request ran cycles
     if (t >= 1.0) {
-      const kin::JointVector e = rig.q_cmd() - at(t), ev = qd - vel(t), ea = (qd - qd_prev) / 1e-3 - acc(t);
+      const kin::JointVector e = rig.q_cmd() - at(t), ev = qd - vel(t), ea = (qd - qd_prev) / dt - acc(t - 0.5 * dt);
       out.worst = std::max(out.worst, e.cwiseAbs().maxCoeff());
       se += e.squaredNorm() / static_cast<double>(e.size());
       sv += ev.squaredNorm() / static_cast<double>(ev.size());
@@ -589,6 +594,7 @@ JitterRun run_jittered_arrival(Rig& rig, bool timed) {
       ++samples;
     }
     qd_prev = qd;
+    t_prev = t;
     CHECK(k == 0 || tel.streaming);
   }
   const double n = static_cast<double>(std::max(1L, samples));
