@@ -111,7 +111,7 @@ class Api:
             t = time.perf_counter()
             m = json.loads(line)
             with self.cv:
-                if m.get("topic") == "state":
+                if m.get("topic") == "state" and "id" not in m:  # a sample (a `state` answer has the id)
                     self.states.append((t, m))
                 elif "id" in m:
                     self.answers[m["id"]] = (t, m)
