@@ -125,7 +125,8 @@ struct Rig {
   std::thread pump_th;
   std::atomic<bool> stop{false};
 
-  explicit Rig(api::ApiConfig ac = {}, bool collision = false, std::vector<OutputConfig> outputs = {}) {
+  explicit Rig(api::ApiConfig ac = {}, bool collision = false, std::vector<OutputConfig> outputs = {},
+               double stream_deadman_s = 0.1) {
     FwConfig cfg;
     cfg.outputs = std::move(outputs);
     cfg.collision = collision;  // the drives map their measured torque (6077h) then
@@ -159,6 +160,7 @@ struct Rig {
     cx.ik = firmware_ik_solver(app.ik_ready ? app.ik.get() : nullptr);
     StreamSettings ss;
     ss.max_step.assign(6, 0.5);
+    ss.deadman_s = stream_deadman_s;
     stream = std::make_unique<StreamService>(app.console->service(), *app.ctl, ss);
     cx.stream = stream.get();
     cx.units = app.console->config().units;
@@ -550,6 +552,46 @@ TEST(FwApi, StreamAndAStopFromAnotherClient) {
   }
   DOUBLES_EQUAL(rest, rig.tel().q_cmd[0], 1e-12);
   CHECK_EQUAL(static_cast<int>(ArmState::idle), static_cast<int>(rig.tel().state));
+}
+
+// Streamed targets with the client's time over the API: each answer carries the stream's counts;
+// an older target is answered ok with `stale` and counted (the state sample's `stream` too); a
+// negative, non-numeric or NaN time is refused in one line.
+TEST(FwApi, StreamTargetsWithTheClientsTime) {
+  Rig rig({}, false, {}, 30.0);  // a deadman that a loaded machine's pauses between requests do not reach
+  Client a(rig.port());
+  rig.enable(a);
+  const std::string first = a.ask(10, "\"cmd\":\"stream\",\"q\":[0,0,0,0,0,0],\"start\":true,\"t\":1000.0");
+  CHECK_TEXT(is_ok(first) && has(first, "\"stream\":{") && has(first, "\"timed\":1"), first.c_str());
+  const std::string next = a.ask(11, "\"cmd\":\"stream\",\"q\":[0.01,0,0,0,0,0],\"t\":1000.02");
+  CHECK_TEXT(is_ok(next) && !has(next, "\"stale\":true") && has(next, "\"targets\":2"), next.c_str());
+  const std::string old = a.ask(12, "\"cmd\":\"stream\",\"q\":[0.3,0,0,0,0,0],\"t\":1000.01");
+  CHECK_TEXT(is_ok(old) && has(old, "\"stale\":true") && has(old, "\"stale\":1") && has(old, "\"targets\":2"), old.c_str());
+  struct Case {
+    const char* line;
+    const char* error;
+    const char* says;
+  } cases[] = {
+      {"{\"id\":20,\"cmd\":\"stream\",\"q\":[0.01,0,0,0,0,0],\"t\":-1}", "out_of_range", "t: -1 is outside"},
+      {"{\"id\":21,\"cmd\":\"stream\",\"q\":[0.01,0,0,0,0,0],\"t\":\"now\"}", "bad_number", "t"},
+      {"{\"id\":22,\"cmd\":\"stream\",\"q\":[0.01,0,0,0,0,0],\"t\":NaN}", "bad_json", ""},
+      {"{\"id\":23,\"cmd\":\"stream\",\"q\":[0.01,0,0,0,0,0],\"t\":5000}", "out_of_range", "ahead of the control thread's clock"},
+  };
+  for (const Case& k : cases) {
+    a.send(k.line);
+    std::string r;
+    while (r.empty() || has(r, "\"topic\"")) r = a.line();
+    STRCMP_EQUAL_TEXT(k.error, error_of(r).c_str(), (std::string(k.line) + " -> " + r).c_str());
+    CHECK_TEXT(has(r, k.says), r.c_str());
+  }
+  // the state sample says the same counts (taken on the service thread after each round)
+  std::string st;
+  for (int i = 0; i < 100 && !has(st, "\"stale\":1"); ++i) {
+    st = a.ask(30 + i, "\"cmd\":\"state\"");
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  CHECK_TEXT(has(st, "\"stream\":{") && has(st, "\"stale\":1"), st.c_str());
+  CHECK(rig.tel().q_cmd[0] < 0.2);  // the stale 0.3 was never a target
 }
 
 // docs/api.md holds exactly what the message table produces between its markers.

@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -510,4 +512,208 @@ TEST(FwStream, ACartesianTargetInTheActiveFrame) {
   kin::Pose p;
   CHECK(kin::forward(ch, rig.q_cmd(), p) == kin::Status::ok);
   CHECK((p.translation() - goal.translation()).norm() < 1e-4);
+}
+
+namespace {
+
+/// A client sampling a 0.5 Hz, 0.4 rad sine (every joint, phases 0.5 rad apart) at a steady 30 Hz
+/// whose targets reach the service 0 to 12 ms after they were sampled (a loaded machine's
+/// scheduling, a network), in order, for 4 s; the targets carry their sampling time
+/// (`timed`, on a clock 100 s from the sine's origin) or not. Over the last 3 s: the commanded
+/// velocity's ripple (RMS of qd_cmd against the sine's velocity at the same instant), the largest
+/// change of the commanded acceleration within a cycle (jerk), and the tracking error.
+struct JitterRun {
+  double v_ripple = 0, a_ripple = 0, worst = 0, rms = 0;
+  Peaks peaks;
+  StreamStats stats;
+  std::string figure() const {
+    char b[320];
+    std::snprintf(b, sizeof b,
+                  "velocity ripple rms %.4f rad/s, acceleration ripple rms %.3f rad/s^2, tracking error max %.4f rms %.4f "
+                  "rad, peak/limit v %.3f a %.3f j %.3f, late max %.1f ms jitter %.2f ms, stale %llu",
+                  v_ripple, a_ripple, worst, rms, peaks.v, peaks.a, peaks.j, stats.late_max_s * 1e3, stats.jitter_s * 1e3,
+                  static_cast<unsigned long long>(stats.stale));
+    return b;
+  }
+};
+JitterRun run_jittered_arrival(Rig& rig, bool timed) {
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  const kin::JointVector q0 = rig.q_cmd();
+  const double amp = 0.4, w = 2 * M_PI * 0.5, T = 1.0 / 30;
+  auto at = [&](double t) {
+    kin::JointVector q = q0;
+    for (int j = 0; j < q.size(); ++j) q[j] += amp * std::sin(w * t + 0.5 * j);
+    return q;
+  };
+  auto vel = [&](double t) {
+    kin::JointVector v = kin::JointVector::Zero(q0.size());
+    for (int j = 0; j < v.size(); ++j) v[j] = amp * w * std::cos(w * t + 0.5 * j);
+    return v;
+  };
+  auto acc = [&](double t) {
+    kin::JointVector a = kin::JointVector::Zero(q0.size());
+    for (int j = 0; j < a.size(); ++j) a[j] = -amp * w * w * std::sin(w * t + 0.5 * j);
+    return a;
+  };
+  std::mt19937 rng(38);
+  std::uniform_real_distribution<double> delay(0.0, 0.012);
+  JitterRun out;
+  rig.record = true;
+  rig.trace.clear();
+  double sv = 0, sa = 0, se = 0;
+  long samples = 0;
+  int k = 0;
+  double arrive = delay(rng);
+  kin::JointVector qd_prev = kin::JointVector::Zero(q0.size());
+  // the control thread's clock is the time base (a request to it runs cycles of its own here)
+  const std::uint64_t c0 = rig.tel().cycles;
+  auto clock_s = [&] { return static_cast<double>(rig.tel().cycles - c0) * 1e-3; };
+  double t_prev = 0;
+  while (clock_s() < 4.0) {
+    const double now = clock_s();
+    while (now >= arrive) {  // every target due by now, oldest first
+      const double ts = k * T;
+      const StreamResult r = st.target(at(ts), k == 0, kin::JointVector(), timed ? std::optional<double>(100.0 + ts) : std::nullopt);
+      CHECK_TEXT(r.ok() && !r.stale, r.reason.c_str());
+      out.stats = r.stats;
+      ++k;
+      arrive = k * T + delay(rng);
+    }
+    rig.cycle();
+    const Telemetry tel = rig.tel();
+    kin::JointVector qd(tel.n);
+    for (int j = 0; j < tel.n; ++j) qd[j] = tel.qd_cmd[static_cast<std::size_t>(j)];
+    const double t = clock_s();
+    const double dt = t - t_prev;  // one cycle, or more when a target's request ran cycles
+    if (t >= 1.0) {
+      const kin::JointVector e = rig.q_cmd() - at(t), ev = qd - vel(t), ea = (qd - qd_prev) / dt - acc(t - 0.5 * dt);
+      out.worst = std::max(out.worst, e.cwiseAbs().maxCoeff());
+      se += e.squaredNorm() / static_cast<double>(e.size());
+      sv += ev.squaredNorm() / static_cast<double>(ev.size());
+      sa += ea.squaredNorm() / static_cast<double>(ea.size());
+      ++samples;
+    }
+    qd_prev = qd;
+    t_prev = t;
+    CHECK(k == 0 || tel.streaming);
+  }
+  const double n = static_cast<double>(std::max(1L, samples));
+  out.v_ripple = std::sqrt(sv / n);
+  out.a_ripple = std::sqrt(sa / n);
+  out.rms = std::sqrt(se / n);
+  out.peaks = peak_ratios(rig.trace, rig.svc().limits());
+  rig.record = false;
+  if (std::getenv("SERVOARM_STREAM_FIGURES") != nullptr)
+    std::printf("\n30 Hz sine sampled on time, delivered 0-12 ms late, %s: %s\n", timed ? "with t" : "without t",
+                out.figure().c_str());
+  return out;
+}
+
+}  // namespace
+
+// Targets sampled at a steady 30 Hz but delivered 0 to 12 ms late: spaced by their arrival, the
+// velocity estimate swings with the delivery (a 33 ms interval read as 21 to 45 ms) and a late
+// target pulls the moving target back; spaced by the client's times and moved on by their
+// velocity over their delay, the commanded path is smoother: its velocity and acceleration
+// ripple against the sine are well below the arrival-spaced run's, within the same limits.
+TEST(FwStream, ClientTimesSmoothAJitteredArrival) {
+  JitterRun without, with;
+  {
+    Rig rig;
+    rig.enable();
+    without = run_jittered_arrival(rig, false);
+  }
+  {
+    Rig rig;
+    rig.enable();
+    with = run_jittered_arrival(rig, true);
+  }
+  const std::string fig = "without t: " + without.figure() + "; with t: " + with.figure();
+  CHECK_TEXT(with.v_ripple < 0.5 * without.v_ripple, fig.c_str());
+  CHECK_TEXT(with.a_ripple < 0.7 * without.a_ripple, fig.c_str());
+  CHECK_TEXT(with.rms < without.rms, fig.c_str());
+  CHECK_TEXT(with.peaks.v <= 1.0 + 1e-6 && with.peaks.a <= 1.0 + 1e-3 && with.peaks.j <= 1.0 + 1e-2, fig.c_str());
+  // the service saw the delivery: delays up to the 12 ms given, none stale
+  CHECK_TEXT(with.stats.late_max_s > 0.008 && with.stats.late_max_s < 0.0125, fig.c_str());
+  CHECK_TEXT(with.stats.jitter_s > 0.002 && with.stats.jitter_s < 0.005, fig.c_str());
+  CHECK_EQUAL(0u, with.stats.stale);
+  CHECK_EQUAL(with.stats.targets, with.stats.timed);
+}
+
+// A timed target older than, or as old as, the stream's newest is dropped: answered ok with
+// `stale`, counted, never sent (the arm keeps tracking the newest); `start` begins a new clock.
+TEST(FwStream, AnOutOfOrderTargetIsDroppedAndCounted) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  const kin::JointVector q0 = rig.q_cmd(), rest = kin::JointVector::Zero(q0.size());
+  kin::JointVector q1 = q0, far = q0;
+  q1[0] += 0.05;
+  far[0] += 0.3;
+  rig.record = true;
+  CHECK(st.target(q0, true, rest, 5.0).ok());
+  rig.run(0.02);
+  CHECK(st.target(q1, false, rest, 5.02).ok());
+  rig.run(0.01);
+  const StreamResult older = st.target(far, false, rest, 5.01);
+  CHECK_TEXT(older.ok(), older.reason.c_str());
+  CHECK(older.stale);
+  CHECK_EQUAL(1u, older.stats.stale);
+  const StreamResult same = st.target(far, false, rest, 5.02);
+  CHECK(same.ok() && same.stale);
+  CHECK_EQUAL(2u, same.stats.stale);
+  CHECK_EQUAL(2u, same.stats.targets);
+  for (int i = 1; i <= 30; ++i) {  // the newest target, kept alive
+    const StreamResult r = st.target(q1, false, rest, 5.02 + 0.01 * i);
+    CHECK(r.ok() && !r.stale);
+    rig.run(0.01);
+  }
+  double top = -1e9;
+  for (const kin::JointVector& q : rig.trace) top = std::max(top, q[0]);
+  DOUBLES_EQUAL(q1[0], rig.q_cmd()[0], 1e-6);
+  CHECK_TEXT(top <= q1[0] + 1e-9, ("joint 0 went to " + std::to_string(top) + " beyond the newest target").c_str());
+  CHECK_EQUAL(2u, st.stats().stale);
+  // a new stream, a new clock: an earlier time is its first target, counts start again
+  const StreamResult again = st.target(q1, true, rest, 1.0);
+  CHECK(again.ok() && !again.stale);
+  CHECK_EQUAL(0u, again.stats.stale);
+  CHECK_EQUAL(1u, again.stats.targets);
+}
+
+// A bad time is refused with one line and moves nothing: NaN (not_finite), negative and a jump
+// of the client's clock far beyond the control thread's (out_of_range); the stream keeps its last
+// target and goes on with the next good one.
+TEST(FwStream, ABadClientTimeIsRefused) {
+  Rig rig;
+  rig.enable();
+  StreamService st(rig.svc(), *rig.app.ctl, rig.settings());
+  const kin::JointVector q0 = rig.q_cmd(), rest = kin::JointVector::Zero(q0.size());
+  kin::JointVector q1 = q0;
+  q1[0] += 0.2;
+  CHECK(st.target(q0, true, rest, 50.0).ok());
+  rig.run(0.02);
+  struct Case {
+    double t;
+    CmdError error;
+    const char* says;
+  };
+  const Case cases[] = {{std::nan(""), CmdError::not_finite, "t: not finite"},
+                        {std::numeric_limits<double>::infinity(), CmdError::not_finite, "t: not finite"},
+                        {-0.5, CmdError::out_of_range, "t: -0.5 s is negative"},
+                        {50.0 + 3600, CmdError::out_of_range, "s ahead of the control thread's clock"},
+                        {50.0 + 1.5, CmdError::out_of_range, "s ahead of the control thread's clock"}};
+  for (const Case& c : cases) {
+    const StreamResult r = st.target(q1, false, rest, c.t);
+    const std::string what = std::to_string(c.t) + ": " + r.reason;
+    CHECK_EQUAL_TEXT(static_cast<int>(c.error), static_cast<int>(r.error), what.c_str());
+    CHECK_TEXT(r.reason.find(c.says) != std::string::npos && r.reason.find('\n') == std::string::npos, what.c_str());
+    rig.run(0.01);
+  }
+  CHECK((rig.q_cmd() - q0).cwiseAbs().maxCoeff() < 1e-9);  // nothing moved
+  CHECK(rig.tel().streaming);
+  // within the allowance (the client's clock 0.5 s ahead after 70 ms): taken
+  const StreamResult ok = st.target(q1, false, rest, 50.0 + 0.57);
+  CHECK_TEXT(ok.ok() && !ok.stale, ok.reason.c_str());
+  rig.run(0.05);
+  CHECK(rig.q_cmd()[0] > q0[0]);
 }

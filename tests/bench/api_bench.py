@@ -11,7 +11,10 @@ With --stream: streaming targets (a sine and a hand-like motion at 30 / 100 / 50
 targets computed in the same run; the deadman's stop distance; the pty console's round trip next
 to the API's; the e-stop's time to the arm's stop while another client floods requests.
 
-  python3 tests/bench/api_bench.py build/bin/armfw [--stream]
+Each streaming row runs three ways: the velocity estimated by the firmware from the targets'
+arrival, estimated from the client's sampling times (`t`), and sent with the target (`qd`, and `t`).
+
+  python3 tests/bench/api_bench.py build/bin/armfw [--stream [--rates=30,100,500]]
 """
 import math
 import os
@@ -108,7 +111,7 @@ class Api:
             t = time.perf_counter()
             m = json.loads(line)
             with self.cv:
-                if m.get("topic") == "state":
+                if m.get("topic") == "state" and "id" not in m:  # a sample (a `state` answer has the id)
                     self.states.append((t, m))
                 elif "id" in m:
                     self.answers[m["id"]] = (t, m)
@@ -183,7 +186,7 @@ def setpoint_peaks(ts, v, lim):
     return max(map(abs, a or [0])) / lim[1], max(map(abs, j or [0])) / lim[2]
 
 
-def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005, send_qd=False):
+def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005, send_qd=False, send_t=False):
     a = Api(port)
     a.ask("take_control")
     a.ask("enable")
@@ -207,11 +210,15 @@ def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005, send_qd=False):
         extra = {"start": True} if k == 0 else {}
         if send_qd:  # the target's velocity, as a client that knows its signal sends it
             extra["qd"] = [(fn(t + 1e-4) - fn(t - 1e-4)) / 2e-4, 0, 0, 0, 0, 0]
+        if send_t:  # when it was sampled, on this process's monotonic clock
+            extra["t"] = t0 + t
         a.send("stream", q=[x, 0, 0, 0, 0, 0], **extra)
         sent.append((t0 + t, x))
     time.sleep(0.5)
     with a.lock:
         st = [(t, m) for t, m in a.states if t >= t0]
+        refused = sum(1 for _, m in a.answers.values() if "error" in m)
+    counts = a.ask("state").get("stream", {})
     a.ask("stop")
     wait_idle(a)
     a.ask("release_control")
@@ -249,7 +256,7 @@ def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005, send_qd=False):
     qdc = [m["qd_cmd"][0] for _, m in st]
     pk = (max(map(abs, qdc)) / lim[0],) + setpoint_peaks(at, qdc, lim)
     return dict(lag=best, err=err, err0=err0, rms0=rms0, pk=pk, nlag=nbest, nerr=nerr, npk=peaks(ngrid, nq, lim),
-                samples=len(st), targets=len(sent))
+                samples=len(st), targets=len(sent), refused=refused, counts=counts)
 
 
 def deadman(port, lim):
@@ -335,7 +342,7 @@ def estop_under_flood(port):
     return (ans - t0) * 1e3, ((seen[0] - t0) * 1e3 if seen else -1), (seen[1]["state"] if seen else "?"), rate
 
 
-def stream_main(exe):
+def stream_main(exe, rates=(30, 100, 500)):
     p, port, pty = start(exe, ("--pty",))
     try:
         time.sleep(1)
@@ -344,13 +351,20 @@ def stream_main(exe):
         h.s.close()
         lim = (j0["max_velocity"], j0["max_acceleration"], j0["max_jerk"])
         print(f"joint 1 limits: v {lim[0]:.3f} rad/s, a {lim[1]:.3f} rad/s^2, j {lim[2]:.1f} rad/s^3")
+        # each target as sent: its velocity estimated by the firmware from arrivals, estimated from
+        # the client's times (t), or sent with it (qd) and its time
+        modes = (("estimated", False, False), ("estimated, t", False, True), ("qd, t", True, True))
         for name, fn in (("sine", sine), ("hand", hand)):
-            for rate in (30, 100, 500):
-                r = stream_run(port, lim, fn, rate)
-                print(f"{name} {rate:3d} Hz: targets {r['targets']}, samples {r['samples']}; stream: lag {r['lag']} ms, "
-                      f"max error {r['err']:.4f} rad, peak v/a/j {r['pk'][0]:.2f}/{r['pk'][1]:.2f}/{r['pk'][2]:.2f}; "
-                      f"naive interpolation: lag {r['nlag']} ms, max error {r['nerr']:.4f} rad, peak v/a/j "
-                      f"{r['npk'][0]:.2f}/{r['npk'][1]:.2f}/{r['npk'][2]:.2f}")
+            for rate in rates:
+                for mode, qd, ts in modes:
+                    r = stream_run(port, lim, fn, rate, send_qd=qd, send_t=ts)
+                    c = r["counts"]
+                    print(f"{name} {rate:3d} Hz {mode:12s}: targets {r['targets']} (refused {r['refused']}, stale "
+                          f"{c.get('stale', 0)}, late max {c.get('late_max_ms', 0):.1f} ms, jitter {c.get('jitter_ms', 0):.2f} ms), "
+                          f"samples {r['samples']}; stream: lag {r['lag']} ms, max error {r['err']:.4f} rad, unshifted max "
+                          f"{r['err0']:.4f} rms {r['rms0']:.4f} rad, peak v/a/j {r['pk'][0]:.2f}/{r['pk'][1]:.2f}/{r['pk'][2]:.2f}; "
+                          f"naive interpolation: lag {r['nlag']} ms, max error {r['nerr']:.4f} rad, peak v/a/j "
+                          f"{r['npk'][0]:.2f}/{r['npk'][1]:.2f}/{r['npk'][2]:.2f}", flush=True)
         d, ms = deadman(port, lim)
         print(f"deadman: 0.5 rad/s stream stopped: rest {d * 1000:.1f} mrad beyond the last target, {ms:.0f} ms after it")
         med, p99 = roundtrips(port, "events", 1000)
@@ -366,7 +380,9 @@ def stream_main(exe):
 
 def main():
     if "--stream" in sys.argv:
-        return stream_main(next((x for x in sys.argv[1:] if not x.startswith("--")), "build/bin/armfw"))
+        rates = next((x.split("=", 1)[1] for x in sys.argv if x.startswith("--rates=")), "30,100,500")
+        return stream_main(next((x for x in sys.argv[1:] if not x.startswith("--")), "build/bin/armfw"),
+                           tuple(int(r) for r in rates.split(",")))
     p, port = start(sys.argv[1] if len(sys.argv) > 1 else "build/bin/armfw")
     try:
         time.sleep(1)

@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 
@@ -149,6 +150,18 @@ double num_or(const ServiceCall& c, const char* name, double dflt) {
   return a != nullptr && a->present ? a->num : dflt;
 }
 
+/// A stream's counts (a `stream` answer's and the state's `stream`).
+json stream_json(const fw::StreamStats& s) {
+  return {{"targets", s.targets}, {"timed", s.timed}, {"stale", s.stale}, {"late_ms", s.late_s * 1e3},
+          {"late_max_ms", s.late_max_s * 1e3}, {"jitter_ms", s.jitter_s * 1e3}};
+}
+
+/// A streamed target's client time `t` (s), when given.
+std::optional<double> time_of(const ServiceCall& c) {
+  const ArgValue* a = c.rq.arg("t");
+  return a != nullptr && a->present ? std::optional<double>(a->num) : std::nullopt;
+}
+
 // The active tool's chain and IK, as the console's moves have them.
 fw::MoveContext move_cx(ServiceCall& c) {
   fw::MoveContext m;
@@ -199,12 +212,16 @@ constexpr ArgSpec kStream[] = {
     {"q", ArgType::numbers, true, -1e6, 1e6, "the newest joint target, one value per joint (rad / m)"},
     {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"},
     {"qd", ArgType::numbers, false, -1e6, 1e6,
-     "the target's joint velocities (rad/s / m/s); left out: estimated from this target and the one before"}};
+     "the target's joint velocities (rad/s / m/s); left out: estimated from this target and the one before"},
+    {"t", ArgType::number, false, 0, 1e10,
+     "when the client sampled the target (s on its own monotonic clock, any origin): targets are spaced by it, not "
+     "by their arrival; one not newer than the stream's newest is dropped (answered with `stale`); see Streaming targets"}};
 constexpr ArgSpec kStreamPose[] = {
     {"position", ArgType::numbers, true, -1000, 1000, "the tool point [x, y, z] (m), in the base frame or the active user frame"},
     {"rpy", ArgType::numbers, true, -10, 10, "the tool orientation [roll, pitch, yaw] (rad) in the same frame"},
     {"frame", ArgType::text, false, 4, 4, "`base` (default) or `user` (the active user frame)"},
-    {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"}};
+    {"start", ArgType::boolean, false, 0, 1, "true: begins a stream (the first target; again after the stream ended)"},
+    {"t", ArgType::number, false, 0, 1e10, "when the client sampled the pose (s on its own monotonic clock), as for `stream`"}};
 
 using C = ServiceCall;
 using R = ResultFields;
@@ -574,9 +591,11 @@ constexpr MessageSpec kMessages[] = {
        if (!joints_of(c, "q", q, out)) return;
        kin::JointVector qd;
        if (const ArgValue* v = c.rq.arg("qd"); v != nullptr && v->present && !joints_of(c, "qd", qd, out)) return;
-       const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0, qd);
+       const fw::StreamResult r = c.cx.stream->target(q, num_or(c, "start", 0) != 0, qd, time_of(c));
        if (!r.ok()) return out.fail(r.error, r.reason);
        if (r.clamped) out.j["clamped"] = true;
+       if (r.stale) out.j["stale"] = true;
+       out.j["stream"] = stream_json(r.stats);
      }},
     {"stream_pose", kStreamPose, Gate::control, Where::service, "StreamService::target_pose",
      "streaming (servo) mode with a Cartesian target: the active tool's pose, solved by the active tool's IK on the "
@@ -597,8 +616,10 @@ constexpr MessageSpec kMessages[] = {
        kin::Pose pose = kin::Pose::Identity();
        pose.linear() = kin::rotation_from_rpy(r->list[0], r->list[1], r->list[2]);
        pose.translation() = Eigen::Vector3d(p->list[0], p->list[1], p->list[2]);
-       const fw::StreamResult res = c.cx.stream->target_pose(pose, user, num_or(c, "start", 0) != 0);
+       const fw::StreamResult res = c.cx.stream->target_pose(pose, user, num_or(c, "start", 0) != 0, time_of(c));
        if (!res.ok()) return out.fail(res.error, res.reason);
+       if (res.stale) out.j["stale"] = true;
+       out.j["stream"] = stream_json(res.stats);
      }},
     {"program_save", kProgramSave, Gate::control, Where::service, "prog::load_program",
      "saves a program into the programs folder (programs.dir) as `name`.arm, or `name`.gcode for G-code, replacing "
@@ -995,6 +1016,7 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
   j["q_cmd"] = std::move(qc);
   j["qd_cmd"] = std::move(qd);
   j["streaming"] = t.streaming;
+  if (svc != nullptr) j["stream"] = stream_json(svc->stream);
   j["following_error"] = std::move(fe);
   kin::Pose p = kin::Pose::Identity();
   kin::FrameSet fs;

@@ -736,6 +736,7 @@ std::size_t ApiServer::pump(ServiceContext& cx) {
     for (std::size_t i = 0; i < cx.svc->output_count(); ++i)
       sn.outputs.emplace_back(cx.svc->settings().outputs[i].name, cx.svc->output_on(i));
     sn.frame = cx.svc->frame(cx.svc->active_frame()).name;
+    if (cx.stream != nullptr) sn.stream = cx.stream->stats();
     {
       std::lock_guard<std::mutex> l(s.snap_mu);
       s.snap = std::move(sn);

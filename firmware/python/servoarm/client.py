@@ -82,37 +82,63 @@ class Subscription:
 class Stream:
     """Streaming targets (servo mode): `send(q)` as often as the application produces targets;
     the first one starts the stream. The firmware brakes the arm to rest when no target comes
-    within its deadman time (api.stream_deadman_ms), and ends the stream; so does a stop."""
+    within its deadman time (api.stream_deadman_ms), and ends the stream; so does a stop.
 
-    def __init__(self, arm: "Arm"):
+    Each target carries the time it was sampled (`t`, s on the client's monotonic clock; by
+    default `time.monotonic()` when sent; `stamp=False`: none), so the firmware spaces targets
+    by when they were sampled rather than when they arrived. `stale` counts the targets the
+    firmware dropped as older than its newest; `stats` is the stream's counts from the last
+    answer (targets, timed, stale, late_ms, late_max_ms, jitter_ms: docs/api.md)."""
+
+    def __init__(self, arm: "Arm", stamp: bool = True):
         self._arm = arm
         self._started = False
+        self.stamp = stamp
         self.clamped = 0
+        self.stale = 0
+        self.stats: Dict[str, Any] = {}
 
-    def send(self, q: Sequence[float], qd: Optional[Sequence[float]] = None) -> None:
+    def _time(self, t: Optional[float]) -> Dict[str, Any]:
+        if t is not None:
+            return {"t": float(t)}
+        return {"t": time.monotonic()} if self.stamp else {}
+
+    def _answer(self, r: Dict[str, Any]) -> None:
+        self._started = True
+        if r.get("clamped"):
+            self.clamped += 1
+        if r.get("stale"):
+            self.stale += 1
+        self.stats = r.get("stream", self.stats)
+
+    def send(self, q: Sequence[float], qd: Optional[Sequence[float]] = None, t: Optional[float] = None) -> bool:
         """The newest target `q`, with its joint velocities `qd` when the application knows them
-        (otherwise the firmware estimates them from the targets' times): the arm follows a moving
-        target at its velocity instead of stopping at each one."""
-        args: Dict[str, Any] = {"q": [float(v) for v in q]}
+        (otherwise the firmware estimates them from the targets' times) and the time `t` it was
+        sampled (s, the application's monotonic clock; default: now): the arm follows a moving
+        target at its velocity instead of stopping at each one. False when the firmware dropped
+        the target as not newer than one it has (counted in `stale`)."""
+        args: Dict[str, Any] = {"q": [float(v) for v in q], **self._time(t)}
         if qd is not None:
             args["qd"] = [float(v) for v in qd]
         if not self._started:
             args["start"] = True
         r = self._arm.call("stream", **args)
-        self._started = True
-        if r.get("clamped"):
-            self.clamped += 1
+        self._answer(r)
+        return not r.get("stale", False)
 
-    def send_pose(self, position: Sequence[float], rpy: Sequence[float], frame: str = "base") -> None:
+    def send_pose(self, position: Sequence[float], rpy: Sequence[float], frame: str = "base",
+                  t: Optional[float] = None) -> bool:
         """The newest Cartesian target: the active tool's `position` (m) and `rpy` (rad) in the base
-        frame or the active user frame (`frame="user"`), solved by the firmware's IK. A pose out of
-        reach or too far from the last target raises ArmError; the arm keeps its last target."""
+        frame or the active user frame (`frame="user"`), solved by the firmware's IK, sampled at `t`
+        as for send(). A pose out of reach or too far from the last target raises ArmError; the arm
+        keeps its last target."""
         args: Dict[str, Any] = {"position": [float(v) for v in position], "rpy": [float(v) for v in rpy],
-                                "frame": frame}
+                                "frame": frame, **self._time(t)}
         if not self._started:
             args["start"] = True
-        self._arm.call("stream_pose", **args)
-        self._started = True
+        r = self._arm.call("stream_pose", **args)
+        self._answer(r)
+        return not r.get("stale", False)
 
     def restart(self) -> None:
         """The next send() starts a new stream (after the deadman or a stop ended this one)."""
@@ -303,9 +329,10 @@ class Arm:
         with self._ecv:
             return [e for e in self._events if e["seq"] > since]
 
-    def stream(self) -> Stream:
-        """Streaming targets: `with arm.stream() as s: s.send(q)`."""
-        return Stream(self)
+    def stream(self, stamp: bool = True) -> Stream:
+        """Streaming targets: `with arm.stream() as s: s.send(q)`; `stamp`: each target carries
+        the time it was sampled (Stream)."""
+        return Stream(self, stamp)
 
     # -- motion ----------------------------------------------------------------------------
     def home(self, joint: Optional[int] = None, wait: bool = True, timeout: float = 60.0) -> None:

@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """The Python client against `armfw --sim` (the real firmware with virtual drives), one armfw
-per test class, on a free port. ARMFW names the armfw binary (CTest sets it)."""
+per test class, on a free port. ARMFW names the armfw binary (CTest sets it); ARMFW_EMULATOR, when
+set, the program (and its arguments) that runs it (a cross tree's qemu-user)."""
 import math
 import os
 import re
@@ -18,7 +19,8 @@ from servoarm import Arm, ArmError, ArmStopped
 class ArmfwSim:
     def __init__(self, extra=()):
         exe = os.environ.get("ARMFW", "build/bin/armfw")
-        self.p = subprocess.Popen([exe, "--sim", "--no-stdin", "--api-tcp", "0", *extra], stderr=subprocess.PIPE,
+        emu = os.environ.get("ARMFW_EMULATOR", "").split()
+        self.p = subprocess.Popen([*emu, exe, "--sim", "--no-stdin", "--api-tcp", "0", *extra], stderr=subprocess.PIPE,
                                   stdout=subprocess.DEVNULL, text=True)
         self.port = None
         self.lines = []
@@ -322,6 +324,34 @@ class ClientTest(unittest.TestCase):
             sub.close()
             self.assertGreater(len(ratios), 20)
             self.assertGreater(min(ratios), 0.3, ratios)
+
+    def test_stream_timestamps(self):
+        # Each target carries time.monotonic() by default; one older than the newest is dropped
+        # (send returns False, counted in stale and in the answer's counts); a negative time is
+        # refused; stamp=False sends none.
+        with self.arm() as arm:
+            arm.enable()
+            q0 = arm.state()["q_cmd"]
+            with arm.stream() as st:
+                self.assertTrue(st.send(q0))
+                t1 = time.monotonic()
+                self.assertTrue(st.send(q0, t=t1))
+                self.assertEqual(st.stats["timed"], 2)
+                q = list(q0)
+                q[0] += 0.3
+                self.assertFalse(st.send(q, t=t1 - 0.01))
+                self.assertEqual(st.stale, 1)
+                self.assertEqual(st.stats["stale"], 1)
+                with self.assertRaises(ArmError) as e:
+                    st.send(q0, t=-1.0)
+                self.assertEqual(e.exception.code, "out_of_range")
+                self.assertTrue(st.send(q0))
+                self.assertLess(abs(arm.state()["q_cmd"][0] - q0[0]), 1e-6)
+            time.sleep(0.3)
+            with arm.stream(stamp=False) as st:
+                st.send(q0)
+                self.assertEqual(st.stats["timed"], 0)
+                self.assertEqual(st.stats["targets"], 1)
 
     def test_stream_poses(self):
         # Cartesian targets at 30 Hz: 20 mm down along z, the orientation kept; then a pose out of

@@ -7,7 +7,8 @@
 
 namespace servoarm::fw {
 
-StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool start, const kin::JointVector& qd_in, bool clamp_step) {
+StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool start, const kin::JointVector& qd_in,
+                                         std::optional<double> t_in, bool clamp_step) {
   StreamResult r;
   const kin::JointLimits& lim = svc_.limits();
   const int n = lim.n;
@@ -42,6 +43,18 @@ StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool star
       r.reason = "qd: joint " + std::to_string(j) + ": not finite";
       return r;
     }
+  if (t_in && !std::isfinite(*t_in)) {
+    r.error = CmdError::not_finite;
+    r.reason = "t: not finite";
+    return r;
+  }
+  if (t_in && *t_in < 0) {
+    char b[160];
+    std::snprintf(b, sizeof b, "t: %.6g s is negative (the target's time on the client's monotonic clock)", *t_in);
+    r.error = CmdError::out_of_range;
+    r.reason = b;
+    return r;
+  }
   const Telemetry t = ctl_.telemetry();
   // The stream runs while the control thread says so, or the target before this one was taken
   // in the cycle the telemetry shows (its own publication may not have come yet).
@@ -51,6 +64,30 @@ StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool star
     r.reason = sent_ ? std::string("the stream ended (the arm is ") + to_string(t.state) + "): start a new one"
                      : "no stream runs: the first target starts it (start)";
     return r;
+  }
+  // The client's clock: `start` begins it anew. A timed target not newer than the newest is
+  // dropped (counted, answered ok: a reordering transport is not an error of the client's).
+  const double now = static_cast<double>(t.cycles) * ctl_.period_s();
+  const bool clock = !start && clock_;
+  if (t_in && clock && *t_in <= t_newest_) {
+    ++stats_.stale;
+    r.stale = true;
+    r.stats = stats_;
+    return r;
+  }
+  double offset_min = offset_min_, late = 0;
+  if (t_in) {
+    const double off = now - *t_in;  // arrival on the control thread's clock less the client's time
+    if (clock && offset_min_ - off > kStreamClockAheadS) {
+      char b[200];
+      std::snprintf(b, sizeof b, "t: %.6g s is %.3f s ahead of the control thread's clock since the stream's fastest delivery (at most %g s)",
+                    *t_in, offset_min_ - off, kStreamClockAheadS);
+      r.error = CmdError::out_of_range;
+      r.reason = b;
+      return r;
+    }
+    offset_min = clock ? std::fmin(offset_min_, off) : off;
+    late = off - offset_min;
   }
   kin::JointVector q = q_in;
   kin::JointVector from(n);
@@ -78,15 +115,20 @@ StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool star
     return r;
   }
   // The target's velocity: the client's, or estimated from the target before and the time
-  // between them (the control thread's clock). The target moves on at it for `horizon` (twice
-  // the time between targets, at most the deadman time); a velocity that would carry it through
-  // the safety envelope within that time is dropped (the arm comes to rest at the target).
-  const double now = static_cast<double>(t.cycles) * ctl_.period_s();
-  const double gap = now - sent_t_;
-  const bool spaced = running && gap > 0 && gap <= cfg_.deadman_s;
+  // between them (the client's times when both have one, else the control thread's clock at
+  // their arrival). The target moves on at it for `horizon` (twice the time between targets, at
+  // most the deadman time); a velocity that would carry it through the safety envelope within
+  // that time is dropped (the arm comes to rest at the target).
+  const double arrival_gap = now - sent_t_;
+  const bool arrival_spaced = running && arrival_gap > 0 && arrival_gap <= cfg_.deadman_s;
+  const bool client_gap = t_in && clock && last_timed_ && running;
+  const double gap = client_gap ? *t_in - t_newest_ : arrival_gap;
+  const bool spaced = client_gap ? gap > 0 && gap <= cfg_.deadman_s : arrival_spaced;
   kin::JointVector qd = kin::JointVector::Zero(n);
   if (qd_in.size() == n)
     qd = qd_in;
+  else if (spaced && client_gap)
+    qd = (q - from) / std::fmax(gap, ctl_.period_s());
   else if (spaced)  // two targets that arrive close together (delayed on the way) are not a burst of speed
     qd = (q - from) / std::fmax(gap, 0.5 * gap_avg_);
   const double horizon = spaced ? std::fmin(cfg_.deadman_s, 2 * gap) : cfg_.deadman_s;
@@ -97,16 +139,30 @@ StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool star
       inside = inside && ahead[j] >= lim.lower[static_cast<std::size_t>(j)] && ahead[j] <= lim.upper[static_cast<std::size_t>(j)];
     if (!inside || !svc_.check_target(q, ahead, 0.0, &svc_.tool_chain(svc_.active_tool())).empty()) qd.setZero();
   }
+  // A timed target that came `late` after the fastest delivery has moved on at its velocity
+  // since it was sampled: it starts that far along its checked path, for the rest of its
+  // horizon (past the horizon: at the path's end, at rest).
+  kin::JointVector goal = q;
+  double goal_horizon = horizon;
+  if (late > 0 && qd.cwiseAbs().maxCoeff() > 0) {
+    if (late + ctl_.period_s() < horizon) {
+      goal = q + qd * late;
+      goal_horizon = horizon - late;
+    } else {
+      goal = q + qd * horizon;
+      qd.setZero();
+    }
+  }
   Request rq;
   rq.op = RequestOp::jog;
   rq.jog.space = JogSpace::joint;
   rq.jog.stream = true;
   rq.jog.deadman_s = cfg_.deadman_s;
-  rq.jog.q_goal = q;
+  rq.jog.q_goal = goal;
   rq.jog.override = std::fmin(1.0, std::fmax(0.01, cfg_.speed_pct / 100.0));
   rq.jog.axis = -1;
   rq.jog.qd_goal = qd;
-  rq.jog.horizon_s = horizon;
+  rq.jog.horizon_s = goal_horizon;
   Reply rep;
   if (!svc_.request(rq, rep)) {
     r.error = CmdError::timeout;
@@ -119,8 +175,27 @@ StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool star
       sent_ = true;
       sent_cycle_ = ctl_.telemetry().cycles;
       sent_t_ = now;
-      gap_avg_ = spaced ? (gap_avg_ > 0 ? 0.8 * gap_avg_ + 0.2 * gap : gap) : 0.0;
+      gap_avg_ = arrival_spaced ? (gap_avg_ > 0 ? 0.8 * gap_avg_ + 0.2 * arrival_gap : arrival_gap) : 0.0;
       svc_.jog_forget();  // the next jog starts from the commanded position, not a jog's tail
+      if (start) {
+        stats_ = StreamStats();
+        clock_ = false;
+        late_mean_ = late_m2_ = 0;
+      }
+      ++stats_.targets;
+      last_timed_ = t_in.has_value();
+      if (t_in) {
+        clock_ = true;
+        t_newest_ = *t_in;
+        offset_min_ = offset_min;
+        const double k = static_cast<double>(++stats_.timed), d = late - late_mean_;
+        late_mean_ += d / k;
+        late_m2_ += d * (late - late_mean_);
+        stats_.late_s = late;
+        stats_.late_max_s = std::fmax(stats_.late_max_s, late);
+        stats_.jitter_s = std::sqrt(late_m2_ / k);
+      }
+      r.stats = stats_;
       return r;
     case RtResult::busy: r.error = CmdError::busy; break;
     case RtResult::fault: r.error = CmdError::fault; break;
@@ -133,7 +208,7 @@ StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool star
   return r;
 }
 
-StreamResult StreamService::target_pose(const kin::Pose& pose_in, bool in_frame, bool start) {
+StreamResult StreamService::target_pose(const kin::Pose& pose_in, bool in_frame, bool start, std::optional<double> t_in) {
   StreamResult r;
   if (!pose_in.matrix().allFinite()) {
     r.error = CmdError::not_finite;
@@ -158,7 +233,7 @@ StreamResult StreamService::target_pose(const kin::Pose& pose_in, bool in_frame,
     r.reason = b;
     return r;
   }
-  return joint_target(q, start, kin::JointVector(), false);
+  return joint_target(q, start, kin::JointVector(), t_in, false);
 }
 
 }  // namespace servoarm::fw

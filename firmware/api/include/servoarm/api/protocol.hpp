@@ -21,10 +21,7 @@
 #include "servoarm/kinematics/ik.hpp"
 #include "servoarm/rt/controller.hpp"
 #include "servoarm/service/arm_service.hpp"
-
-namespace servoarm::fw {
-class StreamService;
-}
+#include "servoarm/service/stream.hpp"
 
 namespace servoarm::api {
 
@@ -165,6 +162,8 @@ struct ServiceSnapshot {
   kin::Pose tool_pose = kin::Pose::Identity();
   /// The digital outputs ([[output]] order): name and whether it is on (the drives' output words).
   std::vector<std::pair<std::string, bool>> outputs;
+  /// The streaming targets' counts since the stream's start (the state's `stream`).
+  fw::StreamStats stream;
 };
 /// `svc`: the service's part (nullptr: left out).
 std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain& chain, std::uint64_t dropped,
