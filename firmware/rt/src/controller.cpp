@@ -1286,6 +1286,7 @@ void Controller::publish() {
   t.safety_mode = safety_mode_.load(std::memory_order_relaxed);
   t.safety_stops = safety_stops_;
   t.safety_zone = static_cast<std::int8_t>(safety_.zone());
+  t.speed_scale = exec_.speed_scale();
   t.homing_failed = 0;
   std::uint16_t attained = 0;  // homed_mask() from the progress read here: one homing() a joint
   for (int j = 0; j < n_; ++j) {
@@ -1392,11 +1393,18 @@ void Controller::step_safety() {
     case Mode::freedrive_end: safety_.reset(); return;  // not powered on the setpoints
   }
   const kin::SafetyMode op = safety_mode();
+  if (op != last_op_) {  // the limits the running motion was planned with came down (or went up)
+    if (op == kin::SafetyMode::reduced) reduced_since_ = static_cast<std::int64_t>(cycles_);
+    last_op_ = op;
+  }
   const bool jogging = mode_ == Mode::jogging;
+  // the motion runs on the speed scale: the executor's segments (a jog is not scaled)
+  const bool scaled = watch && !jogging;
+  if (!scaled) speed_over_cycles_ = 0;
   kin::SafetyViolation v;
   bool on_actual = false;
   const int zone_before = safety_.zone();
-  bool hit = safety_.update(cmd_.pos, q_act_, op, jogging, v, on_actual);
+  bool hit = safety_.update(cmd_.pos, q_act_, op, jogging, v, on_actual, scaled);
   const kin::SafetyMode sm = safety_.effective(op);  // Reduced in a trigger plane's zone
   if (const int zone = safety_.zone(); zone != zone_before) {
     char z[sizeof(Event::message)];
@@ -1407,7 +1415,8 @@ void Controller::step_safety() {
     emit(EventKind::warning, FaultCause::none, -1, 0, z);
   }
   if (!watch) return;
-  if (!hit && safety_.check_state(limits_, cmd_, sm, v)) hit = true, on_actual = false;  // stop, momentum, power
+  if (!hit && safety_.check_state(limits_, cmd_, sm, v)) hit = true, on_actual = false;  // stop, momentum, power (not scaled)
+  if (!hit && scaled && scale_speed(v)) hit = true, on_actual = false;  // a speed the scale cannot keep
   char line[sizeof(Event::message)];
   char what[sizeof(Event::message)];
   if (jogging && !hit && safety_.predict_stop(limits_, cmd_, sm, v)) {
@@ -1431,6 +1440,46 @@ void Controller::step_safety() {
   begin_ramp(Mode::stopping_to_idle);
   ++safety_stops_;
   emit(was_jog ? EventKind::jog_stopped : EventKind::motion_refused, FaultCause::none, -1, id, line);
+}
+
+// Speed scaling (docs/safety.md#speed-scaling). The speeds go with the scale s, so the ratio
+// per unit scale is speed_ratio / s and the scale that holds every speed function is kAim over
+// it. Outside a trigger zone, the Reduced mode's scale is taken as soon as the tool, moving on at
+// its unscaled velocity, would reach a trigger plane within the time the scale takes to ramp
+// from 1 down to it (with margin): so it is below the Reduced limits when it crosses. A speed
+// beyond its limit and tolerance is left to the scale only in the kScaleGrace after Reduced
+// mode was switched on (the limits came down onto a running motion); anywhere else the
+// scale should have kept it, and it is a protective stop as without scaling.
+bool Controller::scale_speed(kin::SafetyViolation& v) {
+  constexpr double kAim = 0.995;       // just below each limit (the scale lags a plan that speeds up by a cycle)
+  constexpr double kScaleGrace = 0.5;  // s: how long a speed may stay beyond its limit and tolerance while the scale ramps
+  const double s = exec_.speed_scale();
+  const double per_scale = s > 0 ? safety_.speed_ratio() / s : 0.0;
+  double want = per_scale > kAim ? kAim / per_scale : 1.0;
+  double reduced = 0;
+  const double t = safety_.time_to_trigger(s > 0 ? 1.0 / s : 1.0, reduced);
+  if (reduced > 0 && s > 0) {
+    const double want_reduced = kAim * s / reduced;
+    if (want_reduced < want && t <= 1.2 * TimeScale::ramp_time(1.0, want_reduced) + 3 * period_s_) want = want_reduced;
+  }
+  exec_.set_speed_target(want);
+  kin::SafetyViolation over;
+  if (!safety_.speed_over(over)) {
+    speed_over_cycles_ = 0;
+    return false;
+  }
+  // Left to the scale while it is winning: from the second cycle beyond, the value no higher
+  // than a cycle ago (a plan that speeds up faster than the scale can slow it is stopped), the
+  // scale it needs within its range, and for at most kScaleGrace.
+  const bool same = speed_over_cycles_ > 0 && over.function == over_last_.function && over.index == over_last_.index &&
+                    over.elbow == over_last_.elbow;
+  const bool growing = same && over.value > over_last_.value;
+  ++speed_over_cycles_;
+  over_last_ = over;
+  const bool after_switch = static_cast<double>(static_cast<std::int64_t>(cycles_) - reduced_since_) * period_s_ <= kScaleGrace;
+  if (after_switch && !growing && !exec_.speed_scale_limited() && want >= TimeScale::kMin) return false;
+  v = over;
+  return true;
 }
 
 void Controller::apply_output(const OutputChange& c) {

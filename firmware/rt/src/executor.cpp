@@ -110,7 +110,15 @@ std::size_t MotionExecutor::flush() {
   const std::size_t n = queue_.clear();
   running_ = nullptr;
   phase_ = SegPhase::none;
+  scale_.reset();  // (a stop ramps from the commanded state, in real time)
   return n;
+}
+
+double MotionExecutor::scale_step(const kin::JointState& cmd) {
+  double down = 0, up = 0;
+  scale_.rate_bounds(*limits_, n_, cmd, down, up);
+  scale_.step(period_s_, down, up);
+  return period_s_ * scale_.s;
 }
 
 // ---------------------------------------------------------------------------
@@ -197,10 +205,11 @@ void MotionExecutor::blend_more() {
   ++blend_items_;
 }
 
-MotionExecutor::Step MotionExecutor::step_blend(kin::JointState& cmd) {
+MotionExecutor::Step MotionExecutor::step_blend(kin::JointState& cmd, double h) {
   blend_more();
-  blend_t_ += period_s_;
+  blend_t_ += h;
   blend_.sample(blend_t_, cmd.pos, cmd.vel, cmd.acc);
+  scaled(cmd);
   const int before = blend_.size();
   blend_.retire(blend_t_);
   for (int ended = before - blend_.size(); ended > 0 && running_ != nullptr; --ended) {
@@ -238,6 +247,7 @@ bool MotionExecutor::begin_path(MotionItem& m, const kin::JointState& cmd) {
   phase_ = SegPhase::path_open;
   path_t0_ = g.start;  // on the console's time base: the overlaps it checked line up
   path_k_ = 0;
+  path_lag_ = path_next_lag_ = 0;
   path_have_ahead_ = false;
   t_ = 0;
   return true;
@@ -259,12 +269,16 @@ void MotionExecutor::path_look_ahead(const kin::PathSegment& g, double t, double
 }
 
 // One sample ahead: the setpoint is the sample at t (taken last cycle), its velocity and
-// acceleration central differences with the one at t + dt (what a stop ramps down from,
-// accurate to O(dt^2): the ramp starts without an acceleration step).
-MotionExecutor::Step MotionExecutor::step_path(kin::JointState& cmd) {
+// acceleration central differences with the one at t + h (what a stop ramps down from,
+// accurate to O(dt^2): the ramp starts without an acceleration step). h is the period on the
+// run's time base (period_s_ times the speed scale): the differences are over real time
+// already, so the setpoints need no conversion.
+MotionExecutor::Step MotionExecutor::step_path(kin::JointState& cmd, double h) {
   const kin::PathSegment& g = seg_of(*running_);
   ++path_k_;
-  const double t = run_time(), tn = t + period_s_;
+  path_lag_ += path_next_lag_;
+  path_next_lag_ = h - period_s_;  // 0 at full speed: the run stays on whole periods
+  const double t = run_time(), tn = t + h;
   if (!path_have_ahead_) {  // the run's first cycle
     const bool both = phase_ == SegPhase::path_overlap;
     if (kin::path_sample_pair(both ? &g : nullptr, both ? seg_of(*next_) : g, t, cmd.pos, path_ahead_) <
@@ -384,6 +398,7 @@ void Controller::step_motion() {
       if (exec_.running() == nullptr && exec_.queue().empty()) set_mode(Mode::idle);
       return;
     case Mode::idle:
+      exec_.reset_speed_scale();  // at rest: a new run starts as planned
       if (!exec_.start(cmd_)) return;
       set_mode(Mode::moving);
       break;

@@ -2,6 +2,9 @@
 // The safety envelope's run-time monitor (servoarm/rt/safety_monitor.hpp).
 #include "servoarm/rt/safety_monitor.hpp"
 
+#include <algorithm>
+#include <cmath>
+
 namespace servoarm::fw {
 
 void SafetyMonitor::configure(const kin::Chain& chain, const kin::SafetyConfig& cfg, double period_s) {
@@ -20,7 +23,9 @@ void SafetyMonitor::set_tool(const kin::Pose& tool, double radius) {
 }
 
 bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector& q_act, kin::SafetyMode mode,
-                           bool only_growing, kin::SafetyViolation& out, bool& on_actual) {
+                           bool only_growing, kin::SafetyViolation& out, bool& on_actual, bool speeds_scaled) {
+  ratio_ = 0;
+  speed_over_ = false;
   if (!cfg_.enabled || chain_ == nullptr) return false;
   const bool ok_cmd = kin::safety_sample(*chain_, cfg_, q_cmd, -1.0, cmd_);
   const bool ok_act = kin::safety_sample(*chain_, cfg_, q_act, -1.0, act_);
@@ -33,9 +38,15 @@ bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector
   // cycle: only its positions and orientation are checked.
   const double pm = cfg_.position_tolerance, am = cfg_.angle_tolerance, sm = cfg_.speed_tolerance;
   bool hit = false;
+  if (ok_cmd) ratio_ = kin::speed_ratio(cfg_, mode, cmd_);
   if (ok_cmd && kin::check_sample(cfg_, mode, cmd_, pm, am, sm, out, 1.0)) {
-    hit = !only_growing || !had_prev || out.excess() > kin::safety_excess(cfg_, mode, prev_cmd_, out);
-    on_actual = false;
+    if (speeds_scaled && kin::is_speed(out.function)) {  // (the places come first: they are inside)
+      speed_over_ = true;
+      speed_v_ = out;
+    } else {
+      hit = !only_growing || !had_prev || out.excess() > kin::safety_excess(cfg_, mode, prev_cmd_, out);
+      on_actual = false;
+    }
   }
   if (!hit && ok_act && kin::check_sample(cfg_, mode, act_, pm, am, sm, out)) {
     hit = !only_growing || !had_prev || out.excess() > kin::safety_excess(cfg_, mode, prev_act_, out);
@@ -49,16 +60,37 @@ bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector
 }
 
 bool SafetyMonitor::check_state(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
-                                kin::SafetyViolation& out) {
+                                kin::SafetyViolation& out, bool speeds_scaled) {
   if (!cfg_.enabled || chain_ == nullptr) return false;
   const kin::SafetyLimits& lim = cfg_.limits(mode);
   if (!lim.has_stop_limit() && !lim.has_dynamics_limit()) return false;
   // cmd_ is the TCP at cmd.pos (update() of this cycle)
   if (lim.has_stop_limit()) (void)kin::stop_prediction(*chain_, limits, cmd, stop_, cmd_);
   if (lim.has_dynamics_limit()) (void)kin::dynamics_prediction(*chain_, cmd, cmd_);
-  const bool hit = kin::check_stop(cfg_, mode, cmd_, cfg_.position_tolerance, 1.0, out);
+  bool hit = kin::check_stop(cfg_, mode, cmd_, cfg_.position_tolerance, 1.0, out);
   cmd_.has_stop = cmd_.has_dynamics = false;
+  if (hit && speeds_scaled) {  // (all of them speed functions)
+    if (!speed_over_) speed_v_ = out;
+    speed_over_ = true;
+    hit = false;
+  }
   return hit;
+}
+
+double SafetyMonitor::time_to_trigger(double per_scale, double& reduced_ratio) const {
+  reduced_ratio = 0;
+  if (!cfg_.enabled || zone_ >= 0 || cfg_.trigger_count == 0 || !cmd_.has_velocity) return INFINITY;
+  double t = INFINITY;
+  const Eigen::Vector3d c = cmd_.tcp.translation();
+  const Eigen::Vector3d v = cmd_.tcp_velocity * per_scale;
+  for (int i = 0; i < cfg_.trigger_count && i < kin::kMaxSafetyPlanes; ++i) {
+    const kin::SafetyPlane& p = cfg_.trigger_planes[static_cast<std::size_t>(i)];
+    const double gap = p.normal.dot(c) - cfg_.tool_radius - p.offset;  // > 0: outside its zone
+    const double towards = -p.normal.dot(v);
+    if (towards > 0) t = std::fmin(t, std::fmax(0.0, gap) / towards);
+  }
+  if (t < INFINITY) reduced_ratio = kin::speed_ratio(cfg_, kin::SafetyMode::reduced, cmd_);
+  return t;
 }
 
 bool SafetyMonitor::predict_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,

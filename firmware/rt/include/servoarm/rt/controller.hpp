@@ -198,6 +198,13 @@ class Controller final : private SegmentHost {
   /// The safety envelope's monitor, after the motion's sample: a protective stop (ramp to rest
   /// on the limits, then idle holding) with an event naming the function and values.
   void step_safety();
+  /// The speed scale's target from the monitor's speed ratio (and, outside a trigger zone, the
+  /// Reduced mode's when the tool would reach a trigger plane before the scale could come down
+  /// to it), for the executor. True when a speed function is beyond its limit and tolerance
+  /// and the scale may not cure it (only within kScaleGrace of Reduced mode switched on, while
+  /// its value is not rising, the scale not held back by the joints' acceleration limits and
+  /// the scale it needs not below TimeScale::kMin): `v` names it, the caller stops.
+  bool scale_speed(kin::SafetyViolation& v);
   // SegmentHost: the executor's calls
   bool may_move() const override;
   void segment_started(const MotionItem& m) override;
@@ -293,6 +300,10 @@ class Controller final : private SegmentHost {
   SpscQueue<SafetyToolChange, 8> safety_tools_;  ///< set_safety_tool -> the monitor
   std::atomic<std::uint8_t> safety_mode_{0};  ///< kin::SafetyMode
   std::uint32_t safety_stops_ = 0;
+  int speed_over_cycles_ = 0;  ///< cycles in a row a scaled speed has been beyond its limit and tolerance
+  kin::SafetyViolation over_last_{};  ///< the speed function beyond in the last of them
+  kin::SafetyMode last_op_ = kin::SafetyMode::normal;  ///< safety_mode() at the last step_safety
+  std::int64_t reduced_since_ = -1000000000;  ///< cycles_ when Reduced mode was switched on last
   std::int64_t estop_latency_ = -1;
 
   // Replies are committed after the cycle's telemetry is published, so a

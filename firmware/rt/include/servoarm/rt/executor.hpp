@@ -23,6 +23,7 @@
 #include "servoarm/rt/messages.hpp"
 #include "servoarm/rt/mode_table.hpp"
 #include "servoarm/rt/spsc_queue.hpp"
+#include "servoarm/rt/time_scale.hpp"
 #include "servoarm/kinematics/blend.hpp"
 #include "servoarm/kinematics/blend_path.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
@@ -70,30 +71,44 @@ class MotionExecutor {
   /// setpoint into `cmd`; a segment that ends is done and the next one starts. The one sample
   /// function: one case per kind of phase (inline: a joint plan's sample is the common cycle).
   Step step(Mode mode, kin::JointState& cmd) {
-    t_ += period_s_;
+    // The period on the segment's time base: the speed scale's (a dwell's clock is real time).
+    const double h = scale_.idle() ? period_s_ : scale_step(cmd);
     switch (phase_) {
       case SegPhase::none: return Step::idle;  // (not called without a segment)
       case SegPhase::plan:
       case SegPhase::path_to_end:
       case SegPhase::path_to_start:
+        t_ += h;
         plan_->sample(t_, cmd);
+        scaled(cmd);
         return t_ < plan_->duration ? Step::running : end_of_plan(cmd);
       case SegPhase::line:
       case SegPhase::path_line:
         // IK at the exact pose; when it fails the precomputed joint value of the path is kept
         // (the console checked the whole path with IK, and the controller checks the setpoint
         // as every other one), and the sample is counted (Telemetry::ik_fallbacks).
+        t_ += h;
         if (line_->sample_ik(t_, cmd.pos, cmd.vel, cmd.acc) < kin::Status::ok) ++ik_fallbacks_;
+        scaled(cmd);
         return t_ < line_->duration ? Step::running : end_of_line(mode, cmd);
       case SegPhase::blend_open:
-      case SegPhase::blend_closed: return step_blend(cmd);
+      case SegPhase::blend_closed: return step_blend(cmd, h);
       case SegPhase::path_open:
       case SegPhase::path_closed:
-      case SegPhase::path_overlap: return step_path(cmd);
-      case SegPhase::dwell: return step_dwell(cmd);
+      case SegPhase::path_overlap: return step_path(cmd, h);
+      case SegPhase::dwell: t_ += period_s_; return step_dwell(cmd);
     }
     return Step::running;
   }
+  /// Real-time: the speed scale's target (docs/safety.md#speed-scaling), in [TimeScale::kMin, 1];
+  /// the scale ramps towards it from the next step on.
+  void set_speed_target(double s) { scale_.set_target(s); }
+  /// The speed scale of the last step (1: as planned).
+  double speed_scale() const { return scale_.s; }
+  /// The last step's scale would have fallen faster than the joints' acceleration limits allow.
+  bool speed_scale_limited() const { return scale_.limited; }
+  /// The scale back to 1 at once (the arm at rest: nothing to ramp).
+  void reset_speed_scale() { scale_.reset(); }
   /// Feed hold of the running segment: its part (a line stops on its line, an overlapped
   /// path segment is done); the controller enters rule.mode (a ramp for hold_ramp).
   HoldRule hold();
@@ -134,8 +149,18 @@ class MotionExecutor {
   // into the controller's cycle, the joint plan's sample in it).
   [[gnu::noinline]] Step end_of_plan(kin::JointState& cmd);
   [[gnu::noinline]] Step end_of_line(Mode mode, kin::JointState& cmd);
-  [[gnu::noinline]] Step step_blend(kin::JointState& cmd);
-  [[gnu::noinline]] Step step_path(kin::JointState& cmd);
+  [[gnu::noinline]] Step step_blend(kin::JointState& cmd, double h);
+  [[gnu::noinline]] Step step_path(kin::JointState& cmd, double h);
+  /// The speed scale's step this period (its rate bounded by the joints' acceleration limits at
+  /// the last setpoint `cmd`): the period on the segment's time base, period_s_ * s.
+  [[gnu::noinline]] double scale_step(const kin::JointState& cmd);
+  /// A sample of the segment's own trajectory (velocity and acceleration in its time) into real
+  /// time: velocity q' s, acceleration q'' s^2 + q' ds/dt. Nothing when the scale is idle.
+  void scaled(kin::JointState& cmd) const {
+    if (scale_.s == 1.0 && scale_.rate == 0.0) return;
+    cmd.acc = cmd.acc * (scale_.s * scale_.s) + cmd.vel * scale_.rate;
+    cmd.vel *= scale_.s;
+  }
   [[gnu::noinline]] Step step_dwell(kin::JointState& cmd);
 
   // Blended joint runs (docs/motion.md#blending)
@@ -145,7 +170,7 @@ class MotionExecutor {
   bool begin_path(MotionItem& m, const kin::JointState& cmd);
   /// Open the next path move when it blends out of the running one (phase path_open only).
   void path_look_ahead(const kin::PathSegment& g, double t, double tn);
-  double run_time() const { return path_t0_ + static_cast<double>(path_k_) * period_s_; }
+  double run_time() const { return path_t0_ + static_cast<double>(path_k_) * period_s_ + path_lag_; }
   /// Phases path_open, path_closed, path_overlap (consecutive): sampled on the run's time base.
   bool path_run() const {
     return static_cast<unsigned>(phase_) - static_cast<unsigned>(SegPhase::path_open) <= 2u;
@@ -171,12 +196,16 @@ class MotionExecutor {
   double blend_t_ = 0;               ///< time on blend_'s time base (s)
   double blend_override_ = 1.0;
   // Path run (phases path_open / path_closed / path_overlap): the run's time is path_t0_ +
-  // path_k_ / rate on the console's time base (integer steps: no drift).
+  // path_k_ / rate on the console's time base (integer steps: no drift), plus path_lag_, what
+  // the speed scale has held it back (0 while it is idle).
   double path_t0_ = 0;
   std::int64_t path_k_ = 0;
+  double path_lag_ = 0;
+  double path_next_lag_ = 0;  ///< the lag the sample one period ahead was taken at (added next step)
   kin::JointVector path_ahead_;      ///< the sample one period ahead of the setpoint
   bool path_have_ahead_ = false;
   kin::JointTrajectory resume_plan_;  ///< phases path_to_end / path_to_start
+  TimeScale scale_;                  ///< the speed scale (time_scale.hpp)
   std::uint64_t blends_ = 0;         ///< corners blended since boot
   std::uint64_t ik_fallbacks_ = 0;
   std::uint64_t joint_replans_ = 0;

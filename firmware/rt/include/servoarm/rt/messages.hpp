@@ -220,6 +220,7 @@ struct Telemetry {
   std::uint8_t safety_mode = 0;    ///< kin::SafetyMode the monitor runs with
   std::uint32_t safety_stops = 0;  ///< protective stops and jogs stopped by the safety envelope
   std::int8_t safety_zone = -1;    ///< the trigger plane the commanded tool sphere reaches beyond (Reduced), -1: none
+  double speed_scale = 1.0;        ///< the speed scale the motion or jog runs at (docs/safety.md#speed-scaling; 1: as planned)
 };
 
 /// One control cycle's joint sample for a recorder (Controller::start_samples): what an MCAP

@@ -37,9 +37,12 @@ class SafetyMonitor {
   /// tool sphere reaches beyond a trigger plane (zone()). True when a function is beyond its limit
   /// by more than its tolerance on either, `out` naming it and `on_actual` which one.
   /// `only_growing` (a jog): a function already beyond is reported only while its excess grows
-  /// on the commanded state (so that a jog may move back in).
+  /// on the commanded state (so that a jog may move back in). `speeds_scaled`: the motion runs
+  /// on the speed scale, so a speed function (kin::is_speed) beyond its limit on the commanded
+  /// state is not reported here but kept (speed_over()) for the caller to judge, and the
+  /// measured state is still checked.
   bool update(const kin::JointVector& q_cmd, const kin::JointVector& q_act, kin::SafetyMode mode, bool only_growing,
-              kin::SafetyViolation& out, bool& on_actual);
+              kin::SafetyViolation& out, bool& on_actual, bool speeds_scaled = false);
 
   /// While jogging: the commanded state `cmd` braked to rest now with `limits` (the
   /// controller's ramp) ends outside a plane or box, further out than `cmd` itself is (a jog
@@ -52,8 +55,25 @@ class SafetyMonitor {
   /// or moves the TCP further than its stop distance limit, or the arm's momentum or power at
   /// `cmd` is above the mode's limit, beyond the tolerances: true, `out` naming it. Nothing is
   /// computed for the limits the mode does not set.
+  /// `speeds_scaled`: as update()'s (every one of these functions is cured by a lower speed).
   bool check_state(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
-                  kin::SafetyViolation& out);
+                  kin::SafetyViolation& out, bool speeds_scaled = false);
+
+  /// After update(): the commanded state's highest value / limit of the mode's TCP, elbow and
+  /// joint speed limits (kin::speed_ratio), 0 without a speed.
+  double speed_ratio() const { return ratio_; }
+  /// After update() and check_state() with speeds_scaled: a speed function beyond its limit and
+  /// tolerance on the commanded state (true, `out` naming the first one found).
+  bool speed_over(kin::SafetyViolation& out) const {
+    if (!speed_over_) return false;
+    out = speed_v_;
+    return true;
+  }
+  /// After update(), outside every trigger zone: how long (s) the commanded tool sphere, moving
+  /// on at `per_scale` times its present velocity, takes to reach the nearest trigger plane it
+  /// moves towards (INFINITY: none), and the Reduced mode's speed ratio at the commanded state
+  /// (its TCP, elbow and joint speeds) into `reduced_ratio`.
+  double time_to_trigger(double per_scale, double& reduced_ratio) const;
 
   /// The trigger plane the commanded tool sphere reaches beyond at the last update() (its
   /// functions then ran in Reduced mode), -1 when none.
@@ -74,6 +94,9 @@ class SafetyMonitor {
   kin::JointVector prev_q_cmd_{};  ///< the joint speeds' previous commanded joints
   bool have_prev_ = false;
   int zone_ = -1;  ///< trigger plane of the last commanded sample
+  double ratio_ = 0;  ///< speed_ratio()
+  bool speed_over_ = false;  ///< speed_over()
+  kin::SafetyViolation speed_v_{};
   kin::JointTrajectory stop_{};  ///< predict_stop's ramp (kept here: no stack copy per cycle)
 };
 

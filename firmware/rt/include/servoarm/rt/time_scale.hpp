@@ -1,0 +1,89 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+// The run-time speed scale (docs/safety.md#speed-scaling): a factor s in [kMin, 1] on the time of
+// the motion being sampled. The trajectory is sampled at tau with dtau/dt = s, so the path is kept
+// exactly and every speed along it is s times the planned one; with q' and q'' the trajectory's
+// derivatives in tau, the commanded velocity is q' s and the acceleration q'' s^2 + q' ds/dt.
+//
+// s follows a target (the safety monitor's, set every cycle), ramped:
+//  - its rate ds/dt is at most kRate, and at most what the joints' acceleration limits leave at
+//    the present sample (rate_bounds: q'' s^2 + q' ds/dt within +-kAccShare of each joint's
+//    limit), so that no joint exceeds its acceleration limit while s changes;
+//  - the rate itself changes by at most kJerk per second (the ramp is jerk-limited in s), and
+//    brakes so that s comes to the target without overshooting it.
+// With s = 1, its target 1 and no rate, nothing is scaled (idle(): the sample is the plan's own).
+//
+// Real-time: plain arithmetic on a small struct, no allocation.
+#include <algorithm>
+#include <cmath>
+
+#include "servoarm/kinematics/trajectory.hpp"
+
+namespace servoarm::fw {
+
+struct TimeScale {
+  static constexpr double kRate = 8.0;       ///< 1/s: at most full speed to 5 % in 0.12 s
+  static constexpr double kJerk = 100.0;     ///< 1/s^2: the rate's own change
+  static constexpr double kMin = 0.05;       ///< the lowest scale (slower is a protective stop)
+  static constexpr double kAccShare = 0.98;  ///< of each joint's acceleration limit while s changes
+
+  double s = 1.0;       ///< the scale now
+  double rate = 0.0;    ///< ds/dt (1/s)
+  double target = 1.0;  ///< where s goes, in [kMin, 1]
+  bool limited = false; ///< the last step would have slowed faster than the joints' acceleration limits let it
+
+  bool idle() const { return s == 1.0 && rate == 0.0 && target == 1.0; }
+  void reset() {
+    s = 1.0;
+    rate = 0.0;
+    target = 1.0;
+    limited = false;
+  }
+  void set_target(double t) { target = std::isfinite(t) ? std::clamp(t, kMin, 1.0) : kMin; }
+
+  /// How fast s may fall (`down`) and rise (`up`), both >= 0 (1/s), so that the commanded state
+  /// `cmd` (real time: velocity q' s, acceleration q'' s^2 + q' rate) keeps every joint's
+  /// acceleration within kAccShare of its limit: per joint, with c = q'' s^2 the planned part,
+  /// |c + q' ds/dt| <= a.
+  void rate_bounds(const kin::JointLimits& lim, int n, const kin::JointState& cmd, double& down, double& up) const {
+    down = up = kRate;
+    const double si = 1.0 / s;
+    for (int j = 0; j < n; ++j) {
+      const double p = cmd.vel[j] * si;               // q'
+      const double c = cmd.acc[j] - p * rate;         // q'' s^2
+      const double ap = std::fabs(p);
+      if (!(ap > 1e-9) || !std::isfinite(c)) continue;
+      const double a = kAccShare * lim.dyn[static_cast<std::size_t>(j)].max_acceleration;
+      const double sc = p > 0 ? c : -c;  // the planned acceleration along q'
+      down = std::fmin(down, std::fmax(0.0, (a + sc) / ap));
+      up = std::fmin(up, std::fmax(0.0, (a - sc) / ap));
+    }
+  }
+
+  /// One period dt: the rate towards the one that brings s to the target without overshoot
+  /// (at most kRate, braking at kJerk), changed by at most kJerk dt, within [-down, up].
+  void step(double dt, double down, double up) {
+    const double e = target - s;
+    double want = std::copysign(std::fmin(kRate, std::sqrt(2.0 * kJerk * std::fabs(e))), e);
+    limited = want < -down;
+    want = std::clamp(want, -down, up);
+    rate += std::clamp(want - rate, -kJerk * dt, kJerk * dt);
+    rate = std::clamp(rate, -down, up);
+    s += rate * dt;
+    const double e2 = target - s;
+    if (e == 0.0 || e2 == 0.0 || (e > 0) != (e2 > 0)) {  // at the target (or past it): rest there
+      s = target;
+      rate = 0.0;
+    }
+    s = std::clamp(s, kMin, 1.0);
+  }
+
+  /// The time s takes from `from` to `to` at the nominal limits (kRate, kJerk), from no rate.
+  static double ramp_time(double from, double to) {
+    const double d = std::fabs(from - to);
+    if (d >= kRate * kRate / kJerk) return d / kRate + kRate / kJerk;
+    return 2.0 * std::sqrt(d / kJerk);
+  }
+};
+
+}  // namespace servoarm::fw
