@@ -132,7 +132,14 @@ StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool star
   else if (spaced)  // two targets that arrive close together (delayed on the way) are not a burst of speed
     qd = (q - from) / std::fmax(gap, 0.5 * gap_avg_);
   const double horizon = spaced ? std::fmin(cfg_.deadman_s, 2 * gap) : cfg_.deadman_s;
-  if (qd.cwiseAbs().maxCoeff() > 0) {
+  // Element by element over the n joints: GCC 12 for armhf reads Eigen's reduction over the
+  // inline storage as possibly uninitialised (-Wmaybe-uninitialized).
+  const auto moving = [n](const kin::JointVector& v) {
+    for (int j = 0; j < n; ++j)
+      if (v[j] != 0) return true;
+    return false;
+  };
+  if (moving(qd)) {
     const kin::JointVector ahead = q + qd * horizon;
     bool inside = true;
     for (int j = 0; j < n; ++j)
@@ -144,7 +151,7 @@ StreamResult StreamService::joint_target(const kin::JointVector& q_in, bool star
   // horizon (past the horizon: at the path's end, at rest).
   kin::JointVector goal = q;
   double goal_horizon = horizon;
-  if (late > 0 && qd.cwiseAbs().maxCoeff() > 0) {
+  if (late > 0 && moving(qd)) {
     if (late + ctl_.period_s() < horizon) {
       goal = q + qd * late;
       goal_horizon = horizon - late;
