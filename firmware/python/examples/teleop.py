@@ -6,7 +6,9 @@
   teleop.py --from-file FILE --follower HOST:PORT [--rate 100]
 
 The leader is another armfw (in free-drive, a person moves it; or any motion), read through its
-state stream; with --from-file each line of FILE (or of a pipe or socket: `-` is stdin) is one set
+state stream; each target carries the leader's sample time (its control thread's clock, `t` of
+the state sample), so the follower spaces the targets by when the leader measured them, not by
+when they arrived through two network hops and this loop; with --from-file each line of FILE (or of a pipe or socket: `-` is stdin) is one set
 of joint values (rad / m, whitespace-separated), a leader device of your own. The follower
 tracks every target jerk-limited; when the targets stop, its deadman brakes it to rest. A file's
 last line is held (sent on at the rate) until the follower is within 0.001 of it or --settle
@@ -89,18 +91,19 @@ def main(argv=None):
     period = 1.0 / a.rate
     restarts = 0
 
-    def send(st, q):
+    def send(st, q, t=None):
         # A stall of this script longer than the follower's deadman (a loaded machine) ends the
         # stream: the follower brakes to rest; the next target starts a new one from there.
+        # `t`: when the target was sampled (the leader's clock); None: now, on this machine's.
         nonlocal restarts
         try:
-            st.send(q)
+            st.send(q, t=t)
         except ArmError as e:
             if e.code != "bad_state" or "stream ended" not in e.message:
                 raise
             restarts += 1
             st.restart()
-            st.send(q)
+            st.send(q, t=t)
 
     with follower.stream() as st:
         if a.leader:
@@ -115,7 +118,7 @@ def main(argv=None):
                         s = sub.get(timeout=0)
                     except queue.Empty:
                         break
-                send(st, s["q"])
+                send(st, s["q"], s["t"])
                 lead_log.append((time.monotonic(), s["q"]))
                 qf = follower.state()["q"]
                 follow_log.append((time.monotonic(), qf))

@@ -77,6 +77,40 @@ class TeleopTest(unittest.TestCase):
             self.assertLess(max(abs(x - y) for x, y in zip(qf, ql)), 0.02, p.stdout)
             print(p.stdout.strip())
 
+    def test_targets_carry_the_leaders_sample_time(self):
+        # The example run in this process, every target it streams recorded: each carries the
+        # time the leader sampled it (the leader's control-thread clock: whole 1 ms cycles since
+        # the leader started), not this machine's time.monotonic() at sending.
+        import importlib.util
+        from servoarm import client
+        spec = importlib.util.spec_from_file_location("teleop_example", os.path.join(EXAMPLES, "teleop.py"))
+        teleop = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(teleop)
+        sent = []
+        real_send = client.Stream.send
+
+        def recording_send(st, q, qd=None, t=None):
+            sent.append(t)
+            return real_send(st, q, qd, t)
+
+        with Arm(port=self.leader.port) as lead:
+            lead.enable()
+            lead.movej([-0.2, 0.1, -0.1, 0.1, -0.1, 0.1], speed_pct=20, wait=False)
+            client.Stream.send = recording_send
+            try:
+                rc = teleop.main(["--leader", f"127.0.0.1:{self.leader.port}", "--follower",
+                                  f"127.0.0.1:{self.follower.port}", "--rate", "50", "--seconds", "1"])
+            finally:
+                client.Stream.send = real_send
+            t_leader = lead.state()["t"]
+        self.assertEqual(rc, 0)
+        self.assertGreater(len(sent), 10)
+        for t in sent:
+            self.assertIsNotNone(t, "a target went without the leader's time")
+            self.assertLessEqual(t, t_leader)
+            self.assertAlmostEqual(t * 1000, round(t * 1000), delta=1e-6, msg=f"{t} is not on the leader's 1 ms cycles")
+        self.assertEqual(sent, sorted(sent))
+
     def test_from_a_file(self):
         path = f"/tmp/servoarm_teleop_{os.getpid()}.txt"
         with open(path, "w") as f:
