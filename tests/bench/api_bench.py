@@ -13,6 +13,9 @@ to the API's; the e-stop's time to the arm's stop while another client floods re
 
 Each streaming row runs three ways: the velocity estimated by the firmware from the targets'
 arrival, estimated from the client's sampling times (`t`), and sent with the target (`qd`, and `t`).
+A row prints this script's longest gap between two targets: one past the deadman
+(api.stream_deadman_ms, 100 ms) ends the stream, and the targets after it are refused, so
+such a row measures the machine's load, not the stream.
 
   python3 tests/bench/api_bench.py build/bin/armfw [--stream [--rates=30,100,500]]
 """
@@ -139,6 +142,18 @@ def wait_idle(a, timeout=20):
         time.sleep(0.02)
 
 
+def wait_motion(a, r, timeout=20):
+    # a move's answer comes before the control thread takes it up: wait for its motion id to be
+    # done (as the Python client does), not for "idle", which the state may still show
+    mid = r["motion"]
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        s = a.ask("state")
+        if s.get("done", 0) >= mid and (s.get("running") == 0 or s.get("queued") == 0):
+            return
+        time.sleep(0.02)
+
+
 def sine(t):
     return 0.4 * math.sin(2 * math.pi * 0.5 * t)
 
@@ -191,8 +206,7 @@ def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005, send_qd=False, se
     a.ask("take_control")
     a.ask("enable")
     wait_idle(a)
-    a.ask("movej", q=[fn(0), 0, 0, 0, 0, 0], speed_pct=50)
-    wait_idle(a)
+    wait_motion(a, a.ask("movej", q=[fn(0), 0, 0, 0, 0, 0], speed_pct=50))
     a.ask("subscribe", topic="state", rate_hz=1000)
     sent = []
     # send times on an absolute timeline: k / rate, each moved by up to +-jitter (kept in order)
@@ -256,7 +270,8 @@ def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005, send_qd=False, se
     qdc = [m["qd_cmd"][0] for _, m in st]
     pk = (max(map(abs, qdc)) / lim[0],) + setpoint_peaks(at, qdc, lim)
     return dict(lag=best, err=err, err0=err0, rms0=rms0, pk=pk, nlag=nbest, nerr=nerr, npk=peaks(ngrid, nq, lim),
-                samples=len(st), targets=len(sent), refused=refused, counts=counts)
+                samples=len(st), targets=len(sent), refused=refused, counts=counts,
+                gap=max((sent[i][0] - sent[i - 1][0] for i in range(1, len(sent))), default=0.0))
 
 
 def deadman(port, lim):
@@ -360,7 +375,8 @@ def stream_main(exe, rates=(30, 100, 500)):
                     r = stream_run(port, lim, fn, rate, send_qd=qd, send_t=ts)
                     c = r["counts"]
                     print(f"{name} {rate:3d} Hz {mode:12s}: targets {r['targets']} (refused {r['refused']}, stale "
-                          f"{c.get('stale', 0)}, late max {c.get('late_max_ms', 0):.1f} ms, jitter {c.get('jitter_ms', 0):.2f} ms), "
+                          f"{c.get('stale', 0)}, late max {c.get('late_max_ms', 0):.1f} ms, jitter {c.get('jitter_ms', 0):.2f} ms, "
+                          f"this script's longest gap between targets {r['gap'] * 1e3:.0f} ms), "
                           f"samples {r['samples']}; stream: lag {r['lag']} ms, max error {r['err']:.4f} rad, unshifted max "
                           f"{r['err0']:.4f} rms {r['rms0']:.4f} rad, peak v/a/j {r['pk'][0]:.2f}/{r['pk'][1]:.2f}/{r['pk'][2]:.2f}; "
                           f"naive interpolation: lag {r['nlag']} ms, max error {r['nerr']:.4f} rad, peak v/a/j "
