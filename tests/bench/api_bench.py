@@ -17,7 +17,11 @@ A row prints this script's longest gap between two targets: one past the deadman
 (api.stream_deadman_ms, 100 ms) ends the stream, and the targets after it are refused, so
 such a row measures the machine's load, not the stream.
 
-  python3 tests/bench/api_bench.py build/bin/armfw [--stream [--rates=30,100,500]]
+  python3 tests/bench/api_bench.py build/bin/armfw [--stream [--rates=30,100,500] [--plant=dynamic]]
+
+--plant: armfw --sim's plant (first-order by default; dynamic: the rigid-body plant). On a
+shared machine, `chrt -f 50` in front keeps other processes' builds from stalling this script
+(armfw's control thread still runs above it at SCHED_FIFO 80).
 """
 import math
 import os
@@ -110,6 +114,15 @@ class Api:
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self):
+        try:
+            self._read_lines()
+        except OSError:  # the connection closed by close()
+            pass
+        except ValueError:  # reading the file close() closed; a bad JSON line is raised
+            if not self.f.closed:
+                raise
+
+    def _read_lines(self):
         for line in self.f:
             t = time.perf_counter()
             m = json.loads(line)
@@ -119,6 +132,16 @@ class Api:
                 elif "id" in m:
                     self.answers[m["id"]] = (t, m)
                     self.cv.notify_all()
+
+    def close(self):
+        # shutdown, not only close: the reader's file object keeps the socket open otherwise, and
+        # the firmware would go on streaming 1 kHz samples into a reader thread nobody uses
+        try:
+            self.s.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self.s.close()
+        self.f.close()
 
     def send(self, cmd, **kw):
         with self.lock:
@@ -207,7 +230,10 @@ def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005, send_qd=False, se
     a.ask("enable")
     wait_idle(a)
     wait_motion(a, a.ask("movej", q=[fn(0), 0, 0, 0, 0, 0], speed_pct=50))
-    a.ask("subscribe", topic="state", rate_hz=1000)
+    # the arm's samples on a connection of their own (an observer): a backlog of 1 kHz samples
+    # this script reads too slowly holds back that connection only, not the targets' answers
+    mon = Api(port)
+    mon.ask("subscribe", topic="state", rate_hz=1000)
     sent = []
     # send times on an absolute timeline: k / rate, each moved by up to +-jitter (kept in order)
     plan, prev = [], 0.0
@@ -229,14 +255,16 @@ def stream_run(port, lim, fn, rate, seconds=4.0, jitter=0.005, send_qd=False, se
         a.send("stream", q=[x, 0, 0, 0, 0, 0], **extra)
         sent.append((t0 + t, x))
     time.sleep(0.5)
+    with mon.lock:
+        st = [(t, m) for t, m in mon.states if t >= t0]
+    mon.close()
     with a.lock:
-        st = [(t, m) for t, m in a.states if t >= t0]
         refused = sum(1 for _, m in a.answers.values() if "error" in m)
     counts = a.ask("state").get("stream", {})
     a.ask("stop")
     wait_idle(a)
     a.ask("release_control")
-    a.s.close()
+    a.close()
     # the arm's samples on the RT clock, placed on the wall clock by the earliest arrival
     off = min(t - m["cycle"] / 1000.0 for t, m in st)
     at = [m["cycle"] / 1000.0 + off for _, m in st]
@@ -292,7 +320,7 @@ def deadman(port, lim):
         st = [(t, m) for t, m in a.states if t >= t_last]
     rest = next((t, m) for t, m in st if not m["streaming"] and all(abs(v) < 1e-9 for v in m["qd_cmd"]))
     a.ask("release_control")
-    a.s.close()
+    a.close()
     return rest[1]["q_cmd"][0] - last, (rest[0] - t_last) * 1e3
 
 
@@ -353,17 +381,17 @@ def estop_under_flood(port):
         st = [(t, m) for t, m in a.states if t >= t0]
     seen = next(((t, m) for t, m in st if m["state"] != "moving"), None)
     cyc0 = next((m["cycle"] for t, m in st), 0)
-    a.s.close()
+    a.close()
     return (ans - t0) * 1e3, ((seen[0] - t0) * 1e3 if seen else -1), (seen[1]["state"] if seen else "?"), rate
 
 
-def stream_main(exe, rates=(30, 100, 500)):
-    p, port, pty = start(exe, ("--pty",))
+def stream_main(exe, rates=(30, 100, 500), plant="first-order"):
+    p, port, pty = start(exe, ("--pty", "--plant", plant))
     try:
         time.sleep(1)
         h = Api(port)
         j0 = h.ask("hello")["joints"][0]
-        h.s.close()
+        h.close()
         lim = (j0["max_velocity"], j0["max_acceleration"], j0["max_jerk"])
         print(f"joint 1 limits: v {lim[0]:.3f} rad/s, a {lim[1]:.3f} rad/s^2, j {lim[2]:.1f} rad/s^3")
         # each target as sent: its velocity estimated by the firmware from arrivals, estimated from
@@ -397,8 +425,9 @@ def stream_main(exe, rates=(30, 100, 500)):
 def main():
     if "--stream" in sys.argv:
         rates = next((x.split("=", 1)[1] for x in sys.argv if x.startswith("--rates=")), "30,100,500")
+        plant = next((x.split("=", 1)[1] for x in sys.argv if x.startswith("--plant=")), "first-order")
         return stream_main(next((x for x in sys.argv[1:] if not x.startswith("--")), "build/bin/armfw"),
-                           tuple(int(r) for r in rates.split(",")))
+                           tuple(int(r) for r in rates.split(",")), plant)
     p, port = start(sys.argv[1] if len(sys.argv) > 1 else "build/bin/armfw")
     try:
         time.sleep(1)
