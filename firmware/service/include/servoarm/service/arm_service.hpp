@@ -255,7 +255,8 @@ struct ArmStatus {
   bool collision_on = false;
   FreedrivePhase freedrive = FreedrivePhase::off;
   bool safety_on = false;                              ///< a safety envelope is configured
-  kin::SafetyMode safety_mode = kin::SafetyMode::normal;  ///< Normal or Reduced
+  kin::SafetyMode safety_mode = kin::SafetyMode::normal;  ///< Normal or Reduced (Reduced while the Reduced input is)
+  std::uint8_t safety_inputs = 0;                      ///< Telemetry::safety_inputs
   std::uint32_t safety_checksum = 0;                   ///< of the [safety] section (MotionSettings::safety_checksum)
 };
 
@@ -951,6 +952,11 @@ class ArmService {
   double tool_radius(const NamedPose& def) const { return def.radius >= 0 ? def.radius : cfg_.safety.tool_radius; }
   ControlResult set_safety_mode(kin::SafetyMode mode);
   kin::SafetyMode safety_mode() const { return safety_mode_; }
+  /// The mode moves are planned and checked in: Reduced while the controller's Reduced input is
+  /// asserted (Controller::reduced_by_input), else safety_mode().
+  kin::SafetyMode plan_safety_mode() const {
+    return ctl_ != nullptr && ctl_->reduced_by_input() ? kin::SafetyMode::reduced : safety_mode_;
+  }
   /// One streamed target against the envelope (envelope_violation_at with the service's
   /// envelope and mode, the arm's chain unless `chain` is given): "" or the refusal's line.
   std::string check_target(const kin::JointVector& q_prev, const kin::JointVector& q, double dt,
