@@ -188,6 +188,8 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   ctl->set_safety_inputs(si);
   model = std::make_unique<ModelControl>();
   console = std::make_unique<Console>(*ctl, console_config(), ik_ready ? ik.get() : nullptr);
+  console->service().set_safety_stager(
+      [this](const std::string& changes, SafetyProposal& out) { return stage_safety_change(changes, out); });
   if (const std::string e = console->load_frames(); !e.empty()) return "frames file refused: " + e;
   if (const std::string e = console->load_points(); !e.empty()) return "points file refused: " + e;
   McapSettings ms;  // `record mcap`: an absolute folder only (armfw resolves a relative record.dir)
@@ -269,6 +271,73 @@ std::unique_ptr<hal::SafetyInput> App::make_safety_input(const std::string& text
     case hal::InputKind::gpio: return std::make_unique<hal::GpiodInput>(src.chip, src.line, hal::kMillisecond, stale);
   }
   return nullptr;
+}
+
+std::string App::stage_safety_change(const std::string& changes, SafetyProposal& out) const {
+  // Keys set at start only: the controller's reactions and the inputs' wiring are not part of
+  // the monitor's envelope, which is all a run-time change replaces.
+  static constexpr const char* kStartOnly[] = {
+      "following_error_deg", "enable_timeout_s", "feedback_timeout_ms", "stop", "drive_stop_timeout_s",
+      "estop_input", "estop_input_active", "reduced_input", "reduced_input_active", "input_debounce_ms",
+      "input_timeout_ms"};
+  std::string text = to_toml(cfg);
+  const std::size_t sec = text.find("\n[safety]\n");
+  if (sec == std::string::npos) return "no [safety] section to change";
+  std::vector<std::string> keys;
+  std::size_t a = 0;
+  while (a <= changes.size()) {
+    std::size_t b = changes.find_first_of(";\n", a);
+    if (b == std::string::npos) b = changes.size();
+    std::string item = changes.substr(a, b - a);
+    a = b + 1;
+    const auto trim = [](std::string s) {
+      const std::size_t f = s.find_first_not_of(" \t\r");
+      if (f == std::string::npos) return std::string();
+      return s.substr(f, s.find_last_not_of(" \t\r") - f + 1);
+    };
+    item = trim(item);
+    if (item.empty()) continue;
+    const std::size_t eq = item.find('=');
+    if (eq == std::string::npos) return "\"" + item + "\": a change is `key = value`";
+    std::string key = trim(item.substr(0, eq));
+    const std::string value = trim(item.substr(eq + 1));
+    if (key.rfind("safety.", 0) == 0) key = key.substr(7);
+    if (value.empty()) return "safety." + key + ": no value";
+    for (const char* k : kStartOnly)
+      if (key == k) return "safety." + key + " is set at start only: change it in the configuration file and restart";
+    for (const std::string& k : keys)
+      if (k == key) return "safety." + key + ": given twice";
+    // its line in the [safety] section of the effective configuration
+    const std::size_t at = text.find("\n" + key + " = ", sec + 1);
+    const std::size_t next_sec = text.find("\n[", sec + 1);
+    if (at == std::string::npos || (next_sec != std::string::npos && at > next_sec))
+      return "safety." + key + ": no such key in [safety] (armfw --config-keys lists them)";
+    const std::size_t end = text.find('\n', at + 1);
+    text.replace(at + 1, end - at - 1, key + " = " + value);
+    keys.push_back(key);
+  }
+  if (keys.empty()) return "no change given (`key = value`, `;` between)";
+  FwConfig next;
+  if (std::string e = load_config_text(text, "safety change", next, false); !e.empty()) return e;
+  if (std::string e = validate_for_chain(next, chain); !e.empty()) return e;
+  if (std::string e = safety_envelope(next, chain, out.safety); !e.empty()) return e;
+  out.checksum = safety_checksum(next, chain);
+  out.changes.clear();
+  for (const ConfigKey& k : config_keys()) {
+    const std::string name = k.name;
+    if (name.rfind("safety.", 0) != 0) continue;
+    const std::string was = value_text(k, cfg), now = value_text(k, next);
+    if (was != now) out.changes += (out.changes.empty() ? "" : "; ") + name + " = " + was + " -> " + now;
+  }
+  // The App's configuration takes the safety.* values when the change is applied, so that the
+  // next change starts from it (the other keys stay as they are).
+  FwConfig* mine = const_cast<FwConfig*>(&cfg);
+  out.commit = [mine, next] {
+    for (const ConfigKey& k : config_keys())
+      if (std::string(k.name).rfind("safety.", 0) == 0)
+        std::visit([&](auto m) { (*mine).*m = next.*m; }, k.member);
+  };
+  return "";
 }
 
 hal::SimInput* App::sim_input_of(hal::SafetyInput* in) {

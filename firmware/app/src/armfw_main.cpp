@@ -99,7 +99,7 @@ int usage(FILE* f, int code) {
                "  --record-dir DIR      where `record mcap` writes its MCAP files (record.dir)\n"
                "  --api-reference       print the generated reference section of docs/api.md and exit\n"
                "  (safety inputs: the safety.estop_input / safety.reduced_input keys, a drive's 60FDh bit or a GPIO\n"
-               "  line; docs/safety.md)\n"
+               "  line; run-time [safety] changes: the API's safety_stage + safety_confirm; docs/safety.md)\n"
                "  -h, --help            this text\n");
   return code;
 }

@@ -1365,6 +1365,9 @@ void join_text(char* dst, std::size_t size, const char* a, const char* b) {
 }  // namespace
 
 void Controller::step_safety() {
+  // A confirmed run-time change of the envelope (ArmService::confirm_safety): the console thread
+  // sends the active tool again right after it.
+  if (safety_configs_.pop(safety_next_)) safety_.configure(chain_, safety_next_, period_s_);
   if (!safety_.enabled()) return;
   SafetyToolChange tc;
   while (safety_tools_.pop(tc)) {

@@ -93,6 +93,9 @@ struct App {
   std::string check_safety_input(const char* key, const std::string& text, const std::vector<DriveGroupPlan>& plans) const;
   std::unique_ptr<hal::SafetyInput> make_safety_input(const std::string& text) const;
   static hal::SimInput* sim_input_of(hal::SafetyInput* in);
+  /// The ArmService's SafetyStager: `changes` applied to the [safety] section of `cfg` through the
+  /// key table (load_config_text, validate_for_chain, safety_envelope): "" or the refusal.
+  std::string stage_safety_change(const std::string& changes, SafetyProposal& out) const;
 };
 
 }  // namespace servoarm::fw

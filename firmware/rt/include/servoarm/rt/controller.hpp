@@ -155,6 +155,10 @@ class Controller final : private SegmentHost {
   /// Any thread: the Reduced input is asserted (or lost): the envelope runs in Reduced mode
   /// whatever set_safety_mode() said, and moves are planned so.
   bool reduced_by_input() const { return reduced_by_input_.load(std::memory_order_relaxed); }
+  /// Console thread: a new safety envelope for the monitor (a confirmed run-time change of
+  /// [safety]); the monitor takes it at its next cycle with the chain's own tool: send the active
+  /// tool after it (set_safety_tool). False when the queue is full (not taken).
+  bool set_safety_config(const kin::SafetyConfig& c) { return safety_configs_.push(c); }
   /// Real-time / tests: the safety monitor (its last commanded TCP sample).
   const SafetyMonitor& safety_monitor() const { return safety_; }
 
@@ -324,6 +328,8 @@ class Controller final : private SegmentHost {
   };
   SpscQueue<SafetyToolChange, 8> safety_tools_;  ///< set_safety_tool -> the monitor
   std::atomic<std::uint8_t> safety_mode_{0};  ///< kin::SafetyMode
+  SpscQueue<kin::SafetyConfig, 2> safety_configs_;  ///< set_safety_config -> the monitor
+  kin::SafetyConfig safety_next_{};                 ///< (the cycle's copy of one taken from it)
   std::uint32_t safety_stops_ = 0;
   int speed_over_cycles_ = 0;  ///< cycles in a row a scaled speed has been beyond its limit and tolerance
   kin::SafetyViolation over_last_{};  ///< the speed function beyond in the last of them
