@@ -383,6 +383,7 @@ TEST(SafetyInputs, DriveBitEstopLostWhenTheDriveFallsSilent) {
   r.start_move();
   r.app.plant->arm().at(1).faults().silent = true;
   const int n = cycles_to_estop(r, 200);
+  std::printf("\n  joint 2's drive silent (input timeout 20 ms) -> estop state after %d cycle(s)\n", n);
   CHECK(n <= 25);
   STRCMP_CONTAINS("emergency stop: e-stop input cannot be read: drive:2:bit16: joint 2's digital inputs (60FDh) not "
                   "received for",
