@@ -2,13 +2,14 @@
 // A run-time change of the [safety] section (ArmService::stage_safety / confirm_safety, App's
 // stager through the key table) on the puma560 with virtual drives: staged, nothing changes (a
 // query changes nothing); applied only by its checksum, within its window, with the arm at rest;
-// the monitor takes it at its next cycle; refusals in one line.
+// the monitor takes it at its next cycle without allocating; refusals in one line.
 #include <chrono>
 #include <cstdio>
 #include <string>
 #include <thread>
 
 #include "../support/sim_app.hpp"
+#include "alloc_counter.hpp"
 #include "servoarm/service/arm_service.hpp"
 
 #include <CppUTest/TestHarness.h>
@@ -35,8 +36,12 @@ struct Rig {
   ~Rig() { clock.set_idle_hook(nullptr); }
   ArmService& svc() { return app.console->service(); }
   Telemetry tel() const { return app.ctl->telemetry(); }
+  std::size_t rt_allocs = 0;
+  bool count_allocs = false;
   void cycle() {
+    if (count_allocs) test::alloc_count_begin();
     app.ctl->cycle(clock.now());
+    if (count_allocs) rt_allocs += test::alloc_count_end();
     clock.advance(hal::kMillisecond);
   }
   void cycles(int n) {
@@ -105,7 +110,10 @@ TEST(SafetyChange, StagedThenConfirmedByItsChecksum) {
   DOUBLES_EQUAL(0.25, r.app.ctl->safety_monitor().config().normal.tcp_speed, 1e-12);
   const SafetyChangeResult c = r.svc().confirm_safety(s.checksum);
   CHECK_TEXT(c.ok(), c.reason.c_str());
+  r.count_allocs = true;  // the control thread takes the new envelope (and the tool) without allocating
   r.cycles(2);
+  r.count_allocs = false;
+  LONGS_EQUAL(0, r.rt_allocs);
   CHECK_EQUAL(s.checksum, r.svc().status().safety_checksum);
   DOUBLES_EQUAL(0.1, r.svc().settings().safety.normal.tcp_speed, 1e-12);
   DOUBLES_EQUAL(0.1, r.app.ctl->safety_monitor().config().normal.tcp_speed, 1e-12);
