@@ -298,6 +298,13 @@ void CanopenServoBus::dispatch(const CanFrame& f, TimePoint now) {
       }
       return;
     }
+    case kTpdo3: {
+      // 60FDh digital inputs (UNSIGNED32), mapped by start() when asked for.
+      if (!jt.tpdo3 || f.len != 4) break;
+      fb.digital_inputs = get_u32(&f.data[0]);
+      fb.inputs_time = now;
+      return;
+    }
     case kTpdo2: {
       // Decoded with the layout start() mapped (default: velocity + error code, 6 bytes).
       if (jt.tpdo2_len == 0 || f.len != jt.tpdo2_len) break;
@@ -663,6 +670,14 @@ Status CanopenServoBus::setup_node(std::size_t j, TimePoint deadline) {
     if (const Status s = map_pdo(j, 0x1402, 0x1602, kRpdo3 + n, rpdo3, 1, m5, "RPDO3"); s != Status::ok) return s;
     jt.rpdo3 = m5[0];
   }
+  jt.tpdo3 = false;
+  if (cfg_.joints[j].digital_inputs) {
+    const MapEntry tpdo3[] = {{cia402::kDigitalInputs, 32, PdoUse::required, "digital inputs"}};
+    bool m6[1] = {};
+    if (late()) return Status::timeout;
+    if (const Status s = map_pdo(j, 0x1802, 0x1A02, kTpdo3 + n, tpdo3, 1, m6, "TPDO3"); s != Status::ok) return s;
+    jt.tpdo3 = m6[0];
+  }
   jt.rpdo1_len = m1[2] ? 7 : 6;
   jt.tpdo1_len = m2[2] ? 7 : 6;
   jt.mode_shown = 0;
@@ -799,6 +814,7 @@ Status CanopenServoBus::family_start(TimePoint deadline) {
     joints_[j].prev_pos_time = 0;
     fb_[j] = JointFeedback{};
     fb_[j].state = JointState::disabled;
+    fb_[j].has_inputs = joints_[j].tpdo3;
     joints_[j].hb_watch_since = now;  // consumer starts counting now (last_heartbeat stays a real one)
   }
   target_ = cia402::Target::disabled;

@@ -21,10 +21,11 @@ namespace {
 constexpr int kRpdos = 3;  // RPDO3: 60FEh:01 digital outputs
 constexpr std::uint16_t kRpdoComm[kRpdos] = {0x1400, 0x1401, 0x1402};
 constexpr std::uint16_t kRpdoMap[kRpdos] = {0x1600, 0x1601, 0x1602};
-constexpr std::uint16_t kTpdoComm[2] = {0x1800, 0x1801};
-constexpr std::uint16_t kTpdoMap[2] = {0x1A00, 0x1A01};
+constexpr int kTpdos = 3;  // TPDO3: 60FDh digital inputs
+constexpr std::uint16_t kTpdoComm[kTpdos] = {0x1800, 0x1801, 0x1802};
+constexpr std::uint16_t kTpdoMap[kTpdos] = {0x1A00, 0x1A01, 0x1A02};
 constexpr std::uint32_t kRpdoBase[kRpdos] = {kRpdo1, kRpdo2, hal::canopen::kRpdo3};
-constexpr std::uint32_t kTpdoBase[2] = {kTpdo1, kTpdo2};
+constexpr std::uint32_t kTpdoBase[kTpdos] = {kTpdo1, kTpdo2, hal::canopen::kTpdo3};
 constexpr std::uint32_t kCobInvalid = 0x80000000u;
 constexpr std::uint16_t kMaxCurrent = 0x6073;              // UNSIGNED16, per mille of the rated current
 constexpr std::uint32_t kPeakCurrentPerMille = 3000;       // the model's power stage: 3x rated
@@ -47,7 +48,7 @@ VirtualDrive::VirtualDrive(std::uint8_t node, const MotorParams& motor, std::uin
     add(kRpdoMap[p], 0, 1, true, false, 0);
     for (std::uint8_t s = 1; s <= 8; ++s) add(kRpdoMap[p], s, 4, true, false, 0);
   }
-  for (int p = 0; p < 2; ++p) {
+  for (int p = 0; p < kTpdos; ++p) {
     add(kTpdoComm[p], 0, 1, false, false, 2);
     add(kTpdoComm[p], 1, 4, true, false, kCobInvalid | (kTpdoBase[p] + node));
     add(kTpdoComm[p], 2, 1, true, false, 0xFF);
@@ -320,8 +321,8 @@ std::uint32_t VirtualDrive::sdo_write(Entry& e, const std::uint8_t* data, std::s
   if (len < e.size) return sdo::kAbortTooShort;
   std::uint32_t v = 0;
   for (std::size_t i = 0; i < len; ++i) v |= std::uint32_t(data[i]) << (8 * i);
-  const bool is_map = (e.index >= 0x1600 && e.index <= 0x1602) || (e.index >= 0x1A00 && e.index <= 0x1A01);
-  const bool is_comm = (e.index >= 0x1400 && e.index <= 0x1402) || (e.index >= 0x1800 && e.index <= 0x1801);
+  const bool is_map = (e.index >= 0x1600 && e.index <= 0x1602) || (e.index >= 0x1A00 && e.index <= 0x1A02);
+  const bool is_comm = (e.index >= 0x1400 && e.index <= 0x1402) || (e.index >= 0x1800 && e.index <= 0x1802);
   if (is_map) {
     const std::uint16_t comm = std::uint16_t(e.index - 0x200);
     if (!(get(comm, 1) & kCobInvalid)) return sdo::kAbortDeviceState;  // PDO must be disabled first
@@ -554,7 +555,7 @@ void VirtualDrive::on_sync(TimePoint now, CanBus& bus) {
   tq_sum_ = 0;
   tq_n_ = 0;
   // Inputs are sampled at the SYNC...
-  for (int p = 0; p < 2; ++p) {
+  for (int p = 0; p < kTpdos; ++p) {
     const std::uint32_t type = get(kTpdoComm[p], 2);
     if (type >= 1 && type <= 240 && syncs_ % type == 0) send_tpdo(p, bus);
   }
@@ -642,7 +643,7 @@ std::uint32_t VirtualDrive::digital_inputs() const {
   if (p <= switches_.neg_limit) v |= c402::kDiNegLimit;
   if (p >= switches_.pos_limit) v |= c402::kDiPosLimit;
   if (home_active(p)) v |= c402::kDiHome;
-  return v;
+  return v | std::atomic_ref<std::uint32_t>(input_bits_).load(std::memory_order_relaxed);
 }
 
 bool VirtualDrive::signal_at(double p) const {

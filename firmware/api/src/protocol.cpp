@@ -455,6 +455,25 @@ constexpr ArgSpec kMotion[] = {
     {"motion", ArgType::integer, false, 0, 4e9, "the motion's id (a move's answer, the state's `running`); left out: the running motion"}};
 constexpr ArgSpec kFeed[] = {{"pct", ArgType::integer, true, fw::kMinFeedOverride, fw::kMaxFeedOverride, "the feed override (percent): scales jogs and the moves queued from now on"}};
 
+constexpr ArgSpec kSafetyStage[] = {
+    {"changes", ArgType::text, true, 1, 4096,
+     "[safety] keys and their new values as TOML, `key = value` lines (newline or `;` between), e.g. "
+     "`tcp_speed_mm_s = 200; reduced_tcp_speed_mm_s = 50`"}};
+constexpr ArgSpec kSafetyConfirm[] = {
+    {"checksum", ArgType::text, true, 8, 8, "the staged change's checksum as `safety_stage` answered it (8 hex digits)"}};
+
+// A safety change's answer: the checksums (8 hex digits), what changes, the seconds left to confirm.
+void safety_change_result(const fw::SafetyChangeResult& r, bool staged, R& out) {
+  if (!r.ok()) return out.fail(r.error, r.reason);
+  char now[9], was[9];
+  std::snprintf(now, sizeof now, "%08X", static_cast<unsigned>(r.checksum));
+  std::snprintf(was, sizeof was, "%08X", static_cast<unsigned>(r.previous));
+  out.j["checksum"] = now;
+  out.j["previous"] = was;
+  out.j["changes"] = r.changes;
+  if (staged) out.j["expires_s"] = r.expires_s;
+}
+
 constexpr MessageSpec kMessages[] = {
     {"hello", kHello, Gate::open, Where::session, "-",
      "authenticates (with a token when the server has a token file) and answers protocol, robot, joints with their "
@@ -579,6 +598,24 @@ constexpr MessageSpec kMessages[] = {
        o.on = c.rq.arg("on")->num != 0;
        const fw::OutputResult r = c.cx.svc->set_output(o);
        if (!r.ok()) return out.fail(r.error, std::string(fw::to_string(r.refusal)) + " (" + std::to_string(r.count) + " outputs)");
+     }},
+    {"safety_stage", kSafetyStage, Gate::control, Where::service, "ArmService::stage_safety",
+     "stages a run-time change of the [safety] section (docs/safety.md#confirming-a-change): checked against the "
+     "robot, nothing changes yet; answers the `checksum` the configuration will have, the one in force "
+     "(`previous`), what changes and the seconds left to confirm it (`expires_s`)",
+     +[](C& c, R& out) { safety_change_result(c.cx.svc->stage_safety(c.rq.arg("changes")->text), true, out); }},
+    {"safety_confirm", kSafetyConfirm, Gate::control, Where::service, "ArmService::confirm_safety",
+     "applies the staged [safety] change when `checksum` is its checksum, in time, with the arm at rest; "
+     "refused in one line otherwise (nothing staged, another checksum, expired: the change is then dropped)",
+     +[](C& c, R& out) {
+       const std::string& t = c.rq.arg("checksum")->text;
+       std::uint32_t v = 0;
+       for (const char ch : t) {
+         const int d = ch >= '0' && ch <= '9' ? ch - '0' : ch >= 'A' && ch <= 'F' ? ch - 'A' + 10 : ch >= 'a' && ch <= 'f' ? ch - 'a' + 10 : -1;
+         if (d < 0) return out.fail(CmdError::bad_number, "checksum: \"" + t + "\" is not 8 hex digits");
+         v = (v << 4) | static_cast<std::uint32_t>(d);
+       }
+       safety_change_result(c.cx.svc->confirm_safety(v), false, out);
      }},
     {"stream", kStream, Gate::control, Where::service, "StreamService::target",
      "streaming (servo) mode: the newest joint target, latest wins, moving on at its velocity (`qd`, or estimated) "

@@ -1,6 +1,9 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "servoarm/app/app.hpp"
 
+#include <chrono>
+#include <thread>
+
 #include <algorithm>
 #include <cmath>
 #include <vector>
@@ -145,6 +148,10 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
              std::to_string(plans.back().ids.back()) + ")";
     output_joint.push_back(jo);
   }
+  // [safety] inputs: a drive input on a CiA 402 drive of the arm, a GPIO input only with libgpiod
+  if (const std::string e = check_safety_input("safety.estop_input", cfg.safety_estop_input, plans); !e.empty()) return e;
+  if (const std::string e = check_safety_input("safety.reduced_input", cfg.safety_reduced_input, plans); !e.empty())
+    return e;
   // One bus per interface named; one group per (family, interface); the arm's ServoBus over them.
   servo = std::make_unique<hal::ArmServoBus>();
   buses.clear();
@@ -165,8 +172,24 @@ std::string App::build(const FwConfig& c, hal::Clock* clock_override, const SimF
   ik = std::make_unique<kin::IkModel>();
   ik_ready = kin::ik_prepare(chain, *ik) == kin::Status::ok && ik->method != kin::IkMethod::none;
   ctl = std::make_unique<Controller>(*servo, chain, controller_config());
+  estop_input = make_safety_input(cfg.safety_estop_input);
+  reduced_input = make_safety_input(cfg.safety_reduced_input);
+  // A simulated input rests released (a test asserts it: SimInput::set).
+  if (auto* e = sim_input_of(estop_input.get()))
+    e->set(cfg.safety_estop_input_active == "low" ? hal::InputLevel::high : hal::InputLevel::low);
+  if (auto* r = sim_input_of(reduced_input.get()))
+    r->set(cfg.safety_reduced_input_active == "low" ? hal::InputLevel::high : hal::InputLevel::low);
+  SafetyInputs si;
+  si.estop = estop_input.get();
+  si.estop_active_low = cfg.safety_estop_input_active == "low";
+  si.reduced = reduced_input.get();
+  si.reduced_active_low = cfg.safety_reduced_input_active == "low";
+  si.debounce = static_cast<hal::Duration>(cfg.safety_input_debounce_ms * 1e6);
+  ctl->set_safety_inputs(si);
   model = std::make_unique<ModelControl>();
   console = std::make_unique<Console>(*ctl, console_config(), ik_ready ? ik.get() : nullptr);
+  console->service().set_safety_stager(
+      [this](const std::string& changes, SafetyProposal& out) { return stage_safety_change(changes, out); });
   if (const std::string e = console->load_frames(); !e.empty()) return "frames file refused: " + e;
   if (const std::string e = console->load_points(); !e.empty()) return "points file refused: " + e;
   McapSettings ms;  // `record mcap`: an absolute folder only (armfw resolves a relative record.dir)
@@ -210,7 +233,133 @@ std::string App::open_bus(const DriveGroupPlan& p, const SimFactory& sim, hal::C
   return "";
 }
 
+std::string App::check_safety_input(const char* key, const std::string& text,
+                                    const std::vector<DriveGroupPlan>& plans) const {
+  hal::InputSource src;
+  char err[160];
+  if (!hal::parse_input_source(text, src, err, sizeof err)) return std::string("config: ") + key + ": " + err;
+  const std::string what = std::string("config: ") + key + ": \"" + text + "\": ";
+  switch (src.kind) {
+    case hal::InputKind::none:
+    case hal::InputKind::sim: return "";
+    case hal::InputKind::gpio:
+      if (!hal::gpiod_available())
+        return what + "this armfw was built without libgpiod (install libgpiod-dev and configure the build again)";
+      return "";
+    case hal::InputKind::drive:
+      if (src.joint >= chain.n_joints)
+        return what + "the robot has " + std::to_string(chain.n_joints) + " joints";
+      for (const DriveGroupPlan& p : plans)
+        for (int jo : p.joints)
+          if (jo == src.joint && p.family != "cia402")
+            return what + "joint " + std::to_string(src.joint + 1) + "'s drive is of the family " + p.family +
+                   ", which reports no digital inputs (60FDh is CiA 402's): use a CiA 402 drive's input or a GPIO line";
+      return "";
+  }
+  return "";
+}
+
+std::unique_ptr<hal::SafetyInput> App::make_safety_input(const std::string& text) const {
+  hal::InputSource src;
+  char err[160];
+  if (!hal::parse_input_source(text, src, err, sizeof err)) return nullptr;  // (refused by build())
+  const auto stale = static_cast<hal::Duration>(cfg.safety_input_timeout_ms * 1e6);
+  switch (src.kind) {
+    case hal::InputKind::none: return nullptr;
+    case hal::InputKind::sim: return std::make_unique<hal::SimInput>(src.name);
+    case hal::InputKind::drive: return std::make_unique<hal::DriveBitInput>(*servo, src.joint, src.bit, stale);
+    case hal::InputKind::gpio: return std::make_unique<hal::GpiodInput>(src.chip, src.line, hal::kMillisecond, stale);
+  }
+  return nullptr;
+}
+
+std::string App::stage_safety_change(const std::string& changes, SafetyProposal& out) const {
+  // Keys set at start only: the controller's reactions and the inputs' wiring are not part of
+  // the monitor's envelope, which is all a run-time change replaces.
+  static constexpr const char* kStartOnly[] = {
+      "following_error_deg", "enable_timeout_s", "feedback_timeout_ms", "stop", "drive_stop_timeout_s",
+      "estop_input", "estop_input_active", "reduced_input", "reduced_input_active", "input_debounce_ms",
+      "input_timeout_ms"};
+  std::string text = to_toml(cfg);
+  const std::size_t sec = text.find("\n[safety]\n");
+  if (sec == std::string::npos) return "no [safety] section to change";
+  std::vector<std::string> keys;
+  std::size_t a = 0;
+  while (a <= changes.size()) {
+    std::size_t b = changes.find_first_of(";\n", a);
+    if (b == std::string::npos) b = changes.size();
+    std::string item = changes.substr(a, b - a);
+    a = b + 1;
+    const auto trim = [](std::string s) {
+      const std::size_t f = s.find_first_not_of(" \t\r");
+      if (f == std::string::npos) return std::string();
+      return s.substr(f, s.find_last_not_of(" \t\r") - f + 1);
+    };
+    item = trim(item);
+    if (item.empty()) continue;
+    const std::size_t eq = item.find('=');
+    if (eq == std::string::npos) return "\"" + item + "\": a change is `key = value`";
+    std::string key = trim(item.substr(0, eq));
+    const std::string value = trim(item.substr(eq + 1));
+    if (key.rfind("safety.", 0) == 0) key = key.substr(7);
+    if (value.empty()) return "safety." + key + ": no value";
+    for (const char* k : kStartOnly)
+      if (key == k) return "safety." + key + " is set at start only: change it in the configuration file and restart";
+    for (const std::string& k : keys)
+      if (k == key) return "safety." + key + ": given twice";
+    // its line in the [safety] section of the effective configuration
+    const std::size_t at = text.find("\n" + key + " = ", sec + 1);
+    const std::size_t next_sec = text.find("\n[", sec + 1);
+    if (at == std::string::npos || (next_sec != std::string::npos && at > next_sec))
+      return "safety." + key + ": no such key in [safety] (armfw --config-keys lists them)";
+    const std::size_t end = text.find('\n', at + 1);
+    text.replace(at + 1, end - at - 1, key + " = " + value);
+    keys.push_back(key);
+  }
+  if (keys.empty()) return "no change given (`key = value`, `;` between)";
+  FwConfig next;
+  if (std::string e = load_config_text(text, "safety change", next, false); !e.empty()) return e;
+  if (std::string e = validate_for_chain(next, chain); !e.empty()) return e;
+  if (std::string e = safety_envelope(next, chain, out.safety); !e.empty()) return e;
+  out.checksum = safety_checksum(next, chain);
+  out.changes.clear();
+  for (const ConfigKey& k : config_keys()) {
+    const std::string name = k.name;
+    if (name.rfind("safety.", 0) != 0) continue;
+    const std::string was = value_text(k, cfg), now = value_text(k, next);
+    if (was != now) out.changes += (out.changes.empty() ? "" : "; ") + name + " = " + was + " -> " + now;
+  }
+  // The App's configuration takes the safety.* values when the change is applied, so that the
+  // next change starts from it (the other keys stay as they are).
+  FwConfig* mine = const_cast<FwConfig*>(&cfg);
+  out.commit = [mine, next] {
+    for (const ConfigKey& k : config_keys())
+      if (std::string(k.name).rfind("safety.", 0) == 0)
+        std::visit([&](auto m) { (*mine).*m = next.*m; }, k.member);
+  };
+  return "";
+}
+
+hal::SimInput* App::sim_input_of(hal::SafetyInput* in) {
+  return in != nullptr && std::string(in->source()).rfind("sim:", 0) == 0 ? static_cast<hal::SimInput*>(in) : nullptr;
+}
+
+hal::SimInput* App::sim_input(const std::string& name) const {
+  for (hal::SafetyInput* in : {estop_input.get(), reduced_input.get()})
+    if (in != nullptr && std::string(in->source()) == "sim:" + name) return static_cast<hal::SimInput*>(in);
+  return nullptr;
+}
+
 std::string App::boot() {
+  // A GPIO safety input's reading thread (its line is read from now on; lost until it is).
+  // Its first reading is waited for (at most 100 ms), so that the first cycle does not take a
+  // line not read yet for a lost one.
+  for (hal::SafetyInput* in : {estop_input.get(), reduced_input.get()}) {
+    if (in == nullptr || std::string(in->source()).rfind("gpio:", 0) != 0) continue;
+    auto* g = static_cast<hal::GpiodInput*>(in);
+    if (!g->start()) continue;
+    for (int i = 0; i < 100 && g->polls() == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
   const hal::TimePoint now = clock->now();
   const hal::Status st = ctl->boot(now, now + static_cast<hal::Duration>(cfg.start_timeout_s * 1e9));
   if (st != hal::Status::ok) return std::string("drive bring-up failed: ") + hal::to_string(st) + ": " + servo->last_error();

@@ -98,6 +98,8 @@ int usage(FILE* f, int code) {
                "                        foxglove.enabled on (docs/foxglove-mcap.md)\n"
                "  --record-dir DIR      where `record mcap` writes its MCAP files (record.dir)\n"
                "  --api-reference       print the generated reference section of docs/api.md and exit\n"
+               "  (safety inputs: the safety.estop_input / safety.reduced_input keys, a drive's 60FDh bit or a GPIO\n"
+               "  line; run-time [safety] changes: the API's safety_stage + safety_confirm; docs/safety.md)\n"
                "  -h, --help            this text\n");
   return code;
 }

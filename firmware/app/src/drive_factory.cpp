@@ -11,6 +11,7 @@
 
 #include "servoarm/hal/canopen_master.hpp"
 #include "servoarm/hal/mit_group.hpp"
+#include "servoarm/hal/safety_input.hpp"
 
 namespace servoarm::fw {
 
@@ -138,6 +139,13 @@ std::string make_cia402(const DriveGroupInput& in, std::unique_ptr<hal::DriveGro
     // they can map it (else the following error alone detects the stop, as documented)
     if (jc.homing.kind == hal::HomingKind::hard_stop && jc.homing.torque_limit > 0) mc.tpdo2.torque = hal::PdoUse::optional;
     for (int jo : in.output_joint) jc.digital_outputs = jc.digital_outputs || jo == j;
+    // [safety] inputs on this joint's drive: its 60FDh into TPDO3 (docs/safety.md#safety-inputs)
+    for (const std::string* text : {&cfg.safety_estop_input, &cfg.safety_reduced_input}) {
+      hal::InputSource src;
+      char err[160];
+      if (hal::parse_input_source(*text, src, err, sizeof err) && src.kind == hal::InputKind::drive && src.joint == j)
+        jc.digital_inputs = true;
+    }
     if (!cfg.drives.empty()) {  // drive.sdo, validated by the key table
       const std::vector<SdoEntry>& sdo = cfg.drives[ju].sdo;
       jc.sdo_write_count = std::min(sdo.size(), hal::kMaxSdoWrites);

@@ -10,6 +10,7 @@
 #include "servoarm/hal/mit.hpp"
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/orientation.hpp"
+#include "servoarm/hal/safety_input.hpp"
 #include "servoarm/kinematics/safety.hpp"
 #include "servoarm/kinematics/io/file_input.hpp"
 #include "servoarm/lang/markdown.hpp"
@@ -27,6 +28,7 @@ namespace {
 constexpr double kBauds[] = {9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600};
 constexpr double kDirections[] = {1, -1};
 constexpr const char* kStops[] = {"ramp", "drive"};
+constexpr const char* kInputLevels[] = {"low", "high"};
 constexpr const char* kDriveFamilies[] = {"cia402", "damiao", "cubemars_mit", "robstride_mit"};
 constexpr const char* kDialects[] = {"native", "grbl"};
 constexpr const char* kTransportDialects[] = {"", "native", "grbl"};
@@ -120,6 +122,16 @@ std::string safety_reduced_plane_frames_ok(const FwConfig& c, const FwConfig&) {
 }
 std::string safety_keep_in_frames_ok(const FwConfig& c, const FwConfig&) {
   return safety_frames_ok(c.safety_keep_in_frames, c.safety_keep_in, 6, "safety.keep_in");
+}
+// [safety] inputs: a source the parser takes (hal/safety_input.hpp)
+std::string safety_input_ok(const std::string& text) {
+  hal::InputSource src;
+  char err[160];
+  return hal::parse_input_source(text, src, err, sizeof err) ? std::string() : std::string(err);
+}
+std::string safety_estop_input_ok(const FwConfig& c, const FwConfig&) { return safety_input_ok(c.safety_estop_input); }
+std::string safety_reduced_input_ok(const FwConfig& c, const FwConfig&) {
+  return safety_input_ok(c.safety_reduced_input);
 }
 std::string safety_keep_out_frames_ok(const FwConfig& c, const FwConfig&) {
   return safety_frames_ok(c.safety_keep_out_frames, c.safety_keep_out, 6, "safety.keep_out");
@@ -476,6 +488,31 @@ const ConfigKey kConfigTable[] = {
       "description with capsules"},
     K{"safety.self_collision_margin_mm", &F::safety_self_collision_margin_mm, "mm",
       "least distance between the surfaces of two capsules that safety.self_collision checks"}.within(0, 1000),
+    K{"safety.estop_input", &F::safety_estop_input, "",
+      "external e-stop input (docs/safety.md#safety-inputs), mapped to the emergency stop: `\"drive:J:bitN\"` = bit "
+      "N of joint J's drive's digital inputs (60FDh, CiA 402 drives), `\"gpio:CHIP:LINE\"` = a GPIO line (libgpiod), "
+      "`\"sim:NAME\"` = simulated (tests); asserted or unreadable: emergency stop in that cycle (a powered arm), "
+      "`enable` and `reset` refused until it is released; not a safety-rated input (wire the contact to the drives' STO through a safety "
+      "relay too); `\"\"` = none"}
+        .related(safety_estop_input_ok, "drive:J:bitN, gpio:CHIP:LINE or sim:NAME"),
+    K{"safety.estop_input_active", &F::safety_estop_input_active, "",
+      "the level of safety.estop_input that means stop: `\"low\"` (a normally closed contact: a broken wire "
+      "stops) or `\"high\"`"}
+        .among(std::span<const char* const>(kInputLevels)),
+    K{"safety.reduced_input", &F::safety_reduced_input, "",
+      "Reduced-mode input (a light curtain's or area scanner's output, a key switch), sources as "
+      "safety.estop_input: asserted or unreadable, the envelope runs with the Reduced limits (moves planned and "
+      "monitored so, a running move slowed on its path); released, the mode `safety` set; `\"\"` = none"}
+        .related(safety_reduced_input_ok, "drive:J:bitN, gpio:CHIP:LINE or sim:NAME"),
+    K{"safety.reduced_input_active", &F::safety_reduced_input_active, "",
+      "the level of safety.reduced_input that means Reduced: `\"low\"` or `\"high\"`"}
+        .among(std::span<const char* const>(kInputLevels)),
+    K{"safety.input_debounce_ms", &F::safety_input_debounce_ms, "ms",
+      "a safety input counts as released once it has read released this long without a break (asserting acts in "
+      "the cycle it is read)"}.within(0, 1000),
+    K{"safety.input_timeout_ms", &F::safety_input_timeout_ms, "ms",
+      "a safety input whose last reading is older than this (a drive's 60FDh, a GPIO line's reading thread) cannot "
+      "be read: the e-stop input then stops, the Reduced input reduces"}.within(5, 10000),
     K{"motion.home_deg", &F::home_deg, "deg (mm)",
       "park pose for `park` / G28, one value per joint, each within that joint's limits; `[]` = zeros clamped into "
       "the limits"}.within(-kMaxLength, kMaxLength).length(0, kin::kMaxJoints),

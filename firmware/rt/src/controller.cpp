@@ -125,6 +125,7 @@ std::size_t Controller::flush_motions() {
 }
 
 void Controller::reply(std::uint32_t seq, RtResult res, const char* msg) {
+  if (seq == 0) return;  // the controller's own request (the e-stop input): no one waits for it
   if (n_pending_ >= static_cast<int>(pending_replies_.size())) return;  // cannot happen: <= 4 requests per cycle
   Reply& r = pending_replies_[static_cast<std::size_t>(n_pending_++)];
   r.seq = seq;
@@ -822,7 +823,7 @@ std::size_t Controller::begin_estop(TimePoint now) {
 
 void Controller::estop_done(const Request& r, std::size_t dropped) {
   char m[sizeof(Reply::message)];
-  emit(EventKind::estop, FaultCause::none, -1, 0, "emergency stop");
+  emit(EventKind::estop, FaultCause::none, -1, 0, estop_why_ != nullptr ? estop_why_ : "emergency stop");
   dropped_text(m, sizeof m, "estop", dropped);
   reply(r.seq, RtResult::ok, m);
 }
@@ -1283,7 +1284,10 @@ void Controller::publish() {
   t.path_time = exec_.path_time();
   t.path_id = exec_.path_id();
   t.homing_now = hrunning_;
-  t.safety_mode = safety_mode_.load(std::memory_order_relaxed);
+  t.safety_mode = reduced_in_.asserted() ? static_cast<std::uint8_t>(kin::SafetyMode::reduced)
+                                         : safety_mode_.load(std::memory_order_relaxed);
+  t.safety_inputs = static_cast<std::uint8_t>((estop_in_.asserted() ? 1u : 0u) | (estop_in_.lost() ? 2u : 0u) |
+                                              (reduced_in_.asserted() ? 4u : 0u) | (reduced_in_.lost() ? 8u : 0u));
   t.safety_stops = safety_stops_;
   t.safety_zone = static_cast<std::int8_t>(safety_.zone());
   t.speed_scale = exec_.speed_scale();
@@ -1361,6 +1365,9 @@ void join_text(char* dst, std::size_t size, const char* a, const char* b) {
 }  // namespace
 
 void Controller::step_safety() {
+  // A confirmed run-time change of the envelope (ArmService::confirm_safety): the console thread
+  // sends the active tool again right after it.
+  if (safety_configs_.pop(safety_next_)) safety_.configure(chain_, safety_next_, period_s_);
   if (!safety_.enabled()) return;
   SafetyToolChange tc;
   while (safety_tools_.pop(tc)) {
@@ -1392,7 +1399,7 @@ void Controller::step_safety() {
     case Mode::freedrive:
     case Mode::freedrive_end: safety_.reset(); return;  // not powered on the setpoints
   }
-  const kin::SafetyMode op = safety_mode();
+  const kin::SafetyMode op = reduced_in_.asserted() ? kin::SafetyMode::reduced : safety_mode();
   if (op != last_op_) {  // the limits the running motion was planned with came down (or went up)
     if (op == kin::SafetyMode::reduced) reduced_since_ = static_cast<std::int64_t>(cycles_);
     last_op_ = op;
@@ -1489,17 +1496,71 @@ void Controller::apply_output(const OutputChange& c) {
   bus_.set_digital_outputs(j, out_words_[j]);  // not_supported: the console checked the mapping
 }
 
+void Controller::watch_safety_inputs(TimePoint now) {
+  char m[256];  // (emit() cuts it to the event's length)
+  if (reduced_in_.configured()) {
+    const bool was = reduced_in_.asserted(), was_lost = reduced_in_.lost();
+    const bool on = reduced_in_.update(now);
+    reduced_by_input_.store(on, std::memory_order_relaxed);
+    if (reduced_in_.lost() && !was_lost) {
+      std::snprintf(m, sizeof m, "safety mode reduced: Reduced input cannot be read: %s", reduced_in_.input()->why_lost());
+      emit(EventKind::warning, FaultCause::none, -1, 0, m);
+    } else if (on != was) {
+      if (on) std::snprintf(m, sizeof m, "safety mode reduced: Reduced input %s asserted", reduced_in_.input()->source());
+      else std::snprintf(m, sizeof m, "safety mode %s: Reduced input %s released", kin::to_string(safety_mode()),
+                         reduced_in_.input()->source());
+      emit(EventKind::warning, FaultCause::none, -1, 0, m);
+    }
+  }
+  if (!estop_in_.configured()) return;
+  const bool was_lost = estop_in_.lost(), was = estop_in_.asserted();
+  const bool on = estop_in_.update(now);
+  const bool newly_lost = estop_in_.lost() && !was_lost;
+  // Not powered and nothing stopping (boot, disabled, a latched fault or e-stop): nothing to
+  // stop; `enable` and `reset` are refused while it is asserted (cycle()).
+  const bool at_rest_off = mode_ == Mode::boot || mode_ == Mode::disabled || mode_ == Mode::fault;
+  if (on && !at_rest_off && arm_state(mode_) != ArmState::estop) {
+    if (estop_in_.lost()) std::snprintf(m, sizeof m, "emergency stop: e-stop input cannot be read: %s", estop_in_.input()->why_lost());
+    else std::snprintf(m, sizeof m, "emergency stop: e-stop input %s asserted", estop_in_.input()->source());
+    estop_why_ = m;
+    run(action_for(mode_, RequestOp::estop), Request(RequestOp::estop, 0), now);
+    estop_why_ = nullptr;
+    return;
+  }
+  if (newly_lost) {  // (already in e-stop, or not powered)
+    std::snprintf(m, sizeof m, "e-stop input cannot be read: %s", estop_in_.input()->why_lost());
+    emit(EventKind::warning, FaultCause::none, -1, 0, m);
+  } else if (on && !was) {  // (already in e-stop, or not powered)
+    std::snprintf(m, sizeof m, "e-stop input %s asserted", estop_in_.input()->source());
+    emit(EventKind::warning, FaultCause::none, -1, 0, m);
+  } else if (was && !on) {
+    std::snprintf(m, sizeof m, "e-stop input %s released%s", estop_in_.input()->source(),
+                  arm_state(mode_) == ArmState::estop ? ": `reset` clears the emergency stop" : "");
+    emit(EventKind::warning, FaultCause::none, -1, 0, m);
+  }
+}
+
 void Controller::cycle(TimePoint now) {
   now_ = now;
   ++cycles_;
   // 1 feedback
   bus_.read(now);
   for (int j = 0; j < n_; ++j) q_act_[j] = bus_.feedback(static_cast<std::size_t>(j)).position;
+  watch_safety_inputs(now);  // the e-stop input acts before any request of this cycle
   // free-drive: the hand moves the arm; whatever a request starts, it starts from where it is now
   if (mode_ == Mode::freedrive || mode_ == Mode::freedrive_end) cmd_ = kin::JointState::rest(q_act_);
   // console requests (bounded per cycle)
   Request r;
-  for (int i = 0; i < 4 && requests_.pop(r); ++i) handle_request(r, now);
+  for (int i = 0; i < 4 && requests_.pop(r); ++i) {
+    if ((r.op == RequestOp::reset || r.op == RequestOp::enable) && estop_in_.asserted()) {
+      char m[256];  // (reply() cuts it to the reply's length)
+      std::snprintf(m, sizeof m, "the e-stop input %s is asserted%s: release it first", estop_in_.input()->source(),
+                    estop_in_.lost() ? " (cannot be read)" : "");
+      reply(r.seq, RtResult::fault, m);
+      continue;
+    }
+    handle_request(r, now);
+  }
   // digital outputs set at once (M64 / M65, `out`), bounded per cycle
   OutputChange oc;
   for (int i = 0; i < 8 && outputs_.pop(oc); ++i) apply_output(oc);

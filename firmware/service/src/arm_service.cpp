@@ -469,7 +469,7 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
     return r;
   }
   // the envelope's TCP speed limit (the mode's) caps the line's speed: slowed, not refused
-  if (const double cap = cfg_.safety.enabled ? cfg_.safety.limits(safety_mode_).tcp_speed : 0.0; cap > 0 && speed > cap)
+  if (const double cap = cfg_.safety.enabled ? cfg_.safety.limits(plan_safety_mode()).tcp_speed : 0.0; cap > 0 && speed > cap)
     speed = cap;
   MotionItem* m = slot(cx.dry != nullptr, r);
   if (m == nullptr) return r;
@@ -1048,7 +1048,7 @@ ArmStatus ArmService::status() const {
   ArmStatus s;
   s.feed_pct = feed_pct_;
   s.safety_on = cfg_.safety.enabled;
-  s.safety_mode = safety_mode_;
+  s.safety_mode = plan_safety_mode();
   s.safety_checksum = cfg_.safety_checksum;
   s.q = kin::JointVector::Zero(n_);
   s.q_cmd = kin::JointVector::Zero(n_);
@@ -1057,6 +1057,7 @@ ArmStatus ArmService::status() const {
   if (ctl_ == nullptr) return s;  // dry runs only: no arm to report
   const Telemetry t = ctl_->telemetry();
   s.state = t.state;
+  s.safety_inputs = t.safety_inputs;
   s.mode = t.mode;
   s.holding = t.holding;
   s.queued = t.queued;

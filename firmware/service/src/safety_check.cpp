@@ -36,7 +36,7 @@ std::string envelope_violation_at(const kin::SafetyConfig& env, kin::SafetyMode 
 std::string ArmService::check_target(const kin::JointVector& q_prev, const kin::JointVector& q, double dt,
                                      const kin::Chain* chain) const {
   const kin::Chain& c = chain != nullptr ? *chain : chain_;
-  return envelope_violation_at(envelope_for(c), safety_mode_, c, q_prev, q, dt);
+  return envelope_violation_at(envelope_for(c), plan_safety_mode(), c, q_prev, q, dt);
 }
 
 kin::SafetyConfig ArmService::envelope_for(const kin::Chain& chain) const {
@@ -94,8 +94,8 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
   // the momentum and power (their limits) at the same state
   // (with trigger planes a sample may run in either mode)
   const bool zones = env.trigger_count > 0;
-  const bool stops = env.limits(safety_mode_).has_stop_limit() || (zones && env.reduced.has_stop_limit());
-  const bool dynamics = env.limits(safety_mode_).has_dynamics_limit() || (zones && env.reduced.has_dynamics_limit());
+  const bool stops = env.limits(plan_safety_mode()).has_stop_limit() || (zones && env.reduced.has_stop_limit());
+  const bool dynamics = env.limits(plan_safety_mode()).has_dynamics_limit() || (zones && env.reduced.has_dynamics_limit());
   kin::JointState st;
   st.pos = st.vel = st.acc = kin::JointVector::Zero(n_);
   kin::JointVector v_prev = kin::JointVector::Zero(n_);
@@ -122,7 +122,7 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
       if (dynamics) (void)kin::dynamics_prediction(chain, st, x);
     }
     // the mode at this sample: Reduced where the tool reaches beyond a trigger plane
-    const kin::SafetyMode mode = kin::effective_mode(env, safety_mode_, x);
+    const kin::SafetyMode mode = kin::effective_mode(env, plan_safety_mode(), x);
     ratio = std::max(ratio, kin::speed_ratio(env, mode, x));
     // (speeds: 1e-6 m/s of rounding, so that a line planned at the limit passes)
     if (!refused && kin::check_sample(env, mode, x, 0.0, 0.0, 1e-6, v)) {
@@ -154,7 +154,7 @@ std::string ArmService::jog_envelope(const kin::Chain& chain,
   for (int k = 0; k <= kSamples; ++k) {
     const double s = static_cast<double>(k) / kSamples;
     if (!at(s, q) || !kin::safety_sample(chain, env, q, s, x)) continue;
-    if (kin::check_sample(env, kin::effective_mode(env, safety_mode_, x), x, 0.0, 0.0, 0.0, v)) return line_of(v);
+    if (kin::check_sample(env, kin::effective_mode(env, plan_safety_mode(), x), x, 0.0, 0.0, 0.0, v)) return line_of(v);
   }
   return "";
 }

@@ -17,6 +17,7 @@ inline constexpr std::uint32_t kTpdo1 = 0x180;    ///< + node
 inline constexpr std::uint32_t kRpdo1 = 0x200;    ///< + node
 inline constexpr std::uint32_t kTpdo2 = 0x280;    ///< + node
 inline constexpr std::uint32_t kRpdo2 = 0x300;    ///< + node
+inline constexpr std::uint32_t kTpdo3 = 0x380;    ///< + node (digital inputs 60FDh)
 inline constexpr std::uint32_t kRpdo3 = 0x400;    ///< + node (digital outputs 60FEh:01)
 inline constexpr std::uint32_t kSdoTx = 0x580;    ///< server -> client, + node
 inline constexpr std::uint32_t kSdoRx = 0x600;    ///< client -> server, + node

@@ -88,6 +88,9 @@ struct CanopenJointConfig {
   /// Digital outputs: map 60FEh:01 into RPDO3 (0x400 + node) and send
   /// ServoBus::set_digital_outputs' word with every write(); false = no RPDO3 (same frames).
   bool digital_outputs = false;
+  /// Digital inputs: map 60FDh into TPDO3 (0x380 + node), sent at every SYNC, into
+  /// JointFeedback::digital_inputs; false = no TPDO3 (same frames).
+  bool digital_inputs = false;
   /// Objects written in this order at the end of the drive's bring-up (after the PDO maps and
   /// 6085h), each read back: a drive that refuses one (SDO abort) or reads back another value
   /// fails start() naming the node, the object and the abort code or both values.
@@ -292,6 +295,7 @@ class CanopenServoBus final : public DriveGroup {
     // Issue 20: RPDO1/TPDO1 lengths (7 with 6060h/6061h), RPDO2 layout (-1 = not mapped).
     std::uint8_t rpdo1_len = 6, tpdo1_len = 6, rpdo2_len = 0;
     bool rpdo3 = false;             ///< 60FEh:01 mapped (digital outputs)
+    bool tpdo3 = false;             ///< 60FDh mapped (digital inputs)
     std::uint32_t outputs = 0;      ///< the 60FEh:01 word sent
     std::int8_t off_vel_off = -1, off_tq_off = -1, off_tq_target = -1;
     bool torque_mode = false;       ///< CST usable on this joint

@@ -56,6 +56,12 @@ struct JointFeedback {
   double temperature_warning = 0.0;  ///< deg C: from here on the joint is hot (a warning)
   double temperature_limit = 0.0;    ///< deg C: here the family faults the joint (drive_fault)
   double temperature_cutoff = 0.0;   ///< deg C: where the motor stops by itself
+  /// The drive's digital inputs (CiA 402 60FDh, when mapped: CanopenJointConfig::digital_inputs):
+  /// has_inputs false when the drive does not report them; inputs_time the last frame that
+  /// carried them (0 = none yet), so a reader can tell a stale word (safety inputs).
+  bool has_inputs = false;
+  std::uint32_t digital_inputs = 0;
+  TimePoint inputs_time = 0;
 };
 
 /// How a joint establishes its zero at power-up (docs/servo-bus.md#homing).

@@ -28,6 +28,7 @@
 // Time is passed in (TimePoint, ns): the simulation runs on a ManualClock in
 // tests and on CLOCK_MONOTONIC in `armsim`.
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -136,8 +137,16 @@ class VirtualDrive {
   double physical_position() const { return pos_ - shift_; }
   /// Where the last homing found its mark, in physical counts (NaN before).
   double home_mark() const { return home_mark_; }
-  /// 60FDh as it is now.
+  /// 60FDh as it is now: the switches' bits and the wired inputs (set_input_bits).
   std::uint32_t digital_inputs() const;
+  /// Any thread: the inputs wired to the drive (an e-stop contact, a Reduced-mode switch):
+  /// bits `mask` of 60FDh become those of `value` from the next SYNC's TPDO on.
+  void set_input_bits(std::uint32_t mask, std::uint32_t value) {
+    std::atomic_ref<std::uint32_t> bits(input_bits_);
+    std::uint32_t old = bits.load(std::memory_order_relaxed);
+    while (!bits.compare_exchange_weak(old, (old & ~mask) | (value & mask), std::memory_order_relaxed)) {
+    }
+  }
   /// 60FEh:01: the physical digital outputs as last written (SDO or RPDO, acted on at the SYNC).
   std::uint32_t digital_outputs() const { return get(hal::cia402::kDigitalOutputs, 1); }
   /// True while the position is clamped at a mechanical end stop.
@@ -256,6 +265,9 @@ class VirtualDrive {
   int tq_n_ = 0;
   std::int32_t target_ = 0;
   std::uint64_t syncs_ = 0;
+  /// set_input_bits: the wired inputs of 60FDh, read and written through std::atomic_ref (the
+  /// drives live in a vector, which needs them movable).
+  alignas(std::atomic_ref<std::uint32_t>::required_alignment) mutable std::uint32_t input_bits_ = 0;
   std::uint64_t rng_;
   // Latched synchronous RPDO payloads (applied at the next SYNC).
   std::array<CanFrame, 3> rpdo_latch_{};   // RPDO1..3 (RPDO3: digital outputs)

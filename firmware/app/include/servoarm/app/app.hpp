@@ -20,6 +20,7 @@
 #include "servoarm/rt/model_control.hpp"
 #include "servoarm/hal/arm_servo_bus.hpp"
 #include "servoarm/hal/clock.hpp"
+#include "servoarm/hal/safety_input.hpp"
 #include "servoarm/hal/socketcan_bus.hpp"
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -59,6 +60,12 @@ struct App {
   /// The dynamic model in the control cycle ([dynamics] keys): made by build(), configured by
   /// boot() once the drives are up (their capabilities and rated torques are known then).
   std::unique_ptr<ModelControl> model;
+  /// The [safety] inputs (safety.estop_input, safety.reduced_input; docs/safety.md#safety-inputs),
+  /// made by build() and handed to the controller; a GPIO input's thread starts in boot().
+  std::unique_ptr<hal::SafetyInput> estop_input, reduced_input;
+  /// A simulated safety input ("sim:NAME") of this App, for tests and armfw --sim; nullptr when
+  /// neither input is that one.
+  hal::SimInput* sim_input(const std::string& name) const;
 
   /// Build everything (no threads started, drives not started). "" or the error.
   /// `clock` overrides the monotonic clock (tests pass a ManualClock); `sim` makes the
@@ -81,6 +88,14 @@ struct App {
  private:
   /// The bus of plan `p`'s interface: SocketCAN, or the SimFactory's for bus.can = "sim".
   std::string open_bus(const DriveGroupPlan& p, const SimFactory& sim, hal::CanBus*& bus);
+  /// Check one safety input's source against the arm and this build (`key` names it in the
+  /// error), and make it (after the servo bus exists): "" or the error.
+  std::string check_safety_input(const char* key, const std::string& text, const std::vector<DriveGroupPlan>& plans) const;
+  std::unique_ptr<hal::SafetyInput> make_safety_input(const std::string& text) const;
+  static hal::SimInput* sim_input_of(hal::SafetyInput* in);
+  /// The ArmService's SafetyStager: `changes` applied to the [safety] section of `cfg` through the
+  /// key table (load_config_text, validate_for_chain, safety_envelope): "" or the refusal.
+  std::string stage_safety_change(const std::string& changes, SafetyProposal& out) const;
 };
 
 }  // namespace servoarm::fw

@@ -176,6 +176,12 @@ struct FwConfig {
   std::vector<double> safety_reduced_plane_frames;  ///< one frame per safety.reduced_planes plane
   bool safety_self_collision = false;            ///< the description's capsules kept apart pairwise
   double safety_self_collision_margin_mm = 0.0;  ///< least distance between two capsules' surfaces
+  std::string safety_estop_input;                ///< "drive:J:bitN", "gpio:CHIP:LINE", "sim:NAME"; "" = none
+  std::string safety_estop_input_active = "low"; ///< the level that means stop: "low" or "high"
+  std::string safety_reduced_input;              ///< as safety_estop_input: Reduced mode while asserted
+  std::string safety_reduced_input_active = "low";
+  double safety_input_debounce_ms = 10.0;        ///< released this long before a release counts
+  double safety_input_timeout_ms = 100.0;        ///< a reading older than this: the input is lost
   // [motion]
   std::vector<double> home_deg;        ///< empty = zeros clamped into the limits
   double joint_speed_pct = 50.0;

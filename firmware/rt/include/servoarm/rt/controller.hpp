@@ -36,6 +36,7 @@
 #include "servoarm/rt/seqlock.hpp"
 #include "servoarm/rt/spsc_queue.hpp"
 #include "servoarm/rt/stats.hpp"
+#include "servoarm/hal/safety_input.hpp"
 #include "servoarm/hal/servo_bus.hpp"
 #include "servoarm/kinematics/blend.hpp"
 #include "servoarm/kinematics/blend_path.hpp"
@@ -74,6 +75,18 @@ struct ControllerConfig {
   double unhomed_jog_scale = 0.25;
   /// The safety envelope the monitor checks every cycle (docs/safety.md); disabled: none.
   kin::SafetyConfig safety{};
+};
+
+/// The safety inputs the cycle reads (docs/safety.md#safety-inputs), each with its active level:
+/// the e-stop input makes the emergency stop, the Reduced input holds the envelope in Reduced
+/// mode. An input that cannot be read counts as asserted. Asserting acts in the cycle it is read,
+/// releasing once the input has read released for `debounce`.
+struct SafetyInputs {
+  hal::SafetyInput* estop = nullptr;    ///< none: no e-stop input
+  bool estop_active_low = true;
+  hal::SafetyInput* reduced = nullptr;  ///< none: no Reduced input
+  bool reduced_active_low = true;
+  hal::Duration debounce = 10 * hal::kMillisecond;
 };
 
 inline constexpr std::size_t kRequestQueue = 16;
@@ -134,6 +147,18 @@ class Controller final : private SegmentHost {
     c.radius = radius;
     return safety_tools_.push(c);
   }
+  /// Set-up (before the control thread runs): the safety inputs; the inputs outlive the controller.
+  void set_safety_inputs(const SafetyInputs& in) {
+    estop_in_.configure(in.estop, in.estop_active_low, in.debounce);
+    reduced_in_.configure(in.reduced, in.reduced_active_low, in.debounce);
+  }
+  /// Any thread: the Reduced input is asserted (or lost): the envelope runs in Reduced mode
+  /// whatever set_safety_mode() said, and moves are planned so.
+  bool reduced_by_input() const { return reduced_by_input_.load(std::memory_order_relaxed); }
+  /// Console thread: a new safety envelope for the monitor (a confirmed run-time change of
+  /// [safety]); the monitor takes it at its next cycle with the chain's own tool: send the active
+  /// tool after it (set_safety_tool). False when the queue is full (not taken).
+  bool set_safety_config(const kin::SafetyConfig& c) { return safety_configs_.push(c); }
   /// Real-time / tests: the safety monitor (its last commanded TCP sample).
   const SafetyMonitor& safety_monitor() const { return safety_; }
 
@@ -162,6 +187,10 @@ class Controller final : private SegmentHost {
 
  private:
   void handle_request(const Request& r, TimePoint now);
+  /// The safety inputs, read after the feedback: the e-stop input asserted makes the emergency
+  /// stop in this cycle, the Reduced input sets reduced_by_input_; a change is an event naming
+  /// the input.
+  void watch_safety_inputs(TimePoint now);
   void run(Action a, const Request& r, TimePoint now);
   void reply(std::uint32_t seq, RtResult res, const char* msg);
   void emit(EventKind k, FaultCause c, int joint, std::uint32_t id, const char* msg);
@@ -299,12 +328,17 @@ class Controller final : private SegmentHost {
   };
   SpscQueue<SafetyToolChange, 8> safety_tools_;  ///< set_safety_tool -> the monitor
   std::atomic<std::uint8_t> safety_mode_{0};  ///< kin::SafetyMode
+  SpscQueue<kin::SafetyConfig, 2> safety_configs_;  ///< set_safety_config -> the monitor
+  kin::SafetyConfig safety_next_{};                 ///< (the cycle's copy of one taken from it)
   std::uint32_t safety_stops_ = 0;
   int speed_over_cycles_ = 0;  ///< cycles in a row a scaled speed has been beyond its limit and tolerance
   kin::SafetyViolation over_last_{};  ///< the speed function beyond in the last of them
   kin::SafetyMode last_op_ = kin::SafetyMode::normal;  ///< safety_mode() at the last step_safety
   std::int64_t reduced_since_ = -1000000000;  ///< cycles_ when Reduced mode was switched on last
   std::int64_t estop_latency_ = -1;
+  hal::InputWatch estop_in_, reduced_in_;
+  std::atomic<bool> reduced_by_input_{false};
+  const char* estop_why_ = nullptr;  ///< the event's text of an e-stop made by the e-stop input
 
   // Replies are committed after the cycle's telemetry is published, so a
   // console that sees a reply also sees the state it produced.

@@ -221,6 +221,9 @@ struct Telemetry {
   std::uint32_t safety_stops = 0;  ///< protective stops and jogs stopped by the safety envelope
   std::int8_t safety_zone = -1;    ///< the trigger plane the commanded tool sphere reaches beyond (Reduced), -1: none
   double speed_scale = 1.0;        ///< the speed scale the motion or jog runs at (docs/safety.md#speed-scaling; 1: as planned)
+  /// The safety inputs (docs/safety.md#safety-inputs): bit 0 the e-stop input asserted, 1 it
+  /// cannot be read, 2 the Reduced input asserted, 3 it cannot be read (lost counts as asserted).
+  std::uint8_t safety_inputs = 0;
 };
 
 /// One control cycle's joint sample for a recorder (Controller::start_samples): what an MCAP

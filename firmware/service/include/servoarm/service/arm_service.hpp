@@ -125,6 +125,29 @@ struct ControlResult {
   bool ok() const { return error == CmdError::ok; }
 };
 
+/// A proposed [safety] section (docs/safety.md#confirming-a-change): what the SafetyStager made
+/// of a change, validated against the robot.
+struct SafetyProposal {
+  kin::SafetyConfig safety{};    ///< the envelope in SI
+  std::uint32_t checksum = 0;    ///< as `status` shows it (the section and the description's capsules)
+  std::string changes;           ///< the keys that change, `key = old -> new`, "; " between
+  std::function<void()> commit;  ///< called when it is applied (keeps the caller's configuration in step)
+};
+/// Makes a proposal from TOML lines of [safety] keys (`key = value`, newline or `;` between,
+/// `safety.` optional): "" or why not (one line naming the key).
+using SafetyStager = std::function<std::string(const std::string& changes, SafetyProposal& out)>;
+
+/// The answer to ArmService::stage_safety / confirm_safety.
+struct SafetyChangeResult {
+  CmdError error = CmdError::ok;
+  std::string reason;          ///< a refusal's one line
+  std::uint32_t checksum = 0;  ///< staged: the checksum to confirm; confirmed: the one in force now
+  std::uint32_t previous = 0;  ///< the checksum in force before
+  double expires_s = 0;        ///< staged: seconds left to confirm it
+  std::string changes;         ///< SafetyProposal::changes
+  bool ok() const { return error == CmdError::ok; }
+};
+
 /// The error code of a control-thread result.
 CmdError control_error(RtResult r);
 
@@ -255,7 +278,8 @@ struct ArmStatus {
   bool collision_on = false;
   FreedrivePhase freedrive = FreedrivePhase::off;
   bool safety_on = false;                              ///< a safety envelope is configured
-  kin::SafetyMode safety_mode = kin::SafetyMode::normal;  ///< Normal or Reduced
+  kin::SafetyMode safety_mode = kin::SafetyMode::normal;  ///< Normal or Reduced (Reduced while the Reduced input is)
+  std::uint8_t safety_inputs = 0;                      ///< Telemetry::safety_inputs
   std::uint32_t safety_checksum = 0;                   ///< of the [safety] section (MotionSettings::safety_checksum)
 };
 
@@ -710,6 +734,8 @@ enum class ServiceOp : std::uint8_t {
   point_delete,         ///< delete_point(name, dry) -> PointResult
   point_move,           ///< move_to_point(PointMove, MoveContext) -> PointResult
   safety_mode,          ///< set_safety_mode(mode) -> ControlResult (Normal / Reduced)
+  safety_stage,         ///< stage_safety(changes) -> SafetyChangeResult
+  safety_confirm,       ///< confirm_safety(checksum) -> SafetyChangeResult
 };
 
 struct ServiceOpInfo {
@@ -766,6 +792,8 @@ inline constexpr ServiceOpInfo kServiceOps[] = {
     {ServiceOp::point_delete, "point_delete", false},
     {ServiceOp::point_move, "point_move", false},
     {ServiceOp::safety_mode, "safety_mode", false},
+    {ServiceOp::safety_stage, "safety_stage", false},
+    {ServiceOp::safety_confirm, "safety_confirm", false},
 };
 const char* to_string(ServiceOp op);
 /// The op named `name` (kServiceOps); false: none is.
@@ -951,6 +979,26 @@ class ArmService {
   double tool_radius(const NamedPose& def) const { return def.radius >= 0 ? def.radius : cfg_.safety.tool_radius; }
   ControlResult set_safety_mode(kin::SafetyMode mode);
   kin::SafetyMode safety_mode() const { return safety_mode_; }
+  /// Set-up: what turns a change of [safety] into a proposal (the App: the key table's checks);
+  /// unset, stage_safety() refuses.
+  void set_safety_stager(SafetyStager s) { stager_ = std::move(s); }
+  /// Seconds a staged change waits for its confirmation (60 unless set: tests).
+  void set_safety_confirm_window(double s) { safety_window_s_ = s; }
+  /// A run-time change of [safety], first step: checked and staged, nothing changes; the answer
+  /// carries the checksum the configuration will have, which confirm_safety() must repeat
+  /// within the confirmation window. A new stage replaces the one staged.
+  SafetyChangeResult stage_safety(const std::string& changes);
+  /// Second step: applies the staged change when `checksum` is its checksum, it has not expired
+  /// and the arm is at rest (not moving, jogging, homing, stopping or in free-drive): the moves
+  /// planned from then on and the monitor from its next cycle use it. Refused in one line
+  /// otherwise (nothing staged, another checksum, expired, the arm moving); a refusal because
+  /// of another checksum or an expiry drops the staged change.
+  SafetyChangeResult confirm_safety(std::uint32_t checksum);
+  /// The mode moves are planned and checked in: Reduced while the controller's Reduced input is
+  /// asserted (Controller::reduced_by_input), else safety_mode().
+  kin::SafetyMode plan_safety_mode() const {
+    return ctl_ != nullptr && ctl_->reduced_by_input() ? kin::SafetyMode::reduced : safety_mode_;
+  }
   /// One streamed target against the envelope (envelope_violation_at with the service's
   /// envelope and mode, the arm's chain unless `chain` is given): "" or the refusal's line.
   std::string check_target(const kin::JointVector& q_prev, const kin::JointVector& q, double dt,
@@ -1038,6 +1086,10 @@ class ArmService {
   std::uint32_t shadow_tail_id_ = 0;    ///< the motion the newest segment was queued as (0: none)
   std::unique_ptr<MotionItem> scratch_;  ///< a dry run's motion (planned, never queued)
   kin::SafetyMode safety_mode_ = kin::SafetyMode::normal;
+  SafetyStager stager_;
+  std::unique_ptr<SafetyProposal> staged_;  ///< the change waiting for confirm_safety
+  double staged_until_ = 0;                 ///< steady clock, s
+  double safety_window_s_ = 60.0;
   /// The envelope check of a planned motion whose joints at time t (0..duration) `at` gives:
   /// true when inside; false with r refused (limits, the violation's line in r.reason).
   /// `violation` (optional): the function found; `speed_ratio` (optional): the highest TCP or
