@@ -19,6 +19,7 @@
 #include "alloc_counter.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/service/arm_service.hpp"
+#include "servoarm/service/stream.hpp"
 
 #include <CppUTest/TestHarness.h>
 
@@ -46,12 +47,16 @@ double plane_mm() {
   return p.translation().z() * 1000.0 - kBelowMm;
 }
 
+struct Trace;
+void trace_add(Trace& t, struct Rig& r);
+
 struct Rig {
   hal::ManualClock clock;
   test::SimApp app;
   hal::Duration period = hal::kMillisecond;
   std::size_t rt_allocs = 0;
   double low_cmd = INFINITY, low_act = INFINITY;  // lowest sphere bottom (mm), commanded / measured
+  Trace* trace = nullptr;  // set: every cycle is added to it
 
   explicit Rig(FwConfig cfg) {
     cfg.can = "sim";
@@ -80,6 +85,7 @@ struct Rig {
     clock.advance(period);
     low_cmd = std::fmin(low_cmd, tool_z_mm(true) - kRadiusMm);
     low_act = std::fmin(low_act, tool_z_mm(false) - kRadiusMm);
+    if (trace != nullptr) trace_add(*trace, *this);
   }
   void until_idle(int max_cycles) {
     for (int i = 0; i < max_cycles && (!app.ctl->motions().empty() || tel().state != ArmState::idle); ++i) cycle();
@@ -441,9 +447,11 @@ TEST(SafetyMonitor, TheElbowSphereAgainstAVerticalPlane) {
 }
 
 // Joint speed limits per mode: a joint move of joint 1 the planner never saw (queued
-// directly, at full speed) runs in Normal mode (limit 200 deg/s) and gets a protective stop in
-// Reduced mode (limit 20 deg/s) in the cycle its commanded speed passes limit + tolerance; the
-// event names the joint, its speed and the limit.
+// directly, at full speed) runs in Normal mode (limit 200 deg/s) and, in Reduced mode (limit
+// 20 deg/s) switched on well before it (past the speed scale's grace after a switch), gets a
+// protective stop in the cycle its commanded speed passes limit + tolerance (the scale could not
+// slow a plan that speeds up at the joint's acceleration limit soon enough); the event names the
+// joint, its speed and the limit.
 TEST(SafetyMonitor, AJointFasterThanItsModesSpeedLimitGetsAProtectiveStopNamingIt) {
   FwConfig c = table(250);
   c.safety_joint_speed_deg_s = {200, 200, 200, 200, 200, 200};
@@ -454,6 +462,7 @@ TEST(SafetyMonitor, AJointFasterThanItsModesSpeedLimitGetsAProtectiveStopNamingI
     r.enable();
     r.to_work();
     CHECK(r.svc().set_safety_mode(mode).ok());
+    for (int i = 0; i < 600; ++i) r.cycle();  // past the scale's grace after a switch (0.5 s)
     MotionItem* m = r.app.ctl->motions().back();
     CHECK(m != nullptr);
     m->id = 901;
@@ -485,9 +494,7 @@ TEST(SafetyMonitor, AJointFasterThanItsModesSpeedLimitGetsAProtectiveStopNamingI
       continue;
     }
     CHECK(crossed >= 0);
-    // Reduced was switched on just before: the speed scale has one cycle, then the speed still
-    // rising (the plan speeds up faster than the scale can slow it) is the protective stop
-    CHECK(stopped == crossed + 1);
+    CHECK(stopped == crossed);
     CHECK(r.tel().state == ArmState::idle);
     CHECK(r.app.ctl->motions().empty());
     CHECK(r.tel().q_cmd[0] < work_pose()[0] + 20 * kDeg);  // stopped well short of the goal
@@ -674,16 +681,19 @@ struct Trace {
   }
 };
 
+void trace_add(Trace& t, Rig& r) { t.add(r); }
+
 /// Runs until the queue is empty and the arm idle (or max_cycles), tracing every cycle;
 /// `at(i)` is called before cycle i.
 template <class F>
 void run_traced(Rig& r, Trace& tr, int max_cycles, F at) {
+  r.trace = &tr;  // every cycle, those a request runs too
   for (int i = 0; i < max_cycles; ++i) {
     at(i);
     r.cycle();
-    tr.add(r);
     if (i > 10 && r.app.ctl->motions().empty() && r.tel().state == ArmState::idle) break;
   }
+  r.trace = nullptr;
 }
 
 FwConfig reduced_100(double normal_mm_s) {
@@ -727,10 +737,10 @@ TEST(SpeedScaling, ReducedSwitchedOnMidLineSlowsItOnItsPath) {
     const MoveResult m = r.svc().move(side, cx);
     CHECK_TEXT(m.ok(), m.reason.c_str());
     Trace& t = k == 0 ? ref : tr;
-    run_traced(r, t, 20000, [&](int i) {
+    run_traced(r, t, 20000, [&](int) {
       if (k == 1 && switched < 0 && t.x.size() > 400 && t.speed(t.x.size() - 1) > 199.0) {
+        switched = int(t.x.size());  // (the trace's index: the request runs cycles too)
         CHECK(r.svc().set_safety_mode(kin::SafetyMode::reduced).ok());
-        switched = i;
       }
     });
     CHECK_EQUAL(0u, r.tel().safety_stops);
@@ -827,5 +837,291 @@ TEST(SpeedScaling, ALineIntoATriggerZoneIsSlowedBeforeThePlane) {
   CHECK(dev < 0.1);
   CHECK(acc <= 1.0 + 1e-3);
   CHECK((tr.x.back() - side.target.translation()).norm() < 1e-6);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
+// ---------------------------------------------------------------------------
+// Blended runs on the speed scale: a blended path run (lines with blend=) and a blended joint
+// run (movej with blend=) slow on their path as single moves do.
+// ---------------------------------------------------------------------------
+
+namespace {
+
+/// A blended run from the work pose: three lines with blend= (`lines`) or three joint moves
+/// with blend= (the joint queue's run), queued before the first cycle (nothing queued late).
+std::vector<MoveResult> queue_blended_run(Rig& r, bool lines) {
+  std::vector<MoveResult> out;
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  if (lines) {
+    const kin::Pose w = work_tcp();
+    const Eigen::Vector3d steps[3] = {{0, 0.07, 0}, {0, 0.04, 0.04}, {0, 0.03, -0.04}};
+    kin::Pose p = w;
+    for (int k = 0; k < 3; ++k) {
+      MoveLine m;
+      p.translation() += steps[k];
+      m.target = p;
+      m.speed = 0.2;
+      m.blend = k < 2 ? 0.015 : 0.0;
+      out.push_back(r.svc().move(m, cx));
+    }
+  } else {
+    const double d[3][6] = {{12, 0, -8, 0, 0, 0}, {22, 6, -14, 0, 0, 0}, {30, 0, -6, 0, 0, 0}};
+    for (int k = 0; k < 3; ++k) {
+      MoveJoints m;
+      m.goal = work_pose();
+      for (int j = 0; j < 6; ++j) m.goal[j] += d[k][j] * kDeg * (work_tcp().translation().x() > 0 ? 1 : -1);
+      m.speed_pct = 100;
+      m.blend = k < 2 ? 5 * kDeg : 0.0;
+      out.push_back(r.svc().move(m, cx));
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+// A blended run (three lines at 200 mm/s with blend=15 mm; three joint moves at 100 % with
+// blend=5 deg, the planner keeping them at the Normal 250 mm/s) with `safety reduced` (100 mm/s)
+// switched on while it runs above 150 mm/s: no protective stop; the TCP is under 100 mm/s + 1
+// within 0.4 s of the switch and stays there; the path is the unswitched run's (every sample
+// within 0.1 mm of its polyline); the run ends at its target; no joint beyond its acceleration
+// limit; no allocation.
+TEST(SpeedScaling, ReducedSwitchedOnMidBlendedRunSlowsItOnItsPath) {
+  for (const bool lines : {true, false}) {
+    Trace ref, tr;
+    int switched = -1;
+    kin::JointLimits lim;
+    std::string scale_shown;
+    double scale_tel = 1;
+    for (int k = 0; k < 2; ++k) {
+      Rig r(reduced_100(250));
+      lim = r.app.ctl->limits();
+      r.enable();
+      r.to_work();
+      for (const MoveResult& m : queue_blended_run(r, lines)) CHECK_TEXT(m.ok(), m.reason.c_str());
+      Trace& t = k == 0 ? ref : tr;
+      run_traced(r, t, 30000, [&](int) {
+        if (k == 1 && switched < 0 && t.x.size() > 100 && t.speed(t.x.size() - 1) > 150.0) {
+          switched = int(t.x.size());  // (the trace's index: the request runs cycles too)
+          CHECK(r.svc().set_safety_mode(kin::SafetyMode::reduced).ok());
+        }
+        if (k == 1 && switched > 0 && int(t.x.size()) == switched + 300) {  // slowed: the console's `safety` shows the scale
+          Session s;
+          r.app.console->execute(s, "safety");
+          scale_shown = s.out;
+          scale_tel = r.tel().speed_scale;
+        }
+      });
+      const std::string ev = r.last_event();
+      std::printf("\n  blended %s run %d: %zu cycles, last event: %s", lines ? "path" : "joint", k, t.x.size(), ev.c_str());
+      CHECK_EQUAL(0u, r.tel().safety_stops);
+      CHECK(r.tel().state == ArmState::idle);
+      CHECK(ev.find("protective stop") == std::string::npos);
+      LONGS_EQUAL(0, r.rt_allocs);
+    }
+    CHECK(switched > 0);
+    CHECK((tr.x.back() - ref.x.back()).norm() < 1e-6);  // at the run's target
+    std::size_t under = tr.x.size();
+    for (std::size_t i = tr.x.size(); i-- > static_cast<std::size_t>(switched);)
+      if (tr.speed(i) > 100.0 + 1.0) break;
+      else under = i;
+    double peak_ref = 0, peak_after = 0;
+    for (std::size_t i = 1; i < ref.x.size(); ++i) peak_ref = std::fmax(peak_ref, ref.speed(i));
+    for (std::size_t i = std::size_t(switched); i < tr.x.size(); ++i) peak_after = std::fmax(peak_after, tr.speed(i));
+    const double dev = tr.deviation_from(ref), acc = tr.acc_ratio(lim);
+    std::printf("\n  scaled blended %s run: %.3f s unswitched (peak %.1f mm/s), %.3f s with Reduced switched on at cycle %d; "
+                "under 100 mm/s %.0f ms after the switch; peak after it %.1f mm/s; path deviation %.4f mm; joint "
+                "acceleration %.3f of its limit",
+                lines ? "path" : "joint", double(ref.x.size()) * 1e-3, peak_ref, double(tr.x.size()) * 1e-3, switched,
+                double(under) - double(switched), peak_after, dev, acc);
+    CHECK(peak_ref > 150.0 && peak_ref < 250.0 + 1.0);
+    CHECK(double(under) - double(switched) <= 400);
+    CHECK(dev < 0.1);
+    CHECK(acc <= 1.0 + 1e-3);
+    CHECK(tr.x.size() > ref.x.size() + 100);  // it did run slower
+    CHECK(scale_tel < 0.9);
+    char want[32];
+    std::snprintf(want, sizeof want, " speed_scale=%.2f", scale_tel);
+    STRCMP_CONTAINS(want, scale_shown.c_str());
+  }
+}
+
+// A blended path run at 200 mm/s (planned without the trigger plane) whose first corner's
+// blend crosses into a trigger zone (Reduced, 100 mm/s): slowed before the plane by the
+// look-ahead, under 100 mm/s + 1 from the crossing on, no protective stop, the path the
+// unslowed run's (within 0.1 mm), at its target at the end.
+TEST(SpeedScaling, ABlendedRunIntoATriggerZoneIsSlowedBeforeThePlane) {
+  double y_plane = 0;
+  Trace ref, tr;
+  for (int k = 0; k < 2; ++k) {
+    FwConfig c = trigger_ahead_y(75, &y_plane);
+    if (k == 0) c.safety_reduced_planes.clear();  // the reference: no zone
+    Rig r(c);
+    r.enable();
+    r.to_work();
+    plan_without_trigger_planes(r);
+    for (const MoveResult& m : queue_blended_run(r, true)) CHECK_TEXT(m.ok(), m.reason.c_str());
+    run_traced(r, k == 0 ? ref : tr, 30000, [](int) {});
+    const std::string ev = r.last_event();
+    CHECK_TEXT(ev.find("protective stop") == std::string::npos, ev.c_str());
+    CHECK_EQUAL(0u, r.tel().safety_stops);
+    CHECK(r.tel().state == ArmState::idle);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+  int crossed = -1;
+  double peak_before = 0, peak_past = 0, at_cross = 0;
+  for (std::size_t i = 1; i < tr.x.size(); ++i) {
+    const bool past = tr.x[i].y() * 1e3 + kRadiusMm > y_plane;
+    if (!past && crossed < 0) peak_before = std::fmax(peak_before, tr.speed(i));
+    if (past && crossed < 0) crossed = int(i), at_cross = tr.speed(i);
+    if (past) peak_past = std::fmax(peak_past, tr.speed(i));
+  }
+  const double dev = tr.deviation_from(ref);
+  std::printf("\n  blended run into a trigger zone: %.3f s without the zone, %.3f s with it; peak %.1f mm/s before the "
+              "plane, %.1f mm/s as it crosses (cycle %d), peak past it %.1f mm/s; path deviation %.4f mm",
+              double(ref.x.size()) * 1e-3, double(tr.x.size()) * 1e-3, peak_before, at_cross, crossed, peak_past, dev);
+  CHECK(crossed > 0);
+  CHECK(peak_before > 190.0);
+  CHECK(peak_past <= 100.0 + 1.0);
+  CHECK(dev < 0.1);
+  CHECK((tr.x.back() - ref.x.back()).norm() < 1e-6);
+}
+
+// ---------------------------------------------------------------------------
+// Jogs and streamed targets into a trigger zone: slowed to the Reduced limits (the jog's clock
+// on the speed scale, its re-plans capped at the limits), not stopped.
+// ---------------------------------------------------------------------------
+
+namespace {
+
+/// What a traced jog or stream did about the trigger plane at y_plane (mm; the tool sphere's
+/// edge): its peak speed before the plane, at the crossing, past it, and how far past the plane
+/// the sphere went while faster than the Reduced 100 mm/s + 1 (the overshoot, mm).
+struct ZoneFigures {
+  int crossed = -1;
+  double before = 0, at = 0, past = 0, overshoot = 0;
+};
+ZoneFigures zone_figures(const Trace& tr, double y_plane) {
+  ZoneFigures f;
+  for (std::size_t i = 1; i < tr.x.size(); ++i) {
+    const double edge = tr.x[i].y() * 1e3 + kRadiusMm;
+    const bool past = edge > y_plane;
+    if (!past && f.crossed < 0) f.before = std::fmax(f.before, tr.speed(i));
+    if (past && f.crossed < 0) f.crossed = int(i), f.at = tr.speed(i);
+    if (past) f.past = std::fmax(f.past, tr.speed(i));
+    if (past && tr.speed(i) > 100.0 + 1.0) f.overshoot = std::fmax(f.overshoot, edge - y_plane);
+  }
+  return f;
+}
+
+/// Runs a continuous jog (started already) until the tool's centre is `past_mm` beyond y_plane
+/// (or max_cycles), keeping it alive; then cancels it and runs to rest.
+void run_jog_past(Rig& r, Trace& tr, double y_plane, double past_mm, int max_cycles) {
+  r.trace = &tr;  // every cycle, those the keep-alive and the cancel run too
+  for (int i = 0; i < max_cycles && r.tel().state == ArmState::jogging; ++i) {
+    if (i % 50 == 0) (void)r.svc().jog_keepalive();
+    r.cycle();
+    if (tr.x.back().y() * 1e3 > y_plane + past_mm) break;
+  }
+  (void)r.svc().jog_cancel();
+  for (int i = 0; i < 5000 && r.tel().state != ArmState::idle; ++i) r.cycle();
+  r.trace = nullptr;
+}
+
+}  // namespace
+
+// A continuous tool jog along +y at 100, 250 and 500 mm/s towards a trigger plane 150 mm ahead
+// (Reduced: 100 mm/s): no stop of any kind; from the plane on the TCP is at 100 mm/s + 1 or
+// under (the sphere's overshoot past the plane above that speed: 0); the jog runs on in the
+// zone until cancelled. Then a continuous joint jog of joint 1 (swinging the tool towards +y,
+// 30 % of the joint's limit, faster than 100 mm/s) into the same zone: the same.
+TEST(SpeedScaling, AJogIntoATriggerZoneIsSlowedNotStopped) {
+  for (const double speed : {100.0, 250.0, 500.0, -1.0}) {
+    double y_plane = 0;
+    FwConfig c = trigger_ahead_y(150, &y_plane);
+    c.max_linear_speed_mm_s = 500;
+    Rig r(c);
+    r.enable();
+    r.to_work();
+    const JogContext jc = r.app.console->jog_context();
+    JogResult j;
+    if (speed > 0) {
+      ToolJog tj;
+      tj.axis = 1;
+      tj.continuous = true;
+      tj.direction = 1;
+      tj.speed_pct = speed / 500.0 * 100.0;
+      j = r.svc().jog(tj, jc);
+    } else {
+      JointJog jj;
+      jj.joint = 0;
+      jj.continuous = true;
+      jj.direction = work_tcp().translation().x() > 0 ? 1 : -1;
+      jj.speed_pct = 30;
+      j = r.svc().jog(jj, jc);
+    }
+    CHECK_TEXT(j.ok(), j.reason.c_str());
+    Trace tr;
+    run_jog_past(r, tr, y_plane, 40, 20000);
+    const ZoneFigures f = zone_figures(tr, y_plane);
+    const std::string ev = r.last_event();
+    std::printf("\n  %s jog into a trigger zone: peak %.1f mm/s before the plane, %.1f mm/s as it crosses (cycle %d), "
+                "peak past it %.1f mm/s, overshoot above 101 mm/s %.2f mm; last event: %s",
+                speed > 0 ? (std::to_string(int(speed)) + " mm/s tool").c_str() : "joint 1", f.before, f.at, f.crossed,
+                f.past, f.overshoot, ev.c_str());
+    CHECK(f.crossed > 0);
+    if (speed != 100.0) CHECK(f.before > (speed > 0 ? 0.7 * speed : 135.0));  // it ran fast outside
+    CHECK(f.past <= 100.0 + 1.0);
+    CHECK_EQUAL(0.0, f.overshoot);
+    CHECK_EQUAL(0u, r.tel().safety_stops);
+    CHECK(ev.find("protective stop") == std::string::npos);
+    CHECK(ev.find("jog stopped") == std::string::npos);
+    CHECK(tr.x.back().y() * 1e3 > y_plane + 40);  // it went on into the zone
+    CHECK(r.tel().state == ArmState::idle);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}
+
+// Streamed poses (every 10 ms, with their times) along +y at 250 mm/s into a trigger zone 100 mm
+// ahead (Reduced: 100 mm/s), then the last one held: no stop of any kind; from the plane on the
+// TCP at 100 mm/s + 1 or under; the arm ends at the last target.
+TEST(SpeedScaling, AStreamIntoATriggerZoneIsSlowedNotStopped) {
+  double y_plane = 0;
+  FwConfig c = trigger_ahead_y(100, &y_plane);
+  c.max_linear_speed_mm_s = 500;
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  StreamSettings ss;
+  ss.max_step.assign(6, 0.5);
+  StreamService st(r.svc(), *r.app.ctl, ss);
+  const kin::Pose w = work_tcp();
+  Trace tr;
+  kin::Pose target = w;
+  bool reached = false;
+  for (int k = 0; k < 3000 && !reached; ++k) {  // 10 ms apart: 30 s at most
+    const double t = k * 0.01;
+    target.translation().y() = w.translation().y() + std::fmin(0.2, 0.25 * t);
+    const StreamResult sr = st.target_pose(target, false, k == 0, t);
+    CHECK_TEXT(sr.ok(), sr.reason.c_str());
+    if (!sr.ok()) break;
+    for (int i = 0; i < 10; ++i) {
+      r.cycle();
+      tr.add(r);
+    }
+    reached = (tr.x.back() - (w.translation() + Eigen::Vector3d(0, 0.2, 0))).norm() < 1e-5;
+  }
+  const ZoneFigures f = zone_figures(tr, y_plane);
+  const std::string ev = r.last_event();
+  std::printf("\n  stream at 250 mm/s into a trigger zone: peak %.1f mm/s before the plane, %.1f mm/s as it crosses "
+              "(cycle %d), peak past it %.1f mm/s, overshoot above 101 mm/s %.2f mm; last event: %s",
+              f.before, f.at, f.crossed, f.past, f.overshoot, ev.c_str());
+  CHECK(reached);
+  CHECK(f.crossed > 0);
+  CHECK(f.before > 200.0);
+  CHECK(f.past <= 100.0 + 1.0);
+  CHECK_EQUAL(0u, r.tel().safety_stops);
+  CHECK(ev.find("protective stop") == std::string::npos);
   LONGS_EQUAL(0, r.rt_allocs);
 }

@@ -1027,6 +1027,7 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
   j["holding"] = t.holding;
   j["safety_mode"] = kin::to_string(static_cast<kin::SafetyMode>(t.safety_mode));
   j["safety_stops"] = t.safety_stops;
+  j["speed_scale"] = t.speed_scale;
   json q = json::array(), qc = json::array(), fe = json::array();
   kin::JointVector qa(chain.n_joints);
   for (int i = 0; i < t.n && i < chain.n_joints; ++i) {

@@ -335,6 +335,7 @@ std::string Console::safety_text() const {
   std::string s = fmt("safety=on mode=%s checksum=%08X stops=%u", kin::to_string(st.safety_mode),
                       static_cast<unsigned>(st.safety_checksum), static_cast<unsigned>(tel.safety_stops));
   if (tel.safety_zone >= 0) s += fmt(" zone=reduced_plane_%d", static_cast<int>(tel.safety_zone));
+  s += fmt(" speed_scale=%.2f", tel.speed_scale);  // the run-time speed scale (docs/safety.md#speed-scaling)
   // the mode's limits that are set, in the [safety] keys' units (docs/safety.md)
   const kin::SafetyConfig& env = svc_->settings().safety;
   const kin::SafetyLimits& lim = env.limits(tel.safety_zone >= 0 ? kin::SafetyMode::reduced : st.safety_mode);

@@ -694,6 +694,7 @@ void Controller::run(Action a, const Request& r, TimePoint now) {
       }
       Request slow = r;  // an unhomed arm jogs its joints at the reduced speed only
       if (unhomed != 0) slow.jog.override = std::fmax(0.01, r.jog.override * cfg_.unhomed_jog_scale);
+      update_jog_cap();  // the plan within the safety envelope's speed limits
       if (!jog_.set(slow.jog, cmd_, now, why)) {
         std::snprintf(m, sizeof m, "jog refused: %s", why);
         reply(r.seq, RtResult::bad_state, m);
@@ -1290,7 +1291,7 @@ void Controller::publish() {
                                               (reduced_in_.asserted() ? 4u : 0u) | (reduced_in_.lost() ? 8u : 0u));
   t.safety_stops = safety_stops_;
   t.safety_zone = static_cast<std::int8_t>(safety_.zone());
-  t.speed_scale = exec_.speed_scale();
+  t.speed_scale = mode_ == Mode::jogging ? jog_.speed_scale() : exec_.speed_scale();
   t.homing_failed = 0;
   std::uint16_t attained = 0;  // homed_mask() from the progress read here: one homing() a joint
   for (int j = 0; j < n_; ++j) {
@@ -1405,9 +1406,9 @@ void Controller::step_safety() {
     last_op_ = op;
   }
   const bool jogging = mode_ == Mode::jogging;
-  // the motion runs on the speed scale: the executor's segments (a jog is not scaled)
-  const bool scaled = watch && !jogging;
-  if (!scaled) speed_over_cycles_ = 0;
+  // the motion runs on the speed scale: the executor's segments, a jog (not while it brakes)
+  const bool scaled = watch && !(jogging && jog_.stopping());
+  if (!scaled) speed_over_cycles_ = 0, target_hold_ = 1.0;
   kin::SafetyViolation v;
   bool on_actual = false;
   const int zone_before = safety_.zone();
@@ -1422,6 +1423,7 @@ void Controller::step_safety() {
     emit(EventKind::warning, FaultCause::none, -1, 0, z);
   }
   if (!watch) return;
+  if (jogging) update_jog_cap();  // for its re-plans (a new target, a target's horizon)
   if (!hit && safety_.check_state(limits_, cmd_, sm, v)) hit = true, on_actual = false;  // stop, momentum, power (not scaled)
   if (!hit && scaled && scale_speed(v)) hit = true, on_actual = false;  // a speed the scale cannot keep
   char line[sizeof(Event::message)];
@@ -1450,7 +1452,7 @@ void Controller::step_safety() {
 }
 
 // Speed scaling (docs/safety.md#speed-scaling). The speeds go with the scale s, so the ratio
-// per unit scale is speed_ratio / s and the scale that holds every speed function is kAim over
+// per unit scale is speed_ratio / s and the scale that holds every speed function is kScaleAim over
 // it. Outside a trigger zone, the Reduced mode's scale is taken as soon as the tool, moving on at
 // its unscaled velocity, would reach a trigger plane within the time the scale takes to ramp
 // from 1 down to it (with margin): so it is below the Reduced limits when it crosses. A speed
@@ -1458,35 +1460,61 @@ void Controller::step_safety() {
 // mode was switched on (the limits came down onto a running motion); anywhere else the
 // scale should have kept it, and it is a protective stop as without scaling.
 bool Controller::scale_speed(kin::SafetyViolation& v) {
-  constexpr double kAim = 0.995;       // just below each limit (the scale lags a plan that speeds up by a cycle)
   constexpr double kScaleGrace = 0.5;  // s: how long a speed may stay beyond its limit and tolerance while the scale ramps
-  const double s = exec_.speed_scale();
+  const bool jogging = mode_ == Mode::jogging;
+  const double s = jogging ? jog_.speed_scale() : exec_.speed_scale();
   const double per_scale = s > 0 ? safety_.speed_ratio() / s : 0.0;
-  double want = per_scale > kAim ? kAim / per_scale : 1.0;
+  double want = per_scale > kScaleAim ? kScaleAim / per_scale : 1.0;
   double reduced = 0;
   const double t = safety_.time_to_trigger(s > 0 ? 1.0 / s : 1.0, reduced);
   if (reduced > 0 && s > 0) {
-    const double want_reduced = kAim * s / reduced;
+    const double want_reduced = kScaleAim * s / reduced;
     if (want_reduced < want && t <= 1.2 * TimeScale::ramp_time(1.0, want_reduced) + 3 * period_s_) want = want_reduced;
   }
-  exec_.set_speed_target(want);
+  // The executor's target is held at its lowest: the speed a plan slows to at a blend's corner
+  // (or a trigger plane's look-ahead reached in such a dip) comes back after it, and a scale
+  // that had risen meanwhile would lag behind it. Under the Reduced limits (the mode, or a
+  // trigger zone) the hold lasts while the motion runs; under Normal, kTargetHoldS from its
+  // last new low (the look-ahead's target, should the tool not reach the plane after all). A
+  // jog's re-plans are capped instead (update_jog_cap): not held.
+  constexpr double kTargetHoldS = 0.4;
+  const auto now = static_cast<std::int64_t>(cycles_);
+  const bool release = jogging || (safety_.effective(safety_mode()) == kin::SafetyMode::normal &&
+                                   static_cast<double>(now - target_hold_since_) * period_s_ > kTargetHoldS);
+  if (want <= target_hold_ || release) {
+    target_hold_ = want;
+    target_hold_since_ = now;
+  }
+  want = target_hold_;
+  if (jogging)
+    jog_.set_speed_target(want);
+  else
+    exec_.set_speed_target(want);
   kin::SafetyViolation over;
   if (!safety_.speed_over(over)) {
     speed_over_cycles_ = 0;
     return false;
   }
-  // Left to the scale while it is winning: from the second cycle beyond, the value no higher
-  // than a cycle ago (a plan that speeds up faster than the scale can slow it is stopped), the
-  // scale it needs within its range, and for at most kScaleGrace.
-  const bool same = speed_over_cycles_ > 0 && over.function == over_last_.function && over.index == over_last_.index &&
-                    over.elbow == over_last_.elbow;
-  const bool growing = same && over.value > over_last_.value;
+  // Left to the scale for at most kScaleGrace after Reduced was switched on, while the scale it
+  // needs is within its range: the limits came down onto a running motion, and the scale ramps
+  // down from there (a plan still speeding up, or joints at their acceleration limits, only
+  // delay it: a speed still beyond after the grace is a protective stop).
   ++speed_over_cycles_;
   over_last_ = over;
   const bool after_switch = static_cast<double>(static_cast<std::int64_t>(cycles_) - reduced_since_) * period_s_ <= kScaleGrace;
-  if (after_switch && !growing && !exec_.speed_scale_limited() && want >= TimeScale::kMin) return false;
+  if (after_switch && want >= TimeScale::kMin) return false;
   v = over;
   return true;
+}
+
+// A jog's or stream's plans are made within the envelope's speed limits (SafetyMonitor::speed_cap):
+// near a trigger plane, slow enough that the scale's look-ahead (the longest ramp, 1 down to
+// TimeScale::kMin, with its margin) can bring them to the Reduced limits before the plane.
+void Controller::update_jog_cap() {
+  SpeedCap cap;
+  const double horizon = 1.2 * TimeScale::ramp_time(1.0, TimeScale::kMin) + 3 * period_s_;
+  safety_.speed_cap(safety_mode(), kScaleAim, horizon, cap);
+  jog_.set_speed_cap(cap);
 }
 
 void Controller::apply_output(const OutputChange& c) {

@@ -58,10 +58,14 @@ bool Jogger::plan_joint(const kin::JointState& cmd) {
   // The jog's speed is a fraction of each joint's velocity limit; accelerations and jerks
   // stay the joint's own (a speed override would scale them too, and a slow jog would
   // then start and stop sluggishly).
+  // The safety envelope's caps lower the velocity limits further (a plan from a state above
+  // them starts with the planner's recovery to within them).
   kin::JointLimits L = limits_;
   for (int j = 0; j < n_; ++j) L.dyn[static_cast<std::size_t>(j)].max_velocity *= spec_.override;
+  cap_.apply(L, cmd, spec_.q_goal, kin::JointVector());
   if (kin::plan_movej(L, cmd, spec_.q_goal, kin::MovejOptions{}, plan_) != kin::MotionStatus::ok) return false;
   t_ = 0;
+  safe_.reset();  // planned from the real-time state within the caps
   return true;
 }
 
@@ -73,11 +77,13 @@ bool Jogger::plan_moving(const kin::JointState& cmd) {
   // The relative limits: |v_rel| <= vmax - |v_target| keeps |v| <= vmax; the target's speed is
   // held to kMovingShare of the limit so the arm keeps room to catch up.
   kin::JointLimits L = limits_;
+  for (int j = 0; j < n_; ++j) L.dyn[static_cast<std::size_t>(j)].max_velocity *= spec_.override;
+  cap_.apply(L, cmd, spec_.q_goal, spec_.qd_goal);  // the safety envelope's caps
   kin::JointVector v = spec_.qd_goal;
   kin::JointState rel = cmd;
   for (int j = 0; j < n_; ++j) {
     const auto u = static_cast<std::size_t>(j);
-    const double vmax = limits_.dyn[u].max_velocity * spec_.override;
+    const double vmax = L.dyn[u].max_velocity;
     v[j] = std::fmax(-kMovingShare * vmax, std::fmin(kMovingShare * vmax, v[j]));
     L.dyn[u].max_velocity = vmax - std::fabs(v[j]);
     L.lower[u] = -1e9;
@@ -105,6 +111,7 @@ bool Jogger::plan_moving(const kin::JointState& cmd) {
   horizon_ = h;
   moving_ = true;
   t_ = 0;
+  safe_.reset();  // planned from the real-time state within the caps
   return true;
 }
 
@@ -119,18 +126,21 @@ bool Jogger::plan_tool(const kin::JointVector& c_goal) {
     const double share = linear ? (lin > 0 ? std::fabs(d[a]) / lin : 0.0) : (ang > 0 ? std::fabs(d[a]) / ang : 0.0);
     const double f = std::fmax(share, kFloor);
     kin::JointDynamics& dy = vlimits_.dyn[static_cast<std::size_t>(a)];
-    dy.max_velocity = f * (linear ? spec_.linear_speed : spec_.angular_speed);
+    dy.max_velocity = f * (linear ? std::fmin(spec_.linear_speed, cap_.tcp) : spec_.angular_speed);  // (the TCP's cap)
     dy.max_acceleration = f * (linear ? L.linear_acceleration : L.angular_acceleration);
     dy.max_jerk = f * (linear ? L.linear_jerk : L.angular_jerk);
   }
-  // The state of the virtual axes in real time (the clock may have been slowed).
+  // The state of the virtual axes in real time (the clock may have been slowed, near a
+  // singularity and by the speed scale).
+  const double k = scale_ * safe_.s;
   kin::JointState s = c_;
-  s.vel *= scale_;
-  s.acc *= scale_ * scale_;
+  s.vel *= k;
+  s.acc *= k * k;
   if (kin::plan_movej(vlimits_, s, c_goal, kin::MovejOptions{}, plan_) != kin::MotionStatus::ok) return false;
   c_ = s;
   t_ = 0;
   scale_ = 1.0;
+  safe_.reset();
   return true;
 }
 
@@ -227,9 +237,10 @@ void Jogger::stop(const kin::JointState& cmd) {
       return;
     }
   } else {
+    const double k = scale_ * safe_.s;
     kin::JointState s = c_;
-    s.vel *= scale_;
-    s.acc *= scale_ * scale_;
+    s.vel *= k;
+    s.acc *= k * k;
     if (kin::plan_stop(vlimits_, s, o, plan_) != kin::MotionStatus::ok) {
       end(JogEnd::done, -1, true);
       return;
@@ -239,6 +250,15 @@ void Jogger::stop(const kin::JointState& cmd) {
   }
   t_ = 0;
   stopping_ = true;
+  safe_.reset();  // the stop brakes on the limits in real time
+}
+
+double Jogger::scale_step(const kin::JointState& cmd) {
+  if (safe_.idle()) return dt_;
+  double down = 0, up = 0;
+  safe_.rate_bounds(limits_, n_, cmd, down, up);
+  safe_.step(dt_, down, up);
+  return dt_ * safe_.s;
 }
 
 JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
@@ -261,16 +281,19 @@ JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
       if (!plan_joint(cmd)) {
         if (kin::plan_stop(limits_, cmd, kin::MovejOptions{}, plan_) != kin::MotionStatus::ok) return end(JogEnd::done, -1, true);
         t_ = 0;
+        safe_.reset();
       }
     }
-    t_ += dt_;
+    t_ += stopping_ ? dt_ : scale_step(cmd);  // the jog's clock: on the speed scale
     if (moving_) {
       plan_.sample(t_, cmd);
       cmd.pos += q_ref_ + v_ref_ * t_;
       cmd.vel += v_ref_;
+      scaled(cmd);
       return JogEnd::running;
     }
     plan_.sample(t_, cmd);
+    scaled(cmd);
     if (t_ < plan_.duration) return JogEnd::running;
     if (spec_.stream && !stopping_) {  // at the target: held there until the next one (or the deadman)
       t_ = plan_.duration;
@@ -281,8 +304,10 @@ JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
     return end(at_end, -1, false);
   }
 
-  // Tool jog: try the next pose at the current time scale; slow down when a joint would
-  // need more than kSlowRatio of its velocity limit.
+  // Tool jog: try the next pose at the current time scale (near a singularity, scale_) times
+  // the speed scale (ks); slow down when a joint would need more than kSlowRatio of its
+  // velocity limit.
+  const double ks = stopping_ ? 1.0 : scale_step(cmd) / dt_;
   auto solve = [&](double t, kin::JointState& c, kin::JointVector& q, double& ratio, int& worst) {
     plan_.sample(t, c);
     kin::Pose x;
@@ -301,14 +326,14 @@ JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
   double ratio = 0;
   int worst = -1;
   double scale = scale_;
-  if (!solve(t_ + dt_ * scale, c, q, ratio, worst)) return end(JogEnd::unreachable, -1, true);
-  // A joint's step scales with the clock: at scale 1 it would need about ratio / scale.
-  const double at_full = scale > 0 ? ratio / scale : ratio;
-  const double want = at_full > 0 ? std::fmin(1.0, kSlowRatio / at_full) : 1.0;
+  if (!solve(t_ + dt_ * scale * ks, c, q, ratio, worst)) return end(JogEnd::unreachable, -1, true);
+  // A joint's step scales with the clock: at both scales 1 it would need about ratio / (scale ks).
+  const double at_full = scale * ks > 0 ? ratio / (scale * ks) : ratio;
+  const double want = at_full > 0 ? std::fmin(1.0, kSlowRatio / (at_full * ks)) : 1.0;
   const double next = std::fmin(1.0, std::fmin(std::fmax(want, scale_ - kScaleStep), scale_ + kScaleStep));
   if (next != scale) {
     scale = next;
-    if (!solve(t_ + dt_ * scale, c, q, ratio, worst)) return end(JogEnd::unreachable, -1, true);
+    if (!solve(t_ + dt_ * scale * ks, c, q, ratio, worst)) return end(JogEnd::unreachable, -1, true);
   }
   // Above kStopRatio of a limit (slowing could not keep up) the jog gives up its line; the
   // caller's joint ramp then starts below the limit.
@@ -328,7 +353,7 @@ JogEnd Jogger::step(kin::JointState& cmd, hal::TimePoint now) {
   cmd.vel = vel;
   cmd.pos = q;
   scale_ = scale;
-  t_ += dt_ * scale;
+  t_ += dt_ * scale * ks;
   c_ = c;
   if (t_ < plan_.duration) return JogEnd::running;
   cmd.vel.setZero();

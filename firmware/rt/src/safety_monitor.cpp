@@ -93,6 +93,40 @@ double SafetyMonitor::time_to_trigger(double per_scale, double& reduced_ratio) c
   return t;
 }
 
+void SafetyMonitor::speed_cap(kin::SafetyMode mode, double aim, double horizon_s, SpeedCap& out) const {
+  out = SpeedCap{};
+  if (!cfg_.enabled || chain_ == nullptr || !have_prev_) return;
+  const kin::SafetyMode m = effective(mode);
+  const kin::SafetyLimits& lim = cfg_.limits(m);
+  const int n = static_cast<int>(prev_q_cmd_.size());
+  if (lim.tcp_speed > 0) out.tcp = aim * lim.tcp_speed;
+  for (int j = 0; j < n && j < kin::kMaxJoints; ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    if (lim.joint_speed[u] > 0) out.joint[u] = aim * lim.joint_speed[u];
+  }
+  if (m == kin::SafetyMode::normal && cfg_.trigger_count > 0) {
+    const kin::SafetyLimits& red = cfg_.reduced;
+    double gap = INFINITY;
+    const Eigen::Vector3d c = cmd_.tcp.translation();
+    for (int i = 0; i < cfg_.trigger_count && i < kin::kMaxSafetyPlanes; ++i) {
+      const kin::SafetyPlane& p = cfg_.trigger_planes[static_cast<std::size_t>(i)];
+      gap = std::fmin(gap, std::fmax(0.0, p.normal.dot(c) - cfg_.tool_radius - p.offset));
+    }
+    const double v = red.tcp_speed > 0 ? red.tcp_speed : kCapSpeed;
+    const double f = std::fmax(1.0, gap / (horizon_s * v));
+    if (red.tcp_speed > 0) out.tcp = std::fmin(out.tcp, aim * red.tcp_speed * f);
+    for (int j = 0; j < n && j < kin::kMaxJoints; ++j) {
+      const auto u = static_cast<std::size_t>(j);
+      if (red.joint_speed[u] > 0) out.joint[u] = std::fmin(out.joint[u], aim * red.joint_speed[u] * f);
+    }
+  }
+  if (!(out.tcp < INFINITY)) return;
+  kin::Jacobian J;
+  if (kin::jacobian(*chain_, prev_q_cmd_, J) < kin::Status::ok) return;
+  for (int j = 0; j < n && j < kin::kMaxJoints; ++j)
+    out.tcp_gain[static_cast<std::size_t>(j)] = J.block<3, 1>(0, j).norm();
+}
+
 bool SafetyMonitor::predict_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
                                  kin::SafetyViolation& out) {
   if (!cfg_.enabled || chain_ == nullptr) return false;

@@ -242,7 +242,7 @@ inline constexpr CommandSpec kCommands[] = {
      "as `safety normal`; a move faster than the Reduced TCP speed limit is refused at plan time", false},
     {"safety", Cmd::safety, ArgShape::none, "safety",
      "the safety envelope: on or off, the mode, the configuration's checksum and the stops it made",
-     "`safety=on mode=normal|reduced checksum=XXXXXXXX stops=N [zone=reduced_plane_K] tool=NAME tool_radius_mm=R` "
+     "`safety=on mode=normal|reduced checksum=XXXXXXXX stops=N [zone=reduced_plane_K] speed_scale=S tool=NAME tool_radius_mm=R` "
      "then the limits in force (`safety=off` without [safety]); not a safety-rated function: docs/safety.md", true},
     {"out", Cmd::out, ArgShape::output, "out [NAME on/off]",
      "digital output NAME ([[output]]: a drive's 60FEh:01 bit) on or off at once; `out` lists them",

@@ -229,11 +229,15 @@ class Controller final : private SegmentHost {
   void step_safety();
   /// The speed scale's target from the monitor's speed ratio (and, outside a trigger zone, the
   /// Reduced mode's when the tool would reach a trigger plane before the scale could come down
-  /// to it), for the executor. True when a speed function is beyond its limit and tolerance
-  /// and the scale may not cure it (only within kScaleGrace of Reduced mode switched on, while
-  /// its value is not rising, the scale not held back by the joints' acceleration limits and
-  /// the scale it needs not below TimeScale::kMin): `v` names it, the caller stops.
+  /// to it), for the executor or the jog, held at its lowest for kTargetHoldS. True when a
+  /// speed function is beyond its limit and tolerance and the scale may not cure it (only
+  /// within kScaleGrace of Reduced mode switched on, while the scale it needs is not below
+  /// TimeScale::kMin): `v` names it, the caller stops.
   bool scale_speed(kin::SafetyViolation& v);
+  /// The speed caps of the jog's plans from the monitor's last sample (SafetyMonitor::speed_cap).
+  void update_jog_cap();
+  /// The speed scale's aim: just below each limit (the scale lags a plan that speeds up by a cycle).
+  static constexpr double kScaleAim = 0.995;
   // SegmentHost: the executor's calls
   bool may_move() const override;
   void segment_started(const MotionItem& m) override;
@@ -332,6 +336,8 @@ class Controller final : private SegmentHost {
   kin::SafetyConfig safety_next_{};                 ///< (the cycle's copy of one taken from it)
   std::uint32_t safety_stops_ = 0;
   int speed_over_cycles_ = 0;  ///< cycles in a row a scaled speed has been beyond its limit and tolerance
+  double target_hold_ = 1.0;              ///< the lowest speed scale target of the last kTargetHoldS
+  std::int64_t target_hold_since_ = 0;    ///< the cycle it was set in
   kin::SafetyViolation over_last_{};  ///< the speed function beyond in the last of them
   kin::SafetyMode last_op_ = kin::SafetyMode::normal;  ///< safety_mode() at the last step_safety
   std::int64_t reduced_since_ = -1000000000;  ///< cycles_ when Reduced mode was switched on last

@@ -21,6 +21,12 @@
 //    stops in joint space before it (JogEnd::limit, naming the joint);
 //  - move without being asked: a continuous jog stops (on its line) when it has not been
 //    refreshed within its deadman time (JogEnd::deadman).
+// The safety envelope's speed limits (docs/safety.md#speed-scaling) act on a jog twice: its
+// clock runs on a speed scale (time_scale.hpp, the target set by the controller every cycle:
+// the running plan slows on its path), and every plan it makes (a new target, a streamed
+// target, the end of a target's horizon) is made within the speed caps the controller sets
+// (SpeedCap), from the real-time state, the scale back at 1: a re-plan never speeds up again
+// past a limit the scale had slowed the jog to.
 // Heap-free, no locks, no exceptions: it runs inside Controller::cycle.
 #include <cstdint>
 
@@ -28,6 +34,7 @@
 #include "servoarm/kinematics/trajectory.hpp"
 #include "servoarm/kinematics/trajectory_cartesian.hpp"
 #include "servoarm/hal/time.hpp"
+#include "servoarm/rt/time_scale.hpp"
 
 namespace servoarm::fw {
 
@@ -120,7 +127,20 @@ class Jogger {
   bool needs_joint_ramp() const { return needs_ramp_; }
   /// Current time scaling of a tool jog (1 = full speed; < 1 slowed near a singularity).
   double scale() const { return scale_; }
-  void reset() { active_ = stopping_ = needs_ramp_ = deadman_ = moving_ = false; }
+  void reset() {
+    active_ = stopping_ = needs_ramp_ = deadman_ = moving_ = false;
+    safe_.reset();
+  }
+
+  /// Real-time: the safety envelope's speed caps for the plans made from now on.
+  void set_speed_cap(const SpeedCap& c) { cap_ = c; }
+  /// Real-time: the speed scale's target (docs/safety.md#speed-scaling), in [TimeScale::kMin, 1];
+  /// the jog's clock ramps towards it from the next step on (not while it brakes to rest).
+  void set_speed_target(double s) { safe_.set_target(s); }
+  /// The speed scale of the last step (1: as planned).
+  double speed_scale() const { return safe_.s; }
+  /// The last step's scale would have fallen faster than the joints' acceleration limits allow.
+  bool speed_scale_limited() const { return safe_.limited; }
 
  private:
   bool plan_joint(const kin::JointState& cmd);
@@ -130,6 +150,16 @@ class Jogger {
   bool plan_tool(const kin::JointVector& c_goal);
   void tool_pose(const kin::JointState& c, kin::Pose& out) const;
   JogEnd end(JogEnd e, int joint, bool ramp);
+  /// The speed scale's step this period (its rate bounded by the joints' acceleration limits at
+  /// the last setpoint `cmd`): the period on the jog's clock, dt_ * s.
+  double scale_step(const kin::JointState& cmd);
+  /// A joint plan's sample into real time on the speed scale: velocity q' s, acceleration
+  /// q'' s^2 + q' ds/dt.
+  void scaled(kin::JointState& cmd) const {
+    if (safe_.s == 1.0 && safe_.rate == 0.0) return;
+    cmd.acc = cmd.acc * (safe_.s * safe_.s) + cmd.vel * safe_.rate;
+    cmd.vel *= safe_.s;
+  }
 
   const kin::Chain* chain_ = nullptr;
   kin::JointLimits limits_{};
@@ -158,6 +188,9 @@ class Jogger {
   kin::JointState c_;                          ///< virtual axes' state at t_
   double scale_ = 1.0;
   kin::JointVector q_prev_;
+  // the safety envelope's speed limits
+  TimeScale safe_;  ///< the speed scale of the jog's clock
+  SpeedCap cap_;    ///< the caps of its plans
 };
 
 }  // namespace servoarm::fw

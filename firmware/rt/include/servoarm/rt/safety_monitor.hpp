@@ -15,6 +15,7 @@
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/safety.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
+#include "servoarm/rt/time_scale.hpp"
 
 namespace servoarm::fw {
 
@@ -74,6 +75,18 @@ class SafetyMonitor {
   /// moves towards (INFINITY: none), and the Reduced mode's speed ratio at the commanded state
   /// (its TCP, elbow and joint speeds) into `reduced_ratio`.
   double time_to_trigger(double per_scale, double& reduced_ratio) const;
+
+  /// After update(): the speed caps for a jog's or stream's plans at the commanded pose
+  /// (docs/safety.md#speed-scaling): the TCP and joint speed limits of `mode` (Reduced in a
+  /// trigger zone) times `aim`, and the TCP's speed per unit speed of each joint there (the
+  /// linear Jacobian's columns; computed only when a TCP limit is set). Outside a trigger zone,
+  /// in Normal mode, the Reduced limits times max(1, g / (horizon_s v)) cap them too, with g the
+  /// tool sphere's distance to the nearest trigger plane and v the Reduced TCP speed limit
+  /// (kCapSpeed without one): a plan started near a trigger plane is slow enough that the speed
+  /// scale can bring it to the Reduced limits before it gets there (in any direction: the plan's
+  /// is not known yet). Nothing capped when the envelope is off.
+  void speed_cap(kin::SafetyMode mode, double aim, double horizon_s, SpeedCap& out) const;
+  static constexpr double kCapSpeed = 0.25;  ///< m/s: speed_cap's speed per distance without a Reduced TCP limit
 
   /// The trigger plane the commanded tool sphere reaches beyond at the last update() (its
   /// functions then ran in Reduced mode), -1 when none.

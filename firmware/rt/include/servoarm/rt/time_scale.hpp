@@ -15,6 +15,7 @@
 //
 // Real-time: plain arithmetic on a small struct, no allocation.
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "servoarm/kinematics/trajectory.hpp"
@@ -83,6 +84,39 @@ struct TimeScale {
     const double d = std::fabs(from - to);
     if (d >= kRate * kRate / kJerk) return d / kRate + kRate / kJerk;
     return 2.0 * std::sqrt(d / kJerk);
+  }
+};
+
+/// The speed caps a jog's or stream's plans are made with (docs/safety.md#speed-scaling): the
+/// safety envelope's speed limits turned into joint velocity limits for the planner, so that a
+/// re-plan (a new jog target, a streamed target) starts within them instead of speeding up
+/// again for the scale to catch. Filled by SafetyMonitor::speed_cap, used by Jogger.
+struct SpeedCap {
+  std::array<double, kin::kMaxJoints> joint;     ///< per joint: the highest speed a plan may use (rad/s, m/s); INFINITY: none
+  std::array<double, kin::kMaxJoints> tcp_gain;  ///< per joint: the TCP's speed per unit joint speed at the pose (m/rad, |linear Jacobian column|)
+  double tcp = INFINITY;                         ///< the TCP speed a plan may reach (m/s)
+  SpeedCap() {
+    joint.fill(INFINITY);
+    tcp_gain.fill(0.0);
+  }
+  /// `L`'s velocity limits capped for a plan from `from` towards `goal`, or moving at `qd`
+  /// (may be empty): each joint's at its cap, and those of the joints that move (goal, velocity
+  /// or qd not zero) lowered together so that the sum of their TCP gains times their limits is
+  /// within the TCP cap (the TCP's speed is at most that sum, whatever the direction).
+  void apply(kin::JointLimits& L, const kin::JointState& from, const kin::JointVector& goal, const kin::JointVector& qd) const {
+    double sum = 0;
+    std::array<bool, kin::kMaxJoints> moves{};
+    for (int j = 0; j < L.n && j < kin::kMaxJoints; ++j) {
+      const auto u = static_cast<std::size_t>(j);
+      double& v = L.dyn[u].max_velocity;
+      v = std::fmin(v, joint[u]);
+      moves[u] = goal[j] != from.pos[j] || from.vel[j] != 0.0 || (qd.size() > j && qd[j] != 0.0);
+      if (moves[u]) sum += tcp_gain[u] * v;
+    }
+    if (!(sum > tcp)) return;
+    const double f = tcp / sum;
+    for (int j = 0; j < L.n && j < kin::kMaxJoints; ++j)
+      if (moves[static_cast<std::size_t>(j)]) L.dyn[static_cast<std::size_t>(j)].max_velocity *= f;
   }
 };
 
