@@ -90,3 +90,48 @@ TEST(SafetyApi, StageAndConfirmRoundTrip) {
   STRCMP_CONTAINS("no safety change is staged", bad.c_str());
   clock.set_idle_hook(nullptr);
 }
+
+// The state sample (the `state` answer and stream, state_line) carries the safety inputs
+// (asserted, lost) and the speed scale, as the control thread publishes them: a Reduced input on a simulated contact, released, asserted, then lost.
+TEST(SafetyApi, TheStateSampleCarriesTheInputsAndTheSpeedScale) {
+  test::SimApp app;
+  hal::ManualClock clock;
+  FwConfig c;
+  c.can = "sim";
+  c.safety_planes = {0, 0, 1, -500};
+  c.safety_reduced_input = "sim:door";
+  std::string e = app.build(c, &clock);
+  CHECK_TEXT(e.empty(), e.c_str());
+  clock.set_idle_hook([&](hal::TimePoint t) { app.plant->step(t); });
+  e = app.boot();
+  CHECK_TEXT(e.empty(), e.c_str());
+  auto run = [&](int cycles) {
+    for (int i = 0; i < cycles; ++i) {
+      app.ctl->cycle(clock.now());
+      clock.advance(hal::kMillisecond);
+    }
+  };
+  hal::SimInput* door = app.sim_input("door");
+  CHECK(door != nullptr);
+  struct Step {
+    hal::InputLevel level;  // the contact (asserted when low: safety.reduced_input_active)
+    const char* inputs;     // the state's safety_inputs
+    const char* mode;       // and safety_mode
+  } const steps[] = {
+      {hal::InputLevel::high, R"("safety_inputs":{"estop":false,"estop_lost":false,"reduced":false,"reduced_lost":false})",
+       R"("safety_mode":"normal")"},
+      {hal::InputLevel::low, R"("safety_inputs":{"estop":false,"estop_lost":false,"reduced":true,"reduced_lost":false})",
+       R"("safety_mode":"reduced")"},
+      {hal::InputLevel::lost, R"("safety_inputs":{"estop":false,"estop_lost":false,"reduced":true,"reduced_lost":true})",
+       R"("safety_mode":"reduced")"},
+  };
+  for (const Step& s : steps) {
+    door->set(s.level);
+    run(2 * static_cast<int>(c.safety_input_debounce_ms) + 20);  // a release counts after the debounce
+    const std::string st = api::state_line(app.ctl->telemetry(), 1000.0, app.chain, 0, nullptr);
+    STRCMP_CONTAINS(s.inputs, st.c_str());
+    STRCMP_CONTAINS(s.mode, st.c_str());
+    STRCMP_CONTAINS("\"speed_scale\":1.0", st.c_str());  // at rest: nothing to scale
+  }
+  clock.set_idle_hook(nullptr);
+}

@@ -1028,6 +1028,10 @@ std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain&
   j["safety_mode"] = kin::to_string(static_cast<kin::SafetyMode>(t.safety_mode));
   j["safety_stops"] = t.safety_stops;
   j["speed_scale"] = t.speed_scale;
+  j["safety_inputs"] = {{"estop", (t.safety_inputs & 1u) != 0},
+                        {"estop_lost", (t.safety_inputs & 2u) != 0},
+                        {"reduced", (t.safety_inputs & 4u) != 0},
+                        {"reduced_lost", (t.safety_inputs & 8u) != 0}};
   json q = json::array(), qc = json::array(), fe = json::array();
   kin::JointVector qa(chain.n_joints);
   for (int i = 0; i < t.n && i < chain.n_joints; ++i) {
