@@ -162,7 +162,8 @@ TEST(Package, DependsCoversEveryNeededLibrary) {
                        {"libdl.so.", "libc6"},         {"librt.so.", "libc6"},      {"ld-linux", "libc6"},
                        {"libstdc++.so.", "libstdc++6"}, {"libgcc_s.so.", "libgcc-s1"}, {"libedit.so.", "libedit2"},
                        {"liburdfdom_model.so.", "liburdfdom-model3.0"}, {"libconsole_bridge.so.", "libconsole-bridge1.0"},
-                       {"libwebsockets.so.", "libwebsockets17"}, {"libmosquitto.so.", "libmosquitto1"}};
+                       {"libwebsockets.so.", "libwebsockets17"}, {"libmosquitto.so.", "libmosquitto1"},
+                       {"libgpiod.so.", "libgpiod2"}};
   int binaries = 0;
   for (const char* bin : {"/usr/bin/armfw", "/usr/bin/armctl"}) {
     const std::string path = root + bin;
