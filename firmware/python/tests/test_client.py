@@ -270,6 +270,9 @@ class ClientTest(unittest.TestCase):
         with self.arm() as arm:
             arm.enable()
             q0 = arm.state()["q_cmd"]
+            # the events from here on: the stream's end may come before this script looks again
+            # (a loaded machine stalls it past the deadman)
+            seq = max([e["seq"] for e in arm.events()] or [0])
             with arm.stream() as st:
                 t0 = time.monotonic()
                 while time.monotonic() - t0 < 1.0:
@@ -279,7 +282,6 @@ class ClientTest(unittest.TestCase):
                     st.send(q)
                     time.sleep(0.02)
                 self.assertTrue(arm.state()["streaming"])
-            seq = max([e["seq"] for e in arm.events()] or [0])
             end = time.monotonic() + 10  # no target: after the deadman (1 s) the arm brakes to rest
             s = arm.state()
             while (s["streaming"] or s["state"] != "idle") and time.monotonic() < end:
