@@ -1424,7 +1424,8 @@ void Controller::step_safety() {
   }
   if (!watch) return;
   if (jogging) update_jog_cap();  // for its re-plans (a new target, a target's horizon)
-  if (!hit && safety_.check_state(limits_, cmd_, sm, v)) hit = true, on_actual = false;  // stop, momentum, power (not scaled)
+  // stop time and distance (a stop now); momentum and power on the scale as the speeds
+  if (!hit && safety_.check_state(limits_, cmd_, sm, v, scaled)) hit = true, on_actual = false;
   if (!hit && scaled && scale_speed(v)) hit = true, on_actual = false;  // a speed the scale cannot keep
   char line[sizeof(Event::message)];
   char what[sizeof(Event::message)];

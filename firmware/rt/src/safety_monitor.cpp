@@ -25,6 +25,9 @@ void SafetyMonitor::set_tool(const kin::Pose& tool, double radius) {
 bool SafetyMonitor::update(const kin::JointVector& q_cmd, const kin::JointVector& q_act, kin::SafetyMode mode,
                            bool only_growing, kin::SafetyViolation& out, bool& on_actual, bool speeds_scaled) {
   ratio_ = 0;
+  reduced_state_ratio_ = 0;
+  had_stop_ = has_stop_ && have_prev_;
+  has_stop_ = false;
   speed_over_ = false;
   if (!cfg_.enabled || chain_ == nullptr) return false;
   const bool ok_cmd = kin::safety_sample(*chain_, cfg_, q_cmd, -1.0, cmd_);
@@ -63,17 +66,53 @@ bool SafetyMonitor::check_state(const kin::JointLimits& limits, const kin::Joint
                                 kin::SafetyViolation& out, bool speeds_scaled) {
   if (!cfg_.enabled || chain_ == nullptr) return false;
   const kin::SafetyLimits& lim = cfg_.limits(mode);
-  if (!lim.has_stop_limit() && !lim.has_dynamics_limit()) return false;
+  // The trigger look-ahead (time_to_trigger) takes the Reduced stop and dynamics limits too.
+  const kin::SafetyLimits& red = cfg_.reduced;
+  const bool ahead = speeds_scaled && mode == kin::SafetyMode::normal && cfg_.trigger_count > 0 && zone_ < 0;
+  const bool stops = lim.has_stop_limit() || (ahead && red.has_stop_limit());
+  const bool dynamics = lim.has_dynamics_limit() || (ahead && red.has_dynamics_limit());
+  if (!stops && !dynamics) return false;
   // cmd_ is the TCP at cmd.pos (update() of this cycle)
-  if (lim.has_stop_limit()) (void)kin::stop_prediction(*chain_, limits, cmd, stop_, cmd_);
-  if (lim.has_dynamics_limit()) (void)kin::dynamics_prediction(*chain_, cmd, cmd_);
-  bool hit = kin::check_stop(cfg_, mode, cmd_, cfg_.position_tolerance, 1.0, out);
-  cmd_.has_stop = cmd_.has_dynamics = false;
-  if (hit && speeds_scaled) {  // (all of them speed functions)
-    if (!speed_over_) speed_v_ = out;
-    speed_over_ = true;
-    hit = false;
+  if (stops) (void)kin::stop_prediction(*chain_, limits, cmd, stop_, cmd_);
+  if (dynamics) (void)kin::dynamics_prediction(*chain_, cmd, cmd_);
+  if (ahead) reduced_state_ratio_ = kin::speed_ratio(cfg_, kin::SafetyMode::reduced, cmd_);
+  if (!speeds_scaled) {
+    const bool hit = kin::check_stop(cfg_, mode, cmd_, cfg_.position_tolerance, 1.0, out);
+    cmd_.has_stop = cmd_.has_dynamics = false;
+    return hit;
   }
+  // On the speed scale: each of these goes down with the speed, so their ratios (kin::speed_ratio)
+  // drive the scale's target as the speeds' do, and the predicted stop is kept within its limits
+  // before they are reached. A stop time or distance beyond limit + tolerance is a protective
+  // stop in this very cycle all the same: the stop that starts now is the ramp predicted, and one
+  // a cycle later would end beyond it. Momentum and power beyond theirs are left to the caller
+  // as the speeds are (speed_over()).
+  ratio_ = std::fmax(ratio_, kin::speed_ratio(cfg_, mode, cmd_));
+  const bool dyn = cmd_.has_dynamics;
+  cmd_.has_dynamics = false;
+  // The stop is checked as predicted one cycle on (its growth over the last cycle added): a
+  // prediction growing by a millimetre a cycle would otherwise pass limit + tolerance by up to
+  // that much in the cycle it is caught. The event shows the value predicted now.
+  const double d = cmd_.stop_distance, t = cmd_.stop_time;
+  if (cmd_.has_stop && had_stop_) {
+    cmd_.stop_distance += std::fmax(0.0, d - prev_stop_distance_);
+    cmd_.stop_time += std::fmax(0.0, t - prev_stop_time_);
+  }
+  const bool hit = kin::check_stop(cfg_, mode, cmd_, cfg_.position_tolerance, 1.0, out);
+  if (hit) out.value = out.function == kin::SafetyFunction::stop_time ? t : d;
+  has_stop_ = cmd_.has_stop;
+  prev_stop_distance_ = d;
+  prev_stop_time_ = t;
+  cmd_.stop_distance = d;
+  cmd_.stop_time = t;
+  cmd_.has_dynamics = dyn;
+  cmd_.has_stop = false;
+  kin::SafetyViolation v;
+  if (!hit && kin::check_stop(cfg_, mode, cmd_, cfg_.position_tolerance, 1.0, v)) {
+    if (!speed_over_) speed_v_ = v;
+    speed_over_ = true;
+  }
+  cmd_.has_dynamics = false;
   return hit;
 }
 
@@ -89,7 +128,8 @@ double SafetyMonitor::time_to_trigger(double per_scale, double& reduced_ratio) c
     const double towards = -p.normal.dot(v);
     if (towards > 0) t = std::fmin(t, std::fmax(0.0, gap) / towards);
   }
-  if (t < INFINITY) reduced_ratio = kin::speed_ratio(cfg_, kin::SafetyMode::reduced, cmd_);
+  if (t < INFINITY)
+    reduced_ratio = std::fmax(kin::speed_ratio(cfg_, kin::SafetyMode::reduced, cmd_), reduced_state_ratio_);
   return t;
 }
 

@@ -56,12 +56,19 @@ class SafetyMonitor {
   /// or moves the TCP further than its stop distance limit, or the arm's momentum or power at
   /// `cmd` is above the mode's limit, beyond the tolerances: true, `out` naming it. Nothing is
   /// computed for the limits the mode does not set.
-  /// `speeds_scaled`: as update()'s (every one of these functions is cured by a lower speed).
+  /// `speeds_scaled` (the motion runs on the speed scale): their ratios to the limits join
+  /// speed_ratio() (kin::speed_ratio), so the scale keeps them as it keeps the speeds; the stop
+  /// time and distance are checked as predicted one cycle on (their growth over the last cycle
+  /// added, the event showing the value predicted now), still a protective stop in this cycle
+  /// (the stop is the ramp predicted); momentum and power beyond their limits are not reported
+  /// here but kept (speed_over()) for the caller to judge, as the speeds are. Outside a trigger
+  /// zone in Normal mode the Reduced stop and dynamics ratios are kept for time_to_trigger().
   bool check_state(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
                   kin::SafetyViolation& out, bool speeds_scaled = false);
 
   /// After update(): the commanded state's highest value / limit of the mode's TCP, elbow and
-  /// joint speed limits (kin::speed_ratio), 0 without a speed.
+  /// joint speed limits (kin::speed_ratio), 0 without a speed; after check_state() with
+  /// speeds_scaled, its stop and dynamics ratios too.
   double speed_ratio() const { return ratio_; }
   /// After update() and check_state() with speeds_scaled: a speed function beyond its limit and
   /// tolerance on the commanded state (true, `out` naming the first one found).
@@ -73,7 +80,8 @@ class SafetyMonitor {
   /// After update(), outside every trigger zone: how long (s) the commanded tool sphere, moving
   /// on at `per_scale` times its present velocity, takes to reach the nearest trigger plane it
   /// moves towards (INFINITY: none), and the Reduced mode's speed ratio at the commanded state
-  /// (its TCP, elbow and joint speeds) into `reduced_ratio`.
+  /// (its TCP, elbow and joint speeds; after check_state() with speeds_scaled, its stop and
+  /// dynamics limits too) into `reduced_ratio`.
   double time_to_trigger(double per_scale, double& reduced_ratio) const;
 
   /// After update(): the speed caps for a jog's or stream's plans at the commanded pose
@@ -108,6 +116,9 @@ class SafetyMonitor {
   bool have_prev_ = false;
   int zone_ = -1;  ///< trigger plane of the last commanded sample
   double ratio_ = 0;  ///< speed_ratio()
+  double reduced_state_ratio_ = 0;  ///< check_state(): the Reduced stop and dynamics ratios (time_to_trigger)
+  bool has_stop_ = false, had_stop_ = false;  ///< check_state() predicted a stop this cycle / the previous one
+  double prev_stop_distance_ = 0, prev_stop_time_ = 0;  ///< the previous cycle's predicted stop (m, s)
   bool speed_over_ = false;  ///< speed_over()
   kin::SafetyViolation speed_v_{};
   kin::JointTrajectory stop_{};  ///< predict_stop's ramp (kept here: no stack copy per cycle)
