@@ -11,7 +11,7 @@ the state sample), so the follower spaces the targets by when the leader measure
 when they arrived through two network hops and this loop; with --from-file each line of FILE (or of a pipe or socket: `-` is stdin) is one set
 of joint values (rad / m, whitespace-separated), a leader device of your own. The follower
 tracks every target jerk-limited; when the targets stop, its deadman brakes it to rest. A file's
-last line is held (sent on at the rate) until the follower is within 0.001 of it or --settle
+last line is held (sent on at the rate) until the follower rests within 0.001 of it or --settle
 seconds pass, so a replay ends where the file does even when the follower lags. At the
 end the follower's lag and error are printed (one line): the error is the largest joint
 difference between the follower's measured joints and the leader's sample sent just before,
@@ -140,9 +140,12 @@ def main(argv=None):
             if f is not sys.stdin:
                 f.close()
             end = time.monotonic() + a.settle
-            while lead_log and time.monotonic() < end:  # hold the last line until the follower is there
+            while lead_log and time.monotonic() < end:  # hold the last line until the follower rests there
                 q = lead_log[-1][1]
-                if max(abs(x - y) for x, y in zip(follower.state()["q"], q)) < 1e-3:
+                fs = follower.state()
+                # at rest too: a follower passing the line on its way would otherwise be left to
+                # carry on at the lines' speed to where the target was extrapolated
+                if max(abs(x - y) for x, y in zip(fs["q"], q)) < 1e-3 and max(map(abs, fs["qd_cmd"])) < 1e-3:
                     break
                 send(st, q)
                 time.sleep(period)
