@@ -66,7 +66,12 @@ void VirtualMitMotor::integrate_to(hal::TimePoint now) {
     const double dt = std::min(step, left);
     left -= dt;
     double tau = 0;
-    if (enabled_) {
+    const std::uint32_t mode = vendor_ == mit::Vendor::damiao ? reg(mit::Reg::ctrl_mode) : mit::kModeMit;
+    if (enabled_ && (mode == kModePosVel || mode == kModeVel)) {
+      // the drive's own loops: position (mode 2, at most the frame's speed), then velocity
+      const double vd = mode == kModeVel ? vel_v_ : std::clamp(kPosGain * (pv_p_ - wrapped()), -pv_v_, pv_v_);
+      tau = std::clamp(p_.inertia / kVelTime * (vd - qd_) + p_.damping * vd, -r.t_max, r.t_max);
+    } else if (enabled_) {
       tau = cmd_.kp * (cmd_.p - wrapped()) + cmd_.kd * (cmd_.v - qd_) + cmd_.t;
       tau = std::clamp(tau, -r.t_max, r.t_max);
     }
@@ -110,8 +115,28 @@ void VirtualMitMotor::answer(const hal::CanFrame& reply, hal::TimePoint now, hal
 
 void VirtualMitMotor::handle(const hal::CanFrame& f, hal::TimePoint now, hal::CanBus& out) {
   integrate_to(now);
-  if (quirks_.silent || f.error || f.rtr || f.extended || f.len != 8 || f.fd != fd_) return;
+  if (quirks_.silent || f.error || f.rtr || f.extended || f.fd != fd_) return;
   const auto id = static_cast<std::uint16_t>(reg(mit::Reg::esc_id));
+  const std::uint32_t pv_id = 0x100u + id, vel_id = 0x200u + id;
+  if (vendor_ == mit::Vendor::damiao && (f.id == pv_id || f.id == vel_id)) {
+    // position-velocity / velocity frames: taken in their own control mode only
+    std::uint16_t to = 0;
+    double p = 0, v = 0;
+    const std::uint32_t mode = reg(mit::Reg::ctrl_mode);
+    if (f.id == pv_id ? mode != kModePosVel || !mit::unpack_pos_vel(f, to, p, v)
+                           : mode != kModeVel || !mit::unpack_vel(f, to, v))
+      return;
+    last_rx_ = now;
+    if (enabled_ && f.id == pv_id) {
+      pv_p_ = p;
+      pv_v_ = std::min(std::fabs(v), ranges().v_max);
+    } else if (enabled_) {
+      vel_v_ = std::clamp(v, -ranges().v_max, ranges().v_max);
+    }
+    send_feedback(now, out);
+    return;
+  }
+  if (f.len != 8) return;
   if (f.id == mit::kRegisterId) {
     mit::RegMessage m;
     if (vendor_ != mit::Vendor::damiao || !mit::decode_register(f, m) || m.motor_id != id) return;
@@ -138,7 +163,11 @@ void VirtualMitMotor::handle(const hal::CanFrame& f, hal::TimePoint now, hal::Ca
   if (mit::is_special(f, s)) {
     switch (s) {
       case mit::Special::enable:
-        if (error_ == 0) enabled_ = true;
+        if (error_ == 0 && !enabled_) {
+          enabled_ = true;
+          pv_p_ = wrapped();  // the other modes hold where they are until their first frame
+          pv_v_ = vel_v_ = 0;
+        }
         break;
       case mit::Special::disable: enabled_ = false; break;
       case mit::Special::save_zero: q_ = 0; break;

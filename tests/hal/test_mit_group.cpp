@@ -428,3 +428,52 @@ TEST(MitGroup, BusOffFaultsEveryJoint) {
   }
   STRCMP_CONTAINS("the CAN controller is bus-off", rig.group->last_error());
 }
+
+// Damiao's other two control modes on the virtual motor: in position-velocity mode (CTRL_MODE 2)
+// it takes [p, v] on 0x100 + id and moves to p no faster than v; in velocity mode (3) it takes v
+// on 0x200 + id and turns at v; each frame is answered with a feedback frame. A frame of another
+// mode than the motor's is not its own: no answer, no motion (an MIT frame in mode 2, a velocity
+// frame in MIT mode). CTRL_MODE is written through 0x7FF while the motor is disabled.
+TEST(MitGroup, DamiaoPositionVelocityAndVelocityModesOnTheVirtualMotor) {
+  ManualClock clock;
+  sim::MitPlant plant(clock, motors(1, 2));
+  CanBus& bus = plant.master_bus();
+  auto exchange = [&](const CanFrame& f) {  // one frame, 1 ms, the answers counted
+    bus.send(f);
+    clock.advance(kMillisecond);
+    plant.step(clock.now());
+    int n = 0;
+    CanFrame in;
+    while (bus.receive(in, 0) == Status::ok) ++n;
+    return n;
+  };
+  LONGS_EQUAL(1, exchange(mit::special_frame(1, mit::Special::enable)));
+  CanFrame f;
+  mit::pack_command(mit::ranges_of(j4340()), 1, {1.0, 0, 30, 1, 0}, f);
+  LONGS_EQUAL(0, exchange(f));  // an MIT frame in position-velocity mode
+  double peak = 0;
+  int answered = 0;
+  for (int i = 0; i < 1500; ++i) {
+    CHECK(mit::pack_pos_vel(1, 1.0, 2.0, f));
+    answered += exchange(f);
+    peak = std::fmax(peak, std::fabs(plant.at(0).velocity()));
+  }
+  std::printf("\n  virtual DM-J4340 in position-velocity mode: to 1.0 rad at most 2.0 rad/s: at %.4f rad, peak %.3f rad/s\n",
+              plant.at(0).position(), peak);
+  LONGS_EQUAL(1500, answered);
+  DOUBLES_EQUAL(1.0, plant.at(0).position(), 2e-3);
+  CHECK(peak > 1.9 && peak < 2.05);
+  CHECK(mit::pack_vel(1, -3.0, f));
+  LONGS_EQUAL(0, exchange(f));  // a velocity frame in position-velocity mode
+  // velocity mode: CTRL_MODE = 3 while disabled, then enable
+  LONGS_EQUAL(1, exchange(mit::special_frame(1, mit::Special::disable)));
+  LONGS_EQUAL(1, exchange(mit::reg_write_u32(1, static_cast<std::uint8_t>(mit::Reg::ctrl_mode), 3)));
+  UNSIGNED_LONGS_EQUAL(3, plant.at(0).reg(mit::Reg::ctrl_mode));
+  LONGS_EQUAL(1, exchange(mit::special_frame(1, mit::Special::enable)));
+  answered = 0;
+  for (int i = 0; i < 500; ++i) answered += exchange(f);
+  LONGS_EQUAL(500, answered);
+  DOUBLES_EQUAL(-3.0, plant.at(0).velocity(), 0.05);
+  CHECK(mit::pack_pos_vel(1, 1.0, 2.0, f));
+  LONGS_EQUAL(0, exchange(f));  // a position-velocity frame in velocity mode
+}

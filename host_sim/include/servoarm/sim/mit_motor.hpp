@@ -11,6 +11,9 @@
 // over-temperature (OT_Value). Quirks users meet: in a control mode other than MIT it answers no
 // MIT frame; a CTRL_MODE it will not change; silent (another bitrate or frame format); answers
 // late; set to CAN FD on a classic bus (or the other way round): nothing seen, no answer.
+// Damiao's position-velocity (CTRL_MODE 2: [p, v] on 0x100 + id, to p at most at v) and velocity
+// (3: v on 0x200 + id) modes run the drive's own position and velocity loops (time constants
+// 50 ms and 1 ms, T_MAX) and answer each such frame with a feedback frame, in that mode only.
 // MitPlant puts motors on a fresh in-process bus, stepped by a thread or by the caller.
 #include <array>
 #include <atomic>
@@ -97,7 +100,11 @@ class VirtualMitMotor {
   std::array<std::uint32_t, hal::mit::kLastReg + 1> regs_{};
   bool enabled_ = false;
   std::uint8_t error_ = 0;
+  static constexpr std::uint32_t kModePosVel = 2, kModeVel = 3;
+  static constexpr double kPosGain = 20;     ///< 1/s, position loop of mode 2
+  static constexpr double kVelTime = 1e-3;   ///< s, velocity loop of modes 2 and 3
   hal::mit::Command cmd_{};
+  double pv_p_ = 0, pv_v_ = 0, vel_v_ = 0;  ///< the last position-velocity / velocity frame taken
   double q_ = 0, qd_ = 0, tau_ = 0, temp_ = 0;
   hal::TimePoint t_ = 0, last_rx_ = 0;
   std::uint64_t mit_frames_ = 0;
