@@ -211,6 +211,21 @@ TEST(ArmctlDrives, CommandLineErrorsAreOneLineAndExitTwo) {
   r = run_command(armctl + " drives check");
   LONGS_EQUAL(2, r.status);
   STRCMP_EQUAL("armctl: drives check: --config FILE is required\n", r.err.c_str());
+  // check takes the scan's --timeout (a busy host answers late): checked like scan's, and taken
+  r = run_command(armctl + " drives check --config nosuch.toml --timeout 0");
+  LONGS_EQUAL(2, r.status);
+  STRCMP_EQUAL("armctl: --timeout: '0' is not a time in ms (1..10000)\n", r.err.c_str());
+  {
+    const std::string file = "armctl_drives_check_sim.toml";
+    FILE* f = std::fopen(file.c_str(), "w");
+    CHECK(f != nullptr);
+    std::fputs("robot = \"puma560\"\n[bus]\ncan = \"sim\"\n", f);
+    std::fclose(f);
+    r = run_command(armctl + " drives check --config " + file + " --timeout 300");
+    std::remove(file.c_str());
+    LONGS_EQUAL_TEXT(0, r.status, r.err.c_str());
+    STRCMP_CONTAINS("bus.can = \"sim\": the simulated drives, nothing to check on a bus", r.out.c_str());
+  }
   r = run_command(armctl + " drives frobnicate");
   LONGS_EQUAL(2, r.status);
   STRCMP_CONTAINS("unknown drives command 'frobnicate'", r.err.c_str());

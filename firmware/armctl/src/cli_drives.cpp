@@ -29,7 +29,7 @@ namespace {
 
 const char* kDrivesUsage =
     "usage: armctl drives scan --iface IFACE [--fd] [--first N] [--last N] [--timeout MS]\n"
-    "       armctl drives check --config FILE\n"
+    "       armctl drives check --config FILE [--timeout MS]\n"
     "\n"
     "  scan   what answers on a CAN interface, one line per drive: id, family, identity or\n"
     "         motor model, mode, frame format, errors, temperature. CANopen nodes: an SDO read\n"
@@ -40,6 +40,7 @@ const char* kDrivesUsage =
     "         --timeout: how long answers are awaited (ms, default 50; longer on a busy host).\n"
     "  check  armfw's configuration (FILE) against the buses its [[drive]] tables name: one\n"
     "         line per joint, \"ok\" or what to change; drives that no joint names.\n"
+    "         --timeout: as for scan.\n"
     "Both only read from the drives. Exit status: 0 found / as configured, 1 nothing found /\n"
     "something to change, 2 bad usage or an interface that cannot be opened.\n";
 
@@ -232,6 +233,17 @@ bool parse_id(const char* option, const char* s, int hi, std::uint16_t& out, int
   return true;
 }
 
+/// --timeout MS (scan and check): how long answers are awaited. False with `rc` set when bad.
+bool parse_timeout(const char* s, hal::Duration& out, int& rc) {
+  double ms = 0;
+  if (!parse_number(s, ms) || ms < 1 || ms > 10000) {
+    rc = usage_error(fmt("--timeout: '%s' is not a time in ms (1..10000)", s));
+    return false;
+  }
+  out = static_cast<hal::Duration>(ms * double(hal::kMillisecond));
+  return true;
+}
+
 int scan_main(int argc, char** argv) {
   std::string iface;
   hal::ScanOptions opt;
@@ -250,10 +262,8 @@ int scan_main(int argc, char** argv) {
     } else if (a == "--last" && more) {
       if (!parse_id("--last", argv[++i], 0x7FE, opt.last_id, rc)) return rc;
     } else if (a == "--timeout" && more) {
-      double ms = 0;
-      if (!parse_number(argv[++i], ms) || ms < 1 || ms > 10000)
-        return usage_error(fmt("--timeout: '%s' is not a time in ms (1..10000)", argv[i]));
-      opt.window = opt.timeout = static_cast<hal::Duration>(ms * double(hal::kMillisecond));
+      if (!parse_timeout(argv[++i], opt.timeout, rc)) return rc;
+      opt.window = opt.timeout;
     } else return usage_error("drives scan: unknown or incomplete option '" + a + "' (see armctl drives --help)");
   }
   if (iface.empty()) return usage_error("drives scan: --iface IFACE is required (e.g. can0)");
@@ -274,6 +284,8 @@ int scan_main(int argc, char** argv) {
 
 int check_main(int argc, char** argv) {
   std::string file;
+  hal::Duration timeout = 50 * hal::kMillisecond;
+  int rc = 0;
   for (int i = 0; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
@@ -281,7 +293,9 @@ int check_main(int argc, char** argv) {
       return kExitOk;
     }
     if (a == "--config" && i + 1 < argc) file = argv[++i];
-    else return usage_error("drives check: unknown or incomplete option '" + a + "' (see armctl drives --help)");
+    else if (a == "--timeout" && i + 1 < argc) {
+      if (!parse_timeout(argv[++i], timeout, rc)) return rc;
+    } else return usage_error("drives check: unknown or incomplete option '" + a + "' (see armctl drives --help)");
   }
   if (file.empty()) return usage_error("drives check: --config FILE is required");
   FwConfig cfg;
@@ -306,7 +320,7 @@ int check_main(int argc, char** argv) {
   };
   hal::MonotonicClock clock;
   std::string out;
-  const int problems = drives_check(cfg, joints, open, clock, out);
+  const int problems = drives_check(cfg, joints, open, clock, out, timeout, timeout);
   std::fputs(out.c_str(), stdout);
   return problems == 0 ? kExitOk : kExitFailed;
 }
