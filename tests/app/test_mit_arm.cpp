@@ -335,7 +335,9 @@ TEST(FwMitArm, BadMitConfigurationsAreRefusedAtLoad) {
        "drive[2].master_id: is CANopen's SYNC id (0x080), and a CiA 402 drive is on the same interface"},
       {"[[drive]]\n[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmaster_id = 0x085\n",
        "drive[2].master_id: is a CANopen EMCY id (0x081..0x0FF), and a CiA 402 drive is on the same interface"},
-      {"[[drive]]\n[[drive]]\nfamily = \"cubemars_mit\"\nmotor = \"AK80-9\"\nmaster_id = 0x000\n", ""},
+      {"[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmit_kd = 6\n",
+       "drive[1].mit_kd: must be at most 5, the DM-J4340's KD range"},
+      {"[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nnode = 128\n", "drive[1].node: "},
       {"[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmaster_id = 0x7FF\n",
        "drive[1].master_id: is the Damiao register id (0x7FF)"},
       {"[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nmit_kp = 600\n",
@@ -345,7 +347,7 @@ TEST(FwMitArm, BadMitConfigurationsAreRefusedAtLoad) {
   for (const Case& k : cases) {
     FwConfig c;
     const std::string e = load_config_text(k.toml, "mit.toml", c);
-    CHECK_TEXT(has(e, k.expect), (std::string(k.toml) + " -> " + e).c_str());
+    CHECK_TEXT(!e.empty() && has(e, k.expect), (std::string(k.toml) + " -> " + e).c_str());
   }
   {
     // without CANopen drives on the interface the same ids are free: a Damiao master 0x085 loads
@@ -364,6 +366,20 @@ TEST(FwMitArm, BadMitConfigurationsAreRefusedAtLoad) {
   std::string e = app.build(c, &clock);
   CHECK_TEXT(has(e, "config: drive[6].master_id: 0x080 (the damiao default) is CANopen's SYNC id (0x080), and a CiA 402 "
                     "drive is on sim"),
+             e.c_str());
+  // CubeMars motors answer on 0x000 by default (drive.master_id 0 is the default): CANopen's NMT
+  // id beside the CiA 402 drive
+  FwConfig c1 = damiao_arm();
+  for (DriveConfig& d : c1.drives) {
+    d.family = "cubemars_mit";
+    d.motor = "AK80-9";
+  }
+  c1.drives[0] = DriveConfig{};
+  c1.drives[0].node = 1;
+  MitApp app1;
+  e = app1.build(c1, &clock);
+  CHECK_TEXT(has(e, "config: drive[2].master_id: 0x000 (the cubemars_mit default) is CANopen's NMT id (0x000), and a "
+                    "CiA 402 drive is on sim"),
              e.c_str());
   FwConfig c2 = damiao_arm();
   c2.drives[2].master_id = 0x02;
