@@ -52,6 +52,8 @@ MitGroup::MitGroup(CanBus& bus, Clock& clock, const MitGroupConfig& cfg) : bus_(
     J.r = mit::ranges_of(*c.profile);
     J.k = c.scaling.direction * c.scaling.counts_per_si() * kMicro;
     J.zero = c.scaling.zero_offset * kMicro;
+    const double kd = std::isfinite(c.stop_damping) && c.stop_damping > 0 ? c.stop_damping / (J.k * J.k) : 0.0;
+    J.stop_kd_rest = std::max(0.0, kd - J.r.kd_max);  // the hold frame carries KD_MAX itself
   }
 }
 
@@ -267,11 +269,12 @@ Status MitGroup::family_start(TimePoint deadline) {
   for (std::size_t j = 0; j < cfg_.joint_count; ++j) {
     Joint& J = joints_[j];
     const mit::Ranges keep = mit::ranges_of(*cfg_.joints[j].profile);
-    const double k = J.k, zero = J.zero;
+    const double k = J.k, zero = J.zero, stop_kd_rest = J.stop_kd_rest;
     J = Joint{};
     J.r = keep;
     J.k = k;
     J.zero = zero;
+    J.stop_kd_rest = stop_kd_rest;
     fb_[j] = JointFeedback{};
     fb_[j].has_torque = true;
   }
@@ -447,9 +450,14 @@ Status MitGroup::family_write(std::span<const double> setpoints, TimePoint now) 
         J.qstop_rest = std::fabs(J.v_act) <= rest_band(J);
       }
       const double wrap = static_cast<double>(J.unwrap.turns()) * 2.0 * J.r.p_max;
-      // the model's torque at the measured pose when the controller gives one (gravity), else
-      // the torque the motor measured when the stop began
-      const mit::Command cmd{J.qstop_at - wrap, 0, c.kp, J.r.kd_max, J.ff ? J.ff_t : J.qstop_t};
+      // the model's torque at the measured pose when the controller gives one (gravity and its
+      // braking torque), else the torque the motor measured when the stop began; without the
+      // model's torque (a velocity feed-forward comes with torque 0: model_torque_) the stop
+      // damping beyond KD_MAX brakes it from the measured velocity until it is at rest
+      // (MitJointConfig::stop_damping)
+      const double brake = model_torque_ || J.qstop_rest ? 0.0 : J.stop_kd_rest * J.v_act;
+      const double t = std::clamp((J.ff ? J.ff_t : J.qstop_t) - brake, -J.r.t_max, J.r.t_max);
+      const mit::Command cmd{J.qstop_at - wrap, 0, c.kp, J.r.kd_max, t};
       mit::pack_command(J.r, c.motor_id, cmd, f);
       J.sent = cmd;
       J.ff = false;
@@ -628,6 +636,7 @@ Status MitGroup::family_set_feed_forward(std::size_t j, double velocity, double 
   J.ff = true;
   J.ff_v = v;
   J.ff_t = t;
+  if (t != 0.0) model_torque_ = true;
   return Status::ok;
 }
 

@@ -703,6 +703,55 @@ TEST(FwMitArm, EstopBrakesAHeavyBaseWithinTheDefaultTimeoutWithTheControllersRam
   estop_base_brakes_within_the_default_timeout("ramp");
 }
 
+// Without the model's torque feed-forward nothing but the hold frame's KD_MAX would brake the
+// base after a stop (its inertia over KD_MAX: about 0.85 s, more than 2 s to rest from here, past
+// the default timeout, which would then power it down and let it coast). The hold brakes it with
+// the stop damping (its largest inertia over 0.1 s, beyond KD_MAX through tau_ff, at most T_MAX),
+// with the drives' stop and with the controller's ramp, whose end finds the base still moving:
+// kp alone lags its inertia far behind the setpoints. (No gravity here: without the model's
+// torque nothing holds the puma against it.)
+void estop_without_the_model_brakes_within_the_default_timeout(const char* stop) {
+  FwConfig c = damiao_arm("velocity");
+  c.stop = stop;  // safety.drive_stop_timeout_s left at its default
+  c.following_error_deg = 45;
+  Arm a(c);
+  CHECK_TEXT(a.boot_error.empty(), a.boot_error.c_str());
+  kin::JointVector q = kin::JointVector::Zero(6);
+  q << 0, -30 * kDeg, 60 * kDeg, 0, 20 * kDeg, 0;
+  a.arm_inertia(q);
+  CHECK_TEXT(ok(a.cmd("enable")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("movej 0 -30 60 0 20 0")), a.s.out.c_str());
+  CHECK_TEXT(ok(a.cmd("wait")), (a.s.out + a.events).c_str());
+  CHECK_TEXT(ok(a.cmd("movej 60 -30 60 0 20 0")), a.s.out.c_str());  // the base alone
+  a.run(0.6);
+  const double v0 = a.app.servo->feedback(0).velocity;
+  CHECK_TEXT(ok(a.cmd("estop")), a.s.out.c_str());
+  int rest_ms = -1;
+  double top = 0;
+  for (int ms = 0; ms < 4000; ++ms) {
+    a.run(0.001);
+    top = std::max(top, std::fabs(a.app.servo->feedback(0).velocity));
+    if (rest_ms < 0 && a.app.servo->holding(0)) rest_ms = ms;
+  }
+  std::printf("\n  e-stop (safety.stop = \"%s\", velocity feed-forward, drive_stop_timeout_s 2) with the puma's base at "
+              "%.2f rad/s (at most %.2f after it): at rest and held after %d ms, base motor %s\n",
+              stop, v0, top, rest_ms, a.motor(0).enabled() ? "powered" : "powered DOWN");
+  CHECK(std::fabs(v0) > 0.5);
+  CHECK_TEXT(a.tel().state == ArmState::estop, a.events.c_str());
+  for (std::size_t j = 0; j < 6; ++j) CHECK_TEXT(a.motor(j).enabled(), a.events.c_str());
+  CHECK(rest_ms >= 0 && rest_ms < 1500);
+  CHECK(std::fabs(a.app.servo->feedback(0).velocity) < 0.01);
+  LONGS_EQUAL(0, long(a.rt_allocs));
+}
+
+TEST(FwMitArm, WithoutTheModelsTorqueTheHoldBrakesAHeavyBaseWithinTheDefaultTimeoutWithTheDrivesStop) {
+  estop_without_the_model_brakes_within_the_default_timeout("drive");
+}
+
+TEST(FwMitArm, WithoutTheModelsTorqueTheHoldBrakesAHeavyBaseWithinTheDefaultTimeoutWithTheControllersRamp) {
+  estop_without_the_model_brakes_within_the_default_timeout("ramp");
+}
+
 // A joint that does not come to rest within safety.drive_stop_timeout_s (the base, pushed beyond
 // its motor's T_MAX from the e-stop on, let go once powered down) is powered down alone at the
 // timeout; the other motors, at rest, keep holding the arm against gravity (within a fraction of

@@ -12,6 +12,8 @@
 #include "servoarm/hal/canopen_master.hpp"
 #include "servoarm/hal/mit_group.hpp"
 #include "servoarm/hal/safety_input.hpp"
+#include "servoarm/kinematics/collision.hpp"
+#include "servoarm/kinematics/dynamics.hpp"
 
 namespace servoarm::fw {
 
@@ -172,6 +174,35 @@ std::string make_cia402(const DriveGroupInput& in, std::unique_ptr<hal::DriveGro
   return "";
 }
 
+/// Each joint's largest inertia M_jj (kg m^2 or kg, joint side) over the zero pose and 64
+/// pseudo-random poses within the limits; all 0 for a robot without inertial data.
+kin::JointVector largest_inertia(const kin::Chain& chain) {
+  kin::JointVector out = kin::JointVector::Zero(chain.n_joints);
+  char why[8];
+  if (chain.n_joints < 1 || kin::dynamics_refusal(chain, why, sizeof why)) return out;
+  kin::MassMatrix M;
+  kin::JointVector q = kin::JointVector::Zero(chain.n_joints);
+  std::uint64_t seed = 39;
+  for (int s = 0; s <= 64; ++s) {
+    for (int j = 0; j < chain.n_joints && s > 0; ++j) {
+      const kin::DhRow& row = chain.joint(j);
+      const bool finite = std::isfinite(row.lower) && std::isfinite(row.upper);
+      const double lo = finite ? row.lower : row.type == kin::JointType::prismatic ? 0.0 : -M_PI;
+      const double hi = finite ? row.upper : row.type == kin::JointType::prismatic ? 0.5 : M_PI;
+      seed = seed * 6364136223846793005ull + 1442695040888963407ull;
+      q[j] = lo + (hi - lo) * static_cast<double>(seed >> 11) * (1.0 / 9007199254740992.0);
+    }
+    if (kin::mass_matrix(chain, q, M) != kin::Status::ok) continue;
+    for (int j = 0; j < chain.n_joints; ++j) out[j] = std::fmax(out[j], M(j, j));
+  }
+  return out;
+}
+
+/// The hold after an e-stop or fault brakes each MIT joint with its largest inertia over this
+/// time (MitJointConfig::stop_damping) when no model torque arrives: a velocity time constant of
+/// at most 0.1 s (at most T_MAX), where KD_MAX alone gives a heavy joint about a second.
+constexpr double kStopBrakeTime = 0.1;  // s
+
 /// MIT-mode actuators of one vendor: one hal::MitGroup for the group's joints.
 std::string make_mit(const DriveGroupInput& in, hal::mit::Vendor vendor, std::unique_ptr<hal::DriveGroup>& out) {
   const FwConfig& cfg = in.cfg;
@@ -183,6 +214,7 @@ std::string make_mit(const DriveGroupInput& in, hal::mit::Vendor vendor, std::un
   mc.motor_timeout = static_cast<hal::Duration>(cfg.heartbeat_timeout_ms * 1e6);  // the motor stops as late as armfw sees it
   mc.state_timeout = static_cast<hal::Duration>(cfg.state_timeout_ms * 1e6);
   mc.fd = cfg.drives[static_cast<std::size_t>(in.plan.joints.front())].can_fd;  // one value per interface (plan)
+  const kin::JointVector inertia = largest_inertia(in.chain);
   for (std::size_t k = 0; k < mc.joint_count && k < hal::kMaxServoJoints; ++k) {
     const int j = in.plan.joints[k];
     const DriveConfig& d = cfg.drives[static_cast<std::size_t>(j)];
@@ -198,6 +230,7 @@ std::string make_mit(const DriveGroupInput& in, hal::mit::Vendor vendor, std::un
     jc.scaling.kind = in.chain.joint(j).type == kin::JointType::prismatic ? hal::JointScaling::Kind::prismatic
                                                                           : hal::JointScaling::Kind::revolute;
     if (d.heartbeat_timeout_ms > 0) mc.feedback_timeout = std::max(mc.feedback_timeout, static_cast<hal::Duration>(d.heartbeat_timeout_ms * 1e6));
+    jc.stop_damping = j < inertia.size() ? inertia[j] / kStopBrakeTime : 0.0;
     jc.homing = homing_spec(cfg, in.chain, j);
     if (jc.homing.kind == hal::HomingKind::cia402)
       return "config: drive[" + std::to_string(j + 1) + "].homing.method: " + d.homing_method +

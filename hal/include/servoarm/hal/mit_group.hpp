@@ -54,6 +54,10 @@ struct MitJointConfig {
   HomingSpec homing{};
   double temp_warning = 0;  ///< deg C; 0 = 15 below the motor's cut-off
   double temp_fault = 0;    ///< deg C; 0 = 5 below the motor's cut-off
+  /// N m s / rad, joint side: the damping the hold after quick_stop() brakes the joint with in
+  /// the cycles without a torque feed-forward (the rest beyond KD_MAX through tau_ff from the
+  /// measured velocity, at most T_MAX): KD_MAX alone takes a heavy joint seconds to stop. 0: KD_MAX.
+  double stop_damping = 0;
 };
 
 struct MitGroupConfig {
@@ -170,10 +174,15 @@ class MitGroup final : public DriveGroup {
     bool qstop = false;         ///< quick_stop(): holds at qstop_at with qstop_t until enable() / disable()
     bool qstop_rest = false;    ///< the held joint came to rest: qstop_at is fixed, kp holds it there
     double qstop_at = 0, qstop_t = 0;  ///< actuator rad, N m
+    double stop_kd_rest = 0;    ///< MitJointConfig::stop_damping beyond KD_MAX, actuator side: tau_ff in the hold
     double v_act = 0, t_act = 0;       ///< the last feedback's velocity and torque, actuator side
     double hold_at = 0;         ///< actuator rad
     mit::Command sent{};
   };
+  /// set_feed_forward has given a torque other than 0 (the model's torque feed-forward runs; a
+  /// velocity feed-forward comes with torque 0): the controller brakes the hold through it, so
+  /// the hold leaves out the stop damping.
+  bool model_torque_ = false;
   static double rest_band(const Joint& J);
   std::uint16_t master(std::size_t j) const;
   bool is_feedback_of(std::size_t j, const CanFrame& f) const;
