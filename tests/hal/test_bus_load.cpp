@@ -88,3 +88,35 @@ TEST(BusLoad, SixJointsAtOneKilohertzOnOneMegabit) {
   const auto time = [](const FrameBits& b) { return b.nominal / 1e6 + b.data / 5e6; };
   DOUBLES_EQUAL(400 * (time(none) + 12 * time(six)) + 6 * 20 * time(one), l.total(), 1e-12);
 }
+
+// Six MIT motors (one 8-byte command and one 8-byte feedback frame each per cycle, no SYNC, no
+// heartbeat) per loop rate, on one bus and split over two, classic CAN at 1 Mbit/s and CAN FD
+// with bit-rate switch at 1 Mbit/s nominal and 2 or 5 Mbit/s data: the table of RESULTS
+// ("MIT motors: bus load per rate"); the 1 kHz figures are the ones the bus-load check names
+// (fw_mit_arm BusLoadIsCheckedPerInterface, docs/mit-motors.md).
+TEST(BusLoad, SixMitMotorsPerLoopRate) {
+  const double rates[] = {250, 500, 1000};
+  const double data[] = {0, 2e6, 5e6};
+  std::printf("\n  six MIT motors, worst-case bit stuffing: load %% of 1 Mbit/s (one bus / three motors per bus)\n");
+  std::printf("  %-8s %-18s %-18s %-18s\n", "rate", "classic", "FD data 2 Mbit/s", "FD data 5 Mbit/s");
+  double at1k[3] = {};
+  for (const double r : rates) {
+    std::printf("  %-8.0f", r);
+    for (std::size_t k = 0; k < 3; ++k) {
+      BusTraffic t;
+      t.joints = 0;
+      t.mit_joints = 6;
+      t.rate_hz = r;
+      const double one = bus_load(t, 1e6, data[k]).total();
+      t.mit_joints = 3;
+      const double two = bus_load(t, 1e6, data[k]).total();
+      std::printf(" %6.1f / %6.1f    ", one * 100, two * 100);
+      if (r == 1000) at1k[k] = one;
+      DOUBLES_EQUAL(one / 2, two, 1e-12);  // no shared frame: half the motors, half the load
+    }
+    std::printf("\n");
+  }
+  DOUBLES_EQUAL(1.620, at1k[0], 5e-4);
+  DOUBLES_EQUAL(1.086, at1k[1], 5e-4);
+  DOUBLES_EQUAL(0.679, at1k[2], 5e-4);
+}
