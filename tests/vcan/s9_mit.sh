@@ -15,7 +15,10 @@
 #     0.137 rad/s (7.8 deg/s): the joints creep no faster than 9 deg/s (a real motor's friction
 #     holds it), no runaway;
 #   - armfw killed: the motors' own watchdog disables them (error 0xD, communication lost), seen
-#     by the drive doctor, which finds the six motors and the one in the wrong mode.
+#     by the drive doctor, which finds the six motors and the one in the wrong mode;
+#   - before armfw starts, `armctl drives check` of the same configuration: every joint ok, the
+#     motor in position-velocity mode a note, motor 7 named as no joint's; on CAN FD also the
+#     check and a scan in classic CAN, the motors' stand-in for another bitrate: not seen, said so.
 . "$SCENARIO_DIR/lib.sh"
 . "$SCENARIO_DIR/s5_lib.sh"
 need candump isotpsend isotprecv isotpsniffer armsim armfw armctl od mkfifo
@@ -50,8 +53,22 @@ start_candump all -r 4194304 "$CAN_IF,000:F00,7FF:7FF"   # ids 0x000-0x0FF (MIT 
 # mode, is no joint's (the drive doctor reports it)
 start_armsim armsim --nodes none --mit DM-J4340:1 --mit DM-J4340:2 --mit DM-J4340:3 --mit DM-J4340:4 \
   --mit DM-J4340:5 --mit DM-J4340:6 --mit DM-J8006:7 --mit-mode 3:2 --mit-mode 7:2 $mit_fd
+# the drive doctor before armfw runs: the configuration against the bus (exit 0; motor 3's mode
+# and the CAN timeouts are notes, armfw sets them; motor 7 is no joint's), and, on CAN FD, the
+# configuration and a scan in the other frame format (what a motor at another bitrate looks like:
+# not seen, said so)
+csrc=0
+armctl drives check --config "$OUT_DIR/armfw.toml" --timeout 300 >"$OUT_DIR/check.txt" 2>&1 || csrc=$?
+if [ "$fd" = 1 ]; then
+  sed 's/^can_fd = true/can_fd = false/' "$OUT_DIR/armfw.toml" >"$OUT_DIR/armfw_classic.toml"
+  wcrc=0
+  armctl drives check --config "$OUT_DIR/armfw_classic.toml" --timeout 300 >"$OUT_DIR/check_classic.txt" 2>&1 || wcrc=$?
+  wsrc=0
+  armctl drives scan --iface "$CAN_IF" --last 16 --timeout 300 >"$OUT_DIR/scan_classic.txt" 2>&1 || wsrc=$?
+fi
 start_isotprecv
 log "armfw: ${rate_hz} Hz, CAN timeout ${hb_timeout_ms} ms"
+t_armfw=$(date +%s.%N)
 start_armfw "$OUT_DIR/armfw.toml"
 first_contact
 # each step's answer must be ok; else armfw's log says why and the scenario stops there
@@ -109,6 +126,13 @@ for n in 1 2 3 4 5 6; do
   fi
 done
 
+# bring-up time (a figure, not checked): armfw's first register frame on 0x7FF to its last one
+# before the first enable frame
+awk -v t0="$t_armfw" '$1 >= t0 && $2 ~ /^7FF#/ && !e { if (!a) a = $1; l = $1; n++ }
+  $2 ~ /^00[1-6]#FFFFFFFFFFFFFFFC$/ && !e { e = $1 }
+  END { if (a && l) printf "bring-up of the six motors: %.1f ms, %d register frames (first to last 0x7FF frame of armfw)\n", (l - a) * 1000, n }' \
+  "$OUT_DIR/all.tframes" | while read -r line; do log "$line"; done
+
 # MIT frames: p 16 bits over [-12.5, 12.5] rad, v 12, kp 12 over [0, 500], kd 12 over [0, 5], t 12
 awk -v goal="$goal" "$AWK_LE"'
   BEGIN { split("-160 -225 -45 -110 -100 -266", lo, " "); split("160 45 225 170 100 266", hi, " "); split(goal, g, " ")
@@ -152,4 +176,25 @@ else check_fail "drive doctor: exit $src, want 7 drives"; fi
 if grep -q '^id 0x07: damiao DM-J8006 .*mode 2 position-velocity (not MIT' "$OUT_DIR/scan.txt"; then
   pass "drive doctor: id 7 in position-velocity mode, said so"
 else check_fail "drive doctor: id 7's wrong mode not reported"; fi
+cat "$OUT_DIR/check.txt"
+fmt_name=$([ "$fd" = 1 ] && echo "CAN FD" || echo "classic CAN")
+ok_joints=0
+for n in 1 2 3 4 5 6; do
+  grep -q "^joint $n (damiao id $n on $CAN_IF): ok, DM-J4340, $fmt_name" "$OUT_DIR/check.txt" && ok_joints=$((ok_joints + 1))
+done
+if [ "$csrc" -eq 0 ] && [ "$ok_joints" = 6 ] && grep -q '^the configuration matches the buses' "$OUT_DIR/check.txt" &&
+   grep -q "^joint 3 .*note: mode 2 position-velocity: armfw sets MIT" "$OUT_DIR/check.txt" &&
+   grep -q "^$CAN_IF: id 0x07: damiao DM-J8006 .*no joint names it" "$OUT_DIR/check.txt"; then
+  pass "drive doctor check: 6 joints ok ($fmt_name), joint 3's mode a note, id 7 named as no joint's, exit 0"
+else check_fail "drive doctor check: exit $csrc, $ok_joints of 6 joints ok"; fi
+if [ "$fd" = 1 ]; then
+  cat "$OUT_DIR/check_classic.txt" "$OUT_DIR/scan_classic.txt"
+  unseen=$(grep -c "^joint [1-6] (damiao id [1-6] on $CAN_IF): not seen (no answer to a register read in classic CAN): a motor set to CAN FD needs drive.can_fd = true" "$OUT_DIR/check_classic.txt")
+  if [ "$wcrc" -eq 1 ] && [ "$unseen" = 6 ] && grep -q '^6 things to change before armfw runs on this arm' "$OUT_DIR/check_classic.txt"; then
+    pass "drive doctor check with can_fd = false on the CAN FD motors: 6 joints not seen, each saying drive.can_fd = true, exit 1"
+  else check_fail "drive doctor check in the wrong frame format: exit $wcrc, $unseen of 6 joints not seen"; fi
+  if [ "$wsrc" -eq 1 ] && grep -q "^no drive answered on $CAN_IF (classic CAN, ids 1-16): check the bitrate, the frame format (--fd)" "$OUT_DIR/scan_classic.txt"; then
+    pass "drive doctor scan in classic CAN on the CAN FD motors: nothing seen, said so, exit 1"
+  else check_fail "drive doctor scan in the wrong frame format: exit $wsrc"; fi
+fi
 finish
