@@ -40,7 +40,9 @@
 #include "servoarm/rt/rt_loop.hpp"
 #include "servoarm/lang/number.hpp"
 #include "servoarm/console/transport.hpp"
+#include "servoarm/kinematics/collision.hpp"
 #include "servoarm/kinematics/description.hpp"
+#include "servoarm/kinematics/dynamics.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 
 using namespace servoarm;
@@ -74,7 +76,8 @@ int usage(FILE* f, int code) {
                "  --rate HZ             control rate 250..4000 (default 1000)\n"
                "  --priority N          SCHED_FIFO priority 1..99, 0 = normal scheduling (default 80)\n"
                "  --cpu N               pin the control thread to CPU N\n"
-               "  --plant KIND          with --sim: first-order (default) or dynamic (rigid-body arm; needs inertial data)\n"
+               "  --plant KIND          with --sim: first-order (default) or dynamic (rigid-body arm; needs inertial data;\n"
+               "                        virtual MIT motors: each moves its joint's inertia and carries the arm's gravity)\n"
                "  --push J:NM:HZ[:DEG]  with --plant dynamic: a scripted external torque NM x sin(2 pi HZ t + DEG) on\n"
                "                        joint J (HZ 0: constant), t from the plant's start; up to 8, added up (a hand\n"
                "                        moving the arm in free-drive, e.g. a teleoperation leader)\n"
@@ -470,12 +473,37 @@ int run_bench(App& app, double seconds) {
 #ifdef SERVOARM_WITH_SIM
 /// The virtual buses of --sim, stepped by one RtLoop pre-cycle hook before each control cycle:
 /// the CiA 402 drives' plant (if any joint is CiA 402) and one MitPlant per MIT interface.
+/// With --plant dynamic on an arm of MIT motors (`arm` set), before the step each virtual motor
+/// moves its joint's inertia of the arm (the mass matrix's diagonal at the pose the controller
+/// last read, actuator side) and, while powered, carries the arm's gravity torque at that pose;
+/// an unpowered one carries none (the arm rests as if supported). Joints are decoupled: what
+/// one joint's motion does to another is not modelled.
 struct SimPlants {
   sim::SimPlant* cia = nullptr;
   std::vector<sim::MitPlant*> mit;
+  struct MitJoint {
+    sim::VirtualMitMotor* motor;
+    int joint;
+    double k;  ///< actuator rad per joint rad (direction x transmission)
+  };
+  std::vector<MitJoint> mit_joints;
+  const kin::Chain* arm = nullptr;
+  hal::ServoBus* servo = nullptr;
+  kin::MassMatrix M;
+  kin::JointVector q, g;
+  void load_arm() {
+    q = kin::JointVector::Zero(arm->n_joints);
+    for (int j = 0; j < arm->n_joints; ++j) q[j] = servo->feedback(static_cast<std::size_t>(j)).position;
+    if (kin::mass_matrix(*arm, q, M) != kin::Status::ok || kin::gravity_torques(*arm, q, g) != kin::Status::ok) return;
+    for (const MitJoint& m : mit_joints) {
+      m.motor->params().inertia = M(m.joint, m.joint) / (m.k * m.k);
+      m.motor->load_torque = m.motor->enabled() ? -g[m.joint] / m.k : 0.0;
+    }
+  }
   static void step_hook(void* ctx, std::int64_t now_ns) {
     auto* s = static_cast<SimPlants*>(ctx);
     if (s->cia != nullptr) s->cia->step(now_ns);
+    if (s->arm != nullptr) s->load_arm();
     for (sim::MitPlant* m : s->mit) m->step(now_ns);
   }
 };
@@ -859,6 +887,25 @@ int main(int argc, char** argv) {
     // One pre-cycle hook steps every virtual bus: the CiA 402 plant and each MIT plant.
     sim_plants.cia = plant.get();
     for (auto& m : mit_plants) sim_plants.mit.push_back(m.get());
+    if (plant_kind == "dynamic" && !plant) {  // an arm of MIT motors on the dynamic plant
+      char why[256];
+      if (kin::dynamics_refusal(app.chain, why, sizeof why)) {
+        std::fprintf(stderr, "armfw: --plant dynamic: %s\n", why);
+        return 2;
+      }
+      if (!pushes.empty()) {
+        std::fprintf(stderr, "armfw: --push: the virtual MIT motors take no scripted torque (CiA 402 virtual drives do)\n");
+        return 2;
+      }
+      for (std::size_t j = 0; j < app.servo->joint_count(); ++j) {
+        const hal::ArmServoBus::Slot sl = app.servo->slot(j);
+        const hal::JointScaling sc = app.servo->scaling(j);
+        sim_plants.mit_joints.push_back({&mit_plants.at(sl.group)->at(sl.local), static_cast<int>(j),
+                                         sc.direction * (sc.gear_ratio != 0 ? sc.gear_ratio : 1.0)});
+      }
+      sim_plants.arm = &app.chain;
+      sim_plants.servo = app.servo.get();
+    }
     loop.set_pre_cycle(&SimPlants::step_hook, &sim_plants);
   }
 #endif
