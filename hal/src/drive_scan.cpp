@@ -196,6 +196,7 @@ bool read_drive_status(CanBus& bus, Clock& clock, const ScanOptions& opt, const 
         out.has_temperature = true;
         out.t_mos = static_cast<float>(fb.t_mos);
         out.t_rotor = static_cast<float>(fb.t_rotor);
+        out.position = fb.p;
       });
       return out.answered;
     }

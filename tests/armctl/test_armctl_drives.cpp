@@ -194,6 +194,42 @@ TEST(ArmctlDrives, CheckOfAMatchingMixedArmOnTwoBusesIsOk) {
   STRCMP_CONTAINS("the configuration matches the buses", out.c_str());
 }
 
+// The motor's own zero, when the user asks for it (`armctl drives zero --iface IFACE --id N`):
+// the save-zero frame (FF..FE) to a disabled Damiao motor, whose position then reads 0; the
+// position before and after said in one line. An enabled motor (armfw driving it) or one that
+// does not answer is refused in one line, nothing sent.
+TEST(ArmctlDrives, ZeroSavesTheMotorsOwnZeroAndRefusesAnEnabledOrSilentOne) {
+  ManualClock clock;
+  sim::MitPlant plant(clock, motors(true));
+  plant.at(2).set_position(1.25);
+  plant.at(7).quirks().silent = true;  // id 8: another bitrate
+  clock.set_idle_hook([&](TimePoint t) { plant.step(t); });
+  ScanOptions opt;
+  opt.fd = true;
+  std::string out;
+  LONGS_EQUAL(0, fw::drives_zero(plant.master_bus(), clock, "can0", 3, opt, out));
+  std::printf("\n%s", out.c_str());
+  STRCMP_CONTAINS("id 0x03: damiao DM-J4340: zero saved in the motor: position 1.250 rad -> 0.000 rad", out.c_str());
+  DOUBLES_EQUAL(0.0, plant.at(2).position(), 1e-9);
+  // enabled: refused, the position kept
+  plant.at(3).set_position(0.5);
+  plant.master_bus().send([] {
+    CanFrame f = mit::special_frame(4, mit::Special::enable);
+    f.fd = f.brs = true;
+    return f;
+  }());
+  clock.advance(kMillisecond);
+  plant.step(clock.now());
+  out.clear();
+  LONGS_EQUAL(1, fw::drives_zero(plant.master_bus(), clock, "can0", 4, opt, out));
+  STRCMP_CONTAINS("id 0x04: the motor is enabled (is armfw driving it?): disable it first; nothing saved", out.c_str());
+  DOUBLES_EQUAL(0.5, plant.at(3).position(), 1e-3);
+  out.clear();
+  LONGS_EQUAL(1, fw::drives_zero(plant.master_bus(), clock, "can0", 8, opt, out));  // id 8 is silent
+  clock.set_idle_hook(nullptr);
+  STRCMP_CONTAINS("id 0x08: no Damiao motor answered on can0 (CAN FD): nothing saved", out.c_str());
+}
+
 TEST(ArmctlDrives, CommandLineErrorsAreOneLineAndExitTwo) {
   const std::string armctl = ARMCTL_PATH;
   auto r = run_command(armctl + " drives scan");
@@ -226,6 +262,9 @@ TEST(ArmctlDrives, CommandLineErrorsAreOneLineAndExitTwo) {
     LONGS_EQUAL_TEXT(0, r.status, r.err.c_str());
     STRCMP_CONTAINS("bus.can = \"sim\": the simulated drives, nothing to check on a bus", r.out.c_str());
   }
+  r = run_command(armctl + " drives zero --iface vcan0");
+  LONGS_EQUAL(2, r.status);
+  STRCMP_EQUAL("armctl: drives zero: --id N is required (the motor's id)\n", r.err.c_str());
   r = run_command(armctl + " drives frobnicate");
   LONGS_EQUAL(2, r.status);
   STRCMP_CONTAINS("unknown drives command 'frobnicate'", r.err.c_str());

@@ -30,6 +30,7 @@ namespace {
 const char* kDrivesUsage =
     "usage: armctl drives scan --iface IFACE [--fd] [--first N] [--last N] [--timeout MS]\n"
     "       armctl drives check --config FILE [--timeout MS]\n"
+    "       armctl drives zero --iface IFACE --id N [--fd] [--timeout MS]\n"
     "\n"
     "  scan   what answers on a CAN interface, one line per drive: id, family, identity or\n"
     "         motor model, mode, frame format, errors, temperature. CANopen nodes: an SDO read\n"
@@ -41,8 +42,11 @@ const char* kDrivesUsage =
     "  check  armfw's configuration (FILE) against the buses its [[drive]] tables name: one\n"
     "         line per joint, \"ok\" or what to change; drives that no joint names.\n"
     "         --timeout: as for scan.\n"
-    "Both only read from the drives. Exit status: 0 found / as configured, 1 nothing found /\n"
-    "something to change, 2 bad usage or an interface that cannot be opened.\n";
+    "  zero   saves the present position as Damiao motor N's own zero (its save-zero frame),\n"
+    "         the motor disabled; the position before and after.\n"
+    "scan and check only read from the drives. Exit status: 0 found / as configured / saved,\n"
+    "1 nothing found / something to change / not saved, 2 bad usage or an interface that\n"
+    "cannot be opened.\n";
 
 }  // namespace
 
@@ -82,6 +86,37 @@ int drives_scan(hal::CanBus& bus, hal::Clock& clock, const std::string& iface, c
     out += fmt("%zu drive%s on %s (%s, ids %u-%u); a drive at another bitrate or frame format is not seen\n", n,
                n == 1 ? "" : "s", iface.c_str(), format_name(opt.fd), unsigned(opt.first_id), unsigned(opt.last_id));
   return static_cast<int>(n);
+}
+
+int drives_zero(hal::CanBus& bus, hal::Clock& clock, const std::string& iface, std::uint16_t id,
+                const hal::ScanOptions& opt, std::string& out) {
+  hal::ScanOptions o = opt;
+  o.first_id = o.last_id = id;
+  o.canopen = false;
+  o.damiao = true;
+  hal::ScannedDrive found[1];
+  hal::DriveStatus before, after;
+  if (hal::scan_drives(bus, clock, o, found) != 1 || !hal::read_drive_status(bus, clock, o, found[0], before)) {
+    out += fmt("id 0x%02X: no Damiao motor answered on %s (%s): nothing saved; check the id, the frame format "
+               "(--fd), the bitrate, wiring and power\n",
+               unsigned(id), iface.c_str(), format_name(o.fd));
+    return 1;
+  }
+  if (before.error == 1) {  // the feedback's state nibble: 1 = enabled
+    out += fmt("id 0x%02X: the motor is enabled (is armfw driving it?): disable it first; nothing saved\n", unsigned(id));
+    return 1;
+  }
+  hal::CanFrame f = hal::mit::special_frame(id, hal::mit::Special::save_zero);
+  f.fd = f.brs = o.fd;
+  if (bus.send(f) != hal::Status::ok || !hal::read_drive_status(bus, clock, o, found[0], after)) {
+    out += fmt("id 0x%02X: no answer after the save-zero frame: read it again with armctl drives scan\n", unsigned(id));
+    return 1;
+  }
+  out += fmt("id 0x%02X: damiao %s: zero saved in the motor: position %.3f rad -> %.3f rad (armfw: drive.zero_offset "
+             "= 0 for its joint)\n",
+             unsigned(id), found[0].model != nullptr ? found[0].model->name : "model unknown", before.position,
+             after.position);
+  return 0;
 }
 
 int drives_check(const FwConfig& cfg, int joints, const BusOpener& open, hal::Clock& clock, std::string& out,
@@ -325,6 +360,43 @@ int check_main(int argc, char** argv) {
   return problems == 0 ? kExitOk : kExitFailed;
 }
 
+int zero_main(int argc, char** argv) {
+  std::string iface;
+  hal::ScanOptions opt;
+  std::uint16_t id = 0;
+  int rc = 0;
+  for (int i = 0; i < argc; ++i) {
+    const std::string a = argv[i];
+    const bool more = i + 1 < argc;
+    if (a == "--help" || a == "-h") {
+      std::fputs(kDrivesUsage, stdout);
+      return kExitOk;
+    }
+    if (a == "--iface" && more) iface = argv[++i];
+    else if (a == "--fd") opt.fd = true;
+    else if (a == "--id" && more) {
+      if (!parse_id("--id", argv[++i], 0x7FE, id, rc)) return rc;
+    } else if (a == "--timeout" && more) {
+      if (!parse_timeout(argv[++i], opt.timeout, rc)) return rc;
+      opt.window = opt.timeout;
+    } else return usage_error("drives zero: unknown or incomplete option '" + a + "' (see armctl drives --help)");
+  }
+  if (iface.empty()) return usage_error("drives zero: --iface IFACE is required (e.g. can0)");
+  if (id == 0) return usage_error("drives zero: --id N is required (the motor's id)");
+  hal::SocketCanBus bus;
+  hal::SocketCanOptions so;
+  so.enable_fd = opt.fd;
+  so.auto_reopen = false;
+  if (const hal::Status s = bus.open(iface.c_str(), so); s != hal::Status::ok)
+    return usage_error(fmt("drives zero: cannot open %s%s: %s", iface.c_str(), opt.fd ? " for CAN FD" : "",
+                           hal::describe(s)));
+  hal::MonotonicClock clock;
+  std::string out;
+  const int r = drives_zero(bus, clock, iface, id, opt, out);
+  std::fputs(out.c_str(), stdout);
+  return r == 0 ? kExitOk : kExitFailed;
+}
+
 }  // namespace
 
 int cli_drives(int argc, char** argv) {
@@ -336,6 +408,7 @@ int cli_drives(int argc, char** argv) {
   const std::string sub = argv[1];
   if (sub == "scan") return scan_main(argc - 2, argv + 2);
   if (sub == "check") return check_main(argc - 2, argv + 2);
+  if (sub == "zero") return zero_main(argc - 2, argv + 2);
   return usage_error("unknown drives command '" + sub + "' (see armctl drives --help)");
 }
 

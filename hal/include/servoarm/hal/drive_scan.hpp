@@ -58,6 +58,7 @@ struct DriveStatus {
   std::uint16_t error_code = 0;  ///< CANopen: 603Fh (0 = none or not read)
   bool has_temperature = false;
   float t_mos = 0, t_rotor = 0;  ///< deg C (Damiao feedback)
+  double position = 0;         ///< Damiao: the feedback's position (rad, within +-PMAX)
 };
 
 /// Asks one drive the scan found for its state: Damiao, a refresh (0x7FF, 0xCC) answered by a

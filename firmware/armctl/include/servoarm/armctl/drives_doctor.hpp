@@ -19,6 +19,13 @@ namespace servoarm::fw {
 int drives_scan(hal::CanBus& bus, hal::Clock& clock, const std::string& iface, const hal::ScanOptions& opt,
                 std::string& out);
 
+/// Saves the present position as the zero of Damiao motor `id` on `bus` (its save-zero frame,
+/// FF..FE), which must be disabled: finds it with a register read (opt.fd: CAN FD), reads its
+/// position, sends the frame, reads it again. One line to `out`: the position before and after,
+/// or why nothing was saved (no answer, enabled). Returns 0 when saved, else 1.
+int drives_zero(hal::CanBus& bus, hal::Clock& clock, const std::string& iface, std::uint16_t id,
+                const hal::ScanOptions& opt, std::string& out);
+
 /// The bus an interface name stands for, opened for CAN FD when `fd`; nullptr with `error` set
 /// (one line) when it cannot be opened.
 using BusOpener = std::function<hal::CanBus*(const std::string& iface, bool fd, std::string& error)>;
