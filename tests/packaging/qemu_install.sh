@@ -21,6 +21,11 @@
 # usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR [API]
 #   API: "api" when the package's armfw was built with the network API (the aarch64 tree's),
 #        "no-api" (default) when not (the armhf tree's)
+#        qemu_install.sh --root DEB_ARCH WORK_DIR
+#   only step 1 into the cache (.ci/background runs it while the host tree builds); exit 0
+#   when the cache has the root. The cache's lock file (<tarball>.lock) is held while a root
+#   is bootstrapped, so a test that starts meanwhile waits for it (and says how long in
+#   $SERVOARM_CI_TIMES as qemu-root-wait, when .ci/run set it), then unpacks the cached root.
 # Environment:
 #   SERVOARM_QEMU_ROOT_CACHE  folder of the cached roots (default /var/cache/servoarm/qemu-roots);
 #                             "" = no cache (bootstrap every run)
@@ -32,7 +37,9 @@
 # entry for the architecture and none can be registered, the chroot cannot run
 # the target's programs, or the mirror cannot be reached for the bootstrap.
 set -euo pipefail
-deb_dir=${1:?usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR}
+mode=install
+if [ "${1:-}" = --root ]; then mode=root; shift; set -- "" "$@"; fi
+deb_dir=${1?usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR [api|no-api] | --root DEB_ARCH WORK_DIR}
 arch=${2:?usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR}
 work=${3:?usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR}
 api=${4:-no-api}
@@ -53,10 +60,12 @@ esac
 command -v debootstrap >/dev/null || skip "debootstrap missing (apt-get install debootstrap; .ci/packages-cross)"
 qemu_static=$(command -v "qemu-$qarch-static" || true)
 [ -n "$qemu_static" ] || skip "qemu-$qarch-static missing (apt-get install qemu-user-static; .ci/packages-cross)"
-debs=("$deb_dir"/servoarm_*_"$arch".deb)
-[ -f "${debs[0]}" ] || fail "no servoarm_*_$arch.deb in $deb_dir"
-[ ${#debs[@]} -eq 1 ] || fail "more than one servoarm_*_$arch.deb in $deb_dir: ${debs[*]}"
-deb=${debs[0]}
+if [ "$mode" = install ]; then
+  debs=("$deb_dir"/servoarm_*_"$arch".deb)
+  [ -f "${debs[0]}" ] || fail "no servoarm_*_$arch.deb in $deb_dir"
+  [ ${#debs[@]} -eq 1 ] || fail "more than one servoarm_*_$arch.deb in $deb_dir: ${debs[*]}"
+  deb=${debs[0]}
+fi
 
 suite=${SERVOARM_QEMU_SUITE:-$( . /etc/os-release 2>/dev/null; echo "${VERSION_CODENAME:-}")}
 [ -n "$suite" ] || skip "no Debian codename in /etc/os-release; set SERVOARM_QEMU_SUITE"
@@ -124,6 +133,7 @@ cleanup() {
   exit $rc
 }
 trap cleanup EXIT
+trap 'exit 143' TERM INT
 mount_root() {
   mkdir -p "$root/proc" "$root/dev/pts"
   mount -t proc proc "$root/proc" || skip "cannot mount /proc in the root"
@@ -142,6 +152,20 @@ put_qemu() { if [[ $flags != *F* ]]; then mkdir -p "$root$(dirname "$interp")"; 
 rm -rf "$root"; mkdir -p "$root"
 tarball=""
 [ -z "$cache" ] || tarball="$cache/$suite-$arch-minbase.tar"
+[ -n "$tarball" ] || [ "$mode" = install ] || skip "no root cache (SERVOARM_QEMU_ROOT_CACHE is empty): nothing to prepare"
+if [ -n "$tarball" ]; then
+  mkdir -p "$cache" || fail "cannot create the root cache $cache"
+  exec 8>"$tarball.lock"
+  t_w=$(date +%s)
+  if ! flock -n 8; then
+    say "waiting for the root being bootstrapped by another process ($tarball.lock)"
+    flock 8
+  fi
+  waited=$(( $(date +%s) - t_w ))
+  if [ "$mode" = install ] && [ -n "${SERVOARM_CI_TIMES:-}" ]; then echo "qemu-root-wait=$waited" >>"$SERVOARM_CI_TIMES"; fi
+  [ "$waited" -eq 0 ] || lap "waited for the root's bootstrap"
+  if [ "$mode" = root ] && [ -f "$tarball" ]; then say "the cache has the root: $tarball"; exit 0; fi
+fi
 if [ -n "$tarball" ] && [ -f "$tarball" ]; then
   tar -C "$root" -xf "$tarball" || fail "cannot unpack the cached root $tarball"
   put_qemu
@@ -165,6 +189,11 @@ else
     mkdir -p "$cache" && tar -C "$root" -cf "$tarball.tmp" . && mv "$tarball.tmp" "$tarball" &&
       say "root cached as $tarball" || say "WARNING: could not cache the root in $cache"
   fi
+fi
+[ -z "$tarball" ] || exec 8>&-  # (the cache's lock: the root is there, or this test bootstraps alone)
+if [ "$mode" = root ]; then
+  [ -f "$tarball" ] || fail "the root was bootstrapped but could not be cached in $cache"
+  exit 0
 fi
 chroot "$root" /bin/true 2>/dev/null || skip "the chroot cannot run $arch programs through binfmt_misc qemu-$qarch ($interp, flags '$flags')"
 mount_root
