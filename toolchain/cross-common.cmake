@@ -27,6 +27,13 @@ set(CMAKE_FIND_ROOT_PATH_MODE_PACKAGE ONLY)
 # arch-independent ones, never the build machine's /usr/lib/x86_64-linux-gnu.
 set(ENV{PKG_CONFIG_LIBDIR} /usr/lib/${_t}/pkgconfig:/usr/share/pkgconfig)
 set(ENV{PKG_CONFIG_PATH} "")
+# Target libraries unpacked rather than installed (.ci/cross: libwebsockets-dev for the target
+# cannot be installed beside the build machine's): the environment's SERVOARM_CROSS_EXTRA_ROOT
+# names that root (its .pc files already point into it); looked up before the multiarch ones.
+if(DEFINED ENV{SERVOARM_CROSS_EXTRA_ROOT} AND IS_DIRECTORY "$ENV{SERVOARM_CROSS_EXTRA_ROOT}/usr/lib/${_t}/pkgconfig")
+  list(PREPEND CMAKE_FIND_ROOT_PATH $ENV{SERVOARM_CROSS_EXTRA_ROOT})
+  set(ENV{PKG_CONFIG_LIBDIR} $ENV{SERVOARM_CROSS_EXTRA_ROOT}/usr/lib/${_t}/pkgconfig:$ENV{PKG_CONFIG_LIBDIR})
+endif()
 
 # Run target binaries (tests, try_run) under qemu-user with the cross sysroot
 # for the dynamic loader. A test that starts another target binary (fork/exec,

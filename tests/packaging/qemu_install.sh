@@ -9,14 +9,23 @@
 #   2. apt-get update; apt-get install ./servoarm_*.deb: dpkg -i with its
 #      dependencies from apt, the maintainer scripts run (service user, config mode)
 #   3. the installed armfw --help / --config-keys and armctl kin fk / kin models run;
-#      armctl's FK of the PUMA 560 zero pose against the closed form
+#      armctl's FK of the PUMA 560 zero pose against the closed form; with API=api the
+#      installed armfw's network API: --api-reference, and armfw --sim --api-tcp 0
+#      answering hello over TCP (protocol 1, six joints)
 #   4. the shipped unit's ExecStart= line, with its EnvironmentFile and as its User=,
 #      on the shipped /etc/servoarm/armfw.toml (bus.can = "sim", checked, not edited):
 #      the pty console answers status / enable / movej / wait / status / disable
 #      (driven by the installed armctl console --serial), then SIGTERM: exit 0
 #   5. dpkg -r (binaries gone, conffiles kept), dpkg --purge (/etc/servoarm gone)
 #
-# usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR
+# usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR [API]
+#   API: "api" when the package's armfw was built with the network API (the aarch64 tree's),
+#        "no-api" (default) when not (the armhf tree's)
+#        qemu_install.sh --root DEB_ARCH WORK_DIR
+#   only step 1 into the cache (.ci/background runs it while the host tree builds); exit 0
+#   when the cache has the root. The cache's lock file (<tarball>.lock) is held while a root
+#   is bootstrapped, so a test that starts meanwhile waits for it (and says how long in
+#   $SERVOARM_CI_TIMES as qemu-root-wait, when .ci/run set it), then unpacks the cached root.
 # Environment:
 #   SERVOARM_QEMU_ROOT_CACHE  folder of the cached roots (default /var/cache/servoarm/qemu-roots);
 #                             "" = no cache (bootstrap every run)
@@ -28,9 +37,12 @@
 # entry for the architecture and none can be registered, the chroot cannot run
 # the target's programs, or the mirror cannot be reached for the bootstrap.
 set -euo pipefail
-deb_dir=${1:?usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR}
+mode=install
+if [ "${1:-}" = --root ]; then mode=root; shift; set -- "" "$@"; fi
+deb_dir=${1?usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR [api|no-api] | --root DEB_ARCH WORK_DIR}
 arch=${2:?usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR}
 work=${3:?usage: qemu_install.sh DEB_DIR DEB_ARCH WORK_DIR}
+api=${4:-no-api}
 cache=${SERVOARM_QEMU_ROOT_CACHE-/var/cache/servoarm/qemu-roots}
 t_start=$(date +%s)
 say() { echo "qemu_install: $*"; }
@@ -48,10 +60,12 @@ esac
 command -v debootstrap >/dev/null || skip "debootstrap missing (apt-get install debootstrap; .ci/packages-cross)"
 qemu_static=$(command -v "qemu-$qarch-static" || true)
 [ -n "$qemu_static" ] || skip "qemu-$qarch-static missing (apt-get install qemu-user-static; .ci/packages-cross)"
-debs=("$deb_dir"/servoarm_*_"$arch".deb)
-[ -f "${debs[0]}" ] || fail "no servoarm_*_$arch.deb in $deb_dir"
-[ ${#debs[@]} -eq 1 ] || fail "more than one servoarm_*_$arch.deb in $deb_dir: ${debs[*]}"
-deb=${debs[0]}
+if [ "$mode" = install ]; then
+  debs=("$deb_dir"/servoarm_*_"$arch".deb)
+  [ -f "${debs[0]}" ] || fail "no servoarm_*_$arch.deb in $deb_dir"
+  [ ${#debs[@]} -eq 1 ] || fail "more than one servoarm_*_$arch.deb in $deb_dir: ${debs[*]}"
+  deb=${debs[0]}
+fi
 
 suite=${SERVOARM_QEMU_SUITE:-$( . /etc/os-release 2>/dev/null; echo "${VERSION_CODENAME:-}")}
 [ -n "$suite" ] || skip "no Debian codename in /etc/os-release; set SERVOARM_QEMU_SUITE"
@@ -119,6 +133,7 @@ cleanup() {
   exit $rc
 }
 trap cleanup EXIT
+trap 'exit 143' TERM INT
 mount_root() {
   mkdir -p "$root/proc" "$root/dev/pts"
   mount -t proc proc "$root/proc" || skip "cannot mount /proc in the root"
@@ -137,6 +152,20 @@ put_qemu() { if [[ $flags != *F* ]]; then mkdir -p "$root$(dirname "$interp")"; 
 rm -rf "$root"; mkdir -p "$root"
 tarball=""
 [ -z "$cache" ] || tarball="$cache/$suite-$arch-minbase.tar"
+[ -n "$tarball" ] || [ "$mode" = install ] || skip "no root cache (SERVOARM_QEMU_ROOT_CACHE is empty): nothing to prepare"
+if [ -n "$tarball" ]; then
+  mkdir -p "$cache" || fail "cannot create the root cache $cache"
+  exec 8>"$tarball.lock"
+  t_w=$(date +%s)
+  if ! flock -n 8; then
+    say "waiting for the root being bootstrapped by another process ($tarball.lock)"
+    flock 8
+  fi
+  waited=$(( $(date +%s) - t_w ))
+  if [ "$mode" = install ] && [ -n "${SERVOARM_CI_TIMES:-}" ]; then echo "qemu-root-wait=$waited" >>"$SERVOARM_CI_TIMES"; fi
+  [ "$waited" -eq 0 ] || lap "waited for the root's bootstrap"
+  if [ "$mode" = root ] && [ -f "$tarball" ]; then say "the cache has the root: $tarball"; exit 0; fi
+fi
 if [ -n "$tarball" ] && [ -f "$tarball" ]; then
   tar -C "$root" -xf "$tarball" || fail "cannot unpack the cached root $tarball"
   put_qemu
@@ -160,6 +189,11 @@ else
     mkdir -p "$cache" && tar -C "$root" -cf "$tarball.tmp" . && mv "$tarball.tmp" "$tarball" &&
       say "root cached as $tarball" || say "WARNING: could not cache the root in $cache"
   fi
+fi
+[ -z "$tarball" ] || exec 8>&-  # (the cache's lock: the root is there, or this test bootstraps alone)
+if [ "$mode" = root ]; then
+  [ -f "$tarball" ] || fail "the root was bootstrapped but could not be cached in $cache"
+  exit 0
 fi
 chroot "$root" /bin/true 2>/dev/null || skip "the chroot cannot run $arch programs through binfmt_misc qemu-$qarch ($interp, flags '$flags')"
 mount_root
@@ -200,6 +234,45 @@ assert all(abs(a - b) < 1e-4 for a, b in zip(p, [411.48, 149.09, 489.32])), p
 assert all(abs(R[r][c] - (r == c)) < 1e-9 for r in range(3) for c in range(3)), R
 PY
 lap "armfw --help / --config-keys, armctl kin models / kin fk (x y z = 411.48 149.09 489.32 mm)"
+
+# The network API of the installed armfw: its reference, then armfw --sim serving TCP on a
+# free port (the root shares the build machine's network), and hello answered over it.
+if [ "$api" = api ]; then
+  out=$(in_root /usr/bin/armfw --api-reference 2>&1) || fail "armfw --api-reference exit $?: the installed armfw has no network API: ${out:0:200}"
+  [[ $out == *'`hello`'* ]] || fail "armfw --api-reference does not list hello: ${out:0:200}"
+  # (chroot itself in the background, not in_root: a function would run in a subshell, and
+  # $! would be that shell, not armfw)
+  chroot "$root" /usr/bin/env -i PATH=/usr/bin:/bin LANG=C.UTF-8 /usr/bin/armfw --sim --no-stdin --api-tcp 0 \
+    </dev/null >"$work/api.out" 2>"$work/api.err" &
+  armfw_pid=$!
+  port=""
+  for _ in $(seq 1 600); do
+    port=$(sed -n 's/^armfw: api: .*TCP port \([0-9]*\).*/\1/p' "$work/api.err")
+    [ -z "$port" ] || break
+    kill -0 "$armfw_pid" 2>/dev/null || fail "armfw --sim --api-tcp 0 exited before serving: $(cat "$work/api.err")"
+    sleep 0.1
+  done
+  [ -n "$port" ] || fail "armfw --sim --api-tcp 0 did not print its TCP port within 60 s: $(cat "$work/api.err")"
+  python3 - "$port" <<'PY' || fail "hello over the installed armfw's API (TCP port $port): see above; armfw: $(tail -n 3 "$work/api.err")"
+import json, socket, sys
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])), timeout=60)
+s.sendall(b'{"id":1,"cmd":"hello"}\n')
+buf = b""
+while b"\n" not in buf:
+    chunk = s.recv(65536)
+    assert chunk, "the server closed the connection before answering hello"
+    buf += chunk
+r = json.loads(buf.split(b"\n", 1)[0])
+assert r.get("id") == 1 and r.get("ok") is True, r
+assert r.get("protocol") == 1 and len(r.get("joints", [])) == 6, r
+print("qemu_install: hello answered: protocol %d, %d joints" % (r["protocol"], len(r["joints"])))
+PY
+  kill -TERM "$armfw_pid"
+  rc=0; wait "$armfw_pid" || rc=$?
+  armfw_pid=""
+  [ $rc -eq 0 ] || fail "armfw --sim --api-tcp 0 exit $rc after SIGTERM: $(tail -n 5 "$work/api.err")"
+  lap "armfw --api-reference; armfw --sim --api-tcp $port answered hello over TCP; SIGTERM: exit 0"
+fi
 
 # ---------------------------------------------------------------------------
 # 4. The service's command line, as systemd would start it (no systemd in the root).
