@@ -163,8 +163,11 @@ void SafetyMonitor::speed_cap(kin::SafetyMode mode, double aim, double horizon_s
   if (!(out.tcp < INFINITY)) return;
   kin::Jacobian J;
   if (kin::jacobian(*chain_, prev_q_cmd_, J) < kin::Status::ok) return;
-  for (int j = 0; j < n && j < kin::kMaxJoints; ++j)
-    out.tcp_gain[static_cast<std::size_t>(j)] = J.block<3, 1>(0, j).norm();
+  for (int j = 0; j < n && j < kin::kMaxJoints; ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    out.tcp_gain[u] = J.block<3, 1>(0, j).norm();
+    for (int k = 0; k < 3; ++k) out.tcp_col[u][static_cast<std::size_t>(k)] = J(k, j);
+  }
 }
 
 bool SafetyMonitor::predict_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,
