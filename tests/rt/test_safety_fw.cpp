@@ -1282,3 +1282,58 @@ TEST(SpeedScaling, ReducedSwitchedOnMidLineKeepsThePredictedStopWithinItsDistanc
   CHECK(acc <= 1.0 + 1e-3);
   CHECK(tr.x.size() > ref.x.size() + 100);  // it did run slower
 }
+
+// The speed scale keeps the predicted stop under the limit itself, not only under limit +
+// tolerance: a movel at 200 mm/s with `safety reduced` switched on while it accelerates (at
+// 60 mm/s), Reduced mode's stop distance limit 5 mm, then (a run of its own) its stop time limit
+// 0.08 s; the stop predicted from the commanded state at every cycle after the switch stays
+// within the limit and a numeric margin of 1 % (the prediction from the telemetry's differenced
+// acceleration is not the monitor's own to the last bit); no protective stop.
+TEST(SpeedScaling, AScaledLineKeepsThePredictedStopUnderItsLimitNotOnlyItsTolerance) {
+  const kin::Pose w = work_tcp();
+  MoveLine side;
+  side.target = w;
+  side.target.translation().y() += 0.15;
+  side.speed = 0.2;
+  struct Case {
+    const char* what;
+    double distance_mm, time_s;
+  } const cases[] = {{"stop distance 5 mm", 5.0, 0}, {"stop time 0.08 s", 0, 0.08}};
+  for (const Case& k : cases) {
+    FwConfig c = table(500);
+    if (k.distance_mm > 0) c.safety_reduced_stop_distance_mm = k.distance_mm;
+    if (k.time_s > 0) c.safety_reduced_stop_time_s = k.time_s;
+    Rig r(c);
+    r.enable();
+    r.to_work();
+    MoveContext cx;
+    cx.ik = r.app.console->jog_context().ik;
+    const MoveResult m = r.svc().move(side, cx);
+    CHECK_TEXT(m.ok(), m.reason.c_str());
+    Trace t;
+    kin::JointVector qd_prev;
+    kin::JointTrajectory scratch;
+    int switched = -1;
+    double worst_mm = 0, worst_s = 0, unswitched_mm = 0, unswitched_s = 0;
+    run_traced(r, t, 20000, [&](int) {
+      double ts = 0;
+      const double d = predicted_stop_mm(r, qd_prev, scratch, &ts);
+      if (switched >= 0) worst_mm = std::fmax(worst_mm, d), worst_s = std::fmax(worst_s, ts);
+      if (switched < 0 && t.x.size() > 2 && t.speed(t.x.size() - 1) > 60.0) {
+        switched = int(t.x.size());
+        unswitched_mm = d, unswitched_s = ts;
+        CHECK(r.svc().set_safety_mode(kin::SafetyMode::reduced).ok());
+      }
+    });
+    char fig[300];
+    std::snprintf(fig, sizeof fig, "%s: at the switch %.2f mm / %.3f s; after it predicted up to %.3f mm / %.4f s; %u stops, last event: %s",
+                  k.what, unswitched_mm, unswitched_s, worst_mm, worst_s, unsigned(r.tel().safety_stops), r.last_event().c_str());
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(switched > 0, fig);
+    CHECK_EQUAL(0u, r.tel().safety_stops);
+    if (k.distance_mm > 0) CHECK_TEXT(worst_mm <= k.distance_mm * 1.01, fig);
+    if (k.time_s > 0) CHECK_TEXT(worst_s <= k.time_s * 1.01, fig);
+    CHECK((t.x.back() - side.target.translation()).norm() < 1e-6);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}
