@@ -1337,3 +1337,53 @@ TEST(SpeedScaling, AScaledLineKeepsThePredictedStopUnderItsLimitNotOnlyItsTolera
     LONGS_EQUAL(0, r.rt_allocs);
   }
 }
+
+// The trigger look-ahead takes the Reduced mode's stop limits: a 200 mm/s line (planned without
+// the trigger plane) towards a trigger plane 100 mm ahead, Reduced mode with a 5 mm stop distance
+// and no Reduced speed limit, Normal with no limits. The look-ahead slows the line before the
+// plane so that the stop predicted from the commanded state as the tool crosses it, and after,
+// is within 5 mm (+ the 1 % margin of the prediction from the telemetry): no protective stop.
+// Were the Reduced stop limits left out of the look-ahead, the line would cross at full speed
+// (predicted stop ~10 mm) and be stopped at once.
+TEST(SpeedScaling, TheTriggerLookAheadKeepsTheReducedStopDistance) {
+  constexpr double kStopMm = 5.0;
+  double y_plane = 0;
+  FwConfig c = table(500);
+  y_plane = work_tcp().translation().y() * 1000.0 + 100;
+  c.safety_reduced_planes = {0, -1, 0, -y_plane};
+  c.safety_reduced_stop_distance_mm = kStopMm;
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  plan_without_trigger_planes(r);
+  const kin::Pose w = work_tcp();
+  MoveLine side;
+  side.target = w;
+  side.target.translation().y() += 0.15;
+  side.speed = 0.2;
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  const MoveResult m = r.svc().move(side, cx);
+  CHECK_TEXT(m.ok(), m.reason.c_str());
+  Trace tr;
+  kin::JointVector qd_prev;
+  kin::JointTrajectory scratch;
+  double before = 0, past = 0;
+  bool crossed = false;
+  run_traced(r, tr, 20000, [&](int) {
+    const double d = predicted_stop_mm(r, qd_prev, scratch);
+    crossed = crossed || (!tr.x.empty() && tr.x.back().y() * 1e3 + kRadiusMm > y_plane);
+    (crossed ? past : before) = std::fmax(crossed ? past : before, d);
+  });
+  char fig[240];
+  std::snprintf(fig, sizeof fig, "line into a trigger zone with a %.0f mm Reduced stop distance: predicted stop up to %.2f mm "
+                "before the plane, %.3f mm past it; %u stops, last event: %s",
+                kStopMm, before, past, unsigned(r.tel().safety_stops), r.last_event().c_str());
+  std::printf("\n  %s", fig);
+  CHECK_TEXT(crossed, fig);
+  CHECK_TEXT(before > 1.5 * kStopMm, fig);  // it ran fast outside
+  CHECK_TEXT(past <= kStopMm * 1.01, fig);
+  CHECK_EQUAL(0u, r.tel().safety_stops);
+  CHECK((tr.x.back() - side.target.translation()).norm() < 1e-6);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
