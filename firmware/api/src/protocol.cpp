@@ -605,7 +605,7 @@ constexpr MessageSpec kMessages[] = {
        if (!r.ok()) return out.fail(r.error, std::string(fw::to_string(r.refusal)) + " (" + std::to_string(r.count) + " outputs)");
      }},
     {"safety_mode", kSafetyMode, Gate::control, Where::service, "ArmService::set_safety_mode",
-     "switches the safety envelope's mode (docs/safety.md#modes): Reduced at once; Reduced -> Normal loosens the "
+     "switches the safety envelope's mode (docs/safety.md#normal-and-reduced-mode): Reduced at once; Reduced -> Normal loosens the "
      "limits and needs `confirm`: true (refused in one line without it, the mode kept)",
      +[](C& c, R& out) {
        const std::string& m = c.rq.arg("mode")->text;
