@@ -366,7 +366,7 @@ void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_p
   for (int j = 0; j < n; ++j) x.joint_velocity[static_cast<std::size_t>(j)] = (q[j] - q_prev[j]) / h;
 }
 
-double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x) {
+double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double stop_aim) {
   if (!cfg.enabled || (!x.has_velocity && !x.has_stop && !x.has_dynamics)) return 0;
   const SafetyLimits& lim = cfg.limits(mode);
   double r = 0;
@@ -380,8 +380,8 @@ double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample&
   // v sqrt(v / jerk): speed goes with the square of the time and the 2/3 power of the
   // distance there (less steeply at higher speeds), so these ratios slow a path enough.
   if (x.has_stop) {
-    if (lim.stop_time > 0) r = std::max(r, std::pow(x.stop_time / lim.stop_time, 2.0));
-    if (lim.stop_distance > 0) r = std::max(r, std::cbrt(std::pow(x.stop_distance / lim.stop_distance, 2.0)));
+    if (lim.stop_time > 0) r = std::max(r, std::pow(x.stop_time / (stop_aim * lim.stop_time), 2.0));
+    if (lim.stop_distance > 0) r = std::max(r, std::cbrt(std::pow(x.stop_distance / (stop_aim * lim.stop_distance), 2.0)));
   }
   if (x.has_dynamics) {
     if (lim.momentum > 0) r = std::max(r, x.momentum / lim.momentum);

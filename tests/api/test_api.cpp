@@ -126,8 +126,7 @@ struct Rig {
   std::atomic<bool> stop{false};
 
   explicit Rig(api::ApiConfig ac = {}, bool collision = false, std::vector<OutputConfig> outputs = {},
-               double stream_deadman_s = 0.1) {
-    FwConfig cfg;
+               double stream_deadman_s = 0.1, FwConfig cfg = {}) {
     cfg.outputs = std::move(outputs);
     cfg.collision = collision;  // the drives map their measured torque (6077h) then
     cfg.can = "sim";
@@ -151,6 +150,10 @@ struct Rig {
     if (ac.tcp_port < 0 && ac.ws_port < 0) ac.tcp_port = 0, ac.ws_port = 0;
     ac.rate_hz = app.cfg.rate_hz;
     ac.robot = app.cfg.robot;
+    if (app.console->config().safety.enabled) {  // as armfw does
+      ac.safety_on = true;
+      ac.safety_checksum = app.console->config().safety_checksum;
+    }
     server = std::make_unique<api::ApiServer>(ac, *app.ctl, app.chain, app.ctl->limits());
     e = server->start();
     CHECK_TEXT(e.empty(), e.c_str());
@@ -228,6 +231,35 @@ TEST(FwApi, RequestAndResultRoundTrip) {
   CHECK_EQUAL(1u, rig.tel().done_id);
   const std::string s = c.ask(3, "\"cmd\":\"state\"");
   CHECK_TEXT(is_ok(s) && has(s, "\"cycle\":") && has(s, "\"q_cmd\":[0.2") && has(s, "\"tool\":"), s.c_str());
+}
+
+// hello shows the checksum of the safety configuration in force: after a confirmed run-time
+// change (safety_stage + safety_confirm) the new one, not the one armfw started with.
+TEST(FwApi, HelloShowsTheChecksumOfTheSafetyConfigurationInForce) {
+  FwConfig cfg;
+  cfg.safety_planes = {0, 0, 1, -500};
+  cfg.safety_tcp_speed_mm_s = 250;
+  Rig rig({}, false, {}, 0.1, cfg);
+  Client c(rig.port());
+  char start[9];
+  std::snprintf(start, sizeof start, "%08X", static_cast<unsigned>(rig.app.console->config().safety_checksum));
+  std::string h = c.ask(1, "\"cmd\":\"hello\"");
+  CHECK_TEXT(has(h, std::string("\"checksum\":\"") + start + "\""), h.c_str());
+  CHECK(is_ok(c.ask(2, "\"cmd\":\"take_control\"")));
+  const std::string staged = c.ask(3, "\"cmd\":\"safety_stage\",\"changes\":\"tcp_speed_mm_s = 120\"");
+  CHECK_TEXT(is_ok(staged), staged.c_str());
+  const std::size_t at = staged.find("\"checksum\":\"");
+  CHECK_TEXT(at != std::string::npos, staged.c_str());
+  const std::string sum = staged.substr(at + 12, 8);
+  const std::string done = c.ask(4, "\"cmd\":\"safety_confirm\",\"checksum\":\"" + sum + "\"");
+  CHECK_TEXT(is_ok(done), done.c_str());
+  // the service thread publishes it with its next snapshot (within its 10 ms poll)
+  for (int i = 0; i < 400; ++i) {
+    h = c.ask(5, "\"cmd\":\"hello\"");
+    if (has(h, "\"checksum\":\"" + sum + "\"")) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  CHECK_TEXT(has(h, "\"checksum\":\"" + sum + "\""), ("want " + sum + ": " + h).c_str());
 }
 
 // The state stream carries what the drives measure: joint velocity (follows the commanded one

@@ -91,6 +91,44 @@ TEST(SafetyApi, StageAndConfirmRoundTrip) {
   clock.set_idle_hook(nullptr);
 }
 
+// safety_mode: to Reduced at once; Reduced -> Normal loosens the limits and needs confirm=true,
+// refused in the service's one line without it (the console's `safety normal` gives the same).
+TEST(SafetyApi, LooseningTheSafetyModeNeedsTheConfirmation) {
+  const api::MessageSpec* m = api::find_message("safety_mode");
+  CHECK(m != nullptr);
+  CHECK(m->gate == api::Gate::control);
+  test::SimApp app;
+  hal::ManualClock clock;
+  FwConfig c;
+  c.can = "sim";
+  c.safety_planes = {0, 0, 1, -500};
+  c.safety_tcp_speed_mm_s = 250;
+  c.safety_reduced_tcp_speed_mm_s = 100;
+  std::string e = app.build(c, &clock);
+  CHECK_TEXT(e.empty(), e.c_str());
+  clock.set_idle_hook([&](hal::TimePoint t) { app.plant->step(t); });
+  e = app.boot();
+  CHECK_TEXT(e.empty(), e.c_str());
+  api::ServiceContext cx;
+  cx.svc = &app.console->service();
+  cx.ctl = app.ctl.get();
+  cx.chain = &app.chain;
+  std::string a = ask(cx, R"({"id":1,"cmd":"safety_mode","mode":"reduced"})");
+  STRCMP_CONTAINS("\"ok\":true", a.c_str());
+  CHECK(app.ctl->safety_mode() == kin::SafetyMode::reduced);
+  a = ask(cx, R"({"id":2,"cmd":"safety_mode","mode":"normal"})");
+  STRCMP_CONTAINS("\"error\":\"bad_state\"", a.c_str());
+  STRCMP_CONTAINS("Reduced -> Normal loosens the safety limits: confirm it", a.c_str());
+  CHECK(app.ctl->safety_mode() == kin::SafetyMode::reduced);
+  a = ask(cx, R"({"id":3,"cmd":"safety_mode","mode":"normal","confirm":true})");
+  STRCMP_CONTAINS("\"ok\":true", a.c_str());
+  CHECK(app.ctl->safety_mode() == kin::SafetyMode::normal);
+  a = ask(cx, R"({"id":4,"cmd":"safety_mode","mode":"fast"})");
+  STRCMP_CONTAINS("mode: normal or reduced", a.c_str());
+  CHECK(app.ctl->safety_mode() == kin::SafetyMode::normal);
+  clock.set_idle_hook(nullptr);
+}
+
 // The state sample (the `state` answer and stream, state_line) carries the safety inputs
 // (asserted, lost) and the speed scale, as the control thread publishes them: a Reduced input on a simulated contact, released, asserted, then lost.
 TEST(SafetyApi, TheStateSampleCarriesTheInputsAndTheSpeedScale) {

@@ -44,6 +44,9 @@ std::string sample_line(const CommandSpec& e) {
     case ArgShape::program_name: l += " pick_place"; break;
     case ArgShape::record: l += " start rate=50"; break;
     case ArgShape::output: l += " gripper on"; break;
+    case ArgShape::confirm: l += " confirm"; break;
+    case ArgShape::rest: l += " tcp_speed_mm_s = 100; reduced_tcp_speed_mm_s = 50"; break;
+    case ArgShape::checksum: l += " 0123abCD"; break;
   }
   return l;
 }
@@ -62,7 +65,8 @@ TEST(CommandTable, EveryEntryIsReachableByTheParser) {
     CHECK_TEXT(find_command(e.cmd) == &e, e.name);
     for (const std::string& line : {sample_line(e), std::string(e.name)}) {
       if (line == e.name && (e.args == ArgShape::joints_speed || e.args == ArgShape::pose_speed || e.args == ArgShape::pose ||
-                             e.args == ArgShape::point_name || e.args == ArgShape::program_name || e.args == ArgShape::record))
+                             e.args == ArgShape::point_name || e.args == ArgShape::program_name || e.args == ArgShape::record ||
+                             e.args == ArgShape::rest || e.args == ArgShape::checksum))
         continue;  // these need values
       GcodeModal m;
       Command c;
@@ -201,4 +205,32 @@ TEST(CommandTable, QuitAndExitEndTheSession) {
     CHECK_TEXT(help_text(topic, "", h), topic);
     CHECK_TEXT(has(h, "quit") && has(h, "exit") && has(h, "stdin") && has(h, "Ctrl-D"), h.c_str());
   }
+}
+
+// `safety stage` takes the rest of the line as typed, also beyond the parser's 24 words (an
+// array of six values and more), into the Command's fixed field; `safety confirm` reads exactly
+// 8 hex digits; `safety normal` takes only the word `confirm`.
+TEST(CommandTable, SafetyStageTakesTheRestOfTheLineAndConfirmAChecksum) {
+  const std::string change =
+      "joint_speed_deg_s = [90, 90, 90, 180, 180, 180]; reduced_joint_speed_deg_s = [30, 30, 30, 60, 60, 60]; planes = [0, 0, 1, -400, 1, 0, 0, 800]";
+  GcodeModal m;
+  Command c;
+  ParseResult r = parse_line("  safety   stage " + change + "  ", kN, m, c);
+  CHECK_TEXT(r.ok(), r.message.data());
+  CHECK(c.cmd == Cmd::safety_stage);
+  STRCMP_EQUAL(change.c_str(), c.text.data());
+  r = parse_line("movej 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25", kN, m, c);  // any other: too many words
+  STRCMP_CONTAINS("too many words", r.message.data());
+  r = parse_line("safety confirm 0123abCD", kN, m, c);
+  CHECK_TEXT(r.ok(), r.message.data());
+  CHECK_EQUAL(0x0123ABCDu, c.checksum);
+  for (const char* bad : {"safety confirm 0123abC", "safety confirm 0123abCDE", "safety confirm 0x23abCD", "safety confirm"}) {
+    r = parse_line(bad, kN, m, c);
+    CHECK_TEXT(!r.ok(), bad);
+  }
+  r = parse_line("safety normal confirm", kN, m, c);
+  CHECK_TEXT(r.ok() && c.confirm && c.cmd == Cmd::safety_normal, r.message.data());
+  r = parse_line("safety normal", kN, m, c);
+  CHECK_TEXT(r.ok() && !c.confirm, r.message.data());
+  STRCMP_CONTAINS("is not `confirm`", parse_line("safety normal please", kN, m, c).message.data());
 }

@@ -214,7 +214,7 @@ TEST(ConsoleRequests, SafetyShowsModeAndChecksumAndSwitchesTheMode) {
   STRCMP_CONTAINS("mode=reduced", r.cmd("safety").c_str());
   STRCMP_CONTAINS("tcp_speed_mm_s=100 joint_speed_deg_s=[30,30,30,60,60,60] stop_distance_mm=40 momentum_kg_m_s=4", r.cmd("safety").c_str());
   CHECK(r.app.ctl->safety_mode() == kin::SafetyMode::reduced);
-  CHECK_TEXT(answer_ok(r.cmd("safety normal")), "safety normal");
+  CHECK_TEXT(answer_ok(r.cmd("safety normal confirm")), "safety normal confirm");
   CHECK(r.app.ctl->safety_mode() == kin::SafetyMode::normal);
 
   test::ConsoleRig plain;
@@ -222,4 +222,75 @@ TEST(ConsoleRequests, SafetyShowsModeAndChecksumAndSwitchesTheMode) {
   const std::string refused = plain.cmd("safety reduced");
   STRCMP_CONTAINS("error: bad_state no safety envelope is configured", refused.c_str());
   CHECK(plain.cmd("status").find("safety=") == std::string::npos);
+}
+
+// Switching the safety mode: to Reduced (stricter) at once; Reduced -> Normal loosens the limits
+// and needs `confirm`: refused in one line without it, the mode kept; Normal -> Normal changes
+// nothing and needs none.
+TEST(ConsoleRequests, LooseningTheSafetyModeNeedsTheConfirmation) {
+  FwConfig c;
+  c.safety_planes = {0, 0, 1, -500};
+  c.safety_tcp_speed_mm_s = 1000;
+  c.safety_reduced_tcp_speed_mm_s = 100;
+  test::ConsoleRig r(c);
+  CHECK_TEXT(answer_ok(r.cmd("safety normal")), "normal -> normal");
+  const std::string red = r.cmd("safety reduced");
+  CHECK_TEXT(answer_ok(red), red.c_str());
+  const std::string refused = r.cmd("safety normal");
+  STRCMP_EQUAL("error: bad_state Reduced -> Normal loosens the safety limits: confirm it (console `safety normal "
+               "confirm`, API safety_mode with confirm=true); still Reduced\n",
+               refused.c_str());
+  CHECK(r.app.ctl->safety_mode() == kin::SafetyMode::reduced);
+  STRCMP_CONTAINS("mode=reduced", r.cmd("safety").c_str());
+  const std::string ok = r.cmd("safety normal confirm");
+  CHECK_TEXT(answer_ok(ok), ok.c_str());
+  STRCMP_CONTAINS("safety mode normal", ok.c_str());
+  CHECK(r.app.ctl->safety_mode() == kin::SafetyMode::normal);
+  STRCMP_CONTAINS("error: arg_count", r.cmd("safety reduced confirm").c_str());  // a stricter mode needs none
+  STRCMP_CONTAINS("error: bad_option", r.cmd("safety normal yes").c_str());
+}
+
+// `safety stage` / `safety confirm` on the console: the service's stage_safety / confirm_safety
+// (the API's safety_stage / safety_confirm): staged, nothing changes; a wrong checksum drops it;
+// confirmed with its checksum, `status` and `safety` show the new checksum. A change longer than
+// the parser's word table (an array of six values and more) is taken whole.
+TEST(ConsoleRequests, SafetyStageAndConfirmChangeTheEnvelopeAtRunTime) {
+  FwConfig c;
+  c.safety_planes = {0, 0, 1, -500};
+  c.safety_tcp_speed_mm_s = 250;
+  test::ConsoleRig r(c);
+  char before[16];
+  std::snprintf(before, sizeof before, "%08X", static_cast<unsigned>(safety_checksum(c)));
+  const std::string staged =
+      r.cmd("safety stage tcp_speed_mm_s = 120; joint_speed_deg_s = [90, 90, 90, 180, 180, 180]; reduced_joint_speed_deg_s = [30, 30, 30, 60, 60, 60]; planes = [0, 0, 1, -400]");
+  CHECK_TEXT(answer_ok(staged), staged.c_str());
+  STRCMP_CONTAINS("safety.tcp_speed_mm_s = 250 -> 120", staged.c_str());
+  STRCMP_CONTAINS((std::string("previous=") + before).c_str(), staged.c_str());
+  const std::size_t at = staged.find("checksum=");
+  CHECK_TEXT(at != std::string::npos, staged.c_str());
+  const std::string sum = staged.substr(at + 9, 8);
+  STRCMP_CONTAINS(("safety confirm " + sum).c_str(), staged.c_str());  // says how to confirm it
+  STRCMP_CONTAINS((std::string("checksum=") + before).c_str(), r.cmd("status").c_str());  // nothing changed yet
+  DOUBLES_EQUAL(0.25, r.app.ctl->safety_monitor().config().normal.tcp_speed, 1e-12);
+  // a wrong checksum: refused, the change dropped
+  const std::string wrong = r.cmd("safety confirm 0BADF00D");
+  STRCMP_CONTAINS("error: bad_option checksum 0BADF00D is not the staged change's", wrong.c_str());
+  STRCMP_CONTAINS("error: bad_state no safety change is staged", r.cmd("safety confirm " + sum).c_str());
+  STRCMP_CONTAINS("error: bad_number", r.cmd("safety confirm 12345XYZ").c_str());
+  STRCMP_CONTAINS("error: arg_count", r.cmd("safety confirm").c_str());
+  STRCMP_CONTAINS("error: arg_count", r.cmd("safety stage").c_str());
+  STRCMP_CONTAINS("error: bad_option safety.tcp_sped_mm_s: no such key", r.cmd("safety stage tcp_sped_mm_s = 1").c_str());
+  // staged again and confirmed
+  const std::string again = r.cmd("safety stage tcp_speed_mm_s = 120; joint_speed_deg_s = [90, 90, 90, 180, 180, 180]; reduced_joint_speed_deg_s = [30, 30, 30, 60, 60, 60]; planes = [0, 0, 1, -400]");
+  CHECK_TEXT(answer_ok(again), again.c_str());
+  const std::string ok = r.cmd("safety confirm " + sum);
+  CHECK_TEXT(answer_ok(ok), ok.c_str());
+  STRCMP_CONTAINS(("safety configuration " + sum + " in force (was " + before + ")").c_str(), ok.c_str());
+  for (int i = 0; i < 3; ++i) r.cycle();
+  DOUBLES_EQUAL(0.12, r.app.ctl->safety_monitor().config().normal.tcp_speed, 1e-12);
+  STRCMP_CONTAINS(("checksum=" + sum).c_str(), r.cmd("status").c_str());
+  STRCMP_CONTAINS(("checksum=" + sum).c_str(), r.cmd("safety").c_str());
+  // in check mode ($C) neither runs
+  CHECK(answer_ok(r.cmd("$C")));
+  STRCMP_CONTAINS("check mode: not run", r.cmd("safety stage tcp_speed_mm_s = 100").c_str());
 }

@@ -648,8 +648,10 @@ namespace {
 struct Trace {
   std::vector<kin::JointVector> q;
   std::vector<Eigen::Vector3d> x;
+  std::vector<std::uint64_t> cycle;  ///< the control cycle of each sample (a service request runs cycles of its own)
   void add(Rig& r) {
     const Telemetry t = r.tel();
+    cycle.push_back(t.cycles);
     kin::JointVector v(6);
     for (int j = 0; j < 6; ++j) v[j] = t.q_cmd[std::size_t(j)];
     kin::Pose p;
@@ -657,8 +659,12 @@ struct Trace {
     q.push_back(v);
     x.push_back(p.translation());
   }
-  /// TCP speed (mm/s) between sample i-1 and i.
-  double speed(std::size_t i) const { return i == 0 ? 0.0 : (x[i] - x[i - 1]).norm() / 1e-3 * 1e3; }
+  /// TCP speed (mm/s) between sample i-1 and i (over the cycles between them).
+  double speed(std::size_t i) const {
+    if (i == 0) return 0.0;
+    const double cycles = cycle[i] > cycle[i - 1] ? static_cast<double>(cycle[i] - cycle[i - 1]) : 1.0;
+    return (x[i] - x[i - 1]).norm() / (cycles * 1e-3) * 1e3;
+  }
   /// Highest |second difference| / dt^2 over each joint's acceleration limit, from sample `from` on.
   double acc_ratio(const kin::JointLimits& lim, std::size_t from = 1) const {
     double worst = 0;
@@ -1093,7 +1099,7 @@ TEST(SpeedScaling, AJogIntoATriggerZoneIsSlowedNotStopped) {
 // TCP at 100 mm/s + 1 or under; the arm ends at the last target.
 TEST(SpeedScaling, AStreamIntoATriggerZoneIsSlowedNotStopped) {
   double y_plane = 0;
-  FwConfig c = trigger_ahead_y(100, &y_plane);
+  FwConfig c = trigger_ahead_y(140, &y_plane);
   c.max_linear_speed_mm_s = 500;
   Rig r(c);
   r.enable();
@@ -1105,8 +1111,9 @@ TEST(SpeedScaling, AStreamIntoATriggerZoneIsSlowedNotStopped) {
   Trace tr;
   kin::Pose target = w;
   bool reached = false;
-  for (int k = 0; k < 3000 && !reached; ++k) {  // 10 ms apart: 30 s at most
-    const double t = k * 0.01;
+  const double t0 = double(r.tel().cycles) * 1e-3;
+  for (int k = 0; k < 3000 && !reached; ++k) {  // about 10 ms apart: 30 s at most
+    const double t = double(r.tel().cycles) * 1e-3 - t0;  // the control thread's clock (see below)
     target.translation().y() = w.translation().y() + std::fmin(0.2, 0.25 * t);
     const StreamResult sr = st.target_pose(target, false, k == 0, t);
     CHECK_TEXT(sr.ok(), sr.reason.c_str());
@@ -1131,6 +1138,52 @@ TEST(SpeedScaling, AStreamIntoATriggerZoneIsSlowedNotStopped) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+// A stream under a TCP speed limit it keeps within (100 mm/s; the stream's targets move at
+// 90 mm/s along y): tracked at the targets' speed, not slowed below it by the plans' TCP cap
+// (the cap bounds the TCP's speed for the direction the stream moves in, not for every joint at
+// its own limit at once); no stop, and the TCP never beyond its limit.
+TEST(SpeedScaling, AStreamWithinTheTcpSpeedLimitIsNotSlowedByTheCap) {
+  FwConfig c = table(500);
+  c.safety_tcp_speed_mm_s = 100;
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  StreamSettings ss;
+  ss.max_step.assign(6, 0.5);
+  StreamService st(r.svc(), *r.app.ctl, ss);
+  const kin::Pose w = work_tcp();
+  Trace tr;
+  kin::Pose target = w;
+  bool reached = false;
+  const double t0 = double(r.tel().cycles) * 1e-3;
+  for (int k = 0; k < 3000 && !reached; ++k) {  // about 10 ms apart: 30 s at most
+    // sampled on the control thread's clock (as a leader's state samples are): each target
+    // costs the rig a cycle of its own to answer, which would otherwise make the targets' time
+    // fall behind the clock and leave them late, and without their velocity
+    const double t = double(r.tel().cycles) * 1e-3 - t0;
+    target.translation().y() = w.translation().y() + std::fmin(0.15, 0.09 * t);
+    const StreamResult sr = st.target_pose(target, false, k == 0, t);
+    CHECK_TEXT(sr.ok(), sr.reason.c_str());
+    if (!sr.ok()) break;
+    for (int i = 0; i < 10; ++i) {
+      r.cycle();
+      tr.add(r);
+    }
+    reached = (tr.x.back() - (w.translation() + Eigen::Vector3d(0, 0.15, 0))).norm() < 1e-5;
+  }
+  double peak = 0;
+  for (std::size_t i = 1; i < tr.x.size(); ++i) peak = std::fmax(peak, tr.speed(i));
+  char fig[200];
+  std::snprintf(fig, sizeof fig, "stream at 90 mm/s under a 100 mm/s TCP limit: peak %.1f mm/s, %zu cycles to the end, %u stops",
+                peak, tr.x.size(), unsigned(r.tel().safety_stops));
+  std::printf("\n  %s", fig);
+  CHECK_TEXT(reached, fig);
+  CHECK_TEXT(peak >= 88.0, fig);
+  CHECK_TEXT(peak <= 100.0 + 1.0, fig);
+  CHECK_EQUAL(0u, r.tel().safety_stops);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 // ---------------------------------------------------------------------------
 // Stopping distance on the speed scale: the stop predicted from the commanded state (braked
 // on the joints' limits, as the protective stop brakes) is kept within the mode's limit by
@@ -1141,8 +1194,8 @@ namespace {
 
 /// The TCP's travel (mm) during the stop predicted from the commanded state after the last
 /// cycle (the telemetry's joints and velocities, the acceleration from the velocities'
-/// difference with `qd_prev`, which it updates).
-double predicted_stop_mm(Rig& r, kin::JointVector& qd_prev, kin::JointTrajectory& scratch) {
+/// difference with `qd_prev`, which it updates); `time_s`: how long that stop lasts.
+double predicted_stop_mm(Rig& r, kin::JointVector& qd_prev, kin::JointTrajectory& scratch, double* time_s = nullptr) {
   const Telemetry t = r.tel();
   kin::JointState st;
   st.pos.resize(6);
@@ -1157,6 +1210,7 @@ double predicted_stop_mm(Rig& r, kin::JointVector& qd_prev, kin::JointTrajectory
   kin::SafetySample x;
   (void)kin::forward(r.app.chain, st.pos, x.tcp);
   if (!kin::stop_prediction(r.app.chain, r.app.ctl->limits(), st, scratch, x)) return 0;
+  if (time_s != nullptr) *time_s = x.stop_time;
   return x.stop_distance * 1e3;
 }
 
@@ -1227,4 +1281,109 @@ TEST(SpeedScaling, ReducedSwitchedOnMidLineKeepsThePredictedStopWithinItsDistanc
   CHECK(dev < 0.1);
   CHECK(acc <= 1.0 + 1e-3);
   CHECK(tr.x.size() > ref.x.size() + 100);  // it did run slower
+}
+
+// The speed scale keeps the predicted stop under the limit itself, not only under limit +
+// tolerance: a movel at 200 mm/s with `safety reduced` switched on while it accelerates (at
+// 60 mm/s), Reduced mode's stop distance limit 5 mm, then (a run of its own) its stop time limit
+// 0.08 s; the stop predicted from the commanded state at every cycle after the switch stays
+// within the limit and a numeric margin of 1 % (the prediction from the telemetry's differenced
+// acceleration is not the monitor's own to the last bit); no protective stop.
+TEST(SpeedScaling, AScaledLineKeepsThePredictedStopUnderItsLimitNotOnlyItsTolerance) {
+  const kin::Pose w = work_tcp();
+  MoveLine side;
+  side.target = w;
+  side.target.translation().y() += 0.15;
+  side.speed = 0.2;
+  struct Case {
+    const char* what;
+    double distance_mm, time_s;
+  } const cases[] = {{"stop distance 5 mm", 5.0, 0}, {"stop time 0.08 s", 0, 0.08}};
+  for (const Case& k : cases) {
+    FwConfig c = table(500);
+    if (k.distance_mm > 0) c.safety_reduced_stop_distance_mm = k.distance_mm;
+    if (k.time_s > 0) c.safety_reduced_stop_time_s = k.time_s;
+    Rig r(c);
+    r.enable();
+    r.to_work();
+    MoveContext cx;
+    cx.ik = r.app.console->jog_context().ik;
+    const MoveResult m = r.svc().move(side, cx);
+    CHECK_TEXT(m.ok(), m.reason.c_str());
+    Trace t;
+    kin::JointVector qd_prev;
+    kin::JointTrajectory scratch;
+    int switched = -1;
+    double worst_mm = 0, worst_s = 0, unswitched_mm = 0, unswitched_s = 0;
+    run_traced(r, t, 20000, [&](int) {
+      double ts = 0;
+      const double d = predicted_stop_mm(r, qd_prev, scratch, &ts);
+      if (switched >= 0) worst_mm = std::fmax(worst_mm, d), worst_s = std::fmax(worst_s, ts);
+      if (switched < 0 && t.x.size() > 2 && t.speed(t.x.size() - 1) > 60.0) {
+        switched = int(t.x.size());
+        unswitched_mm = d, unswitched_s = ts;
+        CHECK(r.svc().set_safety_mode(kin::SafetyMode::reduced).ok());
+      }
+    });
+    char fig[300];
+    std::snprintf(fig, sizeof fig, "%s: at the switch %.2f mm / %.3f s; after it predicted up to %.3f mm / %.4f s; %u stops, last event: %s",
+                  k.what, unswitched_mm, unswitched_s, worst_mm, worst_s, unsigned(r.tel().safety_stops), r.last_event().c_str());
+    std::printf("\n  %s", fig);
+    CHECK_TEXT(switched > 0, fig);
+    CHECK_EQUAL(0u, r.tel().safety_stops);
+    if (k.distance_mm > 0) CHECK_TEXT(worst_mm <= k.distance_mm * 1.01, fig);
+    if (k.time_s > 0) CHECK_TEXT(worst_s <= k.time_s * 1.01, fig);
+    CHECK((t.x.back() - side.target.translation()).norm() < 1e-6);
+    LONGS_EQUAL(0, r.rt_allocs);
+  }
+}
+
+// The trigger look-ahead takes the Reduced mode's stop limits: a 200 mm/s line (planned without
+// the trigger plane) towards a trigger plane 100 mm ahead, Reduced mode with a 5 mm stop distance
+// and no Reduced speed limit, Normal with no limits. The look-ahead slows the line before the
+// plane so that the stop predicted from the commanded state as the tool crosses it, and after,
+// is within 5 mm (+ the 1 % margin of the prediction from the telemetry): no protective stop.
+// Were the Reduced stop limits left out of the look-ahead, the line would cross at full speed
+// (predicted stop ~10 mm) and be stopped at once.
+TEST(SpeedScaling, TheTriggerLookAheadKeepsTheReducedStopDistance) {
+  constexpr double kStopMm = 5.0;
+  double y_plane = 0;
+  FwConfig c = table(500);
+  y_plane = work_tcp().translation().y() * 1000.0 + 100;
+  c.safety_reduced_planes = {0, -1, 0, -y_plane};
+  c.safety_reduced_stop_distance_mm = kStopMm;
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  plan_without_trigger_planes(r);
+  const kin::Pose w = work_tcp();
+  MoveLine side;
+  side.target = w;
+  side.target.translation().y() += 0.15;
+  side.speed = 0.2;
+  MoveContext cx;
+  cx.ik = r.app.console->jog_context().ik;
+  const MoveResult m = r.svc().move(side, cx);
+  CHECK_TEXT(m.ok(), m.reason.c_str());
+  Trace tr;
+  kin::JointVector qd_prev;
+  kin::JointTrajectory scratch;
+  double before = 0, past = 0;
+  bool crossed = false;
+  run_traced(r, tr, 20000, [&](int) {
+    const double d = predicted_stop_mm(r, qd_prev, scratch);
+    crossed = crossed || (!tr.x.empty() && tr.x.back().y() * 1e3 + kRadiusMm > y_plane);
+    (crossed ? past : before) = std::fmax(crossed ? past : before, d);
+  });
+  char fig[240];
+  std::snprintf(fig, sizeof fig, "line into a trigger zone with a %.0f mm Reduced stop distance: predicted stop up to %.2f mm "
+                "before the plane, %.3f mm past it; %u stops, last event: %s",
+                kStopMm, before, past, unsigned(r.tel().safety_stops), r.last_event().c_str());
+  std::printf("\n  %s", fig);
+  CHECK_TEXT(crossed, fig);
+  CHECK_TEXT(before > 1.5 * kStopMm, fig);  // it ran fast outside
+  CHECK_TEXT(past <= kStopMm * 1.01, fig);
+  CHECK_EQUAL(0u, r.tel().safety_stops);
+  CHECK((tr.x.back() - side.target.translation()).norm() < 1e-6);
+  LONGS_EQUAL(0, r.rt_allocs);
 }

@@ -1018,7 +1018,7 @@ TEST(ArmService, JogStepsAndTheReducedModeAreCheckedToo) {
   CHECK_TEXT(slow.ok(), slow.reason.c_str());
   DOUBLES_EQUAL(0.1, slow.speed, 1e-12);
   CHECK(slow.duration > fast_ok.duration);
-  CHECK(svc.set_safety_mode(kin::SafetyMode::normal).ok());
+  CHECK(svc.set_safety_mode(kin::SafetyMode::normal, true).ok());  // the looser mode, confirmed
   // a fast movej: slowed until its tool stays within 300 mm/s (checked here every 1 ms)
   MoveJoints quick;
   quick.goal = joints({40, -45, 180, 0, 45, 0});

@@ -19,6 +19,7 @@
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/lang/markdown.hpp"
+#include "servoarm/lang/number.hpp"
 #include "servoarm/service/stream.hpp"
 
 namespace servoarm::api {
@@ -459,6 +460,10 @@ constexpr ArgSpec kSafetyStage[] = {
     {"changes", ArgType::text, true, 1, 4096,
      "[safety] keys and their new values as TOML, `key = value` lines (newline or `;` between), e.g. "
      "`tcp_speed_mm_s = 200; reduced_tcp_speed_mm_s = 50`"}};
+constexpr ArgSpec kSafetyMode[] = {
+    {"mode", ArgType::text, true, 1, 16, "`normal` or `reduced`"},
+    {"confirm", ArgType::boolean, false, 0, 1,
+     "true: the operator confirms a switch that loosens the limits (Reduced -> Normal; refused without it)"}};
 constexpr ArgSpec kSafetyConfirm[] = {
     {"checksum", ArgType::text, true, 8, 8, "the staged change's checksum as `safety_stage` answered it (8 hex digits)"}};
 
@@ -599,6 +604,17 @@ constexpr MessageSpec kMessages[] = {
        const fw::OutputResult r = c.cx.svc->set_output(o);
        if (!r.ok()) return out.fail(r.error, std::string(fw::to_string(r.refusal)) + " (" + std::to_string(r.count) + " outputs)");
      }},
+    {"safety_mode", kSafetyMode, Gate::control, Where::service, "ArmService::set_safety_mode",
+     "switches the safety envelope's mode (docs/safety.md#normal-and-reduced-mode): Reduced at once; Reduced -> Normal loosens the "
+     "limits and needs `confirm`: true (refused in one line without it, the mode kept)",
+     +[](C& c, R& out) {
+       const std::string& m = c.rq.arg("mode")->text;
+       if (m != "normal" && m != "reduced") return out.fail(CmdError::bad_option, "mode: normal or reduced, not \"" + m + "\"");
+       const ArgValue* cf = c.rq.arg("confirm");
+       control_result(c.cx.svc->set_safety_mode(m == "reduced" ? kin::SafetyMode::reduced : kin::SafetyMode::normal,
+                                                 cf != nullptr && cf->present && cf->num != 0),
+                      out);
+     }},
     {"safety_stage", kSafetyStage, Gate::control, Where::service, "ArmService::stage_safety",
      "stages a run-time change of the [safety] section (docs/safety.md#confirming-a-change): checked against the "
      "robot, nothing changes yet; answers the `checksum` the configuration will have, the one in force "
@@ -610,11 +626,7 @@ constexpr MessageSpec kMessages[] = {
      +[](C& c, R& out) {
        const std::string& t = c.rq.arg("checksum")->text;
        std::uint32_t v = 0;
-       for (const char ch : t) {
-         const int d = ch >= '0' && ch <= '9' ? ch - '0' : ch >= 'A' && ch <= 'F' ? ch - 'A' + 10 : ch >= 'a' && ch <= 'f' ? ch - 'a' + 10 : -1;
-         if (d < 0) return out.fail(CmdError::bad_number, "checksum: \"" + t + "\" is not 8 hex digits");
-         v = (v << 4) | static_cast<std::uint32_t>(d);
-       }
+       if (!fw::parse_checksum(t, v)) return out.fail(CmdError::bad_number, "checksum: \"" + t + "\" is not 8 hex digits");
        safety_change_result(c.cx.svc->confirm_safety(v), false, out);
      }},
     {"stream", kStream, Gate::control, Where::service, "StreamService::target",

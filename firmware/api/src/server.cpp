@@ -129,7 +129,10 @@ struct ApiServer::Impl {
   ApiStats st;
 
   Impl(const ApiConfig& c, fw::Controller& k, const kin::Chain& ch, const kin::JointLimits& l)
-      : cfg(c), ctl(k), chain(ch), limits(l) {}
+      : cfg(c), ctl(k), chain(ch), limits(l) {
+    snap.safety_on = cfg.safety_on;  // until the service thread's first snapshot
+    snap.safety_checksum = cfg.safety_checksum;
+  }
 
   // --- network thread ---------------------------------------------------------------------
   Client* client_of(lws* wsi) {
@@ -269,8 +272,9 @@ struct ApiServer::Impl {
       h.role = role_name(c.role);
       h.client = c.id;
       h.controller = controller.load();
-      h.safety_on = cfg.safety_on;
-      h.safety_checksum = cfg.safety_checksum;
+      const ServiceSnapshot sn = snapshot();  // the envelope in force (a confirmed change's checksum)
+      h.safety_on = sn.safety_on;
+      h.safety_checksum = sn.safety_checksum;
       return send(c, hello_line(rq, h, chain, limits), true);
     }
     if (name == "subscribe" || name == "unsubscribe") {
@@ -737,6 +741,9 @@ std::size_t ApiServer::pump(ServiceContext& cx) {
       sn.outputs.emplace_back(cx.svc->settings().outputs[i].name, cx.svc->output_on(i));
     sn.frame = cx.svc->frame(cx.svc->active_frame()).name;
     if (cx.stream != nullptr) sn.stream = cx.stream->stats();
+    sn.safety_on = s.cfg.safety_on;
+    sn.safety_checksum = s.cfg.safety_checksum;
+    if (cx.svc->settings().safety.enabled) sn.safety_on = true, sn.safety_checksum = cx.svc->settings().safety_checksum;
     {
       std::lock_guard<std::mutex> l(s.snap_mu);
       s.snap = std::move(sn);

@@ -113,6 +113,8 @@ bool moves_arm(const Command& c) {
     case Cmd::safety:
     case Cmd::safety_normal:
     case Cmd::safety_reduced:
+    case Cmd::safety_stage:
+    case Cmd::safety_confirm:
     case Cmd::quit: return false;
   }
   return false;
@@ -915,9 +917,33 @@ void Console::run_command(Session& s, const Command& c, const StepParams* step) 
         return;
       }
       answer_control(s, svc_->set_safety_mode(c.cmd == Cmd::safety_reduced ? kin::SafetyMode::reduced
-                                                                              : kin::SafetyMode::normal));
+                                                                              : kin::SafetyMode::normal,
+                                              c.confirm));
       return;
+    case Cmd::safety_stage:
+    case Cmd::safety_confirm: do_safety_change(s, c); return;
   }
+}
+
+// A run-time change of [safety]: the service's stage_safety / confirm_safety (the API's
+// safety_stage / safety_confirm), rendered in one line.
+void Console::do_safety_change(Session& s, const Command& c) {
+  if (s.check_mode) {
+    answer_ok(s, "check mode: not run");
+    return;
+  }
+  if (c.cmd == Cmd::safety_stage) {
+    const SafetyChangeResult r = svc_->stage_safety(c.text.data());
+    if (!r.ok()) return answer_error(s, r.error, r.reason);
+    answer_ok(s, fmt("staged checksum=%08X previous=%08X expires_s=%.0f changes: %s; confirm with: safety confirm %08X",
+                     static_cast<unsigned>(r.checksum), static_cast<unsigned>(r.previous), r.expires_s,
+                     r.changes.c_str(), static_cast<unsigned>(r.checksum)));
+    return;
+  }
+  const SafetyChangeResult r = svc_->confirm_safety(c.checksum);
+  if (!r.ok()) return answer_error(s, r.error, r.reason);
+  answer_ok(s, fmt("safety configuration %08X in force (was %08X): %s", static_cast<unsigned>(r.checksum),
+                   static_cast<unsigned>(r.previous), r.changes.c_str()));
 }
 
 // ---------------------------------------------------------------------------

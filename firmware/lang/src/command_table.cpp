@@ -28,6 +28,9 @@ const char* to_string(ArgShape a) {
     case ArgShape::program_name: return "program_name";
     case ArgShape::record: return "record";
     case ArgShape::output: return "output";
+    case ArgShape::confirm: return "confirm";
+    case ArgShape::rest: return "rest";
+    case ArgShape::checksum: return "checksum";
   }
   return "?";
 }

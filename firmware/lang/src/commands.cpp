@@ -102,6 +102,8 @@ const char* to_string(Cmd c) {
     case Cmd::safety: return "safety";
     case Cmd::safety_normal: return "safety normal";
     case Cmd::safety_reduced: return "safety reduced";
+    case Cmd::safety_stage: return "safety stage";
+    case Cmd::safety_confirm: return "safety confirm";
     case Cmd::quit: return "quit";
   }
   return "?";
@@ -674,7 +676,16 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
     if ((u < 0x20 && ch != '\t') || u >= 0x7f) return fail(CmdError::binary, "control or non-ASCII byte 0x%02X in line", unsigned(u));
   }
   const Words ws = split(line);
-  if (ws.too_many) return fail(CmdError::arg_count, "too many words");
+  // A command that takes the rest of the line (safety stage) may have more words than the table.
+  bool rest_of_line = false;
+  for (const CommandSpec& e : kCommands) {
+    const std::string_view name(e.name);
+    const std::size_t sp = name.find(' ');
+    if (e.args == ArgShape::rest && sp != std::string_view::npos && ws.n >= 2 && ieq(ws.w[0], name.substr(0, sp)) &&
+        ieq(ws.w[1], name.substr(sp + 1)))
+      rest_of_line = true;
+  }
+  if (ws.too_many && !rest_of_line) return fail(CmdError::arg_count, "too many words");
   Command c;
   if (ws.n == 0 || ws.w[0][0] == '#' || ws.w[0][0] == ';') {
     out = c;
@@ -861,6 +872,30 @@ ParseResult parse_line(std::string_view line, int n_joints, GcodeModal& modal, C
           c.rate = v;
         }
       }
+      break;
+    }
+    case ArgShape::confirm:
+      if (nargs > 1) return fail(CmdError::arg_count, "%s takes at most the word confirm", name);
+      if (nargs == 1) {
+        const std::string_view w = ws.w[used];
+        if (!ieq(w, "confirm"))
+          return fail(CmdError::bad_option, "%s: '%.*s' is not `confirm`", name, int(w.size() > 20 ? 20 : w.size()), w.data());
+        c.confirm = true;
+      }
+      break;
+    case ArgShape::rest: {
+      if (nargs < 1) return fail(CmdError::arg_count, "%s needs the change: KEY = VALUE[; KEY = VALUE ...]", name);
+      // from the first argument to the end of the line (trailing blanks already cut)
+      const std::size_t from = static_cast<std::size_t>(ws.w[used].data() - line.data());
+      const std::string_view t = line.substr(from);
+      std::memcpy(c.text.data(), t.data(), t.size());  // t.size() <= kMaxLine < c.text.size()
+      break;
+    }
+    case ArgShape::checksum: {
+      if (nargs != 1) return fail(CmdError::arg_count, "%s takes one checksum (8 hex digits, as `safety stage` answered it)", name);
+      const std::string_view w = ws.w[used];
+      if (!parse_checksum(w, c.checksum))
+        return fail(CmdError::bad_number, "%s: '%.*s' is not 8 hex digits", name, int(w.size() > 20 ? 20 : w.size()), w.data());
       break;
     }
     case ArgShape::joint_word: {

@@ -55,4 +55,16 @@ Num parse_decimal(std::string_view s, double& out) {
   return Num::ok;
 }
 
+bool parse_checksum(std::string_view s, std::uint32_t& out) {
+  if (s.size() != 8) return false;
+  std::uint32_t v = 0;
+  for (const char ch : s) {
+    const int d = ch >= '0' && ch <= '9' ? ch - '0' : ch >= 'A' && ch <= 'F' ? ch - 'A' + 10 : ch >= 'a' && ch <= 'f' ? ch - 'a' + 10 : -1;
+    if (d < 0) return false;
+    v = (v << 4) | static_cast<std::uint32_t>(d);
+  }
+  out = v;
+  return true;
+}
+
 }  // namespace servoarm::fw

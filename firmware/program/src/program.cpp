@@ -515,6 +515,8 @@ StepKind kind_of(fw::Cmd c) {
     case fw::Cmd::collision_off:
     case fw::Cmd::safety_normal:
     case fw::Cmd::safety_reduced:
+    case fw::Cmd::safety_stage:
+    case fw::Cmd::safety_confirm:
     case fw::Cmd::quit: return StepKind::refused;
     case fw::Cmd::none:
     case fw::Cmd::help:

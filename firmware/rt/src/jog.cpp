@@ -78,7 +78,7 @@ bool Jogger::plan_moving(const kin::JointState& cmd) {
   // held to kMovingShare of the limit so the arm keeps room to catch up.
   kin::JointLimits L = limits_;
   for (int j = 0; j < n_; ++j) L.dyn[static_cast<std::size_t>(j)].max_velocity *= spec_.override;
-  cap_.apply(L, cmd, spec_.q_goal, spec_.qd_goal);  // the safety envelope's caps
+  cap_.apply_joints(L);  // the safety envelope's joint caps (its TCP cap below)
   kin::JointVector v = spec_.qd_goal;
   kin::JointState rel = cmd;
   for (int j = 0; j < n_; ++j) {
@@ -88,9 +88,10 @@ bool Jogger::plan_moving(const kin::JointState& cmd) {
     L.dyn[u].max_velocity = vmax - std::fabs(v[j]);
     L.lower[u] = -1e9;
     L.upper[u] = 1e9;
-    rel.pos[j] = cmd.pos[j] - spec_.q_goal[j];
-    rel.vel[j] = cmd.vel[j] - v[j];
   }
+  for (int j = 0; j < n_; ++j) rel.pos[j] = cmd.pos[j] - spec_.q_goal[j];
+  cap_.apply_moving(L, v, rel.pos, kMovingShare);  // the target's TCP speed, then the catch-up's, within the TCP cap
+  for (int j = 0; j < n_; ++j) rel.vel[j] = cmd.vel[j] - v[j];
   kin::JointTrajectory plan;
   if (kin::plan_movej(L, rel, kin::JointVector::Zero(n_), kin::MovejOptions{}, plan) != kin::MotionStatus::ok) return false;
   // Where the arm can get to: the relative path's extremes, the target's travel over the horizon,

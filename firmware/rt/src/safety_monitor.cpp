@@ -75,7 +75,7 @@ bool SafetyMonitor::check_state(const kin::JointLimits& limits, const kin::Joint
   // cmd_ is the TCP at cmd.pos (update() of this cycle)
   if (stops) (void)kin::stop_prediction(*chain_, limits, cmd, stop_, cmd_);
   if (dynamics) (void)kin::dynamics_prediction(*chain_, cmd, cmd_);
-  if (ahead) reduced_state_ratio_ = kin::speed_ratio(cfg_, kin::SafetyMode::reduced, cmd_);
+  if (ahead) reduced_state_ratio_ = kin::speed_ratio(cfg_, kin::SafetyMode::reduced, cmd_, kStopAim);
   if (!speeds_scaled) {
     const bool hit = kin::check_stop(cfg_, mode, cmd_, cfg_.position_tolerance, 1.0, out);
     cmd_.has_stop = cmd_.has_dynamics = false;
@@ -87,7 +87,7 @@ bool SafetyMonitor::check_state(const kin::JointLimits& limits, const kin::Joint
   // stop in this very cycle all the same: the stop that starts now is the ramp predicted, and one
   // a cycle later would end beyond it. Momentum and power beyond theirs are left to the caller
   // as the speeds are (speed_over()).
-  ratio_ = std::fmax(ratio_, kin::speed_ratio(cfg_, mode, cmd_));
+  ratio_ = std::fmax(ratio_, kin::speed_ratio(cfg_, mode, cmd_, kStopAim));
   const bool dyn = cmd_.has_dynamics;
   cmd_.has_dynamics = false;
   // The stop is checked as predicted one cycle on (its growth over the last cycle added): a
@@ -163,8 +163,11 @@ void SafetyMonitor::speed_cap(kin::SafetyMode mode, double aim, double horizon_s
   if (!(out.tcp < INFINITY)) return;
   kin::Jacobian J;
   if (kin::jacobian(*chain_, prev_q_cmd_, J) < kin::Status::ok) return;
-  for (int j = 0; j < n && j < kin::kMaxJoints; ++j)
-    out.tcp_gain[static_cast<std::size_t>(j)] = J.block<3, 1>(0, j).norm();
+  for (int j = 0; j < n && j < kin::kMaxJoints; ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    out.tcp_gain[u] = J.block<3, 1>(0, j).norm();
+    for (int k = 0; k < 3; ++k) out.tcp_col[u][static_cast<std::size_t>(k)] = J(k, j);
+  }
 }
 
 bool SafetyMonitor::predict_stop(const kin::JointLimits& limits, const kin::JointState& cmd, kin::SafetyMode mode,

@@ -175,12 +175,24 @@ std::string ArmService::jog_envelope_line(const kin::Chain& chain, const kin::Po
   return jog_envelope(chain, at);
 }
 
-ControlResult ArmService::set_safety_mode(kin::SafetyMode mode) {
+ControlResult ArmService::set_safety_mode(kin::SafetyMode mode, bool confirm) {
   ControlResult c;
   if (!cfg_.safety.enabled) {
     c.error = CmdError::bad_state;
     c.reason = "no safety envelope is configured ([safety] in the configuration, docs/safety.md)";
     return c;
+  }
+  // Only a looser mode needs the operator's confirmation; a stricter one is always allowed.
+  switch (mode) {
+    case kin::SafetyMode::normal:
+      if (safety_mode_ == kin::SafetyMode::reduced && !confirm) {
+        c.error = CmdError::bad_state;
+        c.reason = "Reduced -> Normal loosens the safety limits: confirm it (console `safety normal confirm`, API "
+                   "safety_mode with confirm=true); still Reduced";
+        return c;
+      }
+      break;
+    case kin::SafetyMode::reduced: break;
   }
   safety_mode_ = mode;
   if (ctl_ != nullptr) ctl_->set_safety_mode(mode);

@@ -260,7 +260,9 @@ void set_velocity(SafetySample& x, const SafetySample& p, const JointVector& q_p
 /// limit) and power limit (its square root: power goes with speed to the first (gravity) to the
 /// third (inertia) power, so a caller plans again until it holds) (0 when none is set or x has
 /// neither velocity nor stop): a path whose highest ratio is k runs within them k times slower.
-double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x);
+/// `stop_aim` (0, 1]: the stop limits taken at that fraction of their value (a margin for a
+/// caller whose slowing lags the prediction: the run-time speed scale).
+double speed_ratio(const SafetyConfig& cfg, SafetyMode mode, const SafetySample& x, double stop_aim = 1.0);
 
 /// The arm's momentum and mechanical power at state s (see the conventions above) into
 /// x.momentum / x.power (x.has_dynamics); the centres of mass' speeds from FK at s.pos and a

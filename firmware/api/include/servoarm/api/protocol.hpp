@@ -164,6 +164,9 @@ struct ServiceSnapshot {
   std::vector<std::pair<std::string, bool>> outputs;
   /// The streaming targets' counts since the stream's start (the state's `stream`).
   fw::StreamStats stream;
+  /// The safety envelope in force (hello's `safety`): after a confirmed run-time change, its checksum.
+  bool safety_on = false;
+  std::uint32_t safety_checksum = 0;
 };
 /// `svc`: the service's part (nullptr: left out).
 std::string state_line(const fw::Telemetry& t, double rate_hz, const kin::Chain& chain, std::uint64_t dropped,

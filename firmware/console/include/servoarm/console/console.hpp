@@ -286,6 +286,7 @@ class Console {
   void do_halt(Session& s, ProgramEnd how, const char* what, RequestOp op);
   void do_abort(Session& s);
   void do_switch(Session& s, const Command& c);  ///< freedrive on|off, collision on|off
+  void do_safety_change(Session& s, const Command& c);  ///< safety stage | safety confirm
   void do_dynamics(Session& s);                  ///< `freedrive`
   /// park, movej, movel, G0-G3 (teach points, a program step's point joints).
   void do_move(Session& s, const Command& c, const StepParams* step);

@@ -34,6 +34,9 @@ enum class ArgShape : std::uint8_t {
   program_name,  ///< exactly one program name (run)
   record,        ///< `start [rate=Hz]` or `stop NAME [tolerance=angle]`
   output,        ///< nothing (list) or NAME on|off (out)
+  confirm,       ///< nothing or the word `confirm` (safety normal)
+  rest,          ///< the rest of the line as typed, at least one character (safety stage)
+  checksum,      ///< exactly 8 hex digits (safety confirm)
 };
 const char* to_string(ArgShape a);
 
@@ -233,13 +236,29 @@ inline constexpr CommandSpec kCommands[] = {
     {"collision off", Cmd::collision_off, ArgShape::none, "collision off",
      "collision detection off: to move the arm clear of what it hit (it is still pressed against it: detected again "
      "at once otherwise), then `collision on`", "", false},
-    {"safety normal", Cmd::safety_normal, ArgShape::none, "safety normal",
-     "the safety envelope's Normal limits ([safety], docs/safety.md)",
-     "the moves planned from now on and the control thread's monitor (from its next cycle) use them; refused "
-     "(`error: bad_state no safety envelope is configured ...`) without [safety]", false},
+    {"safety normal", Cmd::safety_normal, ArgShape::confirm, "safety normal [confirm]",
+     "the safety envelope's Normal limits ([safety], docs/safety.md); from Reduced only with `confirm`",
+     "the moves planned from now on and the control thread's monitor (from its next cycle) use them. From Reduced "
+     "mode this loosens the limits: refused without the word `confirm` (`error: bad_state Reduced -> Normal loosens "
+     "the safety limits: confirm it ...`, the mode kept); the API's safety_mode asks the same (confirm=true). "
+     "Refused (`error: bad_state no safety envelope is configured ...`) without [safety]", false},
     {"safety reduced", Cmd::safety_reduced, ArgShape::none, "safety reduced",
      "the safety envelope's Reduced limits (safety.reduced_*: TCP and elbow speed, orientation cone)",
-     "as `safety normal`; a move faster than the Reduced TCP speed limit is refused at plan time", false},
+     "as `safety normal`, but never needs a confirmation (a stricter mode is always allowed); a move faster than the "
+     "Reduced TCP speed limit is refused at plan time", false},
+    {"safety stage", Cmd::safety_stage, ArgShape::rest, "safety stage KEY = VALUE[; KEY = VALUE ...]",
+     "stage a run-time change of the [safety] section: checked, nothing changes until `safety confirm`",
+     "the rest of the line is the change as TOML `key = value` pairs (`;` between, `safety.` optional; the line's "
+     "200 characters at most), checked through the configuration's key table against the robot (as at load; keys "
+     "that act at start only are refused). Answers `ok staged checksum=XXXXXXXX previous=YYYYYYYY expires_s=60 "
+     "changes: KEY = OLD -> NEW; ...; confirm with: safety confirm XXXXXXXX`; nothing changes yet. The service call "
+     "of the API's safety_stage (docs/safety.md#confirming-a-change)", false},
+    {"safety confirm", Cmd::safety_confirm, ArgShape::checksum, "safety confirm XXXXXXXX",
+     "apply the staged [safety] change: its checksum (as `safety stage` answered it), in time, with the arm at rest",
+     "answers `ok safety configuration XXXXXXXX in force (was YYYYYYYY): CHANGES`; the monitor takes it at its next "
+     "cycle, `status`, `safety` and the API's hello show the new checksum and an event says old -> new. Refused in "
+     "one line: nothing staged, another checksum or an expired one (the staged change is then dropped), the arm not "
+     "at rest (the change stays staged). The service call of the API's safety_confirm", false},
     {"safety", Cmd::safety, ArgShape::none, "safety",
      "the safety envelope: on or off, the mode, the configuration's checksum and the stops it made",
      "`safety=on mode=normal|reduced checksum=XXXXXXXX stops=N [zone=reduced_plane_K] speed_scale=S tool=NAME tool_radius_mm=R` "

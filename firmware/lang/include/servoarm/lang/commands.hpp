@@ -101,6 +101,8 @@ enum class Cmd : std::uint8_t {
   safety,         ///< `safety`: the safety envelope's mode, checksum and stops (query)
   safety_normal,  ///< `safety normal`: the envelope's Normal limits
   safety_reduced, ///< `safety reduced`: the envelope's Reduced limits
+  safety_stage,   ///< `safety stage KEY = VALUE; ...`: stage a run-time change of [safety] (text)
+  safety_confirm, ///< `safety confirm XXXXXXXX`: apply the staged change with that checksum
   quit,           ///< `quit` / `exit`: end this console session (the transport decides what ends: ConsoleServer)
 };
 
@@ -172,6 +174,10 @@ struct Command {
   int out_index = -1;                   ///< out: -1 list, -2 by name (word), >= 0 M62..M65 P
   bool out_on = false;
   bool out_sync = false;                ///< M62 / M63: at the start of the next move
+  // safety
+  bool confirm = false;                 ///< `safety normal confirm`: the operator confirms the looser mode
+  std::uint32_t checksum = 0;           ///< `safety confirm XXXXXXXX`: the staged change's checksum
+  std::array<char, kMaxLine + 1> text{};  ///< `safety stage ...`: the rest of the line as typed
 };
 
 struct ParseResult {

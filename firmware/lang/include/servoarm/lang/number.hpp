@@ -7,6 +7,7 @@
 // in the mantissa, nothing before or after; hex, "0x", "1e", ".", "nan", "inf" are refused.
 // No heap, no exceptions, no locale: callable from any thread.
 
+#include <cstdint>
 #include <string_view>
 
 namespace servoarm::fw {
@@ -19,6 +20,10 @@ enum class Num {
 
 /// Parse `s` as a strict decimal; `out` is written only on Num::ok.
 Num parse_decimal(std::string_view s, double& out);
+
+/// Exactly 8 hex digits (either case) into `out`, as a CRC-32 checksum is shown
+/// (`%08X`); false: anything else (`out` untouched).
+bool parse_checksum(std::string_view s, std::uint32_t& out);
 
 /// ASCII case-insensitive equality: how every word of the text front ends is matched
 /// (command words, options, `$` words, reserved names).

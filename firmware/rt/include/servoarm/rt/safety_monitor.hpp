@@ -94,6 +94,10 @@ class SafetyMonitor {
   /// scale can bring it to the Reduced limits before it gets there (in any direction: the plan's
   /// is not known yet). Nothing capped when the envelope is off.
   void speed_cap(kin::SafetyMode mode, double aim, double horizon_s, SpeedCap& out) const;
+  /// The stop limits the speed scale aims at, as a fraction of their value: the scale's ramp
+  /// lags a motion that still speeds up, and the predicted stop grows meanwhile
+  /// (docs/safety.md#speed-scaling).
+  static constexpr double kStopAim = 0.85;
   static constexpr double kCapSpeed = 0.25;  ///< m/s: speed_cap's speed per distance without a Reduced TCP limit
 
   /// The trigger plane the commanded tool sphere reaches beyond at the last update() (its

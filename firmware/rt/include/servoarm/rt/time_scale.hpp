@@ -94,29 +94,72 @@ struct TimeScale {
 struct SpeedCap {
   std::array<double, kin::kMaxJoints> joint;     ///< per joint: the highest speed a plan may use (rad/s, m/s); INFINITY: none
   std::array<double, kin::kMaxJoints> tcp_gain;  ///< per joint: the TCP's speed per unit joint speed at the pose (m/rad, |linear Jacobian column|)
+  std::array<std::array<double, 3>, kin::kMaxJoints> tcp_col;  ///< per joint: the linear Jacobian's column at the pose (m/rad)
   double tcp = INFINITY;                         ///< the TCP speed a plan may reach (m/s)
   SpeedCap() {
     joint.fill(INFINITY);
     tcp_gain.fill(0.0);
+    tcp_col.fill({0.0, 0.0, 0.0});
   }
   /// `L`'s velocity limits capped for a plan from `from` towards `goal`, or moving at `qd`
   /// (may be empty): each joint's at its cap, and those of the joints that move (goal, velocity
   /// or qd not zero) lowered together so that the sum of their TCP gains times their limits is
   /// within the TCP cap (the TCP's speed is at most that sum, whatever the direction).
   void apply(kin::JointLimits& L, const kin::JointState& from, const kin::JointVector& goal, const kin::JointVector& qd) const {
+    apply_joints(L);
     double sum = 0;
     std::array<bool, kin::kMaxJoints> moves{};
     for (int j = 0; j < L.n && j < kin::kMaxJoints; ++j) {
       const auto u = static_cast<std::size_t>(j);
-      double& v = L.dyn[u].max_velocity;
-      v = std::fmin(v, joint[u]);
       moves[u] = goal[j] != from.pos[j] || from.vel[j] != 0.0 || (qd.size() > j && qd[j] != 0.0);
-      if (moves[u]) sum += tcp_gain[u] * v;
+      if (moves[u]) sum += tcp_gain[u] * L.dyn[u].max_velocity;
     }
     if (!(sum > tcp)) return;
     const double f = tcp / sum;
     for (int j = 0; j < L.n && j < kin::kMaxJoints; ++j)
       if (moves[static_cast<std::size_t>(j)]) L.dyn[static_cast<std::size_t>(j)].max_velocity *= f;
+  }
+  /// `L`'s velocity limits, each within its joint's cap.
+  void apply_joints(kin::JointLimits& L) const {
+    for (int j = 0; j < L.n && j < kin::kMaxJoints; ++j) {
+      double& v = L.dyn[static_cast<std::size_t>(j)].max_velocity;
+      v = std::fmin(v, joint[static_cast<std::size_t>(j)]);
+    }
+  }
+  /// The TCP cap of a plan that follows a moving target (a stream), each part along its own
+  /// direction with the linear Jacobian's columns at the pose: the target's velocity `v` (joint
+  /// speeds) slowed as a whole until its TCP speed |J v| is within `target_share` of the cap;
+  /// then the relative (catch-up) limits `rel` lowered together until the catch-up from
+  /// `rel_pos` (the arm less the target) straight to the target, at the highest speed they
+  /// allow, adds at most the rest of the cap. A target within the cap is followed at its own
+  /// speed, not held to the cap spread over every joint's limit at once.
+  void apply_moving(kin::JointLimits& rel, kin::JointVector& v, const kin::JointVector& rel_pos, double target_share) const {
+    if (!(tcp < INFINITY)) return;
+    const int n = static_cast<int>(v.size()) < rel.n ? static_cast<int>(v.size()) : rel.n;
+    const double sv = tcp_speed(v, n);
+    if (sv > target_share * tcp) {
+      const double f = target_share * tcp / sv;
+      for (int j = 0; j < n && j < kin::kMaxJoints; ++j) {
+        rel.dyn[static_cast<std::size_t>(j)].max_velocity += std::fabs(v[j]) * (1.0 - f);  // the room the target no longer takes
+        v[j] *= f;
+      }
+    }
+    // the catch-up at its highest common speed k along -rel_pos
+    double k = INFINITY;
+    for (int j = 0; j < n && j < kin::kMaxJoints; ++j)
+      if (rel_pos[j] != 0.0) k = std::fmin(k, rel.dyn[static_cast<std::size_t>(j)].max_velocity / std::fabs(rel_pos[j]));
+    if (!(k < INFINITY)) return;
+    const double catch_up = k * tcp_speed(rel_pos, n), room = tcp - std::fmin(sv, target_share * tcp);
+    if (!(catch_up > room)) return;
+    const double g = room / catch_up;
+    for (int j = 0; j < n && j < kin::kMaxJoints; ++j) rel.dyn[static_cast<std::size_t>(j)].max_velocity *= g;
+  }
+  /// |J q̇|: the TCP's speed of joint speeds `qd` at the pose (m/s).
+  double tcp_speed(const kin::JointVector& qd, int n) const {
+    double t[3] = {0, 0, 0};
+    for (int j = 0; j < n && j < kin::kMaxJoints; ++j)
+      for (std::size_t a = 0; a < 3; ++a) t[a] += tcp_col[static_cast<std::size_t>(j)][a] * qd[j];
+    return std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
   }
 };
 

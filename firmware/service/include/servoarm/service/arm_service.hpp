@@ -733,7 +733,7 @@ enum class ServiceOp : std::uint8_t {
   point_teach,          ///< teach(TeachRequest) -> PointResult
   point_delete,         ///< delete_point(name, dry) -> PointResult
   point_move,           ///< move_to_point(PointMove, MoveContext) -> PointResult
-  safety_mode,          ///< set_safety_mode(mode) -> ControlResult (Normal / Reduced)
+  safety_mode,          ///< set_safety_mode(mode, confirm) -> ControlResult (Normal / Reduced)
   safety_stage,         ///< stage_safety(changes) -> SafetyChangeResult
   safety_confirm,       ///< confirm_safety(checksum) -> SafetyChangeResult
 };
@@ -974,10 +974,13 @@ class ArmService {
 
   /// Switch the safety envelope's mode (docs/safety.md): the planning checks of the moves
   /// queued from now on and the control thread's monitor (from its next cycle) use the
-  /// mode's limits. Refused (bad_state, one line) when no envelope is configured.
+  /// mode's limits. Refused (bad_state, one line) when no envelope is configured, and from
+  /// Reduced to Normal (which loosens the limits) unless `confirm` (the operator's explicit
+  /// confirmation: console `safety normal confirm`, the API's safety_mode confirm=true); a
+  /// switch to Reduced, the stricter mode, never needs it. The console and the API call this.
+  ControlResult set_safety_mode(kin::SafetyMode mode, bool confirm = false);
   /// A tool's safety sphere radius (m): its radius=, else safety.tool_radius_mm.
   double tool_radius(const NamedPose& def) const { return def.radius >= 0 ? def.radius : cfg_.safety.tool_radius; }
-  ControlResult set_safety_mode(kin::SafetyMode mode);
   kin::SafetyMode safety_mode() const { return safety_mode_; }
   /// Set-up: what turns a change of [safety] into a proposal (the App: the key table's checks);
   /// unset, stage_safety() refuses.
