@@ -326,7 +326,7 @@ const ConfigKey kConfigTable[] = {
     K{"loop.rate_hz", &F::rate_hz, "Hz",
       "control rate, and the SYNC rate of the drive bus (written to each drive's 60C2h interpolation period). Left "
       "out on a real bus with [[drive]] tables: the highest of 1000, 800, 500, 400 and 250 Hz whose bus load "
-      "(bus.bitrate) stays at most 60 % (400 Hz for 6 drives at 1 Mbit/s)"}
+      "(each interface at its own bit rate) stays at most 60 % (400 Hz for 6 drives at 1 Mbit/s)"}
         .within(250, 4000),
     K{"loop.priority", &F::priority, "", "SCHED_FIFO priority of the control thread; 0 = normal scheduling"}.within(0, 99),
     K{"loop.cpu", &F::cpu, "", "pin the control thread to this CPU (e.g. an isolcpus= one); -1 = no affinity"}.within(-1, 1023),
@@ -358,7 +358,8 @@ const ConfigKey kConfigTable[] = {
       "longest a drive may sit in one CiA 402 state while being enabled, or show the old mode (6061h) after a mode "
       "change; longer fails it naming the node"}.within(10, 60000),
     K{"bus.bitrate", &F::bitrate, "bit/s",
-      "bit rate of the drive bus, as its interface is set up (`ip link set can0 type can bitrate 1000000`; "
+      "bit rate of the drive bus (bus.can, and every drive.can whose drives give no drive.bitrate), as its "
+      "interface is set up (`ip link set can0 type can bitrate 1000000`; "
       "SERVOARM_CAN_BITRATE of the .deb). The cyclic traffic's load at it (`armfw --config FILE --bus-load`, "
       "docs/deployment.md#bus-load) is checked on a real bus (not \"sim\" or a vcan): above 85 % the configuration "
       "is refused, above 60 % armfw warns at start"}
@@ -366,8 +367,8 @@ const ConfigKey kConfigTable[] = {
     K{"bus.data_bitrate", &F::data_bitrate, "bit/s",
       "CAN FD's data bit rate (`ip link set can0 type can bitrate 1000000 dbitrate 5000000 fd on`): on an interface "
       "whose drives say drive.can_fd the bus-load check counts their frames as CAN FD with bit-rate switch, the "
-      "arbitration at bus.bitrate and the data phase at this rate; 0 = counted as classical frames (an upper "
-      "bound)"}
+      "arbitration at the interface's bit rate and the data phase at this rate (drive.data_bitrate: another one "
+      "per interface); 0 = counted as classical frames (an upper bound)"}
         .within(0, 8000000)
         .related(data_bitrate_not_below_nominal, "0 or at least bus.bitrate"),
     K{"bus.tpdo2", &F::tpdo2, "",
@@ -1498,9 +1499,7 @@ hal::BusTraffic bus_traffic(const FwConfig& c, std::size_t joints) {
 bool bus_load_checked(const FwConfig& c) { return c.can != "sim" && c.can.rfind("vcan", 0) != 0; }
 
 namespace {
-bool on_iface(const FwConfig& c, const DriveConfig& d, const std::string& iface) {
-  return (d.can.empty() ? c.can : d.can) == iface;
-}
+bool on_iface(const FwConfig& c, const DriveConfig& d, const std::string& iface) { return drive_iface(c, d) == iface; }
 }  // namespace
 
 double interface_bitrate(const FwConfig& c, const std::string& iface) {
