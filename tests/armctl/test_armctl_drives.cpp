@@ -194,6 +194,43 @@ TEST(ArmctlDrives, CheckOfAMatchingMixedArmOnTwoBusesIsOk) {
   STRCMP_CONTAINS("the configuration matches the buses", out.c_str());
 }
 
+// A drive that is not seen is told to check the bit rate its own interface is set up for:
+// can1's drive.bitrate (500 kbit/s) for the CiA 402 wrist, bus.bitrate and the FD data phase
+// for the Damiao motors on can0.
+TEST(ArmctlDrives, CheckNamesEachInterfacesOwnBitrate) {
+  ManualClock clock;
+  std::vector<sim::MitMotorSpec> specs = motors(true);
+  specs.resize(4);
+  sim::MitPlant mit_plant(clock, specs);
+  mit_plant.at(3).quirks().silent = true;  // id 4: another bitrate
+  sim::SimPlant co_plant(clock, {5});      // node 6 is not on can1
+  clock.set_idle_hook([&](TimePoint t) {
+    mit_plant.step(t);
+    co_plant.step(t);
+  });
+  FwConfig cfg = six_damiao("can0", true);
+  cfg.data_bitrate = 5000000;
+  for (std::size_t j = 4; j < 6; ++j) {
+    cfg.drives[j].family = "cia402";
+    cfg.drives[j].motor.clear();
+    cfg.drives[j].can_fd = false;
+    cfg.drives[j].can = "can1";
+    cfg.drives[j].bitrate = 500000;
+  }
+  const fw::BusOpener open = [&](const std::string& iface, bool, std::string&) -> CanBus* {
+    return iface == "can0" ? &mit_plant.master_bus() : &co_plant.master_bus();
+  };
+  std::string out;
+  const int problems = fw::drives_check(cfg, 6, open, clock, out);
+  clock.set_idle_hook(nullptr);
+  std::printf("\n%s", out.c_str());
+  LONGS_EQUAL(2, problems);
+  STRCMP_CONTAINS("check drive.node, the bitrate (500000 bit/s in drive.bitrate), wiring",
+                  line_with(out, "joint 6 (cia402 node 6 on can1): not seen").c_str());
+  STRCMP_CONTAINS("the bitrate (1000000 bit/s in bus.bitrate, data phase 5000000 bit/s), wiring",
+                  line_with(out, "joint 4 (damiao id 4 on can0): not seen").c_str());
+}
+
 // The motor's own zero, when the user asks for it (`armctl drives zero --iface IFACE --id N`):
 // the save-zero frame (FF..FE) to a disabled Damiao motor, whose position then reads 0; the
 // position before and after said in one line. An enabled motor (armfw driving it) or one that

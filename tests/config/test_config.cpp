@@ -1189,6 +1189,107 @@ TEST(Config, BusLoadOfCanFdFramesCountsTheDataBitrate) {
   CHECK_TEXT(has(slow, "bus.data_bitrate"), slow.c_str());
 }
 
+// Several buses at their own rates: can0 carries four Damiao motors at CAN FD 1/5 Mbit/s,
+// can1 two CiA 402 drives at 500 kbit/s (drive.bitrate). can1's traffic at 1 kHz is
+// (55 + 4 x 115) bits a cycle + 2 x 20/s x 65 heartbeat bits = 517600 bit/s: 51.8 % of
+// 1 Mbit/s, 103.5 % of its own 500 kbit/s, so it is refused naming can1 and drive.bitrate.
+namespace {
+std::string mixed_arm(const std::string& loop, const std::string& can1_extra) {
+  std::string t = loop + "[bus]\ncan = \"can0\"\nbitrate = 1000000\ndata_bitrate = 5000000\n";
+  for (int i = 1; i <= 4; ++i)
+    t += "[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nnode = " + std::to_string(i) +
+         "\ncan_fd = true\nhoming.method = \"absolute\"\n";
+  for (int i = 5; i <= 6; ++i)
+    t += "[[drive]]\ncan = \"can1\"\nnode = " + std::to_string(i) + "\nhoming.method = \"absolute\"\n" + can1_extra;
+  return t;
+}
+}  // namespace
+
+TEST(Config, EachInterfaceIsLoadCheckedAtItsOwnBitrate) {
+  const std::string loop = "[loop]\nrate_hz = 1000\n";
+  FwConfig at1m;
+  STRCMP_EQUAL("", load_config_text(mixed_arm(loop, ""), "m.toml", at1m).c_str());
+  FwConfig at500k;
+  const std::string e = load_config_text(mixed_arm(loop, "bitrate = 500000\n"), "m.toml", at500k);
+  std::printf("\n  can1 at 500 kbit/s: %s\n", e.c_str());
+  CHECK_TEXT(has(e, "loop.rate_hz: drive.can \"can1\": bus load 103.5 % of drive.bitrate 500000 bit/s at loop.rate_hz "
+                    "1000 with 2 drives") && has(e, "above 85 %"),
+             e.c_str());
+  CHECK_TEXT(e.find('\n') == std::string::npos, e.c_str());
+  // the interface's rates, for armfw and armctl drives check
+  DOUBLES_EQUAL(1e6, interface_bitrate(at1m, "can1"), 0);
+  DOUBLES_EQUAL(5e6, interface_data_bitrate(at1m, "can0"), 0);
+  DOUBLES_EQUAL(0, interface_data_bitrate(at1m, "can1"), 0);  // classical: no drive says can_fd
+  FwConfig slow = at1m;
+  slow.drives[4].bitrate = slow.drives[5].bitrate = 500000;
+  DOUBLES_EQUAL(5e5, interface_bitrate(slow, "can1"), 0);
+  DOUBLES_EQUAL(1e6, interface_bitrate(slow, "can0"), 0);
+  // loop.rate_hz left out: the highest standard rate every interface leaves room at (500 Hz:
+  // can1 at 52.0 % of 500 kbit/s)
+  FwConfig picked;
+  STRCMP_EQUAL("", load_config_text(mixed_arm("", "bitrate = 500000\n"), "m.toml", picked).c_str());
+  DOUBLES_EQUAL(500, picked.rate_hz, 0);
+}
+
+// All drives on one interface run at one rate: a drive.bitrate (or drive.data_bitrate) that
+// another drive on the interface does not share, given or inherited, is refused naming both.
+TEST(Config, DrivesOnOneInterfaceAgreeOnItsBitrates) {
+  const std::string loop = "[loop]\nrate_hz = 250\n";
+  struct Case {
+    std::string toml;
+    const char* want;
+  } bad[] = {
+      {mixed_arm(loop, "") + "[[drive]]\ncan = \"can1\"\nnode = 7\nbitrate = 500000\nhoming.method = \"absolute\"\n",
+       "drive[7].bitrate: 500000 on can1, but drive[5] on the same interface has 1000000 (bus.bitrate)"},
+      {mixed_arm(loop, "bitrate = 500000\n") + "[[drive]]\ncan = \"can1\"\nnode = 7\nbitrate = 250000\n"
+                                               "homing.method = \"absolute\"\n",
+       "drive[5].bitrate: 500000 on can1, but drive[7] on the same interface has 250000"},
+      {mixed_arm(loop, "can_fd = true\ndata_bitrate = 2000000\n") +
+           "[[drive]]\ncan = \"can1\"\nnode = 7\ncan_fd = true\nhoming.method = \"absolute\"\n",
+       "drive[5].data_bitrate: 2000000 on can1, but drive[7] on the same interface has 5000000 (bus.data_bitrate)"},
+      {mixed_arm(loop, "bitrate = 500000\ncan_fd = true\ndata_bitrate = 250000\n"),
+       "drive[5].data_bitrate: must be at least the interface's bit rate (500000), or 0 (got 250000)"},
+      {mixed_arm(loop, "data_bitrate = 2000000\n"), "drive[5].data_bitrate: is for a drive.can_fd interface"},
+  };
+  for (const Case& b : bad) {
+    FwConfig k;
+    const std::string e = load_config_text(b.toml, "m.toml", k);
+    CHECK_TEXT(has(e, b.want) && e.find('\n') == std::string::npos, ("wanted '" + std::string(b.want) + "' in: " + e).c_str());
+  }
+  FwConfig ok;
+  STRCMP_EQUAL("", load_config_text(mixed_arm(loop, "bitrate = 500000\ncan_fd = true\ndata_bitrate = 2000000\n"), "m.toml", ok).c_str());
+  DOUBLES_EQUAL(2e6, interface_data_bitrate(ok, "can1"), 0);
+}
+
+// armfw --bus-load prints one table per interface, from the traffic the check counts: six
+// Damiao motors on can0 show MIT frames and the 162 % the check refuses; a mixed arm, two tables.
+TEST(Config, BusLoadTableIsOnePerInterfaceWithItsOwnFramesAndRates) {
+  std::string six = "[loop]\nrate_hz = 1000\n[bus]\ncan = \"can0\"\n";
+  for (int i = 1; i <= 6; ++i)
+    six += "[[drive]]\nfamily = \"damiao\"\nmotor = \"DM-J4340\"\nnode = " + std::to_string(i) +
+           "\nhoming.method = \"absolute\"\n";
+  FwConfig c;
+  STRCMP_EQUAL("", load_config_text(six, "six.toml", c, false).c_str());
+  const std::string t = bus_load_table(c, 6);
+  std::printf("\n%s", t.c_str());
+  CHECK_TEXT(has(t, "bus load on can0: 6 drives (damiao)"), t.c_str());
+  CHECK_TEXT(has(t, "\nMIT command ") && has(t, "\nMIT feedback "), t.c_str());
+  CHECK_TEXT(!has(t, "SYNC") && !has(t, "RPDO1"), t.c_str());
+  CHECK_TEXT(has(t, "162.0 %\nrefused: above 85 %: at most 524 Hz fits"), t.c_str());
+  FwConfig m;
+  STRCMP_EQUAL("", load_config_text(mixed_arm("[loop]\nrate_hz = 1000\n", "bitrate = 500000\n"), "m.toml", m, false).c_str());
+  const std::string two = bus_load_table(m, 6);
+  std::printf("\n%s", two.c_str());
+  const std::size_t a = two.find("bus load on can0: 4 drives (damiao), loop.rate_hz 1000, bus.bitrate 1000000 bit/s, "
+                                 "CAN FD data phase 5000000 bit/s");
+  const std::size_t b = two.find("bus load on can1: 2 drives (cia402), loop.rate_hz 1000, drive.bitrate 500000 bit/s, "
+                                 "classical CAN");
+  CHECK_TEXT(a != std::string::npos && b != std::string::npos && a < b, two.c_str());
+  CHECK_TEXT(has(two.substr(b), "\nSYNC ") && !has(two.substr(b), "MIT") && !has(two.substr(a, b - a), "SYNC"), two.c_str());
+  CHECK_TEXT(has(two.substr(b), "103.5 %\nrefused: above 85 %"), two.c_str());
+  CHECK_TEXT(has(two.substr(a, b - a), "\nfits: at most 60 %") || has(two.substr(a, b - a), "\nwarning:"), two.c_str());
+}
+
 // [safety]: the envelope's keys are read into the kinematics core's SI struct; bad ones
 // (NaN, zero normal, inverted box, partial groups, a keep-in box narrower than the tool sphere)
 // are refused at load with one line naming the key; the park pose outside is refused against

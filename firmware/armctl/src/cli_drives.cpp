@@ -162,6 +162,12 @@ int drives_check(const FwConfig& cfg, int joints, const BusOpener& open, hal::Cl
       continue;
     }
     opt.damiao = any_mit;
+    // the rates this interface's drives are set up for (drive.bitrate / drive.data_bitrate, else bus.*)
+    bool own_rate = false;
+    for (const Joint& j : js) own_rate = own_rate || (j.iface == iface && j.d.bitrate != 0);
+    const double data_rate = interface_data_bitrate(cfg, iface);
+    const std::string rates = num(interface_bitrate(cfg, iface)) + " bit/s in " + (own_rate ? "drive.bitrate" : "bus.bitrate") +
+                              (data_rate > 0 ? ", data phase " + num(data_rate) + " bit/s" : std::string());
     std::vector<hal::ScannedDrive> found(256);
     const std::size_t n = hal::scan_drives(*bus, clock, opt, found);
     std::vector<bool> claimed(n, false);
@@ -178,8 +184,8 @@ int drives_check(const FwConfig& cfg, int joints, const BusOpener& open, hal::Cl
       if (d.family == "cia402") {
         const int i = find(hal::ScannedDrive::Kind::canopen, j.node);
         if (i < 0) {
-          out += who + ": not seen (no answer to an SDO read of 1000h): check drive.node, the bitrate (" +
-                 num(cfg.bitrate) + " bit/s in bus.bitrate), wiring, termination and power\n";
+          out += who + ": not seen (no answer to an SDO read of 1000h): check drive.node, the bitrate (" + rates +
+                 "), wiring, termination and power\n";
           ++problems;
           continue;
         }
@@ -207,8 +213,8 @@ int drives_check(const FwConfig& cfg, int joints, const BusOpener& open, hal::Cl
       const int i = find(hal::ScannedDrive::Kind::damiao, j.node);
       if (i < 0) {
         out += who + fmt(": not seen (no answer to a register read in %s): a motor set to %s needs drive.can_fd = %s; "
-                         "else check drive.node, the bitrate, wiring, termination and power\n",
-                         format_name(opt.fd), format_name(!opt.fd), opt.fd ? "false" : "true");
+                         "else check drive.node, the bitrate (%s), wiring, termination and power\n",
+                         format_name(opt.fd), format_name(!opt.fd), opt.fd ? "false" : "true", rates.c_str());
         ++problems;
         continue;
       }

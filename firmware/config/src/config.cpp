@@ -267,6 +267,39 @@ std::string drive_master_id_free(const DriveConfig& d, const FwConfig& c) {
   return "";
 }
 
+// drive.bitrate / drive.data_bitrate: one value per interface. Each drive's own or inherited
+// value is compared with every other drive on its interface (data bit rates among the
+// drive.can_fd ones), so the first drive that gives a value the others do not share is named.
+const std::string& drive_iface(const FwConfig& c, const DriveConfig& d) { return d.can.empty() ? c.can : d.can; }
+std::string drive_index_text(const FwConfig& c, const DriveConfig& d) {
+  for (std::size_t i = 0; i < c.drives.size(); ++i)
+    if (&c.drives[i] == &d) return "drive[" + std::to_string(i + 1) + "]";
+  return "a drive";
+}
+template <double DriveConfig::*Own, double FwConfig::*Bus>
+std::string drive_rate_agrees(const DriveConfig& d, const FwConfig& c, const char* bus_key, bool fd_only) {
+  const double mine = d.*Own != 0 ? d.*Own : c.*Bus;
+  for (const DriveConfig& o : c.drives) {
+    if (&o == &d || drive_iface(c, o) != drive_iface(c, d) || (fd_only && !o.can_fd)) continue;
+    const double theirs = o.*Own != 0 ? o.*Own : c.*Bus;
+    if (theirs != mine)
+      return num_text(d.*Own) + " on " + drive_iface(c, d) + ", but " + drive_index_text(c, o) +
+             " on the same interface has " + num_text(theirs) + (o.*Own != 0 ? "" : std::string(" (") + bus_key + ")") +
+             ": every drive on one interface gives the same";
+  }
+  return "";
+}
+std::string drive_bitrate_agrees(const DriveConfig& d, const FwConfig& c) {
+  return drive_rate_agrees<&DriveConfig::bitrate, &FwConfig::bitrate>(d, c, "bus.bitrate", false);
+}
+std::string drive_data_bitrate_ok(const DriveConfig& d, const FwConfig& c) {
+  if (!d.can_fd) return "is for a drive.can_fd interface (classical frames have no data phase)";
+  const double nominal = d.bitrate != 0 ? d.bitrate : c.bitrate;
+  if (d.data_bitrate < nominal)
+    return "must be at least the interface's bit rate (" + num_text(nominal) + "), or 0 (got " + num_text(d.data_bitrate) + ")";
+  return drive_rate_agrees<&DriveConfig::data_bitrate, &FwConfig::data_bitrate>(d, c, "bus.data_bitrate", true);
+}
+
 std::string homing_order_once(const FwConfig& c, const FwConfig&) {
   std::vector<int> seen;
   for (const auto& g : c.homing_order)
@@ -293,7 +326,7 @@ const ConfigKey kConfigTable[] = {
     K{"loop.rate_hz", &F::rate_hz, "Hz",
       "control rate, and the SYNC rate of the drive bus (written to each drive's 60C2h interpolation period). Left "
       "out on a real bus with [[drive]] tables: the highest of 1000, 800, 500, 400 and 250 Hz whose bus load "
-      "(bus.bitrate) stays at most 60 % (400 Hz for 6 drives at 1 Mbit/s)"}
+      "(each interface at its own bit rate) stays at most 60 % (400 Hz for 6 drives at 1 Mbit/s)"}
         .within(250, 4000),
     K{"loop.priority", &F::priority, "", "SCHED_FIFO priority of the control thread; 0 = normal scheduling"}.within(0, 99),
     K{"loop.cpu", &F::cpu, "", "pin the control thread to this CPU (e.g. an isolcpus= one); -1 = no affinity"}.within(-1, 1023),
@@ -325,7 +358,8 @@ const ConfigKey kConfigTable[] = {
       "longest a drive may sit in one CiA 402 state while being enabled, or show the old mode (6061h) after a mode "
       "change; longer fails it naming the node"}.within(10, 60000),
     K{"bus.bitrate", &F::bitrate, "bit/s",
-      "bit rate of the drive bus, as its interface is set up (`ip link set can0 type can bitrate 1000000`; "
+      "bit rate of the drive bus (bus.can, and every drive.can whose drives give no drive.bitrate), as its "
+      "interface is set up (`ip link set can0 type can bitrate 1000000`; "
       "SERVOARM_CAN_BITRATE of the .deb). The cyclic traffic's load at it (`armfw --config FILE --bus-load`, "
       "docs/deployment.md#bus-load) is checked on a real bus (not \"sim\" or a vcan): above 85 % the configuration "
       "is refused, above 60 % armfw warns at start"}
@@ -333,8 +367,8 @@ const ConfigKey kConfigTable[] = {
     K{"bus.data_bitrate", &F::data_bitrate, "bit/s",
       "CAN FD's data bit rate (`ip link set can0 type can bitrate 1000000 dbitrate 5000000 fd on`): on an interface "
       "whose drives say drive.can_fd the bus-load check counts their frames as CAN FD with bit-rate switch, the "
-      "arbitration at bus.bitrate and the data phase at this rate; 0 = counted as classical frames (an upper "
-      "bound)"}
+      "arbitration at the interface's bit rate and the data phase at this rate (drive.data_bitrate: another one "
+      "per interface); 0 = counted as classical frames (an upper bound)"}
         .within(0, 8000000)
         .related(data_bitrate_not_below_nominal, "0 or at least bus.bitrate"),
     K{"bus.tpdo2", &F::tpdo2, "",
@@ -748,6 +782,20 @@ const DriveKey kDriveTable[] = {
        "MTU says it cannot) and the MIT families send their frames as FD with bit-rate switch (Damiao motors set to "
        "CAN FD answer only those; set the bitrates with `ip link set can0 type can bitrate 1000000 dbitrate 5000000 "
        "fd on`). Every drive on one interface says the same"},
+    DK{"bitrate", &D::bitrate, "bit/s",
+       "bit rate of this drive's interface (drive.can) when it is not bus.bitrate, as that interface is set up (a "
+       "CiA 402 wrist on can1 at 500 kbit/s beside motors on can0 at 1 Mbit/s): the bus-load check counts that "
+       "interface at it and `armctl drives check` names it. Every drive on one interface has the same, given or "
+       "inherited"}
+        .within(10000, 1000000).related(drive_bitrate_agrees, "the same on every drive of the interface")
+        .unset_means(0, "bus.bitrate", true),
+    DK{"data_bitrate", &D::data_bitrate, "bit/s",
+       "CAN FD data bit rate of this drive's interface when it is not bus.data_bitrate (drive.can_fd drives only): "
+       "the bus-load check counts that interface's data phase at it. At least the interface's bit rate; every "
+       "drive.can_fd drive on one interface has the same, given or inherited"}
+        .within(10000, 8000000)
+        .related(drive_data_bitrate_ok, "drive.can_fd only, at least the interface's bit rate, the same on the interface")
+        .unset_means(0, "bus.data_bitrate", true),
     DK{"counts_per_rev", &D::counts_per_rev, "counts/rev",
        "encoder counts per motor revolution (per motor mm for prismatic joints)"}
         .below(1, kTwo31).unset_means(0, "bus.counts_per_rev", false),
@@ -1451,6 +1499,26 @@ hal::BusTraffic bus_traffic(const FwConfig& c, std::size_t joints) {
 bool bus_load_checked(const FwConfig& c) { return c.can != "sim" && c.can.rfind("vcan", 0) != 0; }
 
 namespace {
+bool on_iface(const FwConfig& c, const DriveConfig& d, const std::string& iface) { return drive_iface(c, d) == iface; }
+}  // namespace
+
+double interface_bitrate(const FwConfig& c, const std::string& iface) {
+  for (const DriveConfig& d : c.drives)
+    if (on_iface(c, d, iface) && d.bitrate != 0) return d.bitrate;
+  return c.bitrate;
+}
+
+double interface_data_bitrate(const FwConfig& c, const std::string& iface) {
+  bool fd = false;
+  for (const DriveConfig& d : c.drives)
+    if (on_iface(c, d, iface) && d.can_fd) {
+      if (d.data_bitrate != 0) return d.data_bitrate;
+      fd = true;
+    }
+  return fd ? c.data_bitrate : 0;
+}
+
+namespace {
 std::string pct_text(double share) {
   char b[32];
   std::snprintf(b, sizeof b, "%.1f %%", share * 100.0);
@@ -1470,6 +1538,17 @@ std::string frames_text(const hal::BusLoad& l, double rate) {
   return o;
 }
 
+/// One interface as the load check sees it: `c` is the configuration with bus.can, bus.bitrate
+/// and bus.data_bitrate set to the interface's (data_bitrate 0: classical frames), `t` its traffic.
+struct IfaceLoad {
+  FwConfig c;
+  hal::BusTraffic t;
+  std::string families;     ///< "damiao", "damiao, cia402"
+  const char* rate_key;     ///< where the bit rate comes from: "bus.bitrate" or "drive.bitrate"
+  const char* can_key;      ///< "bus.can" or "drive.can"
+  hal::BusLoad load() const { return hal::bus_load(t, c.bitrate, c.data_bitrate); }
+};
+
 /// Highest rate (Hz) at which the load of `c`'s traffic `t` stays at most `share`.
 double rate_for(const FwConfig& c, hal::BusTraffic t, double share) {
   t.rate_hz = 1;
@@ -1481,9 +1560,10 @@ double rate_for(const FwConfig& c, hal::BusTraffic t, double share) {
   return per_hz > 0 ? std::max(0.0, (share - fixed) / per_hz) : 1e9;
 }
 
-std::string load_line(const FwConfig& c, const hal::BusTraffic& t, const hal::BusLoad& l) {
-  return "bus load " + pct_text(l.total()) + " of bus.bitrate " + num_text(c.bitrate) + " bit/s at loop.rate_hz " +
-         num_text(c.rate_hz) + " with " + std::to_string(t.joints + t.mit_joints) + " drives (" +
+std::string load_line(const IfaceLoad& i, const hal::BusLoad& l) {
+  const FwConfig& c = i.c;
+  return "bus load " + pct_text(l.total()) + " of " + i.rate_key + " " + num_text(c.bitrate) + " bit/s at loop.rate_hz " +
+         num_text(c.rate_hz) + " with " + std::to_string(i.t.joints + i.t.mit_joints) + " drives (" +
          frames_text(l, c.rate_hz) +
          (c.data_bitrate > 0 ? ", CAN FD, data phase " + num_text(c.data_bitrate) + " bit/s" : std::string()) +
          ", worst-case bit stuffing)";
@@ -1510,81 +1590,99 @@ hal::BusTraffic interface_traffic(const FwConfig& c, const std::string& iface) {
   return t;
 }
 
-/// `what` (problem or warning) of each interface the drives use, "" when none has one; an
+/// The interfaces with drives, each at its own rates: with [[drive]] tables every interface
+/// they use (bus.can first), else bus.can with `joints` CiA 402 drives and classical frames.
+std::vector<IfaceLoad> interface_loads(const FwConfig& c, std::size_t joints) {
+  std::vector<IfaceLoad> out;
+  if (c.drives.empty()) {
+    if (joints == 0) return out;
+    out.push_back(IfaceLoad{c, bus_traffic(c, joints), "cia402", "bus.bitrate", "bus.can"});
+    out.back().c.data_bitrate = 0;  // without [[drive]] tables no drive says drive.can_fd
+    return out;
+  }
+  for (const std::string& iface : drive_interfaces(c)) {
+    IfaceLoad i{c, interface_traffic(c, iface), "", "bus.bitrate", iface == c.can ? "bus.can" : "drive.can"};
+    if (i.t.joints + i.t.mit_joints == 0) continue;
+    for (const DriveConfig& d : c.drives) {
+      if (!on_iface(c, d, iface)) continue;
+      if (d.bitrate != 0) i.rate_key = "drive.bitrate";
+      if (i.families.find(d.family) == std::string::npos) i.families += (i.families.empty() ? "" : ", ") + d.family;
+    }
+    i.c.can = iface;
+    i.c.bitrate = interface_bitrate(c, iface);
+    i.c.data_bitrate = interface_data_bitrate(c, iface);
+    out.push_back(std::move(i));
+  }
+  return out;
+}
+
+/// The first problem or warning `check` finds on a checked interface, "" when none; an
 /// interface other than bus.can is named first ("drive.can \"can1\": ...").
 template <class Check>
-std::string per_interface(const FwConfig& c, Check&& check) {
-  for (const std::string& iface : drive_interfaces(c)) {
-    FwConfig ci = c;
-    ci.can = iface;
-    ci.data_bitrate = 0;
-    for (const DriveConfig& d : c.drives)
-      if ((d.can.empty() ? c.can : d.can) == iface && d.can_fd) ci.data_bitrate = c.data_bitrate;
-    if (!bus_load_checked(ci)) continue;
-    const hal::BusTraffic t = interface_traffic(c, iface);
-    if (t.joints + t.mit_joints == 0) continue;
-    if (std::string why = check(ci, t); !why.empty())
-      return iface == c.can ? why : "drive.can " + toml_string(iface) + ": " + why;
+std::string per_interface(const FwConfig& c, std::size_t joints, Check&& check) {
+  for (const IfaceLoad& i : interface_loads(c, joints)) {
+    if (!bus_load_checked(i.c)) continue;
+    if (std::string why = check(i); !why.empty())
+      return i.c.can == c.can ? why : "drive.can " + toml_string(i.c.can) + ": " + why;
   }
   return "";
 }
 
-std::string problem_for(const FwConfig& c, const hal::BusTraffic& t) {
-  const hal::BusLoad l = hal::bus_load(t, c.bitrate, c.data_bitrate);
+/// The highest load of the checked interfaces (0 when none is checked).
+double highest_load(const FwConfig& c) {
+  double most = 0;
+  for (const IfaceLoad& i : interface_loads(c, c.drives.size()))
+    if (bus_load_checked(i.c)) most = std::max(most, i.load().total());
+  return most;
+}
+
+std::string problem_for(const IfaceLoad& i) {
+  const hal::BusLoad l = i.load();
   if (l.total() <= kBusLoadLimit) return "";
   char b[32];
-  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, t, kBusLoadLimit)));
-  return load_line(c, t, l) + " is above 85 %: at most " + b + " Hz fits (armfw --config FILE --bus-load)";
+  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(i.c, i.t, kBusLoadLimit)));
+  return load_line(i, l) + " is above 85 %: at most " + b + " Hz fits (armfw --config FILE --bus-load)";
 }
 
-std::string warning_for(const FwConfig& c, const hal::BusTraffic& t) {
-  const hal::BusLoad l = hal::bus_load(t, c.bitrate, c.data_bitrate);
+std::string warning_for(const IfaceLoad& i) {
+  const hal::BusLoad l = i.load();
   if (l.total() <= kBusLoadWarn || l.total() > kBusLoadLimit) return "";
   char b[32];
-  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(c, t, kBusLoadWarn)));
-  return load_line(c, t, l) + " is above 60 %: little room for SDO, EMCY and retransmitted frames (" + b +
+  std::snprintf(b, sizeof b, "%.0f", std::floor(rate_for(i.c, i.t, kBusLoadWarn)));
+  return load_line(i, l) + " is above 60 %: little room for SDO, EMCY and retransmitted frames (" + b +
          " Hz or less stays under 60 %)";
 }
-}  // namespace
 
-// With [[drive]] tables the load is checked per interface (each drive on its drive.can, CiA 402
-// and MIT frames counted as they are); without, `joints` CiA 402 drives on bus.can.
-std::string bus_load_problem(const FwConfig& c, std::size_t joints) {
-  if (!c.drives.empty()) return per_interface(c, problem_for);
-  if (!bus_load_checked(c) || joints == 0) return "";
-  FwConfig classic = c;  // without [[drive]] tables no drive says drive.can_fd
-  classic.data_bitrate = 0;
-  return problem_for(classic, bus_traffic(c, joints));
-}
-
-std::string bus_load_warning(const FwConfig& c, std::size_t joints) {
-  if (!c.drives.empty()) return per_interface(c, warning_for);
-  if (!bus_load_checked(c) || joints == 0) return "";
-  FwConfig classic = c;
-  classic.data_bitrate = 0;
-  return warning_for(classic, bus_traffic(c, joints));
-}
-
-std::string bus_load_table(const FwConfig& c, std::size_t joints) {
-  const hal::BusLoad l = hal::bus_load(bus_traffic(c, joints), c.bitrate);
+/// One interface's table of `armfw --bus-load`.
+std::string load_table(const IfaceLoad& i) {
+  const FwConfig& c = i.c;
+  const hal::BusLoad l = i.load();
+  const bool fd = c.data_bitrate > 0;
   std::string o;
-  char b[200];
-  std::snprintf(b, sizeof b, "bus load: %zu drives, loop.rate_hz %s, bus.bitrate %s bit/s, classical CAN, worst-case bit stuffing\n",
-                joints, num_text(c.rate_hz).c_str(), num_text(c.bitrate).c_str());
+  char b[300];
+  std::snprintf(b, sizeof b, "bus load on %s: %zu drives (%s), loop.rate_hz %s, %s %s bit/s, %s, worst-case bit stuffing\n",
+                c.can.c_str(), i.t.joints + i.t.mit_joints, i.families.c_str(), num_text(c.rate_hz).c_str(), i.rate_key,
+                num_text(c.bitrate).c_str(),
+                fd ? ("CAN FD data phase " + num_text(c.data_bitrate) +
+                      " bit/s (bits: nominal+data; bit/s: bus time at the nominal rate)").c_str()
+                   : "classical CAN");
   o += b;
-  std::snprintf(b, sizeof b, "%-11s %-12s %6s %10s %6s %10s %8s\n", "frame", "direction", "bytes", "per cycle", "bits",
+  std::snprintf(b, sizeof b, "%-12s %-12s %6s %10s %8s %10s %8s\n", "frame", "direction", "bytes", "per cycle", "bits",
                 "bit/s", "load");
   o += b;
   for (std::size_t k = 0; k < l.count; ++k) {
+    if (l.kinds[k].per_second == 0) continue;  // heartbeats of an interface with MIT motors only
     const double per_cycle = l.kinds[k].per_second / c.rate_hz;
     const bool hb = std::strcmp(l.kinds[k].name, "heartbeat") == 0;
-    std::snprintf(b, sizeof b, "%-11s %-12s %6u %10s %6d %10.0f %8s\n", l.kinds[k].name, hal::to_string(l.kinds[k].direction),
-                  unsigned(l.kinds[k].data_len), hb ? "-" : num_text(per_cycle).c_str(), l.bits[k].total(),
-                  l.kinds[k].per_second * l.bits[k].total(), pct_text(l.seconds[k]).c_str());
+    const std::string bits = fd ? std::to_string(l.bits[k].nominal) + "+" + std::to_string(l.bits[k].data)
+                                : std::to_string(l.bits[k].total());
+    std::snprintf(b, sizeof b, "%-12s %-12s %6u %10s %8s %10.0f %8s\n", l.kinds[k].name, hal::to_string(l.kinds[k].direction),
+                  unsigned(l.kinds[k].data_len), hb ? "-" : num_text(per_cycle).c_str(), bits.c_str(),
+                  l.seconds[k] * c.bitrate, pct_text(l.seconds[k]).c_str());
     o += b;
   }
   const auto line = [&](const char* what, double share) {
-    std::snprintf(b, sizeof b, "%-11s %-12s %6s %10s %6s %10.0f %8s\n", what, "", "", "", "", share * c.bitrate,
+    std::snprintf(b, sizeof b, "%-12s %-12s %6s %10s %8s %10.0f %8s\n", what, "", "", "", "", share * c.bitrate,
                   pct_text(share).c_str());
     o += b;
   };
@@ -1592,13 +1690,28 @@ std::string bus_load_table(const FwConfig& c, std::size_t joints) {
   line("from drives", l.from_drives);
   line("total", l.total());
   if (!bus_load_checked(c))
-    o += "not checked: bus.can = " + toml_string(c.can) + " has no wire (the figures are what a real bus would carry)\n";
+    o += std::string("not checked: ") + i.can_key + " = " + toml_string(c.can) +
+         " has no wire (the figures are what a real bus would carry)\n";
   else if (l.total() > kBusLoadLimit)
-    o += "refused: above 85 %: at most " + num_text(std::floor(rate_for(c, bus_traffic(c, joints), kBusLoadLimit))) + " Hz fits\n";
+    o += "refused: above 85 %: at most " + num_text(std::floor(rate_for(c, i.t, kBusLoadLimit))) + " Hz fits\n";
   else if (l.total() > kBusLoadWarn)
-    o += "warning: above 60 %: " + num_text(std::floor(rate_for(c, bus_traffic(c, joints), kBusLoadWarn))) + " Hz or less stays under 60 %\n";
+    o += "warning: above 60 %: " + num_text(std::floor(rate_for(c, i.t, kBusLoadWarn))) + " Hz or less stays under 60 %\n";
   else
     o += "fits: at most 60 %\n";
+  return o;
+}
+}  // namespace
+
+// With [[drive]] tables the load is checked per interface (each drive on its drive.can, CiA 402
+// and MIT frames counted as they are, at the interface's own bit rates); without, `joints`
+// CiA 402 drives on bus.can.
+std::string bus_load_problem(const FwConfig& c, std::size_t joints) { return per_interface(c, joints, problem_for); }
+
+std::string bus_load_warning(const FwConfig& c, std::size_t joints) { return per_interface(c, joints, warning_for); }
+
+std::string bus_load_table(const FwConfig& c, std::size_t joints) {
+  std::string o;
+  for (const IfaceLoad& i : interface_loads(c, joints)) o += (o.empty() ? "" : "\n") + load_table(i);
   return o;
 }
 
@@ -2074,7 +2187,7 @@ std::string load_text(const std::string& text, const std::string& origin, FwConf
       for (const double r : rates) {
         if (pick > 0) break;
         c.rate_hz = r;
-        if (hal::bus_load(bus_traffic(c, c.drives.size()), c.bitrate).total() <= limit) pick = r;
+        if (highest_load(c) <= limit) pick = r;  // every interface at its own rates
       }
     c.rate_hz = pick > 0 ? pick : 250;
   }

@@ -57,6 +57,8 @@ struct DriveConfig {
   double mit_kd = 1;                     ///< N m s/rad
   int master_id = 0;                     ///< the id the motor answers on; 0 = the vendor's default
   bool can_fd = false;                   ///< this drive's interface carries CAN FD (all its drives agree)
+  double bitrate = 0;                    ///< bit/s of this drive's interface; 0 = bus.bitrate (all its drives agree)
+  double data_bitrate = 0;               ///< CAN FD data bit/s of this drive's interface; 0 = bus.data_bitrate
   double counts_per_rev = 0;             ///< 0 = bus.counts_per_rev (counts per mm for prismatic joints)
   double gear_ratio = 0;                 ///< 0 = bus.gear_ratio
   int direction = 1;                     ///< +1 / -1 between joint and drive
@@ -376,12 +378,22 @@ hal::BusTraffic bus_traffic(const FwConfig& cfg, std::size_t joints);
 /// True when the load is checked: bus.can is a wire (not "sim", not a virtual "vcan*").
 bool bus_load_checked(const FwConfig& cfg);
 /// "" or why `cfg` with `joints` drives is refused: the load above kBusLoadLimit, naming
-/// bus.bitrate, loop.rate_hz, the frames per cycle, the load and the highest rate that fits.
+/// bus.bitrate (or drive.bitrate), loop.rate_hz, the frames per cycle, the load and the highest
+/// rate that fits. With [[drive]] tables each interface they use is checked with its own traffic
+/// and rates (interface_bitrate, interface_data_bitrate); a drive.can other than bus.can is named.
 std::string bus_load_problem(const FwConfig& cfg, std::size_t joints);
+/// The nominal bit rate of interface `iface` (bus.can or a drive.can): the drive.bitrate its
+/// drives give (validate() makes them agree), else bus.bitrate.
+double interface_bitrate(const FwConfig& cfg, const std::string& iface);
+/// The CAN FD data bit rate the load of `iface` is counted with: 0 (classical frames) when its
+/// drives do not say drive.can_fd, else their drive.data_bitrate, else bus.data_bitrate.
+double interface_data_bitrate(const FwConfig& cfg, const std::string& iface);
 /// "" or the warning for a load above kBusLoadWarn (and at most kBusLoadLimit).
 std::string bus_load_warning(const FwConfig& cfg, std::size_t joints);
-/// What `armfw --config FILE --bus-load` prints: one line per frame kind (direction, frames
-/// per cycle, bits per frame with worst-case stuffing, load), the two directions, the total.
+/// What `armfw --config FILE --bus-load` prints: one table per interface with drives (the
+/// traffic and rates the check counts; its family, bit rates, drive count in the title), each
+/// with one line per frame kind (direction, frames per cycle, bits per frame with worst-case
+/// stuffing, load), the two directions, the total and the verdict; tables apart by a blank line.
 std::string bus_load_table(const FwConfig& cfg, std::size_t joints);
 /// The table of docs/deployment.md (`armfw --bus-load-reference`): the load of the default
 /// traffic by loop rate and joint count at 1 Mbit/s and 500 kbit/s, between its markers.
