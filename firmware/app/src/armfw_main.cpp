@@ -103,7 +103,8 @@ int usage(FILE* f, int code) {
                "  --record-dir DIR      where `record mcap` writes its MCAP files (record.dir)\n"
                "  --api-reference       print the generated reference section of docs/api.md and exit\n"
                "  (safety inputs: the safety.estop_input / safety.reduced_input keys, a drive's 60FDh bit or a GPIO\n"
-               "  line; run-time [safety] changes: the API's safety_stage + safety_confirm; docs/safety.md)\n"
+               "  line; run-time [safety] changes: the console's safety stage + safety confirm, or the API's\n"
+               "  safety_stage + safety_confirm; docs/safety.md)\n"
                "  -h, --help            this text\n");
   return code;
 }
@@ -736,6 +737,10 @@ int main(int argc, char** argv) {
     }
   }
   if (sim) cfg.can = "sim";
+  // The virtual drives answer the bring-up's SDOs from a thread of normal priority: on a busy
+  // host it can be starved past the 100 ms a real drive is given, and the bring-up would fail
+  // naming a drive that is not at fault. Without a configuration file they are given 1 s.
+  if (sim && config_file.empty()) cfg.sdo_timeout_ms = std::max(cfg.sdo_timeout_ms, 1000.0);
   if (!robot.empty()) cfg.robot = robot;
   if (rate > 0) cfg.rate_hz = rate;
   if (priority >= 0) cfg.priority = priority;
