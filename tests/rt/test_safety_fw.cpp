@@ -1111,9 +1111,9 @@ TEST(SpeedScaling, AStreamIntoATriggerZoneIsSlowedNotStopped) {
   Trace tr;
   kin::Pose target = w;
   bool reached = false;
-  const double t0 = double(r.tel().cycles) * 1e-3;
+  const auto c0 = r.tel().cycles;  // (t from the cycle count: a contracted multiply-subtract can make 0 slightly negative)
   for (int k = 0; k < 3000 && !reached; ++k) {  // about 10 ms apart: 30 s at most
-    const double t = double(r.tel().cycles) * 1e-3 - t0;  // the control thread's clock (see below)
+    const double t = double(r.tel().cycles - c0) * 1e-3;  // the control thread's clock (see below)
     target.translation().y() = w.translation().y() + std::fmin(0.2, 0.25 * t);
     const StreamResult sr = st.target_pose(target, false, k == 0, t);
     CHECK_TEXT(sr.ok(), sr.reason.c_str());
@@ -1155,12 +1155,12 @@ TEST(SpeedScaling, AStreamWithinTheTcpSpeedLimitIsNotSlowedByTheCap) {
   Trace tr;
   kin::Pose target = w;
   bool reached = false;
-  const double t0 = double(r.tel().cycles) * 1e-3;
+  const auto c0 = r.tel().cycles;  // (t from the cycle count: a contracted multiply-subtract can make 0 slightly negative)
   for (int k = 0; k < 3000 && !reached; ++k) {  // about 10 ms apart: 30 s at most
     // sampled on the control thread's clock (as a leader's state samples are): each target
     // costs the rig a cycle of its own to answer, which would otherwise make the targets' time
     // fall behind the clock and leave them late, and without their velocity
-    const double t = double(r.tel().cycles) * 1e-3 - t0;
+    const double t = double(r.tel().cycles - c0) * 1e-3;
     target.translation().y() = w.translation().y() + std::fmin(0.15, 0.09 * t);
     const StreamResult sr = st.target_pose(target, false, k == 0, t);
     CHECK_TEXT(sr.ok(), sr.reason.c_str());
