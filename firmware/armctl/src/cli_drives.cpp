@@ -285,6 +285,32 @@ bool parse_timeout(const char* s, hal::Duration& out, int& rc) {
   return true;
 }
 
+/// The options scan and zero share: --iface IFACE, --fd, --timeout MS. Returns 1 when argv[i]
+/// is one of them (i moved past its value), 0 when it is not, -1 with `rc` set when its value
+/// is bad.
+int shared_option(int argc, char** argv, int& i, std::string& iface, hal::ScanOptions& opt, int& rc) {
+  const std::string a = argv[i];
+  const bool more = i + 1 < argc;
+  if (a == "--iface" && more) iface = argv[++i];
+  else if (a == "--fd") opt.fd = true;
+  else if (a == "--timeout" && more) {
+    if (!parse_timeout(argv[++i], opt.timeout, rc)) return -1;
+    opt.window = opt.timeout;
+  } else return 0;
+  return 1;
+}
+
+/// Opens `iface` for `command` (classic or CAN FD, no reopening); 0, or the usage error's code.
+int open_bus(const char* command, const std::string& iface, bool fd, hal::SocketCanBus& bus) {
+  hal::SocketCanOptions so;
+  so.enable_fd = fd;
+  so.auto_reopen = false;
+  if (const hal::Status s = bus.open(iface.c_str(), so); s != hal::Status::ok)
+    return usage_error(fmt("drives %s: cannot open %s%s: %s", command, iface.c_str(), fd ? " for CAN FD" : "",
+                           hal::describe(s)));
+  return 0;
+}
+
 int scan_main(int argc, char** argv) {
   std::string iface;
   hal::ScanOptions opt;
@@ -296,26 +322,18 @@ int scan_main(int argc, char** argv) {
       std::fputs(kDrivesUsage, stdout);
       return kExitOk;
     }
-    if (a == "--iface" && more) iface = argv[++i];
-    else if (a == "--fd") opt.fd = true;
-    else if (a == "--first" && more) {
+    if (const int k = shared_option(argc, argv, i, iface, opt, rc); k != 0) {
+      if (k < 0) return rc;
+    } else if (a == "--first" && more) {
       if (!parse_id("--first", argv[++i], 0x7FE, opt.first_id, rc)) return rc;
     } else if (a == "--last" && more) {
       if (!parse_id("--last", argv[++i], 0x7FE, opt.last_id, rc)) return rc;
-    } else if (a == "--timeout" && more) {
-      if (!parse_timeout(argv[++i], opt.timeout, rc)) return rc;
-      opt.window = opt.timeout;
     } else return usage_error("drives scan: unknown or incomplete option '" + a + "' (see armctl drives --help)");
   }
   if (iface.empty()) return usage_error("drives scan: --iface IFACE is required (e.g. can0)");
   if (opt.first_id > opt.last_id) return usage_error("drives scan: --first is above --last");
   hal::SocketCanBus bus;
-  hal::SocketCanOptions so;
-  so.enable_fd = opt.fd;
-  so.auto_reopen = false;
-  if (const hal::Status s = bus.open(iface.c_str(), so); s != hal::Status::ok)
-    return usage_error(fmt("drives scan: cannot open %s%s: %s", iface.c_str(), opt.fd ? " for CAN FD" : "",
-                           hal::describe(s)));
+  if (const int e = open_bus("scan", iface, opt.fd, bus); e != 0) return e;
   hal::MonotonicClock clock;
   std::string out;
   const int n = drives_scan(bus, clock, iface, opt, out);
@@ -378,24 +396,16 @@ int zero_main(int argc, char** argv) {
       std::fputs(kDrivesUsage, stdout);
       return kExitOk;
     }
-    if (a == "--iface" && more) iface = argv[++i];
-    else if (a == "--fd") opt.fd = true;
-    else if (a == "--id" && more) {
+    if (const int k = shared_option(argc, argv, i, iface, opt, rc); k != 0) {
+      if (k < 0) return rc;
+    } else if (a == "--id" && more) {
       if (!parse_id("--id", argv[++i], 0x7FE, id, rc)) return rc;
-    } else if (a == "--timeout" && more) {
-      if (!parse_timeout(argv[++i], opt.timeout, rc)) return rc;
-      opt.window = opt.timeout;
     } else return usage_error("drives zero: unknown or incomplete option '" + a + "' (see armctl drives --help)");
   }
   if (iface.empty()) return usage_error("drives zero: --iface IFACE is required (e.g. can0)");
   if (id == 0) return usage_error("drives zero: --id N is required (the motor's id)");
   hal::SocketCanBus bus;
-  hal::SocketCanOptions so;
-  so.enable_fd = opt.fd;
-  so.auto_reopen = false;
-  if (const hal::Status s = bus.open(iface.c_str(), so); s != hal::Status::ok)
-    return usage_error(fmt("drives zero: cannot open %s%s: %s", iface.c_str(), opt.fd ? " for CAN FD" : "",
-                           hal::describe(s)));
+  if (const int e = open_bus("zero", iface, opt.fd, bus); e != 0) return e;
   hal::MonotonicClock clock;
   std::string out;
   const int r = drives_zero(bus, clock, iface, id, opt, out);
