@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "servo_spy.hpp"
-#include "sim_app.hpp"
+#include "controller_rig.hpp"
 #include "servoarm/rt/controller.hpp"
 #include "servoarm/rt/mode_table.hpp"
 #include "servoarm/kinematics/ik.hpp"
@@ -29,24 +29,28 @@ using Call = test::ServoSpy::Call;
 
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
+using test::kDeg;
 
-struct TableRig {
-  hal::ManualClock clock;
-  test::SimApp app;
+/// The App built, not booted; a Controller of the test's own over a ServoSpy on its bus,
+/// stepped by the rig's cycle().
+struct TableRig : test::ControllerRig {
   std::unique_ptr<test::ServoSpy> spy;
   std::unique_ptr<Controller> ctl;
-  hal::Duration period = hal::kMillisecond;
   std::uint32_t seq = 100;
 
   /// `homing`: joint 1 homes with CiA 402 method 19 and no home switch on its drive (the search
   /// goes on until the 60 s timeout: the homing modes last), the others are absolute.
   bool freedrive = false;  ///< the dynamic plant, [dynamics] freedrive, the model attached
   explicit TableRig(bool drive_quick_stop, const sim::MotorParams& motor = {}, bool homing = false, bool fd = false)
-      : freedrive(fd) {
-    app.sim_motor = motor;
+      : ControllerRig(config(drive_quick_stop, homing, fd),
+                      test::RigOptions{motor, fd ? dynamic_plant : nullptr, /*boot=*/false}),
+        freedrive(fd) {
+    spy = std::make_unique<test::ServoSpy>(*app.servo);
+    ctl = std::make_unique<Controller>(*spy, app.chain, app.controller_config());
+    drive(*ctl);
+  }
+  static FwConfig config(bool drive_quick_stop, bool homing, bool fd) {
     FwConfig cfg;
-    cfg.can = "sim";
     cfg.freedrive = fd;
     cfg.stop = drive_quick_stop ? "drive" : "ramp";
     if (homing) {
@@ -55,20 +59,17 @@ struct TableRig {
       cfg.drives[0].homing_speed_switch = 5;
       cfg.drives[0].homing_timeout_s = 60;
     }
-    const std::string e = app.build(cfg, &clock);
-    if (!e.empty()) FAIL(e.c_str());
-    if (fd) {  // torque mode needs the rigid-body plant
-      std::vector<hal::JointScaling> sc;
-      for (std::size_t j = 0; j < app.servo->joint_count(); ++j) sc.push_back(app.servo->scaling(j));
-      const std::string d = app.plant->use_dynamic_plant(app.chain, sc);
-      if (!d.empty()) FAIL(d.c_str());
-      kin::JointVector q(6);
-      q << 0, -0.6, 1.2, 0, 0.9, 0;
-      app.plant->arm().plant()->set_state(q, kin::JointVector::Zero(6));
-    }
-    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
-    spy = std::make_unique<test::ServoSpy>(*app.servo);
-    ctl = std::make_unique<Controller>(*spy, app.chain, app.controller_config());
+    return cfg;
+  }
+  /// Torque mode needs the rigid-body plant.
+  static void dynamic_plant(test::SimApp& app) {
+    std::vector<hal::JointScaling> sc;
+    for (std::size_t j = 0; j < app.servo->joint_count(); ++j) sc.push_back(app.servo->scaling(j));
+    const std::string d = app.plant->use_dynamic_plant(app.chain, sc);
+    if (!d.empty()) FAIL(d.c_str());
+    kin::JointVector q(6);
+    q << 0, -0.6, 1.2, 0, 0.9, 0;
+    app.plant->arm().plant()->set_state(q, kin::JointVector::Zero(6));
   }
   ~TableRig() {
     clock.set_idle_hook(nullptr);
@@ -82,13 +83,6 @@ struct TableRig {
       if (!app.model->available(ModelPart::freedrive)) FAIL(app.model->refusal(ModelPart::freedrive));
       ctl->set_model(app.model.get());
     }
-  }
-  void cycle() {
-    ctl->cycle(clock.now());
-    clock.advance(period);
-  }
-  void cycles(int n) {
-    for (int i = 0; i < n; ++i) cycle();
   }
   Mode mode() const { return ctl->mode(); }
   /// Send a request, run one cycle, return its reply (the cycle it ran in: spy->cycle).
@@ -122,12 +116,7 @@ struct TableRig {
   void expect(Mode m, const char* what) {
     if (mode() != m) FAIL((std::string(what) + ": mode " + to_string(mode()) + ", wanted " + to_string(m)).c_str());
   }
-  kin::JointVector q_cmd() const {
-    const Telemetry t = ctl->telemetry();
-    kin::JointVector q(6);
-    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
-    return q;
-  }
+  /// Enable through the request queue (this controller has no service).
   void enable() {
     boot();
     request(RequestOp::enable);
@@ -1011,43 +1000,28 @@ TEST(ModeTable, DisableReportsStoppingThenDisabled) {
 
 namespace {
 
-struct QueueRig {
-  hal::ManualClock clock;
-  test::SimApp app;
-  Session s;
+struct QueueRig : test::ControllerRig {
   std::vector<std::pair<Mode, SegPhase>> bad_cells;  ///< (mode, phase) pairs no cell allows
   std::vector<bool> seen = std::vector<bool>(kSegPhases, false);
 
-  QueueRig() {
-    FwConfig cfg;
-    cfg.can = "sim";
-    const std::string e = app.build(cfg, &clock);
-    if (!e.empty()) FAIL(e.c_str());
-    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
-    const std::string b = app.boot();
-    if (!b.empty()) FAIL(b.c_str());
-    app.console->set_idle([this] { cycle(); });
+  QueueRig() : ControllerRig(FwConfig{}) {
+    after_cycle = [this] {
+      const Mode m = app.ctl->mode();
+      const SegPhase p = app.ctl->segment_phase();
+      seen[static_cast<std::size_t>(p)] = true;
+      if (!allowed(m, p)) bad_cells.emplace_back(m, p);
+    };
   }
-  ~QueueRig() { clock.set_idle_hook(nullptr); }
   static bool allowed(Mode m, SegPhase p);
-  void cycle() {
-    app.ctl->cycle(clock.now());
-    clock.advance(hal::kMillisecond);
-    const Mode m = app.ctl->mode();
-    const SegPhase p = app.ctl->segment_phase();
-    seen[static_cast<std::size_t>(p)] = true;
-    if (!allowed(m, p)) bad_cells.emplace_back(m, p);
-  }
   void step() {
     cycle();
-    app.console->poll(s);
+    app.console->poll(session);
   }
+  /// A console line run to its end; anything but an ok fails the test.
   std::string cmd(const std::string& line) {
-    s.out.clear();
-    app.console->execute(s, line);
-    for (int i = 0; i < 60000 && app.console->busy(s); ++i) step();
-    if (s.out.rfind("ok", 0) != 0 && s.out.find("\nok") == std::string::npos) FAIL((line + ": " + s.out).c_str());
-    return s.out;
+    const std::string out = console(line);
+    if (out.rfind("ok", 0) != 0 && out.find("\nok") == std::string::npos) FAIL((line + ": " + out).c_str());
+    return out;
   }
   Mode mode() const { return app.ctl->mode(); }
   SegPhase phase() const { return app.ctl->segment_phase(); }
@@ -1055,17 +1029,6 @@ struct QueueRig {
   void settle() {
     for (int i = 0; i < 60000 && !idle(); ++i) step();
     if (!idle()) FAIL((std::string("not idle: mode ") + to_string(mode())).c_str());
-  }
-  kin::JointVector q_cmd() const {
-    const Telemetry t = app.ctl->telemetry();
-    kin::JointVector q(6);
-    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[static_cast<std::size_t>(j)];
-    return q;
-  }
-  Eigen::Vector3d flange(const kin::JointVector& q) const {
-    kin::Pose x;
-    CHECK(kin::forward(app.ctl->chain(), q, x) == kin::Status::ok);
-    return x.translation();
   }
   /// The running motion is a path move's joint segment.
   bool joint_path_segment() {
@@ -1112,12 +1075,7 @@ std::string line_cmd(const Eigen::Vector3d& p, double blend_mm) {
   return t;
 }
 
-kin::JointVector deg(std::initializer_list<double> l) {
-  kin::JointVector v(6);
-  int k = 0;
-  for (double x : l) v[k++] = x * kDeg;
-  return v;
-}
+using test::deg;
 
 const kin::JointVector kStart = deg({0, -30, 60, 0, 40, 0});
 
@@ -1134,7 +1092,7 @@ struct PhaseCase {
 };
 
 std::vector<std::string> moves_for(QueueRig& r, SegPhase p) {
-  const Eigen::Vector3d p0 = r.flange(kStart);
+  const Eigen::Vector3d p0 = r.flange(kStart).translation();
   const Eigen::Vector3d A = p0 + Eigen::Vector3d(-0.10, 0, 0), B = A + Eigen::Vector3d(0, 0.10, 0),
                         C = B + Eigen::Vector3d(0, 0, -0.08);
   const kin::JointVector kA = deg({30, -20, 40, 0, 20, 0}), kB = deg({70, -30, 60, 20, 30, 30});
@@ -1152,7 +1110,8 @@ std::vector<std::string> moves_for(QueueRig& r, SegPhase p) {
     case SegPhase::path_line:
     case SegPhase::path_to_start: return {line_cmd(A, 10), line_cmd(B, 10), line_cmd(C, -1)};
     case SegPhase::path_to_end: {
-      const Eigen::Vector3d L0 = p0 + Eigen::Vector3d(0, 0, -0.08), L = r.flange(kJ) + Eigen::Vector3d(0, 0, -0.12);
+      const Eigen::Vector3d L0 = p0 + Eigen::Vector3d(0, 0, -0.08);
+      const Eigen::Vector3d L = r.flange(kJ).translation() + Eigen::Vector3d(0, 0, -0.12);
       return {line_cmd(L0, 25), joints_cmd(kJ, 20), line_cmd(L, -1)};
     }
   }

@@ -19,8 +19,7 @@
 #include <thread>
 #include <vector>
 
-#include "../support/sim_app.hpp"
-#include "alloc_counter.hpp"
+#include "controller_rig.hpp"
 #include "servoarm/hal/safety_input.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/service/arm_service.hpp"
@@ -32,63 +31,7 @@ using namespace servoarm::fw;
 
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
-
-struct Rig {
-  hal::ManualClock clock;
-  test::SimApp app;
-  hal::Duration period = hal::kMillisecond;
-  std::size_t rt_allocs = 0;
-  bool count_allocs = false;
-
-  explicit Rig(FwConfig cfg, const std::function<void(test::SimApp&)>& before_boot = {}) {
-    cfg.can = "sim";
-    const std::string e = app.build(cfg, &clock);
-    if (!e.empty()) FAIL(e.c_str());
-    if (before_boot) before_boot(app);
-    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
-    const std::string b = app.boot();
-    if (!b.empty()) FAIL(b.c_str());
-    app.console->set_idle([this] { cycle(); });
-  }
-  ~Rig() { clock.set_idle_hook(nullptr); }
-  ArmService& svc() { return app.console->service(); }
-  Telemetry tel() const { return app.ctl->telemetry(); }
-  void cycle() {
-    if (count_allocs) test::alloc_count_begin();
-    app.ctl->cycle(clock.now());
-    if (count_allocs) rt_allocs += test::alloc_count_end();
-    clock.advance(period);
-  }
-  void cycles(int n) {
-    for (int i = 0; i < n; ++i) cycle();
-  }
-  void enable() {
-    const ControlResult r = svc().enable();
-    CHECK_TEXT(r.ok(), r.reason.c_str());
-    for (int i = 0; i < 3000 && tel().state != ArmState::idle; ++i) cycle();
-    CHECK(tel().state == ArmState::idle);
-  }
-  /// A long joint move started (queued, running).
-  void start_move() {
-    MoveJoints m;
-    m.goal = kin::JointVector::Zero(6);
-    m.goal[0] = 60 * kDeg;
-    m.goal[1] = -30 * kDeg;
-    const MoveResult r = svc().move(m, MoveContext{});
-    CHECK_TEXT(r.ok(), r.reason.c_str());
-    for (int i = 0; i < 300 && tel().state != ArmState::moving; ++i) cycle();
-    CHECK(tel().state == ArmState::moving);
-    cycles(200);
-  }
-  /// Every event's text since the start, one a line.
-  std::string events() {
-    svc().poll_events();
-    std::string all;
-    for (const ArmEvent& e : svc().events_since(0).events) all += std::string(svc().event_detail(e)) + "\n";
-    return all;
-  }
-};
+using Rig = test::ControllerRig;
 
 /// Cycles until the arm is in an e-stop mode (at most `max`); how many it took (max + 1: never).
 int cycles_to_estop(Rig& r, int max) {
@@ -323,7 +266,7 @@ TEST(SafetyInputs, EstopInputStopsAMoveAndBlocksReset) {
   hal::SimInput* in = r.app.sim_input("estop");
   CHECK(in != nullptr);
   r.enable();
-  r.start_move();
+  r.start_move(200);
   in->set(hal::InputLevel::low);  // active low: the contact opened
   const int n = cycles_to_estop(r, 50);
   std::printf("\n  e-stop input (sim) asserted -> estop state after %d cycle(s)\n", n);
@@ -348,7 +291,7 @@ TEST(SafetyInputs, EstopInputStopsAMoveAndBlocksReset) {
 TEST(SafetyInputs, EstopInputLostStops) {
   Rig r(with_inputs("sim:estop", ""));
   r.enable();
-  r.start_move();
+  r.start_move(200);
   r.app.sim_input("estop")->set(hal::InputLevel::lost);
   CHECK(cycles_to_estop(r, 50) <= 2);
   STRCMP_CONTAINS("emergency stop: e-stop input cannot be read: sim:estop cannot be read", r.events().c_str());
@@ -364,7 +307,7 @@ TEST(SafetyInputs, DriveBitEstopStopsAMove) {
   CHECK(!r.app.canopen().config().joints[0].digital_inputs);
   r.enable();
   CHECK(r.tel().safety_inputs == 0);
-  r.start_move();
+  r.start_move(200);
   r.app.plant->arm().at(1).set_input_bits(1u << 16, 0);
   const int n = cycles_to_estop(r, 50);
   std::printf("\n  e-stop input (drive:2:bit16) cleared -> estop state after %d cycle(s)\n", n);
@@ -380,7 +323,7 @@ TEST(SafetyInputs, DriveBitEstopLostWhenTheDriveFallsSilent) {
   c.feedback_timeout_ms = 200;
   Rig r(c, [](test::SimApp& a) { a.plant->arm().at(1).set_input_bits(1u << 16, 1u << 16); });
   r.enable();
-  r.start_move();
+  r.start_move(200);
   r.app.plant->arm().at(1).faults().silent = true;
   const int n = cycles_to_estop(r, 200);
   std::printf("\n  joint 2's drive silent (input timeout 20 ms) -> estop state after %d cycle(s)\n", n);
@@ -404,23 +347,14 @@ TEST(SafetyInputs, ReducedInputReducesAndLostReduces) {
   CHECK(r.tel().safety_mode == static_cast<std::uint8_t>(kin::SafetyMode::normal));
   // at a pose clear of the wrist's singularity, a line at 200 mm/s, the Reduced input asserted
   // while it runs
-  kin::JointVector q(6);
-  const double work[6] = {0, -45, 180, 0, 45, 0};
-  for (int j = 0; j < 6; ++j) q[j] = work[j] * kDeg;
-  MoveJoints mj;
-  mj.goal = q;
-  const MoveResult wr = r.svc().move(mj, MoveContext{});
+  const kin::JointVector q = test::puma_work_pose();
+  const MoveResult wr = r.movej(q);
   CHECK_TEXT(wr.ok(), wr.reason.c_str());
-  for (int i = 0; i < 30000 && (!r.app.ctl->motions().empty() || r.tel().state != ArmState::idle); ++i) r.cycle();
+  r.until_idle(30000);
   kin::Pose p;
   (void)kin::forward(r.app.chain, q, p);
-  MoveLine ml;
-  ml.target = p;
-  ml.target.translation().y() += 0.15;
-  ml.speed = 0.2;
-  MoveContext cx;
-  cx.ik = r.app.console->jog_context().ik;
-  const MoveResult mr = r.svc().move(ml, cx);
+  p.translation().y() += 0.15;
+  const MoveResult mr = r.movel(p, 0.2);
   CHECK_TEXT(mr.ok(), (std::string(to_string(mr.error)) + " " + to_string(mr.refusal) + " " + mr.reason).c_str());
   for (int i = 0; i < 400 && r.tel().state != ArmState::moving; ++i) r.cycle();
   r.cycles(300);
@@ -459,7 +393,7 @@ TEST(SafetyInputs, NoAllocationInTheCycle) {
     a.plant->arm().at(2).set_input_bits(1u << 17, 1u << 17);
   });
   r.enable();
-  r.start_move();
+  r.start_move(200);
   r.count_allocs = true;
   r.cycles(100);
   r.app.plant->arm().at(2).set_input_bits(1u << 17, 0);

@@ -14,8 +14,7 @@
 #include <string>
 
 #include "../program/tmp_dir.hpp"
-#include "../support/sim_app.hpp"
-#include "alloc_counter.hpp"
+#include "controller_rig.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/service/arm_service.hpp"
 
@@ -26,7 +25,6 @@ using namespace servoarm::fw;
 
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
 constexpr double kMarginMm = 10.0;  // safety.self_collision_margin_mm
 constexpr double kTolMm = 2.0;      // safety.tolerance_mm
 constexpr double kToolMm = 30.0;    // safety.tool_radius_mm: the tool capsule's radius
@@ -51,12 +49,7 @@ std::string puma_with_capsules(double forearm_radius_mm = 40) {
          "[[joint]]\ntype = \"revolute\"\nd = 56.25\nlimits = [-266, 266]\n";
 }
 
-kin::JointVector pose(double q5_deg) {
-  kin::JointVector q(6);
-  const double d[6] = {0, -45, 180, 0, q5_deg, 0};
-  for (int j = 0; j < 6; ++j) q[j] = d[j] * kDeg;
-  return q;
-}
+kin::JointVector pose(double q5_deg) { return test::deg({0, -45, 180, 0, q5_deg, 0}); }
 
 // The distance between the forearm's and the tool's capsules at q (mm), from the core.
 double forearm_tool_mm(const kin::Chain& chain, const kin::JointVector& q) {
@@ -86,63 +79,7 @@ FwConfig self_collision_config(const std::string& robot) {
   return c;
 }
 
-struct Rig {
-  hal::ManualClock clock;
-  test::SimApp app;
-  std::size_t rt_allocs = 0;
-  Session session;
-
-  explicit Rig(const FwConfig& cfg) {
-    const std::string e = app.build(cfg, &clock);
-    if (!e.empty()) FAIL(e.c_str());
-    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
-    const std::string b = app.boot();
-    if (!b.empty()) FAIL(b.c_str());
-    app.console->set_idle([this] { cycle(); });
-  }
-  ~Rig() { clock.set_idle_hook(nullptr); }
-  ArmService& svc() { return app.console->service(); }
-  Telemetry tel() const { return app.ctl->telemetry(); }
-  kin::JointVector q_cmd() const {
-    const Telemetry t = tel();
-    kin::JointVector q(6);
-    for (int j = 0; j < 6; ++j) q[j] = t.q_cmd[std::size_t(j)];
-    return q;
-  }
-  void cycle() {
-    test::alloc_count_begin();
-    app.ctl->cycle(clock.now());
-    rt_allocs += test::alloc_count_end();
-    clock.advance(hal::kMillisecond);
-  }
-  void until_idle(int max_cycles) {
-    for (int i = 0; i < max_cycles && (!app.ctl->motions().empty() || tel().state != ArmState::idle); ++i) cycle();
-  }
-  void enable() {
-    CHECK(svc().enable().ok());
-    for (int i = 0; i < 3000 && tel().state != ArmState::idle; ++i) cycle();
-    CHECK(tel().state == ArmState::idle);
-  }
-  MoveResult movej(const kin::JointVector& goal) {
-    MoveJoints m;
-    m.goal = goal;
-    return svc().move(m, MoveContext{});
-  }
-  std::string cmd(const std::string& line) {
-    session.out.clear();
-    app.console->execute(session, line);
-    for (int i = 0; i < 60000 && app.console->busy(session); ++i) {
-      cycle();
-      app.console->poll(session);
-    }
-    return session.out;
-  }
-  std::string last_event() {
-    svc().poll_events();
-    const EventBatch b = svc().events_since(0);
-    return b.events.empty() ? std::string() : std::string(svc().event_detail(b.events.back()));
-  }
-};
+using Rig = test::ControllerRig;
 
 }  // namespace
 
@@ -193,15 +130,8 @@ TEST(SelfCollision, AnUncheckedFoldingMoveGetsAProtectiveStop) {
   const MoveResult to_work = r.movej(pose(45));
   CHECK_TEXT(to_work.ok(), to_work.reason.c_str());
   r.until_idle(30000);
-  r.rt_allocs = 0;
-  MotionItem* m = r.app.ctl->motions().back();
-  CHECK(m != nullptr);
-  m->id = 901;
-  JointMove& jm = m->payload.emplace<JointMove>();
-  jm.goal = pose(100);
-  jm.override = 0.5;
-  jm.plan.n = 0;
-  r.app.ctl->motions().commit();
+  r.count_allocs = true;
+  r.queue_unchecked_joint_move(901, pose(100), 0.5);
   int crossed = -1, stopped = -1;
   double closest = INFINITY;
   for (int i = 0; i < 20000; ++i) {
@@ -272,7 +202,7 @@ TEST(SelfCollision, TheChecksumCoversTheCapsules) {
   CHECK_EQUAL(safety_checksum(c, la.chain), r.svc().status().safety_checksum);
   char sum[16];
   std::snprintf(sum, sizeof sum, "%08X", static_cast<unsigned>(safety_checksum(c, la.chain)));
-  const std::string shown = r.cmd("safety");
+  const std::string shown = r.console("safety");
   STRCMP_CONTAINS((std::string("safety=on mode=normal checksum=") + sum).c_str(), shown.c_str());
   STRCMP_CONTAINS("self_collision_margin_mm=10 capsule_pairs=5", shown.c_str());
 }

@@ -8,70 +8,13 @@
 #include <string>
 #include <thread>
 
-#include "../support/sim_app.hpp"
-#include "alloc_counter.hpp"
-#include "servoarm/service/arm_service.hpp"
+#include "controller_rig.hpp"
 
 #include <CppUTest/TestHarness.h>
 
 using namespace servoarm;
 using namespace servoarm::fw;
-
-namespace {
-
-constexpr double kDeg = M_PI / 180.0;
-
-struct Rig {
-  hal::ManualClock clock;
-  test::SimApp app;
-  explicit Rig(FwConfig cfg) {
-    cfg.can = "sim";
-    const std::string e = app.build(cfg, &clock);
-    if (!e.empty()) FAIL(e.c_str());
-    clock.set_idle_hook([this](hal::TimePoint t) { app.plant->step(t); });
-    const std::string b = app.boot();
-    if (!b.empty()) FAIL(b.c_str());
-    app.console->set_idle([this] { cycle(); });
-  }
-  ~Rig() { clock.set_idle_hook(nullptr); }
-  ArmService& svc() { return app.console->service(); }
-  Telemetry tel() const { return app.ctl->telemetry(); }
-  std::size_t rt_allocs = 0;
-  bool count_allocs = false;
-  void cycle() {
-    if (count_allocs) test::alloc_count_begin();
-    app.ctl->cycle(clock.now());
-    if (count_allocs) rt_allocs += test::alloc_count_end();
-    clock.advance(hal::kMillisecond);
-  }
-  void cycles(int n) {
-    for (int i = 0; i < n; ++i) cycle();
-  }
-  void enable() {
-    const ControlResult r = svc().enable();
-    CHECK_TEXT(r.ok(), r.reason.c_str());
-    for (int i = 0; i < 3000 && tel().state != ArmState::idle; ++i) cycle();
-    CHECK(tel().state == ArmState::idle);
-  }
-  void start_move() {
-    MoveJoints m;
-    m.goal = kin::JointVector::Zero(6);
-    m.goal[0] = 60 * kDeg;
-    m.goal[1] = -30 * kDeg;
-    const MoveResult r = svc().move(m, MoveContext{});
-    CHECK_TEXT(r.ok(), r.reason.c_str());
-    for (int i = 0; i < 300 && tel().state != ArmState::moving; ++i) cycle();
-    CHECK(tel().state == ArmState::moving);
-  }
-  std::string events() {
-    svc().poll_events();
-    std::string all;
-    for (const ArmEvent& e : svc().events_since(0).events) all += std::string(svc().event_detail(e)) + "\n";
-    return all;
-  }
-};
-
-}  // namespace
+using Rig = servoarm::test::ControllerRig;
 
 TEST_GROUP(SafetyChange){};
 
