@@ -1180,8 +1180,8 @@ TEST(ArmService, StoppingDistanceAndTimeLimitsOfTheModeSlowMovesDown) {
 // slower so that, run on the controller, the arm's momentum (each link's mass x the speed of its
 // centre of mass, differenced every cycle here from FK of the commanded joints) and mechanical
 // power (sum |tau qd|, tau by inverse dynamics) stay within the mode's limits: 6 kg m/s / 2 W
-// in Normal (the power binds; the planner's estimate from (power / limit)^(1/2) slows more than
-// needed), 2 kg m/s / 40 W in Reduced (the momentum binds: no slower than needed); no protective stop.
+// in Normal (the power binds: the planner slows the move to the fastest scale that keeps it, not
+// below), 2 kg m/s / 40 W in Reduced (the momentum binds: no slower than needed); no protective stop.
 TEST(ArmService, MomentumAndPowerLimitsOfTheModeSlowMovesDown) {
   FwConfig c = table_config(60);
   c.safety_tcp_speed_mm_s = c.safety_reduced_tcp_speed_mm_s = 0;

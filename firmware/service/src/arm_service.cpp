@@ -3,6 +3,7 @@
 #include "servoarm/service/arm_service.hpp"
 #include "servoarm/service/mcap_recorder.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <thread>
@@ -305,6 +306,43 @@ double ArmService::blend_of(double given, bool line, const MoveContext& cx) cons
   return line ? cfg_.default_blend_m : cfg_.default_blend_rad;
 }
 
+namespace {
+
+// The fastest scale of a slowed move that still keeps the envelope's limits. A speed limit's
+// ratio is exact (the speeds go with the scale), but the stop limits' and the power's are
+// estimates that slow more than needed ((time / limit)^2, (distance / limit)^(2/3),
+// (power / limit)^(1/2)): between the scale that held (its highest ratio r_held <= 1) and the
+// lowest that failed (r_failed > 1), each try is planned and checked again, at the scale where
+// log ratio, interpolated linearly in log scale, reaches kAim (kept within the middle 80 % of
+// the bracket, halved in log scale when the failed one's ratio is unknown), until the held
+// ratio is kDone or more, the bracket is within kNarrow, or after kChecks tries.
+struct ScaleSearch {
+  static constexpr int kChecks = 5;
+  static constexpr double kAim = 0.99;
+  static constexpr double kDone = 0.98;
+  static constexpr double kNarrow = 1.01;
+  double held = 0, r_held = 0;      // the highest scale that held, its highest ratio
+  double failed = 0, r_failed = 0;  // the lowest scale that failed, its ratio (0: not a speed's)
+  int tries = 0;
+  bool done() const { return tries >= kChecks || r_held >= kDone || !(failed > held * kNarrow); }
+  double next() const {
+    const double lo = std::log(held), hi = std::log(failed);
+    double x = 0.5 * (lo + hi);
+    if (r_held > 0 && r_failed > 1 && r_failed > r_held) {
+      const double y_lo = std::log(r_held), y_hi = std::log(r_failed);
+      x = lo + (std::log(kAim) - y_lo) * (hi - lo) / (y_hi - y_lo);
+    }
+    return std::exp(std::clamp(x, lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)));
+  }
+  void record(double scale, bool ok, double ratio) {
+    ++tries;
+    if (ok) held = scale, r_held = ratio;
+    else failed = scale, r_failed = ratio;
+  }
+};
+
+}  // namespace
+
 // The checks a real move passes before it is planned: the arm takes moves, and every joint
 // is homed (a target means nothing in coordinates not established). A dry run moves nothing.
 static bool admitted(const ArmService& svc, const MoveContext& cx, MoveResult& r) {
@@ -429,19 +467,31 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
     return r;
   }
   if (!duration_ok(jm.plan.duration, r)) return r;
-  // The envelope along the plan. A TCP, elbow or joint speed above its limit slows the move down
-  // instead (the same joint path at a lower override: every speed scales with it), the
-  // override divided by the highest speed / limit along the path (sampled: a few times at most).
-  for (int attempt = 0;; ++attempt) {
+  // The envelope along the plan. A TCP, elbow or joint speed, a stop time or distance, a
+  // momentum or power above its limit slows the move down instead (the same joint path at a
+  // lower override: every speed scales with it), the override divided by the highest ratio
+  // along the path (sampled: a few times at most), then sped up again to the fastest that
+  // holds (ScaleSearch).
+  const kin::Chain& chain = cx.chain != nullptr ? *cx.chain : chain_;
+  auto check = [&](MoveResult& res, kin::SafetyViolation& sv, double& ratio) {
     kin::JointVector v(n_), a(n_);
     const kin::JointTrajectory& plan_ = jm.plan;
     auto at = [&](double t, kin::JointVector& q) { plan_.sample(t, q, v, a); return true; };
+    ratio = 0;
+    return envelope_ok(chain, plan_.duration, at, "movej", res, &sv, &ratio);
+  };
+  ScaleSearch search;
+  for (int attempt = 0;; ++attempt) {
     kin::SafetyViolation sv;
     double ratio = 1;
-    if (envelope_ok(cx.chain != nullptr ? *cx.chain : chain_, plan_.duration, at, "movej", r, &sv, &ratio)) break;
+    if (check(r, sv, ratio)) {
+      search.held = jm.override, search.r_held = ratio;
+      break;
+    }
     const bool speed = kin::is_speed(sv.function);
     const double slower = jm.override * 0.995 / std::max(ratio, 1.0);
     if (!speed || attempt >= 12 || !(slower >= kMinJointSpeedPct / 100.0)) return r;
+    search.failed = jm.override, search.r_failed = ratio;
     const MoveResult refused = r;
     r = MoveResult{};
     jm.override = o.override = slower;
@@ -449,6 +499,24 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
     if (!kin::is_ok(r.status)) return refused;
     if (!duration_ok(jm.plan.duration, r)) return r;
   }
+  if (search.failed > 0 && !search.done()) {
+    kin::JointTrajectory best = jm.plan;
+    kin::MotionStatus best_status = r.status;
+    while (!search.done()) {
+      o.override = search.next();
+      MoveResult probe;
+      kin::SafetyViolation sv;
+      double ratio = 0;
+      probe.status = kin::plan_movej(lim_, kin::JointState::rest(cx.dry != nullptr ? cx.dry->tail : tail()), goal, o, jm.plan);
+      const bool ok = kin::is_ok(probe.status) && duration_ok(jm.plan.duration, probe) && check(probe, sv, ratio);
+      search.record(o.override, ok, ok || kin::is_speed(sv.function) ? ratio : 0.0);
+      if (ok) best = jm.plan, best_status = probe.status;
+    }
+    jm.plan = best;
+    r.status = best_status;
+    jm.override = o.override = search.held;
+  }
+  r.envelope_ratio = search.r_held;
   r.duration = jm.plan.duration;  // (jm is replaced when the move goes as a blended segment)
   const double tol = blend_of(req.blend, false, cx);
   const bool path = path_segment(*m, false, goal, kin::Pose::Identity(), cfg_.cartesian, jm.override, tol, cx, r);
@@ -480,8 +548,17 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
   kin::CartesianTrajectory& traj = m->payload.emplace<CartesianMove>().path;
   const kin::Chain& chain = cx.chain != nullptr ? *cx.chain : chain_;
   kin::MotionStatus ms = kin::MotionStatus::ok;
-  // The envelope along the line. A speed above its limit (a joint's, the elbow's) slows the
-  // line down instead: planned again at its speed divided by the highest speed / limit found.
+  // The envelope along the line. A speed above its limit (a joint's, the elbow's), a stop time
+  // or distance, a momentum or power slows the line down instead: planned again at its speed
+  // divided by the highest ratio found, then sped up again to the fastest that holds
+  // (ScaleSearch).
+  auto check = [&](MoveResult& res, kin::SafetyViolation& sv, double& ratio) {
+    kin::JointVector v(n_), a(n_);
+    auto at = [&](double t, kin::JointVector& q) { traj.sample_precomputed(t, q, v, a); return true; };
+    ratio = 0;
+    return envelope_ok(chain, traj.duration, at, "movel", res, &sv, &ratio);
+  };
+  ScaleSearch search;
   for (int attempt = 0;; ++attempt) {
     cl.linear_velocity = speed;
     ms = kin::plan_movel(chain, q0, req.target, cl, mo, cx.ik, traj, &rep);
@@ -491,16 +568,36 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
       return r;
     }
     if (!duration_ok(traj.duration, r)) return r;
-    kin::JointVector v(n_), a(n_);
-    auto at = [&](double t, kin::JointVector& q) { traj.sample_precomputed(t, q, v, a); return true; };
     kin::SafetyViolation sv;
     double ratio = 1;
-    if (envelope_ok(chain, traj.duration, at, "movel", r, &sv, &ratio)) break;
+    if (check(r, sv, ratio)) {
+      search.held = speed, search.r_held = ratio;
+      break;
+    }
     const double slower = speed * 0.995 / std::max(ratio, 1.0);
     if (!kin::is_speed(sv.function) || attempt >= 12 || !(slower >= kMinLinearSpeedMmS * 1e-3)) return r;
+    search.failed = speed, search.r_failed = ratio;
     r = MoveResult{};
     speed = slower;
   }
+  if (search.failed > 0 && !search.done()) {
+    kin::CartesianTrajectory best = traj;
+    kin::MotionStatus best_status = ms;
+    while (!search.done()) {
+      cl.linear_velocity = search.next();
+      MoveResult probe;
+      kin::SafetyViolation sv;
+      double ratio = 0;
+      const kin::MotionStatus st = kin::plan_movel(chain, q0, req.target, cl, mo, cx.ik, traj, &rep);
+      const bool ok = kin::is_ok(st) && duration_ok(traj.duration, probe) && check(probe, sv, ratio);
+      search.record(cl.linear_velocity, ok, ok || kin::is_speed(sv.function) ? ratio : 0.0);
+      if (ok) best = traj, best_status = st;
+    }
+    traj = best;
+    ms = best_status;
+    cl.linear_velocity = speed = search.held;
+  }
+  r.envelope_ratio = search.r_held;
   traj.ik = cx.ik;
   r.status = ms;
   r.speed = speed;

@@ -81,6 +81,7 @@ struct MoveResult {
   kin::JointVector goal;           ///< where the move (or dwell) ends
   double speed = 0;                ///< lines: the tool speed planned (m/s: default, override and clamp applied)
   double slowdown = 1;             ///< lines slowed near a singularity: the factor
+  double envelope_ratio = 0;       ///< the planned move's highest ratio to the envelope's speed, stop and dynamics limits (kin::speed_ratio; <= 1: within, 0: none set)
   bool blended = false;            ///< went as a blended path segment (PathMove)
   double blend = 0;                ///< s: its overlap with the segment before it
   double segment_start = 0;        ///< s: the segment's start and end on its blended run's time base
