@@ -2,13 +2,15 @@
 // The plan-time envelope check slows a move that a stop distance or a power limit binds to the
 // fastest scale that keeps the limit, not below it (docs/safety.md#before-motion): the check's
 // own highest ratio along the plan (MoveResult::envelope_ratio) is within the limit and within
-// 2 % of it, and the motion run on the controller reaches the limit (its predicted stop, its
-// power, from the commanded state every cycle) without passing it. Prints the planned duration
-// and the planning time (the median of 7 dry runs; no timing assert: the machine is shared).
+// 2 % of it, and the motion run on the controller (its predicted stop, its power, from the
+// commanded state every cycle) comes near the limit without passing it. Prints the planned
+// and run durations and the planning time (the median of 7 dry runs; no timing assert: the
+// machine is shared).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <string>
 #include <vector>
 
 #include "../console/console_rig.hpp"
@@ -143,7 +145,9 @@ TEST(EnvelopeScale, AStopDistanceLimitedMoveRunsAtTheLimitNotBelowIt) {
   side.speed = 0.25;
   double plan_ms[2] = {0, 0};  // (timed first: the figures of both, whatever the checks below find)
   for (const bool line : {false, true})
-    plan_ms[line] = median_plan_ms(svc, cx, [&](ArmService& s, const MoveContext& m) { return line ? s.move(side, m) : s.move(quick, m); });
+    plan_ms[line] = median_plan_ms(svc, cx, [&](ArmService& s, const MoveContext& m) {
+      return line ? s.move(side, m) : s.move(quick, m);
+    });
   std::printf("\n  planning time (median of 7 dry runs): movej %.2f ms, movel %.2f ms", plan_ms[0], plan_ms[1]);
   for (const bool line : {false, true}) {
     const MoveResult q = line ? svc.move(side, cx) : svc.move(quick, cx);
