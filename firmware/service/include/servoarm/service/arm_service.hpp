@@ -1096,8 +1096,8 @@ class ArmService {
   double safety_window_s_ = 60.0;
   /// The envelope check of a planned motion whose joints at time t (0..duration) `at` gives:
   /// true when inside; false with r refused (limits, the violation's line in r.reason).
-  /// `violation` (optional): the function found; `speed_ratio` (optional): the highest TCP or
-  /// elbow speed over its limit along the whole path.
+  /// `violation` (optional): the function found; `speed_ratio` (optional): the highest
+  /// kin::speed_ratio (speeds, stop limits, momentum, power) along the whole path.
   bool envelope_ok(const kin::Chain& chain, double duration, const std::function<bool(double, kin::JointVector&)>& at,
                    const char* what, MoveResult& r, kin::SafetyViolation* violation = nullptr,
                    double* speed_ratio = nullptr) const;
