@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "console_rig.hpp"
+#include "servoarm/hal/safety_input.hpp"
 #include "servoarm/kinematics/orientation.hpp"
 #include "servoarm/lang/command_table.hpp"
 #include "servoarm/lang/commands.hpp"
@@ -115,6 +116,48 @@ TEST(ConsoleText, LongestEventTextsAreWholeOrEndWithAnEllipsis) {
       const std::string gt = ends_with(g[0], "]") ? g[0].substr(0, g[0].size() - 1) : g[0];
       if (!whole_or_ellipsis(gt, full)) FAIL(("cut inside a word: " + grbl).c_str());
     }
+}
+
+// An e-stop from the simulated e-stop input while a movej runs: the alarm names its cause in
+// both dialects; an e-stop by command has no cause beyond itself and keeps the plain line.
+TEST(ConsoleText, EstopAlarmNamesItsCause) {
+  FwConfig cfg;
+  cfg.safety_estop_input = "sim:estop";
+  test::ConsoleRig rig(cfg);
+  hal::SimInput* in = rig.app.sim_input("estop");
+  CHECK(in != nullptr);
+  in->set(hal::InputLevel::high);  // active low: released
+  for (int i = 0; i < 100; ++i) rig.cycle();  // the debounce (10 ms)
+  rig.enable();
+  CHECK(test::answer_ok(rig.cmd("movej 30 0 0 0 0 0")));
+  for (int i = 0; i < 100; ++i) rig.cycle();
+  std::string native, grbl;
+  rig.app.console->drain_events(native, grbl);
+  in->set(hal::InputLevel::low);
+  for (int i = 0; i < 3000 && rig.app.ctl->telemetry().state != ArmState::estop; ++i) rig.cycle();
+  CHECK(rig.app.ctl->telemetry().state == ArmState::estop);
+  native.clear(), grbl.clear();
+  rig.app.console->drain_events(native, grbl);
+  std::printf("\ne-stop input -> %sGRBL: %s", native.c_str(), grbl.c_str());
+  CHECK_TEXT(native.find("alarm: estop: e-stop input sim:estop asserted (send reset, then enable)\n") !=
+                 std::string::npos,
+             native.c_str());
+  CHECK_TEXT(grbl.find("ALARM:10\n[MSG:e-stop: e-stop input sim:estop asserted ($X to reset and enable)]\n") !=
+                 std::string::npos,
+             grbl.c_str());
+  // released, reset, enabled again; then `estop` by command
+  in->set(hal::InputLevel::high);
+  for (int i = 0; i < 200; ++i) rig.cycle();
+  CHECK_TEXT(test::answer_ok(rig.cmd("reset")), rig.s.out.c_str());
+  rig.enable();
+  rig.app.console->drain_events(native, grbl);
+  native.clear(), grbl.clear();
+  rig.cmd("estop");
+  for (int i = 0; i < 3000 && rig.app.ctl->telemetry().state != ArmState::estop; ++i) rig.cycle();
+  rig.app.console->drain_events(native, grbl);
+  std::printf("estop command -> %sGRBL: %s", native.c_str(), grbl.c_str());
+  CHECK_TEXT(native.find("alarm: estop (send reset, then enable)\n") != std::string::npos, native.c_str());
+  CHECK_TEXT(grbl.find("ALARM:10\n[MSG:e-stop: $X to reset and enable]\n") != std::string::npos, grbl.c_str());
 }
 
 // Every command of the table and the G-code words with the longest arguments a line may

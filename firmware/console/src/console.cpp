@@ -509,10 +509,23 @@ void Console::render_event(const ArmEvent& e, std::string& native, std::string& 
       grbl += fmt("ALARM:%d\n[MSG:fault %s]\n",
                   e.cause == FaultCause::setpoint_position ? 2 : e.cause == FaultCause::homing_failed ? 9 : 1, detail.c_str());
             break;
-    case ArmEventKind::estop:
-      native += "alarm: estop (send reset, then enable)\n";
-      grbl += "ALARM:10\n[MSG:e-stop: $X to reset and enable]\n";  // grblHAL: 10 = e-stop
-            break;
+    case ArmEventKind::estop: {
+      // The control thread's text is "emergency stop" (a command), or "emergency stop: " and
+      // the cause (an input: "e-stop input gpio:gpiochip0:17 asserted"): the cause is shown.
+      constexpr std::string_view kPlain = "emergency stop";
+      std::string_view cause = detail;
+      if (cause == kPlain) cause = {};
+      else if (cause.substr(0, kPlain.size() + 2) == "emergency stop: ") cause.remove_prefix(kPlain.size() + 2);
+      if (cause.empty()) {
+        native += "alarm: estop (send reset, then enable)\n";
+        grbl += "ALARM:10\n[MSG:e-stop: $X to reset and enable]\n";  // grblHAL: 10 = e-stop
+      } else {
+        const int n = static_cast<int>(cause.size());
+        native += fmt("alarm: estop: %.*s (send reset, then enable)\n", n, cause.data());
+        grbl += fmt("ALARM:10\n[MSG:e-stop: %.*s ($X to reset and enable)]\n", n, cause.data());
+      }
+      break;
+    }
     case ArmEventKind::motion_refused:
       native += fmt("alarm: %s\n", detail.c_str());
       grbl += fmt("[MSG:%s]\n", detail.c_str());
