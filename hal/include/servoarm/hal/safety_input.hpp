@@ -5,8 +5,9 @@
 // the backends side by side:
 //   DriveBitInput  bit N of a drive's digital inputs (CiA 402 60FDh in TPDO3, read with the
 //                  drive's feedback: CanopenJointConfig::digital_inputs)      safety_input.cpp
-//   GpiodInput     a GPIO line through libgpiod (v1 API), polled on its own thread, its level
-//                  handed to the control thread in one atomic word            gpiod_input.cpp
+//   GpiodInput     a GPIO line through libgpiod (v1 API), its edges waited for on a thread of
+//                  its own, its level handed to the control thread in one atomic word
+//                                                                             gpiod_input.cpp
 //   SimInput       a level a test (or armfw --sim) sets                       safety_input.cpp
 // InputWatch adds the active level, the debounce and the fail-safe rule on top of any of them.
 //
@@ -104,12 +105,15 @@ class DriveBitInput final : public SafetyInput {
 };
 
 /// A GPIO line through libgpiod (Debian's libgpiod-dev, the v1 C API): a thread of its own opens
-/// the chip, requests the line as an input and reads it every `period`; each read's outcome goes
-/// to the control thread in one atomic word, with a count of reads. read() loads that word: no
-/// system call and no lock on the control thread. Lost when the chip or line cannot be opened
-/// or read (the thread tries again every second) or when the thread has not read for `stale`
-/// (it stalled). Latency from the line's edge to read(): at most `period` plus the thread's
-/// wake-up latency.
+/// the chip and requests the line for both edges' events; it sleeps until an edge (then reads
+/// the level at once) or until the refresh period has passed (then reads it again, to say that
+/// the line and the thread are alive). A line that gives no events (a GPIO driver without
+/// interrupts) is requested as a plain input and read every `period` instead, said once on
+/// stderr and by polling(). Each reading goes to the control thread in one atomic word, with a
+/// count of readings. read() loads that word: no system call and no lock on the control thread.
+/// Lost when the chip or line cannot be opened or read (the thread tries again every second) or
+/// when the thread has not read for `stale` (it stalled). Latency from the line's edge to read():
+/// the thread's wake-up latency (polled: plus up to `period`).
 class GpiodInput final : public SafetyInput {
  public:
   /// Set-up: nothing opened yet (start()).
@@ -123,8 +127,13 @@ class GpiodInput final : public SafetyInput {
   void stop();
   InputLevel read(TimePoint now) override;
   const char* why_lost() const override { return lost_ ? why_ : ""; }
-  /// Reads the thread has done since start() (tests).
+  /// Readings the thread has published since start() (tests).
   std::uint32_t polls() const { return word_.load(std::memory_order_acquire) >> 13; }
+  /// The longest the thread waits for an edge before it reads the line again: a quarter of
+  /// `stale`, within [period, 50 ms].
+  Duration refresh() const { return refresh_; }
+  /// The line gives no edge events: it is read every `period` instead.
+  bool polling() const { return polling_.load(std::memory_order_relaxed); }
 
  private:
   void run();
@@ -132,10 +141,11 @@ class GpiodInput final : public SafetyInput {
   /// the count of reads (wraps).
   std::atomic<std::uint32_t> word_{static_cast<std::uint32_t>(InputLevel::lost)};
   std::atomic<bool> stop_{false};
+  std::atomic<bool> polling_{false};
   std::thread thread_;
   char chip_[48] = {};
   int line_ = -1;
-  Duration period_, stale_;
+  Duration period_, stale_, refresh_ = 0;
   // control thread's view
   std::uint32_t seen_count_ = 0;
   TimePoint seen_at_ = -1;
