@@ -380,7 +380,13 @@ bool build(const Joint1& P, double t0, double p0, double v0, double a0, double p
            JointProfile& prof, bool hold_final) {
   Writer w{prof, t0, p0, v0, a0};
   if (P.hold) {
+    // Stop, then wait at the goal until t0 + T. The wait is a segment of its
+    // own (zero jerk from the stopped state): a segment lasts until the next
+    // one starts, so without it the stop's last jerk ramp would run on over
+    // the whole stretched duration (+-J t^3 / 6: 0.1 rad after 0.15 s at 200
+    // rad/s^3 for a joint that was at its goal to rounding).
     w.add(velocity_change(v0, a0, 0.0, P.L.a, P.L.j), 1.0);
+    w.add(0.0, t0 + T - w.t);
   } else {
     const double vc = T > P.T_min * (1 + 1e-15) ? vc_for_duration(P, T) : P.vc_star;
     const VelChange acc = velocity_change(P.v0, P.a0, vc, P.L.a, P.L.j);
@@ -393,10 +399,7 @@ bool build(const Joint1& P, double t0, double p0, double v0, double a0, double p
     w.add(0.0, tc);
     w.add(dec, P.sigma);
   }
-  if (w.t < t0 + T) {
-    // Stretched hold (P.hold) or rounding: wait at the goal.
-    w.t = std::max(w.t, t0);
-  }
+  // Rounding (a few ulp of T): the final hold starts at t0 + T.
   w.t = std::max(w.t, t0 + T);
   if (hold_final) w.hold_at(pf);
   return !w.full;

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "alloc_counter.hpp"
+#include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/trajectory.hpp"
 #include "sweep.hpp"  // sweep(): fewer cases under qemu and the sanitizers
 
@@ -379,4 +380,132 @@ TEST(Movej, ZeroHeapInPlanAndSample) {
   tr.sample(tr.duration * 0.5, st);
   CHECK(plan_movej(l, st, s.pos, MovejOptions{0.2}, re) == MotionStatus::ok);
   CHECK_EQUAL(0u, scope.end());
+}
+
+// A joint already at its goal to within rounding (a residual of ~1e-17 rad and
+// ~1e-16 rad/s, as a stream or jog leaves it) or whose goal is exactly its
+// stopping point: its profile is "stop, then wait at the goal". When another
+// joint sets a longer duration the wait stretches; the joint must stay at its
+// goal for all of it, not drift away under the stop's last jerk segment.
+namespace {
+
+// Sampled at the loop rate and at the exact extrema: every position of joint i
+// within [min(start, goal), max(start, goal)] +- tol. "" if fine.
+std::string stays_between(const JointTrajectory& tr, int i, double start, double goal, double tol) {
+  const double lo = std::min(start, goal) - tol, hi = std::max(start, goal) + tol;
+  const JointPeaks pk = peaks(tr, i);
+  if (pk.min_position < lo || pk.max_position > hi)
+    return fmt("positions [%.3g, %.3g] leave [%.3g, %.3g]", pk.min_position - goal, pk.max_position - goal, lo - goal, hi - goal);
+  const int steps = static_cast<int>(std::ceil(tr.duration / kDt)) + 1;
+  for (int k = 0; k <= steps; ++k) {
+    const double p = tr.position(i, k * kDt);
+    if (!(p >= lo && p <= hi)) return fmt("joint %g: %.3g at t=%g outside the band", i, p, k * kDt);
+  }
+  if (tr.position(i, tr.duration) != goal) return fmt("joint %g: does not end at the goal", i);
+  return "";
+}
+
+}  // namespace
+
+TEST(Movej, NearRestJointStaysAtItsGoalWhileAnotherJointMoves) {
+  struct Case {
+    double d0;        // joint 0's distance to go
+    double p1, v1;    // joint 1's offset from its goal (0) and velocity
+    const char* what;
+  } cases[] = {
+      {0.001, 2.01e-17, 1.18e-16, "1 mrad, rounding residual"},
+      {0.01, 2.01e-17, 1.18e-16, "10 mrad, rounding residual"},
+      {0.05, 2.01e-17, 1.18e-16, "50 mrad, rounding residual"},
+      {0.2, 2.01e-17, 1.18e-16, "200 mrad, rounding residual"},
+      {0.2, -2.01e-17, 1.18e-16, "residual behind, moving towards"},
+      {0.2, 2.01e-17, -1.18e-16, "residual ahead, moving away"},
+      {0.2, -2.01e-17, -1.18e-16, "both negative"},
+      {0.2, 0.0, 0.0, "exactly at rest"},
+      {0.2, 1e-9, 1e-9, "nanoradian residual"},
+  };
+  JointLimits l;
+  l.n = 2;
+  for (int k = 0; k < 2; ++k) {
+    l.dyn[static_cast<std::size_t>(k)] = {0.0958, 12.57, 200.0};
+    l.lower[static_cast<std::size_t>(k)] = -3;
+    l.upper[static_cast<std::size_t>(k)] = 3;
+  }
+  for (const Case& c : cases) {
+    JointState s = JointState::rest(JointVector::Zero(2));
+    s.pos[1] = c.p1;
+    s.vel[1] = c.v1;
+    JointVector goal = JointVector::Zero(2);
+    goal[0] = c.d0;
+    JointTrajectory tr;
+    const MotionStatus st = plan_movej(l, s, goal, {}, tr);
+    CHECK_EQUAL_TEXT(std::string("ok"), std::string(to_string(st)), c.what);
+    const std::string e = stays_between(tr, 1, c.p1, 0.0, 1e-12);
+    if (!e.empty()) FAIL((std::string(c.what) + ": " + e).c_str());
+    CHECK_TRAJ(tr, l, s, 1.0, true, c.what);
+  }
+  // The same with a joint really moving whose goal is exactly its stopping
+  // point (the plan_stop target): stop, then wait there while joint 0 moves.
+  JointState s = JointState::rest(JointVector::Zero(2));
+  s.vel[1] = 0.05;
+  s.acc[1] = -2.0;
+  JointTrajectory stop, tr;
+  CHECK(plan_stop(l, s, {}, stop) == MotionStatus::ok);
+  JointVector goal = stop.goal;
+  goal[0] = 0.2;
+  CHECK_EQUAL(std::string("ok"), std::string(to_string(plan_movej(l, s, goal, {}, tr))));
+  const std::string e = stays_between(tr, 1, 0.0, stop.goal[1], 1e-12);
+  if (!e.empty()) FAIL(("moving joint at its stopping point: " + e).c_str());
+  CHECK_TRAJ(tr, l, s, 1.0, true, "moving joint at its stopping point");
+}
+
+// Seeded sweep over the built-in robots' jerk-limited limits: one joint within
+// 1e-18..1e-6 rad of its goal with a velocity of 1e-18..1e-6 rad/s (either
+// sign, or zero), the others with random distances to go, override 1 or random.
+// The near-rest joint stays within [start, goal] +- (1e-9 rad + its own
+// stopping distance, which it cannot avoid) and every plan ends at its goal.
+TEST(Movej, RandomNearRestJointsOnTheBuiltinRobots) {
+  Rng r(4007);
+  int planned = 0;
+  for (const BuiltinModel& bm : builtin_models()) {
+    const LoadResult lr = load_robot(bm.name);
+    CHECK_TEXT(lr.ok, bm.name);
+    const JointLimits l = limits_from(lr.chain);
+    const int n = l.n;
+    for (int m = 0; m < sweep(2000); ++m) {
+      JointVector goal(n);
+      for (int i = 0; i < n; ++i) {
+        const auto k = static_cast<std::size_t>(i);
+        const double lo = std::max(l.lower[k], -3.0), hi = std::min(l.upper[k], 3.0);
+        goal[i] = r.uni(lo + 0.25 * (hi - lo), hi - 0.25 * (hi - lo));
+      }
+      JointState s = JointState::rest(goal);
+      const int near = r.integer(0, n - 1);
+      const auto sign = [&r] { return r.integer(0, 1) ? 1.0 : -1.0; };
+      for (int i = 0; i < n; ++i) {
+        if (i == near) {
+          s.pos[i] = goal[i] + sign() * r.logu(1e-18, 1e-6);
+          s.vel[i] = r.integer(0, 9) == 0 ? 0.0 : sign() * r.logu(1e-18, 1e-6);
+        } else {
+          s.pos[i] = goal[i] + sign() * r.logu(1e-4, 0.5);
+        }
+      }
+      const double ov = r.integer(0, 1) ? 1.0 : r.uni(0.05, 1.0);
+      JointTrajectory tr;
+      const std::string ctx = std::string(bm.name) + " move " + std::to_string(m) +
+                              fmt(" (joint %g at %.3g rad, %.3g rad/s from its goal)", near, s.pos[near] - goal[near],
+                                  s.vel[near]);
+      const MotionStatus st = plan_movej(l, s, goal, MovejOptions{ov}, tr);
+      CHECK_EQUAL_TEXT(std::string("ok"), std::string(to_string(st)), ctx.c_str());
+      // Its own stopping distance from |v| (at zero acceleration, override-scaled
+      // limits) is unavoidable: v T / 2, T = v/A + A/J or 2 sqrt(v/J).
+      const JointDynamics& d = l.dyn[static_cast<std::size_t>(near)];
+      const double v = std::fabs(s.vel[near]), A = d.max_acceleration * ov * ov, J = d.max_jerk * ov * ov * ov;
+      const double t_stop = v * J >= A * A ? v / A + A / J : 2.0 * std::sqrt(v / J);
+      const std::string e = stays_between(tr, near, s.pos[near], goal[near], 1e-9 + 0.5 * v * t_stop);
+      if (!e.empty()) FAIL((ctx + ": " + e).c_str());
+      CHECK_TRAJ(tr, l, s, ov, true, ctx);
+      ++planned;
+    }
+  }
+  CHECK(planned >= sweep(2000));
 }
