@@ -63,13 +63,7 @@ bool Jogger::plan_joint(const kin::JointState& cmd) {
   kin::JointLimits L = limits_;
   for (int j = 0; j < n_; ++j) L.dyn[static_cast<std::size_t>(j)].max_velocity *= spec_.override;
   cap_.apply(L, cmd, spec_.q_goal, kin::JointVector());
-  // (a joint at its goal to rounding starts there, at rest: see plan_moving)
-  kin::JointState from = cmd;
-  for (int j = 0; j < n_; ++j)
-    if (std::fabs(from.pos[j] - spec_.q_goal[j]) < kRoundingRad && std::fabs(from.vel[j]) < kRoundingRad &&
-        std::fabs(from.acc[j]) < kRoundingRad)
-      from.pos[j] = spec_.q_goal[j], from.vel[j] = from.acc[j] = 0.0;
-  if (kin::plan_movej(L, from, spec_.q_goal, kin::MovejOptions{}, plan_) != kin::MotionStatus::ok) return false;
+  if (kin::plan_movej(L, cmd, spec_.q_goal, kin::MovejOptions{}, plan_) != kin::MotionStatus::ok) return false;
   t_ = 0;
   safe_.reset();  // planned from the real-time state within the caps
   return true;
@@ -98,14 +92,6 @@ bool Jogger::plan_moving(const kin::JointState& cmd) {
   for (int j = 0; j < n_; ++j) rel.pos[j] = cmd.pos[j] - spec_.q_goal[j];
   cap_.apply_moving(L, v, rel.pos, kMovingShare);  // the target's TCP speed, then the catch-up's, within the TCP cap
   for (int j = 0; j < n_; ++j) rel.vel[j] = cmd.vel[j] - v[j];
-  // A joint that follows its target to rounding (one the stream hardly moves) is at it: planned
-  // from that rounding (1e-17 rad, 1e-16 rad/s) and stretched over the others' longer catch-up,
-  // kin::plan_movej's profile for it reaches radians away (the reach check below fails, or the
-  // planner's own path_out_of_limits), and the stream falls back to the joint jog's plan and its
-  // TCP cap summed over every joint, a third of the cap.
-  for (int j = 0; j < n_; ++j)
-    if (std::fabs(rel.pos[j]) < kRoundingRad && std::fabs(rel.vel[j]) < kRoundingRad && std::fabs(rel.acc[j]) < kRoundingRad)
-      rel.pos[j] = rel.vel[j] = 0.0;
   kin::JointTrajectory plan;
   if (kin::plan_movej(L, rel, kin::JointVector::Zero(n_), kin::MovejOptions{}, plan) != kin::MotionStatus::ok) return false;
   // Where the arm can get to: the relative path's extremes, the target's travel over the horizon,

@@ -99,8 +99,6 @@ class Jogger {
   static constexpr double kStopRatio = 0.9;
   /// A streamed target's velocity is held to this fraction of the joint's velocity limit.
   static constexpr double kMovingShare = 0.9;
-  /// rad, rad/s: a streamed joint this close to its moving target (position, velocity) is at it
-  static constexpr double kRoundingRad = 1e-12;
 
   void configure(const kin::Chain& chain, const kin::JointLimits& limits, double period_s);
 
