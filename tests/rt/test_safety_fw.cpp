@@ -1192,6 +1192,50 @@ TEST(SpeedScaling, AStreamWithinTheTcpSpeedLimitIsNotSlowedByTheCap) {
   LONGS_EQUAL(0, r.rt_allocs);
 }
 
+// A stream whose last target is held still while the arm is still far from it (one target
+// 120 mm away along y, then the same target again every 10 ms, under a 100 mm/s TCP limit):
+// the catch-up to it is capped along its own straight line to the target, so it runs near the
+// TCP limit (not at the cap spread over every joint's limit at once, about a third of it), and
+// the TCP never beyond its limit.
+TEST(SpeedScaling, AHeldStreamTargetIsCaughtUpNearTheTcpLimit) {
+  FwConfig c = table(500);
+  c.safety_tcp_speed_mm_s = 100;
+  Rig r(c);
+  r.enable();
+  r.to_work();
+  StreamSettings ss;
+  ss.max_step.assign(6, 0.5);
+  StreamService st(r.svc(), *r.app.ctl, ss);
+  const kin::Pose w = work_tcp();
+  Trace tr;
+  kin::Pose target = w;
+  target.translation().y() += 0.12;
+  bool reached = false;
+  const auto c0 = r.tel().cycles;
+  for (int k = 0; k < 3000 && !reached; ++k) {  // about 10 ms apart: 30 s at most
+    const double t = double(r.tel().cycles - c0) * 1e-3;
+    const StreamResult sr = st.target_pose(target, false, k == 0, t);
+    CHECK_TEXT(sr.ok(), sr.reason.c_str());
+    if (!sr.ok()) break;
+    for (int i = 0; i < 10; ++i) {
+      r.cycle();
+      tr.add(r);
+    }
+    reached = (tr.x.back() - target.translation()).norm() < 1e-5;
+  }
+  double peak = 0;
+  for (std::size_t i = 1; i < tr.x.size(); ++i) peak = std::fmax(peak, tr.speed(i));
+  char fig[200];
+  std::snprintf(fig, sizeof fig, "held stream target 120 mm away under a 100 mm/s TCP limit: peak %.1f mm/s, %zu cycles to it, %u stops",
+                peak, tr.x.size(), unsigned(r.tel().safety_stops));
+  std::printf("\n  %s", fig);
+  CHECK_TEXT(reached, fig);
+  CHECK_TEXT(peak >= 85.0, fig);
+  CHECK_TEXT(peak <= 100.0 + 1.0, fig);
+  CHECK_EQUAL(0u, r.tel().safety_stops);
+  LONGS_EQUAL(0, r.rt_allocs);
+}
+
 // ---------------------------------------------------------------------------
 // Stopping distance on the speed scale: the stop predicted from the commanded state (braked
 // on the joints' limits, as the protective stop brakes) is kept within the mode's limit by

@@ -62,7 +62,16 @@ bool Jogger::plan_joint(const kin::JointState& cmd) {
   // them starts with the planner's recovery to within them).
   kin::JointLimits L = limits_;
   for (int j = 0; j < n_; ++j) L.dyn[static_cast<std::size_t>(j)].max_velocity *= spec_.override;
-  cap_.apply(L, cmd, spec_.q_goal, kin::JointVector());
+  if (spec_.stream) {
+    // A stream's target held still: the catch-up's TCP cap along its own straight line to the
+    // target (a target at rest, SpeedCap::apply_moving), not spread over every joint's limit
+    // at once, so the catch-up runs near the TCP limit (the run-time scale holds the rest).
+    cap_.apply_joints(L);
+    kin::JointVector v = kin::JointVector::Zero(n_), rel = cmd.pos - spec_.q_goal;
+    cap_.apply_moving(L, v, rel, kMovingShare);
+  } else {
+    cap_.apply(L, cmd, spec_.q_goal, kin::JointVector());
+  }
   if (kin::plan_movej(L, cmd, spec_.q_goal, kin::MovejOptions{}, plan_) != kin::MotionStatus::ok) return false;
   t_ = 0;
   safe_.reset();  // planned from the real-time state within the caps
