@@ -311,12 +311,18 @@ namespace {
 // The fastest scale of a slowed move that still keeps the envelope's limits. A speed limit's
 // ratio is exact (the speeds go with the scale), but the stop limits' and the power's are
 // estimates that slow more than needed ((time / limit)^2, (distance / limit)^(2/3),
-// (power / limit)^(1/2)): between the scale that held (its highest ratio r_held <= 1) and the
-// lowest that failed (r_failed > 1), each try is planned and checked again, at the scale where
+// (power / limit)^(1/2)): between the scale that held (its highest ratio r_held <= kHold) and the
+// lowest that failed (r_failed > kHold), each try is planned and checked again, at the scale where
 // log ratio, interpolated linearly in log scale, reaches kAim (kept within the middle 80 % of
 // the bracket, halved in log scale when the failed one's ratio is unknown), until the held
-// ratio is kDone or more, the bracket is within kNarrow, or after kChecks tries.
+// ratio is kDone or more, the bracket is within kNarrow, or after kChecks tries. A scale holds
+// when the envelope check passes and its highest ratio is within kHold, the stop limits taken
+// at the run-time speed scale's aim (SafetyMonitor::kStopAim, in envelope_ok): a plan that holds
+// keeps its predicted stop where the run-time scale aims it, so the scale does not trim it
+// while it runs and the planned duration is the one that runs. (Speeds, momentum and power
+// are taken at their limits, as the run-time scale takes them.)
 struct ScaleSearch {
+  static constexpr double kHold = 1.0 + 1e-6;  // 1, and rounding (a line planned at a speed limit: 1 to rounding)
   static constexpr int kChecks = 5;
   static constexpr double kAim = 0.99;
   static constexpr double kDone = 0.98;
@@ -328,7 +334,7 @@ struct ScaleSearch {
   double next() const {
     const double lo = std::log(held), hi = std::log(failed);
     double x = 0.5 * (lo + hi);
-    if (r_held > 0 && r_failed > 1 && r_failed > r_held) {
+    if (r_held > 0 && r_failed > kHold && r_failed > r_held) {
       const double y_lo = std::log(r_held), y_hi = std::log(r_failed);
       x = lo + (std::log(kAim) - y_lo) * (hi - lo) / (y_hi - y_lo);
     }
@@ -484,19 +490,26 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
   for (int attempt = 0;; ++attempt) {
     kin::SafetyViolation sv;
     double ratio = 1;
-    if (check(r, sv, ratio)) {
+    const bool passed = check(r, sv, ratio);
+    const double slower = jm.override * 0.995 / std::max(ratio, 1.0);
+    const bool last = attempt >= 12 || !(slower >= kMinJointSpeedPct / 100.0);
+    if (passed && (ratio <= ScaleSearch::kHold || last)) {
       search.held = jm.override, search.r_held = ratio;
       break;
     }
-    const bool speed = kin::is_speed(sv.function);
-    const double slower = jm.override * 0.995 / std::max(ratio, 1.0);
-    if (!speed || attempt >= 12 || !(slower >= kMinJointSpeedPct / 100.0)) return r;
+    if (!passed && (!kin::is_speed(sv.function) || last)) return r;
     search.failed = jm.override, search.r_failed = ratio;
     const MoveResult refused = r;
     r = MoveResult{};
     jm.override = o.override = slower;
     r.status = kin::plan_movej(lim_, kin::JointState::rest(cx.dry != nullptr ? cx.dry->tail : tail()), goal, o, jm.plan);
-    if (!kin::is_ok(r.status)) return refused;
+    if (!kin::is_ok(r.status)) {
+      if (!passed) return refused;
+      const kin::MotionStatus st = r.status;  // (never seen: the same move, slower)
+      r = refuse(MoveRefusal::plan, motion_error(st));
+      r.status = st;
+      return r;
+    }
     if (!duration_ok(jm.plan.duration, r)) return r;
   }
   if (search.failed > 0 && !search.done()) {
@@ -508,8 +521,9 @@ MoveResult ArmService::plan(const MoveJoints& req, const MoveContext& cx) {
       kin::SafetyViolation sv;
       double ratio = 0;
       probe.status = kin::plan_movej(lim_, kin::JointState::rest(cx.dry != nullptr ? cx.dry->tail : tail()), goal, o, jm.plan);
-      const bool ok = kin::is_ok(probe.status) && duration_ok(jm.plan.duration, probe) && check(probe, sv, ratio);
-      search.record(o.override, ok, ok || kin::is_speed(sv.function) ? ratio : 0.0);
+      const bool passed = kin::is_ok(probe.status) && duration_ok(jm.plan.duration, probe) && check(probe, sv, ratio);
+      const bool ok = passed && ratio <= ScaleSearch::kHold;
+      search.record(o.override, ok, passed || kin::is_speed(sv.function) ? ratio : 0.0);
       if (ok) best = jm.plan, best_status = probe.status;
     }
     jm.plan = best;
@@ -570,12 +584,14 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
     if (!duration_ok(traj.duration, r)) return r;
     kin::SafetyViolation sv;
     double ratio = 1;
-    if (check(r, sv, ratio)) {
+    const bool passed = check(r, sv, ratio);
+    const double slower = speed * 0.995 / std::max(ratio, 1.0);
+    const bool last = attempt >= 12 || !(slower >= kMinLinearSpeedMmS * 1e-3);
+    if (passed && (ratio <= ScaleSearch::kHold || last)) {
       search.held = speed, search.r_held = ratio;
       break;
     }
-    const double slower = speed * 0.995 / std::max(ratio, 1.0);
-    if (!kin::is_speed(sv.function) || attempt >= 12 || !(slower >= kMinLinearSpeedMmS * 1e-3)) return r;
+    if (!passed && (!kin::is_speed(sv.function) || last)) return r;
     search.failed = speed, search.r_failed = ratio;
     r = MoveResult{};
     speed = slower;
@@ -589,8 +605,9 @@ MoveResult ArmService::plan(const MoveLine& req, const MoveContext& cx) {
       kin::SafetyViolation sv;
       double ratio = 0;
       const kin::MotionStatus st = kin::plan_movel(chain, q0, req.target, cl, mo, cx.ik, traj, &rep);
-      const bool ok = kin::is_ok(st) && duration_ok(traj.duration, probe) && check(probe, sv, ratio);
-      search.record(cl.linear_velocity, ok, ok || kin::is_speed(sv.function) ? ratio : 0.0);
+      const bool passed = kin::is_ok(st) && duration_ok(traj.duration, probe) && check(probe, sv, ratio);
+      const bool ok = passed && ratio <= ScaleSearch::kHold;
+      search.record(cl.linear_velocity, ok, passed || kin::is_speed(sv.function) ? ratio : 0.0);
       if (ok) best = traj, best_status = st;
     }
     traj = best;

@@ -123,7 +123,8 @@ bool ArmService::envelope_ok(const kin::Chain& chain, double duration,
     }
     // the mode at this sample: Reduced where the tool reaches beyond a trigger plane
     const kin::SafetyMode mode = kin::effective_mode(env, plan_safety_mode(), x);
-    ratio = std::max(ratio, kin::speed_ratio(env, mode, x));
+    // (the stop limits at the run-time speed scale's aim: a plan the scale would trim is not one that holds)
+    ratio = std::max(ratio, kin::speed_ratio(env, mode, x, SafetyMonitor::kStopAim));
     // (speeds: 1e-6 m/s of rounding, so that a line planned at the limit passes)
     if (!refused && kin::check_sample(env, mode, x, 0.0, 0.0, 1e-6, v)) {
       r = refuse(MoveRefusal::arm_state, CmdError::limits);
