@@ -100,6 +100,20 @@ TEST(MitProcess, DemoOnSixDamiaoMotorsPasses) {
   CHECK_TEXT(out.find("unexpected errors: 0") != std::string::npos, out.c_str());
 }
 
+/// The demo summary's loop line ("loop: N cycles at R Hz, M overruns, ..."), or "".
+static std::string loop_line(const std::string& out) {
+  const auto at = out.find("  loop: ");
+  return at == std::string::npos ? std::string() : out.substr(at + 2, out.find('\n', at) - at - 2);
+}
+
+/// Whether the demo's loop overran in more than 2 % of its cycles.
+static bool starved(const std::string& out) {
+  long cycles = 0, overruns = 0;
+  const std::string l = loop_line(out);
+  return std::sscanf(l.c_str(), "loop: %ld cycles at %*d Hz, %ld overruns", &cycles, &overruns) == 2 &&
+         cycles > 0 && overruns * 50 > cycles;
+}
+
 // The demo on the dynamic plant (armfw --sim --plant dynamic): each virtual motor moves its
 // joint's inertia of the arm (the mass matrix's diagonal at the measured pose) and, while
 // powered, carries the arm's gravity torque. The puma's base, shoulder and elbow through 4:1
@@ -115,8 +129,17 @@ TEST(MitProcess, DemoOnSixDamiaoMotorsWithTheModelsTorqueOnTheDynamicPlantPasses
     const std::string cfg = write_config("armfw-damiao-dyn", false,
                                          (std::string("[dynamics]\nfeed_forward = \"") + kinds[k] + "\"\n").c_str(), true);
     int st = 0;
-    outs[k] = run_capture(emulator_prefix() + ARMFW_PATH " --sim --config " + cfg +
-                              " --plant dynamic --demo --priority 0 2>&1 </dev/null", st);
+    const std::string cmd = emulator_prefix() + ARMFW_PATH " --sim --config " + cfg + " --plant dynamic --demo --priority 0 2>&1 </dev/null";
+    outs[k] = run_capture(cmd, st);
+    // The virtual motors keep the wall clock: a loop starved for a tenth of a second (seen under
+    // ASan at a load average of 4-5: 14 % of the cycles overran, one wake-up 117 ms late) lets
+    // the arm fall behind its plan by more than the following-error limit, although nothing is
+    // wrong with the controller. A failed run whose loop overran in more than 2 % of its cycles
+    // runs once more; a second starved failure stays a failure.
+    if (k == 1 && outs[k].find("result: PASS") == std::string::npos && starved(outs[k])) {
+      std::printf("\n  the torque run failed with a starved loop (%s): run once more\n", loop_line(outs[k]).c_str());
+      outs[k] = run_capture(cmd, st);
+    }
     std::remove(cfg.c_str());
     if (k == 1) CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, outs[k].c_str());
     const auto at = outs[k].find("max following error ");
