@@ -289,8 +289,12 @@ class ClientTest(unittest.TestCase):
                 s = arm.state()
             self.assertFalse(s["streaming"])
             self.assertEqual(s["state"], "idle")
-            self.assertTrue(any(e["kind"] == "jog_stopped" and "stream stopped" in e["detail"]
-                                for e in arm.events(seq)))
+            # events come on their own push, which may arrive after the state answer above
+            stopped = lambda: any(e["kind"] == "jog_stopped" and "stream stopped" in e["detail"]
+                                  for e in arm.events(seq))
+            while not stopped() and time.monotonic() < end + 5:
+                time.sleep(0.05)
+            self.assertTrue(stopped(), arm.events(seq))
 
     def test_stream_with_velocities_moves_through_the_targets(self):
         # 30 Hz of a 0.5 Hz sine on joint 0, each target with its velocity: mid-swing the arm's
