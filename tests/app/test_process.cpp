@@ -172,6 +172,61 @@ TEST(Process, ConsoleSpeaksTheDescriptionsUnits) {
   CHECK_TEXT(std::fabs(x - 0.3) < 1e-3 && std::fabs(y - 0.25) < 1e-3, out.c_str());
 }
 
+// SIGTERM ends a running demo: the arm is stopped and armfw exits (1: the demo did not pass),
+// instead of the demo waiting on for its moves.
+TEST(Process, DemoEndsOnSigterm) {
+  const std::vector<std::string> args =
+      servoarm::test::target_argv({ARMFW_PATH, "--sim", "--demo", "--no-stdin", "--priority", "0"});
+  std::vector<char*> argv;
+  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  int outpipe[2];
+  CHECK(pipe(outpipe) == 0);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    dup2(outpipe[1], 1);
+    dup2(outpipe[1], 2);
+    close(outpipe[0]);
+    const int devnull = open("/dev/null", O_RDONLY);
+    dup2(devnull, 0);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  close(outpipe[1]);
+  fcntl(outpipe[0], F_SETFL, O_NONBLOCK);
+  std::string out;
+  auto drain = [&] {
+    char b[4096];
+    ssize_t r;
+    while ((r = read(outpipe[0], b, sizeof b)) > 0) out.append(b, static_cast<std::size_t>(r));
+  };
+  // into the demo's first move (a busy machine or an emulator takes longer to get there)
+  const auto t0 = std::chrono::steady_clock::now();
+  while (out.find("> movej") == std::string::npos && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60)) {
+    drain();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  CHECK_TEXT(out.find("> movej") != std::string::npos, out.c_str());
+  kill(pid, SIGTERM);
+  int st = 0;
+  pid_t done = 0;
+  const auto t1 = std::chrono::steady_clock::now();
+  while ((done = waitpid(pid, &st, WNOHANG)) == 0 && std::chrono::steady_clock::now() - t1 < std::chrono::seconds(30)) {
+    drain();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  if (done == 0) {
+    kill(pid, SIGKILL);
+    waitpid(pid, &st, 0);
+  }
+  drain();
+  close(outpipe[0]);
+  CHECK_TEXT(done == pid, ("armfw --demo still running 30 s after SIGTERM\n" + out).c_str());
+  CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 1, out.c_str());
+  CHECK_TEXT(out.find("interrupted (SIGINT or SIGTERM)") != std::string::npos, out.c_str());
+  CHECK_TEXT(out.find("== summary") == std::string::npos, out.c_str());
+}
+
 TEST(Process, PtyConsoleDrivenByArmctl) {
   int errpipe[2];
   CHECK(pipe(errpipe) == 0);

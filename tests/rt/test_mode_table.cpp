@@ -193,6 +193,11 @@ void enter(TableRig& r, Mode m) {
       r.request(RequestOp::hold);
       r.expect(Mode::hold_ramp, "hold");
       return;
+    case Mode::hold_ramp_resume:
+      enter(r, Mode::hold_ramp);
+      r.request(RequestOp::resume);
+      r.expect(Mode::hold_ramp_resume, "resume during the hold's ramp");
+      return;
     case Mode::hold_line:
       r.enable();
       r.start_line();
@@ -320,6 +325,7 @@ Expect expected(Mode m, RequestOp op) {
       case Mode::idle: return stays(bad, "freedrive refused: no dynamic model");
       case Mode::moving:
       case Mode::hold_ramp:
+      case Mode::hold_ramp_resume:
       case Mode::hold_line:
       case Mode::held:
       case Mode::jogging: return stays(busy, "a move, jog or homing is running (or held): freedrive refused");
@@ -366,6 +372,7 @@ Expect expected(Mode m, RequestOp op) {
       case Mode::idle: return {ok, "homing: group 1 of 1 (joints 1, 2, 3, 4, 5, 6)", Mode::idle, kStart6};
       case Mode::moving:
       case Mode::hold_ramp:
+      case Mode::hold_ramp_resume:
       case Mode::hold_line:
       case Mode::held:
       case Mode::jogging: return stays(busy, "a move or jog is running (or held): home refused");
@@ -427,6 +434,7 @@ Expect expected(Mode m, RequestOp op) {
       case Mode::idle: return {ok, "jogging", Mode::jogging, kNone};
       case Mode::moving:
       case Mode::hold_ramp:
+      case Mode::hold_ramp_resume:
       case Mode::hold_line:
       case Mode::held: return stays(busy, "a move is running (or held): jog refused");
       case Mode::stopping_to_idle:
@@ -544,7 +552,25 @@ Expect expected(Mode m, RequestOp op) {
         case RequestOp::estop: return {ok, "estop", Mode::estop_ramp, kNone};
         case RequestOp::reset: return nothing_to_reset;
         case RequestOp::hold: return stays(ok, "already holding");
-        case RequestOp::resume: return stays(bad, "still ramping down; retry");
+        case RequestOp::resume: return {ok, "resumes when the hold's ramp ends", Mode::hold_ramp_resume, kNone};
+        case RequestOp::set_zero: return no_zero;
+        case RequestOp::jog:
+        case RequestOp::jog_cancel:
+        case RequestOp::jog_keepalive:
+        case RequestOp::home:
+        case RequestOp::freedrive_on:
+        case RequestOp::freedrive_off: break;  // (above)
+      }
+      break;
+    case Mode::hold_ramp_resume:  // the hold released, the ramp still running
+      switch (op) {
+        case RequestOp::enable: return stays(ok, "already enabled");
+        case RequestOp::disable: return {ok, "stopping, then disabling", Mode::stopping_to_disabled, kNone};
+        case RequestOp::stop: return {ok, "stopping", Mode::stopping_to_idle, kNone};
+        case RequestOp::estop: return {ok, "estop", Mode::estop_ramp, kNone};
+        case RequestOp::reset: return nothing_to_reset;
+        case RequestOp::hold: return {ok, "feed hold", Mode::hold_ramp, kNone};  // the later request wins
+        case RequestOp::resume: return stays(ok, "resumes when the hold's ramp ends");
         case RequestOp::set_zero: return no_zero;
         case RequestOp::jog:
         case RequestOp::jog_cancel:
@@ -798,6 +824,7 @@ TEST(ModeTable, Enabling) { walk_mode(Mode::enabling); }
 TEST(ModeTable, Idle) { walk_mode(Mode::idle); }
 TEST(ModeTable, Moving) { walk_mode(Mode::moving); }
 TEST(ModeTable, HoldRamp) { walk_mode(Mode::hold_ramp); }
+TEST(ModeTable, HoldRampResume) { walk_mode(Mode::hold_ramp_resume); }
 TEST(ModeTable, HoldLine) { walk_mode(Mode::hold_line); }
 TEST(ModeTable, Held) { walk_mode(Mode::held); }
 TEST(ModeTable, StoppingToIdle) { walk_mode(Mode::stopping_to_idle); }
@@ -969,6 +996,38 @@ TEST(ModeTable, DriveQuickStopReportsStoppingUntilRest) {
 }
 
 // `disable` of an idle arm: the joints go stopping -> disabled, not enabling -> disabled.
+// A resume sent while a feed hold still ramps down is kept, not refused (a '~' typed half a
+// second after a '!' must not depend on how long the ramp takes): at rest the move resumes
+// and reaches its goal.
+TEST(ModeTable, AResumeDuringTheHoldsRampResumesTheMoveAtRest) {
+  TableRig r(false);
+  r.enable();
+  const kin::JointVector start = r.q_cmd();
+  r.start_joint_move();
+  r.request(RequestOp::hold);
+  r.expect(Mode::hold_ramp, "hold");
+  const Reply rep = r.request(RequestOp::resume);
+  LONGS_EQUAL_TEXT(int(RtResult::ok), int(rep.result), rep.message);
+  r.expect(Mode::hold_ramp_resume, "resume during the ramp");
+  r.run_until(Mode::moving, 5000, "the hold's ramp, then the resume");
+  r.run_until(Mode::idle, 20000, "the resumed move");
+  for (int j = 0; j < 6; ++j) DOUBLES_EQUAL(start[j] + (j % 2 ? -40.0 : 40.0) * kDeg, r.q_cmd()[j], 1e-6);
+  LONGS_EQUAL(1, r.ctl->telemetry().done_id);
+}
+
+// A hold after a resume kept during the ramp wins: the arm comes to rest and stays held.
+TEST(ModeTable, AHoldAfterAKeptResumeHoldsAtRest) {
+  TableRig r(false);
+  enter(r, Mode::hold_ramp_resume);
+  r.request(RequestOp::hold);
+  r.expect(Mode::hold_ramp, "hold after the kept resume");
+  r.run_until(Mode::held, 5000, "the hold's ramp");
+  const kin::JointVector at = r.q_cmd();
+  r.cycles(500);
+  r.expect(Mode::held, "held");
+  for (int j = 0; j < 6; ++j) DOUBLES_EQUAL(at[j], r.q_cmd()[j], 0.0);
+}
+
 TEST(ModeTable, DisableReportsStoppingThenDisabled) {
   TableRig r(false);
   r.enable();

@@ -134,11 +134,19 @@ struct DemoRunner {
   bool verbose = true;
 
   std::string run(const std::string& line, bool show_progress = true) {
+    if (g_quit) return "";  // SIGINT / SIGTERM: the demo ends here (nothing more is sent)
     if (verbose) std::printf("> %s\n", line.c_str());
     s.out.clear();
     app.console->execute(s, line);
     double last = now_s();
     while (app.console->busy(s)) {
+      if (g_quit) {  // a signal during a move or a wait: the arm is stopped, the demo ends
+        Session stop;
+        app.console->execute(stop, "stop");
+        std::printf("%s", stop.out.c_str());
+        std::fflush(stdout);
+        return "";
+      }
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
       app.console->poll(s);
       const std::string ev = app.console->drain_events();
@@ -430,6 +438,11 @@ int run_demo(App& app) {
   d.run("stats", false);
   d.run("disable", false);
 
+  if (g_quit) {
+    std::printf("\n== interrupted (SIGINT or SIGTERM): the arm was stopped\n  result: FAIL\n");
+    std::fflush(stdout);
+    return 1;
+  }
   const Telemetry t = app.ctl->telemetry();
   std::printf("\n== summary\n");
   std::printf("  %-34s %s\n", "move", "final error");

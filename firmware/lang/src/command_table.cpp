@@ -78,7 +78,7 @@ constexpr CodeSpec kRealtime[] = {
     {"!", "feed hold (linear moves stop on the line; a running program is paused; a jog stops); aborts a homing cycle. "
           "Lines received before it and not run yet are held too: a move sent right before `!` is held as soon as it is "
           "queued, until `~` (a `!` at rest with nothing before it holds nothing)"},
-    {"~", "resume (a paused program goes on)"},
+    {"~", "resume (a paused program goes on; during the hold's ramp, once the arm is at rest)"},
     {"Ctrl-X (0x18)",
      "e-stop; discards the partial line, answers every line not executed yet with `error: estop` (GRBL dialect: a "
      "soft reset, the banner again; an e-stop only while the arm moves)"},

@@ -191,6 +191,7 @@ void Controller::end_of_ramp(Mode ramp) {
   cmd_ = kin::JointState::rest(cmd_.pos);
   switch (ramp) {
     case Mode::hold_ramp: set_mode(Mode::held); return;  // at rest, the motion kept
+    case Mode::hold_ramp_resume: resume_held(); return;
     case Mode::stopping_to_idle: set_mode(Mode::idle); return;
     case Mode::stopping_to_disabled: power_down(Mode::disabled); return;
     case Mode::fault_ramp:
@@ -347,6 +348,7 @@ void Controller::raise_fault(FaultCause c, int joint, const char* detail) {
     case Mode::idle:
     case Mode::moving:
     case Mode::hold_ramp:
+    case Mode::hold_ramp_resume:
     case Mode::hold_line:
     case Mode::held:
     case Mode::stopping_to_idle:
@@ -410,6 +412,7 @@ void Controller::supervise(TimePoint now) {
     case Mode::idle:
     case Mode::moving:
     case Mode::hold_ramp:
+    case Mode::hold_ramp_resume:
     case Mode::hold_line:
     case Mode::held:
     case Mode::stopping_to_idle:
@@ -663,10 +666,17 @@ void Controller::run(Action a, const Request& r, TimePoint now) {
       reply(r.seq, RtResult::ok, "feed hold (queue held)");
       return;
     case Action::already_holding: reply(r.seq, RtResult::ok, "already holding"); return;
+    case Action::hold_drops_resume:
+      set_mode(Mode::hold_ramp);
+      reply(r.seq, RtResult::ok, "feed hold");
+      return;
     case Action::not_moving: reply(r.seq, RtResult::ok, "not moving"); return;
     // resume
     case Action::resume_motion: resume_motion(r); return;
-    case Action::refuse_still_ramping: reply(r.seq, RtResult::bad_state, "still ramping down; retry"); return;
+    case Action::resume_after_ramp:
+      set_mode(Mode::hold_ramp_resume);  // the ramp goes on (the same stop trajectory)
+      reply(r.seq, RtResult::ok, "resumes when the hold's ramp ends");
+      return;
     case Action::not_holding: reply(r.seq, RtResult::ok, "not holding"); return;
     // set_zero
     case Action::set_zero: set_zero(r); return;
@@ -1384,6 +1394,7 @@ void Controller::step_safety() {
     case Mode::idle:
     case Mode::held:
     case Mode::hold_ramp:
+    case Mode::hold_ramp_resume:
     case Mode::stopping_to_idle:
     case Mode::stopping_to_disabled:
     case Mode::fault_ramp:

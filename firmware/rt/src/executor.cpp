@@ -372,6 +372,7 @@ void Controller::step_motion() {
     case Mode::fault_quick_stop:
     case Mode::estop_quick_stop: step_drive_stop(); return;
     case Mode::hold_ramp:
+    case Mode::hold_ramp_resume:
     case Mode::stopping_to_idle:
     case Mode::stopping_to_disabled:
     case Mode::fault_ramp:
@@ -437,6 +438,16 @@ void Controller::resume_motion(const Request& r) {
     return;
   }
   reply(r.seq, RtResult::ok, "resumed");
+}
+
+void Controller::resume_held() {
+  // The resume was answered when it came, during the ramp: what happens at rest is an event.
+  set_mode(Mode::moving);
+  if (!exec_.resume(cmd_)) {
+    emit(EventKind::motion_refused, FaultCause::none, -1, 0, "resume at the end of the hold's ramp: cannot re-plan the interrupted move");
+    return;
+  }
+  emit(EventKind::state, FaultCause::none, -1, 0, "resumed at the end of the hold's ramp");
 }
 
 bool Controller::may_move() const { return all_homed(); }

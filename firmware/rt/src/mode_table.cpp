@@ -48,6 +48,7 @@ const char* to_string(Mode m) {
     case Mode::idle: return "idle";
     case Mode::moving: return "moving";
     case Mode::hold_ramp: return "hold_ramp";
+    case Mode::hold_ramp_resume: return "hold_ramp_resume";
     case Mode::hold_line: return "hold_line";
     case Mode::held: return "held";
     case Mode::stopping_to_idle: return "stopping_to_idle";
@@ -110,9 +111,10 @@ const char* to_string(Action a) {
     case Action::hold_motion: return "hold_motion";
     case Action::hold_queue: return "hold_queue";
     case Action::already_holding: return "already_holding";
+    case Action::hold_drops_resume: return "hold_drops_resume";
     case Action::not_moving: return "not_moving";
     case Action::resume_motion: return "resume_motion";
-    case Action::refuse_still_ramping: return "refuse_still_ramping";
+    case Action::resume_after_ramp: return "resume_after_ramp";
     case Action::not_holding: return "not_holding";
     case Action::set_zero: return "set_zero";
     case Action::refuse_set_zero: return "refuse_set_zero";

@@ -132,7 +132,7 @@ inline constexpr CommandSpec kCommands[] = {
      "with moves queued but not started yet, holds the queue (GRBL Hold: `?` says `Hold`); `resume` runs it, "
      "`stop` drops it",
      false},
-    {"resume", Cmd::resume, ArgShape::none, "resume", "resume after a feed hold (same as ~)", "", false},
+    {"resume", Cmd::resume, ArgShape::none, "resume", "resume after a feed hold (same as ~); sent while the hold still ramps down, the move resumes once the arm is at rest", "", false},
     {"jog", Cmd::jog, ArgShape::jog, "jog <axis> <+v, -v, + or -> [speed=%] [frame=base, tool or user]; jog stop; jog",
      "jog a joint (j1..jn) or the tool (x y z rx ry rz) by v, or continuously (+ / -); `jog` alone keeps a "
      "continuous jog alive, `jog stop` ends it",

@@ -258,6 +258,7 @@ class Controller final : private SegmentHost {
   void reset_latched(const Request& r);
   void hold_motion(const Request& r);
   void resume_motion(const Request& r);
+  void resume_held();  ///< a hold's ramp at rest with a resume sent during it (Mode::hold_ramp_resume)
   void start_homing(const Request& r);
   void start_freedrive(const Request& r);
   /// One cycle of the freedrive modes: the setpoint follows the measured pose, the model's

@@ -59,6 +59,7 @@ enum class Mode : std::uint8_t {
   idle,              ///< powered, at rest, no motion running
   moving,            ///< running the motion queue
   hold_ramp,         ///< feed hold of a joint move: ramping to rest (motion kept)
+  hold_ramp_resume,  ///< hold_ramp with a `resume` sent during the ramp: at rest the motion resumes
   hold_line,         ///< feed hold of a Cartesian move: slowing to rest on the line (motion kept)
   held,              ///< feed hold at rest, motion kept (or a held queue not started yet)
   stopping_to_idle,  ///< `stop`: ramping to rest, then idle
@@ -77,7 +78,7 @@ enum class Mode : std::uint8_t {
   freedrive_end,     ///< back to CSP holding where each joint stands (`freedrive off`, `stop`, a joint that left
                      ///< CST by itself); then idle with the setpoint at the measured pose
 };
-inline constexpr std::size_t kModes = 21;
+inline constexpr std::size_t kModes = 22;
 const char* to_string(Mode m);
 
 /// The one function from mode to what the console sees.
@@ -89,6 +90,7 @@ constexpr ArmState arm_state(Mode m) {
     case Mode::idle: return ArmState::idle;
     case Mode::moving:
     case Mode::hold_ramp:
+    case Mode::hold_ramp_resume:
     case Mode::hold_line:
     case Mode::held: return ArmState::moving;
     case Mode::stopping_to_idle:
@@ -108,7 +110,8 @@ constexpr ArmState arm_state(Mode m) {
   return ArmState::fault;
 }
 
-/// Feed hold active (Telemetry::holding).
+/// Feed hold active (Telemetry::holding). Not in hold_ramp_resume: the hold is released
+/// (the program runner and a GRBL sender see the arm running again), the ramp only ends first.
 constexpr bool holding(Mode m) { return m == Mode::hold_ramp || m == Mode::hold_line || m == Mode::held; }
 
 /// The drives are powered and follow the controller's setpoints (which are then
@@ -120,6 +123,7 @@ constexpr bool powered(Mode m) {
     case Mode::idle:
     case Mode::moving:
     case Mode::hold_ramp:
+    case Mode::hold_ramp_resume:
     case Mode::hold_line:
     case Mode::held:
     case Mode::stopping_to_idle:
@@ -144,15 +148,15 @@ constexpr bool powered(Mode m) {
 
 /// The controller samples its stop trajectory (a ramp to rest is running).
 constexpr bool ramping(Mode m) {
-  return m == Mode::hold_ramp || m == Mode::stopping_to_idle || m == Mode::stopping_to_disabled ||
+  return m == Mode::hold_ramp || m == Mode::hold_ramp_resume || m == Mode::stopping_to_idle || m == Mode::stopping_to_disabled ||
          m == Mode::fault_ramp || m == Mode::estop_ramp;
 }
 
 /// The running segment's phase: the motion executor's state (executor.hpp) while the mode
-/// runs the motion queue (moving, hold_ramp, hold_line, held; none in every other mode). The
+/// runs the motion queue (moving, hold_ramp, hold_ramp_resume, hold_line, held; none in every other mode). The
 /// mode says what the arm does (moves, ramps down, slows on a line, holds), the phase which
 /// kind of segment runs and where its run stands. The (mode x phase) cells that exist:
-///   moving: every phase but none; hold_ramp: plan, path_to_end, path_to_start;
+///   moving: every phase but none; hold_ramp and hold_ramp_resume: plan, path_to_end, path_to_start;
 ///   hold_line: line, path_line; held: none, plan, line, dwell, path_line, path_to_end, path_to_start.
 /// A feed hold (hold_rule) and `resume` (resume_rule) are decided by the phase; a stop, fault,
 /// e-stop or disable drops the queue: phase none.
@@ -252,10 +256,14 @@ enum class Action : std::uint8_t {
   hold_motion,            ///< moving -> hold_ramp / hold_line / held
   hold_queue,             ///< idle with a queue -> held (else "not moving")
   already_holding,        ///< ok "already holding"
+  hold_drops_resume,      ///< hold_ramp_resume: ok "feed hold" -> hold_ramp (the resume kept for the ramp's end is
+                          ///< dropped: the later request wins)
   not_moving,             ///< ok "not moving"
   // resume
   resume_motion,          ///< held / hold_line -> moving
-  refuse_still_ramping,   ///< bad_state "still ramping down; retry"
+  resume_after_ramp,      ///< hold_ramp: ok "resumes when the hold's ramp ends" -> hold_ramp_resume; the ramp goes
+                          ///< on to rest, then the motion resumes (an operator's resume is never lost to the
+                          ///< ramp's timing; a hold, stop, e-stop or disable before that drops it)
   not_holding,            ///< ok "not holding"
   // set_zero
   set_zero,               ///< disabled: joint zero = current position (all joints or none)
@@ -286,7 +294,7 @@ enum class Action : std::uint8_t {
   end_freedrive,          ///< freedrive (`freedrive off`, `stop`, feed hold): back to CSP where it stands -> freedrive_end
   not_in_freedrive,       ///< ok "free-drive off" (freedrive_end: "free-drive ending")
 };
-inline constexpr std::size_t kActions = 49;
+inline constexpr std::size_t kActions = 50;
 const char* to_string(Action a);
 
 using RequestRow = std::array<Action, kRequestOps>;  ///< indexed by RequestOp
@@ -322,7 +330,12 @@ inline constexpr std::array<RequestRow, kModes> kRequestTable = {{
      Action::refuse_freedrive_busy, Action::not_in_freedrive},
     // hold_ramp
     {Action::already_enabled, Action::keep_ramp_then_disable, Action::keep_ramp_to_idle, Action::estop_keep_ramp,
-     Action::nothing_to_reset, Action::already_holding, Action::refuse_still_ramping, Action::refuse_set_zero,
+     Action::nothing_to_reset, Action::already_holding, Action::resume_after_ramp, Action::refuse_set_zero,
+     Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving,
+     Action::refuse_freedrive_busy, Action::not_in_freedrive},
+    // hold_ramp_resume
+    {Action::already_enabled, Action::keep_ramp_then_disable, Action::keep_ramp_to_idle, Action::estop_keep_ramp,
+     Action::nothing_to_reset, Action::hold_drops_resume, Action::resume_after_ramp, Action::refuse_set_zero,
      Action::refuse_jog_moving, Action::not_jogging, Action::not_jogging, Action::refuse_home_moving,
      Action::refuse_freedrive_busy, Action::not_in_freedrive},
     // hold_line
