@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <fstream>
 #include <functional>
@@ -241,17 +242,59 @@ bool printed_extent(const std::string& out, double e[4]) {
   return true;
 }
 
+// The raster `armctl kin workspace --csv` wrote (runs of cell centres, mm), back on a grid:
+// the cell size from the printed one (4 digits) refined over the rows' span, so the cell
+// boundaries are the command's own to the CSV's 6 digits.
+struct CsvRaster {
+  double u0 = 0, v0 = 0, cell = 0;  // mm: lower-left corner of cell (0, 0)
+  int nu = 0, nv = 0;
+  std::vector<std::uint8_t> on;
+  bool at(int i, int j) const { return on[static_cast<std::size_t>(j) * nu + i] != 0; }
+};
+
+bool read_csv_raster(const std::string& csv, double printed_cell, CsvRaster& r, std::string& err) {
+  std::istringstream in(csv);
+  std::string line;
+  std::getline(in, line);  // the header
+  std::vector<std::array<double, 3>> runs;
+  double ulo = 1e300, uhi = -1e300, vlo = 1e300, vhi = -1e300;
+  while (std::getline(in, line)) {
+    std::array<double, 3> x{};
+    if (std::sscanf(line.c_str(), "%lf,%lf,%lf", &x[0], &x[1], &x[2]) != 3) return err = "bad CSV row '" + line + "'", false;
+    runs.push_back(x);
+    vlo = std::min(vlo, x[0]), vhi = std::max(vhi, x[0]), ulo = std::min(ulo, x[1]), uhi = std::max(uhi, x[2]);
+  }
+  if (runs.size() < 100 || !(printed_cell > 0)) return err = "CSV of " + std::to_string(runs.size()) + " runs", false;
+  const long n_v = std::lround((vhi - vlo) / printed_cell), n_u = std::lround((uhi - ulo) / printed_cell);
+  r.cell = n_v >= n_u ? (vhi - vlo) / static_cast<double>(n_v) : (uhi - ulo) / static_cast<double>(n_u);
+  r.u0 = ulo - r.cell / 2, r.v0 = vlo - r.cell / 2;
+  r.nu = static_cast<int>(n_u) + 1, r.nv = static_cast<int>(n_v) + 1;
+  r.on.assign(static_cast<std::size_t>(r.nu) * r.nv, 0);
+  auto index = [&](double x, double lo, int n, int& k) {
+    const double f = (x - lo) / r.cell;
+    k = static_cast<int>(std::lround(f));
+    return std::abs(f - k) < 0.01 && k >= 0 && k < n;
+  };
+  for (const auto& x : runs) {
+    int j = 0, i0 = 0, i1 = 0;
+    if (!index(x[0], vlo, r.nv, j) || !index(x[1], ulo, r.nu, i0) || !index(x[2], ulo, r.nu, i1) || i1 < i0)
+      return err = "CSV run off the cell grid: " + std::to_string(x[0]) + "," + std::to_string(x[1]) + "," + std::to_string(x[2]), false;
+    for (int i = i0; i <= i1; ++i) r.on[static_cast<std::size_t>(j) * r.nu + i] = 1;
+  }
+  return true;
+}
+
 TEST(Workspace, TurningArmWithOffsetWristHoldsEveryPointDenseFkSamplingReaches) {
   // Dense seeded sampling of the joint box (joints 2..6 uniform, a quarter of the values
   // at a limit), each sample turned by joint 1 into the plane's two half-planes where
   // joint 1's limits allow; FK of the turned joints gives a point of the section. The
-  // printed extent (cell centres) must hold every such point to within one cell, and
-  // every point must lie within two cells of a filled cell (no cut, no hole wider than
-  // about two cells: joints 4 and 5 are sampled in steps, the gripper's sideways offset
-  // between two steps is not drawn). Under qemu and the sanitizers the first 1/20 of the
-  // samples (tests/support/sweep.hpp).
+  // extent the command prints (cell centres) must hold every such point to within one
+  // cell, and every point must lie within two cells of a filled cell of the raster its
+  // --csv writes (no cut, no hole wider than about two cells: joints 4 and 5 are sampled
+  // in steps, the gripper's sideways offset between two steps is not drawn). Under qemu
+  // and the sanitizers the first 1/20 of the samples (tests/support/sweep.hpp).
   constexpr int kReachCells = 2;  // a sampled point's distance to a filled cell, at most (cells)
-  const std::string f = write_temp("ar4_like.toml", kAr4);
+  const std::string f = write_temp("ar4_like.toml", kAr4), csv = write_temp("ar4_like.csv", "");
   const servoarm::kin::LoadResult lr = servoarm::kin::load_robot(f);
   CHECK_TEXT(lr.ok, lr.error.c_str());
   const servoarm::kin::Chain& c = lr.chain;
@@ -260,14 +303,16 @@ TEST(Workspace, TurningArmWithOffsetWristHoldsEveryPointDenseFkSamplingReaches) 
   for (const char* plane : {"xz", "yz"}) {
     const int iu = plane[0] == 'x' ? 0 : 1, iv = 2;
     const double psi0 = iu == 0 ? 0 : M_PI / 2;  // azimuth of the +u half-plane
-    WorkspaceOptions o;
-    o.plane = plane;
-    const WorkspaceResult w = compute_workspace(c, o);
-    CHECK_TEXT(w.status == 0, w.error.c_str());
-    const double mm = 1000, cell = w.cell * mm;
-    const auto r = run_command(kArmctl + " kin workspace --robot " + f + " --plane " + plane);
+    const double mm = 1000;
+    const auto r = run_command(kArmctl + " kin workspace --robot " + f + " --plane " + plane + " --csv " + csv);
     double e[4];
     CHECK_TEXT(r.status == 0 && printed_extent(r.out, e), (r.out + r.err).c_str());
+    std::smatch m;
+    CHECK_TEXT(std::regex_search(r.out, m, std::regex("grid of ([0-9.e+-]+) mm cells")), r.out.c_str());
+    CsvRaster w;
+    std::string err;
+    CHECK_TEXT(read_csv_raster(slurp(csv), std::stod(m[1]), w, err), (std::string(plane) + ": " + err).c_str());
+    const double cell = w.cell;
     double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
     int points = 0, uncovered = 0;
     std::string first;
@@ -296,7 +341,7 @@ TEST(Workspace, TurningArmWithOffsetWristHoldsEveryPointDenseFkSamplingReaches) 
         const double u = p[iu], v = p[iv];
         ++points;
         lo[0] = std::min(lo[0], u), hi[0] = std::max(hi[0], u), lo[1] = std::min(lo[1], v), hi[1] = std::max(hi[1], v);
-        const int i = static_cast<int>(std::floor((u / mm - w.u0) / w.cell)), j = static_cast<int>(std::floor((v / mm - w.v0) / w.cell));
+        const int i = static_cast<int>(std::floor((u - w.u0) / cell)), j = static_cast<int>(std::floor((v - w.v0) / cell));
         bool near = false;
         for (int a = i - kReachCells; a <= i + kReachCells && !near; ++a)
           for (int b = j - kReachCells; b <= j + kReachCells && !near; ++b) near = a >= 0 && a < w.nu && b >= 0 && b < w.nv && w.at(a, b);
@@ -318,6 +363,7 @@ TEST(Workspace, TurningArmWithOffsetWristHoldsEveryPointDenseFkSamplingReaches) 
     CHECK_TEXT(uncovered == 0, msg);
   }
   std::remove(f.c_str());
+  std::remove(csv.c_str());
 }
 
 TEST(Workspace, PlanesWithoutAreaAndBadOptionsAreRefused) {
