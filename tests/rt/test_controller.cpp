@@ -1150,8 +1150,8 @@ TEST(RtThread, RealLoopRunsMovesWithoutAllocatingOnTheControlThread) {
   LoopConfig lc;
   lc.priority = 0;
   lc.lock_memory = false;
+  std::size_t allocs = 999;  // before the loop: a failed check ends the test with the loop's thread still running
   RtLoop loop(*app.ctl, lc);
-  std::size_t allocs = 999;
   loop.on_thread_start = [] { test::alloc_count_begin(); };
   loop.on_thread_exit = [&] { allocs = test::alloc_count_end(); };
   CHECK(loop.start());
@@ -1165,24 +1165,28 @@ TEST(RtThread, RealLoopRunsMovesWithoutAllocatingOnTheControlThread) {
     }
     return s.out;
   };
-  CHECK(is_ok(run("enable")));
+  auto ok = [&](const std::string& line) {
+    const std::string out = run(line);
+    CHECK_TEXT(is_ok(out), (line + ": " + out).c_str());
+  };
+  ok("enable");
   for (int i = 0; i < 2000 && app.ctl->telemetry().state != ArmState::idle; ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  CHECK(is_ok(run("movej 20 -40 160 10 -50 30 speed=100")));
-  CHECK(is_ok(run("wait")));
-  CHECK(is_ok(run("movel 700 380 120 speed=250")));
-  CHECK(is_ok(run("G4 P20")));
-  CHECK(is_ok(run("park")));
+  ok("movej 20 -40 160 10 -50 30 speed=100");
+  ok("wait");
+  ok("movel 700 380 120 speed=250");
+  ok("G4 P20");
+  ok("park");
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   app.console->feed(s, "!");
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   app.console->feed(s, "~");
-  CHECK(is_ok(run("wait")));
-  CHECK(is_ok(run("movej 10 0 0 0 0 0")));
+  ok("wait");
+  ok("movej 10 0 0 0 0 0");
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  CHECK(is_ok(run("stop")));
+  ok("stop");
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  CHECK(is_ok(run("estop")));
+  ok("estop");
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   loop.stop();
   app.plant->stop_thread();
