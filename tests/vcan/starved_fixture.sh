@@ -7,21 +7,27 @@
 #   starved_fixture.sh stallskip the faked stall, then a skip (exit 77), as a scenario's
 #                                own starvation check reports one
 . "$SCENARIO_DIR/lib.sh"
+# The probe counts the stall lines it printed in /tmp/stalls ("N longest n30", host_sim/vm/init):
+# after the faked stall the fixture waits for one more than before it, not a fixed time.
+_stalls() { read -r _n _ </tmp/stalls; echo "${_n:-0}"; }
+_stall_printed() { [ "$(_stalls)" -gt "$stalls_before" ]; }
 case ${1:-} in
   stall)
     [ -n "${SERVOARM_STALL_PROBE_PID:-}" ] || fail "SERVOARM_STALL_PROBE_PID not set: /init started no probe"
+    stalls_before=$(_stalls)
     kill -STOP "$SERVOARM_STALL_PROBE_PID"
     sleep 1
     kill -CONT "$SERVOARM_STALL_PROBE_PID"
-    sleep 1   # the probe prints its stall line
+    wait_until 10 "the probe to print its stall line" _stall_printed
     fail "a deliberate failure after a faked stall" ;;
   nostall) fail "a deliberate failure, no stall" ;;
   stallskip)
     [ -n "${SERVOARM_STALL_PROBE_PID:-}" ] || fail "SERVOARM_STALL_PROBE_PID not set: /init started no probe"
+    stalls_before=$(_stalls)
     kill -STOP "$SERVOARM_STALL_PROBE_PID"
     sleep 1
     kill -CONT "$SERVOARM_STALL_PROBE_PID"
-    sleep 1
+    wait_until 10 "the probe to print its stall line" _stall_printed
     skip "a deliberate skip after a faked stall" ;;
   *) fail "usage: starved_fixture.sh stall|nostall|stallskip" ;;
 esac
