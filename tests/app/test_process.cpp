@@ -25,25 +25,31 @@ using servoarm::test::run_capture;
 
 using servoarm::test::emulator_prefix;
 
-// armfw --sim --pty --no-stdin --priority 0, stdout and stdin on /dev/null, stderr
-// into err_fd (the pty path is printed there). Returns the child's pid.
-pid_t start_armfw_pty(int err_fd, int close_fd) {
-  const std::vector<std::string> args =
-      servoarm::test::target_argv({ARMFW_PATH, "--sim", "--pty", "--no-stdin", "--priority", "0"});
+// armfw with `args`, stdin on /dev/null, stdout on out_fd (-1: /dev/null) and stderr on
+// err_fd; close_fd is closed in the child. Returns the child's pid.
+pid_t start_armfw(const std::vector<std::string>& args, int out_fd, int err_fd, int close_fd) {
+  std::vector<std::string> all{ARMFW_PATH};
+  all.insert(all.end(), args.begin(), args.end());
+  const std::vector<std::string> argv_s = servoarm::test::target_argv(all);
   std::vector<char*> argv;
-  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  for (const auto& a : argv_s) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
   const pid_t pid = fork();
   if (pid == 0) {
-    dup2(err_fd, 2);
-    close(close_fd);
     const int devnull = open("/dev/null", O_RDWR);
     dup2(devnull, 0);
-    dup2(devnull, 1);
+    dup2(out_fd >= 0 ? out_fd : devnull, 1);
+    dup2(err_fd, 2);
+    close(close_fd);
     execv(argv[0], argv.data());
     _exit(127);
   }
   return pid;
+}
+
+// armfw --sim --pty --no-stdin --priority 0, stderr into err_fd (the pty path is printed there).
+pid_t start_armfw_pty(int err_fd, int close_fd) {
+  return start_armfw({"--sim", "--pty", "--no-stdin", "--priority", "0"}, -1, err_fd, close_fd);
 }
 
 int count(const std::string& s, const std::string& what) {
@@ -175,23 +181,9 @@ TEST(Process, ConsoleSpeaksTheDescriptionsUnits) {
 // SIGTERM ends a running demo: the arm is stopped and armfw exits (1: the demo did not pass),
 // instead of the demo waiting on for its moves.
 TEST(Process, DemoEndsOnSigterm) {
-  const std::vector<std::string> args =
-      servoarm::test::target_argv({ARMFW_PATH, "--sim", "--demo", "--no-stdin", "--priority", "0"});
-  std::vector<char*> argv;
-  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
   int outpipe[2];
   CHECK(pipe(outpipe) == 0);
-  const pid_t pid = fork();
-  if (pid == 0) {
-    dup2(outpipe[1], 1);
-    dup2(outpipe[1], 2);
-    close(outpipe[0]);
-    const int devnull = open("/dev/null", O_RDONLY);
-    dup2(devnull, 0);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
+  const pid_t pid = start_armfw({"--sim", "--demo", "--no-stdin", "--priority", "0"}, outpipe[1], outpipe[1], outpipe[0]);
   close(outpipe[1]);
   fcntl(outpipe[0], F_SETFL, O_NONBLOCK);
   std::string out;
