@@ -11,3 +11,33 @@ step_done() {
   return 0
 }
 apt_lock() { flock "${TMPDIR:-/tmp}/servoarm-apt.lock" "$@"; }
+# idle_class: puts the calling shell (and what it starts from then on) into the machine's
+# lowest CPU class, so that it runs only on cycles the foreground leaves idle. Nice or
+# SCHED_IDLE alone does not do that when the kernel groups processes by session
+# (autogroup): a background session then gets as much CPU as the foreground's. So, first
+# choice, a cpu cgroup marked idle (cpu.idle, Linux >= 5.15; cgroup v2 or v1's cpu
+# hierarchy, root only); else its session's autogroup at nice 19; and in every case
+# SCHED_IDLE and nice 19 for the processes themselves. Prints what it got.
+idle_class() {
+  local how="" g v2=/sys/fs/cgroup v1=/sys/fs/cgroup/cpu
+  if [ -f "$v2/cgroup.controllers" ] && grep -qw cpu "$v2/cgroup.controllers" && [ -w "$v2" ]; then
+    g=$v2/servoarm-idle
+  elif [ -d "$v1" ] && [ -w "$v1" ]; then
+    g=$v1/servoarm-idle
+  else
+    g=""
+  fi
+  if [ -n "$g" ] && mkdir -p "$g" 2>/dev/null; then
+    if [ -f "$g/cpu.idle" ] && echo 1 > "$g/cpu.idle" 2>/dev/null && echo $BASHPID > "$g/cgroup.procs" 2>/dev/null; then
+      how="cgroup ${g#/sys/fs/cgroup/} (cpu.idle)"
+    elif [ -f "$g/cpu.shares" ] && echo 2 > "$g/cpu.shares" 2>/dev/null && echo $BASHPID > "$g/cgroup.procs" 2>/dev/null; then
+      how="cgroup ${g#/sys/fs/cgroup/} (cpu.shares 2)"
+    fi
+  fi
+  if [ -z "$how" ] && [ -w /proc/self/autogroup ] && echo 19 > /proc/$BASHPID/autogroup 2>/dev/null; then
+    how="its session's autogroup at nice 19"
+  fi
+  renice -n 19 -p $BASHPID >/dev/null 2>&1 || true
+  if chrt -i -p 0 $BASHPID >/dev/null 2>&1; then how="${how:+$how, }SCHED_IDLE"; fi
+  echo "${how:-nice 19 only}"
+}
