@@ -42,12 +42,28 @@ struct Raster {
   double u0 = 0, v0 = 0, cell = 1;
   int nu = 0, nv = 0;
   std::vector<std::uint8_t> on;
+  // True when every cell fill() can set for these corners is set already, so fill() would
+  // change nothing: the cells of the corners' bounding box widened by one cell on every
+  // side (fill sets only cells of corners and cells whose centre the polygon covers, all
+  // inside the box; the widening absorbs rounding of the crossings and of the inverse).
+  bool covered(const double (*p)[2], int n) const {
+    double ulo = p[0][0], uhi = p[0][0], vlo = p[0][1], vhi = p[0][1];
+    for (int k = 1; k < n; ++k) ulo = std::min(ulo, p[k][0]), uhi = std::max(uhi, p[k][0]), vlo = std::min(vlo, p[k][1]), vhi = std::max(vhi, p[k][1]);
+    const double inv = 1 / cell;
+    auto index = [](double x, double lo, double hi) { return static_cast<int>(std::clamp(std::floor(x), lo, hi)); };
+    const int i0 = index((ulo - u0) * inv - 1, 0, nu), i1 = index((uhi - u0) * inv + 1, -1, nu - 1);
+    const int j0 = index((vlo - v0) * inv - 1, 0, nv), j1 = index((vhi - v0) * inv + 1, -1, nv - 1);
+    for (int j = j0; j <= j1 && i0 <= i1; ++j)
+      if (std::memchr(&on[static_cast<std::size_t>(j) * nu + i0], 0, static_cast<std::size_t>(i1 - i0 + 1))) return false;
+    return true;
+  }
   void set(double u, double v) {
     const int i = static_cast<int>(std::floor((u - u0) / cell)), j = static_cast<int>(std::floor((v - v0) / cell));
     if (i >= 0 && i < nu && j >= 0 && j < nv) on[static_cast<std::size_t>(j) * nu + i] = 1;
   }
   // Fill the cells whose centre lies inside the polygon (even-odd), and the cells of its corners.
   void fill(const double (*p)[2], int n) {
+    if (covered(p, n)) return;
     double vmin = p[0][1], vmax = p[0][1];
     for (int k = 0; k < n; ++k) {
       set(p[k][0], p[k][1]);
@@ -93,6 +109,54 @@ bool reaches(double phi, double psi, const Range& r0, double q0ref, double sign)
   const double off = wrap(psi - a) + (wrap(psi - a) < 0 ? kTwoPi : 0);        // psi - a in [0, 2pi)
   return off <= (r0.hi - r0.lo) + 1e-12;
 }
+
+// Forward kinematics split at the joints that vary over a slice. kin::forward walks the
+// rows from chain.base, and each row's step reads only the frame before it and the row's
+// own joint value: so kin::forward over the rows from a joint on, started from the frame
+// before that joint (a copy of the chain holding those rows, its base set to that frame),
+// gives bit for bit the pose kin::forward gives over the whole chain. The frame before a
+// varying joint depends only on the joints before it, so it is computed once for all the
+// values of the joints after it.
+class SplitFk {
+ public:
+  // cuts: the varying joints, ascending; q: the value of every other joint. Segment s
+  // holds the rows from cuts[s - 1] (from the first row, s = 0) to cuts[s] (to the last
+  // row and the tool, s = cuts.size()).
+  SplitFk(const kin::Chain& chain, const std::vector<int>& cuts, const kin::JointVector& q) {
+    const int k = static_cast<int>(cuts.size());
+    for (int s = 0; s <= k; ++s) {
+      const int j0 = s == 0 ? 0 : cuts[static_cast<std::size_t>(s - 1)];
+      const int j1 = s == k ? chain.n_joints : cuts[static_cast<std::size_t>(s)];
+      const int r0 = s == 0 ? 0 : chain.joint_row[static_cast<std::size_t>(j0)];
+      const int r1 = s == k ? chain.n_rows : chain.joint_row[static_cast<std::size_t>(j1)];
+      Segment g;
+      g.chain = chain;
+      g.chain.n_rows = r1 - r0;
+      for (int r = r0; r < r1; ++r) g.chain.rows[static_cast<std::size_t>(r - r0)] = chain.rows[static_cast<std::size_t>(r)];
+      g.chain.n_joints = j1 - j0;
+      for (int j = j0; j < j1; ++j)
+        g.chain.joint_row[static_cast<std::size_t>(j - j0)] = static_cast<std::int8_t>(chain.joint_row[static_cast<std::size_t>(j)] - r0);
+      if (s < k) g.chain.tool = kin::Pose::Identity(), g.chain.tool_is_identity = true;
+      g.q = q.segment(j0, j1 - j0);
+      seg_.push_back(std::move(g));
+    }
+  }
+  // The frame after segment s (after the last: the tool pose), from the frame before it,
+  // the segment's first joint (a varying one, s > 0) at x.
+  void advance(int s, const kin::Pose& before, double x, kin::Pose& after) {
+    Segment& g = seg_[static_cast<std::size_t>(s)];
+    g.chain.base = before;
+    if (s > 0) g.q[0] = x;
+    kin::forward(g.chain, g.q, after);
+  }
+
+ private:
+  struct Segment {
+    kin::Chain chain;
+    kin::JointVector q;
+  };
+  std::vector<Segment> seg_;
+};
 
 }  // namespace
 
@@ -300,20 +364,77 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
       --*it;
     }
     std::vector<Node> grid(static_cast<std::size_t>((m + 1) * (m + 1)));
-    std::vector<int> idx(steps.size(), 0);
+    // The joints that vary over the slices, in chain order: the two gridded ones (m + 1
+    // values) and the stepped ones. The slices run through the stepped joints' values
+    // with the joint last in the chain fastest, so a frame before a stepped joint serves
+    // every slice that differs only in joints after it (SplitFk). The raster is the union
+    // of the quads' cells: the order of the slices does not change it.
+    struct Var {
+      int joint;
+      bool gridded;
+      std::vector<double> value;
+    };
+    std::vector<Var> vars;
+    auto add_var = [&](int j, bool gridded, int count) {
+      const Range& r = rg[static_cast<std::size_t>(j)];
+      Var v{j, gridded, {}};
+      for (int i = 0; i < count; ++i) v.value.push_back(gridded ? r.lo + (r.hi - r.lo) * i / m : r.lo + (r.hi - r.lo) * i / (count - 1));
+      vars.push_back(std::move(v));
+    };
+    add_var(ja, true, m + 1);
+    add_var(jb, true, m + 1);
+    for (std::size_t k = 0; k < steps.size(); ++k) add_var(moving[k + 2], false, steps[k]);
+    std::sort(vars.begin(), vars.end(), [](const Var& x, const Var& y) { return x.joint < y.joint; });
+    const int nvar = static_cast<int>(vars.size());
+    std::vector<int> cuts;
+    for (const Var& v : vars) cuts.push_back(v.joint);
+    kin::JointVector q = qref;
+    if (kind.turning) q[0] = q0ref;
+    SplitFk fk(chain, cuts, q);
+    // level[i]: the frames before vars[i], one per combination of the gridded joints before it
+    std::vector<std::vector<kin::Pose>> level(static_cast<std::size_t>(nvar));
+    level[0].resize(1);
+    fk.advance(0, chain.base, 0, level[0][0]);
+    std::vector<int> digit(static_cast<std::size_t>(nvar), 0);  // the stepped joints' value index
+    const bool a_first = ja < jb;  // the gridded index at the tips is a (m + 1) + b, else b (m + 1) + a
     for (long c = 0; c < combos; ++c) {
-      kin::JointVector q = qref;
-      if (kind.turning) q[0] = q0ref;
-      for (std::size_t k = 0; k < steps.size(); ++k) {
-        const Range& r = rg[static_cast<std::size_t>(moving[k + 2])];
-        q[moving[k + 2]] = r.lo + (r.hi - r.lo) * idx[k] / (steps[k] - 1);
+      int from = 1;  // the first level whose frames change
+      if (c > 0) {
+        int i = nvar - 1;
+        for (; i >= 0; --i) {
+          if (vars[static_cast<std::size_t>(i)].gridded) continue;
+          if (++digit[static_cast<std::size_t>(i)] < static_cast<int>(vars[static_cast<std::size_t>(i)].value.size())) break;
+          digit[static_cast<std::size_t>(i)] = 0;
+        }
+        from = i + 1;
       }
-      for (int a = 0; a <= m; ++a)
-        for (int b = 0; b <= m; ++b) {
-          q[ja] = rg[static_cast<std::size_t>(ja)].lo + (rg[static_cast<std::size_t>(ja)].hi - rg[static_cast<std::size_t>(ja)].lo) * a / m;
-          q[jb] = rg[static_cast<std::size_t>(jb)].lo + (rg[static_cast<std::size_t>(jb)].hi - rg[static_cast<std::size_t>(jb)].lo) * b / m;
-          const Eigen::Vector3d p = tip(q);
-          Node& nd = grid[static_cast<std::size_t>(a * (m + 1) + b)];
+      auto values = [&](int i, int& x0, int& x1) {  // the value indices of vars[i] in this slice
+        const Var& v = vars[static_cast<std::size_t>(i)];
+        x0 = v.gridded ? 0 : digit[static_cast<std::size_t>(i)];
+        x1 = v.gridded ? m : x0;
+      };
+      for (int i = from; i < nvar; ++i) {
+        int x0, x1;
+        values(i - 1, x0, x1);
+        const std::vector<kin::Pose>& before = level[static_cast<std::size_t>(i - 1)];
+        std::vector<kin::Pose>& after = level[static_cast<std::size_t>(i)];
+        after.resize(before.size() * static_cast<std::size_t>(x1 - x0 + 1));
+        std::size_t o = 0;
+        for (const kin::Pose& f : before)
+          for (int x = x0; x <= x1; ++x) fk.advance(i, f, vars[static_cast<std::size_t>(i - 1)].value[static_cast<std::size_t>(x)], after[o++]);
+      }
+      int x0, x1;
+      values(nvar - 1, x0, x1);
+      const std::vector<kin::Pose>& before = level[static_cast<std::size_t>(nvar - 1)];
+      std::size_t g = 0;  // the gridded joints' combined index, in chain order
+      kin::Pose T;
+      for (const kin::Pose& f : before)
+        for (int x = x0; x <= x1; ++x, ++g) {
+          fk.advance(nvar, f, vars[static_cast<std::size_t>(nvar - 1)].value[static_cast<std::size_t>(x)], T);
+          ++res.evaluations;
+          const Eigen::Vector3d p = T.translation();
+          const std::size_t mm = static_cast<std::size_t>(m + 1);
+          Node& nd = grid[a_first ? g : (g % mm) * mm + g / mm];
           if (kind.planar) {
             nd.u[0] = p[iu], nd.v[0] = p[iv], nd.ok[0] = true, nd.ok[1] = false;
           } else {
@@ -416,10 +537,6 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
               ras.fill(poly, 4);
             }
           }
-      }
-      for (std::size_t k = 0; k < idx.size(); ++k) {  // next combination
-        if (++idx[k] < steps[k]) break;
-        idx[k] = 0;
       }
     }
     // Does the raster hold every point of this pass? If not, the next pass covers their extent.
