@@ -3,6 +3,7 @@
 #include "servoarm/armctl/cli_workspace.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -42,28 +43,86 @@ struct Raster {
   double u0 = 0, v0 = 0, cell = 1;
   int nu = 0, nv = 0;
   std::vector<std::uint8_t> on;
-  // True when every cell fill() can set for these corners is set already, so fill() would
-  // change nothing: the cells of the corners' bounding box widened by one cell on every
-  // side (fill sets only cells of corners and cells whose centre the polygon covers, all
-  // inside the box; the widening absorbs rounding of the crossings and of the inverse).
-  bool covered(const double (*p)[2], int n) const {
+  // Blocks of 8 x 8 cells: the set cells of each and how many it has (fewer at the edges).
+  int nbu = 0;
+  std::vector<std::uint8_t> block_set, block_cells;
+  void clear() {
+    on.assign(static_cast<std::size_t>(nu) * nv, 0);
+    nbu = (nu + 7) / 8;
+    const int nbv = (nv + 7) / 8;
+    block_set.assign(static_cast<std::size_t>(nbu) * nbv, 0);
+    block_cells.resize(block_set.size());
+    for (int bj = 0; bj < nbv; ++bj)
+      for (int bi = 0; bi < nbu; ++bi)
+        block_cells[static_cast<std::size_t>(bj) * nbu + bi] = static_cast<std::uint8_t>(std::min(8, nu - 8 * bi) * std::min(8, nv - 8 * bj));
+  }
+  void mark(int i, int j) {
+    std::uint8_t& c = on[static_cast<std::size_t>(j) * nu + i];
+    if (!c) c = 1, ++block_set[static_cast<std::size_t>(j >> 3) * nbu + (i >> 3)];
+  }
+  // Cells i0..i1 of row j all set? A cell holds 0 or 1: eight set cells read as one word.
+  bool row_full(int j, int i0, int i1) const {
+    const std::uint8_t* r = on.data() + static_cast<std::size_t>(j) * nu;
+    constexpr std::uint64_t kAll = 0x0101010101010101u;
+    std::uint64_t w;
+    if (i1 - i0 < 7) {
+      if constexpr (std::endian::native == std::endian::little) {
+        if (nu >= 8) {  // one word holding the cells, the others masked off
+          const int st = std::min(i0, nu - 8);
+          std::memcpy(&w, r + st, 8);
+          const std::uint64_t mask = (~std::uint64_t{0} << (8 * (i0 - st))) & (~std::uint64_t{0} >> (8 * (7 - (i1 - st))));
+          return (w & mask) == (kAll & mask);
+        }
+      }
+      for (int i = i0; i <= i1; ++i)
+        if (!r[i]) return false;
+      return true;
+    }
+    for (int i = i0; i + 7 < i1; i += 8)
+      if (std::memcpy(&w, r + i, 8), w != kAll) return false;
+    return std::memcpy(&w, r + i1 - 7, 8), w == kAll;
+  }
+  // Every cell of [i0, i1] x [j0, j1] set (an empty box: true)? The blocks it touches first.
+  bool box_full(int i0, int i1, int j0, int j1) const {
+    if (i0 > i1 || j0 > j1) return true;
+    bool blocks = true;
+    for (int bj = j0 >> 3; bj <= j1 >> 3 && blocks; ++bj)
+      for (int bi = i0 >> 3; bi <= i1 >> 3 && blocks; ++bi) {
+        const std::size_t b = static_cast<std::size_t>(bj) * nbu + bi;
+        blocks = block_set[b] == block_cells[b];
+      }
+    if (blocks) return true;
+    for (int j = j0; j <= j1; ++j)
+      if (!row_full(j, i0, i1)) return false;
+    return true;
+  }
+  // The cell index of u (v: with v0, nv) rounded down, clipped to [-2, n + 1]: a box
+  // beyond the raster stays beyond it.
+  static int index(double x, int n) { return static_cast<int>(std::clamp(x, -2.0, n + 1.0) + 2) - 2; }
+  // The cells fill() can set for these corners: those of the corners' bounding box widened
+  // by one cell on every side (fill sets only cells of corners and cells whose centre the
+  // polygon covers, all inside the box; the widening absorbs rounding of the crossings and
+  // of the inverse), clipped to the raster (i0 > i1 or j0 > j1: none).
+  void box(const double (*p)[2], int n, int& i0, int& i1, int& j0, int& j1) const {
     double ulo = p[0][0], uhi = p[0][0], vlo = p[0][1], vhi = p[0][1];
     for (int k = 1; k < n; ++k) ulo = std::min(ulo, p[k][0]), uhi = std::max(uhi, p[k][0]), vlo = std::min(vlo, p[k][1]), vhi = std::max(vhi, p[k][1]);
     const double inv = 1 / cell;
-    auto index = [](double x, double lo, double hi) { return static_cast<int>(std::clamp(std::floor(x), lo, hi)); };
-    const int i0 = index((ulo - u0) * inv - 1, 0, nu), i1 = index((uhi - u0) * inv + 1, -1, nu - 1);
-    const int j0 = index((vlo - v0) * inv - 1, 0, nv), j1 = index((vhi - v0) * inv + 1, -1, nv - 1);
-    for (int j = j0; j <= j1 && i0 <= i1; ++j)
-      if (std::memchr(&on[static_cast<std::size_t>(j) * nu + i0], 0, static_cast<std::size_t>(i1 - i0 + 1))) return false;
-    return true;
+    i0 = std::max(0, index((ulo - u0) * inv - 1, nu)), i1 = std::min(nu - 1, index((uhi - u0) * inv + 1, nu));
+    j0 = std::max(0, index((vlo - v0) * inv - 1, nv)), j1 = std::min(nv - 1, index((vhi - v0) * inv + 1, nv));
   }
   void set(double u, double v) {
     const int i = static_cast<int>(std::floor((u - u0) / cell)), j = static_cast<int>(std::floor((v - v0) / cell));
-    if (i >= 0 && i < nu && j >= 0 && j < nv) on[static_cast<std::size_t>(j) * nu + i] = 1;
+    if (i >= 0 && i < nu && j >= 0 && j < nv) mark(i, j);
   }
   // Fill the cells whose centre lies inside the polygon (even-odd), and the cells of its corners.
+  // A row of the box whose cells are all set is skipped: fill would set nothing there.
   void fill(const double (*p)[2], int n) {
-    if (covered(p, n)) return;
+    int bi0, bi1, bj0, bj1;
+    box(p, n, bi0, bi1, bj0, bj1);
+    if (bi0 > bi1) return;
+    int open = bj0;  // the first row of the box with an empty cell
+    while (open <= bj1 && row_full(open, bi0, bi1)) ++open;
+    if (open > bj1) return;
     double vmin = p[0][1], vmax = p[0][1];
     for (int k = 0; k < n; ++k) {
       set(p[k][0], p[k][1]);
@@ -71,7 +130,8 @@ struct Raster {
     }
     const int j0 = std::max(0, static_cast<int>(std::ceil((vmin - v0) / cell - 0.5)));
     const int j1 = std::min(nv - 1, static_cast<int>(std::floor((vmax - v0) / cell - 0.5)));
-    for (int j = j0; j <= j1; ++j) {
+    for (int j = std::max(j0, open); j <= j1; ++j) {
+      if (j < bj0 || j > bj1 || row_full(j, bi0, bi1)) continue;
       const double v = v0 + (j + 0.5) * cell;
       double xs[8];
       int m = 0;
@@ -85,7 +145,7 @@ struct Raster {
       for (int k = 0; k + 1 < m; k += 2) {
         const int i0 = std::max(0, static_cast<int>(std::ceil((xs[k] - u0) / cell - 0.5)));
         const int i1 = std::min(nu - 1, static_cast<int>(std::floor((xs[k + 1] - u0) / cell - 0.5)));
-        for (int i = i0; i <= i1; ++i) on[static_cast<std::size_t>(j) * nu + i] = 1;
+        for (int i = i0; i <= i1; ++i) mark(i, j);
       }
     }
   }
@@ -106,7 +166,8 @@ double wrap(double a) { return a - kTwoPi * std::floor((a + M_PI) / kTwoPi); }  
 bool reaches(double phi, double psi, const Range& r0, double q0ref, double sign) {
   if (r0.hi - r0.lo >= kTwoPi - 1e-9) return true;
   const double a = sign > 0 ? phi + (r0.lo - q0ref) : phi - (r0.hi - q0ref);  // azimuth interval [a, a + span]
-  const double off = wrap(psi - a) + (wrap(psi - a) < 0 ? kTwoPi : 0);        // psi - a in [0, 2pi)
+  const double d = wrap(psi - a);
+  const double off = d + (d < 0 ? kTwoPi : 0);  // psi - a in [0, 2pi)
   return off <= (r0.hi - r0.lo) + 1e-12;
 }
 
@@ -313,6 +374,10 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
     bool ok[2];
     double rho, z, phi;
     double s, w;  // turning: along / across the slice's reference azimuth (see below)
+    double x, y;  // turning: the tool point's x and y
+    int ci[2], cj;  // fill pass: the raster cell of (u[s], v[s]), rounded down (Raster::index)
+    int s_sign;     // turning: 1 s > 0, 2 s < 0, 0 s = 0
+    bool exact;   // turning: s and w computed
   };
   Raster ras;
   std::vector<std::uint8_t> polar;  // slice: [rho bin][azimuth bin]
@@ -340,7 +405,7 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
         ras.u0 = u_lo - 3 * ras.cell, ras.v0 = v_lo - 3 * ras.cell;
         ras.nu = static_cast<int>(std::ceil(su / ras.cell)) + 6;
         ras.nv = static_cast<int>(std::ceil(sv / ras.cell)) + 6;
-        ras.on.assign(static_cast<std::size_t>(ras.nu) * ras.nv, 0);
+        ras.clear();
       }
     }
     // The quadrilaterals interpolate between the two gridded joints' steps; nothing
@@ -439,9 +504,15 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
             nd.u[0] = p[iu], nd.v[0] = p[iv], nd.ok[0] = true, nd.ok[1] = false;
           } else {
             nd.rho = std::hypot(p.x(), p.y()), nd.z = p.z(), nd.phi = std::atan2(p.y(), p.x());
+            nd.x = p.x(), nd.y = p.y();
             nd.u[0] = nd.rho, nd.u[1] = -nd.rho, nd.v[0] = nd.v[1] = nd.z;
             nd.ok[0] = reaches(nd.phi, psi_plus, r0, q0ref, kind.sign);
             nd.ok[1] = reaches(nd.phi, psi_plus + M_PI, r0, q0ref, kind.sign);
+          }
+          if (!coarse && !slice) {
+            const double inv = 1 / ras.cell;
+            nd.ci[0] = Raster::index((nd.u[0] - ras.u0) * inv, ras.nu), nd.cj = Raster::index((nd.v[0] - ras.v0) * inv, ras.nv);
+            if (nd.ok[1]) nd.ci[1] = Raster::index((nd.u[1] - ras.u0) * inv, ras.nu);
           }
           for (int s = 0; s < 2; ++s) {
             if (!nd.ok[s] && !slice) continue;
@@ -454,12 +525,29 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
       // vertical plane through the axis (w ~ 0), such a quad is turned as a whole instead:
       // its corners keep their signed distance s along the plane's direction e.
       double ex = 1, ey = 0, best = -1;
+      auto exact_sw = [&](Node& nd) {
+        const double x = nd.rho * std::cos(nd.phi), y = nd.rho * std::sin(nd.phi);
+        nd.s = x * ex + y * ey, nd.w = -x * ey + y * ex;
+        nd.s_sign = nd.s > 0 ? 1 : nd.s < 0 ? 2 : 0;
+        nd.exact = true;
+      };
       if (kind.turning) {
         for (const Node& nd : grid)
           if (nd.rho > best) best = nd.rho, ex = std::cos(nd.phi), ey = std::sin(nd.phi);
+        // s and w from the polar form (rho, phi), as every quad uses them. Outside the xy
+        // plane a quad needs only the sign of s at its corners unless they have both signs:
+        // the sign from the tool point's own x and y where it is certain (|s| well above the
+        // few ulps of rho by which the two forms differ), s and w themselves when needed.
         for (Node& nd : grid) {
-          const double x = nd.rho * std::cos(nd.phi), y = nd.rho * std::sin(nd.phi);
-          nd.s = x * ex + y * ey, nd.w = -x * ey + y * ex;
+          nd.exact = false;
+          if (!slice && !coarse) {
+            const double s_near = nd.x * ex + nd.y * ey;
+            if (std::abs(s_near) > 1e-12 * nd.rho) {
+              nd.s_sign = s_near > 0 ? 1 : 2;
+              continue;
+            }
+          }
+          if (!coarse) exact_sw(nd);
         }
       }
       const double phi_e = std::atan2(ey, ex);
@@ -517,9 +605,14 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
               continue;
             }
             if (kind.turning) {
-              bool pos = false, neg = false;
+              const int signs = c4[0]->s_sign | c4[1]->s_sign | c4[2]->s_sign | c4[3]->s_sign;
+              const bool pos = (signs & 1) != 0, neg = (signs & 2) != 0;
               double wmax = 0;
-              for (int k = 0; k < 4; ++k) pos = pos || c4[k]->s > 0, neg = neg || c4[k]->s < 0, wmax = std::max(wmax, std::abs(c4[k]->w));
+              for (int k = 0; k < 4 && pos && neg; ++k) {
+                Node& nd = grid[static_cast<std::size_t>(c4[k] - grid.data())];
+                if (!nd.exact) exact_sw(nd);
+                wmax = std::max(wmax, std::abs(nd.w));
+              }
               if (pos && neg && wmax < 2 * ras.cell) {
                 for (int side = 0; side < 2; ++side) {
                   if (!(side == 0 ? e_plus : e_minus)) continue;
@@ -532,6 +625,12 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
             }
             for (int s = 0; s < 2; ++s) {
               if (!(c4[0]->ok[s] && c4[1]->ok[s] && c4[2]->ok[s] && c4[3]->ok[s])) continue;
+              // every cell fill() can set (the corners' cells widened by one) set already: skip
+              const int i0 = std::max(0, std::min({c4[0]->ci[s], c4[1]->ci[s], c4[2]->ci[s], c4[3]->ci[s]}) - 1);
+              const int i1 = std::min(ras.nu - 1, std::max({c4[0]->ci[s], c4[1]->ci[s], c4[2]->ci[s], c4[3]->ci[s]}) + 1);
+              const int j0 = std::max(0, std::min({c4[0]->cj, c4[1]->cj, c4[2]->cj, c4[3]->cj}) - 1);
+              const int j1 = std::min(ras.nv - 1, std::max({c4[0]->cj, c4[1]->cj, c4[2]->cj, c4[3]->cj}) + 1);
+              if (ras.box_full(i0, i1, j0, j1)) continue;
               double poly[4][2];
               for (int k = 0; k < 4; ++k) poly[k][0] = c4[k]->u[s], poly[k][1] = c4[k]->v[s];
               ras.fill(poly, 4);
