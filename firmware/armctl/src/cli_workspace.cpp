@@ -160,16 +160,46 @@ struct Kind {
   double sign = 1;     // turning: azimuth change per joint 1 change (+1 or -1)
 };
 
-double wrap(double a) { return a - kTwoPi * std::floor((a + M_PI) / kTwoPi); }  // to [-pi, pi)
+[[gnu::always_inline]] inline double wrap(double a) { return a - kTwoPi * std::floor((a + M_PI) / kTwoPi); }  // to [-pi, pi)
 
-// Azimuth psi reachable from azimuth phi (at q0ref) by joint 1 within [lo, hi]?
-bool reaches(double phi, double psi, const Range& r0, double q0ref, double sign) {
-  if (r0.hi - r0.lo >= kTwoPi - 1e-9) return true;
-  const double a = sign > 0 ? phi + (r0.lo - q0ref) : phi - (r0.hi - q0ref);  // azimuth interval [a, a + span]
-  const double d = wrap(psi - a);
-  const double off = d + (d < 0 ? kTwoPi : 0);  // psi - a in [0, 2pi)
-  return off <= (r0.hi - r0.lo) + 1e-12;
-}
+// Azimuth psi reachable from azimuth phi (at q0ref) by joint 1 within [lo, hi]? (Inlined:
+// every tool point of a turning arm asks it twice.)
+struct Reach {
+  bool full;            // joint 1 turns a whole turn
+  double shift, sign;   // the azimuth interval starts at phi + shift (sign > 0), phi - shift
+  double span;          // its length, with a tolerance
+  Reach(const Range& r0, double q0ref, double sign)
+      : full(r0.hi - r0.lo >= kTwoPi - 1e-9), shift(sign > 0 ? r0.lo - q0ref : r0.hi - q0ref), sign(sign), span((r0.hi - r0.lo) + 1e-12) {}
+  [[gnu::always_inline]] bool operator()(double phi, double psi) const {
+    if (full) return true;
+    const double a = sign > 0 ? phi + shift : phi - shift;  // azimuth interval [a, a + span]
+    const double d = wrap(psi - a);
+    const double off = d + (d < 0 ? kTwoPi : 0);  // psi - a in [0, 2pi)
+    return off <= span;
+  }
+};
+
+// Reach's answer for most tool points without their azimuth: the azimuths joint 1 brings
+// to psi are [theta - span, theta]; the side of the tool point (x, y) relative to the two
+// directions that bound them decides where it is certain (the point more than 1e-9 rad
+// from both lines, far beyond the rounding of either form). 1 reached, 0 not, -1 ask Reach.
+struct ReachSector {
+  double ux, uy, wx, wy;  // directions theta and theta - span
+  bool wide;              // span > pi: the test is of the arc outside it
+  ReachSector(const Reach& r, double psi) {
+    const double theta = r.sign > 0 ? psi - r.shift : psi + r.shift;
+    ux = std::cos(theta), uy = std::sin(theta), wx = std::cos(theta - r.span), wy = std::sin(theta - r.span);
+    wide = r.span > M_PI;
+  }
+  int operator()(double x, double y, double rho) const {
+    const double margin = 1e-9 * rho;
+    const double cw = wx * y - wy * x;  // w x p: > 0 when p lies counter-clockwise of w
+    const double cu = x * uy - y * ux;  // p x u: > 0 when u lies counter-clockwise of p
+    if (std::abs(cw) <= margin || std::abs(cu) <= margin) return -1;
+    if (!wide) return cw > 0 && cu > 0;
+    return !(cw < 0 && cu < 0);  // outside the arc from u to w (shorter than pi)
+  }
+};
 
 // Forward kinematics split at the joints that vary over a slice. kin::forward walks the
 // rows from chain.base, and each row's step reads only the frame before it and the row's
@@ -363,6 +393,7 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
   const int iu = axis_index(res.u), iv = axis_index(res.v);
   const bool slice = kind.turning && plane == "xy";
   const double psi_plus = iu == 0 ? 0 : M_PI / 2;  // azimuth of the +u half-plane (xz: +x, yz: +y)
+  const Reach reaches(r0, q0ref, kind.sign);
 
   // Pass 0 (coarse) estimates the extent, the next pass fills the raster over it. The
   // coarse pass can miss the far reach (e.g. an offset tool turned sideways by wrist joints
@@ -378,7 +409,14 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
     int ci[2], cj;  // fill pass: the raster cell of (u[s], v[s]), rounded down (Raster::index)
     int s_sign;     // turning: 1 s > 0, 2 s < 0, 0 s = 0
     bool exact;   // turning: s and w computed
+    bool has_phi;  // turning: phi computed (always in the xy plane, else where needed)
   };
+  // phi = atan2(y, x) of the tool point, computed once where it is needed
+  auto phi_of = [](Node& nd) {
+    if (!nd.has_phi) nd.phi = std::atan2(nd.y, nd.x), nd.has_phi = true;
+    return nd.phi;
+  };
+  const ReachSector sector[2] = {ReachSector(reaches, psi_plus), ReachSector(reaches, psi_plus + M_PI)};
   Raster ras;
   std::vector<std::uint8_t> polar;  // slice: [rho bin][azimuth bin]
   int n_rho = 0, n_az = 0;
@@ -503,11 +541,14 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
           if (kind.planar) {
             nd.u[0] = p[iu], nd.v[0] = p[iv], nd.ok[0] = true, nd.ok[1] = false;
           } else {
-            nd.rho = std::hypot(p.x(), p.y()), nd.z = p.z(), nd.phi = std::atan2(p.y(), p.x());
-            nd.x = p.x(), nd.y = p.y();
+            nd.rho = std::hypot(p.x(), p.y()), nd.z = p.z();
+            nd.x = p.x(), nd.y = p.y(), nd.has_phi = false;
+            if (slice) phi_of(nd);
             nd.u[0] = nd.rho, nd.u[1] = -nd.rho, nd.v[0] = nd.v[1] = nd.z;
-            nd.ok[0] = reaches(nd.phi, psi_plus, r0, q0ref, kind.sign);
-            nd.ok[1] = reaches(nd.phi, psi_plus + M_PI, r0, q0ref, kind.sign);
+            for (int s = 0; s < 2; ++s) {
+              const int k = reaches.full ? 1 : sector[s](nd.x, nd.y, nd.rho);
+              nd.ok[s] = k >= 0 ? k == 1 : reaches(phi_of(nd), s == 0 ? psi_plus : psi_plus + M_PI);
+            }
           }
           if (!coarse && !slice) {
             const double inv = 1 / ras.cell;
@@ -526,14 +567,14 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
       // its corners keep their signed distance s along the plane's direction e.
       double ex = 1, ey = 0, best = -1;
       auto exact_sw = [&](Node& nd) {
-        const double x = nd.rho * std::cos(nd.phi), y = nd.rho * std::sin(nd.phi);
+        const double x = nd.rho * std::cos(phi_of(nd)), y = nd.rho * std::sin(phi_of(nd));
         nd.s = x * ex + y * ey, nd.w = -x * ey + y * ex;
         nd.s_sign = nd.s > 0 ? 1 : nd.s < 0 ? 2 : 0;
         nd.exact = true;
       };
       if (kind.turning) {
-        for (const Node& nd : grid)
-          if (nd.rho > best) best = nd.rho, ex = std::cos(nd.phi), ey = std::sin(nd.phi);
+        for (Node& nd : grid)
+          if (nd.rho > best) best = nd.rho, ex = std::cos(phi_of(nd)), ey = std::sin(phi_of(nd));
         // s and w from the polar form (rho, phi), as every quad uses them. Outside the xy
         // plane a quad needs only the sign of s at its corners unless they have both signs:
         // the sign from the tool point's own x and y where it is certain (|s| well above the
@@ -551,11 +592,35 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
         }
       }
       const double phi_e = std::atan2(ey, ex);
-      const bool e_plus = kind.turning && reaches(phi_e, psi_plus, r0, q0ref, kind.sign);
-      const bool e_minus = kind.turning && reaches(phi_e, psi_plus + M_PI, r0, q0ref, kind.sign);
+      const bool e_plus = kind.turning && reaches(phi_e, psi_plus);
+      const bool e_minus = kind.turning && reaches(phi_e, psi_plus + M_PI);
       if (!coarse) {
-        for (int a = 0; a < m; ++a)
-          for (int b = 0; b < m; ++b) {
+        // The quads in groups of kGroup x kGroup: when every cell a group's quads can set on
+        // a side (the box of its nodes' cells widened by one) is set, none of them is filled
+        // there. (The raster is a union of cells: the order of the quads does not matter.)
+        constexpr int kGroup = 4;
+        for (int ga = 0; ga < m; ga += kGroup)
+          for (int gb = 0; gb < m; gb += kGroup) {
+          const int ga1 = std::min(m, ga + kGroup), gb1 = std::min(m, gb + kGroup);
+          bool group_full[2] = {false, false};
+          for (int s = 0; s < 2 && !slice; ++s) {
+            int i0 = ras.nu, i1 = -1, j0 = ras.nv, j1 = -1;
+            for (int a = ga; a <= ga1; ++a)
+              for (int b = gb; b <= gb1; ++b) {
+                const Node& nd = grid[static_cast<std::size_t>(a * (m + 1) + b)];
+                if (!nd.ok[s]) continue;
+                i0 = std::min(i0, nd.ci[s]), i1 = std::max(i1, nd.ci[s]), j0 = std::min(j0, nd.cj), j1 = std::max(j1, nd.cj);
+              }
+            group_full[s] = ras.box_full(std::max(0, i0 - 1), std::min(ras.nu - 1, i1 + 1), std::max(0, j0 - 1), std::min(ras.nv - 1, j1 + 1));
+          }
+          if (!slice && group_full[0] && group_full[1]) {  // nothing to fill unless a quad has corners with s of both signs
+            int signs = 0;
+            for (int a = ga; a <= ga1 && kind.turning; ++a)
+              for (int b = gb; b <= gb1; ++b) signs |= grid[static_cast<std::size_t>(a * (m + 1) + b)].s_sign;
+            if (signs != 3) continue;
+          }
+        for (int a = ga; a < ga1; ++a)
+          for (int b = gb; b < gb1; ++b) {
             const Node* c4[4] = {&grid[static_cast<std::size_t>(a * (m + 1) + b)], &grid[static_cast<std::size_t>((a + 1) * (m + 1) + b)],
                                  &grid[static_cast<std::size_t>((a + 1) * (m + 1) + b + 1)], &grid[static_cast<std::size_t>(a * (m + 1) + b + 1)]};
             if (slice) {
@@ -624,7 +689,7 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
               }
             }
             for (int s = 0; s < 2; ++s) {
-              if (!(c4[0]->ok[s] && c4[1]->ok[s] && c4[2]->ok[s] && c4[3]->ok[s])) continue;
+              if (group_full[s] || !(c4[0]->ok[s] && c4[1]->ok[s] && c4[2]->ok[s] && c4[3]->ok[s])) continue;
               // every cell fill() can set (the corners' cells widened by one) set already: skip
               const int i0 = std::max(0, std::min({c4[0]->ci[s], c4[1]->ci[s], c4[2]->ci[s], c4[3]->ci[s]}) - 1);
               const int i1 = std::min(ras.nu - 1, std::max({c4[0]->ci[s], c4[1]->ci[s], c4[2]->ci[s], c4[3]->ci[s]}) + 1);
@@ -635,6 +700,7 @@ WorkspaceResult compute_workspace(const kin::Chain& chain, const WorkspaceOption
               for (int k = 0; k < 4; ++k) poly[k][0] = c4[k]->u[s], poly[k][1] = c4[k]->v[s];
               ras.fill(poly, 4);
             }
+          }
           }
       }
     }
