@@ -131,7 +131,7 @@ struct Raster {
     const int j0 = std::max(0, static_cast<int>(std::ceil((vmin - v0) / cell - 0.5)));
     const int j1 = std::min(nv - 1, static_cast<int>(std::floor((vmax - v0) / cell - 0.5)));
     for (int j = std::max(j0, open); j <= j1; ++j) {
-      if (j < bj0 || j > bj1 || row_full(j, bi0, bi1)) continue;
+      if (j >= bj0 && j <= bj1 && row_full(j, bi0, bi1)) continue;
       const double v = v0 + (j + 0.5) * cell;
       double xs[8];
       int m = 0;
