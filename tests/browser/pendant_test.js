@@ -14,7 +14,9 @@
 'use strict';
 
 const childProcess = require('child_process');
+const crypto = require('crypto');
 const fs = require('fs');
+const http = require('http');
 const net = require('net');
 const path = require('path');
 
@@ -110,6 +112,32 @@ function stopArmfw(a) {
     const t = setTimeout(() => { a.proc.kill('SIGKILL'); resolve(); }, 10000);
     a.proc.on('exit', () => { clearTimeout(t); resolve(); });
     a.proc.kill('SIGTERM');
+  });
+}
+
+// ---- an armfw that is going away: accepts the WebSocket, closes it at the first message ----------
+/** A WebSocket server on `port` that completes each handshake and closes the connection without
+ *  an answer when the first message (the page's hello) arrives, as an armfw shutting down may.
+ *  `hellos` counts them; close() stops listening and drops its connections. */
+function closingServer(host, port) {
+  const srv = { hellos: 0, sockets: new Set() };
+  const server = http.createServer((req, res) => { res.writeHead(503); res.end(); });
+  server.on('upgrade', (req, socket) => {
+    srv.sockets.add(socket);
+    socket.on('close', () => srv.sockets.delete(socket));
+    socket.on('error', () => {});
+    const accept = crypto.createHash('sha1').update(req.headers['sec-websocket-key'] + '258EAFA5-E914-47DA-95CA-C5AB0DC85B11').digest('base64');
+    socket.write('HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n' +
+                 `Sec-WebSocket-Accept: ${accept}\r\n\r\n`);
+    socket.once('data', () => { ++srv.hellos; socket.destroy(); });
+  });
+  srv.close = () => new Promise((resolve) => {
+    for (const s of srv.sockets) s.destroy();
+    server.close(() => resolve());
+  });
+  return new Promise((resolve, reject) => {
+    server.once('error', reject);
+    server.listen(port, host, () => resolve(srv));
   });
 }
 
@@ -865,6 +893,33 @@ async function main() {
                                  window.pendant.state !== null, { timeout: WAIT_S * 1000 });
       const ctl = await page.$eval('#control', (e) => e.textContent);
       assert(ctl === 'control: nobody', `after the reconnection: ${ctl} (control is not taken again by itself)`);
+    });
+    await check('a connection closed before hello is answered: the page connects again by itself', async () => {
+      const u = new URL(armfw.url);
+      const wsPort = Number(u.port);
+      tcp.close();
+      await stopArmfw(armfw);
+      armfw = null;
+      await page.waitForFunction(() => document.getElementById('conn').textContent === 'offline', { timeout: WAIT_S * 1000 });
+      // in armfw's place, one that accepts each connection and closes it at the page's hello:
+      // twice, so that a page that took the first for a refusal has stopped by the second
+      const closing = await closingServer(u.hostname, wsPort);
+      try {
+        await until('two hellos closed unanswered', async () => closing.hellos >= 2);
+      } finally {
+        await closing.close();
+      }
+      const shown = await page.$eval('#msg', (e) => e.textContent);
+      armfw = await startArmfw(args.armfw, [], wsPort);
+      tcp = new Tcp(armfw.tcp);
+      await tcp.connect();
+      try {
+        await page.waitForFunction(() => document.getElementById('conn').textContent === 'online' && window.pendant.role === 'operator' &&
+                                   window.pendant.state !== null, { timeout: WAIT_S * 1000 });
+      } catch (e) {
+        const later = await page.$eval('#msg', (el) => el.textContent);
+        throw new Error(`the page did not connect to armfw again in ${WAIT_S} s; it said '${shown}' after the unanswered hellos, '${later}' at the end`);
+      }
     });
     if (page) await page.close();
     tcp.close();
