@@ -27,8 +27,9 @@ export class ApiClient {
       ws.onopen = () => { opened = true; this.emit('open', {}); resolve(); };
       ws.onerror = () => { if (!opened) reject(new Error('cannot connect to ' + this.url)); };
       ws.onclose = () => {
-        // the requests sent on this socket get an answer; a socket replaced by connect() or
-        // closed by close() is not reported as a lost connection
+        // the requests sent on this socket get an answer: error 'closed', this client's own
+        // code (armfw has none by that name) for "no answer came"; a socket replaced by
+        // connect() or closed by close() is not reported as a lost connection
         for (const [id, p] of this.pending) {
           if (p.ws !== ws) continue;
           p.resolve({ error: 'closed', message: 'the connection closed' });
@@ -60,7 +61,8 @@ export class ApiClient {
     }
   }
 
-  /** Send a request; resolves with its result (ok or error), never rejects. */
+  /** Send a request; resolves with its result (ok or error; error 'closed' when the connection
+   *  closed before an answer, or was not open), never rejects. */
   request(cmd, args = {}) {
     if (!this.open) return Promise.resolve({ error: 'closed', message: 'not connected' });
     const id = this.nextId++;

@@ -64,7 +64,21 @@ function refreshRole() {
   document.body.dataset.role = P.role || '';
 }
 
+// Whether a lost connection is tried again (every 2 s): once armfw has accepted the page, or
+// has closed a connection before answering its hello (armfw stopping for a restart, too many
+// clients: no answer is no refusal); not after a refusal (hello answered with an error: wrong
+// token, protocol), nor before any connection opened (the page's first, armfw not running).
+let reconnect = false;
+let retry = null;
+let attempt = 0;  // the newest connect(): a continuation of an older one, replaced, does nothing
+
+function connectLater() {
+  if (reconnect && retry === null) retry = setTimeout(() => { retry = null; connect(); }, 2000);
+}
+
 async function connect() {
+  const mine = ++attempt;
+  if (retry !== null) { clearTimeout(retry); retry = null; }
   const token = $('token').value.trim();
   if (token) sessionStorage.setItem('servoarm-token', token);
   P.role = null;
@@ -72,11 +86,21 @@ async function connect() {
   try {
     await api.connect();
   } catch (e) {
+    if (mine !== attempt) return;
     say(String(e.message || e));
-    return;  // the close handler tries again when the page was connected before
+    return;  // the close handler tries again when armfw accepted the page before
   }
   const h = await api.request('hello', token ? { token } : {});
+  if (mine !== attempt) return;
+  if (h.error === 'closed') {
+    // the connection closed before armfw answered (api.js's own code, never armfw's): not a refusal
+    reconnect = true;
+    say('the connection closed before armfw answered: connecting again');
+    connectLater();
+    return;
+  }
   if (h.error) {
+    reconnect = false;
     report('hello', h);
     say('refused: ' + (h.error === 'unauthenticated' ? 'wrong token' : h.error) + (h.message ? ' (' + h.message + ')' : ''));
     document.body.dataset.auth = 'refused';
@@ -84,6 +108,7 @@ async function connect() {
     $('conn').textContent = 'refused';
     return;
   }
+  reconnect = true;
   document.body.dataset.auth = 'ok';
   P.hello = h;
   P.role = h.role;
@@ -102,7 +127,6 @@ async function connect() {
 }
 
 api.on('open', () => { $('conn').textContent = 'online'; });
-let retry = null;
 api.on('close', () => {
   endJog(false);
   pathFor = 0;  // motions are numbered again by an armfw started again
@@ -111,11 +135,11 @@ api.on('close', () => {
   $('conn').textContent = 'offline';
   P.controller = 0;
   refreshRole();
-  // a connection that was accepted and is lost (armfw restarted, network gone): connect again
-  // every 2 s; control is not taken again by itself
-  if (document.body.dataset.auth === 'ok' && retry === null) {
+  // a connection that is lost (armfw restarted, network gone): connect again every 2 s;
+  // control is not taken again by itself
+  if (reconnect && retry === null) {
     say('connection lost: connecting again');
-    retry = setTimeout(() => { retry = null; connect(); }, 2000);
+    connectLater();
   }
 });
 api.on('control', (m) => { P.controller = m.holder; refreshRole(); });
