@@ -41,3 +41,7 @@ idle_class() {
   if chrt -i -p 0 $BASHPID >/dev/null 2>&1; then how="${how:+$how, }SCHED_IDLE"; fi
   echo "${how:-nice 19 only}"
 }
+# ctest_slots CPUS: the `ctest -j` for CPUS processors. Each CPU is two CTest slots: a test that
+# keeps a CPU busy asks for two, one that mostly waits on the clock for one, a vcan VM for three
+# (PROCESSORS; the table in the top CMakeLists.txt, "CTest slots").
+ctest_slots() { echo $((2 * $1)); }
