@@ -131,19 +131,26 @@ TEST(MitProcess, DemoOnSixDamiaoMotorsWithTheModelsTorqueOnTheDynamicPlantPasses
     int st = 0;
     const std::string cmd = emulator_prefix() + ARMFW_PATH " --sim --config " + cfg + " --plant dynamic --demo --priority 0 2>&1 </dev/null";
     outs[k] = run_capture(cmd, st);
+    const auto following = [&] {
+      const auto at = outs[k].find("max following error ");
+      CHECK_TEXT(at != std::string::npos && std::sscanf(outs[k].c_str() + at + 20, "%lf", &fe[k]) == 1, outs[k].c_str());
+    };
+    following();
     // The virtual motors keep the wall clock: a loop starved for a tenth of a second (seen under
     // ASan at a load average of 4-5: 14 % of the cycles overran, one wake-up 117 ms late) lets
-    // the arm fall behind its plan by more than the following-error limit, although nothing is
-    // wrong with the controller. A failed run whose loop overran in more than 2 % of its cycles
-    // runs once more; a second starved failure stays a failure.
-    if (k == 1 && outs[k].find("result: PASS") == std::string::npos && starved(outs[k])) {
-      std::printf("\n  the torque run failed with a starved loop (%s): run once more\n", loop_line(outs[k]).c_str());
+    // the arm fall behind its plan, although nothing is wrong with the controller: by more than
+    // the following-error limit (the demo fails), or by less, but by more than half the velocity
+    // run's error (29 % of the cycles overran, wake-ups 108 ms late at p99: 3.24 deg against
+    // 5.01). A torque run that failed either way with a loop that overran in more than 2 % of its
+    // cycles runs once more; a second starved failure stays a failure.
+    if (k == 1 && (outs[k].find("result: PASS") == std::string::npos || !(fe[1] < fe[0] / 2)) && starved(outs[k])) {
+      std::printf("\n  the torque run failed with a starved loop (%s, largest following error %.3f deg): run once more\n",
+                  loop_line(outs[k]).c_str(), fe[1]);
       outs[k] = run_capture(cmd, st);
+      following();
     }
     std::remove(cfg.c_str());
     if (k == 1) CHECK_TEXT(WIFEXITED(st) && WEXITSTATUS(st) == 0, outs[k].c_str());
-    const auto at = outs[k].find("max following error ");
-    CHECK_TEXT(at != std::string::npos && std::sscanf(outs[k].c_str() + at + 20, "%lf", &fe[k]) == 1, outs[k].c_str());
   }
   std::printf("\n  demo on six virtual DM-J4340 on the dynamic plant: largest following error %.3f deg with velocity "
               "feed-forward, %.3f deg with the model's torque\n", fe[0], fe[1]);
