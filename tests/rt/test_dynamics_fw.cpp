@@ -201,10 +201,12 @@ TEST(FwDynamics, FreedriveHoldsMovesWhenPushedAndOffHoldsWithinOneCycle) {
   a = r.cmd("movej 10 -30 60 0 50 0");
   CHECK_TEXT(has(a, "error: bad_state") && has(a, "free-drive is on"), a.c_str());
   CHECK_TEXT(has(r.cmd("freedrive on"), "ok free-drive on"), r.s.out.c_str());
-  // holds with no force: drift over 3 s
+  // holds with no force: drift over 3 s (1 s under qemu and the sanitizers, sweep.hpp, which run
+  // the plant some 40x slower; the host holds the whole 3 s against the same bound)
   const kin::JointVector q0 = r.plant().q();
   double drift = 0;
-  for (int k = 0; k < 3000; ++k) {
+  const int hold_cycles = servoarm::test::kSlowBuild ? 1000 : 3000;
+  for (int k = 0; k < hold_cycles; ++k) {
     r.cycle();
     drift = std::max(drift, (r.plant().q() - q0).cwiseAbs().maxCoeff());
   }
@@ -239,9 +241,9 @@ TEST(FwDynamics, FreedriveHoldsMovesWhenPushedAndOffHoldsWithinOneCycle) {
   }
   r.run(0.5);
   const double after_off = (r.plant().q() - at).cwiseAbs().maxCoeff();
-  std::printf("\n  freedrive through the console: drift over 3 s %.3g rad; pushed 20 N for 1 s: tool moved %.3f m; off: "
+  std::printf("\n  freedrive through the console: drift over %.0f s %.3g rad; pushed 20 N for 1 s: tool moved %.3f m; off: "
               "drives in CSP after %d cycle(s), idle after %d, then %.3g rad from where it was\n",
-              drift, moved, csp, idle, after_off);
+              hold_cycles * 1e-3, drift, moved, csp, idle, after_off);
   CHECK(drift < 5e-3);
   CHECK(moved > 0.05);
   LONGS_EQUAL(1, csp);
