@@ -675,18 +675,36 @@ struct Trace {
       }
     return worst;
   }
-  /// Largest distance (mm) of any sample from the polyline of `ref`'s samples.
+  /// Largest distance (mm) of any sample from the polyline of `ref`'s samples. Exact, and not
+  /// quadratic in practice: each sample's segments are searched outward from the previous
+  /// sample's nearest one, and the search ends at the first segment no farther than the largest
+  /// distance so far (that sample cannot raise it); a sample farther than that gets a full search.
+  /// (Two traces of 7 000 and 3 600 samples took 25 M segment distances the quadratic way, most
+  /// of the 11.6 s of a test under qemu.)
   double deviation_from(const Trace& ref) const {
+    const std::size_t n = ref.x.size();
+    auto dist = [&](const Eigen::Vector3d& p, std::size_t k) {  // to segment k-1 .. k
+      const Eigen::Vector3d a = ref.x[k - 1], d = ref.x[k] - a;
+      const double len2 = d.squaredNorm();
+      const double u = len2 > 0 ? std::clamp((p - a).dot(d) / len2, 0.0, 1.0) : 0.0;
+      return (a + u * d - p).norm();
+    };
     double worst = 0;
+    std::size_t hint = 1;
     for (const Eigen::Vector3d& p : x) {
       double best = INFINITY;
-      for (std::size_t k = 1; k < ref.x.size(); ++k) {
-        const Eigen::Vector3d a = ref.x[k - 1], d = ref.x[k] - a;
-        const double len2 = d.squaredNorm();
-        const double u = len2 > 0 ? std::clamp((p - a).dot(d) / len2, 0.0, 1.0) : 0.0;
-        best = std::fmin(best, (a + u * d - p).norm());
+      std::size_t best_k = hint;
+      for (std::size_t off = 0; best > worst; ++off) {
+        const bool up = hint + off < n, down = off > 0 && hint >= off + 1;
+        if (!up && !down) break;  // every segment searched
+        for (const std::size_t k : {up ? hint + off : 0, down ? hint - off : 0}) {
+          if (k == 0) continue;
+          const double e = dist(p, k);
+          if (e < best) best = e, best_k = k;
+        }
       }
       worst = std::fmax(worst, best);
+      hint = best_k;
     }
     return worst * 1e3;
   }
