@@ -7,6 +7,7 @@
 // the closed-form solutions).
 #include "servoarm/kinematics/ik.hpp"
 #include "kin_test_util.hpp"
+#include "sweep.hpp"  // sweep(): the KDL comparison on the first 1/20 of the targets under the sanitizers
 
 #ifdef SERVOARM_WITH_KDL
 #include <kdl/chainfksolverpos_recursive.hpp>
@@ -37,8 +38,13 @@ bool success(const kin::Chain& c, const kin::JointVector& q, const kin::Pose& T,
 
 TEST_GROUP(IkNumeric){};
 
+// Every model's 300 targets go to servoarm's solver in every build. KDL's two solvers, the
+// reference, take some 90 % of the time (up to 500 iterations where they fail): under qemu and
+// the sanitizers (sweep.hpp) they see the first 15 targets, compared with servoarm's successes
+// on those same 15; the host compares all 300.
 TEST(IkNumeric, SuccessRateLimitsAndKdlComparison) {
   const int n_targets = 300;
+  [[maybe_unused]] const int n_kdl = servoarm::test::sweep(n_targets);
   std::string failures;
   for (const auto& bm : kin::builtin_models()) {
     const kin::Chain c = model(bm.name);
@@ -48,6 +54,7 @@ TEST(IkNumeric, SuccessRateLimitsAndKdlComparison) {
     const bool position_only = false;
     std::mt19937_64 rng(2026);
     int ok = 0, iters = 0, ok_nr = 0, ok_lma = 0;
+    [[maybe_unused]] int ok_kdl_targets = 0;  // servoarm's successes on the targets KDL sees
 #ifdef SERVOARM_WITH_KDL
     const KDL::Chain kc = to_kdl(c);
     KDL::JntArray qmin(static_cast<unsigned>(c.n_joints)), qmax(static_cast<unsigned>(c.n_joints));
@@ -75,9 +82,11 @@ TEST(IkNumeric, SuccessRateLimitsAndKdlComparison) {
         CHECK_TEXT(r.position_error <= 1e-9 && r.rotation_error <= 1e-9, bm.name);
         CHECK_TEXT(success(c, r.q, T, position_only), bm.name);
         ++ok;
+        if (t < n_kdl) ++ok_kdl_targets;
       }
       iters += r.iterations;
 #ifdef SERVOARM_WITH_KDL
+      if (t >= n_kdl) continue;
       KDL::JntArray out(static_cast<unsigned>(c.n_joints));
       knr.CartToJnt(to_kdl(q_start), to_kdl(T), out);
       kin::JointVector qk(c.n_joints);
@@ -89,11 +98,11 @@ TEST(IkNumeric, SuccessRateLimitsAndKdlComparison) {
 #endif
     }
     std::printf("\n  %-20s servoarm %5.1f%% (%.1f iterations)   KDL NR_JL %5.1f%%   KDL LMA (limits checked after) %5.1f%%",
-                bm.name, 100.0 * ok / n_targets, static_cast<double>(iters) / n_targets, 100.0 * ok_nr / n_targets,
-                100.0 * ok_lma / n_targets);
+                bm.name, 100.0 * ok / n_targets, static_cast<double>(iters) / n_targets, 100.0 * ok_nr / n_kdl,
+                100.0 * ok_lma / n_kdl);
     if (ok < n_targets * 95 / 100) failures += std::string(" ") + bm.name + " (success rate)";
 #ifdef SERVOARM_WITH_KDL
-    if (!(ok >= ok_nr && ok >= ok_lma)) failures += std::string(" ") + bm.name + " (worse than KDL)";
+    if (!(ok_kdl_targets >= ok_nr && ok_kdl_targets >= ok_lma)) failures += std::string(" ") + bm.name + " (worse than KDL)";
 #endif
   }
   if (!failures.empty()) FAIL(("numerical IK:" + failures).c_str());
