@@ -30,7 +30,7 @@
 #include "servoarm/kinematics/trajectory.hpp"
 #include "servoarm/sim/arm_plant.hpp"
 #include "servoarm/sim/virtual_drive.hpp"
-#include "sweep.hpp"  // kSlowBuild: one pick-and-place cycle of three under qemu and the sanitizers
+#include "sweep.hpp"  // kSlowBuild: one pick-and-place cycle of three, shorter free-drive and collision runs under qemu and the sanitizers
 
 // CppUTest last: its leak detector redefines `new`.
 #include <CppUTest/TestHarness.h>
@@ -372,6 +372,10 @@ TEST(DynamicsFigures, CollisionIsDetectedSoonAfterContact) {
     }
     rig.master->write(sp, rig.clock.now());
     rig.clock.advance(kPeriod);
+    // Under qemu and the sanitizers (sweep.hpp) the run ends once every figure checked below
+    // is known (the standstill and the torque 100 ms after the alarm, some 0.8 s in); the host
+    // runs the whole 3 s, so the peak it prints covers the arm resting against the stop too.
+    if (servoarm::test::kSlowBuild && t_still >= 0 && after >= 0) break;
   }
   const double tl = rig.plant().info(0).gains.torque_limit;
   std::printf("\n  collision, %s stop on joint 1 at 0.5 rad (%.2f rad/s at contact): alarm %.0f ms after contact on "

@@ -355,6 +355,9 @@ TEST(FwDynamics, CollisionWithARigidStopFaultsNamingTheJointAndTheArmStops) {
     if (contact > 0 && t_contact < 0) t_contact = t;
     if (t_fault < 0 && r.tel().state == ArmState::fault) t_fault = t;
     if (t_fault >= 0 && t_still < 0 && r.plant().qd().cwiseAbs().maxCoeff() < 1e-2) t_still = t;
+    // 3 s on the host; under qemu and the sanitizers (sweep.hpp) 0.5 s past the standstill
+    // (about 0.8 s in all), still in fault against the stop for the checks below
+    if (servoarm::test::kSlowBuild && t_still >= 0 && t >= t_still + 0.5) break;
   }
   const Telemetry t = r.tel();
   std::printf("\n  collision through the firmware (rigid stop on joint 1 at 20 deg, movej speed=100): fault %.0f ms after "
