@@ -30,7 +30,7 @@
 #include "servoarm/kinematics/trajectory.hpp"
 #include "servoarm/sim/arm_plant.hpp"
 #include "servoarm/sim/virtual_drive.hpp"
-#include "sweep.hpp"  // kSlowBuild: one pick-and-place cycle of three, shorter free-drive and collision runs under qemu and the sanitizers
+#include "sweep.hpp"  // kSlowBuild: one pick-and-place cycle, shorter hold and collision runs (qemu, sanitizers)
 
 // CppUTest last: its leak detector redefines `new`.
 #include <CppUTest/TestHarness.h>

@@ -102,7 +102,8 @@ TEST(IkNumeric, SuccessRateLimitsAndKdlComparison) {
                 100.0 * ok_lma / n_kdl);
     if (ok < n_targets * 95 / 100) failures += std::string(" ") + bm.name + " (success rate)";
 #ifdef SERVOARM_WITH_KDL
-    if (!(ok_kdl_targets >= ok_nr && ok_kdl_targets >= ok_lma)) failures += std::string(" ") + bm.name + " (worse than KDL)";
+    if (!(ok_kdl_targets >= ok_nr && ok_kdl_targets >= ok_lma))
+      failures += std::string(" ") + bm.name + " (worse than KDL)";
 #endif
   }
   if (!failures.empty()) FAIL(("numerical IK:" + failures).c_str());
