@@ -43,5 +43,5 @@ idle_class() {
 }
 # ctest_slots CPUS: the `ctest -j` for CPUS processors. Each CPU is two CTest slots: a test that
 # keeps a CPU busy asks for two, one that mostly waits on the clock for one, a vcan VM for three
-# (PROCESSORS; the table in the top CMakeLists.txt, "CTest slots").
+# (PROCESSORS; the top CMakeLists.txt, "How CTest shares the machine").
 ctest_slots() { echo $((2 * $1)); }
