@@ -200,6 +200,7 @@ class VirtualDrive {
   Entry* find(std::uint16_t index, std::uint8_t sub);
   const Entry* find(std::uint16_t index, std::uint8_t sub) const;
   void add(std::uint16_t index, std::uint8_t sub, std::uint8_t size, bool writable, bool mappable, std::uint32_t value);
+  void index_dictionary();
   void reset_dictionary(bool communication_only);
   std::uint32_t sdo_write(Entry& e, const std::uint8_t* data, std::size_t len);
   std::uint32_t check_mapping(std::uint16_t map_index, std::uint32_t count) const;
@@ -244,6 +245,10 @@ class VirtualDrive {
   MotorParams motor_;
   DriveFaults faults_;
   std::vector<Entry> od_;
+  /// find()'s hash table over od_ (open addressing, linear probing; -1 = empty slot), at
+  /// most a quarter full; rebuilt by index_dictionary() whenever od_ changes shape.
+  std::vector<std::int16_t> od_slots_;
+  unsigned od_shift_ = 32;
   hal::canopen::NmtState nmt_ = hal::canopen::NmtState::boot_up;
   hal::cia402::State state_ = hal::cia402::State::not_ready_to_switch_on;
   std::uint16_t prev_cw_ = 0;
