@@ -145,6 +145,16 @@ void VirtualDrive::index_dictionary() {
     while (od_slots_[i] >= 0) i = (i + 1) & mask;
     od_slots_[i] = std::int16_t(k);
   }
+  const auto at = [this](std::uint16_t index, std::uint8_t sub) {
+    const Entry* e = find(index, sub);
+    return e ? std::int16_t(e - od_.data()) : std::int16_t(-1);
+  };
+  mode_at_ = at(c402::kModesDisplay, 0);
+  static_assert(kRpdos == std::size(decltype(rpdo_cob_at_){}));
+  for (int p = 0; p < kRpdos; ++p) {
+    rpdo_cob_at_[p] = at(kRpdoComm[p], 1);
+    rpdo_type_at_[p] = at(kRpdoComm[p], 2);
+  }
 }
 
 VirtualDrive::Entry* VirtualDrive::find(std::uint16_t index, std::uint8_t sub) {
@@ -278,9 +288,9 @@ void VirtualDrive::handle(const CanFrame& f, TimePoint now, CanBus& bus) {
     return;
   }
   for (int p = 0; p < kRpdos; ++p) {
-    const std::uint32_t cob = get(kRpdoComm[p], 1);
+    const std::uint32_t cob = value_at(rpdo_cob_at_[p]);
     if ((cob & kCobInvalid) || f.id != (cob & 0x7FF)) continue;
-    const std::uint32_t type = get(kRpdoComm[p], 2);
+    const std::uint32_t type = value_at(rpdo_type_at_[p]);
     if (type <= 240) {
       rpdo_latch_[p] = f;  // synchronous: acted on at the next SYNC
       rpdo_pending_[p] = true;

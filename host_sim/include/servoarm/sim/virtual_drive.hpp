@@ -151,7 +151,7 @@ class VirtualDrive {
   std::uint32_t digital_outputs() const { return get(hal::cia402::kDigitalOutputs, 1); }
   /// True while the position is clamped at a mechanical end stop.
   bool at_end_stop() const { return at_stop_; }
-  std::int8_t mode_display() const { return std::int8_t(get(hal::cia402::kModesDisplay)); }
+  std::int8_t mode_display() const { return std::int8_t(value_at(mode_at_)); }
   hal::cia402::State state() const { return state_; }
   hal::canopen::NmtState nmt() const { return nmt_; }
   double position() const { return pos_; }        ///< counts, unquantised
@@ -249,6 +249,12 @@ class VirtualDrive {
   /// most a quarter full; rebuilt by index_dictionary() whenever od_ changes shape.
   std::vector<std::int16_t> od_slots_;
   unsigned od_shift_ = 32;
+  /// Positions in od_ of the entries read for every frame and sub-step, -1 if absent (set
+  /// with od_slots_): 6061h, and each RPDO's COB-ID (sub 1) and transmission type (sub 2).
+  std::int16_t mode_at_ = -1;
+  std::int16_t rpdo_cob_at_[3] = {-1, -1, -1};
+  std::int16_t rpdo_type_at_[3] = {-1, -1, -1};
+  std::uint32_t value_at(std::int16_t k) const { return k < 0 ? 0 : od_[std::size_t(k)].value; }
   hal::canopen::NmtState nmt_ = hal::canopen::NmtState::boot_up;
   hal::cia402::State state_ = hal::cia402::State::not_ready_to_switch_on;
   std::uint16_t prev_cw_ = 0;
