@@ -540,7 +540,10 @@ async function main() {
         await sleep(150);  // a frame drawn (the view draws at most every 50 ms)
         await shot(page, 'pendant-path');
       }
+      const drawsMoving = await page.evaluate(() => window.pendant.view.renderer.info.render.frame);
       await until('the move done and the arm at rest', async () => { const s = await tcp.state(); return s.done >= run.running && allStill(s); });
+      const drawsDone = await page.evaluate(() => window.pendant.view.renderer.info.render.frame);
+      assert(drawsDone > drawsMoving, `the view was not drawn again while the arm moved (${drawsMoving} draws, then ${drawsDone})`);
       // where the arm stopped (its tool point, measured) is where the drawn path ends; 1 mm
       // covers the float32 of the drawing and the simulated drives' settling
       const tool = (await tcp.state()).tool.position;
@@ -554,6 +557,13 @@ async function main() {
       await page.$eval('#movej-q', (e, g) => { e.value = g; }, s0.q.map((v) => v.toFixed(6)).join(', '));
       await moveAtFullSpeed(page);
       await until('the arm back at the start', async () => { const s = await tcp.state(); return allStill(s) && s.q.every((v, j) => Math.abs(v - s0.q[j]) < 1e-3); });
+      // at rest the state stream goes on (30 Hz) but nothing in the view changes: it is not drawn
+      await sleep(300);  // the last change drawn (at most every 50 ms)
+      const drawsAtRest = await page.evaluate(() => window.pendant.view.renderer.info.render.frame);
+      await sleep(1500);
+      const drawsLater = await page.evaluate(() => window.pendant.view.renderer.info.render.frame);
+      figure(`3D view: ${drawsDone - drawsMoving} draws for the rest of the planned-path move, ${drawsLater - drawsAtRest} in 1.5 s at rest`);
+      assert(drawsLater === drawsAtRest, `the view was drawn ${drawsLater - drawsAtRest} times in 1.5 s with the arm at rest`);
       await setSpeed(page, 30);
     });
 

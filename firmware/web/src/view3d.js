@@ -35,6 +35,7 @@ export class ArmView {
     this.toolMat = new THREE.MeshStandardMaterial({ color: 0xf59e0b });
     this.count = -1;
     this.dirty = true;
+    this.drawn = {};  // what update() and tool() last drew, flat, for changed()
     new ResizeObserver(() => this.resize()).observe(el);
     this.resize();
     this.controls.addEventListener('change', () => { this.dirty = true; });
@@ -45,6 +46,16 @@ export class ArmView {
       requestAnimationFrame(loop);
     };
     requestAnimationFrame(loop);
+  }
+
+  /** Whether `values` (numbers, m) differ by 10 um or more from what `key` last drew; if so they
+   *  are what it draws now. The state stream (30 Hz) repeats an arm at rest: drawn
+   *  again each time, SwiftShader's WebGL kept half a core busy on a page nobody touched. */
+  changed(key, values) {
+    const prev = this.drawn[key];
+    if (prev && prev.length === values.length && values.every((v, i) => Math.abs(v - prev[i]) < 1e-5)) return false;
+    this.drawn[key] = values;
+    return true;
   }
 
   /** The taught points: a marker at each tool point (positions [x, y, z] in m, base frame). */
@@ -129,6 +140,7 @@ export class ArmView {
   /** The active tool: a rod from the flange (the last frame) to its point `tcp` ([x, y, z] in m,
    *  the state's `tcp`), hidden when the tool is the flange itself (tool0). */
   tool(flange, tcp) {
+    if (!this.changed('tool', [...flange, ...tcp])) return;
     if (!this.toolRod) {
       this.toolRod = new THREE.Mesh(new THREE.CylinderGeometry(0.006, 0.006, 1, 8), this.toolMat);
       this.toolTip = new THREE.Mesh(new THREE.ConeGeometry(0.012, 0.03, 12), this.toolMat);
@@ -151,7 +163,7 @@ export class ArmView {
 
   /** frames: [[x, y, z], ...] in m, base first, tool last. */
   update(frames) {
-    if (!Array.isArray(frames) || frames.length < 2) return;
+    if (!Array.isArray(frames) || frames.length < 2 || !this.changed('frames', frames.flat())) return;
     if (frames.length !== this.count) {
       let reach = 0;
       for (const f of frames) reach = Math.max(reach, Math.hypot(f[0], f[1], f[2]));
