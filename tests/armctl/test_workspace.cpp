@@ -124,7 +124,7 @@ bool have_rsvg() { return std::system("command -v rsvg-convert >/dev/null 2>&1")
 // Renders the SVG to PNG; fails when rsvg-convert refuses it (a malformed file) or
 // writes no PNG.
 void render(const std::string& svg) {
-  CHECK_TEXT(have_rsvg(), "rsvg-convert not found: install librsvg2-bin (.ci/packages [test])");
+  CHECK_TEXT(have_rsvg(), "rsvg-convert not found: install librsvg2-bin (.ci/packages [suites])");
   const std::string png = svg + ".png";
   std::remove(png.c_str());
   const auto r = run_command("rsvg-convert -o " + png + " " + svg);
