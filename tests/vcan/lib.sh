@@ -20,6 +20,22 @@ finish() {
   echo "PASSED"; exit 0
 }
 
+# to_host VAR...: hands variables to the scenario's host check. SCRIPT.host-check runs on the
+# host once the scenario passed (tests/vcan/vcan-test), with the files the scenario left in
+# $OUT_DIR; long analyses of the captured frames belong there: awk over some 10 000 frames
+# takes the emulated guest seconds per pass, the host milliseconds. A host check starts with
+#   OUT_DIR=$1 CAN_IF=host SCENARIO_DIR=$(cd "$(dirname "$0")" && pwd)
+#   . "$SCENARIO_DIR/lib.sh"; from_guest
+# and ends with finish, as a scenario does.
+to_host() {
+  for _v in "$@"; do eval "printf \"%s='%s'\\n\" \"\$_v\" \"\$$_v\""; done >>"$OUT_DIR/host-check.env"
+}
+# from_guest: in a host check, the variables the scenario handed over (to_host).
+from_guest() {
+  [ -f "$OUT_DIR/host-check.env" ] || fail "$OUT_DIR/host-check.env missing: the scenario handed nothing over (to_host)"
+  . "$OUT_DIR/host-check.env"
+}
+
 need() { # need CMD... : fail (not skip) when a tool is missing
   for c in "$@"; do command -v "$c" >/dev/null 2>&1 || fail "$c not found in PATH ($PATH)"; done
 }

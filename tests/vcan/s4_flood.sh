@@ -17,6 +17,8 @@
 # the id) would keep most of the flood away from its frame decoder, which is
 # what is tested here (scenarios 1-3 run with the filters); it must report
 # thousands of ignored frames.
+# The frames candump captured are checked on the host (s4_flood.host-check): armsim's
+# answer after the flood, RPDO lengths, controlwords, setpoints intact and followed.
 . "$SCENARIO_DIR/lib.sh"
 need candump cangen cansend armsim canmaster
 # Time constants: 10 ms cycle, 50 ms heartbeat, 150 ms consumer timeout on a
@@ -88,17 +90,6 @@ ign=$(sed -n 's/^result .*ignored_frames=\([0-9]*\).*/\1/p' "$OUT_DIR/canmaster.
 [ "${ign:-0}" -ge 1000 ] && pass "canmaster's decoder saw and ignored $ign flood frames" ||
   check_fail "canmaster ignored only '${ign}' frames: the flood did not reach its decoder"
 
-tframes "$OUT_DIR/all.log" | grep -v '##' >"$OUT_DIR/all.tframes"   # FD frames are flood
-cut -d' ' -f2 "$OUT_DIR/all.tframes" >"$OUT_DIR/all.frames"
-grep -q '^584#4300100092010200$' "$OUT_DIR/all.frames" && pass "armsim node 4 answers SDO after the flood" ||
-  check_fail "armsim node 4 did not answer the SDO upload of 0x1000 after the flood"
-for n in 1 2 3 4 5 6; do
-  bad=$(grep "^20$n#" "$OUT_DIR/all.frames" | awk -F'#' 'length($2) != 12' | head -n 1)
-  [ -z "$bad" ] || check_fail "node $n: RPDO1 of the wrong length on the bus: $bad"
-  check_controlwords "no false fault" "$OUT_DIR/all.frames" "$n"
-  # this node's frames and the SYNCs only: the checks below read them several times
-  grep -E " (080|18$n|20$n)#" "$OUT_DIR/all.tframes" >"$OUT_DIR/node$n.tframes"
-  check_sine_targets "node $n setpoints intact" "$OUT_DIR/node$n.tframes" "20$n" 6258 0.5 "0.0$period_ms"
-  check_tracking "node $n followed its setpoints" "$OUT_DIR/node$n.tframes" "$n" "$tol_counts" 64
-done
+# the frames on the bus are checked on the host (s4_flood.host-check)
+to_host period_ms tol_counts
 finish

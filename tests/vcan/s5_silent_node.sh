@@ -8,9 +8,10 @@
 # armfw must stop the arm with a fault naming joint 3:
 #   - on the console: an `alarm: fault joint 3 ...` line, and `status` in
 #     state fault with fault="joint 3 heartbeat_lost ...";
-#   - on the bus (candump kernel timestamps): from node 3's last heartbeat to the
-#     first RPDO 0x203 that no longer says "enable operation" (the fault
-#     reaction) within heartbeat timeout + 2 control cycles. Under emulation the
+#   - on the bus (candump kernel timestamps, checked on the host by
+#     s5_silent_node.host-check): from node 3's last heartbeat to the first RPDO
+#     0x203 that no longer says "enable operation" (the fault reaction) within
+#     heartbeat timeout + 2 control cycles. Under emulation the
 #     cycles themselves run late, so this is judged like scenario 3, in cycles
 #     actually run: at most 2 SYNCs between (last heartbeat + timeout) and the
 #     reaction, and not before the timeout expired; the time is printed.
@@ -62,23 +63,6 @@ ARMSIM_PID=$others; stop_armsim
 stop_candump all
 cat "$OUT_DIR/armsim_node3.log" | grep -E 'fault|ready'
 
-tframes "$OUT_DIR/all.log" >"$OUT_DIR/all.tframes"
-awk -v timeout="$hb_timeout_ms" -v rate="$rate_hz" '
-    { split($2, p, "#") }
-    p[1] == "703" { last_hb = $1 }
-    p[1] == "080" && p[2] == "" { sync[++ns] = $1 }
-    p[1] == "203" && substr(p[2], 1, 4) == "0F00" { moving = 1; if (react != "") back = 1 }
-    p[1] == "203" && moving && react == "" && substr(p[2], 1, 4) != "0F00" { react = $1; cw = substr(p[2], 3, 2) substr(p[2], 1, 2) }
-    END { if (react == "") { print "no fault reaction (RPDO 0x203 without enable operation) after node 3 fell silent"; exit 1 }
-          period = 1000 / rate; dt = (react - last_hb) * 1000
-          for (i = 1; i <= ns; i++) if (sync[i] > last_hb + timeout / 1000 && sync[i] < react) between++
-          printf "bus: node 3 last heartbeat at %.6f, RPDO 0x203 controlword 0x%s at %.6f: %.1f ms later (timeout %d ms + 2 cycles = %.1f ms), %d SYNC(s) between timeout expiry and reaction (want 0-2)%s\n", last_hb, cw, react, dt, timeout, timeout + 2 * period, between + 0, back ? "; node 3 re-enabled afterwards!" : ""
-          exit !(dt > timeout && between <= 2 && !back) }' "$OUT_DIR/all.tframes" >"$OUT_DIR/silent_latency.txt" &&
-  pass "$(cat "$OUT_DIR/silent_latency.txt")" || check_fail "$(cat "$OUT_DIR/silent_latency.txt")"
-# the other joints end powered down (ramp to rest, then no "enable operation")
-for n in 1 2 4 5 6; do
-  last=$(grep " 20$n#" "$OUT_DIR/all.tframes" | tail -n 1 | cut -d' ' -f2)
-  case $last in 20$n#0F00*) check_fail "node $n still enabled at the end: $last" ;; "") check_fail "no RPDO for node $n" ;;
-    *) pass "node $n powered down after the fault ($last)" ;; esac
-done
+# the frames on the bus are checked on the host (s5_silent_node.host-check)
+to_host hb_timeout_ms rate_hz
 finish
