@@ -11,6 +11,11 @@ step_done() {
   return 0
 }
 apt_lock() { flock "${TMPDIR:-/tmp}/servoarm-apt.lock" "$@"; }
+# apt_lock_hold: takes the same lock until the calling script ends (file descriptor 9), for a
+# look at what is installed and the install that follows it, so that a list made before
+# another script's install is not installed again. No apt_lock after it (it would wait for
+# the lock its own script holds).
+apt_lock_hold() { exec 9>"${TMPDIR:-/tmp}/servoarm-apt.lock"; flock 9; }
 # idle_class: puts the calling shell (and what it starts from then on) into the machine's
 # lowest CPU class, so that it runs only on cycles the foreground leaves idle. Nice or
 # SCHED_IDLE alone does not do that when the kernel groups processes by session
