@@ -1,8 +1,11 @@
 // SPDX-License-Identifier: Apache-2.0
 // Jacobian against central finite differences of FK, manipulability and
-// condition number at known singular configurations, Cartesian precision
+// condition number at known singular configurations and against the eigenvalues of the
+// Gram matrix for every column count, Cartesian precision
 // (Carrara, Apostila de Robótica, §3.14) against its closed form, and the two PUMA descriptions
 // against each other.
+#include <Eigen/Eigenvalues>
+
 #include "kin_test_util.hpp"
 
 using namespace servoarm;
@@ -158,5 +161,35 @@ TEST(Jacobian, TheTwoPumaDescriptionsAgree) {
     for (int j = 0; j < 6; ++j) Jmoved.block<3, 1>(0, j) += Js.block<3, 1>(3, j).cross(r);
     CHECK((Jmoved - Jc).cwiseAbs().maxCoeff() < 1e-12);
     DOUBLES_EQUAL(kin::manipulability(Js), kin::manipulability(Jc), 1e-12);
+  }
+}
+
+// The singular values behind manipulability and condition_number, for every column count
+// 1..8 (fewer, as many as and more joints than the 6 task directions), against an independent
+// route: the eigenvalues of the square Gram matrix (J J^T for a wide J, J^T J otherwise) from
+// Eigen's self-adjoint solver, whose square roots are J's singular values. Seeded random
+// Jacobians, well conditioned (errors near rounding) and with two columns 1e-3 apart
+// (condition numbers up to some 1e4: the Gram matrix squares them, and 1e8 is still well
+// inside what its eigenvalues resolve).
+TEST(Jacobian, SingularValuesMatchTheGramMatrixEigenvaluesForEveryColumnCount) {
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int n = 1; n <= kin::kMaxJoints; ++n) {
+    for (int k = 0; k < 200; ++k) {
+      kin::Jacobian J(6, n);
+      for (int i = 0; i < 6; ++i)
+        for (int j = 0; j < n; ++j) J(i, j) = u(rng);
+      if (k % 2) J.col(n - 1) = J.col(0) + 1e-3 * J.col(n - 1);  // nearly dependent columns
+      const Eigen::MatrixXd G = n > 6 ? Eigen::MatrixXd(J * J.transpose()) : Eigen::MatrixXd(J.transpose() * J);
+      const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(G).eigenvalues();
+      double m = 1.0;
+      for (int i = 0; i < ev.size(); ++i) m *= std::sqrt(std::max(0.0, ev[i]));
+      const double cond = std::sqrt(ev.maxCoeff() / ev.minCoeff());
+      std::ostringstream os;
+      os << "n " << n << " case " << k << ": manipulability " << kin::manipulability(J) << " against "
+         << m << ", condition number " << kin::condition_number(J) << " against " << cond;
+      CHECK_TEXT(std::abs(kin::manipulability(J) - m) <= 1e-9 * std::max(1.0, m), os.str().c_str());
+      CHECK_TEXT(std::abs(kin::condition_number(J) - cond) <= 1e-6 * cond, os.str().c_str());
+    }
   }
 }
