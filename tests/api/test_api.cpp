@@ -19,7 +19,6 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -32,6 +31,7 @@
 #include "servoarm/service/stream.hpp"
 #include "sim_app.hpp"
 #include "sweep.hpp"
+#include "text_regex.hpp"
 
 // CppUTest last: its leak detector redefines new
 #include "CppUTest/TestHarness.h"
@@ -111,9 +111,9 @@ struct Client {
 bool has(const std::string& s, const std::string& what) { return s.find(what) != std::string::npos; }
 bool is_ok(const std::string& s) { return has(s, "\"ok\":true"); }
 std::string error_of(const std::string& s) {
-  const std::regex e("\"error\":\"([a-z_]+)\"");
-  std::smatch m;
-  return std::regex_search(s, m, e) ? m[1].str() : "";
+  const test::Regex e("\"error\":\"([a-z_]+)\"");
+  const test::Groups m = e.search(s);
+  return m.empty() ? "" : m[1];
 }
 
 struct Rig {
@@ -275,7 +275,7 @@ TEST(FwApi, StateCarriesMeasuredVelocityAndTorque) {
   rig.enable(c);
   CHECK(is_ok(c.ask(1, "\"cmd\":\"subscribe\",\"topic\":\"state\",\"rate_hz\":200")));
   CHECK(is_ok(c.ask(2, "\"cmd\":\"movej\",\"q\":[0.5,0,0,0,0,0],\"speed_pct\":50")));
-  const std::regex qd("\"qd\":\\[([-0-9.e]+)"), qdc("\"qd_cmd\":\\[([-0-9.e]+)"),
+  const test::Regex qd("\"qd\":\\[([-0-9.e]+)"), qdc("\"qd_cmd\":\\[([-0-9.e]+)"),
       tau("\"torque\":\\[((null|[-0-9.e]+)(,(null|[-0-9.e]+)){5})\\]");
   double max_qd = 0, max_qdc = 0, max_tau = 0;
   int samples = 0, with_tau = 0;
@@ -284,13 +284,13 @@ TEST(FwApi, StateCarriesMeasuredVelocityAndTorque) {
     const std::string l = c.line(1);
     if (!has(l, "\"topic\":\"state\"")) continue;
     ++samples;
-    std::smatch m;
-    CHECK_TEXT(std::regex_search(l, m, qd), l.c_str());
-    max_qd = std::max(max_qd, std::fabs(std::stod(m[1].str())));
-    CHECK_TEXT(std::regex_search(l, m, qdc), l.c_str());
-    max_qdc = std::max(max_qdc, std::fabs(std::stod(m[1].str())));
-    CHECK_TEXT(std::regex_search(l, m, tau), l.c_str());
-    if (m[2].str() != "null") ++with_tau, max_tau = std::max(max_tau, std::fabs(std::stod(m[2].str())));
+    test::Groups m;
+    CHECK_TEXT(!(m = qd.search(l)).empty(), l.c_str());
+    max_qd = std::max(max_qd, std::fabs(std::stod(m[1])));
+    CHECK_TEXT(!(m = qdc.search(l)).empty(), l.c_str());
+    max_qdc = std::max(max_qdc, std::fabs(std::stod(m[1])));
+    CHECK_TEXT(!(m = tau.search(l)).empty(), l.c_str());
+    if (m[2] != "null") ++with_tau, max_tau = std::max(max_tau, std::fabs(std::stod(m[2])));
   }
   CHECK(samples >= 50);
   // the measured velocity is the drive's, not the setpoint's: near it at the top of the move
@@ -429,12 +429,12 @@ TEST(FwApi, ANonReadingSubscriberDelaysNobody) {
   std::uint64_t dropped = 0;
   int lines = 0;
   const double end = now_s() + 10;
-  const std::regex d("\"dropped\":([0-9]+)");
+  const test::Regex d("\"dropped\":([0-9]+)");
   while (dropped == 0 && now_s() < end) {
     const std::string l = slow.line(1);
     ++lines;
-    std::smatch m;
-    if (std::regex_search(l, m, d)) dropped = std::stoull(m[1].str());
+    test::Groups m;
+    if (!(m = d.search(l)).empty()) dropped = std::stoull(m[1]);
   }
   CHECK_TEXT(dropped > 0, std::to_string(lines).c_str());
 }
@@ -670,16 +670,16 @@ TEST(FwApi, StateCarriesJointFrames) {
   Client c(rig.port());
   const std::string s = c.ask(1, "\"cmd\":\"state\"");
   CHECK_TEXT(is_ok(s), s.c_str());
-  const std::regex fr("\"frames\":\\[((\\[[^\\]]*\\],?)+)\\]");
-  std::smatch m;
-  CHECK_TEXT(std::regex_search(s, m, fr), s.c_str());
-  const std::string frames = m[1].str();
+  const test::Regex fr("\"frames\":\\[((\\[[^\\]]*\\],?)+)\\]");
+  test::Groups m;
+  CHECK_TEXT(!(m = fr.search(s)).empty(), s.c_str());
+  const std::string frames = m[1];
   CHECK_EQUAL(rig.app.chain.n_rows + 2, static_cast<int>(std::count(frames.begin(), frames.end(), '[')));
-  const std::regex tool("\"tool\":\\{\"position\":(\\[[^\\]]*\\])");
-  std::smatch t;
-  CHECK_TEXT(std::regex_search(s, t, tool), s.c_str());
+  const test::Regex tool("\"tool\":\\{\"position\":(\\[[^\\]]*\\])");
+  test::Groups t;
+  CHECK_TEXT(!(t = tool.search(s)).empty(), s.c_str());
   const std::string last = frames.substr(frames.rfind('['));
-  CHECK_EQUAL(t[1].str(), last);
+  CHECK_EQUAL(t[1], last);
   CHECK(frames.rfind("[0,0,0]", 0) == 0 || frames.rfind("[0.0,0.0,0.0]", 0) == 0);  // puma560's base at the origin
 }
 
@@ -740,14 +740,14 @@ std::string jstr(const std::string& s) {
 }
 /// The state sample's program state ("" when it has none).
 std::string program_state(const std::string& s) {
-  const std::regex e("\"program\":\\{[^}]*\"state\":\"([a-z]+)\"");
-  std::smatch m;
-  return std::regex_search(s, m, e) ? m[1].str() : "";
+  const test::Regex e("\"program\":\\{[^}]*\"state\":\"([a-z]+)\"");
+  const test::Groups m = e.search(s);
+  return m.empty() ? "" : m[1];
 }
 int int_field(const std::string& s, const std::string& key) {
-  const std::regex e("\"" + key + "\":(-?[0-9]+)");
-  std::smatch m;
-  return std::regex_search(s, m, e) ? std::stoi(m[1].str()) : -999;
+  const test::Regex e("\"" + key + "\":(-?[0-9]+)");
+  const test::Groups m = e.search(s);
+  return m.empty() ? -999 : std::stoi(m[1]);
 }
 }  // namespace
 
@@ -885,10 +885,10 @@ TEST(FwApi, TeachPointsToolsAndFrames) {
   CHECK_TEXT(is_ok(t) && has(t, "\"name\":\"p1\"") && int_field(t, "count") == 1, t.c_str());
   const std::string l = c.ask(3, "\"cmd\":\"points\"");
   CHECK_TEXT(is_ok(l) && has(l, "\"name\":\"p1\"") && has(l, "\"tool\":\"tool0\""), l.c_str());
-  const std::regex q("\"q\":\\[([-0-9.e]+),([-0-9.e]+),");  // the measured joints when taught
-  std::smatch m;
-  CHECK_TEXT(std::regex_search(l, m, q), l.c_str());
-  const double q0 = std::stod(m[1].str()), q1 = std::stod(m[2].str());
+  const test::Regex q("\"q\":\\[([-0-9.e]+),([-0-9.e]+),");  // the measured joints when taught
+  test::Groups m;
+  CHECK_TEXT(!(m = q.search(l)).empty(), l.c_str());
+  const double q0 = std::stod(m[1]), q1 = std::stod(m[2]);
   DOUBLES_EQUAL(0.2, q0, 1e-3);
   DOUBLES_EQUAL(0.1, q1, 1e-3);
   CHECK(is_ok(c.ask(4, "\"cmd\":\"movej\",\"q\":[-0.2,0,0,0,0,0],\"speed_pct\":50")));
@@ -924,10 +924,10 @@ TEST(FwApi, CartesianJogAndFeedOverride) {
   for (int i = 0; i < 6000 && rig.tel().done_id < 1; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   const auto tool_at = [&](int id) {
     const std::string s = c.ask(id, "\"cmd\":\"state\"");
-    const std::regex e("\"tool\":\\{\"position\":\\[([-0-9.e]+),([-0-9.e]+),([-0-9.e]+)\\]");
-    std::smatch m;
-    CHECK_TEXT(std::regex_search(s, m, e), s.c_str());
-    return std::array<double, 3>{std::stod(m[1].str()), std::stod(m[2].str()), std::stod(m[3].str())};
+    const test::Regex e("\"tool\":\\{\"position\":\\[([-0-9.e]+),([-0-9.e]+),([-0-9.e]+)\\]");
+    test::Groups m;
+    CHECK_TEXT(!(m = e.search(s)).empty(), s.c_str());
+    return std::array<double, 3>{std::stod(m[1]), std::stod(m[2]), std::stod(m[3])};
   };
   const auto p0 = tool_at(2);
   const std::string j = c.ask(3, "\"cmd\":\"jog_cartesian\",\"axis\":0,\"frame\":\"base\",\"increment\":0.02");
@@ -1095,10 +1095,9 @@ std::vector<Eigen::Vector3d> path_points(const std::string& s) {
   const auto at = s.find("\"points\":[");
   if (at == std::string::npos) return out;
   const std::string rest = s.substr(at);
-  const std::regex e("\\[(-?[0-9.eE+-]+),(-?[0-9.eE+-]+),(-?[0-9.eE+-]+)\\]");
-  for (auto it = std::sregex_iterator(rest.begin(), rest.begin() + static_cast<long>(rest.find("]]") + 2), e);
-       it != std::sregex_iterator(); ++it)
-    out.emplace_back(std::stod((*it)[1].str()), std::stod((*it)[2].str()), std::stod((*it)[3].str()));
+  const test::Regex e("\\[(-?[0-9.eE+-]+),(-?[0-9.eE+-]+),(-?[0-9.eE+-]+)\\]");
+  for (const test::Groups& g : e.search_all(rest.substr(0, rest.find("]]") + 2)))
+    out.emplace_back(std::stod(g[1]), std::stod(g[2]), std::stod(g[3]));
   return out;
 }
 Eigen::Vector3d tool_point(const kin::Chain& ch, const kin::JointVector& q) {
@@ -1158,10 +1157,10 @@ TEST(FwApi, PlannedPathOfAJointMoveAndALine) {
 namespace {
 /// The [x, y, z] after `"key":{"position":` in a state line.
 Eigen::Vector3d pose_position(const std::string& s, const std::string& key) {
-  const std::regex e("\"" + key + "\":\\{\"position\":\\[(-?[0-9.eE+-]+),(-?[0-9.eE+-]+),(-?[0-9.eE+-]+)\\]");
-  std::smatch m;
-  if (!std::regex_search(s, m, e)) return Eigen::Vector3d::Constant(1e9);
-  return {std::stod(m[1].str()), std::stod(m[2].str()), std::stod(m[3].str())};
+  const test::Regex e("\"" + key + "\":\\{\"position\":\\[(-?[0-9.eE+-]+),(-?[0-9.eE+-]+),(-?[0-9.eE+-]+)\\]");
+  test::Groups m;
+  if ((m = e.search(s)).empty()) return Eigen::Vector3d::Constant(1e9);
+  return {std::stod(m[1]), std::stod(m[2]), std::stod(m[3])};
 }
 }  // namespace
 
@@ -1181,10 +1180,10 @@ TEST(FwApi, StateCarriesTheActiveToolsPoint) {
   const fw::ArmService& svc = rig.app.console->service();
   // the measured joints of the same state sample (the arm may still settle after the move)
   const std::string s1 = c.ask(5, "\"cmd\":\"state\"");
-  std::smatch qm;
-  CHECK_TEXT(std::regex_search(s1, qm, std::regex("\"q\":\\[([^\\]]*)\\]")), s1.c_str());
+  test::Groups qm;
+  CHECK_TEXT(!(qm = test::regex_search(s1, "\"q\":\\[([^\\]]*)\\]")).empty(), s1.c_str());
   std::vector<double> qs;
-  std::stringstream qss(qm[1].str());
+  std::stringstream qss(qm[1]);
   for (std::string v; std::getline(qss, v, ',');) qs.push_back(std::stod(v));
   const Telemetry t = rig.tel();
   LONGS_EQUAL(t.n, static_cast<long>(qs.size()));

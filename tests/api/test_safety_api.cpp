@@ -3,11 +3,11 @@
 // operator holding control, parsed and run through the message table on the service (the server's
 // gate itself is fw_api's TokensAndRoles), answers and refusals rendered in one line.
 #include <cstdio>
-#include <regex>
 #include <string>
 
 #include "../support/sim_app.hpp"
 #include "servoarm/api/protocol.hpp"
+#include "text_regex.hpp"
 
 #include <CppUTest/TestHarness.h>
 
@@ -22,9 +22,8 @@ std::string ask(api::ServiceContext& cx, const std::string& text) {
   return api::execute(cx, rq);
 }
 std::string field(const std::string& line, const char* name) {
-  const std::regex e(std::string("\"") + name + "\":\"([^\"]*)\"");
-  std::smatch m;
-  return std::regex_search(line, m, e) ? m[1].str() : "";
+  const test::Groups m = test::regex_search(line, std::string("\"") + name + "\":\"([^\"]*)\"");
+  return m.empty() ? "" : m[1];
 }
 }  // namespace
 

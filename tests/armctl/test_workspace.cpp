@@ -15,13 +15,13 @@
 #include <fstream>
 #include <functional>
 #include <random>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "run_command.hpp"
 #include "sweep.hpp"
+#include "text_regex.hpp"
 #include "servoarm/armctl/cli_workspace.hpp"
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/description.hpp"
@@ -34,6 +34,7 @@ using servoarm::fw::WorkspaceOptions;
 using servoarm::fw::WorkspaceResult;
 using servoarm::test::run_command;
 using servoarm::test::slurp;
+namespace test = servoarm::test;
 
 namespace {
 
@@ -137,21 +138,20 @@ void render(const std::string& svg) {
 // Legibility: every text inside the canvas (its estimated box), tick labels (the
 // grey 11 px texts) numbers with at most 4 significant digits, at least 4 of them.
 void check_readable(const std::string& svg_text, const std::string& what) {
-  std::smatch m;
-  CHECK_TEXT(std::regex_search(svg_text, m, std::regex("width=\"([0-9.]+)\" height=\"([0-9.]+)\"")), what.c_str());
+  test::Groups m;
+  CHECK_TEXT(!(m = test::regex_search(svg_text, "width=\"([0-9.]+)\" height=\"([0-9.]+)\"")).empty(), what.c_str());
   const double W = std::stod(m[1]), H = std::stod(m[2]);
-  const std::regex text_re("<text x=\"([-0-9.]+)\" y=\"([-0-9.]+)\" text-anchor=\"(start|middle|end)\" font-size=\"([0-9.]+)\" fill=\"([^\"]*)\"([^>]*)>([^<]*)</text>");
+  const test::Regex text_re("<text x=\"([-0-9.]+)\" y=\"([-0-9.]+)\" text-anchor=\"(start|middle|end)\" font-size=\"([0-9.]+)\" fill=\"([^\"]*)\"([^>]*)>([^<]*)</text>");
   int ticks = 0;
-  for (auto it = std::sregex_iterator(svg_text.begin(), svg_text.end(), text_re); it != std::sregex_iterator(); ++it) {
-    const auto& t = *it;
+  for (const test::Groups& t : text_re.search_all(svg_text)) {
     const double x = std::stod(t[1]), y = std::stod(t[2]), size = std::stod(t[4]);
     const std::string anchor = t[3], s = t[7];
-    const bool rotated = t[6].str().find("rotate") != std::string::npos;
+    const bool rotated = t[6].find("rotate") != std::string::npos;
     const double w = 0.58 * size * static_cast<double>(s.size());
     const double x0 = rotated ? x - size : anchor == "start" ? x : anchor == "middle" ? x - w / 2 : x - w;
     const double x1 = rotated ? x + size : x0 + w;
     const double y0 = rotated ? y - w / 2 : y - size, y1 = rotated ? y + w / 2 : y;
-    const std::string where = what + ": text '" + s + "' at (" + t[1].str() + ", " + t[2].str() + ") leaves the canvas";
+    const std::string where = what + ": text '" + s + "' at (" + t[1] + ", " + t[2] + ") leaves the canvas";
     CHECK_TEXT(x0 >= 0 && x1 <= W && y0 >= 0 && y1 <= H, where.c_str());
     if (t[5] == "#333" && size == 11) {  // a tick label
       ++ticks;
@@ -235,9 +235,9 @@ const char* kAr4 =
 
 // The printed extent "u from A to B mm, v from C to D mm" of `armctl kin workspace`.
 bool printed_extent(const std::string& out, double e[4]) {
-  std::smatch m;
-  const std::regex re("([xyz]) from ([-0-9.e+]+) to ([-0-9.e+]+) mm, ([xyz]) from ([-0-9.e+]+) to ([-0-9.e+]+) mm");
-  if (!std::regex_search(out, m, re)) return false;
+  test::Groups m;
+  const test::Regex re("([xyz]) from ([-0-9.e+]+) to ([-0-9.e+]+) mm, ([xyz]) from ([-0-9.e+]+) to ([-0-9.e+]+) mm");
+  if ((m = re.search(out)).empty()) return false;
   for (int k = 0; k < 2; ++k) e[k] = std::stod(m[2 + k]), e[2 + k] = std::stod(m[5 + k]);
   return true;
 }
@@ -307,8 +307,8 @@ TEST(Workspace, TurningArmWithOffsetWristHoldsEveryPointDenseFkSamplingReaches) 
     const auto r = run_command(kArmctl + " kin workspace --robot " + f + " --plane " + plane + " --csv " + csv);
     double e[4];
     CHECK_TEXT(r.status == 0 && printed_extent(r.out, e), (r.out + r.err).c_str());
-    std::smatch m;
-    CHECK_TEXT(std::regex_search(r.out, m, std::regex("grid of ([0-9.e+-]+) mm cells")), r.out.c_str());
+    test::Groups m;
+    CHECK_TEXT(!(m = test::regex_search(r.out, "grid of ([0-9.e+-]+) mm cells")).empty(), r.out.c_str());
     CsvRaster w;
     std::string err;
     CHECK_TEXT(read_csv_raster(slurp(csv), std::stod(m[1]), w, err), (std::string(plane) + ": " + err).c_str());

@@ -13,7 +13,6 @@
 #include <cstdio>
 #include <fstream>
 #include <random>
-#include <regex>
 #include <set>
 #include <sstream>
 #include <string>
@@ -24,10 +23,12 @@
 #include "servoarm/kinematics/chain.hpp"
 #include "servoarm/kinematics/description.hpp"
 #include "servoarm/kinematics/safety.hpp"
+#include "text_regex.hpp"
 
 #include <CppUTest/TestHarness.h>
 
 using namespace servoarm::fw;
+namespace test = servoarm::test;
 
 namespace {
 
@@ -159,10 +160,10 @@ TEST(Config, ShippedConfigAgreesWithTheKeyTable) {
       if (leaf == k.name) return true;
     return false;
   };
-  const std::regex section(R"(^\[([a-z_]+)\]\s*(#.*)?$)");
-  const std::regex assign(R"(^([a-z_]+)\s*=\s*([^#]*?)\s*(#(.*))?$)");
-  const std::regex commented(R"(^#\s*([a-z_]+)\s*=)");
-  const std::regex range(R"((-?[0-9.]+)\.\.(-?[0-9.]+))");
+  const test::Regex section(R"(^\[([a-z_]+)\]\s*(#.*)?$)");
+  const test::Regex assign(R"(^([a-z_]+)\s*=\s*([^#]*?)\s*(#(.*))?$)");
+  const test::Regex commented(R"(^#\s*([a-z_]+)\s*=)");
+  const test::Regex range(R"((-?[0-9.]+)\.\.(-?[0-9.]+))");
   std::istringstream is(text);
   std::string line, sec;
   int assignments = 0, ranges = 0, commented_keys = 0;
@@ -170,19 +171,19 @@ TEST(Config, ShippedConfigAgreesWithTheKeyTable) {
   STRCMP_EQUAL("", load_config_file(SERVOARM_SHIPPED_CONFIG, loaded).c_str());
   const FwConfig defaults;
   while (std::getline(is, line)) {
-    std::smatch m;
-    if (std::regex_match(line, m, section)) {
+    test::Groups m;
+    if (!(m = section.match(line)).empty()) {
       sec = m[1];
       continue;
     }
-    if (std::regex_search(line, m, commented)) {
+    if (!(m = commented.search(line)).empty()) {
       const std::string leaf = m[1];
       const std::string full = sec.empty() ? leaf : sec + "." + leaf;
       if (!find_key(full) && !is_drive_key(leaf)) FAIL(("shipped file shows an unknown key: " + line).c_str());
       ++commented_keys;
       continue;
     }
-    if (!std::regex_match(line, m, assign)) continue;
+    if ((m = assign.match(line)).empty()) continue;
     const std::string full = sec.empty() ? std::string(m[1]) : sec + "." + std::string(m[1]);
     const ConfigKey* k = find_key(full);
     if (!k) FAIL(("shipped file sets a key not in the table: " + full).c_str());
@@ -193,8 +194,8 @@ TEST(Config, ShippedConfigAgreesWithTheKeyTable) {
             default_text(*k) + " (change one of them, or list it as a service choice here)")
                .c_str());
     const std::string comment = m[4];
-    std::smatch r;
-    if (std::regex_search(comment, r, range)) {
+    test::Groups r;
+    if (!(r = range.search(comment)).empty()) {
       ++ranges;
       const double lo = std::stod(r[1]), hi = std::stod(r[2]);
       if (lo != k->lo || hi != k->hi)
@@ -521,14 +522,14 @@ TEST(Config, ConfigKeysTextListsDefaultRangeUnitDoc) {
   for (const ConfigKey& k : config_keys()) CHECK_TEXT(has(t, std::string(k.name) + " "), k.name);
   for (const DriveKey& k : drive_keys()) CHECK_TEXT(has(t, std::string("drive.") + k.name + " "), k.name);
   // written out here, independently of the table
-  const std::regex dur(R"(motion\.max_move_duration_s +default 600 +range \[1, 86400\]  unit s\n +longest move the console accepts)");
-  CHECK_TEXT(std::regex_search(t, dur), t.c_str());
-  const std::regex gear(R"(drive\.gear_ratio +default bus\.gear_ratio +range \[0\.001, 100000\])");
-  CHECK_TEXT(std::regex_search(t, gear), t.c_str());
-  const std::regex rx(R"(console\.can_rx_id +default 0x7E0 )");
-  CHECK_TEXT(std::regex_search(t, rx), t.c_str());
-  const std::regex speed(R"(motion\.linear_speed_mm_s +default 100 +range \[0\.01, 5000\], at most motion\.max_linear_speed_mm_s  unit mm/s)");
-  CHECK_TEXT(std::regex_search(t, speed), t.c_str());
+  const test::Regex dur(R"(motion\.max_move_duration_s +default 600 +range \[1, 86400\]  unit s\n +longest move the console accepts)");
+  CHECK_TEXT(!dur.search(t).empty(), t.c_str());
+  const test::Regex gear(R"(drive\.gear_ratio +default bus\.gear_ratio +range \[0\.001, 100000\])");
+  CHECK_TEXT(!gear.search(t).empty(), t.c_str());
+  const test::Regex rx(R"(console\.can_rx_id +default 0x7E0 )");
+  CHECK_TEXT(!rx.search(t).empty(), t.c_str());
+  const test::Regex speed(R"(motion\.linear_speed_mm_s +default 100 +range \[0\.01, 5000\], at most motion\.max_linear_speed_mm_s  unit mm/s)");
+  CHECK_TEXT(!speed.search(t).empty(), t.c_str());
 }
 
 // docs/configuration.md holds exactly what the key tables produce between its markers: a key
