@@ -274,33 +274,27 @@ Status jacobian(const Chain& chain, const JointVector& q, Jacobian& J, Pose* pos
 
 namespace {
 using SingularValues = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, 6, 1>;
-// Every SVD here is of a square matrix, so Eigen's QR preconditioner (which only a
-// rectangular one needs, and which instantiates three QR decompositions for each shape)
-// is left out: the same singular values, a fraction of the compile time.
+// Every SVD here is of a 6 x 6 matrix, so Eigen's QR preconditioner (which only a rectangular
+// one needs, and which instantiates three QR decompositions for each shape) is left out: the
+// same singular values, a fraction of the compile time.
 using Square6 = Eigen::Matrix<double, 6, 6>;
-using Small = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kMaxJoints, kMaxJoints>;
 SingularValues singular_values(const Jacobian& J) {
-  if (J.cols() == 0) return SingularValues();
-  if (J.cols() == 6) {
-    const Square6 A = J;
-    Eigen::JacobiSVD<Square6, Eigen::NoQRPreconditioner> svd(A);
-    return svd.singularValues();
-  }
-  if (J.cols() > 6) {
+  const int n = static_cast<int>(J.cols());
+  if (n == 0) return SingularValues();
+  Square6 A = Square6::Zero();
+  if (n <= 6) {
+    // 6 x n, n <= 6: [J 0] has J's n singular values and 6 - n zeros, so (sorted, largest
+    // first) its first n are J's.
+    A.leftCols(n) = J;
+  } else {
     // 6 x n, n > 6: J^T = Q R, and R^T (6 x 6) has J's singular values; this is the step
     // Eigen's column-pivoting preconditioner takes for a matrix wider than it is tall.
     using Tall = Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::ColMajor, kMaxJoints, 6>;
     Eigen::ColPivHouseholderQR<Tall> qr(Tall(J.transpose()));
-    const Square6 Rt = qr.matrixQR().topRows<6>().triangularView<Eigen::Upper>().transpose();
-    Eigen::JacobiSVD<Square6, Eigen::NoQRPreconditioner> svd(Rt);
-    return svd.singularValues();
+    A = qr.matrixQR().topRows<6>().triangularView<Eigen::Upper>().transpose();
   }
-  // n < 6: the n singular values of J are those of the n x n matrix J^T J (square roots).
-  Small JtJ = J.transpose() * J;
-  Eigen::JacobiSVD<Small, Eigen::NoQRPreconditioner> svd(JtJ);
-  SingularValues sv = svd.singularValues();
-  for (int i = 0; i < sv.size(); ++i) sv[i] = std::sqrt(std::max(0.0, sv[i]));
-  return sv;
+  Eigen::JacobiSVD<Square6, Eigen::NoQRPreconditioner> svd(A);
+  return svd.singularValues().head(std::min(n, 6));
 }
 }  // namespace
 
