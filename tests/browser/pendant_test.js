@@ -57,9 +57,8 @@ function puppeteer() {
     return require(p);
   } catch (e) {
     if (e.code === 'MODULE_NOT_FOUND') throw new Error(`${p} is not installed (run: bash .ci/npm)`);
-    // installed but not loadable: puppeteer-core 25 is an ES module, which require() loads
-    // from Node.js 20.19 on (Debian 12's Node.js 18 cannot)
-    throw new Error(`${p} does not load in Node.js ${process.version} (it needs 20.19 or later): ${e.message}`);
+    // installed but not loadable (puppeteer-core 24, a CommonJS package, asks for Node.js 18 or later)
+    throw new Error(`${p} does not load in Node.js ${process.version} (it needs 18 or later): ${e.message}`);
   }
 }
 
