@@ -258,6 +258,44 @@ TEST(Urdf, ExportThenImportOfEveryBuiltinModelGivesTheSameFk) {
   }
 }
 
+// The exporter draws each link as a cylinder from the link's origin to the next joint's:
+// read back by urdfdom, its visual origin sits halfway along that vector and its rotation
+// takes the cylinder's z axis onto it, for every link of every built-in model (links along
+// +z, along -z and across).
+TEST(Urdf, ExportedLinkCylindersRunFromTheLinkOriginToTheNextJoint) {
+  int cylinders = 0, along_minus_z = 0;
+  std::vector<std::pair<std::string, kin::Chain>> arms;
+  for (const auto& bm : kin::builtin_models()) arms.emplace_back(bm.name, model(bm.name));
+  // No built-in link runs along -z: a modified-DH arm whose second row is a pure offset d < 0
+  // has one (the next joint straight below the first link's origin).
+  for (const auto& [name, c] : arms) {
+    if (c.convention != kin::Convention::modified || c.n_rows < 3) continue;
+    kin::Chain down = c;
+    down.rows[1].a = 0, down.rows[1].alpha = 0, down.rows[1].theta = 0, down.rows[1].d = -0.25;
+    arms.emplace_back(name + "_down", down);
+    break;
+  }
+  for (const auto& [arm, c] : arms) {
+    const urdf::ModelInterfaceSharedPtr m = urdf::parseURDF(kin::urdf_export(c));
+    CHECK_TEXT(m != nullptr, arm.c_str());
+    for (const auto& [name, link] : m->links_) {
+      if (!link->visual || !link->visual->geometry || link->visual->geometry->type != urdf::Geometry::CYLINDER) continue;
+      const auto& cyl = static_cast<const urdf::Cylinder&>(*link->visual->geometry);
+      const urdf::Pose& o = link->visual->origin;
+      const KDL::Vector half(o.position.x, o.position.y, o.position.z);
+      const KDL::Vector axis = kdl_pose(o).M * KDL::Vector(0, 0, 1);
+      const std::string where = arm + " link " + name;
+      DOUBLES_EQUAL_TEXT(cyl.length, 2 * half.Norm(), 1e-12, where.c_str());
+      CHECK_TEXT((axis - half / half.Norm()).Norm() < 1e-12, where.c_str());
+      ++cylinders;
+      if (half.z() < 0 && std::hypot(half.x(), half.y()) < 1e-12) ++along_minus_z;
+    }
+  }
+  std::printf("\n  %d link cylinders, %d along -z", cylinders, along_minus_z);
+  CHECK(cylinders >= 40);
+  CHECK(along_minus_z >= 1);
+}
+
 TEST(Urdf, ConversionTimeOfTheSevenJointArm) {
   const std::string text = slurp(data("seven_dof.urdf"));
   std::vector<double> us;

@@ -54,7 +54,14 @@ std::string visual(const Eigen::Vector3d& to) {
   if (len < 1e-6) return "";
   const double radius = std::clamp(0.08 * len, 0.005, 0.04);
   Pose T = Pose::Identity();
-  T.linear() = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), to / len).toRotationMatrix();
+  // The rotation taking z to the cylinder's axis: about z x d by the angle between them (any
+  // axis across z when d is -z: a cylinder looks the same turned about its own axis). Written
+  // out instead of Quaternion::FromTwoVectors, whose antiparallel case instantiates a 2 x 3
+  // Jacobi SVD with its QR preconditioners (g++ 12: 12.5 CPU-s for this file with it, 4.4 without).
+  const Eigen::Vector3d d = to / len, axis = Eigen::Vector3d::UnitZ().cross(d);
+  const double s = axis.norm();
+  if (s > 1e-12) T.linear() = Eigen::AngleAxisd(std::atan2(s, d.z()), axis / s).toRotationMatrix();
+  else if (d.z() < 0) T.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
   T.translation() = to / 2;
   return "    <visual>\n      " + origin(T) + "\n      <geometry><cylinder radius=\"" + g17(radius) + "\" length=\"" + g17(len) +
          "\"/></geometry>\n    </visual>\n";
