@@ -1,11 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 # Fixture of the harness's own test (tests/vcan/starved-test, CTest vcan_starved): a
-# scenario that fails on purpose, after a faked stall or without one.
-#   starved_fixture.sh stall     stop the guest's starvation probe for 1 s (its next
-#                                wake-up is then ~1 s late, as in a starved VM), then fail
-#   starved_fixture.sh nostall   fail at once
-#   starved_fixture.sh stallskip the faked stall, then a skip (exit 77), as a scenario's
-#                                own starvation check reports one
+# scenario that fails on purpose after a faked stall.
+#   starved_fixture.sh stall   stop the guest's starvation probe for 1 s (its next wake-up
+#                              is then ~1 s late, as in a starved VM), then fail
 . "$SCENARIO_DIR/lib.sh"
 # The probe counts the stall lines it printed in /tmp/stalls ("N longest n30", host_sim/vm/init):
 # after the faked stall the fixture waits for one more than before it, not a fixed time.
@@ -20,14 +17,5 @@ case ${1:-} in
     kill -CONT "$SERVOARM_STALL_PROBE_PID"
     wait_until 10 "the probe to print its stall line" _stall_printed
     fail "a deliberate failure after a faked stall" ;;
-  nostall) fail "a deliberate failure, no stall" ;;
-  stallskip)
-    [ -n "${SERVOARM_STALL_PROBE_PID:-}" ] || fail "SERVOARM_STALL_PROBE_PID not set: /init started no probe"
-    stalls_before=$(_stalls)
-    kill -STOP "$SERVOARM_STALL_PROBE_PID"
-    sleep 1
-    kill -CONT "$SERVOARM_STALL_PROBE_PID"
-    wait_until 10 "the probe to print its stall line" _stall_printed
-    skip "a deliberate skip after a faked stall" ;;
-  *) fail "usage: starved_fixture.sh stall|nostall|stallskip" ;;
+  *) fail "usage: starved_fixture.sh stall" ;;
 esac
