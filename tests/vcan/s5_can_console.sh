@@ -11,8 +11,9 @@
 #      the kernel timestamps of candump: the ISO-TP frame 7E0#0118 -> the first
 #      RPDO (0x201-0x206) whose controlword no longer says "enable operation"
 #      (armfw's e-stop ramps to rest with the full limits, then powers down; at
-#      rest the ramp ends in its first cycle). Three runs; figures printed and
-#      left in $OUT_DIR/estop.txt. Emulated CPU in the VM: the figures say so.
+#      rest the ramp ends in its first cycle). Three runs; measured on the host
+#      (s5_can_console.host-check), figures printed and left in $OUT_DIR/estop.txt.
+#      Emulated CPU in the VM: the figures say so.
 . "$SCENARIO_DIR/lib.sh"
 . "$SCENARIO_DIR/s5_lib.sh"
 need candump isotpsend isotprecv isotpsniffer armsim armfw armctl od mkfifo
@@ -96,17 +97,9 @@ stop_armfw
 stop_isotprecv
 stop_armsim
 stop_candump all
-tframes "$OUT_DIR/all.log" >"$OUT_DIR/all.tframes"
-awk -v period_ms="$(awk -v r="$rate_hz" 'BEGIN { print 1000 / r }')" '
-    $2 == "7E0#0118" { t0 = $1; want = 1; next }
-    want && $2 ~ /^20[1-6]#/ && substr($2, 5, 4) != "0F00" {
-      ms = ($1 - t0) * 1000; n++; v[n] = ms; printf "run %d: Ctrl-X on the bus at %.6f -> %s at %.6f: %.2f ms (%.1f cycles)\n", n, t0, $2, $1, ms, ms / period_ms; want = 0 }
-    END { if (n != 3) { printf "want 3 e-stop reactions on the bus, found %d\n", n; exit 1 }
-          for (i = 1; i <= n; i++) for (j = i + 1; j <= n; j++) if (v[j] < v[i]) { t = v[i]; v[i] = v[j]; v[j] = t }
-          printf "e-stop latency (Ctrl-X frame -> first RPDO without enable operation, kernel timestamps, %s): min %.2f ms, median %.2f ms, max %.2f ms at %d Hz\n", ENVIRON["SERVOARM_VM"] == "1" ? "emulated TCG VM" : "host vcan", v[1], v[2], v[3], 1000 / period_ms
-          exit !(v[3] < 200) }' "$OUT_DIR/all.tframes" >"$OUT_DIR/estop.txt" && pass "$(tail -n 1 "$OUT_DIR/estop.txt")" ||
-  check_fail "e-stop on the bus: $(tail -n 1 "$OUT_DIR/estop.txt")"
-cat "$OUT_DIR/estop.txt"
+# the e-stop latency on the bus is measured on the host (s5_can_console.host-check) from all.log
+capture_on=$([ "${SERVOARM_VM:-0}" = 1 ] && echo "emulated TCG VM" || echo "host vcan")
+to_host rate_hz capture_on
 # no fault was latched along the way, and every drive was enabled at some point
 isotp_text | grep -q '^alarm: fault' && check_fail "armfw raised a fault: $(isotp_text | grep '^alarm: fault' | head -n 1)" || pass "no fault alarm on the ISO-TP console"
 finish
