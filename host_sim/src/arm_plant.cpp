@@ -159,15 +159,13 @@ double ArmPlant::kinetic_energy() const {
 }
 
 void ArmPlant::acceleration(const kin::JointVector& q, const kin::JointVector& qd, kin::JointVector& qdd) {
-  kin::JointVector zero = kin::JointVector::Zero(n_), h(n_);
-  kin::MassMatrix M(n_, n_);
-  qdd = kin::JointVector::Zero(n_);
-  if (kin::inverse_dynamics(chain_, q, qd, zero, h) != kin::Status::ok) return;  // c + g
-  if (kin::mass_matrix(chain_, q, M) != kin::Status::ok) return;
-  kin::JointVector rhs = tau_motor_ + tau_ext_ - h;
+  // The torques on the joints besides the arm's own (c + g): the motors', the external ones,
+  // the plant's friction (smoothed Coulomb; the chain's own friction is zero here) and a stop's
+  // contact.
+  kin::JointVector tau = tau_motor_ + tau_ext_;
   for (int j = 0; j < n_; ++j) {
     const std::size_t k = static_cast<std::size_t>(j);
-    rhs[j] -= viscous_[k] * qd[j] + coulomb_[k] * std::tanh(qd[j] / params_.coulomb_velocity);
+    tau[j] -= viscous_[k] * qd[j] + coulomb_[k] * std::tanh(qd[j] / params_.coulomb_velocity);
   }
   const JointStop& st = params_.stop;
   if (st.joint >= 0) {
@@ -175,9 +173,21 @@ void ArmPlant::acceleration(const kin::JointVector& q, const kin::JointVector& q
     const double pen = double(st.side) * (q[st.joint] - st.position);
     if (pen > 0) {
       const double f = std::max(0.0, o.stop_stiffness * pen + o.stop_damping * double(st.side) * qd[st.joint]);
-      rhs[st.joint] -= double(st.side) * f;
+      tau[st.joint] -= double(st.side) * f;
     }
   }
+  bool any_locked = false;
+  for (int j = 0; j < n_; ++j) any_locked = any_locked || locked(j);
+  // No joint braked: M qdd = tau - c - g in one pass of the row transforms, M factored in place
+  // (kin::forward_dynamics). It also refuses a mass matrix its pivot test finds singular; the
+  // general path below then decides.
+  if (!any_locked && kin::forward_dynamics(chain_, q, qd, tau, qdd) == kin::Status::ok) return;
+  kin::JointVector zero = kin::JointVector::Zero(n_), h(n_);
+  kin::MassMatrix M(n_, n_);
+  qdd = kin::JointVector::Zero(n_);
+  if (kin::inverse_dynamics(chain_, q, qd, zero, h) != kin::Status::ok) return;  // c + g
+  if (kin::mass_matrix(chain_, q, M) != kin::Status::ok) return;
+  kin::JointVector rhs = tau - h;
   // Braked joints are held: their row and column become the identity, their acceleration 0.
   for (int j = 0; j < n_; ++j) {
     if (!locked(j)) continue;
