@@ -40,13 +40,28 @@ need() { # need CMD... : fail (not skip) when a tool is missing
   for c in "$@"; do command -v "$c" >/dev/null 2>&1 || fail "$c not found in PATH ($PATH)"; done
 }
 
+# nap SECONDS: a sleep that starts no process where the shell's `read` has a timeout
+# (busybox ash, bash): a read on a FIFO that nothing writes, held open read-write on
+# descriptor 8, so it never ends before its timeout. The wait loops poll every 50 ms, and
+# under the VM's emulated CPUs each sleep(1) they started was a fork the guest paid for.
+# A shell without `read -t` (dash: exit status 2) sleeps with sleep(1).
+_nap_fifo=${TMPDIR:-/tmp}/servoarm-nap.$$
+if mkfifo "$_nap_fifo" 2>/dev/null; then
+  exec 8<>"$_nap_fifo"
+  rm -f "$_nap_fifo"
+  if (read -t 0.01 _ <&8) 2>/dev/null; then _nap_rc=0; else _nap_rc=$?; fi
+  if [ "$_nap_rc" -ne 2 ]; then nap() { read -t "$1" _ <&8; return 0; }; else nap() { sleep "$1"; }; fi
+else
+  nap() { sleep "$1"; }
+fi
+
 # wait_until SECONDS WHAT CMD...: poll CMD every 50 ms until it succeeds.
 wait_until() {
   _w_limit=$1; _w_what=$2; shift 2
   _w_n=$((_w_limit * 20))
   while [ "$_w_n" -gt 0 ]; do
     "$@" && return 0
-    sleep 0.05
+    nap 0.05
     _w_n=$((_w_n - 1))
   done
   fail "timed out after ${_w_limit}s waiting for $_w_what"
@@ -148,11 +163,11 @@ play_exchange() {
     case $_p_dir in
       '>') _p_n=$((_p_n + 1)); cansend "$CAN_IF" "$_p_frame" || check_fail "cansend $_p_frame failed" ;;
       '<') _p_n=$((_p_n + 1)) ;;
-      '~') sleep "$_p_frame"; continue ;;
+      '~') nap "$_p_frame"; continue ;;
       *) continue ;;
     esac
     _p_t=60   # x 50 ms
-    while [ "$(wc -l <"$OUT_DIR/$2.log")" -lt "$_p_n" ] && [ "$_p_t" -gt 0 ]; do sleep 0.05; _p_t=$((_p_t - 1)); done
+    while [ "$(wc -l <"$OUT_DIR/$2.log")" -lt "$_p_n" ] && [ "$_p_t" -gt 0 ]; do nap 0.05; _p_t=$((_p_t - 1)); done
     [ "$_p_t" -gt 0 ] || { check_fail "no answer within 3 s after line $_p_n ($_p_dir $_p_frame)"; return 1; }
   done <"$1"
 }

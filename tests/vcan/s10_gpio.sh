@@ -95,8 +95,9 @@ has_line() { isotp_text | grep -qF -- "$1"; }
 until_s() {
   _u_end=$(awk -v s="$1" '{ printf "%d", $1 + s }' /proc/uptime); _u_what=$2; shift 2
   while ! "$@"; do
-    [ "$(cut -d. -f1 /proc/uptime)" -lt "$_u_end" ] || fail "timed out waiting for $_u_what"
-    sleep 0.05
+    read -r _u_now _ </proc/uptime
+    [ "${_u_now%.*}" -lt "$_u_end" ] || fail "timed out waiting for $_u_what"
+    nap 0.05
   done
 }
 # joints: the joints= list of a status line

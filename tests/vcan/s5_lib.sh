@@ -95,7 +95,7 @@ isotp_ask() {
   _q_n=$(isotp_finals)
   isotp_send_hex "$(hex_of "$1")" || echo "(isotpsend failed)"
   _q_t=$(( ${2:-30} * 10 ))
-  while [ "$_q_t" -gt 0 ] && ! _more_finals "$_q_n"; do sleep 0.1; _q_t=$((_q_t - 1)); done
+  while [ "$_q_t" -gt 0 ] && ! _more_finals "$_q_n"; do nap 0.1; _q_t=$((_q_t - 1)); done
   if [ "$_q_t" -gt 0 ]; then isotp_text | grep -E '^(ok|error:)' | tail -n 1; else echo "(no answer within ${2:-30} s)"; fi
 }
 # first_contact: `status` must be answered, else dump what is known and stop.
