@@ -43,7 +43,7 @@ need() { # need CMD... : fail (not skip) when a tool is missing
 # nap SECONDS: a sleep that starts no process where the shell's `read` has a timeout
 # (busybox ash, bash): a read on a FIFO that nothing writes, held open read-write on
 # descriptor 8, so it never ends before its timeout. The wait loops poll every 50 ms, and
-# under the VM's emulated CPUs each sleep(1) they started was a fork the guest paid for.
+# under the VM's emulated CPUs each sleep(1) would be a fork and an exec the guest pays for.
 # A shell without `read -t` (dash: exit status 2) sleeps with sleep(1).
 _nap_fifo=${TMPDIR:-/tmp}/servoarm-nap.$$
 if mkfifo "$_nap_fifo" 2>/dev/null; then
