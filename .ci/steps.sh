@@ -22,7 +22,9 @@ apt_lock_hold() { exec 9>"${TMPDIR:-/tmp}/servoarm-apt.lock"; flock 9; }
 # (autogroup): a background session then gets as much CPU as the foreground's. So, first
 # choice, a cpu cgroup marked idle (cpu.idle, Linux >= 5.15; cgroup v2 or v1's cpu
 # hierarchy, root only); else its session's autogroup at nice 19; and in every case
-# SCHED_IDLE and nice 19 for the processes themselves. Prints what it got.
+# SCHED_IDLE and nice 19 for the processes themselves. Sets SERVOARM_IDLE_CLASS to what it
+# got. Call it in the shell that is to run idle, never inside $(...): a command substitution
+# is a subshell of its own, which would get the class and exit, leaving its caller as it was.
 idle_class() {
   local how="" g v2=/sys/fs/cgroup v1=/sys/fs/cgroup/cpu
   if [ -f "$v2/cgroup.controllers" ] && grep -qw cpu "$v2/cgroup.controllers" && [ -w "$v2" ]; then
@@ -44,7 +46,7 @@ idle_class() {
   fi
   renice -n 19 -p $BASHPID >/dev/null 2>&1 || true
   if chrt -i -p 0 $BASHPID >/dev/null 2>&1; then how="${how:+$how, }SCHED_IDLE"; fi
-  echo "${how:-nice 19 only}"
+  SERVOARM_IDLE_CLASS=${how:-nice 19 only}
 }
 # ctest_slots CPUS: the `ctest -j` for CPUS processors. Each CPU is two CTest slots: a test that
 # keeps a CPU busy asks for two, one that mostly waits on the clock for one, a vcan VM for three
